@@ -1,0 +1,117 @@
+//! The model trait: what generated code provides and the runtime consumes.
+
+use core::fmt::Debug;
+use nalgebra::{RealField, SMatrix, SVector};
+
+/// The scalar the generated code is generic over (`f32` and `f64`).
+///
+/// Generated code writes every constant as an `f64` literal that round-trips exactly and
+/// converts it with [`Real::lit`], so `f64` models carry the derivation's constants bit
+/// for bit and `f32` models their nearest `f32`.
+pub trait Real: RealField + Copy {
+    /// Converts an `f64` literal of generated code into this scalar.
+    fn lit(value: f64) -> Self;
+}
+
+impl Real for f64 {
+    #[inline(always)]
+    fn lit(value: f64) -> Self {
+        value
+    }
+}
+
+impl Real for f32 {
+    #[inline(always)]
+    fn lit(value: f64) -> Self {
+        value as f32
+    }
+}
+
+/// The terms of the constrained equations of motion at one state, evaluated together so
+/// that they share subexpressions (`M q̈ + N = Jᵀ F + B u`, `J q̈ + J̇ q̇ = 0`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DynamicsTerms<T: Real, const NQ: usize, const NC: usize> {
+    /// `M(q)`, including the reflected rotor inertia `I_rotor · gear²` of actuated joints.
+    pub mass_matrix: SMatrix<T, NQ, NQ>,
+    /// `N(q, q̇) = C(q, q̇) q̇ + G(q)`.
+    pub bias_forces: SVector<T, NQ>,
+    /// `J(q) = ∂φ/∂q`.
+    pub constraint_jacobian: SMatrix<T, NC, NQ>,
+    /// `J̇(q, q̇) q̇`.
+    pub constraint_bias: SVector<T, NC>,
+}
+
+/// A planar leg: a tree of rigid links on revolute joints, closed by point-on-link
+/// closures. Implemented by generated code (`cargo xtask gen`), one type per geometry.
+///
+/// - `NQ`: joints (one per link, relative angles, in spec order);
+/// - `NC`: closure rows (two per closure: x and y of point a minus point b);
+/// - `NU`: actuated joints.
+///
+/// All methods are straight-line code: no allocation, no panic, no loop.
+pub trait LegModel<const NQ: usize, const NC: usize, const NU: usize> {
+    /// The geometry's name (its spec's file stem).
+    const NAME: &'static str;
+    /// The name of the link each joint moves, in coordinate order.
+    const JOINT_NAMES: [&'static str; NQ];
+    /// Indices (into `q`) of the actuated joints, in the order of the input vector `u`.
+    const ACTUATED: [usize; NU];
+
+    /// The physical parameters (lengths, masses, centres of mass, inertias, rotor
+    /// inertias and gear ratios, damping, gravity). `Default` holds the spec's values.
+    type Params<T: Real>: Clone + Copy + Debug + PartialEq + Default;
+
+    /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on the actuated joints.
+    fn mass_matrix<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, NQ, NQ>;
+    /// `N(q, q̇) = (∂²L/∂q̇∂q) q̇ − ∂L/∂q = C q̇ + G` (without damping).
+    fn bias_forces<T: Real>(
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        p: &Self::Params<T>,
+    ) -> SVector<T, NQ>;
+    /// `G(q) = ∂V/∂q`.
+    fn gravity_forces<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SVector<T, NQ>;
+    /// Viscous joint damping torques `D q̇` (they enter as `M q̈ + N + D q̇ = …`).
+    fn damping_forces<T: Real>(qd: &SVector<T, NQ>, p: &Self::Params<T>) -> SVector<T, NQ>;
+    /// The closure residual `φ(q)`: for each closure, point a minus point b.
+    fn closure_residual<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SVector<T, NC>;
+    /// `J(q) = ∂φ/∂q`.
+    fn constraint_jacobian<T: Real>(
+        q: &SVector<T, NQ>,
+        p: &Self::Params<T>,
+    ) -> SMatrix<T, NC, NQ>;
+    /// `J̇(q, q̇) q̇`.
+    fn constraint_bias<T: Real>(
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        p: &Self::Params<T>,
+    ) -> SVector<T, NC>;
+    /// The foot point in the base frame.
+    fn foot_position<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SVector<T, 2>;
+    /// `J_f(q) = ∂(foot)/∂q`.
+    fn foot_jacobian<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, 2, NQ>;
+    /// `J̇_f(q, q̇) q̇`.
+    fn foot_bias<T: Real>(
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        p: &Self::Params<T>,
+    ) -> SVector<T, 2>;
+    /// Kinetic energy `½ q̇ᵀ M q̇` (links and rotors).
+    fn kinetic_energy<T: Real>(q: &SVector<T, NQ>, qd: &SVector<T, NQ>, p: &Self::Params<T>)
+        -> T;
+    /// Potential energy `−Σ m g·c` (zero at the base origin).
+    fn potential_energy<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> T;
+    /// Each link's joint position in the base frame (column `i` for joint `i`).
+    fn joint_positions<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, 2, NQ>;
+    /// Each link's tip (the end of its length vector) in the base frame.
+    fn link_tips<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, 2, NQ>;
+    /// The closure points in the base frame: columns `2k` and `2k + 1` are points a and b
+    /// of closure `k` (they coincide on an assembled leg).
+    fn closure_points<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, 2, NC>;
+    /// `M`, `N`, `J` and `J̇ q̇` together, sharing subexpressions.
+    fn dynamics_terms<T: Real>(
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        p: &Self::Params<T>,
+    ) -> DynamicsTerms<T, NQ, NC>;
+}

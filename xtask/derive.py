@@ -1,0 +1,243 @@
+"""CasADi derivation of a leg model, run by `cargo xtask gen` (generation step only).
+
+Reads on stdin the normalized model that xtask built from a validated spec (links, the
+parameter names that stand for every geometric quantity, closures, foot, gravity) and
+writes on stdout the derived terms as straight-line programs in SSA form: one
+instruction per value, operands referring to earlier instructions, outputs listing the
+value of every entry in column-major order. Errors go to stderr with exit code 1.
+
+Mathematics: shared/DESIGN.md §3. Each branch (a subtree hanging from the base) is an
+open chain with Lagrangian L_i = T_i - V_i; L = sum L_i; M = d2L/dqd2;
+N = (d2L/dqd dq) qd - dL/dq; the closure residual phi is point a minus point b per
+closure; J = dphi/dq and Jdot qd = d(J qd)/dq qd.
+"""
+
+import hashlib
+import json
+import math
+import sys
+
+import casadi as cs
+
+UNARY = {
+    cs.OP_NEG: "neg",
+    cs.OP_SQ: "sq",
+    cs.OP_TWICE: "twice",
+    cs.OP_INV: "inv",
+    cs.OP_SQRT: "sqrt",
+    cs.OP_SIN: "sin",
+    cs.OP_COS: "cos",
+    cs.OP_TAN: "tan",
+    cs.OP_ASIN: "asin",
+    cs.OP_ACOS: "acos",
+    cs.OP_ATAN: "atan",
+    cs.OP_SINH: "sinh",
+    cs.OP_COSH: "cosh",
+    cs.OP_TANH: "tanh",
+    cs.OP_EXP: "exp",
+    cs.OP_LOG: "log",
+    cs.OP_FABS: "abs",
+}
+BINARY = {
+    cs.OP_ADD: "add",
+    cs.OP_SUB: "sub",
+    cs.OP_MUL: "mul",
+    cs.OP_DIV: "div",
+    cs.OP_POW: "pow",
+    cs.OP_CONSTPOW: "pow",
+    cs.OP_ATAN2: "atan2",
+    cs.OP_FMIN: "min",
+    cs.OP_FMAX: "max",
+}
+OP_NAMES = {getattr(cs, n): n for n in dir(cs) if n.startswith("OP_")}
+
+
+class DerivationError(Exception):
+    pass
+
+
+def rotate(angle, v):
+    c, s = cs.cos(angle), cs.sin(angle)
+    return cs.vertcat(c * v[0] - s * v[1], s * v[0] + c * v[1])
+
+
+def derive(model):
+    """Returns {function name: (input names, [(output name, kind, expression)])}."""
+    sym = {p["name"]: cs.SX.sym(p["name"]) for p in model["params"]}
+    params = cs.vertcat(*[sym[p["name"]] for p in model["params"]])
+    links = model["links"]
+    n = len(links)
+    q = cs.SX.sym("q", n)
+    qd = cs.SX.sym("qd", n)
+
+    def vec(pair):
+        return cs.vertcat(sym[pair[0]], sym[pair[1]])
+
+    # Absolute angle and joint position of every link, from relative angles.
+    angle = [None] * n
+    joint = [None] * n
+    for i, link in enumerate(links):
+        parent = link["parent"]
+        if parent is None:
+            angle[i] = q[i]
+            joint[i] = vec(link["origin"])
+        else:
+            angle[i] = angle[parent] + q[i]
+            joint[i] = joint[parent] + rotate(angle[parent], vec(link["origin"]))
+
+    def point(ref):
+        i = ref["link"]
+        return joint[i] + rotate(angle[i], vec(ref["point"]))
+
+    # The Lagrangian of each branch (the links under one base joint), then their sum.
+    gravity = vec(model["gravity"])
+    branch_of = [None] * n
+    for i, link in enumerate(links):
+        branch_of[i] = i if link["parent"] is None else branch_of[link["parent"]]
+    kinetic = {b: 0 for b in set(branch_of)}
+    potential = {b: 0 for b in set(branch_of)}
+    for i, link in enumerate(links):
+        b = branch_of[i]
+        com = point({"link": i, "point": link["com"]})
+        v_com = cs.jtimes(com, q, qd)
+        omega = cs.jtimes(angle[i], q, qd)
+        mass, inertia = sym[link["mass"]], sym[link["inertia"]]
+        kinetic[b] += 0.5 * mass * cs.dot(v_com, v_com) + 0.5 * inertia * omega**2
+        if link["rotor"] is not None:
+            rotor_inertia, gear_ratio = sym[link["rotor"][0]], sym[link["rotor"][1]]
+            kinetic[b] += 0.5 * rotor_inertia * gear_ratio**2 * qd[i] ** 2
+        potential[b] += -mass * cs.dot(gravity, com)
+    T = sum(kinetic.values())
+    V = sum(potential.values())
+    L = sum(kinetic[b] - potential[b] for b in kinetic)
+
+    dL_dqd = cs.gradient(L, qd)
+    M = cs.jacobian(dL_dqd, qd)
+    N = cs.jtimes(dL_dqd, q, qd) - cs.gradient(L, q)
+    G = cs.gradient(V, q)
+    D = cs.vertcat(*[sym[link["damping"]] * qd[i] for i, link in enumerate(links)])
+
+    closures = model["closures"]
+    if closures:
+        phi = cs.vertcat(*[point(c["a"]) - point(c["b"]) for c in closures])
+        J = cs.jacobian(phi, q)
+        Jdot_qd = cs.jtimes(cs.jtimes(phi, q, qd), q, qd)
+        closure_points = cs.horzcat(*[cs.horzcat(point(c["a"]), point(c["b"])) for c in closures])
+    else:
+        phi, J, Jdot_qd, closure_points = cs.SX(0, 1), cs.SX(0, n), cs.SX(0, 1), cs.SX(2, 0)
+
+    foot = point(model["foot"])
+    Jf = cs.jacobian(foot, q)
+    Jf_dot_qd = cs.jtimes(cs.jtimes(foot, q, qd), q, qd)
+    tips = cs.horzcat(*[point({"link": i, "point": l["length"]}) for i, l in enumerate(links)])
+
+    inputs = {"q": q, "qd": qd, "p": params}
+    Q, QQ = ["q", "p"], ["q", "qd", "p"]
+    terms = {
+        "mass_matrix": (Q, [("mass_matrix", "matrix", M)]),
+        "bias_forces": (QQ, [("bias_forces", "vector", N)]),
+        "gravity_forces": (Q, [("gravity_forces", "vector", G)]),
+        "damping_forces": (["qd", "p"], [("damping_forces", "vector", D)]),
+        "closure_residual": (Q, [("closure_residual", "vector", phi)]),
+        "constraint_jacobian": (Q, [("constraint_jacobian", "matrix", J)]),
+        "constraint_bias": (QQ, [("constraint_bias", "vector", Jdot_qd)]),
+        "foot_position": (Q, [("foot_position", "vector", foot)]),
+        "foot_jacobian": (Q, [("foot_jacobian", "matrix", Jf)]),
+        "foot_bias": (QQ, [("foot_bias", "vector", Jf_dot_qd)]),
+        "kinetic_energy": (QQ, [("kinetic_energy", "scalar", T)]),
+        "potential_energy": (Q, [("potential_energy", "scalar", V)]),
+        "joint_positions": (Q, [("joint_positions", "matrix", cs.horzcat(*joint))]),
+        "link_tips": (Q, [("link_tips", "matrix", tips)]),
+        "closure_points": (Q, [("closure_points", "matrix", closure_points)]),
+        "dynamics_terms": (
+            QQ,
+            [
+                ("mass_matrix", "matrix", M),
+                ("bias_forces", "vector", N),
+                ("constraint_jacobian", "matrix", J),
+                ("constraint_bias", "vector", Jdot_qd),
+            ],
+        ),
+    }
+    return inputs, terms
+
+
+def export(name, f, input_names):
+    """Turns an SXFunction into an SSA straight-line program."""
+    instructions = []
+    work = {}  # CasADi work slot -> SSA id
+    consts = {}  # exact float -> SSA id
+    input_ids = {}
+    outputs = [[None] * f.nnz_out(i) for i in range(f.n_out())]
+
+    def emit(instr):
+        instructions.append(instr)
+        return len(instructions) - 1
+
+    for k in range(f.n_instructions()):
+        op = f.instruction_id(k)
+        args = f.instruction_input(k)
+        res = f.instruction_output(k)
+        if op == cs.OP_INPUT:
+            key = (args[0], args[1])
+            if key not in input_ids:
+                input_ids[key] = emit({"op": "input", "input": args[0], "index": args[1]})
+            work[res[0]] = input_ids[key]
+        elif op == cs.OP_OUTPUT:
+            outputs[res[0]][res[1]] = work[args[0]]
+        elif op == cs.OP_CONST:
+            value = f.instruction_constant(k)
+            if not math.isfinite(value):
+                raise DerivationError(f"{name}: non-finite constant {value}")
+            key = (value, math.copysign(1.0, value))
+            if key not in consts:
+                consts[key] = emit({"op": "const", "value": value})
+            work[res[0]] = consts[key]
+        elif op in UNARY:
+            work[res[0]] = emit({"op": UNARY[op], "args": [work[args[0]]]})
+        elif op in BINARY:
+            work[res[0]] = emit({"op": BINARY[op], "args": [work[args[0]], work[args[1]]]})
+        else:
+            raise DerivationError(f"{name}: CasADi operation {OP_NAMES.get(op, op)} has no IR form")
+    for i, entries in enumerate(outputs):
+        if any(e is None for e in entries):
+            raise DerivationError(f"{name}: output {i} has unassigned entries")
+    return instructions, outputs
+
+
+def main():
+    model = json.load(sys.stdin)
+    inputs, terms = derive(model)
+    functions = []
+    for name, (input_names, outs) in terms.items():
+        exprs = [cs.densify(e) for _, _, e in outs]
+        exprs = cs.cse(exprs)
+        f = cs.Function(name, [inputs[i] for i in input_names], exprs)
+        instructions, entries = export(name, f, input_names)
+        functions.append(
+            {
+                "name": name,
+                "inputs": input_names,
+                "outputs": [
+                    {"name": oname, "kind": kind, "rows": e.size1(), "cols": e.size2(), "entries": ent}
+                    for (oname, kind, e), ent in zip(outs, entries)
+                ],
+                "instructions": instructions,
+            }
+        )
+    json.dump(
+        {
+            "casadi_version": cs.__version__,
+            "spec_sha256": hashlib.sha256(model["spec_text"].encode("utf-8")).hexdigest(),
+            "functions": functions,
+        },
+        sys.stdout,
+    )
+
+
+if __name__ == "__main__":
+    try:
+        main()
+    except DerivationError as e:
+        print(f"derivation failed: {e}", file=sys.stderr)
+        sys.exit(1)

@@ -1,0 +1,347 @@
+//! `cargo xtask gen`: specs → CasADi → IR → Rust, all in memory first, then written only
+//! when every model succeeded (a failed generation leaves every file untouched).
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+
+use codegen::ir::{Input, InputShape, Output, Program};
+use serde::Deserialize;
+
+use crate::ir_file::{IrFile, ModelInfo, FORMAT};
+use crate::model::{self, Model};
+use crate::rust_module::{self, Summary};
+use crate::spec::Spec;
+
+pub const SPECS_DIR: &str = "leg-models/specs";
+pub const IR_DIR: &str = "generated/ir";
+pub const SRC_DIR: &str = "generated/src";
+pub const VENV_DIR: &str = ".venv";
+pub const REQUIREMENTS: &str = "xtask/requirements.txt";
+const SCRIPT: &str = "xtask/derive.py";
+
+/// The workspace root (the parent of `xtask/`).
+pub fn workspace_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("xtask lives in the workspace")
+        .to_path_buf()
+}
+
+/// The spec files, sorted by name.
+pub fn spec_paths(root: &Path) -> Result<Vec<PathBuf>, String> {
+    let dir = root.join(SPECS_DIR);
+    let mut out: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .map_err(|e| format!("{}: cannot list specs: {e}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    out.sort();
+    Ok(out)
+}
+
+/// Loads and validates a spec, with its path shown relative to the workspace.
+pub fn load_spec(root: &Path, path: &Path) -> Result<Spec, String> {
+    let shown = path.strip_prefix(root).unwrap_or(path);
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: cannot read: {e}", shown.display()))?;
+    Spec::parse(shown, text).map_err(|e| e.to_string())
+}
+
+/// What `derive.py` prints.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Derived {
+    casadi_version: String,
+    spec_sha256: String,
+    functions: Vec<DerivedFunction>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct DerivedFunction {
+    name: String,
+    inputs: Vec<String>,
+    outputs: Vec<Output>,
+    instructions: Vec<codegen::ir::Instr>,
+}
+
+/// Sets up (once) the virtual environment with the pinned CasADi; returns its python.
+pub fn python(root: &Path) -> Result<PathBuf, String> {
+    let venv = root.join(VENV_DIR);
+    let py = venv.join("bin").join("python");
+    let requirements = std::fs::read_to_string(root.join(REQUIREMENTS))
+        .map_err(|e| format!("{REQUIREMENTS}: {e}"))?;
+    let stamp = venv.join("requirements.installed");
+    if py.exists() && std::fs::read_to_string(&stamp).ok().as_deref() == Some(requirements.as_str()) {
+        return Ok(py);
+    }
+    eprintln!("setting up {VENV_DIR}/ with {REQUIREMENTS} (first run only)…");
+    let run = |cmd: &mut Command, shown: &str| -> Result<(), String> {
+        let status = cmd
+            .current_dir(root)
+            .status()
+            .map_err(|e| format!("cannot run `{shown}`: {e}; is python3 (3.9 or later, with venv) installed?"))?;
+        if status.success() {
+            Ok(())
+        } else {
+            Err(format!("`{shown}` failed ({status}); run it by hand to see why, then `cargo xtask gen` again"))
+        }
+    };
+    if !py.exists() {
+        run(
+            Command::new("python3").args(["-m", "venv", VENV_DIR]),
+            &format!("python3 -m venv {VENV_DIR}"),
+        )?;
+    }
+    run(
+        Command::new(&py).args(["-m", "pip", "install", "--quiet", "--disable-pip-version-check", "-r", REQUIREMENTS]),
+        &format!("{VENV_DIR}/bin/python -m pip install -r {REQUIREMENTS}"),
+    )?;
+    std::fs::write(&stamp, requirements).map_err(|e| format!("{}: {e}", stamp.display()))?;
+    Ok(py)
+}
+
+fn derive(root: &Path, py: &Path, model: &Model) -> Result<Derived, String> {
+    let mut child = Command::new(py)
+        .arg(root.join(SCRIPT))
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(|e| format!("cannot start {}: {e}", py.display()))?;
+    let input = serde_json::to_vec(model).expect("model serializes");
+    child
+        .stdin
+        .take()
+        .expect("piped")
+        .write_all(&input)
+        .map_err(|e| format!("derivation of `{}`: {e}", model.name))?;
+    let out = child
+        .wait_with_output()
+        .map_err(|e| format!("derivation of `{}`: {e}", model.name))?;
+    if !out.status.success() {
+        return Err(format!(
+            "derivation of `{}` failed ({}):\n{}",
+            model.name,
+            out.status,
+            String::from_utf8_lossy(&out.stderr).trim()
+        ));
+    }
+    serde_json::from_slice(&out.stdout)
+        .map_err(|e| format!("derivation of `{}` printed unreadable IR: {e}", model.name))
+}
+
+/// Puts the derivation's programs together with what the model is.
+fn assemble(spec: &Spec, model: &Model, derived: Derived) -> IrFile {
+    let n = model.links.len();
+    let fields: Vec<String> = model.params.iter().map(|p| p.name.clone()).collect();
+    let functions = derived
+        .functions
+        .into_iter()
+        .map(|f| Program {
+            name: f.name,
+            inputs: f
+                .inputs
+                .into_iter()
+                .map(|name| {
+                    let shape = if name == "p" {
+                        InputShape::Struct {
+                            type_name: "Params".into(),
+                            fields: fields.clone(),
+                        }
+                    } else {
+                        InputShape::Vector { len: n }
+                    };
+                    Input { name, shape }
+                })
+                .collect(),
+            outputs: f.outputs,
+            instructions: f.instructions,
+        })
+        .collect();
+    IrFile {
+        format: FORMAT,
+        model: ModelInfo {
+            name: model.name.clone(),
+            spec: spec.path.display().to_string(),
+            spec_sha256: derived.spec_sha256,
+            casadi_version: derived.casadi_version,
+            joints: model.joint_names(),
+            actuated: model.actuated.clone(),
+            closures: model.closures.iter().map(|c| c.name.clone()).collect(),
+            params: model.params.clone(),
+        },
+        functions,
+    }
+}
+
+/// Every Rust file the committed IR determines (each model's module and `lib.rs`), by
+/// path relative to the root.
+pub fn rust_files(irs: &[IrFile]) -> Result<BTreeMap<PathBuf, String>, String> {
+    let mut files = BTreeMap::new();
+    for ir in irs {
+        let src = rust_module::model_source(ir).map_err(|e| e.to_string())?;
+        files.insert(Path::new(SRC_DIR).join(format!("{}.rs", ir.model.name)), src);
+    }
+    let summaries: Vec<Summary> = irs.iter().map(Summary::of).collect();
+    let lib = rust_module::lib_source(&summaries).map_err(|e| e.to_string())?;
+    files.insert(Path::new(SRC_DIR).join("lib.rs"), lib);
+    Ok(files)
+}
+
+/// Reads every committed IR file.
+pub fn committed_irs(root: &Path) -> Result<Vec<IrFile>, String> {
+    let mut out = Vec::new();
+    for spec in spec_paths(root)? {
+        let name = spec.file_stem().and_then(|s| s.to_str()).unwrap_or_default();
+        let path = Path::new(IR_DIR).join(format!("{name}.json"));
+        let text = std::fs::read_to_string(root.join(&path))
+            .map_err(|e| format!("{}: {e} (run `cargo xtask gen`)", path.display()))?;
+        out.push(IrFile::parse(&text).map_err(|e| format!("{}: {e}", path.display()))?);
+    }
+    Ok(out)
+}
+
+/// Files under `generated/` that no spec accounts for.
+fn orphans(root: &Path, expected: &BTreeMap<PathBuf, String>) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for (dir, ext) in [(IR_DIR, "json"), (SRC_DIR, "rs")] {
+        let Ok(entries) = std::fs::read_dir(root.join(dir)) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            let rel = Path::new(dir).join(e.file_name());
+            if rel.extension().is_some_and(|x| x == ext) && !expected.contains_key(&rel) {
+                out.push(rel);
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// Files whose committed content differs from `expected` (missing ones included), and
+/// orphans.
+pub fn stale_files(root: &Path, expected: &BTreeMap<PathBuf, String>) -> Vec<PathBuf> {
+    let mut stale: Vec<PathBuf> = expected
+        .iter()
+        .filter(|(path, text)| std::fs::read_to_string(root.join(path)).ok().as_deref() != Some(text.as_str()))
+        .map(|(p, _)| p.clone())
+        .collect();
+    stale.extend(orphans(root, expected));
+    stale
+}
+
+pub struct GenOptions {
+    pub check: bool,
+    /// Models to regenerate; empty means all.
+    pub names: Vec<String>,
+}
+
+/// Runs the generation; returns a report for the user.
+pub fn run(root: &Path, opts: &GenOptions) -> Result<String, String> {
+    let started = std::time::Instant::now();
+    let paths = spec_paths(root)?;
+    let known: Vec<String> = paths
+        .iter()
+        .filter_map(|p| p.file_stem().and_then(|s| s.to_str()).map(String::from))
+        .collect();
+    for n in &opts.names {
+        if !known.contains(n) {
+            return Err(format!(
+                "unknown model `{n}` (specs in {SPECS_DIR}/: {})",
+                known.join(", ")
+            ));
+        }
+    }
+    let selected = |name: &str| opts.names.is_empty() || opts.names.iter().any(|n| n == name);
+
+    // Everything is computed before anything is written.
+    let mut specs = Vec::new();
+    for p in &paths {
+        specs.push(load_spec(root, p)?);
+    }
+    let py = python(root)?;
+    let mut irs = Vec::new();
+    let mut files = BTreeMap::new();
+    for spec in &specs {
+        let ir = if selected(&spec.name) {
+            let model = model::build(spec).map_err(|e| e.to_string())?;
+            let derived = derive(root, &py, &model)?;
+            let ir = assemble(spec, &model, derived);
+            rust_module::check_terms(&ir).map_err(|e| e.to_string())?;
+            files.insert(Path::new(IR_DIR).join(format!("{}.json", spec.name)), ir.to_text());
+            ir
+        } else {
+            let path = Path::new(IR_DIR).join(format!("{}.json", spec.name));
+            let text = std::fs::read_to_string(root.join(&path))
+                .map_err(|e| format!("{}: {e} (run `cargo xtask gen {}`)", path.display(), spec.name))?;
+            IrFile::parse(&text).map_err(|e| format!("{}: {e}", path.display()))?
+        };
+        irs.push(ir);
+    }
+    files.extend(rust_files(&irs)?);
+    let names: Vec<&str> = specs.iter().map(|s| s.name.as_str()).filter(|n| selected(n)).collect();
+
+    if opts.check {
+        let mut expected = files;
+        if !opts.names.is_empty() {
+            // Only the selected models' files are compared.
+            expected.retain(|p, _| {
+                p.file_stem().and_then(|s| s.to_str()).is_some_and(|s| selected(s) || s == "lib")
+            });
+        }
+        let mut stale = stale_files(root, &expected);
+        if !opts.names.is_empty() {
+            stale.retain(|p| expected.contains_key(p));
+        }
+        if stale.is_empty() {
+            return Ok(format!(
+                "generated code is up to date ({}; {:.1} s)",
+                names.join(", "),
+                started.elapsed().as_secs_f64()
+            ));
+        }
+        let list: Vec<String> = stale.iter().map(|p| format!("  {}", p.display())).collect();
+        return Err(format!(
+            "generated files are stale or missing:\n{}\nrun `cargo xtask gen` and commit the result",
+            list.join("\n")
+        ));
+    }
+
+    let mut written = Vec::new();
+    for (path, text) in &files {
+        let full = root.join(path);
+        if std::fs::read_to_string(&full).ok().as_deref() == Some(text.as_str()) {
+            continue;
+        }
+        write_atomic(&full, text)?;
+        written.push(path.display().to_string());
+    }
+    if opts.names.is_empty() {
+        for orphan in orphans(root, &files) {
+            std::fs::remove_file(root.join(&orphan)).map_err(|e| format!("{}: {e}", orphan.display()))?;
+            written.push(format!("{} (removed)", orphan.display()));
+        }
+    }
+    Ok(format!(
+        "generated {} in {:.1} s; {}",
+        names.join(", "),
+        started.elapsed().as_secs_f64(),
+        if written.is_empty() {
+            "no file changed".to_string()
+        } else {
+            format!("changed: {}", written.join(", "))
+        }
+    ))
+}
+
+/// Writes through a temporary file and a rename, so a reader never sees half a file.
+fn write_atomic(path: &Path, text: &str) -> Result<(), String> {
+    let dir = path.parent().expect("generated files live in a folder");
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, text).map_err(|e| format!("{}: {e}", tmp.display()))?;
+    std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+}

@@ -1,0 +1,95 @@
+//! The committed IR file of one geometry (`generated/ir/NAME.json`): what the model is and
+//! its derived terms as straight-line programs. Written one instruction per line so that
+//! a change reviews as a readable diff; floats round-trip exactly.
+
+use codegen::ir::Program;
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use crate::model::Param;
+
+pub const FORMAT: u32 = 1;
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IrFile {
+    pub format: u32,
+    pub model: ModelInfo,
+    pub functions: Vec<Program>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelInfo {
+    pub name: String,
+    /// The spec, relative to the workspace root.
+    pub spec: String,
+    pub spec_sha256: String,
+    pub casadi_version: String,
+    /// Link names, in coordinate order.
+    pub joints: Vec<String>,
+    pub actuated: Vec<usize>,
+    pub closures: Vec<String>,
+    pub params: Vec<Param>,
+}
+
+impl IrFile {
+    pub fn parse(text: &str) -> Result<IrFile, String> {
+        let ir: IrFile = serde_json::from_str(text).map_err(|e| e.to_string())?;
+        if ir.format != FORMAT {
+            return Err(format!("IR format {} (this generator reads {FORMAT})", ir.format));
+        }
+        Ok(ir)
+    }
+
+    /// The canonical text: objects that hold lists of objects are spread over lines,
+    /// everything else (an instruction, a parameter, an output) stays on one line.
+    pub fn to_text(&self) -> String {
+        let value = serde_json::to_value(self).expect("IR serializes");
+        let mut out = String::new();
+        write_value(&value, 0, &mut out);
+        out.push('\n');
+        out
+    }
+}
+
+fn holds_object_list(v: &Value) -> bool {
+    match v {
+        Value::Array(items) => items.iter().any(|i| i.is_object() || holds_object_list(i)),
+        Value::Object(map) => map.values().any(holds_object_list),
+        _ => false,
+    }
+}
+
+fn write_value(v: &Value, indent: usize, out: &mut String) {
+    let pad = |n: usize| "  ".repeat(n);
+    if !holds_object_list(v) {
+        out.push_str(&serde_json::to_string(v).expect("JSON value serializes"));
+        return;
+    }
+    match v {
+        Value::Array(items) => {
+            out.push_str("[\n");
+            for (i, item) in items.iter().enumerate() {
+                out.push_str(&pad(indent + 1));
+                write_value(item, indent + 1, out);
+                out.push_str(if i + 1 < items.len() { ",\n" } else { "\n" });
+            }
+            out.push_str(&pad(indent));
+            out.push(']');
+        }
+        Value::Object(map) => {
+            out.push_str("{\n");
+            for (i, (k, item)) in map.iter().enumerate() {
+                out.push_str(&pad(indent + 1));
+                out.push_str(&serde_json::to_string(k).expect("key serializes"));
+                out.push_str(": ");
+                write_value(item, indent + 1, out);
+                out.push_str(if i + 1 < map.len() { ",\n" } else { "\n" });
+            }
+            out.push_str(&pad(indent));
+            out.push('}');
+        }
+        _ => unreachable!("scalars hold no lists"),
+    }
+}

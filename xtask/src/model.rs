@@ -1,0 +1,249 @@
+//! A validated spec in the form the derivation reads: every geometric quantity named by
+//! the run-time parameter that stands for it, links and points by index.
+
+use serde::{Deserialize, Serialize};
+
+use crate::spec::{PointSpec, Spec, SpecError, Vec2};
+
+/// One run-time parameter: a field of the generated `Params` struct.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Param {
+    pub name: String,
+    /// The spec's value (the generated `Default`).
+    pub default: f64,
+    /// What it is, with its unit; written from templates, never from spec text.
+    pub doc: String,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Link {
+    pub name: String,
+    pub parent: Option<usize>,
+    pub origin: [String; 2],
+    pub length: [String; 2],
+    pub com: [String; 2],
+    pub mass: String,
+    pub inertia: String,
+    pub damping: String,
+    /// `[rotor_inertia, gear_ratio]` of an actuated joint.
+    pub rotor: Option<[String; 2]>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Point {
+    pub link: usize,
+    pub point: [String; 2],
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Closure {
+    pub name: String,
+    pub a: Point,
+    pub b: Point,
+}
+
+/// What `derive.py` reads on stdin.
+#[derive(Clone, Debug, Serialize)]
+pub struct Model {
+    pub name: String,
+    pub spec_text: String,
+    pub params: Vec<Param>,
+    pub links: Vec<Link>,
+    pub closures: Vec<Closure>,
+    pub foot: Point,
+    pub gravity: [String; 2],
+    pub actuated: Vec<usize>,
+}
+
+impl Model {
+    pub fn joint_names(&self) -> Vec<String> {
+        self.links.iter().map(|l| l.name.clone()).collect()
+    }
+}
+
+struct Builder<'a> {
+    spec: &'a Spec,
+    params: Vec<Param>,
+}
+
+impl Builder<'_> {
+    fn scalar(&mut self, name: String, value: f64, doc: String) -> Result<String, SpecError> {
+        if self.params.iter().any(|p| p.name == name) {
+            return Err(SpecError {
+                file: self.spec.path.clone(),
+                line: 1,
+                column: 1,
+                field: "(names)".into(),
+                message: format!(
+                    "two quantities would both be the parameter `{name}`; rename a link or closure"
+                ),
+            });
+        }
+        self.params.push(Param {
+            name: name.clone(),
+            default: value,
+            doc,
+        });
+        Ok(name)
+    }
+
+    fn vector(&mut self, prefix: &str, v: &Vec2, doc: &str) -> Result<[String; 2], SpecError> {
+        Ok([
+            self.scalar(format!("{prefix}_x"), v.value[0], format!("{doc}, x [m]."))?,
+            self.scalar(format!("{prefix}_y"), v.value[1], format!("{doc}, y [m]."))?,
+        ])
+    }
+
+    /// A point on a link: its own parameters when the spec gives one, else the link's tip.
+    fn point(
+        &mut self,
+        prefix: &str,
+        p: &PointSpec,
+        doc: &str,
+        links: &[Link],
+    ) -> Result<Point, SpecError> {
+        let link = self.spec.link_index(p.link.get_ref()).expect("validated");
+        let point = match &p.point {
+            Some(v) => self.vector(prefix, v.get_ref(), doc)?,
+            None => links[link].length.clone(),
+        };
+        Ok(Point { link, point })
+    }
+}
+
+/// Builds the derivation's model from a validated spec.
+pub fn build(spec: &Spec) -> Result<Model, SpecError> {
+    let mut b = Builder {
+        spec,
+        params: Vec::new(),
+    };
+    let f = &spec.file;
+    let gravity = [
+        b.scalar(
+            "gravity_x".into(),
+            f.gravity.get_ref().value[0],
+            "Gravity in the base frame, x [m/s²].".into(),
+        )?,
+        b.scalar(
+            "gravity_y".into(),
+            f.gravity.get_ref().value[1],
+            "Gravity in the base frame, y [m/s²].".into(),
+        )?,
+    ];
+    let mut links: Vec<Link> = Vec::new();
+    let mut actuated = Vec::new();
+    for (i, link) in f.links.iter().enumerate() {
+        let l = link.get_ref();
+        let name = l.name.get_ref().clone();
+        let parent = match l.parent.get_ref().as_str() {
+            "base" => None,
+            p => Some(spec.link_index(p).expect("validated")),
+        };
+        let origin = match (&l.origin, parent) {
+            (Some(o), None) => b.vector(
+                &format!("{name}_origin"),
+                o.get_ref(),
+                &format!("Joint of `{name}` in the base frame"),
+            )?,
+            (Some(o), Some(_)) => b.vector(
+                &format!("{name}_origin"),
+                o.get_ref(),
+                &format!("Joint of `{name}` in its parent's frame"),
+            )?,
+            (None, None) => b.vector(
+                &format!("{name}_origin"),
+                &Vec2 {
+                    value: [0.0, 0.0],
+                    source: None,
+                },
+                &format!("Joint of `{name}` in the base frame"),
+            )?,
+            (None, Some(p)) => links[p].length.clone(),
+        };
+        let length = b.vector(
+            &format!("{name}_length"),
+            l.length.get_ref(),
+            &format!("Tip of `{name}` from its joint, link frame"),
+        )?;
+        let mass = b.scalar(
+            format!("{name}_mass"),
+            l.mass.get_ref().value,
+            format!("Mass of `{name}` [kg]."),
+        )?;
+        let com = b.vector(
+            &format!("{name}_com"),
+            l.com.get_ref(),
+            &format!("Centre of mass of `{name}` from its joint, link frame"),
+        )?;
+        let inertia = b.scalar(
+            format!("{name}_inertia"),
+            l.inertia.get_ref().value,
+            format!("Inertia of `{name}` about its centre of mass [kg m²]."),
+        )?;
+        let damping = b.scalar(
+            format!("{name}_damping"),
+            l.damping.as_ref().map_or(0.0, |d| d.get_ref().value),
+            format!("Viscous damping of the joint of `{name}` [N m s/rad]."),
+        )?;
+        let rotor = match &l.actuator {
+            None => None,
+            Some(a) => {
+                actuated.push(i);
+                let a = a.get_ref();
+                Some([
+                    b.scalar(
+                        format!("{name}_rotor_inertia"),
+                        a.rotor_inertia.get_ref().value,
+                        format!("Rotor inertia of the motor of `{name}` [kg m²]."),
+                    )?,
+                    b.scalar(
+                        format!("{name}_gear_ratio"),
+                        a.gear_ratio.get_ref().value,
+                        format!("Gear ratio of the motor of `{name}` (reflected inertia I·N²)."),
+                    )?,
+                ])
+            }
+        };
+        links.push(Link {
+            name,
+            parent,
+            origin,
+            length,
+            com,
+            mass,
+            inertia,
+            damping,
+            rotor,
+        });
+    }
+    let mut closures = Vec::new();
+    for c in &f.closures {
+        let c = c.get_ref();
+        let name = c.name.get_ref().clone();
+        let a = b.point(
+            &format!("{name}_a"),
+            c.a.get_ref(),
+            &format!("Point a of closure `{name}`, link frame"),
+            &links,
+        )?;
+        let bp = b.point(
+            &format!("{name}_b"),
+            c.b.get_ref(),
+            &format!("Point b of closure `{name}`, link frame"),
+            &links,
+        )?;
+        closures.push(Closure { name, a, b: bp });
+    }
+    let foot = b.point("foot", f.foot.get_ref(), "Foot point, link frame", &links)?;
+    Ok(Model {
+        name: spec.name.clone(),
+        spec_text: spec.text.clone(),
+        params: b.params,
+        links,
+        closures,
+        foot,
+        gravity,
+        actuated,
+    })
+}

@@ -1,0 +1,442 @@
+//! Geometry specs: parsing (TOML with serde), validation, and every error with the
+//! file, line, column and field it concerns.
+//!
+//! A spec describes a planar tree of rigid links on revolute joints (each link hangs from
+//! its parent link or from the base by one joint, whose angle is relative to the parent),
+//! any number of point-on-link closures, the actuated joints, the foot point and gravity.
+//! Every number may be written plain (`mass = 0.05`) or with its source
+//! (`mass = { value = 0.05, source = "PyBullet minitaur.urdf" }`).
+
+use std::fmt;
+use std::marker::PhantomData;
+use std::path::{Path, PathBuf};
+
+use serde::de::{self, Deserializer, MapAccess, SeqAccess, Visitor};
+use serde::Deserialize;
+use toml::Spanned;
+
+/// A spec that cannot be used, and where.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SpecError {
+    pub file: PathBuf,
+    pub line: usize,
+    pub column: usize,
+    pub field: String,
+    pub message: String,
+}
+
+impl fmt::Display for SpecError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{}:{}:{}: {}: {}",
+            self.file.display(),
+            self.line,
+            self.column,
+            self.field,
+            self.message
+        )
+    }
+}
+
+impl std::error::Error for SpecError {}
+
+/// A number or 2-vector, with the optional note of where it comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Noted<V> {
+    pub value: V,
+    pub source: Option<String>,
+}
+
+pub type Num = Noted<f64>;
+pub type Vec2 = Noted<[f64; 2]>;
+
+/// Plain values a [`Noted`] can hold.
+pub trait PlainValue: Sized {
+    const EXPECTING: &'static str;
+    fn from_number(v: f64) -> Option<Self>;
+    fn from_seq<'de, A: SeqAccess<'de>>(seq: A) -> Result<Self, A::Error>;
+    fn from_map_value<'de, A: MapAccess<'de>>(map: &mut A) -> Result<Self, A::Error>;
+}
+
+impl PlainValue for f64 {
+    const EXPECTING: &'static str = "a number";
+    fn from_number(v: f64) -> Option<Self> {
+        Some(v)
+    }
+    fn from_seq<'de, A: SeqAccess<'de>>(_: A) -> Result<Self, A::Error> {
+        Err(de::Error::invalid_type(de::Unexpected::Seq, &Self::EXPECTING))
+    }
+    fn from_map_value<'de, A: MapAccess<'de>>(map: &mut A) -> Result<Self, A::Error> {
+        map.next_value()
+    }
+}
+
+impl PlainValue for [f64; 2] {
+    const EXPECTING: &'static str = "a 2-vector [x, y]";
+    fn from_number(_: f64) -> Option<Self> {
+        None
+    }
+    fn from_seq<'de, A: SeqAccess<'de>>(mut seq: A) -> Result<Self, A::Error> {
+        let x = seq.next_element()?;
+        let y = seq.next_element()?;
+        match (x, y, seq.next_element::<f64>()?) {
+            (Some(x), Some(y), None) => Ok([x, y]),
+            _ => Err(de::Error::custom("expected a 2-vector [x, y]")),
+        }
+    }
+    fn from_map_value<'de, A: MapAccess<'de>>(map: &mut A) -> Result<Self, A::Error> {
+        map.next_value()
+    }
+}
+
+impl<'de, V: PlainValue> Deserialize<'de> for Noted<V> {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct NotedVisitor<V>(PhantomData<V>);
+        impl<'de, V: PlainValue> Visitor<'de> for NotedVisitor<V> {
+            type Value = Noted<V>;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                write!(f, "{} or {{ value = …, source = \"…\" }}", V::EXPECTING)
+            }
+            fn visit_f64<E: de::Error>(self, v: f64) -> Result<Self::Value, E> {
+                V::from_number(v)
+                    .map(|value| Noted { value, source: None })
+                    .ok_or_else(|| E::invalid_type(de::Unexpected::Float(v), &self))
+            }
+            fn visit_i64<E: de::Error>(self, v: i64) -> Result<Self::Value, E> {
+                V::from_number(v as f64)
+                    .map(|value| Noted { value, source: None })
+                    .ok_or_else(|| E::invalid_type(de::Unexpected::Signed(v), &self))
+            }
+            fn visit_u64<E: de::Error>(self, v: u64) -> Result<Self::Value, E> {
+                self.visit_i64(v as i64)
+            }
+            fn visit_seq<A: SeqAccess<'de>>(self, seq: A) -> Result<Self::Value, A::Error> {
+                V::from_seq(seq).map(|value| Noted { value, source: None })
+            }
+            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
+                let (mut value, mut source) = (None, None);
+                while let Some(key) = map.next_key::<String>()? {
+                    match key.as_str() {
+                        "value" => value = Some(V::from_map_value(&mut map)?),
+                        "source" => source = Some(map.next_value::<String>()?),
+                        other => {
+                            return Err(de::Error::unknown_field(other, &["value", "source"]))
+                        }
+                    }
+                }
+                let value = value.ok_or_else(|| de::Error::missing_field("value"))?;
+                Ok(Noted { value, source })
+            }
+        }
+        d.deserialize_any(NotedVisitor(PhantomData))
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SpecFile {
+    /// What the leg is; for people, never emitted into code.
+    #[serde(default)]
+    pub description: Option<String>,
+    /// Gravity in the base frame [m/s²].
+    pub gravity: Spanned<Vec2>,
+    pub links: Vec<Spanned<LinkSpec>>,
+    #[serde(default)]
+    pub closures: Vec<Spanned<ClosureSpec>>,
+    pub foot: Spanned<PointSpec>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LinkSpec {
+    pub name: Spanned<String>,
+    /// `"base"` or a link defined above.
+    pub parent: Spanned<String>,
+    /// Where the joint sits: on the base, in the base frame (default `[0, 0]`); on a
+    /// parent link, in the parent's frame (default the parent's tip).
+    #[serde(default)]
+    pub origin: Option<Spanned<Vec2>>,
+    /// From the joint to the link's tip, in the link frame [m].
+    pub length: Spanned<Vec2>,
+    /// [kg]
+    pub mass: Spanned<Num>,
+    /// Centre of mass, from the joint, in the link frame [m].
+    pub com: Spanned<Vec2>,
+    /// About the centre of mass [kg m²].
+    pub inertia: Spanned<Num>,
+    /// Viscous joint damping [N m s/rad]; default 0.
+    #[serde(default)]
+    pub damping: Option<Spanned<Num>>,
+    /// Present when a motor drives this link's joint.
+    #[serde(default)]
+    pub actuator: Option<Spanned<ActuatorSpec>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ActuatorSpec {
+    /// Rotor inertia on the motor side [kg m²]; reflected as `I · gear_ratio²`.
+    pub rotor_inertia: Spanned<Num>,
+    pub gear_ratio: Spanned<Num>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PointSpec {
+    pub link: Spanned<String>,
+    /// In the link frame, from its joint; default the link's tip.
+    #[serde(default)]
+    pub point: Option<Spanned<Vec2>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClosureSpec {
+    pub name: Spanned<String>,
+    pub a: Spanned<PointSpec>,
+    pub b: Spanned<PointSpec>,
+}
+
+/// A parsed, validated spec with its source text.
+#[derive(Debug)]
+pub struct Spec {
+    /// The file stem: the module name of the generated code.
+    pub name: String,
+    pub path: PathBuf,
+    pub text: String,
+    pub file: SpecFile,
+}
+
+const RUST_KEYWORDS: &[&str] = &[
+    "as", "async", "await", "break", "const", "continue", "crate", "dyn", "else", "enum",
+    "extern", "false", "fn", "for", "gen", "if", "impl", "in", "let", "loop", "match", "mod",
+    "move", "mut", "pub", "ref", "return", "self", "static", "struct", "super", "trait",
+    "true", "try", "type", "unsafe", "use", "where", "while", "abstract", "become", "box",
+    "do", "final", "macro", "override", "priv", "typeof", "unsized", "virtual", "yield",
+];
+
+/// Names in specs become module, field and constant names: lowercase snake case ASCII
+/// identifiers that are not keywords.
+pub fn check_name(name: &str) -> Result<(), String> {
+    let ok = name.starts_with(|c: char| c.is_ascii_lowercase())
+        && name
+            .chars()
+            .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_')
+        && name.len() <= 48;
+    if !ok {
+        return Err(format!(
+            "`{name}` is not a plain identifier (lowercase letters, digits and `_`, starting with a letter, at most 48 characters)"
+        ));
+    }
+    if RUST_KEYWORDS.contains(&name) {
+        return Err(format!("`{name}` is a Rust keyword"));
+    }
+    Ok(())
+}
+
+struct Ctx<'a> {
+    path: &'a Path,
+    text: &'a str,
+}
+
+impl Ctx<'_> {
+    fn at(&self, offset: usize, field: impl Into<String>, message: impl Into<String>) -> SpecError {
+        let (line, column) = line_column(self.text, offset);
+        SpecError {
+            file: self.path.to_path_buf(),
+            line,
+            column,
+            field: field.into(),
+            message: message.into(),
+        }
+    }
+
+    fn span<T>(&self, s: &Spanned<T>, field: impl Into<String>, msg: impl Into<String>) -> SpecError {
+        self.at(s.span().start, field, msg)
+    }
+}
+
+/// 1-based line and column (in characters) of a byte offset.
+pub fn line_column(text: &str, offset: usize) -> (usize, usize) {
+    let offset = offset.min(text.len());
+    let before = &text[..offset];
+    let line = before.matches('\n').count() + 1;
+    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+    (line, before[line_start..].chars().count() + 1)
+}
+
+/// The key written before `offset` on its line (`mass = …` → `mass`), to name the field
+/// of a syntax or type error.
+fn key_at(text: &str, offset: usize) -> Option<String> {
+    let offset = offset.min(text.len());
+    let line_start = text[..offset].rfind('\n').map_or(0, |i| i + 1);
+    let line_end = text[offset..].find('\n').map_or(text.len(), |i| offset + i);
+    let line = &text[line_start..line_end];
+    let (key, _) = line.split_once('=')?;
+    let key = key.trim().trim_matches('"');
+    (!key.is_empty() && !key.starts_with('#')).then(|| key.to_string())
+}
+
+impl Spec {
+    /// Reads, parses and validates the spec at `path`.
+    pub fn load(path: &Path) -> Result<Spec, SpecError> {
+        let text = std::fs::read_to_string(path).map_err(|e| SpecError {
+            file: path.to_path_buf(),
+            line: 0,
+            column: 0,
+            field: "(file)".into(),
+            message: format!("cannot read: {e}"),
+        })?;
+        Spec::parse(path, text)
+    }
+
+    /// Parses and validates `text` as the spec at `path` (whose stem names the model).
+    pub fn parse(path: &Path, text: String) -> Result<Spec, SpecError> {
+        let ctx = Ctx { path, text: &text };
+        let name = path
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or_default()
+            .to_string();
+        check_name(&name).map_err(|m| ctx.at(0, "(file name)", m))?;
+        let file: SpecFile = toml::from_str(&text).map_err(|e| {
+            let offset = e.span().map_or(0, |s| s.start);
+            let field = key_at(&text, offset).unwrap_or_else(|| "(document)".into());
+            ctx.at(offset, field, e.message().trim().to_string())
+        })?;
+        validate(&ctx, &file)?;
+        Ok(Spec {
+            name,
+            path: path.to_path_buf(),
+            text,
+            file,
+        })
+    }
+
+    pub fn link_index(&self, name: &str) -> Option<usize> {
+        self.file.links.iter().position(|l| *l.get_ref().name.get_ref() == name)
+    }
+}
+
+fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
+    if file.links.is_empty() {
+        return Err(ctx.at(0, "links", "a spec needs at least one [[links]] table"));
+    }
+    check_vec(ctx, &file.gravity, "gravity", Sign::Any)?;
+    let mut names: Vec<String> = Vec::new();
+    let mut check_new_name = |s: &Spanned<String>, field: &str| -> Result<(), SpecError> {
+        let n = s.get_ref();
+        check_name(n).map_err(|m| ctx.span(s, field, m))?;
+        if n == "base" {
+            return Err(ctx.span(s, field, format!("`{n}` is reserved")));
+        }
+        if names.contains(n) {
+            return Err(ctx.span(s, field, format!("duplicate name `{n}`")));
+        }
+        names.push(n.clone());
+        Ok(())
+    };
+    let link_names: Vec<&str> = file.links.iter().map(|l| l.get_ref().name.get_ref().as_str()).collect();
+    for (i, link) in file.links.iter().enumerate() {
+        let l = link.get_ref();
+        let f = |field: &str| format!("links[{i}].{field}");
+        check_new_name(&l.name, &f("name"))?;
+        let parent = l.parent.get_ref();
+        if parent != "base" {
+            match link_names.iter().position(|n| n == parent) {
+                Some(p) if p < i => {}
+                Some(_) => {
+                    return Err(ctx.span(
+                        &l.parent,
+                        f("parent"),
+                        format!("parent `{parent}` is defined below this link; list parents first"),
+                    ))
+                }
+                None => {
+                    return Err(ctx.span(
+                        &l.parent,
+                        f("parent"),
+                        format!(
+                            "unknown parent `{parent}` (expected \"base\" or one of: {})",
+                            link_names[..i].join(", ")
+                        ),
+                    ))
+                }
+            }
+        }
+        if let Some(o) = &l.origin {
+            check_vec(ctx, o, &f("origin"), Sign::Any)?;
+        }
+        check_vec(ctx, &l.length, &f("length"), Sign::Any)?;
+        check_vec(ctx, &l.com, &f("com"), Sign::Any)?;
+        check_num(ctx, &l.mass, &f("mass"), Sign::Positive)?;
+        check_num(ctx, &l.inertia, &f("inertia"), Sign::NonNegative)?;
+        if let Some(d) = &l.damping {
+            check_num(ctx, d, &f("damping"), Sign::NonNegative)?;
+        }
+        if let Some(a) = &l.actuator {
+            let a = a.get_ref();
+            check_num(ctx, &a.rotor_inertia, &f("actuator.rotor_inertia"), Sign::NonNegative)?;
+            check_num(ctx, &a.gear_ratio, &f("actuator.gear_ratio"), Sign::Positive)?;
+        }
+    }
+    let check_point = |p: &PointSpec, field: &str| -> Result<(), SpecError> {
+        let link = p.link.get_ref();
+        if !link_names.contains(&link.as_str()) {
+            return Err(ctx.span(
+                &p.link,
+                format!("{field}.link"),
+                format!("unknown link `{link}` (links: {})", link_names.join(", ")),
+            ));
+        }
+        if let Some(pt) = &p.point {
+            check_vec(ctx, pt, &format!("{field}.point"), Sign::Any)?;
+        }
+        Ok(())
+    };
+    for (k, closure) in file.closures.iter().enumerate() {
+        let c = closure.get_ref();
+        check_new_name(&c.name, &format!("closures[{k}].name"))?;
+        check_point(c.a.get_ref(), &format!("closures[{k}].a"))?;
+        check_point(c.b.get_ref(), &format!("closures[{k}].b"))?;
+        if c.a.get_ref().link.get_ref() == c.b.get_ref().link.get_ref() {
+            return Err(ctx.span(
+                &c.b.get_ref().link,
+                format!("closures[{k}].b.link"),
+                "a closure joins points on two different links",
+            ));
+        }
+    }
+    check_point(file.foot.get_ref(), "foot")?;
+    Ok(())
+}
+
+#[derive(Clone, Copy)]
+enum Sign {
+    Any,
+    NonNegative,
+    Positive,
+}
+
+fn check_value(v: f64, sign: Sign) -> Result<(), String> {
+    if !v.is_finite() {
+        return Err(format!("must be a finite number, got {v}"));
+    }
+    match sign {
+        Sign::Positive if v <= 0.0 => Err(format!("must be positive, got {v}")),
+        Sign::NonNegative if v < 0.0 => Err(format!("must not be negative, got {v}")),
+        _ => Ok(()),
+    }
+}
+
+fn check_num(ctx: &Ctx, n: &Spanned<Num>, field: &str, sign: Sign) -> Result<(), SpecError> {
+    check_value(n.get_ref().value, sign).map_err(|m| ctx.span(n, field, m))
+}
+
+fn check_vec(ctx: &Ctx, n: &Spanned<Vec2>, field: &str, sign: Sign) -> Result<(), SpecError> {
+    for v in n.get_ref().value {
+        check_value(v, sign).map_err(|m| ctx.span(n, field, m))?;
+    }
+    Ok(())
+}
