@@ -12,5 +12,5 @@
 
 mod model;
 
-pub use model::{DynamicsTerms, LegModel, Real};
+pub use model::{DynamicsTerms, LegModel, Parameters, Real};
 pub use nalgebra;

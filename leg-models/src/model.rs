@@ -27,6 +27,17 @@ impl Real for f32 {
     }
 }
 
+/// Named access to a model's parameters, for identification, randomization and tools
+/// that treat every geometry alike.
+pub trait Parameters<T>: Sized {
+    /// The field names, in declaration order.
+    const NAMES: &'static [&'static str];
+    /// The value of parameter `i` (an index into [`Parameters::NAMES`]).
+    fn get(&self, i: usize) -> Option<T>;
+    /// Sets parameter `i`; returns `false` (and changes nothing) if there is none.
+    fn set(&mut self, i: usize, value: T) -> bool;
+}
+
 /// The terms of the constrained equations of motion at one state, evaluated together so
 /// that they share subexpressions (`M q̈ + N = Jᵀ F + B u`, `J q̈ + J̇ q̇ = 0`).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -59,7 +70,7 @@ pub trait LegModel<const NQ: usize, const NC: usize, const NU: usize> {
 
     /// The physical parameters (lengths, masses, centres of mass, inertias, rotor
     /// inertias and gear ratios, damping, gravity). `Default` holds the spec's values.
-    type Params<T: Real>: Clone + Copy + Debug + PartialEq + Default;
+    type Params<T: Real>: Clone + Copy + Debug + PartialEq + Default + Parameters<T>;
 
     /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on the actuated joints.
     fn mass_matrix<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, NQ, NQ>;

@@ -130,6 +130,9 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
 
     let mut fields = Vec::new();
     let mut defaults = Vec::new();
+    let mut param_names = Vec::new();
+    let mut getters = Vec::new();
+    let mut setters = Vec::new();
     for p in &info.params {
         let id = codegen::ident(&ctx, &p.name)?;
         let doc = format!(" {}", p.doc);
@@ -142,6 +145,10 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         }
         let v = codegen_literal(p.default);
         defaults.push(quote!(#id: #v));
+        let i = lit(param_names.len());
+        getters.push(quote!(#i => Some(self.#id)));
+        setters.push(quote!(#i => self.#id = value));
+        param_names.push(p.name.clone());
     }
 
     let mut functions = Vec::new();
@@ -160,10 +167,15 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     let (lq, lc, lu) = (lit(nq), lit(nc), lit(nu));
     let tokens = quote! {
         #![doc = #doc]
-        #![allow(clippy::approx_constant, clippy::excessive_precision, clippy::too_many_lines)]
+        #![allow(
+            clippy::approx_constant,
+            clippy::excessive_precision,
+            clippy::let_and_return,
+            clippy::too_many_lines
+        )]
 
         use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
-        use leg_models::{DynamicsTerms, LegModel, Real};
+        use leg_models::{DynamicsTerms, LegModel, Parameters, Real};
 
         /// Number of joints.
         pub const NQ: usize = #lq;
@@ -186,6 +198,23 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         impl<T: Real> Default for Params<T> {
             fn default() -> Self {
                 Self { #(#defaults,)* }
+            }
+        }
+
+        impl<T: Real> Parameters<T> for Params<T> {
+            const NAMES: &'static [&'static str] = &[#(#param_names),*];
+            fn get(&self, i: usize) -> Option<T> {
+                match i {
+                    #(#getters,)*
+                    _ => None,
+                }
+            }
+            fn set(&mut self, i: usize, value: T) -> bool {
+                match i {
+                    #(#setters,)*
+                    _ => return false,
+                }
+                true
             }
         }
 

@@ -1,0 +1,321 @@
+//! Validation of every generated model's terms, independent of CasADi: each derived
+//! term is checked against finite differences of lower-order generated terms (the
+//! energies, the closure residual, the foot position), at many random states.
+//! New geometries are covered automatically through `generated::for_each_model!`.
+
+use leg_models::nalgebra::{SMatrix, SVector};
+use leg_models::{LegModel, Parameters};
+use leg_tests::Rng;
+
+const STATES: usize = 200;
+
+fn random_state<const NQ: usize>(rng: &mut Rng) -> (SVector<f64, NQ>, SVector<f64, NQ>) {
+    let q = SVector::from_fn(|_, _| rng.range(-std::f64::consts::PI, std::f64::consts::PI));
+    let qd = SVector::from_fn(|_, _| rng.range(-3.0, 3.0));
+    (q, qd)
+}
+
+/// Odd-numbered samples use randomized parameters: every length, offset and centre of
+/// mass moved (so terms that vanish at the spec's values, such as a zero `com_y`, are
+/// exercised) and every mass, inertia, rotor inertia, gear ratio and damping scaled and
+/// kept positive; gravity tilted (so terms that vanish with `gravity_x = 0` are too).
+fn sample_params<P: Parameters<f64> + Default>(rng: &mut Rng, sample: usize) -> P {
+    let mut p = P::default();
+    if sample % 2 == 0 {
+        return p;
+    }
+    for (i, name) in P::NAMES.iter().enumerate() {
+        let v = p.get(i).expect("listed parameter");
+        let positive = ["mass", "inertia", "gear_ratio", "damping"].iter().any(|s| name.ends_with(s));
+        let new = if name.starts_with("gravity") {
+            v + rng.range(-2.0, 2.0)
+        } else if positive {
+            v * rng.range(0.8, 1.2) + rng.range(0.0, 0.02)
+        } else {
+            v + rng.range(-0.05, 0.05)
+        };
+        assert!(p.set(i, new));
+    }
+    assert!(p.get(P::NAMES.len()).is_none() && !p.set(P::NAMES.len(), 0.0));
+    p
+}
+
+fn unit<const NQ: usize>(i: usize) -> SVector<f64, NQ> {
+    SVector::from_fn(|r, _| if r == i { 1.0 } else { 0.0 })
+}
+
+/// `|a − b| ≤ tol · (1 + max|b|)`, entry by entry, with a message naming the term.
+fn assert_close<const R: usize, const C: usize>(
+    what: &str,
+    a: &SMatrix<f64, R, C>,
+    b: &SMatrix<f64, R, C>,
+    tol: f64,
+) {
+    let scale = 1.0 + b.amax();
+    let err = (a - b).amax();
+    assert!(
+        err <= tol * scale,
+        "{what}: error {err:.3e} > {tol:.1e} × {scale:.3e}\n got {a}\n expected {b}"
+    );
+}
+
+fn lagrangian<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
+    q: &SVector<f64, NQ>,
+    qd: &SVector<f64, NQ>,
+    p: &L::Params<f64>,
+) -> f64 {
+    L::kinetic_energy(q, qd, p) - L::potential_energy(q, p)
+}
+
+/// `∂L/∂q̇` by central differences; exact up to rounding since `L` is quadratic in `q̇`.
+fn momentum<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
+    q: &SVector<f64, NQ>,
+    qd: &SVector<f64, NQ>,
+    p: &L::Params<f64>,
+) -> SVector<f64, NQ> {
+    let h = 1e-3;
+    SVector::from_fn(|i, _| {
+        let e = unit::<NQ>(i) * h;
+        (lagrangian::<L, NQ, NC, NU>(q, &(qd + e), p) - lagrangian::<L, NQ, NC, NU>(q, &(qd - e), p))
+            / (2.0 * h)
+    })
+}
+
+pub fn check_mass_matrix<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+    let mut rng = Rng::new(1);
+    for sample in 0..STATES {
+        let p: L::Params<f64> = sample_params(&mut rng, sample);
+        let (q, qd) = random_state::<NQ>(&mut rng);
+        let m = L::mass_matrix(&q, &p);
+        assert_close("M − Mᵀ", &m, &m.transpose(), 1e-14);
+        let chol = m.cholesky();
+        assert!(chol.is_some(), "{}: M not positive definite at q = {q}", L::NAME);
+        // M as the Hessian of the generated kinetic energy in q̇ (exact for a quadratic).
+        let h = 1e-2;
+        let t = |v: SVector<f64, NQ>| L::kinetic_energy(&q, &v, &p);
+        let fd = SMatrix::<f64, NQ, NQ>::from_fn(|i, j| {
+            let (ei, ej) = (unit::<NQ>(i) * h, unit::<NQ>(j) * h);
+            (t(qd + ei + ej) - t(qd + ei - ej) - t(qd - ei + ej) + t(qd - ei - ej)) / (4.0 * h * h)
+        });
+        assert_close(&format!("{}: M vs ∂²T/∂q̇²", L::NAME), &m, &fd, 1e-9);
+        let t_quad = 0.5 * qd.dot(&(m * qd));
+        let t_gen = L::kinetic_energy(&q, &qd, &p);
+        assert!((t_quad - t_gen).abs() <= 1e-12 * (1.0 + t_gen.abs()), "{}: T ≠ ½ q̇ᵀMq̇", L::NAME);
+    }
+}
+
+pub fn check_bias_forces<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+    let mut rng = Rng::new(2);
+    let eps = 1e-5;
+    for sample in 0..STATES {
+        let p: L::Params<f64> = sample_params(&mut rng, sample);
+        let (q, qd) = random_state::<NQ>(&mut rng);
+        // Lagrange: N = (∂²L/∂q̇∂q) q̇ − ∂L/∂q, all by differences of the energies.
+        let dp_dq_qd = (momentum::<L, NQ, NC, NU>(&(q + qd * eps), &qd, &p)
+            - momentum::<L, NQ, NC, NU>(&(q - qd * eps), &qd, &p))
+            / (2.0 * eps);
+        let dl_dq = SVector::<f64, NQ>::from_fn(|i, _| {
+            let e = unit::<NQ>(i) * eps;
+            (lagrangian::<L, NQ, NC, NU>(&(q + e), &qd, &p) - lagrangian::<L, NQ, NC, NU>(&(q - e), &qd, &p))
+                / (2.0 * eps)
+        });
+        let n = L::bias_forces(&q, &qd, &p);
+        assert_close(&format!("{}: N vs Lagrange's equations", L::NAME), &n, &(dp_dq_qd - dl_dq), 1e-6);
+        // G = ∂V/∂q and N(q, 0) = G.
+        let dv_dq = SVector::<f64, NQ>::from_fn(|i, _| {
+            let e = unit::<NQ>(i) * eps;
+            (L::potential_energy(&(q + e), &p) - L::potential_energy(&(q - e), &p)) / (2.0 * eps)
+        });
+        let g = L::gravity_forces(&q, &p);
+        assert_close(&format!("{}: G vs ∂V/∂q", L::NAME), &g, &dv_dq, 1e-7);
+        assert_close(&format!("{}: N(q, 0) vs G", L::NAME), &L::bias_forces(&q, &SVector::zeros(), &p), &g, 1e-13);
+    }
+}
+
+pub fn check_constraint_terms<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+    let mut rng = Rng::new(3);
+    let (h, eps) = (1e-6, 1e-4);
+    for sample in 0..STATES {
+        let p: L::Params<f64> = sample_params(&mut rng, sample);
+        let (q, qd) = random_state::<NQ>(&mut rng);
+        let phi = |q: SVector<f64, NQ>| L::closure_residual(&q, &p);
+        let fd = SMatrix::<f64, NC, NQ>::from_fn(|r, i| {
+            let e = unit::<NQ>(i) * h;
+            (phi(q + e)[r] - phi(q - e)[r]) / (2.0 * h)
+        });
+        assert_close(&format!("{}: J vs ∂φ/∂q", L::NAME), &L::constraint_jacobian(&q, &p), &fd, 1e-7);
+        // J̇ q̇ = d²/dt² φ(q + t q̇) at t = 0: a second difference of φ in time.
+        let second = (phi(q + qd * eps) - phi(q) * 2.0 + phi(q - qd * eps)) / (eps * eps);
+        assert_close(&format!("{}: J̇q̇ vs d²φ/dt²", L::NAME), &L::constraint_bias(&q, &qd, &p), &second, 1e-5);
+        // The closure points: column 2k minus column 2k + 1 is closure k's residual.
+        let pts = L::closure_points(&q, &p);
+        let from_points = SVector::<f64, NC>::from_fn(|r, _| pts[(r % 2, r - r % 2)] - pts[(r % 2, r - r % 2 + 1)]);
+        assert_close(&format!("{}: closure points vs φ", L::NAME), &from_points, &phi(q), 1e-13);
+    }
+}
+
+pub fn check_foot_terms<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+    let mut rng = Rng::new(4);
+    let (h, eps) = (1e-6, 1e-4);
+    for sample in 0..STATES {
+        let p: L::Params<f64> = sample_params(&mut rng, sample);
+        let (q, qd) = random_state::<NQ>(&mut rng);
+        let foot = |q: SVector<f64, NQ>| L::foot_position(&q, &p);
+        let fd = SMatrix::<f64, 2, NQ>::from_fn(|r, i| {
+            let e = unit::<NQ>(i) * h;
+            (foot(q + e)[r] - foot(q - e)[r]) / (2.0 * h)
+        });
+        assert_close(&format!("{}: J_f vs ∂foot/∂q", L::NAME), &L::foot_jacobian(&q, &p), &fd, 1e-7);
+        let second = (foot(q + qd * eps) - foot(q) * 2.0 + foot(q - qd * eps)) / (eps * eps);
+        assert_close(&format!("{}: J̇_f q̇ vs d²foot/dt²", L::NAME), &L::foot_bias(&q, &qd, &p), &second, 1e-5);
+    }
+}
+
+pub fn check_fused_terms<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+    let mut rng = Rng::new(5);
+    for sample in 0..STATES {
+        let p: L::Params<f64> = sample_params(&mut rng, sample);
+        let (q, qd) = random_state::<NQ>(&mut rng);
+        let t = L::dynamics_terms(&q, &qd, &p);
+        assert_close("fused M", &t.mass_matrix, &L::mass_matrix(&q, &p), 1e-13);
+        assert_close("fused N", &t.bias_forces, &L::bias_forces(&q, &qd, &p), 1e-13);
+        assert_close("fused J", &t.constraint_jacobian, &L::constraint_jacobian(&q, &p), 1e-13);
+        assert_close("fused J̇q̇", &t.constraint_bias, &L::constraint_bias(&q, &qd, &p), 1e-13);
+    }
+}
+
+pub fn check_f32_matches_f64<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+    let p64 = L::Params::<f64>::default();
+    let p32 = L::Params::<f32>::default();
+    let mut rng = Rng::new(6);
+    for _ in 0..STATES {
+        let (q, qd) = random_state::<NQ>(&mut rng);
+        let (q32, qd32) = (q.cast::<f32>(), qd.cast::<f32>());
+        let a = L::dynamics_terms(&q32, &qd32, &p32);
+        let b = L::dynamics_terms(&q, &qd, &p64);
+        let tol = 1e-4;
+        assert_close("f32 M", &a.mass_matrix.cast::<f64>(), &b.mass_matrix, tol);
+        assert_close("f32 N", &a.bias_forces.cast::<f64>(), &b.bias_forces, tol);
+        assert_close("f32 J", &a.constraint_jacobian.cast::<f64>(), &b.constraint_jacobian, tol);
+        assert_close("f32 J̇q̇", &a.constraint_bias.cast::<f64>(), &b.constraint_bias, tol);
+        let f = L::foot_position(&q32, &p32).cast::<f64>();
+        assert_close("f32 foot", &f, &L::foot_position(&q, &p64), tol);
+    }
+}
+
+pub fn check_damping<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+    // The spec's default damping is zero for the built-in legs unless set; whatever it is,
+    // the damping torque is linear in q̇ and diagonal.
+    let p = L::Params::<f64>::default();
+    let mut rng = Rng::new(7);
+    let (_, qd) = random_state::<NQ>(&mut rng);
+    let d = L::damping_forces(&qd, &p);
+    for i in 0..NQ {
+        let di = L::damping_forces(&unit::<NQ>(i), &p);
+        for r in 0..NQ {
+            if r != i {
+                assert_eq!(di[r], 0.0, "damping couples joints {i} and {r}");
+            }
+        }
+        assert!((d[i] - di[i] * qd[i]).abs() <= 1e-15 * (1.0 + d[i].abs()));
+    }
+}
+
+macro_rules! validate {
+    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+        mod $module {
+            type Model = $ty;
+            #[test]
+            fn mass_matrix_is_spd_and_the_hessian_of_kinetic_energy() {
+                super::check_mass_matrix::<Model, $nq, $nc, $nu>();
+            }
+            #[test]
+            fn bias_forces_satisfy_lagranges_equations() {
+                super::check_bias_forces::<Model, $nq, $nc, $nu>();
+            }
+            #[test]
+            fn constraint_jacobian_and_bias_match_differences_of_phi() {
+                super::check_constraint_terms::<Model, $nq, $nc, $nu>();
+            }
+            #[test]
+            fn foot_jacobian_and_bias_match_differences_of_foot() {
+                super::check_foot_terms::<Model, $nq, $nc, $nu>();
+            }
+            #[test]
+            fn fused_terms_match_separate_terms() {
+                super::check_fused_terms::<Model, $nq, $nc, $nu>();
+            }
+            #[test]
+            fn f32_matches_f64() {
+                super::check_f32_matches_f64::<Model, $nq, $nc, $nu>();
+            }
+            #[test]
+            fn damping_is_diagonal_and_linear() {
+                super::check_damping::<Model, $nq, $nc, $nu>();
+            }
+        }
+    };
+}
+
+generated::for_each_model!(validate);
+
+/// The open chain against the textbook closed form of a two-link arm's `M` and `G`,
+/// with the parameters read from the generated `Params` (the spec's values).
+#[test]
+fn two_link_matches_the_textbook_closed_form() {
+    use generated::two_link::Params;
+    use generated::TwoLink;
+    let p = Params::<f64>::default();
+    let (m1, m2, i1, i2) = (p.upper_arm_mass, p.forearm_mass, p.upper_arm_inertia, p.forearm_inertia);
+    let (l1, c1, c2) = (p.upper_arm_length_x, p.upper_arm_com_x, p.forearm_com_x);
+    let g = -p.gravity_y;
+    let mut rng = Rng::new(8);
+    for _ in 0..STATES {
+        let (q, qd) = random_state::<2>(&mut rng);
+        let (cq2, sq2) = (q[1].cos(), q[1].sin());
+        let m11 = i1 + i2 + m1 * c1 * c1 + m2 * (l1 * l1 + c2 * c2 + 2.0 * l1 * c2 * cq2);
+        let m12 = i2 + m2 * (c2 * c2 + l1 * c2 * cq2);
+        let m22 = i2 + m2 * c2 * c2;
+        let m = SMatrix::<f64, 2, 2>::new(m11, m12, m12, m22);
+        assert_close("two_link M", &TwoLink::mass_matrix(&q, &p), &m, 1e-13);
+        let gv = SVector::<f64, 2>::new(
+            (m1 * c1 + m2 * l1) * g * q[0].cos() + m2 * c2 * g * (q[0] + q[1]).cos(),
+            m2 * c2 * g * (q[0] + q[1]).cos(),
+        );
+        assert_close("two_link G", &TwoLink::gravity_forces(&q, &p), &gv, 1e-13);
+        // Coriolis and centrifugal terms: h = m2 l1 c2 sin q2.
+        let h = m2 * l1 * c2 * sq2;
+        let c = SVector::<f64, 2>::new(-h * (2.0 * qd[0] * qd[1] + qd[1] * qd[1]), h * qd[0] * qd[0]);
+        assert_close("two_link N", &TwoLink::bias_forces(&q, &qd, &p), &(c + gv), 1e-12);
+        let foot = SVector::<f64, 2>::new(
+            l1 * q[0].cos() + p.forearm_length_x * (q[0] + q[1]).cos(),
+            l1 * q[0].sin() + p.forearm_length_x * (q[0] + q[1]).sin(),
+        );
+        assert_close("two_link foot", &TwoLink::foot_position(&q, &p), &foot, 1e-14);
+    }
+}
+
+/// A symmetric five-bar in a symmetric pose has its foot on the symmetry axis and
+/// zero closure residual when the angles close the loop (law of cosines).
+#[test]
+fn minitaur_closes_at_the_law_of_cosines_pose() {
+    use generated::minitaur::Params;
+    use generated::Minitaur;
+    let p = Params::<f64>::default();
+    let (l1, l2) = (p.upper_a_length_x, p.lower_a_length_x);
+    // Foot straight below the hip at depth d: upper links at ±alpha from the vertical.
+    let d: f64 = 0.22;
+    let alpha = ((l1 * l1 + d * d - l2 * l2) / (2.0 * l1 * d)).acos();
+    let beta = ((l1 * l1 + l2 * l2 - d * d) / (2.0 * l1 * l2)).acos();
+    let down = -std::f64::consts::FRAC_PI_2;
+    let q = SVector::<f64, 4>::new(
+        down + alpha,
+        -(std::f64::consts::PI - beta),
+        down - alpha,
+        std::f64::consts::PI - beta,
+    );
+    let phi = Minitaur::closure_residual(&q, &p);
+    assert!(phi.amax() < 1e-15, "residual {phi}");
+    let foot = Minitaur::foot_position(&q, &p);
+    assert!((foot[0]).abs() < 1e-15 && (foot[1] + d).abs() < 1e-15, "foot {foot}");
+}
