@@ -17,9 +17,9 @@ pub struct Program {
     pub instructions: Vec<Instr>,
 }
 
-/// A function argument, passed by reference.
+/// A function argument, passed by reference. (No `deny_unknown_fields` here: serde does
+/// not support it beside `flatten`; `InputShape` refuses unknown fields itself.)
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
 pub struct Input {
     pub name: String,
     #[serde(flatten)]
@@ -27,7 +27,7 @@ pub struct Input {
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+#[serde(tag = "kind", rename_all = "snake_case")]
 pub enum InputShape {
     /// `&SVector<T, len>`; element `i` is read as `name_i`.
     Vector { len: usize },
@@ -78,7 +78,10 @@ pub enum OutputKind {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Instr {
     /// Element `index` of input `input`.
-    Input { input: usize, index: usize },
+    Input {
+        input: usize,
+        index: usize,
+    },
     /// A constant, emitted so that it round-trips exactly.
     Const(f64),
     Unary(UnaryOp, usize),

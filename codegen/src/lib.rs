@@ -49,7 +49,10 @@ pub fn ident(context: &str, text: &str) -> Result<Ident, Error> {
         && text.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
     match syn::parse_str::<Ident>(text) {
         Ok(id) if plain && text != "_" => Ok(id),
-        _ => Err(err(context, format!("`{text}` is not a plain Rust identifier"))),
+        _ => Err(err(
+            context,
+            format!("`{text}` is not a plain Rust identifier"),
+        )),
     }
 }
 
@@ -106,7 +109,10 @@ impl Program {
                 for f in fields {
                     ident(ctx, f)?;
                     if !seen.insert(f) {
-                        return Err(err(ctx, format!("duplicate field `{f}` in `{}`", input.name)));
+                        return Err(err(
+                            ctx,
+                            format!("duplicate field `{f}` in `{}`", input.name),
+                        ));
                     }
                 }
             }
@@ -124,7 +130,10 @@ impl Program {
                 }
             }
             if let Some(bad) = instr.operands().find(|&a| a >= k) {
-                return Err(err(ctx, format!("value {k} reads value {bad}, not defined before it")));
+                return Err(err(
+                    ctx,
+                    format!("value {k} reads value {bad}, not defined before it"),
+                ));
             }
         }
         let mut names = HashSet::new();
@@ -141,7 +150,10 @@ impl Program {
             if !shape_ok {
                 return Err(err(
                     ctx,
-                    format!("output `{}` is {:?} but {}×{}", out.name, out.kind, out.rows, out.cols),
+                    format!(
+                        "output `{}` is {:?} but {}×{}",
+                        out.name, out.kind, out.rows, out.cols
+                    ),
                 ));
             }
             if out.entries.len() != out.rows * out.cols {
@@ -157,7 +169,10 @@ impl Program {
                 ));
             }
             if let Some(bad) = out.entries.iter().find(|&&e| e >= self.instructions.len()) {
-                return Err(err(ctx, format!("output `{}` reads missing value {bad}", out.name)));
+                return Err(err(
+                    ctx,
+                    format!("output `{}` reads missing value {bad}", out.name),
+                ));
             }
         }
         if self.outputs.is_empty() {
@@ -181,7 +196,10 @@ fn input_type(input: &Input) -> TokenStream {
 }
 
 fn output_type(kind: OutputKind, rows: usize, cols: usize) -> TokenStream {
-    let (r, c) = (Literal::usize_unsuffixed(rows), Literal::usize_unsuffixed(cols));
+    let (r, c) = (
+        Literal::usize_unsuffixed(rows),
+        Literal::usize_unsuffixed(cols),
+    );
     match kind {
         OutputKind::Scalar => quote!(T),
         OutputKind::Vector => quote!(SVector<T, #r>),
@@ -255,9 +273,10 @@ pub fn emit_function(prog: &Program, doc: &str) -> Result<TokenStream, Error> {
     let mut body = Vec::new();
     for (i, input) in prog.inputs.iter().enumerate() {
         let ty = input_type(input);
-        let used = prog.instructions.iter().enumerate().any(
-            |(k, ins)| live[k] && matches!(ins, Instr::Input { input, .. } if *input == i),
-        );
+        let used =
+            prog.instructions.iter().enumerate().any(|(k, ins)| {
+                live[k] && matches!(ins, Instr::Input { input, .. } if *input == i)
+            });
         let name = if used {
             format_ident!("{}", input.name)
         } else {
@@ -295,17 +314,21 @@ pub fn emit_function(prog: &Program, doc: &str) -> Result<TokenStream, Error> {
         let value = if out.kind == OutputKind::Scalar {
             values[out.entries[0]].tokens()
         } else {
-            let columns = out.entries.chunks(out.rows.max(1)).take(out.cols).map(|col| {
-                let entries = col.iter().map(|&e| values[e].tokens());
-                quote!([#(#entries),*])
-            });
-            let ty = output_type(out.kind, out.rows, out.cols);
+            let columns = out
+                .entries
+                .chunks(out.rows.max(1))
+                .take(out.cols)
+                .map(|col| {
+                    let entries = col.iter().map(|&e| values[e].tokens());
+                    quote!([#(#entries),*])
+                });
             let columns: Vec<_> = if out.rows == 0 {
                 (0..out.cols).map(|_| quote!([])).collect()
             } else {
                 columns.collect()
             };
-            quote!(<#ty>::from_data(ArrayStorage([#(#columns),*])))
+            // The dimensions come from the storage; the return type pins the scalar.
+            quote!(SMatrix::from_data(ArrayStorage([#(#columns),*])))
         };
         results.push(value);
     }

@@ -87,10 +87,7 @@ pub trait LegModel<const NQ: usize, const NC: usize, const NU: usize> {
     /// The closure residual `φ(q)`: for each closure, point a minus point b.
     fn closure_residual<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SVector<T, NC>;
     /// `J(q) = ∂φ/∂q`.
-    fn constraint_jacobian<T: Real>(
-        q: &SVector<T, NQ>,
-        p: &Self::Params<T>,
-    ) -> SMatrix<T, NC, NQ>;
+    fn constraint_jacobian<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, NC, NQ>;
     /// `J̇(q, q̇) q̇`.
     fn constraint_bias<T: Real>(
         q: &SVector<T, NQ>,
@@ -108,8 +105,7 @@ pub trait LegModel<const NQ: usize, const NC: usize, const NU: usize> {
         p: &Self::Params<T>,
     ) -> SVector<T, 2>;
     /// Kinetic energy `½ q̇ᵀ M q̇` (links and rotors).
-    fn kinetic_energy<T: Real>(q: &SVector<T, NQ>, qd: &SVector<T, NQ>, p: &Self::Params<T>)
-        -> T;
+    fn kinetic_energy<T: Real>(q: &SVector<T, NQ>, qd: &SVector<T, NQ>, p: &Self::Params<T>) -> T;
     /// Potential energy `−Σ m g·c` (zero at the base origin).
     fn potential_energy<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> T;
     /// Each link's joint position in the base frame (column `i` for joint `i`).

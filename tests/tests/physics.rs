@@ -21,12 +21,14 @@ fn random_state<const NQ: usize>(rng: &mut Rng) -> (SVector<f64, NQ>, SVector<f6
 /// kept positive; gravity tilted (so terms that vanish with `gravity_x = 0` are too).
 fn sample_params<P: Parameters<f64> + Default>(rng: &mut Rng, sample: usize) -> P {
     let mut p = P::default();
-    if sample % 2 == 0 {
+    if sample.is_multiple_of(2) {
         return p;
     }
     for (i, name) in P::NAMES.iter().enumerate() {
         let v = p.get(i).expect("listed parameter");
-        let positive = ["mass", "inertia", "gear_ratio", "damping"].iter().any(|s| name.ends_with(s));
+        let positive = ["mass", "inertia", "gear_ratio", "damping"]
+            .iter()
+            .any(|s| name.ends_with(s));
         let new = if name.starts_with("gravity") {
             v + rng.range(-2.0, 2.0)
         } else if positive {
@@ -76,12 +78,18 @@ fn momentum<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU:
     let h = 1e-3;
     SVector::from_fn(|i, _| {
         let e = unit::<NQ>(i) * h;
-        (lagrangian::<L, NQ, NC, NU>(q, &(qd + e), p) - lagrangian::<L, NQ, NC, NU>(q, &(qd - e), p))
+        (lagrangian::<L, NQ, NC, NU>(q, &(qd + e), p)
+            - lagrangian::<L, NQ, NC, NU>(q, &(qd - e), p))
             / (2.0 * h)
     })
 }
 
-pub fn check_mass_matrix<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+pub fn check_mass_matrix<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>() {
     let mut rng = Rng::new(1);
     for sample in 0..STATES {
         let p: L::Params<f64> = sample_params(&mut rng, sample);
@@ -89,7 +97,11 @@ pub fn check_mass_matrix<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usi
         let m = L::mass_matrix(&q, &p);
         assert_close("M − Mᵀ", &m, &m.transpose(), 1e-14);
         let chol = m.cholesky();
-        assert!(chol.is_some(), "{}: M not positive definite at q = {q}", L::NAME);
+        assert!(
+            chol.is_some(),
+            "{}: M not positive definite at q = {q}",
+            L::NAME
+        );
         // M as the Hessian of the generated kinetic energy in q̇ (exact for a quadratic).
         let h = 1e-2;
         let t = |v: SVector<f64, NQ>| L::kinetic_energy(&q, &v, &p);
@@ -100,11 +112,20 @@ pub fn check_mass_matrix<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usi
         assert_close(&format!("{}: M vs ∂²T/∂q̇²", L::NAME), &m, &fd, 1e-9);
         let t_quad = 0.5 * qd.dot(&(m * qd));
         let t_gen = L::kinetic_energy(&q, &qd, &p);
-        assert!((t_quad - t_gen).abs() <= 1e-12 * (1.0 + t_gen.abs()), "{}: T ≠ ½ q̇ᵀMq̇", L::NAME);
+        assert!(
+            (t_quad - t_gen).abs() <= 1e-12 * (1.0 + t_gen.abs()),
+            "{}: T ≠ ½ q̇ᵀMq̇",
+            L::NAME
+        );
     }
 }
 
-pub fn check_bias_forces<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+pub fn check_bias_forces<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>() {
     let mut rng = Rng::new(2);
     let eps = 1e-5;
     for sample in 0..STATES {
@@ -116,11 +137,17 @@ pub fn check_bias_forces<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usi
             / (2.0 * eps);
         let dl_dq = SVector::<f64, NQ>::from_fn(|i, _| {
             let e = unit::<NQ>(i) * eps;
-            (lagrangian::<L, NQ, NC, NU>(&(q + e), &qd, &p) - lagrangian::<L, NQ, NC, NU>(&(q - e), &qd, &p))
+            (lagrangian::<L, NQ, NC, NU>(&(q + e), &qd, &p)
+                - lagrangian::<L, NQ, NC, NU>(&(q - e), &qd, &p))
                 / (2.0 * eps)
         });
         let n = L::bias_forces(&q, &qd, &p);
-        assert_close(&format!("{}: N vs Lagrange's equations", L::NAME), &n, &(dp_dq_qd - dl_dq), 1e-6);
+        assert_close(
+            &format!("{}: N vs Lagrange's equations", L::NAME),
+            &n,
+            &(dp_dq_qd - dl_dq),
+            1e-6,
+        );
         // G = ∂V/∂q and N(q, 0) = G.
         let dv_dq = SVector::<f64, NQ>::from_fn(|i, _| {
             let e = unit::<NQ>(i) * eps;
@@ -128,11 +155,21 @@ pub fn check_bias_forces<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usi
         });
         let g = L::gravity_forces(&q, &p);
         assert_close(&format!("{}: G vs ∂V/∂q", L::NAME), &g, &dv_dq, 1e-7);
-        assert_close(&format!("{}: N(q, 0) vs G", L::NAME), &L::bias_forces(&q, &SVector::zeros(), &p), &g, 1e-13);
+        assert_close(
+            &format!("{}: N(q, 0) vs G", L::NAME),
+            &L::bias_forces(&q, &SVector::zeros(), &p),
+            &g,
+            1e-13,
+        );
     }
 }
 
-pub fn check_constraint_terms<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+pub fn check_constraint_terms<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>() {
     let mut rng = Rng::new(3);
     let (h, eps) = (1e-6, 1e-4);
     for sample in 0..STATES {
@@ -143,18 +180,40 @@ pub fn check_constraint_terms<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC
             let e = unit::<NQ>(i) * h;
             (phi(q + e)[r] - phi(q - e)[r]) / (2.0 * h)
         });
-        assert_close(&format!("{}: J vs ∂φ/∂q", L::NAME), &L::constraint_jacobian(&q, &p), &fd, 1e-7);
+        assert_close(
+            &format!("{}: J vs ∂φ/∂q", L::NAME),
+            &L::constraint_jacobian(&q, &p),
+            &fd,
+            1e-7,
+        );
         // J̇ q̇ = d²/dt² φ(q + t q̇) at t = 0: a second difference of φ in time.
         let second = (phi(q + qd * eps) - phi(q) * 2.0 + phi(q - qd * eps)) / (eps * eps);
-        assert_close(&format!("{}: J̇q̇ vs d²φ/dt²", L::NAME), &L::constraint_bias(&q, &qd, &p), &second, 1e-5);
+        assert_close(
+            &format!("{}: J̇q̇ vs d²φ/dt²", L::NAME),
+            &L::constraint_bias(&q, &qd, &p),
+            &second,
+            1e-5,
+        );
         // The closure points: column 2k minus column 2k + 1 is closure k's residual.
         let pts = L::closure_points(&q, &p);
-        let from_points = SVector::<f64, NC>::from_fn(|r, _| pts[(r % 2, r - r % 2)] - pts[(r % 2, r - r % 2 + 1)]);
-        assert_close(&format!("{}: closure points vs φ", L::NAME), &from_points, &phi(q), 1e-13);
+        let from_points = SVector::<f64, NC>::from_fn(|r, _| {
+            pts[(r % 2, r - r % 2)] - pts[(r % 2, r - r % 2 + 1)]
+        });
+        assert_close(
+            &format!("{}: closure points vs φ", L::NAME),
+            &from_points,
+            &phi(q),
+            1e-13,
+        );
     }
 }
 
-pub fn check_foot_terms<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+pub fn check_foot_terms<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>() {
     let mut rng = Rng::new(4);
     let (h, eps) = (1e-6, 1e-4);
     for sample in 0..STATES {
@@ -165,26 +224,61 @@ pub fn check_foot_terms<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usiz
             let e = unit::<NQ>(i) * h;
             (foot(q + e)[r] - foot(q - e)[r]) / (2.0 * h)
         });
-        assert_close(&format!("{}: J_f vs ∂foot/∂q", L::NAME), &L::foot_jacobian(&q, &p), &fd, 1e-7);
+        assert_close(
+            &format!("{}: J_f vs ∂foot/∂q", L::NAME),
+            &L::foot_jacobian(&q, &p),
+            &fd,
+            1e-7,
+        );
         let second = (foot(q + qd * eps) - foot(q) * 2.0 + foot(q - qd * eps)) / (eps * eps);
-        assert_close(&format!("{}: J̇_f q̇ vs d²foot/dt²", L::NAME), &L::foot_bias(&q, &qd, &p), &second, 1e-5);
+        assert_close(
+            &format!("{}: J̇_f q̇ vs d²foot/dt²", L::NAME),
+            &L::foot_bias(&q, &qd, &p),
+            &second,
+            1e-5,
+        );
     }
 }
 
-pub fn check_fused_terms<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+pub fn check_fused_terms<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>() {
     let mut rng = Rng::new(5);
     for sample in 0..STATES {
         let p: L::Params<f64> = sample_params(&mut rng, sample);
         let (q, qd) = random_state::<NQ>(&mut rng);
         let t = L::dynamics_terms(&q, &qd, &p);
         assert_close("fused M", &t.mass_matrix, &L::mass_matrix(&q, &p), 1e-13);
-        assert_close("fused N", &t.bias_forces, &L::bias_forces(&q, &qd, &p), 1e-13);
-        assert_close("fused J", &t.constraint_jacobian, &L::constraint_jacobian(&q, &p), 1e-13);
-        assert_close("fused J̇q̇", &t.constraint_bias, &L::constraint_bias(&q, &qd, &p), 1e-13);
+        assert_close(
+            "fused N",
+            &t.bias_forces,
+            &L::bias_forces(&q, &qd, &p),
+            1e-13,
+        );
+        assert_close(
+            "fused J",
+            &t.constraint_jacobian,
+            &L::constraint_jacobian(&q, &p),
+            1e-13,
+        );
+        assert_close(
+            "fused J̇q̇",
+            &t.constraint_bias,
+            &L::constraint_bias(&q, &qd, &p),
+            1e-13,
+        );
     }
 }
 
-pub fn check_f32_matches_f64<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+pub fn check_f32_matches_f64<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>() {
     let p64 = L::Params::<f64>::default();
     let p32 = L::Params::<f32>::default();
     let mut rng = Rng::new(6);
@@ -196,8 +290,18 @@ pub fn check_f32_matches_f64<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC:
         let tol = 1e-4;
         assert_close("f32 M", &a.mass_matrix.cast::<f64>(), &b.mass_matrix, tol);
         assert_close("f32 N", &a.bias_forces.cast::<f64>(), &b.bias_forces, tol);
-        assert_close("f32 J", &a.constraint_jacobian.cast::<f64>(), &b.constraint_jacobian, tol);
-        assert_close("f32 J̇q̇", &a.constraint_bias.cast::<f64>(), &b.constraint_bias, tol);
+        assert_close(
+            "f32 J",
+            &a.constraint_jacobian.cast::<f64>(),
+            &b.constraint_jacobian,
+            tol,
+        );
+        assert_close(
+            "f32 J̇q̇",
+            &a.constraint_bias.cast::<f64>(),
+            &b.constraint_bias,
+            tol,
+        );
         let f = L::foot_position(&q32, &p32).cast::<f64>();
         assert_close("f32 foot", &f, &L::foot_position(&q, &p64), tol);
     }
@@ -266,7 +370,12 @@ fn two_link_matches_the_textbook_closed_form() {
     use generated::two_link::Params;
     use generated::TwoLink;
     let p = Params::<f64>::default();
-    let (m1, m2, i1, i2) = (p.upper_arm_mass, p.forearm_mass, p.upper_arm_inertia, p.forearm_inertia);
+    let (m1, m2, i1, i2) = (
+        p.upper_arm_mass,
+        p.forearm_mass,
+        p.upper_arm_inertia,
+        p.forearm_inertia,
+    );
     let (l1, c1, c2) = (p.upper_arm_length_x, p.upper_arm_com_x, p.forearm_com_x);
     let g = -p.gravity_y;
     let mut rng = Rng::new(8);
@@ -285,13 +394,26 @@ fn two_link_matches_the_textbook_closed_form() {
         assert_close("two_link G", &TwoLink::gravity_forces(&q, &p), &gv, 1e-13);
         // Coriolis and centrifugal terms: h = m2 l1 c2 sin q2.
         let h = m2 * l1 * c2 * sq2;
-        let c = SVector::<f64, 2>::new(-h * (2.0 * qd[0] * qd[1] + qd[1] * qd[1]), h * qd[0] * qd[0]);
-        assert_close("two_link N", &TwoLink::bias_forces(&q, &qd, &p), &(c + gv), 1e-12);
+        let c = SVector::<f64, 2>::new(
+            -h * (2.0 * qd[0] * qd[1] + qd[1] * qd[1]),
+            h * qd[0] * qd[0],
+        );
+        assert_close(
+            "two_link N",
+            &TwoLink::bias_forces(&q, &qd, &p),
+            &(c + gv),
+            1e-12,
+        );
         let foot = SVector::<f64, 2>::new(
             l1 * q[0].cos() + p.forearm_length_x * (q[0] + q[1]).cos(),
             l1 * q[0].sin() + p.forearm_length_x * (q[0] + q[1]).sin(),
         );
-        assert_close("two_link foot", &TwoLink::foot_position(&q, &p), &foot, 1e-14);
+        assert_close(
+            "two_link foot",
+            &TwoLink::foot_position(&q, &p),
+            &foot,
+            1e-14,
+        );
     }
 }
 
@@ -317,5 +439,8 @@ fn minitaur_closes_at_the_law_of_cosines_pose() {
     let phi = Minitaur::closure_residual(&q, &p);
     assert!(phi.amax() < 1e-15, "residual {phi}");
     let foot = Minitaur::foot_position(&q, &p);
-    assert!((foot[0]).abs() < 1e-15 && (foot[1] + d).abs() < 1e-15, "foot {foot}");
+    assert!(
+        (foot[0]).abs() < 1e-15 && (foot[1] + d).abs() < 1e-15,
+        "foot {foot}"
+    );
 }

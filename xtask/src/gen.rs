@@ -44,7 +44,8 @@ pub fn spec_paths(root: &Path) -> Result<Vec<PathBuf>, String> {
 /// Loads and validates a spec, with its path shown relative to the workspace.
 pub fn load_spec(root: &Path, path: &Path) -> Result<Spec, String> {
     let shown = path.strip_prefix(root).unwrap_or(path);
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: cannot read: {e}", shown.display()))?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("{}: cannot read: {e}", shown.display()))?;
     Spec::parse(shown, text).map_err(|e| e.to_string())
 }
 
@@ -73,15 +74,15 @@ pub fn python(root: &Path) -> Result<PathBuf, String> {
     let requirements = std::fs::read_to_string(root.join(REQUIREMENTS))
         .map_err(|e| format!("{REQUIREMENTS}: {e}"))?;
     let stamp = venv.join("requirements.installed");
-    if py.exists() && std::fs::read_to_string(&stamp).ok().as_deref() == Some(requirements.as_str()) {
+    if py.exists() && std::fs::read_to_string(&stamp).ok().as_deref() == Some(requirements.as_str())
+    {
         return Ok(py);
     }
     eprintln!("setting up {VENV_DIR}/ with {REQUIREMENTS} (first run only)…");
     let run = |cmd: &mut Command, shown: &str| -> Result<(), String> {
-        let status = cmd
-            .current_dir(root)
-            .status()
-            .map_err(|e| format!("cannot run `{shown}`: {e}; is python3 (3.9 or later, with venv) installed?"))?;
+        let status = cmd.current_dir(root).status().map_err(|e| {
+            format!("cannot run `{shown}`: {e}; is python3 (3.9 or later, with venv) installed?")
+        })?;
         if status.success() {
             Ok(())
         } else {
@@ -95,7 +96,15 @@ pub fn python(root: &Path) -> Result<PathBuf, String> {
         )?;
     }
     run(
-        Command::new(&py).args(["-m", "pip", "install", "--quiet", "--disable-pip-version-check", "-r", REQUIREMENTS]),
+        Command::new(&py).args([
+            "-m",
+            "pip",
+            "install",
+            "--quiet",
+            "--disable-pip-version-check",
+            "-r",
+            REQUIREMENTS,
+        ]),
         &format!("{VENV_DIR}/bin/python -m pip install -r {REQUIREMENTS}"),
     )?;
     std::fs::write(&stamp, requirements).map_err(|e| format!("{}: {e}", stamp.display()))?;
@@ -182,7 +191,10 @@ pub fn rust_files(irs: &[IrFile]) -> Result<BTreeMap<PathBuf, String>, String> {
     let mut files = BTreeMap::new();
     for ir in irs {
         let src = rust_module::model_source(ir).map_err(|e| e.to_string())?;
-        files.insert(Path::new(SRC_DIR).join(format!("{}.rs", ir.model.name)), src);
+        files.insert(
+            Path::new(SRC_DIR).join(format!("{}.rs", ir.model.name)),
+            src,
+        );
     }
     let summaries: Vec<Summary> = irs.iter().map(Summary::of).collect();
     let lib = rust_module::lib_source(&summaries).map_err(|e| e.to_string())?;
@@ -194,7 +206,10 @@ pub fn rust_files(irs: &[IrFile]) -> Result<BTreeMap<PathBuf, String>, String> {
 pub fn committed_irs(root: &Path) -> Result<Vec<IrFile>, String> {
     let mut out = Vec::new();
     for spec in spec_paths(root)? {
-        let name = spec.file_stem().and_then(|s| s.to_str()).unwrap_or_default();
+        let name = spec
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or_default();
         let path = Path::new(IR_DIR).join(format!("{name}.json"));
         let text = std::fs::read_to_string(root.join(&path))
             .map_err(|e| format!("{}: {e} (run `cargo xtask gen`)", path.display()))?;
@@ -226,7 +241,9 @@ fn orphans(root: &Path, expected: &BTreeMap<PathBuf, String>) -> Vec<PathBuf> {
 pub fn stale_files(root: &Path, expected: &BTreeMap<PathBuf, String>) -> Vec<PathBuf> {
     let mut stale: Vec<PathBuf> = expected
         .iter()
-        .filter(|(path, text)| std::fs::read_to_string(root.join(path)).ok().as_deref() != Some(text.as_str()))
+        .filter(|(path, text)| {
+            std::fs::read_to_string(root.join(path)).ok().as_deref() != Some(text.as_str())
+        })
         .map(|(p, _)| p.clone())
         .collect();
     stale.extend(orphans(root, expected));
@@ -271,25 +288,39 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, String> {
             let derived = derive(root, &py, &model)?;
             let ir = assemble(spec, &model, derived);
             rust_module::check_terms(&ir).map_err(|e| e.to_string())?;
-            files.insert(Path::new(IR_DIR).join(format!("{}.json", spec.name)), ir.to_text());
+            files.insert(
+                Path::new(IR_DIR).join(format!("{}.json", spec.name)),
+                ir.to_text(),
+            );
             ir
         } else {
             let path = Path::new(IR_DIR).join(format!("{}.json", spec.name));
-            let text = std::fs::read_to_string(root.join(&path))
-                .map_err(|e| format!("{}: {e} (run `cargo xtask gen {}`)", path.display(), spec.name))?;
+            let text = std::fs::read_to_string(root.join(&path)).map_err(|e| {
+                format!(
+                    "{}: {e} (run `cargo xtask gen {}`)",
+                    path.display(),
+                    spec.name
+                )
+            })?;
             IrFile::parse(&text).map_err(|e| format!("{}: {e}", path.display()))?
         };
         irs.push(ir);
     }
     files.extend(rust_files(&irs)?);
-    let names: Vec<&str> = specs.iter().map(|s| s.name.as_str()).filter(|n| selected(n)).collect();
+    let names: Vec<&str> = specs
+        .iter()
+        .map(|s| s.name.as_str())
+        .filter(|n| selected(n))
+        .collect();
 
     if opts.check {
         let mut expected = files;
         if !opts.names.is_empty() {
             // Only the selected models' files are compared.
             expected.retain(|p, _| {
-                p.file_stem().and_then(|s| s.to_str()).is_some_and(|s| selected(s) || s == "lib")
+                p.file_stem()
+                    .and_then(|s| s.to_str())
+                    .is_some_and(|s| selected(s) || s == "lib")
             });
         }
         let mut stale = stale_files(root, &expected);
@@ -321,7 +352,8 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, String> {
     }
     if opts.names.is_empty() {
         for orphan in orphans(root, &files) {
-            std::fs::remove_file(root.join(&orphan)).map_err(|e| format!("{}: {e}", orphan.display()))?;
+            std::fs::remove_file(root.join(&orphan))
+                .map_err(|e| format!("{}: {e}", orphan.display()))?;
             written.push(format!("{} (removed)", orphan.display()));
         }
     }

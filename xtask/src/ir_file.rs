@@ -37,7 +37,10 @@ impl IrFile {
     pub fn parse(text: &str) -> Result<IrFile, String> {
         let ir: IrFile = serde_json::from_str(text).map_err(|e| e.to_string())?;
         if ir.format != FORMAT {
-            return Err(format!("IR format {} (this generator reads {FORMAT})", ir.format));
+            return Err(format!(
+                "IR format {} (this generator reads {FORMAT})",
+                ir.format
+            ));
         }
         Ok(ir)
     }

@@ -34,22 +34,92 @@ pub fn terms(nq: usize, nc: usize) -> Vec<Term> {
     let j = ("constraint_jacobian", Matrix, nc, nq);
     let b = ("constraint_bias", Vector, nc, 1);
     vec![
-        t("mass_matrix", Q, vec![m], "`M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints."),
-        t("bias_forces", QQ, vec![n], "`N(q, q̇) = (∂²L/∂q̇∂q) q̇ − ∂L/∂q = C q̇ + G`."),
-        t("gravity_forces", Q, vec![("gravity_forces", Vector, nq, 1)], "`G(q) = ∂V/∂q`."),
-        t("damping_forces", &["qd", "p"], vec![("damping_forces", Vector, nq, 1)], "Viscous joint damping `D q̇`."),
-        t("closure_residual", Q, vec![("closure_residual", Vector, nc, 1)], "`φ(q)`: point a minus point b of each closure."),
+        t(
+            "mass_matrix",
+            Q,
+            vec![m],
+            "`M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.",
+        ),
+        t(
+            "bias_forces",
+            QQ,
+            vec![n],
+            "`N(q, q̇) = (∂²L/∂q̇∂q) q̇ − ∂L/∂q = C q̇ + G`.",
+        ),
+        t(
+            "gravity_forces",
+            Q,
+            vec![("gravity_forces", Vector, nq, 1)],
+            "`G(q) = ∂V/∂q`.",
+        ),
+        t(
+            "damping_forces",
+            &["qd", "p"],
+            vec![("damping_forces", Vector, nq, 1)],
+            "Viscous joint damping `D q̇`.",
+        ),
+        t(
+            "closure_residual",
+            Q,
+            vec![("closure_residual", Vector, nc, 1)],
+            "`φ(q)`: point a minus point b of each closure.",
+        ),
         t("constraint_jacobian", Q, vec![j], "`J(q) = ∂φ/∂q`."),
         t("constraint_bias", QQ, vec![b], "`J̇(q, q̇) q̇`."),
-        t("foot_position", Q, vec![("foot_position", Vector, 2, 1)], "The foot point in the base frame."),
-        t("foot_jacobian", Q, vec![("foot_jacobian", Matrix, 2, nq)], "`J_f(q) = ∂(foot)/∂q`."),
-        t("foot_bias", QQ, vec![("foot_bias", Vector, 2, 1)], "`J̇_f(q, q̇) q̇`."),
-        t("kinetic_energy", QQ, vec![("kinetic_energy", Scalar, 1, 1)], "Kinetic energy of links and rotors."),
-        t("potential_energy", Q, vec![("potential_energy", Scalar, 1, 1)], "Potential energy `−Σ m g·c`."),
-        t("joint_positions", Q, vec![("joint_positions", Matrix, 2, nq)], "Joint positions in the base frame, one column per joint."),
-        t("link_tips", Q, vec![("link_tips", Matrix, 2, nq)], "Link tips in the base frame, one column per link."),
-        t("closure_points", Q, vec![("closure_points", Matrix, 2, nc)], "Closure points a, b of each closure in the base frame."),
-        t("dynamics_terms", QQ, vec![m, n, j, b], "`M`, `N`, `J` and `J̇ q̇` together, sharing subexpressions."),
+        t(
+            "foot_position",
+            Q,
+            vec![("foot_position", Vector, 2, 1)],
+            "The foot point in the base frame.",
+        ),
+        t(
+            "foot_jacobian",
+            Q,
+            vec![("foot_jacobian", Matrix, 2, nq)],
+            "`J_f(q) = ∂(foot)/∂q`.",
+        ),
+        t(
+            "foot_bias",
+            QQ,
+            vec![("foot_bias", Vector, 2, 1)],
+            "`J̇_f(q, q̇) q̇`.",
+        ),
+        t(
+            "kinetic_energy",
+            QQ,
+            vec![("kinetic_energy", Scalar, 1, 1)],
+            "Kinetic energy of links and rotors.",
+        ),
+        t(
+            "potential_energy",
+            Q,
+            vec![("potential_energy", Scalar, 1, 1)],
+            "Potential energy `−Σ m g·c`.",
+        ),
+        t(
+            "joint_positions",
+            Q,
+            vec![("joint_positions", Matrix, 2, nq)],
+            "Joint positions in the base frame, one column per joint.",
+        ),
+        t(
+            "link_tips",
+            Q,
+            vec![("link_tips", Matrix, 2, nq)],
+            "Link tips in the base frame, one column per link.",
+        ),
+        t(
+            "closure_points",
+            Q,
+            vec![("closure_points", Matrix, 2, nc)],
+            "Closure points a, b of each closure in the base frame.",
+        ),
+        t(
+            "dynamics_terms",
+            QQ,
+            vec![m, n, j, b],
+            "`M`, `N`, `J` and `J̇ q̇` together, sharing subexpressions.",
+        ),
     ]
 }
 
@@ -118,7 +188,11 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     let info = &ir.model;
     let ctx = format!("model `{}`", info.name);
     codegen::ident(&ctx, &info.name)?;
-    let (nq, nc, nu) = (info.joints.len(), 2 * info.closures.len(), info.actuated.len());
+    let (nq, nc, nu) = (
+        info.joints.len(),
+        2 * info.closures.len(),
+        info.actuated.len(),
+    );
     let ty = codegen::ident(&ctx, &type_name(&info.name))?;
     let name = &info.name;
     let joints = info
@@ -158,7 +232,8 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         methods.push(trait_method(f, nq, nc));
     }
 
-    let doc = format!(
+    let doc =
+        format!(
         " The `{name}` leg: {nq} joints, {} closure(s), actuated joints {:?}. Generated from `{}`.",
         info.closures.len(),
         info.actuated.iter().map(|&a| &info.joints[a]).collect::<Vec<_>>(),
@@ -167,6 +242,8 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     let (lq, lc, lu) = (lit(nq), lit(nc), lit(nu));
     let tokens = quote! {
         #![doc = #doc]
+        // prettyplease formats generated code, so that formatting cannot drift.
+        #![cfg_attr(rustfmt, rustfmt::skip)]
         #![allow(
             clippy::approx_constant,
             clippy::excessive_precision,
@@ -234,7 +311,9 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
 fn codegen_literal(v: f64) -> TokenStream {
     // The same form codegen gives constants: `T::lit(x)`, x round-trips exactly.
     let text = format!("{:?}", v.abs());
-    let lit: Literal = text.parse().expect("a finite float's Debug form is a literal");
+    let lit: Literal = text
+        .parse()
+        .expect("a finite float's Debug form is a literal");
     if v.is_sign_negative() {
         quote!(T::lit(-#lit))
     } else {
@@ -257,7 +336,11 @@ fn trait_method(f: &Program, nq: usize, nc: usize) -> TokenStream {
             }
         })
         .collect();
-    let pass: Vec<_> = f.inputs.iter().map(|i| format_ident!("{}", i.name)).collect();
+    let pass: Vec<_> = f
+        .inputs
+        .iter()
+        .map(|i| format_ident!("{}", i.name))
+        .collect();
     if f.name == "dynamics_terms" {
         return quote! {
             fn #name<T: Real>(#(#args),*) -> DynamicsTerms<T, #lq, #lc> {
@@ -317,6 +400,7 @@ pub fn lib_source(models: &[Summary]) -> Result<String, Error> {
         //! Generated leg models, one module per spec in `leg-models/specs/`. Each implements
         //! [`leg_models::LegModel`]. Regenerate with `cargo xtask gen`; never edit by hand.
         #![cfg_attr(not(feature = "std"), no_std)]
+        #![cfg_attr(rustfmt, rustfmt::skip)]
 
         #(#mods)*
 

@@ -65,7 +65,10 @@ impl PlainValue for f64 {
         Some(v)
     }
     fn from_seq<'de, A: SeqAccess<'de>>(_: A) -> Result<Self, A::Error> {
-        Err(de::Error::invalid_type(de::Unexpected::Seq, &Self::EXPECTING))
+        Err(de::Error::invalid_type(
+            de::Unexpected::Seq,
+            &Self::EXPECTING,
+        ))
     }
     fn from_map_value<'de, A: MapAccess<'de>>(map: &mut A) -> Result<Self, A::Error> {
         map.next_value()
@@ -100,19 +103,28 @@ impl<'de, V: PlainValue> Deserialize<'de> for Noted<V> {
             }
             fn visit_f64<E: de::Error>(self, v: f64) -> Result<Self::Value, E> {
                 V::from_number(v)
-                    .map(|value| Noted { value, source: None })
+                    .map(|value| Noted {
+                        value,
+                        source: None,
+                    })
                     .ok_or_else(|| E::invalid_type(de::Unexpected::Float(v), &self))
             }
             fn visit_i64<E: de::Error>(self, v: i64) -> Result<Self::Value, E> {
                 V::from_number(v as f64)
-                    .map(|value| Noted { value, source: None })
+                    .map(|value| Noted {
+                        value,
+                        source: None,
+                    })
                     .ok_or_else(|| E::invalid_type(de::Unexpected::Signed(v), &self))
             }
             fn visit_u64<E: de::Error>(self, v: u64) -> Result<Self::Value, E> {
                 self.visit_i64(v as i64)
             }
             fn visit_seq<A: SeqAccess<'de>>(self, seq: A) -> Result<Self::Value, A::Error> {
-                V::from_seq(seq).map(|value| Noted { value, source: None })
+                V::from_seq(seq).map(|value| Noted {
+                    value,
+                    source: None,
+                })
             }
             fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
                 let (mut value, mut source) = (None, None);
@@ -120,9 +132,7 @@ impl<'de, V: PlainValue> Deserialize<'de> for Noted<V> {
                     match key.as_str() {
                         "value" => value = Some(V::from_map_value(&mut map)?),
                         "source" => source = Some(map.next_value::<String>()?),
-                        other => {
-                            return Err(de::Error::unknown_field(other, &["value", "source"]))
-                        }
+                        other => return Err(de::Error::unknown_field(other, &["value", "source"])),
                     }
                 }
                 let value = value.ok_or_else(|| de::Error::missing_field("value"))?;
@@ -209,11 +219,11 @@ pub struct Spec {
 }
 
 const RUST_KEYWORDS: &[&str] = &[
-    "as", "async", "await", "break", "const", "continue", "crate", "dyn", "else", "enum",
-    "extern", "false", "fn", "for", "gen", "if", "impl", "in", "let", "loop", "match", "mod",
-    "move", "mut", "pub", "ref", "return", "self", "static", "struct", "super", "trait",
-    "true", "try", "type", "unsafe", "use", "where", "while", "abstract", "become", "box",
-    "do", "final", "macro", "override", "priv", "typeof", "unsized", "virtual", "yield",
+    "as", "async", "await", "break", "const", "continue", "crate", "dyn", "else", "enum", "extern",
+    "false", "fn", "for", "gen", "if", "impl", "in", "let", "loop", "match", "mod", "move", "mut",
+    "pub", "ref", "return", "self", "static", "struct", "super", "trait", "true", "try", "type",
+    "unsafe", "use", "where", "while", "abstract", "become", "box", "do", "final", "macro",
+    "override", "priv", "typeof", "unsized", "virtual", "yield",
 ];
 
 /// Names in specs become module, field and constant names: lowercase snake case ASCII
@@ -252,7 +262,12 @@ impl Ctx<'_> {
         }
     }
 
-    fn span<T>(&self, s: &Spanned<T>, field: impl Into<String>, msg: impl Into<String>) -> SpecError {
+    fn span<T>(
+        &self,
+        s: &Spanned<T>,
+        field: impl Into<String>,
+        msg: impl Into<String>,
+    ) -> SpecError {
         self.at(s.span().start, field, msg)
     }
 }
@@ -266,16 +281,52 @@ pub fn line_column(text: &str, offset: usize) -> (usize, usize) {
     (line, before[line_start..].chars().count() + 1)
 }
 
-/// The key written before `offset` on its line (`mass = …` → `mass`), to name the field
-/// of a syntax or type error.
-fn key_at(text: &str, offset: usize) -> Option<String> {
+/// The field a syntax or type error at `offset` concerns, as a path such as
+/// `links[1].com`: the enclosing table header (`[[links]]` counted, `[foot]`) and the key
+/// written before `offset` on its line, or the field a "missing field" message names.
+fn field_at(text: &str, offset: usize, message: &str) -> String {
     let offset = offset.min(text.len());
+    let mut table = String::new();
+    let mut counts: Vec<(String, usize)> = Vec::new();
     let line_start = text[..offset].rfind('\n').map_or(0, |i| i + 1);
+    for line in text[..line_start]
+        .lines()
+        .chain(text[line_start..].lines().take(1))
+    {
+        let t = line.trim();
+        if let Some(name) = t.strip_prefix("[[").and_then(|r| r.split("]]").next()) {
+            let name = name.trim().to_string();
+            let n = match counts.iter_mut().find(|(k, _)| *k == name) {
+                Some((_, n)) => {
+                    *n += 1;
+                    *n
+                }
+                None => {
+                    counts.push((name.clone(), 0));
+                    0
+                }
+            };
+            table = format!("{name}[{n}]");
+        } else if let Some(name) = t.strip_prefix('[').and_then(|r| r.split(']').next()) {
+            table = name.trim().to_string();
+        }
+    }
     let line_end = text[offset..].find('\n').map_or(text.len(), |i| offset + i);
     let line = &text[line_start..line_end];
-    let (key, _) = line.split_once('=')?;
-    let key = key.trim().trim_matches('"');
-    (!key.is_empty() && !key.starts_with('#')).then(|| key.to_string())
+    let key = line
+        .split_once('=')
+        .map(|(k, _)| k.trim().trim_matches('"').to_string())
+        .filter(|k| !k.is_empty() && !k.starts_with('#') && !k.starts_with('['))
+        .or_else(|| {
+            let rest = message.split("missing field `").nth(1)?;
+            Some(rest.split('`').next()?.to_string())
+        });
+    match (table.is_empty(), key) {
+        (true, Some(k)) => k,
+        (false, Some(k)) => format!("{table}.{k}"),
+        (false, None) => table,
+        (true, None) => "(document)".into(),
+    }
 }
 
 impl Spec {
@@ -302,8 +353,8 @@ impl Spec {
         check_name(&name).map_err(|m| ctx.at(0, "(file name)", m))?;
         let file: SpecFile = toml::from_str(&text).map_err(|e| {
             let offset = e.span().map_or(0, |s| s.start);
-            let field = key_at(&text, offset).unwrap_or_else(|| "(document)".into());
-            ctx.at(offset, field, e.message().trim().to_string())
+            let message = e.message().trim().to_string();
+            ctx.at(offset, field_at(&text, offset, &message), message)
         })?;
         validate(&ctx, &file)?;
         Ok(Spec {
@@ -315,7 +366,10 @@ impl Spec {
     }
 
     pub fn link_index(&self, name: &str) -> Option<usize> {
-        self.file.links.iter().position(|l| *l.get_ref().name.get_ref() == name)
+        self.file
+            .links
+            .iter()
+            .position(|l| *l.get_ref().name.get_ref() == name)
     }
 }
 
@@ -337,7 +391,11 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
         names.push(n.clone());
         Ok(())
     };
-    let link_names: Vec<&str> = file.links.iter().map(|l| l.get_ref().name.get_ref().as_str()).collect();
+    let link_names: Vec<&str> = file
+        .links
+        .iter()
+        .map(|l| l.get_ref().name.get_ref().as_str())
+        .collect();
     for (i, link) in file.links.iter().enumerate() {
         let l = link.get_ref();
         let f = |field: &str| format!("links[{i}].{field}");
@@ -377,8 +435,18 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
         }
         if let Some(a) = &l.actuator {
             let a = a.get_ref();
-            check_num(ctx, &a.rotor_inertia, &f("actuator.rotor_inertia"), Sign::NonNegative)?;
-            check_num(ctx, &a.gear_ratio, &f("actuator.gear_ratio"), Sign::Positive)?;
+            check_num(
+                ctx,
+                &a.rotor_inertia,
+                &f("actuator.rotor_inertia"),
+                Sign::NonNegative,
+            )?;
+            check_num(
+                ctx,
+                &a.gear_ratio,
+                &f("actuator.gear_ratio"),
+                Sign::Positive,
+            )?;
         }
     }
     let check_point = |p: &PointSpec, field: &str| -> Result<(), SpecError> {

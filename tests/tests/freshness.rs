@@ -1,0 +1,46 @@
+//! The committed generated code is what `codegen` makes from the committed IR (no Python
+//! needed), and the committed IR is in its canonical form (floats round-trip exactly).
+//! `cargo xtask gen --check` covers the other half: the IR is what CasADi derives today.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use leg_tests::workspace_root;
+use xtask::gen;
+
+#[test]
+fn committed_rust_and_ir_are_fresh() {
+    let root = workspace_root();
+    let irs = gen::committed_irs(&root).expect("committed IR reads");
+    assert!(!irs.is_empty(), "no IR under {}", gen::IR_DIR);
+    let mut expected: BTreeMap<PathBuf, String> = gen::rust_files(&irs).expect("codegen succeeds");
+    for ir in &irs {
+        expected.insert(
+            PathBuf::from(gen::IR_DIR).join(format!("{}.json", ir.model.name)),
+            ir.to_text(),
+        );
+    }
+    let stale = gen::stale_files(&root, &expected);
+    assert!(
+        stale.is_empty(),
+        "generated files differ from what the committed IR makes: {stale:?}\nrun `cargo xtask gen` and commit the result"
+    );
+}
+
+#[test]
+fn every_spec_has_committed_ir_that_names_it() {
+    let root = workspace_root();
+    let specs = gen::spec_paths(&root).unwrap();
+    let irs = gen::committed_irs(&root).unwrap();
+    assert_eq!(specs.len(), irs.len());
+    for (spec, ir) in specs.iter().zip(&irs) {
+        let rel = spec.strip_prefix(&root).unwrap();
+        assert_eq!(
+            PathBuf::from(&ir.model.spec),
+            rel,
+            "IR of {} names another spec",
+            ir.model.name
+        );
+        assert_eq!(ir.model.spec_sha256.len(), 64);
+    }
+}

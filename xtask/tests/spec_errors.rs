@@ -1,0 +1,371 @@
+//! Bad specs fail with the file, line, column and field; spec text never reaches
+//! generated code; a failed generation writes nothing.
+
+use std::path::{Path, PathBuf};
+
+use xtask::gen::{self, GenOptions};
+use xtask::model;
+use xtask::spec::{Spec, SpecError};
+
+const VALID: &str = r#"# a small five-bar
+gravity = [0.0, -9.81]
+
+[[links]]
+name = "upper_a"
+parent = "base"
+length = [0.1, 0.0]
+mass = 0.05
+com = [0.05, 0.0]
+inertia = 4e-5
+actuator = { rotor_inertia = 0.0, gear_ratio = 1.0 }
+
+[[links]]
+name = "lower_a"
+parent = "upper_a"
+length = [0.2, 0.0]
+mass = 0.05
+com = [0.1, 0.0]
+inertia = 1.6e-4
+
+[[links]]
+name = "upper_b"
+parent = "base"
+origin = [0.05, 0.0]
+length = [0.1, 0.0]
+mass = 0.05
+com = [0.05, 0.0]
+inertia = 4e-5
+actuator = { rotor_inertia = 0.0, gear_ratio = 1.0 }
+
+[[links]]
+name = "lower_b"
+parent = "upper_b"
+length = [0.2, 0.0]
+mass = 0.05
+com = [0.1, 0.0]
+inertia = 1.6e-4
+
+[[closures]]
+name = "toe"
+a = { link = "lower_a" }
+b = { link = "lower_b" }
+
+[foot]
+link = "lower_a"
+"#;
+
+fn parse(text: &str) -> Result<Spec, SpecError> {
+    Spec::parse(Path::new("leg-models/specs/leg.toml"), text.to_string())
+}
+
+/// Replaces the `nth` (0-based) occurrence of `from` in the valid spec.
+fn edit(from: &str, to: &str, nth: usize) -> String {
+    let (i, _) = VALID
+        .match_indices(from)
+        .nth(nth)
+        .unwrap_or_else(|| panic!("`{from}` #{nth} not in spec"));
+    format!("{}{}{}", &VALID[..i], to, &VALID[i + from.len()..])
+}
+
+/// 1-based line and column of the `nth` occurrence of `needle` in `text`.
+fn pos(text: &str, needle: &str, nth: usize) -> (usize, usize) {
+    let (i, _) = text.match_indices(needle).nth(nth).unwrap();
+    xtask::spec::line_column(text, i)
+}
+
+fn expect_error(text: &str, at: (usize, usize), field: &str, says: &str) {
+    let e = parse(text).expect_err("spec should be refused");
+    assert_eq!(e.file, PathBuf::from("leg-models/specs/leg.toml"));
+    assert_eq!((e.line, e.column), at, "position of: {e}");
+    assert_eq!(e.field, field, "field of: {e}");
+    assert!(e.message.contains(says), "`{e}` should say `{says}`");
+    let shown = e.to_string();
+    assert!(
+        shown.starts_with(&format!(
+            "leg-models/specs/leg.toml:{}:{}: {field}: ",
+            at.0, at.1
+        )),
+        "{shown}"
+    );
+}
+
+#[test]
+fn the_valid_spec_parses() {
+    let spec = parse(VALID).unwrap();
+    assert_eq!(spec.name, "leg");
+    let m = model::build(&spec).unwrap();
+    assert_eq!(m.actuated, vec![0, 2]);
+    assert_eq!(m.links[2].origin, ["upper_b_origin_x", "upper_b_origin_y"]);
+    // A child joint sits at its parent's tip unless the spec says otherwise.
+    assert_eq!(m.links[1].origin, m.links[0].length);
+    let p = m
+        .params
+        .iter()
+        .find(|p| p.name == "upper_b_origin_x")
+        .unwrap();
+    assert_eq!(p.default, 0.05);
+}
+
+#[test]
+fn syntax_error() {
+    let text = edit("mass = 0.05", "mass = ", 1);
+    let at = pos(&text, "mass = \n", 0);
+    expect_error(&text, (at.0, at.1 + 7), "links[1].mass", "");
+}
+
+#[test]
+fn unknown_parent() {
+    let text = edit("parent = \"upper_a\"", "parent = \"uper_a\"", 0);
+    let (l, c) = pos(&text, "\"uper_a\"", 0);
+    expect_error(&text, (l, c), "links[1].parent", "unknown parent `uper_a`");
+}
+
+#[test]
+fn parent_defined_below() {
+    let text = edit("parent = \"upper_a\"", "parent = \"lower_b\"", 0);
+    let (l, c) = pos(&text, "\"lower_b\"", 0);
+    expect_error(&text, (l, c), "links[1].parent", "defined below");
+}
+
+#[test]
+fn missing_field() {
+    let text = edit("mass = 0.05\n", "", 2);
+    let e = parse(&text).unwrap_err();
+    assert!(e.message.contains("missing field `mass`"), "{e}");
+    assert_eq!(e.field, "links[2].mass", "{e}");
+    // The error points into the third link's table.
+    let third = pos(&text, "name = \"upper_b\"", 0).0;
+    assert!(e.line >= third - 1 && e.line <= third + 6, "{e}");
+}
+
+#[test]
+fn negative_mass() {
+    let text = edit("mass = 0.05", "mass = -0.05", 3);
+    let (l, c) = pos(&text, "-0.05", 0);
+    expect_error(
+        &text,
+        (l, c),
+        "links[3].mass",
+        "must be positive, got -0.05",
+    );
+}
+
+#[test]
+fn negative_mass_with_a_source_note() {
+    let text = edit(
+        "mass = 0.05",
+        "mass = { value = -1.0, source = \"a datasheet\" }",
+        0,
+    );
+    let (l, c) = pos(&text, "{ value = -1.0", 0);
+    expect_error(&text, (l, c), "links[0].mass", "must be positive");
+}
+
+#[test]
+fn zero_gear_ratio() {
+    let text = edit("gear_ratio = 1.0", "gear_ratio = 0", 1);
+    let (l, c) = pos(&text, "gear_ratio = 0 }", 0);
+    expect_error(
+        &text,
+        (l, c + 13),
+        "links[2].actuator.gear_ratio",
+        "must be positive",
+    );
+}
+
+#[test]
+fn closure_naming_a_missing_link() {
+    let text = edit(
+        "b = { link = \"lower_b\" }",
+        "b = { link = \"lower_c\" }",
+        0,
+    );
+    let (l, c) = pos(&text, "\"lower_c\"", 0);
+    expect_error(
+        &text,
+        (l, c),
+        "closures[0].b.link",
+        "unknown link `lower_c`",
+    );
+}
+
+#[test]
+fn closure_on_one_link() {
+    let text = edit(
+        "b = { link = \"lower_b\" }",
+        "b = { link = \"lower_a\" }",
+        0,
+    );
+    let (l, c) = pos(&text, "\"lower_a\" }", 1);
+    expect_error(&text, (l, c), "closures[0].b.link", "two different links");
+}
+
+#[test]
+fn foot_on_a_missing_link() {
+    let text = edit("link = \"lower_a\"\n", "link = \"shin\"\n", 0);
+    let (l, c) = pos(&text, "\"shin\"", 0);
+    expect_error(&text, (l, c), "foot.link", "unknown link `shin`");
+}
+
+#[test]
+fn names_that_are_not_plain_identifiers() {
+    for bad in [
+        "Upper-A",
+        "upper a",
+        "fn",
+        "1st",
+        "_x",
+        "ünter",
+        "a\\\"; panic!(\\\"",
+        "base",
+    ] {
+        let text = edit("name = \"upper_b\"", &format!("name = \"{bad}\""), 0);
+        let (l, c) = pos(&text, "name = \"", 2);
+        let e = parse(&text).expect_err(bad);
+        assert_eq!((e.line, e.column), (l, c + 7), "{e}");
+        assert_eq!(e.field, "links[2].name");
+    }
+}
+
+#[test]
+fn duplicate_names() {
+    let text = edit("name = \"toe\"", "name = \"lower_b\"", 0);
+    let (l, c) = pos(&text, "\"lower_b\"", 1);
+    expect_error(
+        &text,
+        (l, c),
+        "closures[0].name",
+        "duplicate name `lower_b`",
+    );
+    let text = edit("name = \"lower_b\"", "name = \"lower_a\"", 0);
+    let (l, c) = pos(&text, "\"lower_a\"", 1);
+    expect_error(&text, (l, c), "links[3].name", "duplicate name `lower_a`");
+}
+
+#[test]
+fn unknown_field_and_wrong_type() {
+    let text = edit("inertia = 4e-5", "inertia = 4e-5\ninertai = 1.0", 0);
+    let e = parse(&text).unwrap_err();
+    assert!(e.message.contains("unknown field `inertai`"), "{e}");
+    assert_eq!(e.field, "links[0].inertai", "{e}");
+    assert_eq!(e.line, pos(&text, "inertai", 0).0);
+    let text = edit("com = [0.1, 0.0]", "com = \"middle\"", 0);
+    let (l, c) = pos(&text, "\"middle\"", 0);
+    expect_error(&text, (l, c), "links[1].com", "a 2-vector");
+    let text = edit("com = [0.1, 0.0]", "com = [0.1, 0.0, 0.3]", 0);
+    let e = parse(&text).unwrap_err();
+    assert_eq!(e.field, "links[1].com", "{e}");
+}
+
+#[test]
+fn a_file_name_that_is_not_an_identifier() {
+    let e = Spec::parse(Path::new("specs/Five-Bar.toml"), VALID.to_string()).unwrap_err();
+    assert_eq!(e.field, "(file name)");
+    assert!(e.message.contains("`Five-Bar`"));
+}
+
+#[test]
+fn spec_text_never_reaches_what_is_generated() {
+    let evil = "\\\"); } panic!(\\\"pwned\\\"); /*";
+    let text = format!(
+        "description = \"{evil}\"\n{}",
+        edit(
+            "mass = 0.05",
+            &format!("mass = {{ value = 0.05, source = \"{evil}\" }}"),
+            0
+        )
+    );
+    let spec = parse(&text).unwrap();
+    let m = model::build(&spec).unwrap();
+    for p in &m.params {
+        assert!(
+            !p.doc.contains("pwned") && !p.name.contains("pwned"),
+            "{p:?}"
+        );
+    }
+    for l in &m.links {
+        assert!(!l.name.contains("pwned"));
+    }
+}
+
+/// A temporary workspace holding specs and generated files.
+struct TempRoot(PathBuf);
+
+impl TempRoot {
+    fn new(tag: &str) -> TempRoot {
+        let dir = std::env::temp_dir().join(format!("xtask-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        for sub in [gen::SPECS_DIR, gen::IR_DIR, gen::SRC_DIR] {
+            std::fs::create_dir_all(dir.join(sub)).unwrap();
+        }
+        TempRoot(dir)
+    }
+
+    fn write(&self, rel: &str, text: &str) {
+        std::fs::write(self.0.join(rel), text).unwrap();
+    }
+
+    fn listing(&self) -> Vec<(PathBuf, String)> {
+        let mut out = Vec::new();
+        for sub in [gen::SPECS_DIR, gen::IR_DIR, gen::SRC_DIR] {
+            let mut entries: Vec<_> = std::fs::read_dir(self.0.join(sub))
+                .unwrap()
+                .flatten()
+                .map(|e| e.path())
+                .collect();
+            entries.sort();
+            for p in entries {
+                let text = std::fs::read_to_string(&p).unwrap();
+                out.push((p, text));
+            }
+        }
+        out
+    }
+}
+
+impl Drop for TempRoot {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+#[test]
+fn a_failed_generation_leaves_every_file_untouched() {
+    let root = TempRoot::new("failed-gen");
+    root.write("leg-models/specs/good.toml", VALID);
+    root.write(
+        "leg-models/specs/bad.toml",
+        &edit("mass = 0.05", "mass = -1.0", 0),
+    );
+    root.write("generated/ir/good.json", "committed IR");
+    root.write("generated/src/good.rs", "// committed code");
+    root.write("generated/src/lib.rs", "// committed lib");
+    let before = root.listing();
+    let err = gen::run(
+        &root.0,
+        &GenOptions {
+            check: false,
+            names: vec![],
+        },
+    )
+    .unwrap_err();
+    assert!(
+        err.contains("leg-models/specs/bad.toml:") && err.contains("links[0].mass"),
+        "{err}"
+    );
+    assert_eq!(root.listing(), before, "a failed generation changed files");
+    // Unknown model names are refused before anything runs, too.
+    let err = gen::run(
+        &root.0,
+        &GenOptions {
+            check: false,
+            names: vec!["nope".into()],
+        },
+    )
+    .unwrap_err();
+    assert!(
+        err.contains("unknown model `nope`") && err.contains("good"),
+        "{err}"
+    );
+    assert_eq!(root.listing(), before);
+}
