@@ -7,6 +7,8 @@ pub mod atrias;
 pub use atrias::Atrias;
 pub mod digit;
 pub use digit::Digit;
+pub mod five_bar_offset;
+pub use five_bar_offset::FiveBarOffset;
 pub mod minitaur;
 pub use minitaur::Minitaur;
 pub mod two_link;
@@ -17,7 +19,8 @@ pub use two_link::TwoLink;
 macro_rules! for_each_model {
     ($callback:ident) => {
         $callback ! (atrias, $crate::atrias::Atrias, 4, 2, 2); $callback ! (digit,
-        $crate::digit::Digit, 4, 2, 2); $callback ! (minitaur,
+        $crate::digit::Digit, 4, 2, 2); $callback ! (five_bar_offset,
+        $crate::five_bar_offset::FiveBarOffset, 4, 2, 2); $callback ! (minitaur,
         $crate::minitaur::Minitaur, 4, 2, 2); $callback ! (two_link,
         $crate::two_link::TwoLink, 2, 0, 2);
     };
