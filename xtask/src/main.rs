@@ -4,12 +4,16 @@ use std::process::ExitCode;
 
 use xtask::gen::{self, GenOptions};
 
+mod test;
+
 const USAGE: &str = "\
 usage: cargo xtask <command>
 
 commands:
   gen [--check] [NAME…]   derive the models (CasADi) and write generated/; with --check,
                           regenerate in memory and fail if the committed files differ
+  test                    every check CI runs: formatting, `gen --check`, the workspace
+                          tests (snapshots must be reviewed), the no_std build, clippy
 ";
 
 fn main() -> ExitCode {
@@ -42,6 +46,18 @@ fn main() -> ExitCode {
                     println!("{report}");
                     ExitCode::SUCCESS
                 }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
+        Some("test") => {
+            if let Some(extra) = args.get(1) {
+                return usage_error(format!("`test` takes no arguments, got `{extra}`"));
+            }
+            match test::run(&gen::workspace_root()) {
+                Ok(()) => ExitCode::SUCCESS,
                 Err(e) => {
                     eprintln!("error: {e}");
                     ExitCode::FAILURE
