@@ -1,4 +1,7 @@
-//! Helpers shared by the workspace tests.
+#![doc = include_str!("../../README.md")]
+// The README is this crate's documentation, so its Rust examples run as doctests.
+
+// Helpers shared by the workspace tests.
 
 use std::path::{Path, PathBuf};
 
