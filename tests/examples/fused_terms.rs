@@ -14,7 +14,9 @@ use std::hint::black_box;
 use leg_models::nalgebra::SVector;
 use leg_models::LegModel;
 
-fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(n: usize) -> f64 {
+fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
+    n: usize,
+) -> f64 {
     let p = L::Params::<f64>::default();
     let mut acc = 0.0;
     for k in 0..n {
@@ -28,7 +30,10 @@ fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usiz
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let (Some(model), Some(n)) = (args.first(), args.get(1).and_then(|n| n.parse::<usize>().ok())) else {
+    let (Some(model), Some(n)) = (
+        args.first(),
+        args.get(1).and_then(|n| n.parse::<usize>().ok()),
+    ) else {
         eprintln!("usage: fused_terms MODEL ITERATIONS");
         std::process::exit(2);
     };

@@ -57,7 +57,11 @@ pub fn run(root: &Path) -> Result<(), String> {
     )?;
     eprintln!("{report}");
     // Snapshots must match as committed: insta neither writes nor accepts here.
-    cargo(root, &["test", "--workspace"], &[("INSTA_UPDATE", "no"), ("CI", "true")])?;
+    cargo(
+        root,
+        &["test", "--workspace"],
+        &[("INSTA_UPDATE", "no"), ("CI", "true")],
+    )?;
     let pending = pending_snapshots(root);
     if !pending.is_empty() {
         return Err(format!(
@@ -67,13 +71,27 @@ pub fn run(root: &Path) -> Result<(), String> {
     }
     cargo(
         root,
-        &["build", "-p", "leg-models", "-p", "generated", "--no-default-features"],
+        &[
+            "build",
+            "-p",
+            "leg-models",
+            "-p",
+            "generated",
+            "--no-default-features",
+        ],
         &[],
     )
     .map_err(|e| format!("{e}: the runtime and the generated models must build without std"))?;
     cargo(
         root,
-        &["clippy", "--workspace", "--all-targets", "--", "-D", "warnings"],
+        &[
+            "clippy",
+            "--workspace",
+            "--all-targets",
+            "--",
+            "-D",
+            "warnings",
+        ],
         &[],
     )?;
     eprintln!("all checks passed");
