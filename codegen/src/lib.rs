@@ -70,15 +70,19 @@ impl Value {
         match self {
             Value::Local(id) => quote!(#id),
             Value::Field(s, f) => quote!(#s.#f),
-            Value::Const(v) => {
-                let lit = float_literal(v.abs());
-                if v.is_sign_negative() {
-                    quote!(T::lit(-#lit))
-                } else {
-                    quote!(T::lit(#lit))
-                }
-            }
+            Value::Const(v) => scalar_literal(*v),
         }
+    }
+}
+
+/// A constant of generated code: `T::lit(x)`, with `x` the shortest `f64` literal that
+/// parses back to exactly `v` (sign included, `-0.0` too). `v` must be finite.
+pub fn scalar_literal(v: f64) -> TokenStream {
+    let lit = float_literal(v.abs());
+    if v.is_sign_negative() {
+        quote!(T::lit(-#lit))
+    } else {
+        quote!(T::lit(#lit))
     }
 }
 

@@ -217,7 +217,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
                 message: format!("parameter `{}` has no finite default", p.name),
             });
         }
-        let v = codegen_literal(p.default);
+        let v = codegen::scalar_literal(p.default);
         defaults.push(quote!(#id: #v));
         let i = lit(param_names.len());
         getters.push(quote!(#i => Some(self.#id)));
@@ -306,19 +306,6 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         #(#functions)*
     };
     codegen::format_file(&[header(ir)], tokens)
-}
-
-fn codegen_literal(v: f64) -> TokenStream {
-    // The same form codegen gives constants: `T::lit(x)`, x round-trips exactly.
-    let text = format!("{:?}", v.abs());
-    let lit: Literal = text
-        .parse()
-        .expect("a finite float's Debug form is a literal");
-    if v.is_sign_negative() {
-        quote!(T::lit(-#lit))
-    } else {
-        quote!(T::lit(#lit))
-    }
 }
 
 fn trait_method(f: &Program, nq: usize, nc: usize) -> TokenStream {
