@@ -75,24 +75,26 @@ impl Value {
     }
 }
 
-/// A constant of generated code: `T::lit(x)`, with `x` the shortest `f64` literal that
-/// parses back to exactly `v` (sign included, `-0.0` too). `v` must be finite.
+/// A constant of generated code: `T::lit(x)`, with `x` from [`f64_literal`].
 pub fn scalar_literal(v: f64) -> TokenStream {
-    let lit = float_literal(v.abs());
-    if v.is_sign_negative() {
-        quote!(T::lit(-#lit))
-    } else {
-        quote!(T::lit(#lit))
-    }
+    let x = f64_literal(v);
+    quote!(T::lit(#x))
 }
 
-/// The shortest literal that parses back to exactly `v` (finite, non-negative).
-fn float_literal(v: f64) -> Literal {
+/// The shortest `f64` literal that parses back to exactly `v` (sign included, `-0.0`
+/// too). `v` must be finite.
+pub fn f64_literal(v: f64) -> TokenStream {
     // `{:?}` is the shortest round-trip form and switches to exponent notation for very
     // large or small magnitudes; it always has a `.` or an `e`, so it is a float literal.
-    let text = format!("{v:?}");
-    text.parse::<Literal>()
-        .unwrap_or_else(|_| Literal::f64_unsuffixed(v))
+    let text = format!("{:?}", v.abs());
+    let lit = text
+        .parse::<Literal>()
+        .unwrap_or_else(|_| Literal::f64_unsuffixed(v.abs()));
+    if v.is_sign_negative() {
+        quote!(-#lit)
+    } else {
+        quote!(#lit)
+    }
 }
 
 impl Program {

@@ -67,6 +67,9 @@ pub trait LegModel<const NQ: usize, const NC: usize, const NU: usize> {
     const JOINT_NAMES: [&'static str; NQ];
     /// Indices (into `q`) of the actuated joints, in the order of the input vector `u`.
     const ACTUATED: [usize; NU];
+    /// A typical assembled pose (rad) from the spec: the default guess of loop assembly
+    /// (it picks the assembly mode) and the default initial state of simulations.
+    const HOME: [f64; NQ];
 
     /// The physical parameters (lengths, masses, centres of mass, inertias, rotor
     /// inertias and gear ratios, damping, gravity). `Default` holds the spec's values.

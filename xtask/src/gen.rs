@@ -178,6 +178,7 @@ fn assemble(spec: &Spec, model: &Model, derived: Derived) -> IrFile {
             casadi_version: derived.casadi_version,
             joints: model.joint_names(),
             actuated: model.actuated.clone(),
+            home: model.home.clone(),
             closures: model.closures.iter().map(|c| c.name.clone()).collect(),
             params: model.params.clone(),
         },

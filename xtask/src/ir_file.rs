@@ -29,6 +29,8 @@ pub struct ModelInfo {
     /// Link names, in coordinate order.
     pub joints: Vec<String>,
     pub actuated: Vec<usize>,
+    /// The home pose (rad), in coordinate order.
+    pub home: Vec<f64>,
     pub closures: Vec<String>,
     pub params: Vec<Param>,
 }

@@ -54,6 +54,8 @@ pub struct Model {
     pub foot: Point,
     pub gravity: [String; 2],
     pub actuated: Vec<usize>,
+    /// The home pose (rad).
+    pub home: Vec<f64>,
 }
 
 impl Model {
@@ -245,5 +247,9 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
         foot,
         gravity,
         actuated,
+        home: f
+            .home
+            .as_ref()
+            .map_or_else(|| vec![0.0; f.links.len()], |h| h.get_ref().clone()),
     })
 }

@@ -201,6 +201,13 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         .map(|j| codegen::ident(&ctx, j).map(|_| j))
         .collect::<Result<Vec<_>, _>>()?;
     let actuated = info.actuated.iter().map(|&a| lit(a));
+    if info.home.len() != nq || !info.home.iter().all(|h| h.is_finite()) {
+        return Err(Error {
+            context: ctx.clone(),
+            message: format!("home pose needs {nq} finite angles"),
+        });
+    }
+    let home = info.home.iter().map(|&h| codegen::f64_literal(h));
 
     let mut fields = Vec::new();
     let mut defaults = Vec::new();
@@ -299,6 +306,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             const NAME: &'static str = #name;
             const JOINT_NAMES: [&'static str; NQ] = [#(#joints),*];
             const ACTUATED: [usize; NU] = [#(#actuated),*];
+            const HOME: [f64; NQ] = [#(#home),*];
             type Params<T: Real> = Params<T>;
             #(#methods)*
         }

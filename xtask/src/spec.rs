@@ -152,6 +152,11 @@ pub struct SpecFile {
     /// Gravity in the base frame [m/s²].
     pub gravity: Spanned<Vec2>,
     pub links: Vec<Spanned<LinkSpec>>,
+    /// A typical assembled pose (rad, one angle per link in file order): the default
+    /// guess of loop assembly, which picks the assembly mode (knee in or out), and the
+    /// default initial state of simulations. Default: all zeros.
+    #[serde(default)]
+    pub home: Option<Spanned<Vec<f64>>>,
     #[serde(default)]
     pub closures: Vec<Spanned<ClosureSpec>>,
     pub foot: Spanned<PointSpec>,
@@ -477,6 +482,19 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
         }
     }
     check_point(file.foot.get_ref(), "foot")?;
+    if let Some(home) = &file.home {
+        let h = home.get_ref();
+        if h.len() != file.links.len() {
+            return Err(ctx.span(
+                home,
+                "home",
+                format!("lists {} angles for {} links", h.len(), file.links.len()),
+            ));
+        }
+        for &v in h {
+            check_value(v, Sign::Any).map_err(|m| ctx.span(home, "home", m))?;
+        }
+    }
     Ok(())
 }
 
