@@ -1,16 +1,27 @@
 //! Runtime for closed-chain leg models.
 //!
-//! This crate holds the contract between the generator and the runtime: the
+//! This crate holds the contract between the generator and the runtime — the
 //! [`LegModel`] trait that every generated geometry implements (see the `generated`
-//! crate), and the scalar trait [`Real`] the generated code is generic over. The
-//! geometry specs the generator reads live in `leg-models/specs/`.
+//! crate) and the scalar trait [`Real`] the generated code is generic over — and the
+//! algorithms that use the generated terms: constrained forward dynamics
+//! ([`dynamics`]), loop assembly ([`assembly`]), time stepping with drift control
+//! ([`integrate`]) and, with the `std` feature, a recording [`simulate::Simulator`].
+//! Everything but the simulator's record is fixed-size and allocation-free, and the
+//! crate is `no_std` without the default `std` feature. The geometry specs the generator
+//! reads live in `leg-models/specs/`.
 //!
 //! Conventions (see `shared/DESIGN.md` §3): `q` are relative joint angles, one per link,
 //! in the order the links appear in the spec; a closure contributes two rows to the
-//! closure residual `φ(q)` (point a minus point b, in the base frame); `M q̈ + N = Jᵀ F + B u`.
+//! closure residual `φ(q)` (point a minus point b, in the base frame);
+//! `M q̈ + N + D q̇ = Jᵀ F + B u`.
 #![cfg_attr(not(feature = "std"), no_std)]
 
+pub mod assembly;
+pub mod dynamics;
+pub mod integrate;
 mod model;
+#[cfg(feature = "std")]
+pub mod simulate;
 
 pub use model::{DynamicsTerms, LegModel, Parameters, Real};
 pub use nalgebra;

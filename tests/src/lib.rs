@@ -5,6 +5,12 @@
 
 use std::path::{Path, PathBuf};
 
+use leg_models::assembly::{project_position, project_velocity, Tolerance};
+use leg_models::dynamics::forward_dynamics;
+use leg_models::integrate::State;
+use leg_models::nalgebra::SVector;
+use leg_models::LegModel;
+
 /// A small deterministic generator (xorshift64*), so that failures reproduce.
 pub struct Rng(u64);
 
@@ -34,4 +40,78 @@ pub fn workspace_root() -> PathBuf {
         .parent()
         .expect("tests/ lives in the workspace")
         .to_path_buf()
+}
+
+/// A random regular assembled state: random angles projected onto `φ = 0`, random rates
+/// projected onto `J q̇ = 0`. States near a singularity are skipped: the dynamics must
+/// solve and the passive joints must keep their rank (reciprocal condition of
+/// `J_p J_pᵀ` above 1e-6), which also leaves out a five-bar's degenerate mode where both
+/// branches coincide. Singular configurations have tests of their own.
+pub fn random_assembled_state<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>(
+    p: &L::Params<f64>,
+    rng: &mut Rng,
+    rate: f64,
+) -> State<f64, NQ> {
+    loop {
+        let mut q = SVector::<f64, NQ>::from_fn(|_, _| {
+            rng.range(-std::f64::consts::PI, std::f64::consts::PI)
+        });
+        let mut qd = SVector::<f64, NQ>::from_fn(|_, _| rng.range(-rate, rate));
+        if project_position::<L, f64, NQ, NC, NU>(p, &mut q, &Tolerance::default()).is_err()
+            || project_velocity::<L, f64, NQ, NC, NU>(p, &q, &mut qd).is_err()
+        {
+            continue;
+        }
+        if forward_dynamics::<L, f64, NQ, NC, NU>(p, &q, &qd, &SVector::zeros(), None).is_ok()
+            && passive_rcond::<L, NQ, NC, NU>(p, &q) > 1e-6
+        {
+            return State { q, qd };
+        }
+    }
+}
+
+/// The leg's home pose from its spec, assembled (every joint free), at rest: where the
+/// drift figures release each leg.
+pub fn passive_release_state<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>(
+    p: &L::Params<f64>,
+) -> State<f64, NQ> {
+    let mut q = SVector::<f64, NQ>::from_column_slice(&L::HOME);
+    project_position::<L, f64, NQ, NC, NU>(p, &mut q, &Tolerance::default())
+        .expect("the home pose assembles");
+    State {
+        q,
+        qd: SVector::zeros(),
+    }
+}
+
+/// The reciprocal condition of `J_p J_pᵀ` (`J` without the actuated columns), from the
+/// pivots of its Cholesky factor; 1 without closures, 0 where it is singular.
+pub fn passive_rcond<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
+    p: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+) -> f64 {
+    if NC == 0 {
+        return 1.0;
+    }
+    let mut jp = L::constraint_jacobian(q, p);
+    for &a in L::ACTUATED.iter() {
+        jp.column_mut(a).fill(0.0);
+    }
+    match (jp * jp.transpose()).cholesky() {
+        None => 0.0,
+        Some(c) => {
+            let d = c.l_dirty().diagonal().map(f64::abs);
+            (d.min() / d.max()).powi(2)
+        }
+    }
 }

@@ -1,0 +1,195 @@
+//! Constrained forward dynamics: the KKT system of DESIGN.md §3, solved with structure.
+//!
+//! ```text
+//! [ M   −Jᵀ ] [ q̈ ]   [ B u − N − D q̇ ]
+//! [ J    0  ] [ F  ] = [ −J̇ q̇ − 2α J q̇ − β² φ ]      (α = β = 0: no Baumgarte terms)
+//! ```
+//!
+//! `M = L Lᵀ` (Cholesky), `a = M⁻¹ τ`, `Y = M⁻¹ Jᵀ`, `S = J Y` (`NC × NC`, SPD when `J` has
+//! full row rank), `F = S⁻¹ (rhs − J a)`, `q̈ = a + Y F`. Everything is fixed-size and on
+//! the stack.
+
+use core::fmt;
+
+use nalgebra::{Cholesky, Const, SMatrix, SVector};
+
+use crate::model::{DynamicsTerms, LegModel, Real};
+
+/// Why the constrained dynamics cannot be solved at a state.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum DynamicsError {
+    /// `M` is not positive definite (a massless, inertia-free link, or bad parameters).
+    MassMatrixNotPositiveDefinite,
+    /// `J M⁻¹ Jᵀ` is singular or too ill-conditioned to trust: the closure constraints
+    /// lose rank here, a singular configuration of the mechanism. `rcond` is the
+    /// reciprocal condition estimate (squared pivot ratio of its Cholesky factor).
+    SingularConstraints { rcond: f64 },
+    /// A state, input or parameter is NaN or infinite.
+    NonFinite,
+}
+
+impl fmt::Display for DynamicsError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            DynamicsError::MassMatrixNotPositiveDefinite => {
+                write!(f, "the mass matrix is not positive definite")
+            }
+            DynamicsError::SingularConstraints { rcond } => write!(
+                f,
+                "singular configuration: the closure constraints lose rank (rcond {rcond:.1e})"
+            ),
+            DynamicsError::NonFinite => write!(f, "non-finite state, input or parameter"),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for DynamicsError {}
+
+/// Baumgarte stabilization of the closure: `J q̈ = −J̇ q̇ − 2α J q̇ − β² φ`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Baumgarte<T> {
+    pub alpha: T,
+    pub beta: T,
+}
+
+/// The solution of the KKT system.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Acceleration<T: Real, const NQ: usize, const NC: usize> {
+    /// `q̈`.
+    pub qdd: SVector<T, NQ>,
+    /// The closure forces `F` (on point a; `−F` acts on point b), base frame.
+    pub forces: SVector<T, NC>,
+}
+
+/// Below this reciprocal condition (relative to the scalar's epsilon) `J M⁻¹ Jᵀ` is
+/// treated as singular: about 2e-13 for `f64`, 1e-4 for `f32`.
+pub fn rcond_floor<T: Real>() -> T {
+    T::default_epsilon() * T::lit(1000.0)
+}
+
+fn to_f64<T: Real>(x: T) -> f64 {
+    x.to_subset().unwrap_or(f64::NAN)
+}
+
+/// The reciprocal condition estimate of an SPD matrix from its Cholesky factor.
+pub(crate) fn cholesky_rcond<T: Real, const N: usize>(chol: &Cholesky<T, Const<N>>) -> T {
+    if N == 0 {
+        return T::one();
+    }
+    let l = chol.l_dirty();
+    let (mut lo, mut hi) = (l[(0, 0)].abs(), l[(0, 0)].abs());
+    for i in 1..N {
+        let d = l[(i, i)].abs();
+        lo = lo.min(d);
+        hi = hi.max(d);
+    }
+    if hi == T::zero() {
+        return T::zero();
+    }
+    (lo / hi) * (lo / hi)
+}
+
+/// The generalized forces of the motors: `B u`.
+pub fn actuation<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    u: &SVector<T, NU>,
+) -> SVector<T, NQ>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let mut tau = SVector::<T, NQ>::zeros();
+    for (k, &j) in L::ACTUATED.iter().enumerate() {
+        tau[j] += u[k];
+    }
+    tau
+}
+
+/// Solves the KKT system from evaluated terms: `tau` is the generalized force on the
+/// right-hand side (`B u − N − D q̇`), `closure_rhs` the constraint row (`−J̇ q̇ − …`).
+pub fn solve_kkt<T: Real, const NQ: usize, const NC: usize>(
+    mass_matrix: &SMatrix<T, NQ, NQ>,
+    jacobian: &SMatrix<T, NC, NQ>,
+    tau: &SVector<T, NQ>,
+    closure_rhs: &SVector<T, NC>,
+) -> Result<Acceleration<T, NQ, NC>, DynamicsError> {
+    let all_finite = mass_matrix
+        .iter()
+        .chain(jacobian.iter())
+        .chain(tau.iter())
+        .chain(closure_rhs.iter());
+    if !all_finite.into_iter().all(|x| x.is_finite()) {
+        return Err(DynamicsError::NonFinite);
+    }
+    let chol_m = Cholesky::new(*mass_matrix).ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
+    if cholesky_rcond(&chol_m) < rcond_floor::<T>() {
+        return Err(DynamicsError::MassMatrixNotPositiveDefinite);
+    }
+    let mut qdd = *tau;
+    chol_m.solve_mut(&mut qdd); // a = M⁻¹ τ
+    if NC == 0 {
+        return Ok(Acceleration {
+            qdd,
+            forces: SVector::zeros(),
+        });
+    }
+    let mut y = jacobian.transpose();
+    chol_m.solve_mut(&mut y); // Y = M⁻¹ Jᵀ
+    let s = jacobian * y;
+    let mut forces = closure_rhs - jacobian * qdd;
+    let chol_s = Cholesky::new(s).ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?;
+    let rcond = cholesky_rcond(&chol_s);
+    if rcond < rcond_floor::<T>() {
+        return Err(DynamicsError::SingularConstraints {
+            rcond: to_f64(rcond),
+        });
+    }
+    chol_s.solve_mut(&mut forces);
+    qdd += y * forces;
+    if !qdd.iter().chain(forces.iter()).all(|x| x.is_finite()) {
+        return Err(DynamicsError::NonFinite);
+    }
+    Ok(Acceleration { qdd, forces })
+}
+
+/// Forward dynamics of the closed chain at `(q, q̇)` under motor torques `u`, with joint
+/// damping, reflected rotor inertia and, optionally, Baumgarte stabilization.
+pub fn forward_dynamics<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+    qd: &SVector<T, NQ>,
+    u: &SVector<T, NU>,
+    baumgarte: Option<Baumgarte<T>>,
+) -> Result<Acceleration<T, NQ, NC>, DynamicsError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let terms = L::dynamics_terms(q, qd, params);
+    forward_dynamics_from_terms::<L, T, NQ, NC, NU>(params, &terms, q, qd, u, baumgarte)
+}
+
+/// [`forward_dynamics`] from terms already evaluated (a controller evaluating the same
+/// terms in the same step shares them).
+pub fn forward_dynamics_from_terms<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    terms: &DynamicsTerms<T, NQ, NC>,
+    q: &SVector<T, NQ>,
+    qd: &SVector<T, NQ>,
+    u: &SVector<T, NU>,
+    baumgarte: Option<Baumgarte<T>>,
+) -> Result<Acceleration<T, NQ, NC>, DynamicsError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let tau = actuation::<L, T, NQ, NC, NU>(u) - terms.bias_forces - L::damping_forces(qd, params);
+    let mut rhs = -terms.constraint_bias;
+    if let Some(b) = baumgarte {
+        if NC > 0 {
+            let phi = L::closure_residual(q, params);
+            rhs -= (terms.constraint_jacobian * qd) * (b.alpha + b.alpha) + phi * (b.beta * b.beta);
+        }
+    }
+    solve_kkt(&terms.mass_matrix, &terms.constraint_jacobian, &tau, &rhs)
+}

@@ -1,0 +1,126 @@
+//! The hot paths allocate nothing: a counting global allocator around each of them, for
+//! every model. One test in this file, so that no other test allocates meanwhile.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use leg_models::assembly::{
+    assemble, consistent_velocity, foot_inverse, project_position, project_velocity, Tolerance,
+};
+use leg_models::dynamics::{forward_dynamics, Baumgarte};
+use leg_models::integrate::{step, Method, State, StepOptions};
+use leg_models::nalgebra::SVector;
+use leg_models::simulate::Simulator;
+use leg_models::LegModel;
+use leg_tests::passive_release_state;
+
+struct Counting;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// How many allocations `f` makes.
+fn allocations<R>(f: impl FnOnce() -> R) -> (usize, R) {
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let r = std::hint::black_box(f());
+    (ALLOCATIONS.load(Ordering::SeqCst) - before, r)
+}
+
+fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+    let p = L::Params::<f64>::default();
+    let start = passive_release_state::<L, NQ, NC, NU>(&p);
+    let (q, tol) = (start.q, Tolerance::default());
+    let qd = SVector::<f64, NQ>::from_element(0.3);
+    let u = SVector::<f64, NU>::from_element(0.1);
+    let name = L::NAME;
+    let zero = |what: &str, n: usize| assert_eq!(n, 0, "{name}: {what} allocated {n} times");
+
+    zero(
+        "dynamics_terms",
+        allocations(|| L::dynamics_terms(&q, &qd, &p)).0,
+    );
+    zero(
+        "forward dynamics",
+        allocations(|| forward_dynamics::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None)).0,
+    );
+    let b = Some(Baumgarte {
+        alpha: 10.0,
+        beta: 10.0,
+    });
+    zero(
+        "forward dynamics with Baumgarte",
+        allocations(|| forward_dynamics::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, b)).0,
+    );
+    let theta = SVector::<f64, NU>::from_fn(|k, _| q[L::ACTUATED[k]] + 0.01);
+    zero(
+        "assembly",
+        allocations(|| assemble::<L, f64, NQ, NC, NU>(&p, &theta, &q, &tol)).0,
+    );
+    zero(
+        "consistent velocity",
+        allocations(|| consistent_velocity::<L, f64, NQ, NC, NU>(&p, &q, &u)).0,
+    );
+    let foot = L::foot_position(&q, &p) + SVector::<f64, 2>::new(0.002, -0.001);
+    zero(
+        "foot inverse",
+        allocations(|| foot_inverse::<L, f64, NQ, NC, NU>(&p, &foot, &q, &tol)).0,
+    );
+    let mut moved = q.add_scalar(0.01);
+    zero(
+        "position projection",
+        allocations(|| project_position::<L, f64, NQ, NC, NU>(&p, &mut moved, &tol)).0,
+    );
+    let mut rates = qd;
+    zero(
+        "velocity projection",
+        allocations(|| project_velocity::<L, f64, NQ, NC, NU>(&p, &q, &mut rates)).0,
+    );
+    for method in [Method::Rk4, Method::SemiImplicitEuler] {
+        let opts = StepOptions {
+            method,
+            ..StepOptions::rk4(1e-3)
+        };
+        let mut s = State { q, qd };
+        zero(
+            "a simulation step",
+            allocations(|| step::<L, f64, NQ, NC, NU>(&p, &mut s, &u, &opts)).0,
+        );
+    }
+    // A whole run allocates its record once, up front.
+    let sim = Simulator::<L, f64, NQ, NC, NU>::new(p, StepOptions::rk4(1e-3));
+    let mut source = |_: f64, _: &State<f64, NQ>| SVector::<f64, NU>::zeros();
+    let (n, run) = allocations(|| sim.run(start, 200, &mut source));
+    assert_eq!(run.expect("runs").len(), 201);
+    assert_eq!(
+        n, 1,
+        "{name}: a 200-step run allocated {n} times (the record only expected)"
+    );
+}
+
+#[test]
+fn hot_paths_do_not_allocate() {
+    // The counter works: a Vec allocates.
+    assert_eq!(allocations(|| vec![1u8; 16]).0, 1);
+    macro_rules! each {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+            check::<$ty, $nq, $nc, $nu>();
+        };
+    }
+    generated::for_each_model!(each);
+}
