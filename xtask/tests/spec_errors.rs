@@ -369,3 +369,25 @@ fn a_failed_generation_leaves_every_file_untouched() {
     );
     assert_eq!(root.listing(), before);
 }
+
+#[test]
+fn home_pose_with_the_wrong_number_of_angles() {
+    let text = edit(
+        "gravity = [0.0, -9.81]\n",
+        "gravity = [0.0, -9.81]\nhome = [0.1, 0.2, 0.3]\n",
+        0,
+    );
+    let (l, c) = pos(&text, "[0.1, 0.2, 0.3]", 0);
+    expect_error(&text, (l, c), "home", "lists 3 angles for 4 links");
+    let text = edit(
+        "gravity = [0.0, -9.81]\n",
+        "gravity = [0.0, -9.81]\nhome = [0.1, 0.2, 0.3, 0.4]\n",
+        0,
+    );
+    let m = model::build(&parse(&text).unwrap()).unwrap();
+    assert_eq!(m.home, vec![0.1, 0.2, 0.3, 0.4]);
+    assert_eq!(
+        model::build(&parse(VALID).unwrap()).unwrap().home,
+        vec![0.0; 4]
+    );
+}
