@@ -5,7 +5,7 @@
 
 use leg_models::assembly::{assemble, consistent_velocity, foot_inverse, AssemblyError, Tolerance};
 use leg_models::dynamics::{actuation, forward_dynamics, DynamicsError};
-use leg_models::integrate::{State, StepOptions};
+use leg_models::integrate::{State, StepError, StepOptions};
 use leg_models::nalgebra::{DMatrix, DVector, SVector};
 use leg_models::simulate::Simulator;
 use leg_models::LegModel;
@@ -311,5 +311,56 @@ mod minitaur_singularities {
         );
         let shown = stop.to_string();
         assert!(shown.contains("stopped at t ="), "{shown}");
+    }
+
+    /// Lower links shortened at run time (no regeneration) to 5 cm: knees 20 cm apart
+    /// cannot meet, and assembly says so.
+    #[test]
+    fn unreachable_motor_angles_are_a_typed_error() {
+        let mut p = params();
+        p.lower_a_length_x = 0.05;
+        p.lower_b_length_x = 0.05;
+        let guess = SVector::<f64, 4>::from_column_slice(&Minitaur::HOME);
+        let theta = SVector::<f64, 2>::new(0.0, std::f64::consts::PI);
+        let r = assemble::<Minitaur, f64, 4, 2, 2>(&p, &theta, &guess, &Tolerance::default());
+        match r {
+            Err(AssemblyError::Unreachable { residual }) => assert!(residual > 0.01, "{residual}"),
+            other => panic!("expected Unreachable, got {other:?}"),
+        }
+        // The same angles with the spec's links assemble.
+        assert!(assemble::<Minitaur, f64, 4, 2, 2>(
+            &params(),
+            &theta,
+            &guess,
+            &Tolerance::default()
+        )
+        .is_ok());
+    }
+
+    /// A simulation started at a singular configuration stops at once with the typed
+    /// cause and an empty record.
+    #[test]
+    fn a_simulation_stops_at_a_singularity() {
+        let q = SVector::<f64, 4>::new(-FRAC_PI_2, 0.0, -FRAC_PI_2, 0.0);
+        let sim = Simulator::<Minitaur, f64, 4, 2, 2>::new(params(), StepOptions::rk4(1e-3));
+        let mut zero = |_: f64, _: &State<f64, 4>| SVector::<f64, 2>::zeros();
+        let stop = sim
+            .run(
+                State {
+                    q,
+                    qd: SVector::zeros(),
+                },
+                10,
+                &mut zero,
+            )
+            .unwrap_err();
+        assert!(
+            matches!(
+                stop.cause,
+                StepError::Dynamics(DynamicsError::SingularConstraints { .. })
+            ),
+            "{stop}"
+        );
+        assert_eq!((stop.t, stop.samples.len()), (0.0, 0));
     }
 }
