@@ -231,7 +231,25 @@ where
         return Ok(qd);
     }
     let j = L::constraint_jacobian(q, params);
-    let mut jp = j;
+    qd += passive_solve::<L, T, NQ, NC, NU>(&j, &-(j * qd))?;
+    Ok(qd)
+}
+
+/// The smallest `x` with zero actuated entries that solves `J x = rhs`:
+/// `x = J_pᵀ (J_p J_pᵀ)⁻¹ rhs`, `J_p` being `J` without its actuated columns. Moving the
+/// passive joints by `x` changes `J q̇` by `rhs`.
+pub(crate) fn passive_solve<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    j: &SMatrix<T, NC, NQ>,
+    rhs: &SVector<T, NC>,
+) -> Result<SVector<T, NQ>, AssemblyError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    if NC == 0 {
+        return Ok(SVector::zeros());
+    }
+    let mut jp = *j;
     for &a in L::ACTUATED.iter() {
         jp.column_mut(a).fill(T::zero());
     }
@@ -239,10 +257,9 @@ where
     if cholesky_rcond(&chol) < rcond_floor::<T>() {
         return Err(AssemblyError::Singular);
     }
-    let mut w = j * qd;
+    let mut w = *rhs;
     chol.solve_mut(&mut w);
-    qd -= jp.transpose() * w;
-    Ok(qd)
+    Ok(jp.transpose() * w)
 }
 
 /// The assembled configuration that puts the foot at `foot` (base frame), from `guess`

@@ -7,6 +7,7 @@ use core::fmt;
 use nalgebra::SVector;
 
 use crate::assembly::{project_position, project_velocity, AssemblyError, Tolerance};
+use crate::control::ControlError;
 use crate::dynamics::{forward_dynamics, Acceleration, Baumgarte, DynamicsError};
 use crate::model::{LegModel, Real};
 
@@ -15,6 +16,31 @@ use crate::model::{LegModel, Real};
 pub struct State<T: Real, const NQ: usize> {
     pub q: SVector<T, NQ>,
     pub qd: SVector<T, NQ>,
+}
+
+/// Motor torques as a function of time and state: a controller, or any closure
+/// `FnMut(t, &State) -> u`. A controller that cannot act (a singular configuration, an
+/// unreachable reference) says why.
+pub trait TorqueSource<T: Real, const NQ: usize, const NU: usize> {
+    fn torque(&mut self, t: T, state: &State<T, NQ>) -> Result<SVector<T, NU>, ControlError>;
+}
+
+impl<T: Real, const NQ: usize, const NU: usize, F> TorqueSource<T, NQ, NU> for F
+where
+    F: FnMut(T, &State<T, NQ>) -> SVector<T, NU>,
+{
+    fn torque(&mut self, t: T, state: &State<T, NQ>) -> Result<SVector<T, NU>, ControlError> {
+        Ok(self(t, state))
+    }
+}
+
+/// When the torque source is asked.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ControlUpdate {
+    /// Once per step, held over the step (a digital controller at the step rate).
+    PerStep,
+    /// At every stage of the integrator (the continuous-time control law).
+    PerStage,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -36,6 +62,7 @@ pub struct StepOptions<T> {
     pub project: bool,
     /// For the position projection.
     pub tolerance: Tolerance<T>,
+    pub control: ControlUpdate,
 }
 
 impl<T: Real> StepOptions<T> {
@@ -47,6 +74,7 @@ impl<T: Real> StepOptions<T> {
             baumgarte: None,
             project: true,
             tolerance: Tolerance::default(),
+            control: ControlUpdate::PerStep,
         }
     }
 }
@@ -56,6 +84,7 @@ impl<T: Real> StepOptions<T> {
 pub enum StepError {
     Dynamics(DynamicsError),
     Projection(AssemblyError),
+    Control(ControlError),
 }
 
 impl fmt::Display for StepError {
@@ -63,6 +92,7 @@ impl fmt::Display for StepError {
         match self {
             StepError::Dynamics(e) => write!(f, "dynamics: {e}"),
             StepError::Projection(e) => write!(f, "projection onto the constraints: {e}"),
+            StepError::Control(e) => write!(f, "control: {e}"),
         }
     }
 }
@@ -76,30 +106,50 @@ impl From<DynamicsError> for StepError {
     }
 }
 
+impl From<ControlError> for StepError {
+    fn from(e: ControlError) -> Self {
+        StepError::Control(e)
+    }
+}
+
 impl From<AssemblyError> for StepError {
     fn from(e: AssemblyError) -> Self {
         StepError::Projection(e)
     }
 }
 
-/// Advances `state` by one step under torques `u`; returns the accelerations and closure
-/// forces at the start of the step.
+/// What a step did: the torques applied at its start and the accelerations and closure
+/// forces there.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepReport<T: Real, const NQ: usize, const NC: usize, const NU: usize> {
+    pub u: SVector<T, NU>,
+    pub acceleration: Acceleration<T, NQ, NC>,
+}
+
+/// Advances `state` from time `t` by one step, with torques from `source`.
 pub fn step<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     params: &L::Params<T>,
     state: &mut State<T, NQ>,
-    u: &SVector<T, NU>,
+    t: T,
+    source: &mut impl TorqueSource<T, NQ, NU>,
     opts: &StepOptions<T>,
-) -> Result<Acceleration<T, NQ, NC>, StepError>
+) -> Result<StepReport<T, NQ, NC, NU>, StepError>
 where
     L: LegModel<NQ, NC, NU>,
     T: Real,
 {
-    let f = |q: &SVector<T, NQ>, qd: &SVector<T, NQ>| {
-        forward_dynamics::<L, T, NQ, NC, NU>(params, q, qd, u, opts.baumgarte)
-    };
     let dt = opts.dt;
     let (q, qd) = (state.q, state.qd);
-    let first = f(&q, &qd)?;
+    let u0 = source.torque(t, state)?;
+    let mut f =
+        |tau: T, q: SVector<T, NQ>, qd: SVector<T, NQ>| -> Result<SVector<T, NQ>, StepError> {
+            let u = match opts.control {
+                ControlUpdate::PerStep => u0,
+                ControlUpdate::PerStage => source.torque(t + tau, &State { q, qd })?,
+            };
+            Ok(forward_dynamics::<L, T, NQ, NC, NU>(params, &q, &qd, &u, opts.baumgarte)?.qdd)
+        };
+    let first = forward_dynamics::<L, T, NQ, NC, NU>(params, &q, &qd, &u0, opts.baumgarte)?;
     match opts.method {
         Method::SemiImplicitEuler => {
             state.qd = qd + first.qdd * dt;
@@ -108,15 +158,9 @@ where
         Method::Rk4 => {
             let half = dt * T::lit(0.5);
             let (k1q, k1v) = (qd, first.qdd);
-            let (k2q, k2v) = (
-                qd + k1v * half,
-                f(&(q + k1q * half), &(qd + k1v * half))?.qdd,
-            );
-            let (k3q, k3v) = (
-                qd + k2v * half,
-                f(&(q + k2q * half), &(qd + k2v * half))?.qdd,
-            );
-            let (k4q, k4v) = (qd + k3v * dt, f(&(q + k3q * dt), &(qd + k3v * dt))?.qdd);
+            let (k2q, k2v) = (qd + k1v * half, f(half, q + k1q * half, qd + k1v * half)?);
+            let (k3q, k3v) = (qd + k2v * half, f(half, q + k2q * half, qd + k2v * half)?);
+            let (k4q, k4v) = (qd + k3v * dt, f(dt, q + k3q * dt, qd + k3v * dt)?);
             let sixth = dt / T::lit(6.0);
             state.q = q + (k1q + (k2q + k3q) * T::lit(2.0) + k4q) * sixth;
             state.qd = qd + (k1v + (k2v + k3v) * T::lit(2.0) + k4v) * sixth;
@@ -126,7 +170,10 @@ where
         project_position::<L, T, NQ, NC, NU>(params, &mut state.q, &opts.tolerance)?;
         project_velocity::<L, T, NQ, NC, NU>(params, &state.q, &mut state.qd)?;
     }
-    Ok(first)
+    Ok(StepReport {
+        u: u0,
+        acceleration: first,
+    })
 }
 
 /// Total mechanical energy `T + V`.

@@ -5,7 +5,9 @@
 //! crate) and the scalar trait [`Real`] the generated code is generic over — and the
 //! algorithms that use the generated terms: constrained forward dynamics
 //! ([`dynamics`]), loop assembly ([`assembly`]), time stepping with drift control
-//! ([`integrate`]) and, with the `std` feature, a recording [`simulate::Simulator`].
+//! ([`integrate`]), control in the actuated coordinates ([`control`]) with reference
+//! trajectories ([`reference`]) and, with the `std` feature, a recording
+//! [`simulate::Simulator`].
 //! Everything but the simulator's record is fixed-size and allocation-free, and the
 //! crate is `no_std` without the default `std` feature. The geometry specs the generator
 //! reads live in `leg-models/specs/`.
@@ -17,9 +19,11 @@
 #![cfg_attr(not(feature = "std"), no_std)]
 
 pub mod assembly;
+pub mod control;
 pub mod dynamics;
 pub mod integrate;
 mod model;
+pub mod reference;
 #[cfg(feature = "std")]
 pub mod simulate;
 

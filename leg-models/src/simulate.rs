@@ -6,23 +6,9 @@ use core::marker::PhantomData;
 
 use nalgebra::SVector;
 
+pub use crate::integrate::TorqueSource;
 use crate::integrate::{energy, step, State, StepError, StepOptions};
 use crate::model::{LegModel, Real};
-
-/// Motor torques as a function of time and state: a controller, or any closure
-/// `FnMut(t, &State) -> u`.
-pub trait TorqueSource<T: Real, const NQ: usize, const NU: usize> {
-    fn torque(&mut self, t: T, state: &State<T, NQ>) -> SVector<T, NU>;
-}
-
-impl<T: Real, const NQ: usize, const NU: usize, F> TorqueSource<T, NQ, NU> for F
-where
-    F: FnMut(T, &State<T, NQ>) -> SVector<T, NU>,
-{
-    fn torque(&mut self, t: T, state: &State<T, NQ>) -> SVector<T, NU> {
-        self(t, state)
-    }
-}
 
 /// One recorded instant.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -122,31 +108,31 @@ where
         let mut state = initial;
         let mut t = T::zero();
         for k in 0..steps {
-            let u = source.torque(t, &state);
             let before = state;
-            match step::<L, T, NQ, NC, NU>(&self.params, &mut state, &u, &self.options) {
-                Ok(acc) => samples.push(self.sample(t, before, u, acc.forces)),
+            match step::<L, T, NQ, NC, NU>(&self.params, &mut state, t, source, &self.options) {
+                Ok(r) => samples.push(self.sample(t, before, r.u, r.acceleration.forces)),
                 Err(cause) => return Err(Stopped { t, cause, samples }),
             }
             t = self.options.dt * T::lit((k + 1) as f64);
         }
-        // The last state: its forces under the last torques, for a complete record.
-        let u = source.torque(t, &state);
-        match crate::dynamics::forward_dynamics::<L, T, NQ, NC, NU>(
-            &self.params,
-            &state.q,
-            &state.qd,
-            &u,
-            self.options.baumgarte,
-        ) {
-            Ok(acc) => samples.push(self.sample(t, state, u, acc.forces)),
-            Err(e) => {
-                return Err(Stopped {
-                    t,
-                    cause: StepError::Dynamics(e),
-                    samples,
-                })
-            }
+        // The last state, with its torques and forces, for a complete record.
+        let last = source
+            .torque(t, &state)
+            .map_err(StepError::Control)
+            .and_then(|u| {
+                crate::dynamics::forward_dynamics::<L, T, NQ, NC, NU>(
+                    &self.params,
+                    &state.q,
+                    &state.qd,
+                    &u,
+                    self.options.baumgarte,
+                )
+                .map(|acc| (u, acc))
+                .map_err(StepError::Dynamics)
+            });
+        match last {
+            Ok((u, acc)) => samples.push(self.sample(t, state, u, acc.forces)),
+            Err(cause) => return Err(Stopped { t, cause, samples }),
         }
         Ok(samples)
     }

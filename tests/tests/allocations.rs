@@ -7,9 +7,14 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use leg_models::assembly::{
     assemble, consistent_velocity, foot_inverse, project_position, project_velocity, Tolerance,
 };
+use leg_models::control::{
+    actuated_reduction, FootFeedbackLinearization, FootPdGravity, Gains,
+    JointFeedbackLinearization, PdGravity, Saturated,
+};
 use leg_models::dynamics::{forward_dynamics, Baumgarte};
-use leg_models::integrate::{step, Method, State, StepOptions};
+use leg_models::integrate::{step, Method, State, StepOptions, TorqueSource};
 use leg_models::nalgebra::SVector;
+use leg_models::reference::{Sinusoid, StepCycle};
 use leg_models::simulate::Simulator;
 use leg_models::LegModel;
 use leg_tests::passive_release_state;
@@ -97,11 +102,70 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
             ..StepOptions::rk4(1e-3)
         };
         let mut s = State { q, qd };
+        let mut hold = |_: f64, _: &State<f64, NQ>| u;
         zero(
             "a simulation step",
-            allocations(|| step::<L, f64, NQ, NC, NU>(&p, &mut s, &u, &opts)).0,
+            allocations(|| step::<L, f64, NQ, NC, NU>(&p, &mut s, 0.0, &mut hold, &opts)).0,
         );
     }
+    // A control step: every controller, and torque limits around one.
+    let state = State { q, qd };
+    let theta = SVector::<f64, NU>::from_fn(|k, _| q[L::ACTUATED[k]]);
+    let joint_ref = Sinusoid {
+        offset: theta,
+        amplitude: SVector::from_element(0.1),
+        frequency: SVector::from_element(1.0),
+        phase: SVector::zeros(),
+    };
+    let foot_ref = StepCycle {
+        center: L::foot_position(&q, &p),
+        half_stride: 0.02,
+        half_height: 0.01,
+        period: 0.5,
+    };
+    let mut fl = JointFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(
+        p,
+        Gains::critically_damped(100.0),
+        joint_ref,
+    );
+    zero(
+        "joint feedback linearization",
+        allocations(|| fl.torque(0.1, &state)).0,
+    );
+    let mut foot = FootFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(
+        p,
+        Gains::critically_damped(400.0),
+        foot_ref,
+    );
+    zero(
+        "foot feedback linearization",
+        allocations(|| foot.torque(0.1, &state)).0,
+    );
+    let mut pd = PdGravity::<L, f64, _, NQ, NC, NU>::new(p, Gains::new(50.0, 2.0), joint_ref);
+    zero(
+        "PD with gravity compensation",
+        allocations(|| pd.torque(0.1, &state)).0,
+    );
+    let mut foot_pd =
+        FootPdGravity::<L, f64, _, NQ, NC, NU>::new(p, Gains::new(2000.0, 40.0), foot_ref);
+    zero(
+        "foot PD with gravity compensation",
+        allocations(|| foot_pd.torque(0.1, &state)).0,
+    );
+    let mut limited = Saturated::new(fl, SVector::from_element(1.0));
+    zero(
+        "torque limits",
+        allocations(|| limited.torque(0.1, &state)).0,
+    );
+    zero(
+        "actuated reduction",
+        allocations(|| {
+            let terms = L::dynamics_terms(&q, &qd, &p);
+            actuated_reduction::<L, f64, NQ, NC, NU>(&p, &terms, &qd)
+        })
+        .0,
+    );
+
     // A whole run allocates its record once, up front.
     let sim = Simulator::<L, f64, NQ, NC, NU>::new(p, StepOptions::rk4(1e-3));
     let mut source = |_: f64, _: &State<f64, NQ>| SVector::<f64, NU>::zeros();

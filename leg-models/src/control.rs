@@ -1,0 +1,589 @@
+//! Control in the actuated coordinates (DESIGN.md §3).
+//!
+//! The reduction writes the closed chain as `Ã θ̈ = b̃ + u` in the motor angles `θ`,
+//! two ways that must agree: the Schur complement of the reordered KKT system
+//! (`Ã = A11 − A12 A22⁻¹ A21`, `b̃ = b1 − A12 A22⁻¹ b2`, with `z = (passive q̈, F)`), and
+//! the null-space form (`q̇ = G θ̇`, `q̈ = G θ̈ + c`, `Ã = Gᵀ M G`, `b̃ = Gᵀ(b − M c)`). The
+//! controllers are [`TorqueSource`]s, so the simulator runs them directly.
+//!
+//! `A22` has a size (`passive joints + closure rows`) that stable Rust cannot write as a
+//! const expression; it is solved embedded in `NQ + NC`: the actuated rows and columns
+//! of `M` replaced by the identity and the actuated columns of `J` by zeros, which
+//! leaves exactly `A22` acting on the passive entries.
+
+use core::fmt;
+use core::marker::PhantomData;
+
+use nalgebra::{Cholesky, Const, SMatrix, SVector};
+
+use crate::assembly::{passive_solve, AssemblyError};
+use crate::dynamics::{cholesky_rcond, rcond_floor, DynamicsError};
+use crate::integrate::{State, TorqueSource};
+use crate::model::{DynamicsTerms, LegModel, Real};
+use crate::reference::Reference;
+
+/// Why a controller cannot act at a state.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ControlError {
+    /// `A22` is singular: the passive joints lose rank (e.g. a five-bar's lower links
+    /// collinear), so the motors do not determine the leg's motion.
+    SingularPassive,
+    /// The foot Jacobian in actuated coordinates `J_f G` loses rank: the foot cannot be
+    /// moved in some direction.
+    SingularTask,
+    Dynamics(DynamicsError),
+    /// A state, reference or parameter is NaN or infinite.
+    NonFinite,
+}
+
+impl fmt::Display for ControlError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ControlError::SingularPassive => {
+                write!(
+                    f,
+                    "singular configuration: the passive joints lose rank (A22 singular)"
+                )
+            }
+            ControlError::SingularTask => {
+                write!(f, "the foot Jacobian in motor coordinates is singular")
+            }
+            ControlError::Dynamics(e) => write!(f, "{e}"),
+            ControlError::NonFinite => write!(f, "non-finite state, reference or parameter"),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for ControlError {}
+
+impl From<AssemblyError> for ControlError {
+    fn from(e: AssemblyError) -> Self {
+        match e {
+            AssemblyError::NonFinite => ControlError::NonFinite,
+            _ => ControlError::SingularPassive,
+        }
+    }
+}
+
+/// `Ã θ̈ = b̃ + u`: the dynamics in the motor angles.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ActuatedDynamics<T: Real, const NU: usize> {
+    pub a_tilde: SMatrix<T, NU, NU>,
+    pub b_tilde: SVector<T, NU>,
+}
+
+/// `A22 z = r` for the passive joints and the closure forces, embedded in full size.
+struct PassiveSystem<T: Real, const NQ: usize, const NC: usize> {
+    chol_m: Cholesky<T, Const<NQ>>,
+    /// `J` without its actuated columns.
+    jp: SMatrix<T, NC, NQ>,
+    /// `M̂⁻¹ J_pᵀ`.
+    y: SMatrix<T, NQ, NC>,
+    chol_s: Option<Cholesky<T, Const<NC>>>,
+    actuated: [bool; NQ],
+}
+
+impl<T: Real, const NQ: usize, const NC: usize> PassiveSystem<T, NQ, NC> {
+    fn new(
+        m: &SMatrix<T, NQ, NQ>,
+        j: &SMatrix<T, NC, NQ>,
+        actuated: [bool; NQ],
+    ) -> Result<Self, ControlError> {
+        let mut mp = *m;
+        let mut jp = *j;
+        for (a, _) in actuated.iter().enumerate().filter(|(_, &is)| is) {
+            mp.row_mut(a).fill(T::zero());
+            mp.column_mut(a).fill(T::zero());
+            mp[(a, a)] = T::one();
+            jp.column_mut(a).fill(T::zero());
+        }
+        let chol_m = Cholesky::new(mp).ok_or(ControlError::Dynamics(
+            DynamicsError::MassMatrixNotPositiveDefinite,
+        ))?;
+        let mut y = jp.transpose();
+        chol_m.solve_mut(&mut y);
+        let chol_s = if NC == 0 {
+            None
+        } else {
+            let c = Cholesky::new(jp * y).ok_or(ControlError::SingularPassive)?;
+            if cholesky_rcond(&c) < rcond_floor::<T>() {
+                return Err(ControlError::SingularPassive);
+            }
+            Some(c)
+        };
+        Ok(PassiveSystem {
+            chol_m,
+            jp,
+            y,
+            chol_s,
+            actuated,
+        })
+    }
+
+    /// Solves `[M_pp −J_pᵀ; J_p 0] (x_p, f) = (r_p, r_c)`; `x` has zero actuated entries.
+    fn solve(
+        &self,
+        r_q: &SVector<T, NQ>,
+        r_c: &SVector<T, NC>,
+    ) -> (SVector<T, NQ>, SVector<T, NC>) {
+        let mut x = *r_q;
+        for (a, _) in self.actuated.iter().enumerate().filter(|(_, &is)| is) {
+            x[a] = T::zero();
+        }
+        self.chol_m.solve_mut(&mut x);
+        let Some(chol_s) = &self.chol_s else {
+            return (x, SVector::zeros());
+        };
+        let mut f = r_c - self.jp * x;
+        chol_s.solve_mut(&mut f);
+        (x + self.y * f, f)
+    }
+}
+
+fn actuated_mask<L, const NQ: usize, const NC: usize, const NU: usize>() -> [bool; NQ]
+where
+    L: LegModel<NQ, NC, NU>,
+{
+    core::array::from_fn(|j| L::ACTUATED.contains(&j))
+}
+
+/// `b = −N − D q̇`: the right-hand side of the joint rows without the motors.
+fn passive_forces<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    terms: &DynamicsTerms<T, NQ, NC>,
+    qd: &SVector<T, NQ>,
+) -> SVector<T, NQ>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    -terms.bias_forces - L::damping_forces(qd, params)
+}
+
+fn check_finite<T: Real, const NQ: usize>(state: &State<T, NQ>) -> Result<(), ControlError> {
+    if state.q.iter().chain(state.qd.iter()).all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(ControlError::NonFinite)
+    }
+}
+
+/// `Ã` and `b̃` by the Schur complement of the reordered KKT system, as in the notes.
+pub fn actuated_reduction<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    terms: &DynamicsTerms<T, NQ, NC>,
+    qd: &SVector<T, NQ>,
+) -> Result<ActuatedDynamics<T, NU>, ControlError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let (m, j) = (&terms.mass_matrix, &terms.constraint_jacobian);
+    let a22 = PassiveSystem::new(m, j, actuated_mask::<L, NQ, NC, NU>())?;
+    // A12 z for z = (x, f): the actuated rows of M x − Jᵀ f.
+    let a12 = |(x, f): (SVector<T, NQ>, SVector<T, NC>)| m * x - j.transpose() * f;
+    let mut a_tilde = SMatrix::<T, NU, NU>::zeros();
+    for (k, &ak) in L::ACTUATED.iter().enumerate() {
+        // A21's column for θ_k: the passive rows of M's column and J's column.
+        let col = a12(a22.solve(&m.column(ak).into_owned(), &j.column(ak).into_owned()));
+        for (i, &ai) in L::ACTUATED.iter().enumerate() {
+            a_tilde[(i, k)] = m[(ai, ak)] - col[ai];
+        }
+    }
+    let b = passive_forces::<L, T, NQ, NC, NU>(params, terms, qd);
+    let col = a12(a22.solve(&b, &-terms.constraint_bias));
+    let b_tilde = SVector::<T, NU>::from_fn(|i, _| b[L::ACTUATED[i]] - col[L::ACTUATED[i]]);
+    if !a_tilde.iter().chain(b_tilde.iter()).all(|x| x.is_finite()) {
+        return Err(ControlError::NonFinite);
+    }
+    Ok(ActuatedDynamics { a_tilde, b_tilde })
+}
+
+/// The constrained motion in motor coordinates: `q̇ = G θ̇` and `q̈ = G θ̈ + c`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NullSpace<T: Real, const NQ: usize, const NU: usize> {
+    pub g: SMatrix<T, NQ, NU>,
+    pub c: SVector<T, NQ>,
+}
+
+/// `G` (each column: the joint rates when one motor turns at unit rate) and `c` (the
+/// passive accelerations that keep `J q̈ + J̇ q̇ = 0` when `θ̈ = 0`).
+pub fn null_space<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    jacobian: &SMatrix<T, NC, NQ>,
+    constraint_bias: &SVector<T, NC>,
+) -> Result<NullSpace<T, NQ, NU>, ControlError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let mut g = SMatrix::<T, NQ, NU>::zeros();
+    for (k, &ak) in L::ACTUATED.iter().enumerate() {
+        let mut col =
+            passive_solve::<L, T, NQ, NC, NU>(jacobian, &-jacobian.column(ak).into_owned())?;
+        col[ak] = T::one();
+        g.set_column(k, &col);
+    }
+    let c = passive_solve::<L, T, NQ, NC, NU>(jacobian, &-constraint_bias)?;
+    Ok(NullSpace { g, c })
+}
+
+/// `Ã = Gᵀ M G`, `b̃ = Gᵀ (b − M c)`: the null-space form of [`actuated_reduction`].
+pub fn actuated_reduction_null_space<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    terms: &DynamicsTerms<T, NQ, NC>,
+    qd: &SVector<T, NQ>,
+) -> Result<ActuatedDynamics<T, NU>, ControlError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let ns = null_space::<L, T, NQ, NC, NU>(&terms.constraint_jacobian, &terms.constraint_bias)?;
+    let m = &terms.mass_matrix;
+    let b = passive_forces::<L, T, NQ, NC, NU>(params, terms, qd);
+    Ok(ActuatedDynamics {
+        a_tilde: ns.g.transpose() * m * ns.g,
+        b_tilde: ns.g.transpose() * (b - m * ns.c),
+    })
+}
+
+/// Proportional and derivative gains per coordinate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Gains<T: Real, const N: usize> {
+    pub kp: SVector<T, N>,
+    pub kd: SVector<T, N>,
+}
+
+impl<T: Real, const N: usize> Gains<T, N> {
+    pub fn new(kp: T, kd: T) -> Self {
+        Gains {
+            kp: SVector::from_element(kp),
+            kd: SVector::from_element(kd),
+        }
+    }
+
+    /// `k_d = 2√k_p`: the error dynamics `ë + k_d ė + k_p e = 0` are critically damped.
+    pub fn critically_damped(kp: T) -> Self {
+        Gains::new(kp, T::lit(2.0) * kp.sqrt())
+    }
+
+    fn feedback(&self, e: &SVector<T, N>, ed: &SVector<T, N>) -> SVector<T, N> {
+        self.kp.component_mul(e) + self.kd.component_mul(ed)
+    }
+}
+
+fn motor_state<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    state: &State<T, NQ>,
+) -> (SVector<T, NU>, SVector<T, NU>)
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    (
+        SVector::from_fn(|k, _| state.q[L::ACTUATED[k]]),
+        SVector::from_fn(|k, _| state.qd[L::ACTUATED[k]]),
+    )
+}
+
+/// Joint-space feedback linearization: `u = Ã (θ̈_ref + k_p e + k_d ė) − b̃`, so that
+/// `ë + k_d ė + k_p e = 0` with `e = θ_ref − θ`. With no closure (`two_link`) `Ã = M`
+/// and `b̃ = −N − D q̇`: the open-chain law `u = M(q̈_ref + k_p e + k_d ė) + N`.
+pub struct JointFeedbackLinearization<
+    L,
+    T: Real,
+    R,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+> where
+    L: LegModel<NQ, NC, NU>,
+{
+    /// The controller's model of the leg (it may differ from the plant's).
+    pub params: L::Params<T>,
+    pub gains: Gains<T, NU>,
+    pub reference: R,
+    model: PhantomData<L>,
+}
+
+impl<L, T, R, const NQ: usize, const NC: usize, const NU: usize>
+    JointFeedbackLinearization<L, T, R, NQ, NC, NU>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+    R: Reference<T, NU>,
+{
+    pub fn new(params: L::Params<T>, gains: Gains<T, NU>, reference: R) -> Self {
+        JointFeedbackLinearization {
+            params,
+            gains,
+            reference,
+            model: PhantomData,
+        }
+    }
+}
+
+impl<L, T, R, const NQ: usize, const NC: usize, const NU: usize> TorqueSource<T, NQ, NU>
+    for JointFeedbackLinearization<L, T, R, NQ, NC, NU>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+    R: Reference<T, NU>,
+{
+    fn torque(&mut self, t: T, state: &State<T, NQ>) -> Result<SVector<T, NU>, ControlError> {
+        check_finite(state)?;
+        let terms = L::dynamics_terms(&state.q, &state.qd, &self.params);
+        let red = actuated_reduction::<L, T, NQ, NC, NU>(&self.params, &terms, &state.qd)?;
+        let (theta, theta_dot) = motor_state::<L, T, NQ, NC, NU>(state);
+        let r = self.reference.sample(t);
+        let v = r.acceleration
+            + self
+                .gains
+                .feedback(&(r.position - theta), &(r.velocity - theta_dot));
+        Ok(red.a_tilde * v - red.b_tilde)
+    }
+}
+
+/// What the foot controllers need at a state: the foot, its rate, `J_f G` and the part of
+/// the foot's acceleration that does not come from `θ̈`.
+struct FootKinematics<T: Real, const NU: usize> {
+    position: SVector<T, 2>,
+    velocity: SVector<T, 2>,
+    jacobian: SMatrix<T, 2, NU>,
+    drift: SVector<T, 2>,
+}
+
+fn foot_kinematics<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    state: &State<T, NQ>,
+    ns: &NullSpace<T, NQ, NU>,
+) -> FootKinematics<T, NU>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let jf = L::foot_jacobian(&state.q, params);
+    FootKinematics {
+        position: L::foot_position(&state.q, params),
+        velocity: jf * state.qd,
+        jacobian: jf * ns.g,
+        drift: jf * ns.c + L::foot_bias(&state.q, &state.qd, params),
+    }
+}
+
+/// Foot-space feedback linearization: the motor accelerations that give the foot
+/// `ÿ = ÿ_ref + k_p e + k_d ė` (smallest-norm when there are more than two motors), then
+/// `u = Ã θ̈ − b̃`.
+pub struct FootFeedbackLinearization<
+    L,
+    T: Real,
+    R,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+> where
+    L: LegModel<NQ, NC, NU>,
+{
+    pub params: L::Params<T>,
+    pub gains: Gains<T, 2>,
+    pub reference: R,
+    model: PhantomData<L>,
+}
+
+impl<L, T, R, const NQ: usize, const NC: usize, const NU: usize>
+    FootFeedbackLinearization<L, T, R, NQ, NC, NU>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+    R: Reference<T, 2>,
+{
+    pub fn new(params: L::Params<T>, gains: Gains<T, 2>, reference: R) -> Self {
+        FootFeedbackLinearization {
+            params,
+            gains,
+            reference,
+            model: PhantomData,
+        }
+    }
+}
+
+impl<L, T, R, const NQ: usize, const NC: usize, const NU: usize> TorqueSource<T, NQ, NU>
+    for FootFeedbackLinearization<L, T, R, NQ, NC, NU>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+    R: Reference<T, 2>,
+{
+    fn torque(&mut self, t: T, state: &State<T, NQ>) -> Result<SVector<T, NU>, ControlError> {
+        check_finite(state)?;
+        let p = &self.params;
+        let terms = L::dynamics_terms(&state.q, &state.qd, p);
+        let red = actuated_reduction::<L, T, NQ, NC, NU>(p, &terms, &state.qd)?;
+        let ns =
+            null_space::<L, T, NQ, NC, NU>(&terms.constraint_jacobian, &terms.constraint_bias)?;
+        let foot = foot_kinematics::<L, T, NQ, NC, NU>(p, state, &ns);
+        let r = self.reference.sample(t);
+        let v = r.acceleration
+            + self
+                .gains
+                .feedback(&(r.position - foot.position), &(r.velocity - foot.velocity))
+            - foot.drift;
+        let jy = foot.jacobian;
+        let chol = Cholesky::new(jy * jy.transpose()).ok_or(ControlError::SingularTask)?;
+        if cholesky_rcond(&chol) < rcond_floor::<T>() {
+            return Err(ControlError::SingularTask);
+        }
+        let mut w = v;
+        chol.solve_mut(&mut w);
+        Ok(red.a_tilde * (jy.transpose() * w) - red.b_tilde)
+    }
+}
+
+/// The motor torques that hold the leg still against gravity: `Gᵀ G(q)`.
+fn gravity_compensation<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+) -> Result<(NullSpace<T, NQ, NU>, SVector<T, NU>), ControlError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let ns = null_space::<L, T, NQ, NC, NU>(&L::constraint_jacobian(q, params), &SVector::zeros())?;
+    let g = ns.g.transpose() * L::gravity_forces(q, params);
+    Ok((ns, g))
+}
+
+/// The baseline: joint PD with gravity compensation, `u = k_p e + k_d ė + Gᵀ G(q)`.
+pub struct PdGravity<L, T: Real, R, const NQ: usize, const NC: usize, const NU: usize>
+where
+    L: LegModel<NQ, NC, NU>,
+{
+    pub params: L::Params<T>,
+    pub gains: Gains<T, NU>,
+    pub reference: R,
+    model: PhantomData<L>,
+}
+
+impl<L, T, R, const NQ: usize, const NC: usize, const NU: usize> PdGravity<L, T, R, NQ, NC, NU>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+    R: Reference<T, NU>,
+{
+    pub fn new(params: L::Params<T>, gains: Gains<T, NU>, reference: R) -> Self {
+        PdGravity {
+            params,
+            gains,
+            reference,
+            model: PhantomData,
+        }
+    }
+}
+
+impl<L, T, R, const NQ: usize, const NC: usize, const NU: usize> TorqueSource<T, NQ, NU>
+    for PdGravity<L, T, R, NQ, NC, NU>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+    R: Reference<T, NU>,
+{
+    fn torque(&mut self, t: T, state: &State<T, NQ>) -> Result<SVector<T, NU>, ControlError> {
+        check_finite(state)?;
+        let (_, g) = gravity_compensation::<L, T, NQ, NC, NU>(&self.params, &state.q)?;
+        let (theta, theta_dot) = motor_state::<L, T, NQ, NC, NU>(state);
+        let r = self.reference.sample(t);
+        Ok(self
+            .gains
+            .feedback(&(r.position - theta), &(r.velocity - theta_dot))
+            + g)
+    }
+}
+
+/// The foot-space baseline: a virtual spring-damper at the foot through the Jacobian
+/// transpose, with gravity compensation, `u = (J_f G)ᵀ (K_p e + K_d ė) + Gᵀ G(q)`.
+pub struct FootPdGravity<L, T: Real, R, const NQ: usize, const NC: usize, const NU: usize>
+where
+    L: LegModel<NQ, NC, NU>,
+{
+    pub params: L::Params<T>,
+    /// Stiffness (N/m) and damping (N s/m) at the foot.
+    pub gains: Gains<T, 2>,
+    pub reference: R,
+    model: PhantomData<L>,
+}
+
+impl<L, T, R, const NQ: usize, const NC: usize, const NU: usize> FootPdGravity<L, T, R, NQ, NC, NU>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+    R: Reference<T, 2>,
+{
+    pub fn new(params: L::Params<T>, gains: Gains<T, 2>, reference: R) -> Self {
+        FootPdGravity {
+            params,
+            gains,
+            reference,
+            model: PhantomData,
+        }
+    }
+}
+
+impl<L, T, R, const NQ: usize, const NC: usize, const NU: usize> TorqueSource<T, NQ, NU>
+    for FootPdGravity<L, T, R, NQ, NC, NU>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+    R: Reference<T, 2>,
+{
+    fn torque(&mut self, t: T, state: &State<T, NQ>) -> Result<SVector<T, NU>, ControlError> {
+        check_finite(state)?;
+        let (ns, g) = gravity_compensation::<L, T, NQ, NC, NU>(&self.params, &state.q)?;
+        let foot = foot_kinematics::<L, T, NQ, NC, NU>(&self.params, state, &ns);
+        let r = self.reference.sample(t);
+        let force = self
+            .gains
+            .feedback(&(r.position - foot.position), &(r.velocity - foot.velocity));
+        Ok(foot.jacobian.transpose() * force + g)
+    }
+}
+
+/// Torque limits per motor around any torque source, counting how often each motor
+/// saturated (per evaluation of the source).
+pub struct Saturated<C, T: Real, const NU: usize> {
+    pub inner: C,
+    /// The largest `|u_k|` each motor can give.
+    pub limits: SVector<T, NU>,
+    /// Evaluations in which motor `k` was clipped.
+    pub saturations: [usize; NU],
+    /// The largest `|u_k|` the inner source asked for.
+    pub peak_request: SVector<T, NU>,
+}
+
+impl<C, T: Real, const NU: usize> Saturated<C, T, NU> {
+    pub fn new(inner: C, limits: SVector<T, NU>) -> Self {
+        Saturated {
+            inner,
+            limits,
+            saturations: [0; NU],
+            peak_request: SVector::zeros(),
+        }
+    }
+}
+
+impl<C, T, const NQ: usize, const NU: usize> TorqueSource<T, NQ, NU> for Saturated<C, T, NU>
+where
+    C: TorqueSource<T, NQ, NU>,
+    T: Real,
+{
+    fn torque(&mut self, t: T, state: &State<T, NQ>) -> Result<SVector<T, NU>, ControlError> {
+        let mut u = self.inner.torque(t, state)?;
+        for k in 0..NU {
+            self.peak_request[k] = self.peak_request[k].max(u[k].abs());
+            let lim = self.limits[k];
+            if u[k].abs() > lim {
+                u[k] = u[k].max(-lim).min(lim);
+                self.saturations[k] += 1;
+            }
+        }
+        Ok(u)
+    }
+}
