@@ -1,0 +1,249 @@
+//! Tracking error, peak torque and saturation count of every controller on every leg:
+//! 3 s at dt = 1 ms (RK4 with projection), torques updated once per step (1 kHz) and
+//! clipped at assumed motor limits. Errors are measured after the first second.
+//!
+//! `cargo run --release -p leg-tests --example control_report`
+
+use leg_models::assembly::{foot_inverse, Tolerance};
+use leg_models::control::{
+    actuated_reduction, null_space, FootFeedbackLinearization, FootPdGravity, Gains,
+    JointFeedbackLinearization, PdGravity, Saturated,
+};
+use leg_models::integrate::{State, StepOptions, TorqueSource};
+use leg_models::nalgebra::{SMatrix, SVector};
+use leg_models::reference::{Reference, Sinusoid, StepCycle};
+use leg_models::simulate::{Sample, Simulator};
+use leg_models::{LegModel, Parameters};
+use leg_tests::passive_release_state;
+
+/// Assumed joint-side torque limits (N m): not in the specs; plausible for each leg.
+fn limit(model: &str) -> f64 {
+    match model {
+        "minitaur" | "five_bar_offset" => 5.0,
+        "atrias" => 600.0,
+        "digit" => 120.0,
+        _ => 30.0,
+    }
+}
+
+struct Row {
+    max: f64,
+    rms: f64,
+    peak: f64,
+    saturations: usize,
+    note: String,
+}
+
+fn run<L, C, const NQ: usize, const NC: usize, const NU: usize>(
+    p: &L::Params<f64>,
+    initial: State<f64, NQ>,
+    controller: C,
+    error: impl Fn(&Sample<f64, NQ, NC, NU>) -> f64,
+) -> Row
+where
+    L: LegModel<NQ, NC, NU>,
+    C: TorqueSource<f64, NQ, NU>,
+{
+    let mut limited = Saturated::new(controller, SVector::from_element(limit(L::NAME)));
+    let sim = Simulator::<L, f64, NQ, NC, NU>::new(*p, StepOptions::rk4(1e-3));
+    let (samples, note) = match sim.run(initial, 3000, &mut limited) {
+        Ok(s) => (s, String::new()),
+        Err(stop) => {
+            let note = format!("stopped at {:.3} s: {}", stop.t, stop.cause);
+            (stop.samples, note)
+        }
+    };
+    let errs: Vec<f64> = samples.iter().filter(|s| s.t >= 1.0).map(&error).collect();
+    let n = errs.len().max(1) as f64;
+    Row {
+        max: errs.iter().copied().fold(0.0, f64::max),
+        rms: (errs.iter().map(|e| e * e).sum::<f64>() / n).sqrt(),
+        peak: samples.iter().map(|s| s.u.amax()).fold(0.0, f64::max),
+        saturations: limited.saturations.iter().sum(),
+        note,
+    }
+}
+
+fn report<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+    let p = L::Params::<f64>::default();
+    let home = passive_release_state::<L, NQ, NC, NU>(&p).q;
+    let theta_home = SVector::<f64, NU>::from_fn(|k, _| home[L::ACTUATED[k]]);
+    let joint_ref = Sinusoid {
+        offset: theta_home,
+        amplitude: SVector::from_element(0.1),
+        frequency: SVector::from_element(1.0),
+        phase: SVector::from_fn(|k, _| k as f64),
+    };
+    let cycle = StepCycle {
+        center: L::foot_position(&home, &p),
+        half_stride: 0.03,
+        half_height: 0.015,
+        period: 0.5,
+    };
+    // Baseline gains with the same bandwidth (ω = 10 rad/s joint, 20 rad/s foot), scaled
+    // by the leg's inertia at home: joint PD by diag(Ã), foot PD by the foot-space
+    // inertia Λ = (J_y Ã⁻¹ J_yᵀ)⁻¹.
+    let terms = L::dynamics_terms(&home, &SVector::zeros(), &p);
+    let red = actuated_reduction::<L, f64, NQ, NC, NU>(&p, &terms, &SVector::zeros()).unwrap();
+    let ns = null_space::<L, f64, NQ, NC, NU>(&terms.constraint_jacobian, &terms.constraint_bias)
+        .unwrap();
+    let jy: SMatrix<f64, 2, NU> = L::foot_jacobian(&home, &p) * ns.g;
+    let lambda = (jy * red.a_tilde.try_inverse().unwrap() * jy.transpose())
+        .try_inverse()
+        .unwrap();
+    let (lx, ly) = (lambda[(0, 0)], lambda[(1, 1)]);
+    let joint_pd = Gains {
+        kp: red.a_tilde.diagonal() * 100.0,
+        kd: red.a_tilde.diagonal() * 20.0,
+    };
+    let foot_pd = Gains {
+        kp: SVector::<f64, 2>::new(lx, ly) * 400.0,
+        kd: SVector::<f64, 2>::new(lx, ly) * 40.0,
+    };
+
+    let r0 = joint_ref.sample(0.0);
+    let q_joint = leg_models::assembly::assemble::<L, f64, NQ, NC, NU>(
+        &p,
+        &r0.position,
+        &home,
+        &Tolerance::default(),
+    )
+    .unwrap();
+    let joint_start = State {
+        q: q_joint,
+        qd: leg_models::assembly::consistent_velocity::<L, f64, NQ, NC, NU>(
+            &p,
+            &q_joint,
+            &r0.velocity,
+        )
+        .unwrap(),
+    };
+    let q_foot = foot_inverse::<L, f64, NQ, NC, NU>(
+        &p,
+        &cycle.sample(0.0).position,
+        &home,
+        &Tolerance::default(),
+    )
+    .unwrap();
+    let foot_start = State {
+        q: q_foot,
+        qd: SVector::zeros(),
+    };
+    let joint_err = |s: &Sample<f64, NQ, NC, NU>| {
+        let r = joint_ref.sample(s.t);
+        (0..NU)
+            .map(|k| (r.position[k] - s.state.q[L::ACTUATED[k]]).abs())
+            .fold(0.0, f64::max)
+    };
+    let foot_err = |s: &Sample<f64, NQ, NC, NU>| {
+        (L::foot_position(&s.state.q, &p) - cycle.sample(s.t).position).norm()
+    };
+    let mut heavy = p;
+    for (i, name) in <L::Params<f64> as Parameters<f64>>::NAMES
+        .iter()
+        .enumerate()
+    {
+        if name.ends_with("_mass") || name.ends_with("_inertia") {
+            let v = heavy.get(i).unwrap();
+            heavy.set(i, v * 1.2);
+        }
+    }
+
+    let rows = [
+        (
+            "joint FL, sinusoid (rad)",
+            run::<L, _, NQ, NC, NU>(
+                &p,
+                joint_start,
+                JointFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(
+                    p,
+                    Gains::critically_damped(100.0),
+                    joint_ref,
+                ),
+                joint_err,
+            ),
+        ),
+        (
+            "joint PD+g, sinusoid (rad)",
+            run::<L, _, NQ, NC, NU>(
+                &p,
+                joint_start,
+                PdGravity::<L, f64, _, NQ, NC, NU>::new(p, joint_pd, joint_ref),
+                joint_err,
+            ),
+        ),
+        (
+            "joint FL, masses +20 % (rad)",
+            run::<L, _, NQ, NC, NU>(
+                &p,
+                joint_start,
+                JointFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(
+                    heavy,
+                    Gains::critically_damped(100.0),
+                    joint_ref,
+                ),
+                joint_err,
+            ),
+        ),
+        (
+            "foot FL, step cycle (m)",
+            run::<L, _, NQ, NC, NU>(
+                &p,
+                foot_start,
+                FootFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(
+                    p,
+                    Gains::critically_damped(400.0),
+                    cycle,
+                ),
+                foot_err,
+            ),
+        ),
+        (
+            "foot PD+g, step cycle (m)",
+            run::<L, _, NQ, NC, NU>(
+                &p,
+                foot_start,
+                FootPdGravity::<L, f64, _, NQ, NC, NU>::new(p, foot_pd, cycle),
+                foot_err,
+            ),
+        ),
+        (
+            "foot FL, masses +20 % (m)",
+            run::<L, _, NQ, NC, NU>(
+                &p,
+                foot_start,
+                FootFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(
+                    heavy,
+                    Gains::critically_damped(400.0),
+                    cycle,
+                ),
+                foot_err,
+            ),
+        ),
+    ];
+    for (name, r) in rows {
+        println!(
+            "| {} | {} | {:.2e} | {:.2e} | {:.3} | {} | {} |",
+            L::NAME,
+            name,
+            r.max,
+            r.rms,
+            r.peak,
+            r.saturations,
+            if r.note.is_empty() { "" } else { &r.note }
+        );
+    }
+}
+
+fn main() {
+    println!(
+        "| leg | controller | max error | RMS error | peak torque (N m) | saturations | note |"
+    );
+    println!("|---|---|---|---|---|---|---|");
+    macro_rules! each {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+            report::<$ty, $nq, $nc, $nu>();
+        };
+    }
+    generated::for_each_model!(each);
+}
