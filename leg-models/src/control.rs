@@ -546,6 +546,30 @@ where
     }
 }
 
+/// The effective inertias at a pose, to scale baseline gains to a bandwidth: the
+/// diagonal of `Ã` (each motor's inertia with the loop closed) and of the foot-space
+/// inertia `Λ = (J_y Ã⁻¹ J_yᵀ)⁻¹`, `J_y = J_f G`, at rest.
+pub fn effective_inertias<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+) -> Result<(SVector<T, NU>, SVector<T, 2>), ControlError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let rest = SVector::<T, NQ>::zeros();
+    let terms = L::dynamics_terms(q, &rest, params);
+    let red = actuated_reduction::<L, T, NQ, NC, NU>(params, &terms, &rest)?;
+    let ns = null_space::<L, T, NQ, NC, NU>(&terms.constraint_jacobian, &terms.constraint_bias)?;
+    let jy = L::foot_jacobian(q, params) * ns.g;
+    let a = Cholesky::new(red.a_tilde).ok_or(ControlError::SingularPassive)?;
+    let mut y = jy.transpose();
+    a.solve_mut(&mut y); // Ã⁻¹ J_yᵀ
+    let lambda_inv = Cholesky::new(jy * y).ok_or(ControlError::SingularTask)?;
+    let lambda = lambda_inv.inverse();
+    Ok((red.a_tilde.diagonal(), lambda.diagonal()))
+}
+
 /// Torque limits per motor around any torque source, counting how often each motor
 /// saturated (per evaluation of the source).
 pub struct Saturated<C, T: Real, const NU: usize> {

@@ -6,11 +6,11 @@
 
 use leg_models::assembly::{foot_inverse, Tolerance};
 use leg_models::control::{
-    actuated_reduction, null_space, FootFeedbackLinearization, FootPdGravity, Gains,
+    effective_inertias, FootFeedbackLinearization, FootPdGravity, Gains,
     JointFeedbackLinearization, PdGravity, Saturated,
 };
 use leg_models::integrate::{State, StepOptions, TorqueSource};
-use leg_models::nalgebra::{SMatrix, SVector};
+use leg_models::nalgebra::SVector;
 use leg_models::reference::{Reference, Sinusoid, StepCycle};
 use leg_models::simulate::{Sample, Simulator};
 use leg_models::{LegModel, Parameters};
@@ -83,22 +83,15 @@ fn report<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: u
     // Baseline gains with the same bandwidth (ω = 10 rad/s joint, 20 rad/s foot), scaled
     // by the leg's inertia at home: joint PD by diag(Ã), foot PD by the foot-space
     // inertia Λ = (J_y Ã⁻¹ J_yᵀ)⁻¹.
-    let terms = L::dynamics_terms(&home, &SVector::zeros(), &p);
-    let red = actuated_reduction::<L, f64, NQ, NC, NU>(&p, &terms, &SVector::zeros()).unwrap();
-    let ns = null_space::<L, f64, NQ, NC, NU>(&terms.constraint_jacobian, &terms.constraint_bias)
-        .unwrap();
-    let jy: SMatrix<f64, 2, NU> = L::foot_jacobian(&home, &p) * ns.g;
-    let lambda = (jy * red.a_tilde.try_inverse().unwrap() * jy.transpose())
-        .try_inverse()
-        .unwrap();
-    let (lx, ly) = (lambda[(0, 0)], lambda[(1, 1)]);
+    let (joint_inertia, foot_inertia) =
+        effective_inertias::<L, f64, NQ, NC, NU>(&p, &home).unwrap();
     let joint_pd = Gains {
-        kp: red.a_tilde.diagonal() * 100.0,
-        kd: red.a_tilde.diagonal() * 20.0,
+        kp: joint_inertia * 100.0,
+        kd: joint_inertia * 20.0,
     };
     let foot_pd = Gains {
-        kp: SVector::<f64, 2>::new(lx, ly) * 400.0,
-        kd: SVector::<f64, 2>::new(lx, ly) * 40.0,
+        kp: foot_inertia * 400.0,
+        kd: foot_inertia * 40.0,
     };
 
     let r0 = joint_ref.sample(0.0);

@@ -2,6 +2,8 @@
 //! committed IR files and the Rust modules made from them. A library so that the
 //! workspace tests can check the committed code without Python.
 
+pub mod cli;
+pub mod export;
 pub mod gen;
 pub mod ir_file;
 pub mod model;

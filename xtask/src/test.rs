@@ -1,6 +1,6 @@
 //! `cargo xtask test`: every check CI runs, in the order that fails fastest.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use xtask::gen::{self, GenOptions};
@@ -44,6 +44,52 @@ fn pending_snapshots(root: &Path) -> Vec<String> {
     out
 }
 
+/// Every model exported to MJCF and loaded in MuJoCo (from the generation step's Python
+/// environment): mass matrix and bias forces against ours, and the closure in a MuJoCo run.
+fn mujoco_cross_check(root: &Path) -> Result<(), String> {
+    eprintln!("==> MuJoCo cross-check (xtask/mujoco_check.py)");
+    cargo(
+        root,
+        &[
+            "build",
+            "--quiet",
+            "-p",
+            "xtask",
+            "--features",
+            "models",
+            "--bin",
+            "legs",
+        ],
+        &[],
+    )?;
+    let target =
+        std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root.join("target"), PathBuf::from);
+    let legs = target.join("debug").join("legs");
+    let py = gen::python(root)?;
+    let dir = target.join("mujoco");
+    for name in xtask::cli::model_names(root)? {
+        let spec = gen::load_spec(
+            root,
+            &root.join(gen::SPECS_DIR).join(format!("{name}.toml")),
+        )?;
+        let model = xtask::model::build(&spec).map_err(|e| e.to_string())?;
+        let file = dir.join(format!("{name}.xml"));
+        xtask::cli::write_atomic(&file, &xtask::export::mjcf(&model))?;
+        let status = Command::new(&py)
+            .arg(root.join("xtask").join("mujoco_check.py"))
+            .arg(&legs)
+            .arg(&name)
+            .arg(&file)
+            .current_dir(root)
+            .status()
+            .map_err(|e| format!("cannot run the MuJoCo check: {e}"))?;
+        if !status.success() {
+            return Err(format!("MuJoCo disagrees with `{name}` (see above)"));
+        }
+    }
+    Ok(())
+}
+
 pub fn run(root: &Path) -> Result<(), String> {
     cargo(root, &["fmt", "--all", "--check"], &[])
         .map_err(|e| format!("{e}: run `cargo fmt --all`"))?;
@@ -59,7 +105,7 @@ pub fn run(root: &Path) -> Result<(), String> {
     // Snapshots must match as committed: insta neither writes nor accepts here.
     cargo(
         root,
-        &["test", "--workspace"],
+        &["test", "--workspace", "--all-features"],
         &[("INSTA_UPDATE", "no"), ("CI", "true")],
     )?;
     let pending = pending_snapshots(root);
@@ -69,6 +115,7 @@ pub fn run(root: &Path) -> Result<(), String> {
             pending.join(", ")
         ));
     }
+    mujoco_cross_check(root)?;
     cargo(
         root,
         &[
@@ -88,6 +135,7 @@ pub fn run(root: &Path) -> Result<(), String> {
             "clippy",
             "--workspace",
             "--all-targets",
+            "--all-features",
             "--",
             "-D",
             "warnings",

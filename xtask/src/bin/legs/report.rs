@@ -1,0 +1,216 @@
+//! The self-contained HTML report of a simulation: plots drawn by plotters (SVG, inlined)
+//! and an animation of the linkage (the frames as JSON, drawn by a few lines of script).
+//! Nothing is fetched: no network, no external file.
+
+use plotters::prelude::*;
+use serde_json::{json, Value};
+
+/// Named time series sharing one time axis, plotted together.
+pub struct Series {
+    title: String,
+    t: Vec<f64>,
+    lines: Vec<(String, Vec<f64>)>,
+}
+
+impl Series {
+    pub fn new(title: &str, t: &[f64], lines: Vec<(String, Vec<f64>)>) -> Series {
+        Series {
+            title: title.to_string(),
+            t: t.to_vec(),
+            lines,
+        }
+    }
+}
+
+/// The linkage at one instant: each link as a segment (joint → tip), the closure
+/// points, the foot and its reference.
+pub struct Frame {
+    pub t: f64,
+    pub links: Vec<[f64; 4]>,
+    pub closures: Vec<[f64; 2]>,
+    pub foot: [f64; 2],
+    pub reference: Option<[f64; 2]>,
+}
+
+pub struct Report<'a> {
+    pub title: String,
+    pub summary: &'a Value,
+    pub plots: &'a [Series],
+    pub frames: &'a [Frame],
+}
+
+const COLORS: [RGBColor; 4] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(148, 103, 189),
+];
+
+fn plot(series: &Series) -> Result<String, String> {
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (640, 260)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let t_end = series.t.last().copied().unwrap_or(1.0).max(1e-9);
+        let finite = series
+            .lines
+            .iter()
+            .flat_map(|(_, v)| v.iter().copied())
+            .filter(|v| v.is_finite());
+        let (lo, hi) = finite.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(v), b.max(v))
+        });
+        let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
+        let pad = ((hi - lo) * 0.05)
+            .max(hi.abs().max(lo.abs()) * 1e-9)
+            .max(1e-300);
+        let mut chart = ChartBuilder::on(&root)
+            .caption(&series.title, ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..t_end, (lo - pad)..(hi + pad))
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc("t (s)")
+            .y_label_formatter(&|v| format!("{v:.2e}"))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        for (i, (name, values)) in series.lines.iter().enumerate() {
+            let color = COLORS[i % COLORS.len()];
+            chart
+                .draw_series(LineSeries::new(
+                    series
+                        .t
+                        .iter()
+                        .copied()
+                        .zip(values.iter().copied())
+                        .filter(|(_, v)| v.is_finite()),
+                    color.stroke_width(2),
+                ))
+                .map_err(|e| e.to_string())?
+                .label(name.clone())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
+                });
+        }
+        if series.lines.len() > 1 {
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()
+                .map_err(|e| e.to_string())?;
+        }
+        root.present().map_err(|e| e.to_string())?;
+    }
+    Ok(svg)
+}
+
+/// Escapes text for HTML (the summary is ours, but it names models and errors).
+fn escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+}
+
+pub fn html(r: &Report) -> Result<String, String> {
+    let plots: Vec<String> = r.plots.iter().map(plot).collect::<Result<_, _>>()?;
+    let frames = json!({
+        "t": r.frames.iter().map(|f| f.t).collect::<Vec<_>>(),
+        "links": r.frames.iter().map(|f| f.links.clone()).collect::<Vec<_>>(),
+        "closures": r.frames.iter().map(|f| f.closures.clone()).collect::<Vec<_>>(),
+        "foot": r.frames.iter().map(|f| f.foot).collect::<Vec<_>>(),
+        "reference": r.frames.iter().map(|f| f.reference).collect::<Vec<_>>(),
+    });
+    // `</` cannot appear inside a <script> element.
+    let data = frames.to_string().replace("</", "<\\/");
+    Ok(format!(
+        r#"<!DOCTYPE html>
+<html lang="en">
+<head>
+<meta charset="utf-8">
+<title>{title}</title>
+<style>
+body {{ font-family: sans-serif; margin: 24px; color: #222; }}
+.row {{ display: flex; flex-wrap: wrap; gap: 24px; align-items: flex-start; }}
+#leg {{ border: 1px solid #ccc; background: #fafafa; }}
+pre {{ background: #f4f4f4; padding: 12px; font-size: 12px; max-width: 640px; overflow-x: auto; }}
+.plots svg {{ display: block; margin-bottom: 8px; }}
+</style>
+</head>
+<body>
+<h1>{title}</h1>
+<div class="row">
+<div>
+<svg id="leg" width="520" height="520" viewBox="0 0 520 520"></svg>
+<div><button id="play">pause</button> <input id="scrub" type="range" min="0" value="0" style="width:380px"> <span id="time"></span></div>
+<p>Links (blue, joint → tip), joints (dots), closure points (red), foot path (green), reference (dashed grey).</p>
+</div>
+<pre id="summary">{summary}</pre>
+</div>
+<div class="plots">
+{plots}
+</div>
+<script id="frames" type="application/json">{data}</script>
+<script>
+(function () {{
+  const d = JSON.parse(document.getElementById('frames').textContent);
+  const svg = document.getElementById('leg');
+  const ns = 'http://www.w3.org/2000/svg';
+  const n = d.t.length;
+  const xs = [], ys = [];
+  d.links.forEach(f => f.forEach(l => {{ xs.push(l[0], l[2]); ys.push(l[1], l[3]); }}));
+  d.reference.forEach(p => {{ if (p) {{ xs.push(p[0]); ys.push(p[1]); }} }});
+  const minx = Math.min(...xs), maxx = Math.max(...xs), miny = Math.min(...ys), maxy = Math.max(...ys);
+  const span = Math.max(maxx - minx, maxy - miny, 1e-6) * 1.15;
+  const cx = (minx + maxx) / 2, cy = (miny + maxy) / 2;
+  const X = x => 260 + (x - cx) / span * 500, Y = y => 260 - (y - cy) / span * 500;
+  function el(name, attrs) {{ const e = document.createElementNS(ns, name); for (const k in attrs) e.setAttribute(k, attrs[k]); svg.appendChild(e); return e; }}
+  const path = pts => pts.filter(p => p).map((p, i) => (i ? 'L' : 'M') + X(p[0]).toFixed(1) + ' ' + Y(p[1]).toFixed(1)).join(' ');
+  el('path', {{ d: path(d.reference), fill: 'none', stroke: '#999', 'stroke-dasharray': '4 3' }});
+  const trail = el('path', {{ fill: 'none', stroke: '#2ca02c', 'stroke-width': 1.5 }});
+  const links = d.links[0].map(() => el('line', {{ stroke: '#1f77b4', 'stroke-width': 5, 'stroke-linecap': 'round' }}));
+  const joints = d.links[0].map(() => el('circle', {{ r: 4, fill: '#222' }}));
+  const closures = d.closures[0].map(() => el('circle', {{ r: 5, fill: 'none', stroke: '#d62728', 'stroke-width': 2 }}));
+  const foot = el('circle', {{ r: 4, fill: '#2ca02c' }});
+  const ref = el('circle', {{ r: 4, fill: 'none', stroke: '#666' }});
+  el('circle', {{ cx: X(0), cy: Y(0), r: 6, fill: '#444' }});
+  const scrub = document.getElementById('scrub'), time = document.getElementById('time'), play = document.getElementById('play');
+  scrub.max = n - 1;
+  let k = 0, playing = true;
+  function draw(i) {{
+    d.links[i].forEach((l, j) => {{
+      links[j].setAttribute('x1', X(l[0])); links[j].setAttribute('y1', Y(l[1]));
+      links[j].setAttribute('x2', X(l[2])); links[j].setAttribute('y2', Y(l[3]));
+      joints[j].setAttribute('cx', X(l[0])); joints[j].setAttribute('cy', Y(l[1]));
+    }});
+    d.closures[i].forEach((p, j) => {{ closures[j].setAttribute('cx', X(p[0])); closures[j].setAttribute('cy', Y(p[1])); }});
+    foot.setAttribute('cx', X(d.foot[i][0])); foot.setAttribute('cy', Y(d.foot[i][1]));
+    const r = d.reference[i];
+    ref.setAttribute('visibility', r ? 'visible' : 'hidden');
+    if (r) {{ ref.setAttribute('cx', X(r[0])); ref.setAttribute('cy', Y(r[1])); }}
+    trail.setAttribute('d', path(d.foot.slice(Math.max(0, i - 50), i + 1)));
+    scrub.value = i; time.textContent = 't = ' + d.t[i].toFixed(3) + ' s';
+  }}
+  let last = null;
+  function tick(now) {{
+    if (playing && last !== null && now - last > 20) {{ k = (k + 1) % n; draw(k); last = now; }}
+    if (last === null) last = now;
+    requestAnimationFrame(tick);
+  }}
+  play.onclick = () => {{ playing = !playing; play.textContent = playing ? 'pause' : 'play'; }};
+  scrub.oninput = () => {{ k = +scrub.value; draw(k); }};
+  draw(0);
+  requestAnimationFrame(tick);
+}})();
+</script>
+</body>
+</html>
+"#,
+        title = escape(&r.title),
+        summary = escape(&format!("{:#}", r.summary)),
+        plots = plots.join("\n"),
+    ))
+}

@@ -1,0 +1,618 @@
+//! `cargo xtask sim`: simulate a leg under a controller; write `trajectory.csv`,
+//! `summary.json` and a self-contained `report.html`.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use leg_models::assembly::{
+    assemble, consistent_velocity, foot_inverse, project_position, Tolerance,
+};
+use leg_models::control::{
+    effective_inertias, ControlError, FootFeedbackLinearization, FootPdGravity, Gains,
+    JointFeedbackLinearization, PdGravity, Saturated,
+};
+use leg_models::integrate::{State, StepOptions, TorqueSource};
+use leg_models::nalgebra::SVector;
+use leg_models::reference::{MinimumJerk, Reference, Setpoint, Sinusoid, StepCycle};
+use leg_models::simulate::{Sample, Simulator};
+use leg_models::LegModel;
+use serde_json::json;
+use xtask::cli::{write_atomic, Error, Flags};
+
+use crate::report::{self, Report, Series};
+
+pub const HELP: &str = "\
+usage: cargo xtask sim [MODEL] [options]        (default: minitaur, foot-fl on the step cycle)
+
+  --controller C   foot-fl (default), foot-pd, joint-fl, joint-pd, passive
+  --trajectory T   for foot controllers: step (default, an ellipse under the hip), hold;
+                   for joint controllers: sine (default), min-jerk, hold
+  --duration S     simulated time in s (default 3)
+  --dt S           step in s (default 0.001); torques are updated once per step
+  --kp K           stiffness of the error dynamics in 1/s² (default 400 foot, 100 joint);
+                   k_d = 2√k_p; PD gains are scaled by the leg's inertia at home
+  --torque-limit N motor limit in N m (default none); saturations are counted
+  --out DIR        where to write (default target/sim/MODEL)
+
+writes trajectory.csv, summary.json and report.html (open it in a browser)
+";
+
+pub const VALUE_FLAGS: &[&str] = &[
+    "--controller",
+    "--trajectory",
+    "--duration",
+    "--dt",
+    "--kp",
+    "--torque-limit",
+    "--out",
+];
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Controller {
+    FootFl,
+    FootPd,
+    JointFl,
+    JointPd,
+    Passive,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Trajectory {
+    Step,
+    Sine,
+    MinJerk,
+    Hold,
+}
+
+pub struct Settings {
+    controller: Controller,
+    trajectory: Trajectory,
+    duration: f64,
+    dt: f64,
+    kp: Option<f64>,
+    torque_limit: Option<f64>,
+    out: Option<PathBuf>,
+}
+
+impl Controller {
+    fn name(self) -> &'static str {
+        match self {
+            Controller::FootFl => "foot-fl",
+            Controller::FootPd => "foot-pd",
+            Controller::JointFl => "joint-fl",
+            Controller::JointPd => "joint-pd",
+            Controller::Passive => "passive",
+        }
+    }
+
+    fn in_foot_space(self) -> bool {
+        matches!(self, Controller::FootFl | Controller::FootPd)
+    }
+}
+
+impl Trajectory {
+    fn name(self) -> &'static str {
+        match self {
+            Trajectory::Step => "step",
+            Trajectory::Sine => "sine",
+            Trajectory::MinJerk => "min-jerk",
+            Trajectory::Hold => "hold",
+        }
+    }
+}
+
+impl Settings {
+    pub fn from_flags(flags: &mut Flags) -> Result<Settings, Error> {
+        let controller = match flags.take("--controller").as_deref() {
+            None | Some("foot-fl") => Controller::FootFl,
+            Some("foot-pd") => Controller::FootPd,
+            Some("joint-fl") => Controller::JointFl,
+            Some("joint-pd") => Controller::JointPd,
+            Some("passive") => Controller::Passive,
+            Some(other) => {
+                return Err(Error::usage(format!(
+                    "unknown controller `{other}` (expected foot-fl, foot-pd, joint-fl, joint-pd or passive)"
+                )))
+            }
+        };
+        let trajectory = match (flags.take("--trajectory").as_deref(), controller.in_foot_space()) {
+            (None, true) | (Some("step"), true) => Trajectory::Step,
+            (None, false) | (Some("sine"), false) => Trajectory::Sine,
+            (Some("min-jerk"), false) => Trajectory::MinJerk,
+            (Some("hold"), _) => Trajectory::Hold,
+            (Some(t @ ("step" | "sine" | "min-jerk")), _) => {
+                return Err(Error::usage(format!(
+                    "trajectory `{t}` does not suit controller `{}` (foot controllers: step, hold; joint controllers: sine, min-jerk, hold)",
+                    controller.name()
+                )))
+            }
+            (Some(other), _) => {
+                return Err(Error::usage(format!(
+                    "unknown trajectory `{other}` (expected step, hold, sine or min-jerk)"
+                )))
+            }
+        };
+        let duration = flags.number(
+            "--duration",
+            3.0,
+            ("a duration in (0, 600] s", |x| x > 0.0 && x <= 600.0),
+        )?;
+        let dt = flags.number(
+            "--dt",
+            1e-3,
+            ("a step in (0, 0.05] s", |x| x > 0.0 && x <= 0.05),
+        )?;
+        if duration / dt > 5e6 {
+            return Err(Error::usage(format!(
+                "{duration} s at dt = {dt} s is more than 5 million steps"
+            )));
+        }
+        let kp = match flags.take("--kp") {
+            None => None,
+            Some(v) => match v.parse::<f64>() {
+                Ok(k) if k.is_finite() && k > 0.0 => Some(k),
+                _ => {
+                    return Err(Error::usage(format!(
+                        "`--kp {v}`: expected a positive number"
+                    )))
+                }
+            },
+        };
+        let torque_limit = match flags.take("--torque-limit") {
+            None => None,
+            Some(v) => match v.parse::<f64>() {
+                Ok(k) if k.is_finite() && k > 0.0 => Some(k),
+                _ => {
+                    return Err(Error::usage(format!(
+                        "`--torque-limit {v}`: expected a positive number of N m"
+                    )))
+                }
+            },
+        };
+        Ok(Settings {
+            controller,
+            trajectory,
+            duration,
+            dt,
+            kp,
+            torque_limit,
+            out: flags.take("--out").map(PathBuf::from),
+        })
+    }
+}
+
+/// The foot references `sim` offers.
+#[derive(Clone, Copy)]
+enum FootRef {
+    Cycle(StepCycle<f64>),
+    Hold(SVector<f64, 2>),
+}
+
+impl Reference<f64, 2> for FootRef {
+    fn sample(&self, t: f64) -> Setpoint<f64, 2> {
+        match self {
+            FootRef::Cycle(c) => c.sample(t),
+            FootRef::Hold(p) => Setpoint {
+                position: *p,
+                velocity: SVector::zeros(),
+                acceleration: SVector::zeros(),
+            },
+        }
+    }
+}
+
+/// The joint references `sim` offers.
+#[derive(Clone, Copy)]
+enum JointRef<const NU: usize> {
+    Sine(Sinusoid<f64, NU>),
+    MinJerk(MinimumJerk<f64, NU>),
+}
+
+impl<const NU: usize> Reference<f64, NU> for JointRef<NU> {
+    fn sample(&self, t: f64) -> Setpoint<f64, NU> {
+        match self {
+            JointRef::Sine(s) => s.sample(t),
+            JointRef::MinJerk(m) => m.sample(t),
+        }
+    }
+}
+
+/// One of the controllers, as a torque source.
+enum AnyController<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize> {
+    FootFl(FootFeedbackLinearization<L, f64, FootRef, NQ, NC, NU>),
+    FootPd(FootPdGravity<L, f64, FootRef, NQ, NC, NU>),
+    JointFl(JointFeedbackLinearization<L, f64, JointRef<NU>, NQ, NC, NU>),
+    JointPd(PdGravity<L, f64, JointRef<NU>, NQ, NC, NU>),
+    Passive,
+}
+
+impl<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>
+    TorqueSource<f64, NQ, NU> for AnyController<L, NQ, NC, NU>
+{
+    fn torque(&mut self, t: f64, s: &State<f64, NQ>) -> Result<SVector<f64, NU>, ControlError> {
+        match self {
+            AnyController::FootFl(c) => c.torque(t, s),
+            AnyController::FootPd(c) => c.torque(t, s),
+            AnyController::JointFl(c) => c.torque(t, s),
+            AnyController::JointPd(c) => c.torque(t, s),
+            AnyController::Passive => Ok(SVector::zeros()),
+        }
+    }
+}
+
+fn max(xs: impl Iterator<Item = f64>) -> f64 {
+    xs.fold(0.0, f64::max)
+}
+
+pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
+    s: &Settings,
+) -> Result<(), Error> {
+    let p = <L as LegModel<NQ, NC, NU>>::Params::<f64>::default();
+    let tol = Tolerance::default();
+    let fail =
+        |what: &str, e: &dyn std::fmt::Display| Error::Failed(format!("{}: {what}: {e}", L::NAME));
+    let mut home = SVector::<f64, NQ>::from_column_slice(&L::HOME);
+    project_position::<L, f64, NQ, NC, NU>(&p, &mut home, &tol)
+        .map_err(|e| fail("the home pose does not assemble", &e))?;
+    let theta_home = SVector::<f64, NU>::from_fn(|k, _| home[L::ACTUATED[k]]);
+    let foot_home = L::foot_position(&home, &p);
+    let kp = s.kp.unwrap_or(if s.controller.in_foot_space() {
+        400.0
+    } else {
+        100.0
+    });
+    let (joint_inertia, foot_inertia) =
+        effective_inertias::<L, f64, NQ, NC, NU>(&p, &home).map_err(|e| fail("at home", &e))?;
+    let kd = 2.0 * kp.sqrt();
+
+    let foot_ref = match s.trajectory {
+        Trajectory::Step => FootRef::Cycle(StepCycle {
+            center: foot_home,
+            half_stride: 0.03,
+            half_height: 0.015,
+            period: 0.5,
+        }),
+        _ => FootRef::Hold(foot_home),
+    };
+    let joint_ref = match s.trajectory {
+        Trajectory::MinJerk => JointRef::MinJerk(MinimumJerk {
+            start: theta_home,
+            goal: theta_home.add_scalar(0.2),
+            t0: 0.5,
+            duration: 1.0,
+        }),
+        Trajectory::Sine => JointRef::Sine(Sinusoid {
+            offset: theta_home,
+            amplitude: SVector::from_element(0.1),
+            frequency: SVector::from_element(1.0),
+            phase: SVector::from_fn(|k, _| k as f64),
+        }),
+        _ => JointRef::Sine(Sinusoid {
+            offset: theta_home,
+            amplitude: SVector::zeros(),
+            frequency: SVector::zeros(),
+            phase: SVector::zeros(),
+        }),
+    };
+
+    // Start on the reference, at rest for foot tasks, at the reference's rates for joint tasks.
+    let initial = if s.controller.in_foot_space() {
+        let q = foot_inverse::<L, f64, NQ, NC, NU>(&p, &foot_ref.sample(0.0).position, &home, &tol)
+            .map_err(|e| fail("the foot reference's start", &e))?;
+        State {
+            q,
+            qd: SVector::zeros(),
+        }
+    } else if s.controller == Controller::Passive {
+        State {
+            q: home,
+            qd: SVector::zeros(),
+        }
+    } else {
+        let r0 = joint_ref.sample(0.0);
+        let q = assemble::<L, f64, NQ, NC, NU>(&p, &r0.position, &home, &tol)
+            .map_err(|e| fail("the joint reference's start", &e))?;
+        let qd = consistent_velocity::<L, f64, NQ, NC, NU>(&p, &q, &r0.velocity)
+            .map_err(|e| fail("the joint reference's start", &e))?;
+        State { q, qd }
+    };
+
+    let (controller, gains_text): (AnyController<L, NQ, NC, NU>, String) = match s.controller {
+        Controller::FootFl => (
+            AnyController::FootFl(FootFeedbackLinearization::new(
+                p,
+                Gains::new(kp, kd),
+                foot_ref,
+            )),
+            format!("k_p = {kp} 1/s², k_d = {kd:.3} 1/s"),
+        ),
+        Controller::FootPd => {
+            let g = Gains {
+                kp: foot_inertia * kp,
+                kd: foot_inertia * kd,
+            };
+            (
+                AnyController::FootPd(FootPdGravity::new(p, g, foot_ref)),
+                format!(
+                    "K = {:?} N/m, D = {:?} N s/m (Λ × {kp}, Λ × {kd:.3})",
+                    g.kp.as_slice(),
+                    g.kd.as_slice()
+                ),
+            )
+        }
+        Controller::JointFl => (
+            AnyController::JointFl(JointFeedbackLinearization::new(
+                p,
+                Gains::new(kp, kd),
+                joint_ref,
+            )),
+            format!("k_p = {kp} 1/s², k_d = {kd:.3} 1/s"),
+        ),
+        Controller::JointPd => {
+            let g = Gains {
+                kp: joint_inertia * kp,
+                kd: joint_inertia * kd,
+            };
+            (
+                AnyController::JointPd(PdGravity::new(p, g, joint_ref)),
+                format!(
+                    "k_p = {:?} N m/rad, k_d = {:?} N m s/rad",
+                    g.kp.as_slice(),
+                    g.kd.as_slice()
+                ),
+            )
+        }
+        Controller::Passive => (AnyController::Passive, "none".to_string()),
+    };
+    let limit = s.torque_limit.unwrap_or(f64::INFINITY);
+    let mut source = Saturated::new(controller, SVector::from_element(limit));
+    let steps = (s.duration / s.dt).round() as usize;
+    let sim = Simulator::<L, f64, NQ, NC, NU>::new(p, StepOptions::rk4(s.dt));
+    let (samples, stopped) = match sim.run(initial, steps, &mut source) {
+        Ok(samples) => (samples, None),
+        Err(stop) => {
+            let why = (stop.t, stop.cause.to_string());
+            (stop.samples, Some(why))
+        }
+    };
+
+    // What each sample is measured against.
+    let foot_task = s.controller.in_foot_space();
+    let foot_of = |x: &Sample<f64, NQ, NC, NU>| L::foot_position(&x.state.q, &p);
+    let error_of = |x: &Sample<f64, NQ, NC, NU>| -> f64 {
+        if foot_task {
+            (foot_of(x) - foot_ref.sample(x.t).position).norm()
+        } else {
+            let r = joint_ref.sample(x.t).position;
+            max((0..NU).map(|k| (r[k] - x.state.q[L::ACTUATED[k]]).abs()))
+        }
+    };
+    let tracked = s.controller != Controller::Passive;
+    let errors: Vec<f64> = samples.iter().map(error_of).collect();
+    let settle = 1.0f64.min(s.duration / 2.0);
+    let steady: Vec<f64> = samples
+        .iter()
+        .zip(&errors)
+        .filter(|(x, _)| x.t >= settle)
+        .map(|(_, e)| *e)
+        .collect();
+    let rms = |v: &[f64]| (v.iter().map(|e| e * e).sum::<f64>() / v.len().max(1) as f64).sqrt();
+    let e0 = samples.first().map_or(0.0, |x| x.energy);
+    let energy_drift = max(samples.iter().map(|x| (x.energy - e0).abs())) / e0.abs().max(1e-300);
+
+    let out = s.out.clone().unwrap_or_else(|| {
+        xtask::gen::workspace_root()
+            .join("target")
+            .join("sim")
+            .join(L::NAME)
+    });
+    std::fs::create_dir_all(&out).map_err(|e| Error::Failed(format!("{}: {e}", out.display())))?;
+
+    // trajectory.csv
+    let mut csv = String::from("t");
+    for j in L::JOINT_NAMES {
+        let _ = write!(csv, ",q_{j}");
+    }
+    for j in L::JOINT_NAMES {
+        let _ = write!(csv, ",qd_{j}");
+    }
+    for &a in &L::ACTUATED {
+        let _ = write!(csv, ",u_{}", L::JOINT_NAMES[a]);
+    }
+    for r in 0..NC {
+        let _ = write!(csv, ",F_{}{}", r / 2, if r % 2 == 0 { "_x" } else { "_y" });
+    }
+    csv.push_str(",closure_residual,energy,foot_x,foot_y");
+    if foot_task {
+        csv.push_str(",ref_x,ref_y");
+    } else if tracked {
+        for &a in &L::ACTUATED {
+            let _ = write!(csv, ",ref_{}", L::JOINT_NAMES[a]);
+        }
+    }
+    if tracked {
+        csv.push_str(",error");
+    }
+    csv.push('\n');
+    for (x, e) in samples.iter().zip(&errors) {
+        let mut row = format!("{}", x.t);
+        for v in x
+            .state
+            .q
+            .iter()
+            .chain(x.state.qd.iter())
+            .chain(x.u.iter())
+            .chain(x.forces.iter())
+        {
+            let _ = write!(row, ",{v}");
+        }
+        let f = foot_of(x);
+        let _ = write!(
+            row,
+            ",{},{},{},{}",
+            x.closure_residual, x.energy, f[0], f[1]
+        );
+        if foot_task {
+            let r = foot_ref.sample(x.t).position;
+            let _ = write!(row, ",{},{}", r[0], r[1]);
+        } else if tracked {
+            for v in joint_ref.sample(x.t).position.iter() {
+                let _ = write!(row, ",{v}");
+            }
+        }
+        if tracked {
+            let _ = write!(row, ",{e}");
+        }
+        csv.push_str(&row);
+        csv.push('\n');
+    }
+
+    let unit = if foot_task { "m" } else { "rad" };
+    let summary = json!({
+        "model": L::NAME,
+        "controller": s.controller.name(),
+        "trajectory": if tracked { json!(s.trajectory.name()) } else { json!(null) },
+        "settings": {
+            "duration_s": s.duration,
+            "dt_s": s.dt,
+            "integrator": "RK4 with projection onto the closure",
+            "torque_update": "once per step (zero-order hold)",
+            "gains": gains_text,
+            "torque_limit_nm": s.torque_limit,
+        },
+        "samples": samples.len(),
+        "tracking_error": if tracked { json!({
+            "unit": unit,
+            "max": max(errors.iter().copied()),
+            "rms": rms(&errors),
+            "steady_state_from_s": settle,
+            "steady_state_max": max(steady.iter().copied()),
+            "steady_state_rms": rms(&steady),
+        }) } else { json!(null) },
+        "peak_torque_nm": max(samples.iter().map(|x| x.u.amax())),
+        "saturations": source.saturations.iter().sum::<usize>(),
+        "saturations_per_motor": source.saturations.to_vec(),
+        "max_closure_residual_m": max(samples.iter().map(|x| x.closure_residual)),
+        "energy_drift_relative": if tracked { json!(null) } else { json!(energy_drift) },
+        "stopped": stopped.as_ref().map(|(t, why)| json!({"t": t, "cause": why})),
+    });
+
+    // report.html
+    let frame_every = ((0.02 / s.dt).round() as usize).max(1);
+    let frames: Vec<report::Frame> = samples
+        .iter()
+        .step_by(frame_every)
+        .map(|x| {
+            let joints = L::joint_positions(&x.state.q, &p);
+            let tips = L::link_tips(&x.state.q, &p);
+            let closures = L::closure_points(&x.state.q, &p);
+            report::Frame {
+                t: x.t,
+                links: (0..NQ)
+                    .map(|i| [joints[(0, i)], joints[(1, i)], tips[(0, i)], tips[(1, i)]])
+                    .collect(),
+                closures: (0..NC)
+                    .map(|i| [closures[(0, i)], closures[(1, i)]])
+                    .collect(),
+                foot: {
+                    let f = foot_of(x);
+                    [f[0], f[1]]
+                },
+                reference: if foot_task {
+                    let r = foot_ref.sample(x.t).position;
+                    Some([r[0], r[1]])
+                } else {
+                    None
+                },
+            }
+        })
+        .collect();
+    let t: Vec<f64> = samples.iter().map(|x| x.t).collect();
+    let mut plots = Vec::new();
+    if tracked {
+        plots.push(Series::new(
+            &format!("tracking error ({unit})"),
+            &t,
+            vec![("error".into(), errors.clone())],
+        ));
+    }
+    plots.push(Series::new(
+        "motor torques (N m)",
+        &t,
+        L::ACTUATED
+            .iter()
+            .enumerate()
+            .map(|(k, &a)| {
+                (
+                    L::JOINT_NAMES[a].to_string(),
+                    samples.iter().map(|x| x.u[k]).collect(),
+                )
+            })
+            .collect(),
+    ));
+    plots.push(Series::new(
+        "closure residual max |φ| (m)",
+        &t,
+        vec![(
+            "|φ|".into(),
+            samples.iter().map(|x| x.closure_residual).collect(),
+        )],
+    ));
+    plots.push(Series::new(
+        "energy T + V (J)",
+        &t,
+        vec![("energy".into(), samples.iter().map(|x| x.energy).collect())],
+    ));
+    let html = report::html(&Report {
+        title: format!(
+            "{} — {}{}",
+            L::NAME,
+            s.controller.name(),
+            if tracked {
+                format!(", {}", s.trajectory.name())
+            } else {
+                String::new()
+            }
+        ),
+        summary: &summary,
+        plots: &plots,
+        frames: &frames,
+    })
+    .map_err(Error::Failed)?;
+
+    let written = [
+        ("trajectory.csv", csv),
+        ("summary.json", format!("{:#}\n", summary)),
+        ("report.html", html),
+    ];
+    for (name, text) in &written {
+        write_atomic(&out.join(name), text).map_err(Error::Failed)?;
+    }
+    println!(
+        "{} with {} ({} s at dt = {} s): wrote {}/{{trajectory.csv, summary.json, report.html}}",
+        L::NAME,
+        s.controller.name(),
+        s.duration,
+        s.dt,
+        out.display()
+    );
+    if tracked {
+        println!(
+            "  tracking error: max {:.3e} {unit}, steady-state max {:.3e} {unit}",
+            max(errors.iter().copied()),
+            max(steady.iter().copied())
+        );
+    }
+    println!(
+        "  peak torque {:.4} N m, {} saturations, max closure residual {:.1e} m",
+        max(samples.iter().map(|x| x.u.amax())),
+        source.saturations.iter().sum::<usize>(),
+        max(samples.iter().map(|x| x.closure_residual))
+    );
+    match stopped {
+        None => Ok(()),
+        Some((t, why)) => Err(Error::Failed(format!(
+            "the simulation stopped at t = {t} s: {why} (the output holds everything until then)"
+        ))),
+    }
+}

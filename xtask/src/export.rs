@@ -1,0 +1,281 @@
+//! Export a leg to MuJoCo (MJCF) and URDF, from its spec.
+//!
+//! The leg lies in the x–y plane; every joint is a hinge about z at the link's joint,
+//! and each body's frame is its parent's turned by the joint angle, as in the generated
+//! model, so `qpos` (by joint name) is `q`. Masses, centres of mass and inertias are
+//! written exactly (shortest round-trip decimals); the inertia about z is the spec's, the
+//! x and y moments (which a z-hinge never sees) are set equal to it so that MuJoCo's
+//! triangle inequality holds. Reflected rotor inertia `I·N²` is MuJoCo's joint
+//! `armature`; motors are joint-torque actuators (`gear = 1`: `ctrl` is the joint torque
+//! `u` of the runtime). In MJCF a closure is an `<equality><connect>` between two sites;
+//! URDF holds only the spanning tree, with one fixed, massless frame per closure point,
+//! named `<closure>_a` and `<closure>_b`, and a `foot` frame, so that tools reading URDF
+//! can rebuild the loop.
+
+use std::fmt::Write;
+
+use crate::model::{Model, Param, Point};
+
+fn num(v: f64) -> String {
+    format!("{v:?}")
+}
+
+fn value(params: &[Param], name: &str) -> f64 {
+    params
+        .iter()
+        .find(|p| p.name == name)
+        .map(|p| p.default)
+        .expect("every quantity of a model is one of its parameters")
+}
+
+fn pair(m: &Model, names: &[String; 2]) -> (f64, f64) {
+    (value(&m.params, &names[0]), value(&m.params, &names[1]))
+}
+
+/// A point of a link, in the link's frame.
+fn at(m: &Model, p: &Point) -> String {
+    let (x, y) = pair(m, &p.point);
+    format!("{} {} 0", num(x), num(y))
+}
+
+fn children(m: &Model, parent: Option<usize>) -> Vec<usize> {
+    (0..m.links.len())
+        .filter(|&i| m.links[i].parent == parent)
+        .collect()
+}
+
+/// The model as MJCF.
+pub fn mjcf(m: &Model) -> String {
+    let mut out = String::new();
+    let g = pair(m, &m.gravity);
+    let _ = writeln!(
+        out,
+        "<!-- {}: exported by `cargo xtask export {} --format mjcf` from its spec. -->",
+        m.name, m.name
+    );
+    let _ = writeln!(out, "<mujoco model=\"{}\">", m.name);
+    let _ = writeln!(out, "  <compiler angle=\"radian\" autolimits=\"true\"/>");
+    let _ = writeln!(
+        out,
+        "  <option gravity=\"{} {} 0\" timestep=\"0.001\" integrator=\"RK4\">\n    <flag contact=\"disable\"/>\n  </option>",
+        num(g.0),
+        num(g.1)
+    );
+    let _ = writeln!(out, "  <worldbody>");
+    for i in children(m, None) {
+        mjcf_body(m, i, 2, &mut out);
+    }
+    let _ = writeln!(out, "  </worldbody>");
+    if !m.closures.is_empty() {
+        let _ = writeln!(out, "  <equality>");
+        for c in &m.closures {
+            // Stiffer than MuJoCo's default soft constraint (time constant 2 dt).
+            let _ = writeln!(out, "    <connect name=\"{0}\" site1=\"{0}_a\" site2=\"{0}_b\" solref=\"0.002 1\" solimp=\"0.95 0.99 0.001\"/>", c.name);
+        }
+        let _ = writeln!(out, "  </equality>");
+    }
+    if !m.actuated.is_empty() {
+        let _ = writeln!(out, "  <actuator>");
+        for &a in &m.actuated {
+            let _ = writeln!(
+                out,
+                "    <motor name=\"{0}\" joint=\"{0}\" gear=\"1\"/>",
+                m.links[a].name
+            );
+        }
+        let _ = writeln!(out, "  </actuator>");
+    }
+    let _ = writeln!(out, "</mujoco>");
+    out
+}
+
+fn mjcf_body(m: &Model, i: usize, depth: usize, out: &mut String) {
+    let l = &m.links[i];
+    let pad = "  ".repeat(depth);
+    let (ox, oy) = pair(m, &l.origin);
+    let (lx, ly) = pair(m, &l.length);
+    let (cx, cy) = pair(m, &l.com);
+    let (mass, inertia, damping) = (
+        value(&m.params, &l.mass),
+        value(&m.params, &l.inertia),
+        value(&m.params, &l.damping),
+    );
+    let armature = l.rotor.as_ref().map_or(0.0, |r| {
+        let (ir, n) = pair(m, r);
+        ir * n * n
+    });
+    let _ = writeln!(
+        out,
+        "{pad}<body name=\"{}\" pos=\"{} {} 0\">",
+        l.name,
+        num(ox),
+        num(oy)
+    );
+    let _ = writeln!(
+        out,
+        "{pad}  <joint name=\"{}\" type=\"hinge\" axis=\"0 0 1\" damping=\"{}\" armature=\"{}\"/>",
+        l.name,
+        num(damping),
+        num(armature)
+    );
+    let _ = writeln!(
+        out,
+        "{pad}  <inertial pos=\"{} {} 0\" mass=\"{}\" diaginertia=\"{i} {i} {i}\"/>",
+        num(cx),
+        num(cy),
+        num(mass),
+        i = num(inertia)
+    );
+    let _ = writeln!(
+        out,
+        "{pad}  <geom type=\"capsule\" fromto=\"0 0 0 {} {} 0\" size=\"0.006\" contype=\"0\" conaffinity=\"0\" mass=\"0\"/>",
+        num(lx),
+        num(ly)
+    );
+    for c in &m.closures {
+        for (side, p) in [("a", &c.a), ("b", &c.b)] {
+            if p.link == i {
+                let _ = writeln!(
+                    out,
+                    "{pad}  <site name=\"{}_{side}\" pos=\"{}\"/>",
+                    c.name,
+                    at(m, p)
+                );
+            }
+        }
+    }
+    if m.foot.link == i {
+        let _ = writeln!(
+            out,
+            "{pad}  <site name=\"foot\" pos=\"{}\"/>",
+            at(m, &m.foot)
+        );
+    }
+    for c in children(m, Some(i)) {
+        mjcf_body(m, c, depth + 1, out);
+    }
+    let _ = writeln!(out, "{pad}</body>");
+}
+
+/// The spanning tree as URDF, with fixed frames at the closure points and the foot.
+pub fn urdf(m: &Model) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "<?xml version=\"1.0\"?>");
+    let _ = writeln!(
+        out,
+        "<!-- {}: exported by `cargo xtask export {} --format urdf` from its spec.",
+        m.name, m.name
+    );
+    let _ = writeln!(
+        out,
+        "     Planar leg in the x-y plane, joints about z. URDF holds the spanning tree only:"
+    );
+    let _ = writeln!(
+        out,
+        "     each closure k joins the frames k_a and k_b (they must coincide). Gravity of the"
+    );
+    let _ = writeln!(
+        out,
+        "     spec: {} {} 0 m/s^2. Reflected rotor inertia: see the transmissions. -->",
+        num(pair(m, &m.gravity).0),
+        num(pair(m, &m.gravity).1)
+    );
+    let _ = writeln!(out, "<robot name=\"{}\">", m.name);
+    let _ = writeln!(out, "  <link name=\"base\"/>");
+    for l in &m.links {
+        let (cx, cy) = pair(m, &l.com);
+        let (lx, ly) = pair(m, &l.length);
+        let (mass, inertia) = (value(&m.params, &l.mass), value(&m.params, &l.inertia));
+        let _ = writeln!(out, "  <link name=\"{}\">", l.name);
+        let _ = writeln!(out, "    <inertial>");
+        let _ = writeln!(
+            out,
+            "      <origin xyz=\"{} {} 0\" rpy=\"0 0 0\"/>",
+            num(cx),
+            num(cy)
+        );
+        let _ = writeln!(out, "      <mass value=\"{}\"/>", num(mass));
+        let _ = writeln!(
+            out,
+            "      <inertia ixx=\"{i}\" ixy=\"0\" ixz=\"0\" iyy=\"{i}\" iyz=\"0\" izz=\"{i}\"/>",
+            i = num(inertia)
+        );
+        let _ = writeln!(out, "    </inertial>");
+        let len = (lx * lx + ly * ly).sqrt();
+        let _ = writeln!(
+            out,
+            "    <visual>\n      <origin xyz=\"{} {} 0\" rpy=\"0 {} {}\"/>\n      <geometry><cylinder radius=\"0.006\" length=\"{}\"/></geometry>\n    </visual>",
+            num(lx / 2.0),
+            num(ly / 2.0),
+            num(std::f64::consts::FRAC_PI_2),
+            num(ly.atan2(lx)),
+            num(len)
+        );
+        let _ = writeln!(out, "  </link>");
+        let parent = l.parent.map_or("base", |p| m.links[p].name.as_str());
+        let (ox, oy) = pair(m, &l.origin);
+        let _ = writeln!(out, "  <joint name=\"{}\" type=\"continuous\">", l.name);
+        let _ = writeln!(
+            out,
+            "    <parent link=\"{parent}\"/>\n    <child link=\"{}\"/>",
+            l.name
+        );
+        let _ = writeln!(
+            out,
+            "    <origin xyz=\"{} {} 0\" rpy=\"0 0 0\"/>\n    <axis xyz=\"0 0 1\"/>",
+            num(ox),
+            num(oy)
+        );
+        let _ = writeln!(
+            out,
+            "    <dynamics damping=\"{}\" friction=\"0\"/>",
+            num(value(&m.params, &l.damping))
+        );
+        let _ = writeln!(out, "  </joint>");
+    }
+    let frame = |name: &str, p: &Point, out: &mut String| {
+        let _ = writeln!(out, "  <link name=\"{name}\"/>");
+        let _ = writeln!(out, "  <joint name=\"{name}_frame\" type=\"fixed\">");
+        let _ = writeln!(
+            out,
+            "    <parent link=\"{}\"/>\n    <child link=\"{name}\"/>",
+            m.links[p.link].name
+        );
+        let _ = writeln!(out, "    <origin xyz=\"{}\" rpy=\"0 0 0\"/>", at(m, p));
+        let _ = writeln!(out, "  </joint>");
+    };
+    for c in &m.closures {
+        frame(&format!("{}_a", c.name), &c.a, &mut out);
+        frame(&format!("{}_b", c.name), &c.b, &mut out);
+    }
+    frame("foot", &m.foot, &mut out);
+    for &a in &m.actuated {
+        let l = &m.links[a];
+        let (ir, n) = pair(m, l.rotor.as_ref().expect("actuated links have a rotor"));
+        let _ = writeln!(out, "  <transmission name=\"{}_motor\">", l.name);
+        let _ = writeln!(
+            out,
+            "    <type>transmission_interface/SimpleTransmission</type>"
+        );
+        let _ = writeln!(
+            out,
+            "    <joint name=\"{}\"><hardwareInterface>hardware_interface/EffortJointInterface</hardwareInterface></joint>",
+            l.name
+        );
+        let _ = writeln!(
+            out,
+            "    <actuator name=\"{}_motor\"><mechanicalReduction>{}</mechanicalReduction></actuator>",
+            l.name,
+            num(n)
+        );
+        let _ = writeln!(
+            out,
+            "    <!-- rotor inertia {} kg m^2, reflected {} kg m^2 -->",
+            num(ir),
+            num(ir * n * n)
+        );
+        let _ = writeln!(out, "  </transmission>");
+    }
+    let _ = writeln!(out, "</robot>");
+    out
+}

@@ -1,0 +1,378 @@
+//! The command line: `legs` (behind `cargo xtask sim` and `eval`) and `xtask` itself.
+//! Bad input is one line on stderr, exit code 2, and no output file.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+use generated::Minitaur;
+use leg_models::nalgebra::SVector;
+use leg_models::LegModel;
+use serde_json::Value;
+
+fn legs(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_legs"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn xtask(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_xtask"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn temp_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("legs-cli-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+/// Exit code 2, a one-line error that says `says`, nothing on stdout.
+fn refused(out: &Output, says: &str) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "stderr: {err}");
+    assert!(
+        err.starts_with("error: ") && err.trim_end().lines().count() == 1,
+        "not one line: {err}"
+    );
+    assert!(
+        err.contains(says),
+        "`{}` should say `{says}`",
+        err.trim_end()
+    );
+    assert!(out.stdout.is_empty());
+}
+
+#[test]
+fn eval_json_has_every_term_and_matches_the_model() {
+    let out = legs(&[
+        "eval",
+        "minitaur",
+        "--q",
+        "-0.7,-1.25,-2.43,1.25",
+        "--qd",
+        "0.1,0.2,-0.3,0.4",
+        "--u",
+        "0.05,-0.02",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    for key in [
+        "q",
+        "qd",
+        "u",
+        "M",
+        "N",
+        "G",
+        "J",
+        "Jdot_qdot",
+        "qdd",
+        "F",
+        "A_tilde",
+        "b_tilde",
+        "foot",
+        "foot_jacobian",
+        "kinetic",
+        "potential",
+        "phi",
+    ] {
+        assert!(v.get(key).is_some_and(|x| !x.is_null()), "missing {key}");
+    }
+    let q = SVector::<f64, 4>::from_column_slice(&[-0.7, -1.25, -2.43, 1.25]);
+    let p = generated::minitaur::Params::<f64>::default();
+    let m = Minitaur::mass_matrix(&q, &p);
+    for r in 0..4 {
+        for c in 0..4 {
+            assert_eq!(
+                v["M"][r][c].as_f64().unwrap(),
+                m[(r, c)],
+                "M is printed exactly, as rows"
+            );
+        }
+    }
+    assert_eq!(v["J"].as_array().unwrap().len(), 2);
+    assert_eq!(v["foot_jacobian"][0].as_array().unwrap().len(), 4);
+}
+
+#[test]
+fn eval_assemble_solves_the_loop() {
+    let out = legs(&[
+        "eval",
+        "minitaur",
+        "--q",
+        "-0.75,-2.4",
+        "--qd",
+        "1,-1",
+        "--assemble",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let q: Vec<f64> = v["q"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    assert_eq!((q.len(), q[0], q[2]), (4, -0.75, -2.4));
+    let phi = v["phi"].as_array().unwrap();
+    assert!(
+        phi.iter().all(|x| x.as_f64().unwrap().abs() < 1e-12),
+        "{phi:?}"
+    );
+    let qd: Vec<f64> = v["qd"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    assert_eq!((qd[0], qd[2]), (1.0, -1.0));
+}
+
+#[test]
+fn eval_refuses_bad_input() {
+    refused(&legs(&["eval", "nope", "--q", "1"]), "unknown model `nope`");
+    refused(
+        &legs(&["eval", "minitaur", "--q", "1,2,3"]),
+        "has 3 values, expected 4",
+    );
+    refused(
+        &legs(&["eval", "minitaur", "--q", "1,2", "--assemble", "--qd", "1"]),
+        "has 1 values, expected 2",
+    );
+    refused(
+        &legs(&["eval", "minitaur", "--q", "1,x,3,4"]),
+        "expected 4 comma-separated numbers",
+    );
+    refused(
+        &legs(&["eval", "minitaur", "--q", "1,2,3,4", "--frob"]),
+        "unknown flag `--frob`",
+    );
+    refused(&legs(&["eval", "minitaur"]), "`--q` is required");
+    refused(&legs(&["eval", "minitaur", "--q"]), "`--q` needs a value");
+}
+
+#[test]
+fn eval_reports_a_singular_state_without_failing() {
+    let out = legs(&[
+        "eval",
+        "minitaur",
+        "--q",
+        "-1.5707963267948966,0,-1.5707963267948966,0",
+        "--json",
+    ]);
+    assert!(out.status.success());
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(
+        v["qdd"].is_null() && v["errors"]["qdd"].as_str().unwrap().contains("singular"),
+        "{v}"
+    );
+}
+
+#[test]
+fn sim_writes_csv_summary_and_report() {
+    let dir = temp_dir("sim");
+    let out = legs(&[
+        "sim",
+        "two_link",
+        "--duration",
+        "0.2",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains(dir.to_str().unwrap()),
+        "says where it wrote"
+    );
+    let csv = std::fs::read_to_string(dir.join("trajectory.csv")).unwrap();
+    let header = csv.lines().next().unwrap();
+    assert!(header.starts_with("t,q_upper_arm,q_forearm,qd_upper_arm,qd_forearm,u_upper_arm,u_forearm,closure_residual,energy,foot_x,foot_y,ref_x,ref_y,error"), "{header}");
+    assert_eq!(csv.lines().count(), 1 + 201);
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["model"], "two_link");
+    assert_eq!(summary["controller"], "foot-fl");
+    assert!(summary["tracking_error"]["max"].as_f64().unwrap() < 0.01);
+    assert!(summary["stopped"].is_null());
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert!(html.contains("<svg") && html.contains("id=\"frames\""));
+    assert!(
+        !html.contains("http://")
+            || html
+                .matches("http://")
+                .all(|_| html.contains("http://www.w3.org/2000/svg"))
+    );
+    assert!(
+        !html.contains("https://") && !html.contains("src=\""),
+        "the report must not fetch anything"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn sim_refuses_bad_input_and_writes_nothing() {
+    let dir = temp_dir("bad-sim");
+    let d = dir.to_str().unwrap();
+    refused(&legs(&["sim", "nope", "--out", d]), "unknown model `nope`");
+    refused(
+        &legs(&["sim", "minitaur", "--controller", "magic", "--out", d]),
+        "unknown controller `magic`",
+    );
+    refused(
+        &legs(&[
+            "sim",
+            "minitaur",
+            "--controller",
+            "joint-fl",
+            "--trajectory",
+            "step",
+            "--out",
+            d,
+        ]),
+        "does not suit",
+    );
+    refused(
+        &legs(&["sim", "minitaur", "--dt", "-1", "--out", d]),
+        "`--dt -1`",
+    );
+    refused(
+        &legs(&["sim", "minitaur", "--duration", "abc", "--out", d]),
+        "`--duration abc`",
+    );
+    refused(
+        &legs(&["sim", "minitaur", "--speed", "2", "--out", d]),
+        "unknown flag `--speed`",
+    );
+    assert!(!dir.exists(), "bad input left {}", dir.display());
+}
+
+#[test]
+fn a_simulation_that_stops_keeps_its_output() {
+    let dir = temp_dir("stops");
+    // k_p = 1e9 at dt = 1 ms: the discrete loop diverges within a few steps.
+    let out = legs(&[
+        "sim",
+        "minitaur",
+        "--controller",
+        "joint-fl",
+        "--kp",
+        "1e9",
+        "--duration",
+        "0.5",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("the simulation stopped at t =")
+            && err.contains("the output holds everything until then"),
+        "{err}"
+    );
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    let t = summary["stopped"]["t"].as_f64().unwrap();
+    assert!(
+        t > 0.0 && t < 0.5 && summary["stopped"]["cause"].is_string(),
+        "{summary}"
+    );
+    let rows = std::fs::read_to_string(dir.join("trajectory.csv"))
+        .unwrap()
+        .lines()
+        .count();
+    assert_eq!(rows as u64, 1 + summary["samples"].as_u64().unwrap());
+    assert!(rows > 2);
+    assert!(dir.join("report.html").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn export_writes_mjcf_and_urdf_and_refuses_bad_input() {
+    let dir = temp_dir("export");
+    let file = dir.join("minitaur.urdf");
+    let out = xtask(&[
+        "export",
+        "minitaur",
+        "--format",
+        "urdf",
+        "--out",
+        file.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let urdf = std::fs::read_to_string(&file).unwrap();
+    for frame in [
+        "<link name=\"toe_a\"/>",
+        "<link name=\"toe_b\"/>",
+        "<link name=\"foot\"/>",
+        "<mass value=\"0.05\"/>",
+    ] {
+        assert!(urdf.contains(frame), "{frame} missing");
+    }
+    let out = xtask(&["export", "atrias", "--format", "mjcf"]);
+    let mjcf = String::from_utf8(out.stdout).unwrap();
+    assert!(mjcf.contains("<connect name=\"shin_pin\" site1=\"shin_pin_a\" site2=\"shin_pin_b\""));
+    assert!(
+        mjcf.contains("mass=\"0.4438\"")
+            && mjcf.contains("<motor name=\"thigh\" joint=\"thigh\" gear=\"1\"/>")
+    );
+    let armature = format!("armature=\"{:?}\"", 1.2e-4 * 50.0 * 50.0);
+    assert!(
+        mjcf.contains(&armature),
+        "reflected rotor inertia I·N² as {armature}"
+    );
+    let bad = dir.join("bad.xml");
+    let b = bad.to_str().unwrap();
+    refused(
+        &xtask(&["export", "nope", "--format", "mjcf", "--out", b]),
+        "unknown model `nope`",
+    );
+    refused(
+        &xtask(&["export", "minitaur", "--format", "obj", "--out", b]),
+        "unknown format `obj`",
+    );
+    refused(
+        &xtask(&["export", "minitaur", "--out", b]),
+        "`--format mjcf|urdf` is required",
+    );
+    refused(
+        &xtask(&["export", "minitaur", "atrias", "--format", "mjcf"]),
+        "expected a model name only",
+    );
+    assert!(!bad.exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn list_new_and_unknown_commands() {
+    let out = xtask(&["list"]);
+    let text = String::from_utf8(out.stdout).unwrap();
+    for m in ["atrias", "digit", "five_bar_offset", "minitaur", "two_link"] {
+        assert!(text.contains(m), "{text}");
+    }
+    assert!(text.contains("upper_a, upper_b"));
+    refused(&xtask(&["new", "Bad-Name"]), "not a plain identifier");
+    refused(&xtask(&["new", "minitaur"]), "exists already");
+    refused(&xtask(&["frobnicate"]), "unknown command `frobnicate`");
+    refused(&xtask(&["gen", "--frob"]), "unknown flag `--frob`");
+    refused(&xtask(&["gen", "nope"]), "unknown model `nope`");
+}
