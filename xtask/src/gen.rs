@@ -17,6 +17,8 @@ use crate::spec::Spec;
 pub const SPECS_DIR: &str = "leg-models/specs";
 pub const IR_DIR: &str = "generated/ir";
 pub const SRC_DIR: &str = "generated/src";
+/// CasADi's own C code of each derivation, the benchmarks' peer.
+pub const CASADI_C_DIR: &str = "generated/casadi";
 pub const VENV_DIR: &str = ".venv";
 pub const REQUIREMENTS: &str = "xtask/requirements.txt";
 const SCRIPT: &str = "xtask/derive.py";
@@ -56,6 +58,7 @@ struct Derived {
     casadi_version: String,
     spec_sha256: String,
     functions: Vec<DerivedFunction>,
+    casadi_c: String,
 }
 
 #[derive(Deserialize)]
@@ -222,7 +225,7 @@ pub fn committed_irs(root: &Path) -> Result<Vec<IrFile>, String> {
 /// Files under `generated/` that no spec accounts for.
 fn orphans(root: &Path, expected: &BTreeMap<PathBuf, String>) -> Vec<PathBuf> {
     let mut out = Vec::new();
-    for (dir, ext) in [(IR_DIR, "json"), (SRC_DIR, "rs")] {
+    for (dir, ext) in [(IR_DIR, "json"), (SRC_DIR, "rs"), (CASADI_C_DIR, "c")] {
         let Ok(entries) = std::fs::read_dir(root.join(dir)) else {
             continue;
         };
@@ -286,7 +289,9 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, String> {
     for spec in &specs {
         let ir = if selected(&spec.name) {
             let model = model::build(spec).map_err(|e| e.to_string())?;
-            let derived = derive(root, &py, &model)?;
+            let mut derived = derive(root, &py, &model)?;
+            let c = std::mem::take(&mut derived.casadi_c);
+            files.insert(Path::new(CASADI_C_DIR).join(format!("{}.c", spec.name)), c);
             let ir = assemble(spec, &model, derived);
             rust_module::check_terms(&ir).map_err(|e| e.to_string())?;
             files.insert(
