@@ -111,10 +111,33 @@ def derive(model):
     V = sum(potential.values())
     L = sum(kinetic[b] - potential[b] for b in kinetic)
 
+    # Lagrange's equations of L as written in the notes: what a CasADi user gets by
+    # differentiating L (CasADi's C code of these is the benchmarks' peer).
     dL_dqd = cs.gradient(L, qd)
-    M = cs.jacobian(dL_dqd, qd)
-    N = cs.jtimes(dL_dqd, q, qd) - cs.gradient(L, q)
-    G = cs.gradient(V, q)
+    M_lagrange = cs.jacobian(dL_dqd, qd)
+    N_lagrange = cs.jtimes(dL_dqd, q, qd) - cs.gradient(L, q)
+
+    # The same terms in closed form, which is what those derivatives are for this L:
+    # M = Σ m J_cᵀ J_c + I J_ωᵀ J_ω (+ rotors), G = ∂V/∂q = −Σ m J_cᵀ g, and
+    # N = Σ m J_cᵀ (J̇_c q̇) + G (a planar link's J_ω is constant, so its rotation adds
+    # nothing to N). Fewer operations, the same values; M is emitted as one triangle
+    # mirrored, so it is symmetric to the bit.
+    M = cs.SX(n, n)
+    G = cs.SX(n, 1)
+    C_qd = cs.SX(n, 1)
+    for i, link in enumerate(links):
+        com = point({"link": i, "point": link["com"]})
+        J_c = cs.jacobian(com, q)
+        J_w = cs.jacobian(angle[i], q)
+        mass, inertia = sym[link["mass"]], sym[link["inertia"]]
+        M += mass * cs.mtimes(J_c.T, J_c) + inertia * cs.mtimes(J_w.T, J_w)
+        G -= mass * cs.mtimes(J_c.T, gravity)
+        C_qd += mass * cs.mtimes(J_c.T, cs.jtimes(cs.jtimes(com, q, qd), q, qd))
+        if link["rotor"] is not None:
+            rotor_inertia, gear_ratio = sym[link["rotor"][0]], sym[link["rotor"][1]]
+            M[i, i] += rotor_inertia * gear_ratio**2
+    M = cs.vertcat(*[cs.horzcat(*[M[max(r, c), min(r, c)] for c in range(n)]) for r in range(n)])
+    N = C_qd + G
     D = cs.vertcat(*[sym[link["damping"]] * qd[i] for i, link in enumerate(links)])
 
     closures = model["closures"]
@@ -159,7 +182,7 @@ def derive(model):
             ],
         ),
     }
-    peer = {"q": q, "qd": qd, "p": params, "M": M, "N": N, "D": D, "J": J, "Jdot_qd": Jdot_qd}
+    peer = {"q": q, "qd": qd, "p": params, "M": M_lagrange, "N": N_lagrange, "D": D, "J": J, "Jdot_qd": Jdot_qd}
     return inputs, terms, peer
 
 

@@ -1,0 +1,42 @@
+//! With the `peers` feature: compiles CasADi's C code of every model (generated/casadi/)
+//! at -O3 and declares its functions to Rust, for the benchmarks.
+
+fn main() {
+    #[cfg(feature = "peers")]
+    peers::build();
+}
+
+#[cfg(feature = "peers")]
+mod peers {
+    use std::fmt::Write;
+    use std::path::PathBuf;
+
+    pub fn build() {
+        let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../generated/casadi");
+        println!("cargo:rerun-if-changed={}", dir.display());
+        let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+            .expect("generated/casadi exists (cargo xtask gen)")
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| p.extension().is_some_and(|x| x == "c"))
+            .collect();
+        files.sort();
+        let mut build = cc::Build::new();
+        build.opt_level(3).flag("-O3").warnings(false);
+        let mut decls = String::from("extern \"C\" {\n");
+        let mut table = String::from("/// CasADi's C functions by model: (dynamics terms, forward dynamics).\npub const CASADI_C: &[(&str, CasadiFn, CasadiFn)] = &[\n");
+        for f in &files {
+            println!("cargo:rerun-if-changed={}", f.display());
+            build.file(f);
+            let name = f.file_stem().unwrap().to_str().unwrap();
+            let _ = writeln!(decls, "    fn {name}_dynamics_terms(arg: *const *const f64, res: *const *mut f64, iw: *mut i64, w: *mut f64, mem: i32) -> i32;");
+            let _ = writeln!(decls, "    fn {name}_forward_dynamics(arg: *const *const f64, res: *const *mut f64, iw: *mut i64, w: *mut f64, mem: i32) -> i32;");
+            let _ = writeln!(table, "    (\"{name}\", {name}_dynamics_terms, {name}_forward_dynamics),");
+        }
+        decls.push_str("}\n");
+        table.push_str("];\n");
+        build.compile("casadi_peers");
+        let out = PathBuf::from(std::env::var("OUT_DIR").unwrap()).join("casadi_peers.rs");
+        std::fs::write(out, format!("{decls}\n{table}")).unwrap();
+    }
+}
