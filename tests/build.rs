@@ -31,7 +31,10 @@ mod peers {
             let name = f.file_stem().unwrap().to_str().unwrap();
             let _ = writeln!(decls, "    fn {name}_dynamics_terms(arg: *const *const f64, res: *const *mut f64, iw: *mut i64, w: *mut f64, mem: i32) -> i32;");
             let _ = writeln!(decls, "    fn {name}_forward_dynamics(arg: *const *const f64, res: *const *mut f64, iw: *mut i64, w: *mut f64, mem: i32) -> i32;");
-            let _ = writeln!(table, "    (\"{name}\", {name}_dynamics_terms, {name}_forward_dynamics),");
+            let _ = writeln!(
+                table,
+                "    (\"{name}\", {name}_dynamics_terms, {name}_forward_dynamics),"
+            );
         }
         decls.push_str("}\n");
         table.push_str("];\n");

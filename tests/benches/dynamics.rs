@@ -17,7 +17,9 @@ use leg_models::{LegModel, Parameters};
 use leg_tests::casadi;
 use leg_tests::passive_release_state;
 
-fn bench_model<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(c: &mut Criterion) {
+fn bench_model<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
+    c: &mut Criterion,
+) {
     let p = L::Params::<f64>::default();
     let p32 = L::Params::<f32>::default();
     let q = passive_release_state::<L, NQ, NC, NU>(&p).q;
@@ -25,44 +27,124 @@ fn bench_model<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const 
     project_velocity::<L, f64, NQ, NC, NU>(&p, &q, &mut qd).unwrap();
     let u = SVector::<f64, NU>::from_fn(|k, _| 0.05 * (k as f64 + 1.0));
     let (q32, qd32, u32) = (q.cast::<f32>(), qd.cast::<f32>(), u.cast::<f32>());
-    let pv: Vec<f64> = (0..<L::Params<f64> as Parameters<f64>>::NAMES.len()).map(|i| p.get(i).unwrap()).collect();
+    let pv: Vec<f64> = (0..<L::Params<f64> as Parameters<f64>>::NAMES.len())
+        .map(|i| p.get(i).unwrap())
+        .collect();
     let (c_terms, c_fd) = casadi::functions(L::NAME);
 
     // The peer computes the same numbers.
     let ours = L::dynamics_terms(&q, &qd, &p);
-    let (mut m, mut n, mut j, mut b) = (vec![0.0; NQ * NQ], vec![0.0; NQ], vec![0.0; NC * NQ], vec![0.0; NC]);
-    casadi::call(c_terms, &[q.as_slice(), qd.as_slice(), &pv], &mut [&mut m, &mut n, &mut j, &mut b]);
-    let close = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= 1e-12 * (1.0 + y.abs()));
-    assert!(close(&m, ours.mass_matrix.as_slice()) && close(&n, ours.bias_forces.as_slice()), "{}: CasADi's C differs", L::NAME);
-    assert!(close(&j, ours.constraint_jacobian.as_slice()) && close(&b, ours.constraint_bias.as_slice()));
+    let (mut m, mut n, mut j, mut b) = (
+        vec![0.0; NQ * NQ],
+        vec![0.0; NQ],
+        vec![0.0; NC * NQ],
+        vec![0.0; NC],
+    );
+    casadi::call(
+        c_terms,
+        &[q.as_slice(), qd.as_slice(), &pv],
+        &mut [&mut m, &mut n, &mut j, &mut b],
+    );
+    let close = |a: &[f64], b: &[f64]| {
+        a.iter()
+            .zip(b)
+            .all(|(x, y)| (x - y).abs() <= 1e-12 * (1.0 + y.abs()))
+    };
+    assert!(
+        close(&m, ours.mass_matrix.as_slice()) && close(&n, ours.bias_forces.as_slice()),
+        "{}: CasADi's C differs",
+        L::NAME
+    );
+    assert!(
+        close(&j, ours.constraint_jacobian.as_slice())
+            && close(&b, ours.constraint_bias.as_slice())
+    );
     let acc = forward_dynamics::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None).unwrap();
     let (mut qdd, mut f) = (vec![0.0; NQ], vec![0.0; NC]);
-    casadi::call(c_fd, &[q.as_slice(), qd.as_slice(), u.as_slice(), &pv], &mut [&mut qdd, &mut f]);
-    let near = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= 1e-8 * (1.0 + y.abs()));
-    assert!(near(&qdd, acc.qdd.as_slice()) && near(&f, acc.forces.as_slice()), "{}: CasADi's forward dynamics differ", L::NAME);
+    casadi::call(
+        c_fd,
+        &[q.as_slice(), qd.as_slice(), u.as_slice(), &pv],
+        &mut [&mut qdd, &mut f],
+    );
+    let near = |a: &[f64], b: &[f64]| {
+        a.iter()
+            .zip(b)
+            .all(|(x, y)| (x - y).abs() <= 1e-8 * (1.0 + y.abs()))
+    };
+    assert!(
+        near(&qdd, acc.qdd.as_slice()) && near(&f, acc.forces.as_slice()),
+        "{}: CasADi's forward dynamics differ",
+        L::NAME
+    );
 
     let mut g = c.benchmark_group(L::NAME);
-    g.warm_up_time(Duration::from_millis(300)).measurement_time(Duration::from_millis(1200)).sample_size(40);
-    g.bench_function("fused-ours", |bch| bch.iter(|| L::dynamics_terms(black_box(&q), black_box(&qd), black_box(&p))));
-    g.bench_function("fused-ours-f32", |bch| bch.iter(|| L::dynamics_terms(black_box(&q32), black_box(&qd32), black_box(&p32))));
+    g.warm_up_time(Duration::from_millis(300))
+        .measurement_time(Duration::from_millis(1200))
+        .sample_size(40);
+    g.bench_function("fused-ours", |bch| {
+        bch.iter(|| L::dynamics_terms(black_box(&q), black_box(&qd), black_box(&p)))
+    });
+    g.bench_function("fused-ours-f32", |bch| {
+        bch.iter(|| L::dynamics_terms(black_box(&q32), black_box(&qd32), black_box(&p32)))
+    });
     g.bench_function("fused-casadi", |bch| {
-        bch.iter(|| casadi::call(c_terms, &[black_box(q.as_slice()), qd.as_slice(), &pv], &mut [&mut m, &mut n, &mut j, &mut b]))
+        bch.iter(|| {
+            casadi::call(
+                c_terms,
+                &[black_box(q.as_slice()), qd.as_slice(), &pv],
+                &mut [&mut m, &mut n, &mut j, &mut b],
+            )
+        })
     });
     g.bench_function("fd-ours", |bch| {
-        bch.iter(|| forward_dynamics::<L, f64, NQ, NC, NU>(black_box(&p), black_box(&q), black_box(&qd), black_box(&u), None))
+        bch.iter(|| {
+            forward_dynamics::<L, f64, NQ, NC, NU>(
+                black_box(&p),
+                black_box(&q),
+                black_box(&qd),
+                black_box(&u),
+                None,
+            )
+        })
     });
     g.bench_function("fd-ours-f32", |bch| {
-        bch.iter(|| forward_dynamics::<L, f32, NQ, NC, NU>(black_box(&p32), black_box(&q32), black_box(&qd32), black_box(&u32), None))
+        bch.iter(|| {
+            forward_dynamics::<L, f32, NQ, NC, NU>(
+                black_box(&p32),
+                black_box(&q32),
+                black_box(&qd32),
+                black_box(&u32),
+                None,
+            )
+        })
     });
     g.bench_function("fd-casadi", |bch| {
-        bch.iter(|| casadi::call(c_fd, &[black_box(q.as_slice()), qd.as_slice(), u.as_slice(), &pv], &mut [&mut qdd, &mut f]))
+        bch.iter(|| {
+            casadi::call(
+                c_fd,
+                &[black_box(q.as_slice()), qd.as_slice(), u.as_slice(), &pv],
+                &mut [&mut qdd, &mut f],
+            )
+        })
     });
-    g.bench_function("mass_matrix-ours", |bch| bch.iter(|| L::mass_matrix(black_box(&q), black_box(&p))));
-    g.bench_function("bias_forces-ours", |bch| bch.iter(|| L::bias_forces(black_box(&q), black_box(&qd), black_box(&p))));
-    g.bench_function("constraint_jacobian-ours", |bch| bch.iter(|| L::constraint_jacobian(black_box(&q), black_box(&p))));
-    g.bench_function("constraint_bias-ours", |bch| bch.iter(|| L::constraint_bias(black_box(&q), black_box(&qd), black_box(&p))));
-    g.bench_function("foot_jacobian-ours", |bch| bch.iter(|| L::foot_jacobian(black_box(&q), black_box(&p))));
-    g.bench_function("kinetic_energy-ours", |bch| bch.iter(|| L::kinetic_energy(black_box(&q), black_box(&qd), black_box(&p))));
+    g.bench_function("mass_matrix-ours", |bch| {
+        bch.iter(|| L::mass_matrix(black_box(&q), black_box(&p)))
+    });
+    g.bench_function("bias_forces-ours", |bch| {
+        bch.iter(|| L::bias_forces(black_box(&q), black_box(&qd), black_box(&p)))
+    });
+    g.bench_function("constraint_jacobian-ours", |bch| {
+        bch.iter(|| L::constraint_jacobian(black_box(&q), black_box(&p)))
+    });
+    g.bench_function("constraint_bias-ours", |bch| {
+        bch.iter(|| L::constraint_bias(black_box(&q), black_box(&qd), black_box(&p)))
+    });
+    g.bench_function("foot_jacobian-ours", |bch| {
+        bch.iter(|| L::foot_jacobian(black_box(&q), black_box(&p)))
+    });
+    g.bench_function("kinetic_energy-ours", |bch| {
+        bch.iter(|| L::kinetic_energy(black_box(&q), black_box(&qd), black_box(&p)))
+    });
     g.bench_function("reduction-ours", |bch| {
         bch.iter(|| {
             let t = L::dynamics_terms(black_box(&q), black_box(&qd), &p);
@@ -76,9 +158,15 @@ fn bench_model<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const 
         frequency: SVector::from_element(1.0),
         phase: SVector::zeros(),
     };
-    let mut controller = JointFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(p, Gains::critically_damped(100.0), reference);
+    let mut controller = JointFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(
+        p,
+        Gains::critically_damped(100.0),
+        reference,
+    );
     let state = State { q, qd };
-    g.bench_function("control-ours", |bch| bch.iter(|| controller.torque(black_box(0.1), black_box(&state))));
+    g.bench_function("control-ours", |bch| {
+        bch.iter(|| controller.torque(black_box(0.1), black_box(&state)))
+    });
     let opts = StepOptions::rk4(1e-3);
     g.bench_function("step-ours", |bch| {
         bch.iter(|| {

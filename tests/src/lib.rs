@@ -121,20 +121,25 @@ pub fn passive_rcond<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, 
 #[cfg(feature = "peers")]
 pub mod casadi {
     /// CasADi's calling convention: input and output pointer arrays, integer and real work.
-    pub type CasadiFn = unsafe extern "C" fn(*const *const f64, *const *mut f64, *mut i64, *mut f64, i32) -> i32;
+    pub type CasadiFn =
+        unsafe extern "C" fn(*const *const f64, *const *mut f64, *mut i64, *mut f64, i32) -> i32;
 
     include!(concat!(env!("OUT_DIR"), "/casadi_peers.rs"));
 
     /// The two functions of `model`.
     pub fn functions(model: &str) -> (CasadiFn, CasadiFn) {
-        let (_, terms, fd) = CASADI_C.iter().find(|(n, _, _)| *n == model).expect("CasADi C of every model");
+        let (_, terms, fd) = CASADI_C
+            .iter()
+            .find(|(n, _, _)| *n == model)
+            .expect("CasADi C of every model");
         (*terms, *fd)
     }
 
     /// Calls `f` with dense column-major inputs and outputs. The generated functions need no
     /// work arrays (`*_work` reports zero sizes).
     pub fn call(f: CasadiFn, inputs: &[&[f64]], outputs: &mut [&mut [f64]]) {
-        let args: [*const f64; 4] = core::array::from_fn(|i| inputs.get(i).map_or(core::ptr::null(), |s| s.as_ptr()));
+        let args: [*const f64; 4] =
+            core::array::from_fn(|i| inputs.get(i).map_or(core::ptr::null(), |s| s.as_ptr()));
         let mut res: [*mut f64; 4] = [core::ptr::null_mut(); 4];
         for (r, o) in res.iter_mut().zip(outputs.iter_mut()) {
             *r = o.as_mut_ptr();
@@ -142,7 +147,15 @@ pub mod casadi {
         // SAFETY: CasADi's generated functions read `inputs.len()` arrays of the sizes of
         // their sparsity patterns (dense vectors here) and write the outputs' dense sizes,
         // which the callers allocate; they use no work memory.
-        let status = unsafe { f(args.as_ptr(), res.as_ptr(), core::ptr::null_mut(), core::ptr::null_mut(), 0) };
+        let status = unsafe {
+            f(
+                args.as_ptr(),
+                res.as_ptr(),
+                core::ptr::null_mut(),
+                core::ptr::null_mut(),
+                0,
+            )
+        };
         assert_eq!(status, 0, "CasADi function failed");
     }
 }

@@ -19,6 +19,15 @@ fn committed_rust_and_ir_are_fresh() {
             PathBuf::from(gen::IR_DIR).join(format!("{}.json", ir.model.name)),
             ir.to_text(),
         );
+        // CasADi's C comes from CasADi alone (`gen --check` compares it); here: it exists.
+        let c = PathBuf::from(gen::CASADI_C_DIR).join(format!("{}.c", ir.model.name));
+        let text = std::fs::read_to_string(root.join(&c)).unwrap_or_default();
+        assert!(
+            text.contains(&format!("{}_dynamics_terms", ir.model.name)),
+            "{} is missing",
+            c.display()
+        );
+        expected.insert(c, text);
     }
     let stale = gen::stale_files(&root, &expected);
     assert!(
