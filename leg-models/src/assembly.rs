@@ -9,9 +9,10 @@
 
 use core::fmt;
 
-use nalgebra::{Cholesky, SMatrix, SVector};
+use nalgebra::{SMatrix, SVector};
 
-use crate::dynamics::{cholesky_rcond, rcond_floor};
+use crate::dynamics::rcond_floor;
+use crate::linalg::Cholesky;
 use crate::model::{LegModel, Real};
 
 /// Why a leg cannot be assembled as asked.
@@ -104,7 +105,7 @@ where
         }
         let mu = phi.norm_squared();
         let s = j * j.transpose() + SMatrix::<T, NC, NC>::identity() * mu;
-        let chol = Cholesky::new(s).ok_or(AssemblyError::Unreachable {
+        let chol = Cholesky::new(&s).ok_or(AssemblyError::Unreachable {
             residual: to_f64(err),
         })?;
         let mut w = phi;
@@ -195,11 +196,11 @@ where
     }
     let m = L::mass_matrix(q, params);
     let j = L::constraint_jacobian(q, params);
-    let chol_m = Cholesky::new(m).ok_or(AssemblyError::Singular)?;
+    let chol_m = Cholesky::new(&m).ok_or(AssemblyError::Singular)?;
     let mut y = j.transpose();
     chol_m.solve_mut(&mut y); // M⁻¹ Jᵀ
-    let chol_s = Cholesky::new(j * y).ok_or(AssemblyError::Singular)?;
-    if cholesky_rcond(&chol_s) < rcond_floor::<T>() {
+    let chol_s = Cholesky::new(&(j * y)).ok_or(AssemblyError::Singular)?;
+    if chol_s.rcond < rcond_floor::<T>() {
         return Err(AssemblyError::Singular);
     }
     let mut lambda = j * *qd;
@@ -253,8 +254,8 @@ where
     for &a in L::ACTUATED.iter() {
         jp.column_mut(a).fill(T::zero());
     }
-    let chol = Cholesky::new(jp * jp.transpose()).ok_or(AssemblyError::Singular)?;
-    if cholesky_rcond(&chol) < rcond_floor::<T>() {
+    let chol = Cholesky::new(&(jp * jp.transpose())).ok_or(AssemblyError::Singular)?;
+    if chol.rcond < rcond_floor::<T>() {
         return Err(AssemblyError::Singular);
     }
     let mut w = *rhs;
@@ -295,7 +296,7 @@ where
         let jf = L::foot_jacobian(&q, params);
         let mu = cost(&r);
         let h = j.transpose() * j + jf.transpose() * jf + SMatrix::<T, NQ, NQ>::identity() * mu;
-        let chol = Cholesky::new(h).ok_or(AssemblyError::Unreachable {
+        let chol = Cholesky::new(&h).ok_or(AssemblyError::Unreachable {
             residual: to_f64(worst(&r)),
         })?;
         let mut step = j.transpose() * r.0 + jf.transpose() * r.1;

@@ -14,11 +14,12 @@
 use core::fmt;
 use core::marker::PhantomData;
 
-use nalgebra::{Cholesky, Const, SMatrix, SVector};
+use nalgebra::{SMatrix, SVector};
 
 use crate::assembly::{passive_solve, AssemblyError};
-use crate::dynamics::{cholesky_rcond, rcond_floor, DynamicsError};
+use crate::dynamics::{rcond_floor, DynamicsError};
 use crate::integrate::{State, TorqueSource};
+use crate::linalg::Cholesky;
 use crate::model::{DynamicsTerms, LegModel, Real};
 use crate::reference::Reference;
 
@@ -75,12 +76,12 @@ pub struct ActuatedDynamics<T: Real, const NU: usize> {
 
 /// `A22 z = r` for the passive joints and the closure forces, embedded in full size.
 struct PassiveSystem<T: Real, const NQ: usize, const NC: usize> {
-    chol_m: Cholesky<T, Const<NQ>>,
+    chol_m: Cholesky<T, NQ>,
     /// `J` without its actuated columns.
     jp: SMatrix<T, NC, NQ>,
     /// `M̂⁻¹ J_pᵀ`.
     y: SMatrix<T, NQ, NC>,
-    chol_s: Option<Cholesky<T, Const<NC>>>,
+    chol_s: Option<Cholesky<T, NC>>,
     actuated: [bool; NQ],
 }
 
@@ -98,7 +99,7 @@ impl<T: Real, const NQ: usize, const NC: usize> PassiveSystem<T, NQ, NC> {
             mp[(a, a)] = T::one();
             jp.column_mut(a).fill(T::zero());
         }
-        let chol_m = Cholesky::new(mp).ok_or(ControlError::Dynamics(
+        let chol_m = Cholesky::new(&mp).ok_or(ControlError::Dynamics(
             DynamicsError::MassMatrixNotPositiveDefinite,
         ))?;
         let mut y = jp.transpose();
@@ -106,8 +107,8 @@ impl<T: Real, const NQ: usize, const NC: usize> PassiveSystem<T, NQ, NC> {
         let chol_s = if NC == 0 {
             None
         } else {
-            let c = Cholesky::new(jp * y).ok_or(ControlError::SingularPassive)?;
-            if cholesky_rcond(&c) < rcond_floor::<T>() {
+            let c = Cholesky::new(&(jp * y)).ok_or(ControlError::SingularPassive)?;
+            if c.rcond < rcond_floor::<T>() {
                 return Err(ControlError::SingularPassive);
             }
             Some(c)
@@ -428,8 +429,8 @@ where
                 .feedback(&(r.position - foot.position), &(r.velocity - foot.velocity))
             - foot.drift;
         let jy = foot.jacobian;
-        let chol = Cholesky::new(jy * jy.transpose()).ok_or(ControlError::SingularTask)?;
-        if cholesky_rcond(&chol) < rcond_floor::<T>() {
+        let chol = Cholesky::new(&(jy * jy.transpose())).ok_or(ControlError::SingularTask)?;
+        if chol.rcond < rcond_floor::<T>() {
             return Err(ControlError::SingularTask);
         }
         let mut w = v;
@@ -562,10 +563,10 @@ where
     let red = actuated_reduction::<L, T, NQ, NC, NU>(params, &terms, &rest)?;
     let ns = null_space::<L, T, NQ, NC, NU>(&terms.constraint_jacobian, &terms.constraint_bias)?;
     let jy = L::foot_jacobian(q, params) * ns.g;
-    let a = Cholesky::new(red.a_tilde).ok_or(ControlError::SingularPassive)?;
+    let a = Cholesky::new(&red.a_tilde).ok_or(ControlError::SingularPassive)?;
     let mut y = jy.transpose();
     a.solve_mut(&mut y); // Ã⁻¹ J_yᵀ
-    let lambda_inv = Cholesky::new(jy * y).ok_or(ControlError::SingularTask)?;
+    let lambda_inv = Cholesky::new(&(jy * y)).ok_or(ControlError::SingularTask)?;
     let lambda = lambda_inv.inverse();
     Ok((red.a_tilde.diagonal(), lambda.diagonal()))
 }

@@ -11,8 +11,9 @@
 
 use core::fmt;
 
-use nalgebra::{Cholesky, Const, SMatrix, SVector};
+use nalgebra::{SMatrix, SVector};
 
+use crate::linalg::{all_finite, mul, Cholesky};
 use crate::model::{DynamicsTerms, LegModel, Real};
 
 /// Why the constrained dynamics cannot be solved at a state.
@@ -72,24 +73,6 @@ fn to_f64<T: Real>(x: T) -> f64 {
     x.to_subset().unwrap_or(f64::NAN)
 }
 
-/// The reciprocal condition estimate of an SPD matrix from its Cholesky factor.
-pub(crate) fn cholesky_rcond<T: Real, const N: usize>(chol: &Cholesky<T, Const<N>>) -> T {
-    if N == 0 {
-        return T::one();
-    }
-    let l = chol.l_dirty();
-    let (mut lo, mut hi) = (l[(0, 0)].abs(), l[(0, 0)].abs());
-    for i in 1..N {
-        let d = l[(i, i)].abs();
-        lo = lo.min(d);
-        hi = hi.max(d);
-    }
-    if hi == T::zero() {
-        return T::zero();
-    }
-    (lo / hi) * (lo / hi)
-}
-
 /// The generalized forces of the motors: `B u`.
 pub fn actuation<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     u: &SVector<T, NU>,
@@ -113,40 +96,29 @@ pub fn solve_kkt<T: Real, const NQ: usize, const NC: usize>(
     tau: &SVector<T, NQ>,
     closure_rhs: &SVector<T, NC>,
 ) -> Result<Acceleration<T, NQ, NC>, DynamicsError> {
-    let all_finite = mass_matrix
-        .iter()
-        .chain(jacobian.iter())
-        .chain(tau.iter())
-        .chain(closure_rhs.iter());
-    if !all_finite.into_iter().all(|x| x.is_finite()) {
-        return Err(DynamicsError::NonFinite);
-    }
-    let chol_m = Cholesky::new(*mass_matrix).ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
-    if cholesky_rcond(&chol_m) < rcond_floor::<T>() {
+    // A NaN or infinity anywhere shows in M's pivots or in the result, checked below.
+    let chol_m = Cholesky::new(mass_matrix).ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
+    if chol_m.rcond < rcond_floor::<T>() {
         return Err(DynamicsError::MassMatrixNotPositiveDefinite);
     }
     let mut qdd = *tau;
     chol_m.solve_mut(&mut qdd); // a = M⁻¹ τ
-    if NC == 0 {
-        return Ok(Acceleration {
-            qdd,
-            forces: SVector::zeros(),
-        });
+    let mut forces = SVector::<T, NC>::zeros();
+    if NC > 0 {
+        let mut y = jacobian.transpose();
+        chol_m.solve_mut(&mut y); // Y = M⁻¹ Jᵀ
+        let s = mul(jacobian, &y);
+        forces = closure_rhs - mul(jacobian, &qdd);
+        let chol_s = Cholesky::new(&s).ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?;
+        if chol_s.rcond < rcond_floor::<T>() {
+            return Err(DynamicsError::SingularConstraints {
+                rcond: to_f64(chol_s.rcond),
+            });
+        }
+        chol_s.solve_mut(&mut forces);
+        qdd += mul(&y, &forces);
     }
-    let mut y = jacobian.transpose();
-    chol_m.solve_mut(&mut y); // Y = M⁻¹ Jᵀ
-    let s = jacobian * y;
-    let mut forces = closure_rhs - jacobian * qdd;
-    let chol_s = Cholesky::new(s).ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?;
-    let rcond = cholesky_rcond(&chol_s);
-    if rcond < rcond_floor::<T>() {
-        return Err(DynamicsError::SingularConstraints {
-            rcond: to_f64(rcond),
-        });
-    }
-    chol_s.solve_mut(&mut forces);
-    qdd += y * forces;
-    if !qdd.iter().chain(forces.iter()).all(|x| x.is_finite()) {
+    if !(all_finite(&qdd) && all_finite(&forces) && all_finite(tau) && all_finite(closure_rhs)) {
         return Err(DynamicsError::NonFinite);
     }
     Ok(Acceleration { qdd, forces })

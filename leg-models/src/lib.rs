@@ -22,6 +22,7 @@ pub mod assembly;
 pub mod control;
 pub mod dynamics;
 pub mod integrate;
+pub mod linalg;
 mod model;
 pub mod reference;
 #[cfg(feature = "std")]
