@@ -90,33 +90,6 @@ impl<T: Real, const N: usize> Cholesky<T, N> {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use nalgebra::Matrix3;
-
-    #[test]
-    fn factors_solves_and_refuses() {
-        let a = Matrix3::new(4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0);
-        let c = Cholesky::new(&a).unwrap();
-        let mut x = SMatrix::<f64, 3, 2>::new(1.0, 0.0, 2.0, 1.0, 3.0, -1.0);
-        let b = x;
-        c.solve_mut(&mut x);
-        assert!((a * x - b).amax() < 1e-14);
-        assert!((c.inverse() * a - Matrix3::identity()).amax() < 1e-14);
-        let reference = a.cholesky().unwrap().l();
-        assert!((c.l - reference).amax() < 1e-15);
-        assert!(
-            Cholesky::new(&Matrix3::new(1.0, 2.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 1.0)).is_none()
-        );
-        assert!(Cholesky::new(&Matrix3::from_element(f64::NAN)).is_none());
-        assert_eq!(
-            Cholesky::new(&SMatrix::<f64, 0, 0>::zeros()).unwrap().rcond,
-            1.0
-        );
-    }
-}
-
 /// `A B`, as plain loops over the fixed sizes (unrolled by the compiler).
 #[inline]
 pub fn mul<T: Real, const R: usize, const K: usize, const C: usize>(
@@ -162,4 +135,31 @@ pub fn all_finite<T: Real, const R: usize, const C: usize>(a: &SMatrix<T, R, C>)
         ok &= x.is_finite();
     }
     ok
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Matrix3;
+
+    #[test]
+    fn factors_solves_and_refuses() {
+        let a = Matrix3::new(4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0);
+        let c = Cholesky::new(&a).unwrap();
+        let mut x = SMatrix::<f64, 3, 2>::new(1.0, 0.0, 2.0, 1.0, 3.0, -1.0);
+        let b = x;
+        c.solve_mut(&mut x);
+        assert!((a * x - b).amax() < 1e-14);
+        assert!((c.inverse() * a - Matrix3::identity()).amax() < 1e-14);
+        let reference = a.cholesky().unwrap().l();
+        assert!((c.l - reference).amax() < 1e-15);
+        assert!(
+            Cholesky::new(&Matrix3::new(1.0, 2.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 1.0)).is_none()
+        );
+        assert!(Cholesky::new(&Matrix3::from_element(f64::NAN)).is_none());
+        assert_eq!(
+            Cholesky::new(&SMatrix::<f64, 0, 0>::zeros()).unwrap().rcond,
+            1.0
+        );
+    }
 }
