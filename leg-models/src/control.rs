@@ -19,7 +19,7 @@ use nalgebra::{SMatrix, SVector};
 use crate::assembly::{passive_solve, AssemblyError};
 use crate::dynamics::{rcond_floor, DynamicsError};
 use crate::integrate::{State, TorqueSource};
-use crate::linalg::Cholesky;
+use crate::linalg::{mul, mul_tn, Cholesky};
 use crate::model::{DynamicsTerms, LegModel, Real};
 use crate::reference::Reference;
 
@@ -107,7 +107,7 @@ impl<T: Real, const NQ: usize, const NC: usize> PassiveSystem<T, NQ, NC> {
         let chol_s = if NC == 0 {
             None
         } else {
-            let c = Cholesky::new(&(jp * y)).ok_or(ControlError::SingularPassive)?;
+            let c = Cholesky::new(&mul(&jp, &y)).ok_or(ControlError::SingularPassive)?;
             if c.rcond < rcond_floor::<T>() {
                 return Err(ControlError::SingularPassive);
             }
@@ -136,9 +136,9 @@ impl<T: Real, const NQ: usize, const NC: usize> PassiveSystem<T, NQ, NC> {
         let Some(chol_s) = &self.chol_s else {
             return (x, SVector::zeros());
         };
-        let mut f = r_c - self.jp * x;
+        let mut f = r_c - mul(&self.jp, &x);
         chol_s.solve_mut(&mut f);
-        (x + self.y * f, f)
+        (x + mul(&self.y, &f), f)
     }
 }
 
@@ -183,7 +183,7 @@ where
     let (m, j) = (&terms.mass_matrix, &terms.constraint_jacobian);
     let a22 = PassiveSystem::new(m, j, actuated_mask::<L, NQ, NC, NU>())?;
     // A12 z for z = (x, f): the actuated rows of M x − Jᵀ f.
-    let a12 = |(x, f): (SVector<T, NQ>, SVector<T, NC>)| m * x - j.transpose() * f;
+    let a12 = |(x, f): (SVector<T, NQ>, SVector<T, NC>)| mul(m, &x) - mul_tn(j, &f);
     let mut a_tilde = SMatrix::<T, NU, NU>::zeros();
     for (k, &ak) in L::ACTUATED.iter().enumerate() {
         // A21's column for θ_k: the passive rows of M's column and J's column.

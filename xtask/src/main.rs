@@ -24,6 +24,9 @@ commands:
   export MODEL --format mjcf|urdf [--out FILE]
                              the leg for MuJoCo (closures as <connect>) or URDF (spanning
                              tree, closure frames NAME_a / NAME_b)
+  bench [--pinocchio]        criterion benchmarks beside CasADi's C (and Pinocchio), one table
+  bench --instructions       instructions per call of the hot paths (callgrind) vs budgets
+  bench --update-budgets     rewrite tests/instruction-budgets.json with today's counts
   list                       the geometries, their sizes and actuated joints
   new NAME                   write leg-models/specs/NAME.toml, a commented spec to start from
   test                       every check CI runs: formatting, `gen --check`, the workspace
@@ -50,6 +53,7 @@ fn main() -> ExitCode {
         },
         Some("new") => new(&root, &args[1..]),
         Some("export") => run_export(&root, &args[1..]),
+        Some("bench") => run_bench(&root, &args[1..]),
         Some(cmd @ ("sim" | "eval")) => return delegate(&root, cmd, &args[1..]),
         Some("-h" | "--help" | "help") => {
             print!("{USAGE}");
@@ -92,6 +96,26 @@ fn run_gen(root: &Path, args: &[String]) -> Result<(), cli::Error> {
     }
     println!("{}", gen::run(root, &opts).map_err(cli::Error::Failed)?);
     Ok(())
+}
+
+fn run_bench(root: &Path, args: &[String]) -> Result<(), cli::Error> {
+    let flags = cli::Flags::parse(
+        args,
+        &[],
+        &["--pinocchio", "--instructions", "--update-budgets"],
+    )?;
+    if let Some(extra) = flags.positionals.first() {
+        return Err(cli::Error::usage(format!(
+            "`bench` takes no model, got `{extra}`"
+        )));
+    }
+    if flags.switch("--instructions") || flags.switch("--update-budgets") {
+        let report = xtask::bench::check_budgets(root, flags.switch("--update-budgets"))
+            .map_err(cli::Error::Failed)?;
+        println!("{report}");
+        return Ok(());
+    }
+    xtask::bench::run(root, flags.switch("--pinocchio")).map_err(cli::Error::Failed)
 }
 
 fn load_model(root: &Path, name: &str) -> Result<model::Model, cli::Error> {

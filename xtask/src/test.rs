@@ -116,6 +116,8 @@ pub fn run(root: &Path) -> Result<(), String> {
         ));
     }
     mujoco_cross_check(root)?;
+    eprintln!("==> instruction budgets ({})", xtask::bench::BUDGETS);
+    eprintln!("{}", xtask::bench::check_budgets(root, false)?);
     cargo(
         root,
         &[
