@@ -10,8 +10,9 @@
 //! `prettyplease`.
 
 pub mod ir;
+pub mod optimize;
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::fmt;
 
 use ir::{BinaryOp, Input, InputShape, Instr, OutputKind, Program, UnaryOp};
@@ -217,6 +218,7 @@ fn output_type(kind: OutputKind, rows: usize, cols: usize) -> TokenStream {
 /// documentation. Values no output needs are not emitted.
 pub fn emit_function(prog: &Program, doc: &str) -> Result<TokenStream, Error> {
     prog.validate()?;
+    let prog = &optimize::optimize(prog);
     let n = prog.instructions.len();
 
     // Liveness: only values some output depends on are emitted.
@@ -298,9 +300,37 @@ pub fn emit_function(prog: &Program, doc: &str) -> Result<TokenStream, Error> {
         }
     }
 
+    // `sin` and `cos` of one value become one `sin_cos` (one argument reduction), emitted
+    // where the first of the two was.
+    let mut sin_of = HashMap::new();
+    let mut cos_of = HashMap::new();
+    for (k, instr) in prog.instructions.iter().enumerate() {
+        match *instr {
+            Instr::Unary(UnaryOp::Sin, a) if live[k] => {
+                sin_of.insert(a, k);
+            }
+            Instr::Unary(UnaryOp::Cos, a) if live[k] => {
+                cos_of.insert(a, k);
+            }
+            _ => {}
+        }
+    }
     for (k, instr) in prog.instructions.iter().enumerate() {
         if !live[k] {
             continue;
+        }
+        if let Instr::Unary(op @ (UnaryOp::Sin | UnaryOp::Cos), a) = *instr {
+            if let (Some(&s), Some(&c)) = (sin_of.get(&a), cos_of.get(&a)) {
+                if k == s.min(c) {
+                    let (Value::Local(vs), Value::Local(vc)) = (&values[s], &values[c]) else {
+                        unreachable!("computed values are locals")
+                    };
+                    let arg = values[a].tokens();
+                    body.push(quote!(let (#vs, #vc) = #arg.sin_cos();));
+                }
+                let _ = op;
+                continue;
+            }
         }
         let rhs = match *instr {
             Instr::Input { .. } | Instr::Const(_) => continue,

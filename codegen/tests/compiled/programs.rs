@@ -10,8 +10,7 @@ pub fn unary<T: Real>(x: &SVector<T, 1>) -> SVector<T, 17> {
     let v2 = x_0 + x_0;
     let v3 = T::lit(1.0) / x_0;
     let v4 = x_0.sqrt();
-    let v5 = x_0.sin();
-    let v6 = x_0.cos();
+    let (v5, v6) = x_0.sin_cos();
     let v7 = x_0.tan();
     let v8 = x_0.asin();
     let v9 = x_0.acos();
@@ -68,7 +67,7 @@ pub fn struct_input<T: Real>(
 ) -> T {
     let [_, q_1, _] = q.data.0[0];
     let v0 = p.mass * p.length;
-    let v1 = v0 * q_1;
+    let v1 = q_1 * v0;
     v1
 }
 /// Fixture.
