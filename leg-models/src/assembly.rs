@@ -12,7 +12,7 @@ use core::fmt;
 use nalgebra::{SMatrix, SVector};
 
 use crate::dynamics::rcond_floor;
-use crate::linalg::Cholesky;
+use crate::linalg::{mul, Cholesky};
 use crate::model::{LegModel, Real};
 
 /// Why a leg cannot be assembled as asked.
@@ -254,13 +254,14 @@ where
     for &a in L::ACTUATED.iter() {
         jp.column_mut(a).fill(T::zero());
     }
-    let chol = Cholesky::new(&(jp * jp.transpose())).ok_or(AssemblyError::Singular)?;
+    let jpt = jp.transpose();
+    let chol = Cholesky::new(&mul(&jp, &jpt)).ok_or(AssemblyError::Singular)?;
     if chol.rcond < rcond_floor::<T>() {
         return Err(AssemblyError::Singular);
     }
     let mut w = *rhs;
     chol.solve_mut(&mut w);
-    Ok(jp.transpose() * w)
+    Ok(mul(&jpt, &w))
 }
 
 /// The assembled configuration that puts the foot at `foot` (base frame), from `guess`

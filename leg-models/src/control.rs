@@ -240,12 +240,24 @@ where
     T: Real,
 {
     let ns = null_space::<L, T, NQ, NC, NU>(&terms.constraint_jacobian, &terms.constraint_bias)?;
-    let m = &terms.mass_matrix;
-    let b = passive_forces::<L, T, NQ, NC, NU>(params, terms, qd);
-    Ok(ActuatedDynamics {
-        a_tilde: ns.g.transpose() * m * ns.g,
-        b_tilde: ns.g.transpose() * (b - m * ns.c),
-    })
+    Ok(reduce_with(
+        &ns,
+        terms,
+        &passive_forces::<L, T, NQ, NC, NU>(params, terms, qd),
+    ))
+}
+
+/// `Ã = Gᵀ M G`, `b̃ = Gᵀ (b − M c)` from a null space already computed.
+fn reduce_with<T: Real, const NQ: usize, const NC: usize, const NU: usize>(
+    ns: &NullSpace<T, NQ, NU>,
+    terms: &DynamicsTerms<T, NQ, NC>,
+    b: &SVector<T, NQ>,
+) -> ActuatedDynamics<T, NU> {
+    let mg = mul(&terms.mass_matrix, &ns.g);
+    ActuatedDynamics {
+        a_tilde: mul_tn(&ns.g, &mg),
+        b_tilde: mul_tn(&ns.g, &(b - mul(&terms.mass_matrix, &ns.c))),
+    }
 }
 
 /// Proportional and derivative gains per coordinate.
@@ -333,14 +345,16 @@ where
     fn torque(&mut self, t: T, state: &State<T, NQ>) -> Result<SVector<T, NU>, ControlError> {
         check_finite(state)?;
         let terms = L::dynamics_terms(&state.q, &state.qd, &self.params);
-        let red = actuated_reduction::<L, T, NQ, NC, NU>(&self.params, &terms, &state.qd)?;
+        // The null-space form: equal to the Schur complement (tested), and cheaper.
+        let red =
+            actuated_reduction_null_space::<L, T, NQ, NC, NU>(&self.params, &terms, &state.qd)?;
         let (theta, theta_dot) = motor_state::<L, T, NQ, NC, NU>(state);
         let r = self.reference.sample(t);
         let v = r.acceleration
             + self
                 .gains
                 .feedback(&(r.position - theta), &(r.velocity - theta_dot));
-        Ok(red.a_tilde * v - red.b_tilde)
+        Ok(mul(&red.a_tilde, &v) - red.b_tilde)
     }
 }
 

@@ -5,14 +5,18 @@ use nalgebra::SMatrix;
 
 use crate::model::Real;
 
-/// `A = L Lᵀ` of a symmetric positive definite `A` (only its lower triangle is read).
+/// The factorization `A = L D Lᵀ` (`L` unit lower triangular, `D` diagonal and positive)
+/// of a symmetric positive definite `A`: the Cholesky factorization without its square
+/// roots, which would lengthen the chain of dependent operations. Only the lower
+/// triangle of `A` is read.
 #[derive(Clone, Copy, Debug)]
 pub struct Cholesky<T: Real, const N: usize> {
+    /// Strictly lower part of `L`.
     l: SMatrix<T, N, N>,
-    /// `1 / Lᵢᵢ`: the solves multiply instead of dividing (a division costs as much as a
-    /// dozen multiplications and they chain).
+    /// `1 / Dᵢᵢ`: the solves multiply instead of dividing.
     inv_diag: nalgebra::SVector<T, N>,
-    /// Reciprocal condition estimate: `(min Lᵢᵢ / max Lᵢᵢ)²`.
+    /// Reciprocal condition estimate: `min Dᵢᵢ / max Dᵢᵢ` (the squared pivot ratio of
+    /// the Cholesky factor).
     pub rcond: T,
 }
 
@@ -21,40 +25,36 @@ impl<T: Real, const N: usize> Cholesky<T, N> {
     #[inline]
     pub fn new(a: &SMatrix<T, N, N>) -> Option<Self> {
         let mut l = SMatrix::<T, N, N>::zeros();
+        let mut d = nalgebra::SVector::<T, N>::zeros();
         let mut inv_diag = nalgebra::SVector::<T, N>::zeros();
         let (mut lo, mut hi) = (T::zero(), T::zero());
         for j in 0..N {
-            let mut d = a[(j, j)];
+            let mut dj = a[(j, j)];
             for k in 0..j {
-                d -= l[(j, k)] * l[(j, k)];
+                dj -= l[(j, k)] * l[(j, k)] * d[k];
             }
             // A NaN pivot compares as nothing, so it is refused too.
-            if d.partial_cmp(&T::zero()) != Some(core::cmp::Ordering::Greater) || !d.is_finite() {
+            if dj.partial_cmp(&T::zero()) != Some(core::cmp::Ordering::Greater) || !dj.is_finite() {
                 return None;
             }
-            let ljj = d.sqrt();
-            l[(j, j)] = ljj;
+            d[j] = dj;
             if j == 0 {
-                (lo, hi) = (ljj, ljj);
+                (lo, hi) = (dj, dj);
             } else {
-                lo = lo.min(ljj);
-                hi = hi.max(ljj);
+                lo = lo.min(dj);
+                hi = hi.max(dj);
             }
-            let inv = T::one() / ljj;
+            let inv = T::one() / dj;
             inv_diag[j] = inv;
             for i in j + 1..N {
                 let mut s = a[(i, j)];
                 for k in 0..j {
-                    s -= l[(i, k)] * l[(j, k)];
+                    s -= l[(i, k)] * l[(j, k)] * d[k];
                 }
                 l[(i, j)] = s * inv;
             }
         }
-        let rcond = if N == 0 {
-            T::one()
-        } else {
-            (lo / hi) * (lo / hi)
-        };
+        let rcond = if N == 0 { T::one() } else { lo / hi };
         Some(Cholesky { l, inv_diag, rcond })
     }
 
@@ -63,21 +63,24 @@ impl<T: Real, const N: usize> Cholesky<T, N> {
     pub fn solve_mut<const C: usize>(&self, b: &mut SMatrix<T, N, C>) {
         let l = &self.l;
         for c in 0..C {
-            // L y = b
+            // L y = b, then D z = y
             for i in 0..N {
                 let mut s = b[(i, c)];
                 for k in 0..i {
                     s -= l[(i, k)] * b[(k, c)];
                 }
-                b[(i, c)] = s * self.inv_diag[i];
+                b[(i, c)] = s;
             }
-            // Lᵀ x = y
+            for i in 0..N {
+                b[(i, c)] *= self.inv_diag[i];
+            }
+            // Lᵀ x = z
             for i in (0..N).rev() {
                 let mut s = b[(i, c)];
                 for k in i + 1..N {
                     s -= l[(k, i)] * b[(k, c)];
                 }
-                b[(i, c)] = s * self.inv_diag[i];
+                b[(i, c)] = s;
             }
         }
     }
@@ -151,8 +154,17 @@ mod tests {
         c.solve_mut(&mut x);
         assert!((a * x - b).amax() < 1e-14);
         assert!((c.inverse() * a - Matrix3::identity()).amax() < 1e-14);
+        // L D Lᵀ against nalgebra's Cholesky factor: L_chol = L √D.
         let reference = a.cholesky().unwrap().l();
-        assert!((c.l - reference).amax() < 1e-15);
+        for i in 0..3 {
+            let d = 1.0 / c.inv_diag[i];
+            assert!((reference[(i, i)] - d.sqrt()).abs() < 1e-15);
+            for j in 0..i {
+                assert!(
+                    (reference[(i, j)] - c.l[(i, j)] * (1.0 / c.inv_diag[j]).sqrt()).abs() < 1e-15
+                );
+            }
+        }
         assert!(
             Cholesky::new(&Matrix3::new(1.0, 2.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 1.0)).is_none()
         );
