@@ -3,7 +3,8 @@
 //! is the cost of one call (`cargo xtask bench --instructions`, and the budgets
 //! `cargo xtask test` checks).
 //!
-//! `count_calls MODEL fused|forward_dynamics CALLS`
+//! `count_calls MODEL fused|forward_dynamics|casadi_fused|casadi_forward_dynamics CALLS`
+//! (the CasADi paths with the `peers` feature).
 
 use std::hint::black_box;
 
@@ -39,6 +40,32 @@ fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usiz
                 None,
             ))
             .map_or(0.0, |a| a.qdd[0]),
+            #[cfg(feature = "peers")]
+            "casadi_fused" | "casadi_forward_dynamics" => {
+                use leg_models::Parameters;
+                let pv: Vec<f64> = (0..<L::Params<f64> as Parameters<f64>>::NAMES.len())
+                    .map(|i| p.get(i).unwrap())
+                    .collect();
+                let (terms, fd) = leg_tests::casadi::functions(L::NAME);
+                let mut out = vec![0.0; NQ * NQ + NQ + NC * NQ + NC];
+                let (a, rest) = out.split_at_mut(NQ * NQ);
+                let (b, rest) = rest.split_at_mut(NQ);
+                let (c, d) = rest.split_at_mut(NC * NQ);
+                if what == "casadi_fused" {
+                    leg_tests::casadi::call(
+                        terms,
+                        &[black_box(q.as_slice()), qd.as_slice(), &pv],
+                        &mut [a, b, c, d],
+                    );
+                } else {
+                    leg_tests::casadi::call(
+                        fd,
+                        &[black_box(q.as_slice()), qd.as_slice(), u.as_slice(), &pv],
+                        &mut [&mut a[..NQ], &mut c[..NC]],
+                    );
+                }
+                black_box(&out)[0]
+            }
             _ => return None,
         };
     }

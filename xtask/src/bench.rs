@@ -87,6 +87,53 @@ pub fn instruction_counts(root: &Path) -> Result<BTreeMap<String, BTreeMap<Strin
     Ok(out)
 }
 
+/// Instructions per call of ours and of CasADi's C, side by side (not budgeted: the
+/// peer's count only puts ours in perspective).
+pub fn compare_instructions(root: &Path) -> Result<String, String> {
+    cargo(
+        root,
+        &[
+            "build",
+            "--quiet",
+            "--release",
+            "-p",
+            "leg-tests",
+            "--features",
+            "peers",
+            "--example",
+            "count_calls",
+        ],
+    )?;
+    let bin = target_dir(root)
+        .join("release")
+        .join("examples")
+        .join("count_calls");
+    let per_call = |model: &str, path: &str| -> Result<u64, String> {
+        Ok(
+            collected(&bin, model, path, CALLS)?.saturating_sub(collected(&bin, model, path, 0)?)
+                / CALLS,
+        )
+    };
+    let mut lines = vec![
+        "| model | fused ours | fused CasADi C | ratio | FD ours | FD CasADi C | ratio |"
+            .to_string(),
+        "|---|---|---|---|---|---|---|".to_string(),
+    ];
+    for m in crate::cli::model_names(root)? {
+        let (fo, fc) = (per_call(&m, "fused")?, per_call(&m, "casadi_fused")?);
+        let (do_, dc) = (
+            per_call(&m, "forward_dynamics")?,
+            per_call(&m, "casadi_forward_dynamics")?,
+        );
+        lines.push(format!(
+            "| {m} | {fo} | {fc} | {:.2} | {do_} | {dc} | {:.2} |",
+            fo as f64 / fc as f64,
+            do_ as f64 / dc as f64
+        ));
+    }
+    Ok(lines.join("\n"))
+}
+
 /// Compares the counts with the committed budgets; `update` rewrites the budgets file.
 pub fn check_budgets(root: &Path, update: bool) -> Result<String, String> {
     let counts = instruction_counts(root)?;

@@ -113,6 +113,10 @@ fn run_bench(root: &Path, args: &[String]) -> Result<(), cli::Error> {
         let report = xtask::bench::check_budgets(root, flags.switch("--update-budgets"))
             .map_err(cli::Error::Failed)?;
         println!("{report}");
+        if flags.switch("--instructions") {
+            let table = xtask::bench::compare_instructions(root).map_err(cli::Error::Failed)?;
+            println!("\n{table}");
+        }
         return Ok(());
     }
     xtask::bench::run(root, flags.switch("--pinocchio")).map_err(cli::Error::Failed)
