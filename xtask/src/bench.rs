@@ -3,10 +3,12 @@
 //! instruction counts (callgrind) of the hot paths, checked against committed budgets.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use serde_json::Value;
+
+use crate::cli::target_dir;
 
 /// The committed instruction budgets: per model, per hot path, instructions per call.
 pub const BUDGETS: &str = "tests/instruction-budgets.json";
@@ -16,23 +18,8 @@ pub const TOLERANCE: f64 = 0.02;
 const PATHS: [&str; 2] = ["fused", "forward_dynamics"];
 const CALLS: u64 = 10_000;
 
-fn target_dir(root: &Path) -> PathBuf {
-    std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root.join("target"), PathBuf::from)
-}
-
 fn cargo(root: &Path, args: &[&str]) -> Result<(), String> {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    eprintln!("==> cargo {}", args.join(" "));
-    let status = Command::new(cargo)
-        .args(args)
-        .current_dir(root)
-        .status()
-        .map_err(|e| format!("cannot run cargo: {e}"))?;
-    if status.success() {
-        Ok(())
-    } else {
-        Err(format!("`cargo {}` failed ({status})", args.join(" ")))
-    }
+    crate::cli::cargo(root, args, &[])
 }
 
 /// Instructions of `calls` calls of `path` of `model`, whole program.

@@ -104,8 +104,7 @@ pub fn run(root: &Path) -> Result<BTreeMap<String, f64>, String> {
         "python",
     )?;
     let prefix = PathBuf::from(prefix.trim());
-    let target =
-        std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root.join("target"), PathBuf::from);
+    let target = crate::cli::target_dir(root);
     let dir = target.join("pinocchio");
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let bin = dir.join("pinocchio_bench");

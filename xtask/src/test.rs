@@ -1,26 +1,10 @@
 //! `cargo xtask test`: every check CI runs, in the order that fails fastest.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
+use xtask::cli::{cargo, target_dir};
 use xtask::gen::{self, GenOptions};
-
-fn cargo(root: &Path, args: &[&str], env: &[(&str, &str)]) -> Result<(), String> {
-    let shown = format!("cargo {}", args.join(" "));
-    eprintln!("==> {shown}");
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let status = Command::new(cargo)
-        .args(args)
-        .envs(env.iter().copied())
-        .current_dir(root)
-        .status()
-        .map_err(|e| format!("cannot run `{shown}`: {e}"))?;
-    if status.success() {
-        Ok(())
-    } else {
-        Err(format!("`{shown}` failed ({status})"))
-    }
-}
 
 /// Snapshots insta wrote but nobody reviewed.
 fn pending_snapshots(root: &Path) -> Vec<String> {
@@ -62,8 +46,7 @@ fn mujoco_cross_check(root: &Path) -> Result<(), String> {
         ],
         &[],
     )?;
-    let target =
-        std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root.join("target"), PathBuf::from);
+    let target = target_dir(root);
     let legs = target.join("debug").join("legs");
     let py = gen::python(root)?;
     let dir = target.join("mujoco");
