@@ -319,7 +319,7 @@ pub fn emit_function(prog: &Program, doc: &str) -> Result<TokenStream, Error> {
         if !live[k] {
             continue;
         }
-        if let Instr::Unary(op @ (UnaryOp::Sin | UnaryOp::Cos), a) = *instr {
+        if let Instr::Unary(UnaryOp::Sin | UnaryOp::Cos, a) = *instr {
             if let (Some(&s), Some(&c)) = (sin_of.get(&a), cos_of.get(&a)) {
                 if k == s.min(c) {
                     let (Value::Local(vs), Value::Local(vc)) = (&values[s], &values[c]) else {
@@ -328,7 +328,6 @@ pub fn emit_function(prog: &Program, doc: &str) -> Result<TokenStream, Error> {
                     let arg = values[a].tokens();
                     body.push(quote!(let (#vs, #vc) = #arg.sin_cos();));
                 }
-                let _ = op;
                 continue;
             }
         }

@@ -77,6 +77,27 @@ where
     L::ACTUATED.contains(&j)
 }
 
+/// Backtracking along `−step` from `q0`: the first of `q0 − step`, `q0 − step/2`, … (40
+/// halvings at most) whose residual `r` has a smaller `cost` than `cost0`.
+fn backtrack<T: Real, const NQ: usize, R>(
+    q0: &SVector<T, NQ>,
+    step: &SVector<T, NQ>,
+    cost0: T,
+    residual: impl Fn(&SVector<T, NQ>) -> R,
+    cost: impl Fn(&R) -> T,
+) -> Option<(SVector<T, NQ>, R)> {
+    let mut alpha = T::one();
+    for _ in 0..40 {
+        let trial = q0 - step * alpha;
+        let r = residual(&trial);
+        if cost(&r) < cost0 {
+            return Some((trial, r));
+        }
+        alpha *= T::lit(0.5);
+    }
+    None
+}
+
 /// Minimal-norm damped Gauss–Newton on `φ(q) = 0`, moving only the joints in `free`.
 fn solve_closure<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     params: &L::Params<T>,
@@ -111,22 +132,10 @@ where
         let mut w = phi;
         chol.solve_mut(&mut w);
         let step = j.transpose() * w;
-        let (q0, cost) = (*q, phi.norm_squared());
-        let mut alpha = T::one();
-        let mut accepted = false;
-        for _ in 0..40 {
-            let trial = q0 - step * alpha;
-            let trial_phi = L::closure_residual(&trial, params);
-            if trial_phi.norm_squared() < cost {
-                *q = trial;
-                phi = trial_phi;
-                accepted = true;
-                break;
-            }
-            alpha *= T::lit(0.5);
-        }
-        if !accepted {
-            break;
+        let residual = |x: &SVector<T, NQ>| L::closure_residual(x, params);
+        match backtrack(q, &step, phi.norm_squared(), residual, |r| r.norm_squared()) {
+            Some((next, r)) => (*q, phi) = (next, r),
+            None => break,
         }
     }
     let err = phi.amax();
@@ -302,22 +311,9 @@ where
         })?;
         let mut step = j.transpose() * r.0 + jf.transpose() * r.1;
         chol.solve_mut(&mut step);
-        let (q0, c0) = (q, cost(&r));
-        let mut alpha = T::one();
-        let mut accepted = false;
-        for _ in 0..40 {
-            let trial = q0 - step * alpha;
-            let rt = residuals(&trial);
-            if cost(&rt) < c0 {
-                q = trial;
-                r = rt;
-                accepted = true;
-                break;
-            }
-            alpha *= T::lit(0.5);
-        }
-        if !accepted {
-            break;
+        match backtrack(&q, &step, cost(&r), residuals, cost) {
+            Some((next, rn)) => (q, r) = (next, rn),
+            None => break,
         }
     }
     if worst(&r) <= tol.residual {
