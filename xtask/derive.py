@@ -183,10 +183,78 @@ def derive(model):
         ),
     }
     peer = {"q": q, "qd": qd, "p": params, "M": M_lagrange, "N": N_lagrange, "D": D, "J": J, "Jdot_qd": Jdot_qd}
-    return inputs, terms, peer
+    points = cs.horzcat(cs.horzcat(*joint), tips, closure_points, foot)
+    numeric = cs.Function("home_check", [q, params], [phi, J, points])
+    return inputs, terms, peer, numeric
 
 
-def casadi_c(model, peer):
+# Relative accuracy of an assembled pose (times the leg's size): as the runtime's default.
+ASSEMBLY_TOLERANCE = 1000 * 2.220446049250313e-16
+# How far from assembled a spec's home pose may be: it is a guess, written with a few digits.
+HOME_TOLERANCE = 1e-2
+
+
+def home_check(model, numeric):
+    """The spec's home pose, assembled with every joint free (minimal-norm Gauss-Newton with the
+    spec's parameters), and the structure there: the rank of J, which closure rows repeat the
+    others (a parallelogram closed twice), and the mobility NQ - rank J. Rust turns a home that
+    does not assemble into a located spec error."""
+    import numpy as np
+
+    p = [prm["default"] for prm in model["params"]]
+    home = np.array(model["home"], dtype=float)
+    n = len(home)
+
+    def evaluate(q):
+        phi, J, points = numeric(q, p)
+        return np.array(phi).reshape(-1), np.array(J).reshape(-1, n), np.array(points)
+
+    phi, J, points = evaluate(home)
+    scale = max(float(np.abs(points).max()), 1e-300)
+    raw = float(np.abs(phi).max()) if phi.size else 0.0
+    q = home.copy()
+    for _ in range(100):
+        if phi.size == 0 or np.abs(phi).max() <= ASSEMBLY_TOLERANCE * scale:
+            break
+        step = np.linalg.lstsq(J, -phi, rcond=None)[0]
+        alpha, cost = 1.0, float(phi @ phi)
+        while alpha > 1e-12:
+            trial = q + alpha * step
+            phi_t, _, _ = evaluate(trial)
+            if float(phi_t @ phi_t) < cost:
+                break
+            alpha *= 0.5
+        else:
+            break
+        q = trial
+        phi, J, points = evaluate(q)
+    residual = float(np.abs(phi).max()) if phi.size else 0.0
+    redundant = []
+    rank = 0
+    if phi.size:
+        sv = np.linalg.svd(J, compute_uv=False)
+        cut = 1e-8 * max(float(sv[0]), 1e-300)
+        kept = []
+        for r in range(J.shape[0]):
+            trial = J[kept + [r], :]
+            if np.linalg.matrix_rank(trial, tol=cut) > len(kept):
+                kept.append(r)
+            else:
+                redundant.append(r)
+        rank = len(kept)
+    return {
+        "scale": scale,
+        "raw_residual": raw,
+        "residual": residual,
+        "assembled": [float(x) for x in q],
+        "moved": float(np.abs(q - home).max()),
+        "rank": rank,
+        "redundant_rows": redundant,
+        "mobility": n - rank,
+    }
+
+
+def casadi_c(model, peer, redundant_rows):
     """CasADi's own C code generation of the same derivation, the benchmarks' peer: the
     fused terms (M, N, J, J̇q̇) and forward dynamics (the KKT system solved by CasADi's
     `solve`), named `<model>_dynamics_terms` and `<model>_forward_dynamics`."""
@@ -194,6 +262,10 @@ def casadi_c(model, peer):
     q, qd, p = peer["q"], peer["qd"], peer["p"]
     M, N, D, J, Jdot_qd = peer["M"], peer["N"], peer["D"], peer["J"], peer["Jdot_qd"]
     n, nu, nc = q.size1(), len(model["actuated"]), J.size1()
+    # Closure rows that repeat the others carry no force (the runtime's convention): CasADi
+    # solves the KKT system of the independent rows.
+    keep = [r for r in range(nc) if r not in redundant_rows]
+    J, Jdot_qd, nc = J[keep, :], Jdot_qd[keep], len(keep)
     u = cs.SX.sym("u", nu)
     B = cs.SX(n, nu)
     for k, a in enumerate(model["actuated"]):
@@ -206,7 +278,10 @@ def casadi_c(model, peer):
     else:
         A, b = M, cs.mtimes(B, u) - N - D
     x = cs.solve(A, b)
-    fd = cs.Function(f"{name}_forward_dynamics", [q, qd, u, p], dense([x[:n], x[n:] if nc else cs.SX(0, 1)]))
+    forces = cs.SX(J.size1() + len(redundant_rows), 1)
+    for k, r in enumerate(keep):
+        forces[r] = x[n + k]
+    fd = cs.Function(f"{name}_forward_dynamics", [q, qd, u, p], dense([x[:n], forces if forces.size1() else cs.SX(0, 1)]))
     cg = cs.CodeGenerator(f"{name}_casadi", {"with_header": False})
     cg.add(fused)
     cg.add(fd)
@@ -261,7 +336,8 @@ def export(name, f, input_names):
 
 def main():
     model = json.load(sys.stdin)
-    inputs, terms, peer = derive(model)
+    inputs, terms, peer, numeric = derive(model)
+    home = home_check(model, numeric)
     functions = []
     for name, (input_names, outs) in terms.items():
         exprs = [cs.densify(e) for _, _, e in outs]
@@ -284,7 +360,8 @@ def main():
             "casadi_version": cs.__version__,
             "spec_sha256": hashlib.sha256(model["spec_text"].encode("utf-8")).hexdigest(),
             "functions": functions,
-            "casadi_c": casadi_c(model, peer),
+            "casadi_c": casadi_c(model, peer, home["redundant_rows"]),
+            "home_check": home,
         },
         sys.stdout,
     )

@@ -5,12 +5,22 @@
 #![cfg_attr(rustfmt, rustfmt::skip)]
 pub mod atrias;
 pub use atrias::Atrias;
+pub mod braced_parallelogram;
+pub use braced_parallelogram::BracedParallelogram;
 pub mod digit;
 pub use digit::Digit;
 pub mod five_bar_offset;
 pub use five_bar_offset::FiveBarOffset;
+pub mod klann_linkage;
+pub use klann_linkage::KlannLinkage;
 pub mod minitaur;
 pub use minitaur::Minitaur;
+pub mod offset_five_bar;
+pub use offset_five_bar::OffsetFiveBar;
+pub mod open_three_link;
+pub use open_three_link::OpenThreeLink;
+pub mod three_motor_leg;
+pub use three_motor_leg::ThreeMotorLeg;
 pub mod two_link;
 pub use two_link::TwoLink;
 /// Calls `$callback!(module, Type, NQ, NC, NU)` once for every generated model, so
@@ -18,10 +28,15 @@ pub use two_link::TwoLink;
 #[macro_export]
 macro_rules! for_each_model {
     ($callback:ident) => {
-        $callback ! (atrias, $crate::atrias::Atrias, 4, 2, 2); $callback ! (digit,
-        $crate::digit::Digit, 4, 2, 2); $callback ! (five_bar_offset,
-        $crate::five_bar_offset::FiveBarOffset, 4, 2, 2); $callback ! (minitaur,
-        $crate::minitaur::Minitaur, 4, 2, 2); $callback ! (two_link,
+        $callback ! (atrias, $crate::atrias::Atrias, 4, 2, 2); $callback !
+        (braced_parallelogram, $crate::braced_parallelogram::BracedParallelogram, 5, 4,
+        2); $callback ! (digit, $crate::digit::Digit, 4, 2, 2); $callback !
+        (five_bar_offset, $crate::five_bar_offset::FiveBarOffset, 4, 2, 2); $callback !
+        (klann_linkage, $crate::klann_linkage::KlannLinkage, 7, 6, 1); $callback !
+        (minitaur, $crate::minitaur::Minitaur, 4, 2, 2); $callback ! (offset_five_bar,
+        $crate::offset_five_bar::OffsetFiveBar, 4, 2, 2); $callback ! (open_three_link,
+        $crate::open_three_link::OpenThreeLink, 3, 0, 2); $callback ! (three_motor_leg,
+        $crate::three_motor_leg::ThreeMotorLeg, 7, 4, 3); $callback ! (two_link,
         $crate::two_link::TwoLink, 2, 0, 2);
     };
 }

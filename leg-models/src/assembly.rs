@@ -5,7 +5,14 @@
 //! which keeps quadratic convergence at a regular solution) with a backtracking line
 //! search, on the generated `φ`, `J`, foot position and foot Jacobian. Where there are
 //! more free joints than equations, each step is the minimal-norm one, so the solution
-//! stays on the branch (assembly mode) of the starting guess.
+//! stays on the branch (assembly mode) of the starting guess. A guess far from the answer
+//! may still land on another branch: [`assemble_along`] follows one branch continuously
+//! from an assembled pose and reports where it ends.
+//!
+//! Tolerances are relative to the leg's size ([`leg_size`]), so a 1 m leg and a 10 cm
+//! leg are assembled to the same number of significant digits. Closure rows that repeat
+//! the others ([`LegModel::REDUNDANT_ROWS`]) are left out of every step, and met because
+//! the rows they repeat are.
 
 use core::fmt;
 
@@ -14,6 +21,7 @@ use nalgebra::{SMatrix, SVector};
 use crate::dynamics::rcond_floor;
 use crate::linalg::{mul, Cholesky};
 use crate::model::{LegModel, Real};
+use crate::structure::factor_closure_rows;
 
 /// Why a leg cannot be assembled as asked.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -25,6 +33,10 @@ pub enum AssemblyError {
     /// The passive joints lose rank here (e.g. a five-bar's lower links are collinear),
     /// so the velocities of the passive joints are not determined by the motors'.
     Singular,
+    /// Following the branch of the starting pose ([`assemble_along`]), the branch ends
+    /// (a singular configuration, or the edge of the workspace) after this fraction of
+    /// the way, or the solution would jump to another branch there.
+    BranchEnds { fraction: f64 },
     /// An input is NaN or infinite.
     NonFinite,
 }
@@ -41,6 +53,11 @@ impl fmt::Display for AssemblyError {
             AssemblyError::Singular => {
                 write!(f, "singular configuration: the passive joints lose rank")
             }
+            AssemblyError::BranchEnds { fraction } => write!(
+                f,
+                "the assembly branch of the starting pose ends {:.1} % of the way (a singular configuration or the edge of the workspace)",
+                fraction * 100.0
+            ),
             AssemblyError::NonFinite => write!(f, "non-finite input"),
         }
     }
@@ -52,18 +69,35 @@ impl std::error::Error for AssemblyError {}
 /// When the solvers stop.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Tolerance<T> {
-    /// Largest residual accepted (m): about 2e-14 m for `f64`, 1e-5 m for `f32`.
-    pub residual: T,
+    /// Largest residual accepted, relative to the leg's size ([`leg_size`]): by default
+    /// `1000 ε` (2.2e-13 for `f64`, 1.2e-4 for `f32`), so about 1e-13 m on a 0.5 m leg.
+    pub relative_residual: T,
     pub max_iterations: usize,
 }
 
 impl<T: Real> Default for Tolerance<T> {
     fn default() -> Self {
         Tolerance {
-            residual: T::default_epsilon() * T::lit(100.0),
+            relative_residual: T::default_epsilon() * T::lit(1000.0),
             max_iterations: 50,
         }
     }
+}
+
+/// The leg's size at `q` (m): the largest coordinate of any joint or link tip in the base
+/// frame. The closure residual is a difference of such coordinates, so its rounding
+/// error scales with it.
+pub fn leg_size<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+) -> T
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    L::joint_positions(q, params)
+        .amax()
+        .max(L::link_tips(q, params).amax())
 }
 
 fn to_f64<T: Real>(x: T) -> f64 {
@@ -113,9 +147,10 @@ where
         return Err(AssemblyError::NonFinite);
     }
     let mut phi = L::closure_residual(q, params);
+    let limit = tol.relative_residual * leg_size::<L, T, NQ, NC, NU>(params, q);
     for _ in 0..tol.max_iterations {
         let err = phi.amax();
-        if err <= tol.residual {
+        if err <= limit {
             return Ok(());
         }
         let mut j = L::constraint_jacobian(q, params);
@@ -126,20 +161,21 @@ where
         }
         let mu = phi.norm_squared();
         let s = j * j.transpose() + SMatrix::<T, NC, NC>::identity() * mu;
-        let chol = Cholesky::new(&s).ok_or(AssemblyError::Unreachable {
-            residual: to_f64(err),
-        })?;
+        let chol =
+            factor_closure_rows::<L, T, NQ, NC, NU>(&s).ok_or(AssemblyError::Unreachable {
+                residual: to_f64(err),
+            })?;
         let mut w = phi;
         chol.solve_mut(&mut w);
         let step = j.transpose() * w;
         let residual = |x: &SVector<T, NQ>| L::closure_residual(x, params);
-        match backtrack(q, &step, phi.norm_squared(), residual, |r| r.norm_squared()) {
+        match backtrack(q, &step, mu, residual, |r| r.norm_squared()) {
             Some((next, r)) => (*q, phi) = (next, r),
             None => break,
         }
     }
     let err = phi.amax();
-    if err <= tol.residual {
+    if err <= limit {
         Ok(())
     } else {
         Err(AssemblyError::Unreachable {
@@ -208,7 +244,8 @@ where
     let chol_m = Cholesky::new(&m).ok_or(AssemblyError::Singular)?;
     let mut y = j.transpose();
     chol_m.solve_mut(&mut y); // M⁻¹ Jᵀ
-    let chol_s = Cholesky::new(&(j * y)).ok_or(AssemblyError::Singular)?;
+    let chol_s =
+        factor_closure_rows::<L, T, NQ, NC, NU>(&(j * y)).ok_or(AssemblyError::Singular)?;
     if chol_s.rcond < rcond_floor::<T>() {
         return Err(AssemblyError::Singular);
     }
@@ -264,10 +301,8 @@ where
         jp.column_mut(a).fill(T::zero());
     }
     let jpt = jp.transpose();
-    let chol = Cholesky::new(&mul(&jp, &jpt)).ok_or(AssemblyError::Singular)?;
-    if chol.rcond < rcond_floor::<T>() {
-        return Err(AssemblyError::Singular);
-    }
+    let chol =
+        factor_closure_rows::<L, T, NQ, NC, NU>(&mul(&jp, &jpt)).ok_or(AssemblyError::Singular)?;
     let mut w = *rhs;
     chol.solve_mut(&mut w);
     Ok(mul(&jpt, &w))
@@ -298,29 +333,121 @@ where
     let worst = |(phi, e): &(SVector<T, NC>, SVector<T, 2>)| phi.amax().max(e.amax());
     let mut q = *guess;
     let mut r = residuals(&q);
+    let limit =
+        tol.relative_residual * leg_size::<L, T, NQ, NC, NU>(params, guess).max(foot.amax());
     for _ in 0..tol.max_iterations {
-        if worst(&r) <= tol.residual {
+        if worst(&r) <= limit {
             return Ok(q);
         }
         let j = L::constraint_jacobian(&q, params);
         let jf = L::foot_jacobian(&q, params);
         let mu = cost(&r);
-        let h = j.transpose() * j + jf.transpose() * jf + SMatrix::<T, NQ, NQ>::identity() * mu;
-        let chol = Cholesky::new(&h).ok_or(AssemblyError::Unreachable {
+        let unreachable = AssemblyError::Unreachable {
             residual: to_f64(worst(&r)),
-        })?;
-        let mut step = j.transpose() * r.0 + jf.transpose() * r.1;
-        chol.solve_mut(&mut step);
+        };
+        let phi = r.0;
+        let step = if L::MOBILITY >= 2 {
+            // At least as many free motions as the foot's two coordinates: the minimal-norm
+            // step `Aᵀ (A Aᵀ + μ I)⁻¹ r` of the stacked residual, A = [J; J_f], by block
+            // elimination (JᵀJ + J_fᵀJ_f would be singular at the solution).
+            let s11 = mul(&j, &j.transpose()) + SMatrix::<T, NC, NC>::identity() * mu;
+            let s12 = mul(&j, &jf.transpose());
+            let chol1 = factor_closure_rows::<L, T, NQ, NC, NU>(&s11).ok_or(unreachable)?;
+            let mut x = s12;
+            chol1.solve_mut(&mut x); // S11⁻¹ S12
+            let schur = mul(&jf, &jf.transpose()) + SMatrix::<T, 2, 2>::identity() * mu
+                - s12.transpose() * x;
+            let chol2 = Cholesky::new(&schur).ok_or(unreachable)?;
+            let mut w1 = phi;
+            chol1.solve_mut(&mut w1);
+            let mut w2 = r.1 - s12.transpose() * w1;
+            chol2.solve_mut(&mut w2);
+            w1 -= x * w2;
+            j.transpose() * w1 + jf.transpose() * w2
+        } else {
+            // One free motion and two foot coordinates: more equations than unknowns, a
+            // least-squares step `(AᵀA + μ I)⁻¹ Aᵀ r` (regular: A has full column rank).
+            let h = j.transpose() * j + jf.transpose() * jf + SMatrix::<T, NQ, NQ>::identity() * mu;
+            let chol = Cholesky::new(&h).ok_or(unreachable)?;
+            let mut step = j.transpose() * phi + jf.transpose() * r.1;
+            chol.solve_mut(&mut step);
+            step
+        };
         match backtrack(&q, &step, cost(&r), residuals, cost) {
             Some((next, rn)) => (q, r) = (next, rn),
             None => break,
         }
     }
-    if worst(&r) <= tol.residual {
+    if worst(&r) <= limit {
         Ok(q)
     } else {
         Err(AssemblyError::Unreachable {
             residual: to_f64(worst(&r)),
         })
     }
+}
+
+/// Follows the assembly branch of `from` (an assembled pose) while the motor angles move
+/// on a straight line from `from`'s to `theta`: steps of at most `max_step` rad, each
+/// predicted to first order (`q + G Δθ`, the passive rates of [`consistent_velocity`])
+/// and corrected by [`assemble`]. A step whose correction is more than a quarter of its
+/// size (the solution would jump), or that meets a singular configuration, is halved;
+/// when a step would fall below 1e-7 of the way, the branch ends there:
+/// [`AssemblyError::BranchEnds`] says how far it got. A sweep or a start pose computed
+/// this way stays in the assembly mode of `from`.
+pub fn assemble_along<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    from: &SVector<T, NQ>,
+    theta: &SVector<T, NU>,
+    max_step: T,
+    tol: &Tolerance<T>,
+) -> Result<SVector<T, NQ>, AssemblyError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    if !theta.iter().chain(from.iter()).all(|x| x.is_finite()) || !max_step.is_finite() {
+        return Err(AssemblyError::NonFinite);
+    }
+    let start = SVector::<T, NU>::from_fn(|k, _| from[L::ACTUATED[k]]);
+    let delta = theta - start;
+    let total = delta.amax();
+    if total == T::zero() || NC == 0 {
+        return assemble::<L, T, NQ, NC, NU>(params, theta, from, tol);
+    }
+    let longest = (max_step / total).min(T::one());
+    let (mut q, mut done, mut h) = (*from, T::zero(), longest);
+    while done < T::one() {
+        let h_now = h.min(T::one() - done);
+        let step = delta * h_now;
+        let target = start + delta * (done + h_now);
+        let next = consistent_velocity::<L, T, NQ, NC, NU>(params, &q, &step).and_then(|dq| {
+            let predicted = q + dq;
+            let next = assemble::<L, T, NQ, NC, NU>(params, &target, &predicted, tol)?;
+            if (next - predicted).amax() <= step.amax() * T::lit(0.25) {
+                Ok(next)
+            } else {
+                Err(AssemblyError::BranchEnds {
+                    fraction: to_f64(done),
+                })
+            }
+        });
+        match next {
+            Ok(next) => {
+                q = next;
+                done += h_now;
+                h = (h + h).min(longest);
+            }
+            Err(AssemblyError::NonFinite) => return Err(AssemblyError::NonFinite),
+            Err(_) => {
+                h *= T::lit(0.5);
+                if h < T::lit(1e-7) {
+                    return Err(AssemblyError::BranchEnds {
+                        fraction: to_f64(done),
+                    });
+                }
+            }
+        }
+    }
+    Ok(q)
 }

@@ -19,9 +19,10 @@ use nalgebra::{SMatrix, SVector};
 use crate::assembly::{passive_solve, AssemblyError};
 use crate::dynamics::{rcond_floor, DynamicsError};
 use crate::integrate::{State, TorqueSource};
-use crate::linalg::{mul, mul_tn, Cholesky};
+use crate::linalg::{mul, mul_tn, Cholesky, PivotedLdlt};
 use crate::model::{DynamicsTerms, LegModel, Real};
 use crate::reference::Reference;
+use crate::structure::{Actuation, NotApplicable, Structure};
 
 /// Why a controller cannot act at a state.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -35,6 +36,9 @@ pub enum ControlError {
     Dynamics(DynamicsError),
     /// A state, reference or parameter is NaN or infinite.
     NonFinite,
+    /// The method does not apply to this leg (too few motors for the foot, an
+    /// under- or over-actuated leg): reported when the controller is built.
+    NotApplicable(NotApplicable),
 }
 
 impl fmt::Display for ControlError {
@@ -51,12 +55,19 @@ impl fmt::Display for ControlError {
             }
             ControlError::Dynamics(e) => write!(f, "{e}"),
             ControlError::NonFinite => write!(f, "non-finite state, reference or parameter"),
+            ControlError::NotApplicable(why) => write!(f, "not applicable: {why}"),
         }
     }
 }
 
 #[cfg(feature = "std")]
 impl std::error::Error for ControlError {}
+
+impl From<NotApplicable> for ControlError {
+    fn from(e: NotApplicable) -> Self {
+        ControlError::NotApplicable(e)
+    }
+}
 
 impl From<AssemblyError> for ControlError {
     fn from(e: AssemblyError) -> Self {
@@ -81,7 +92,7 @@ struct PassiveSystem<T: Real, const NQ: usize, const NC: usize> {
     jp: SMatrix<T, NC, NQ>,
     /// `M̂⁻¹ J_pᵀ`.
     y: SMatrix<T, NQ, NC>,
-    chol_s: Option<Cholesky<T, NC>>,
+    chol_s: Option<PivotedLdlt<T, NC>>,
     actuated: [bool; NQ],
 }
 
@@ -90,6 +101,7 @@ impl<T: Real, const NQ: usize, const NC: usize> PassiveSystem<T, NQ, NC> {
         m: &SMatrix<T, NQ, NQ>,
         j: &SMatrix<T, NC, NQ>,
         actuated: [bool; NQ],
+        deficiency: usize,
     ) -> Result<Self, ControlError> {
         let mut mp = *m;
         let mut jp = *j;
@@ -107,10 +119,8 @@ impl<T: Real, const NQ: usize, const NC: usize> PassiveSystem<T, NQ, NC> {
         let chol_s = if NC == 0 {
             None
         } else {
-            let c = Cholesky::new(&mul(&jp, &y)).ok_or(ControlError::SingularPassive)?;
-            if c.rcond < rcond_floor::<T>() {
-                return Err(ControlError::SingularPassive);
-            }
+            let c = PivotedLdlt::new(&mul(&jp, &y), deficiency, rcond_floor::<T>())
+                .ok_or(ControlError::SingularPassive)?;
             Some(c)
         };
         Ok(PassiveSystem {
@@ -171,6 +181,9 @@ fn check_finite<T: Real, const NQ: usize>(state: &State<T, NQ>) -> Result<(), Co
 }
 
 /// `Ã` and `b̃` by the Schur complement of the reordered KKT system, as in the notes.
+/// It applies to every leg whose motors do not over-determine it; on an under-actuated
+/// leg `Ã θ̈ = b̃ + u` holds with the passive joints moving on their own (collocated
+/// partial feedback linearization).
 pub fn actuated_reduction<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     params: &L::Params<T>,
     terms: &DynamicsTerms<T, NQ, NC>,
@@ -180,8 +193,10 @@ where
     L: LegModel<NQ, NC, NU>,
     T: Real,
 {
+    Structure::of::<L, NQ, NC, NU>().joint_space()?;
     let (m, j) = (&terms.mass_matrix, &terms.constraint_jacobian);
-    let a22 = PassiveSystem::new(m, j, actuated_mask::<L, NQ, NC, NU>())?;
+    let deficiency = L::REDUNDANT_ROWS.iter().filter(|&&r| r).count();
+    let a22 = PassiveSystem::new(m, j, actuated_mask::<L, NQ, NC, NU>(), deficiency)?;
     // A12 z for z = (x, f): the actuated rows of M x − Jᵀ f.
     let a12 = |(x, f): (SVector<T, NQ>, SVector<T, NC>)| mul(m, &x) - mul_tn(j, &f);
     let mut a_tilde = SMatrix::<T, NU, NU>::zeros();
@@ -209,7 +224,8 @@ pub struct NullSpace<T: Real, const NQ: usize, const NU: usize> {
 }
 
 /// `G` (each column: the joint rates when one motor turns at unit rate) and `c` (the
-/// passive accelerations that keep `J q̈ + J̇ q̇ = 0` when `θ̈ = 0`).
+/// passive accelerations that keep `J q̈ + J̇ q̇ = 0` when `θ̈ = 0`). Only where the motors
+/// determine the leg ([`Structure::motors_determine_the_leg`]).
 pub fn null_space<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     jacobian: &SMatrix<T, NC, NQ>,
     constraint_bias: &SVector<T, NC>,
@@ -218,6 +234,7 @@ where
     L: LegModel<NQ, NC, NU>,
     T: Real,
 {
+    Structure::of::<L, NQ, NC, NU>().motors_determine_the_leg()?;
     let mut g = SMatrix::<T, NQ, NU>::zeros();
     for (k, &ak) in L::ACTUATED.iter().enumerate() {
         let mut col =
@@ -298,9 +315,28 @@ where
     )
 }
 
+/// The reduction a controller uses: the null-space form where the motors determine the
+/// leg (cheaper; equal to the Schur form, tested), the Schur form on an under-actuated leg.
+fn reduction<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    terms: &DynamicsTerms<T, NQ, NC>,
+    qd: &SVector<T, NQ>,
+) -> Result<ActuatedDynamics<T, NU>, ControlError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    match Structure::of::<L, NQ, NC, NU>().actuation() {
+        Actuation::Full => actuated_reduction_null_space::<L, T, NQ, NC, NU>(params, terms, qd),
+        _ => actuated_reduction::<L, T, NQ, NC, NU>(params, terms, qd),
+    }
+}
+
 /// Joint-space feedback linearization: `u = Ã (θ̈_ref + k_p e + k_d ė) − b̃`, so that
 /// `ë + k_d ė + k_p e = 0` with `e = θ_ref − θ`. With no closure (`two_link`) `Ã = M`
-/// and `b̃ = −N − D q̇`: the open-chain law `u = M(q̈_ref + k_p e + k_d ė) + N`.
+/// and `b̃ = −N − D q̇`: the open-chain law `u = M(q̈_ref + k_p e + k_d ė) + N`. On an
+/// under-actuated leg it commands the motors' own accelerations (the passive joints
+/// follow on their own); a leg whose motors over-determine it has no such law.
 pub struct JointFeedbackLinearization<
     L,
     T: Real,
@@ -325,13 +361,19 @@ where
     T: Real,
     R: Reference<T, NU>,
 {
-    pub fn new(params: L::Params<T>, gains: Gains<T, NU>, reference: R) -> Self {
-        JointFeedbackLinearization {
+    /// Fails with [`ControlError::NotApplicable`] on a leg whose motors over-determine it.
+    pub fn new(
+        params: L::Params<T>,
+        gains: Gains<T, NU>,
+        reference: R,
+    ) -> Result<Self, ControlError> {
+        Structure::of::<L, NQ, NC, NU>().joint_space()?;
+        Ok(JointFeedbackLinearization {
             params,
             gains,
             reference,
             model: PhantomData,
-        }
+        })
     }
 }
 
@@ -345,9 +387,7 @@ where
     fn torque(&mut self, t: T, state: &State<T, NQ>) -> Result<SVector<T, NU>, ControlError> {
         check_finite(state)?;
         let terms = L::dynamics_terms(&state.q, &state.qd, &self.params);
-        // The null-space form: equal to the Schur complement (tested), and cheaper.
-        let red =
-            actuated_reduction_null_space::<L, T, NQ, NC, NU>(&self.params, &terms, &state.qd)?;
+        let red = reduction::<L, T, NQ, NC, NU>(&self.params, &terms, &state.qd)?;
         let (theta, theta_dot) = motor_state::<L, T, NQ, NC, NU>(state);
         let r = self.reference.sample(t);
         let v = r.acceleration
@@ -386,8 +426,10 @@ where
 }
 
 /// Foot-space feedback linearization: the motor accelerations that give the foot
-/// `ÿ = ÿ_ref + k_p e + k_d ė` (smallest-norm when there are more than two motors), then
-/// `u = Ã θ̈ − b̃`.
+/// `ÿ = ÿ_ref + k_p e + k_d ė`, then `u = Ã θ̈ − b̃`. With more than two motors the foot
+/// task leaves motions free: they are held at the motor angles of the first state by a
+/// posture law (same gains) in the task's null space, so they neither drift nor fight
+/// the foot.
 pub struct FootFeedbackLinearization<
     L,
     T: Real,
@@ -401,6 +443,8 @@ pub struct FootFeedbackLinearization<
     pub params: L::Params<T>,
     pub gains: Gains<T, 2>,
     pub reference: R,
+    /// The motor angles the free motions are held at (set from the first state).
+    pub posture: Option<SVector<T, NU>>,
     model: PhantomData<L>,
 }
 
@@ -411,14 +455,36 @@ where
     T: Real,
     R: Reference<T, 2>,
 {
-    pub fn new(params: L::Params<T>, gains: Gains<T, 2>, reference: R) -> Self {
-        FootFeedbackLinearization {
+    /// Fails with [`ControlError::NotApplicable`] unless the motors can place the foot
+    /// (at least two, and they determine the leg).
+    pub fn new(
+        params: L::Params<T>,
+        gains: Gains<T, 2>,
+        reference: R,
+    ) -> Result<Self, ControlError> {
+        Structure::of::<L, NQ, NC, NU>().foot_space()?;
+        Ok(FootFeedbackLinearization {
             params,
             gains,
             reference,
+            posture: None,
             model: PhantomData,
-        }
+        })
     }
+}
+
+/// `J⁺ w` for a `2 × NU` task Jacobian of full row rank, `J⁺ = Jᵀ (J Jᵀ)⁻¹`.
+fn task_solve<T: Real, const NU: usize>(
+    jy: &SMatrix<T, 2, NU>,
+    w: &SVector<T, 2>,
+) -> Result<SVector<T, NU>, ControlError> {
+    let chol = Cholesky::new(&(jy * jy.transpose())).ok_or(ControlError::SingularTask)?;
+    if chol.rcond < rcond_floor::<T>() {
+        return Err(ControlError::SingularTask);
+    }
+    let mut x = *w;
+    chol.solve_mut(&mut x);
+    Ok(jy.transpose() * x)
 }
 
 impl<L, T, R, const NQ: usize, const NC: usize, const NU: usize> TorqueSource<T, NQ, NU>
@@ -432,9 +498,13 @@ where
         check_finite(state)?;
         let p = &self.params;
         let terms = L::dynamics_terms(&state.q, &state.qd, p);
-        let red = actuated_reduction::<L, T, NQ, NC, NU>(p, &terms, &state.qd)?;
         let ns =
             null_space::<L, T, NQ, NC, NU>(&terms.constraint_jacobian, &terms.constraint_bias)?;
+        let red = reduce_with(
+            &ns,
+            &terms,
+            &passive_forces::<L, T, NQ, NC, NU>(p, &terms, &state.qd),
+        );
         let foot = foot_kinematics::<L, T, NQ, NC, NU>(p, state, &ns);
         let r = self.reference.sample(t);
         let v = r.acceleration
@@ -443,31 +513,42 @@ where
                 .feedback(&(r.position - foot.position), &(r.velocity - foot.velocity))
             - foot.drift;
         let jy = foot.jacobian;
-        let chol = Cholesky::new(&(jy * jy.transpose())).ok_or(ControlError::SingularTask)?;
-        if chol.rcond < rcond_floor::<T>() {
-            return Err(ControlError::SingularTask);
-        }
-        let mut w = v;
-        chol.solve_mut(&mut w);
-        Ok(red.a_tilde * (jy.transpose() * w) - red.b_tilde)
+        let theta_dd = if NU > 2 {
+            let (theta, theta_dot) = motor_state::<L, T, NQ, NC, NU>(state);
+            let posture = *self.posture.get_or_insert(theta);
+            let (kp, kd) = (self.gains.kp[0], self.gains.kd[0]);
+            let hold = (posture - theta) * kp - theta_dot * kd;
+            // J⁺ v + (I − J⁺ J) hold
+            task_solve(&jy, &(v - jy * hold))? + hold
+        } else {
+            task_solve(&jy, &v)?
+        };
+        Ok(red.a_tilde * theta_dd - red.b_tilde)
     }
 }
 
-/// The motor torques that hold the leg still against gravity: `Gᵀ G(q)`.
+/// The motor torques that hold the leg still against gravity: `−b̃(q, 0)`, which is
+/// `Gᵀ G(q)` where the motors determine the leg (computed so), and the torques that keep
+/// the motors from accelerating on an under-actuated leg.
 fn gravity_compensation<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     params: &L::Params<T>,
     q: &SVector<T, NQ>,
-) -> Result<(NullSpace<T, NQ, NU>, SVector<T, NU>), ControlError>
+) -> Result<SVector<T, NU>, ControlError>
 where
     L: LegModel<NQ, NC, NU>,
     T: Real,
 {
-    let ns = null_space::<L, T, NQ, NC, NU>(&L::constraint_jacobian(q, params), &SVector::zeros())?;
-    let g = ns.g.transpose() * L::gravity_forces(q, params);
-    Ok((ns, g))
+    if Structure::of::<L, NQ, NC, NU>().actuation() == Actuation::Full {
+        let ns =
+            null_space::<L, T, NQ, NC, NU>(&L::constraint_jacobian(q, params), &SVector::zeros())?;
+        return Ok(ns.g.transpose() * L::gravity_forces(q, params));
+    }
+    let rest = SVector::<T, NQ>::zeros();
+    let terms = L::dynamics_terms(q, &rest, params);
+    Ok(-actuated_reduction::<L, T, NQ, NC, NU>(params, &terms, &rest)?.b_tilde)
 }
 
-/// The baseline: joint PD with gravity compensation, `u = k_p e + k_d ė + Gᵀ G(q)`.
+/// The baseline: joint PD with gravity compensation, `u = k_p e + k_d ė − b̃(q, 0)`.
 pub struct PdGravity<L, T: Real, R, const NQ: usize, const NC: usize, const NU: usize>
 where
     L: LegModel<NQ, NC, NU>,
@@ -484,13 +565,19 @@ where
     T: Real,
     R: Reference<T, NU>,
 {
-    pub fn new(params: L::Params<T>, gains: Gains<T, NU>, reference: R) -> Self {
-        PdGravity {
+    /// Fails with [`ControlError::NotApplicable`] on a leg whose motors over-determine it.
+    pub fn new(
+        params: L::Params<T>,
+        gains: Gains<T, NU>,
+        reference: R,
+    ) -> Result<Self, ControlError> {
+        Structure::of::<L, NQ, NC, NU>().joint_space()?;
+        Ok(PdGravity {
             params,
             gains,
             reference,
             model: PhantomData,
-        }
+        })
     }
 }
 
@@ -503,7 +590,7 @@ where
 {
     fn torque(&mut self, t: T, state: &State<T, NQ>) -> Result<SVector<T, NU>, ControlError> {
         check_finite(state)?;
-        let (_, g) = gravity_compensation::<L, T, NQ, NC, NU>(&self.params, &state.q)?;
+        let g = gravity_compensation::<L, T, NQ, NC, NU>(&self.params, &state.q)?;
         let (theta, theta_dot) = motor_state::<L, T, NQ, NC, NU>(state);
         let r = self.reference.sample(t);
         Ok(self
@@ -532,13 +619,19 @@ where
     T: Real,
     R: Reference<T, 2>,
 {
-    pub fn new(params: L::Params<T>, gains: Gains<T, 2>, reference: R) -> Self {
-        FootPdGravity {
+    /// Fails with [`ControlError::NotApplicable`] unless the motors can place the foot.
+    pub fn new(
+        params: L::Params<T>,
+        gains: Gains<T, 2>,
+        reference: R,
+    ) -> Result<Self, ControlError> {
+        Structure::of::<L, NQ, NC, NU>().foot_space()?;
+        Ok(FootPdGravity {
             params,
             gains,
             reference,
             model: PhantomData,
-        }
+        })
     }
 }
 
@@ -551,7 +644,11 @@ where
 {
     fn torque(&mut self, t: T, state: &State<T, NQ>) -> Result<SVector<T, NU>, ControlError> {
         check_finite(state)?;
-        let (ns, g) = gravity_compensation::<L, T, NQ, NC, NU>(&self.params, &state.q)?;
+        let ns = null_space::<L, T, NQ, NC, NU>(
+            &L::constraint_jacobian(&state.q, &self.params),
+            &SVector::zeros(),
+        )?;
+        let g = ns.g.transpose() * L::gravity_forces(&state.q, &self.params);
         let foot = foot_kinematics::<L, T, NQ, NC, NU>(&self.params, state, &ns);
         let r = self.reference.sample(t);
         let force = self
@@ -561,28 +658,51 @@ where
     }
 }
 
-/// The effective inertias at a pose, to scale baseline gains to a bandwidth: the
-/// diagonal of `Ã` (each motor's inertia with the loop closed) and of the foot-space
-/// inertia `Λ = (J_y Ã⁻¹ J_yᵀ)⁻¹`, `J_y = J_f G`, at rest.
-pub fn effective_inertias<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+/// Each motor's effective inertia at a pose, with the loop closed: the diagonal of `Ã`
+/// at rest (to scale joint-space baseline gains to a bandwidth).
+pub fn joint_inertias<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     params: &L::Params<T>,
     q: &SVector<T, NQ>,
-) -> Result<(SVector<T, NU>, SVector<T, 2>), ControlError>
+) -> Result<SVector<T, NU>, ControlError>
 where
     L: LegModel<NQ, NC, NU>,
     T: Real,
 {
     let rest = SVector::<T, NQ>::zeros();
     let terms = L::dynamics_terms(q, &rest, params);
-    let red = actuated_reduction::<L, T, NQ, NC, NU>(params, &terms, &rest)?;
+    Ok(
+        actuated_reduction::<L, T, NQ, NC, NU>(params, &terms, &rest)?
+            .a_tilde
+            .diagonal(),
+    )
+}
+
+/// The foot's effective inertia at a pose: the diagonal of the foot-space inertia
+/// `Λ = (J_y Ã⁻¹ J_yᵀ)⁻¹`, `J_y = J_f G`, at rest (to scale foot-space baseline gains).
+/// Only where the motors can place the foot.
+pub fn foot_inertias<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+) -> Result<SVector<T, 2>, ControlError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    Structure::of::<L, NQ, NC, NU>().foot_space()?;
+    let rest = SVector::<T, NQ>::zeros();
+    let terms = L::dynamics_terms(q, &rest, params);
     let ns = null_space::<L, T, NQ, NC, NU>(&terms.constraint_jacobian, &terms.constraint_bias)?;
+    let red = reduce_with(
+        &ns,
+        &terms,
+        &passive_forces::<L, T, NQ, NC, NU>(params, &terms, &rest),
+    );
     let jy = L::foot_jacobian(q, params) * ns.g;
     let a = Cholesky::new(&red.a_tilde).ok_or(ControlError::SingularPassive)?;
     let mut y = jy.transpose();
     a.solve_mut(&mut y); // Ã⁻¹ J_yᵀ
     let lambda_inv = Cholesky::new(&(jy * y)).ok_or(ControlError::SingularTask)?;
-    let lambda = lambda_inv.inverse();
-    Ok((red.a_tilde.diagonal(), lambda.diagonal()))
+    Ok(lambda_inv.inverse().diagonal())
 }
 
 /// Torque limits per motor around any torque source, counting how often each motor

@@ -13,7 +13,7 @@ use core::fmt;
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::linalg::{all_finite, mul, Cholesky};
+use crate::linalg::{all_finite, mul, Cholesky, PivotedLdlt};
 use crate::model::{DynamicsTerms, LegModel, Real};
 
 /// Why the constrained dynamics cannot be solved at a state.
@@ -90,11 +90,15 @@ where
 
 /// Solves the KKT system from evaluated terms: `tau` is the generalized force on the
 /// right-hand side (`B u − N − D q̇`), `closure_rhs` the constraint row (`−J̇ q̇ − …`).
+/// Up to `deficiency` closure rows may repeat the others (a leg closed redundantly,
+/// [`LegModel::REDUNDANT_ROWS`]): the pivots leave them out and their forces are zero, so
+/// the accelerations are those of the whole system and the forces one of its solutions.
 pub fn solve_kkt<T: Real, const NQ: usize, const NC: usize>(
     mass_matrix: &SMatrix<T, NQ, NQ>,
     jacobian: &SMatrix<T, NC, NQ>,
     tau: &SVector<T, NQ>,
     closure_rhs: &SVector<T, NC>,
+    deficiency: usize,
 ) -> Result<Acceleration<T, NQ, NC>, DynamicsError> {
     // A NaN or infinity anywhere shows in M's pivots or in the result, checked below.
     let chol_m = Cholesky::new(mass_matrix).ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
@@ -109,7 +113,8 @@ pub fn solve_kkt<T: Real, const NQ: usize, const NC: usize>(
         chol_m.solve_mut(&mut y); // Y = M⁻¹ Jᵀ
         let s = mul(jacobian, &y);
         forces = closure_rhs - mul(jacobian, &qdd);
-        let chol_s = Cholesky::new(&s).ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?;
+        let chol_s = PivotedLdlt::new(&s, deficiency, rcond_floor::<T>())
+            .ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?;
         if chol_s.rcond < rcond_floor::<T>() {
             return Err(DynamicsError::SingularConstraints {
                 rcond: to_f64(chol_s.rcond),
@@ -163,5 +168,11 @@ where
             rhs -= (terms.constraint_jacobian * qd) * (b.alpha + b.alpha) + phi * (b.beta * b.beta);
         }
     }
-    solve_kkt(&terms.mass_matrix, &terms.constraint_jacobian, &tau, &rhs)
+    solve_kkt(
+        &terms.mass_matrix,
+        &terms.constraint_jacobian,
+        &tau,
+        &rhs,
+        L::REDUNDANT_ROWS.iter().filter(|&&r| r).count(),
+    )
 }

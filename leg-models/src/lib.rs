@@ -27,6 +27,7 @@ mod model;
 pub mod reference;
 #[cfg(feature = "std")]
 pub mod simulate;
+pub mod structure;
 
 pub use model::{DynamicsTerms, LegModel, Parameters, Real};
 pub use nalgebra;

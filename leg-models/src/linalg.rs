@@ -93,6 +93,126 @@ impl<T: Real, const N: usize> Cholesky<T, N> {
     }
 }
 
+/// `P A Pᵀ = L D Lᵀ` with symmetric (diagonal) pivoting, for a positive semidefinite `A`
+/// whose rank may fall short of `N` by up to `deficiency`: the closure rows of a leg
+/// closed redundantly (a parallelogram closed twice). Which rows repeat the others
+/// depends on the configuration, so the pivots choose them: the last `deficiency` pivots
+/// may be negligible (below `rcond_floor` of the largest), and their unknowns are set to
+/// zero; any other negligible pivot refuses the factorization.
+#[derive(Clone, Copy, Debug)]
+pub struct PivotedLdlt<T: Real, const N: usize> {
+    l: SMatrix<T, N, N>,
+    inv_diag: nalgebra::SVector<T, N>,
+    perm: [usize; N],
+    /// Pivots used (`N` minus the rows left out).
+    pub rank: usize,
+    /// `min Dᵢᵢ / max Dᵢᵢ` over the pivots used.
+    pub rcond: T,
+}
+
+impl<T: Real, const N: usize> PivotedLdlt<T, N> {
+    /// `None` if a pivot other than the last `deficiency` is negligible or not finite.
+    pub fn new(a: &SMatrix<T, N, N>, deficiency: usize, rcond_floor: T) -> Option<Self> {
+        let mut w = *a;
+        let mut l = SMatrix::<T, N, N>::zeros();
+        let mut inv_diag = nalgebra::SVector::<T, N>::zeros();
+        let mut perm: [usize; N] = core::array::from_fn(|i| i);
+        let (mut lo, mut hi) = (T::one(), T::zero());
+        let mut rank = N;
+        for k in 0..N {
+            let mut p = k;
+            for i in k + 1..N {
+                if w[(i, i)] > w[(p, p)] {
+                    p = i;
+                }
+            }
+            if p != k {
+                w.swap_rows(k, p);
+                w.swap_columns(k, p);
+                l.swap_rows(k, p);
+                perm.swap(k, p);
+            }
+            let d = w[(k, k)];
+            if !d.is_finite() {
+                return None;
+            }
+            if k == 0 {
+                hi = d;
+                lo = d;
+            }
+            // A NaN compares as nothing, so it counts as negligible.
+            let above = |x: T| d.partial_cmp(&x) == Some(core::cmp::Ordering::Greater);
+            if !above(rcond_floor * hi) || (k == 0 && !above(T::zero())) {
+                if N - k <= deficiency {
+                    rank = k;
+                    break;
+                }
+                return None;
+            }
+            lo = lo.min(d);
+            let inv = T::one() / d;
+            inv_diag[k] = inv;
+            for i in k + 1..N {
+                l[(i, k)] = w[(i, k)] * inv;
+            }
+            for j in k + 1..N {
+                for i in j..N {
+                    let v = w[(i, j)] - l[(i, k)] * l[(j, k)] * d;
+                    w[(i, j)] = v;
+                    w[(j, i)] = v;
+                }
+            }
+        }
+        let rcond = if N == 0 || rank == 0 {
+            T::one()
+        } else {
+            lo / hi
+        };
+        Some(PivotedLdlt {
+            l,
+            inv_diag,
+            perm,
+            rank,
+            rcond,
+        })
+    }
+
+    /// Overwrites `b` with the solution that uses the pivoted rows (the others' unknowns
+    /// are zero; their equations hold when they repeat the others).
+    pub fn solve_mut<const C: usize>(&self, b: &mut SMatrix<T, N, C>) {
+        let r = self.rank;
+        for c in 0..C {
+            let mut y = nalgebra::SVector::<T, N>::zeros();
+            for i in 0..N {
+                y[i] = b[(self.perm[i], c)];
+            }
+            for i in 0..r {
+                let mut s = y[i];
+                for k in 0..i {
+                    s -= self.l[(i, k)] * y[k];
+                }
+                y[i] = s;
+            }
+            for i in 0..r {
+                y[i] *= self.inv_diag[i];
+            }
+            for i in (0..r).rev() {
+                let mut s = y[i];
+                for k in i + 1..r {
+                    s -= self.l[(k, i)] * y[k];
+                }
+                y[i] = s;
+            }
+            for i in r..N {
+                y[i] = T::zero();
+            }
+            for i in 0..N {
+                b[(self.perm[i], c)] = y[i];
+            }
+        }
+    }
+}
+
 /// `A B`, as plain loops over the fixed sizes (unrolled by the compiler).
 #[inline]
 pub fn mul<T: Real, const R: usize, const K: usize, const C: usize>(
@@ -173,5 +293,28 @@ mod tests {
             Cholesky::new(&SMatrix::<f64, 0, 0>::zeros()).unwrap().rcond,
             1.0
         );
+    }
+
+    /// A rank-2 3×3 system (its third row is the sum of the first two): solved where it is
+    /// consistent, refused without the allowance, and equal to Cholesky when regular.
+    #[test]
+    fn pivoted_ldlt_solves_rank_deficient_systems() {
+        let j = nalgebra::Matrix3x2::new(1.0, 0.5, -0.3, 2.0, 0.7, 2.5);
+        let a = j * j.transpose(); // rows 0 + 1 = row 2
+        let floor = 1e-13;
+        assert!(PivotedLdlt::new(&a, 0, floor).is_none());
+        let f = PivotedLdlt::new(&a, 1, floor).unwrap();
+        assert_eq!(f.rank, 2);
+        let b = a * nalgebra::Vector3::new(0.3, -1.0, 2.0); // consistent
+        let mut x = b;
+        f.solve_mut(&mut x);
+        assert!((a * x - b).amax() < 1e-12, "{}", a * x - b);
+        assert!(x.iter().filter(|v| **v == 0.0).count() >= 1);
+        let spd = Matrix3::new(4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0);
+        let mut y = nalgebra::Vector3::new(1.0, 2.0, 3.0);
+        let mut z = y;
+        PivotedLdlt::new(&spd, 1, floor).unwrap().solve_mut(&mut y);
+        Cholesky::new(&spd).unwrap().solve_mut(&mut z);
+        assert!((y - z).amax() < 1e-14);
     }
 }

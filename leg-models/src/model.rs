@@ -70,6 +70,13 @@ pub trait LegModel<const NQ: usize, const NC: usize, const NU: usize> {
     /// A typical assembled pose (rad) from the spec: the default guess of loop assembly
     /// (it picks the assembly mode) and the default initial state of simulations.
     const HOME: [f64; NQ];
+    /// Closure rows that the others imply on this geometry (a parallelogram closed twice):
+    /// the solvers use the independent rows and hold these rows' forces at zero. Found by
+    /// `cargo xtask gen` at the assembled home pose with the spec's parameters.
+    const REDUNDANT_ROWS: [bool; NC];
+    /// Degrees of freedom of the closed chain, `NQ − rank J`, at the assembled home pose.
+    /// Compared with `NU`, it says which methods apply (see [`crate::structure`]).
+    const MOBILITY: usize;
 
     /// The physical parameters (lengths, masses, centres of mass, inertias, rotor
     /// inertias and gear ratios, damping, gravity). `Default` holds the spec's values.

@@ -47,6 +47,24 @@ impl<T: Real, const N: usize> Reference<T, N> for Sinusoid<T, N> {
     }
 }
 
+/// `start + rate · t` per coordinate: a crank turning at a steady speed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ramp<T: Real, const N: usize> {
+    pub start: SVector<T, N>,
+    /// Per second.
+    pub rate: SVector<T, N>,
+}
+
+impl<T: Real, const N: usize> Reference<T, N> for Ramp<T, N> {
+    fn sample(&self, t: T) -> Setpoint<T, N> {
+        Setpoint {
+            position: self.start + self.rate * t,
+            velocity: self.rate,
+            acceleration: SVector::zeros(),
+        }
+    }
+}
+
 /// A minimum-jerk move from `start` to `goal` over `duration` seconds from `t0`
 /// (quintic with zero velocity and acceleration at both ends); it holds `start` before
 /// and `goal` after.
@@ -130,6 +148,16 @@ mod tests {
                 "acceleration at {t}"
             );
         }
+    }
+
+    #[test]
+    fn ramp_derivatives() {
+        let r = Ramp {
+            start: Vector2::new(0.3, -1.0),
+            rate: Vector2::new(6.0, -0.5),
+        };
+        check(&r, &[0.0, 0.4, 2.5]);
+        assert!((r.sample(2.0).position - Vector2::new(12.3, -2.0)).amax() < 1e-15);
     }
 
     #[test]

@@ -4,15 +4,16 @@
 //!
 //! `cargo run --release -p leg-tests --example control_report`
 
-use leg_models::assembly::{foot_inverse, Tolerance};
+use leg_models::assembly::{assemble_along, consistent_velocity, foot_inverse, Tolerance};
 use leg_models::control::{
-    effective_inertias, FootFeedbackLinearization, FootPdGravity, Gains,
+    foot_inertias, joint_inertias, FootFeedbackLinearization, FootPdGravity, Gains,
     JointFeedbackLinearization, PdGravity, Saturated,
 };
 use leg_models::integrate::{State, StepOptions, TorqueSource};
 use leg_models::nalgebra::SVector;
 use leg_models::reference::{Reference, Sinusoid, StepCycle};
 use leg_models::simulate::{Sample, Simulator};
+use leg_models::structure::Structure;
 use leg_models::{LegModel, Parameters};
 use leg_tests::passive_release_state;
 
@@ -80,48 +81,6 @@ fn report<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: u
         half_height: 0.015,
         period: 0.5,
     };
-    // Baseline gains with the same bandwidth (ω = 10 rad/s joint, 20 rad/s foot), scaled
-    // by the leg's inertia at home: joint PD by diag(Ã), foot PD by the foot-space
-    // inertia Λ = (J_y Ã⁻¹ J_yᵀ)⁻¹.
-    let (joint_inertia, foot_inertia) =
-        effective_inertias::<L, f64, NQ, NC, NU>(&p, &home).unwrap();
-    let joint_pd = Gains {
-        kp: joint_inertia * 100.0,
-        kd: joint_inertia * 20.0,
-    };
-    let foot_pd = Gains {
-        kp: foot_inertia * 400.0,
-        kd: foot_inertia * 40.0,
-    };
-
-    let r0 = joint_ref.sample(0.0);
-    let q_joint = leg_models::assembly::assemble::<L, f64, NQ, NC, NU>(
-        &p,
-        &r0.position,
-        &home,
-        &Tolerance::default(),
-    )
-    .unwrap();
-    let joint_start = State {
-        q: q_joint,
-        qd: leg_models::assembly::consistent_velocity::<L, f64, NQ, NC, NU>(
-            &p,
-            &q_joint,
-            &r0.velocity,
-        )
-        .unwrap(),
-    };
-    let q_foot = foot_inverse::<L, f64, NQ, NC, NU>(
-        &p,
-        &cycle.sample(0.0).position,
-        &home,
-        &Tolerance::default(),
-    )
-    .unwrap();
-    let foot_start = State {
-        q: q_foot,
-        qd: SVector::zeros(),
-    };
     let joint_err = |s: &Sample<f64, NQ, NC, NU>| {
         let r = joint_ref.sample(s.t);
         (0..NU)
@@ -142,79 +101,112 @@ fn report<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: u
         }
     }
 
-    let rows = [
-        (
-            "joint FL, sinusoid (rad)",
-            run::<L, _, NQ, NC, NU>(
+    let structure = Structure::of::<L, NQ, NC, NU>();
+    let mut rows: Vec<(&str, Result<Row, String>)> = Vec::new();
+    match structure.joint_space() {
+        Ok(()) => {
+            // Baseline gains with the same bandwidth (ω = 10 rad/s), scaled by diag(Ã).
+            let joint_inertia = joint_inertias::<L, f64, NQ, NC, NU>(&p, &home).unwrap();
+            let joint_pd = Gains {
+                kp: joint_inertia * 100.0,
+                kd: joint_inertia * 20.0,
+            };
+            let r0 = joint_ref.sample(0.0);
+            let q_joint = assemble_along::<L, f64, NQ, NC, NU>(
                 &p,
-                joint_start,
+                &home,
+                &r0.position,
+                0.05,
+                &Tolerance::default(),
+            )
+            .unwrap();
+            let joint_start = State {
+                q: q_joint,
+                qd: consistent_velocity::<L, f64, NQ, NC, NU>(&p, &q_joint, &r0.velocity).unwrap(),
+            };
+            let fl = |params| {
                 JointFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(
-                    p,
+                    params,
                     Gains::critically_damped(100.0),
                     joint_ref,
-                ),
-                joint_err,
-            ),
-        ),
-        (
-            "joint PD+g, sinusoid (rad)",
-            run::<L, _, NQ, NC, NU>(
+                )
+                .unwrap()
+            };
+            let pd = PdGravity::<L, f64, _, NQ, NC, NU>::new(p, joint_pd, joint_ref).unwrap();
+            rows.push((
+                "joint FL, sinusoid (rad)",
+                Ok(run::<L, _, NQ, NC, NU>(&p, joint_start, fl(p), joint_err)),
+            ));
+            rows.push((
+                "joint PD+g, sinusoid (rad)",
+                Ok(run::<L, _, NQ, NC, NU>(&p, joint_start, pd, joint_err)),
+            ));
+            rows.push((
+                "joint FL, masses +20 % (rad)",
+                Ok(run::<L, _, NQ, NC, NU>(
+                    &p,
+                    joint_start,
+                    fl(heavy),
+                    joint_err,
+                )),
+            ));
+        }
+        Err(why) => rows.push(("joint control", Err(why.to_string()))),
+    }
+    match structure.foot_space() {
+        Ok(()) => {
+            // Foot PD scaled by the foot-space inertia Λ = (J_y Ã⁻¹ J_yᵀ)⁻¹ (ω = 20 rad/s).
+            let foot_inertia = foot_inertias::<L, f64, NQ, NC, NU>(&p, &home).unwrap();
+            let foot_pd = Gains {
+                kp: foot_inertia * 400.0,
+                kd: foot_inertia * 40.0,
+            };
+            let q_foot = foot_inverse::<L, f64, NQ, NC, NU>(
                 &p,
-                joint_start,
-                PdGravity::<L, f64, _, NQ, NC, NU>::new(p, joint_pd, joint_ref),
-                joint_err,
-            ),
-        ),
-        (
-            "joint FL, masses +20 % (rad)",
-            run::<L, _, NQ, NC, NU>(
-                &p,
-                joint_start,
-                JointFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(
-                    heavy,
-                    Gains::critically_damped(100.0),
-                    joint_ref,
-                ),
-                joint_err,
-            ),
-        ),
-        (
-            "foot FL, step cycle (m)",
-            run::<L, _, NQ, NC, NU>(
-                &p,
-                foot_start,
+                &cycle.sample(0.0).position,
+                &home,
+                &Tolerance::default(),
+            )
+            .unwrap();
+            let foot_start = State {
+                q: q_foot,
+                qd: SVector::zeros(),
+            };
+            let fl = |params| {
                 FootFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(
-                    p,
+                    params,
                     Gains::critically_damped(400.0),
                     cycle,
-                ),
-                foot_err,
-            ),
-        ),
-        (
-            "foot PD+g, step cycle (m)",
-            run::<L, _, NQ, NC, NU>(
-                &p,
-                foot_start,
-                FootPdGravity::<L, f64, _, NQ, NC, NU>::new(p, foot_pd, cycle),
-                foot_err,
-            ),
-        ),
-        (
-            "foot FL, masses +20 % (m)",
-            run::<L, _, NQ, NC, NU>(
-                &p,
-                foot_start,
-                FootFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(
-                    heavy,
-                    Gains::critically_damped(400.0),
-                    cycle,
-                ),
-                foot_err,
-            ),
-        ),
-    ];
+                )
+                .unwrap()
+            };
+            let pd = FootPdGravity::<L, f64, _, NQ, NC, NU>::new(p, foot_pd, cycle).unwrap();
+            rows.push((
+                "foot FL, step cycle (m)",
+                Ok(run::<L, _, NQ, NC, NU>(&p, foot_start, fl(p), foot_err)),
+            ));
+            rows.push((
+                "foot PD+g, step cycle (m)",
+                Ok(run::<L, _, NQ, NC, NU>(&p, foot_start, pd, foot_err)),
+            ));
+            rows.push((
+                "foot FL, masses +20 % (m)",
+                Ok(run::<L, _, NQ, NC, NU>(&p, foot_start, fl(heavy), foot_err)),
+            ));
+        }
+        Err(why) => rows.push(("foot control", Err(why.to_string()))),
+    }
     for (name, r) in rows {
+        let r = match r {
+            Ok(r) => r,
+            Err(why) => {
+                println!(
+                    "| {} | {name} | – | – | – | – | not applicable: {why} |",
+                    L::NAME
+                );
+                continue;
+            }
+        };
         println!(
             "| {} | {} | {:.2e} | {:.2e} | {:.3} | {} | {} |",
             L::NAME,

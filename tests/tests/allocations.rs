@@ -5,7 +5,8 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use leg_models::assembly::{
-    assemble, consistent_velocity, foot_inverse, project_position, project_velocity, Tolerance,
+    assemble, assemble_along, consistent_velocity, foot_inverse, project_position,
+    project_velocity, Tolerance,
 };
 use leg_models::control::{
     actuated_reduction, FootFeedbackLinearization, FootPdGravity, Gains,
@@ -17,7 +18,7 @@ use leg_models::nalgebra::SVector;
 use leg_models::reference::{Sinusoid, StepCycle};
 use leg_models::simulate::Simulator;
 use leg_models::LegModel;
-use leg_tests::passive_release_state;
+use leg_tests::{not_applicable, passive_release_state};
 
 struct Counting;
 
@@ -123,39 +124,53 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
         half_height: 0.01,
         period: 0.5,
     };
-    let mut fl = JointFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(
+    // Each controller where it applies to this leg (its constructor says why not).
+    match JointFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(
         p,
         Gains::critically_damped(100.0),
         joint_ref,
-    );
-    zero(
-        "joint feedback linearization",
-        allocations(|| fl.torque(0.1, &state)).0,
-    );
-    let mut foot = FootFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(
+    ) {
+        Ok(mut fl) => {
+            zero(
+                "joint feedback linearization",
+                allocations(|| fl.torque(0.1, &state)).0,
+            );
+            let mut limited = Saturated::new(fl, SVector::from_element(1.0));
+            zero(
+                "torque limits",
+                allocations(|| limited.torque(0.1, &state)).0,
+            );
+        }
+        Err(e) => not_applicable(name, "allocations of joint feedback linearization", &e),
+    }
+    match FootFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(
         p,
         Gains::critically_damped(400.0),
         foot_ref,
-    );
+    ) {
+        Ok(mut foot) => zero(
+            "foot feedback linearization",
+            allocations(|| foot.torque(0.1, &state)).0,
+        ),
+        Err(e) => not_applicable(name, "allocations of foot feedback linearization", &e),
+    }
+    match PdGravity::<L, f64, _, NQ, NC, NU>::new(p, Gains::new(50.0, 2.0), joint_ref) {
+        Ok(mut pd) => zero(
+            "PD with gravity compensation",
+            allocations(|| pd.torque(0.1, &state)).0,
+        ),
+        Err(e) => not_applicable(name, "allocations of PD with gravity compensation", &e),
+    }
+    match FootPdGravity::<L, f64, _, NQ, NC, NU>::new(p, Gains::new(2000.0, 40.0), foot_ref) {
+        Ok(mut foot_pd) => zero(
+            "foot PD with gravity compensation",
+            allocations(|| foot_pd.torque(0.1, &state)).0,
+        ),
+        Err(e) => not_applicable(name, "allocations of foot PD", &e),
+    }
     zero(
-        "foot feedback linearization",
-        allocations(|| foot.torque(0.1, &state)).0,
-    );
-    let mut pd = PdGravity::<L, f64, _, NQ, NC, NU>::new(p, Gains::new(50.0, 2.0), joint_ref);
-    zero(
-        "PD with gravity compensation",
-        allocations(|| pd.torque(0.1, &state)).0,
-    );
-    let mut foot_pd =
-        FootPdGravity::<L, f64, _, NQ, NC, NU>::new(p, Gains::new(2000.0, 40.0), foot_ref);
-    zero(
-        "foot PD with gravity compensation",
-        allocations(|| foot_pd.torque(0.1, &state)).0,
-    );
-    let mut limited = Saturated::new(fl, SVector::from_element(1.0));
-    zero(
-        "torque limits",
-        allocations(|| limited.torque(0.1, &state)).0,
+        "assembly along a branch",
+        allocations(|| assemble_along::<L, f64, NQ, NC, NU>(&p, &q, &theta, 0.05, &tol)).0,
     );
     zero(
         "actuated reduction",

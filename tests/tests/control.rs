@@ -6,15 +6,16 @@
 use leg_models::assembly::{assemble, consistent_velocity, foot_inverse, Tolerance};
 use leg_models::control::{
     actuated_reduction, actuated_reduction_null_space, ControlError, FootFeedbackLinearization,
-    Gains, JointFeedbackLinearization,
+    FootPdGravity, Gains, JointFeedbackLinearization, PdGravity,
 };
 use leg_models::dynamics::forward_dynamics;
 use leg_models::integrate::{ControlUpdate, State, StepOptions, TorqueSource};
 use leg_models::nalgebra::SVector;
 use leg_models::reference::{Reference, Sinusoid, StepCycle};
 use leg_models::simulate::Simulator;
+use leg_models::structure::{NotApplicable, Structure};
 use leg_models::{LegModel, Parameters};
-use leg_tests::{passive_release_state, random_assembled_state, Rng};
+use leg_tests::{not_applicable, passive_release_state, random_assembled_state, Rng};
 
 pub fn check_reductions<
     L: LegModel<NQ, NC, NU>,
@@ -23,24 +24,47 @@ pub fn check_reductions<
     const NU: usize,
 >() {
     let p = L::Params::<f64>::default();
+    let structure = Structure::of::<L, NQ, NC, NU>();
+    if let Err(why) = structure.joint_space() {
+        // Typed, not NaN: the reduction says why.
+        let s = passive_release_state::<L, NQ, NC, NU>(&p);
+        let terms = L::dynamics_terms(&s.q, &s.qd, &p);
+        assert_eq!(
+            actuated_reduction::<L, f64, NQ, NC, NU>(&p, &terms, &s.qd),
+            Err(ControlError::NotApplicable(why))
+        );
+        return not_applicable(L::NAME, "the actuated reduction", &why);
+    }
+    let full = structure.motors_determine_the_leg();
+    if let Err(why) = full {
+        not_applicable(L::NAME, "the null-space reduction (Schur form only)", &why);
+    }
     let mut rng = Rng::new(21);
     for _ in 0..100 {
         let s = random_assembled_state::<L, NQ, NC, NU>(&p, &mut rng, 3.0);
         let terms = L::dynamics_terms(&s.q, &s.qd, &p);
         let schur = actuated_reduction::<L, f64, NQ, NC, NU>(&p, &terms, &s.qd).unwrap();
-        let ns = actuated_reduction_null_space::<L, f64, NQ, NC, NU>(&p, &terms, &s.qd).unwrap();
         let scale = 1.0 + schur.a_tilde.amax();
-        assert!(
-            (schur.a_tilde - ns.a_tilde).amax() < 1e-10 * scale,
-            "{}: Ã differs",
-            L::NAME
-        );
-        let bscale = 1.0 + schur.b_tilde.amax();
-        assert!(
-            (schur.b_tilde - ns.b_tilde).amax() < 1e-10 * bscale,
-            "{}: b̃ differs",
-            L::NAME
-        );
+        // Both forms square the passive joints' conditioning: rounding grows as 1/rcond.
+        let tol = 1e-12 / leg_tests::passive_rcond::<L, NQ, NC, NU>(&p, &s.q);
+        if full.is_ok() {
+            let ns =
+                actuated_reduction_null_space::<L, f64, NQ, NC, NU>(&p, &terms, &s.qd).unwrap();
+            assert!(
+                (schur.a_tilde - ns.a_tilde).amax() < tol * scale,
+                "{}: Ã differs by {:e} (scale {scale:e}): {} vs {}",
+                L::NAME,
+                (schur.a_tilde - ns.a_tilde).amax(),
+                schur.a_tilde,
+                ns.a_tilde
+            );
+            let bscale = 1.0 + schur.b_tilde.amax();
+            assert!(
+                (schur.b_tilde - ns.b_tilde).amax() < tol * bscale,
+                "{}: b̃ differs",
+                L::NAME
+            );
+        }
         assert!(
             (schur.a_tilde - schur.a_tilde.transpose()).amax() < 1e-10 * scale,
             "Ã symmetric"
@@ -87,6 +111,9 @@ pub fn check_error_dynamics<
     const NU: usize,
 >() {
     let p = L::Params::<f64>::default();
+    if let Err(why) = Structure::of::<L, NQ, NC, NU>().joint_space() {
+        return not_applicable(L::NAME, "joint feedback linearization", &why);
+    }
     let reference = Sinusoid {
         offset: home_theta::<L, NQ, NC, NU>(&p),
         amplitude: SVector::from_element(0.1),
@@ -101,7 +128,8 @@ pub fn check_error_dynamics<
             p,
             Gains::new(kp, kd),
             reference,
-        );
+        )
+        .unwrap();
         let opts = StepOptions {
             control: ControlUpdate::PerStage,
             ..StepOptions::rk4(1e-3)
@@ -169,7 +197,8 @@ fn foot_tracking<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, cons
         controller_params,
         Gains::critically_damped(400.0),
         cycle,
-    );
+    )
+    .unwrap();
     let sim = Simulator::<L, f64, NQ, NC, NU>::new(p, StepOptions::rk4(1e-3));
     let samples = sim.run(initial, 3000, &mut controller).unwrap();
     let worst = |from: f64, to: f64| {
@@ -188,6 +217,9 @@ pub fn check_foot_tracking<
     const NC: usize,
     const NU: usize,
 >() {
+    if let Err(why) = Structure::of::<L, NQ, NC, NU>().foot_space() {
+        return not_applicable(L::NAME, "foot tracking", &why);
+    }
     let (a, b) = foot_tracking::<L, NQ, NC, NU>(L::Params::default());
     assert!(
         a.max(b) < 1e-4,
@@ -203,6 +235,9 @@ pub fn check_mass_error_robustness<
     const NC: usize,
     const NU: usize,
 >() {
+    if let Err(why) = Structure::of::<L, NQ, NC, NU>().foot_space() {
+        return not_applicable(L::NAME, "foot tracking with masses 20 % off", &why);
+    }
     let mut wrong = L::Params::<f64>::default();
     scale_masses(&mut wrong, 1.2);
     // A 20 % model error acts like a disturbance of about 0.2 (g + |ÿ_ref|) ≈ 3 m/s²,
@@ -218,6 +253,67 @@ pub fn check_mass_error_robustness<
         "{}: the error grows: {a:e} then {b:e} m",
         L::NAME
     );
+}
+
+/// Every controller is built where its method applies to the leg, and refused with the
+/// reason where it does not; the refusal is decided by the leg's structure alone.
+pub fn check_applicability<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>() {
+    let p = L::Params::<f64>::default();
+    let structure = Structure::of::<L, NQ, NC, NU>();
+    let home = passive_release_state::<L, NQ, NC, NU>(&p).q;
+    let theta = home_theta::<L, NQ, NC, NU>(&p);
+    let hold = Sinusoid {
+        offset: theta,
+        amplitude: SVector::zeros(),
+        frequency: SVector::zeros(),
+        phase: SVector::zeros(),
+    };
+    let cycle = StepCycle {
+        center: L::foot_position(&home, &p),
+        half_stride: 0.01,
+        half_height: 0.01,
+        period: 0.5,
+    };
+    let expect = |built: Result<(), ControlError>, applies: Result<(), NotApplicable>| {
+        assert_eq!(
+            built,
+            applies.map_err(ControlError::NotApplicable),
+            "{}",
+            L::NAME
+        );
+    };
+    let g2 = Gains::critically_damped(100.0);
+    expect(
+        FootFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(p, g2, cycle).map(|_| ()),
+        structure.foot_space(),
+    );
+    expect(
+        FootPdGravity::<L, f64, _, NQ, NC, NU>::new(p, g2, cycle).map(|_| ()),
+        structure.foot_space(),
+    );
+    let gu = Gains::critically_damped(100.0);
+    expect(
+        JointFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(p, gu, hold).map(|_| ()),
+        structure.joint_space(),
+    );
+    expect(
+        PdGravity::<L, f64, _, NQ, NC, NU>::new(p, gu, hold).map(|_| ()),
+        structure.joint_space(),
+    );
+    // Where a controller applies, it acts at home (no NaN, no error).
+    if let Ok(mut c) = JointFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(p, gu, hold) {
+        let s = State {
+            q: home,
+            qd: SVector::zeros(),
+        };
+        let u = c.torque(0.0, &s).unwrap();
+        assert!(u.iter().all(|x| x.is_finite()), "{}", L::NAME);
+    }
 }
 
 macro_rules! control {
@@ -240,6 +336,10 @@ macro_rules! control {
             fn masses_off_by_20_percent_stay_stable() {
                 super::check_mass_error_robustness::<Model, $nq, $nc, $nu>();
             }
+            #[test]
+            fn controllers_apply_by_the_legs_structure() {
+                super::check_applicability::<Model, $nq, $nc, $nu>();
+            }
         }
     };
 }
@@ -258,7 +358,8 @@ fn two_link_uses_the_open_chain_law() {
         phase: SVector::zeros(),
     };
     let gains = Gains::new(50.0, 9.0);
-    let mut c = JointFeedbackLinearization::<TwoLink, f64, _, 2, 0, 2>::new(p, gains, reference);
+    let mut c =
+        JointFeedbackLinearization::<TwoLink, f64, _, 2, 0, 2>::new(p, gains, reference).unwrap();
     let s = State {
         q: SVector::<f64, 2>::new(-0.9, 1.2),
         qd: SVector::<f64, 2>::new(0.3, -0.4),
@@ -315,7 +416,8 @@ fn torque_limits_clip_and_count() {
         p,
         Gains::critically_damped(400.0),
         cycle,
-    );
+    )
+    .unwrap();
     let mut tight = Saturated::new(fl, SVector::<f64, 2>::from_element(0.05));
     let sim = Simulator::<Minitaur, f64, 4, 2, 2>::new(p, StepOptions::rk4(1e-3));
     let samples = sim.run(s, 500, &mut tight).unwrap();

@@ -10,7 +10,10 @@
 //! `u` of the runtime). In MJCF a closure is an `<equality><connect>` between two sites;
 //! URDF holds only the spanning tree, with one fixed, massless frame per closure point,
 //! named `<closure>_a` and `<closure>_b`, and a `foot` frame, so that tools reading URDF
-//! can rebuild the loop.
+//! can rebuild the loop. URDF has no rotor inertia: each motor's transmission carries
+//! Drake's extension elements `<drake:rotor_inertia>` and `<drake:gear_ratio>` (read by
+//! Drake; other parsers skip them) and a comment with the reflected inertia `I·N²`.
+//! The spec validation reserves every name the exporters add (`foot`, `<closure>_a`, …).
 
 use std::fmt::Write;
 
@@ -180,7 +183,11 @@ pub fn urdf(m: &Model) -> String {
         num(pair(m, &m.gravity).0),
         num(pair(m, &m.gravity).1)
     );
-    let _ = writeln!(out, "<robot name=\"{}\">", m.name);
+    let _ = writeln!(
+        out,
+        "<robot name=\"{}\" xmlns:drake=\"http://drake.mit.edu\">",
+        m.name
+    );
     let _ = writeln!(out, "  <link name=\"base\"/>");
     for l in &m.links {
         let (cx, cy) = pair(m, &l.com);
@@ -262,12 +269,19 @@ pub fn urdf(m: &Model) -> String {
             "    <joint name=\"{}\"><hardwareInterface>hardware_interface/EffortJointInterface</hardwareInterface></joint>",
             l.name
         );
+        let _ = writeln!(out, "    <actuator name=\"{}_motor\">", l.name);
         let _ = writeln!(
             out,
-            "    <actuator name=\"{}_motor\"><mechanicalReduction>{}</mechanicalReduction></actuator>",
-            l.name,
+            "      <mechanicalReduction>{}</mechanicalReduction>",
             num(n)
         );
+        let _ = writeln!(
+            out,
+            "      <drake:rotor_inertia value=\"{}\"/>\n      <drake:gear_ratio value=\"{}\"/>",
+            num(ir),
+            num(n)
+        );
+        let _ = writeln!(out, "    </actuator>");
         let _ = writeln!(
             out,
             "    <!-- rotor inertia {} kg m^2, reflected {} kg m^2 -->",

@@ -59,6 +59,91 @@ struct Derived {
     spec_sha256: String,
     functions: Vec<DerivedFunction>,
     casadi_c: String,
+    home_check: HomeCheck,
+}
+
+/// The spec's home pose assembled by the derivation (every joint free, the spec's
+/// parameters), and the leg's structure there.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct HomeCheck {
+    /// The largest coordinate of any point of the leg at home (m): the leg's size.
+    scale: f64,
+    /// `max |φ|` at the home pose as written.
+    raw_residual: f64,
+    /// `max |φ|` after assembly.
+    residual: f64,
+    assembled: Vec<f64>,
+    /// The largest change of a joint angle during assembly (rad).
+    moved: f64,
+    rank: usize,
+    redundant_rows: Vec<usize>,
+    mobility: usize,
+}
+
+/// What a home pose may miss by (relative to the leg's size): it is a guess written with a
+/// few digits, from which assembly starts.
+const HOME_TOLERANCE: f64 = 1e-2;
+/// How closely assembly must meet the closures (relative to the leg's size), as the runtime.
+const ASSEMBLY_TOLERANCE: f64 = 1000.0 * f64::EPSILON;
+
+/// A home pose that does not assemble is a spec error at `home`.
+fn check_home(spec: &Spec, check: &HomeCheck) -> Result<(), String> {
+    let (line, column, field) = match &spec.file.home {
+        Some(h) => {
+            let (l, c) = crate::spec::line_column(&spec.text, h.span().start);
+            (l, c, "home")
+        }
+        None => (1, 1, "home (not given: all zeros)"),
+    };
+    let error = |message: String| {
+        crate::spec::SpecError {
+            file: spec.path.clone(),
+            line,
+            column,
+            field: field.into(),
+            message,
+        }
+        .to_string()
+    };
+    let scale = check.scale;
+    let assembled = check.residual <= ASSEMBLY_TOLERANCE * scale;
+    let pose = check
+        .assembled
+        .iter()
+        .map(|x| format!("{x:.4}"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    if check.raw_residual > HOME_TOLERANCE * scale || !assembled {
+        let hint = if assembled {
+            format!(" (the nearest assembled pose is [{pose}])")
+        } else {
+            format!(
+                " (assembly from it stops at residual {:.3e} m)",
+                check.residual
+            )
+        };
+        return Err(error(format!(
+            "the home pose does not assemble: closure residual {:.3e} m, more than {} of the leg's size {:.3} m{hint}",
+            check.raw_residual, HOME_TOLERANCE, scale
+        )));
+    }
+    if check.moved > 0.2 {
+        return Err(error(format!(
+            "the home pose is far from assembled: assembly moves a joint by {:.3} rad (the nearest assembled pose is [{pose}])",
+            check.moved
+        )));
+    }
+    Ok(())
+}
+
+/// How the leg's mobility at home compares with its motors, for people.
+pub fn actuation_note(mobility: usize, motors: usize) -> &'static str {
+    match mobility.cmp(&motors) {
+        std::cmp::Ordering::Equal => "fully actuated",
+        std::cmp::Ordering::Greater => "under-actuated",
+        std::cmp::Ordering::Less => "over-actuated",
+    }
 }
 
 #[derive(Deserialize)]
@@ -146,6 +231,8 @@ fn derive(root: &Path, py: &Path, model: &Model) -> Result<Derived, String> {
 
 /// Puts the derivation's programs together with what the model is.
 fn assemble(spec: &Spec, model: &Model, derived: Derived) -> IrFile {
+    let structure = &derived.home_check;
+    let (redundant_rows, mobility) = (structure.redundant_rows.clone(), structure.mobility);
     let n = model.links.len();
     let fields: Vec<String> = model.params.iter().map(|p| p.name.clone()).collect();
     let functions = derived
@@ -183,6 +270,8 @@ fn assemble(spec: &Spec, model: &Model, derived: Derived) -> IrFile {
             actuated: model.actuated.clone(),
             home: model.home.clone(),
             closures: model.closures.iter().map(|c| c.name.clone()).collect(),
+            redundant_rows,
+            mobility,
             params: model.params.clone(),
         },
         functions,
@@ -286,10 +375,29 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, String> {
     let py = python(root)?;
     let mut irs = Vec::new();
     let mut files = BTreeMap::new();
+    let mut notes = Vec::new();
     for spec in &specs {
         let ir = if selected(&spec.name) {
             let model = model::build(spec).map_err(|e| e.to_string())?;
             let mut derived = derive(root, &py, &model)?;
+            check_home(spec, &derived.home_check)?;
+            let h = &derived.home_check;
+            let motors = model.actuated.len();
+            notes.push(format!(
+                "{}: mobility {} (rank J {} of {} closure rows{}), {} motor{}: {}",
+                spec.name,
+                h.mobility,
+                h.rank,
+                2 * model.closures.len(),
+                if h.redundant_rows.is_empty() {
+                    String::new()
+                } else {
+                    format!(", redundant rows {:?}", h.redundant_rows)
+                },
+                motors,
+                if motors == 1 { "" } else { "s" },
+                actuation_note(h.mobility, motors)
+            ));
             let c = std::mem::take(&mut derived.casadi_c);
             files.insert(Path::new(CASADI_C_DIR).join(format!("{}.c", spec.name)), c);
             let ir = assemble(spec, &model, derived);
@@ -335,9 +443,10 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, String> {
         }
         if stale.is_empty() {
             return Ok(format!(
-                "generated code is up to date ({}; {:.1} s)",
+                "generated code is up to date ({}; {:.1} s)\n{}",
                 names.join(", "),
-                started.elapsed().as_secs_f64()
+                started.elapsed().as_secs_f64(),
+                notes.join("\n")
             ));
         }
         let list: Vec<String> = stale.iter().map(|p| format!("  {}", p.display())).collect();
@@ -364,7 +473,8 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, String> {
         }
     }
     Ok(format!(
-        "generated {} in {:.1} s; {}",
+        "{}\ngenerated {} in {:.1} s; {}",
+        notes.join("\n"),
         names.join(", "),
         started.elapsed().as_secs_f64(),
         if written.is_empty() {

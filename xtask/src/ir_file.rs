@@ -32,6 +32,11 @@ pub struct ModelInfo {
     /// The home pose (rad), in coordinate order.
     pub home: Vec<f64>,
     pub closures: Vec<String>,
+    /// Closure rows implied by the others at the assembled home pose (their forces are
+    /// held at zero), found by the derivation.
+    pub redundant_rows: Vec<usize>,
+    /// `NQ − rank J` at the assembled home pose.
+    pub mobility: usize,
     pub params: Vec<Param>,
 }
 

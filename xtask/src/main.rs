@@ -157,27 +157,62 @@ fn run_export(root: &Path, args: &[String]) -> Result<(), cli::Error> {
 }
 
 fn list(root: &Path) -> Result<(), cli::Error> {
-    println!(
-        "{:<18} {:>3} {:>3} {:>3}  actuated joints    spec",
-        "model", "NQ", "NC", "NU"
-    );
-    for path in gen::spec_paths(root).map_err(cli::Error::Failed)? {
-        let spec = gen::load_spec(root, &path).map_err(cli::Error::Failed)?;
+    // Mobility and redundant rows come from the derivation (the committed IR).
+    let irs = gen::committed_irs(root).map_err(cli::Error::Failed)?;
+    let mut rows = vec![[
+        "model".to_string(),
+        "NQ".into(),
+        "NC".into(),
+        "NU".into(),
+        "mobility".into(),
+        "actuation".into(),
+        "actuated joints".into(),
+        "spec".into(),
+    ]];
+    for (path, ir) in gen::spec_paths(root)
+        .map_err(cli::Error::Failed)?
+        .iter()
+        .zip(&irs)
+    {
+        let spec = gen::load_spec(root, path).map_err(cli::Error::Failed)?;
         let m = model::build(&spec).map_err(|e| cli::Error::Failed(e.to_string()))?;
         let actuated: Vec<&str> = m
             .actuated
             .iter()
             .map(|&a| m.links[a].name.as_str())
             .collect();
-        println!(
-            "{:<18} {:>3} {:>3} {:>3}  {:<18} {}",
-            m.name,
-            m.links.len(),
-            2 * m.closures.len(),
-            m.actuated.len(),
+        let redundant = match ir.model.redundant_rows.len() {
+            0 => String::new(),
+            n => format!(" ({n} redundant)"),
+        };
+        rows.push([
+            m.name.clone(),
+            m.links.len().to_string(),
+            format!("{}{redundant}", 2 * m.closures.len()),
+            m.actuated.len().to_string(),
+            ir.model.mobility.to_string(),
+            gen::actuation_note(ir.model.mobility, m.actuated.len()).to_string(),
             actuated.join(", "),
-            spec.path.display()
-        );
+            spec.path.display().to_string(),
+        ]);
+    }
+    let widths: Vec<usize> = (0..8)
+        .map(|c| rows.iter().map(|r| r[c].chars().count()).max().unwrap_or(0))
+        .collect();
+    for r in &rows {
+        let cells: Vec<String> = r
+            .iter()
+            .zip(&widths)
+            .enumerate()
+            .map(|(c, (cell, &w))| {
+                if (1..=4).contains(&c) {
+                    format!("{cell:>w$}")
+                } else {
+                    format!("{cell:<w$}")
+                }
+            })
+            .collect();
+        println!("{}", cells.join("  ").trim_end());
     }
     Ok(())
 }

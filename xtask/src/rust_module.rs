@@ -208,6 +208,17 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         });
     }
     let home = info.home.iter().map(|&h| codegen::f64_literal(h));
+    if info.redundant_rows.iter().any(|&r| r >= nc) || info.mobility > nq {
+        return Err(Error {
+            context: ctx.clone(),
+            message: format!(
+                "redundant rows {:?} or mobility {} out of range",
+                info.redundant_rows, info.mobility
+            ),
+        });
+    }
+    let redundant = (0..nc).map(|r| info.redundant_rows.contains(&r));
+    let mobility = lit(info.mobility);
 
     let mut fields = Vec::new();
     let mut defaults = Vec::new();
@@ -307,6 +318,8 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             const JOINT_NAMES: [&'static str; NQ] = [#(#joints),*];
             const ACTUATED: [usize; NU] = [#(#actuated),*];
             const HOME: [f64; NQ] = [#(#home),*];
+            const REDUNDANT_ROWS: [bool; NC] = [#(#redundant),*];
+            const MOBILITY: usize = #mobility;
             type Params<T: Real> = Params<T>;
             #(#methods)*
         }

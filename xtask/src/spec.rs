@@ -482,6 +482,7 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
         }
     }
     check_point(file.foot.get_ref(), "foot")?;
+    check_reserved(ctx, file)?;
     if let Some(home) = &file.home {
         let h = home.get_ref();
         if h.len() != file.links.len() {
@@ -493,6 +494,51 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
         }
         for &v in h {
             check_value(v, Sign::Any).map_err(|m| ctx.span(home, "home", m))?;
+        }
+    }
+    Ok(())
+}
+
+/// Names the exporters add (URDF frames for the foot and the closure points, and their
+/// fixed joints) must not be spec names: a link called `foot` would make two URDF links
+/// `foot`. Each clash is reported at the spec name, with what the exporter uses it for.
+fn check_reserved(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
+    let mut reserved: Vec<(String, String)> = vec![
+        ("foot".into(), "the foot frame of the exports".into()),
+        (
+            "foot_frame".into(),
+            "the joint of the foot frame in URDF".into(),
+        ),
+    ];
+    for c in &file.closures {
+        let n = c.get_ref().name.get_ref();
+        for side in ["a", "b"] {
+            let why = format!("the frame of point {side} of closure `{n}` in the exports");
+            reserved.push((format!("{n}_{side}"), why.clone()));
+            reserved.push((format!("{n}_{side}_frame"), format!("the joint of {why}")));
+        }
+    }
+    let named = file
+        .links
+        .iter()
+        .enumerate()
+        .map(|(i, l)| (&l.get_ref().name, format!("links[{i}].name")))
+        .chain(
+            file.closures
+                .iter()
+                .enumerate()
+                .map(|(k, c)| (&c.get_ref().name, format!("closures[{k}].name"))),
+        );
+    for (name, field) in named {
+        if let Some((_, why)) = reserved.iter().find(|(r, _)| r == name.get_ref()) {
+            return Err(ctx.span(
+                name,
+                field,
+                format!(
+                    "`{}` is reserved for {why}; choose another name",
+                    name.get_ref()
+                ),
+            ));
         }
     }
     Ok(())

@@ -1,4 +1,5 @@
-//! `cargo xtask test`: every check CI runs, in the order that fails fastest.
+//! `cargo xtask test`: every check CI runs. Each check runs even when an earlier one
+//! failed, and every failure is listed at the end.
 
 use std::path::Path;
 use std::process::Command;
@@ -28,10 +29,14 @@ fn pending_snapshots(root: &Path) -> Vec<String> {
     out
 }
 
-/// Every model exported to MJCF and loaded in MuJoCo (from the generation step's Python
-/// environment): mass matrix and bias forces against ours, and the closure in a MuJoCo run.
-fn mujoco_cross_check(root: &Path) -> Result<(), String> {
-    eprintln!("==> MuJoCo cross-check (xtask/mujoco_check.py)");
+/// Every model exported and loaded by independent tools, from the generation step's
+/// Python environment: the MJCF in MuJoCo (mass matrix and bias forces against ours, and
+/// the closure in a MuJoCo run), the URDF in Pinocchio (its parser, mass matrix, bias
+/// forces, foot and closure frames against ours). Returns the models that disagree.
+fn cross_checks(root: &Path) -> Result<Vec<String>, String> {
+    eprintln!(
+        "==> MuJoCo (xtask/mujoco_check.py) and Pinocchio (xtask/urdf_check.py) cross-checks"
+    );
     cargo(
         root,
         &[
@@ -49,84 +54,145 @@ fn mujoco_cross_check(root: &Path) -> Result<(), String> {
     let target = target_dir(root);
     let legs = target.join("debug").join("legs");
     let py = gen::python(root)?;
-    let dir = target.join("mujoco");
+    let dir = target.join("exports");
+    let mut failed = Vec::new();
     for name in xtask::cli::model_names(root)? {
         let spec = gen::load_spec(
             root,
             &root.join(gen::SPECS_DIR).join(format!("{name}.toml")),
         )?;
         let model = xtask::model::build(&spec).map_err(|e| e.to_string())?;
-        let file = dir.join(format!("{name}.xml"));
-        xtask::cli::write_atomic(&file, &xtask::export::mjcf(&model))?;
-        let status = Command::new(&py)
-            .arg(root.join("xtask").join("mujoco_check.py"))
-            .arg(&legs)
-            .arg(&name)
-            .arg(&file)
-            .current_dir(root)
-            .status()
-            .map_err(|e| format!("cannot run the MuJoCo check: {e}"))?;
-        if !status.success() {
-            return Err(format!("MuJoCo disagrees with `{name}` (see above)"));
+        let mjcf = dir.join(format!("{name}.xml"));
+        xtask::cli::write_atomic(&mjcf, &xtask::export::mjcf(&model))?;
+        let urdf = dir.join(format!("{name}.urdf"));
+        xtask::cli::write_atomic(&urdf, &xtask::export::urdf(&model))?;
+        for (script, file, tool) in [
+            ("mujoco_check.py", &mjcf, "MuJoCo"),
+            ("urdf_check.py", &urdf, "Pinocchio"),
+        ] {
+            let status = Command::new(&py)
+                .arg(root.join("xtask").join(script))
+                .arg(&legs)
+                .arg(&name)
+                .arg(file)
+                .current_dir(root)
+                .status()
+                .map_err(|e| format!("cannot run {script}: {e}"))?;
+            if !status.success() {
+                failed.push(format!("{tool} disagrees with `{name}` (see above)"));
+            }
         }
     }
-    Ok(())
+    Ok(failed)
 }
 
 pub fn run(root: &Path) -> Result<(), String> {
-    cargo(root, &["fmt", "--all", "--check"], &[])
-        .map_err(|e| format!("{e}: run `cargo fmt --all`"))?;
+    let mut failures: Vec<String> = Vec::new();
+    let mut check = |what: &str, r: Result<(), String>| {
+        if let Err(e) = r {
+            eprintln!("FAILED: {what}: {e}");
+            failures.push(format!("{what}: {e}"));
+        }
+    };
+    check(
+        "formatting",
+        cargo(root, &["fmt", "--all", "--check"], &[])
+            .map_err(|e| format!("{e}: run `cargo fmt --all`")),
+    );
     eprintln!("==> cargo xtask gen --check");
-    let report = gen::run(
-        root,
-        &GenOptions {
-            check: true,
-            names: Vec::new(),
-        },
-    )?;
-    eprintln!("{report}");
+    check(
+        "gen --check",
+        gen::run(
+            root,
+            &GenOptions {
+                check: true,
+                names: Vec::new(),
+            },
+        )
+        .map(|report| eprintln!("{report}")),
+    );
+    // Which checks did not apply to which leg, and why: written by the tests.
+    let applicability = target_dir(root).join("not-applicable.txt");
+    let _ = std::fs::remove_file(&applicability);
     // Snapshots must match as committed: insta neither writes nor accepts here.
-    cargo(
-        root,
-        &["test", "--workspace", "--all-features"],
-        &[("INSTA_UPDATE", "no"), ("CI", "true")],
-    )?;
+    check(
+        "workspace tests",
+        cargo(
+            root,
+            &["test", "--workspace", "--all-features", "--no-fail-fast"],
+            &[("INSTA_UPDATE", "no"), ("CI", "true")],
+        ),
+    );
     let pending = pending_snapshots(root);
     if !pending.is_empty() {
-        return Err(format!(
-            "unreviewed snapshots: {}\nrun `cargo insta review`",
-            pending.join(", ")
-        ));
+        check(
+            "snapshots",
+            Err(format!(
+                "unreviewed snapshots: {}\nrun `cargo insta review`",
+                pending.join(", ")
+            )),
+        );
     }
-    mujoco_cross_check(root)?;
+    match cross_checks(root) {
+        Ok(failed) => failed
+            .into_iter()
+            .for_each(|f| check("cross-check", Err(f))),
+        Err(e) => check("cross-checks", Err(e)),
+    }
     eprintln!("==> instruction budgets ({})", xtask::bench::BUDGETS);
-    eprintln!("{}", xtask::bench::check_budgets(root, false)?);
-    cargo(
-        root,
-        &[
-            "build",
-            "-p",
-            "leg-models",
-            "-p",
-            "generated",
-            "--no-default-features",
-        ],
-        &[],
-    )
-    .map_err(|e| format!("{e}: the runtime and the generated models must build without std"))?;
-    cargo(
-        root,
-        &[
-            "clippy",
-            "--workspace",
-            "--all-targets",
-            "--all-features",
-            "--",
-            "-D",
-            "warnings",
-        ],
-        &[],
-    )?;
-    eprintln!("all checks passed");
-    Ok(())
+    check(
+        "instruction budgets",
+        xtask::bench::check_budgets(root, false).map(|r| eprintln!("{r}")),
+    );
+    check(
+        "no_std build",
+        cargo(
+            root,
+            &[
+                "build",
+                "-p",
+                "leg-models",
+                "-p",
+                "generated",
+                "--no-default-features",
+            ],
+            &[],
+        )
+        .map_err(|e| format!("{e}: the runtime and the generated models must build without std")),
+    );
+    check(
+        "clippy",
+        cargo(
+            root,
+            &[
+                "clippy",
+                "--workspace",
+                "--all-targets",
+                "--all-features",
+                "--",
+                "-D",
+                "warnings",
+            ],
+            &[],
+        ),
+    );
+    if let Ok(text) = std::fs::read_to_string(&applicability) {
+        let mut lines: Vec<&str> = text.lines().collect();
+        lines.sort_unstable();
+        lines.dedup();
+        eprintln!(
+            "checks that do not apply to a leg (by its structure):\n  {}",
+            lines.join("\n  ")
+        );
+    }
+    if failures.is_empty() {
+        eprintln!("all checks passed");
+        Ok(())
+    } else {
+        Err(format!(
+            "{} check(s) failed:\n  {}",
+            failures.len(),
+            failures.join("\n  ")
+        ))
+    }
 }

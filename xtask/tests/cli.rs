@@ -256,8 +256,17 @@ fn sim_refuses_bad_input_and_writes_nothing() {
         "`--duration abc`",
     );
     refused(
-        &legs(&["sim", "minitaur", "--speed", "2", "--out", d]),
-        "unknown flag `--speed`",
+        &legs(&["sim", "minitaur", "--sped", "2", "--out", d]),
+        "unknown flag `--sped`",
+    );
+    refused(
+        &legs(&["sim", "minitaur", "--speed", "0", "--out", d]),
+        "`--speed 0`",
+    );
+    // A controller that does not apply to the leg is refused with the reason.
+    refused(
+        &legs(&["sim", "klann_linkage", "--controller", "foot-fl", "--out", d]),
+        "controller `foot-fl` does not apply to klann_linkage: the foot has two coordinates but the leg 1 motor",
     );
     assert!(!dir.exists(), "bad input left {}", dir.display());
 }

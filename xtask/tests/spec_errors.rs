@@ -391,3 +391,58 @@ fn home_pose_with_the_wrong_number_of_angles() {
         vec![0.0; 4]
     );
 }
+
+#[test]
+fn names_the_exporters_add_are_reserved() {
+    let text = VALID.replace("lower_b", "foot");
+    let (l, c) = pos(&text, "\"foot\"", 0);
+    expect_error(
+        &text,
+        (l, c),
+        "links[3].name",
+        "`foot` is reserved for the foot frame of the exports",
+    );
+    // A link named like the frame of a closure point.
+    let text = edit("name = \"upper_b\"", "name = \"toe_a\"", 0)
+        .replace("parent = \"upper_b\"", "parent = \"toe_a\"");
+    let (l, c) = pos(&text, "\"toe_a\"", 0);
+    expect_error(
+        &text,
+        (l, c),
+        "links[2].name",
+        "`toe_a` is reserved for the frame of point a of closure `toe`",
+    );
+}
+
+/// Runs the derivation (CasADi, from the project's Python environment): a home pose that
+/// does not assemble is a spec error located at `home`, and nothing is written.
+#[test]
+fn a_home_pose_that_does_not_assemble_is_located() {
+    let root = TempRoot::new("bad-home");
+    for dir in ["xtask", ".venv"] {
+        let from = gen::workspace_root().join(dir);
+        std::os::unix::fs::symlink(&from, root.0.join(dir)).unwrap();
+    }
+    // Every link along x: the two branches end 5 cm apart on a 0.35 m leg.
+    let text = edit(
+        "gravity = [0.0, -9.81]\n",
+        "gravity = [0.0, -9.81]\nhome = [0.0, 0.0, 0.0, 0.0]\n",
+        0,
+    );
+    root.write("leg-models/specs/leg.toml", &text);
+    let before = root.listing();
+    let err = gen::run(
+        &root.0,
+        &GenOptions {
+            check: false,
+            names: vec![],
+        },
+    )
+    .unwrap_err();
+    let (l, c) = pos(&text, "[0.0, 0.0, 0.0, 0.0]", 0);
+    assert!(
+        err.starts_with(&format!("leg-models/specs/leg.toml:{l}:{c}: home: the home pose does not assemble: closure residual 5.000e-2 m")),
+        "{err}"
+    );
+    assert_eq!(root.listing(), before, "a failed generation changed files");
+}

@@ -1,7 +1,9 @@
 //! `cargo xtask eval MODEL --q … [--qd …] [--u …] [--json] [--assemble]`: every term at
 //! one state.
 
-use leg_models::assembly::{assemble, consistent_velocity, Tolerance};
+use leg_models::assembly::{
+    assemble, assemble_along, consistent_velocity, project_position, Tolerance,
+};
 use leg_models::control::actuated_reduction;
 use leg_models::dynamics::forward_dynamics;
 use leg_models::nalgebra::{SMatrix, SVector};
@@ -10,12 +12,16 @@ use serde_json::{json, Map, Value};
 use xtask::cli::{numbers, Error, Flags};
 
 pub const HELP: &str = "\
-usage: cargo xtask eval MODEL --q Q1,Q2,… [--qd …] [--u …] [--json] [--assemble]
+usage: cargo xtask eval MODEL --q Q1,Q2,… [--qd …] [--u …] [--json] [--assemble [--guess …]]
 
   --q         joint angles (rad), one per joint; with --assemble, the actuated angles only
   --qd        joint rates (rad/s), default zero; with --assemble, the actuated rates only
   --u         motor torques (N m), one per actuated joint, default zero
-  --assemble  solve the loop for the passive joints first (from the spec's home pose)
+  --assemble  solve the loops for the passive joints first: by default following the
+              assembly branch of the spec's home pose while the motors move from their
+              home angles to --q (an error says where that branch ends); with --guess,
+              from that pose (it picks the assembly mode)
+  --guess     with --assemble: a starting pose, one angle per joint (rad)
   --json      one JSON object: q, qd, u, M, N, G, J, Jdot_qdot, qdd, F, A_tilde, b_tilde,
               foot, foot_jacobian, kinetic, potential, phi (matrices as arrays of rows);
               a term that cannot be computed at this state is null, and `errors` says why
@@ -48,17 +54,40 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
             Some(t) => numbers("--qd", &t, NU, "actuated rates with --assemble")?,
             None => vec![0.0; NU],
         };
-        let guess = SVector::<f64, NQ>::from_column_slice(&L::HOME);
         let theta = SVector::<f64, NU>::from_column_slice(&theta);
-        let q = assemble::<L, f64, NQ, NC, NU>(&p, &theta, &guess, &Tolerance::default()).map_err(
-            |e| {
-                Error::usage(format!(
-                    "cannot assemble {} at θ = {:?}: {e}",
-                    L::NAME,
-                    theta.as_slice()
-                ))
-            },
-        )?;
+        let tol = Tolerance::default();
+        let cannot = |how: &str, e: &dyn std::fmt::Display| {
+            Error::usage(format!(
+                "cannot assemble {} at θ = {:?} {how}: {e}",
+                L::NAME,
+                theta.as_slice()
+            ))
+        };
+        let q = match flags.take("--guess") {
+            Some(g) => {
+                let guess = SVector::<f64, NQ>::from_column_slice(&numbers(
+                    "--guess",
+                    &g,
+                    NQ,
+                    "a starting pose, one angle per joint",
+                )?);
+                assemble::<L, f64, NQ, NC, NU>(&p, &theta, &guess, &tol)
+                    .map_err(|e| cannot("from --guess", &e))?
+            }
+            None => {
+                let mut home = SVector::<f64, NQ>::from_column_slice(&L::HOME);
+                project_position::<L, f64, NQ, NC, NU>(&p, &mut home, &tol)
+                    .map_err(|e| cannot("(the home pose does not assemble)", &e))?;
+                assemble_along::<L, f64, NQ, NC, NU>(&p, &home, &theta, 0.05, &tol).map_err(
+                    |e| {
+                        cannot(
+                            "on the home pose's branch",
+                            &format!("{e}; give a starting pose in another mode with --guess"),
+                        )
+                    },
+                )?
+            }
+        };
         let qd = consistent_velocity::<L, f64, NQ, NC, NU>(
             &p,
             &q,
@@ -75,6 +104,9 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
         };
         (q, qd)
     };
+    if flags.take("--guess").is_some() {
+        return Err(Error::usage("`--guess` goes with `--assemble`"));
+    }
     let u = match flags.take("--u") {
         Some(t) => SVector::<f64, NU>::from_column_slice(&numbers("--u", &t, NU, "motor torques")?),
         None => SVector::zeros(),

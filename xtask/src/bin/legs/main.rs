@@ -82,7 +82,7 @@ fn main() -> ExitCode {
         }
         Some("eval") => Flags::parse(
             &args[1..],
-            &["--q", "--qd", "--u"],
+            &["--q", "--qd", "--u", "--guess"],
             &["--json", "--assemble"],
         )
         .and_then(eval),

@@ -5,16 +5,17 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use leg_models::assembly::{
-    assemble, consistent_velocity, foot_inverse, project_position, Tolerance,
+    assemble_along, consistent_velocity, foot_inverse, project_position, Tolerance,
 };
 use leg_models::control::{
-    effective_inertias, ControlError, FootFeedbackLinearization, FootPdGravity, Gains,
+    foot_inertias, joint_inertias, ControlError, FootFeedbackLinearization, FootPdGravity, Gains,
     JointFeedbackLinearization, PdGravity, Saturated,
 };
 use leg_models::integrate::{State, StepOptions, TorqueSource};
 use leg_models::nalgebra::SVector;
-use leg_models::reference::{MinimumJerk, Reference, Setpoint, Sinusoid, StepCycle};
+use leg_models::reference::{MinimumJerk, Ramp, Reference, Setpoint, Sinusoid, StepCycle};
 use leg_models::simulate::{Sample, Simulator};
+use leg_models::structure::{NotApplicable, Structure};
 use leg_models::LegModel;
 use serde_json::json;
 use xtask::cli::{write_atomic, Error, Flags};
@@ -22,11 +23,15 @@ use xtask::cli::{write_atomic, Error, Flags};
 use crate::report::{self, Report, Series};
 
 pub const HELP: &str = "\
-usage: cargo xtask sim [MODEL] [options]        (default: minitaur, foot-fl on the step cycle)
+usage: cargo xtask sim [MODEL] [options]        (default: minitaur)
 
-  --controller C   foot-fl (default), foot-pd, joint-fl, joint-pd, passive
+  --controller C   foot-fl, foot-pd, joint-fl, joint-pd, passive. Default: foot-fl where
+                   the motors can place the foot (two or more motors that determine the
+                   leg), else joint-fl on the motors, else passive; the summary says why
   --trajectory T   for foot controllers: step (default, an ellipse under the hip), hold;
-                   for joint controllers: sine (default), min-jerk, hold
+                   for joint controllers: sine (default), spin (default with one motor:
+                   the motors turn at --speed), min-jerk, hold
+  --speed W        motor speed of the spin trajectory in rad/s (default 6.283, 1 turn/s)
   --duration S     simulated time in s (default 3)
   --dt S           step in s (default 0.001); torques are updated once per step
   --kp K           stiffness of the error dynamics in 1/s² (default 400 foot, 100 joint);
@@ -40,6 +45,7 @@ writes trajectory.csv, summary.json and report.html (open it in a browser)
 pub const VALUE_FLAGS: &[&str] = &[
     "--controller",
     "--trajectory",
+    "--speed",
     "--duration",
     "--dt",
     "--kp",
@@ -60,13 +66,15 @@ enum Controller {
 enum Trajectory {
     Step,
     Sine,
+    Spin,
     MinJerk,
     Hold,
 }
 
 pub struct Settings {
-    controller: Controller,
-    trajectory: Trajectory,
+    controller: Option<Controller>,
+    trajectory: Option<Trajectory>,
+    speed: f64,
     duration: f64,
     dt: f64,
     kp: Option<f64>,
@@ -88,6 +96,15 @@ impl Controller {
     fn in_foot_space(self) -> bool {
         matches!(self, Controller::FootFl | Controller::FootPd)
     }
+
+    /// Whether the controller applies to a leg of this structure, and why not.
+    fn applies(self, s: &Structure) -> Result<(), NotApplicable> {
+        match self {
+            Controller::FootFl | Controller::FootPd => s.foot_space(),
+            Controller::JointFl | Controller::JointPd => s.joint_space(),
+            Controller::Passive => Ok(()),
+        }
+    }
 }
 
 impl Trajectory {
@@ -95,43 +112,58 @@ impl Trajectory {
         match self {
             Trajectory::Step => "step",
             Trajectory::Sine => "sine",
+            Trajectory::Spin => "spin",
             Trajectory::MinJerk => "min-jerk",
             Trajectory::Hold => "hold",
         }
     }
 }
 
+fn positive(flags: &mut Flags, flag: &str, what: &str) -> Result<Option<f64>, Error> {
+    match flags.take(flag) {
+        None => Ok(None),
+        Some(v) => match v.parse::<f64>() {
+            Ok(k) if k.is_finite() && k > 0.0 => Ok(Some(k)),
+            _ => Err(Error::usage(format!("`{flag} {v}`: expected {what}"))),
+        },
+    }
+}
+
 impl Settings {
     pub fn from_flags(flags: &mut Flags) -> Result<Settings, Error> {
         let controller = match flags.take("--controller").as_deref() {
-            None | Some("foot-fl") => Controller::FootFl,
-            Some("foot-pd") => Controller::FootPd,
-            Some("joint-fl") => Controller::JointFl,
-            Some("joint-pd") => Controller::JointPd,
-            Some("passive") => Controller::Passive,
+            None => None,
+            Some("foot-fl") => Some(Controller::FootFl),
+            Some("foot-pd") => Some(Controller::FootPd),
+            Some("joint-fl") => Some(Controller::JointFl),
+            Some("joint-pd") => Some(Controller::JointPd),
+            Some("passive") => Some(Controller::Passive),
             Some(other) => {
                 return Err(Error::usage(format!(
                     "unknown controller `{other}` (expected foot-fl, foot-pd, joint-fl, joint-pd or passive)"
                 )))
             }
         };
-        let trajectory = match (flags.take("--trajectory").as_deref(), controller.in_foot_space()) {
-            (None, true) | (Some("step"), true) => Trajectory::Step,
-            (None, false) | (Some("sine"), false) => Trajectory::Sine,
-            (Some("min-jerk"), false) => Trajectory::MinJerk,
-            (Some("hold"), _) => Trajectory::Hold,
-            (Some(t @ ("step" | "sine" | "min-jerk")), _) => {
+        let trajectory = match flags.take("--trajectory").as_deref() {
+            None => None,
+            Some("step") => Some(Trajectory::Step),
+            Some("sine") => Some(Trajectory::Sine),
+            Some("spin") => Some(Trajectory::Spin),
+            Some("min-jerk") => Some(Trajectory::MinJerk),
+            Some("hold") => Some(Trajectory::Hold),
+            Some(other) => {
                 return Err(Error::usage(format!(
-                    "trajectory `{t}` does not suit controller `{}` (foot controllers: step, hold; joint controllers: sine, min-jerk, hold)",
-                    controller.name()
-                )))
-            }
-            (Some(other), _) => {
-                return Err(Error::usage(format!(
-                    "unknown trajectory `{other}` (expected step, hold, sine or min-jerk)"
+                    "unknown trajectory `{other}` (expected step, hold, sine, spin or min-jerk)"
                 )))
             }
         };
+        let speed = flags.number(
+            "--speed",
+            std::f64::consts::TAU,
+            ("a speed in rad/s, not zero, at most 1000", |x| {
+                x != 0.0 && x.abs() <= 1000.0
+            }),
+        )?;
         let duration = flags.number(
             "--duration",
             3.0,
@@ -147,37 +179,85 @@ impl Settings {
                 "{duration} s at dt = {dt} s is more than 5 million steps"
             )));
         }
-        let kp = match flags.take("--kp") {
-            None => None,
-            Some(v) => match v.parse::<f64>() {
-                Ok(k) if k.is_finite() && k > 0.0 => Some(k),
-                _ => {
-                    return Err(Error::usage(format!(
-                        "`--kp {v}`: expected a positive number"
-                    )))
-                }
-            },
-        };
-        let torque_limit = match flags.take("--torque-limit") {
-            None => None,
-            Some(v) => match v.parse::<f64>() {
-                Ok(k) if k.is_finite() && k > 0.0 => Some(k),
-                _ => {
-                    return Err(Error::usage(format!(
-                        "`--torque-limit {v}`: expected a positive number of N m"
-                    )))
-                }
-            },
-        };
-        Ok(Settings {
+        let kp = positive(flags, "--kp", "a positive number")?;
+        let torque_limit = positive(flags, "--torque-limit", "a positive number of N m")?;
+        let settings = Settings {
             controller,
             trajectory,
+            speed,
             duration,
             dt,
             kp,
             torque_limit,
             out: flags.take("--out").map(PathBuf::from),
-        })
+        };
+        if let (Some(c), Some(t)) = (controller, trajectory) {
+            settings.check_pair(c, t)?;
+        }
+        Ok(settings)
+    }
+
+    fn check_pair(&self, c: Controller, t: Trajectory) -> Result<(), Error> {
+        let fits = match t {
+            Trajectory::Hold => true,
+            Trajectory::Step => c.in_foot_space(),
+            _ => !c.in_foot_space() && c != Controller::Passive,
+        };
+        if fits || c == Controller::Passive && t == Trajectory::Hold {
+            Ok(())
+        } else {
+            Err(Error::usage(format!(
+                "trajectory `{}` does not suit controller `{}` (foot controllers: step, hold; joint controllers: sine, spin, min-jerk, hold)",
+                t.name(),
+                c.name()
+            )))
+        }
+    }
+
+    /// The controller and trajectory for a leg of this structure, and why they were
+    /// chosen. A controller asked for that does not apply is bad input.
+    fn resolve(
+        &self,
+        model: &str,
+        s: &Structure,
+    ) -> Result<(Controller, Trajectory, String), Error> {
+        let (controller, why) = match self.controller {
+            Some(c) => {
+                c.applies(s).map_err(|e| {
+                    Error::usage(format!(
+                        "controller `{}` does not apply to {model}: {e}",
+                        c.name()
+                    ))
+                })?;
+                (c, "asked for".to_string())
+            }
+            None => match (s.foot_space(), s.joint_space()) {
+                (Ok(()), _) => (
+                    Controller::FootFl,
+                    "default: the motors can place the foot".to_string(),
+                ),
+                (Err(foot), Ok(())) => (
+                    Controller::JointFl,
+                    format!("default: joint-space tracking of the motors, because {foot}"),
+                ),
+                (Err(_), Err(joint)) => (
+                    Controller::Passive,
+                    format!("default: no controller applies ({joint})"),
+                ),
+            },
+        };
+        let trajectory = match self.trajectory {
+            Some(t) => {
+                self.check_pair(controller, t)?;
+                t
+            }
+            None if controller.in_foot_space() => Trajectory::Step,
+            None if controller == Controller::Passive => Trajectory::Hold,
+            // One motor turning a crank: spin it.
+            None if s.motors == 1 => Trajectory::Spin,
+            None => Trajectory::Sine,
+        };
+        Ok((controller, trajectory, why))
     }
 }
 
@@ -205,6 +285,7 @@ impl Reference<f64, 2> for FootRef {
 #[derive(Clone, Copy)]
 enum JointRef<const NU: usize> {
     Sine(Sinusoid<f64, NU>),
+    Spin(Ramp<f64, NU>),
     MinJerk(MinimumJerk<f64, NU>),
 }
 
@@ -212,6 +293,7 @@ impl<const NU: usize> Reference<f64, NU> for JointRef<NU> {
     fn sample(&self, t: f64) -> Setpoint<f64, NU> {
         match self {
             JointRef::Sine(s) => s.sample(t),
+            JointRef::Spin(r) => r.sample(t),
             JointRef::MinJerk(m) => m.sample(t),
         }
     }
@@ -254,18 +336,18 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
     let mut home = SVector::<f64, NQ>::from_column_slice(&L::HOME);
     project_position::<L, f64, NQ, NC, NU>(&p, &mut home, &tol)
         .map_err(|e| fail("the home pose does not assemble", &e))?;
+    let structure = Structure::of::<L, NQ, NC, NU>();
+    let (controller_kind, trajectory, choice) = s.resolve(L::NAME, &structure)?;
     let theta_home = SVector::<f64, NU>::from_fn(|k, _| home[L::ACTUATED[k]]);
     let foot_home = L::foot_position(&home, &p);
-    let kp = s.kp.unwrap_or(if s.controller.in_foot_space() {
+    let kp = s.kp.unwrap_or(if controller_kind.in_foot_space() {
         400.0
     } else {
         100.0
     });
-    let (joint_inertia, foot_inertia) =
-        effective_inertias::<L, f64, NQ, NC, NU>(&p, &home).map_err(|e| fail("at home", &e))?;
     let kd = 2.0 * kp.sqrt();
 
-    let foot_ref = match s.trajectory {
+    let foot_ref = match trajectory {
         Trajectory::Step => FootRef::Cycle(StepCycle {
             center: foot_home,
             half_stride: 0.03,
@@ -274,7 +356,11 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
         }),
         _ => FootRef::Hold(foot_home),
     };
-    let joint_ref = match s.trajectory {
+    let joint_ref = match trajectory {
+        Trajectory::Spin => JointRef::Spin(Ramp {
+            start: theta_home,
+            rate: SVector::from_element(s.speed),
+        }),
         Trajectory::MinJerk => JointRef::MinJerk(MinimumJerk {
             start: theta_home,
             goal: theta_home.add_scalar(0.2),
@@ -296,43 +382,46 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
     };
 
     // Start on the reference, at rest for foot tasks, at the reference's rates for joint tasks.
-    let initial = if s.controller.in_foot_space() {
+    let initial = if controller_kind.in_foot_space() {
         let q = foot_inverse::<L, f64, NQ, NC, NU>(&p, &foot_ref.sample(0.0).position, &home, &tol)
             .map_err(|e| fail("the foot reference's start", &e))?;
         State {
             q,
             qd: SVector::zeros(),
         }
-    } else if s.controller == Controller::Passive {
+    } else if controller_kind == Controller::Passive {
         State {
             q: home,
             qd: SVector::zeros(),
         }
     } else {
         let r0 = joint_ref.sample(0.0);
-        let q = assemble::<L, f64, NQ, NC, NU>(&p, &r0.position, &home, &tol)
+        // Along the home pose's branch, so that the start is in its assembly mode.
+        let q = assemble_along::<L, f64, NQ, NC, NU>(&p, &home, &r0.position, 0.05, &tol)
             .map_err(|e| fail("the joint reference's start", &e))?;
         let qd = consistent_velocity::<L, f64, NQ, NC, NU>(&p, &q, &r0.velocity)
             .map_err(|e| fail("the joint reference's start", &e))?;
         State { q, qd }
     };
 
-    let (controller, gains_text): (AnyController<L, NQ, NC, NU>, String) = match s.controller {
+    let not_applicable = |e: ControlError| fail("the controller", &e);
+    let (controller, gains_text): (AnyController<L, NQ, NC, NU>, String) = match controller_kind {
         Controller::FootFl => (
-            AnyController::FootFl(FootFeedbackLinearization::new(
-                p,
-                Gains::new(kp, kd),
-                foot_ref,
-            )),
+            AnyController::FootFl(
+                FootFeedbackLinearization::new(p, Gains::new(kp, kd), foot_ref)
+                    .map_err(not_applicable)?,
+            ),
             format!("k_p = {kp} 1/s², k_d = {kd:.3} 1/s"),
         ),
         Controller::FootPd => {
+            let foot_inertia = foot_inertias::<L, f64, NQ, NC, NU>(&p, &home)
+                .map_err(|e| fail("the foot's inertia at home", &e))?;
             let g = Gains {
                 kp: foot_inertia * kp,
                 kd: foot_inertia * kd,
             };
             (
-                AnyController::FootPd(FootPdGravity::new(p, g, foot_ref)),
+                AnyController::FootPd(FootPdGravity::new(p, g, foot_ref).map_err(not_applicable)?),
                 format!(
                     "K = {:?} N/m, D = {:?} N s/m (Λ × {kp}, Λ × {kd:.3})",
                     g.kp.as_slice(),
@@ -341,20 +430,21 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
             )
         }
         Controller::JointFl => (
-            AnyController::JointFl(JointFeedbackLinearization::new(
-                p,
-                Gains::new(kp, kd),
-                joint_ref,
-            )),
+            AnyController::JointFl(
+                JointFeedbackLinearization::new(p, Gains::new(kp, kd), joint_ref)
+                    .map_err(not_applicable)?,
+            ),
             format!("k_p = {kp} 1/s², k_d = {kd:.3} 1/s"),
         ),
         Controller::JointPd => {
+            let joint_inertia = joint_inertias::<L, f64, NQ, NC, NU>(&p, &home)
+                .map_err(|e| fail("the motors' inertia at home", &e))?;
             let g = Gains {
                 kp: joint_inertia * kp,
                 kd: joint_inertia * kd,
             };
             (
-                AnyController::JointPd(PdGravity::new(p, g, joint_ref)),
+                AnyController::JointPd(PdGravity::new(p, g, joint_ref).map_err(not_applicable)?),
                 format!(
                     "k_p = {:?} N m/rad, k_d = {:?} N m s/rad",
                     g.kp.as_slice(),
@@ -377,7 +467,7 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
     };
 
     // What each sample is measured against.
-    let foot_task = s.controller.in_foot_space();
+    let foot_task = controller_kind.in_foot_space();
     let foot_of = |x: &Sample<f64, NQ, NC, NU>| L::foot_position(&x.state.q, &p);
     let error_of = |x: &Sample<f64, NQ, NC, NU>| -> f64 {
         if foot_task {
@@ -387,7 +477,7 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
             max((0..NU).map(|k| (r[k] - x.state.q[L::ACTUATED[k]]).abs()))
         }
     };
-    let tracked = s.controller != Controller::Passive;
+    let tracked = controller_kind != Controller::Passive;
     let errors: Vec<f64> = samples.iter().map(error_of).collect();
     let settle = 1.0f64.min(s.duration / 2.0);
     let steady: Vec<f64> = samples
@@ -470,8 +560,16 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
     let unit = if foot_task { "m" } else { "rad" };
     let summary = json!({
         "model": L::NAME,
-        "controller": s.controller.name(),
-        "trajectory": if tracked { json!(s.trajectory.name()) } else { json!(null) },
+        "controller": controller_kind.name(),
+        "controller_choice": choice,
+        "structure": {
+            "joints": NQ,
+            "closure_rows": NC,
+            "redundant_rows": structure.redundant_rows,
+            "mobility": structure.mobility,
+            "motors": NU,
+        },
+        "trajectory": if tracked { json!(trajectory.name()) } else { json!(null) },
         "settings": {
             "duration_s": s.duration,
             "dt_s": s.dt,
@@ -567,9 +665,9 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
         title: format!(
             "{} — {}{}",
             L::NAME,
-            s.controller.name(),
+            controller_kind.name(),
             if tracked {
-                format!(", {}", s.trajectory.name())
+                format!(", {}", trajectory.name())
             } else {
                 String::new()
             }
@@ -589,9 +687,9 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
         write_atomic(&out.join(name), text).map_err(Error::Failed)?;
     }
     println!(
-        "{} with {} ({} s at dt = {} s): wrote {}/{{trajectory.csv, summary.json, report.html}}",
+        "{} with {} ({choice}; {} s at dt = {} s): wrote {}/{{trajectory.csv, summary.json, report.html}}",
         L::NAME,
-        s.controller.name(),
+        controller_kind.name(),
         s.duration,
         s.dt,
         out.display()

@@ -1,0 +1,149 @@
+//! What a leg is as a mechanism, and which methods apply to it: its mobility (degrees of
+//! freedom of the closed chain, `NQ − rank J`) against its motors, and the closure rows
+//! that repeat the others. Properties, never names, decide what applies to a leg.
+
+use core::fmt;
+
+use nalgebra::SMatrix;
+
+use crate::dynamics::rcond_floor;
+use crate::linalg::PivotedLdlt;
+use crate::model::{LegModel, Real};
+
+/// How a leg's motors compare with its degrees of freedom.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Actuation {
+    /// As many motors as degrees of freedom: the motor angles determine the leg.
+    Full,
+    /// Fewer motors than degrees of freedom (a passive ankle): the passive joints move on
+    /// their own; the motors' own accelerations can still be commanded.
+    Under,
+    /// More motors than degrees of freedom: the motors fight through the closures.
+    Over,
+}
+
+/// The counts that decide which methods apply to a leg.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Structure {
+    pub joints: usize,
+    pub closure_rows: usize,
+    /// Closure rows implied by the others ([`LegModel::REDUNDANT_ROWS`]).
+    pub redundant_rows: usize,
+    /// `NQ − rank J` ([`LegModel::MOBILITY`]).
+    pub mobility: usize,
+    pub motors: usize,
+}
+
+/// Why a method does not apply to a leg; named when a controller or reduction is built.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NotApplicable {
+    /// The motors do not determine the passive joints, so the null-space form `q̇ = G θ̇`
+    /// and everything built on it (foot control, the foot inverse) do not exist.
+    UnderActuated { mobility: usize, motors: usize },
+    /// The motors over-determine the leg: there is no reduction to the motor angles.
+    OverActuated { mobility: usize, motors: usize },
+    /// A foot in the plane has two coordinates; fewer motors cannot place it.
+    FootNeedsTwoMotors { motors: usize },
+}
+
+impl fmt::Display for NotApplicable {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let s = |n: usize| if n == 1 { "" } else { "s" };
+        match *self {
+            NotApplicable::UnderActuated { mobility, motors } => write!(
+                f,
+                "the leg has {mobility} degree{} of freedom but {motors} motor{}: the motors do not determine the passive joints",
+                s(mobility),
+                s(motors)
+            ),
+            NotApplicable::OverActuated { mobility, motors } => write!(
+                f,
+                "the leg has {mobility} degree{} of freedom but {motors} motors: the motors over-determine it, so there is no reduction to the motor angles",
+                s(mobility)
+            ),
+            NotApplicable::FootNeedsTwoMotors { motors } => write!(
+                f,
+                "the foot has two coordinates but the leg {motors} motor{}: foot-space control needs at least two",
+                s(motors)
+            ),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for NotApplicable {}
+
+impl Structure {
+    pub fn of<L, const NQ: usize, const NC: usize, const NU: usize>() -> Structure
+    where
+        L: LegModel<NQ, NC, NU>,
+    {
+        Structure {
+            joints: NQ,
+            closure_rows: NC,
+            redundant_rows: L::REDUNDANT_ROWS.iter().filter(|&&r| r).count(),
+            mobility: L::MOBILITY,
+            motors: NU,
+        }
+    }
+
+    pub fn actuation(&self) -> Actuation {
+        match self.mobility.cmp(&self.motors) {
+            core::cmp::Ordering::Equal => Actuation::Full,
+            core::cmp::Ordering::Greater => Actuation::Under,
+            core::cmp::Ordering::Less => Actuation::Over,
+        }
+    }
+
+    /// The Schur reduction `Ã θ̈ = b̃ + u` (and joint-space control of the motors) exists
+    /// unless the motors over-determine the leg.
+    pub fn joint_space(&self) -> Result<(), NotApplicable> {
+        match self.actuation() {
+            Actuation::Over => Err(NotApplicable::OverActuated {
+                mobility: self.mobility,
+                motors: self.motors,
+            }),
+            _ => Ok(()),
+        }
+    }
+
+    /// The motor angles determine the leg (`q̇ = G θ̇`): the null-space form applies.
+    pub fn motors_determine_the_leg(&self) -> Result<(), NotApplicable> {
+        match self.actuation() {
+            Actuation::Full => Ok(()),
+            Actuation::Under => Err(NotApplicable::UnderActuated {
+                mobility: self.mobility,
+                motors: self.motors,
+            }),
+            Actuation::Over => Err(NotApplicable::OverActuated {
+                mobility: self.mobility,
+                motors: self.motors,
+            }),
+        }
+    }
+
+    /// The motors can place the foot: at least two of them, and they determine the leg.
+    /// (At a given pose the foot Jacobian may still lose rank: a typed error there.)
+    pub fn foot_space(&self) -> Result<(), NotApplicable> {
+        if self.motors < 2 {
+            return Err(NotApplicable::FootNeedsTwoMotors {
+                motors: self.motors,
+            });
+        }
+        self.motors_determine_the_leg()
+    }
+}
+
+/// Factors a matrix built from the closure rows (`J X Jᵀ`, `J Jᵀ + μ I`), allowing as
+/// many negligible pivots as the leg has redundant rows ([`LegModel::REDUNDANT_ROWS`]
+/// counts them; the pivots choose which, since that depends on the configuration).
+pub(crate) fn factor_closure_rows<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    s: &SMatrix<T, NC, NC>,
+) -> Option<PivotedLdlt<T, NC>>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let deficiency = L::REDUNDANT_ROWS.iter().filter(|&&r| r).count();
+    PivotedLdlt::new(s, deficiency, rcond_floor::<T>())
+}
