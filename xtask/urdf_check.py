@@ -49,8 +49,17 @@ def main():
         gear = float(act.find(f"{DRAKE}gear_ratio").get("value"))
         model.armature[model.joints[model.getJointId(joint)].idx_v] = rotor * gear * gear
     joints = ir["model"]["joints"]
-    idx = [model.joints[model.getJointId(j)].idx_q for j in joints]
-    assert model.nq == len(joints), (model.nq, joints)
+    # URDF `continuous` joints are Pinocchio's unbounded revolute joints: (cos q, sin q) in
+    # the configuration, one entry in the velocity.
+    qidx = [model.joints[model.getJointId(j)].idx_q for j in joints]
+    idx = [model.joints[model.getJointId(j)].idx_v for j in joints]
+    assert model.nv == len(joints), (model.nv, joints)
+
+    def configuration(q):
+        qp = pin.neutral(model)
+        for k, a in zip(qidx, q):
+            qp[k], qp[k + 1] = np.cos(a), np.sin(a)
+        return qp
     rng = np.random.default_rng(5)
     worst = {"M": 0.0, "N": 0.0, "foot": 0.0}
     foot_frame = model.getFrameId("foot")
@@ -58,8 +67,8 @@ def main():
         q = rng.uniform(-np.pi, np.pi, len(joints))
         qd = rng.uniform(-3.0, 3.0, len(joints))
         t = ours(legs, name, q, qd)
-        qp, vp = np.zeros(model.nq), np.zeros(model.nv)
-        qp[idx], vp[idx] = q, qd
+        qp, vp = configuration(q), np.zeros(model.nv)
+        vp[idx] = qd
         mp = pin.crba(model, data, qp)
         mp = np.triu(mp) + np.triu(mp, 1).T
         np_ = pin.rnea(model, data, qp, vp, np.zeros(model.nv))
@@ -75,8 +84,7 @@ def main():
         home, actuated = ir["model"]["home"], ir["model"]["actuated"]
         theta = [home[a] + 0.05 for a in actuated]
         start = ours(legs, name, theta, [0.0] * len(theta), assemble=True)
-        qp = np.zeros(model.nq)
-        qp[idx] = start["q"]
+        qp = configuration(start["q"])
         pin.framesForwardKinematics(model, data, qp)
         for c in ir["model"]["closures"]:
             a = data.oMf[model.getFrameId(f"{c}_a")].translation

@@ -113,14 +113,21 @@ pub fn solve_kkt<T: Real, const NQ: usize, const NC: usize>(
         chol_m.solve_mut(&mut y); // Y = M⁻¹ Jᵀ
         let s = mul(jacobian, &y);
         forces = closure_rhs - mul(jacobian, &qdd);
-        let chol_s = PivotedLdlt::new(&s, deficiency, rcond_floor::<T>())
-            .ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?;
-        if chol_s.rcond < rcond_floor::<T>() {
-            return Err(DynamicsError::SingularConstraints {
-                rcond: to_f64(chol_s.rcond),
-            });
+        if deficiency == 0 {
+            // The common case, unrolled without pivoting.
+            let chol_s =
+                Cholesky::new(&s).ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?;
+            if chol_s.rcond < rcond_floor::<T>() {
+                return Err(DynamicsError::SingularConstraints {
+                    rcond: to_f64(chol_s.rcond),
+                });
+            }
+            chol_s.solve_mut(&mut forces);
+        } else {
+            PivotedLdlt::new(&s, deficiency, rcond_floor::<T>())
+                .ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?
+                .solve_mut(&mut forces);
         }
-        chol_s.solve_mut(&mut forces);
         qdd += mul(&y, &forces);
     }
     if !(all_finite(&qdd) && all_finite(&forces) && all_finite(tau) && all_finite(closure_rhs)) {

@@ -53,7 +53,7 @@ pub fn mjcf(m: &Model) -> String {
     let g = pair(m, &m.gravity);
     let _ = writeln!(
         out,
-        "<!-- {}: exported by `cargo xtask export {} --format mjcf` from its spec. -->",
+        "<!-- {}: exported from its spec by `cargo xtask export {}`, format mjcf. -->",
         m.name, m.name
     );
     let _ = writeln!(out, "<mujoco model=\"{}\">", m.name);
@@ -166,7 +166,7 @@ pub fn urdf(m: &Model) -> String {
     let _ = writeln!(out, "<?xml version=\"1.0\"?>");
     let _ = writeln!(
         out,
-        "<!-- {}: exported by `cargo xtask export {} --format urdf` from its spec.",
+        "<!-- {}: exported from its spec by `cargo xtask export {}`, format urdf.",
         m.name, m.name
     );
     let _ = writeln!(

@@ -236,7 +236,7 @@ fn new(root: &Path, args: &[String]) -> Result<(), cli::Error> {
     let text = NEW_SPEC.replace("NAME", name);
     cli::write_atomic(&path, &text).map_err(cli::Error::Failed)?;
     println!(
-        "wrote {}; edit it, then `cargo xtask gen {name}`",
+        "wrote {}: a five-bar (two motors at the hip, two branches of two links, one closure at\n  the toe, the foot at the closure, home pose knee-out). Edit the links (lengths, masses,\n  centres of mass, inertias, which joints have an actuator), the closures, the foot and\n  `home` (a pose near assembled: it picks the assembly mode), then `cargo xtask gen {name}`;\n  it prints the leg's mobility and motors and checks that the home pose assembles.",
         path.strip_prefix(root).unwrap_or(&path).display()
     );
     Ok(())
