@@ -212,6 +212,12 @@ fn sim_writes_csv_summary_and_report() {
     assert!(summary["stopped"].is_null());
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
     assert!(html.contains("<svg") && html.contains("id=\"frames\""));
+    // Links drawn as bodies, the summary as a table, and why the controller was chosen.
+    assert!(html.contains("\"bodies\":[[[[") && html.contains("<table class=\"summary\">"));
+    assert_eq!(
+        summary["controller_choice"],
+        "default: the motors can place the foot"
+    );
     // The only URLs are SVG's namespace name, which is never fetched.
     assert_eq!(
         html.matches("http://").count(),

@@ -26,6 +26,9 @@ impl Series {
 /// points, the foot and its reference.
 pub struct Frame {
     pub t: f64,
+    /// Each link's points (joint, tip, children's joints, closure points, foot), drawn as
+    /// a filled outline (their convex hull).
+    pub bodies: Vec<Vec<[f64; 2]>>,
     pub links: Vec<[f64; 4]>,
     pub closures: Vec<[f64; 2]>,
     pub foot: [f64; 2],
@@ -74,7 +77,14 @@ fn plot(series: &Series) -> Result<String, String> {
         chart
             .configure_mesh()
             .x_desc("t (s)")
-            .y_label_formatter(&|v| format!("{v:.2e}"))
+            .y_desc(series.title.as_str())
+            .y_label_formatter(&|v| {
+                if *v == 0.0 {
+                    "0".to_string()
+                } else {
+                    format!("{v:.2e}")
+                }
+            })
             .draw()
             .map_err(|e| e.to_string())?;
         for (i, (name, values)) in series.lines.iter().enumerate() {
@@ -115,11 +125,44 @@ fn escape(s: &str) -> String {
         .replace('>', "&gt;")
 }
 
+/// The summary as table rows, nested objects flattened to `a.b` keys; `null`s left out.
+fn summary_rows(v: &Value) -> String {
+    fn walk(prefix: &str, v: &Value, out: &mut String) {
+        match v {
+            Value::Object(m) => {
+                for (k, x) in m {
+                    let key = if prefix.is_empty() {
+                        k.clone()
+                    } else {
+                        format!("{prefix}.{k}")
+                    };
+                    walk(&key, x, out);
+                }
+            }
+            Value::Null => {}
+            Value::String(s) => out.push_str(&format!(
+                "<tr><td>{}</td><td>{}</td></tr>",
+                escape(prefix),
+                escape(s)
+            )),
+            other => out.push_str(&format!(
+                "<tr><td>{}</td><td>{}</td></tr>",
+                escape(prefix),
+                escape(&other.to_string())
+            )),
+        }
+    }
+    let mut out = String::new();
+    walk("", v, &mut out);
+    out
+}
+
 pub fn html(r: &Report) -> Result<String, String> {
     let plots: Vec<String> = r.plots.iter().map(plot).collect::<Result<_, _>>()?;
     let frames = json!({
         "t": r.frames.iter().map(|f| f.t).collect::<Vec<_>>(),
         "links": r.frames.iter().map(|f| f.links.clone()).collect::<Vec<_>>(),
+        "bodies": r.frames.iter().map(|f| f.bodies.clone()).collect::<Vec<_>>(),
         "closures": r.frames.iter().map(|f| f.closures.clone()).collect::<Vec<_>>(),
         "foot": r.frames.iter().map(|f| f.foot).collect::<Vec<_>>(),
         "reference": r.frames.iter().map(|f| f.reference).collect::<Vec<_>>(),
@@ -137,7 +180,11 @@ body {{ font-family: sans-serif; margin: 24px; color: #222; }}
 .row {{ display: flex; flex-wrap: wrap; gap: 24px; align-items: flex-start; }}
 #leg {{ border: 1px solid #ccc; background: #fafafa; }}
 pre {{ background: #f4f4f4; padding: 12px; font-size: 12px; max-width: 640px; overflow-x: auto; }}
-.plots svg {{ display: block; margin-bottom: 8px; }}
+.plots {{ display: grid; grid-template-columns: repeat(auto-fill, minmax(640px, 1fr)); gap: 8px; }}
+.plots svg {{ display: block; }}
+table.summary {{ border-collapse: collapse; font-size: 13px; max-width: 640px; }}
+table.summary td {{ border-bottom: 1px solid #e4e4e4; padding: 3px 10px 3px 0; vertical-align: top; }}
+table.summary td:first-child {{ color: #555; white-space: nowrap; }}
 </style>
 </head>
 <body>
@@ -146,9 +193,9 @@ pre {{ background: #f4f4f4; padding: 12px; font-size: 12px; max-width: 640px; ov
 <div>
 <svg id="leg" width="520" height="520" viewBox="0 0 520 520"></svg>
 <div><button id="play">pause</button> <input id="scrub" type="range" min="0" value="0" style="width:380px"> <span id="time"></span></div>
-<p>Links (blue, joint → tip), joints (dots), closure points (red), foot path (green), reference (dashed grey).</p>
+<p>Links as rigid bodies (blue outlines through every point of a link), joints (dots), closure points (red), foot path (green), reference (dashed grey), base (grey disc); scale bar below.</p>
 </div>
-<pre id="summary">{summary}</pre>
+<table class="summary">{summary}</table>
 </div>
 <div class="plots">
 {plots}
@@ -161,7 +208,7 @@ pre {{ background: #f4f4f4; padding: 12px; font-size: 12px; max-width: 640px; ov
   const ns = 'http://www.w3.org/2000/svg';
   const n = d.t.length;
   const xs = [], ys = [];
-  d.links.forEach(f => f.forEach(l => {{ xs.push(l[0], l[2]); ys.push(l[1], l[3]); }}));
+  d.bodies.forEach(f => f.forEach(b => b.forEach(p => {{ xs.push(p[0]); ys.push(p[1]); }})));
   d.reference.forEach(p => {{ if (p) {{ xs.push(p[0]); ys.push(p[1]); }} }});
   const minx = Math.min(...xs), maxx = Math.max(...xs), miny = Math.min(...ys), maxy = Math.max(...ys);
   const span = Math.max(maxx - minx, maxy - miny, 1e-6) * 1.15;
@@ -171,7 +218,21 @@ pre {{ background: #f4f4f4; padding: 12px; font-size: 12px; max-width: 640px; ov
   const path = pts => pts.filter(p => p).map((p, i) => (i ? 'L' : 'M') + X(p[0]).toFixed(1) + ' ' + Y(p[1]).toFixed(1)).join(' ');
   el('path', {{ d: path(d.reference), fill: 'none', stroke: '#999', 'stroke-dasharray': '4 3' }});
   const trail = el('path', {{ fill: 'none', stroke: '#2ca02c', 'stroke-width': 1.5 }});
-  const links = d.links[0].map(() => el('line', {{ stroke: '#1f77b4', 'stroke-width': 5, 'stroke-linecap': 'round' }}));
+  // A scale bar of a round length near a fifth of the view, at the bottom left.
+  const bar = Math.pow(10, Math.floor(Math.log10(span / 5)));
+  el('line', {{ x1: 20, y1: 500, x2: 20 + bar / span * 500, y2: 500, stroke: '#222', 'stroke-width': 2 }});
+  const label = el('text', {{ x: 20, y: 492, 'font-size': 12 }});
+  label.textContent = (bar >= 1 ? bar + ' m' : (bar * 100 >= 1 ? bar * 100 + ' cm' : bar * 1000 + ' mm'));
+  function hull(pts) {{
+    const p = pts.slice().sort((a, b) => a[0] - b[0] || a[1] - b[1]);
+    if (p.length < 3) return p;
+    const cross = (o, a, b) => (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
+    const lo = [], hi = [];
+    for (const q of p) {{ while (lo.length >= 2 && cross(lo[lo.length - 2], lo[lo.length - 1], q) <= 0) lo.pop(); lo.push(q); }}
+    for (const q of p.slice().reverse()) {{ while (hi.length >= 2 && cross(hi[hi.length - 2], hi[hi.length - 1], q) <= 0) hi.pop(); hi.push(q); }}
+    return lo.slice(0, -1).concat(hi.slice(0, -1));
+  }}
+  const links = d.bodies[0].map(() => el('path', {{ fill: '#aec7e8', 'fill-opacity': 0.6, stroke: '#1f77b4', 'stroke-width': 5, 'stroke-linejoin': 'round', 'stroke-linecap': 'round' }}));
   const joints = d.links[0].map(() => el('circle', {{ r: 4, fill: '#222' }}));
   const closures = d.closures[0].map(() => el('circle', {{ r: 5, fill: 'none', stroke: '#d62728', 'stroke-width': 2 }}));
   const foot = el('circle', {{ r: 4, fill: '#2ca02c' }});
@@ -181,11 +242,8 @@ pre {{ background: #f4f4f4; padding: 12px; font-size: 12px; max-width: 640px; ov
   scrub.max = n - 1;
   let k = 0, playing = true;
   function draw(i) {{
-    d.links[i].forEach((l, j) => {{
-      links[j].setAttribute('x1', X(l[0])); links[j].setAttribute('y1', Y(l[1]));
-      links[j].setAttribute('x2', X(l[2])); links[j].setAttribute('y2', Y(l[3]));
-      joints[j].setAttribute('cx', X(l[0])); joints[j].setAttribute('cy', Y(l[1]));
-    }});
+    d.bodies[i].forEach((b, j) => {{ links[j].setAttribute('d', path(hull(b)) + ' Z'); }});
+    d.links[i].forEach((l, j) => {{ joints[j].setAttribute('cx', X(l[0])); joints[j].setAttribute('cy', Y(l[1])); }});
     d.closures[i].forEach((p, j) => {{ closures[j].setAttribute('cx', X(p[0])); closures[j].setAttribute('cy', Y(p[1])); }});
     foot.setAttribute('cx', X(d.foot[i][0])); foot.setAttribute('cy', Y(d.foot[i][1]));
     const r = d.reference[i];
@@ -210,7 +268,7 @@ pre {{ background: #f4f4f4; padding: 12px; font-size: 12px; max-width: 640px; ov
 </html>
 "#,
         title = escape(&r.title),
-        summary = escape(&format!("{:#}", r.summary)),
+        summary = summary_rows(r.summary),
         plots = plots.join("\n"),
     ))
 }

@@ -326,6 +326,45 @@ fn max(xs: impl Iterator<Item = f64>) -> f64 {
     xs.fold(0.0, f64::max)
 }
 
+/// A point of the drawing, by what the generated functions call it.
+enum Member {
+    Joint(usize),
+    Tip(usize),
+    /// A column of `closure_points`.
+    Closure(usize),
+    Foot,
+}
+
+/// The points of each link, from the leg's spec (joint and tip only if it cannot be read).
+fn body_points(name: &str, nq: usize) -> Vec<Vec<Member>> {
+    let mut bodies: Vec<Vec<Member>> = (0..nq)
+        .map(|i| vec![Member::Joint(i), Member::Tip(i)])
+        .collect();
+    let root = xtask::gen::workspace_root();
+    let path = root
+        .join(xtask::gen::SPECS_DIR)
+        .join(format!("{name}.toml"));
+    let Ok(model) = xtask::gen::load_spec(&root, &path)
+        .and_then(|s| xtask::model::build(&s).map_err(|e| e.to_string()))
+    else {
+        return bodies;
+    };
+    if model.links.len() != nq {
+        return bodies;
+    }
+    for (i, l) in model.links.iter().enumerate() {
+        if let Some(parent) = l.parent {
+            bodies[parent].push(Member::Joint(i));
+        }
+    }
+    for (k, c) in model.closures.iter().enumerate() {
+        bodies[c.a.link].push(Member::Closure(2 * k));
+        bodies[c.b.link].push(Member::Closure(2 * k + 1));
+    }
+    bodies[model.foot.link].push(Member::Foot);
+    bodies
+}
+
 pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
     s: &Settings,
 ) -> Result<(), Error> {
@@ -597,6 +636,9 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
 
     // report.html
     let frame_every = ((0.02 / s.dt).round() as usize).max(1);
+    // Each link as the rigid body it is: every point that belongs to it (its joint and tip,
+    // its children's joints, its closure points, the foot), from the spec's structure.
+    let members = body_points(L::NAME, NQ);
     let frames: Vec<report::Frame> = samples
         .iter()
         .step_by(frame_every)
@@ -604,8 +646,19 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
             let joints = L::joint_positions(&x.state.q, &p);
             let tips = L::link_tips(&x.state.q, &p);
             let closures = L::closure_points(&x.state.q, &p);
+            let f = foot_of(x);
+            let at = |m: &Member| match *m {
+                Member::Joint(i) => [joints[(0, i)], joints[(1, i)]],
+                Member::Tip(i) => [tips[(0, i)], tips[(1, i)]],
+                Member::Closure(c) => [closures[(0, c)], closures[(1, c)]],
+                Member::Foot => [f[0], f[1]],
+            };
             report::Frame {
                 t: x.t,
+                bodies: members
+                    .iter()
+                    .map(|body| body.iter().map(at).collect())
+                    .collect(),
                 links: (0..NQ)
                     .map(|i| [joints[(0, i)], joints[(1, i)], tips[(0, i)], tips[(1, i)]])
                     .collect(),
