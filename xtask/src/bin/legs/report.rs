@@ -67,19 +67,26 @@ fn plot(series: &Series) -> Result<String, String> {
         let pad = ((hi - lo) * 0.05)
             .max(hi.abs().max(lo.abs()) * 1e-9)
             .max(1e-300);
+        let legend_room = if series.lines.len() > 1 {
+            (hi - lo).max(pad) * 0.35
+        } else {
+            0.0
+        };
+        let tiny = (hi.abs().max(lo.abs())) * 1e-9;
         let mut chart = ChartBuilder::on(&root)
             .caption(&series.title, ("sans-serif", 16))
             .margin(8)
             .x_label_area_size(30)
             .y_label_area_size(70)
-            .build_cartesian_2d(0.0..t_end, (lo - pad)..(hi + pad))
+            // Headroom above the curves for the legend of several lines.
+            .build_cartesian_2d(0.0..t_end, (lo - pad)..(hi + pad + legend_room))
             .map_err(|e| e.to_string())?;
         chart
             .configure_mesh()
             .x_desc("t (s)")
             .y_desc(series.title.as_str())
             .y_label_formatter(&|v| {
-                if *v == 0.0 {
+                if v.abs() <= tiny {
                     "0".to_string()
                 } else {
                     format!("{v:.2e}")
@@ -108,6 +115,7 @@ fn plot(series: &Series) -> Result<String, String> {
         if series.lines.len() > 1 {
             chart
                 .configure_series_labels()
+                .position(SeriesLabelPosition::UpperRight)
                 .background_style(WHITE.mix(0.8))
                 .border_style(BLACK)
                 .draw()
@@ -219,10 +227,12 @@ table.summary td:first-child {{ color: #555; white-space: nowrap; }}
   el('path', {{ d: path(d.reference), fill: 'none', stroke: '#999', 'stroke-dasharray': '4 3' }});
   const trail = el('path', {{ fill: 'none', stroke: '#2ca02c', 'stroke-width': 1.5 }});
   // A scale bar of a round length near a fifth of the view, at the bottom left.
-  const bar = Math.pow(10, Math.floor(Math.log10(span / 5)));
+  const decade = Math.pow(10, Math.floor(Math.log10(span / 5)));
+  const bar = [5, 2, 1].map(m => m * decade).find(b => b <= span / 5) || decade;
   el('line', {{ x1: 20, y1: 500, x2: 20 + bar / span * 500, y2: 500, stroke: '#222', 'stroke-width': 2 }});
   const label = el('text', {{ x: 20, y: 492, 'font-size': 12 }});
-  label.textContent = (bar >= 1 ? bar + ' m' : (bar * 100 >= 1 ? bar * 100 + ' cm' : bar * 1000 + ' mm'));
+  const round = x => +x.toPrecision(3);
+  label.textContent = (bar >= 1 ? round(bar) + ' m' : (bar * 100 >= 1 ? round(bar * 100) + ' cm' : round(bar * 1000) + ' mm'));
   function hull(pts) {{
     const p = pts.slice().sort((a, b) => a[0] - b[0] || a[1] - b[1]);
     if (p.length < 3) return p;
