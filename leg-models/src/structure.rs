@@ -63,7 +63,7 @@ impl fmt::Display for NotApplicable {
             ),
             NotApplicable::FootNeedsTwoMotors { motors } => write!(
                 f,
-                "the foot has two coordinates but the leg {motors} motor{}: foot-space control needs at least two",
+                "the foot has two coordinates but the leg has {motors} motor{}: foot-space control needs at least two",
                 s(motors)
             ),
         }

@@ -272,7 +272,7 @@ fn sim_refuses_bad_input_and_writes_nothing() {
     // A controller that does not apply to the leg is refused with the reason.
     refused(
         &legs(&["sim", "klann_linkage", "--controller", "foot-fl", "--out", d]),
-        "controller `foot-fl` does not apply to klann_linkage: the foot has two coordinates but the leg 1 motor",
+        "controller `foot-fl` does not apply to klann_linkage: the foot has two coordinates but the leg has 1 motor",
     );
     assert!(!dir.exists(), "bad input left {}", dir.display());
 }

@@ -616,6 +616,7 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
             "torque_update": "once per step (zero-order hold)",
             "gains": gains_text,
             "torque_limit_nm": s.torque_limit,
+            "spin_speed_rad_s": if trajectory == Trajectory::Spin { json!(s.speed) } else { json!(null) },
         },
         "samples": samples.len(),
         "tracking_error": if tracked { json!({
@@ -760,6 +761,9 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
         source.saturations.iter().sum::<usize>(),
         max(samples.iter().map(|x| x.closure_residual))
     );
+    if !tracked {
+        println!("  energy drift max |E(t) − E(0)| / |E(0)| = {energy_drift:.1e}");
+    }
     match stopped {
         None => Ok(()),
         Some((t, why)) => Err(Error::Failed(format!(
