@@ -12,25 +12,16 @@ on a mismatch.
 
 import json
 import pathlib
-import subprocess
 import sys
 
 import mujoco
 import numpy as np
 
+from legs_eval import ours
+
 STATES = 20
 REL_TOL = 1e-9
 CLOSURE_TOL = 1e-3  # m; MuJoCo's equality constraints are soft
-
-
-def ours(legs, model, q, qd, assemble=False):
-    args = [legs, "eval", model, "--q", ",".join(repr(float(x)) for x in q), "--qd", ",".join(repr(float(x)) for x in qd), "--json"]
-    if assemble:
-        args.append("--assemble")
-    out = subprocess.run(args, capture_output=True, text=True)
-    if out.returncode != 0:
-        raise SystemExit(f"{model}: legs eval failed: {out.stderr.strip()}")
-    return json.loads(out.stdout)
 
 
 def main():

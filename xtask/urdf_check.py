@@ -12,26 +12,17 @@ and its `foot` frame with our foot; at an assembled pose, the frames `<closure>_
 
 import json
 import pathlib
-import subprocess
 import sys
 import xml.etree.ElementTree as ET
 
 import numpy as np
 import pinocchio as pin
 
+from legs_eval import ours
+
 STATES = 20
 REL_TOL = 1e-9
 DRAKE = "{http://drake.mit.edu}"
-
-
-def ours(legs, model, q, qd, assemble=False):
-    args = [legs, "eval", model, "--q", ",".join(repr(float(x)) for x in q), "--qd", ",".join(repr(float(x)) for x in qd), "--json"]
-    if assemble:
-        args.append("--assemble")
-    out = subprocess.run(args, capture_output=True, text=True)
-    if out.returncode != 0:
-        raise SystemExit(f"{model}: legs eval failed: {out.stderr.strip()}")
-    return json.loads(out.stdout)
 
 
 def main():

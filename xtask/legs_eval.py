@@ -1,0 +1,15 @@
+"""What the cross-checks share: the generated model's terms at a state, from `legs eval --json`."""
+
+import json
+import subprocess
+
+
+def ours(legs, model, q, qd, assemble=False):
+    """`legs eval MODEL --q … --qd … --json` (with `--assemble`, q and qd are the motors')."""
+    args = [legs, "eval", model, "--q", ",".join(repr(float(x)) for x in q), "--qd", ",".join(repr(float(x)) for x in qd), "--json"]
+    if assemble:
+        args.append("--assemble")
+    out = subprocess.run(args, capture_output=True, text=True)
+    if out.returncode != 0:
+        raise SystemExit(f"{model}: legs eval failed: {out.stderr.strip()}")
+    return json.loads(out.stdout)
