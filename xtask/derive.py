@@ -188,10 +188,9 @@ def derive(model):
     return inputs, terms, peer, numeric
 
 
-# Relative accuracy of an assembled pose (times the leg's size): as the runtime's default.
+# Relative accuracy of an assembled pose (times the leg's size): the runtime's default
+# (`Tolerance`) and the limit `gen` checks the home pose against (gen.rs).
 ASSEMBLY_TOLERANCE = 1000 * 2.220446049250313e-16
-# How far from assembled a spec's home pose may be: it is a guess, written with a few digits.
-HOME_TOLERANCE = 1e-2
 
 
 def home_check(model, numeric):

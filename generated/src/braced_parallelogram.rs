@@ -361,7 +361,7 @@ impl LegModel<NQ, NC, NU> for BracedParallelogram {
     ];
     const ACTUATED: [usize; NU] = [0, 2];
     const HOME: [f64; NQ] = [-2.17, 1.2, -0.97, -1.2, -1.2];
-    const REDUNDANT_ROWS: [bool; NC] = [false, false, false, true];
+    const REDUNDANT_ROWS: usize = 1;
     const MOBILITY: usize = 2;
     type Params<T: Real> = Params<T>;
     fn mass_matrix<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5> {

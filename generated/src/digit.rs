@@ -294,7 +294,7 @@ impl LegModel<NQ, NC, NU> for Digit {
     ];
     const ACTUATED: [usize; NU] = [0, 3];
     const HOME: [f64; NQ] = [-2.5088, 0.9651, -1.7777, 1.503];
-    const REDUNDANT_ROWS: [bool; NC] = [false, false];
+    const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 2;
     type Params<T: Real> = Params<T>;
     fn mass_matrix<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 4, 4> {

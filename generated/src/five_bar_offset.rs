@@ -277,7 +277,7 @@ impl LegModel<NQ, NC, NU> for FiveBarOffset {
     const JOINT_NAMES: [&'static str; NQ] = ["upper_a", "lower_a", "upper_b", "lower_b"];
     const ACTUATED: [usize; NU] = [0, 2];
     const HOME: [f64; NQ] = [-0.6201, -1.2365, -2.5215, 1.2365];
-    const REDUNDANT_ROWS: [bool; NC] = [false, false];
+    const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 2;
     type Params<T: Real> = Params<T>;
     fn mass_matrix<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 4, 4> {

@@ -467,7 +467,7 @@ impl LegModel<NQ, NC, NU> for KlannLinkage {
         1.298471711,
         -0.3534930633,
     ];
-    const REDUNDANT_ROWS: [bool; NC] = [false, false, false, false, false, false];
+    const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 1;
     type Params<T: Real> = Params<T>;
     fn mass_matrix<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 7, 7> {

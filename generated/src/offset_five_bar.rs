@@ -337,7 +337,7 @@ impl LegModel<NQ, NC, NU> for OffsetFiveBar {
     const JOINT_NAMES: [&'static str; NQ] = ["upper_a", "lower_a", "upper_b", "lower_b"];
     const ACTUATED: [usize; NU] = [0, 2];
     const HOME: [f64; NQ] = [-2.297438667, 1.056266748, -0.6107259644, -1.205049026];
-    const REDUNDANT_ROWS: [bool; NC] = [false, false];
+    const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 2;
     type Params<T: Real> = Params<T>;
     fn mass_matrix<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 4, 4> {

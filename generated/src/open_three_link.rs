@@ -223,7 +223,7 @@ impl LegModel<NQ, NC, NU> for OpenThreeLink {
     const JOINT_NAMES: [&'static str; NQ] = ["thigh", "shin", "ankle"];
     const ACTUATED: [usize; NU] = [0, 1];
     const HOME: [f64; NQ] = [-1.451367401, -0.2780841882, 1.370680919];
-    const REDUNDANT_ROWS: [bool; NC] = [];
+    const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 3;
     type Params<T: Real> = Params<T>;
     fn mass_matrix<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 3, 3> {

@@ -467,7 +467,7 @@ impl LegModel<NQ, NC, NU> for ThreeMotorLeg {
         1.570796327,
         -1.570796327,
     ];
-    const REDUNDANT_ROWS: [bool; NC] = [false, false, false, false];
+    const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 3;
     type Params<T: Real> = Params<T>;
     fn mass_matrix<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 7, 7> {

@@ -181,7 +181,7 @@ impl LegModel<NQ, NC, NU> for TwoLink {
     const JOINT_NAMES: [&'static str; NQ] = ["upper_arm", "forearm"];
     const ACTUATED: [usize; NU] = [0, 1];
     const HOME: [f64; NQ] = [-1.2288, 1.1593];
-    const REDUNDANT_ROWS: [bool; NC] = [];
+    const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 2;
     type Params<T: Real> = Params<T>;
     fn mass_matrix<T: Real>(q: &SVector<T, 2>, p: &Params<T>) -> SMatrix<T, 2, 2> {

@@ -11,14 +11,13 @@
 //!
 //! Tolerances are relative to the leg's size ([`leg_size`]), so a 1 m leg and a 10 cm
 //! leg are assembled to the same number of significant digits. Closure rows that repeat
-//! the others ([`LegModel::REDUNDANT_ROWS`]) are left out of every step, and met because
-//! the rows they repeat are.
+//! the others ([`LegModel::REDUNDANT_ROWS`] of them) are left out of each step by the
+//! pivots of its factorization, and met because the rows they repeat are.
 
 use core::fmt;
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::dynamics::rcond_floor;
 use crate::linalg::{mul, Cholesky};
 use crate::model::{LegModel, Real};
 use crate::structure::factor_closure_rows;
@@ -246,9 +245,6 @@ where
     chol_m.solve_mut(&mut y); // M⁻¹ Jᵀ
     let chol_s =
         factor_closure_rows::<L, T, NQ, NC, NU>(&(j * y)).ok_or(AssemblyError::Singular)?;
-    if chol_s.rcond < rcond_floor::<T>() {
-        return Err(AssemblyError::Singular);
-    }
     let mut lambda = j * *qd;
     chol_s.solve_mut(&mut lambda);
     *qd -= y * lambda;

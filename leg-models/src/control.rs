@@ -195,8 +195,7 @@ where
 {
     Structure::of::<L, NQ, NC, NU>().joint_space()?;
     let (m, j) = (&terms.mass_matrix, &terms.constraint_jacobian);
-    let deficiency = L::REDUNDANT_ROWS.iter().filter(|&&r| r).count();
-    let a22 = PassiveSystem::new(m, j, actuated_mask::<L, NQ, NC, NU>(), deficiency)?;
+    let a22 = PassiveSystem::new(m, j, actuated_mask::<L, NQ, NC, NU>(), L::REDUNDANT_ROWS)?;
     // A12 z for z = (x, f): the actuated rows of M x − Jᵀ f.
     let a12 = |(x, f): (SVector<T, NQ>, SVector<T, NC>)| mul(m, &x) - mul_tn(j, &f);
     let mut a_tilde = SMatrix::<T, NU, NU>::zeros();

@@ -180,6 +180,6 @@ where
         &terms.constraint_jacobian,
         &tau,
         &rhs,
-        L::REDUNDANT_ROWS.iter().filter(|&&r| r).count(),
+        L::REDUNDANT_ROWS,
     )
 }

@@ -70,10 +70,11 @@ pub trait LegModel<const NQ: usize, const NC: usize, const NU: usize> {
     /// A typical assembled pose (rad) from the spec: the default guess of loop assembly
     /// (it picks the assembly mode) and the default initial state of simulations.
     const HOME: [f64; NQ];
-    /// Closure rows that the others imply on this geometry (a parallelogram closed twice):
-    /// the solvers use the independent rows and hold these rows' forces at zero. Found by
-    /// `cargo xtask gen` at the assembled home pose with the spec's parameters.
-    const REDUNDANT_ROWS: [bool; NC];
+    /// How many closure rows the others imply on this geometry (a parallelogram closed
+    /// twice): `NC − rank J`, found by `cargo xtask gen` at the assembled home pose with the
+    /// spec's parameters. The solvers' pivots leave that many rows out (which ones depends
+    /// on the pose) and hold their forces at zero.
+    const REDUNDANT_ROWS: usize;
     /// Degrees of freedom of the closed chain, `NQ − rank J`, at the assembled home pose.
     /// Compared with `NU`, it says which methods apply (see [`crate::structure`]).
     const MOBILITY: usize;

@@ -81,7 +81,7 @@ impl Structure {
         Structure {
             joints: NQ,
             closure_rows: NC,
-            redundant_rows: L::REDUNDANT_ROWS.iter().filter(|&&r| r).count(),
+            redundant_rows: L::REDUNDANT_ROWS,
             mobility: L::MOBILITY,
             motors: NU,
         }
@@ -144,6 +144,5 @@ where
     L: LegModel<NQ, NC, NU>,
     T: Real,
 {
-    let deficiency = L::REDUNDANT_ROWS.iter().filter(|&&r| r).count();
-    PivotedLdlt::new(s, deficiency, rcond_floor::<T>())
+    PivotedLdlt::new(s, L::REDUNDANT_ROWS, rcond_floor::<T>())
 }

@@ -136,7 +136,7 @@ pub fn passive_rcond<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, 
 pub fn rcond_of_rows<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
     j: &leg_models::nalgebra::SMatrix<f64, NC, NQ>,
 ) -> f64 {
-    let redundant = L::REDUNDANT_ROWS.iter().filter(|&&r| r).count();
+    let redundant = L::REDUNDANT_ROWS;
     let dense = leg_models::nalgebra::DMatrix::from_iterator(NC, NQ, j.iter().copied());
     let mut sv: Vec<f64> = dense
         .svd(false, false)

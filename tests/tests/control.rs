@@ -10,7 +10,7 @@ use leg_models::control::{
 };
 use leg_models::dynamics::forward_dynamics;
 use leg_models::integrate::{ControlUpdate, State, StepOptions, TorqueSource};
-use leg_models::nalgebra::SVector;
+use leg_models::nalgebra::{DMatrix, SVector};
 use leg_models::reference::{Reference, Sinusoid, StepCycle};
 use leg_models::simulate::Simulator;
 use leg_models::structure::{NotApplicable, Structure};
@@ -267,6 +267,46 @@ pub fn check_applicability<
     let structure = Structure::of::<L, NQ, NC, NU>();
     let home = passive_release_state::<L, NQ, NC, NU>(&p).q;
     let theta = home_theta::<L, NQ, NC, NU>(&p);
+    // The structure the generator found, against SVDs of J and J_f at home: the mobility
+    // `NQ − rank J`; whether the motors determine the leg (the passive columns of J have
+    // rank NQ − NU); how many directions the foot can move in with the closures held.
+    let rank = |m: &DMatrix<f64>| {
+        let sv = m.clone().svd(false, false).singular_values;
+        let top = sv.max();
+        sv.iter().filter(|&&s| s > 1e-9 * top.max(1e-300)).count()
+    };
+    let j = DMatrix::from_fn(NC, NQ, |r, c| L::constraint_jacobian(&home, &p)[(r, c)]);
+    let passive: Vec<usize> = (0..NQ).filter(|i| !L::ACTUATED.contains(i)).collect();
+    let jp = DMatrix::from_fn(NC, passive.len(), |r, c| j[(r, passive[c])]);
+    let mobility = NQ - if NC > 0 { rank(&j) } else { 0 };
+    assert_eq!(mobility, structure.mobility, "{}: mobility", L::NAME);
+    assert_eq!(
+        NC - if NC > 0 { rank(&j) } else { 0 },
+        structure.redundant_rows
+    );
+    let determined = NC > 0 && rank(&jp) == passive.len() || passive.is_empty();
+    assert_eq!(
+        determined,
+        structure.motors_determine_the_leg().is_ok(),
+        "{}: do the motors determine the leg?",
+        L::NAME
+    );
+    // Foot directions: J_f on the null space of J.
+    let jf = DMatrix::from_fn(2, NQ, |r, c| L::foot_jacobian(&home, &p)[(r, c)]);
+    // The null space of J: eigenvectors of JᵀJ with (numerically) zero eigenvalues.
+    let eig = (j.transpose() * &j).symmetric_eigen();
+    let top = eig.eigenvalues.amax();
+    let free: Vec<usize> = (0..NQ)
+        .filter(|&i| eig.eigenvalues[i] <= 1e-12 * top)
+        .collect();
+    let null = DMatrix::from_fn(NQ, free.len(), |i, k| eig.eigenvectors[(i, free[k])]);
+    let foot_directions = rank(&(&jf * null));
+    assert_eq!(
+        determined && foot_directions == 2 && NU >= 2,
+        structure.foot_space().is_ok(),
+        "{}: can the motors place the foot?",
+        L::NAME
+    );
     let hold = Sinusoid {
         offset: theta,
         amplitude: SVector::zeros(),

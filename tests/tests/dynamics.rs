@@ -38,9 +38,19 @@ pub fn check_kkt<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, cons
             let r2 = (jq + jdqd).amax() / (j.amax() * acc.qdd.amax() + jdqd.amax());
             assert!(r2 < 1e-10, "{}: closure row residual {r2:e}", L::NAME);
         }
-        // The same system, dense, by LU: the independent closure rows (a redundant row's
-        // force is zero by convention; its row is implied by the others).
-        let rows: Vec<usize> = (0..NC).filter(|&r| !L::REDUNDANT_ROWS[r]).collect();
+        // The same system, dense, by LU, on independent closure rows chosen here by rank
+        // (a redundant row is implied by the others; its force is zero by convention).
+        let mut rows: Vec<usize> = Vec::new();
+        for r in 0..NC {
+            let mut trial = rows.clone();
+            trial.push(r);
+            let sub = DMatrix::from_fn(trial.len(), NQ, |i, c| j[(trial[i], c)]);
+            let sv = sub.svd(false, false).singular_values;
+            if sv.min() > 1e-8 * sv.max() {
+                rows = trial;
+            }
+        }
+        assert_eq!(rows.len(), NC - L::REDUNDANT_ROWS, "{}: rank of J", L::NAME);
         let n = NQ + rows.len();
         let mut a = DMatrix::<f64>::zeros(n, n);
         let mut b = DVector::<f64>::zeros(n);

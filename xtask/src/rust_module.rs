@@ -217,7 +217,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             ),
         });
     }
-    let redundant = (0..nc).map(|r| info.redundant_rows.contains(&r));
+    let redundant = lit(info.redundant_rows.len());
     let mobility = lit(info.mobility);
 
     let mut fields = Vec::new();
@@ -318,7 +318,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             const JOINT_NAMES: [&'static str; NQ] = [#(#joints),*];
             const ACTUATED: [usize; NU] = [#(#actuated),*];
             const HOME: [f64; NQ] = [#(#home),*];
-            const REDUNDANT_ROWS: [bool; NC] = [#(#redundant),*];
+            const REDUNDANT_ROWS: usize = #redundant;
             const MOBILITY: usize = #mobility;
             type Params<T: Real> = Params<T>;
             #(#methods)*
