@@ -9,6 +9,7 @@ use std::process::Command;
 use serde_json::Value;
 
 use crate::cli::target_dir;
+use crate::progress::Progress;
 
 /// The committed instruction budgets: per model, per hot path, instructions per call.
 pub const BUDGETS: &str = "tests/instruction-budgets.json";
@@ -62,12 +63,18 @@ pub fn instruction_counts(root: &Path) -> Result<BTreeMap<String, BTreeMap<Strin
         .join("examples")
         .join("count_calls");
     let mut out = BTreeMap::new();
-    for model in crate::cli::model_names(root)? {
+    let models = crate::cli::model_names(root)?;
+    let mut progress = Progress::new(
+        (models.len() * PATHS.len()) as u64,
+        "counting instructions (callgrind)",
+    );
+    for model in models {
         let mut per = BTreeMap::new();
         for path in PATHS {
             let base = collected(&bin, &model, path, 0)?;
             let full = collected(&bin, &model, path, CALLS)?;
             per.insert(path.to_string(), full.saturating_sub(base) / CALLS);
+            progress.set((out.len() * PATHS.len() + per.len()) as u64);
         }
         out.insert(model, per);
     }
@@ -101,16 +108,19 @@ pub fn compare_instructions(root: &Path) -> Result<String, String> {
                 / CALLS,
         )
     };
+    let models = crate::cli::model_names(root)?;
+    let mut progress = Progress::new(models.len() as u64, "counting CasADi's C (callgrind)");
     let mut lines = vec![
         "| model | fused ours | fused CasADi C | ratio | FD ours | FD CasADi C | ratio |"
             .to_string(),
         "|---|---|---|---|---|---|---|".to_string(),
     ];
-    for m in crate::cli::model_names(root)? {
-        let (fo, fc) = (per_call(&m, "fused")?, per_call(&m, "casadi_fused")?);
+    for (k, m) in models.iter().enumerate() {
+        progress.set(k as u64);
+        let (fo, fc) = (per_call(m, "fused")?, per_call(m, "casadi_fused")?);
         let (do_, dc) = (
-            per_call(&m, "forward_dynamics")?,
-            per_call(&m, "casadi_forward_dynamics")?,
+            per_call(m, "forward_dynamics")?,
+            per_call(m, "casadi_forward_dynamics")?,
         );
         lines.push(format!(
             "| {m} | {fo} | {fc} | {:.2} | {do_} | {dc} | {:.2} |",

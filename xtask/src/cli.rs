@@ -1,4 +1,4 @@
-//! What the command-line tools share: errors with their exit codes, flag parsing,
+//! What the command-line tools share: errors with their exit codes, lists of numbers,
 //! model names, and writing files so that a failure leaves no partial output.
 
 use std::path::{Path, PathBuf};
@@ -11,9 +11,22 @@ pub enum Error {
     Failed(String),
 }
 
+impl std::fmt::Display for Error {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Error::Usage(m) | Error::Failed(m) => f.write_str(m),
+        }
+    }
+}
+
 impl Error {
     pub fn usage(msg: impl Into<String>) -> Error {
         Error::Usage(msg.into())
+    }
+
+    /// Whether the input was at fault (exit code 2).
+    pub fn is_usage(&self) -> bool {
+        matches!(self, Error::Usage(_))
     }
 
     /// Prints the one-line error and gives the exit code.
@@ -47,87 +60,6 @@ pub fn check_model(name: &str, known: &[String]) -> Result<(), Error> {
             "unknown model `{name}` (expected one of: {})",
             known.join(", ")
         )))
-    }
-}
-
-/// Parsed arguments: `--flag value` options, boolean `--switch`es, and positionals.
-pub struct Flags {
-    values: Vec<(String, String)>,
-    switches: Vec<String>,
-    pub positionals: Vec<String>,
-}
-
-impl Flags {
-    /// Refuses flags not in `with_value` or `switches`, a missing value, and a repeated
-    /// flag.
-    pub fn parse(args: &[String], with_value: &[&str], switches: &[&str]) -> Result<Flags, Error> {
-        let mut f = Flags {
-            values: Vec::new(),
-            switches: Vec::new(),
-            positionals: Vec::new(),
-        };
-        let mut it = args.iter();
-        while let Some(a) = it.next() {
-            if with_value.contains(&a.as_str()) {
-                let v = it
-                    .next()
-                    .filter(|v| !v.starts_with("--"))
-                    .ok_or_else(|| Error::usage(format!("`{a}` needs a value")))?;
-                if f.values.iter().any(|(k, _)| k == a) {
-                    return Err(Error::usage(format!("`{a}` given twice")));
-                }
-                f.values.push((a.clone(), v.clone()));
-            } else if switches.contains(&a.as_str()) {
-                f.switches.push(a.clone());
-            } else if a.starts_with('-') && a.parse::<f64>().is_err() {
-                let mut known: Vec<&str> = with_value.iter().chain(switches).copied().collect();
-                known.sort_unstable();
-                return Err(Error::usage(format!(
-                    "unknown flag `{a}` (expected one of: {})",
-                    known.join(", ")
-                )));
-            } else {
-                f.positionals.push(a.clone());
-            }
-        }
-        Ok(f)
-    }
-
-    pub fn take(&mut self, flag: &str) -> Option<String> {
-        let i = self.values.iter().position(|(k, _)| k == flag)?;
-        Some(self.values.remove(i).1)
-    }
-
-    pub fn switch(&self, flag: &str) -> bool {
-        self.switches.iter().any(|s| s == flag)
-    }
-
-    /// The one positional argument, described as `what` in errors.
-    pub fn single_positional(&mut self, what: &str) -> Result<String, Error> {
-        match self.positionals.len() {
-            1 => Ok(self.positionals.remove(0)),
-            0 => Err(Error::usage(format!("expected {what}"))),
-            _ => Err(Error::usage(format!(
-                "expected {what} only, got: {}",
-                self.positionals.join(" ")
-            ))),
-        }
-    }
-
-    /// A number: `flag` must parse as a finite float, `ok` says what else it must be.
-    pub fn number(
-        &mut self,
-        flag: &str,
-        default: f64,
-        ok: (&str, fn(f64) -> bool),
-    ) -> Result<f64, Error> {
-        match self.take(flag) {
-            None => Ok(default),
-            Some(v) => match v.parse::<f64>() {
-                Ok(x) if x.is_finite() && (ok.1)(x) => Ok(x),
-                _ => Err(Error::usage(format!("`{flag} {v}`: expected {}", ok.0))),
-            },
-        }
     }
 }
 

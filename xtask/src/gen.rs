@@ -9,6 +9,7 @@ use std::process::{Command, Stdio};
 use codegen::ir::{Input, InputShape, Output, Program};
 use serde::Deserialize;
 
+use crate::cli::Error;
 use crate::ir_file::{IrFile, ModelInfo, FORMAT};
 use crate::model::{self, Model};
 use crate::rust_module::{self, Summary};
@@ -349,20 +350,21 @@ pub struct GenOptions {
     pub names: Vec<String>,
 }
 
-/// Runs the generation; returns a report for the user.
-pub fn run(root: &Path, opts: &GenOptions) -> Result<String, String> {
+/// Runs the generation; returns a report for the user. A bad spec or an unknown name is
+/// a usage error (the input's fault, exit code 2); anything else is a failure.
+pub fn run(root: &Path, opts: &GenOptions) -> Result<String, Error> {
     let started = std::time::Instant::now();
-    let paths = spec_paths(root)?;
+    let paths = spec_paths(root).map_err(Error::Failed)?;
     let known: Vec<String> = paths
         .iter()
         .filter_map(|p| p.file_stem().and_then(|s| s.to_str()).map(String::from))
         .collect();
     for n in &opts.names {
         if !known.contains(n) {
-            return Err(format!(
+            return Err(Error::usage(format!(
                 "unknown model `{n}` (specs in {SPECS_DIR}/: {})",
                 known.join(", ")
-            ));
+            )));
         }
     }
     let selected = |name: &str| opts.names.is_empty() || opts.names.iter().any(|n| n == name);
@@ -370,17 +372,17 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, String> {
     // Everything is computed before anything is written.
     let mut specs = Vec::new();
     for p in &paths {
-        specs.push(load_spec(root, p)?);
+        specs.push(load_spec(root, p).map_err(Error::Usage)?);
     }
-    let py = python(root)?;
+    let py = python(root).map_err(Error::Failed)?;
     let mut irs = Vec::new();
     let mut files = BTreeMap::new();
     let mut notes = Vec::new();
     for spec in &specs {
         let ir = if selected(&spec.name) {
-            let model = model::build(spec).map_err(|e| e.to_string())?;
-            let mut derived = derive(root, &py, &model)?;
-            check_home(spec, &derived.home_check)?;
+            let model = model::build(spec).map_err(|e| Error::Usage(e.to_string()))?;
+            let mut derived = derive(root, &py, &model).map_err(Error::Failed)?;
+            check_home(spec, &derived.home_check).map_err(Error::Usage)?;
             let h = &derived.home_check;
             let motors = model.actuated.len();
             notes.push(format!(
@@ -401,7 +403,7 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, String> {
             let c = std::mem::take(&mut derived.casadi_c);
             files.insert(Path::new(CASADI_C_DIR).join(format!("{}.c", spec.name)), c);
             let ir = assemble(spec, &model, derived);
-            rust_module::check_terms(&ir).map_err(|e| e.to_string())?;
+            rust_module::check_terms(&ir).map_err(|e| Error::Failed(e.to_string()))?;
             files.insert(
                 Path::new(IR_DIR).join(format!("{}.json", spec.name)),
                 ir.to_text(),
@@ -410,17 +412,17 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, String> {
         } else {
             let path = Path::new(IR_DIR).join(format!("{}.json", spec.name));
             let text = std::fs::read_to_string(root.join(&path)).map_err(|e| {
-                format!(
+                Error::Failed(format!(
                     "{}: {e} (run `cargo xtask gen {}`)",
                     path.display(),
                     spec.name
-                )
+                ))
             })?;
-            IrFile::parse(&text).map_err(|e| format!("{}: {e}", path.display()))?
+            IrFile::parse(&text).map_err(|e| Error::Failed(format!("{}: {e}", path.display())))?
         };
         irs.push(ir);
     }
-    files.extend(rust_files(&irs)?);
+    files.extend(rust_files(&irs).map_err(Error::Failed)?);
     let names: Vec<&str> = specs
         .iter()
         .map(|s| s.name.as_str())
@@ -450,10 +452,10 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, String> {
             ));
         }
         let list: Vec<String> = stale.iter().map(|p| format!("  {}", p.display())).collect();
-        return Err(format!(
+        return Err(Error::Failed(format!(
             "generated files are stale or missing:\n{}\nrun `cargo xtask gen` and commit the result",
             list.join("\n")
-        ));
+        )));
     }
 
     let mut written = Vec::new();
@@ -462,13 +464,13 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, String> {
         if std::fs::read_to_string(&full).ok().as_deref() == Some(text.as_str()) {
             continue;
         }
-        write_atomic(&full, text)?;
+        write_atomic(&full, text).map_err(Error::Failed)?;
         written.push(path.display().to_string());
     }
     if opts.names.is_empty() {
         for orphan in orphans(root, &files) {
             std::fs::remove_file(root.join(&orphan))
-                .map_err(|e| format!("{}: {e}", orphan.display()))?;
+                .map_err(|e| Error::Failed(format!("{}: {e}", orphan.display())))?;
             written.push(format!("{} (removed)", orphan.display()));
         }
     }

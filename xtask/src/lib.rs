@@ -2,6 +2,7 @@
 //! committed IR files and the Rust modules made from them. A library so that the
 //! workspace tests can check the committed code without Python.
 
+pub mod args;
 pub mod bench;
 pub mod cli;
 pub mod export;
@@ -9,5 +10,6 @@ pub mod gen;
 pub mod ir_file;
 pub mod model;
 pub mod pinocchio;
+pub mod progress;
 pub mod rust_module;
 pub mod spec;

@@ -5,64 +5,32 @@
 //! code it generates, so it can always regenerate it.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, ExitCode};
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
 
+use xtask::args::{self, Command, ExportFormat};
 use xtask::gen::{self, GenOptions};
 use xtask::{cli, export, model, spec};
 
 mod test;
 
-const USAGE: &str = "\
-usage: cargo xtask <command> [options]
-
-commands:
-  gen [--check] [NAME…]      derive the models (CasADi) and write generated/; with --check,
-                             regenerate in memory and fail if the committed files differ
-  sim [MODEL] [options]      simulate a leg under a controller and write a report
-                             (cargo xtask sim --help)
-  eval MODEL --q … [options] print every term at a state (cargo xtask eval --help)
-  export MODEL --format mjcf|urdf [--out FILE]
-                             the leg for MuJoCo (closures as <connect>) or URDF (spanning
-                             tree, closure frames NAME_a / NAME_b)
-  bench [--pinocchio]        criterion benchmarks beside CasADi's C (and Pinocchio), one table
-  bench --instructions       instructions per call of the hot paths (callgrind) vs budgets
-  bench --update-budgets     rewrite tests/instruction-budgets.json with today's counts
-  list                       the geometries, their sizes and actuated joints
-  new NAME                   write leg-models/specs/NAME.toml, a commented spec to start from
-  test                       every check CI runs: formatting, `gen --check`, the workspace
-                             tests (snapshots must be reviewed), the MuJoCo cross-check,
-                             the no_std build, clippy
-";
-
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let root = gen::workspace_root();
-    let result = match args.first().map(String::as_str) {
-        Some("gen") => run_gen(&root, &args[1..]),
-        Some("test") => match args.get(1) {
-            Some(extra) => Err(cli::Error::usage(format!(
-                "`test` takes no arguments, got `{extra}`"
-            ))),
-            None => test::run(&root).map_err(cli::Error::Failed),
-        },
-        Some("list") => match args.get(1) {
-            Some(extra) => Err(cli::Error::usage(format!(
-                "`list` takes no arguments, got `{extra}`"
-            ))),
-            None => list(&root),
-        },
-        Some("new") => new(&root, &args[1..]),
-        Some("export") => run_export(&root, &args[1..]),
-        Some("bench") => run_bench(&root, &args[1..]),
-        Some(cmd @ ("sim" | "eval")) => return delegate(&root, cmd, &args[1..]),
-        Some("-h" | "--help" | "help") => {
-            print!("{USAGE}");
-            Ok(())
-        }
-        Some(other) => Err(cli::Error::usage(format!("unknown command `{other}`"))),
-        None => Err(cli::Error::usage(
-            "no command given (try `cargo xtask --help`)",
-        )),
+    let parsed = match args::parse::<args::Xtask>(&args) {
+        Ok(args::Parsed::Run(a)) => a,
+        Ok(args::Parsed::Printed) => return ExitCode::SUCCESS,
+        Err(e) => return e.report(),
+    };
+    let result = match parsed.command {
+        Command::Gen(a) => run_gen(&root, a),
+        Command::Test => test::run(&root).map_err(cli::Error::Failed),
+        Command::List => list(&root),
+        Command::New(a) => new(&root, &a.name),
+        Command::Export(a) => run_export(&root, a),
+        Command::Bench(a) => run_bench(&root, a),
+        // Parsed here so that bad input is refused at once; `legs` parses them again.
+        Command::Sim(_) | Command::Eval(_) => return delegate(&root, &args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -70,86 +38,52 @@ fn main() -> ExitCode {
     }
 }
 
-fn run_gen(root: &Path, args: &[String]) -> Result<(), cli::Error> {
-    let mut opts = GenOptions {
-        check: false,
-        names: Vec::new(),
-    };
-    for a in args {
-        match a.as_str() {
-            "--check" => opts.check = true,
-            "-h" | "--help" => {
-                print!("{USAGE}");
-                return Ok(());
-            }
-            flag if flag.starts_with('-') => {
-                return Err(cli::Error::usage(format!(
-                    "unknown flag `{flag}` for `gen` (expected --check)"
-                )))
-            }
-            name => opts.names.push(name.to_string()),
-        }
-    }
+fn run_gen(root: &Path, a: args::GenArgs) -> Result<(), cli::Error> {
     let known = cli::model_names(root).map_err(cli::Error::Failed)?;
-    for n in &opts.names {
+    for n in &a.names {
         cli::check_model(n, &known)?;
     }
-    println!("{}", gen::run(root, &opts).map_err(cli::Error::Failed)?);
+    let opts = GenOptions {
+        check: a.check,
+        names: a.names,
+    };
+    println!("{}", gen::run(root, &opts)?);
     Ok(())
 }
 
-fn run_bench(root: &Path, args: &[String]) -> Result<(), cli::Error> {
-    let flags = cli::Flags::parse(
-        args,
-        &[],
-        &["--pinocchio", "--instructions", "--update-budgets"],
-    )?;
-    if let Some(extra) = flags.positionals.first() {
-        return Err(cli::Error::usage(format!(
-            "`bench` takes no model, got `{extra}`"
-        )));
-    }
-    if flags.switch("--instructions") || flags.switch("--update-budgets") {
-        let report = xtask::bench::check_budgets(root, flags.switch("--update-budgets"))
-            .map_err(cli::Error::Failed)?;
+fn run_bench(root: &Path, a: args::BenchArgs) -> Result<(), cli::Error> {
+    if a.instructions || a.update_budgets {
+        let report =
+            xtask::bench::check_budgets(root, a.update_budgets).map_err(cli::Error::Failed)?;
         println!("{report}");
-        if flags.switch("--instructions") {
+        if a.instructions {
             let table = xtask::bench::compare_instructions(root).map_err(cli::Error::Failed)?;
             println!("\n{table}");
         }
         return Ok(());
     }
-    xtask::bench::run(root, flags.switch("--pinocchio")).map_err(cli::Error::Failed)
+    xtask::bench::run(root, a.pinocchio).map_err(cli::Error::Failed)
 }
 
 fn load_model(root: &Path, name: &str) -> Result<model::Model, cli::Error> {
     let known = cli::model_names(root).map_err(cli::Error::Failed)?;
     cli::check_model(name, &known)?;
     let path = root.join(gen::SPECS_DIR).join(format!("{name}.toml"));
-    let spec = gen::load_spec(root, &path).map_err(cli::Error::Failed)?;
-    model::build(&spec).map_err(|e| cli::Error::Failed(e.to_string()))
+    // A spec that does not load is bad input, as in `gen`.
+    let spec = gen::load_spec(root, &path).map_err(cli::Error::Usage)?;
+    model::build(&spec).map_err(|e| cli::Error::Usage(e.to_string()))
 }
 
-fn run_export(root: &Path, args: &[String]) -> Result<(), cli::Error> {
-    let mut flags = cli::Flags::parse(args, &["--format", "--out"], &[])?;
-    let name = flags.single_positional("a model name")?;
-    let format = flags
-        .take("--format")
-        .ok_or_else(|| cli::Error::usage("`--format mjcf|urdf` is required"))?;
-    let m = load_model(root, &name)?;
-    let text = match format.as_str() {
-        "mjcf" => export::mjcf(&m),
-        "urdf" => export::urdf(&m),
-        other => {
-            return Err(cli::Error::usage(format!(
-                "unknown format `{other}` (expected mjcf or urdf)"
-            )))
-        }
+fn run_export(root: &Path, a: args::ExportArgs) -> Result<(), cli::Error> {
+    let m = load_model(root, &a.model)?;
+    let text = match a.format {
+        ExportFormat::Mjcf => export::mjcf(&m),
+        ExportFormat::Urdf => export::urdf(&m),
     };
-    match flags.take("--out") {
+    match a.out {
         Some(out) => {
-            cli::write_atomic(Path::new(&out), &text).map_err(cli::Error::Failed)?;
-            eprintln!("wrote {out}");
+            cli::write_atomic(&out, &text).map_err(cli::Error::Failed)?;
+            eprintln!("wrote {}", out.display());
         }
         None => print!("{text}"),
     }
@@ -219,12 +153,7 @@ fn list(root: &Path) -> Result<(), cli::Error> {
 
 const NEW_SPEC: &str = include_str!("new_spec.toml");
 
-fn new(root: &Path, args: &[String]) -> Result<(), cli::Error> {
-    let [name] = args else {
-        return Err(cli::Error::usage(
-            "`new` takes one name, e.g. `cargo xtask new my_leg`",
-        ));
-    };
+fn new(root: &Path, name: &str) -> Result<(), cli::Error> {
     spec::check_name(name).map_err(|m| cli::Error::usage(format!("model name: {m}")))?;
     let path: PathBuf = root.join(gen::SPECS_DIR).join(format!("{name}.toml"));
     if path.exists() {
@@ -242,12 +171,14 @@ fn new(root: &Path, args: &[String]) -> Result<(), cli::Error> {
     Ok(())
 }
 
-/// Runs `legs` (this package's binary with the generated models) with the same arguments.
-fn delegate(root: &Path, cmd: &str, args: &[String]) -> ExitCode {
+/// Builds `legs` (this package's binary with the generated models) and runs it with the
+/// same arguments. The alias's `--quiet` hides cargo's progress, and the first build
+/// takes minutes, so a build that is still going after a second says so.
+fn delegate(root: &Path, args: &[String]) -> ExitCode {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let status = Command::new(cargo)
+    let build = std::process::Command::new(cargo)
         .args([
-            "run",
+            "build",
             "--quiet",
             "--package",
             "xtask",
@@ -255,14 +186,46 @@ fn delegate(root: &Path, cmd: &str, args: &[String]) -> ExitCode {
             "models",
             "--bin",
             "legs",
-            "--",
         ])
-        .arg(cmd)
+        .current_dir(root)
+        .spawn();
+    let mut child = match build {
+        Ok(c) => c,
+        Err(e) => return cli::Error::Failed(format!("cannot run cargo: {e}")).report(),
+    };
+    let started = Instant::now();
+    let mut said = false;
+    let built = loop {
+        match child.try_wait() {
+            Ok(Some(status)) => break status,
+            Ok(None) => {
+                if !said && started.elapsed() >= Duration::from_secs(1) {
+                    eprintln!(
+                        "building the generated models for `{}` (the first build takes a few minutes)…",
+                        args[0]
+                    );
+                    said = true;
+                }
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            Err(e) => return cli::Error::Failed(format!("cargo build: {e}")).report(),
+        }
+    };
+    if !built.success() {
+        return cli::Error::Failed(format!("building `legs` failed ({built})")).report();
+    }
+    if said {
+        eprintln!("built in {:.0} s", started.elapsed().as_secs_f64());
+    }
+    let legs = cli::target_dir(root)
+        .join("debug")
+        .join(format!("legs{}", std::env::consts::EXE_SUFFIX));
+    match std::process::Command::new(&legs)
         .args(args)
         .current_dir(root)
-        .status();
-    match status {
+        .status()
+    {
         Ok(s) => ExitCode::from(s.code().unwrap_or(1).clamp(0, 255) as u8),
-        Err(e) => cli::Error::Failed(format!("cannot run cargo: {e}")).report(),
+        Err(e) => cli::Error::Failed(format!("cannot run {}: {e}", legs.display())).report(),
     }
 }

@@ -109,7 +109,8 @@ pub fn run(root: &Path) -> Result<(), String> {
                 names: Vec::new(),
             },
         )
-        .map(|report| eprintln!("{report}")),
+        .map(|report| eprintln!("{report}"))
+        .map_err(|e| e.to_string()),
     );
     // Which checks did not apply to which leg, and why: written by the tests.
     let applicability = target_dir(root).join("not-applicable.txt");

@@ -157,10 +157,24 @@ fn eval_refuses_bad_input() {
     );
     refused(
         &legs(&["eval", "minitaur", "--q", "1,2,3,4", "--frob"]),
-        "unknown flag `--frob`",
+        "unexpected argument '--frob' found (see `cargo xtask eval --help`)",
     );
-    refused(&legs(&["eval", "minitaur"]), "`--q` is required");
-    refused(&legs(&["eval", "minitaur", "--q"]), "`--q` needs a value");
+    refused(
+        &legs(&["eval", "minitaur", "--q", "1,2,3,4", "--jsno"]),
+        "tip: a similar argument exists: '--json'",
+    );
+    refused(
+        &legs(&["eval", "minitaur"]),
+        "the following required arguments were not provided: --q",
+    );
+    refused(
+        &legs(&["eval", "minitaur", "--q"]),
+        "a value is required for '--q",
+    );
+    refused(
+        &legs(&["eval", "minitaur", "--q", "1,2,3,4", "--guess", "1,2,3,4"]),
+        "--assemble",
+    );
 }
 
 #[test]
@@ -238,7 +252,7 @@ fn sim_refuses_bad_input_and_writes_nothing() {
     refused(&legs(&["sim", "nope", "--out", d]), "unknown model `nope`");
     refused(
         &legs(&["sim", "minitaur", "--controller", "magic", "--out", d]),
-        "unknown controller `magic`",
+        "invalid value 'magic' for '--controller <C>'; possible values: foot-fl, foot-pd, joint-fl, joint-pd, passive",
     );
     refused(
         &legs(&[
@@ -255,19 +269,19 @@ fn sim_refuses_bad_input_and_writes_nothing() {
     );
     refused(
         &legs(&["sim", "minitaur", "--dt", "-1", "--out", d]),
-        "`--dt -1`",
+        "invalid value '-1' for '--dt <S>': expected a step in (0, 0.05] s",
     );
     refused(
         &legs(&["sim", "minitaur", "--duration", "abc", "--out", d]),
-        "`--duration abc`",
+        "invalid value 'abc' for '--duration <S>'",
     );
     refused(
         &legs(&["sim", "minitaur", "--sped", "2", "--out", d]),
-        "unknown flag `--sped`",
+        "unexpected argument '--sped' found; tip: a similar argument exists: '--speed'",
     );
     refused(
         &legs(&["sim", "minitaur", "--speed", "0", "--out", d]),
-        "`--speed 0`",
+        "invalid value '0' for '--speed <W>'",
     );
     // A controller that does not apply to the leg is refused with the reason.
     refused(
@@ -363,15 +377,15 @@ fn export_writes_mjcf_and_urdf_and_refuses_bad_input() {
     );
     refused(
         &xtask(&["export", "minitaur", "--format", "obj", "--out", b]),
-        "unknown format `obj`",
+        "invalid value 'obj' for '--format <FORMAT>'; possible values: mjcf, urdf",
     );
     refused(
         &xtask(&["export", "minitaur", "--out", b]),
-        "`--format mjcf|urdf` is required",
+        "the following required arguments were not provided: --format",
     );
     refused(
         &xtask(&["export", "minitaur", "atrias", "--format", "mjcf"]),
-        "expected a model name only",
+        "unexpected argument 'atrias' found",
     );
     assert!(!bad.exists());
     std::fs::remove_dir_all(&dir).unwrap();
@@ -387,7 +401,47 @@ fn list_new_and_unknown_commands() {
     assert!(text.contains("upper_a, upper_b"));
     refused(&xtask(&["new", "Bad-Name"]), "not a plain identifier");
     refused(&xtask(&["new", "minitaur"]), "exists already");
-    refused(&xtask(&["frobnicate"]), "unknown command `frobnicate`");
-    refused(&xtask(&["gen", "--frob"]), "unknown flag `--frob`");
+    refused(
+        &xtask(&["frobnicate"]),
+        "unrecognized subcommand 'frobnicate'",
+    );
+    refused(
+        &xtask(&["exprot", "minitaur"]),
+        "tip: a similar subcommand exists: 'export'",
+    );
+    refused(&xtask(&[]), "no command given");
+    refused(
+        &xtask(&["gen", "--frob"]),
+        "unexpected argument '--frob' found",
+    );
+    refused(
+        &xtask(&["gen", "--chek"]),
+        "tip: a similar argument exists: '--check'",
+    );
     refused(&xtask(&["gen", "nope"]), "unknown model `nope`");
+}
+
+#[test]
+fn every_subcommand_has_help_and_both_value_forms_work() {
+    for cmd in [
+        "gen", "sim", "eval", "export", "bench", "list", "new", "test",
+    ] {
+        let out = xtask(&[cmd, "--help"]);
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success() && text.contains(&format!("Usage: cargo xtask {cmd}")),
+            "`{cmd} --help`: {text}"
+        );
+    }
+    let out = legs(&["sim", "--help"]);
+    assert!(out.status.success() && String::from_utf8_lossy(&out.stdout).contains("--controller"));
+    // `--flag=value` and `--flag value`, negative numbers included.
+    let spaced = legs(&["eval", "minitaur", "--q", "-0.2,1.4,0.3,-1.4", "--json"]);
+    let joined = legs(&["eval", "minitaur", "--q=-0.2,1.4,0.3,-1.4", "--json"]);
+    assert!(
+        spaced.status.success(),
+        "{}",
+        String::from_utf8_lossy(&spaced.stderr)
+    );
+    assert_eq!(spaced.stdout, joined.stdout);
 }

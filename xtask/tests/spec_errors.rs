@@ -350,6 +350,11 @@ fn a_failed_generation_leaves_every_file_untouched() {
     )
     .unwrap_err();
     assert!(
+        err.is_usage(),
+        "bad input must be a usage error (exit 2): {err}"
+    );
+    let err = err.to_string();
+    assert!(
         err.contains("leg-models/specs/bad.toml:") && err.contains("links[0].mass"),
         "{err}"
     );
@@ -363,6 +368,11 @@ fn a_failed_generation_leaves_every_file_untouched() {
         },
     )
     .unwrap_err();
+    assert!(
+        err.is_usage(),
+        "bad input must be a usage error (exit 2): {err}"
+    );
+    let err = err.to_string();
     assert!(
         err.contains("unknown model `nope`") && err.contains("good"),
         "{err}"
@@ -439,6 +449,11 @@ fn a_home_pose_that_does_not_assemble_is_located() {
         },
     )
     .unwrap_err();
+    assert!(
+        err.is_usage(),
+        "bad input must be a usage error (exit 2): {err}"
+    );
+    let err = err.to_string();
     let (l, c) = pos(&text, "[0.0, 0.0, 0.0, 0.0]", 0);
     assert!(
         err.starts_with(&format!("leg-models/specs/leg.toml:{l}:{c}: home: the home pose does not assemble: closure residual 5.000e-2 m")),

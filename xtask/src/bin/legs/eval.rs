@@ -9,23 +9,8 @@ use leg_models::dynamics::forward_dynamics;
 use leg_models::nalgebra::{SMatrix, SVector};
 use leg_models::LegModel;
 use serde_json::{json, Map, Value};
-use xtask::cli::{numbers, Error, Flags};
-
-pub const HELP: &str = "\
-usage: cargo xtask eval MODEL --q Q1,Q2,… [--qd …] [--u …] [--json] [--assemble [--guess …]]
-
-  --q         joint angles (rad), one per joint; with --assemble, the actuated angles only
-  --qd        joint rates (rad/s), default zero; with --assemble, the actuated rates only
-  --u         motor torques (N m), one per actuated joint, default zero
-  --assemble  solve the loops for the passive joints first: by default following the
-              assembly branch of the spec's home pose while the motors move from their
-              home angles to --q (an error says where that branch ends); with --guess,
-              from that pose (it picks the assembly mode)
-  --guess     with --assemble: a starting pose, one angle per joint (rad)
-  --json      one JSON object: q, qd, u, M, N, G, J, Jdot_qdot, qdd, F, A_tilde, b_tilde,
-              foot, foot_jacobian, kinetic, potential, phi (matrices as arrays of rows);
-              a term that cannot be computed at this state is null, and `errors` says why
-";
+use xtask::args::EvalArgs;
+use xtask::cli::{numbers, Error};
 
 fn matrix<const R: usize, const C: usize>(m: &SMatrix<f64, R, C>) -> Value {
     Value::Array(
@@ -40,18 +25,16 @@ fn vector<const R: usize>(v: &SVector<f64, R>) -> Value {
 }
 
 pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
-    mut flags: Flags,
+    args: &EvalArgs,
 ) -> Result<(), Error> {
     let p = L::Params::<f64>::default();
-    let json_out = flags.switch("--json");
-    let assembled = flags.switch("--assemble");
-    let q_text = flags
-        .take("--q")
-        .ok_or_else(|| Error::usage("`--q` is required (see `cargo xtask eval --help`)"))?;
+    let json_out = args.json;
+    let assembled = args.assemble;
+    let q_text = &args.q;
     let (q, qd) = if assembled {
-        let theta = numbers("--q", &q_text, NU, "actuated angles with --assemble")?;
-        let theta_dot = match flags.take("--qd") {
-            Some(t) => numbers("--qd", &t, NU, "actuated rates with --assemble")?,
+        let theta = numbers("--q", q_text, NU, "actuated angles with --assemble")?;
+        let theta_dot = match &args.qd {
+            Some(t) => numbers("--qd", t, NU, "actuated rates with --assemble")?,
             None => vec![0.0; NU],
         };
         let theta = SVector::<f64, NU>::from_column_slice(&theta);
@@ -63,11 +46,11 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
                 theta.as_slice()
             ))
         };
-        let q = match flags.take("--guess") {
+        let q = match &args.guess {
             Some(g) => {
                 let guess = SVector::<f64, NQ>::from_column_slice(&numbers(
                     "--guess",
-                    &g,
+                    g,
                     NQ,
                     "a starting pose, one angle per joint",
                 )?);
@@ -96,24 +79,17 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
         .map_err(|e| Error::usage(format!("no consistent rates at this pose: {e}")))?;
         (q, qd)
     } else {
-        let q =
-            SVector::<f64, NQ>::from_column_slice(&numbers("--q", &q_text, NQ, "joint angles")?);
-        let qd = match flags.take("--qd") {
-            Some(t) => SVector::from_column_slice(&numbers("--qd", &t, NQ, "joint rates")?),
+        let q = SVector::<f64, NQ>::from_column_slice(&numbers("--q", q_text, NQ, "joint angles")?);
+        let qd = match &args.qd {
+            Some(t) => SVector::from_column_slice(&numbers("--qd", t, NQ, "joint rates")?),
             None => SVector::zeros(),
         };
         (q, qd)
     };
-    if flags.take("--guess").is_some() {
-        return Err(Error::usage("`--guess` goes with `--assemble`"));
-    }
-    let u = match flags.take("--u") {
-        Some(t) => SVector::<f64, NU>::from_column_slice(&numbers("--u", &t, NU, "motor torques")?),
+    let u = match &args.u {
+        Some(t) => SVector::<f64, NU>::from_column_slice(&numbers("--u", t, NU, "motor torques")?),
         None => SVector::zeros(),
     };
-    if let Some(extra) = flags.positionals.first() {
-        return Err(Error::usage(format!("unexpected argument `{extra}`")));
-    }
 
     let terms = L::dynamics_terms(&q, &qd, &p);
     let mut out = Map::new();

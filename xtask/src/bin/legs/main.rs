@@ -3,7 +3,8 @@
 
 use std::process::ExitCode;
 
-use xtask::cli::{Error, Flags};
+use xtask::args::{self, EvalArgs, Legs, LegsCommand, Parsed, SimArgs};
+use xtask::cli::Error;
 
 mod eval;
 mod report;
@@ -28,36 +29,21 @@ fn unknown(name: &str) -> Error {
     ))
 }
 
-fn eval(mut flags: Flags) -> Result<(), Error> {
-    let name = flags
-        .positionals
-        .first()
-        .cloned()
-        .ok_or_else(|| Error::usage("expected a model name (see `cargo xtask eval --help`)"))?;
-    flags.positionals.remove(0);
+fn eval(args: EvalArgs) -> Result<(), Error> {
     macro_rules! dispatch {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
-            if name == stringify!($module) {
-                return eval::run::<$ty, $nq, $nc, $nu>(flags);
+            if args.model == stringify!($module) {
+                return eval::run::<$ty, $nq, $nc, $nu>(&args);
             }
         };
     }
     generated::for_each_model!(dispatch);
-    Err(unknown(&name))
+    Err(unknown(&args.model))
 }
 
-fn simulate(mut flags: Flags) -> Result<(), Error> {
-    let name = match flags.positionals.len() {
-        0 => "minitaur".to_string(),
-        1 => flags.positionals.remove(0),
-        _ => {
-            return Err(Error::usage(format!(
-                "expected at most one model, got: {}",
-                flags.positionals.join(" ")
-            )))
-        }
-    };
-    let settings = sim::Settings::from_flags(&mut flags)?;
+fn simulate(args: SimArgs) -> Result<(), Error> {
+    let name = args.model.clone().unwrap_or_else(|| "minitaur".to_string());
+    let settings = sim::Settings::from_args(&args)?;
     macro_rules! dispatch {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
             if name == stringify!($module) {
@@ -71,25 +57,15 @@ fn simulate(mut flags: Flags) -> Result<(), Error> {
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let result = match args.first().map(String::as_str) {
-        Some("eval") if args[1..].iter().any(|a| a == "-h" || a == "--help") => {
-            print!("{}", eval::HELP);
-            Ok(())
-        }
-        Some("sim") if args[1..].iter().any(|a| a == "-h" || a == "--help") => {
-            print!("{}", sim::HELP);
-            Ok(())
-        }
-        Some("eval") => Flags::parse(
-            &args[1..],
-            &["--q", "--qd", "--u", "--guess"],
-            &["--json", "--assemble"],
-        )
-        .and_then(eval),
-        Some("sim") => Flags::parse(&args[1..], sim::VALUE_FLAGS, &[]).and_then(simulate),
-        _ => Err(Error::usage(
-            "usage: legs sim|eval … (run through `cargo xtask sim` or `cargo xtask eval`)",
-        )),
+    let result = match args::parse::<Legs>(&args) {
+        Ok(Parsed::Run(Legs {
+            command: LegsCommand::Eval(a),
+        })) => eval(a),
+        Ok(Parsed::Run(Legs {
+            command: LegsCommand::Sim(a),
+        })) => simulate(a),
+        Ok(Parsed::Printed) => Ok(()),
+        Err(e) => Err(e),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -10,6 +10,8 @@ pub struct Series {
     title: String,
     t: Vec<f64>,
     lines: Vec<(String, Vec<f64>)>,
+    /// A logarithmic y axis, for magnitudes that span decades (residuals).
+    log: bool,
 }
 
 impl Series {
@@ -18,6 +20,16 @@ impl Series {
             title: title.to_string(),
             t: t.to_vec(),
             lines,
+            log: false,
+        }
+    }
+
+    /// Magnitudes on a log scale; exact zeros are drawn on the axis's floor, a decade
+    /// below the smallest positive value.
+    pub fn log(title: &str, t: &[f64], lines: Vec<(String, Vec<f64>)>) -> Series {
+        Series {
+            log: true,
+            ..Series::new(title, t, lines)
         }
     }
 }
@@ -50,6 +62,9 @@ const COLORS: [RGBColor; 4] = [
 ];
 
 fn plot(series: &Series) -> Result<String, String> {
+    if series.log {
+        return plot_log(series);
+    }
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (640, 260)).into_drawing_area();
@@ -104,6 +119,82 @@ fn plot(series: &Series) -> Result<String, String> {
                         .copied()
                         .zip(values.iter().copied())
                         .filter(|(_, v)| v.is_finite()),
+                    color.stroke_width(2),
+                ))
+                .map_err(|e| e.to_string())?
+                .label(name.clone())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
+                });
+        }
+        if series.lines.len() > 1 {
+            chart
+                .configure_series_labels()
+                .position(SeriesLabelPosition::UpperRight)
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()
+                .map_err(|e| e.to_string())?;
+        }
+        root.present().map_err(|e| e.to_string())?;
+    }
+    Ok(svg)
+}
+
+/// The smallest positive and the largest value of the series' lines.
+fn positive_range(series: &Series) -> (f64, f64) {
+    let values = series
+        .lines
+        .iter()
+        .flat_map(|(_, v)| v.iter().copied())
+        .filter(|v| v.is_finite() && *v > 0.0);
+    let (lo, hi) = values.fold((f64::INFINITY, 0.0f64), |(a, b), v| (a.min(v), b.max(v)));
+    if lo.is_finite() {
+        (lo, hi)
+    } else {
+        // Nothing positive (all exact zeros): a nominal decade.
+        (1e-16, 1e-15)
+    }
+}
+
+fn plot_log(series: &Series) -> Result<String, String> {
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (640, 260)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let t_end = series.t.last().copied().unwrap_or(1.0).max(1e-9);
+        let (lo, hi) = positive_range(series);
+        let floor = lo / 10.0;
+        let top = if series.lines.len() > 1 {
+            hi * 1e3
+        } else {
+            hi * 3.0
+        };
+        let mut chart = ChartBuilder::on(&root)
+            .caption(&series.title, ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..t_end, (floor..top).log_scale())
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc("t (s)")
+            .y_desc(format!("{} (log)", series.title))
+            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        for (i, (name, values)) in series.lines.iter().enumerate() {
+            let color = COLORS[i % COLORS.len()];
+            chart
+                .draw_series(LineSeries::new(
+                    series
+                        .t
+                        .iter()
+                        .copied()
+                        .zip(values.iter().copied())
+                        .filter(|(_, v)| v.is_finite())
+                        .map(|(t, v)| (t, v.abs().max(floor))),
                     color.stroke_width(2),
                 ))
                 .map_err(|e| e.to_string())?
@@ -281,4 +372,33 @@ table.summary td:first-child {{ color: #555; white-space: nowrap; }}
         summary = summary_rows(r.summary),
         plots = plots.join("\n"),
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn residuals_are_drawn_on_decades_with_zeros_on_the_floor() {
+        let t = [0.0, 0.5, 1.0, 1.5];
+        let s = Series::log(
+            "closure residual max |φ| (m)",
+            &t,
+            vec![("residual".into(), vec![0.0, 2e-16, 3e-14, 1e-12])],
+        );
+        // The floor is a decade below the smallest positive value.
+        assert_eq!(positive_range(&s), (2e-16, 1e-12));
+        let svg = plot(&s).unwrap();
+        // A tick at every decade the values span.
+        for tick in ["1e-15", "1e-14", "1e-13", "1e-12"] {
+            assert!(
+                svg.contains(&format!("\n{tick}\n")),
+                "no tick {tick}: {svg}"
+            );
+        }
+        assert!(svg.contains("(log)") && !svg.contains("NaN"));
+        // Nothing positive at all still draws (a nominal decade), never a NaN axis.
+        let zeros = Series::log("r", &t, vec![("r".into(), vec![0.0; 4])]);
+        assert!(!plot(&zeros).unwrap().contains("NaN"));
+    }
 }

@@ -18,40 +18,11 @@ use leg_models::simulate::{Sample, Simulator};
 use leg_models::structure::{NotApplicable, Structure};
 use leg_models::LegModel;
 use serde_json::json;
-use xtask::cli::{write_atomic, Error, Flags};
+use xtask::args::{ControllerArg, SimArgs, TrajectoryArg};
+use xtask::cli::{write_atomic, Error};
+use xtask::progress::Progress;
 
 use crate::report::{self, Report, Series};
-
-pub const HELP: &str = "\
-usage: cargo xtask sim [MODEL] [options]        (default: minitaur)
-
-  --controller C   foot-fl, foot-pd, joint-fl, joint-pd, passive. Default: foot-fl where
-                   the motors can place the foot (two or more motors that determine the
-                   leg), else joint-fl on the motors, else passive; the summary says why
-  --trajectory T   for foot controllers: step (default, an ellipse under the hip), hold;
-                   for joint controllers: sine (default), spin (default with one motor:
-                   the motors turn at --speed), min-jerk, hold
-  --speed W        motor speed of the spin trajectory in rad/s (default 6.283, 1 turn/s)
-  --duration S     simulated time in s (default 3)
-  --dt S           step in s (default 0.001); torques are updated once per step
-  --kp K           stiffness of the error dynamics in 1/s² (default 400 foot, 100 joint);
-                   k_d = 2√k_p; PD gains are scaled by the leg's inertia at home
-  --torque-limit N motor limit in N m (default none); saturations are counted
-  --out DIR        where to write (default target/sim/MODEL)
-
-writes trajectory.csv, summary.json and report.html (open it in a browser)
-";
-
-pub const VALUE_FLAGS: &[&str] = &[
-    "--controller",
-    "--trajectory",
-    "--speed",
-    "--duration",
-    "--dt",
-    "--kp",
-    "--torque-limit",
-    "--out",
-];
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Controller {
@@ -119,77 +90,37 @@ impl Trajectory {
     }
 }
 
-fn positive(flags: &mut Flags, flag: &str, what: &str) -> Result<Option<f64>, Error> {
-    match flags.take(flag) {
-        None => Ok(None),
-        Some(v) => match v.parse::<f64>() {
-            Ok(k) if k.is_finite() && k > 0.0 => Ok(Some(k)),
-            _ => Err(Error::usage(format!("`{flag} {v}`: expected {what}"))),
-        },
-    }
-}
-
 impl Settings {
-    pub fn from_flags(flags: &mut Flags) -> Result<Settings, Error> {
-        let controller = match flags.take("--controller").as_deref() {
-            None => None,
-            Some("foot-fl") => Some(Controller::FootFl),
-            Some("foot-pd") => Some(Controller::FootPd),
-            Some("joint-fl") => Some(Controller::JointFl),
-            Some("joint-pd") => Some(Controller::JointPd),
-            Some("passive") => Some(Controller::Passive),
-            Some(other) => {
-                return Err(Error::usage(format!(
-                    "unknown controller `{other}` (expected foot-fl, foot-pd, joint-fl, joint-pd or passive)"
-                )))
-            }
-        };
-        let trajectory = match flags.take("--trajectory").as_deref() {
-            None => None,
-            Some("step") => Some(Trajectory::Step),
-            Some("sine") => Some(Trajectory::Sine),
-            Some("spin") => Some(Trajectory::Spin),
-            Some("min-jerk") => Some(Trajectory::MinJerk),
-            Some("hold") => Some(Trajectory::Hold),
-            Some(other) => {
-                return Err(Error::usage(format!(
-                    "unknown trajectory `{other}` (expected step, hold, sine, spin or min-jerk)"
-                )))
-            }
-        };
-        let speed = flags.number(
-            "--speed",
-            std::f64::consts::TAU,
-            ("a speed in rad/s, not zero, at most 1000", |x| {
-                x != 0.0 && x.abs() <= 1000.0
-            }),
-        )?;
-        let duration = flags.number(
-            "--duration",
-            3.0,
-            ("a duration in (0, 600] s", |x| x > 0.0 && x <= 600.0),
-        )?;
-        let dt = flags.number(
-            "--dt",
-            1e-3,
-            ("a step in (0, 0.05] s", |x| x > 0.0 && x <= 0.05),
-        )?;
-        if duration / dt > 5e6 {
+    pub fn from_args(a: &SimArgs) -> Result<Settings, Error> {
+        let controller = a.controller.map(|c| match c {
+            ControllerArg::FootFl => Controller::FootFl,
+            ControllerArg::FootPd => Controller::FootPd,
+            ControllerArg::JointFl => Controller::JointFl,
+            ControllerArg::JointPd => Controller::JointPd,
+            ControllerArg::Passive => Controller::Passive,
+        });
+        let trajectory = a.trajectory.map(|t| match t {
+            TrajectoryArg::Step => Trajectory::Step,
+            TrajectoryArg::Sine => Trajectory::Sine,
+            TrajectoryArg::Spin => Trajectory::Spin,
+            TrajectoryArg::MinJerk => Trajectory::MinJerk,
+            TrajectoryArg::Hold => Trajectory::Hold,
+        });
+        if a.duration / a.dt > 5e6 {
             return Err(Error::usage(format!(
-                "{duration} s at dt = {dt} s is more than 5 million steps"
+                "{} s at dt = {} s is more than 5 million steps",
+                a.duration, a.dt
             )));
         }
-        let kp = positive(flags, "--kp", "a positive number")?;
-        let torque_limit = positive(flags, "--torque-limit", "a positive number of N m")?;
         let settings = Settings {
             controller,
             trajectory,
-            speed,
-            duration,
-            dt,
-            kp,
-            torque_limit,
-            out: flags.take("--out").map(PathBuf::from),
+            speed: a.speed,
+            duration: a.duration,
+            dt: a.dt,
+            kp: a.kp,
+            torque_limit: a.torque_limit,
+            out: a.out.clone(),
         };
         if let (Some(c), Some(t)) = (controller, trajectory) {
             settings.check_pair(c, t)?;
@@ -319,6 +250,23 @@ impl<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>
             AnyController::JointPd(c) => c.torque(t, s),
             AnyController::Passive => Ok(SVector::zeros()),
         }
+    }
+}
+
+/// A torque source that moves a progress bar: the simulator asks for torques once per
+/// step (torques are held over the step), at the step's start time.
+struct WithProgress<S> {
+    inner: S,
+    progress: Progress,
+    dt: f64,
+}
+
+impl<S: TorqueSource<f64, NQ, NU>, const NQ: usize, const NU: usize> TorqueSource<f64, NQ, NU>
+    for WithProgress<S>
+{
+    fn torque(&mut self, t: f64, s: &State<f64, NQ>) -> Result<SVector<f64, NU>, ControlError> {
+        self.progress.set((t / self.dt).round() as u64);
+        self.inner.torque(t, s)
     }
 }
 
@@ -494,9 +442,14 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
         Controller::Passive => (AnyController::Passive, "none".to_string()),
     };
     let limit = s.torque_limit.unwrap_or(f64::INFINITY);
-    let mut source = Saturated::new(controller, SVector::from_element(limit));
+    let source = Saturated::new(controller, SVector::from_element(limit));
     let steps = (s.duration / s.dt).round() as usize;
     let sim = Simulator::<L, f64, NQ, NC, NU>::new(p, StepOptions::rk4(s.dt));
+    let mut source = WithProgress {
+        inner: source,
+        progress: Progress::new(steps as u64, &format!("simulating {}", L::NAME)),
+        dt: s.dt,
+    };
     let (samples, stopped) = match sim.run(initial, steps, &mut source) {
         Ok(samples) => (samples, None),
         Err(stop) => {
@@ -504,6 +457,13 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
             (stop.samples, Some(why))
         }
     };
+    // The bar goes before anything is printed.
+    let WithProgress {
+        inner: source,
+        progress,
+        ..
+    } = source;
+    drop(progress);
 
     // What each sample is measured against.
     let foot_task = controller_kind.in_foot_space();
@@ -702,7 +662,7 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
             })
             .collect(),
     ));
-    plots.push(Series::new(
+    plots.push(Series::log(
         "closure residual max |φ| (m)",
         &t,
         vec![(

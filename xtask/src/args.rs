@@ -1,0 +1,408 @@
+//! The command line of `cargo xtask`, declared once with clap's derive API: `xtask`
+//! parses it (so a misspelt flag is refused before anything is built) and the `legs`
+//! binary behind `sim` and `eval` parses the same `SimArgs` and `EvalArgs`.
+//!
+//! Clap's errors are several lines (usage, tips); ours are one line on stderr with exit
+//! code 2, so [`parse`] folds them into one.
+
+use std::path::PathBuf;
+
+use clap::error::ErrorKind;
+use clap::{Args, Parser, Subcommand, ValueEnum};
+
+use crate::cli::Error;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "cargo xtask",
+    bin_name = "cargo xtask",
+    about = "Closed-chain leg models: generation (spec → CasADi → Rust), simulation, checks",
+    allow_negative_numbers = true,
+    disable_help_subcommand = true
+)]
+pub struct Xtask {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Derive the models (CasADi) and write generated/
+    Gen(GenArgs),
+    /// Simulate a leg under a controller and write a report
+    Sim(SimArgs),
+    /// Print every term of a model at one state
+    Eval(EvalArgs),
+    /// Write the leg for MuJoCo (MJCF, closures as <connect>) or URDF (spanning tree,
+    /// closure frames NAME_a / NAME_b)
+    Export(ExportArgs),
+    /// Criterion benchmarks beside CasADi's C (and Pinocchio), or instruction counts
+    Bench(BenchArgs),
+    /// The geometries: sizes, mobility, actuated joints
+    List,
+    /// Write leg-models/specs/NAME.toml, a commented spec to start from
+    New(NewArgs),
+    /// Every check CI runs: formatting, `gen --check`, the workspace tests (snapshots
+    /// must be reviewed), the MuJoCo and Pinocchio cross-checks, instruction budgets,
+    /// the no_std build, clippy
+    Test,
+}
+
+#[derive(Args, Debug)]
+pub struct GenArgs {
+    /// Regenerate in memory and fail if the committed files differ (names the command
+    /// to run)
+    #[arg(long)]
+    pub check: bool,
+    /// Models to regenerate (default: every spec in leg-models/specs/)
+    #[arg(value_name = "NAME")]
+    pub names: Vec<String>,
+}
+
+#[derive(Args, Debug)]
+pub struct ExportArgs {
+    /// The model (a spec in leg-models/specs/)
+    pub model: String,
+    /// The file format
+    #[arg(long, value_enum)]
+    pub format: ExportFormat,
+    /// Where to write (default: standard output)
+    #[arg(long, value_name = "FILE")]
+    pub out: Option<PathBuf>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ExportFormat {
+    /// MuJoCo's MJCF: the spanning tree, closures as equality <connect> constraints
+    Mjcf,
+    /// URDF: the spanning tree, closure points as fixed frames NAME_a / NAME_b
+    Urdf,
+}
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Also build and time Pinocchio's pipeline (C++) from each spec
+    #[arg(long)]
+    pub pinocchio: bool,
+    /// Instructions per call of the hot paths (callgrind), against the budgets and
+    /// beside CasADi's C, instead of the criterion timings
+    #[arg(long, conflicts_with = "pinocchio")]
+    pub instructions: bool,
+    /// Rewrite tests/instruction-budgets.json with today's counts
+    #[arg(long, conflicts_with = "pinocchio")]
+    pub update_budgets: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct NewArgs {
+    /// The new model's name: a plain identifier (lower case, digits, underscores)
+    pub name: String,
+}
+
+/// `cargo xtask sim`.
+#[derive(Args, Debug, Clone)]
+#[command(
+    allow_negative_numbers = true,
+    after_help = "writes trajectory.csv, summary.json and report.html (open it in a browser)"
+)]
+pub struct SimArgs {
+    /// The model (default: minitaur)
+    pub model: Option<String>,
+    /// Default: foot-fl where the motors can place the foot (two or more motors that
+    /// determine the leg), else joint-fl on the motors, else passive; the summary says why
+    #[arg(long, value_enum, value_name = "C")]
+    pub controller: Option<ControllerArg>,
+    /// Default: step for foot controllers, sine for joint controllers (spin with one
+    /// motor), hold for passive
+    #[arg(long, value_enum, value_name = "T")]
+    pub trajectory: Option<TrajectoryArg>,
+    /// Motor speed of the spin trajectory in rad/s (1 turn/s by default)
+    #[arg(long, value_name = "W", default_value_t = std::f64::consts::TAU,
+          value_parser = number("a speed in rad/s, not zero, at most 1000", |x| x != 0.0 && x.abs() <= 1000.0))]
+    pub speed: f64,
+    /// Simulated time in s
+    #[arg(long, value_name = "S", default_value_t = 3.0,
+          value_parser = number("a duration in (0, 600] s", |x| x > 0.0 && x <= 600.0))]
+    pub duration: f64,
+    /// Step in s; torques are updated once per step
+    #[arg(long, value_name = "S", default_value_t = 1e-3,
+          value_parser = number("a step in (0, 0.05] s", |x| x > 0.0 && x <= 0.05))]
+    pub dt: f64,
+    /// Stiffness of the error dynamics in 1/s² (default 400 foot, 100 joint); k_d = 2√k_p;
+    /// PD gains are scaled by the leg's inertia at home
+    #[arg(long, value_name = "K", value_parser = number("a positive number", |x| x > 0.0))]
+    pub kp: Option<f64>,
+    /// Motor limit in N m (default none); saturations are counted
+    #[arg(long, value_name = "N", value_parser = number("a positive number of N m", |x| x > 0.0))]
+    pub torque_limit: Option<f64>,
+    /// Where to write (default target/sim/MODEL)
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ControllerArg {
+    /// Feedback linearization of the foot position
+    FootFl,
+    /// PD on the foot position with gravity compensation
+    FootPd,
+    /// Feedback linearization of the motor angles
+    JointFl,
+    /// PD on the motor angles with gravity compensation
+    JointPd,
+    /// No torque
+    Passive,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum TrajectoryArg {
+    /// An ellipse under the hip, 6 cm × 3 cm at 2 Hz (foot controllers)
+    Step,
+    /// 0.1 rad, 1 Hz sinusoids around the home pose (joint controllers)
+    Sine,
+    /// The motors turning at --speed (joint controllers)
+    Spin,
+    /// A minimum-jerk move (joint controllers)
+    MinJerk,
+    /// Hold the start
+    Hold,
+}
+
+/// `cargo xtask eval`.
+#[derive(Args, Debug, Clone)]
+#[command(allow_negative_numbers = true)]
+pub struct EvalArgs {
+    /// The model
+    pub model: String,
+    /// Joint angles (rad), one per joint, comma-separated; with --assemble, the actuated
+    /// angles only
+    #[arg(
+        long,
+        value_name = "Q1,Q2,…",
+        allow_hyphen_values = true,
+        required = true
+    )]
+    pub q: String,
+    /// Joint rates (rad/s), default zero; with --assemble, the actuated rates only
+    #[arg(long, value_name = "QD1,…", allow_hyphen_values = true)]
+    pub qd: Option<String>,
+    /// Motor torques (N m), one per actuated joint, default zero
+    #[arg(long, value_name = "U1,…", allow_hyphen_values = true)]
+    pub u: Option<String>,
+    /// Solve the loops for the passive joints first: by default following the assembly
+    /// branch of the spec's home pose while the motors move from their home angles to
+    /// --q (an error says where that branch ends); with --guess, from that pose
+    #[arg(long)]
+    pub assemble: bool,
+    /// With --assemble: a starting pose, one angle per joint (rad); it picks the
+    /// assembly mode
+    #[arg(
+        long,
+        value_name = "Q1,…",
+        allow_hyphen_values = true,
+        requires = "assemble"
+    )]
+    pub guess: Option<String>,
+    /// One JSON object: q, qd, u, M, N, G, J, Jdot_qdot, qdd, F, A_tilde, b_tilde, foot,
+    /// foot_jacobian, kinetic, potential, phi (matrices as arrays of rows); a term that
+    /// cannot be computed at this state is null, and `errors` says why
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// The commands of the `legs` binary: the same `sim` and `eval` as `cargo xtask`.
+#[derive(Parser, Debug)]
+#[command(
+    name = "cargo xtask",
+    bin_name = "cargo xtask",
+    allow_negative_numbers = true,
+    disable_help_subcommand = true
+)]
+pub struct Legs {
+    #[command(subcommand)]
+    pub command: LegsCommand,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum LegsCommand {
+    /// Simulate a leg under a controller and write a report
+    Sim(SimArgs),
+    /// Print every term of a model at one state
+    Eval(EvalArgs),
+}
+
+/// A value parser for a finite number that satisfies `ok`; `expected` says what it must be.
+fn number(
+    expected: &'static str,
+    ok: fn(f64) -> bool,
+) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync + 'static {
+    move |text: &str| match text.parse::<f64>() {
+        Ok(x) if x.is_finite() && ok(x) => Ok(x),
+        _ => Err(format!("expected {expected}")),
+    }
+}
+
+/// What [`parse`] found: arguments to run, or help that was printed.
+pub enum Parsed<T> {
+    Run(T),
+    Printed,
+}
+
+/// Parses `args` (without the program name). `--help` prints and gives `Printed`; a bad
+/// argument is a one-line usage error (exit code 2) that keeps clap's tip (the flag or
+/// command it probably meant) and points at `--help`.
+pub fn parse<T: Parser>(args: &[String]) -> Result<Parsed<T>, Error> {
+    // No argument of ours holds a newline or another control character; one that does is
+    // refused before clap echoes it.
+    if let Some(bad) = args.iter().find(|a| a.chars().any(char::is_control)) {
+        return Err(Error::usage(format!(
+            "argument `{}` holds a control character (see `cargo xtask --help`)",
+            bad.escape_debug()
+        )));
+    }
+    let argv = std::iter::once("cargo xtask".to_string()).chain(args.iter().cloned());
+    match T::try_parse_from(argv) {
+        Ok(t) => Ok(Parsed::Run(t)),
+        Err(e) => match e.kind() {
+            ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => {
+                print!("{}", e.render());
+                Ok(Parsed::Printed)
+            }
+            ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
+                Err(Error::usage("no command given (see `cargo xtask --help`)"))
+            }
+            _ => Err(Error::usage(one_line(&e.render().to_string(), args))),
+        },
+    }
+}
+
+/// Clap's message, its tips, and where to read more, on one line.
+fn one_line(rendered: &str, args: &[String]) -> String {
+    let mut text = String::new();
+    for line in rendered.lines().map(str::trim) {
+        if line.is_empty()
+            || line.starts_with("Usage:")
+            || line.starts_with("For more information")
+            // Clap's advice for positional values that look like flags: ours never are.
+            || line.starts_with("tip: to pass")
+        {
+            continue;
+        }
+        let line = line.strip_prefix("error: ").unwrap_or(line);
+        let line = match line.strip_prefix('[').and_then(|l| l.strip_suffix(']')) {
+            Some(inner) => inner,
+            None => line,
+        };
+        if !text.is_empty() {
+            text.push_str(if text.ends_with(':') { " " } else { "; " });
+        }
+        text.push_str(line);
+    }
+    // The subcommand's own help, where there is one.
+    let help = match args.first().map(String::as_str) {
+        Some(c) if !c.starts_with('-') && known_command(c) => format!("cargo xtask {c} --help"),
+        _ => "cargo xtask --help".to_string(),
+    };
+    text.push_str(&format!(" (see `{help}`)"));
+    text
+}
+
+fn known_command(name: &str) -> bool {
+    use clap::CommandFactory;
+    Xtask::command()
+        .get_subcommands()
+        .any(|c| c.get_name() == name)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(a: &[&str]) -> Vec<String> {
+        a.iter().map(|s| s.to_string()).collect()
+    }
+
+    fn refused(a: &[&str]) -> String {
+        match parse::<Xtask>(&args(a)) {
+            Err(Error::Usage(m)) => m,
+            Err(Error::Failed(m)) => panic!("{a:?}: a failure, not a usage error: {m}"),
+            Ok(_) => panic!("{a:?} was accepted"),
+        }
+    }
+
+    fn sim(a: &[&str]) -> SimArgs {
+        match parse::<Xtask>(&args(a)) {
+            Ok(Parsed::Run(Xtask {
+                command: Command::Sim(s),
+            })) => s,
+            _ => panic!("{a:?} is not a sim command"),
+        }
+    }
+
+    #[test]
+    fn both_value_forms_and_negative_numbers() {
+        let a = sim(&["sim", "atrias", "--dt=0.002", "--speed", "-3", "--kp", "50"]);
+        assert_eq!(a.model.as_deref(), Some("atrias"));
+        assert_eq!((a.dt, a.speed, a.kp), (0.002, -3.0, Some(50.0)));
+        assert_eq!(a.duration, 3.0);
+        let Ok(Parsed::Run(Xtask {
+            command: Command::Eval(e),
+        })) = parse::<Xtask>(&args(&[
+            "eval",
+            "minitaur",
+            "--q",
+            "-0.1,0.2",
+            "--assemble",
+        ]))
+        else {
+            panic!("eval not parsed");
+        };
+        assert_eq!((e.q.as_str(), e.assemble), ("-0.1,0.2", true));
+    }
+
+    #[test]
+    fn a_misspelt_flag_or_command_gets_a_suggestion_on_one_line() {
+        let m = refused(&["sim", "--sped", "2"]);
+        assert!(m.contains("--sped") && m.contains("--speed"), "{m}");
+        assert!(m.ends_with("(see `cargo xtask sim --help`)"), "{m}");
+        assert!(!m.contains('\n'));
+        let m = refused(&["sim", "--controller", "foot-f"]);
+        assert!(m.contains("foot-f") && m.contains("foot-fl"), "{m}");
+        let m = refused(&["exprot"]);
+        assert!(m.contains("exprot") && m.contains("export"), "{m}");
+        assert!(m.ends_with("(see `cargo xtask --help`)"), "{m}");
+    }
+
+    #[test]
+    fn values_are_checked_with_what_is_expected() {
+        let m = refused(&["sim", "--dt", "-1"]);
+        assert!(
+            m.contains("-1") && m.contains("expected a step in (0, 0.05] s"),
+            "{m}"
+        );
+        let m = refused(&["sim", "--duration", "nan"]);
+        assert!(m.contains("expected a duration"), "{m}");
+        let m = refused(&["eval", "minitaur", "--q", "1,2,3,4", "--guess", "1,2,3,4"]);
+        assert!(m.contains("--assemble"), "{m}");
+        let m = refused(&["bench", "--pinocchio", "--instructions"]);
+        assert!(m.contains("cannot be used with"), "{m}");
+        let m = refused(&["export", "minitaur"]);
+        assert!(m.contains("--format"), "{m}");
+    }
+
+    #[test]
+    fn input_cannot_break_the_line() {
+        let m = refused(&["gen", "--a\nb"]);
+        assert!(!m.contains('\n') && m.contains("\\n"), "{m}");
+    }
+
+    #[test]
+    fn every_subcommand_has_help() {
+        use clap::CommandFactory;
+        Xtask::command().debug_assert();
+        Legs::command().debug_assert();
+        for c in Xtask::command().get_subcommands() {
+            assert!(c.get_about().is_some(), "`{}` has no help", c.get_name());
+        }
+    }
+}

@@ -1,0 +1,74 @@
+//! Progress for long work: a bar on a terminal once the work has taken more than a
+//! second, and nothing at all when standard error is not a terminal (CI logs, pipes).
+
+use std::io::IsTerminal;
+use std::time::{Duration, Instant};
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+/// Work shorter than this shows no bar.
+const QUIET_FOR: Duration = Duration::from_secs(1);
+
+pub struct Progress {
+    bar: ProgressBar,
+    started: Instant,
+    shown: bool,
+    terminal: bool,
+}
+
+impl Progress {
+    /// `len` units of work (steps, runs), described as `what`.
+    pub fn new(len: u64, what: &str) -> Progress {
+        let bar = ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::hidden());
+        bar.set_style(
+            ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} ({eta} left)")
+                .expect("a valid template")
+                .progress_chars("=> "),
+        );
+        bar.set_message(what.to_string());
+        Progress {
+            bar,
+            started: Instant::now(),
+            shown: false,
+            terminal: std::io::stderr().is_terminal(),
+        }
+    }
+
+    /// `pos` units done.
+    pub fn set(&mut self, pos: u64) {
+        if !self.shown && self.terminal && self.started.elapsed() >= QUIET_FOR {
+            self.bar.set_draw_target(ProgressDrawTarget::stderr());
+            self.shown = true;
+        }
+        self.bar.set_position(pos);
+    }
+
+    /// Whether the bar is drawn (a terminal, and more than a second of work so far).
+    pub fn is_shown(&self) -> bool {
+        self.shown
+    }
+}
+
+impl Drop for Progress {
+    fn drop(&mut self) {
+        // The bar goes away with the work; what the command prints stays.
+        self.bar.finish_and_clear();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nothing_is_drawn_off_a_terminal_or_within_a_second() {
+        let mut p = Progress::new(10, "test");
+        p.set(5);
+        // Within a second: hidden whatever stderr is.
+        assert!(!p.is_shown());
+        p.started -= Duration::from_secs(2);
+        p.set(6);
+        assert_eq!(p.is_shown(), std::io::stderr().is_terminal());
+        assert_eq!(p.bar.position(), 6);
+    }
+}
