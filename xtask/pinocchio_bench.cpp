@@ -29,8 +29,8 @@
 namespace pin = pinocchio;
 
 template <int N, int NC>
-int run(pin::Model& model, const std::vector<std::string>& closures, const Eigen::VectorXd& q0,
-        const Eigen::VectorXd& v0) {
+int run(pin::Model& model, const std::vector<std::string>& closures, const Eigen::VectorXd& damping,
+        const Eigen::VectorXd& q0, const Eigen::VectorXd& v0) {
   pin::Data data(model);
   std::vector<std::pair<pin::FrameIndex, pin::FrameIndex>> frames;
   for (const auto& c : closures) frames.emplace_back(model.getFrameId(c + "_a"), model.getFrameId(c + "_b"));
@@ -45,7 +45,8 @@ int run(pin::Model& model, const std::vector<std::string>& closures, const Eigen
     pin::nonLinearEffects(model, data, q, v);
     kkt.setZero();
     kkt.template topLeftCorner<N, N>() = data.M;
-    rhs.template head<N>() = -data.nle;
+    // Viscous joint damping, which our forward dynamics includes (D q̇) and nle does not.
+    rhs.template head<N>() = -data.nle - damping.cwiseProduct(v);
     if (NC > 0) {
       pin::forwardKinematics(model, data, q, v, zero);
       pin::computeJointJacobians(model, data, q);
@@ -108,7 +109,7 @@ int main(int argc, char** argv) {
   }
   // The leg file, written by `cargo xtask bench --pinocchio` from the spec:
   //   gravity GX GY
-  //   link NAME PARENT OX OY MASS CX CY INERTIA ARMATURE     (PARENT: -1 for the base)
+  //   link NAME PARENT OX OY MASS CX CY INERTIA ARMATURE DAMPING   (PARENT: -1 for the base)
   //   closure NAME LINK_A AX AY LINK_B BX BY
   //   state Q... QD...
   std::FILE* f = std::fopen(argv[1], "r");
@@ -119,7 +120,7 @@ int main(int argc, char** argv) {
   pin::Model model;
   std::vector<pin::JointIndex> joints;
   std::vector<std::string> closures;
-  std::vector<double> armature, state;
+  std::vector<double> armature, damping, state;
   char kind[32], name[128];
   while (std::fscanf(f, "%31s", kind) == 1) {
     const std::string k = kind;
@@ -129,13 +130,14 @@ int main(int argc, char** argv) {
       model.gravity.linear(Eigen::Vector3d(gx, gy, 0.0));
     } else if (k == "link") {
       int parent;
-      double ox, oy, m, cx, cy, inertia, arm;
-      if (std::fscanf(f, "%127s %d %lf %lf %lf %lf %lf %lf %lf", name, &parent, &ox, &oy, &m, &cx, &cy, &inertia, &arm) != 9) return 1;
+      double ox, oy, m, cx, cy, inertia, arm, d;
+      if (std::fscanf(f, "%127s %d %lf %lf %lf %lf %lf %lf %lf %lf", name, &parent, &ox, &oy, &m, &cx, &cy, &inertia, &arm, &d) != 10) return 1;
       const pin::JointIndex p = parent < 0 ? 0 : joints[parent];
       const pin::JointIndex j = model.addJoint(p, pin::JointModelRZ(), pin::SE3(Eigen::Matrix3d::Identity(), Eigen::Vector3d(ox, oy, 0)), name);
       model.appendBodyToJoint(j, pin::Inertia(m, Eigen::Vector3d(cx, cy, 0), Eigen::Vector3d(inertia, inertia, inertia).asDiagonal()), pin::SE3::Identity());
       joints.push_back(j);
       armature.push_back(arm);
+      damping.push_back(d);
     } else if (k == "closure") {
       int la, lb;
       double ax, ay, bx, by;
@@ -160,9 +162,15 @@ int main(int argc, char** argv) {
   for (int i = 0; i < nq; ++i) model.armature(i) = armature[i];
   const Eigen::VectorXd q = Eigen::Map<const Eigen::VectorXd>(state.data(), nq);
   const Eigen::VectorXd v = Eigen::Map<const Eigen::VectorXd>(state.data() + nq, nq);
+  const Eigen::VectorXd d = Eigen::Map<const Eigen::VectorXd>(damping.data(), nq);
   const int nc = 2 * int(closures.size());
-  if (nq == 4 && nc == 2) return run<4, 2>(model, closures, q, v);
-  if (nq == 2 && nc == 0) return run<2, 0>(model, closures, q, v);
+  // Fixed-size instances for the legs' sizes (a closure with redundant rows has a singular
+  // KKT matrix, which the LU here does not handle: those legs have no instance).
+  if (nq == 4 && nc == 2) return run<4, 2>(model, closures, d, q, v);
+  if (nq == 2 && nc == 0) return run<2, 0>(model, closures, d, q, v);
+  if (nq == 3 && nc == 0) return run<3, 0>(model, closures, d, q, v);
+  if (nq == 7 && nc == 4) return run<7, 4>(model, closures, d, q, v);
+  if (nq == 7 && nc == 6) return run<7, 6>(model, closures, d, q, v);
   std::fprintf(stderr, "no fixed-size instance for NQ = %d, NC = %d\n", nq, nc);
   return 1;
 }

@@ -13,7 +13,7 @@ use leg_models::dynamics::forward_dynamics;
 use leg_models::integrate::{step, State, StepOptions, TorqueSource};
 use leg_models::nalgebra::SVector;
 use leg_models::reference::Sinusoid;
-use leg_models::{LegModel, Parameters};
+use leg_models::LegModel;
 use leg_tests::casadi;
 use leg_tests::passive_release_state;
 
@@ -27,75 +27,78 @@ fn bench_model<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const 
     project_velocity::<L, f64, NQ, NC, NU>(&p, &q, &mut qd).unwrap();
     let u = SVector::<f64, NU>::from_fn(|k, _| 0.05 * (k as f64 + 1.0));
     let (q32, qd32, u32) = (q.cast::<f32>(), qd.cast::<f32>(), u.cast::<f32>());
-    let pv: Vec<f64> = (0..<L::Params<f64> as Parameters<f64>>::NAMES.len())
-        .map(|i| p.get(i).unwrap())
-        .collect();
-    let (c_terms, c_fd) = casadi::functions(L::NAME);
-
-    // The peer computes the same numbers.
-    let ours = L::dynamics_terms(&q, &qd, &p);
-    let (mut m, mut n, mut j, mut b) = (
-        vec![0.0; NQ * NQ],
-        vec![0.0; NQ],
-        vec![0.0; NC * NQ],
-        vec![0.0; NC],
-    );
-    casadi::call(
-        c_terms,
-        &[q.as_slice(), qd.as_slice(), &pv],
-        &mut [&mut m, &mut n, &mut j, &mut b],
-    );
-    let close = |a: &[f64], b: &[f64]| {
-        a.iter()
-            .zip(b)
-            .all(|(x, y)| (x - y).abs() <= 1e-12 * (1.0 + y.abs()))
-    };
-    assert!(
-        close(&m, ours.mass_matrix.as_slice()) && close(&n, ours.bias_forces.as_slice()),
-        "{}: CasADi's C differs",
-        L::NAME
-    );
-    assert!(
-        close(&j, ours.constraint_jacobian.as_slice())
-            && close(&b, ours.constraint_bias.as_slice())
-    );
-    let acc = forward_dynamics::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None).unwrap();
-    let (mut qdd, mut f) = (vec![0.0; NQ], vec![0.0; NC]);
-    casadi::call(
-        c_fd,
-        &[q.as_slice(), qd.as_slice(), u.as_slice(), &pv],
-        &mut [&mut qdd, &mut f],
-    );
-    let near = |a: &[f64], b: &[f64]| {
-        a.iter()
-            .zip(b)
-            .all(|(x, y)| (x - y).abs() <= 1e-8 * (1.0 + y.abs()))
-    };
-    assert!(
-        near(&qdd, acc.qdd.as_slice()) && near(&f, acc.forces.as_slice()),
-        "{}: CasADi's forward dynamics differ",
-        L::NAME
-    );
+    let pv = casadi::parameter_vector(&p);
+    let peers = casadi::functions(L::NAME);
 
     let mut g = c.benchmark_group(L::NAME);
     g.warm_up_time(Duration::from_millis(300))
         .measurement_time(Duration::from_millis(1200))
         .sample_size(40);
+    // The harness alone: what every measurement below includes besides its contender.
+    g.bench_function("empty", |bch| {
+        bch.iter(|| black_box((black_box(&q), black_box(&qd), black_box(&p))))
+    });
     g.bench_function("fused-ours", |bch| {
         bch.iter(|| L::dynamics_terms(black_box(&q), black_box(&qd), black_box(&p)))
     });
     g.bench_function("fused-ours-f32", |bch| {
         bch.iter(|| L::dynamics_terms(black_box(&q32), black_box(&qd32), black_box(&p32)))
     });
-    g.bench_function("fused-casadi", |bch| {
-        bch.iter(|| {
-            casadi::call(
-                c_terms,
-                &[black_box(q.as_slice()), qd.as_slice(), &pv],
-                &mut [&mut m, &mut n, &mut j, &mut b],
-            )
-        })
-    });
+
+    // Each peer computes the same numbers, and is measured as a CasADi user calls it: the
+    // parameter vector and the argument and result pointer arrays prepared once, outputs
+    // preallocated.
+    let ours = L::dynamics_terms(&q, &qd, &p);
+    let acc = forward_dynamics::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None).unwrap();
+    let close = |a: &[f64], b: &[f64], tol: f64| {
+        a.iter()
+            .zip(b)
+            .all(|(x, y)| (x - y).abs() <= tol * (1.0 + y.abs()))
+    };
+    for (form, pair) in [("casadi", peers.lagrange), ("casadi-closed", peers.closed)] {
+        let (mut m, mut n, mut j, mut b) = (
+            vec![0.0; NQ * NQ],
+            vec![0.0; NQ],
+            vec![0.0; NC * NQ],
+            vec![0.0; NC],
+        );
+        let terms = casadi::Prepared::new(
+            pair.terms,
+            &[q.as_slice(), qd.as_slice(), &pv],
+            &mut [&mut m, &mut n, &mut j, &mut b],
+        );
+        // SAFETY: the buffers outlive `terms` and have the function's dense sizes.
+        assert_eq!(unsafe { terms.call() }, 0);
+        assert!(
+            close(&m, ours.mass_matrix.as_slice(), 1e-12)
+                && close(&n, ours.bias_forces.as_slice(), 1e-12)
+                && close(&j, ours.constraint_jacobian.as_slice(), 1e-12)
+                && close(&b, ours.constraint_bias.as_slice(), 1e-12),
+            "{}: {form}'s terms differ from ours",
+            L::NAME
+        );
+        g.bench_function(format!("fused-{form}"), |bch| {
+            // SAFETY: as above.
+            bch.iter(|| unsafe { black_box(&terms).call() })
+        });
+        let (mut qdd, mut f) = (vec![0.0; NQ], vec![0.0; NC]);
+        let fd = casadi::Prepared::new(
+            pair.forward_dynamics,
+            &[q.as_slice(), qd.as_slice(), u.as_slice(), &pv],
+            &mut [&mut qdd, &mut f],
+        );
+        // SAFETY: as above.
+        assert_eq!(unsafe { fd.call() }, 0);
+        assert!(
+            close(&qdd, acc.qdd.as_slice(), 1e-8) && close(&f, acc.forces.as_slice(), 1e-8),
+            "{}: {form}'s forward dynamics differ from ours",
+            L::NAME
+        );
+        g.bench_function(format!("fd-{form}"), |bch| {
+            // SAFETY: as above.
+            bch.iter(|| unsafe { black_box(&fd).call() })
+        });
+    }
     g.bench_function("fd-ours", |bch| {
         bch.iter(|| {
             forward_dynamics::<L, f64, NQ, NC, NU>(
@@ -115,15 +118,6 @@ fn bench_model<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const 
                 black_box(&qd32),
                 black_box(&u32),
                 None,
-            )
-        })
-    });
-    g.bench_function("fd-casadi", |bch| {
-        bch.iter(|| {
-            casadi::call(
-                c_fd,
-                &[black_box(q.as_slice()), qd.as_slice(), u.as_slice(), &pv],
-                &mut [&mut qdd, &mut f],
             )
         })
     });

@@ -3,8 +3,17 @@
 //! is the cost of one call (`cargo xtask bench --instructions`, and the budgets
 //! `cargo xtask test` checks).
 //!
-//! `count_calls MODEL fused|forward_dynamics|casadi_fused|casadi_forward_dynamics CALLS`
-//! (the CasADi paths with the `peers` feature).
+//! `count_calls MODEL PATH CALLS`, PATH one of `empty`, `fused`, `forward_dynamics` and,
+//! with the `peers` feature, `casadi_fused`, `casadi_forward_dynamics`,
+//! `casadi_closed_fused`, `casadi_closed_forward_dynamics`.
+//!
+//! Every contender runs in the same loop (`measure`) and does only its own work per call:
+//! its inputs are prepared once before the loop (the state, the parameters — as the
+//! vector CasADi reads, as the `Params` ours reads — and CasADi's argument and result
+//! pointer arrays), CasADi writes into buffers allocated before the loop, ours returns its
+//! fixed-size outputs by value, and nothing can be hoisted out of the loop (`black_box`
+//! on ours' inputs; CasADi's call is opaque). `empty` is the loop alone, the harness's
+//! own cost per call, which `cargo xtask bench` subtracts and shows.
 
 use std::hint::black_box;
 
@@ -12,64 +21,82 @@ use leg_models::dynamics::forward_dynamics;
 use leg_models::nalgebra::SVector;
 use leg_models::LegModel;
 
+/// The measured loop, the same for every contender: `call` once per iteration, its result
+/// kept so that nothing is dropped as unused.
+#[inline(never)]
+fn measure(n: usize, mut call: impl FnMut() -> f64) -> f64 {
+    let mut acc = 0.0;
+    for _ in 0..n {
+        acc += black_box(call());
+    }
+    acc
+}
+
 fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
     what: &str,
     n: usize,
 ) -> Option<f64> {
     let p = L::Params::<f64>::default();
     let u = SVector::<f64, NU>::from_element(0.1);
-    let mut acc = 0.0;
-    for k in 0..n {
-        // Distinct states, so that nothing is hoisted out of the loop.
-        let q = SVector::<f64, NQ>::from_fn(|i, _| L::HOME[i] + 1e-6 * k as f64);
-        let qd = SVector::<f64, NQ>::from_fn(|i, _| 0.2 * i as f64 - 0.3);
-        acc += match what {
-            "fused" => {
-                black_box(L::dynamics_terms(
-                    black_box(&q),
-                    black_box(&qd),
-                    black_box(&p),
-                ))
-                .mass_matrix[(0, 0)]
-            }
-            "forward_dynamics" => black_box(forward_dynamics::<L, f64, NQ, NC, NU>(
+    let q = SVector::<f64, NQ>::from_fn(|i, _| L::HOME[i] + 1e-3);
+    let qd = SVector::<f64, NQ>::from_fn(|i, _| 0.2 * i as f64 - 0.3);
+    Some(match what {
+        "empty" => measure(n, || black_box(0.0)),
+        // Ours returns its outputs by value (a fixed-size struct on the stack: no
+        // allocation); `black_box` of the inputs keeps the call in the loop.
+        "fused" => measure(n, || {
+            L::dynamics_terms(black_box(&q), black_box(&qd), black_box(&p)).mass_matrix[(0, 0)]
+        }),
+        "forward_dynamics" => measure(n, || {
+            forward_dynamics::<L, f64, NQ, NC, NU>(
                 black_box(&p),
                 black_box(&q),
                 black_box(&qd),
                 black_box(&u),
                 None,
-            ))
-            .map_or(0.0, |a| a.qdd[0]),
-            #[cfg(feature = "peers")]
-            "casadi_fused" | "casadi_forward_dynamics" => {
-                use leg_models::Parameters;
-                let pv: Vec<f64> = (0..<L::Params<f64> as Parameters<f64>>::NAMES.len())
-                    .map(|i| p.get(i).unwrap())
-                    .collect();
-                let (terms, fd) = leg_tests::casadi::functions(L::NAME);
-                let mut out = vec![0.0; NQ * NQ + NQ + NC * NQ + NC];
-                let (a, rest) = out.split_at_mut(NQ * NQ);
-                let (b, rest) = rest.split_at_mut(NQ);
-                let (c, d) = rest.split_at_mut(NC * NQ);
-                if what == "casadi_fused" {
-                    leg_tests::casadi::call(
-                        terms,
-                        &[black_box(q.as_slice()), qd.as_slice(), &pv],
-                        &mut [a, b, c, d],
-                    );
-                } else {
-                    leg_tests::casadi::call(
-                        fd,
-                        &[black_box(q.as_slice()), qd.as_slice(), u.as_slice(), &pv],
-                        &mut [&mut a[..NQ], &mut c[..NC]],
-                    );
+            )
+            .map_or(0.0, |a| a.qdd[0])
+        }),
+        #[cfg(feature = "peers")]
+        peer if peer.starts_with("casadi_") => {
+            use leg_tests::casadi::{functions, parameter_vector, Prepared};
+            let pv = parameter_vector(&p);
+            let peers = functions(L::NAME);
+            let (pair, path) = match peer.strip_prefix("casadi_closed_") {
+                Some(path) => (peers.closed, path),
+                None => (peers.lagrange, &peer["casadi_".len()..]),
+            };
+            let (mut first, mut second, mut third, mut fourth) = (
+                vec![0.0; NQ * NQ],
+                vec![0.0; NQ],
+                vec![0.0; NC * NQ],
+                vec![0.0; NC],
+            );
+            let prepared = match path {
+                "fused" => Prepared::new(
+                    pair.terms,
+                    &[q.as_slice(), qd.as_slice(), &pv],
+                    &mut [&mut first, &mut second, &mut third, &mut fourth],
+                ),
+                "forward_dynamics" => Prepared::new(
+                    pair.forward_dynamics,
+                    &[q.as_slice(), qd.as_slice(), u.as_slice(), &pv],
+                    &mut [&mut first, &mut fourth],
+                ),
+                _ => return None,
+            };
+            let out = first.as_ptr();
+            measure(n, || {
+                // SAFETY: the buffers live until after the loop, are not reallocated and
+                // have the functions' dense sizes; the output is read after the call.
+                unsafe {
+                    black_box(&prepared).call();
+                    out.read()
                 }
-                black_box(&out)[0]
-            }
-            _ => return None,
-        };
-    }
-    Some(acc)
+            })
+        }
+        _ => return None,
+    })
 }
 
 fn main() {
@@ -79,7 +106,7 @@ fn main() {
         args.get(1),
         args.get(2).and_then(|n| n.parse::<usize>().ok()),
     ) else {
-        eprintln!("usage: count_calls MODEL fused|forward_dynamics CALLS");
+        eprintln!("usage: count_calls MODEL PATH CALLS");
         std::process::exit(2);
     };
     let mut found = None;

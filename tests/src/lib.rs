@@ -160,38 +160,78 @@ pub mod casadi {
     pub type CasadiFn =
         unsafe extern "C" fn(*const *const f64, *const *mut f64, *mut i64, *mut f64, i32) -> i32;
 
-    include!(concat!(env!("OUT_DIR"), "/casadi_peers.rs"));
-
-    /// The two functions of `model`.
-    pub fn functions(model: &str) -> (CasadiFn, CasadiFn) {
-        let (_, terms, fd) = CASADI_C
-            .iter()
-            .find(|(n, _, _)| *n == model)
-            .expect("CasADi C of every model");
-        (*terms, *fd)
+    /// One derivation's fused terms (M, N, J, J̇q̇) and forward dynamics (q̈, F).
+    #[derive(Clone, Copy)]
+    pub struct Pair {
+        pub terms: CasadiFn,
+        pub forward_dynamics: CasadiFn,
     }
 
-    /// Calls `f` with dense column-major inputs and outputs. The generated functions need no
-    /// work arrays (`*_work` reports zero sizes).
-    pub fn call(f: CasadiFn, inputs: &[&[f64]], outputs: &mut [&mut [f64]]) {
-        let args: [*const f64; 4] =
-            core::array::from_fn(|i| inputs.get(i).map_or(core::ptr::null(), |s| s.as_ptr()));
-        let mut res: [*mut f64; 4] = [core::ptr::null_mut(); 4];
-        for (r, o) in res.iter_mut().zip(outputs.iter_mut()) {
-            *r = o.as_mut_ptr();
+    /// CasADi's C of the notes' Lagrange derivation and of the closed form ours uses.
+    #[derive(Clone, Copy)]
+    pub struct Peers {
+        pub lagrange: Pair,
+        pub closed: Pair,
+    }
+
+    include!(concat!(env!("OUT_DIR"), "/casadi_peers.rs"));
+
+    /// The functions of `model`.
+    pub fn functions(model: &str) -> Peers {
+        CASADI_C
+            .iter()
+            .find(|(n, _)| *n == model)
+            .expect("CasADi C of every model")
+            .1
+    }
+
+    /// A call of a CasADi function with its input and output pointer arrays built once, so
+    /// that a measured loop does what a CasADi user's loop does: the call and nothing else.
+    pub struct Prepared {
+        f: CasadiFn,
+        args: [*const f64; 4],
+        res: [*mut f64; 4],
+    }
+
+    impl Prepared {
+        /// `f` reading `inputs` and writing `outputs` (dense, column-major; the generated
+        /// functions need no work arrays: `*_work` reports zero sizes). The output pointers
+        /// come from `Vec::as_mut_ptr`, which makes no reference to the elements, so the
+        /// caller may read the outputs between calls.
+        pub fn new(f: CasadiFn, inputs: &[&[f64]], outputs: &mut [&mut Vec<f64>]) -> Prepared {
+            assert!(inputs.len() <= 4 && outputs.len() <= 4);
+            let args =
+                core::array::from_fn(|i| inputs.get(i).map_or(core::ptr::null(), |s| s.as_ptr()));
+            let mut res = [core::ptr::null_mut(); 4];
+            for (r, o) in res.iter_mut().zip(outputs.iter_mut()) {
+                *r = o.as_mut_ptr();
+            }
+            Prepared { f, args, res }
         }
-        // SAFETY: CasADi's generated functions read `inputs.len()` arrays of the sizes of
-        // their sparsity patterns (dense vectors here) and write the outputs' dense sizes,
-        // which the callers allocate; they use no work memory.
-        let status = unsafe {
-            f(
-                args.as_ptr(),
-                res.as_ptr(),
-                core::ptr::null_mut(),
-                core::ptr::null_mut(),
-                0,
-            )
-        };
-        assert_eq!(status, 0, "CasADi function failed");
+
+        /// Calls the function; its status (0 when it succeeded).
+        ///
+        /// # Safety
+        /// The buffers given to [`Prepared::new`] are alive, not reallocated, and of the
+        /// dense sizes of the function's inputs and outputs; nothing holds a reference into
+        /// the outputs during the call.
+        #[inline]
+        pub unsafe fn call(&self) -> i32 {
+            // SAFETY: as the caller promises; the functions use no work memory.
+            unsafe {
+                (self.f)(
+                    self.args.as_ptr(),
+                    self.res.as_ptr(),
+                    core::ptr::null_mut(),
+                    core::ptr::null_mut(),
+                    0,
+                )
+            }
+        }
+    }
+
+    /// The parameters as the vector CasADi's functions read, in the generated order.
+    pub fn parameter_vector<P: leg_models::Parameters<f64>>(p: &P) -> Vec<f64> {
+        (0..P::NAMES.len()).map(|i| p.get(i).unwrap()).collect()
     }
 }

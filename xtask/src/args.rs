@@ -1,6 +1,6 @@
 //! The command line of `cargo xtask`, declared once with clap's derive API: `xtask`
 //! parses it (so a misspelt flag is refused before anything is built) and the `legs`
-//! binary behind `sim` and `eval` parses the same `SimArgs` and `EvalArgs`.
+//! binary behind `sim` and `eval` parses the same arguments again.
 //!
 //! Clap's errors are several lines (usage, tips); ours are one line on stderr with exit
 //! code 2, so [`parse`] folds them into one.
@@ -17,8 +17,7 @@ use crate::cli::Error;
     name = "cargo xtask",
     bin_name = "cargo xtask",
     about = "Closed-chain leg models: generation (spec → CasADi → Rust), simulation, checks",
-    allow_negative_numbers = true,
-    disable_help_subcommand = true
+    allow_negative_numbers = true
 )]
 pub struct Xtask {
     #[command(subcommand)]
@@ -180,14 +179,15 @@ pub struct EvalArgs {
         long,
         value_name = "Q1,Q2,…",
         allow_hyphen_values = true,
-        required = true
+        required = true,
+        value_parser = numbers_text
     )]
     pub q: String,
     /// Joint rates (rad/s), default zero; with --assemble, the actuated rates only
-    #[arg(long, value_name = "QD1,…", allow_hyphen_values = true)]
+    #[arg(long, value_name = "QD1,…", allow_hyphen_values = true, value_parser = numbers_text)]
     pub qd: Option<String>,
     /// Motor torques (N m), one per actuated joint, default zero
-    #[arg(long, value_name = "U1,…", allow_hyphen_values = true)]
+    #[arg(long, value_name = "U1,…", allow_hyphen_values = true, value_parser = numbers_text)]
     pub u: Option<String>,
     /// Solve the loops for the passive joints first: by default following the assembly
     /// branch of the spec's home pose while the motors move from their home angles to
@@ -200,7 +200,8 @@ pub struct EvalArgs {
         long,
         value_name = "Q1,…",
         allow_hyphen_values = true,
-        requires = "assemble"
+        requires = "assemble",
+        value_parser = numbers_text
     )]
     pub guess: Option<String>,
     /// One JSON object: q, qd, u, M, N, G, J, Jdot_qdot, qdd, F, A_tilde, b_tilde, foot,
@@ -210,25 +211,17 @@ pub struct EvalArgs {
     pub json: bool,
 }
 
-/// The commands of the `legs` binary: the same `sim` and `eval` as `cargo xtask`.
-#[derive(Parser, Debug)]
-#[command(
-    name = "cargo xtask",
-    bin_name = "cargo xtask",
-    allow_negative_numbers = true,
-    disable_help_subcommand = true
-)]
-pub struct Legs {
-    #[command(subcommand)]
-    pub command: LegsCommand,
-}
-
-#[derive(Subcommand, Debug)]
-pub enum LegsCommand {
-    /// Simulate a leg under a controller and write a report
-    Sim(SimArgs),
-    /// Print every term of a model at one state
-    Eval(EvalArgs),
+/// A list of numbers may start with a minus sign, but a flag where the list should be
+/// (`--q --json`) is a missing value, not a list. The numbers are checked against the
+/// model's sizes where the model is known (`cli::numbers`).
+fn numbers_text(text: &str) -> Result<String, String> {
+    if text.starts_with("--") {
+        Err(format!(
+            "expected comma-separated numbers, got the flag `{text}` (is the value missing?)"
+        ))
+    } else {
+        Ok(text.to_string())
+    }
 }
 
 /// A value parser for a finite number that satisfies `ok`; `expected` says what it must be.
@@ -386,6 +379,8 @@ mod tests {
         assert!(m.contains("--assemble"), "{m}");
         let m = refused(&["bench", "--pinocchio", "--instructions"]);
         assert!(m.contains("cannot be used with"), "{m}");
+        let m = refused(&["eval", "minitaur", "--q", "--json"]);
+        assert!(m.contains("got the flag `--json`"), "{m}");
         let m = refused(&["export", "minitaur"]);
         assert!(m.contains("--format"), "{m}");
     }
@@ -400,7 +395,6 @@ mod tests {
     fn every_subcommand_has_help() {
         use clap::CommandFactory;
         Xtask::command().debug_assert();
-        Legs::command().debug_assert();
         for c in Xtask::command().get_subcommands() {
             assert!(c.get_about().is_some(), "`{}` has no help", c.get_name());
         }

@@ -43,25 +43,46 @@ fn collected(bin: &Path, model: &str, path: &str, calls: u64) -> Result<u64, Str
         .ok_or_else(|| format!("no instruction count in callgrind's output:\n{text}"))
 }
 
-/// Instructions per call of every hot path of every model: the difference between
-/// `CALLS` calls and none, so start-up does not count.
-pub fn instruction_counts(root: &Path) -> Result<BTreeMap<String, BTreeMap<String, u64>>, String> {
-    cargo(
-        root,
-        &[
-            "build",
-            "--quiet",
-            "--release",
-            "-p",
-            "leg-tests",
-            "--example",
-            "count_calls",
-        ],
-    )?;
-    let bin = target_dir(root)
+/// Instructions of `CALLS` calls of `path` of `model`, less those of none (so start-up
+/// does not count).
+fn gross(bin: &Path, model: &str, path: &str) -> Result<u64, String> {
+    Ok(collected(bin, model, path, CALLS)?.saturating_sub(collected(bin, model, path, 0)?))
+}
+
+/// The measured loop with no contender in it (`empty`), over `CALLS` calls.
+struct Harness(u64);
+
+impl Harness {
+    fn of(bin: &Path, model: &str) -> Result<Harness, String> {
+        gross(bin, model, "empty").map(Harness)
+    }
+
+    fn per_call(&self) -> u64 {
+        self.0 / CALLS
+    }
+
+    /// Instructions of one call of `path`, net of the harness's loop.
+    fn net(&self, bin: &Path, model: &str, path: &str) -> Result<u64, String> {
+        Ok(gross(bin, model, path)?.saturating_sub(self.0) / CALLS)
+    }
+}
+
+fn count_calls(root: &Path, peers: bool) -> Result<std::path::PathBuf, String> {
+    let mut args = vec!["build", "--quiet", "--release", "-p", "leg-tests"];
+    if peers {
+        args.extend(["--features", "peers"]);
+    }
+    args.extend(["--example", "count_calls"]);
+    cargo(root, &args)?;
+    Ok(target_dir(root)
         .join("release")
         .join("examples")
-        .join("count_calls");
+        .join("count_calls"))
+}
+
+/// Instructions per call of every hot path of every model, net of the harness's loop.
+pub fn instruction_counts(root: &Path) -> Result<BTreeMap<String, BTreeMap<String, u64>>, String> {
+    let bin = count_calls(root, false)?;
     let mut out = BTreeMap::new();
     let models = crate::cli::model_names(root)?;
     let mut progress = Progress::new(
@@ -69,11 +90,10 @@ pub fn instruction_counts(root: &Path) -> Result<BTreeMap<String, BTreeMap<Strin
         "counting instructions (callgrind)",
     );
     for model in models {
+        let harness = Harness::of(&bin, &model)?;
         let mut per = BTreeMap::new();
         for path in PATHS {
-            let base = collected(&bin, &model, path, 0)?;
-            let full = collected(&bin, &model, path, CALLS)?;
-            per.insert(path.to_string(), full.saturating_sub(base) / CALLS);
+            per.insert(path.to_string(), harness.net(&bin, &model, path)?);
             progress.set((out.len() * PATHS.len() + per.len()) as u64);
         }
         out.insert(model, per);
@@ -81,53 +101,41 @@ pub fn instruction_counts(root: &Path) -> Result<BTreeMap<String, BTreeMap<Strin
     Ok(out)
 }
 
-/// Instructions per call of ours and of CasADi's C, side by side (not budgeted: the
-/// peer's count only puts ours in perspective).
+/// Instructions per call of ours and of CasADi's C of the same terms in the closed form
+/// and in the Lagrange form, side by side, net of the harness's loop, which is shown (not
+/// budgeted: the peers' counts only put ours in perspective).
 pub fn compare_instructions(root: &Path) -> Result<String, String> {
-    cargo(
-        root,
-        &[
-            "build",
-            "--quiet",
-            "--release",
-            "-p",
-            "leg-tests",
-            "--features",
-            "peers",
-            "--example",
-            "count_calls",
-        ],
-    )?;
-    let bin = target_dir(root)
-        .join("release")
-        .join("examples")
-        .join("count_calls");
-    let per_call = |model: &str, path: &str| -> Result<u64, String> {
-        Ok(
-            collected(&bin, model, path, CALLS)?.saturating_sub(collected(&bin, model, path, 0)?)
-                / CALLS,
-        )
-    };
+    let bin = count_calls(root, true)?;
     let models = crate::cli::model_names(root)?;
     let mut progress = Progress::new(models.len() as u64, "counting CasADi's C (callgrind)");
     let mut lines = vec![
-        "| model | fused ours | fused CasADi C | ratio | FD ours | FD CasADi C | ratio |"
+        "| model | harness | fused ours | CasADi C, closed form | ratio | CasADi C, Lagrange | ratio | FD ours | CasADi C, closed form | ratio | CasADi C, Lagrange | ratio |"
             .to_string(),
-        "|---|---|---|---|---|---|---|".to_string(),
+        "|---|---|---|---|---|---|---|---|---|---|---|---|".to_string(),
     ];
+    let ratio = |a: u64, b: u64| format!("{:.2}", a as f64 / b.max(1) as f64);
     for (k, m) in models.iter().enumerate() {
         progress.set(k as u64);
-        let (fo, fc) = (per_call(m, "fused")?, per_call(m, "casadi_fused")?);
-        let (do_, dc) = (
-            per_call(m, "forward_dynamics")?,
-            per_call(m, "casadi_forward_dynamics")?,
-        );
-        lines.push(format!(
-            "| {m} | {fo} | {fc} | {:.2} | {do_} | {dc} | {:.2} |",
-            fo as f64 / fc as f64,
-            do_ as f64 / dc as f64
-        ));
+        let harness = Harness::of(&bin, m)?;
+        let mut cells = vec![m.clone(), harness.per_call().to_string()];
+        for path in PATHS {
+            let ours = harness.net(&bin, m, path)?;
+            let closed = harness.net(&bin, m, &format!("casadi_closed_{path}"))?;
+            let lagrange = harness.net(&bin, m, &format!("casadi_{path}"))?;
+            cells.extend([
+                ours.to_string(),
+                closed.to_string(),
+                ratio(ours, closed),
+                lagrange.to_string(),
+                ratio(ours, lagrange),
+            ]);
+        }
+        lines.push(format!("| {} |", cells.join(" | ")));
     }
+    lines.push(String::new());
+    lines.push(format!(
+        "instructions per call (callgrind, {CALLS} calls less none, less the harness's empty loop, shown as `harness`); every contender's inputs are prepared once and its outputs preallocated; ratios are ours / peer"
+    ));
     Ok(lines.join("\n"))
 }
 
@@ -192,8 +200,10 @@ fn ns(v: Option<f64>) -> String {
     v.map_or("–".into(), |x| {
         if x >= 1000.0 {
             format!("{:.2} µs", x / 1000.0)
-        } else {
+        } else if x >= 10.0 {
             format!("{x:.0} ns")
+        } else {
+            format!("{x:.1} ns")
         }
     })
 }
@@ -227,26 +237,32 @@ pub fn run(root: &Path, pinocchio: bool) -> Result<(), String> {
     };
     let models = crate::cli::model_names(root)?;
     println!();
-    println!("| model | fused ours | fused CasADi C | ratio | FD ours | FD CasADi C | ratio | FD Pinocchio | ratio | control step | control / FD | fused f32/f64 | FD f32/f64 | sim step |");
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("| model | harness | fused ours | CasADi C closed | ratio | CasADi C Lagrange | ratio | FD ours | CasADi C closed | ratio | CasADi C Lagrange | ratio | FD Pinocchio | ratio | control step | control / FD | fused f32/f64 | FD f32/f64 | sim step |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for m in &models {
         let g = |id: &str| median(root, m, id);
-        let (fo, fc, dd, dc, c) = (
+        let (fo, fcc, fcl, dd, dcc, dcl, c) = (
             g("fused-ours"),
+            g("fused-casadi-closed"),
             g("fused-casadi"),
             g("fd-ours"),
+            g("fd-casadi-closed"),
             g("fd-casadi"),
             g("control-ours"),
         );
         let p = pin.get(m).copied();
-        println!(
-            "| {m} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+        let cells = [
+            ns(g("empty")),
             ns(fo),
-            ns(fc),
-            ratio(fo, fc),
+            ns(fcc),
+            ratio(fo, fcc),
+            ns(fcl),
+            ratio(fo, fcl),
             ns(dd),
-            ns(dc),
-            ratio(dd, dc),
+            ns(dcc),
+            ratio(dd, dcc),
+            ns(dcl),
+            ratio(dd, dcl),
             ns(p),
             ratio(dd, p),
             ns(c),
@@ -254,8 +270,9 @@ pub fn run(root: &Path, pinocchio: bool) -> Result<(), String> {
             ratio(g("fused-ours-f32"), fo),
             ratio(g("fd-ours-f32"), dd),
             ns(g("step-ours")),
-        );
+        ];
+        println!("| {m} | {} |", cells.join(" | "));
     }
-    println!("\nmedians of criterion (target/criterion/); ratios are ours / peer, measured in this one run");
+    println!("\nmedians of criterion (target/criterion/); `harness` is the measured loop with no contender (included in every other figure); ratios are ours / peer, measured in this one run");
     Ok(())
 }

@@ -172,8 +172,8 @@ fn new(root: &Path, name: &str) -> Result<(), cli::Error> {
 }
 
 /// Builds `legs` (this package's binary with the generated models) and runs it with the
-/// same arguments. The alias's `--quiet` hides cargo's progress, and the first build
-/// takes minutes, so a build that is still going after a second says so.
+/// same arguments. The build is quiet (cargo's progress would bury the command's output)
+/// and the first one takes minutes, so a build that is still going after a second says so.
 fn delegate(root: &Path, args: &[String]) -> ExitCode {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let build = std::process::Command::new(cargo)
@@ -217,15 +217,26 @@ fn delegate(root: &Path, args: &[String]) -> ExitCode {
     if said {
         eprintln!("built in {:.0} s", started.elapsed().as_secs_f64());
     }
-    let legs = cli::target_dir(root)
-        .join("debug")
-        .join(format!("legs{}", std::env::consts::EXE_SUFFIX));
-    match std::process::Command::new(&legs)
+    // Cargo finds the binary it just built (wherever the target directory is) and does
+    // not build again.
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    match std::process::Command::new(cargo)
+        .args([
+            "run",
+            "--quiet",
+            "--package",
+            "xtask",
+            "--features",
+            "models",
+            "--bin",
+            "legs",
+            "--",
+        ])
         .args(args)
         .current_dir(root)
         .status()
     {
         Ok(s) => ExitCode::from(s.code().unwrap_or(1).clamp(0, 255) as u8),
-        Err(e) => cli::Error::Failed(format!("cannot run {}: {e}", legs.display())).report(),
+        Err(e) => cli::Error::Failed(format!("cannot run cargo: {e}")).report(),
     }
 }

@@ -37,7 +37,7 @@ fn leg_file(m: &Model, qd: &[f64]) -> String {
             .map_or(0.0, |r| v(&r[0]) * v(&r[1]) * v(&r[1]));
         let _ = writeln!(
             out,
-            "link {} {} {:?} {:?} {:?} {:?} {:?} {:?} {:?}",
+            "link {} {} {:?} {:?} {:?} {:?} {:?} {:?} {:?} {:?}",
             l.name,
             l.parent.map_or(-1, |p| p as i64),
             v(&l.origin[0]),
@@ -46,7 +46,8 @@ fn leg_file(m: &Model, qd: &[f64]) -> String {
             v(&l.com[0]),
             v(&l.com[1]),
             v(&l.inertia),
-            armature
+            armature,
+            v(&l.damping)
         );
     }
     for c in &m.closures {

@@ -19,6 +19,11 @@ pub struct Progress {
 impl Progress {
     /// `len` units of work (steps, runs), described as `what`.
     pub fn new(len: u64, what: &str) -> Progress {
+        Progress::drawn_on(len, what, std::io::stderr().is_terminal())
+    }
+
+    /// As [`Progress::new`], with whether standard error is a terminal given.
+    fn drawn_on(len: u64, what: &str, terminal: bool) -> Progress {
         let bar = ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::hidden());
         bar.set_style(
             ProgressStyle::with_template("{msg} [{bar:40}] {pos}/{len} ({eta} left)")
@@ -30,7 +35,7 @@ impl Progress {
             bar,
             started: Instant::now(),
             shown: false,
-            terminal: std::io::stderr().is_terminal(),
+            terminal,
         }
     }
 
@@ -61,14 +66,16 @@ mod tests {
     use super::*;
 
     #[test]
-    fn nothing_is_drawn_off_a_terminal_or_within_a_second() {
-        let mut p = Progress::new(10, "test");
-        p.set(5);
-        // Within a second: hidden whatever stderr is.
-        assert!(!p.is_shown());
-        p.started -= Duration::from_secs(2);
-        p.set(6);
-        assert_eq!(p.is_shown(), std::io::stderr().is_terminal());
-        assert_eq!(p.bar.position(), 6);
+    fn a_bar_on_a_terminal_after_a_second_and_never_off_one() {
+        for terminal in [true, false] {
+            let mut p = Progress::drawn_on(10, "test", terminal);
+            p.set(5);
+            // Within a second: hidden, terminal or not.
+            assert!(!p.is_shown());
+            p.started -= Duration::from_secs(2);
+            p.set(6);
+            assert_eq!(p.is_shown(), terminal);
+            assert_eq!(p.bar.position(), 6);
+        }
     }
 }

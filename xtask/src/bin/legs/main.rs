@@ -3,7 +3,7 @@
 
 use std::process::ExitCode;
 
-use xtask::args::{self, EvalArgs, Legs, LegsCommand, Parsed, SimArgs};
+use xtask::args::{self, Command, EvalArgs, Parsed, SimArgs, Xtask};
 use xtask::cli::Error;
 
 mod eval;
@@ -57,13 +57,16 @@ fn simulate(args: SimArgs) -> Result<(), Error> {
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let result = match args::parse::<Legs>(&args) {
-        Ok(Parsed::Run(Legs {
-            command: LegsCommand::Eval(a),
+    let result = match args::parse::<Xtask>(&args) {
+        Ok(Parsed::Run(Xtask {
+            command: Command::Eval(a),
         })) => eval(a),
-        Ok(Parsed::Run(Legs {
-            command: LegsCommand::Sim(a),
+        Ok(Parsed::Run(Xtask {
+            command: Command::Sim(a),
         })) => simulate(a),
+        Ok(Parsed::Run(_)) => Err(Error::usage(
+            "`legs` runs `sim` and `eval` only; the other commands are `cargo xtask`'s",
+        )),
         Ok(Parsed::Printed) => Ok(()),
         Err(e) => Err(e),
     };
