@@ -169,8 +169,6 @@ int main(int argc, char** argv) {
   if (nq == 4 && nc == 2) return run<4, 2>(model, closures, d, q, v);
   if (nq == 2 && nc == 0) return run<2, 0>(model, closures, d, q, v);
   if (nq == 3 && nc == 0) return run<3, 0>(model, closures, d, q, v);
-  if (nq == 7 && nc == 4) return run<7, 4>(model, closures, d, q, v);
-  if (nq == 7 && nc == 6) return run<7, 6>(model, closures, d, q, v);
   std::fprintf(stderr, "no fixed-size instance for NQ = %d, NC = %d\n", nq, nc);
   return 1;
 }

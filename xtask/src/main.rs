@@ -175,18 +175,19 @@ fn new(root: &Path, name: &str) -> Result<(), cli::Error> {
 /// same arguments. The build is quiet (cargo's progress would bury the command's output)
 /// and the first one takes minutes, so a build that is still going after a second says so.
 fn delegate(root: &Path, args: &[String]) -> ExitCode {
+    const LEGS: [&str; 7] = [
+        "--quiet",
+        "--package",
+        "xtask",
+        "--features",
+        "models",
+        "--bin",
+        "legs",
+    ];
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let build = std::process::Command::new(cargo)
-        .args([
-            "build",
-            "--quiet",
-            "--package",
-            "xtask",
-            "--features",
-            "models",
-            "--bin",
-            "legs",
-        ])
+    let build = std::process::Command::new(&cargo)
+        .arg("build")
+        .args(LEGS)
         .current_dir(root)
         .spawn();
     let mut child = match build {
@@ -219,19 +220,10 @@ fn delegate(root: &Path, args: &[String]) -> ExitCode {
     }
     // Cargo finds the binary it just built (wherever the target directory is) and does
     // not build again.
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     match std::process::Command::new(cargo)
-        .args([
-            "run",
-            "--quiet",
-            "--package",
-            "xtask",
-            "--features",
-            "models",
-            "--bin",
-            "legs",
-            "--",
-        ])
+        .arg("run")
+        .args(LEGS)
+        .arg("--")
         .args(args)
         .current_dir(root)
         .status()
