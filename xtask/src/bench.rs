@@ -237,8 +237,8 @@ pub fn run(root: &Path, pinocchio: bool) -> Result<(), String> {
     };
     let models = crate::cli::model_names(root)?;
     println!();
-    println!("| model | harness | fused ours | CasADi C closed | ratio | CasADi C Lagrange | ratio | FD ours | CasADi C closed | ratio | CasADi C Lagrange | ratio | FD Pinocchio | ratio | control step | control / FD | fused f32/f64 | FD f32/f64 | sim step |");
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("| model | harness | fused ours | CasADi C closed | ratio | CasADi C Lagrange | ratio | Pinocchio-on-CasADi C | ratio | FD ours | CasADi C closed | ratio | CasADi C Lagrange | ratio | Pinocchio-on-CasADi C | ratio | Pinocchio C++ | ratio | control step | control / FD | fused f32/f64 | FD f32/f64 | sim step |");
+    println!("|{}", "---|".repeat(23));
     for m in &models {
         let g = |id: &str| median(root, m, id);
         let (fo, fcc, fcl, dd, dcc, dcl, c) = (
@@ -250,7 +250,7 @@ pub fn run(root: &Path, pinocchio: bool) -> Result<(), String> {
             g("fd-casadi"),
             g("control-ours"),
         );
-        let p = pin.get(m).copied();
+        let p = pin.get(m).copied().unwrap_or_default();
         let cells = [
             ns(g("empty")),
             ns(fo),
@@ -258,13 +258,17 @@ pub fn run(root: &Path, pinocchio: bool) -> Result<(), String> {
             ratio(fo, fcc),
             ns(fcl),
             ratio(fo, fcl),
+            ns(p.sx_terms),
+            ratio(fo, p.sx_terms),
             ns(dd),
             ns(dcc),
             ratio(dd, dcc),
             ns(dcl),
             ratio(dd, dcl),
-            ns(p),
-            ratio(dd, p),
+            ns(p.sx_forward_dynamics),
+            ratio(dd, p.sx_forward_dynamics),
+            ns(p.pipeline),
+            ratio(dd, p.pipeline),
             ns(c),
             ratio(c, dd),
             ratio(g("fused-ours-f32"), fo),

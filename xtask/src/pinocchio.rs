@@ -18,6 +18,8 @@ use crate::model::{Model, Param};
 
 const REQUIREMENTS: &str = "xtask/requirements-pinocchio.txt";
 const SOURCE: &str = "xtask/pinocchio_bench.cpp";
+const SX_SOURCE: &str = "xtask/pinocchio_casadi.cpp";
+const LEG_HEADER: &str = "xtask/pinocchio_leg.hpp";
 
 fn value(params: &[Param], name: &str) -> f64 {
     params
@@ -81,9 +83,79 @@ fn run_command(cmd: &mut Command, shown: &str) -> Result<String, String> {
     Ok(String::from_utf8_lossy(&out.stdout).into_owned())
 }
 
-/// The median time (ns) of Pinocchio's pipeline for every model with a fixed-size
-/// instance in the C++ program.
-pub fn run(root: &Path) -> Result<BTreeMap<String, f64>, String> {
+/// Pinocchio's figures for one leg (median ns per call).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Figures {
+    /// Pinocchio's C++ pipeline (forward dynamics), where the C++ program has an instance.
+    pub pipeline: Option<f64>,
+    /// Pinocchio on casadi::SX emitted as C: the fused terms and forward dynamics.
+    pub sx_terms: Option<f64>,
+    pub sx_forward_dynamics: Option<f64>,
+}
+
+/// Whether `out` is older than any of `sources` (or missing).
+fn stale(out: &Path, sources: &[PathBuf]) -> bool {
+    let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+    match modified(out) {
+        None => true,
+        Some(o) => sources.iter().any(|s| modified(s).is_none_or(|m| m > o)),
+    }
+}
+
+/// Compiles one of the C++ programs with Pinocchio (and CasADi when `casadi` is given),
+/// unless it is newer than its sources.
+fn compile(
+    root: &Path,
+    source: &str,
+    bin: &Path,
+    prefix: &Path,
+    casadi: Option<&Path>,
+) -> Result<(), String> {
+    let sources = [root.join(source), root.join(LEG_HEADER)];
+    if !stale(bin, &sources) {
+        return Ok(());
+    }
+    eprintln!("==> g++ {source} (Pinocchio's templates: a few minutes)");
+    let inc = prefix.join("include");
+    let lib = prefix.join("lib");
+    let mut cmd = Command::new("g++");
+    // The symbolic generator's own speed does not matter: -O1 builds faster.
+    cmd.args([
+        if casadi.is_some() { "-O1" } else { "-O3" },
+        "-DNDEBUG",
+        "-std=c++17",
+    ])
+    // The definitions Pinocchio's CMake configuration exports to its users.
+    .args([
+        "-DBOOST_MPL_LIMIT_LIST_SIZE=30",
+        "-DBOOST_MPL_LIMIT_VECTOR_SIZE=30",
+        "-DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS",
+        "-DBOOST_FUSION_INVOKE_MAX_ARITY=12",
+        "-DPINOCCHIO_ENABLE_TEMPLATE_INSTANTIATION",
+    ])
+    .arg(format!("-I{}", inc.join("eigen3").display()))
+    .arg(format!("-I{}", inc.display()));
+    if let Some(c) = casadi {
+        cmd.arg(format!("-I{}", c.join("include").display()));
+    }
+    cmd.arg(&sources[0])
+        .arg("-o")
+        .arg(bin)
+        .arg(format!("-L{}", lib.display()))
+        .arg("-lpinocchio_default")
+        .arg(format!("-Wl,-rpath,{}", lib.display()));
+    if let Some(c) = casadi {
+        cmd.arg(format!("-L{}", c.display()))
+            .arg("-lcasadi")
+            .arg(format!("-Wl,-rpath,{}", c.display()));
+    }
+    run_command(&mut cmd, "g++ (Debian: apt-get install g++)").map(|_| ())
+}
+
+/// Pinocchio's figures for every model: its C++ pipeline where the C++ program has a
+/// fixed-size instance, and its algorithms on casadi::SX emitted as C for every leg
+/// without redundant closure rows.
+pub fn run(root: &Path) -> Result<BTreeMap<String, Figures>, String> {
     let py = gen::python(root)?;
     eprintln!("==> installing {REQUIREMENTS} into {}/", gen::VENV_DIR);
     run_command(
@@ -100,39 +172,20 @@ pub fn run(root: &Path) -> Result<BTreeMap<String, f64>, String> {
             .current_dir(root),
         &format!("pip install -r {REQUIREMENTS}"),
     )?;
-    let prefix = run_command(
-        Command::new(&py).args(["-c", "import sysconfig, os; print(os.path.join(sysconfig.get_paths()['purelib'], 'cmeel.prefix'))"]),
+    let paths = run_command(
+        Command::new(&py).args(["-c", "import sysconfig, os, casadi; print(os.path.join(sysconfig.get_paths()['purelib'], 'cmeel.prefix')); print(os.path.dirname(casadi.__file__))"]),
         "python",
     )?;
-    let prefix = PathBuf::from(prefix.trim());
+    let mut lines = paths.lines();
+    let prefix = PathBuf::from(lines.next().unwrap_or_default().trim());
+    let casadi_dir = PathBuf::from(lines.next().unwrap_or_default().trim());
     let target = crate::cli::target_dir(root);
     let dir = target.join("pinocchio");
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let bin = dir.join("pinocchio_bench");
-    eprintln!("==> g++ -O3 {SOURCE}");
-    let inc = prefix.join("include");
-    let lib = prefix.join("lib");
-    // The definitions Pinocchio's CMake configuration exports to its users.
-    run_command(
-        Command::new("g++")
-            .args(["-O3", "-DNDEBUG", "-std=c++17"])
-            .args([
-                "-DBOOST_MPL_LIMIT_LIST_SIZE=30",
-                "-DBOOST_MPL_LIMIT_VECTOR_SIZE=30",
-                "-DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS",
-                "-DBOOST_FUSION_INVOKE_MAX_ARITY=12",
-                "-DPINOCCHIO_ENABLE_TEMPLATE_INSTANTIATION",
-            ])
-            .arg(format!("-I{}", inc.join("eigen3").display()))
-            .arg(format!("-I{}", inc.display()))
-            .arg(root.join(SOURCE))
-            .arg("-o")
-            .arg(&bin)
-            .arg(format!("-L{}", lib.display()))
-            .arg("-lpinocchio_default")
-            .arg(format!("-Wl,-rpath,{}", lib.display())),
-        "g++ (Debian: apt-get install g++)",
-    )?;
+    compile(root, SOURCE, &bin, &prefix, None)?;
+    let sx_bin = dir.join("pinocchio_casadi");
+    compile(root, SX_SOURCE, &sx_bin, &prefix, Some(&casadi_dir))?;
     let target_legs = target.join("debug").join("legs");
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     run_command(
@@ -160,13 +213,6 @@ pub fn run(root: &Path) -> Result<BTreeMap<String, f64>, String> {
         let qd: Vec<f64> = (0..m.links.len()).map(|i| 0.1 * (i as f64 + 1.0)).collect();
         let file = dir.join(format!("{name}.leg"));
         crate::cli::write_atomic(&file, &leg_file(&m, &qd))?;
-        let pin_out = match run_command(Command::new(&bin).arg(&file), "pinocchio_bench") {
-            Ok(text) => text,
-            Err(e) if e.contains("no fixed-size instance") => continue,
-            Err(e) => return Err(e),
-        };
-        let pin: Value = serde_json::from_str(&pin_out)
-            .map_err(|e| format!("pinocchio_bench printed {pin_out}: {e}"))?;
         let join = |v: &[f64]| {
             v.iter()
                 .map(|x| format!("{x:?}"))
@@ -186,34 +232,89 @@ pub fn run(root: &Path) -> Result<BTreeMap<String, f64>, String> {
             "legs eval",
         )?)
         .map_err(|e| e.to_string())?;
-        for key in ["M", "N", "qdd"] {
-            let flat = |v: &Value| -> Vec<f64> {
-                match v {
-                    Value::Array(a) => a
-                        .iter()
-                        .flat_map(|x| match x {
-                            Value::Array(r) => {
-                                r.iter().filter_map(Value::as_f64).collect::<Vec<_>>()
-                            }
-                            x => x.as_f64().into_iter().collect(),
-                        })
-                        .collect(),
-                    _ => Vec::new(),
-                }
-            };
-            let (a, b) = (flat(&pin[key]), flat(&ours[key]));
-            let scale = b.iter().fold(0.0f64, |s, x| s.max(x.abs())).max(1e-300);
-            let diff = a
-                .iter()
-                .zip(&b)
-                .fold(0.0f64, |s, (x, y)| s.max((x - y).abs()));
-            if a.len() != b.len() || diff > 1e-9 * scale {
-                return Err(format!("{name}: Pinocchio's {key} differs from ours ({diff:e}); not timing different things"));
+        let mut figures = Figures::default();
+        match run_command(Command::new(&bin).arg(&file), "pinocchio_bench") {
+            Ok(text) => {
+                let pin: Value = serde_json::from_str(&text)
+                    .map_err(|e| format!("pinocchio_bench printed {text}: {e}"))?;
+                agree(&name, "Pinocchio's pipeline", &pin, &ours)?;
+                figures.pipeline = pin["median_ns"].as_f64();
             }
+            Err(e) if e.contains("no fixed-size instance") => {}
+            Err(e) => return Err(e),
         }
-        let ns = pin["median_ns"].as_f64().ok_or("no median_ns")?;
-        eprintln!("{name:<16} Pinocchio pipeline {ns:.0} ns (M, N, q̈ agree with ours)");
-        out.insert(name, ns);
+        if m.closures.is_empty() || !has_redundant_rows(root, &name)? {
+            let c = dir.join(format!("{name}_pinocchio_sx.c"));
+            run_command(Command::new(&sx_bin).arg(&file).arg(&c), "pinocchio_casadi")?;
+            let exe = dir.join(format!("{name}_pinocchio_sx"));
+            run_command(
+                Command::new("gcc")
+                    .args(["-O3"])
+                    .arg(&c)
+                    .arg("-o")
+                    .arg(&exe)
+                    .arg("-lm"),
+                "gcc",
+            )?;
+            let text = run_command(&mut Command::new(&exe), "Pinocchio-on-CasADi C")?;
+            let sx: Value = serde_json::from_str(&text)
+                .map_err(|e| format!("{} printed {text}: {e}", exe.display()))?;
+            agree(&name, "Pinocchio on casadi::SX", &sx, &ours)?;
+            figures.sx_terms = sx["terms_median_ns"].as_f64();
+            figures.sx_forward_dynamics = sx["fd_median_ns"].as_f64();
+        }
+        eprintln!(
+            "{name:<16} Pinocchio pipeline {}, Pinocchio-on-CasADi C terms {} / forward dynamics {} (M, N, q̈ agree with ours)",
+            show(figures.pipeline),
+            show(figures.sx_terms),
+            show(figures.sx_forward_dynamics)
+        );
+        out.insert(name, figures);
     }
     Ok(out)
+}
+
+fn show(ns: Option<f64>) -> String {
+    ns.map_or("–".into(), |x| format!("{x:.0} ns"))
+}
+
+/// Whether the committed IR records closure rows that repeat the others (the KKT matrix
+/// the peers' LU and symbolic solve would factor is then singular).
+fn has_redundant_rows(root: &Path, name: &str) -> Result<bool, String> {
+    let irs = gen::committed_irs(root).map_err(|e| e.to_string())?;
+    Ok(irs
+        .iter()
+        .find(|ir| ir.model.name == name)
+        .is_some_and(|ir| !ir.model.redundant_rows.is_empty()))
+}
+
+/// `peer`'s M, N and q̈ (rows in the spec's order; M as rows or flat, column-major or
+/// symmetric) agree with ours, so that both compute the same thing.
+fn agree(name: &str, what: &str, peer: &Value, ours: &Value) -> Result<(), String> {
+    let flat = |v: &Value| -> Vec<f64> {
+        match v {
+            Value::Array(a) => a
+                .iter()
+                .flat_map(|x| match x {
+                    Value::Array(r) => r.iter().filter_map(Value::as_f64).collect::<Vec<_>>(),
+                    x => x.as_f64().into_iter().collect(),
+                })
+                .collect(),
+            _ => Vec::new(),
+        }
+    };
+    for key in ["M", "N", "qdd"] {
+        let (a, b) = (flat(&peer[key]), flat(&ours[key]));
+        let scale = b.iter().fold(0.0f64, |s, x| s.max(x.abs())).max(1e-300);
+        let diff = a
+            .iter()
+            .zip(&b)
+            .fold(0.0f64, |s, (x, y)| s.max((x - y).abs()));
+        if a.len() != b.len() || diff > 1e-9 * scale {
+            return Err(format!(
+                "{name}: {what}'s {key} differs from ours ({diff:e}); not timing different things"
+            ));
+        }
+    }
+    Ok(())
 }
