@@ -129,6 +129,23 @@ fn check_home(spec: &Spec, check: &HomeCheck) -> Result<(), String> {
             check.raw_residual, HOME_TOLERANCE, scale
         )));
     }
+    if check.mobility == 0 {
+        if let Some(c) = spec.file.closures.first() {
+            let name = &c.get_ref().name;
+            let (line, column) = crate::spec::line_column(&spec.text, name.span().start);
+            return Err(crate::spec::SpecError {
+                file: spec.path.clone(),
+                line,
+                column,
+                field: "closures".into(),
+                message: format!(
+                    "the closures leave the leg no motion: rank J = {} = the number of joints at home, so every joint is fixed (remove a closure or add a link)",
+                    check.rank
+                ),
+            }
+            .to_string());
+        }
+    }
     if check.moved > 0.2 {
         return Err(error(format!(
             "the home pose is far from assembled: assembly moves a joint by {:.3} rad (the nearest assembled pose is [{pose}])",
@@ -398,7 +415,14 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, Error> {
                 },
                 motors,
                 if motors == 1 { "" } else { "s" },
-                actuation_note(h.mobility, motors)
+                match actuation_note(h.mobility, motors) {
+                    // Legal, and worth a word: the motors can fight each other.
+                    "over-actuated" => format!(
+                        "over-actuated ({motors} motors for {} degrees of freedom: they can load each other through the closures, and joint-space control does not apply)",
+                        h.mobility
+                    ),
+                    note => note.to_string(),
+                }
             ));
             let c = std::mem::take(&mut derived.casadi_c);
             files.insert(Path::new(CASADI_C_DIR).join(format!("{}.c", spec.name)), c);

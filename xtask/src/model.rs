@@ -4,6 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::spec::{PointSpec, Spec, SpecError, Vec2};
+use toml::Spanned;
 
 /// One run-time parameter: a field of the generated `Params` struct.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -67,18 +68,31 @@ impl Model {
 struct Builder<'a> {
     spec: &'a Spec,
     params: Vec<Param>,
+    /// Which spec name each parameter comes from: its field and byte offset.
+    owners: Vec<(String, usize)>,
+    /// The spec name whose parameters are being made.
+    owner: (String, usize),
 }
 
 impl Builder<'_> {
+    /// From now on, parameters come from the name `at`, the field `field`.
+    fn owned_by(&mut self, field: String, at: &Spanned<String>) {
+        self.owner = (field, at.span().start);
+    }
+
     fn scalar(&mut self, name: String, value: f64, doc: String) -> Result<String, SpecError> {
-        if self.params.iter().any(|p| p.name == name) {
+        if let Some(i) = self.params.iter().position(|p| p.name == name) {
+            // Reported at the second name, naming the first.
+            let (first, first_at) = &self.owners[i];
+            let (first_line, _) = crate::spec::line_column(&self.spec.text, *first_at);
+            let (line, column) = crate::spec::line_column(&self.spec.text, self.owner.1);
             return Err(SpecError {
                 file: self.spec.path.clone(),
-                line: 1,
-                column: 1,
-                field: "(names)".into(),
+                line,
+                column,
+                field: self.owner.0.clone(),
                 message: format!(
-                    "two quantities would both be the parameter `{name}`; rename a link or closure"
+                    "this name and {first} (line {first_line}) would both make the parameter `{name}`; rename one"
                 ),
             });
         }
@@ -87,6 +101,7 @@ impl Builder<'_> {
             default: value,
             doc,
         });
+        self.owners.push(self.owner.clone());
         Ok(name)
     }
 
@@ -119,6 +134,8 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
     let mut b = Builder {
         spec,
         params: Vec::new(),
+        owners: Vec::new(),
+        owner: ("gravity".into(), spec.file.gravity.span().start),
     };
     let f = &spec.file;
     let gravity = [
@@ -138,6 +155,7 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
     for (i, link) in f.links.iter().enumerate() {
         let l = link.get_ref();
         let name = l.name.get_ref().clone();
+        b.owned_by(format!("links[{i}].name"), &l.name);
         let parent = match l.parent.get_ref().as_str() {
             "base" => None,
             p => Some(spec.link_index(p).expect("validated")),
@@ -220,9 +238,10 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
         });
     }
     let mut closures = Vec::new();
-    for c in &f.closures {
+    for (k, c) in f.closures.iter().enumerate() {
         let c = c.get_ref();
         let name = c.name.get_ref().clone();
+        b.owned_by(format!("closures[{k}].name"), &c.name);
         let a = b.point(
             &format!("{name}_a"),
             c.a.get_ref(),
@@ -237,6 +256,7 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
         )?;
         closures.push(Closure { name, a, b: bp });
     }
+    b.owned_by("foot.link".into(), &f.foot.get_ref().link);
     let foot = b.point("foot", f.foot.get_ref(), "Foot point, link frame", &links)?;
     Ok(Model {
         name: spec.name.clone(),

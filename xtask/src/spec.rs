@@ -231,6 +231,17 @@ const RUST_KEYWORDS: &[&str] = &[
     "override", "priv", "typeof", "unsized", "virtual", "yield",
 ];
 
+/// Text from a spec as an error shows it: escaped, so that a newline or another control
+/// character cannot break the one-line error, and at most 40 characters.
+pub fn shown(text: &str) -> String {
+    let escaped: String = text.escape_debug().collect();
+    if escaped.chars().count() > 40 {
+        format!("{}…", escaped.chars().take(40).collect::<String>())
+    } else {
+        escaped
+    }
+}
+
 /// Names in specs become module, field and constant names: lowercase snake case ASCII
 /// identifiers that are not keywords.
 pub fn check_name(name: &str) -> Result<(), String> {
@@ -241,7 +252,8 @@ pub fn check_name(name: &str) -> Result<(), String> {
         && name.len() <= 48;
     if !ok {
         return Err(format!(
-            "`{name}` is not a plain identifier (lowercase letters, digits and `_`, starting with a letter, at most 48 characters)"
+            "`{}` is not a plain identifier (lowercase letters, digits and `_`, starting with a letter, at most 48 characters)",
+            shown(name)
         ));
     }
     if RUST_KEYWORDS.contains(&name) {
@@ -383,17 +395,23 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
         return Err(ctx.at(0, "links", "a spec needs at least one [[links]] table"));
     }
     check_vec(ctx, &file.gravity, "gravity", Sign::Any)?;
-    let mut names: Vec<String> = Vec::new();
+    // Each name with the field and line that gave it, so that a duplicate names the first.
+    let mut names: Vec<(String, String, usize)> = Vec::new();
     let mut check_new_name = |s: &Spanned<String>, field: &str| -> Result<(), SpecError> {
         let n = s.get_ref();
         check_name(n).map_err(|m| ctx.span(s, field, m))?;
         if n == "base" {
             return Err(ctx.span(s, field, format!("`{n}` is reserved")));
         }
-        if names.contains(n) {
-            return Err(ctx.span(s, field, format!("duplicate name `{n}`")));
+        if let Some((_, first, line)) = names.iter().find(|(name, _, _)| name == n) {
+            return Err(ctx.span(
+                s,
+                field,
+                format!("duplicate name `{n}` (first given as {first}, line {line})"),
+            ));
         }
-        names.push(n.clone());
+        let (line, _) = line_column(ctx.text, s.span().start);
+        names.push((n.clone(), field.to_string(), line));
         Ok(())
     };
     let link_names: Vec<&str> = file
@@ -421,7 +439,8 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
                         &l.parent,
                         f("parent"),
                         format!(
-                            "unknown parent `{parent}` (expected \"base\" or one of: {})",
+                            "unknown parent `{}` (expected \"base\" or one of: {})",
+                            shown(parent),
                             link_names[..i].join(", ")
                         ),
                     ))
@@ -454,13 +473,25 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
             )?;
         }
     }
+    if file.links.iter().all(|l| l.get_ref().actuator.is_none()) {
+        return Err(ctx.span(
+            &file.links[0].get_ref().name,
+            "links",
+            "no link has an `actuator`: a leg needs at least one motor (add `actuator = { rotor_inertia = …, gear_ratio = … }` to the links that have one)",
+        ));
+    }
+    check_has_size(ctx, file)?;
     let check_point = |p: &PointSpec, field: &str| -> Result<(), SpecError> {
         let link = p.link.get_ref();
         if !link_names.contains(&link.as_str()) {
             return Err(ctx.span(
                 &p.link,
                 format!("{field}.link"),
-                format!("unknown link `{link}` (links: {})", link_names.join(", ")),
+                format!(
+                    "unknown link `{}` (links: {})",
+                    shown(link),
+                    link_names.join(", ")
+                ),
             ));
         }
         if let Some(pt) = &p.point {
@@ -495,6 +526,28 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
         for &v in h {
             check_value(v, Sign::Any).map_err(|m| ctx.span(home, "home", m))?;
         }
+    }
+    Ok(())
+}
+
+/// A leg whose every length, origin, centre of mass and point is zero has all its points
+/// at the base: nothing moves when a joint turns (J and M vanish).
+fn check_has_size(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
+    let zero = |v: &Spanned<Vec2>| v.get_ref().value == [0.0, 0.0];
+    let point_zero = |p: &PointSpec| p.point.as_ref().is_none_or(zero);
+    let all_zero = file.links.iter().all(|l| {
+        let l = l.get_ref();
+        zero(&l.length) && zero(&l.com) && l.origin.as_ref().is_none_or(zero)
+    }) && file.closures.iter().all(|c| {
+        let c = c.get_ref();
+        point_zero(c.a.get_ref()) && point_zero(c.b.get_ref())
+    }) && point_zero(file.foot.get_ref());
+    if all_zero {
+        return Err(ctx.span(
+            &file.links[0].get_ref().length,
+            "links[0].length",
+            "every length, origin, centre of mass and point in the spec is zero: the leg has no size (every point is at the base, so no joint moves anything)",
+        ));
     }
     Ok(())
 }

@@ -231,11 +231,12 @@ fn names_that_are_not_plain_identifiers() {
 fn duplicate_names() {
     let text = edit("name = \"toe\"", "name = \"lower_b\"", 0);
     let (l, c) = pos(&text, "\"lower_b\"", 1);
+    let (first, _) = pos(&text, "\"lower_b\"", 0);
     expect_error(
         &text,
         (l, c),
         "closures[0].name",
-        "duplicate name `lower_b`",
+        &format!("duplicate name `lower_b` (first given as links[3].name, line {first})"),
     );
     let text = edit("name = \"lower_b\"", "name = \"lower_a\"", 0);
     let (l, c) = pos(&text, "\"lower_a\"", 1);
@@ -457,6 +458,129 @@ fn a_home_pose_that_does_not_assemble_is_located() {
     let (l, c) = pos(&text, "[0.0, 0.0, 0.0, 0.0]", 0);
     assert!(
         err.starts_with(&format!("leg-models/specs/leg.toml:{l}:{c}: home: the home pose does not assemble: closure residual 5.000e-2 m")),
+        "{err}"
+    );
+    assert_eq!(root.listing(), before, "a failed generation changed files");
+}
+
+#[test]
+fn a_leg_without_a_motor() {
+    let text = VALID.replace("actuator = { rotor_inertia = 0.0, gear_ratio = 1.0 }\n", "");
+    let (l, c) = pos(&text, "\"upper_a\"", 0);
+    expect_error(
+        &text,
+        (l, c),
+        "links",
+        "no link has an `actuator`: a leg needs at least one motor",
+    );
+}
+
+#[test]
+fn a_leg_with_no_size() {
+    let text = VALID
+        .replace("[0.1, 0.0]", "[0.0, 0.0]")
+        .replace("[0.2, 0.0]", "[0.0, 0.0]")
+        .replace("[0.05, 0.0]", "[0.0, 0.0]");
+    let (l, c) = pos(&text, "[0.0, 0.0]", 0);
+    expect_error(&text, (l, c), "links[0].length", "the leg has no size");
+    // One offset anywhere gives it a size.
+    let text = text.replacen("origin = [0.0, 0.0]", "origin = [0.05, 0.0]", 1);
+    assert!(parse(&text).is_ok());
+}
+
+#[test]
+fn two_names_that_make_one_parameter() {
+    // `upper_a` has a motor (`upper_a_rotor_inertia`); a link `upper_a_rotor` has an
+    // inertia (`upper_a_rotor_inertia`).
+    let extra = "[[links]]\nname = \"upper_a_rotor\"\nparent = \"base\"\nlength = [0.1, 0.0]\nmass = 0.05\ncom = [0.05, 0.0]\ninertia = 4e-5\n\n[[closures]]";
+    let text = VALID.replacen("[[closures]]", extra, 1);
+    let e = model::build(&parse(&text).unwrap()).unwrap_err();
+    let (l, c) = pos(&text, "\"upper_a_rotor\"", 0);
+    assert_eq!(
+        (e.line, e.column, e.field.as_str()),
+        (l, c, "links[4].name"),
+        "{e}"
+    );
+    let (first, _) = pos(&text, "\"upper_a\"", 0);
+    assert!(
+        e.message.contains(&format!(
+            "this name and links[0].name (line {first}) would both make the parameter `upper_a_rotor_inertia`"
+        )),
+        "{e}"
+    );
+}
+
+#[test]
+fn spec_text_in_an_error_is_escaped_and_short() {
+    let text = edit("name = \"toe\"", "name = \"to\\ne\"", 0);
+    let e = parse(&text).unwrap_err();
+    let shown = e.to_string();
+    assert!(
+        !shown.contains('\n') && shown.contains("`to\\ne`"),
+        "{shown}"
+    );
+    let long = "x".repeat(300);
+    let text = edit("parent = \"upper_a\"", &format!("parent = \"{long}\""), 0);
+    let shown = parse(&text).unwrap_err().to_string();
+    assert!(shown.contains(&format!("`{}…`", "x".repeat(40))), "{shown}");
+    assert!(shown.len() < 300, "{shown}");
+}
+
+/// Runs the derivation (CasADi): closures that fix every joint are a spec error located at
+/// the closures, and nothing is written.
+#[test]
+fn closures_that_leave_no_motion_are_located() {
+    let root = TempRoot::new("no-motion");
+    for dir in ["xtask", ".venv"] {
+        let from = gen::workspace_root().join(dir);
+        std::os::unix::fs::symlink(&from, root.0.join(dir)).unwrap();
+    }
+    // Two links from base points 0.1 m apart whose tips meet: a rigid triangle.
+    let text = r#"gravity = [0.0, -9.81]
+home = [1.0471975511965976, 2.0943951023931957]
+
+[[links]]
+name = "left"
+parent = "base"
+length = [0.1, 0.0]
+mass = 0.05
+com = [0.05, 0.0]
+inertia = 4e-5
+actuator = { rotor_inertia = 0.0, gear_ratio = 1.0 }
+
+[[links]]
+name = "right"
+parent = "base"
+origin = [0.1, 0.0]
+length = [0.1, 0.0]
+mass = 0.05
+com = [0.05, 0.0]
+inertia = 4e-5
+
+[[closures]]
+name = "apex"
+a = { link = "left" }
+b = { link = "right" }
+
+[foot]
+link = "left"
+"#;
+    root.write("leg-models/specs/leg.toml", text);
+    let before = root.listing();
+    let err = gen::run(
+        &root.0,
+        &GenOptions {
+            check: false,
+            names: vec![],
+        },
+    )
+    .unwrap_err();
+    assert!(err.is_usage(), "{err}");
+    let (l, c) = pos(text, "\"apex\"", 0);
+    assert!(
+        err.to_string().starts_with(&format!(
+            "leg-models/specs/leg.toml:{l}:{c}: closures: the closures leave the leg no motion: rank J = 2"
+        )),
         "{err}"
     );
     assert_eq!(root.listing(), before, "a failed generation changed files");
