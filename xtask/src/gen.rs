@@ -12,6 +12,7 @@ use serde::Deserialize;
 use crate::cli::Error;
 use crate::ir_file::{IrFile, ModelInfo, FORMAT};
 use crate::model::{self, Model};
+use crate::progress::Progress;
 use crate::rust_module::{self, Summary};
 use crate::spec::Spec;
 
@@ -395,10 +396,16 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, Error> {
     let mut irs = Vec::new();
     let mut files = BTreeMap::new();
     let mut notes = Vec::new();
+    let mut progress = Progress::ticking(
+        specs.iter().filter(|s| selected(&s.name)).count() as u64,
+        "deriving",
+    );
     for spec in &specs {
         let ir = if selected(&spec.name) {
             let model = model::build(spec).map_err(|e| Error::Usage(e.to_string()))?;
+            progress.message(format!("deriving {} with CasADi", spec.name));
             let mut derived = derive(root, &py, &model).map_err(Error::Failed)?;
+            progress.set(notes.len() as u64 + 1);
             check_home(spec, &derived.home_check).map_err(Error::Usage)?;
             let h = &derived.home_check;
             let motors = model.actuated.len();
@@ -446,6 +453,7 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, Error> {
         };
         irs.push(ir);
     }
+    drop(progress);
     files.extend(rust_files(&irs).map_err(Error::Failed)?);
     let names: Vec<&str> = specs
         .iter()

@@ -39,6 +39,29 @@ impl Progress {
         }
     }
 
+    /// As [`Progress::new`], for work whose units may each take long (one CasADi
+    /// derivation): after a second the bar appears on a terminal by itself and keeps
+    /// ticking, whether or not a unit has finished.
+    pub fn ticking(len: u64, what: &str) -> Progress {
+        let p = Progress::new(len, what);
+        if p.terminal {
+            let bar = p.bar.clone();
+            std::thread::spawn(move || {
+                std::thread::sleep(QUIET_FOR);
+                if !bar.is_finished() {
+                    bar.set_draw_target(ProgressDrawTarget::stderr());
+                    bar.enable_steady_tick(Duration::from_millis(200));
+                }
+            });
+        }
+        p
+    }
+
+    /// What is being done now.
+    pub fn message(&self, what: String) {
+        self.bar.set_message(what);
+    }
+
     /// `pos` units done.
     pub fn set(&mut self, pos: u64) {
         if !self.shown && self.terminal && self.started.elapsed() >= QUIET_FOR {

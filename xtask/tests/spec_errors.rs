@@ -585,3 +585,27 @@ link = "left"
     );
     assert_eq!(root.listing(), before, "a failed generation changed files");
 }
+
+#[test]
+fn a_spec_larger_than_the_limit_is_refused_up_front() {
+    let n = xtask::spec::MAX_LINKS + 1;
+    let mut text = String::from("gravity = [0.0, -9.81]\n");
+    for i in 0..n {
+        let parent = if i == 0 {
+            "base".to_string()
+        } else {
+            format!("l{}", i - 1)
+        };
+        text.push_str(&format!(
+            "\n[[links]]\nname = \"l{i}\"\nparent = \"{parent}\"\nlength = [0.1, 0.0]\nmass = 0.1\ncom = [0.05, 0.0]\ninertia = 1e-4\nactuator = {{ rotor_inertia = 0.0, gear_ratio = 1.0 }}\n"
+        ));
+    }
+    text.push_str(&format!("\n[foot]\nlink = \"l{}\"\n", n - 1));
+    let at = pos(&text, &format!("\"l{}\"", n - 1), 0);
+    expect_error(
+        &text,
+        at,
+        &format!("links[{}]", n - 1),
+        &format!("a spec may have at most {} links, this one has {n}", n - 1),
+    );
+}
