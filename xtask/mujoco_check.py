@@ -50,6 +50,14 @@ def main():
         worst_m, worst_n = max(worst_m, em), max(worst_n, en)
     ok = worst_m < REL_TOL and worst_n < REL_TOL
 
+    # The `home` keyframe holds the spec's home pose, joint by joint.
+    ir = json.loads((pathlib.Path(__file__).parent.parent / "generated" / "ir" / f"{name}.json").read_text())
+    key = m.key("home").qpos
+    home_off = max(abs(key[a] - h) for a, h in zip(qadr, ir["model"]["home"]))
+    if home_off > 0.0:
+        print(f"{name}: the MJCF's home keyframe differs from the spec's home pose by {home_off:.3e} rad")
+        ok = False
+
     closure = 0.0
     if m.neq > 0:
         # Assemble near the spec's home pose (`--assemble` takes the actuated angles).

@@ -71,14 +71,19 @@ pub fn numbers(flag: &str, text: &str, n: usize, what: &str) -> Result<Vec<f64>,
         .filter(|s| !s.is_empty())
         .collect();
     let values: Result<Vec<f64>, _> = parts.iter().map(|p| p.parse::<f64>()).collect();
+    let numbers = if n == 1 { "number" } else { "numbers" };
+    let shown = crate::spec::shown(text);
     match values {
         Ok(v) if v.len() == n && v.iter().all(|x| x.is_finite()) => Ok(v),
         Ok(v) if v.iter().all(|x| x.is_finite()) => Err(Error::usage(format!(
             "`{flag}` has {} values, expected {n} ({what})",
             v.len()
         ))),
-        _ => Err(Error::usage(format!(
-            "`{flag} {text}`: expected {n} comma-separated numbers ({what})"
+        Ok(_) => Err(Error::usage(format!(
+            "`{flag} {shown}`: every value must be finite (not NaN or infinite); expected {n} comma-separated {numbers} ({what})"
+        ))),
+        Err(_) => Err(Error::usage(format!(
+            "`{flag} {shown}`: expected {n} comma-separated {numbers} ({what})"
         ))),
     }
 }

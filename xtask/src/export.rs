@@ -77,6 +77,25 @@ pub fn mjcf(m: &Model) -> String {
         }
         let _ = writeln!(out, "  </equality>");
     }
+    // The spec's home pose (near assembled) as a keyframe: MuJoCo starts at q = 0 otherwise,
+    // where a closure may be open by centimetres. MuJoCo orders qpos as the bodies are
+    // written, depth first.
+    let mut order = Vec::new();
+    fn depth_first(m: &Model, i: usize, order: &mut Vec<usize>) {
+        order.push(i);
+        for c in children(m, Some(i)) {
+            depth_first(m, c, order);
+        }
+    }
+    for i in children(m, None) {
+        depth_first(m, i, &mut order);
+    }
+    let qpos: Vec<String> = order.iter().map(|&i| num(m.home[i])).collect();
+    let _ = writeln!(
+        out,
+        "  <keyframe>\n    <key name=\"home\" qpos=\"{}\"/>\n  </keyframe>",
+        qpos.join(" ")
+    );
     if !m.actuated.is_empty() {
         let _ = writeln!(out, "  <actuator>");
         for &a in &m.actuated {

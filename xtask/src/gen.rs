@@ -315,6 +315,18 @@ pub fn rust_files(irs: &[IrFile]) -> Result<BTreeMap<PathBuf, String>, String> {
 }
 
 /// Reads every committed IR file.
+/// The committed IR of `name`, or `None` when it has not been generated yet.
+pub fn committed_ir(root: &Path, name: &str) -> Result<Option<IrFile>, String> {
+    let path = Path::new(IR_DIR).join(format!("{name}.json"));
+    match std::fs::read_to_string(root.join(&path)) {
+        Ok(text) => IrFile::parse(&text)
+            .map(Some)
+            .map_err(|e| format!("{}: {e}", path.display())),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(e) => Err(format!("{}: {e}", path.display())),
+    }
+}
+
 pub fn committed_irs(root: &Path) -> Result<Vec<IrFile>, String> {
     let mut out = Vec::new();
     for spec in spec_paths(root)? {

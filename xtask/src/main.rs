@@ -91,8 +91,8 @@ fn run_export(root: &Path, a: args::ExportArgs) -> Result<(), cli::Error> {
 }
 
 fn list(root: &Path) -> Result<(), cli::Error> {
-    // Mobility and redundant rows come from the derivation (the committed IR).
-    let irs = gen::committed_irs(root).map_err(cli::Error::Failed)?;
+    // Mobility and redundant rows come from the derivation (the committed IR); a spec not
+    // generated yet (just written by `new`) is listed with what to run.
     let mut rows = vec![[
         "model".to_string(),
         "NQ".into(),
@@ -103,29 +103,37 @@ fn list(root: &Path) -> Result<(), cli::Error> {
         "actuated joints".into(),
         "spec".into(),
     ]];
-    for (path, ir) in gen::spec_paths(root)
-        .map_err(cli::Error::Failed)?
-        .iter()
-        .zip(&irs)
-    {
-        let spec = gen::load_spec(root, path).map_err(cli::Error::Failed)?;
-        let m = model::build(&spec).map_err(|e| cli::Error::Failed(e.to_string()))?;
+    for path in gen::spec_paths(root).map_err(cli::Error::Failed)? {
+        let spec = gen::load_spec(root, &path).map_err(cli::Error::Usage)?;
+        let m = model::build(&spec).map_err(|e| cli::Error::Usage(e.to_string()))?;
         let actuated: Vec<&str> = m
             .actuated
             .iter()
             .map(|&a| m.links[a].name.as_str())
             .collect();
-        let redundant = match ir.model.redundant_rows.len() {
-            0 => String::new(),
-            n => format!(" ({n} redundant)"),
+        let ir = gen::committed_ir(root, &m.name).map_err(cli::Error::Failed)?;
+        let (redundant, mobility, actuation) = match &ir {
+            Some(ir) => (
+                match ir.model.redundant_rows.len() {
+                    0 => String::new(),
+                    n => format!(" ({n} redundant)"),
+                },
+                ir.model.mobility.to_string(),
+                gen::actuation_note(ir.model.mobility, m.actuated.len()).to_string(),
+            ),
+            None => (
+                String::new(),
+                "–".into(),
+                format!("not generated yet: run `cargo xtask gen {}`", m.name),
+            ),
         };
         rows.push([
             m.name.clone(),
             m.links.len().to_string(),
             format!("{}{redundant}", 2 * m.closures.len()),
             m.actuated.len().to_string(),
-            ir.model.mobility.to_string(),
-            gen::actuation_note(ir.model.mobility, m.actuated.len()).to_string(),
+            mobility,
+            actuation,
             actuated.join(", "),
             spec.path.display().to_string(),
         ]);
@@ -202,7 +210,7 @@ fn delegate(root: &Path, args: &[String]) -> ExitCode {
             Ok(None) => {
                 if !said && started.elapsed() >= Duration::from_secs(1) {
                     eprintln!(
-                        "building the generated models for `{}` (the first build takes a few minutes)…",
+                        "building the generated models for `{}` (a first build takes a few minutes)…",
                         args[0]
                     );
                     said = true;

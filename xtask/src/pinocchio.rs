@@ -281,11 +281,7 @@ fn show(ns: Option<f64>) -> String {
 /// Whether the committed IR records closure rows that repeat the others (the KKT matrix
 /// the peers' LU and symbolic solve would factor is then singular).
 fn has_redundant_rows(root: &Path, name: &str) -> Result<bool, String> {
-    let irs = gen::committed_irs(root).map_err(|e| e.to_string())?;
-    Ok(irs
-        .iter()
-        .find(|ir| ir.model.name == name)
-        .is_some_and(|ir| !ir.model.redundant_rows.is_empty()))
+    Ok(gen::committed_ir(root, name)?.is_some_and(|ir| !ir.model.redundant_rows.is_empty()))
 }
 
 /// `peer`'s M, N and q̈ (rows in the spec's order; M as rows or flat, column-major or

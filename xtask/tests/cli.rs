@@ -156,6 +156,10 @@ fn eval_refuses_bad_input() {
         "expected 4 comma-separated numbers",
     );
     refused(
+        &legs(&["eval", "minitaur", "--q=1,nan,3,4"]),
+        "every value must be finite (not NaN or infinite)",
+    );
+    refused(
         &legs(&["eval", "minitaur", "--q", "1,2,3,4", "--frob"]),
         "unexpected argument '--frob' found (see `cargo xtask eval --help`)",
     );
@@ -363,6 +367,17 @@ fn export_writes_mjcf_and_urdf_and_refuses_bad_input() {
     assert!(
         mjcf.contains("mass=\"0.4438\"")
             && mjcf.contains("<motor name=\"thigh\" joint=\"thigh\" gear=\"1\"/>")
+    );
+    // The home keyframe, in MuJoCo's qpos order (bodies depth first: atrias lists its
+    // links in that order).
+    let home = generated::Atrias::HOME
+        .iter()
+        .map(|x| format!("{x:?}"))
+        .collect::<Vec<_>>()
+        .join(" ");
+    assert!(
+        mjcf.contains(&format!("<key name=\"home\" qpos=\"{home}\"/>")),
+        "no home keyframe {home}"
     );
     let armature = format!("armature=\"{:?}\"", 1.2e-4 * 50.0 * 50.0);
     assert!(

@@ -23,8 +23,17 @@ fn models() -> Vec<&'static str> {
 }
 
 fn unknown(name: &str) -> Error {
+    let spec = xtask::gen::workspace_root()
+        .join(xtask::gen::SPECS_DIR)
+        .join(format!("{name}.toml"));
+    if xtask::spec::check_name(name).is_ok() && spec.exists() {
+        return Error::usage(format!(
+            "`{name}` has a spec but no generated code yet: run `cargo xtask gen {name}`"
+        ));
+    }
     Error::usage(format!(
-        "unknown model `{name}` (expected one of: {})",
+        "unknown model `{}` (expected one of: {})",
+        xtask::spec::shown(name),
         models().join(", ")
     ))
 }
