@@ -99,6 +99,12 @@ where
         .max(L::link_tips(q, params).amax())
 }
 
+/// Whether every entry of `r` is finite and within `limit` (itself finite): a NaN residual
+/// or an infinite tolerance (a parameter that is NaN or huge) never counts as met.
+fn within<T: Real, const N: usize>(r: &SVector<T, N>, limit: T) -> bool {
+    limit.is_finite() && r.iter().all(|x| x.is_finite() && x.abs() <= limit)
+}
+
 fn to_f64<T: Real>(x: T) -> f64 {
     x.to_subset().unwrap_or(f64::NAN)
 }
@@ -146,10 +152,15 @@ where
         return Err(AssemblyError::NonFinite);
     }
     let mut phi = L::closure_residual(q, params);
-    let limit = tol.relative_residual * leg_size::<L, T, NQ, NC, NU>(params, q);
+    // The tolerance is relative to the leg's size at the pose being judged.
+    let limit =
+        |q: &SVector<T, NQ>| tol.relative_residual * leg_size::<L, T, NQ, NC, NU>(params, q);
+    if !limit(q).is_finite() || !crate::linalg::all_finite(&phi) {
+        return Err(AssemblyError::NonFinite);
+    }
     for _ in 0..tol.max_iterations {
         let err = phi.amax();
-        if err <= limit {
+        if within(&phi, limit(q)) {
             return Ok(());
         }
         let mut j = L::constraint_jacobian(q, params);
@@ -174,7 +185,7 @@ where
         }
     }
     let err = phi.amax();
-    if err <= limit {
+    if within(&phi, limit(q)) {
         Ok(())
     } else {
         Err(AssemblyError::Unreachable {
@@ -329,10 +340,21 @@ where
     let worst = |(phi, e): &(SVector<T, NC>, SVector<T, 2>)| phi.amax().max(e.amax());
     let mut q = *guess;
     let mut r = residuals(&q);
-    let limit =
-        tol.relative_residual * leg_size::<L, T, NQ, NC, NU>(params, guess).max(foot.amax());
+    // The tolerance is relative to the leg's size at the pose being judged.
+    let limit = |q: &SVector<T, NQ>| {
+        tol.relative_residual * leg_size::<L, T, NQ, NC, NU>(params, q).max(foot.amax())
+    };
+    let met = |q: &SVector<T, NQ>, (phi, e): &(SVector<T, NC>, SVector<T, 2>)| {
+        let limit = limit(q);
+        within(phi, limit) && within(e, limit)
+    };
+    if !limit(&q).is_finite()
+        || !(crate::linalg::all_finite(&r.0) && crate::linalg::all_finite(&r.1))
+    {
+        return Err(AssemblyError::NonFinite);
+    }
     for _ in 0..tol.max_iterations {
-        if worst(&r) <= limit {
+        if met(&q, &r) {
             return Ok(q);
         }
         let j = L::constraint_jacobian(&q, params);
@@ -374,7 +396,7 @@ where
             None => break,
         }
     }
-    if worst(&r) <= limit {
+    if met(&q, &r) {
         Ok(q)
     } else {
         Err(AssemblyError::Unreachable {

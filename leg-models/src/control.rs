@@ -41,6 +41,18 @@ pub enum ControlError {
     NotApplicable(NotApplicable),
 }
 
+/// A torque that is not finite (a parameter or a reference that is NaN or infinite, or
+/// an overflow) is an error, never a command.
+fn finite_torque<T: Real, const NU: usize>(
+    u: SVector<T, NU>,
+) -> Result<SVector<T, NU>, ControlError> {
+    if crate::linalg::all_finite(&u) {
+        Ok(u)
+    } else {
+        Err(ControlError::NonFinite)
+    }
+}
+
 impl fmt::Display for ControlError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
@@ -393,7 +405,7 @@ where
             + self
                 .gains
                 .feedback(&(r.position - theta), &(r.velocity - theta_dot));
-        Ok(mul(&red.a_tilde, &v) - red.b_tilde)
+        finite_torque(mul(&red.a_tilde, &v) - red.b_tilde)
     }
 }
 
@@ -522,7 +534,7 @@ where
         } else {
             task_solve(&jy, &v)?
         };
-        Ok(red.a_tilde * theta_dd - red.b_tilde)
+        finite_torque(red.a_tilde * theta_dd - red.b_tilde)
     }
 }
 
@@ -592,10 +604,11 @@ where
         let g = gravity_compensation::<L, T, NQ, NC, NU>(&self.params, &state.q)?;
         let (theta, theta_dot) = motor_state::<L, T, NQ, NC, NU>(state);
         let r = self.reference.sample(t);
-        Ok(self
-            .gains
-            .feedback(&(r.position - theta), &(r.velocity - theta_dot))
-            + g)
+        finite_torque(
+            self.gains
+                .feedback(&(r.position - theta), &(r.velocity - theta_dot))
+                + g,
+        )
     }
 }
 
@@ -653,7 +666,7 @@ where
         let force = self
             .gains
             .feedback(&(r.position - foot.position), &(r.velocity - foot.velocity));
-        Ok(foot.jacobian.transpose() * force + g)
+        finite_torque(foot.jacobian.transpose() * force + g)
     }
 }
 

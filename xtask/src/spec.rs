@@ -370,7 +370,25 @@ impl Spec {
         check_name(&name).map_err(|m| ctx.at(0, "(file name)", m))?;
         let file: SpecFile = toml::from_str(&text).map_err(|e| {
             let offset = e.span().map_or(0, |s| s.start);
-            let message = e.message().trim().to_string();
+            // The parser's message can span lines (and quote the input): one line, escaped.
+            let message = e
+                .message()
+                .lines()
+                .map(str::trim)
+                .filter(|l| !l.is_empty())
+                .map(|l| {
+                    l.chars()
+                        .map(|c| {
+                            if c.is_control() {
+                                c.escape_default().collect()
+                            } else {
+                                c.to_string()
+                            }
+                        })
+                        .collect::<String>()
+                })
+                .collect::<Vec<_>>()
+                .join(": ");
             ctx.at(offset, field_at(&text, offset, &message), message)
         })?;
         validate(&ctx, &file)?;
