@@ -348,8 +348,9 @@ where
         let limit = limit(q);
         within(phi, limit) && within(e, limit)
     };
-    if !limit(&q).is_finite()
-        || !(crate::linalg::all_finite(&r.0) && crate::linalg::all_finite(&r.1))
+    if !(limit(&q).is_finite()
+        && crate::linalg::all_finite(&r.0)
+        && crate::linalg::all_finite(&r.1))
     {
         return Err(AssemblyError::NonFinite);
     }
