@@ -340,13 +340,14 @@ where
     let worst = |(phi, e): &(SVector<T, NC>, SVector<T, 2>)| phi.amax().max(e.amax());
     let mut q = *guess;
     let mut r = residuals(&q);
-    // The tolerance is relative to the leg's size at the pose being judged.
-    let limit = |q: &SVector<T, NQ>| {
-        tol.relative_residual * leg_size::<L, T, NQ, NC, NU>(params, q).max(foot.amax())
-    };
+    // The tolerances are relative to the leg's size at the pose being judged: the
+    // closures' to that size alone (as in `assemble`), the foot's to the larger of it and
+    // the target's coordinates.
+    let limit =
+        |q: &SVector<T, NQ>| tol.relative_residual * leg_size::<L, T, NQ, NC, NU>(params, q);
     let met = |q: &SVector<T, NQ>, (phi, e): &(SVector<T, NC>, SVector<T, 2>)| {
         let limit = limit(q);
-        within(phi, limit) && within(e, limit)
+        within(phi, limit) && within(e, limit.max(tol.relative_residual * foot.amax()))
     };
     if !(limit(&q).is_finite()
         && crate::linalg::all_finite(&r.0)
