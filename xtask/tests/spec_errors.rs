@@ -429,27 +429,15 @@ fn names_the_exporters_add_are_reserved() {
 /// does not assemble is a spec error located at `home`, and nothing is written.
 #[test]
 fn a_home_pose_that_does_not_assemble_is_located() {
-    let root = TempRoot::new("bad-home");
-    for dir in ["xtask", ".venv"] {
-        let from = gen::workspace_root().join(dir);
-        std::os::unix::fs::symlink(&from, root.0.join(dir)).unwrap();
-    }
     // Every link along x: the two branches end 5 cm apart on a 0.35 m leg.
     let text = edit(
         "gravity = [0.0, -9.81]\n",
         "gravity = [0.0, -9.81]\nhome = [0.0, 0.0, 0.0, 0.0]\n",
         0,
     );
-    root.write("leg-models/specs/leg.toml", &text);
+    let root = scratch("bad-home", &text);
     let before = root.listing();
-    let err = gen::run(
-        &root.0,
-        &GenOptions {
-            check: false,
-            names: vec![],
-        },
-    )
-    .unwrap_err();
+    let err = generate(&root).unwrap_err();
     assert!(
         err.is_usage(),
         "bad input must be a usage error (exit 2): {err}"
@@ -530,11 +518,6 @@ fn spec_text_in_an_error_is_escaped_and_short() {
 /// the closures, and nothing is written.
 #[test]
 fn closures_that_leave_no_motion_are_located() {
-    let root = TempRoot::new("no-motion");
-    for dir in ["xtask", ".venv"] {
-        let from = gen::workspace_root().join(dir);
-        std::os::unix::fs::symlink(&from, root.0.join(dir)).unwrap();
-    }
     // Two links from base points 0.1 m apart whose tips meet: a rigid triangle.
     let text = r#"gravity = [0.0, -9.81]
 home = [1.0471975511965976, 2.0943951023931957]
@@ -565,16 +548,9 @@ b = { link = "right" }
 [foot]
 link = "left"
 "#;
-    root.write("leg-models/specs/leg.toml", text);
+    let root = scratch("no-motion", text);
     let before = root.listing();
-    let err = gen::run(
-        &root.0,
-        &GenOptions {
-            check: false,
-            names: vec![],
-        },
-    )
-    .unwrap_err();
+    let err = generate(&root).unwrap_err();
     assert!(err.is_usage(), "{err}");
     let (l, c) = pos(text, "\"apex\"", 0);
     assert!(
@@ -607,5 +583,75 @@ fn a_spec_larger_than_the_limit_is_refused_up_front() {
         at,
         &format!("links[{}]", n - 1),
         &format!("a spec may have at most {} links, this one has {n}", n - 1),
+    );
+}
+
+/// A scratch workspace whose one spec is `text`, with the project's derivation script and
+/// Python environment.
+fn scratch(tag: &str, text: &str) -> TempRoot {
+    let root = TempRoot::new(tag);
+    for dir in ["xtask", ".venv"] {
+        let from = gen::workspace_root().join(dir);
+        std::os::unix::fs::symlink(&from, root.0.join(dir)).unwrap();
+    }
+    root.write("leg-models/specs/leg.toml", text);
+    root
+}
+
+fn generate(root: &TempRoot) -> Result<String, xtask::cli::Error> {
+    gen::run(
+        &root.0,
+        &GenOptions {
+            check: false,
+            names: vec![],
+        },
+    )
+}
+
+/// Runs the derivation (CasADi): a closure whose points can never meet (the branches are
+/// too short to reach each other) is located at `home`, and nothing is written.
+#[test]
+fn a_closure_that_can_never_meet_is_located() {
+    // The two lower links shortened to 2 cm: the toes are at least 1 cm apart in any pose.
+    let text = VALID
+        .replace("length = [0.2, 0.0]", "length = [0.02, 0.0]")
+        .replace("com = [0.1, 0.0]", "com = [0.01, 0.0]")
+        .replace(
+            "gravity = [0.0, -9.81]\n",
+            "gravity = [0.0, -9.81]\nhome = [-1.0, 0.5, -2.0, -0.5]\n",
+        )
+        .replace("origin = [0.05, 0.0]", "origin = [0.3, 0.0]");
+    let root = scratch("never-meet", &text);
+    let before = root.listing();
+    let err = generate(&root).unwrap_err();
+    assert!(err.is_usage(), "{err}");
+    let (l, c) = pos(&text, "[-1.0, 0.5, -2.0, -0.5]", 0);
+    assert!(
+        err.to_string().starts_with(&format!(
+            "leg-models/specs/leg.toml:{l}:{c}: home: the home pose does not assemble"
+        )),
+        "{err}"
+    );
+    assert_eq!(root.listing(), before, "a failed generation changed files");
+}
+
+/// Runs the derivation (CasADi): a closed chain with every joint driven generates, and
+/// `gen` says it is over-actuated and what that means.
+#[test]
+fn an_over_actuated_leg_is_reported() {
+    let motor = "inertia = 1.6e-4\n";
+    let text = VALID.replace(
+        motor,
+        "inertia = 1.6e-4\nactuator = { rotor_inertia = 0.0, gear_ratio = 1.0 }\n",
+    );
+    let text = text.replace(
+        "gravity = [0.0, -9.81]\n",
+        "gravity = [0.0, -9.81]\nhome = [-0.6437, -1.2057, -2.4979, 1.2057]\n",
+    );
+    let root = scratch("over-actuated", &text);
+    let report = generate(&root).expect("an over-actuated leg is legal");
+    assert!(
+        report.contains("leg: mobility 2 (rank J 2 of 2 closure rows), 4 motors: over-actuated (4 motors for 2 degrees of freedom"),
+        "{report}"
     );
 }
