@@ -75,9 +75,20 @@ fn finite<const N: usize>(v: &SVector<f64, N>) -> bool {
     v.iter().all(|x| x.is_finite())
 }
 
+/// How many calls of each kind returned `Ok`: the properties hold on `Ok` results, so a
+/// function that always failed would pass them; the counts show it does not.
+#[derive(Default, Debug)]
+struct Oks {
+    forward_dynamics: u32,
+    assembled: u32,
+    step: u32,
+    torques: u32,
+}
+
 /// `Ok` results must be finite; an assembled pose must meet its tolerance.
 fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
     c: &Case,
+    oks: &mut Oks,
 ) -> Result<(), TestCaseError> {
     let mut p = L::Params::<f64>::default();
     for (i, e) in c.edits.iter().enumerate() {
@@ -104,10 +115,13 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
             finite(&a.qdd) && finite(&a.forces),
             "forward dynamics: {a:?}"
         );
+        oks.forward_dynamics += 1;
     }
     // An assembled pose meets the closures to the tolerance it promises.
-    let assembled = |what: &str, r: Result<SVector<f64, NQ>, _>| -> Result<(), TestCaseError> {
+    let mut assembled_oks = 0;
+    let mut assembled = |what: &str, r: Result<SVector<f64, NQ>, _>| -> Result<(), TestCaseError> {
         if let Ok(q) = r {
+            assembled_oks += 1;
             prop_assert!(finite(&q), "{what}: {q:?}");
             if NC > 0 {
                 let residual = L::closure_residual(&q, &p).amax();
@@ -128,11 +142,13 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
         "foot inverse",
         foot_inverse::<L, f64, NQ, NC, NU>(&p, &foot, &q, &tol),
     )?;
+    oks.assembled += assembled_oks;
 
     let mut state = State { q, qd };
     let mut hold = |_: f64, _: &State<f64, NQ>| u;
     if step::<L, f64, NQ, NC, NU>(&p, &mut state, 0.0, &mut hold, &StepOptions::rk4(1e-3)).is_ok() {
         prop_assert!(finite(&state.q) && finite(&state.qd), "step: {state:?}");
+        oks.step += 1;
     }
 
     let state = State { q, qd };
@@ -174,6 +190,7 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
     for (what, t) in torques {
         if let Ok(t) = t {
             prop_assert!(finite(&t), "{what}: {t:?}");
+            oks.torques += 1;
         }
     }
     Ok(())
@@ -181,29 +198,63 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
 
 fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
     let n_params = <L::Params<f64> as Parameters<f64>>::NAMES.len();
-    let strategy = (
-        prop::collection::vec(value(4.0), NQ),
-        prop::collection::vec(value(10.0), NQ),
-        prop::collection::vec(value(5.0), NU),
-        prop::collection::vec(value(4.0), NU),
-        (value(0.5), value(0.5)),
-        prop::collection::vec(edit(), n_params),
-    )
-        .prop_map(|(q, qd, u, theta, (fx, fy), edits)| Case {
-            q,
-            qd,
-            u,
-            theta,
-            foot: [fx, fy],
-            edits,
-        });
+    // Half the cases ordinary (states, inputs and scaled parameters), where the calls
+    // mostly succeed and their results are checked; half hostile (NaN, infinite, zero,
+    // negative and huge entries), where they must fail cleanly.
+    let ordinary = |range: f64| -> BoxedStrategy<f64> { (-range..range).boxed() };
+    let hostile = |range: f64| -> BoxedStrategy<f64> { value(range).boxed() };
+    let case = |v: &dyn Fn(f64) -> BoxedStrategy<f64>, e: BoxedStrategy<Edit>| {
+        (
+            prop::collection::vec(v(4.0), NQ),
+            prop::collection::vec(v(10.0), NQ),
+            prop::collection::vec(v(5.0), NU),
+            prop::collection::vec(v(4.0), NU),
+            (v(0.5), v(0.5)),
+            prop::collection::vec(e, n_params),
+        )
+            .prop_map(|(q, qd, u, theta, (fx, fy), edits)| Case {
+                q,
+                qd,
+                u,
+                theta,
+                foot: [fx, fy],
+                edits,
+            })
+            .boxed()
+    };
+    let scaled = prop_oneof![
+        20 => Just(Edit::Keep),
+        4 => (0.5..2.0f64).prop_map(Edit::Scale),
+    ]
+    .boxed();
+    let strategy = prop_oneof![case(&ordinary, scaled), case(&hostile, edit().boxed())];
     let mut runner = TestRunner::new(Config {
         cases: cases(),
         failure_persistence: None,
         ..Config::default()
     });
-    if let Err(e) = runner.run(&strategy, |c| check::<L, NQ, NC, NU>(&c)) {
+    let oks = std::cell::RefCell::new(Oks::default());
+    if let Err(e) = runner.run(&strategy, |c| {
+        check::<L, NQ, NC, NU>(&c, &mut oks.borrow_mut())
+    }) {
         panic!("{}: {e}", L::NAME);
+    }
+    // Most inputs are ordinary: every kind of call succeeds on a share of them.
+    let oks = oks.into_inner();
+    eprintln!("{}: Ok results in {} cases: {oks:?}", L::NAME, cases());
+    let share = cases() / 10;
+    assert!(
+        oks.forward_dynamics >= share && oks.step >= share && oks.torques >= share,
+        "{}: too few Ok results to test anything: {oks:?} of {} cases",
+        L::NAME,
+        cases()
+    );
+    if NC > 0 {
+        assert!(
+            oks.assembled >= 1,
+            "{}: no assembly succeeded: {oks:?}",
+            L::NAME
+        );
     }
 }
 

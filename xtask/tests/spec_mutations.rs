@@ -208,21 +208,30 @@ fn edited_specs_validate_or_fail_located() {
             failure_persistence: None,
             ..Config::default()
         });
+        // How many edited specs were accepted and refused: both must happen, or the edits
+        // test nothing.
+        let outcomes = std::cell::Cell::new((0u32, 0u32));
         let result = runner.run(&mutation(), |ms| {
             let text = ms.iter().fold(original.clone(), |t, m| apply(&t, m));
-            match Spec::parse(&rel, text.clone()) {
-                Err(e) => located(&e, &rel, &text)?,
-                Ok(spec) => {
-                    if let Err(e) = model::build(&spec) {
-                        located(&e, &rel, &text)?;
-                    }
+            let (ok, refused) = outcomes.get();
+            match Spec::parse(&rel, text.clone()).map(|spec| model::build(&spec)) {
+                Err(e) | Ok(Err(e)) => {
+                    located(&e, &rel, &text)?;
+                    outcomes.set((ok, refused + 1));
                 }
+                Ok(Ok(_)) => outcomes.set((ok + 1, refused)),
             }
             Ok(())
         });
         if let Err(e) = result {
             panic!("{}: {e}", rel.display());
         }
+        let (ok, refused) = outcomes.get();
+        assert!(
+            ok > 0 && refused > cases() / 4,
+            "{}: {ok} edited specs accepted, {refused} refused",
+            rel.display()
+        );
         checked += 1;
     }
     assert!(checked >= 5, "only {checked} specs");
