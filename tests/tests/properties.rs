@@ -122,6 +122,15 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
     let mut assembled = |what: &str, r: Result<SVector<f64, NQ>, _>| -> Result<(), TestCaseError> {
         if let Ok(q) = r {
             assembled_oks += 1;
+            if what == "foot inverse" {
+                // The foot is where it was asked to be, to the solver's tolerance.
+                let size = leg_size::<L, f64, NQ, NC, NU>(&p, &q).max(foot.amax());
+                let off = (L::foot_position(&q, &p) - foot).amax();
+                prop_assert!(
+                    off <= tol.relative_residual * size * (1.0 + 1e-9),
+                    "foot inverse: the foot is {off:e} from its target at {q:?}"
+                );
+            }
             prop_assert!(finite(&q), "{what}: {q:?}");
             if NC > 0 {
                 let residual = L::closure_residual(&q, &p).amax();

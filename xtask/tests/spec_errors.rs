@@ -612,7 +612,8 @@ fn generate(root: &TempRoot) -> Result<String, xtask::cli::Error> {
 /// too short to reach each other) is located at `home`, and nothing is written.
 #[test]
 fn a_closure_that_can_never_meet_is_located() {
-    // The two lower links shortened to 2 cm: the toes are at least 1 cm apart in any pose.
+    // The lower links shortened to 2 cm and the motors 0.3 m apart: the toes stay at least
+    // 6 cm apart (0.3 − 2 × 0.12) in any pose.
     let text = VALID
         .replace("length = [0.2, 0.0]", "length = [0.02, 0.0]")
         .replace("com = [0.1, 0.0]", "com = [0.01, 0.0]")
@@ -653,5 +654,17 @@ fn an_over_actuated_leg_is_reported() {
     assert!(
         report.contains("leg: mobility 2 (rank J 2 of 2 closure rows), 4 motors: over-actuated (4 motors for 2 degrees of freedom"),
         "{report}"
+    );
+}
+
+#[test]
+fn a_number_too_large_to_derive_with() {
+    let text = edit("mass = 0.05", "mass = 1e308", 0);
+    let (l, c) = pos(&text, "1e308", 0);
+    expect_error(
+        &text,
+        (l, c),
+        "links[0].mass",
+        "must be at most 1e6 in magnitude, got 1e308",
     );
 }
