@@ -10,10 +10,21 @@
 use std::path::Path;
 
 use proptest::prelude::*;
-use proptest::test_runner::{Config, TestCaseError, TestRunner};
+use proptest::test_runner::{Config, RngSeed, TestCaseError, TestRunner};
 use xtask::gen;
 use xtask::model;
 use xtask::spec::{Spec, SpecError};
+
+/// A fixed seed (1 unless `LEGS_PROPTEST_SEED` says otherwise), so that a run can be
+/// repeated and the counts the test asserts do not depend on luck.
+fn seed() -> RngSeed {
+    RngSeed::Fixed(
+        std::env::var("LEGS_PROPTEST_SEED")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(1),
+    )
+}
 
 fn cases() -> u32 {
     std::env::var("LEGS_SPEC_MUTATIONS")
@@ -206,6 +217,7 @@ fn edited_specs_validate_or_fail_located() {
         let mut runner = TestRunner::new(Config {
             cases: cases(),
             failure_persistence: None,
+            rng_seed: seed(),
             ..Config::default()
         });
         // How many edited specs were accepted and refused: both must happen, or the edits

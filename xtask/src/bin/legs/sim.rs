@@ -16,7 +16,7 @@ use leg_models::nalgebra::SVector;
 use leg_models::reference::{MinimumJerk, Ramp, Reference, Setpoint, Sinusoid, StepCycle};
 use leg_models::simulate::{Sample, Simulator};
 use leg_models::structure::{NotApplicable, Structure};
-use leg_models::{LegModel, Parameters};
+use leg_models::LegModel;
 use serde_json::json;
 use xtask::args::{ControllerArg, SimArgs, TrajectoryArg};
 use xtask::cli::{write_atomic, Error};
@@ -723,10 +723,10 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
     );
     if !tracked {
         // Damped joints dissipate energy: the change is physics, not integration error.
-        let damped = L::Params::<f64>::NAMES
+        // Asked of the model (D q̇ at unit rates), not of parameter names.
+        let damped = L::damping_forces(&SVector::from_element(1.0), &p)
             .iter()
-            .enumerate()
-            .any(|(i, n)| n.ends_with("_damping") && p.get(i).is_some_and(|d| d > 0.0));
+            .any(|d| *d != 0.0);
         println!(
             "  energy drift max |E(t) − E(0)| / |E(0)| = {energy_drift:.1e}{}",
             if damped {
