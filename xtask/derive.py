@@ -7,9 +7,11 @@ instruction per value, operands referring to earlier instructions, outputs listi
 value of every entry in column-major order. Errors go to stderr with exit code 1.
 
 Mathematics: shared/DESIGN.md §3. Each branch (a subtree hanging from the base) is an
-open chain with Lagrangian L_i = T_i - V_i; L = sum L_i; M = d2L/dqd2;
+open chain with Lagrangian L_i = T_i - V_i; L = sum L_i - V_springs; M = d2L/dqd2;
 N = (d2L/dqd dq) qd - dL/dq; the closure residual phi is point a minus point b per
-closure; J = dphi/dq and Jdot qd = d(J qd)/dq qd.
+closure; J = dphi/dq and Jdot qd = d(J qd)/dq qd. Joints are revolute (q turns the link)
+or prismatic (q slides it along a fixed axis of the parent); contact points get their
+positions, J_c and Jc_dot qd (§3.1).
 """
 
 import hashlib
@@ -78,12 +80,18 @@ def derive(model):
     joint = [None] * n
     for i, link in enumerate(links):
         parent = link["parent"]
+        # A revolute joint turns the link by q about the joint point; a prismatic one
+        # slides the joint point by q along a unit axis of the parent's frame.
+        offset = vec(link["origin"])
+        if link["joint"] == "prismatic":
+            offset = offset + q[i] * cs.vertcat(*[cs.SX(a) for a in link["axis"]])
+        turn = q[i] if link["joint"] == "revolute" else cs.SX(0)
         if parent is None:
-            angle[i] = q[i]
-            joint[i] = vec(link["origin"])
+            angle[i] = turn
+            joint[i] = offset
         else:
-            angle[i] = angle[parent] + q[i]
-            joint[i] = joint[parent] + rotate(angle[parent], vec(link["origin"]))
+            angle[i] = angle[parent] + turn
+            joint[i] = joint[parent] + rotate(angle[parent], offset)
 
     def point(ref):
         i = ref["link"]
@@ -107,9 +115,20 @@ def derive(model):
             rotor_inertia, gear_ratio = sym[link["rotor"][0]], sym[link["rotor"][1]]
             kinetic[b] += 0.5 * rotor_inertia * gear_ratio**2 * qd[i] ** 2
         potential[b] += -mass * cs.dot(gravity, com)
+    # Springs: ½ k (q_a − q_b − rest)², or ½ k (q_a − rest)² on one joint.
+    V_springs = 0
+    G_springs = cs.SX(n, 1)
+    for spring in model["springs"]:
+        a, b = spring["a"], spring["b"]
+        k, rest = sym[spring["stiffness"]], sym[spring["rest"]]
+        stretch = q[a] - (q[b] if b is not None else 0) - rest
+        V_springs += 0.5 * k * stretch**2
+        G_springs[a] += k * stretch
+        if b is not None:
+            G_springs[b] -= k * stretch
     T = sum(kinetic.values())
-    V = sum(potential.values())
-    L = sum(kinetic[b] - potential[b] for b in kinetic)
+    V = sum(potential.values()) + V_springs
+    L = sum(kinetic[b] - potential[b] for b in kinetic) - V_springs
 
     # Lagrange's equations of L as written in the notes: what a CasADi user gets by
     # differentiating L (CasADi's C code of these is the benchmarks' peer).
@@ -123,7 +142,7 @@ def derive(model):
     # nothing to N). Fewer operations, the same values; M is emitted as one triangle
     # mirrored, so it is symmetric to the bit.
     M = cs.SX(n, n)
-    G = cs.SX(n, 1)
+    G = G_springs
     C_qd = cs.SX(n, 1)
     for i, link in enumerate(links):
         com = point({"link": i, "point": link["com"]})
@@ -154,6 +173,16 @@ def derive(model):
     Jf_dot_qd = cs.jtimes(cs.jtimes(foot, q, qd), q, qd)
     tips = cs.horzcat(*[point({"link": i, "point": l["length"]}) for i, l in enumerate(links)])
 
+    # Contact points: base-frame positions stacked (rows 2k, 2k + 1 are x, y of contact k),
+    # their Jacobian and J̇_c q̇; the runtime projects them on the ground.
+    contacts = model["contacts"]
+    if contacts:
+        xc = cs.vertcat(*[point(c["point"]) for c in contacts])
+        Jc = cs.jacobian(xc, q)
+        Jc_dot_qd = cs.jtimes(cs.jtimes(xc, q, qd), q, qd)
+    else:
+        xc, Jc, Jc_dot_qd = cs.SX(0, 1), cs.SX(0, n), cs.SX(0, 1)
+
     inputs = {"q": q, "qd": qd, "p": params}
     Q, QQ = ["q", "p"], ["q", "qd", "p"]
     terms = {
@@ -172,6 +201,9 @@ def derive(model):
         "joint_positions": (Q, [("joint_positions", "matrix", cs.horzcat(*joint))]),
         "link_tips": (Q, [("link_tips", "matrix", tips)]),
         "closure_points": (Q, [("closure_points", "matrix", closure_points)]),
+        "contact_positions": (Q, [("contact_positions", "vector", xc)]),
+        "contact_jacobian": (Q, [("contact_jacobian", "matrix", Jc)]),
+        "contact_bias": (QQ, [("contact_bias", "vector", Jc_dot_qd)]),
         "dynamics_terms": (
             QQ,
             [
@@ -195,7 +227,7 @@ def derive(model):
         "Jdot_qd": Jdot_qd,
     }
     points = cs.horzcat(cs.horzcat(*joint), tips, closure_points, foot)
-    numeric = cs.Function("home_check", [q, params], [phi, J, points])
+    numeric = cs.Function("home_check", [q, params], [phi, J, points, M])
     return inputs, terms, peer, numeric
 
 
@@ -216,7 +248,7 @@ def home_check(model, numeric):
     n = len(home)
 
     def evaluate(q):
-        phi, J, points = numeric(q, p)
+        phi, J, points, _ = numeric(q, p)
         return np.array(phi).reshape(-1), np.array(J).reshape(-1, n), np.array(points)
 
     phi, J, points = evaluate(home)
@@ -252,7 +284,16 @@ def home_check(model, numeric):
             else:
                 redundant.append(r)
         rank = len(kept)
+    # M must be positive definite for the runtime's Cholesky: a massless link is allowed
+    # only where other links' mass moves with its joint (a floating base's intermediate
+    # links). Otherwise name the joint that carries no inertia.
+    M = np.array(numeric(q, p)[3])
+    eigenvalues, vectors = np.linalg.eigh(0.5 * (M + M.T))
+    massless_joint = None
+    if eigenvalues[0] <= 1e-12 * max(float(eigenvalues[-1]), 1e-300):
+        massless_joint = int(np.argmax(np.abs(vectors[:, 0])))
     return {
+        "massless_joint": massless_joint,
         "scale": scale,
         "raw_residual": raw,
         "residual": residual,

@@ -3,7 +3,8 @@
 usage: python mujoco_check.py LEGS_BINARY MODEL MJCF_FILE
 
 For random states, compares MuJoCo's mass matrix (`mj_fullM`, armature
-included) and bias forces (`qfrc_bias` = C q̇ + G) of the exported MJCF with the generated
+included) and bias forces (`qfrc_bias` = C q̇ + G, less the joint and tendon springs'
+`qfrc_spring`) of the exported MJCF with the generated
 model's `M` and `N` from `legs eval --json` (relative error below 1e-9); then assembles
 the leg with `legs eval --assemble`, lets MuJoCo simulate it for 1 s with the motors off
 and checks that its (soft) closure constraints hold. Prints one line per model; exits 1
@@ -44,7 +45,8 @@ def main():
         full = np.zeros((m.nv, m.nv))
         mujoco.mj_fullM(m, d, full)
         mm = full[np.ix_(vadr, vadr)]
-        nn = d.qfrc_bias[vadr]
+        # Our N holds the springs' forces (∂V/∂q); MuJoCo applies them as passive forces.
+        nn = d.qfrc_bias[vadr] - d.qfrc_spring[vadr]
         em = np.abs(mm - np.array(t["M"])).max() / max(np.abs(mm).max(), 1e-300)
         en = np.abs(nn - np.array(t["N"])).max() / max(np.abs(nn).max(), 1e-300)
         worst_m, worst_n = max(worst_m, em), max(worst_n, en)

@@ -8,13 +8,15 @@
     clippy::too_many_lines
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
-use leg_models::{DynamicsTerms, LegModel, Parameters, Real};
+use leg_models::{ContactModel, DynamicsTerms, JointKind, LegModel, Parameters, Real};
 /// Number of joints.
 pub const NQ: usize = 5;
 /// Number of closure rows (two per closure).
 pub const NC: usize = 4;
 /// Number of actuated joints.
 pub const NU: usize = 2;
+/// Number of contact rows (two per contact point).
+pub const NK: usize = 0;
 /// The `braced_parallelogram` leg: 5 joints, 2 closure(s), actuated joints ["thigh", "four_bar_link"]. Generated from `leg-models/specs/braced_parallelogram.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct BracedParallelogram;
@@ -359,6 +361,13 @@ impl LegModel<NQ, NC, NU> for BracedParallelogram {
         "lower_leg",
         "brace",
     ];
+    const JOINT_KINDS: [JointKind; NQ] = [
+        JointKind::Revolute,
+        JointKind::Revolute,
+        JointKind::Revolute,
+        JointKind::Revolute,
+        JointKind::Revolute,
+    ];
     const ACTUATED: [usize; NU] = [0, 2];
     const HOME: [f64; NQ] = [-2.17, 1.2, -0.97, -1.2, -1.2];
     const REDUNDANT_ROWS: usize = 1;
@@ -444,6 +453,25 @@ impl LegModel<NQ, NC, NU> for BracedParallelogram {
             constraint_jacobian,
             constraint_bias,
         }
+    }
+}
+impl ContactModel<NQ, NC, NU, NK> for BracedParallelogram {
+    const CONTACT_NAMES: &'static [&'static str] = &[];
+    const CONTACT_FRICTION: &'static [f64] = &[];
+    const GROUND_NORMAL: [f64; 2] = [0.0, 1.0];
+    const GROUND_OFFSET: f64 = 0.0;
+    fn contact_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 0> {
+        contact_positions(q, p)
+    }
+    fn contact_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 0, 5> {
+        contact_jacobian(q, p)
+    }
+    fn contact_bias<T: Real>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SVector<T, 0> {
+        contact_bias(q, qd, p)
     }
 }
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
@@ -1686,6 +1714,25 @@ pub fn closure_points<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2
     let v67 = v65 + v66;
     let v68 = v16 + v67;
     SMatrix::from_data(ArrayStorage([[v12, v20], [v33, v41], [v52, v60], [v64, v68]]))
+}
+/// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
+pub fn contact_positions<T: Real>(_q: &SVector<T, 5>, _p: &Params<T>) -> SVector<T, 0> {
+    SMatrix::from_data(ArrayStorage([[]]))
+}
+/// `J_c(q) = ∂x_c/∂q`.
+pub fn contact_jacobian<T: Real>(
+    _q: &SVector<T, 5>,
+    _p: &Params<T>,
+) -> SMatrix<T, 0, 5> {
+    SMatrix::from_data(ArrayStorage([[], [], [], [], []]))
+}
+/// `J̇_c(q, q̇) q̇`.
+pub fn contact_bias<T: Real>(
+    _q: &SVector<T, 5>,
+    _qd: &SVector<T, 5>,
+    _p: &Params<T>,
+) -> SVector<T, 0> {
+    SMatrix::from_data(ArrayStorage([[]]))
 }
 /// `M`, `N`, `J` and `J̇ q̇` together, sharing subexpressions.
 pub fn dynamics_terms<T: Real>(

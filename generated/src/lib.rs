@@ -15,28 +15,34 @@ pub mod klann_linkage;
 pub use klann_linkage::KlannLinkage;
 pub mod minitaur;
 pub use minitaur::Minitaur;
+pub mod minitaur_hopper;
+pub use minitaur_hopper::MinitaurHopper;
 pub mod offset_five_bar;
 pub use offset_five_bar::OffsetFiveBar;
 pub mod open_three_link;
 pub use open_three_link::OpenThreeLink;
+pub mod raibert_hopper;
+pub use raibert_hopper::RaibertHopper;
 pub mod three_motor_leg;
 pub use three_motor_leg::ThreeMotorLeg;
 pub mod two_link;
 pub use two_link::TwoLink;
-/// Calls `$callback!(module, Type, NQ, NC, NU)` once for every generated model, so
+/// Calls `$callback!(module, Type, NQ, NC, NU, NK)` once for every generated model, so
 /// tests and tools cover a new geometry without naming it.
 #[macro_export]
 macro_rules! for_each_model {
     ($callback:ident) => {
-        $callback ! (atrias, $crate::atrias::Atrias, 4, 2, 2); $callback !
+        $callback ! (atrias, $crate::atrias::Atrias, 4, 2, 2, 0); $callback !
         (braced_parallelogram, $crate::braced_parallelogram::BracedParallelogram, 5, 4,
-        2); $callback ! (digit, $crate::digit::Digit, 4, 2, 2); $callback !
-        (five_bar_offset, $crate::five_bar_offset::FiveBarOffset, 4, 2, 2); $callback !
-        (klann_linkage, $crate::klann_linkage::KlannLinkage, 7, 6, 1); $callback !
-        (minitaur, $crate::minitaur::Minitaur, 4, 2, 2); $callback ! (offset_five_bar,
-        $crate::offset_five_bar::OffsetFiveBar, 4, 2, 2); $callback ! (open_three_link,
-        $crate::open_three_link::OpenThreeLink, 3, 0, 2); $callback ! (three_motor_leg,
-        $crate::three_motor_leg::ThreeMotorLeg, 7, 4, 3); $callback ! (two_link,
-        $crate::two_link::TwoLink, 2, 0, 2);
+        2, 0); $callback ! (digit, $crate::digit::Digit, 4, 2, 2, 0); $callback !
+        (five_bar_offset, $crate::five_bar_offset::FiveBarOffset, 4, 2, 2, 0); $callback
+        ! (klann_linkage, $crate::klann_linkage::KlannLinkage, 7, 6, 1, 0); $callback !
+        (minitaur, $crate::minitaur::Minitaur, 4, 2, 2, 0); $callback ! (minitaur_hopper,
+        $crate::minitaur_hopper::MinitaurHopper, 5, 2, 2, 2); $callback !
+        (offset_five_bar, $crate::offset_five_bar::OffsetFiveBar, 4, 2, 2, 0); $callback
+        ! (open_three_link, $crate::open_three_link::OpenThreeLink, 3, 0, 2, 0);
+        $callback ! (raibert_hopper, $crate::raibert_hopper::RaibertHopper, 5, 0, 2, 4);
+        $callback ! (three_motor_leg, $crate::three_motor_leg::ThreeMotorLeg, 7, 4, 3,
+        0); $callback ! (two_link, $crate::two_link::TwoLink, 2, 0, 2, 0);
     };
 }

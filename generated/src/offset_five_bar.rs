@@ -8,13 +8,15 @@
     clippy::too_many_lines
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
-use leg_models::{DynamicsTerms, LegModel, Parameters, Real};
+use leg_models::{ContactModel, DynamicsTerms, JointKind, LegModel, Parameters, Real};
 /// Number of joints.
 pub const NQ: usize = 4;
 /// Number of closure rows (two per closure).
 pub const NC: usize = 2;
 /// Number of actuated joints.
 pub const NU: usize = 2;
+/// Number of contact rows (two per contact point).
+pub const NK: usize = 0;
 /// The `offset_five_bar` leg: 4 joints, 1 closure(s), actuated joints ["upper_a", "upper_b"]. Generated from `leg-models/specs/offset_five_bar.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct OffsetFiveBar;
@@ -335,6 +337,12 @@ impl<T: Real> Parameters<T> for Params<T> {
 impl LegModel<NQ, NC, NU> for OffsetFiveBar {
     const NAME: &'static str = "offset_five_bar";
     const JOINT_NAMES: [&'static str; NQ] = ["upper_a", "lower_a", "upper_b", "lower_b"];
+    const JOINT_KINDS: [JointKind; NQ] = [
+        JointKind::Revolute,
+        JointKind::Revolute,
+        JointKind::Revolute,
+        JointKind::Revolute,
+    ];
     const ACTUATED: [usize; NU] = [0, 2];
     const HOME: [f64; NQ] = [-2.297438667, 1.056266748, -0.6107259644, -1.205049026];
     const REDUNDANT_ROWS: usize = 0;
@@ -420,6 +428,25 @@ impl LegModel<NQ, NC, NU> for OffsetFiveBar {
             constraint_jacobian,
             constraint_bias,
         }
+    }
+}
+impl ContactModel<NQ, NC, NU, NK> for OffsetFiveBar {
+    const CONTACT_NAMES: &'static [&'static str] = &[];
+    const CONTACT_FRICTION: &'static [f64] = &[];
+    const GROUND_NORMAL: [f64; 2] = [0.0, 1.0];
+    const GROUND_OFFSET: f64 = 0.0;
+    fn contact_positions<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 0> {
+        contact_positions(q, p)
+    }
+    fn contact_jacobian<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 0, 4> {
+        contact_jacobian(q, p)
+    }
+    fn contact_bias<T: Real>(
+        q: &SVector<T, 4>,
+        qd: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> SVector<T, 0> {
+        contact_bias(q, qd, p)
     }
 }
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
@@ -1361,6 +1388,25 @@ pub fn closure_points<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2
     let v40 = v38 + v39;
     let v41 = v37 + v40;
     SMatrix::from_data(ArrayStorage([[v12, v20], [v33, v41]]))
+}
+/// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
+pub fn contact_positions<T: Real>(_q: &SVector<T, 4>, _p: &Params<T>) -> SVector<T, 0> {
+    SMatrix::from_data(ArrayStorage([[]]))
+}
+/// `J_c(q) = ∂x_c/∂q`.
+pub fn contact_jacobian<T: Real>(
+    _q: &SVector<T, 4>,
+    _p: &Params<T>,
+) -> SMatrix<T, 0, 4> {
+    SMatrix::from_data(ArrayStorage([[], [], [], []]))
+}
+/// `J̇_c(q, q̇) q̇`.
+pub fn contact_bias<T: Real>(
+    _q: &SVector<T, 4>,
+    _qd: &SVector<T, 4>,
+    _p: &Params<T>,
+) -> SVector<T, 0> {
+    SMatrix::from_data(ArrayStorage([[]]))
 }
 /// `M`, `N`, `J` and `J̇ q̇` together, sharing subexpressions.
 pub fn dynamics_terms<T: Real>(

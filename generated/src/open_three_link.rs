@@ -8,13 +8,15 @@
     clippy::too_many_lines
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
-use leg_models::{DynamicsTerms, LegModel, Parameters, Real};
+use leg_models::{ContactModel, DynamicsTerms, JointKind, LegModel, Parameters, Real};
 /// Number of joints.
 pub const NQ: usize = 3;
 /// Number of closure rows (two per closure).
 pub const NC: usize = 0;
 /// Number of actuated joints.
 pub const NU: usize = 2;
+/// Number of contact rows (two per contact point).
+pub const NK: usize = 0;
 /// The `open_three_link` leg: 3 joints, 0 closure(s), actuated joints ["thigh", "shin"]. Generated from `leg-models/specs/open_three_link.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct OpenThreeLink;
@@ -221,6 +223,11 @@ impl<T: Real> Parameters<T> for Params<T> {
 impl LegModel<NQ, NC, NU> for OpenThreeLink {
     const NAME: &'static str = "open_three_link";
     const JOINT_NAMES: [&'static str; NQ] = ["thigh", "shin", "ankle"];
+    const JOINT_KINDS: [JointKind; NQ] = [
+        JointKind::Revolute,
+        JointKind::Revolute,
+        JointKind::Revolute,
+    ];
     const ACTUATED: [usize; NU] = [0, 1];
     const HOME: [f64; NQ] = [-1.451367401, -0.2780841882, 1.370680919];
     const REDUNDANT_ROWS: usize = 0;
@@ -306,6 +313,25 @@ impl LegModel<NQ, NC, NU> for OpenThreeLink {
             constraint_jacobian,
             constraint_bias,
         }
+    }
+}
+impl ContactModel<NQ, NC, NU, NK> for OpenThreeLink {
+    const CONTACT_NAMES: &'static [&'static str] = &[];
+    const CONTACT_FRICTION: &'static [f64] = &[];
+    const GROUND_NORMAL: [f64; 2] = [0.0, 1.0];
+    const GROUND_OFFSET: f64 = 0.0;
+    fn contact_positions<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 0> {
+        contact_positions(q, p)
+    }
+    fn contact_jacobian<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 0, 3> {
+        contact_jacobian(q, p)
+    }
+    fn contact_bias<T: Real>(
+        q: &SVector<T, 3>,
+        qd: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> SVector<T, 0> {
+        contact_bias(q, qd, p)
     }
 }
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
@@ -1034,6 +1060,25 @@ pub fn link_tips<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> 
 /// Closure points a, b of each closure in the base frame.
 pub fn closure_points<T: Real>(_q: &SVector<T, 3>, _p: &Params<T>) -> SMatrix<T, 2, 0> {
     SMatrix::from_data(ArrayStorage([]))
+}
+/// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
+pub fn contact_positions<T: Real>(_q: &SVector<T, 3>, _p: &Params<T>) -> SVector<T, 0> {
+    SMatrix::from_data(ArrayStorage([[]]))
+}
+/// `J_c(q) = ∂x_c/∂q`.
+pub fn contact_jacobian<T: Real>(
+    _q: &SVector<T, 3>,
+    _p: &Params<T>,
+) -> SMatrix<T, 0, 3> {
+    SMatrix::from_data(ArrayStorage([[], [], []]))
+}
+/// `J̇_c(q, q̇) q̇`.
+pub fn contact_bias<T: Real>(
+    _q: &SVector<T, 3>,
+    _qd: &SVector<T, 3>,
+    _p: &Params<T>,
+) -> SVector<T, 0> {
+    SMatrix::from_data(ArrayStorage([[]]))
 }
 /// `M`, `N`, `J` and `J̇ q̇` together, sharing subexpressions.
 pub fn dynamics_terms<T: Real>(

@@ -8,13 +8,15 @@
     clippy::too_many_lines
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
-use leg_models::{DynamicsTerms, LegModel, Parameters, Real};
+use leg_models::{ContactModel, DynamicsTerms, JointKind, LegModel, Parameters, Real};
 /// Number of joints.
 pub const NQ: usize = 7;
 /// Number of closure rows (two per closure).
 pub const NC: usize = 4;
 /// Number of actuated joints.
 pub const NU: usize = 3;
+/// Number of contact rows (two per contact point).
+pub const NK: usize = 0;
 /// The `three_motor_leg` leg: 7 joints, 2 closure(s), actuated joints ["thigh", "shin", "toe_crank"]. Generated from `leg-models/specs/three_motor_leg.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct ThreeMotorLeg;
@@ -457,6 +459,15 @@ impl LegModel<NQ, NC, NU> for ThreeMotorLeg {
         "toe_crank",
         "plantar_rod",
     ];
+    const JOINT_KINDS: [JointKind; NQ] = [
+        JointKind::Revolute,
+        JointKind::Revolute,
+        JointKind::Revolute,
+        JointKind::Revolute,
+        JointKind::Revolute,
+        JointKind::Revolute,
+        JointKind::Revolute,
+    ];
     const ACTUATED: [usize; NU] = [0, 1, 5];
     const HOME: [f64; NQ] = [
         -1.405647649,
@@ -550,6 +561,25 @@ impl LegModel<NQ, NC, NU> for ThreeMotorLeg {
             constraint_jacobian,
             constraint_bias,
         }
+    }
+}
+impl ContactModel<NQ, NC, NU, NK> for ThreeMotorLeg {
+    const CONTACT_NAMES: &'static [&'static str] = &[];
+    const CONTACT_FRICTION: &'static [f64] = &[];
+    const GROUND_NORMAL: [f64; 2] = [0.0, 1.0];
+    const GROUND_OFFSET: f64 = 0.0;
+    fn contact_positions<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 0> {
+        contact_positions(q, p)
+    }
+    fn contact_jacobian<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 0, 7> {
+        contact_jacobian(q, p)
+    }
+    fn contact_bias<T: Real>(
+        q: &SVector<T, 7>,
+        qd: &SVector<T, 7>,
+        p: &Params<T>,
+    ) -> SVector<T, 0> {
+        contact_bias(q, qd, p)
     }
 }
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
@@ -2928,6 +2958,25 @@ pub fn closure_points<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2
     let v98 = v96 + v97;
     let v99 = v95 + v98;
     SMatrix::from_data(ArrayStorage([[v12, v20], [v38, v50], [v68, v80], [v91, v99]]))
+}
+/// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
+pub fn contact_positions<T: Real>(_q: &SVector<T, 7>, _p: &Params<T>) -> SVector<T, 0> {
+    SMatrix::from_data(ArrayStorage([[]]))
+}
+/// `J_c(q) = ∂x_c/∂q`.
+pub fn contact_jacobian<T: Real>(
+    _q: &SVector<T, 7>,
+    _p: &Params<T>,
+) -> SMatrix<T, 0, 7> {
+    SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []]))
+}
+/// `J̇_c(q, q̇) q̇`.
+pub fn contact_bias<T: Real>(
+    _q: &SVector<T, 7>,
+    _qd: &SVector<T, 7>,
+    _p: &Params<T>,
+) -> SVector<T, 0> {
+    SMatrix::from_data(ArrayStorage([[]]))
 }
 /// `M`, `N`, `J` and `J̇ q̇` together, sharing subexpressions.
 pub fn dynamics_terms<T: Real>(

@@ -29,5 +29,5 @@ pub mod reference;
 pub mod simulate;
 pub mod structure;
 
-pub use model::{DynamicsTerms, LegModel, Parameters, Real};
+pub use model::{ContactModel, DynamicsTerms, JointKind, LegModel, Parameters, Real};
 pub use nalgebra;

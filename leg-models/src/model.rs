@@ -52,7 +52,16 @@ pub struct DynamicsTerms<T: Real, const NQ: usize, const NC: usize> {
     pub constraint_bias: SVector<T, NC>,
 }
 
-/// A planar leg: a tree of rigid links on revolute joints, closed by point-on-link
+/// How a joint moves its link (DESIGN.md §3, "Joints and springs").
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum JointKind {
+    /// `q` (rad) turns the link about the joint point.
+    Revolute,
+    /// `q` (m) slides the link along a fixed axis of its parent, keeping its orientation.
+    Prismatic,
+}
+
+/// A planar leg: a tree of rigid links on revolute and prismatic joints, closed by point-on-link
 /// closures. Implemented by generated code (`cargo xtask gen`), one type per geometry.
 ///
 /// - `NQ`: joints (one per link, relative angles, in spec order);
@@ -65,9 +74,11 @@ pub trait LegModel<const NQ: usize, const NC: usize, const NU: usize> {
     const NAME: &'static str;
     /// The name of the link each joint moves, in coordinate order.
     const JOINT_NAMES: [&'static str; NQ];
+    /// How each joint moves, in coordinate order.
+    const JOINT_KINDS: [JointKind; NQ];
     /// Indices (into `q`) of the actuated joints, in the order of the input vector `u`.
     const ACTUATED: [usize; NU];
-    /// A typical assembled pose (rad) from the spec: the default guess of loop assembly
+    /// A typical assembled pose (rad, or m for a prismatic joint) from the spec: the default guess of loop assembly
     /// (it picks the assembly mode) and the default initial state of simulations.
     const HOME: [f64; NQ];
     /// How many closure rows the others imply on this geometry (a parallelogram closed
@@ -132,4 +143,35 @@ pub trait LegModel<const NQ: usize, const NC: usize, const NU: usize> {
         qd: &SVector<T, NQ>,
         p: &Self::Params<T>,
     ) -> DynamicsTerms<T, NQ, NC>;
+}
+
+/// A leg's contact points and the ground they may touch (DESIGN.md §3.1). Every generated
+/// model implements it; a leg without `[[contacts]]` has `NK = 0`.
+///
+/// - `NK`: contact rows, two per contact point (x and y in the base frame), in spec order.
+///
+/// The ground is the line `n · x = d` with unit normal `n` pointing out of the ground;
+/// a contact's gap is `n · x_c − d`.
+pub trait ContactModel<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>:
+    LegModel<NQ, NC, NU>
+{
+    /// The contact points' names; contact `k` owns rows `2k` and `2k + 1`.
+    const CONTACT_NAMES: &'static [&'static str];
+    /// The spec's Coulomb friction coefficient of each contact with the ground.
+    const CONTACT_FRICTION: &'static [f64];
+    /// The spec's ground normal `n` (unit, base frame).
+    const GROUND_NORMAL: [f64; 2];
+    /// The spec's ground offset `d` [m].
+    const GROUND_OFFSET: f64;
+
+    /// The contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
+    fn contact_positions<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SVector<T, NK>;
+    /// `J_c(q) = ∂x_c/∂q`, the rows of [`ContactModel::contact_positions`].
+    fn contact_jacobian<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, NK, NQ>;
+    /// `J̇_c(q, q̇) q̇`.
+    fn contact_bias<T: Real>(
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        p: &Self::Params<T>,
+    ) -> SVector<T, NK>;
 }

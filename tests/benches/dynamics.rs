@@ -176,7 +176,7 @@ fn bench_model<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const 
 
 fn benches(c: &mut Criterion) {
     macro_rules! each {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
             bench_model::<$ty, $nq, $nc, $nu>(c);
         };
     }

@@ -226,7 +226,7 @@ fn main() {
     );
     println!("|---|---|---|---|---|---|---|");
     macro_rules! each {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
             report::<$ty, $nq, $nc, $nu>();
         };
     }

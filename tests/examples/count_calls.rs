@@ -118,7 +118,7 @@ fn main() {
     };
     let mut found = None;
     macro_rules! dispatch {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
             if model == stringify!($module) {
                 found = run::<$ty, $nq, $nc, $nu>(what, n);
             }

@@ -84,7 +84,7 @@ fn report<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: u
 
 fn main() {
     macro_rules! each {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
             report::<$ty, $nq, $nc, $nu>();
         };
     }

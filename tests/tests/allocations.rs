@@ -197,7 +197,7 @@ fn hot_paths_do_not_allocate() {
     // The counter works: a Vec allocates.
     assert_eq!(allocations(|| vec![1u8; 16]).0, 1);
     macro_rules! each {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
             check::<$ty, $nq, $nc, $nu>();
         };
     }

@@ -357,7 +357,7 @@ pub fn check_applicability<
 }
 
 macro_rules! control {
-    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
         mod $module {
             type Model = $ty;
             #[test]

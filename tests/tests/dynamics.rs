@@ -291,7 +291,7 @@ pub fn check_assembly<
 }
 
 macro_rules! runtime {
-    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
         mod $module {
             type Model = $ty;
             #[test]

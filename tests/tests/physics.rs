@@ -4,7 +4,7 @@
 //! New geometries are covered automatically through `generated::for_each_model!`.
 
 use leg_models::nalgebra::{SMatrix, SVector};
-use leg_models::{LegModel, Parameters};
+use leg_models::{ContactModel, JointKind, LegModel, Parameters};
 use leg_tests::Rng;
 
 const STATES: usize = 200;
@@ -26,7 +26,7 @@ fn sample_params<P: Parameters<f64> + Default>(rng: &mut Rng, sample: usize) -> 
     }
     for (i, name) in P::NAMES.iter().enumerate() {
         let v = p.get(i).expect("listed parameter");
-        let positive = ["mass", "inertia", "gear_ratio", "damping"]
+        let positive = ["mass", "inertia", "gear_ratio", "damping", "stiffness"]
             .iter()
             .any(|s| name.ends_with(s));
         let new = if name.starts_with("gravity") {
@@ -334,8 +334,107 @@ pub fn check_damping<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, 
     }
 }
 
+/// Contact terms against differences of the generated contact positions.
+pub fn check_contact_terms<
+    L: ContactModel<NQ, NC, NU, NK>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+>() {
+    assert_eq!(
+        L::CONTACT_NAMES.len() * 2,
+        NK,
+        "{}: two rows per contact",
+        L::NAME
+    );
+    assert_eq!(L::CONTACT_FRICTION.len() * 2, NK);
+    let n = L::GROUND_NORMAL;
+    assert!((n[0].hypot(n[1]) - 1.0).abs() < 1e-15, "unit ground normal");
+    let mut rng = Rng::new(9);
+    let (h, eps) = (1e-6, 1e-4);
+    for sample in 0..STATES {
+        let p: L::Params<f64> = sample_params(&mut rng, sample);
+        let (q, qd) = random_state::<NQ>(&mut rng);
+        let x = |q: SVector<f64, NQ>| L::contact_positions(&q, &p);
+        let fd = SMatrix::<f64, NK, NQ>::from_fn(|r, i| {
+            let e = unit::<NQ>(i) * h;
+            (x(q + e)[r] - x(q - e)[r]) / (2.0 * h)
+        });
+        assert_close(
+            &format!("{}: J_c vs ∂x_c/∂q", L::NAME),
+            &L::contact_jacobian(&q, &p),
+            &fd,
+            1e-7,
+        );
+        let second = (x(q + qd * eps) - x(q) * 2.0 + x(q - qd * eps)) / (eps * eps);
+        assert_close(
+            &format!("{}: J̇_c q̇ vs d²x_c/dt²", L::NAME),
+            &L::contact_bias(&q, &qd, &p),
+            &second,
+            1e-5,
+        );
+    }
+}
+
+/// What each joint kind does to the points beyond it, from the generated joint positions
+/// and link tips alone: a prismatic joint translates every point it moves by the same
+/// vector, of the length it slides; a revolute joint keeps every point it moves at its
+/// distance from the joint (a rotation about it) and leaves its own joint point in place.
+pub fn check_joint_kinds<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>() {
+    let mut rng = Rng::new(10);
+    let h = 1e-3;
+    for sample in 0..STATES / 4 {
+        let p: L::Params<f64> = sample_params(&mut rng, sample);
+        let (q, _) = random_state::<NQ>(&mut rng);
+        let points = |q: &SVector<f64, NQ>| {
+            let (j, t) = (L::joint_positions(q, &p), L::link_tips(q, &p));
+            (0..NQ).flat_map(move |i| [j.column(i).into_owned(), t.column(i).into_owned()])
+        };
+        for i in 0..NQ {
+            let moved = q + unit::<NQ>(i) * h;
+            let pivot = L::joint_positions(&q, &p).column(i).into_owned();
+            let mut shift: Option<SVector<f64, 2>> = None;
+            for (a, b) in points(&q).zip(points(&moved)) {
+                let d = b - a;
+                if d.norm() < 1e-14 {
+                    continue;
+                }
+                match L::JOINT_KINDS[i] {
+                    JointKind::Prismatic => {
+                        assert!(
+                            (d.norm() - h).abs() < 1e-12,
+                            "{}: slide of joint {i}",
+                            L::NAME
+                        );
+                        let s = *shift.get_or_insert(d);
+                        assert!((d - s).norm() < 1e-12, "{}: joint {i} translates", L::NAME);
+                    }
+                    JointKind::Revolute => {
+                        let (ra, rb) = ((a - pivot).norm(), (b - pivot).norm());
+                        assert!((ra - rb).abs() < 1e-12, "{}: joint {i} rotates", L::NAME);
+                    }
+                }
+            }
+            let pivot_after = L::joint_positions(&moved, &p).column(i).into_owned();
+            if L::JOINT_KINDS[i] == JointKind::Revolute {
+                assert!(
+                    (pivot_after - pivot).norm() < 1e-14,
+                    "{}: pivot {i} stays",
+                    L::NAME
+                );
+            }
+        }
+    }
+}
+
 macro_rules! validate {
-    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
         mod $module {
             type Model = $ty;
             #[test]
@@ -365,6 +464,14 @@ macro_rules! validate {
             #[test]
             fn damping_is_diagonal_and_linear() {
                 super::check_damping::<Model, $nq, $nc, $nu>();
+            }
+            #[test]
+            fn contact_jacobian_and_bias_match_differences_of_positions() {
+                super::check_contact_terms::<Model, $nq, $nc, $nu, $nk>();
+            }
+            #[test]
+            fn joints_translate_or_rotate_what_they_move() {
+                super::check_joint_kinds::<Model, $nq, $nc, $nu>();
             }
         }
     };
@@ -452,4 +559,85 @@ fn minitaur_closes_at_the_law_of_cosines_pose() {
         (foot[0]).abs() < 1e-15 && (foot[1] + d).abs() < 1e-15,
         "foot {foot}"
     );
+}
+
+/// Springs against their formula: with gravity off, the potential energy of
+/// `raibert_hopper` is `½ k (q_shin − rest)² + ½ k (q_thigh − q_torso − rest)²`, and the
+/// generalized forces `G` are its gradient, written out by hand.
+#[test]
+fn raibert_hopper_springs_follow_their_formula() {
+    use generated::raibert_hopper::Params;
+    use generated::RaibertHopper;
+    let p = Params::<f64> {
+        gravity_x: 0.0,
+        gravity_y: 0.0,
+        ..Default::default()
+    };
+    let mut rng = Rng::new(11);
+    for _ in 0..STATES {
+        let (q, _) = random_state::<5>(&mut rng);
+        let leg = q[4] - p.leg_spring_rest;
+        let hip = q[3] - q[2] - p.hip_spring_rest;
+        let v = 0.5 * p.leg_spring_stiffness * leg * leg + 0.5 * p.hip_spring_stiffness * hip * hip;
+        let got = RaibertHopper::potential_energy(&q, &p);
+        assert!((got - v).abs() <= 1e-12 * (1.0 + v), "V {got} vs {v}");
+        let (kl, kh) = (p.leg_spring_stiffness, p.hip_spring_stiffness);
+        let g = SVector::<f64, 5>::new(0.0, 0.0, -kh * hip, kh * hip, kl * leg);
+        assert_close(
+            "spring G",
+            &RaibertHopper::gravity_forces(&q, &p),
+            &g,
+            1e-12,
+        );
+    }
+}
+
+/// On the rail, `minitaur_hopper` is `minitaur` carried by its body: the same closure
+/// and foot relative to the body, the toe contact at the closure point, and the body's
+/// weight in `G` of the rail joint.
+#[test]
+fn minitaur_hopper_is_minitaur_on_a_rail() {
+    use generated::{Minitaur, MinitaurHopper};
+    let (p, ph) = (
+        generated::minitaur::Params::<f64>::default(),
+        generated::minitaur_hopper::Params::<f64>::default(),
+    );
+    let mut rng = Rng::new(12);
+    for _ in 0..STATES {
+        let (q, _) = random_state::<4>(&mut rng);
+        let y = rng.range(-1.0, 1.0);
+        let qh = SVector::<f64, 5>::new(y, q[0], q[1], q[2], q[3]);
+        let lift = SVector::<f64, 2>::new(0.0, y);
+        assert_close(
+            "closure",
+            &MinitaurHopper::closure_residual(&qh, &ph),
+            &Minitaur::closure_residual(&q, &p),
+            1e-14,
+        );
+        assert_close(
+            "foot",
+            &MinitaurHopper::foot_position(&qh, &ph),
+            &(Minitaur::foot_position(&q, &p) + lift),
+            1e-14,
+        );
+        let toe = MinitaurHopper::contact_positions(&qh, &ph);
+        assert_close("toe", &toe, &MinitaurHopper::foot_position(&qh, &ph), 0.0);
+        let m: f64 = ["body", "upper_a", "lower_a", "upper_b", "lower_b"]
+            .iter()
+            .map(|l| {
+                let names = <generated::minitaur_hopper::Params<f64> as Parameters<f64>>::NAMES;
+                let i = names
+                    .iter()
+                    .position(|n| *n == format!("{l}_mass"))
+                    .unwrap();
+                ph.get(i).unwrap()
+            })
+            .sum();
+        let g = MinitaurHopper::gravity_forces(&qh, &ph)[0];
+        assert!(
+            (g - m * 9.81).abs() < 1e-12,
+            "rail G {g} vs weight {}",
+            m * 9.81
+        );
+    }
 }

@@ -280,7 +280,7 @@ fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usiz
 }
 
 macro_rules! property_tests {
-    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
         #[test]
         fn $module() {
             run::<$ty, $nq, $nc, $nu>();

@@ -1,8 +1,11 @@
 //! Export a leg to MuJoCo (MJCF) and URDF, from its spec.
 //!
-//! The leg lies in the x–y plane; every joint is a hinge about z at the link's joint,
-//! and each body's frame is its parent's turned by the joint angle, as in the generated
-//! model, so `qpos` (by joint name) is `q`. Masses, centres of mass and inertias are
+//! The leg lies in the x–y plane; every revolute joint is a hinge about z at the link's
+//! joint and every prismatic joint a slide along its axis, and each body's frame is its
+//! parent's turned (or moved) by the joint value, as in the generated model, so `qpos`
+//! (by joint name) is `q`. A spring on one joint is MuJoCo's joint `stiffness` about
+//! `springref`; a coupling spring on `q_a − q_b` a fixed tendon with a spring (URDF has
+//! no springs: its checker adds them). Masses, centres of mass and inertias are
 //! written exactly (shortest round-trip decimals); the inertia about z is the spec's, the
 //! x and y moments (which a z-hinge never sees) are set equal to it so that MuJoCo's
 //! triangle inequality holds. Reflected rotor inertia `I·N²` is MuJoCo's joint
@@ -57,7 +60,21 @@ pub fn mjcf(m: &Model) -> String {
         m.name, m.name
     );
     let _ = writeln!(out, "<mujoco model=\"{}\">", m.name);
-    let _ = writeln!(out, "  <compiler angle=\"radian\" autolimits=\"true\"/>");
+    // MuJoCo refuses a moving body without mass; a floating base's massless sliders get
+    // the least mass it accepts instead (1e-9 kg, 1e-12 kg m²: invisible beside the body).
+    let massless = m
+        .links
+        .iter()
+        .any(|l| value(&m.params, &l.mass) == 0.0 || value(&m.params, &l.inertia) == 0.0);
+    let bounds = if massless {
+        " boundmass=\"1e-9\" boundinertia=\"1e-12\""
+    } else {
+        ""
+    };
+    let _ = writeln!(
+        out,
+        "  <compiler angle=\"radian\" autolimits=\"true\"{bounds}/>"
+    );
     let _ = writeln!(
         out,
         "  <option gravity=\"{} {} 0\" timestep=\"0.001\" integrator=\"RK4\">\n    <flag contact=\"disable\"/>\n  </option>",
@@ -76,6 +93,24 @@ pub fn mjcf(m: &Model) -> String {
             let _ = writeln!(out, "    <connect name=\"{0}\" site1=\"{0}_a\" site2=\"{0}_b\" solref=\"0.002 1\" solimp=\"0.95 0.99 0.001\"/>", c.name);
         }
         let _ = writeln!(out, "  </equality>");
+    }
+    // A coupling spring on q_a − q_b is a fixed tendon of length q_a − q_b with a spring.
+    let couplings: Vec<_> = m.springs.iter().filter(|s| s.b.is_some()).collect();
+    if !couplings.is_empty() {
+        let _ = writeln!(out, "  <tendon>");
+        for s in couplings {
+            let b = s.b.expect("a coupling");
+            let _ = writeln!(
+                out,
+                "    <fixed name=\"{}\" stiffness=\"{}\" springlength=\"{}\">\n      <joint joint=\"{}\" coef=\"1\"/>\n      <joint joint=\"{}\" coef=\"-1\"/>\n    </fixed>",
+                s.name,
+                num(value(&m.params, &s.stiffness)),
+                num(value(&m.params, &s.rest)),
+                m.links[s.a].name,
+                m.links[b].name
+            );
+        }
+        let _ = writeln!(out, "  </tendon>");
     }
     // The spec's home pose (near assembled) as a keyframe: MuJoCo starts at q = 0 otherwise,
     // where a closure may be open by centimetres. MuJoCo orders qpos as the bodies are
@@ -133,9 +168,25 @@ fn mjcf_body(m: &Model, i: usize, depth: usize, out: &mut String) {
         num(ox),
         num(oy)
     );
+    let (kind, axis) = match l.axis {
+        Some([ax, ay]) => ("slide", format!("{} {} 0", num(ax), num(ay))),
+        None => ("hinge", "0 0 1".to_string()),
+    };
+    // A spring on this joint alone is MuJoCo's joint stiffness about `springref`.
+    let spring = m
+        .springs
+        .iter()
+        .find(|s| s.a == i && s.b.is_none())
+        .map_or(String::new(), |s| {
+            format!(
+                " stiffness=\"{}\" springref=\"{}\"",
+                num(value(&m.params, &s.stiffness)),
+                num(value(&m.params, &s.rest))
+            )
+        });
     let _ = writeln!(
         out,
-        "{pad}  <joint name=\"{}\" type=\"hinge\" axis=\"0 0 1\" damping=\"{}\" armature=\"{}\"/>",
+        "{pad}  <joint name=\"{}\" type=\"{kind}\" axis=\"{axis}\" damping=\"{}\" armature=\"{}\"{spring}/>",
         l.name,
         num(damping),
         num(armature)
@@ -148,12 +199,20 @@ fn mjcf_body(m: &Model, i: usize, depth: usize, out: &mut String) {
         num(mass),
         i = num(inertia)
     );
-    let _ = writeln!(
-        out,
-        "{pad}  <geom type=\"capsule\" fromto=\"0 0 0 {} {} 0\" size=\"0.006\" contype=\"0\" conaffinity=\"0\" mass=\"0\"/>",
-        num(lx),
-        num(ly)
-    );
+    if lx == 0.0 && ly == 0.0 {
+        // A link of no length (a slider, a body's joint): a dot, for the eye.
+        let _ = writeln!(
+            out,
+            "{pad}  <geom type=\"sphere\" size=\"0.01\" contype=\"0\" conaffinity=\"0\" mass=\"0\"/>"
+        );
+    } else {
+        let _ = writeln!(
+            out,
+            "{pad}  <geom type=\"capsule\" fromto=\"0 0 0 {} {} 0\" size=\"0.006\" contype=\"0\" conaffinity=\"0\" mass=\"0\"/>",
+            num(lx),
+            num(ly)
+        );
+    }
     for c in &m.closures {
         for (side, p) in [("a", &c.a), ("b", &c.b)] {
             if p.link == i {
@@ -240,18 +299,33 @@ pub fn urdf(m: &Model) -> String {
         let _ = writeln!(out, "  </link>");
         let parent = l.parent.map_or("base", |p| m.links[p].name.as_str());
         let (ox, oy) = pair(m, &l.origin);
-        let _ = writeln!(out, "  <joint name=\"{}\" type=\"continuous\">", l.name);
+        let kind = if l.axis.is_some() {
+            "prismatic"
+        } else {
+            "continuous"
+        };
+        let _ = writeln!(out, "  <joint name=\"{}\" type=\"{kind}\">", l.name);
         let _ = writeln!(
             out,
             "    <parent link=\"{parent}\"/>\n    <child link=\"{}\"/>",
             l.name
         );
+        let axis = l.axis.map_or("0 0 1".to_string(), |[ax, ay]| {
+            format!("{} {} 0", num(ax), num(ay))
+        });
         let _ = writeln!(
             out,
-            "    <origin xyz=\"{} {} 0\" rpy=\"0 0 0\"/>\n    <axis xyz=\"0 0 1\"/>",
+            "    <origin xyz=\"{} {} 0\" rpy=\"0 0 0\"/>\n    <axis xyz=\"{axis}\"/>",
             num(ox),
             num(oy)
         );
+        if l.axis.is_some() {
+            // URDF requires limits on a prismatic joint; these never bind.
+            let _ = writeln!(
+                out,
+                "    <limit lower=\"-1000\" upper=\"1000\" effort=\"1e9\" velocity=\"1e9\"/>"
+            );
+        }
         let _ = writeln!(
             out,
             "    <dynamics damping=\"{}\" friction=\"0\"/>",

@@ -69,6 +69,9 @@ struct Derived {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct HomeCheck {
+    /// A joint that moves no inertia at home (`M` singular there): a massless link with
+    /// nothing massive beyond it.
+    massless_joint: Option<usize>,
     /// The largest coordinate of any point of the leg at home (m): the leg's size.
     scale: f64,
     /// `max |φ|` at the home pose as written.
@@ -146,6 +149,21 @@ fn check_home(spec: &Spec, check: &HomeCheck) -> Result<(), String> {
             }
             .to_string());
         }
+    }
+    if let Some(j) = check.massless_joint {
+        let link = spec.file.links[j].get_ref();
+        let (line, column) = crate::spec::line_column(&spec.text, link.mass.span().start);
+        return Err(crate::spec::SpecError {
+            file: spec.path.clone(),
+            line,
+            column,
+            field: format!("links[{j}].mass"),
+            message: format!(
+                "the mass matrix is singular at home: the joint of `{}` moves no mass or inertia (give the link mass or inertia, or hang a massive link from it)",
+                link.name.get_ref()
+            ),
+        }
+        .to_string());
     }
     if check.moved > 0.2 {
         return Err(error(format!(
@@ -292,6 +310,20 @@ fn assemble(spec: &Spec, model: &Model, derived: Derived) -> IrFile {
             redundant_rows,
             mobility,
             params: model.params.clone(),
+            joint_kinds: model.links.iter().map(|l| l.joint.to_string()).collect(),
+            springs: model
+                .springs
+                .iter()
+                .map(|s| crate::ir_file::SpringInfo {
+                    name: s.name.clone(),
+                    a: s.a,
+                    b: s.b,
+                })
+                .collect(),
+            contacts: model.contacts.iter().map(|c| c.name.clone()).collect(),
+            contact_friction: model.contacts.iter().map(|c| c.friction).collect(),
+            ground_normal: model.ground_normal,
+            ground_offset: model.ground_offset,
         },
         functions,
     }

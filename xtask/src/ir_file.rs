@@ -8,7 +8,7 @@ use serde_json::Value;
 
 use crate::model::Param;
 
-pub const FORMAT: u32 = 1;
+pub const FORMAT: u32 = 2;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -38,6 +38,25 @@ pub struct ModelInfo {
     /// `NQ − rank J` at the assembled home pose.
     pub mobility: usize,
     pub params: Vec<Param>,
+    /// `"revolute"` or `"prismatic"`, in coordinate order.
+    pub joint_kinds: Vec<String>,
+    pub springs: Vec<SpringInfo>,
+    /// Contact point names, in the order of the contact terms' columns.
+    pub contacts: Vec<String>,
+    /// Coulomb μ of each contact (the spec's).
+    pub contact_friction: Vec<f64>,
+    /// The ground `normal · x = offset`, unit normal in the base frame.
+    pub ground_normal: [f64; 2],
+    pub ground_offset: f64,
+}
+
+/// A spring on joint `a`, or on `q_a − q_b`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SpringInfo {
+    pub name: String,
+    pub a: usize,
+    pub b: Option<usize>,
 }
 
 impl IrFile {

@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::spec::{PointSpec, Spec, SpecError, Vec2};
+use crate::spec::{JointKind, PointSpec, Spec, SpecError, Vec2};
 use toml::Spanned;
 
 /// One run-time parameter: a field of the generated `Params` struct.
@@ -21,6 +21,11 @@ pub struct Param {
 pub struct Link {
     pub name: String,
     pub parent: Option<usize>,
+    /// `"revolute"` or `"prismatic"`.
+    pub joint: &'static str,
+    /// The unit sliding direction of a prismatic joint (parent frame). A direction, not a
+    /// size: fixed at generation, not a run-time parameter.
+    pub axis: Option<[f64; 2]>,
     pub origin: [String; 2],
     pub length: [String; 2],
     pub com: [String; 2],
@@ -44,6 +49,25 @@ pub struct Closure {
     pub b: Point,
 }
 
+/// `½ k (q_a − q_b − rest)²`, or `½ k (q_a − rest)²` without `b`.
+#[derive(Clone, Debug, Serialize)]
+pub struct Spring {
+    pub name: String,
+    pub a: usize,
+    pub b: Option<usize>,
+    pub stiffness: String,
+    pub rest: String,
+}
+
+/// A point that can touch the ground.
+#[derive(Clone, Debug, Serialize)]
+pub struct Contact {
+    pub name: String,
+    pub point: Point,
+    /// Coulomb μ (the generated model's default; the simulator's to change).
+    pub friction: f64,
+}
+
 /// What `derive.py` reads on stdin.
 #[derive(Clone, Debug, Serialize)]
 pub struct Model {
@@ -55,8 +79,13 @@ pub struct Model {
     pub foot: Point,
     pub gravity: [String; 2],
     pub actuated: Vec<usize>,
-    /// The home pose (rad).
+    /// The home pose (rad, or m for a prismatic joint).
     pub home: Vec<f64>,
+    pub springs: Vec<Spring>,
+    pub contacts: Vec<Contact>,
+    /// The ground line `normal · x = offset`, unit normal (base frame).
+    pub ground_normal: [f64; 2],
+    pub ground_offset: f64,
 }
 
 impl Model {
@@ -225,9 +254,19 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
                 ])
             }
         };
+        let (joint, axis) = match l.kind() {
+            JointKind::Revolute => ("revolute", None),
+            JointKind::Prismatic => {
+                let [x, y] = l.axis.as_ref().expect("validated").get_ref().value;
+                let norm = x.hypot(y);
+                ("prismatic", Some([x / norm, y / norm]))
+            }
+        };
         links.push(Link {
             name,
             parent,
+            joint,
+            axis,
             origin,
             length,
             com,
@@ -258,6 +297,82 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
     }
     b.owned_by("foot.link".into(), &f.foot.get_ref().link);
     let foot = b.point("foot", f.foot.get_ref(), "Foot point, link frame", &links)?;
+    let mut springs = Vec::new();
+    for (k, s) in f.springs.iter().enumerate() {
+        let s = s.get_ref();
+        let name = s.name.get_ref().clone();
+        b.owned_by(format!("springs[{k}].name"), &s.name);
+        let a = spec.link_index(s.a.get_ref()).expect("validated");
+        let bl =
+            s.b.as_ref()
+                .map(|b| spec.link_index(b.get_ref()).expect("validated"));
+        let on = match bl {
+            None => format!("the joint of `{}`", links[a].name),
+            Some(bl) => format!("`{}` minus `{}`", links[a].name, links[bl].name),
+        };
+        let unit = |rad: &str, m: &str| {
+            if links[a].joint == "prismatic" {
+                m.to_string()
+            } else {
+                rad.to_string()
+            }
+        };
+        let stiffness = b.scalar(
+            format!("{name}_stiffness"),
+            s.stiffness.get_ref().value,
+            format!(
+                "Stiffness of spring `{name}` on {on} [{}].",
+                unit("N m/rad", "N/m")
+            ),
+        )?;
+        let rest = b.scalar(
+            format!("{name}_rest"),
+            s.rest.as_ref().map_or(0.0, |r| r.get_ref().value),
+            format!(
+                "Rest value of spring `{name}` on {on} [{}].",
+                unit("rad", "m")
+            ),
+        )?;
+        springs.push(Spring {
+            name,
+            a,
+            b: bl,
+            stiffness,
+            rest,
+        });
+    }
+    let mut contacts = Vec::new();
+    for (k, c) in f.contacts.iter().enumerate() {
+        let c = c.get_ref();
+        let name = c.name.get_ref().clone();
+        b.owned_by(format!("contacts[{k}].name"), &c.name);
+        let point = b.point(
+            &name,
+            &PointSpec {
+                link: c.link.clone(),
+                point: c.point.clone(),
+            },
+            &format!("Contact point `{name}`, link frame"),
+            &links,
+        )?;
+        contacts.push(Contact {
+            name,
+            point,
+            friction: c.friction.get_ref().value,
+        });
+    }
+    let (ground_normal, ground_offset) = match &f.ground {
+        None => ([0.0, 1.0], 0.0),
+        Some(g) => {
+            let g = g.get_ref();
+            let [x, y] = g.normal.as_ref().map_or([0.0, 1.0], |n| n.get_ref().value);
+            let norm = x.hypot(y);
+            (
+                [x / norm, y / norm],
+                g.offset.as_ref().map_or(0.0, |o| o.get_ref().value),
+            )
+        }
+    };
     Ok(Model {
         name: spec.name.clone(),
         spec_text: spec.text.clone(),
@@ -271,5 +386,9 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
             .home
             .as_ref()
             .map_or_else(|| vec![0.0; f.links.len()], |h| h.get_ref().clone()),
+        springs,
+        contacts,
+        ground_normal,
+        ground_offset,
     })
 }

@@ -18,8 +18,9 @@ pub struct Term {
     pub doc: &'static str,
 }
 
-/// The terms every model has, in file order, for `nq` joints and `nc` closure rows.
-pub fn terms(nq: usize, nc: usize) -> Vec<Term> {
+/// The terms every model has, in file order, for `nq` joints, `nc` closure rows and `nk`
+/// contact rows.
+pub fn terms(nq: usize, nc: usize, nk: usize) -> Vec<Term> {
     use OutputKind::{Matrix, Scalar, Vector};
     const Q: &[&str] = &["q", "p"];
     const QQ: &[&str] = &["q", "qd", "p"];
@@ -115,6 +116,24 @@ pub fn terms(nq: usize, nc: usize) -> Vec<Term> {
             "Closure points a, b of each closure in the base frame.",
         ),
         t(
+            "contact_positions",
+            Q,
+            vec![("contact_positions", Vector, nk, 1)],
+            "Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.",
+        ),
+        t(
+            "contact_jacobian",
+            Q,
+            vec![("contact_jacobian", Matrix, nk, nq)],
+            "`J_c(q) = ∂x_c/∂q`.",
+        ),
+        t(
+            "contact_bias",
+            QQ,
+            vec![("contact_bias", Vector, nk, 1)],
+            "`J̇_c(q, q̇) q̇`.",
+        ),
+        t(
             "dynamics_terms",
             QQ,
             vec![m, n, j, b],
@@ -141,7 +160,8 @@ pub fn type_name(model: &str) -> String {
 pub fn check_terms(ir: &IrFile) -> Result<(), Error> {
     let nq = ir.model.joints.len();
     let nc = 2 * ir.model.closures.len();
-    let expected = terms(nq, nc);
+    let nk = 2 * ir.model.contacts.len();
+    let expected = terms(nq, nc, nk);
     let fail = |m: String| Error {
         context: format!("IR of `{}`", ir.model.name),
         message: m,
@@ -188,10 +208,11 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     let info = &ir.model;
     let ctx = format!("model `{}`", info.name);
     codegen::ident(&ctx, &info.name)?;
-    let (nq, nc, nu) = (
+    let (nq, nc, nu, nk) = (
         info.joints.len(),
         2 * info.closures.len(),
         info.actuated.len(),
+        2 * info.contacts.len(),
     );
     let ty = codegen::ident(&ctx, &type_name(&info.name))?;
     let name = &info.name;
@@ -217,6 +238,39 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             ),
         });
     }
+    if info.joint_kinds.len() != nq
+        || info.contact_friction.len() != info.contacts.len()
+        || !info.contact_friction.iter().all(|m| m.is_finite())
+        || !info.ground_normal.iter().all(|v| v.is_finite())
+        || !info.ground_offset.is_finite()
+    {
+        return Err(Error {
+            context: ctx.clone(),
+            message: "joint kinds, contact friction or ground do not match the model".into(),
+        });
+    }
+    let kinds = info
+        .joint_kinds
+        .iter()
+        .map(|k| match k.as_str() {
+            "revolute" => Ok(quote!(JointKind::Revolute)),
+            "prismatic" => Ok(quote!(JointKind::Prismatic)),
+            other => Err(Error {
+                context: ctx.clone(),
+                message: format!("unknown joint kind `{other}`"),
+            }),
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let contact_names = &info.contacts;
+    for c in contact_names {
+        codegen::ident(&ctx, c)?;
+    }
+    let friction = info
+        .contact_friction
+        .iter()
+        .map(|&m| codegen::f64_literal(m));
+    let normal = info.ground_normal.iter().map(|&v| codegen::f64_literal(v));
+    let offset = codegen::f64_literal(info.ground_offset);
     let redundant = lit(info.redundant_rows.len());
     let mobility = lit(info.mobility);
 
@@ -245,9 +299,14 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
 
     let mut functions = Vec::new();
     let mut methods = Vec::new();
-    for (f, t) in ir.functions.iter().zip(terms(nq, nc)) {
+    let mut contact_methods = Vec::new();
+    for (f, t) in ir.functions.iter().zip(terms(nq, nc, nk)) {
         functions.push(codegen::emit_function(f, t.doc)?);
-        methods.push(trait_method(f, nq, nc));
+        if f.name.starts_with("contact_") {
+            contact_methods.push(trait_method(f, nq, nc));
+        } else {
+            methods.push(trait_method(f, nq, nc));
+        }
     }
 
     let doc =
@@ -257,7 +316,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         info.actuated.iter().map(|&a| &info.joints[a]).collect::<Vec<_>>(),
         info.spec
     );
-    let (lq, lc, lu) = (lit(nq), lit(nc), lit(nu));
+    let (lq, lc, lu, lk) = (lit(nq), lit(nc), lit(nu), lit(nk));
     let tokens = quote! {
         #![doc = #doc]
         // prettyplease formats generated code, so that formatting cannot drift.
@@ -270,7 +329,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         )]
 
         use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
-        use leg_models::{DynamicsTerms, LegModel, Parameters, Real};
+        use leg_models::{ContactModel, DynamicsTerms, JointKind, LegModel, Parameters, Real};
 
         /// Number of joints.
         pub const NQ: usize = #lq;
@@ -278,6 +337,8 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         pub const NC: usize = #lc;
         /// Number of actuated joints.
         pub const NU: usize = #lu;
+        /// Number of contact rows (two per contact point).
+        pub const NK: usize = #lk;
 
         #[doc = #doc]
         #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -316,12 +377,21 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         impl LegModel<NQ, NC, NU> for #ty {
             const NAME: &'static str = #name;
             const JOINT_NAMES: [&'static str; NQ] = [#(#joints),*];
+            const JOINT_KINDS: [JointKind; NQ] = [#(#kinds),*];
             const ACTUATED: [usize; NU] = [#(#actuated),*];
             const HOME: [f64; NQ] = [#(#home),*];
             const REDUNDANT_ROWS: usize = #redundant;
             const MOBILITY: usize = #mobility;
             type Params<T: Real> = Params<T>;
             #(#methods)*
+        }
+
+        impl ContactModel<NQ, NC, NU, NK> for #ty {
+            const CONTACT_NAMES: &'static [&'static str] = &[#(#contact_names),*];
+            const CONTACT_FRICTION: &'static [f64] = &[#(#friction),*];
+            const GROUND_NORMAL: [f64; 2] = [#(#normal),*];
+            const GROUND_OFFSET: f64 = #offset;
+            #(#contact_methods)*
         }
 
         #(#functions)*
@@ -377,6 +447,7 @@ pub struct Summary {
     pub nq: usize,
     pub nc: usize,
     pub nu: usize,
+    pub nk: usize,
 }
 
 impl Summary {
@@ -386,6 +457,7 @@ impl Summary {
             nq: ir.model.joints.len(),
             nc: 2 * ir.model.closures.len(),
             nu: ir.model.actuated.len(),
+            nk: 2 * ir.model.contacts.len(),
         }
     }
 }
@@ -397,12 +469,12 @@ pub fn lib_source(models: &[Summary]) -> Result<String, Error> {
     for m in models {
         let module = codegen::ident("lib.rs", &m.name)?;
         let ty = codegen::ident("lib.rs", &type_name(&m.name))?;
-        let (q, c, u) = (lit(m.nq), lit(m.nc), lit(m.nu));
+        let (q, c, u, k) = (lit(m.nq), lit(m.nc), lit(m.nu), lit(m.nk));
         mods.push(quote! {
             pub mod #module;
             pub use #module::#ty;
         });
-        calls.push(quote!($callback!(#module, $crate::#module::#ty, #q, #c, #u);));
+        calls.push(quote!($callback!(#module, $crate::#module::#ty, #q, #c, #u, #k);));
     }
     let tokens = quote! {
         //! Generated leg models, one module per spec in `leg-models/specs/`. Each implements
@@ -412,7 +484,7 @@ pub fn lib_source(models: &[Summary]) -> Result<String, Error> {
 
         #(#mods)*
 
-        /// Calls `$callback!(module, Type, NQ, NC, NU)` once for every generated model, so
+        /// Calls `$callback!(module, Type, NQ, NC, NU, NK)` once for every generated model, so
         /// tests and tools cover a new geometry without naming it.
         #[macro_export]
         macro_rules! for_each_model {

@@ -152,7 +152,8 @@ pub struct SpecFile {
     /// Gravity in the base frame [m/s²].
     pub gravity: Spanned<Vec2>,
     pub links: Vec<Spanned<LinkSpec>>,
-    /// A typical assembled pose (rad, one angle per link in file order): the default
+    /// A typical assembled pose (one joint value per link in file order: rad, or m for a
+    /// prismatic joint): the default
     /// guess of loop assembly, which picks the assembly mode (knee in or out), and the
     /// default initial state of simulations. Default: all zeros.
     #[serde(default)]
@@ -160,6 +161,66 @@ pub struct SpecFile {
     #[serde(default)]
     pub closures: Vec<Spanned<ClosureSpec>>,
     pub foot: Spanned<PointSpec>,
+    /// Joint springs and coupling springs (series-elastic actuators).
+    #[serde(default)]
+    pub springs: Vec<Spanned<SpringSpec>>,
+    /// Points that can touch the ground.
+    #[serde(default)]
+    pub contacts: Vec<Spanned<ContactSpec>>,
+    /// The ground line the contacts meet (default `y = 0`, normal up).
+    #[serde(default)]
+    pub ground: Option<Spanned<GroundSpec>>,
+}
+
+/// How a link moves relative to its parent.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum JointKind {
+    /// Turns by `q` (rad) about the joint point.
+    #[default]
+    Revolute,
+    /// Slides by `q` (m) along `axis` (parent frame), keeping the parent's orientation.
+    Prismatic,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SpringSpec {
+    pub name: Spanned<String>,
+    /// The link whose joint the spring acts on.
+    pub a: Spanned<String>,
+    /// With a second link, a coupling spring on `q_a − q_b` (motor output and link of a
+    /// series-elastic actuator); without, a spring on `q_a` alone.
+    #[serde(default)]
+    pub b: Option<Spanned<String>>,
+    /// [N m/rad] (revolute) or [N/m] (prismatic).
+    pub stiffness: Spanned<Num>,
+    /// The value of `q_a` (or `q_a − q_b`) at which the spring is relaxed; default 0.
+    #[serde(default)]
+    pub rest: Option<Spanned<Num>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ContactSpec {
+    pub name: Spanned<String>,
+    pub link: Spanned<String>,
+    /// In the link frame, from its joint; default the link's tip.
+    #[serde(default)]
+    pub point: Option<Spanned<Vec2>>,
+    /// Coulomb friction coefficient μ with the ground.
+    pub friction: Spanned<Num>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GroundSpec {
+    /// Points out of the ground, base frame; normalized. Default `[0, 1]`.
+    #[serde(default)]
+    pub normal: Option<Spanned<Vec2>>,
+    /// The ground is `normal · x = offset` [m]; default 0.
+    #[serde(default)]
+    pub offset: Option<Spanned<Num>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -168,19 +229,27 @@ pub struct LinkSpec {
     pub name: Spanned<String>,
     /// `"base"` or a link defined above.
     pub parent: Spanned<String>,
+    /// `"revolute"` (default) or `"prismatic"`.
+    #[serde(default)]
+    pub joint: Option<Spanned<JointKind>>,
+    /// The sliding direction of a prismatic joint, in the parent's frame (the base frame
+    /// for a base joint); normalized.
+    #[serde(default)]
+    pub axis: Option<Spanned<Vec2>>,
     /// Where the joint sits: on the base, in the base frame (default `[0, 0]`); on a
     /// parent link, in the parent's frame (default the parent's tip).
     #[serde(default)]
     pub origin: Option<Spanned<Vec2>>,
     /// From the joint to the link's tip, in the link frame [m].
     pub length: Spanned<Vec2>,
-    /// [kg]
+    /// [kg]; zero for the massless intermediate links of a floating base (the mass
+    /// matrix must stay positive definite).
     pub mass: Spanned<Num>,
     /// Centre of mass, from the joint, in the link frame [m].
     pub com: Spanned<Vec2>,
     /// About the centre of mass [kg m²].
     pub inertia: Spanned<Num>,
-    /// Viscous joint damping [N m s/rad]; default 0.
+    /// Viscous joint damping [N m s/rad, or N s/m for a prismatic joint]; default 0.
     #[serde(default)]
     pub damping: Option<Spanned<Num>>,
     /// Present when a motor drives this link's joint.
@@ -348,6 +417,14 @@ fn field_at(text: &str, offset: usize, message: &str) -> String {
     }
 }
 
+impl LinkSpec {
+    pub fn kind(&self) -> JointKind {
+        self.joint
+            .as_ref()
+            .map_or(JointKind::Revolute, |j| *j.get_ref())
+    }
+}
+
 impl Spec {
     /// Reads, parses and validates the spec at `path`.
     pub fn load(path: &Path) -> Result<Spec, SpecError> {
@@ -491,7 +568,35 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
         }
         check_vec(ctx, &l.length, &f("length"), Sign::Any)?;
         check_vec(ctx, &l.com, &f("com"), Sign::Any)?;
-        check_num(ctx, &l.mass, &f("mass"), Sign::Positive)?;
+        check_num(ctx, &l.mass, &f("mass"), Sign::NonNegative)?;
+        match (l.kind(), &l.axis) {
+            (JointKind::Prismatic, None) => {
+                let at = l.joint.as_ref().expect("prismatic is written");
+                return Err(ctx.span(
+                    at,
+                    f("axis"),
+                    "a prismatic joint needs the `axis` it slides along (parent frame), e.g. `axis = [0.0, 1.0]`",
+                ));
+            }
+            (JointKind::Prismatic, Some(axis)) => {
+                check_vec(ctx, axis, &f("axis"), Sign::Any)?;
+                if axis.get_ref().value == [0.0, 0.0] {
+                    return Err(ctx.span(
+                        axis,
+                        f("axis"),
+                        "the axis of a prismatic joint must not be zero",
+                    ));
+                }
+            }
+            (JointKind::Revolute, Some(axis)) => {
+                return Err(ctx.span(
+                    axis,
+                    f("axis"),
+                    "only a prismatic joint has an axis (add `joint = \"prismatic\"`, or remove `axis`)",
+                ));
+            }
+            (JointKind::Revolute, None) => {}
+        }
         check_num(ctx, &l.inertia, &f("inertia"), Sign::NonNegative)?;
         if let Some(d) = &l.damping {
             check_num(ctx, d, &f("damping"), Sign::NonNegative)?;
@@ -552,6 +657,63 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
         }
     }
     check_point(file.foot.get_ref(), "foot")?;
+    let check_link = |s: &Spanned<String>, field: String| -> Result<(), SpecError> {
+        if link_names.contains(&s.get_ref().as_str()) {
+            Ok(())
+        } else {
+            Err(ctx.span(
+                s,
+                field,
+                format!(
+                    "unknown link `{}` (links: {})",
+                    shown(s.get_ref()),
+                    link_names.join(", ")
+                ),
+            ))
+        }
+    };
+    for (k, spring) in file.springs.iter().enumerate() {
+        let s = spring.get_ref();
+        let f = |field: &str| format!("springs[{k}].{field}");
+        check_new_name(&s.name, &f("name"))?;
+        check_link(&s.a, f("a"))?;
+        if let Some(b) = &s.b {
+            check_link(b, f("b"))?;
+            if b.get_ref() == s.a.get_ref() {
+                return Err(ctx.span(
+                    b,
+                    f("b"),
+                    "a coupling spring joins two different joints (leave out `b` for a spring on one joint)",
+                ));
+            }
+        }
+        check_num(ctx, &s.stiffness, &f("stiffness"), Sign::Positive)?;
+        if let Some(r) = &s.rest {
+            check_num(ctx, r, &f("rest"), Sign::Any)?;
+        }
+    }
+    for (k, contact) in file.contacts.iter().enumerate() {
+        let c = contact.get_ref();
+        let f = |field: &str| format!("contacts[{k}].{field}");
+        check_new_name(&c.name, &f("name"))?;
+        check_link(&c.link, f("link"))?;
+        if let Some(pt) = &c.point {
+            check_vec(ctx, pt, &f("point"), Sign::Any)?;
+        }
+        check_num(ctx, &c.friction, &f("friction"), Sign::NonNegative)?;
+    }
+    if let Some(g) = &file.ground {
+        let g = g.get_ref();
+        if let Some(n) = &g.normal {
+            check_vec(ctx, n, "ground.normal", Sign::Any)?;
+            if n.get_ref().value == [0.0, 0.0] {
+                return Err(ctx.span(n, "ground.normal", "the ground's normal must not be zero"));
+            }
+        }
+        if let Some(o) = &g.offset {
+            check_num(ctx, o, "ground.offset", Sign::Any)?;
+        }
+    }
     check_reserved(ctx, file)?;
     if let Some(home) = &file.home {
         let h = home.get_ref();
@@ -559,7 +721,11 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
             return Err(ctx.span(
                 home,
                 "home",
-                format!("lists {} angles for {} links", h.len(), file.links.len()),
+                format!(
+                    "lists {} joint values for {} links",
+                    h.len(),
+                    file.links.len()
+                ),
             ));
         }
         for &v in h {
@@ -576,7 +742,10 @@ fn check_has_size(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
     let point_zero = |p: &PointSpec| p.point.as_ref().is_none_or(zero);
     let all_zero = file.links.iter().all(|l| {
         let l = l.get_ref();
-        zero(&l.length) && zero(&l.com) && l.origin.as_ref().is_none_or(zero)
+        zero(&l.length)
+            && zero(&l.com)
+            && l.origin.as_ref().is_none_or(zero)
+            && l.kind() == JointKind::Revolute
     }) && file.closures.iter().all(|c| {
         let c = c.get_ref();
         point_zero(c.a.get_ref()) && point_zero(c.b.get_ref())
@@ -602,6 +771,13 @@ fn check_reserved(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
             "the joint of the foot frame in URDF".into(),
         ),
     ];
+    for c in &file.contacts {
+        let n = c.get_ref().name.get_ref();
+        reserved.push((
+            format!("{n}_frame"),
+            format!("the joint of the frame of contact `{n}` in URDF"),
+        ));
+    }
     for c in &file.closures {
         let n = c.get_ref().name.get_ref();
         for side in ["a", "b"] {
@@ -620,6 +796,18 @@ fn check_reserved(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
                 .iter()
                 .enumerate()
                 .map(|(k, c)| (&c.get_ref().name, format!("closures[{k}].name"))),
+        )
+        .chain(
+            file.springs
+                .iter()
+                .enumerate()
+                .map(|(k, c)| (&c.get_ref().name, format!("springs[{k}].name"))),
+        )
+        .chain(
+            file.contacts
+                .iter()
+                .enumerate()
+                .map(|(k, c)| (&c.get_ref().name, format!("contacts[{k}].name"))),
         );
     for (name, field) in named {
         if let Some((_, why)) = reserved.iter().find(|(r, _)| r == name.get_ref()) {

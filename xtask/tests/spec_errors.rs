@@ -146,7 +146,7 @@ fn negative_mass() {
         &text,
         (l, c),
         "links[3].mass",
-        "must be positive, got -0.05",
+        "must not be negative, got -0.05",
     );
 }
 
@@ -158,7 +158,7 @@ fn negative_mass_with_a_source_note() {
         0,
     );
     let (l, c) = pos(&text, "{ value = -1.0", 0);
-    expect_error(&text, (l, c), "links[0].mass", "must be positive");
+    expect_error(&text, (l, c), "links[0].mass", "must not be negative");
 }
 
 #[test]
@@ -389,7 +389,7 @@ fn home_pose_with_the_wrong_number_of_angles() {
         0,
     );
     let (l, c) = pos(&text, "[0.1, 0.2, 0.3]", 0);
-    expect_error(&text, (l, c), "home", "lists 3 angles for 4 links");
+    expect_error(&text, (l, c), "home", "lists 3 joint values for 4 links");
     let text = edit(
         "gravity = [0.0, -9.81]\n",
         "gravity = [0.0, -9.81]\nhome = [0.1, 0.2, 0.3, 0.4]\n",
@@ -667,4 +667,124 @@ fn a_number_too_large_to_derive_with() {
         "links[0].mass",
         "must be at most 1e6 in magnitude, got 1e308",
     );
+}
+
+/// The valid spec with `extra` appended (springs, contacts, ground).
+fn with(extra: &str) -> String {
+    format!("{VALID}\n{extra}")
+}
+
+#[test]
+fn joint_kinds_and_axes_are_checked() {
+    let text = edit(
+        "parent = \"upper_a\"",
+        "parent = \"upper_a\"\njoint = \"prismatic\"",
+        0,
+    );
+    let at = pos(&text, "\"prismatic\"", 0);
+    expect_error(
+        &text,
+        at,
+        "links[1].axis",
+        "a prismatic joint needs the `axis`",
+    );
+    let text = edit(
+        "parent = \"upper_a\"",
+        "parent = \"upper_a\"\njoint = \"prismatic\"\naxis = [0.0, 0.0]",
+        0,
+    );
+    let at = pos(&text, "[0.0, 0.0]", 0);
+    expect_error(&text, at, "links[1].axis", "must not be zero");
+    let text = edit(
+        "parent = \"upper_a\"",
+        "parent = \"upper_a\"\naxis = [1.0, 0.0]",
+        0,
+    );
+    let at = pos(&text, "[1.0, 0.0]", 0);
+    expect_error(
+        &text,
+        at,
+        "links[1].axis",
+        "only a prismatic joint has an axis",
+    );
+    let text = edit(
+        "parent = \"upper_a\"",
+        "parent = \"upper_a\"\njoint = \"helical\"",
+        0,
+    );
+    let e = parse(&text).unwrap_err();
+    assert_eq!(e.field, "links[1].joint", "{e}");
+    assert!(e.message.contains("unknown variant `helical`"), "{e}");
+    assert!(
+        e.message.contains("`revolute`, `prismatic`") || e.message.contains("revolute"),
+        "{e}"
+    );
+}
+
+#[test]
+fn springs_contacts_and_ground_are_checked() {
+    let text = with("[[springs]]\nname = \"s\"\na = \"knee\"\nstiffness = 10.0\n");
+    let at = pos(&text, "\"knee\"", 0);
+    expect_error(&text, at, "springs[0].a", "unknown link `knee`");
+    let text =
+        with("[[springs]]\nname = \"s\"\na = \"lower_a\"\nb = \"lower_a\"\nstiffness = 10.0\n");
+    let at = pos(&text, "\"lower_a\"\nstiffness", 0);
+    expect_error(&text, at, "springs[0].b", "two different joints");
+    let text = with("[[springs]]\nname = \"s\"\na = \"lower_a\"\nstiffness = -1.0\n");
+    let at = pos(&text, "-1.0", 0);
+    expect_error(&text, at, "springs[0].stiffness", "must be positive");
+    let text = with("[[springs]]\nname = \"toe\"\na = \"lower_a\"\nstiffness = 1.0\n");
+    let at = pos(&text, "\"toe\"", 1);
+    expect_error(&text, at, "springs[0].name", "duplicate name `toe`");
+    let text = with("[[contacts]]\nname = \"sole\"\nlink = \"shin\"\nfriction = 0.8\n");
+    let at = pos(&text, "\"shin\"", 0);
+    expect_error(&text, at, "contacts[0].link", "unknown link `shin`");
+    let text = with("[[contacts]]\nname = \"sole\"\nlink = \"lower_a\"\nfriction = -0.1\n");
+    let at = pos(&text, "-0.1", 0);
+    expect_error(&text, at, "contacts[0].friction", "must not be negative");
+    let text = with("[[contacts]]\nname = \"sole\"\nlink = \"lower_a\"\n");
+    let e = parse(&text).unwrap_err();
+    assert!(
+        e.field.starts_with("contacts[0]") && e.message.contains("friction"),
+        "{e}"
+    );
+    let text = with("[[contacts]]\nname = \"foot\"\nlink = \"lower_a\"\nfriction = 0.8\n");
+    let at = pos(&text, "\"foot\"", 0);
+    expect_error(&text, at, "contacts[0].name", "reserved");
+    let text = with("[ground]\nnormal = [0.0, 0.0]\n");
+    let at = pos(&text, "[0.0, 0.0]\n", 0);
+    expect_error(&text, at, "ground.normal", "must not be zero");
+    let text = with("[ground]\noffset = 1e9\n");
+    let at = pos(&text, "1e9", 0);
+    expect_error(&text, at, "ground.offset", "at most");
+}
+
+/// Runs the derivation (CasADi): a massless link with nothing beyond it makes `M`
+/// singular, located at its mass; massless links that carry a body generate.
+#[test]
+fn a_massless_link_that_moves_nothing_is_located() {
+    let text = edit(
+        "mass = 0.05\ncom = [0.1, 0.0]\ninertia = 1.6e-4",
+        "mass = 0.0\ncom = [0.1, 0.0]\ninertia = 0.0",
+        1,
+    )
+    .replace(
+        "gravity = [0.0, -9.81]\n",
+        "gravity = [0.0, -9.81]\nhome = [-0.6437, -1.2057, -2.4979, 1.2057]\n",
+    );
+    // lower_b massless but closed to lower_a: its joint still moves nothing by itself,
+    // M (of the open tree) is singular.
+    let root = scratch("massless", &text);
+    let before = root.listing();
+    let err = generate(&root).unwrap_err();
+    assert!(err.is_usage(), "{err}");
+    let (l, c) = pos(&text, "mass = 0.0\n", 0);
+    assert!(
+        err.to_string().starts_with(&format!(
+            "leg-models/specs/leg.toml:{l}:{}: links[3].mass: the mass matrix is singular at home: the joint of `lower_b` moves no mass",
+            c + "mass = ".len()
+        )),
+        "{err}"
+    );
+    assert_eq!(root.listing(), before, "a failed generation changed files");
 }

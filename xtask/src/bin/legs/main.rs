@@ -14,7 +14,7 @@ mod sim;
 fn models() -> Vec<&'static str> {
     let mut names = Vec::new();
     macro_rules! name {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
             names.push(stringify!($module));
         };
     }
@@ -40,7 +40,7 @@ fn unknown(name: &str) -> Error {
 
 fn eval(args: EvalArgs) -> Result<(), Error> {
     macro_rules! dispatch {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
             if args.model == stringify!($module) {
                 return eval::run::<$ty, $nq, $nc, $nu>(&args);
             }
@@ -54,7 +54,7 @@ fn simulate(args: SimArgs) -> Result<(), Error> {
     let name = args.model.clone().unwrap_or_else(|| "minitaur".to_string());
     let settings = sim::Settings::from_args(&args)?;
     macro_rules! dispatch {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
             if name == stringify!($module) {
                 return sim::run::<$ty, $nq, $nc, $nu>(&settings);
             }
