@@ -25,6 +25,9 @@ pub enum DynamicsError {
     /// lose rank here, a singular configuration of the mechanism. `rcond` is the
     /// reciprocal condition estimate (squared pivot ratio of its Cholesky factor).
     SingularConstraints { rcond: f64 },
+    /// The held contact rows repeat each other or the closures (more contacts held than
+    /// the leg can satisfy independently); `rcond` is the pivot ratio of their system.
+    SingularContacts { rcond: f64 },
     /// A state, input or parameter is NaN or infinite.
     NonFinite,
 }
@@ -38,6 +41,10 @@ impl fmt::Display for DynamicsError {
             DynamicsError::SingularConstraints { rcond } => write!(
                 f,
                 "singular configuration: the closure constraints lose rank (rcond {rcond:.1e})"
+            ),
+            DynamicsError::SingularContacts { rcond } => write!(
+                f,
+                "singular contacts: the held contact rows lose rank with the closures (rcond {rcond:.1e})"
             ),
             DynamicsError::NonFinite => write!(f, "non-finite state, input or parameter"),
         }

@@ -19,8 +19,10 @@
 #![cfg_attr(not(feature = "std"), no_std)]
 
 pub mod assembly;
+pub mod contact;
 pub mod control;
 pub mod dynamics;
+pub mod hybrid;
 pub mod integrate;
 pub mod linalg;
 mod model;

@@ -1,0 +1,941 @@
+//! Hybrid simulation of a leg on the ground (DESIGN.md §3.1): contact modes (flight,
+//! sticking, sliding), events located inside the step by root finding, the plastic impact
+//! map at touchdown, friction-cone switching, and projection onto every active constraint
+//! after each step. A step allocates nothing; [`HybridSimulator::run`] (with `std`)
+//! records samples and events in vectors reserved before the first step.
+//!
+//! Each contact row has a guard that is non-negative while its mode is valid:
+//!
+//! | mode  | tangential row `2k`      | normal row `2k + 1` |
+//! |-------|--------------------------|---------------------|
+//! | flight| —                        | gap `n·x_c − d`     |
+//! | stick | `μ λ_n − abs(λ_t)`       | `λ_n`               |
+//! | slide | slip speed `s (t·ẋ_c)`   | `λ_n`               |
+//!
+//! A step integrates (RK4, torques held) in the current modes; if a guard ends negative,
+//! the earliest crossing is found by the Illinois method on the step length (to
+//! [`HybridOptions::time_tolerance`]), the state advanced there, the event handled
+//! (touchdown: impact and stick; liftoff: flight; slip: slide; a slide that stops:
+//! stick), the modes made consistent, and the rest of the step taken the same way.
+
+use core::fmt;
+use core::marker::PhantomData;
+
+use nalgebra::{SMatrix, SVector};
+
+use crate::assembly::{leg_size, AssemblyError, Tolerance};
+use crate::contact::{
+    forward_dynamics_with_contacts, impact_map, solve_structured, spec_friction, ContactMode,
+    ContactRows, ContactSolution, Ground, ImpactError, Modes,
+};
+use crate::control::ControlError;
+use crate::dynamics::{Baumgarte, DynamicsError};
+use crate::integrate::{ControlUpdate, State};
+use crate::linalg::{mul, Cholesky};
+use crate::model::{ContactModel, Real};
+
+/// A leg's state with its contacts.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HybridState<T: Real, const NQ: usize, const NK: usize> {
+    pub state: State<T, NQ>,
+    pub modes: Modes<NK>,
+    /// Ground coordinates the held rows keep: a sticking contact's tangential position at
+    /// touchdown (entry `2k`) and the ground (entry `2k + 1`, always 0).
+    pub anchors: SVector<T, NK>,
+}
+
+impl<T: Real, const NQ: usize, const NK: usize> HybridState<T, NQ, NK> {
+    /// Every contact in flight.
+    pub fn flight(state: State<T, NQ>) -> Self {
+        HybridState {
+            state,
+            modes: Modes::flight(),
+            anchors: SVector::zeros(),
+        }
+    }
+}
+
+/// What happened to a contact.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum EventKind {
+    /// The contact reached the ground (an impact, unless it was resting).
+    Touchdown,
+    /// The normal force reached zero: the contact leaves the ground.
+    Liftoff,
+    /// The friction force reached the cone: sticking becomes sliding.
+    Slip,
+    /// The slip speed reached zero: sliding becomes sticking.
+    Stick,
+}
+
+/// One located event.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Event<T: Real> {
+    pub t: T,
+    pub kind: EventKind,
+    /// The contact's index (in [`ContactModel::CONTACT_NAMES`]).
+    pub contact: usize,
+    /// The ground's impulse on the leg at a touchdown `(Λ_t, Λ_n)` [N s]; zero otherwise.
+    pub impulse: [T; 2],
+    /// Kinetic energy the impact took [J]; zero for other events.
+    pub energy_lost: T,
+}
+
+/// The most events one step may hold; more means the contacts chatter (a Zeno
+/// sequence), reported as [`HybridError::TooManyEvents`].
+pub const MAX_EVENTS_PER_STEP: usize = 8;
+
+/// The events of one step, in time order.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepEvents<T: Real> {
+    events: [Option<Event<T>>; MAX_EVENTS_PER_STEP],
+    count: usize,
+}
+
+impl<T: Real> StepEvents<T> {
+    fn new() -> Self {
+        StepEvents {
+            events: [None; MAX_EVENTS_PER_STEP],
+            count: 0,
+        }
+    }
+
+    fn push(&mut self, e: Event<T>, t: T) -> Result<(), HybridError> {
+        if self.count == MAX_EVENTS_PER_STEP {
+            return Err(HybridError::TooManyEvents { t: to_f64(t) });
+        }
+        self.events[self.count] = Some(e);
+        self.count += 1;
+        Ok(())
+    }
+
+    pub fn iter(&self) -> impl Iterator<Item = &Event<T>> {
+        self.events[..self.count].iter().flatten()
+    }
+
+    pub fn len(&self) -> usize {
+        self.count
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+}
+
+/// Why a hybrid step failed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum HybridError {
+    Dynamics(DynamicsError),
+    Impact(ImpactError),
+    Projection(AssemblyError),
+    Control(ControlError),
+    /// More than [`MAX_EVENTS_PER_STEP`] events in one step at time `t`.
+    TooManyEvents {
+        t: f64,
+    },
+}
+
+impl fmt::Display for HybridError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            HybridError::Dynamics(e) => write!(f, "dynamics: {e}"),
+            HybridError::Impact(e) => write!(f, "{e}"),
+            HybridError::Projection(e) => write!(f, "projection onto the constraints: {e}"),
+            HybridError::Control(e) => write!(f, "control: {e}"),
+            HybridError::TooManyEvents { t } => write!(
+                f,
+                "more than {MAX_EVENTS_PER_STEP} contact events in the step at t = {t} s (the contacts chatter)"
+            ),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for HybridError {}
+
+impl From<DynamicsError> for HybridError {
+    fn from(e: DynamicsError) -> Self {
+        HybridError::Dynamics(e)
+    }
+}
+impl From<ImpactError> for HybridError {
+    fn from(e: ImpactError) -> Self {
+        HybridError::Impact(e)
+    }
+}
+impl From<AssemblyError> for HybridError {
+    fn from(e: AssemblyError) -> Self {
+        HybridError::Projection(e)
+    }
+}
+impl From<ControlError> for HybridError {
+    fn from(e: ControlError) -> Self {
+        HybridError::Control(e)
+    }
+}
+
+fn to_f64<T: Real>(x: T) -> f64 {
+    x.to_subset().unwrap_or(f64::NAN)
+}
+
+/// Motor torques from the time and the hybrid state (the contact modes included): a
+/// hopping controller, or any closure `FnMut(t, &HybridState) -> u`.
+pub trait HybridTorqueSource<T: Real, const NQ: usize, const NK: usize, const NU: usize> {
+    fn torque(
+        &mut self,
+        t: T,
+        state: &HybridState<T, NQ, NK>,
+    ) -> Result<SVector<T, NU>, ControlError>;
+}
+
+impl<T: Real, const NQ: usize, const NK: usize, const NU: usize, F>
+    HybridTorqueSource<T, NQ, NK, NU> for F
+where
+    F: FnMut(T, &HybridState<T, NQ, NK>) -> SVector<T, NU>,
+{
+    fn torque(
+        &mut self,
+        t: T,
+        state: &HybridState<T, NQ, NK>,
+    ) -> Result<SVector<T, NU>, ControlError> {
+        Ok(self(t, state))
+    }
+}
+
+/// How to step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HybridOptions<T: Real, const NK: usize> {
+    pub dt: T,
+    pub ground: Ground<T>,
+    /// Coulomb μ per row (both rows of contact `k` hold its value).
+    pub friction: SVector<T, NK>,
+    /// Baumgarte terms on closures and held contacts (`None`: projection only).
+    pub baumgarte: Option<Baumgarte<T>>,
+    /// For the position projection.
+    pub tolerance: Tolerance<T>,
+    /// How closely an event's time is located [s].
+    pub time_tolerance: T,
+    /// Torques held over each step (and re-asked after each event), or asked at every
+    /// integrator stage and guard evaluation (a continuous-time law).
+    pub control: ControlUpdate,
+}
+
+/// Steps leg `L` on the ground.
+#[derive(Clone, Copy, Debug)]
+pub struct HybridSimulator<
+    L,
+    T: Real,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+> where
+    L: ContactModel<NQ, NC, NU, NK>,
+{
+    pub params: L::Params<T>,
+    pub options: HybridOptions<T, NK>,
+    model: PhantomData<L>,
+}
+
+impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
+    HybridSimulator<L, T, NQ, NC, NU, NK>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+    T: Real,
+{
+    /// The spec's ground and friction, RK4 steps of `dt`, events to 1e-12 s (`f64`).
+    pub fn new(params: L::Params<T>, dt: T) -> Self {
+        HybridSimulator {
+            params,
+            options: HybridOptions {
+                dt,
+                ground: Ground::of::<L, NQ, NC, NU, NK>(),
+                friction: spec_friction::<L, T, NQ, NC, NU, NK>(),
+                baumgarte: None,
+                tolerance: Tolerance::default(),
+                time_tolerance: T::lit(1e-12).max(T::default_epsilon() * T::lit(10.0)),
+                control: ControlUpdate::PerStep,
+            },
+            model: PhantomData,
+        }
+    }
+
+    /// Constrained accelerations and forces in the state's modes.
+    pub fn dynamics(
+        &self,
+        hs: &HybridState<T, NQ, NK>,
+        u: &SVector<T, NU>,
+    ) -> Result<ContactSolution<T, NQ, NC, NK>, DynamicsError> {
+        forward_dynamics_with_contacts::<L, T, NQ, NC, NU, NK>(
+            &self.params,
+            &hs.state.q,
+            &hs.state.qd,
+            u,
+            &hs.modes,
+            &hs.anchors,
+            &self.options.ground,
+            &self.options.friction,
+            self.options.baumgarte,
+        )
+    }
+
+    /// Contact positions and velocities in ground coordinates `(t, n − d)`.
+    pub fn contact_coordinates(&self, state: &State<T, NQ>) -> (SVector<T, NK>, SVector<T, NK>) {
+        let g = &self.options.ground;
+        let x = g.coordinates(&L::contact_positions(&state.q, &self.params));
+        let v = g.rows(&(L::contact_jacobian(&state.q, &self.params) * state.qd));
+        (x, v)
+    }
+
+    /// The torques at time `t` and state `hs` for a step that started with `u0`.
+    fn torque_at(
+        &self,
+        source: &mut impl HybridTorqueSource<T, NQ, NK, NU>,
+        t: T,
+        hs: &HybridState<T, NQ, NK>,
+        u0: &SVector<T, NU>,
+    ) -> Result<SVector<T, NU>, HybridError> {
+        match self.options.control {
+            ControlUpdate::PerStep => Ok(*u0),
+            ControlUpdate::PerStage => Ok(source.torque(t, hs)?),
+        }
+    }
+
+    /// One RK4 step of length `h` from time `t0` in fixed modes.
+    fn rk4(
+        &self,
+        hs: &HybridState<T, NQ, NK>,
+        source: &mut impl HybridTorqueSource<T, NQ, NK, NU>,
+        t0: T,
+        u0: &SVector<T, NU>,
+        h: T,
+    ) -> Result<State<T, NQ>, HybridError> {
+        let mut f = |tau: T,
+                     q: SVector<T, NQ>,
+                     qd: SVector<T, NQ>|
+         -> Result<SVector<T, NQ>, HybridError> {
+            let s = HybridState {
+                state: State { q, qd },
+                ..*hs
+            };
+            let u = self.torque_at(source, t0 + tau, &s, u0)?;
+            Ok(self.dynamics(&s, &u)?.x)
+        };
+        let (q, qd) = (hs.state.q, hs.state.qd);
+        let half = h * T::lit(0.5);
+        let (k1q, k1v) = (qd, f(T::zero(), q, qd)?);
+        let (k2q, k2v) = (qd + k1v * half, f(half, q + k1q * half, qd + k1v * half)?);
+        let (k3q, k3v) = (qd + k2v * half, f(half, q + k2q * half, qd + k2v * half)?);
+        let (k4q, k4v) = (qd + k3v * h, f(h, q + k3q * h, qd + k3v * h)?);
+        let sixth = h / T::lit(6.0);
+        Ok(State {
+            q: q + (k1q + (k2q + k3q) * T::lit(2.0) + k4q) * sixth,
+            qd: qd + (k1v + (k2v + k3v) * T::lit(2.0) + k4v) * sixth,
+        })
+    }
+
+    /// Forces below this are rounding [N]: `√ε` of the leg's weight and motor torques,
+    /// as generalized forces over the leg's size. It keeps the friction cone from
+    /// reporting a slip where both forces vanish together (just before a liftoff).
+    fn force_floor(&self, q: &SVector<T, NQ>, u: &SVector<T, NU>) -> T {
+        let size = leg_size::<L, T, NQ, NC, NU>(&self.params, q);
+        let scale = (L::gravity_forces(q, &self.params).amax() + u.amax()) / size;
+        T::default_epsilon().sqrt() * scale
+    }
+
+    /// The guards of every row (see the module docs); `+∞` where a row has none.
+    pub fn guards(
+        &self,
+        hs: &HybridState<T, NQ, NK>,
+        u: &SVector<T, NU>,
+    ) -> Result<SVector<T, NK>, DynamicsError> {
+        let mut g = SVector::<T, NK>::from_element(T::max_value().unwrap_or(T::one()));
+        let any_ground = (0..NK / 2).any(|k| hs.modes.get(k).on_ground());
+        let forces = if any_ground {
+            self.dynamics(hs, u)?.contact
+        } else {
+            SVector::zeros()
+        };
+        let (x, v) = self.contact_coordinates(&hs.state);
+        let floor = self.force_floor(&hs.state.q, u);
+        for k in 0..NK / 2 {
+            let (t, n) = (2 * k, 2 * k + 1);
+            match hs.modes.get(k) {
+                ContactMode::Flight => g[n] = x[n],
+                ContactMode::Stick => {
+                    g[n] = forces[n];
+                    g[t] = self.options.friction[t] * forces[n] + floor - forces[t].abs();
+                }
+                ContactMode::Slide { forward } => {
+                    g[n] = forces[n];
+                    g[t] = if forward { v[t] } else { -v[t] };
+                }
+            }
+        }
+        Ok(g)
+    }
+
+    /// Moves `q` onto every active constraint (closures, held contacts at their anchors)
+    /// by the smallest correction, and `q̇` onto their velocity constraints in the metric
+    /// of `M`.
+    pub fn project(&self, hs: &mut HybridState<T, NQ, NK>) -> Result<(), HybridError> {
+        let p = &self.params;
+        let g = &self.options.ground;
+        let identity = Cholesky::new(&SMatrix::<T, NQ, NQ>::identity())
+            .ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
+        let held = hs.modes.held_rows();
+        let tol = &self.options.tolerance;
+        let residuals = |q: &SVector<T, NQ>| {
+            let phi = L::closure_residual(q, p);
+            let mut rc = g.coordinates(&L::contact_positions(q, p)) - hs.anchors;
+            for (r, &h) in held.iter().enumerate() {
+                if !h {
+                    rc[r] = T::zero();
+                }
+            }
+            (phi, rc)
+        };
+        let mut q = hs.state.q;
+        let mut converged = false;
+        let mut worst = T::zero();
+        for _ in 0..tol.max_iterations {
+            let (phi, rc) = residuals(&q);
+            let limit = tol.relative_residual * leg_size::<L, T, NQ, NC, NU>(p, &q);
+            worst = phi.amax().max(rc.amax());
+            if !(worst.is_finite() && limit.is_finite()) {
+                return Err(AssemblyError::NonFinite.into());
+            }
+            if worst <= limit {
+                converged = true;
+                break;
+            }
+            let rows = ContactRows::new(
+                g,
+                &L::contact_jacobian(&q, p),
+                &hs.modes,
+                &self.options.friction,
+            );
+            let sol = solve_structured(
+                &identity,
+                &L::constraint_jacobian(&q, p),
+                &-phi,
+                L::REDUNDANT_ROWS,
+                &rows.c,
+                &rows.c,
+                &-rc,
+                &rows.held,
+                &SVector::zeros(),
+                &SVector::zeros(),
+            )
+            .map_err(|_| AssemblyError::Singular)?;
+            q += sol.x;
+        }
+        if !converged {
+            return Err(AssemblyError::Unreachable {
+                residual: to_f64(worst),
+            }
+            .into());
+        }
+        hs.state.q = q;
+        let m = L::mass_matrix(&q, p);
+        let chol_m = Cholesky::new(&m).ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
+        let rows = ContactRows::new(
+            g,
+            &L::contact_jacobian(&q, p),
+            &hs.modes,
+            &self.options.friction,
+        );
+        let sol = solve_structured(
+            &chol_m,
+            &L::constraint_jacobian(&q, p),
+            &SVector::zeros(),
+            L::REDUNDANT_ROWS,
+            &rows.c,
+            &rows.c,
+            &SVector::zeros(),
+            &rows.held,
+            &SVector::zeros(),
+            &mul(&m, &hs.state.qd),
+        )?;
+        hs.state.qd = sol.x;
+        Ok(())
+    }
+
+    /// Touchdown of contact `k` at the current state: stick there, with the plastic impact
+    /// of every held row; a contact that would pull stays (or goes) in flight.
+    fn touchdown(
+        &self,
+        hs: &mut HybridState<T, NQ, NK>,
+        k: usize,
+        t: T,
+        events: &mut StepEvents<T>,
+    ) -> Result<(), HybridError> {
+        let (x, _) = self.contact_coordinates(&hs.state);
+        hs.modes.set(k, ContactMode::Stick);
+        hs.anchors[2 * k] = x[2 * k];
+        hs.anchors[2 * k + 1] = T::zero();
+        for _ in 0..=NK / 2 {
+            let mut modes = hs.modes;
+            match impact_map::<L, T, NQ, NC, NU, NK>(
+                &self.params,
+                &hs.state.q,
+                &hs.state.qd,
+                &mut modes,
+                &self.options.ground,
+                &self.options.friction,
+            ) {
+                Ok(imp) => {
+                    hs.modes = modes;
+                    hs.state.qd = imp.qd_plus;
+                    return events.push(
+                        Event {
+                            t,
+                            kind: EventKind::Touchdown,
+                            contact: k,
+                            impulse: [imp.impulses[2 * k], imp.impulses[2 * k + 1]],
+                            energy_lost: imp.energy_lost,
+                        },
+                        t,
+                    );
+                }
+                Err(ImpactError::Pulling { contact, .. }) => {
+                    hs.modes.set(contact, ContactMode::Flight);
+                    if contact == k {
+                        // Grazing: nothing to stop, the contact stays in the air.
+                        return Ok(());
+                    }
+                }
+                Err(e) => return Err(e.into()),
+            }
+        }
+        Ok(())
+    }
+
+    /// Makes the modes consistent with the forces at the current state: a held contact
+    /// that pulls lifts off, one outside the cone slides, a slide that has stopped sticks.
+    fn settle(
+        &self,
+        hs: &mut HybridState<T, NQ, NK>,
+        u: &SVector<T, NU>,
+        t: T,
+        events: &mut StepEvents<T>,
+    ) -> Result<(), HybridError> {
+        for _ in 0..NK + 2 {
+            let forces = self.dynamics(hs, u)?.contact;
+            let (x, v) = self.contact_coordinates(&hs.state);
+            let floor = self.force_floor(&hs.state.q, u);
+            let mut change = None;
+            for k in 0..NK / 2 {
+                let (ti, ni) = (2 * k, 2 * k + 1);
+                let mu = self.options.friction[ti];
+                match hs.modes.get(k) {
+                    ContactMode::Flight => {}
+                    _ if forces[ni] < T::zero() => {
+                        change = Some((k, ContactMode::Flight, EventKind::Liftoff))
+                    }
+                    ContactMode::Stick if forces[ti].abs() > mu * forces[ni] + floor => {
+                        let slide = ContactMode::Slide {
+                            forward: forces[ti] < T::zero(),
+                        };
+                        change = Some((k, slide, EventKind::Slip));
+                    }
+                    ContactMode::Slide { forward } => {
+                        let speed = if forward { v[ti] } else { -v[ti] };
+                        if speed <= T::zero() {
+                            // Stopped: it sticks if the cone can hold it there, else it
+                            // slides the way the unheld friction demand pushes it.
+                            let mut held = *hs;
+                            held.modes.set(k, ContactMode::Stick);
+                            held.anchors[ti] = x[ti];
+                            let f = self.dynamics(&held, u)?.contact;
+                            if f[ti].abs() <= mu * f[ni] + floor {
+                                hs.anchors[ti] = x[ti];
+                                change = Some((k, ContactMode::Stick, EventKind::Stick));
+                            } else if (f[ti] < T::zero()) != forward {
+                                let slide = ContactMode::Slide {
+                                    forward: f[ti] < T::zero(),
+                                };
+                                change = Some((k, slide, EventKind::Slip));
+                            }
+                        }
+                    }
+                    ContactMode::Stick => {}
+                }
+                if change.is_some() {
+                    break;
+                }
+            }
+            match change {
+                None => return Ok(()),
+                Some((k, mode, kind)) => {
+                    hs.modes.set(k, mode);
+                    events.push(
+                        Event {
+                            t,
+                            kind,
+                            contact: k,
+                            impulse: [T::zero(); 2],
+                            energy_lost: T::zero(),
+                        },
+                        t,
+                    )?;
+                }
+            }
+        }
+        Err(HybridError::TooManyEvents { t: to_f64(t) })
+    }
+
+    /// Puts resting contacts on the ground: flight contacts at or below the ground
+    /// and not moving away stick where they are (no impact is applied; use a state at
+    /// rest), then the modes are settled against the forces under `u`.
+    pub fn start(
+        &self,
+        state: State<T, NQ>,
+        u: &SVector<T, NU>,
+    ) -> Result<HybridState<T, NQ, NK>, HybridError> {
+        let mut hs = HybridState::flight(state);
+        let (x, v) = self.contact_coordinates(&state);
+        let size = leg_size::<L, T, NQ, NC, NU>(&self.params, &state.q);
+        for k in 0..NK / 2 {
+            if x[2 * k + 1] <= self.options.tolerance.relative_residual * size
+                && v[2 * k + 1] <= T::zero()
+            {
+                hs.modes.set(k, ContactMode::Stick);
+                hs.anchors[2 * k] = x[2 * k];
+            }
+        }
+        let mut events = StepEvents::new();
+        self.settle(&mut hs, u, T::zero(), &mut events)?;
+        self.project(&mut hs)?;
+        Ok(hs)
+    }
+
+    /// Advances `hs` from `t` by one step of [`HybridOptions::dt`] with torques from
+    /// `source` (asked at the step's start and after each event), and returns the
+    /// step's events.
+    pub fn step(
+        &self,
+        hs: &mut HybridState<T, NQ, NK>,
+        t: T,
+        source: &mut impl HybridTorqueSource<T, NQ, NK, NU>,
+    ) -> Result<StepEvents<T>, HybridError> {
+        let mut events = StepEvents::new();
+        let mut now = t;
+        let end = t + self.options.dt;
+        let tol = self.options.time_tolerance;
+        loop {
+            let h = end - now;
+            if h <= tol {
+                break;
+            }
+            let u = source.torque(now, hs)?;
+            // A flight contact at or under the ground and moving in touches down now. A
+            // contact that just lifted off sits at the ground with no normal speed (up
+            // to rounding: below `size · tolerance / dt`); it is left to fly.
+            let (x, v) = self.contact_coordinates(&hs.state);
+            let size = leg_size::<L, T, NQ, NC, NU>(&self.params, &hs.state.q);
+            let still = self.options.tolerance.relative_residual * size / self.options.dt;
+            if let Some(k) = (0..NK / 2).find(|&k| {
+                hs.modes.get(k) == ContactMode::Flight
+                    && x[2 * k + 1] <= T::zero()
+                    && v[2 * k + 1] < -still
+            }) {
+                self.touchdown(hs, k, now, &mut events)?;
+                self.settle(hs, &u, now, &mut events)?;
+                continue;
+            }
+            let trial = self.rk4(hs, source, now, &u, h)?;
+            let at = |s: State<T, NQ>| HybridState { state: s, ..*hs };
+            let u1 = self.torque_at(source, end, &at(trial), &u)?;
+            let g1 = self.guards(&at(trial), &u1)?;
+            if !(0..NK).any(|r| g1[r] < T::zero()) {
+                hs.state = trial;
+                self.project(hs)?;
+                break;
+            }
+            // The earliest crossing among the rows whose guard ends negative.
+            let mut best: Option<(T, usize, State<T, NQ>)> = None;
+            for r in 0..NK {
+                if g1[r] >= T::zero() {
+                    continue;
+                }
+                let limit = best.as_ref().map_or(h, |b| b.0);
+                let mut guard = |tau: T| -> Result<(T, State<T, NQ>), HybridError> {
+                    let s = self.rk4(hs, source, now, &u, tau)?;
+                    let us = self.torque_at(source, now + tau, &at(s), &u)?;
+                    Ok((self.guards(&at(s), &us)?[r], s))
+                };
+                let (g_limit, s_limit) = if limit == h {
+                    (g1[r], trial)
+                } else {
+                    guard(limit)?
+                };
+                if g_limit >= T::zero() {
+                    continue; // this row crosses after the best found so far
+                }
+                let g0 = self.guards(hs, &u)?[r];
+                let (tau, s) = illinois(g0, g_limit, limit, s_limit, tol, guard)?;
+                best = Some((tau, r, s));
+            }
+            let Some((tau, r, s)) = best else {
+                // Rounding: no crossing confirmed; accept the step.
+                hs.state = trial;
+                self.project(hs)?;
+                break;
+            };
+            hs.state = s;
+            now += tau;
+            self.project(hs)?;
+            let k = r / 2;
+            match (hs.modes.get(k), r % 2) {
+                (ContactMode::Flight, _) => self.touchdown(hs, k, now, &mut events)?,
+                (_, 1) => {
+                    hs.modes.set(k, ContactMode::Flight);
+                    events.push(
+                        Event {
+                            t: now,
+                            kind: EventKind::Liftoff,
+                            contact: k,
+                            impulse: [T::zero(); 2],
+                            energy_lost: T::zero(),
+                        },
+                        now,
+                    )?;
+                }
+                (ContactMode::Stick, _) => {
+                    let forces = self.dynamics(hs, &u)?.contact;
+                    hs.modes.set(
+                        k,
+                        ContactMode::Slide {
+                            forward: forces[r] < T::zero(),
+                        },
+                    );
+                    events.push(
+                        Event {
+                            t: now,
+                            kind: EventKind::Slip,
+                            contact: k,
+                            impulse: [T::zero(); 2],
+                            energy_lost: T::zero(),
+                        },
+                        now,
+                    )?;
+                }
+                (ContactMode::Slide { .. }, _) => {
+                    let (x, _) = self.contact_coordinates(&hs.state);
+                    hs.anchors[r] = x[r];
+                    hs.modes.set(k, ContactMode::Stick);
+                    events.push(
+                        Event {
+                            t: now,
+                            kind: EventKind::Stick,
+                            contact: k,
+                            impulse: [T::zero(); 2],
+                            energy_lost: T::zero(),
+                        },
+                        now,
+                    )?;
+                }
+            }
+            self.project(hs)?;
+            self.settle(hs, &u, now, &mut events)?;
+        }
+        Ok(events)
+    }
+}
+
+/// The Illinois variant of regula falsi on `g(τ)` over `[0, b]` with `g(0) = g0 ≥ 0 >
+/// g(b) = gb`: the smallest bracket end `b` where `g < 0`, once the bracket is shorter
+/// than `tol` (the event has happened at the returned time, by at most `tol`).
+fn illinois<T: Real, S: Copy>(
+    g0: T,
+    gb: T,
+    b: T,
+    sb: S,
+    tol: T,
+    mut g: impl FnMut(T) -> Result<(T, S), HybridError>,
+) -> Result<(T, S), HybridError> {
+    let (mut a, mut ga) = (T::zero(), g0.max(T::zero()));
+    let (mut b, mut gb, mut sb) = (b, gb, sb);
+    let mut side = 0i8;
+    for _ in 0..200 {
+        if b - a <= tol {
+            break;
+        }
+        let mut c = if ga - gb > T::zero() {
+            b - gb * (b - a) / (gb - ga)
+        } else {
+            (a + b) * T::lit(0.5)
+        };
+        // Keep inside the bracket, away from its ends by a little, so that it shrinks.
+        let margin = tol * T::lit(0.25);
+        if !(c > a + margin && c < b - margin) {
+            c = (a + b) * T::lit(0.5);
+        }
+        let (gc, sc) = g(c)?;
+        if gc < T::zero() {
+            (b, gb, sb) = (c, gc, sc);
+            if side == -1 {
+                ga *= T::lit(0.5);
+            }
+            side = -1;
+        } else {
+            (a, ga) = (c, gc);
+            if side == 1 {
+                gb *= T::lit(0.5);
+            }
+            side = 1;
+        }
+    }
+    Ok((b, sb))
+}
+
+#[cfg(feature = "std")]
+pub use record::*;
+
+#[cfg(feature = "std")]
+mod record {
+    use super::*;
+    use crate::integrate::energy;
+
+    /// One recorded instant of a hybrid run.
+    #[derive(Clone, Copy, Debug, PartialEq)]
+    pub struct HybridSample<
+        T: Real,
+        const NQ: usize,
+        const NC: usize,
+        const NU: usize,
+        const NK: usize,
+    > {
+        pub t: T,
+        pub state: HybridState<T, NQ, NK>,
+        pub u: SVector<T, NU>,
+        /// Ground forces `(λ_t, λ_n)` per contact at this instant.
+        pub contact_forces: SVector<T, NK>,
+        pub closure_forces: SVector<T, NC>,
+        /// `T + V`.
+        pub energy: T,
+        /// `max |φ|` (m).
+        pub closure_residual: T,
+        /// The held contacts' largest distance from their anchors (m).
+        pub contact_residual: T,
+    }
+
+    /// A hybrid run: samples at every step's start (and the last state) and every event.
+    #[derive(Clone, Debug, PartialEq)]
+    pub struct HybridRecord<
+        T: Real,
+        const NQ: usize,
+        const NC: usize,
+        const NU: usize,
+        const NK: usize,
+    > {
+        pub samples: Vec<HybridSample<T, NQ, NC, NU, NK>>,
+        pub events: Vec<Event<T>>,
+    }
+
+    /// A run that stopped early: why, when, and everything recorded until then.
+    #[derive(Clone, Debug, PartialEq)]
+    pub struct HybridStopped<
+        T: Real,
+        const NQ: usize,
+        const NC: usize,
+        const NU: usize,
+        const NK: usize,
+    > {
+        pub t: T,
+        pub cause: HybridError,
+        pub record: HybridRecord<T, NQ, NC, NU, NK>,
+    }
+
+    impl<T: Real, const NQ: usize, const NC: usize, const NU: usize, const NK: usize> fmt::Display
+        for HybridStopped<T, NQ, NC, NU, NK>
+    {
+        fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+            write!(
+                f,
+                "simulation stopped at t = {} s after {} samples and {} events: {}",
+                self.t,
+                self.record.samples.len(),
+                self.record.events.len(),
+                self.cause
+            )
+        }
+    }
+
+    impl<T: Real, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
+        std::error::Error for HybridStopped<T, NQ, NC, NU, NK>
+    {
+    }
+
+    impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
+        HybridSimulator<L, T, NQ, NC, NU, NK>
+    where
+        L: ContactModel<NQ, NC, NU, NK>,
+        T: Real,
+    {
+        fn sample(
+            &self,
+            t: T,
+            hs: &HybridState<T, NQ, NK>,
+            u: SVector<T, NU>,
+        ) -> Result<HybridSample<T, NQ, NC, NU, NK>, HybridError> {
+            let sol = self.dynamics(hs, &u)?;
+            let (x, _) = self.contact_coordinates(&hs.state);
+            let held = hs.modes.held_rows();
+            let contact_residual = (0..NK)
+                .filter(|&r| held[r])
+                .map(|r| (x[r] - hs.anchors[r]).abs())
+                .fold(T::zero(), |a, b| a.max(b));
+            Ok(HybridSample {
+                t,
+                state: *hs,
+                u,
+                contact_forces: sol.contact,
+                closure_forces: sol.closure,
+                energy: energy::<L, T, NQ, NC, NU>(&self.params, &hs.state),
+                closure_residual: if NC == 0 {
+                    T::zero()
+                } else {
+                    L::closure_residual(&hs.state.q, &self.params).amax()
+                },
+                contact_residual,
+            })
+        }
+
+        /// Runs `steps` steps from `initial`; records the initial state, every step and
+        /// every event. Stops at the first failure, keeping the record so far.
+        pub fn run(
+            &self,
+            initial: HybridState<T, NQ, NK>,
+            steps: usize,
+            source: &mut impl HybridTorqueSource<T, NQ, NK, NU>,
+        ) -> Result<HybridRecord<T, NQ, NC, NU, NK>, HybridStopped<T, NQ, NC, NU, NK>> {
+            let mut record = HybridRecord {
+                samples: Vec::with_capacity(steps + 1),
+                events: Vec::with_capacity(64),
+            };
+            let mut hs = initial;
+            let mut t = T::zero();
+            for k in 0..=steps {
+                let outcome = source
+                    .torque(t, &hs)
+                    .map_err(HybridError::from)
+                    .and_then(|u| self.sample(t, &hs, u));
+                match outcome {
+                    Ok(s) => record.samples.push(s),
+                    Err(cause) => return Err(HybridStopped { t, cause, record }),
+                }
+                if k == steps {
+                    break;
+                }
+                match self.step(&mut hs, t, source) {
+                    Ok(events) => record.events.extend(events.iter().copied()),
+                    Err(cause) => return Err(HybridStopped { t, cause, record }),
+                }
+                t = self.options.dt * T::lit((k + 1) as f64);
+            }
+            Ok(record)
+        }
+    }
+}
