@@ -95,6 +95,8 @@ def derive(model):
 
     def point(ref):
         i = ref["link"]
+        if i is None:  # fixed in the base frame
+            return vec(ref["point"])
         return joint[i] + rotate(angle[i], vec(ref["point"]))
 
     # The Lagrangian of each branch (the links under one base joint), then their sum.

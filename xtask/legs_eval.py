@@ -4,11 +4,14 @@ import json
 import subprocess
 
 
-def ours(legs, model, q, qd, assemble=False):
-    """`legs eval MODEL --q … --qd … --json` (with `--assemble`, q and qd are the motors')."""
+def ours(legs, model, q, qd, assemble=False, project=False):
+    """`legs eval MODEL --q … --qd … --json` (with `--assemble`, q and qd are the motors';
+    with `--project`, q and qd are moved onto the closures first)."""
     args = [legs, "eval", model, "--q", ",".join(repr(float(x)) for x in q), "--qd", ",".join(repr(float(x)) for x in qd), "--json"]
     if assemble:
         args.append("--assemble")
+    if project:
+        args.append("--project")
     out = subprocess.run(args, capture_output=True, text=True)
     if out.returncode != 0:
         raise SystemExit(f"{model}: legs eval failed: {out.stderr.strip()}")

@@ -4,7 +4,7 @@
 //
 //   gravity GX GY
 //   link NAME PARENT OX OY MASS CX CY INERTIA ARMATURE DAMPING   (PARENT: -1 for the base)
-//   closure NAME LINK_A AX AY LINK_B BX BY
+//   closure NAME LINK_A AX AY LINK_B BX BY                        (LINK: -1 for the base)
 //   state Q... QD...
 //
 // Revolute joints about z, the spec's masses, centres of mass and inertias, reflected rotor
@@ -58,7 +58,8 @@ inline bool parse(std::FILE* f, Leg& leg, std::vector<Link>& links, std::vector<
       Closure c;
       if (std::fscanf(f, "%127s %d %lf %lf %d %lf %lf", name, &c.la, &c.ax, &c.ay, &c.lb, &c.bx, &c.by) != 7)
         return false;
-      if (c.la < 0 || c.lb < 0 || c.la >= int(links.size()) || c.lb >= int(links.size())) return false;
+      // -1: a point fixed in the base frame.
+      if (c.la < -1 || c.lb < -1 || c.la >= int(links.size()) || c.lb >= int(links.size())) return false;
       c.name = name;
       closures.push_back(c);
     } else if (k == "state") {
@@ -122,10 +123,10 @@ inline bool read_leg(const char* path, Leg& leg) {
     joints[order[k]] = j;
   }
   for (const leg_file::Closure& c : closure_lines) {
-    leg.model.addFrame(pin::Frame(c.name + "_a", joints[c.la],
+    leg.model.addFrame(pin::Frame(c.name + "_a", c.la < 0 ? 0 : joints[c.la],
                                   pin::SE3(Eigen::Matrix3d::Identity(), Eigen::Vector3d(c.ax, c.ay, 0)),
                                   pin::OP_FRAME));
-    leg.model.addFrame(pin::Frame(c.name + "_b", joints[c.lb],
+    leg.model.addFrame(pin::Frame(c.name + "_b", c.lb < 0 ? 0 : joints[c.lb],
                                   pin::SE3(Eigen::Matrix3d::Identity(), Eigen::Vector3d(c.bx, c.by, 0)),
                                   pin::OP_FRAME));
     leg.closures.push_back(c.name);

@@ -5,6 +5,8 @@
 #![cfg_attr(rustfmt, rustfmt::skip)]
 pub mod atrias;
 pub use atrias::Atrias;
+pub mod atrias_hopper;
+pub use atrias_hopper::AtriasHopper;
 pub mod braced_parallelogram;
 pub use braced_parallelogram::BracedParallelogram;
 pub mod digit;
@@ -17,6 +19,8 @@ pub mod minitaur;
 pub use minitaur::Minitaur;
 pub mod minitaur_hopper;
 pub use minitaur_hopper::MinitaurHopper;
+pub mod minitaur_pinned_toe;
+pub use minitaur_pinned_toe::MinitaurPinnedToe;
 pub mod offset_five_bar;
 pub use offset_five_bar::OffsetFiveBar;
 pub mod open_three_link;
@@ -33,16 +37,18 @@ pub use two_link::TwoLink;
 macro_rules! for_each_model {
     ($callback:ident) => {
         $callback ! (atrias, $crate::atrias::Atrias, 4, 2, 2, 0); $callback !
+        (atrias_hopper, $crate::atrias_hopper::AtriasHopper, 9, 2, 2, 2); $callback !
         (braced_parallelogram, $crate::braced_parallelogram::BracedParallelogram, 5, 4,
         2, 0); $callback ! (digit, $crate::digit::Digit, 4, 2, 2, 0); $callback !
         (five_bar_offset, $crate::five_bar_offset::FiveBarOffset, 4, 2, 2, 0); $callback
         ! (klann_linkage, $crate::klann_linkage::KlannLinkage, 7, 6, 1, 0); $callback !
         (minitaur, $crate::minitaur::Minitaur, 4, 2, 2, 0); $callback ! (minitaur_hopper,
         $crate::minitaur_hopper::MinitaurHopper, 5, 2, 2, 2); $callback !
-        (offset_five_bar, $crate::offset_five_bar::OffsetFiveBar, 4, 2, 2, 0); $callback
-        ! (open_three_link, $crate::open_three_link::OpenThreeLink, 3, 0, 2, 0);
-        $callback ! (raibert_hopper, $crate::raibert_hopper::RaibertHopper, 5, 0, 2, 4);
-        $callback ! (three_motor_leg, $crate::three_motor_leg::ThreeMotorLeg, 7, 4, 3,
-        0); $callback ! (two_link, $crate::two_link::TwoLink, 2, 0, 2, 0);
+        (minitaur_pinned_toe, $crate::minitaur_pinned_toe::MinitaurPinnedToe, 5, 4, 2,
+        0); $callback ! (offset_five_bar, $crate::offset_five_bar::OffsetFiveBar, 4, 2,
+        2, 0); $callback ! (open_three_link, $crate::open_three_link::OpenThreeLink, 3,
+        0, 2, 0); $callback ! (raibert_hopper, $crate::raibert_hopper::RaibertHopper, 5,
+        0, 2, 4); $callback ! (three_motor_leg, $crate::three_motor_leg::ThreeMotorLeg,
+        7, 4, 3, 0); $callback ! (two_link, $crate::two_link::TwoLink, 2, 0, 2, 0);
     };
 }

@@ -158,6 +158,7 @@ where
     if !limit(q).is_finite() || !crate::linalg::all_finite(&phi) {
         return Err(AssemblyError::NonFinite);
     }
+    let free_count = free.iter().filter(|&&f| f).count();
     for _ in 0..tol.max_iterations {
         let err = phi.amax();
         if within(&phi, limit(q)) {
@@ -170,14 +171,37 @@ where
             }
         }
         let mu = phi.norm_squared();
-        let s = j * j.transpose() + SMatrix::<T, NC, NC>::identity() * mu;
-        let chol =
-            factor_closure_rows::<L, T, NQ, NC, NU>(&s).ok_or(AssemblyError::Unreachable {
-                residual: to_f64(err),
-            })?;
-        let mut w = phi;
-        chol.solve_mut(&mut w);
-        let step = j.transpose() * w;
+        let unreachable = AssemblyError::Unreachable {
+            residual: to_f64(err),
+        };
+        let step = if free_count >= NC - L::REDUNDANT_ROWS.min(NC) {
+            // As many free joints as independent rows or more: the minimal-norm step
+            // `Jᵀ (J Jᵀ + μ I)⁻¹ φ`.
+            let s = j * j.transpose() + SMatrix::<T, NC, NC>::identity() * mu;
+            let chol = factor_closure_rows::<L, T, NQ, NC, NU>(&s).ok_or(unreachable)?;
+            let mut w = phi;
+            chol.solve_mut(&mut w);
+            j.transpose() * w
+        } else {
+            // Fewer free joints than rows (the motors of an over-actuated leg held): the
+            // least-squares step `(JᵀJ + μ I)⁻¹ Jᵀ φ` over the free joints, the others
+            // decoupled by unit rows.
+            let mut a = j.transpose() * j + SMatrix::<T, NQ, NQ>::identity() * mu;
+            for (c, &f) in free.iter().enumerate() {
+                if !f {
+                    a.row_mut(c).fill(T::zero());
+                    a.column_mut(c).fill(T::zero());
+                    a[(c, c)] = T::one();
+                }
+            }
+            let chol = Cholesky::new(&a).ok_or(unreachable)?;
+            if chol.rcond < crate::dynamics::rcond_floor::<T>() {
+                return Err(unreachable);
+            }
+            let mut step = j.transpose() * phi;
+            chol.solve_mut(&mut step);
+            step
+        };
         let residual = |x: &SVector<T, NQ>| L::closure_residual(x, params);
         match backtrack(q, &step, mu, residual, |r| r.norm_squared()) {
             Some((next, r)) => (*q, phi) = (next, r),
@@ -386,8 +410,14 @@ where
             j.transpose() * w1 + jf.transpose() * w2
         } else {
             // One free motion and two foot coordinates: more equations than unknowns, a
-            // least-squares step `(AᵀA + μ I)⁻¹ Aᵀ r` (regular: A has full column rank).
-            let h = j.transpose() * j + jf.transpose() * jf + SMatrix::<T, NQ, NQ>::identity() * mu;
+            // least-squares step `(AᵀA + μ I)⁻¹ Aᵀ r`. A may lack full column rank (a foot
+            // that cannot move at all, e.g. pinned by a closure): a damping floor of
+            // `1000 ε` of AᵀA's largest diagonal keeps the step regular there.
+            let ata = j.transpose() * j + jf.transpose() * jf;
+            let floor = (0..NQ).fold(T::zero(), |m, i| m.max(ata[(i, i)]))
+                * T::default_epsilon()
+                * T::lit(1000.0);
+            let h = ata + SMatrix::<T, NQ, NQ>::identity() * (mu + floor);
             let chol = Cholesky::new(&h).ok_or(unreachable)?;
             let mut step = j.transpose() * phi + jf.transpose() * r.1;
             chol.solve_mut(&mut step);

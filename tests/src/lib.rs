@@ -128,7 +128,21 @@ pub fn passive_rcond<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, 
     for &a in L::ACTUATED.iter() {
         jp.column_mut(a).fill(0.0);
     }
-    rcond_of_rows::<L, NQ, NC, NU>(&jp)
+    // J_p has at most as many independent rows as passive joints (fewer than its rows
+    // on an over-actuated leg, whose motors load each other).
+    let dense = leg_models::nalgebra::DMatrix::from_iterator(NC, NQ, jp.iter().copied());
+    let mut sv: Vec<f64> = dense
+        .svd(false, false)
+        .singular_values
+        .iter()
+        .copied()
+        .collect();
+    sv.sort_by(|a, b| b.total_cmp(a));
+    sv.truncate((NC - L::REDUNDANT_ROWS.min(NC)).min(NQ - NU));
+    match (sv.first(), sv.last()) {
+        (Some(&hi), Some(&lo)) if hi > 0.0 => (lo / hi).powi(2),
+        _ => 0.0,
+    }
 }
 
 /// `(σ_min / σ_max)²` of the closure rows `j`, not counting the leg's redundant rows (their

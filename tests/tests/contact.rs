@@ -544,3 +544,69 @@ fn raibert_hopper_lands_on_a_slope() {
     let record = drop_test::<generated::RaibertHopper, NQ, NC, NU, NK>(1, 0.0, 1.0, 200.0);
     assert!(record.events.iter().any(|e| e.kind == EventKind::Touchdown));
 }
+
+/// Stance against an independent formulation: `minitaur_hopper` with its toe sticking
+/// (contact rows) and `minitaur_pinned_toe`, the same leg with the toe closed to the base
+/// (closure rows, other generated code), give the same accelerations, and the ground
+/// force equals the pin's closure force, at assembled states under random torques.
+#[test]
+fn sticking_stance_equals_the_toe_pinned_by_a_closure() {
+    use generated::{MinitaurHopper as H, MinitaurPinnedToe as P};
+    let (ph, pp) = (
+        generated::minitaur_hopper::Params::<f64>::default(),
+        generated::minitaur_pinned_toe::Params::<f64>::default(),
+    );
+    let ground = Ground::of::<H, 5, 2, 2, 2>();
+    let mu = spec_friction::<H, f64, 5, 2, 2, 2>();
+    let mut rng = Rng::new(23);
+    let mut compared = 0;
+    for _ in 0..STATES {
+        let mut q = SVector::<f64, 5>::from(P::HOME);
+        for k in 0..5 {
+            q[k] += rng.range(-0.05, 0.05);
+        }
+        let tol = Default::default();
+        if leg_models::assembly::project_position::<P, f64, 5, 4, 2>(&pp, &mut q, &tol).is_err() {
+            continue;
+        }
+        let mut qd = SVector::<f64, 5>::from_fn(|_, _| rng.range(-1.0, 1.0));
+        leg_models::assembly::project_velocity::<P, f64, 5, 4, 2>(&pp, &q, &mut qd).unwrap();
+        let u = SVector::<f64, 2>::from_fn(|_, _| rng.range(-2.0, 2.0));
+        let pinned =
+            leg_models::dynamics::forward_dynamics::<P, f64, 5, 4, 2>(&pp, &q, &qd, &u, None)
+                .unwrap();
+        let mut modes = Modes::<2>::flight();
+        modes.set(0, ContactMode::Stick);
+        let anchors = ground.coordinates(&H::contact_positions(&q, &ph));
+        assert!(anchors[1].abs() < 1e-12, "the pinned toe is on the ground");
+        let stance = forward_dynamics_with_contacts::<H, f64, 5, 2, 2, 2>(
+            &ph, &q, &qd, &u, &modes, &anchors, &ground, &mu, None,
+        )
+        .unwrap();
+        let scale = 1.0 + pinned.qdd.amax();
+        assert!(
+            (stance.x - pinned.qdd).amax() < 1e-9 * scale,
+            "q̈ {} vs {}",
+            stance.x,
+            pinned.qdd
+        );
+        // Closure rows of the pinned leg: [toe (five-bar), ground_pin]; +F acts on the toe.
+        let pin = SVector::<f64, 2>::new(pinned.forces[2], pinned.forces[3]);
+        let force_scale = 1.0 + pin.amax();
+        assert!(
+            (stance.contact[0] - pin[0]).abs() < 1e-9 * force_scale,
+            "λ_t {} vs {}",
+            stance.contact[0],
+            pin[0]
+        );
+        assert!(
+            (stance.contact[1] - pin[1]).abs() < 1e-9 * force_scale,
+            "λ_n {} vs {}",
+            stance.contact[1],
+            pin[1]
+        );
+        assert!((stance.closure[0] - pinned.forces[0]).abs() < 1e-9 * force_scale);
+        compared += 1;
+    }
+    assert!(compared > STATES / 2, "{compared} states compared");
+}

@@ -284,7 +284,9 @@ pub fn check_applicability<
         NC - if NC > 0 { rank(&j) } else { 0 },
         structure.redundant_rows
     );
-    let determined = NC > 0 && rank(&jp) == passive.len() || passive.is_empty();
+    // The motors determine the leg when the passive joints follow them (full column rank
+    // of J's passive columns) and the motors are free to move (mobility = motors).
+    let determined = (NC > 0 && rank(&jp) == passive.len() || passive.is_empty()) && mobility == NU;
     assert_eq!(
         determined,
         structure.motors_determine_the_leg().is_ok(),

@@ -192,8 +192,13 @@ pub struct EvalArgs {
     /// Solve the loops for the passive joints first: by default following the assembly
     /// branch of the spec's home pose while the motors move from their home angles to
     /// --q (an error says where that branch ends); with --guess, from that pose
-    #[arg(long)]
+    #[arg(long, conflicts_with = "project")]
     pub assemble: bool,
+    /// Move --q onto the closures first with every joint free (the smallest
+    /// correction), and --qd onto their velocity constraints: for a pose written
+    /// roughly, or a leg whose motors over-determine it (where --assemble does not apply)
+    #[arg(long)]
+    pub project: bool,
     /// With --assemble: a starting pose, one angle per joint (rad); it picks the
     /// assembly mode
     #[arg(

@@ -82,6 +82,7 @@ pub fn mjcf(m: &Model) -> String {
         num(g.1)
     );
     let _ = writeln!(out, "  <worldbody>");
+    sites(m, None, "    ", &mut out);
     for i in children(m, None) {
         mjcf_body(m, i, 2, &mut out);
     }
@@ -144,6 +145,35 @@ pub fn mjcf(m: &Model) -> String {
     }
     let _ = writeln!(out, "</mujoco>");
     out
+}
+
+/// The sites on link `link` (`None`: the base): closure points, the foot, contacts.
+fn sites(m: &Model, link: Option<usize>, pad: &str, out: &mut String) {
+    for c in &m.closures {
+        for (side, p) in [("a", &c.a), ("b", &c.b)] {
+            if p.link == link {
+                let _ = writeln!(
+                    out,
+                    "{pad}<site name=\"{}_{side}\" pos=\"{}\"/>",
+                    c.name,
+                    at(m, p)
+                );
+            }
+        }
+    }
+    if m.foot.link == link {
+        let _ = writeln!(out, "{pad}<site name=\"foot\" pos=\"{}\"/>", at(m, &m.foot));
+    }
+    for c in &m.contacts {
+        if c.point.link == link {
+            let _ = writeln!(
+                out,
+                "{pad}<site name=\"{}\" pos=\"{}\"/>",
+                c.name,
+                at(m, &c.point)
+            );
+        }
+    }
 }
 
 fn mjcf_body(m: &Model, i: usize, depth: usize, out: &mut String) {
@@ -213,25 +243,7 @@ fn mjcf_body(m: &Model, i: usize, depth: usize, out: &mut String) {
             num(ly)
         );
     }
-    for c in &m.closures {
-        for (side, p) in [("a", &c.a), ("b", &c.b)] {
-            if p.link == i {
-                let _ = writeln!(
-                    out,
-                    "{pad}  <site name=\"{}_{side}\" pos=\"{}\"/>",
-                    c.name,
-                    at(m, p)
-                );
-            }
-        }
-    }
-    if m.foot.link == i {
-        let _ = writeln!(
-            out,
-            "{pad}  <site name=\"foot\" pos=\"{}\"/>",
-            at(m, &m.foot)
-        );
-    }
+    sites(m, Some(i), &format!("{pad}  "), out);
     for c in children(m, Some(i)) {
         mjcf_body(m, c, depth + 1, out);
     }
@@ -339,7 +351,7 @@ pub fn urdf(m: &Model) -> String {
         let _ = writeln!(
             out,
             "    <parent link=\"{}\"/>\n    <child link=\"{name}\"/>",
-            m.links[p.link].name
+            p.link.map_or("base", |l| m.links[l].name.as_str())
         );
         let _ = writeln!(out, "    <origin xyz=\"{}\" rpy=\"0 0 0\"/>", at(m, p));
         let _ = writeln!(out, "  </joint>");
@@ -349,6 +361,9 @@ pub fn urdf(m: &Model) -> String {
         frame(&format!("{}_b", c.name), &c.b, &mut out);
     }
     frame("foot", &m.foot, &mut out);
+    for c in &m.contacts {
+        frame(&c.name, &c.point, &mut out);
+    }
     for &a in &m.actuated {
         let l = &m.links[a];
         let (ir, n) = pair(m, l.rotor.as_ref().expect("actuated links have a rotor"));

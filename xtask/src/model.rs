@@ -38,7 +38,8 @@ pub struct Link {
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Point {
-    pub link: usize,
+    /// The link, or `None` for a point fixed in the base frame (a closure to the base).
+    pub link: Option<usize>,
     pub point: [String; 2],
 }
 
@@ -149,10 +150,11 @@ impl Builder<'_> {
         doc: &str,
         links: &[Link],
     ) -> Result<Point, SpecError> {
-        let link = self.spec.link_index(p.link.get_ref()).expect("validated");
-        let point = match &p.point {
-            Some(v) => self.vector(prefix, v.get_ref(), doc)?,
-            None => links[link].length.clone(),
+        let link = self.spec.link_index(p.link.get_ref());
+        let point = match (&p.point, link) {
+            (Some(v), _) => self.vector(prefix, v.get_ref(), doc)?,
+            (None, Some(link)) => links[link].length.clone(),
+            (None, None) => unreachable!("validated: a base point has its coordinates"),
         };
         Ok(Point { link, point })
     }

@@ -57,10 +57,10 @@ fn leg_file(m: &Model, qd: &[f64]) -> String {
             out,
             "closure {} {} {:?} {:?} {} {:?} {:?}",
             c.name,
-            c.a.link,
+            c.a.link.map_or(-1, |l| l as i64),
             v(&c.a.point[0]),
             v(&c.a.point[1]),
-            c.b.link,
+            c.b.link.map_or(-1, |l| l as i64),
             v(&c.b.point[0]),
             v(&c.b.point[1])
         );

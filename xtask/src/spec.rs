@@ -625,8 +625,20 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
         ));
     }
     check_has_size(ctx, file)?;
-    let check_point = |p: &PointSpec, field: &str| -> Result<(), SpecError> {
+    let check_point = |p: &PointSpec, field: &str, base: bool| -> Result<(), SpecError> {
         let link = p.link.get_ref();
+        if base && link == "base" {
+            // A point fixed in the base frame (a leg pinned to a stand, a foot held on the
+            // ground): it has no tip to default to.
+            return match &p.point {
+                Some(pt) => check_vec(ctx, pt, &format!("{field}.point"), Sign::Any),
+                None => Err(ctx.span(
+                    &p.link,
+                    format!("{field}.point"),
+                    "a point on the base needs its `point` (base frame)",
+                )),
+            };
+        }
         if !link_names.contains(&link.as_str()) {
             return Err(ctx.span(
                 &p.link,
@@ -646,17 +658,17 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
     for (k, closure) in file.closures.iter().enumerate() {
         let c = closure.get_ref();
         check_new_name(&c.name, &format!("closures[{k}].name"))?;
-        check_point(c.a.get_ref(), &format!("closures[{k}].a"))?;
-        check_point(c.b.get_ref(), &format!("closures[{k}].b"))?;
+        check_point(c.a.get_ref(), &format!("closures[{k}].a"), true)?;
+        check_point(c.b.get_ref(), &format!("closures[{k}].b"), true)?;
         if c.a.get_ref().link.get_ref() == c.b.get_ref().link.get_ref() {
             return Err(ctx.span(
                 &c.b.get_ref().link,
                 format!("closures[{k}].b.link"),
-                "a closure joins points on two different links",
+                "a closure joins points on two different links (or a link and the base)",
             ));
         }
     }
-    check_point(file.foot.get_ref(), "foot")?;
+    check_point(file.foot.get_ref(), "foot", false)?;
     let check_link = |s: &Spanned<String>, field: String| -> Result<(), SpecError> {
         if link_names.contains(&s.get_ref().as_str()) {
             Ok(())

@@ -2,7 +2,7 @@
 //! one state.
 
 use leg_models::assembly::{
-    assemble, assemble_along, consistent_velocity, project_position, Tolerance,
+    assemble, assemble_along, consistent_velocity, project_position, project_velocity, Tolerance,
 };
 use leg_models::control::actuated_reduction;
 use leg_models::dynamics::forward_dynamics;
@@ -80,10 +80,17 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
         (q, qd)
     } else {
         let q = SVector::<f64, NQ>::from_column_slice(&numbers("--q", q_text, NQ, "joint angles")?);
-        let qd = match &args.qd {
+        let mut qd = match &args.qd {
             Some(t) => SVector::from_column_slice(&numbers("--qd", t, NQ, "joint rates")?),
             None => SVector::zeros(),
         };
+        let mut q = q;
+        if args.project {
+            project_position::<L, f64, NQ, NC, NU>(&p, &mut q, &Tolerance::default())
+                .map_err(|e| Error::usage(format!("cannot project --q onto the closures: {e}")))?;
+            project_velocity::<L, f64, NQ, NC, NU>(&p, &q, &mut qd)
+                .map_err(|e| Error::usage(format!("cannot project --qd onto the closures: {e}")))?;
+        }
         (q, qd)
     };
     let u = match &args.u {

@@ -305,11 +305,17 @@ fn body_points(name: &str, nq: usize) -> Vec<Vec<Member>> {
             bodies[parent].push(Member::Joint(i));
         }
     }
+    // A point fixed to the base belongs to no link's drawing.
     for (k, c) in model.closures.iter().enumerate() {
-        bodies[c.a.link].push(Member::Closure(2 * k));
-        bodies[c.b.link].push(Member::Closure(2 * k + 1));
+        for (side, p) in [(0, &c.a), (1, &c.b)] {
+            if let Some(l) = p.link {
+                bodies[l].push(Member::Closure(2 * k + side));
+            }
+        }
     }
-    bodies[model.foot.link].push(Member::Foot);
+    if let Some(l) = model.foot.link {
+        bodies[l].push(Member::Foot);
+    }
     bodies
 }
 
