@@ -22,6 +22,7 @@ pub mod assembly;
 pub mod contact;
 pub mod control;
 pub mod dynamics;
+pub mod hop;
 pub mod hybrid;
 pub mod integrate;
 pub mod linalg;

@@ -10,14 +10,21 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use leg_models::assembly::project_velocity;
 use leg_models::control::{actuated_reduction, Gains, JointFeedbackLinearization};
 use leg_models::dynamics::forward_dynamics;
+use leg_models::hybrid::{HybridSimulator, HybridState};
 use leg_models::integrate::{step, State, StepOptions, TorqueSource};
 use leg_models::nalgebra::SVector;
 use leg_models::reference::Sinusoid;
-use leg_models::LegModel;
+use leg_models::ContactModel;
 use leg_tests::casadi;
 use leg_tests::passive_release_state;
 
-fn bench_model<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
+fn bench_model<
+    L: ContactModel<NQ, NC, NU, NK>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+>(
     c: &mut Criterion,
 ) {
     let p = L::Params::<f64>::default();
@@ -171,13 +178,60 @@ fn bench_model<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const 
             step::<L, f64, NQ, NC, NU>(&p, &mut s, 0.0, &mut hold, &opts).map(|_| s)
         })
     });
+    // A hybrid step (RK4 with the contact rows in the solve, guards, projection onto every
+    // active constraint) beside the swing-leg step: in stance (the home pose's contacts on
+    // the ground, sticking) and in flight (5 cm up), neither with an event in the step.
+    if NK > 0 {
+        let sim = HybridSimulator::<L, f64, NQ, NC, NU, NK>::new(p, 1e-3);
+        let zero = SVector::<f64, NU>::zeros();
+        let mut hold = |_: f64, _: &HybridState<f64, NQ, NK>| zero;
+        let rest = State {
+            q,
+            qd: SVector::zeros(),
+        };
+        // Flight: the home pose lifted 5 cm along the prismatic joint that raises the
+        // contacts most (the body's vertical slider).
+        let normal_rows = leg_models::contact::Ground::<f64>::of::<L, NQ, NC, NU, NK>()
+            .rows(&L::contact_jacobian(&q, &p));
+        let lift = (0..NQ)
+            .filter(|&i| L::JOINT_KINDS[i] == leg_models::JointKind::Prismatic)
+            .max_by(|&a, &b| normal_rows[(1, a)].total_cmp(&normal_rows[(1, b)]));
+        let mut up = rest;
+        if let Some(i) = lift {
+            up.q[i] += 0.05;
+        }
+        for (name, start) in [
+            ("hybrid-step-stance", sim.start(rest, &zero)),
+            ("hybrid-step-flight", Ok(HybridState::flight(up))),
+        ] {
+            let Ok(start) = start else { continue };
+            // Measured only where the step has no event: the cost of a plain step.
+            let mut probe = start;
+            match sim.step(&mut probe, 0.0, &mut hold) {
+                Ok(e) if e.is_empty() => {}
+                other => {
+                    eprintln!(
+                        "{}: {name} not measured (the step has events or fails: {other:?})",
+                        L::NAME
+                    );
+                    continue;
+                }
+            }
+            g.bench_function(name, |bch| {
+                bch.iter(|| {
+                    let mut hs = black_box(start);
+                    sim.step(&mut hs, 0.0, &mut hold).map(|e| (hs, e.len()))
+                })
+            });
+        }
+    }
     g.finish();
 }
 
 fn benches(c: &mut Criterion) {
     macro_rules! each {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
-            bench_model::<$ty, $nq, $nc, $nu>(c);
+            bench_model::<$ty, $nq, $nc, $nu, $nk>(c);
         };
     }
     generated::for_each_model!(each);

@@ -209,9 +209,16 @@ pub struct EvalArgs {
         value_parser = numbers_text
     )]
     pub guess: Option<String>,
+    /// The plastic impact of this contact point (a `[[contacts]]` name) landing at this
+    /// state with the others in the air: `impact` holds qd_plus, impulses (the ground's,
+    /// tangential and normal), closure_impulses, energy_lost and the mode after (stick or
+    /// slide)
+    #[arg(long, value_name = "CONTACT")]
+    pub impact: Option<String>,
     /// One JSON object: q, qd, u, M, N, G, J, Jdot_qdot, qdd, F, A_tilde, b_tilde, foot,
-    /// foot_jacobian, kinetic, potential, phi (matrices as arrays of rows); a term that
-    /// cannot be computed at this state is null, and `errors` says why
+    /// foot_jacobian, kinetic, potential, phi, contacts (positions, gaps), impact
+    /// (matrices as arrays of rows); a term that cannot be computed at this state is
+    /// null, and `errors` says why
     #[arg(long)]
     pub json: bool,
 }

@@ -4,10 +4,11 @@
 use leg_models::assembly::{
     assemble, assemble_along, consistent_velocity, project_position, project_velocity, Tolerance,
 };
+use leg_models::contact::{impact_map, spec_friction, ContactMode, Ground, Modes};
 use leg_models::control::actuated_reduction;
 use leg_models::dynamics::forward_dynamics;
 use leg_models::nalgebra::{SMatrix, SVector};
-use leg_models::LegModel;
+use leg_models::ContactModel;
 use serde_json::{json, Map, Value};
 use xtask::args::EvalArgs;
 use xtask::cli::{numbers, Error};
@@ -24,10 +25,38 @@ fn vector<const R: usize>(v: &SVector<f64, R>) -> Value {
     Value::Array(v.iter().map(|x| json!(x)).collect())
 }
 
-pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
+pub fn run<
+    L: ContactModel<NQ, NC, NU, NK>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+>(
     args: &EvalArgs,
 ) -> Result<(), Error> {
     let p = L::Params::<f64>::default();
+    // The contact to land, named before anything is computed.
+    let impact_contact = match &args.impact {
+        None => None,
+        Some(name) => match L::CONTACT_NAMES.iter().position(|c| c == name) {
+            Some(k) => Some(k),
+            None if L::CONTACT_NAMES.is_empty() => {
+                return Err(Error::usage(format!(
+                    "--impact {}: {} has no contact points (add [[contacts]] to its spec)",
+                    xtask::spec::shown(name),
+                    L::NAME
+                )))
+            }
+            None => {
+                return Err(Error::usage(format!(
+                    "--impact: unknown contact `{}` (contacts of {}: {})",
+                    xtask::spec::shown(name),
+                    L::NAME,
+                    L::CONTACT_NAMES.join(", ")
+                )))
+            }
+        },
+    };
     let json_out = args.json;
     let assembled = args.assemble;
     let q_text = &args.q;
@@ -138,6 +167,51 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
     out.insert("kinetic".into(), json!(L::kinetic_energy(&q, &qd, &p)));
     out.insert("potential".into(), json!(L::potential_energy(&q, &p)));
     out.insert("phi".into(), vector(&L::closure_residual(&q, &p)));
+    let ground = Ground::<f64>::of::<L, NQ, NC, NU, NK>();
+    let coords = ground.coordinates(&L::contact_positions(&q, &p));
+    let contacts: Vec<Value> = L::CONTACT_NAMES
+        .iter()
+        .enumerate()
+        .map(|(k, name)| {
+            let x = L::contact_positions(&q, &p);
+            json!({
+                "name": name,
+                "position": [x[2 * k], x[2 * k + 1]],
+                "tangential": coords[2 * k],
+                "gap": coords[2 * k + 1],
+                "friction": L::CONTACT_FRICTION[k],
+            })
+        })
+        .collect();
+    out.insert("contacts".into(), Value::Array(contacts));
+    if let Some(k) = impact_contact {
+        let mut modes = Modes::<NK>::flight();
+        modes.set(k, ContactMode::Stick);
+        let mu = spec_friction::<L, f64, NQ, NC, NU, NK>();
+        match impact_map::<L, f64, NQ, NC, NU, NK>(&p, &q, &qd, &mut modes, &ground, &mu) {
+            Ok(imp) => {
+                let mode = match modes.get(k) {
+                    ContactMode::Stick => "stick",
+                    _ => "slide",
+                };
+                out.insert(
+                    "impact".into(),
+                    json!({
+                        "contact": L::CONTACT_NAMES[k],
+                        "qd_plus": imp.qd_plus.as_slice(),
+                        "impulses": [imp.impulses[2 * k], imp.impulses[2 * k + 1]],
+                        "closure_impulses": imp.closure_impulses.as_slice(),
+                        "energy_lost": imp.energy_lost,
+                        "mode_after": mode,
+                    }),
+                );
+            }
+            Err(e) => {
+                out.insert("impact".into(), Value::Null);
+                errors.insert("impact".into(), json!(e.to_string()));
+            }
+        }
+    }
     if !errors.is_empty() {
         out.insert("errors".into(), Value::Object(errors));
     }

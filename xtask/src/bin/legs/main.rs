@@ -42,7 +42,7 @@ fn eval(args: EvalArgs) -> Result<(), Error> {
     macro_rules! dispatch {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
             if args.model == stringify!($module) {
-                return eval::run::<$ty, $nq, $nc, $nu>(&args);
+                return eval::run::<$ty, $nq, $nc, $nu, $nk>(&args);
             }
         };
     }

@@ -1,0 +1,102 @@
+//! Hopping on the ground: `minitaur_hopper` hops in place to a commanded apex height
+//! under the hopping controller, through the hybrid simulator (impacts at every
+//! touchdown, liftoffs located in the step), with the Minitaur motors' torque limit.
+
+use generated::minitaur_hopper::{Params, NC, NK, NQ, NU};
+use generated::MinitaurHopper as L;
+use leg_models::assembly::project_position;
+use leg_models::hop::{HopController, HopSettings};
+use leg_models::hybrid::{EventKind, HybridSimulator};
+use leg_models::integrate::State;
+use leg_models::nalgebra::SVector;
+use leg_models::LegModel;
+
+/// The hop controller for `minitaur_hopper`, commanding `apex` (body height, m).
+pub fn minitaur_hopper_run(
+    apex: f64,
+    seconds: f64,
+) -> (
+    leg_models::hybrid::HybridRecord<f64, NQ, NC, NU, NK>,
+    HopController<L, f64, NQ, NC, NU, NK>,
+) {
+    let p = Params::<f64>::default();
+    let sim = HybridSimulator::<L, f64, NQ, NC, NU, NK>::new(p, 1e-3);
+    let mut q = SVector::<f64, NQ>::from(L::HOME);
+    project_position::<L, f64, NQ, NC, NU>(&p, &mut q, &Default::default()).unwrap();
+    let posture = SVector::<f64, NU>::from_fn(|k, _| q[L::ACTUATED[k]]);
+    q[0] += 0.03; // released 3 cm above standing
+    let settings = HopSettings {
+        height_joint: 0,
+        apex,
+        posture,
+        kp: 30.0,
+        kd: 0.6,
+        stance_frequency: 18.0,
+        height_gain: 0.8,
+        torque_limits: SVector::from_element(3.5),
+        gravity: 9.81,
+    };
+    let mut controller = HopController::<L, f64, NQ, NC, NU, NK>::new(p, sim.options, settings);
+    let start = sim
+        .start(
+            State {
+                q,
+                qd: SVector::zeros(),
+            },
+            &SVector::zeros(),
+        )
+        .unwrap();
+    let record = match sim.run(start, (seconds / 1e-3) as usize, &mut controller) {
+        Ok(r) => r,
+        Err(stopped) => panic!("{stopped}"),
+    };
+    (record, controller)
+}
+
+#[test]
+fn minitaur_hopper_hops_to_the_commanded_apex() {
+    let apex = 0.30;
+    let (record, controller) = minitaur_hopper_run(apex, 12.0);
+    // Apexes from the record: the body's rate crossing zero in flight.
+    let mut apexes = Vec::new();
+    for w in record.samples.windows(2) {
+        let flight = |s: &leg_models::hybrid::HybridSample<f64, NQ, NC, NU, NK>| {
+            !s.state.modes.get(0).on_ground()
+        };
+        if flight(&w[0])
+            && flight(&w[1])
+            && w[0].state.state.qd[0] > 0.0
+            && w[1].state.state.qd[0] <= 0.0
+        {
+            apexes.push(w[0].state.state.q[0].max(w[1].state.state.q[0]));
+        }
+    }
+    let touchdowns = record
+        .events
+        .iter()
+        .filter(|e| e.kind == EventKind::Touchdown)
+        .count();
+    let slips = record
+        .events
+        .iter()
+        .filter(|e| e.kind == EventKind::Slip)
+        .count();
+    eprintln!(
+        "apexes {apexes:?}\ntouchdowns {touchdowns}, slips {slips}, thrust {}, saturations {:?}",
+        controller.thrust, controller.saturations
+    );
+    assert!(apexes.len() >= 25, "{} hops", apexes.len());
+    let settled = &apexes[5..];
+    let worst = settled.iter().map(|a| (a - apex).abs()).fold(0.0, f64::max);
+    assert!(
+        worst < 5e-3,
+        "apex error {worst:.4} m after five hops: {settled:?}"
+    );
+    assert_eq!(slips, 0, "the toe slipped");
+    let residual = record
+        .samples
+        .iter()
+        .map(|s| s.closure_residual.max(s.contact_residual))
+        .fold(0.0, f64::max);
+    assert!(residual <= 1e-12, "residual {residual:e}");
+}
