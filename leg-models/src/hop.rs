@@ -128,6 +128,36 @@ where
         })
     }
 
+    /// How much the motors move the body's height at a stance state: the norm of
+    /// `∂ÿ/∂u`. Zero where they act on it only through springs (series-elastic
+    /// actuators): this controller's stance then does not apply.
+    pub fn height_authority(&self, hs: &HybridState<T, NQ, NK>) -> Result<T, ControlError> {
+        let solve = |u: &SVector<T, NU>| {
+            forward_dynamics_with_contacts::<L, T, NQ, NC, NU, NK>(
+                &self.params,
+                &hs.state.q,
+                &hs.state.qd,
+                u,
+                &hs.modes,
+                &hs.anchors,
+                &self.options.ground,
+                &self.options.friction,
+                self.options.baumgarte,
+            )
+            .map_err(ControlError::Dynamics)
+        };
+        let h = self.settings.height_joint;
+        let base = solve(&SVector::zeros())?.x[h];
+        let mut sum = T::zero();
+        for k in 0..NU {
+            let mut e = SVector::<T, NU>::zeros();
+            e[k] = T::one();
+            let d = solve(&e)?.x[h] - base;
+            sum += d * d;
+        }
+        Ok(sum.sqrt())
+    }
+
     fn stance(&self, hs: &HybridState<T, NQ, NK>) -> Result<SVector<T, NU>, ControlError> {
         let s = &self.settings;
         let (q, qd) = (&hs.state.q, &hs.state.qd);

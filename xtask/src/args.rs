@@ -137,6 +137,10 @@ pub struct SimArgs {
     /// Where to write (default target/sim/MODEL)
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// On a leg with contacts: the commanded apex height of the body in m (default the
+    /// home pose's height + 5 cm); the leg hops to it
+    #[arg(long, value_name = "H", value_parser = number("a height in m", |x| x.abs() <= 1e3))]
+    pub apex: Option<f64>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]

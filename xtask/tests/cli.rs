@@ -460,3 +460,128 @@ fn every_subcommand_has_help_and_both_value_forms_work() {
     );
     assert_eq!(spaced.stdout, joined.stdout);
 }
+
+/// A leg with contacts runs on the ground: `sim minitaur_hopper` hops (under the Minitaur
+/// motors' 3.5 N m), writes the events and draws the ground; a swing-leg controller, a
+/// hopping controller where the motors act through springs, and an unknown contact are
+/// refused with the reason.
+#[test]
+fn sim_hops_a_leg_with_contacts() {
+    let dir = temp_dir("hop");
+    let d = dir.to_str().unwrap();
+    let out = legs(&[
+        "sim",
+        "minitaur_hopper",
+        "--duration",
+        "3",
+        "--torque-limit",
+        "3.5",
+        "--out",
+        d,
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["controller"], "hop");
+    assert!(summary["hops"].as_u64().unwrap() >= 6, "{summary}");
+    assert!(
+        summary["apex_error_after_five_hops_m"]["max"]
+            .as_f64()
+            .unwrap()
+            < 5e-3,
+        "{summary}"
+    );
+    assert_eq!(summary["events"]["slips"], 0);
+    let events = std::fs::read_to_string(dir.join("events.csv")).unwrap();
+    assert!(events.starts_with("t,kind,contact,impulse_t,impulse_n,energy_lost\n"));
+    assert!(
+        events
+            .lines()
+            .any(|l| l.contains(",Touchdown,toe_contact,")),
+        "{events}"
+    );
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert!(
+        html.contains("\"ground\":[0.0,1.0,0.0]"),
+        "the ground is drawn"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+    let bad = temp_dir("bad-hop");
+    let b = bad.to_str().unwrap();
+    refused(
+        &legs(&[
+            "sim",
+            "minitaur_hopper",
+            "--controller",
+            "foot-fl",
+            "--out",
+            b,
+        ]),
+        "minitaur_hopper has contacts",
+    );
+    refused(
+        &legs(&["sim", "atrias_hopper", "--out", b]),
+        "the hopping controller does not apply: in stance the motors do not move the body's height directly",
+    );
+    refused(
+        &legs(&[
+            "eval",
+            "minitaur_hopper",
+            "--q",
+            "0.3,-0.7,-1.25,-2.43,1.25",
+            "--impact",
+            "heel",
+        ]),
+        "unknown contact `heel` (contacts of minitaur_hopper: toe_contact)",
+    );
+    assert!(!bad.exists(), "bad input left {}", bad.display());
+}
+
+/// `eval --impact`: the impact map at a state, against its own identities (the toe at
+/// rest after it, the energy lost equal to ½ Δq̇ᵀ M Δq̇, a pushing normal impulse).
+#[test]
+fn eval_prints_the_impact_map() {
+    let out = legs(&[
+        "eval",
+        "minitaur_hopper",
+        "--q",
+        "0.26,-0.7076,-1.253,-2.434,1.253",
+        "--project",
+        "--qd=-1,0,0,0,0",
+        "--impact",
+        "toe_contact",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let imp = &v["impact"];
+    let vec = |x: &Value| -> Vec<f64> {
+        x.as_array()
+            .unwrap()
+            .iter()
+            .map(|e| e.as_f64().unwrap())
+            .collect()
+    };
+    let (qd, qd_plus) = (vec(&v["qd"]), vec(&imp["qd_plus"]));
+    let m: Vec<Vec<f64>> = v["M"].as_array().unwrap().iter().map(vec).collect();
+    let dq: Vec<f64> = qd_plus.iter().zip(&qd).map(|(a, b)| a - b).collect();
+    let half_dmd: f64 = 0.5
+        * (0..5)
+            .map(|i| (0..5).map(|j| dq[i] * m[i][j] * dq[j]).sum::<f64>())
+            .sum::<f64>();
+    let lost = imp["energy_lost"].as_f64().unwrap();
+    assert!(
+        (lost - half_dmd).abs() < 1e-12 * lost,
+        "{lost} vs {half_dmd}"
+    );
+    assert!(vec(&imp["impulses"])[1] > 0.0);
+    assert_eq!(imp["mode_after"], "stick");
+}

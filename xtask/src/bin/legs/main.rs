@@ -7,6 +7,7 @@ use xtask::args::{self, Command, EvalArgs, Parsed, SimArgs, Xtask};
 use xtask::cli::Error;
 
 mod eval;
+mod hop_sim;
 mod report;
 mod sim;
 
@@ -56,6 +57,10 @@ fn simulate(args: SimArgs) -> Result<(), Error> {
     macro_rules! dispatch {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
             if name == stringify!($module) {
+                // A leg with contacts runs on the ground.
+                if $nk > 0 {
+                    return hop_sim::run::<$ty, $nq, $nc, $nu, $nk>(&settings);
+                }
                 return sim::run::<$ty, $nq, $nc, $nu>(&settings);
             }
         };

@@ -52,6 +52,8 @@ pub struct Report<'a> {
     pub summary: &'a Value,
     pub plots: &'a [Series],
     pub frames: &'a [Frame],
+    /// The ground line `n · x = d` as `[n_x, n_y, d]`, drawn under a leg with contacts.
+    pub ground: Option<[f64; 3]>,
 }
 
 const COLORS: [RGBColor; 4] = [
@@ -265,6 +267,7 @@ pub fn html(r: &Report) -> Result<String, String> {
         "closures": r.frames.iter().map(|f| f.closures.clone()).collect::<Vec<_>>(),
         "foot": r.frames.iter().map(|f| f.foot).collect::<Vec<_>>(),
         "reference": r.frames.iter().map(|f| f.reference).collect::<Vec<_>>(),
+        "ground": r.ground,
     });
     // `</` cannot appear inside a <script> element.
     let data = frames.to_string().replace("</", "<\\/");
@@ -292,7 +295,7 @@ table.summary td:first-child {{ color: #555; white-space: nowrap; }}
 <div>
 <svg id="leg" width="520" height="520" viewBox="0 0 520 520"></svg>
 <div><button id="play">pause</button> <input id="scrub" type="range" min="0" value="0" style="width:380px"> <span id="time"></span></div>
-<p>Links as rigid bodies (blue outlines through every point of a link), joints (dots), closure points (red), foot path (green), reference (dashed grey), base (grey disc); scale bar below.</p>
+<p>Links as rigid bodies (blue outlines through every point of a link), joints (dots), closure points (red), foot path (green), reference (dashed grey), base (grey disc), the ground (brown) under a leg with contacts; scale bar below.</p>
 </div>
 <table class="summary">{summary}</table>
 </div>
@@ -316,6 +319,14 @@ table.summary td:first-child {{ color: #555; white-space: nowrap; }}
   function el(name, attrs) {{ const e = document.createElementNS(ns, name); for (const k in attrs) e.setAttribute(k, attrs[k]); svg.appendChild(e); return e; }}
   const path = pts => pts.filter(p => p).map((p, i) => (i ? 'L' : 'M') + X(p[0]).toFixed(1) + ' ' + Y(p[1]).toFixed(1)).join(' ');
   el('path', {{ d: path(d.reference), fill: 'none', stroke: '#999', 'stroke-dasharray': '4 3' }});
+  if (d.ground) {{
+    // The ground n·x = d: a brown line through the view, hatched below.
+    const [gx, gy, off] = d.ground, tx = gy, ty = -gx, px = gx * off, py = gy * off;
+    const a = [px - tx * 10 * span, py - ty * 10 * span], b = [px + tx * 10 * span, py + ty * 10 * span];
+    const below = [[b[0] - gx * span, b[1] - gy * span], [a[0] - gx * span, a[1] - gy * span]];
+    el('path', {{ d: path([a, b, below[0], below[1]]) + ' Z', fill: '#d9c7a7', stroke: 'none' }});
+    el('path', {{ d: path([a, b]), stroke: '#8c6d3f', 'stroke-width': 2 }});
+  }}
   const trail = el('path', {{ fill: 'none', stroke: '#2ca02c', 'stroke-width': 1.5 }});
   // A scale bar of a round length near a fifth of the view, at the bottom left.
   const decade = Math.pow(10, Math.floor(Math.log10(span / 5)));

@@ -46,11 +46,30 @@ pub struct Settings {
     controller: Option<Controller>,
     trajectory: Option<Trajectory>,
     speed: f64,
-    duration: f64,
-    dt: f64,
+    pub(crate) duration: f64,
+    pub(crate) dt: f64,
     kp: Option<f64>,
-    torque_limit: Option<f64>,
-    out: Option<PathBuf>,
+    pub(crate) torque_limit: Option<f64>,
+    pub(crate) out: Option<PathBuf>,
+    /// Commanded apex height (legs with contacts).
+    pub(crate) apex: Option<f64>,
+}
+
+impl Settings {
+    /// Whether the run is passive (no torque): `--controller passive`.
+    pub(crate) fn passive(&self) -> bool {
+        self.controller == Some(Controller::Passive)
+    }
+
+    /// A controller or trajectory named for the swing leg, which a leg on the ground does
+    /// not run.
+    pub(crate) fn swing_only(&self) -> Option<&'static str> {
+        match (self.controller, self.trajectory) {
+            (Some(c), _) if c != Controller::Passive => Some(c.name()),
+            (_, Some(t)) => Some(t.name()),
+            _ => None,
+        }
+    }
 }
 
 impl Controller {
@@ -121,6 +140,7 @@ impl Settings {
             kp: a.kp,
             torque_limit: a.torque_limit,
             out: a.out.clone(),
+            apex: a.apex,
         };
         if let (Some(c), Some(t)) = (controller, trajectory) {
             settings.check_pair(c, t)?;
@@ -275,7 +295,7 @@ fn max(xs: impl Iterator<Item = f64>) -> f64 {
 }
 
 /// A point of the drawing, by what the generated functions call it.
-enum Member {
+pub(crate) enum Member {
     Joint(usize),
     Tip(usize),
     /// A column of `closure_points`.
@@ -284,7 +304,7 @@ enum Member {
 }
 
 /// The points of each link, from the leg's spec (joint and tip only if it cannot be read).
-fn body_points(name: &str, nq: usize) -> Vec<Vec<Member>> {
+pub(crate) fn body_points(name: &str, nq: usize) -> Vec<Vec<Member>> {
     let mut bodies: Vec<Vec<Member>> = (0..nq)
         .map(|i| vec![Member::Joint(i), Member::Tip(i)])
         .collect();
@@ -695,6 +715,7 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
         summary: &summary,
         plots: &plots,
         frames: &frames,
+        ground: None,
     })
     .map_err(Error::Failed)?;
 

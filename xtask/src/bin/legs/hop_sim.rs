@@ -1,0 +1,518 @@
+//! `cargo xtask sim MODEL` for a leg with contacts: the hybrid simulator (contact modes,
+//! located events, impacts) under the hopping controller (or no torque with
+//! `--controller passive`); writes `trajectory.csv`, `events.csv`, `summary.json` and
+//! `report.html` with the ground drawn.
+
+use std::fmt::Write as _;
+
+use leg_models::assembly::{project_position, Tolerance};
+use leg_models::contact::{ContactMode, Ground};
+use leg_models::control::joint_inertias;
+use leg_models::hop::{HopController, HopSettings};
+use leg_models::hybrid::{EventKind, HybridSample, HybridSimulator, HybridState};
+use leg_models::integrate::State;
+use leg_models::nalgebra::SVector;
+use leg_models::{ContactModel, JointKind, LegModel, Parameters};
+use serde_json::json;
+use xtask::cli::{write_atomic, Error};
+use xtask::progress::Progress;
+
+use crate::report::{self, Report, Series};
+use crate::sim::{body_points, Member, Settings};
+
+/// The prismatic joint that raises the contacts most at `q`: the body's height.
+fn height_joint<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    p: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+) -> Option<usize>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+{
+    let rows = Ground::<f64>::of::<L, NQ, NC, NU, NK>().rows(&L::contact_jacobian(q, p));
+    (0..NQ)
+        .filter(|&i| L::JOINT_KINDS[i] == JointKind::Prismatic)
+        .filter(|&i| (0..NK / 2).any(|k| rows[(2 * k + 1, i)] > 0.5))
+        .max_by(|&a, &b| rows[(1, a)].total_cmp(&rows[(1, b)]))
+}
+
+enum Source<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+{
+    Hop(Box<HopController<L, f64, NQ, NC, NU, NK>>),
+    Passive,
+}
+
+struct WithProgress<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+{
+    source: Source<L, NQ, NC, NU, NK>,
+    progress: Progress,
+    dt: f64,
+}
+
+impl<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
+    leg_models::hybrid::HybridTorqueSource<f64, NQ, NK, NU> for WithProgress<L, NQ, NC, NU, NK>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+{
+    fn torque(
+        &mut self,
+        t: f64,
+        s: &HybridState<f64, NQ, NK>,
+    ) -> Result<SVector<f64, NU>, leg_models::control::ControlError> {
+        self.progress.set((t / self.dt) as u64);
+        match &mut self.source {
+            Source::Hop(c) => c.torque(t, s),
+            Source::Passive => Ok(SVector::zeros()),
+        }
+    }
+}
+
+fn max(xs: impl Iterator<Item = f64>) -> f64 {
+    xs.fold(0.0, f64::max)
+}
+
+pub fn run<
+    L: ContactModel<NQ, NC, NU, NK>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+>(
+    s: &Settings,
+) -> Result<(), Error> {
+    let p = <L as LegModel<NQ, NC, NU>>::Params::<f64>::default();
+    let fail =
+        |what: &str, e: &dyn std::fmt::Display| Error::Failed(format!("{}: {what}: {e}", L::NAME));
+    if let Some(name) = s.swing_only() {
+        return Err(Error::usage(format!(
+            "{} has contacts: `sim` runs it on the ground under the hopping controller (or with --controller passive); `{name}` is for legs in the air",
+            L::NAME
+        )));
+    }
+    let mut home = SVector::<f64, NQ>::from_column_slice(&L::HOME);
+    project_position::<L, f64, NQ, NC, NU>(&p, &mut home, &Tolerance::default())
+        .map_err(|e| fail("the home pose does not assemble", &e))?;
+    let h = height_joint::<L, NQ, NC, NU, NK>(&p, &home).ok_or_else(|| {
+        Error::usage(format!(
+            "{}: hopping needs a body that rises along a prismatic joint (a vertical slider) and none raises its contacts",
+            L::NAME
+        ))
+    })?;
+    let mut sim = HybridSimulator::<L, f64, NQ, NC, NU, NK>::new(p, s.dt);
+    sim.options.control = leg_models::integrate::ControlUpdate::PerStep;
+    let apex = s.apex.unwrap_or(home[h] + 0.05);
+    let posture = SVector::<f64, NU>::from_fn(|k, _| home[L::ACTUATED[k]]);
+    // Flight posture gains from the motors' inertia at home (a 30 rad/s, damped loop).
+    let inertia = joint_inertias::<L, f64, NQ, NC, NU>(&p, &home)
+        .map(|i| i.mean())
+        .unwrap_or(1e-3);
+    let limit = s.torque_limit.unwrap_or(f64::INFINITY);
+    let settings = HopSettings {
+        height_joint: h,
+        apex,
+        posture,
+        kp: inertia * 900.0,
+        kd: inertia * 2.0 * 0.7 * 30.0,
+        stance_frequency: 18.0,
+        height_gain: 0.8,
+        torque_limits: SVector::from_element(limit),
+        gravity: {
+            // The spec's gravity against the ground's normal (every model has the
+            // parameters `gravity_x`, `gravity_y`).
+            let get = |name: &str| {
+                let names = <L::Params<f64> as Parameters<f64>>::NAMES;
+                names
+                    .iter()
+                    .position(|n| *n == name)
+                    .and_then(|i| p.get(i))
+                    .unwrap_or(0.0)
+            };
+            let n = Ground::<f64>::of::<L, NQ, NC, NU, NK>().normal;
+            -(get("gravity_x") * n[0] + get("gravity_y") * n[1])
+        },
+    };
+    // Released 3 cm above standing, at rest.
+    let mut q0 = home;
+    q0[h] += 0.03;
+    let start = sim
+        .start(
+            State {
+                q: q0,
+                qd: SVector::zeros(),
+            },
+            &SVector::zeros(),
+        )
+        .map_err(|e| fail("the start", &e))?;
+    let controller = HopController::<L, f64, NQ, NC, NU, NK>::new(p, sim.options, settings);
+    let source = if s.passive() {
+        Source::Passive
+    } else {
+        // Stance authority at home, toes held: zero for series-elastic hips.
+        let mut stance = HybridState::flight(State {
+            q: home,
+            qd: SVector::zeros(),
+        });
+        let coords =
+            Ground::<f64>::of::<L, NQ, NC, NU, NK>().coordinates(&L::contact_positions(&home, &p));
+        for k in 0..NK / 2 {
+            stance.modes.set(k, ContactMode::Stick);
+            stance.anchors[2 * k] = coords[2 * k];
+        }
+        let authority = controller
+            .height_authority(&stance)
+            .map_err(|e| fail("the hopping controller", &e))?;
+        if authority < 1e-9 {
+            return Err(Error::usage(format!(
+                "{}: the hopping controller does not apply: in stance the motors do not move the body's height directly (they act through springs, as series-elastic actuators do); run it with --controller passive",
+                L::NAME
+            )));
+        }
+        Source::Hop(Box::new(controller))
+    };
+    let steps = (s.duration / s.dt).round() as usize;
+    let mut source = WithProgress {
+        source,
+        progress: Progress::new(
+            steps as u64,
+            &format!("simulating {} on the ground", L::NAME),
+        ),
+        dt: s.dt,
+    };
+    let (record, stopped) = match sim.run(start, steps, &mut source) {
+        Ok(r) => (r, None),
+        Err(stop) => {
+            let why = (stop.t, stop.cause.to_string());
+            (stop.record, Some(why))
+        }
+    };
+    let WithProgress {
+        source, progress, ..
+    } = source;
+    drop(progress);
+    let samples = &record.samples;
+    let events = &record.events;
+
+    // Apexes: the height's rate crossing zero in flight.
+    let in_flight = |x: &HybridSample<f64, NQ, NC, NU, NK>| {
+        (0..NK / 2).all(|k| !x.state.modes.get(k).on_ground())
+    };
+    let mut apexes: Vec<(f64, f64)> = Vec::new();
+    for w in samples.windows(2) {
+        let (a, b) = (&w[0], &w[1]);
+        if in_flight(a) && in_flight(b) && a.state.state.qd[h] > 0.0 && b.state.state.qd[h] <= 0.0 {
+            apexes.push((a.t, a.state.state.q[h].max(b.state.state.q[h])));
+        }
+    }
+    let settled: Vec<f64> = apexes.iter().skip(5).map(|(_, y)| y - apex).collect();
+    let count = |k: EventKind| events.iter().filter(|e| e.kind == k).count();
+    let energy_lost: f64 = events.iter().map(|e| e.energy_lost).sum();
+    let (saturations, passive) = match &source {
+        Source::Hop(c) => (c.saturations.to_vec(), false),
+        Source::Passive => (vec![0; NU], true),
+    };
+    let out = s.out.clone().unwrap_or_else(|| {
+        xtask::gen::workspace_root()
+            .join("target")
+            .join("sim")
+            .join(L::NAME)
+    });
+    std::fs::create_dir_all(&out).map_err(|e| Error::Failed(format!("{}: {e}", out.display())))?;
+    let summary = json!({
+        "model": L::NAME,
+        "controller": if passive { "passive" } else { "hop" },
+        "height_joint": L::JOINT_NAMES[h],
+        "apex_command_m": if passive { json!(null) } else { json!(apex) },
+        "settings": {
+            "duration_s": s.duration,
+            "dt_s": s.dt,
+            "integrator": "RK4 in the contact modes, events located by root finding, plastic impacts, projection onto every active constraint",
+            "torque_update": "once per step and after each event",
+            "torque_limit_nm": s.torque_limit,
+            "friction": sim.options.friction.iter().step_by(2).copied().collect::<Vec<_>>(),
+        },
+        "hops": apexes.len(),
+        "apex_heights_m": apexes.iter().map(|(_, y)| *y).collect::<Vec<_>>(),
+        "apex_error_after_five_hops_m": if settled.is_empty() { json!(null) } else { json!({
+            "max": max(settled.iter().map(|e| e.abs())),
+            "rms": (settled.iter().map(|e| e * e).sum::<f64>() / settled.len() as f64).sqrt(),
+        }) },
+        "events": {
+            "touchdowns": count(EventKind::Touchdown),
+            "liftoffs": count(EventKind::Liftoff),
+            "slips": count(EventKind::Slip),
+            "sticks": count(EventKind::Stick),
+        },
+        "impact_energy_lost_j": energy_lost,
+        "peak_torque_nm": max(samples.iter().map(|x| x.u.amax())),
+        "saturations_per_motor": saturations,
+        "max_closure_residual_m": max(samples.iter().map(|x| x.closure_residual)),
+        "max_contact_residual_m": max(samples.iter().map(|x| x.contact_residual)),
+        "stopped": stopped.as_ref().map(|(t, why)| json!({"t": t, "cause": why})),
+    });
+
+    // trajectory.csv and events.csv
+    let mut csv = String::from("t");
+    for j in L::JOINT_NAMES {
+        let _ = write!(csv, ",q_{j}");
+    }
+    for j in L::JOINT_NAMES {
+        let _ = write!(csv, ",qd_{j}");
+    }
+    for &a in &L::ACTUATED {
+        let _ = write!(csv, ",u_{}", L::JOINT_NAMES[a]);
+    }
+    for c in L::CONTACT_NAMES {
+        let _ = write!(csv, ",mode_{c},lambda_t_{c},lambda_n_{c}");
+    }
+    csv.push_str(",energy,closure_residual,contact_residual\n");
+    for x in samples {
+        let mut row = format!("{}", x.t);
+        for v in x
+            .state
+            .state
+            .q
+            .iter()
+            .chain(x.state.state.qd.iter())
+            .chain(x.u.iter())
+        {
+            let _ = write!(row, ",{v}");
+        }
+        for k in 0..NK / 2 {
+            let mode = match x.state.modes.get(k) {
+                ContactMode::Flight => "flight",
+                ContactMode::Stick => "stick",
+                ContactMode::Slide { .. } => "slide",
+            };
+            let _ = write!(
+                row,
+                ",{mode},{},{}",
+                x.contact_forces[2 * k],
+                x.contact_forces[2 * k + 1]
+            );
+        }
+        let _ = writeln!(
+            row,
+            ",{},{},{}",
+            x.energy, x.closure_residual, x.contact_residual
+        );
+        csv.push_str(&row);
+    }
+    let mut events_csv = String::from("t,kind,contact,impulse_t,impulse_n,energy_lost\n");
+    for e in events {
+        let _ = writeln!(
+            events_csv,
+            "{},{:?},{},{},{},{}",
+            e.t,
+            e.kind,
+            L::CONTACT_NAMES[e.contact],
+            e.impulse[0],
+            e.impulse[1],
+            e.energy_lost
+        );
+    }
+
+    // report.html: the leg on the ground, heights, forces and the cone, energy.
+    let members = body_points(L::NAME, NQ);
+    let frame_every = ((0.01 / s.dt).round() as usize).max(1);
+    let frames: Vec<report::Frame> = samples
+        .iter()
+        .step_by(frame_every)
+        .map(|x| {
+            let q = &x.state.state.q;
+            let joints = L::joint_positions(q, &p);
+            let tips = L::link_tips(q, &p);
+            let closures = L::closure_points(q, &p);
+            let f = L::foot_position(q, &p);
+            let at = |m: &Member| match *m {
+                Member::Joint(i) => [joints[(0, i)], joints[(1, i)]],
+                Member::Tip(i) => [tips[(0, i)], tips[(1, i)]],
+                Member::Closure(c) => [closures[(0, c)], closures[(1, c)]],
+                Member::Foot => [f[0], f[1]],
+            };
+            report::Frame {
+                t: x.t,
+                bodies: members.iter().map(|b| b.iter().map(at).collect()).collect(),
+                links: (0..NQ)
+                    .map(|i| [joints[(0, i)], joints[(1, i)], tips[(0, i)], tips[(1, i)]])
+                    .collect(),
+                closures: (0..NC)
+                    .map(|i| [closures[(0, i)], closures[(1, i)]])
+                    .collect(),
+                foot: [f[0], f[1]],
+                reference: None,
+            }
+        })
+        .collect();
+    let t: Vec<f64> = samples.iter().map(|x| x.t).collect();
+    let mut plots = vec![Series::new(
+        &format!("body height {} (m); apexes and command", L::JOINT_NAMES[h]),
+        &t,
+        vec![
+            (
+                "height".into(),
+                samples.iter().map(|x| x.state.state.q[h]).collect(),
+            ),
+            ("command".into(), samples.iter().map(|_| apex).collect()),
+        ],
+    )];
+    for (k, c) in L::CONTACT_NAMES.iter().enumerate() {
+        let mu = sim.options.friction[2 * k];
+        plots.push(Series::new(
+            &format!("ground force on `{c}` (N): normal, tangential, ±μ λ_n (the cone)"),
+            &t,
+            vec![
+                (
+                    "λ_n".into(),
+                    samples
+                        .iter()
+                        .map(|x| x.contact_forces[2 * k + 1])
+                        .collect(),
+                ),
+                (
+                    "λ_t".into(),
+                    samples.iter().map(|x| x.contact_forces[2 * k]).collect(),
+                ),
+                (
+                    "μ λ_n".into(),
+                    samples
+                        .iter()
+                        .map(|x| mu * x.contact_forces[2 * k + 1])
+                        .collect(),
+                ),
+                (
+                    "−μ λ_n".into(),
+                    samples
+                        .iter()
+                        .map(|x| -mu * x.contact_forces[2 * k + 1])
+                        .collect(),
+                ),
+            ],
+        ));
+        plots.push(Series::new(
+            &format!("contact `{c}` on the ground (1) or in flight (0)"),
+            &t,
+            vec![(
+                "stance".into(),
+                samples
+                    .iter()
+                    .map(|x| {
+                        if x.state.modes.get(k).on_ground() {
+                            1.0
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect(),
+            )],
+        ));
+    }
+    // Energy, and energy plus every impact's loss so far (flat where only the motors act).
+    let mut lost = 0.0;
+    let mut next = 0;
+    let with_losses: Vec<f64> = samples
+        .iter()
+        .map(|x| {
+            while next < events.len() && events[next].t <= x.t {
+                lost += events[next].energy_lost;
+                next += 1;
+            }
+            x.energy + lost
+        })
+        .collect();
+    plots.push(Series::new(
+        "energy T + V (J), and with the impacts' losses added back",
+        &t,
+        vec![
+            ("T + V".into(), samples.iter().map(|x| x.energy).collect()),
+            ("T + V + losses".into(), with_losses),
+        ],
+    ));
+    plots.push(Series::new(
+        "motor torques (N m)",
+        &t,
+        L::ACTUATED
+            .iter()
+            .enumerate()
+            .map(|(k, &a)| {
+                (
+                    L::JOINT_NAMES[a].to_string(),
+                    samples.iter().map(|x| x.u[k]).collect(),
+                )
+            })
+            .collect(),
+    ));
+    plots.push(Series::log(
+        "residuals: closures max |φ|, held contacts (m)",
+        &t,
+        vec![
+            (
+                "|φ|".into(),
+                samples.iter().map(|x| x.closure_residual).collect(),
+            ),
+            (
+                "contacts".into(),
+                samples.iter().map(|x| x.contact_residual).collect(),
+            ),
+        ],
+    ));
+    let ground = Ground::<f64>::of::<L, NQ, NC, NU, NK>();
+    let html = report::html(&Report {
+        title: format!(
+            "{} — {}",
+            L::NAME,
+            if passive { "passive drop" } else { "hopping" }
+        ),
+        summary: &summary,
+        plots: &plots,
+        frames: &frames,
+        ground: Some([ground.normal[0], ground.normal[1], ground.offset]),
+    })
+    .map_err(Error::Failed)?;
+    for (name, text) in [
+        ("trajectory.csv", csv),
+        ("events.csv", events_csv),
+        ("summary.json", format!("{summary:#}\n")),
+        ("report.html", html),
+    ] {
+        write_atomic(&out.join(name), &text).map_err(Error::Failed)?;
+    }
+    println!(
+        "{} on the ground, {} ({} s at dt = {} s): wrote {}/{{trajectory.csv, events.csv, summary.json, report.html}}",
+        L::NAME,
+        if passive { "passive" } else { "hopping" },
+        s.duration,
+        s.dt,
+        out.display()
+    );
+    if !passive {
+        println!(
+            "  {} hops, apex command {apex} m; after five hops apex error max {}",
+            apexes.len(),
+            if settled.is_empty() {
+                "— (fewer than six hops)".to_string()
+            } else {
+                format!("{:.2e} m", max(settled.iter().map(|e| e.abs())))
+            }
+        );
+    }
+    println!(
+        "  {} touchdowns ({:.4} J lost in impacts), {} liftoffs, {} slips; peak torque {:.3} N m, saturations {:?}; max residual closures {:.1e} m, contacts {:.1e} m",
+        count(EventKind::Touchdown),
+        energy_lost,
+        count(EventKind::Liftoff),
+        count(EventKind::Slip),
+        max(samples.iter().map(|x| x.u.amax())),
+        saturations,
+        max(samples.iter().map(|x| x.closure_residual)),
+        max(samples.iter().map(|x| x.contact_residual)),
+    );
+    match stopped {
+        None => Ok(()),
+        Some((t, why)) => Err(Error::Failed(format!(
+            "the simulation stopped at t = {t} s: {why} (the output holds everything until then)"
+        ))),
+    }
+}
