@@ -384,6 +384,9 @@ where
         let identity = Cholesky::new(&SMatrix::<T, NQ, NQ>::identity())
             .ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
         let held = hs.modes.held_rows();
+        if NC == 0 && !held.iter().any(|&h| h) {
+            return Ok(()); // nothing to project onto
+        }
         let tol = &self.options.tolerance;
         let residuals = |q: &SVector<T, NQ>| {
             let phi = L::closure_residual(q, p);
