@@ -128,24 +128,31 @@ where
         })
     }
 
+    /// The stance's accelerations and ground forces under torques `u`.
+    fn solve(
+        &self,
+        hs: &HybridState<T, NQ, NK>,
+        u: &SVector<T, NU>,
+    ) -> Result<crate::contact::ContactSolution<T, NQ, NC, NK>, ControlError> {
+        forward_dynamics_with_contacts::<L, T, NQ, NC, NU, NK>(
+            &self.params,
+            &hs.state.q,
+            &hs.state.qd,
+            u,
+            &hs.modes,
+            &hs.anchors,
+            &self.options.ground,
+            &self.options.friction,
+            self.options.baumgarte,
+        )
+        .map_err(ControlError::Dynamics)
+    }
+
     /// How much the motors move the body's height at a stance state: the norm of
     /// `∂ÿ/∂u`. Zero where they act on it only through springs (series-elastic
     /// actuators): this controller's stance then does not apply.
     pub fn height_authority(&self, hs: &HybridState<T, NQ, NK>) -> Result<T, ControlError> {
-        let solve = |u: &SVector<T, NU>| {
-            forward_dynamics_with_contacts::<L, T, NQ, NC, NU, NK>(
-                &self.params,
-                &hs.state.q,
-                &hs.state.qd,
-                u,
-                &hs.modes,
-                &hs.anchors,
-                &self.options.ground,
-                &self.options.friction,
-                self.options.baumgarte,
-            )
-            .map_err(ControlError::Dynamics)
-        };
+        let solve = |u: &SVector<T, NU>| self.solve(hs, u);
         let h = self.settings.height_joint;
         let base = solve(&SVector::zeros())?.x[h];
         let mut sum = T::zero();
@@ -161,20 +168,7 @@ where
     fn stance(&self, hs: &HybridState<T, NQ, NK>) -> Result<SVector<T, NU>, ControlError> {
         let s = &self.settings;
         let (q, qd) = (&hs.state.q, &hs.state.qd);
-        let solve = |u: &SVector<T, NU>| {
-            forward_dynamics_with_contacts::<L, T, NQ, NC, NU, NK>(
-                &self.params,
-                q,
-                qd,
-                u,
-                &hs.modes,
-                &hs.anchors,
-                &self.options.ground,
-                &self.options.friction,
-                self.options.baumgarte,
-            )
-            .map_err(ControlError::Dynamics)
-        };
+        let solve = |u: &SVector<T, NU>| self.solve(hs, u);
         let base = solve(&SVector::zeros())?;
         // Task rows: body height acceleration, and the first held contact's tangential force.
         let tangential = (0..NK / 2).find(|&k| hs.modes.get(k) == ContactMode::Stick);

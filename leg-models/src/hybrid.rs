@@ -81,6 +81,19 @@ pub struct Event<T: Real> {
     pub energy_lost: T,
 }
 
+impl<T: Real> Event<T> {
+    /// A change of mode without an impulse (liftoff, slip, stick).
+    fn switch(t: T, kind: EventKind, contact: usize) -> Self {
+        Event {
+            t,
+            kind,
+            contact,
+            impulse: [T::zero(); 2],
+            energy_lost: T::zero(),
+        }
+    }
+}
+
 /// The most events one step may hold; more means the contacts chatter (a Zeno
 /// sequence), reported as [`HybridError::TooManyEvents`].
 pub const MAX_EVENTS_PER_STEP: usize = 8;
@@ -572,16 +585,7 @@ where
                 None => return Ok(()),
                 Some((k, mode, kind)) => {
                     hs.modes.set(k, mode);
-                    events.push(
-                        Event {
-                            t,
-                            kind,
-                            contact: k,
-                            impulse: [T::zero(); 2],
-                            energy_lost: T::zero(),
-                        },
-                        t,
-                    )?;
+                    events.push(Event::switch(t, kind, k), t)?;
                 }
             }
         }
@@ -694,16 +698,7 @@ where
                 (ContactMode::Flight, _) => self.touchdown(hs, k, now, &mut events)?,
                 (_, 1) => {
                     hs.modes.set(k, ContactMode::Flight);
-                    events.push(
-                        Event {
-                            t: now,
-                            kind: EventKind::Liftoff,
-                            contact: k,
-                            impulse: [T::zero(); 2],
-                            energy_lost: T::zero(),
-                        },
-                        now,
-                    )?;
+                    events.push(Event::switch(now, EventKind::Liftoff, k), now)?;
                 }
                 (ContactMode::Stick, _) => {
                     let forces = self.dynamics(hs, &u)?.contact;
@@ -713,31 +708,13 @@ where
                             forward: forces[r] < T::zero(),
                         },
                     );
-                    events.push(
-                        Event {
-                            t: now,
-                            kind: EventKind::Slip,
-                            contact: k,
-                            impulse: [T::zero(); 2],
-                            energy_lost: T::zero(),
-                        },
-                        now,
-                    )?;
+                    events.push(Event::switch(now, EventKind::Slip, k), now)?;
                 }
                 (ContactMode::Slide { .. }, _) => {
                     let (x, _) = self.contact_coordinates(&hs.state);
                     hs.anchors[r] = x[r];
                     hs.modes.set(k, ContactMode::Stick);
-                    events.push(
-                        Event {
-                            t: now,
-                            kind: EventKind::Stick,
-                            contact: k,
-                            impulse: [T::zero(); 2],
-                            energy_lost: T::zero(),
-                        },
-                        now,
-                    )?;
+                    events.push(Event::switch(now, EventKind::Stick, k), now)?;
                 }
             }
             self.project(hs)?;

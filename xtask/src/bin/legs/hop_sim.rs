@@ -18,7 +18,7 @@ use xtask::cli::{write_atomic, Error};
 use xtask::progress::Progress;
 
 use crate::report::{self, Report, Series};
-use crate::sim::{body_points, Member, Settings};
+use crate::sim::{body_points, frame_at, Settings};
 
 /// The prismatic joint that raises the contacts most at `q`: the body's height.
 fn height_joint<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
@@ -320,31 +320,7 @@ pub fn run<
     let frames: Vec<report::Frame> = samples
         .iter()
         .step_by(frame_every)
-        .map(|x| {
-            let q = &x.state.state.q;
-            let joints = L::joint_positions(q, &p);
-            let tips = L::link_tips(q, &p);
-            let closures = L::closure_points(q, &p);
-            let f = L::foot_position(q, &p);
-            let at = |m: &Member| match *m {
-                Member::Joint(i) => [joints[(0, i)], joints[(1, i)]],
-                Member::Tip(i) => [tips[(0, i)], tips[(1, i)]],
-                Member::Closure(c) => [closures[(0, c)], closures[(1, c)]],
-                Member::Foot => [f[0], f[1]],
-            };
-            report::Frame {
-                t: x.t,
-                bodies: members.iter().map(|b| b.iter().map(at).collect()).collect(),
-                links: (0..NQ)
-                    .map(|i| [joints[(0, i)], joints[(1, i)], tips[(0, i)], tips[(1, i)]])
-                    .collect(),
-                closures: (0..NC)
-                    .map(|i| [closures[(0, i)], closures[(1, i)]])
-                    .collect(),
-                foot: [f[0], f[1]],
-                reference: None,
-            }
-        })
+        .map(|x| frame_at::<L, NQ, NC, NU>(&p, &members, x.t, &x.state.state.q, None))
         .collect();
     let t: Vec<f64> = samples.iter().map(|x| x.t).collect();
     let mut plots = vec![Series::new(

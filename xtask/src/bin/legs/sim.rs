@@ -303,6 +303,44 @@ pub(crate) enum Member {
     Foot,
 }
 
+/// The leg drawn at one instant: each link as the rigid body of its points (`members`,
+/// from [`body_points`]), its joints and tips, the closure points and the foot.
+pub(crate) fn frame_at<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>(
+    p: &L::Params<f64>,
+    members: &[Vec<Member>],
+    t: f64,
+    q: &SVector<f64, NQ>,
+    reference: Option<[f64; 2]>,
+) -> report::Frame {
+    let joints = L::joint_positions(q, p);
+    let tips = L::link_tips(q, p);
+    let closures = L::closure_points(q, p);
+    let f = L::foot_position(q, p);
+    let at = |m: &Member| match *m {
+        Member::Joint(i) => [joints[(0, i)], joints[(1, i)]],
+        Member::Tip(i) => [tips[(0, i)], tips[(1, i)]],
+        Member::Closure(c) => [closures[(0, c)], closures[(1, c)]],
+        Member::Foot => [f[0], f[1]],
+    };
+    report::Frame {
+        t,
+        bodies: members.iter().map(|b| b.iter().map(at).collect()).collect(),
+        links: (0..NQ)
+            .map(|i| [joints[(0, i)], joints[(1, i)], tips[(0, i)], tips[(1, i)]])
+            .collect(),
+        closures: (0..NC)
+            .map(|i| [closures[(0, i)], closures[(1, i)]])
+            .collect(),
+        foot: [f[0], f[1]],
+        reference,
+    }
+}
+
 /// The points of each link, from the leg's spec (joint and tip only if it cannot be read).
 pub(crate) fn body_points(name: &str, nq: usize) -> Vec<Vec<Member>> {
     let mut bodies: Vec<Vec<Member>> = (0..nq)
@@ -630,39 +668,11 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
         .iter()
         .step_by(frame_every)
         .map(|x| {
-            let joints = L::joint_positions(&x.state.q, &p);
-            let tips = L::link_tips(&x.state.q, &p);
-            let closures = L::closure_points(&x.state.q, &p);
-            let f = foot_of(x);
-            let at = |m: &Member| match *m {
-                Member::Joint(i) => [joints[(0, i)], joints[(1, i)]],
-                Member::Tip(i) => [tips[(0, i)], tips[(1, i)]],
-                Member::Closure(c) => [closures[(0, c)], closures[(1, c)]],
-                Member::Foot => [f[0], f[1]],
-            };
-            report::Frame {
-                t: x.t,
-                bodies: members
-                    .iter()
-                    .map(|body| body.iter().map(at).collect())
-                    .collect(),
-                links: (0..NQ)
-                    .map(|i| [joints[(0, i)], joints[(1, i)], tips[(0, i)], tips[(1, i)]])
-                    .collect(),
-                closures: (0..NC)
-                    .map(|i| [closures[(0, i)], closures[(1, i)]])
-                    .collect(),
-                foot: {
-                    let f = foot_of(x);
-                    [f[0], f[1]]
-                },
-                reference: if foot_task {
-                    let r = foot_ref.sample(x.t).position;
-                    Some([r[0], r[1]])
-                } else {
-                    None
-                },
-            }
+            let reference = foot_task.then(|| {
+                let r = foot_ref.sample(x.t).position;
+                [r[0], r[1]]
+            });
+            frame_at::<L, NQ, NC, NU>(&p, &members, x.t, &x.state.q, reference)
         })
         .collect();
     let t: Vec<f64> = samples.iter().map(|x| x.t).collect();
