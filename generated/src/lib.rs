@@ -15,6 +15,8 @@ pub mod five_bar_offset;
 pub use five_bar_offset::FiveBarOffset;
 pub mod klann_linkage;
 pub use klann_linkage::KlannLinkage;
+pub mod knee_hopper;
+pub use knee_hopper::KneeHopper;
 pub mod minitaur;
 pub use minitaur::Minitaur;
 pub mod minitaur_hopper;
@@ -42,6 +44,7 @@ macro_rules! for_each_model {
         2, 0); $callback ! (digit, $crate::digit::Digit, 4, 2, 2, 0); $callback !
         (five_bar_offset, $crate::five_bar_offset::FiveBarOffset, 4, 2, 2, 0); $callback
         ! (klann_linkage, $crate::klann_linkage::KlannLinkage, 7, 6, 1, 0); $callback !
+        (knee_hopper, $crate::knee_hopper::KneeHopper, 3, 0, 2, 2); $callback !
         (minitaur, $crate::minitaur::Minitaur, 4, 2, 2, 0); $callback ! (minitaur_hopper,
         $crate::minitaur_hopper::MinitaurHopper, 5, 2, 2, 2); $callback !
         (minitaur_pinned_toe, $crate::minitaur_pinned_toe::MinitaurPinnedToe, 5, 4, 2,

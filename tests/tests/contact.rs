@@ -287,6 +287,10 @@ where
             "{}: momentum balance {balance}",
             L::NAME
         );
+        let held_any = (0..NK / 2).any(|k| modes.get(k).on_ground());
+        if !held_any {
+            continue; // every contact left the impact: nothing happened
+        }
         if modes == before {
             // A plastic sticking impact loses exactly ½ Δq̇ᵀ M Δq̇.
             let expected = 0.5 * dq.dot(&(m * dq));

@@ -431,10 +431,30 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, Error> {
     }
     let selected = |name: &str| opts.names.is_empty() || opts.names.iter().any(|n| n == name);
 
-    // Everything is computed before anything is written.
+    // Everything is computed before anything is written. A spec that is not selected and
+    // does not validate blocks nothing: its committed code (if any) is kept, and a note
+    // says so.
     let mut specs = Vec::new();
+    let mut kept_notes = Vec::new();
+    let mut kept_irs = Vec::new();
     for p in &paths {
-        specs.push(load_spec(root, p).map_err(Error::Usage)?);
+        let name = p.file_stem().and_then(|s| s.to_str()).unwrap_or_default();
+        match load_spec(root, p) {
+            Ok(spec) => specs.push(spec),
+            Err(e) if selected(name) => return Err(Error::Usage(e)),
+            Err(e) => {
+                let kept = committed_ir(root, name).map_err(Error::Failed)?;
+                kept_notes.push(format!(
+                    "note: {name} was not regenerated: its spec does not validate ({e}); {}",
+                    if kept.is_some() {
+                        "its committed code is kept"
+                    } else {
+                        "it has no generated code"
+                    }
+                ));
+                kept_irs.extend(kept);
+            }
+        }
     }
     let py = python(root).map_err(Error::Failed)?;
     let mut irs = Vec::new();
@@ -498,6 +518,9 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, Error> {
         irs.push(ir);
     }
     drop(progress);
+    irs.extend(kept_irs);
+    irs.sort_by(|a, b| a.model.name.cmp(&b.model.name));
+    notes.extend(kept_notes);
     files.extend(rust_files(&irs).map_err(Error::Failed)?);
     let names: Vec<&str> = specs
         .iter()

@@ -104,8 +104,31 @@ fn list(root: &Path) -> Result<(), cli::Error> {
         "spec".into(),
     ]];
     for path in gen::spec_paths(root).map_err(cli::Error::Failed)? {
-        let spec = gen::load_spec(root, &path).map_err(cli::Error::Usage)?;
-        let m = model::build(&spec).map_err(|e| cli::Error::Usage(e.to_string()))?;
+        // A spec that does not validate is listed with its error, not in the way of the rest.
+        let built = gen::load_spec(root, &path).and_then(|spec| {
+            model::build(&spec)
+                .map(|m| (spec, m))
+                .map_err(|e| e.to_string())
+        });
+        let (spec, m) = match built {
+            Ok(x) => x,
+            Err(e) => {
+                let name = path
+                    .file_stem()
+                    .and_then(|s| s.to_str())
+                    .unwrap_or_default();
+                let mut row: [String; 8] = Default::default();
+                row[0] = name.to_string();
+                row[5] = format!("does not validate: {e}");
+                row[7] = path
+                    .strip_prefix(root)
+                    .unwrap_or(&path)
+                    .display()
+                    .to_string();
+                rows.push(row);
+                continue;
+            }
+        };
         let actuated: Vec<&str> = m
             .actuated
             .iter()

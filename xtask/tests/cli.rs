@@ -524,6 +524,10 @@ fn sim_hops_a_leg_with_contacts() {
         "minitaur_hopper has contacts",
     );
     refused(
+        &legs(&["sim", "minitaur_hopper", "--apex", "-1", "--out", b]),
+        "--apex -1: at or below the standing height",
+    );
+    refused(
         &legs(&["sim", "atrias_hopper", "--out", b]),
         "the hopping controller does not apply: in stance the motors do not move the body's height directly",
     );

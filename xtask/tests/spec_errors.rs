@@ -788,3 +788,37 @@ fn a_massless_link_that_moves_nothing_is_located() {
     );
     assert_eq!(root.listing(), before, "a failed generation changed files");
 }
+
+/// Runs the derivation (CasADi): a spec that does not validate blocks `gen` of another
+/// leg only when it is selected: `gen leg` generates `leg` and notes the other; `gen`
+/// of everything (and `--check`) refuses at the broken spec.
+#[test]
+fn a_broken_spec_does_not_block_generating_another() {
+    let text = VALID.replace(
+        "gravity = [0.0, -9.81]\n",
+        "gravity = [0.0, -9.81]\nhome = [-0.6437, -1.2057, -2.4979, 1.2057]\n",
+    );
+    let root = scratch("broken-other", &text);
+    root.write(
+        "leg-models/specs/other.toml",
+        "gravity = [0.0, -9.81]\n[[links]]\nname = \"x\"\n",
+    );
+    let one = gen::run(
+        &root.0,
+        &GenOptions {
+            check: false,
+            names: vec!["leg".into()],
+        },
+    )
+    .expect("`leg` generates beside a broken spec");
+    assert!(
+        one.contains("note: other was not regenerated: its spec does not validate (leg-models/specs/other.toml:"),
+        "{one}"
+    );
+    assert!(root.0.join(gen::SRC_DIR).join("leg.rs").exists());
+    let all = generate(&root).unwrap_err();
+    assert!(
+        all.is_usage() && all.to_string().contains("other.toml"),
+        "{all}"
+    );
+}

@@ -108,7 +108,7 @@ pub fn run<
         .map_err(|e| Error::usage(format!("no consistent rates at this pose: {e}")))?;
         (q, qd)
     } else {
-        let q = SVector::<f64, NQ>::from_column_slice(&numbers("--q", q_text, NQ, "joint angles")?);
+        let q = SVector::<f64, NQ>::from_column_slice(&numbers("--q", q_text, NQ, "joint values")?);
         let mut qd = match &args.qd {
             Some(t) => SVector::from_column_slice(&numbers("--qd", t, NQ, "joint rates")?),
             None => SVector::zeros(),

@@ -104,6 +104,14 @@ pub fn run<
     let mut sim = HybridSimulator::<L, f64, NQ, NC, NU, NK>::new(p, s.dt);
     sim.options.control = leg_models::integrate::ControlUpdate::PerStep;
     let apex = s.apex.unwrap_or(home[h] + 0.05);
+    if apex <= home[h] {
+        return Err(Error::usage(format!(
+            "--apex {apex}: at or below the standing height {:.4} m of {}'s `{}`: a hop's apex is above it",
+            home[h],
+            L::NAME,
+            L::JOINT_NAMES[h]
+        )));
+    }
     let posture = SVector::<f64, NU>::from_fn(|k, _| home[L::ACTUATED[k]]);
     // Flight posture gains from the motors' inertia at home (a 30 rad/s, damped loop).
     let inertia = joint_inertias::<L, f64, NQ, NC, NU>(&p, &home)
@@ -208,6 +216,20 @@ pub fn run<
     }
     let settled: Vec<f64> = apexes.iter().skip(5).map(|(_, y)| y - apex).collect();
     let count = |k: EventKind| events.iter().filter(|e| e.kind == k).count();
+    // A slip in the last millisecond before the same contact lifts off: the normal force
+    // is vanishing, so any tangential force, however small, leaves the cone.
+    let slips_at_liftoff = events
+        .iter()
+        .filter(|e| e.kind == EventKind::Slip)
+        .filter(|e| {
+            events.iter().any(|l| {
+                l.kind == EventKind::Liftoff
+                    && l.contact == e.contact
+                    && l.t >= e.t
+                    && l.t - e.t < 1e-3
+            })
+        })
+        .count();
     let energy_lost: f64 = events.iter().map(|e| e.energy_lost).sum();
     let (saturations, passive) = match &source {
         Source::Hop(c) => (c.saturations.to_vec(), false),
@@ -233,9 +255,9 @@ pub fn run<
             "torque_limit_nm": s.torque_limit,
             "friction": sim.options.friction.iter().step_by(2).copied().collect::<Vec<_>>(),
         },
-        "hops": apexes.len(),
-        "apex_heights_m": apexes.iter().map(|(_, y)| *y).collect::<Vec<_>>(),
-        "apex_error_after_five_hops_m": if settled.is_empty() { json!(null) } else { json!({
+        "hops": if passive { json!(null) } else { json!(apexes.len()) },
+        "apex_heights_m": if passive { json!(null) } else { json!(apexes.iter().map(|(_, y)| *y).collect::<Vec<_>>()) },
+        "apex_error_after_five_hops_m": if settled.is_empty() || passive { json!(null) } else { json!({
             "max": max(settled.iter().map(|e| e.abs())),
             "rms": (settled.iter().map(|e| e * e).sum::<f64>() / settled.len() as f64).sqrt(),
         }) },
@@ -243,6 +265,7 @@ pub fn run<
             "touchdowns": count(EventKind::Touchdown),
             "liftoffs": count(EventKind::Liftoff),
             "slips": count(EventKind::Slip),
+            "slips_within_1_ms_of_liftoff": slips_at_liftoff,
             "sticks": count(EventKind::Stick),
         },
         "impact_energy_lost_j": energy_lost,
@@ -475,7 +498,7 @@ pub fn run<
         );
     }
     println!(
-        "  {} touchdowns ({:.4} J lost in impacts), {} liftoffs, {} slips; peak torque {:.3} N m, saturations {:?}; max residual closures {:.1e} m, contacts {:.1e} m",
+        "  {} touchdowns ({:.4} J lost in impacts), {} liftoffs, {} slips ({slips_at_liftoff} within 1 ms of a liftoff, as the normal force vanishes); peak torque {:.3} N m, saturations {:?}; max residual closures {:.1e} m, contacts {:.1e} m",
         count(EventKind::Touchdown),
         energy_lost,
         count(EventKind::Liftoff),
