@@ -7,12 +7,16 @@ included) and bias forces (`qfrc_bias` = C q̇ + G, less the joint and tendon sp
 `qfrc_spring`) of the exported MJCF with the generated
 model's `M` and `N` from `legs eval --json` (relative error below 1e-9); then assembles
 the leg with `legs eval --project` (near its home pose), lets MuJoCo simulate it for 1 s with the motors off
-and checks that its (soft) closure constraints hold. Prints one line per model; exits 1
-on a mismatch.
+and checks that its (soft) closure constraints hold. A leg with contact points is dropped
+in both (ours: `legs sim --controller passive`, the hybrid simulator; MuJoCo: its soft
+contact against the exported floor) and the first touchdown times must agree within
+2.5 ms (MuJoCo's 1 ms step and soft contact). Prints one line per model; exits 1 on a
+mismatch.
 """
 
 import json
 import pathlib
+import subprocess
 import sys
 
 import mujoco
@@ -79,9 +83,49 @@ def main():
                 b = m.site(f"{m.equality(e).name}_b").id
                 closure = max(closure, float(np.abs(d.site_xpos[a] - d.site_xpos[b]).max()))
         ok = ok and closure < CLOSURE_TOL and bool(np.all(np.isfinite(d.qpos)))
+    landing = ""
+    if ir["model"]["contacts"]:
+        # A passive drop in both: our hybrid simulator (`legs sim --controller passive`,
+        # released 3 cm above home) and MuJoCo from its first state; the first touchdown
+        # times agree to MuJoCo's step and soft contact.
+        import csv
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as out:
+            subprocess.run(
+                [legs, "sim", name, "--controller", "passive", "--duration", "0.6", "--out", out],
+                capture_output=True,
+                text=True,
+            )
+            try:
+                with open(pathlib.Path(out) / "events.csv") as f:
+                    ours_td = next(float(r["t"]) for r in csv.DictReader(f) if r["kind"] == "Touchdown")
+                with open(pathlib.Path(out) / "trajectory.csv") as f:
+                    first = next(csv.DictReader(f))
+            except (OSError, StopIteration):
+                print(f"{name}: our passive drop did not touch down within 0.6 s")
+                ok = False
+                ours_td, first = None, None
+        if first is not None:
+            mujoco.mj_resetData(m, d)  # time 0, after the closure run above
+            d.qpos[qadr] = [float(first[f"q_{j}"]) for j in joints]
+            d.qvel[:] = 0.0
+            d.ctrl[:] = 0.0
+            mujoco.mj_forward(m, d)
+            floor = m.geom("floor").id
+            mj_td = None
+            for _ in range(int(0.6 / m.opt.timestep)):
+                mujoco.mj_step(m, d)
+                if any(floor in (d.contact[i].geom1, d.contact[i].geom2) for i in range(d.ncon)):
+                    mj_td = d.time
+                    break
+            if mj_td is None or abs(mj_td - ours_td) > 2.5e-3:
+                print(f"{name}: touchdown in MuJoCo at {mj_td} s, ours at {ours_td} s")
+                ok = False
+            landing = f"; passive drop: first touchdown {ours_td:.4f} s ours, {mj_td} s MuJoCo (soft contact)"
     print(
         f"{name:<16} MuJoCo {mujoco.__version__}: max relative difference M {worst_m:.1e}, N {worst_n:.1e} "
-        f"over {STATES} states; closure in a 1 s MuJoCo run {closure:.1e} m -> {'ok' if ok else 'MISMATCH'}"
+        f"over {STATES} states; closure in a 1 s MuJoCo run {closure:.1e} m{landing} -> {'ok' if ok else 'MISMATCH'}"
     )
     sys.exit(0 if ok else 1)
 

@@ -16,6 +16,9 @@
 //! can rebuild the loop. URDF has no rotor inertia: each motor's transmission carries
 //! Drake's extension elements `<drake:rotor_inertia>` and `<drake:gear_ratio>` (read by
 //! Drake; other parsers skip them) and a comment with the reflected inertia `I·N²`.
+//! A leg with contact points gets MuJoCo's contact: a small sphere at each point (the only
+//! geoms that collide) against a floor plane at the spec's ground, with the spec's
+//! friction; without contacts, contact stays disabled.
 //! The spec validation reserves every name the exporters add (`foot`, `<closure>_a`, …).
 
 use std::fmt::Write;
@@ -75,13 +78,34 @@ pub fn mjcf(m: &Model) -> String {
         out,
         "  <compiler angle=\"radian\" autolimits=\"true\"{bounds}/>"
     );
+    // Contact only where the spec has contact points: a small sphere at each (the only
+    // geoms that collide) against the floor, the spec's ground.
+    let contact = if m.contacts.is_empty() {
+        "\n    <flag contact=\"disable\"/>\n  "
+    } else {
+        ""
+    };
     let _ = writeln!(
         out,
-        "  <option gravity=\"{} {} 0\" timestep=\"0.001\" integrator=\"RK4\">\n    <flag contact=\"disable\"/>\n  </option>",
+        "  <option gravity=\"{} {} 0\" timestep=\"0.001\" integrator=\"RK4\">{contact}</option>",
         num(g.0),
         num(g.1)
     );
     let _ = writeln!(out, "  <worldbody>");
+    if !m.contacts.is_empty() {
+        // The plane n·x = d, lowered by the spheres' radius so that a sphere touches it
+        // when its centre (the contact point) reaches the ground.
+        let [nx, ny] = m.ground_normal;
+        let d = m.ground_offset - CONTACT_RADIUS;
+        let _ = writeln!(
+            out,
+            "    <geom name=\"floor\" type=\"plane\" size=\"0 0 1\" pos=\"{} {} 0\" zaxis=\"{} {} 0\" contype=\"0\" conaffinity=\"1\"/>",
+            num(nx * d),
+            num(ny * d),
+            num(nx),
+            num(ny)
+        );
+    }
     sites(m, None, "    ", &mut out);
     for i in children(m, None) {
         mjcf_body(m, i, 2, &mut out);
@@ -172,9 +196,22 @@ fn sites(m: &Model, link: Option<usize>, pad: &str, out: &mut String) {
                 c.name,
                 at(m, &c.point)
             );
+            // MuJoCo's contact is soft: a sphere that collides with the floor only, with
+            // the spec's sliding friction (MuJoCo's default torsional and rolling).
+            let _ = writeln!(
+                out,
+                "{pad}<geom name=\"{}_geom\" type=\"sphere\" size=\"{}\" pos=\"{}\" contype=\"1\" conaffinity=\"0\" condim=\"3\" friction=\"{} 0.005 0.0001\" mass=\"0\"/>",
+                c.name,
+                num(CONTACT_RADIUS),
+                at(m, &c.point),
+                num(c.friction)
+            );
         }
     }
 }
+
+/// The radius of the MJCF spheres at the contact points [m].
+const CONTACT_RADIUS: f64 = 0.002;
 
 fn mjcf_body(m: &Model, i: usize, depth: usize, out: &mut String) {
     let l = &m.links[i];
