@@ -19,11 +19,37 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::contact::Ground;
 use crate::contact::{forward_dynamics_with_contacts, ContactMode};
 use crate::control::ControlError;
 use crate::hybrid::{HybridOptions, HybridState, HybridTorqueSource};
 use crate::linalg::Cholesky;
-use crate::model::{ContactModel, Real};
+use crate::model::{ContactModel, JointKind, Real};
+
+/// The body's height coordinate of leg `L` at `q`: the prismatic joint that raises the
+/// contacts most along the ground's normal (a vertical slider), if any joint raises them.
+pub fn height_joint<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+) -> Option<usize>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+    T: Real,
+{
+    let rows = Ground::<T>::of::<L, NQ, NC, NU, NK>().rows(&L::contact_jacobian(q, params));
+    // How much each joint raises the contacts, summed over them.
+    let rise = |i: usize| (0..NK / 2).fold(T::zero(), |a, k| a + rows[(2 * k + 1, i)]);
+    (0..NQ)
+        .filter(|&i| {
+            L::JOINT_KINDS[i] == JointKind::Prismatic
+                && rise(i) > T::lit(0.5) * T::lit((NK / 2) as f64)
+        })
+        .max_by(|&a, &b| {
+            rise(a)
+                .partial_cmp(&rise(b))
+                .unwrap_or(core::cmp::Ordering::Equal)
+        })
+}
 
 /// What the hopping controller aims at, and how hard.
 #[derive(Clone, Copy, Debug, PartialEq)]

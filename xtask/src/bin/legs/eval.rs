@@ -168,12 +168,12 @@ pub fn run<
     out.insert("potential".into(), json!(L::potential_energy(&q, &p)));
     out.insert("phi".into(), vector(&L::closure_residual(&q, &p)));
     let ground = Ground::<f64>::of::<L, NQ, NC, NU, NK>();
-    let coords = ground.coordinates(&L::contact_positions(&q, &p));
+    let x = L::contact_positions(&q, &p);
+    let coords = ground.coordinates(&x);
     let contacts: Vec<Value> = L::CONTACT_NAMES
         .iter()
         .enumerate()
         .map(|(k, name)| {
-            let x = L::contact_positions(&q, &p);
             json!({
                 "name": name,
                 "position": [x[2 * k], x[2 * k + 1]],

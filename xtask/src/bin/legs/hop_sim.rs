@@ -8,32 +8,17 @@ use std::fmt::Write as _;
 use leg_models::assembly::{project_position, Tolerance};
 use leg_models::contact::{ContactMode, Ground};
 use leg_models::control::joint_inertias;
-use leg_models::hop::{HopController, HopSettings};
+use leg_models::hop::{height_joint, HopController, HopSettings};
 use leg_models::hybrid::{EventKind, HybridSample, HybridSimulator, HybridState};
 use leg_models::integrate::State;
 use leg_models::nalgebra::SVector;
-use leg_models::{ContactModel, JointKind, LegModel, Parameters};
+use leg_models::{ContactModel, LegModel, Parameters};
 use serde_json::json;
 use xtask::cli::{write_atomic, Error};
 use xtask::progress::Progress;
 
 use crate::report::{self, Report, Series};
-use crate::sim::{body_points, frame_at, Settings};
-
-/// The prismatic joint that raises the contacts most at `q`: the body's height.
-fn height_joint<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
-    p: &L::Params<f64>,
-    q: &SVector<f64, NQ>,
-) -> Option<usize>
-where
-    L: ContactModel<NQ, NC, NU, NK>,
-{
-    let rows = Ground::<f64>::of::<L, NQ, NC, NU, NK>().rows(&L::contact_jacobian(q, p));
-    (0..NQ)
-        .filter(|&i| L::JOINT_KINDS[i] == JointKind::Prismatic)
-        .filter(|&i| (0..NK / 2).any(|k| rows[(2 * k + 1, i)] > 0.5))
-        .max_by(|&a, &b| rows[(1, a)].total_cmp(&rows[(1, b)]))
-}
+use crate::sim::{body_points, frame_at, max, Settings};
 
 enum Source<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
 where
@@ -70,10 +55,6 @@ where
     }
 }
 
-fn max(xs: impl Iterator<Item = f64>) -> f64 {
-    xs.fold(0.0, f64::max)
-}
-
 pub fn run<
     L: ContactModel<NQ, NC, NU, NK>,
     const NQ: usize,
@@ -95,7 +76,7 @@ pub fn run<
     let mut home = SVector::<f64, NQ>::from_column_slice(&L::HOME);
     project_position::<L, f64, NQ, NC, NU>(&p, &mut home, &Tolerance::default())
         .map_err(|e| fail("the home pose does not assemble", &e))?;
-    let h = height_joint::<L, NQ, NC, NU, NK>(&p, &home).ok_or_else(|| {
+    let h = height_joint::<L, f64, NQ, NC, NU, NK>(&p, &home).ok_or_else(|| {
         Error::usage(format!(
             "{}: hopping needs a body that rises along a prismatic joint (a vertical slider) and none raises its contacts",
             L::NAME

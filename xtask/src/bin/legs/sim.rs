@@ -290,7 +290,7 @@ impl<S: TorqueSource<f64, NQ, NU>, const NQ: usize, const NU: usize> TorqueSourc
     }
 }
 
-fn max(xs: impl Iterator<Item = f64>) -> f64 {
+pub(crate) fn max(xs: impl Iterator<Item = f64>) -> f64 {
     xs.fold(0.0, f64::max)
 }
 
