@@ -300,6 +300,8 @@ impl LegModel<NQ, NC, NU> for Atrias {
         JointKind::Revolute,
         JointKind::Revolute,
     ];
+    const PARENTS: [Option<usize>; NQ] = [None, Some(0), None, Some(2)];
+    const SPRINGS: &'static [leg_models::Spring] = &[];
     const ACTUATED: [usize; NU] = [0, 2];
     const HOME: [f64; NQ] = [-2.1708, 1.2, -0.9708, -1.2];
     const REDUNDANT_ROWS: usize = 0;

@@ -532,6 +532,33 @@ impl LegModel<NQ, NC, NU> for AtriasHopper {
         JointKind::Revolute,
         JointKind::Revolute,
     ];
+    const PARENTS: [Option<usize>; NQ] = [
+        None,
+        Some(0),
+        Some(1),
+        Some(2),
+        Some(2),
+        Some(2),
+        Some(5),
+        Some(2),
+        Some(7),
+    ];
+    const SPRINGS: &'static [leg_models::Spring] = &[
+        leg_models::Spring {
+            name: "thigh_spring",
+            a: 3,
+            b: Some(5),
+            stiffness: 73,
+            rest: 74,
+        },
+        leg_models::Spring {
+            name: "four_bar_spring",
+            a: 4,
+            b: Some(7),
+            stiffness: 75,
+            rest: 76,
+        },
+    ];
     const ACTUATED: [usize; NU] = [3, 4];
     const HOME: [f64; NQ] = [
         0.0,

@@ -368,6 +368,8 @@ impl LegModel<NQ, NC, NU> for BracedParallelogram {
         JointKind::Revolute,
         JointKind::Revolute,
     ];
+    const PARENTS: [Option<usize>; NQ] = [None, Some(0), None, Some(2), Some(2)];
+    const SPRINGS: &'static [leg_models::Spring] = &[];
     const ACTUATED: [usize; NU] = [0, 2];
     const HOME: [f64; NQ] = [-2.17, 1.2, -0.97, -1.2, -1.2];
     const REDUNDANT_ROWS: usize = 1;

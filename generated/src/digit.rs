@@ -300,6 +300,8 @@ impl LegModel<NQ, NC, NU> for Digit {
         JointKind::Revolute,
         JointKind::Revolute,
     ];
+    const PARENTS: [Option<usize>; NQ] = [None, Some(0), None, Some(2)];
+    const SPRINGS: &'static [leg_models::Spring] = &[];
     const ACTUATED: [usize; NU] = [0, 3];
     const HOME: [f64; NQ] = [-2.5088, 0.9651, -1.7777, 1.503];
     const REDUNDANT_ROWS: usize = 0;

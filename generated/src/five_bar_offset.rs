@@ -283,6 +283,8 @@ impl LegModel<NQ, NC, NU> for FiveBarOffset {
         JointKind::Revolute,
         JointKind::Revolute,
     ];
+    const PARENTS: [Option<usize>; NQ] = [None, Some(0), None, Some(2)];
+    const SPRINGS: &'static [leg_models::Spring] = &[];
     const ACTUATED: [usize; NU] = [0, 2];
     const HOME: [f64; NQ] = [-0.6201, -1.2365, -2.5215, 1.2365];
     const REDUNDANT_ROWS: usize = 0;

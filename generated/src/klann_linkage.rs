@@ -468,6 +468,16 @@ impl LegModel<NQ, NC, NU> for KlannLinkage {
         JointKind::Revolute,
         JointKind::Revolute,
     ];
+    const PARENTS: [Option<usize>; NQ] = [
+        None,
+        Some(0),
+        None,
+        Some(1),
+        None,
+        Some(3),
+        Some(2),
+    ];
+    const SPRINGS: &'static [leg_models::Spring] = &[];
     const ACTUATED: [usize; NU] = [0];
     const HOME: [f64; NQ] = [
         0.0,

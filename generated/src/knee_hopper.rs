@@ -252,6 +252,16 @@ impl LegModel<NQ, NC, NU> for KneeHopper {
         JointKind::Revolute,
         JointKind::Revolute,
     ];
+    const PARENTS: [Option<usize>; NQ] = [None, Some(0), Some(1)];
+    const SPRINGS: &'static [leg_models::Spring] = &[
+        leg_models::Spring {
+            name: "knee_spring",
+            a: 2,
+            b: None,
+            stiffness: 31,
+            rest: 32,
+        },
+    ];
     const ACTUATED: [usize; NU] = [1, 2];
     const HOME: [f64; NQ] = [0.31593, -1.0708, -1.0];
     const REDUNDANT_ROWS: usize = 0;

@@ -283,6 +283,8 @@ impl LegModel<NQ, NC, NU> for Minitaur {
         JointKind::Revolute,
         JointKind::Revolute,
     ];
+    const PARENTS: [Option<usize>; NQ] = [None, Some(0), None, Some(2)];
+    const SPRINGS: &'static [leg_models::Spring] = &[];
     const ACTUATED: [usize; NU] = [0, 2];
     const HOME: [f64; NQ] = [-0.7076, -1.253, -2.434, 1.253];
     const REDUNDANT_ROWS: usize = 0;

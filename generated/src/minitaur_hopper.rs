@@ -344,6 +344,8 @@ impl LegModel<NQ, NC, NU> for MinitaurHopper {
         JointKind::Revolute,
         JointKind::Revolute,
     ];
+    const PARENTS: [Option<usize>; NQ] = [None, Some(0), Some(1), Some(0), Some(3)];
+    const SPRINGS: &'static [leg_models::Spring] = &[];
     const ACTUATED: [usize; NU] = [1, 3];
     const HOME: [f64; NQ] = [0.25, -0.7076, -1.253, -2.434, 1.253];
     const REDUNDANT_ROWS: usize = 0;

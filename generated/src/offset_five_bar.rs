@@ -343,6 +343,8 @@ impl LegModel<NQ, NC, NU> for OffsetFiveBar {
         JointKind::Revolute,
         JointKind::Revolute,
     ];
+    const PARENTS: [Option<usize>; NQ] = [None, Some(0), None, Some(2)];
+    const SPRINGS: &'static [leg_models::Spring] = &[];
     const ACTUATED: [usize; NU] = [0, 2];
     const HOME: [f64; NQ] = [-2.297438667, 1.056266748, -0.6107259644, -1.205049026];
     const REDUNDANT_ROWS: usize = 0;

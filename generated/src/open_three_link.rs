@@ -228,6 +228,8 @@ impl LegModel<NQ, NC, NU> for OpenThreeLink {
         JointKind::Revolute,
         JointKind::Revolute,
     ];
+    const PARENTS: [Option<usize>; NQ] = [None, Some(0), Some(1)];
+    const SPRINGS: &'static [leg_models::Spring] = &[];
     const ACTUATED: [usize; NU] = [0, 1];
     const HOME: [f64; NQ] = [-1.451367401, -0.2780841882, 1.370680919];
     const REDUNDANT_ROWS: usize = 0;

@@ -368,6 +368,23 @@ impl LegModel<NQ, NC, NU> for RaibertHopper {
         JointKind::Revolute,
         JointKind::Prismatic,
     ];
+    const PARENTS: [Option<usize>; NQ] = [None, Some(0), Some(1), Some(2), Some(3)];
+    const SPRINGS: &'static [leg_models::Spring] = &[
+        leg_models::Spring {
+            name: "leg_spring",
+            a: 4,
+            b: None,
+            stiffness: 45,
+            rest: 46,
+        },
+        leg_models::Spring {
+            name: "hip_spring",
+            a: 3,
+            b: Some(2),
+            stiffness: 47,
+            rest: 48,
+        },
+    ];
     const ACTUATED: [usize; NU] = [3, 4];
     const HOME: [f64; NQ] = [0.0, 0.9, 0.05, -0.1, 0.02];
     const REDUNDANT_ROWS: usize = 0;

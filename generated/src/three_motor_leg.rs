@@ -468,6 +468,16 @@ impl LegModel<NQ, NC, NU> for ThreeMotorLeg {
         JointKind::Revolute,
         JointKind::Revolute,
     ];
+    const PARENTS: [Option<usize>; NQ] = [
+        None,
+        Some(0),
+        Some(1),
+        Some(2),
+        Some(0),
+        Some(2),
+        Some(5),
+    ];
+    const SPRINGS: &'static [leg_models::Spring] = &[];
     const ACTUATED: [usize; NU] = [0, 1, 5];
     const HOME: [f64; NQ] = [
         -1.405647649,

@@ -182,6 +182,8 @@ impl LegModel<NQ, NC, NU> for TwoLink {
     const NAME: &'static str = "two_link";
     const JOINT_NAMES: [&'static str; NQ] = ["upper_arm", "forearm"];
     const JOINT_KINDS: [JointKind; NQ] = [JointKind::Revolute, JointKind::Revolute];
+    const PARENTS: [Option<usize>; NQ] = [None, Some(0)];
+    const SPRINGS: &'static [leg_models::Spring] = &[];
     const ACTUATED: [usize; NU] = [0, 1];
     const HOME: [f64; NQ] = [-1.2288, 1.1593];
     const REDUNDANT_ROWS: usize = 0;

@@ -351,6 +351,33 @@ where
     L: LegModel<NQ, NC, NU>,
     T: Real,
 {
+    foot_inverse_holding::<L, T, NQ, NC, NU>(params, foot, guess, tol, &[false; NQ])
+}
+
+/// [`foot_inverse`] with the joints marked in `held` kept at `guess`'s values: the
+/// leg's joints placing the foot (base frame) under a body that stays where it is (the
+/// body's joints held), as a controller places a hopper's foot in flight.
+pub fn foot_inverse_holding<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    foot: &SVector<T, 2>,
+    guess: &SVector<T, NQ>,
+    tol: &Tolerance<T>,
+    held: &[bool; NQ],
+) -> Result<SVector<T, NQ>, AssemblyError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let held_count = held.iter().filter(|&&h| h).count();
+    let hold = |mut m: SMatrix<T, NC, NQ>, mut f: SMatrix<T, 2, NQ>| {
+        for (i, &h) in held.iter().enumerate() {
+            if h {
+                m.column_mut(i).fill(T::zero());
+                f.column_mut(i).fill(T::zero());
+            }
+        }
+        (m, f)
+    };
     if !foot.iter().chain(guess.iter()).all(|x| x.is_finite()) {
         return Err(AssemblyError::NonFinite);
     }
@@ -383,14 +410,16 @@ where
         if met(&q, &r) {
             return Ok(q);
         }
-        let j = L::constraint_jacobian(&q, params);
-        let jf = L::foot_jacobian(&q, params);
+        let (j, jf) = hold(
+            L::constraint_jacobian(&q, params),
+            L::foot_jacobian(&q, params),
+        );
         let mu = cost(&r);
         let unreachable = AssemblyError::Unreachable {
             residual: to_f64(worst(&r)),
         };
         let phi = r.0;
-        let step = if L::MOBILITY >= 2 {
+        let step = if L::MOBILITY >= 2 + held_count {
             // At least as many free motions as the foot's two coordinates: the minimal-norm
             // step `Aᵀ (A Aᵀ + μ I)⁻¹ r` of the stacked residual, A = [J; J_f], by block
             // elimination (JᵀJ + J_fᵀJ_f would be singular at the solution).

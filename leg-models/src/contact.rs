@@ -316,6 +316,7 @@ fn to_f64<T: Real>(x: T) -> f64 {
 
 /// The contact rows of leg `L` at `q` in the ground's frame, and the force directions of
 /// the held rows under `modes` with friction `mu` (per contact, entry `2k`).
+#[derive(Clone, Copy, Debug)]
 pub struct ContactRows<T: Real, const NQ: usize, const NK: usize> {
     /// `C = R J_c`.
     pub c: SMatrix<T, NK, NQ>,
@@ -398,38 +399,96 @@ where
     L: ContactModel<NQ, NC, NU, NK>,
     T: Real,
 {
-    let terms = L::dynamics_terms(q, qd, params);
-    let chol_m =
-        Cholesky::new(&terms.mass_matrix).ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
-    if chol_m.rcond < rcond_floor::<T>() {
-        return Err(DynamicsError::MassMatrixNotPositiveDefinite);
-    }
-    let tau = actuation::<L, T, NQ, NC, NU>(u) - terms.bias_forces - L::damping_forces(qd, params);
-    let mut r_j = -terms.constraint_bias;
-    let jc = L::contact_jacobian(q, params);
-    let rows = ContactRows::new(ground, &jc, modes, mu);
-    let mut r_c = -ground.rows(&L::contact_bias(q, qd, params));
-    if let Some(b) = baumgarte {
-        let (two_alpha, beta2) = (b.alpha + b.alpha, b.beta * b.beta);
-        if NC > 0 {
-            let phi = L::closure_residual(q, params);
-            r_j -= (terms.constraint_jacobian * qd) * two_alpha + phi * beta2;
+    ContactSystem::new::<L, NU>(params, q, qd, modes, anchors, ground, mu, baumgarte)?
+        .solve(&actuation::<L, T, NQ, NC, NU>(u))
+}
+
+/// The stance (or flight) system of leg `L` at one state, evaluated and factored once,
+/// for the solves of several applied forces: what a controller that needs the response
+/// to each motor (or to any generalized force) calls instead of
+/// [`forward_dynamics_with_contacts`] once per right-hand side.
+#[derive(Clone, Copy, Debug)]
+pub struct ContactSystem<T: Real, const NQ: usize, const NC: usize, const NK: usize> {
+    chol_m: Cholesky<T, NQ>,
+    jacobian: SMatrix<T, NC, NQ>,
+    r_j: SVector<T, NC>,
+    redundant_rows: usize,
+    rows: ContactRows<T, NQ, NK>,
+    r_c: SVector<T, NK>,
+    /// `−N − D q̇`: the forces that act whatever is applied.
+    passive: SVector<T, NQ>,
+    /// `M(q)`.
+    pub mass_matrix: SMatrix<T, NQ, NQ>,
+}
+
+impl<T: Real, const NQ: usize, const NC: usize, const NK: usize> ContactSystem<T, NQ, NC, NK> {
+    /// Evaluates the terms and factors `M` (the arguments as for
+    /// [`forward_dynamics_with_contacts`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn new<L, const NU: usize>(
+        params: &L::Params<T>,
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        modes: &Modes<NK>,
+        anchors: &SVector<T, NK>,
+        ground: &Ground<T>,
+        mu: &SVector<T, NK>,
+        baumgarte: Option<Baumgarte<T>>,
+    ) -> Result<Self, DynamicsError>
+    where
+        L: ContactModel<NQ, NC, NU, NK>,
+    {
+        let terms = L::dynamics_terms(q, qd, params);
+        let chol_m = Cholesky::new(&terms.mass_matrix)
+            .ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
+        if chol_m.rcond < rcond_floor::<T>() {
+            return Err(DynamicsError::MassMatrixNotPositiveDefinite);
         }
-        let drift = ground.coordinates(&L::contact_positions(q, params)) - anchors;
-        r_c -= (rows.c * qd) * two_alpha + drift * beta2;
+        let passive = -terms.bias_forces - L::damping_forces(qd, params);
+        let mut r_j = -terms.constraint_bias;
+        let jc = L::contact_jacobian(q, params);
+        let rows = ContactRows::new(ground, &jc, modes, mu);
+        let mut r_c = -ground.rows(&L::contact_bias(q, qd, params));
+        if let Some(b) = baumgarte {
+            let (two_alpha, beta2) = (b.alpha + b.alpha, b.beta * b.beta);
+            if NC > 0 {
+                let phi = L::closure_residual(q, params);
+                r_j -= (terms.constraint_jacobian * qd) * two_alpha + phi * beta2;
+            }
+            let drift = ground.coordinates(&L::contact_positions(q, params)) - anchors;
+            r_c -= (rows.c * qd) * two_alpha + drift * beta2;
+        }
+        Ok(ContactSystem {
+            chol_m,
+            jacobian: terms.constraint_jacobian,
+            r_j,
+            redundant_rows: L::REDUNDANT_ROWS,
+            rows,
+            r_c,
+            passive,
+            mass_matrix: terms.mass_matrix,
+        })
     }
-    solve_structured(
-        &chol_m,
-        &terms.constraint_jacobian,
-        &r_j,
-        L::REDUNDANT_ROWS,
-        &rows.c,
-        &rows.w,
-        &r_c,
-        &rows.held,
-        &rows.slide,
-        &tau,
-    )
+
+    /// Accelerations and forces under the applied generalized forces `applied` (`B u`
+    /// for motor torques `u`, [`crate::dynamics::actuation`]).
+    pub fn solve(
+        &self,
+        applied: &SVector<T, NQ>,
+    ) -> Result<ContactSolution<T, NQ, NC, NK>, DynamicsError> {
+        solve_structured(
+            &self.chol_m,
+            &self.jacobian,
+            &self.r_j,
+            self.redundant_rows,
+            &self.rows.c,
+            &self.rows.w,
+            &self.r_c,
+            &self.rows.held,
+            &self.rows.slide,
+            &(applied + self.passive),
+        )
+    }
 }
 
 /// A plastic impact: the velocities after it and what it cost.

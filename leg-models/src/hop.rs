@@ -1,16 +1,34 @@
-//! Hopping: a controller for a leg on a body that hops in place to a commanded apex
-//! height, for any leg with contacts whose body rises along one coordinate (a body on a
-//! rail; the height of a floating body).
+//! Hopping: a controller for a leg on a body that hops, in place to a commanded apex
+//! height, or forward at a commanded speed when the body can move along the ground, for
+//! any leg with contacts whose body rises along one coordinate (a body on a rail; the
+//! height of a floating body). Raibert's three-part hopping controller (Raibert, *Legged
+//! Robots That Balance*, 1986, ch. 2–3), with the stance solved on the exact model:
 //!
-//! - **Flight**: the motors return to a touchdown posture (joint PD in the motor angles;
-//!   in free fall the leg's relative motion needs no gravity compensation).
+//! - **Drives.** A motor joined to a leg joint by a coupling spring (a series-elastic
+//!   actuator, as on ATRIAS) drives that joint through the spring: the controller computes
+//!   the effort wanted on the driven joint (the spring's torque) and an inner loop puts
+//!   the motor where the spring's deflection gives it, `q_m* = q_d + σ r + τ*/k`, with
+//!   `u = τ_spring + I_m (ω² (q_m* − q_m) + 2 ω (q̇_d − q̇_m))` (critically damped, `I_m`
+//!   the motor's inertia; `ω` [`HopSettings::drive_frequency`]). Any other motor drives
+//!   its own joint. [`drives`] finds them from the spec's springs.
+//! - **Flight**: the driven joints go to a touchdown posture (joint PD; in free fall the
+//!   leg's relative motion needs no gravity compensation). With a forward coordinate the
+//!   posture places the foot (Raibert): `x_f = v T_st / 2 + k (v − v_des) + x_learnt`
+//!   ahead of the hip, where `T_st` is the last stance's duration and `x_learnt` an
+//!   integral of each hop's speed error (what the model's asymmetries need); the posture
+//!   is the leg's inverse kinematics with the body held ([`foot_inverse_holding`]), the
+//!   leg shortened by [`Forward::retraction`] while the body rises (clearance) and at
+//!   full length after the apex.
 //! - **Stance**: inverse dynamics through the hybrid model. The accelerations and the
-//!   ground forces of the stance (loop closures and held contacts in the structured solve)
-//!   are affine in the motor torques, `q̈ = a₀ + Q u`, `λ = λ₀ + Λ u` (NU + 1 solves); the
-//!   torques meet two tasks in the least-squares sense: the body height follows a virtual
-//!   leg spring, `ÿ = ω² (y_td − y) − g + a_thrust` (`a_thrust` only while the body rises),
-//!   and the first held contact's tangential force is zero (no push along the ground, so
-//!   no slip). Torques are clipped to the motors' limits.
+//!   ground forces of the stance (loop closures and held contacts in one structured
+//!   solve, [`ContactSystem`]) are affine in the drive efforts, `q̈ = a₀ + Q δ`, `λ = λ₀ +
+//!   Λ δ` (NU + 1 solves of one factorization); the efforts meet up to three tasks in the
+//!   least-squares sense: the body height follows a virtual leg spring, `ÿ = ω² (y_td −
+//!   y) − g + a_thrust` (`a_thrust` only while the body rises); a body that can pitch is
+//!   held upright (`θ̈ = ω_θ² (θ* − θ) − 2 ω_θ θ̇`, Raibert's attitude servo); and, when
+//!   the body cannot move along the ground and a motor is left, the first held contact's
+//!   tangential force is zero (no push along the ground, so no slip). Torques are clipped
+//!   to the motors' limits.
 //! - **Height regulation**: at each apex (the body's vertical rate crossing zero in flight)
 //!   the energy the apex missed, `m g (h_cmd − h_apex)`, spread over the last stance's
 //!   rise as a thrust (`m a · stroke`), sets the next thrust: a share `k_h` of it
@@ -19,12 +37,12 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::contact::Ground;
-use crate::contact::{forward_dynamics_with_contacts, ContactMode};
+use crate::assembly::{foot_inverse_holding, Tolerance};
+use crate::contact::{ContactMode, ContactSystem, Ground};
 use crate::control::ControlError;
 use crate::hybrid::{HybridOptions, HybridState, HybridTorqueSource};
 use crate::linalg::Cholesky;
-use crate::model::{ContactModel, JointKind, Real};
+use crate::model::{ContactModel, JointKind, LegModel, Parameters, Real};
 
 /// The body's height coordinate of leg `L` at `q`: the prismatic joint that raises the
 /// contacts most along the ground's normal (a vertical slider), if any joint raises them.
@@ -36,19 +54,161 @@ where
     L: ContactModel<NQ, NC, NU, NK>,
     T: Real,
 {
+    slider_along::<L, T, NQ, NC, NU, NK>(params, q, 1)
+}
+
+/// The body's forward coordinate of leg `L` at `q`: the prismatic joint of the body that
+/// moves the contacts most along the ground (a horizontal slider), if any.
+pub fn forward_joint<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+) -> Option<usize>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+    T: Real,
+{
+    slider_along::<L, T, NQ, NC, NU, NK>(params, q, 0)
+}
+
+/// The body prismatic joint moving every contact most along the ground's tangent
+/// (`row = 0`) or normal (`row = 1`), by more than half a metre per metre.
+fn slider_along<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+    row: usize,
+) -> Option<usize>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+    T: Real,
+{
     let rows = Ground::<T>::of::<L, NQ, NC, NU, NK>().rows(&L::contact_jacobian(q, params));
-    // How much each joint raises the contacts, summed over them.
-    let rise = |i: usize| (0..NK / 2).fold(T::zero(), |a, k| a + rows[(2 * k + 1, i)]);
+    // How much each joint moves the contacts, summed over them.
+    let along = |i: usize| (0..NK / 2).fold(T::zero(), |a, k| a + rows[(2 * k + row, i)]);
+    let body = body_joints::<L, NQ, NC, NU>();
     (0..NQ)
         .filter(|&i| {
-            L::JOINT_KINDS[i] == JointKind::Prismatic
-                && rise(i) > T::lit(0.5) * T::lit((NK / 2) as f64)
+            body[i]
+                && L::JOINT_KINDS[i] == JointKind::Prismatic
+                && along(i) > T::lit(0.5) * T::lit((NK / 2) as f64)
         })
         .max_by(|&a, &b| {
-            rise(a)
-                .partial_cmp(&rise(b))
+            along(a)
+                .partial_cmp(&along(b))
                 .unwrap_or(core::cmp::Ordering::Equal)
         })
+}
+
+/// The body's joints: every ancestor of a motor's joint (the joints that carry the
+/// motors; for a leg hung from the base, none).
+pub fn body_joints<L, const NQ: usize, const NC: usize, const NU: usize>() -> [bool; NQ]
+where
+    L: LegModel<NQ, NC, NU>,
+{
+    let mut body = [false; NQ];
+    for &a in &L::ACTUATED {
+        let mut j = L::PARENTS[a];
+        while let Some(p) = j {
+            body[p] = true;
+            j = L::PARENTS[p];
+        }
+    }
+    body
+}
+
+/// The body's pitch: a revolute joint of the body that no motor drives, if any (the
+/// first in the tree from the base).
+pub fn pitch_joint<L, const NQ: usize, const NC: usize, const NU: usize>() -> Option<usize>
+where
+    L: LegModel<NQ, NC, NU>,
+{
+    let body = body_joints::<L, NQ, NC, NU>();
+    (0..NQ)
+        .find(|&i| body[i] && L::JOINT_KINDS[i] == JointKind::Revolute && !L::ACTUATED.contains(&i))
+}
+
+/// How a motor's effort reaches the leg.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Drive {
+    /// The motor's joint.
+    pub motor: usize,
+    /// The joint its effort moves: the motor's own, or the one a coupling spring joins
+    /// it to (a series-elastic actuator).
+    pub joint: usize,
+    /// The coupling spring (index into [`LegModel::SPRINGS`]) and whether the motor is
+    /// the spring's `a` (the spring acts on `q_a − q_b`).
+    pub spring: Option<(usize, bool)>,
+}
+
+/// Each motor's drive (see the module docs): series-elastic where a coupling spring joins
+/// the motor's joint to a joint no motor drives.
+pub fn drives<L, const NQ: usize, const NC: usize, const NU: usize>() -> [Drive; NU]
+where
+    L: LegModel<NQ, NC, NU>,
+{
+    core::array::from_fn(|k| {
+        let motor = L::ACTUATED[k];
+        let series = L::SPRINGS.iter().enumerate().find_map(|(i, s)| {
+            let b = s.b?;
+            let (other, motor_is_a) = if s.a == motor {
+                (b, true)
+            } else if b == motor {
+                (s.a, false)
+            } else {
+                return None;
+            };
+            (!L::ACTUATED.contains(&other)).then_some((i, other, motor_is_a))
+        });
+        match series {
+            Some((i, joint, a)) => Drive {
+                motor,
+                joint,
+                spring: Some((i, a)),
+            },
+            None => Drive {
+                motor,
+                joint: motor,
+                spring: None,
+            },
+        }
+    })
+}
+
+/// The body's attitude in stance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pitch<T: Real> {
+    /// The body's pitch joint ([`pitch_joint`]).
+    pub joint: usize,
+    /// The pitch held [rad].
+    pub target: T,
+    /// The attitude servo's natural frequency [rad/s] (critically damped).
+    pub frequency: T,
+    /// With foot placement, the servo's target leads by this share of the leg's swing
+    /// still to come (rad per rad, from the leg's angle now to its next touchdown angle):
+    /// in flight the body turns against the swinging leg (and against the motors'
+    /// rotors), so it leaves the ground turned by what the swing will take back. Tuned:
+    /// 0.8 holds `atrias_hopper`; the free body's momentum alone (`M_bb⁻¹ M_bl`, the
+    /// leg swung rigidly) gives 0.3, too little to keep the speed from running away.
+    pub flight_lead: T,
+}
+
+/// Forward hopping: foot placement in flight (Raibert).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Forward<T: Real> {
+    /// The body's forward coordinate ([`forward_joint`]).
+    pub joint: usize,
+    /// Commanded speed along the ground [m/s].
+    pub speed: T,
+    /// `k` in `x_f = v T_st / 2 + k (v − v_des)` [s].
+    pub gain: T,
+    /// The share of each hop's mean-speed error added to the learnt placement [s].
+    pub learn_rate: T,
+    /// The foot's offset from the hip at touchdown, in ground coordinates (along, up),
+    /// with the foot placement added along the ground [m].
+    pub neutral: SVector<T, 2>,
+    /// How much the leg is shortened while the body rises in flight [m].
+    pub retraction: T,
+    /// The largest foot placement either way [m].
+    pub reach: T,
 }
 
 /// What the hopping controller aims at, and how hard.
@@ -58,11 +218,11 @@ pub struct HopSettings<T: Real, const NU: usize> {
     pub height_joint: usize,
     /// Commanded apex of `q[height_joint]` [m].
     pub apex: T,
-    /// Motor angles held in flight (and at touchdown).
+    /// Angles of the driven joints ([`drives`]) held in flight without foot placement.
     pub posture: SVector<T, NU>,
-    /// Flight PD gains on the motor angles.
-    pub kp: T,
-    pub kd: T,
+    /// Flight PD gains on the driven joints.
+    pub kp: SVector<T, NU>,
+    pub kd: SVector<T, NU>,
     /// The virtual leg spring's natural frequency in stance [rad/s].
     pub stance_frequency: T,
     /// The share of each hop's apex error corrected at the next hop (0 to 1): the thrust
@@ -73,6 +233,143 @@ pub struct HopSettings<T: Real, const NU: usize> {
     pub torque_limits: SVector<T, NU>,
     /// Gravity's magnitude along the height [m/s²].
     pub gravity: T,
+    /// The body's attitude servo, for a body that can pitch.
+    pub pitch: Option<Pitch<T>>,
+    /// Foot placement, for a body that can move along the ground.
+    pub forward: Option<Forward<T>>,
+    /// The series-elastic drives' inner loop natural frequency in stance [rad/s].
+    pub drive_frequency: T,
+    /// The same in flight [rad/s].
+    pub flight_drive_frequency: T,
+    /// The time constant with which the flight targets follow the posture wanted [s].
+    pub posture_time: T,
+}
+
+/// Why [`HopSettings::for_leg`] cannot set the controller up.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum HopSetupError {
+    /// No prismatic joint of the body raises the contacts.
+    NoHeightJoint,
+    /// A speed was commanded and no prismatic joint of the body moves along the ground.
+    NoForwardJoint,
+    /// The mass matrix at `home` is not positive definite, or an inertia is not finite.
+    Inertia,
+}
+
+impl core::fmt::Display for HopSetupError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            HopSetupError::NoHeightJoint => write!(
+                f,
+                "hopping needs a body that rises along a prismatic joint (a vertical slider) and none raises the contacts"
+            ),
+            HopSetupError::NoForwardJoint => write!(
+                f,
+                "a forward speed needs a body that moves along the ground on a prismatic joint (a horizontal slider) and none moves the contacts along it"
+            ),
+            HopSetupError::Inertia => {
+                write!(f, "the mass matrix at the home pose is not positive definite")
+            }
+        }
+    }
+}
+
+impl<T: Real, const NU: usize> HopSettings<T, NU> {
+    /// Settings for leg `L` standing at `home` (assembled, contacts on the ground): the
+    /// height and (with `speed`) forward joints and the pitch found from the model, the
+    /// flight posture that of `home`, flight gains from the driven joints' inertias (a
+    /// 30 rad/s loop, damping 0.7), a 18 rad/s stance spring, 60 rad/s drive loops, the
+    /// attitude servo at 10 rad/s, and Raibert's `k = 0.1 s`.
+    pub fn for_leg<L, const NQ: usize, const NC: usize, const NK: usize>(
+        params: &L::Params<T>,
+        home: &SVector<T, NQ>,
+        apex: T,
+        speed: Option<T>,
+        torque_limit: T,
+    ) -> Result<Self, HopSetupError>
+    where
+        L: ContactModel<NQ, NC, NU, NK>,
+    {
+        let height_joint = height_joint::<L, T, NQ, NC, NU, NK>(params, home)
+            .ok_or(HopSetupError::NoHeightJoint)?;
+        let drives = drives::<L, NQ, NC, NU>();
+        let m = L::mass_matrix(home, params);
+        let inertia = SVector::<T, NU>::from_fn(|k, _| {
+            let d = drives[k];
+            if d.spring.is_some() {
+                m[(d.joint, d.joint)]
+            } else {
+                // A motor's own joint: its inertia through the closures (the reduction).
+                crate::control::joint_inertias::<L, T, NQ, NC, NU>(params, home)
+                    .map(|i| i[k])
+                    .unwrap_or(m[(d.joint, d.joint)])
+            }
+        });
+        if !inertia.iter().all(|i| i.is_finite() && *i > T::zero()) {
+            return Err(HopSetupError::Inertia);
+        }
+        let gravity = {
+            let get = |name: &str| {
+                let names = <L::Params<T> as Parameters<T>>::NAMES;
+                names
+                    .iter()
+                    .position(|n| *n == name)
+                    .and_then(|i| params.get(i))
+                    .unwrap_or(T::zero())
+            };
+            let n = Ground::<T>::of::<L, NQ, NC, NU, NK>().normal;
+            -(get("gravity_x") * n[0] + get("gravity_y") * n[1])
+        };
+        let forward = match speed {
+            None => None,
+            Some(speed) => {
+                let joint = forward_joint::<L, T, NQ, NC, NU, NK>(params, home)
+                    .ok_or(HopSetupError::NoForwardJoint)?;
+                let ground = Ground::<T>::of::<L, NQ, NC, NU, NK>();
+                let offset = L::foot_position(home, params)
+                    - hip(&L::joint_positions(home, params), drives[0].motor);
+                let neutral =
+                    SVector::<T, 2>::new(ground.tangent().dot(&offset), ground.normal.dot(&offset));
+                let length = offset.norm();
+                Some(Forward {
+                    joint,
+                    speed,
+                    gain: T::lit(0.1),
+                    learn_rate: T::lit(0.05),
+                    neutral,
+                    retraction: T::zero() * length,
+                    reach: T::lit(0.4) * length,
+                })
+            }
+        };
+        let omega = T::lit(30.0);
+        Ok(HopSettings {
+            height_joint,
+            apex,
+            posture: SVector::from_fn(|k, _| home[drives[k].joint]),
+            kp: inertia * (omega * omega),
+            kd: inertia * (T::lit(2.0 * 0.7) * omega),
+            stance_frequency: T::lit(18.0),
+            height_gain: T::lit(0.8),
+            torque_limits: SVector::from_element(torque_limit),
+            gravity,
+            pitch: pitch_joint::<L, NQ, NC, NU>().map(|joint| Pitch {
+                joint,
+                target: home[joint],
+                frequency: T::lit(20.0),
+                flight_lead: T::lit(0.8),
+            }),
+            forward,
+            drive_frequency: T::lit(150.0),
+            flight_drive_frequency: T::lit(30.0),
+            posture_time: T::lit(0.03),
+        })
+    }
+}
+
+/// The hip: where the first motor's joint is.
+fn hip<T: Real, const NQ: usize>(joints: &SMatrix<T, 2, NQ>, motor: usize) -> SVector<T, 2> {
+    SVector::<T, 2>::new(joints[(0, motor)], joints[(1, motor)])
 }
 
 /// The hopping controller (see the module docs); it also counts what happened.
@@ -90,22 +387,39 @@ pub struct HopController<
     pub params: L::Params<T>,
     pub options: HybridOptions<T, NK>,
     pub settings: HopSettings<T, NU>,
+    /// Each motor's drive.
+    pub drives: [Drive; NU],
     /// The thrust acceleration added while the body rises in stance.
     pub thrust: T,
     /// Its learnt part: what pays for each hop's impact loss.
     pub loss_thrust: T,
+    /// The learnt part of the foot placement [m].
+    pub learnt_placement: T,
     /// Body height at the last touchdown.
     pub touchdown_height: T,
     /// The lowest body height of the last stance.
     pub bottom: T,
+    /// The last stance's duration [s].
+    pub stance_time: T,
     /// Apexes seen (hops completed).
     pub hops: usize,
     /// The last apex height.
     pub last_apex: Option<T>,
+    /// The mean forward speed from the apex before the last to the last [m/s].
+    pub last_speed: Option<T>,
     /// Evaluations in which motor `k` was clipped.
     pub saturations: [usize; NU],
+    /// Flight evaluations whose foot placement the leg could not reach (the posture of
+    /// the last reachable one was kept).
+    pub unreachable_placements: usize,
     in_stance: bool,
     rising: bool,
+    touchdown_time: T,
+    apex_at: Option<(T, T)>,
+    placement: Option<SVector<T, NQ>>,
+    flight_posture: Option<(T, SVector<T, NU>)>,
+    last_effort: Option<(T, SVector<T, NU>)>,
+    effort_rate: SVector<T, NU>,
 }
 
 impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
@@ -123,15 +437,26 @@ where
             params,
             options,
             settings,
+            drives: drives::<L, NQ, NC, NU>(),
             thrust: T::zero(),
             loss_thrust: T::zero(),
+            learnt_placement: T::zero(),
             touchdown_height: T::zero(),
             bottom: T::zero(),
+            stance_time: T::lit(core::f64::consts::PI) / settings.stance_frequency,
             hops: 0,
             last_apex: None,
+            last_speed: None,
             saturations: [0; NU],
+            unreachable_placements: 0,
             in_stance: false,
             rising: false,
+            touchdown_time: T::zero(),
+            apex_at: None,
+            placement: None,
+            flight_posture: None,
+            last_effort: None,
+            effort_rate: SVector::zeros(),
         }
     }
 
@@ -146,67 +471,228 @@ where
         u
     }
 
-    fn flight(&self, hs: &HybridState<T, NQ, NK>) -> SVector<T, NU> {
-        let s = &self.settings;
-        SVector::from_fn(|k, _| {
-            let j = L::ACTUATED[k];
-            s.kp * (s.posture[k] - hs.state.q[j]) - s.kd * hs.state.qd[j]
+    /// A series-elastic drive's spring: stiffness, and its rest value as seen from the
+    /// motor (`τ = k (q_m − q_d − r)`).
+    fn spring(&self, k: usize) -> Option<(T, T)> {
+        let (i, motor_is_a) = self.drives[k].spring?;
+        let s = &L::SPRINGS[i];
+        let stiffness = self.params.get(s.stiffness)?;
+        let rest = self.params.get(s.rest)?;
+        Some((stiffness, if motor_is_a { rest } else { -rest }))
+    }
+
+    /// The effort each drive puts on its joint now: the spring's torque for a
+    /// series-elastic drive, nothing (it is the torque asked) for a direct one.
+    fn present_efforts(&self, q: &SVector<T, NQ>) -> SVector<T, NU> {
+        SVector::from_fn(|k, _| match self.spring(k) {
+            Some((stiffness, rest)) => {
+                let d = self.drives[k];
+                stiffness * (q[d.motor] - q[d.joint] - rest)
+            }
+            None => T::zero(),
         })
     }
 
-    /// The stance's accelerations and ground forces under torques `u`.
-    fn solve(
+    /// Motor torques that give the drive efforts `effort` (see the module docs).
+    /// `drive_acceleration`, when known (stance), is the driven joints' acceleration
+    /// under `effort`: the motor follows it (feedforward), so the spring's deflection
+    /// does not lag the joint's motion.
+    fn motor_torques(
         &self,
         hs: &HybridState<T, NQ, NK>,
-        u: &SVector<T, NU>,
-    ) -> Result<crate::contact::ContactSolution<T, NQ, NC, NK>, ControlError> {
-        forward_dynamics_with_contacts::<L, T, NQ, NC, NU, NK>(
+        effort: &SVector<T, NU>,
+        mass_matrix: &SMatrix<T, NQ, NQ>,
+        drive_acceleration: &SVector<T, NU>,
+        effort_rate: &SVector<T, NU>,
+    ) -> SVector<T, NU> {
+        let (q, qd) = (&hs.state.q, &hs.state.qd);
+        let present = self.present_efforts(q);
+        let omega = self.settings.drive_frequency;
+        SVector::from_fn(|k, _| match self.spring(k) {
+            None => effort[k],
+            Some((stiffness, rest)) => {
+                let d = self.drives[k];
+                let inertia = mass_matrix[(d.motor, d.motor)];
+                let target = q[d.joint] + rest + effort[k] / stiffness;
+                let (follow, lead) = (drive_acceleration[k], effort_rate[k]);
+                present[k]
+                    + inertia
+                        * (follow
+                            + omega * omega * (target - q[d.motor])
+                            + (omega + omega) * (qd[d.joint] + lead / stiffness - qd[d.motor]))
+            }
+        })
+    }
+
+    /// The driven joints' flight targets: the foot placed (with a forward coordinate)
+    /// or the fixed posture.
+    fn flight_targets(&mut self, hs: &HybridState<T, NQ, NK>) -> SVector<T, NU> {
+        let Some(fw) = self.settings.forward else {
+            return self.settings.posture;
+        };
+        let q = &hs.state.q;
+        let v = hs.state.qd[fw.joint];
+        let half = T::lit(0.5);
+        let x_f = (v * self.stance_time * half + fw.gain * (v - fw.speed) + self.learnt_placement)
+            .max(-fw.reach)
+            .min(fw.reach);
+        let up = if self.rising {
+            fw.retraction
+        } else {
+            T::zero()
+        };
+        let ground = self.options.ground;
+        let hip = hip(&L::joint_positions(q, &self.params), self.drives[0].motor);
+        let target =
+            hip + ground.tangent() * (fw.neutral[0] + x_f) + ground.normal * (fw.neutral[1] + up);
+        let body = body_joints::<L, NQ, NC, NU>();
+        let mut guess = self.placement.unwrap_or(*q);
+        for i in 0..NQ {
+            if body[i] {
+                guess[i] = q[i];
+            }
+        }
+        match foot_inverse_holding::<L, T, NQ, NC, NU>(
+            &self.params,
+            &target,
+            &guess,
+            &Tolerance::default(),
+            &body,
+        ) {
+            Ok(placed) => self.placement = Some(placed),
+            Err(_) => self.unreachable_placements += 1,
+        }
+        match &self.placement {
+            Some(placed) => SVector::from_fn(|k, _| placed[self.drives[k].joint]),
+            None => self.settings.posture,
+        }
+    }
+
+    fn flight(&mut self, t: T, hs: &HybridState<T, NQ, NK>) -> SVector<T, NU> {
+        let wanted = self.flight_targets(hs);
+        // The targets move from where the leg left the ground toward the wanted posture
+        // in a first-order lag (a step would jolt the body at liftoff).
+        let targets = match self.flight_posture {
+            Some((t0, previous)) if t >= t0 => {
+                let a = T::one() - (-(t - t0) / self.settings.posture_time).exp();
+                previous + (wanted - previous) * a
+            }
+            _ => SVector::from_fn(|k, _| hs.state.q[self.drives[k].joint]),
+        };
+        self.flight_posture = Some((t, targets));
+        let s = &self.settings;
+        let (q, qd) = (&hs.state.q, &hs.state.qd);
+        let present = self.present_efforts(q);
+        let omega = s.flight_drive_frequency;
+        let mut m = None;
+        SVector::from_fn(|k, _| {
+            let d = self.drives[k];
+            match self.spring(k) {
+                // A joint PD on a direct drive.
+                None => s.kp[k] * (targets[k] - q[d.joint]) - s.kd[k] * qd[d.joint],
+                // A series-elastic drive's motor goes where its spring is relaxed at the
+                // target (the leg's joints follow through the stiff spring): one slow
+                // loop, since each motor's acceleration turns the body the other way.
+                Some((_, rest)) => {
+                    let inertia = m.get_or_insert_with(|| L::mass_matrix(q, &self.params))
+                        [(d.motor, d.motor)];
+                    present[k]
+                        + inertia
+                            * (omega * omega * (targets[k] + rest - q[d.motor])
+                                - (omega + omega) * qd[d.motor])
+                }
+            }
+        })
+    }
+
+    /// The stance system at `hs`, and the applied forces with every series-elastic motor
+    /// holding its spring (direct motors at zero).
+    #[allow(clippy::type_complexity)]
+    fn system(
+        &self,
+        hs: &HybridState<T, NQ, NK>,
+    ) -> Result<(ContactSystem<T, NQ, NC, NK>, SVector<T, NQ>, SVector<T, NU>), ControlError> {
+        let system = ContactSystem::new::<L, NU>(
             &self.params,
             &hs.state.q,
             &hs.state.qd,
-            u,
             &hs.modes,
             &hs.anchors,
             &self.options.ground,
             &self.options.friction,
             self.options.baumgarte,
         )
-        .map_err(ControlError::Dynamics)
+        .map_err(ControlError::Dynamics)?;
+        let present = self.present_efforts(&hs.state.q);
+        let mut applied = SVector::<T, NQ>::zeros();
+        for k in 0..NU {
+            applied[self.drives[k].motor] += present[k];
+        }
+        Ok((system, applied, present))
     }
 
-    /// How much the motors move the body's height at a stance state: the norm of
-    /// `∂ÿ/∂u`. Zero where they act on it only through springs (series-elastic
-    /// actuators): this controller's stance then does not apply.
+    /// A unit effort of drive `k`: on its joint, and held by its motor when it acts
+    /// through a spring.
+    fn unit_effort(&self, k: usize) -> SVector<T, NQ> {
+        let d = self.drives[k];
+        let mut e = SVector::<T, NQ>::zeros();
+        e[d.joint] = T::one();
+        if d.spring.is_some() {
+            e[d.motor] += T::one();
+        }
+        e
+    }
+
+    /// How much the drives move the body's height at a stance state: the norm of
+    /// `∂ÿ/∂δ` over the drive efforts. Zero where they cannot (the controller's stance
+    /// then does not apply).
     pub fn height_authority(&self, hs: &HybridState<T, NQ, NK>) -> Result<T, ControlError> {
-        let solve = |u: &SVector<T, NU>| self.solve(hs, u);
+        let (system, applied, _) = self.system(hs)?;
         let h = self.settings.height_joint;
-        let base = solve(&SVector::zeros())?.x[h];
+        let solve = |f: &SVector<T, NQ>| system.solve(f).map_err(ControlError::Dynamics);
+        let base = solve(&applied)?.x[h];
         let mut sum = T::zero();
         for k in 0..NU {
-            let mut e = SVector::<T, NU>::zeros();
-            e[k] = T::one();
-            let d = solve(&e)?.x[h] - base;
+            let d = solve(&(applied + self.unit_effort(k)))?.x[h] - base;
             sum += d * d;
         }
         Ok(sum.sqrt())
     }
 
-    fn stance(&self, hs: &HybridState<T, NQ, NK>) -> Result<SVector<T, NU>, ControlError> {
+    /// The drive efforts of the stance, the driven joints' accelerations under them,
+    /// and `M`.
+    #[allow(clippy::type_complexity)]
+    fn stance(
+        &self,
+        hs: &HybridState<T, NQ, NK>,
+    ) -> Result<(SVector<T, NU>, SVector<T, NU>, SMatrix<T, NQ, NQ>), ControlError> {
         let s = &self.settings;
         let (q, qd) = (&hs.state.q, &hs.state.qd);
-        let solve = |u: &SVector<T, NU>| self.solve(hs, u);
-        let base = solve(&SVector::zeros())?;
-        // Task rows: body height acceleration, and the first held contact's tangential force.
-        let tangential = (0..NK / 2).find(|&k| hs.modes.get(k) == ContactMode::Stick);
+        let (system, applied, present) = self.system(hs)?;
+        let solve = |f: &SVector<T, NQ>| system.solve(f).map_err(ControlError::Dynamics);
+        let base = solve(&applied)?;
+        // Task rows: body height acceleration, the pitch's, and (body held along the
+        // ground, a motor left) the first held contact's tangential force.
+        let tangential = match (s.forward, s.pitch) {
+            (None, None) if NU >= 2 => (0..NK / 2).find(|&k| hs.modes.get(k) == ContactMode::Stick),
+            _ => None,
+        };
         let h = s.height_joint;
-        let mut rows = SMatrix::<T, 2, NU>::zeros();
+        let mut rows = SMatrix::<T, 3, NU>::zeros();
+        // The driven joints' accelerations per unit effort.
+        let mut drive_rows = SMatrix::<T, NU, NU>::zeros();
         for k in 0..NU {
-            let mut e = SVector::<T, NU>::zeros();
-            e[k] = T::one();
-            let unit = solve(&e)?;
+            let unit = solve(&(applied + self.unit_effort(k)))?;
+            for i in 0..NU {
+                let j = self.drives[i].joint;
+                drive_rows[(i, k)] = unit.x[j] - base.x[j];
+            }
             rows[(0, k)] = unit.x[h] - base.x[h];
+            if let Some(p) = s.pitch {
+                rows[(1, k)] = unit.x[p.joint] - base.x[p.joint];
+            }
             if let Some(c) = tangential {
-                rows[(1, k)] = unit.contact[2 * c] - base.contact[2 * c];
+                rows[(2, k)] = unit.contact[2 * c] - base.contact[2 * c];
             }
         }
         let omega2 = s.stance_frequency * s.stance_frequency;
@@ -214,8 +700,33 @@ where
         if qd[h] > T::zero() {
             target += self.thrust;
         }
-        let goal = nalgebra::Vector2::new(
+        let pitch_goal = match s.pitch {
+            Some(p) => {
+                let w = p.frequency;
+                let lead = match s.forward {
+                    Some(fw) => {
+                        let ground = self.options.ground;
+                        let hip = hip(&L::joint_positions(q, &self.params), self.drives[0].motor);
+                        let d = L::foot_position(q, &self.params) - hip;
+                        let now = (ground.tangent().dot(&d)).atan2(-ground.normal.dot(&d));
+                        let v = qd[fw.joint];
+                        let x_f = (v * self.stance_time * T::lit(0.5)
+                            + fw.gain * (v - fw.speed)
+                            + self.learnt_placement)
+                            .max(-fw.reach)
+                            .min(fw.reach);
+                        let next = (fw.neutral[0] + x_f).atan2(-fw.neutral[1]);
+                        p.flight_lead * (next - now)
+                    }
+                    None => T::zero(),
+                };
+                w * w * (p.target + lead - q[p.joint]) - (w + w) * qd[p.joint] - base.x[p.joint]
+            }
+            None => T::zero(),
+        };
+        let goal = nalgebra::Vector3::new(
             target - base.x[h],
+            pitch_goal,
             match tangential {
                 Some(c) => -base.contact[2 * c],
                 None => T::zero(),
@@ -225,7 +736,7 @@ where
         // motors, or depend on them alike): rows scaled to unit size first.
         let mut w = rows;
         let mut g = goal;
-        for r in 0..2 {
+        for r in 0..3 {
             let norm = w.row(r).norm();
             if norm > T::zero() {
                 let inv = T::one() / norm;
@@ -240,9 +751,11 @@ where
             normal[(k, k)] += T::lit(1e-9);
         }
         let chol = Cholesky::new(&normal).ok_or(ControlError::NonFinite)?;
-        let mut u = w.transpose() * g;
-        chol.solve_mut(&mut u);
-        Ok(u)
+        let mut delta = w.transpose() * g;
+        chol.solve_mut(&mut delta);
+        let drive_acceleration =
+            SVector::<T, NU>::from_fn(|i, _| base.x[self.drives[i].joint]) + drive_rows * delta;
+        Ok((present + delta, drive_acceleration, system.mass_matrix))
     }
 }
 
@@ -254,7 +767,7 @@ where
 {
     fn torque(
         &mut self,
-        _t: T,
+        t: T,
         hs: &HybridState<T, NQ, NK>,
     ) -> Result<SVector<T, NU>, ControlError> {
         let h = self.settings.height_joint;
@@ -263,6 +776,10 @@ where
         if on_ground && !self.in_stance {
             self.touchdown_height = y;
             self.bottom = y;
+            self.touchdown_time = t;
+        }
+        if !on_ground && self.in_stance {
+            self.stance_time = t - self.touchdown_time;
         }
         if on_ground {
             self.bottom = self.bottom.min(y);
@@ -278,19 +795,51 @@ where
                 // share that pays for each hop's impact loss (integral).
                 let stroke = (self.touchdown_height - self.bottom).max(T::lit(1e-3));
                 let missed = self.settings.gravity * (self.settings.apex - y) / stroke;
-                self.loss_thrust = (self.loss_thrust + T::lit(0.2) * missed).max(T::zero());
-                self.thrust =
-                    (self.loss_thrust + self.settings.height_gain * missed).max(T::zero());
+                self.loss_thrust += T::lit(0.2) * missed;
+                // Negative: the stance brakes the rise (a leg that gains energy in
+                // stance, as one whose springs lag the motors does, needs it).
+                self.thrust = self.loss_thrust + self.settings.height_gain * missed;
+                if let Some(fw) = self.settings.forward {
+                    let x = hs.state.q[fw.joint];
+                    if let Some((t0, x0)) = self.apex_at {
+                        if t > t0 {
+                            let speed = (x - x0) / (t - t0);
+                            self.last_speed = Some(speed);
+                            self.learnt_placement += fw.learn_rate * (speed - fw.speed);
+                        }
+                    }
+                    self.apex_at = Some((t, x));
+                }
             }
             self.rising = vy > T::zero();
         } else {
             self.rising = false;
         }
         self.in_stance = on_ground;
+        if on_ground {
+            self.flight_posture = None;
+        }
         let u = if on_ground {
-            self.stance(hs)?
+            let (effort, acceleration, m) = self.stance(hs)?;
+            // The efforts' rate (the motors lead the springs by it), from the last
+            // evaluation in this stance a step or more ago.
+            let rate = match self.last_effort {
+                Some((t0, e0)) if t - t0 >= T::lit(0.5) * self.options.dt => {
+                    let r = (effort - e0) / (t - t0);
+                    self.last_effort = Some((t, effort));
+                    r
+                }
+                Some(_) => self.effort_rate,
+                None => {
+                    self.last_effort = Some((t, effort));
+                    SVector::zeros()
+                }
+            };
+            self.effort_rate = rate;
+            self.motor_torques(hs, &effort, &m, &acceleration, &rate)
         } else {
-            self.flight(hs)
+            self.last_effort = None;
+            self.flight(t, hs)
         };
         if !u.iter().all(|x| x.is_finite()) {
             return Err(ControlError::NonFinite);

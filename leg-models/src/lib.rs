@@ -32,5 +32,5 @@ pub mod reference;
 pub mod simulate;
 pub mod structure;
 
-pub use model::{ContactModel, DynamicsTerms, JointKind, LegModel, Parameters, Real};
+pub use model::{ContactModel, DynamicsTerms, JointKind, LegModel, Parameters, Real, Spring};
 pub use nalgebra;

@@ -61,6 +61,20 @@ pub enum JointKind {
     Prismatic,
 }
 
+/// A spring of the spec: on joint `a` (`½ k (q_a − rest)²`), or, with `b`, a coupling
+/// spring on `q_a − q_b` (a series-elastic actuator when `a` is a motor's joint).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Spring {
+    /// The spec's name of the spring.
+    pub name: &'static str,
+    pub a: usize,
+    pub b: Option<usize>,
+    /// Indices of its stiffness and rest value in the parameters ([`Parameters::get`]):
+    /// they are run-time parameters like every other.
+    pub stiffness: usize,
+    pub rest: usize,
+}
+
 /// A planar leg: a tree of rigid links on revolute and prismatic joints, closed by point-on-link
 /// closures. Implemented by generated code (`cargo xtask gen`), one type per geometry.
 ///
@@ -76,6 +90,11 @@ pub trait LegModel<const NQ: usize, const NC: usize, const NU: usize> {
     const JOINT_NAMES: [&'static str; NQ];
     /// How each joint moves, in coordinate order.
     const JOINT_KINDS: [JointKind; NQ];
+    /// The parent joint of each joint (`None`: it hangs from the base), in coordinate
+    /// order: the spec's tree.
+    const PARENTS: [Option<usize>; NQ];
+    /// The spec's springs.
+    const SPRINGS: &'static [Spring];
     /// Indices (into `q`) of the actuated joints, in the order of the input vector `u`.
     const ACTUATED: [usize; NU];
     /// A typical assembled pose (rad, or m for a prismatic joint) from the spec: the default guess of loop assembly

@@ -1,6 +1,7 @@
-//! Hopping on the ground: `minitaur_hopper` hops in place to a commanded apex height
-//! under the hopping controller, through the hybrid simulator (impacts at every
-//! touchdown, liftoffs located in the step), with the Minitaur motors' torque limit.
+//! Hopping on the ground, through the hybrid simulator (impacts at every touchdown,
+//! liftoffs located in the step): `minitaur_hopper` hops in place to a commanded apex
+//! height with the Minitaur motors' torque limit, and `atrias_hopper` (a floating body
+//! that pitches, series-elastic hips) hops forward at a commanded speed.
 
 use generated::minitaur_hopper::{Params, NC, NK, NQ, NU};
 use generated::MinitaurHopper as L;
@@ -29,12 +30,13 @@ pub fn minitaur_hopper_run(
         height_joint: 0,
         apex,
         posture,
-        kp: 30.0,
-        kd: 0.6,
+        kp: SVector::from_element(30.0),
+        kd: SVector::from_element(0.6),
         stance_frequency: 18.0,
         height_gain: 0.8,
         torque_limits: SVector::from_element(3.5),
         gravity: 9.81,
+        ..HopSettings::for_leg::<L, NQ, NC, NK>(&p, &q, apex, None, 3.5).unwrap()
     };
     let mut controller = HopController::<L, f64, NQ, NC, NU, NK>::new(p, sim.options, settings);
     let start = sim
@@ -99,4 +101,91 @@ fn minitaur_hopper_hops_to_the_commanded_apex() {
         .map(|s| s.closure_residual.max(s.contact_residual))
         .fold(0.0, f64::max);
     assert!(residual <= 1e-12, "residual {residual:e}");
+}
+
+/// `atrias_hopper` released at rest, commanded 0.5 m/s: the series-elastic drives, the
+/// attitude servo and Raibert's foot placement bring it to the speed and hold it there
+/// (hop speeds from the body's advance between apexes), the apex within 5 mm.
+#[test]
+fn atrias_hopper_hops_forward_at_the_commanded_speed() {
+    use generated::atrias_hopper::{Params, NC, NK, NQ, NU};
+    use generated::AtriasHopper as A;
+    let p = Params::<f64>::default();
+    let mut sim = HybridSimulator::<A, f64, NQ, NC, NU, NK>::new(p, 1e-3);
+    sim.options.control = leg_models::integrate::ControlUpdate::PerStep;
+    let mut home = SVector::<f64, NQ>::from(A::HOME);
+    project_position::<A, f64, NQ, NC, NU>(&p, &mut home, &Default::default()).unwrap();
+    let (speed, apex) = (0.5, home[1] + 0.05);
+    let settings =
+        HopSettings::for_leg::<A, NQ, NC, NK>(&p, &home, apex, Some(speed), f64::INFINITY).unwrap();
+    assert_eq!(settings.height_joint, 1, "slide_y");
+    assert_eq!(settings.forward.map(|f| f.joint), Some(0), "slide_x");
+    assert_eq!(settings.pitch.map(|f| f.joint), Some(2), "torso");
+    let mut controller = HopController::<A, f64, NQ, NC, NU, NK>::new(p, sim.options, settings);
+    assert_eq!(
+        controller.drives.map(|d| (d.motor, d.joint)),
+        [(3, 5), (4, 7)],
+        "each motor drives its segment through its spring"
+    );
+    let mut q = home;
+    q[1] += 0.03;
+    let start = sim
+        .start(
+            State {
+                q,
+                qd: SVector::zeros(),
+            },
+            &SVector::zeros(),
+        )
+        .unwrap();
+    let record = match sim.run(start, 20_000, &mut controller) {
+        Ok(r) => r,
+        Err(stopped) => panic!("{stopped}"),
+    };
+    let mut apexes = Vec::new();
+    for w in record.samples.windows(2) {
+        let flight = |s: &leg_models::hybrid::HybridSample<f64, NQ, NC, NU, NK>| {
+            !s.state.modes.get(0).on_ground()
+        };
+        if flight(&w[0])
+            && flight(&w[1])
+            && w[0].state.state.qd[1] > 0.0
+            && w[1].state.state.qd[1] <= 0.0
+        {
+            apexes.push((w[0].t, w[0].state.state.q[0], w[0].state.state.q[1]));
+        }
+    }
+    let speeds: Vec<f64> = apexes
+        .windows(2)
+        .map(|w| (w[1].1 - w[0].1) / (w[1].0 - w[0].0))
+        .collect();
+    eprintln!("hop speeds {speeds:?}");
+    assert!(apexes.len() >= 40, "{} hops", apexes.len());
+    // The last twenty hops (the speed is reached from rest in about fifteen).
+    let worst = speeds[speeds.len() - 20..]
+        .iter()
+        .map(|v| (v - speed).abs() / speed)
+        .fold(0.0, f64::max);
+    assert!(
+        worst < 0.05,
+        "speed error {:.1} % over the last twenty hops",
+        100.0 * worst
+    );
+    let apex_error = apexes[5..]
+        .iter()
+        .map(|a| (a.2 - apex).abs())
+        .fold(0.0, f64::max);
+    assert!(apex_error < 5e-3, "apex error {apex_error} m");
+    let closure = record
+        .samples
+        .iter()
+        .map(|s| s.closure_residual)
+        .fold(0.0, f64::max);
+    let contact = record
+        .samples
+        .iter()
+        .map(|s| s.contact_residual)
+        .fold(0.0, f64::max);
+    assert!(closure <= 1e-12, "closure residual {closure:e}");
+    assert!(contact <= 1e-11, "contact residual {contact:e}");
 }

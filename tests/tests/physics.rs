@@ -421,6 +421,25 @@ pub fn check_joint_kinds<
                     }
                 }
             }
+            // PARENTS: a joint moves only its own link and the links hung below it.
+            let (j0, t0) = (L::joint_positions(&q, &p), L::link_tips(&q, &p));
+            let (j1, t1) = (L::joint_positions(&moved, &p), L::link_tips(&moved, &p));
+            for k in 0..NQ {
+                let mut below = k == i;
+                let mut a = L::PARENTS[k];
+                while let Some(up) = a {
+                    below |= up == i;
+                    a = L::PARENTS[up];
+                }
+                if !below {
+                    assert!(
+                        (j1.column(k) - j0.column(k)).norm() < 1e-14
+                            && (t1.column(k) - t0.column(k)).norm() < 1e-14,
+                        "{}: joint {i} moves link {k}, which PARENTS does not hang below it",
+                        L::NAME
+                    );
+                }
+            }
             let pivot_after = L::joint_positions(&moved, &p).column(i).into_owned();
             if L::JOINT_KINDS[i] == JointKind::Revolute {
                 assert!(
@@ -429,6 +448,41 @@ pub fn check_joint_kinds<
                     L::NAME
                 );
             }
+        }
+    }
+}
+
+/// `SPRINGS` names the right joints and parameters: turning one spring's stiffness to
+/// zero takes exactly `k (q_a − q_b − rest)` off `G` on `a` and puts it back on `b`.
+pub fn check_springs<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+    let names = <L::Params<f64> as Parameters<f64>>::NAMES;
+    let mut rng = Rng::new(12);
+    for spring in L::SPRINGS {
+        assert_eq!(
+            names[spring.stiffness],
+            format!("{}_stiffness", spring.name)
+        );
+        assert_eq!(names[spring.rest], format!("{}_rest", spring.name));
+        for sample in 0..STATES / 10 {
+            let p: L::Params<f64> = sample_params(&mut rng, sample);
+            let (q, _) = random_state::<NQ>(&mut rng);
+            let mut without = p;
+            assert!(without.set(spring.stiffness, 0.0));
+            let k = p.get(spring.stiffness).unwrap();
+            let stretch =
+                q[spring.a] - spring.b.map_or(0.0, |b| q[b]) - p.get(spring.rest).unwrap();
+            let mut expected = SVector::<f64, NQ>::zeros();
+            expected[spring.a] += k * stretch;
+            if let Some(b) = spring.b {
+                expected[b] -= k * stretch;
+            }
+            let d = L::gravity_forces(&q, &p) - L::gravity_forces(&q, &without);
+            assert!(
+                (d - expected).amax() <= 1e-9 * (1.0 + expected.amax()),
+                "{}: spring {}: {d} against {expected}",
+                L::NAME,
+                spring.name
+            );
         }
     }
 }
@@ -472,6 +526,10 @@ macro_rules! validate {
             #[test]
             fn joints_translate_or_rotate_what_they_move() {
                 super::check_joint_kinds::<Model, $nq, $nc, $nu>();
+            }
+            #[test]
+            fn springs_name_their_joints_and_parameters() {
+                super::check_springs::<Model, $nq, $nc, $nu>();
             }
         }
     };

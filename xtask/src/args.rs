@@ -115,10 +115,11 @@ pub struct SimArgs {
     /// motor), hold for passive
     #[arg(long, value_enum, value_name = "T")]
     pub trajectory: Option<TrajectoryArg>,
-    /// Motor speed of the spin trajectory in rad/s (1 turn/s by default)
-    #[arg(long, value_name = "W", default_value_t = std::f64::consts::TAU,
-          value_parser = number("a speed in rad/s, not zero, at most 1000", |x| x != 0.0 && x.abs() <= 1000.0))]
-    pub speed: f64,
+    /// Motor speed of the spin trajectory in rad/s (1 turn/s by default); on a leg whose
+    /// body moves along the ground, the forward hopping speed in m/s (default: hop in place)
+    #[arg(long, value_name = "V",
+          value_parser = number("a speed of at most 1000 (rad/s, or m/s on the ground)", |x| x.abs() <= 1000.0))]
+    pub speed: Option<f64>,
     /// Simulated time in s
     #[arg(long, value_name = "S", default_value_t = 3.0,
           value_parser = number("a duration in (0, 600] s", |x| x > 0.0 && x <= 600.0))]
@@ -352,7 +353,7 @@ mod tests {
     fn both_value_forms_and_negative_numbers() {
         let a = sim(&["sim", "atrias", "--dt=0.002", "--speed", "-3", "--kp", "50"]);
         assert_eq!(a.model.as_deref(), Some("atrias"));
-        assert_eq!((a.dt, a.speed, a.kp), (0.002, -3.0, Some(50.0)));
+        assert_eq!((a.dt, a.speed, a.kp), (0.002, Some(-3.0), Some(50.0)));
         assert_eq!(a.duration, 3.0);
         let Ok(Parsed::Run(Xtask {
             command: Command::Eval(e),

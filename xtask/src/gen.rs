@@ -311,6 +311,7 @@ fn assemble(spec: &Spec, model: &Model, derived: Derived) -> IrFile {
             mobility,
             params: model.params.clone(),
             joint_kinds: model.links.iter().map(|l| l.joint.to_string()).collect(),
+            parents: model.links.iter().map(|l| l.parent).collect(),
             springs: model
                 .springs
                 .iter()

@@ -8,7 +8,7 @@ use serde_json::Value;
 
 use crate::model::Param;
 
-pub const FORMAT: u32 = 2;
+pub const FORMAT: u32 = 3;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -40,6 +40,8 @@ pub struct ModelInfo {
     pub params: Vec<Param>,
     /// `"revolute"` or `"prismatic"`, in coordinate order.
     pub joint_kinds: Vec<String>,
+    /// Each joint's parent joint (`None`: the base), in coordinate order.
+    pub parents: Vec<Option<usize>>,
     pub springs: Vec<SpringInfo>,
     /// Contact point names, in the order of the contact terms' columns.
     pub contacts: Vec<String>,

@@ -239,6 +239,12 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         });
     }
     if info.joint_kinds.len() != nq
+        || info.parents.len() != nq
+        || info
+            .parents
+            .iter()
+            .enumerate()
+            .any(|(i, p)| p.is_some_and(|p| p >= i))
         || info.contact_friction.len() != info.contacts.len()
         || !info.contact_friction.iter().all(|m| m.is_finite())
         || !info.ground_normal.iter().all(|v| v.is_finite())
@@ -246,7 +252,8 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     {
         return Err(Error {
             context: ctx.clone(),
-            message: "joint kinds, contact friction or ground do not match the model".into(),
+            message: "joint kinds, parents, contact friction or ground do not match the model"
+                .into(),
         });
     }
     let kinds = info
@@ -259,6 +266,48 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
                 context: ctx.clone(),
                 message: format!("unknown joint kind `{other}`"),
             }),
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let parents = info.parents.iter().map(|p| match p {
+        Some(p) => {
+            let p = lit(*p);
+            quote!(Some(#p))
+        }
+        None => quote!(None),
+    });
+    // Each spring's stiffness and rest are the parameters `{name}_stiffness`, `{name}_rest`.
+    let param_index = |name: String| {
+        info.params
+            .iter()
+            .position(|p| p.name == name)
+            .map(lit)
+            .ok_or_else(|| Error {
+                context: ctx.clone(),
+                message: format!("no parameter `{name}`"),
+            })
+    };
+    let springs = info
+        .springs
+        .iter()
+        .map(|s| {
+            if s.a >= nq || s.b.is_some_and(|b| b >= nq) {
+                return Err(Error {
+                    context: ctx.clone(),
+                    message: format!("spring `{}` names a joint out of range", s.name),
+                });
+            }
+            let name = &s.name;
+            let a = lit(s.a);
+            let b = match s.b {
+                Some(b) => {
+                    let b = lit(b);
+                    quote!(Some(#b))
+                }
+                None => quote!(None),
+            };
+            let k = param_index(format!("{name}_stiffness"))?;
+            let r = param_index(format!("{name}_rest"))?;
+            Ok(quote!(leg_models::Spring { name: #name, a: #a, b: #b, stiffness: #k, rest: #r }))
         })
         .collect::<Result<Vec<_>, _>>()?;
     let contact_names = &info.contacts;
@@ -378,6 +427,8 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             const NAME: &'static str = #name;
             const JOINT_NAMES: [&'static str; NQ] = [#(#joints),*];
             const JOINT_KINDS: [JointKind; NQ] = [#(#kinds),*];
+            const PARENTS: [Option<usize>; NQ] = [#(#parents),*];
+            const SPRINGS: &'static [leg_models::Spring] = &[#(#springs),*];
             const ACTUATED: [usize; NU] = [#(#actuated),*];
             const HOME: [f64; NQ] = [#(#home),*];
             const REDUNDANT_ROWS: usize = #redundant;

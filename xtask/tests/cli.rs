@@ -285,7 +285,7 @@ fn sim_refuses_bad_input_and_writes_nothing() {
     );
     refused(
         &legs(&["sim", "minitaur", "--speed", "0", "--out", d]),
-        "invalid value '0' for '--speed <W>'",
+        "--speed 0: on a leg in the air (minitaur) the speed is the spin trajectory's motor speed",
     );
     // A controller that does not apply to the leg is refused with the reason.
     refused(
@@ -463,8 +463,8 @@ fn every_subcommand_has_help_and_both_value_forms_work() {
 
 /// A leg with contacts runs on the ground: `sim minitaur_hopper` hops (under the Minitaur
 /// motors' 3.5 N m), writes the events and draws the ground; a swing-leg controller, a
-/// hopping controller where the motors act through springs, and an unknown contact are
-/// refused with the reason.
+/// forward speed for a body on a vertical rail, and an unknown contact are refused with
+/// the reason.
 #[test]
 fn sim_hops_a_leg_with_contacts() {
     let dir = temp_dir("hop");
@@ -528,8 +528,8 @@ fn sim_hops_a_leg_with_contacts() {
         "--apex -1: at or below the standing height",
     );
     refused(
-        &legs(&["sim", "atrias_hopper", "--out", b]),
-        "the hopping controller does not apply: in stance the motors do not move the body's height directly",
+        &legs(&["sim", "minitaur_hopper", "--speed", "0.5", "--out", b]),
+        "--speed: minitaur_hopper: a forward speed needs a body that moves along the ground",
     );
     refused(
         &legs(&[

@@ -7,12 +7,11 @@ use std::fmt::Write as _;
 
 use leg_models::assembly::{project_position, Tolerance};
 use leg_models::contact::{ContactMode, Ground};
-use leg_models::control::joint_inertias;
-use leg_models::hop::{height_joint, HopController, HopSettings};
+use leg_models::hop::{forward_joint, height_joint, HopController, HopSettings, HopSetupError};
 use leg_models::hybrid::{EventKind, HybridSample, HybridSimulator, HybridState};
 use leg_models::integrate::State;
 use leg_models::nalgebra::SVector;
-use leg_models::{ContactModel, LegModel, Parameters};
+use leg_models::{ContactModel, LegModel};
 use serde_json::json;
 use xtask::cli::{write_atomic, Error};
 use xtask::progress::Progress;
@@ -76,12 +75,8 @@ pub fn run<
     let mut home = SVector::<f64, NQ>::from_column_slice(&L::HOME);
     project_position::<L, f64, NQ, NC, NU>(&p, &mut home, &Tolerance::default())
         .map_err(|e| fail("the home pose does not assemble", &e))?;
-    let h = height_joint::<L, f64, NQ, NC, NU, NK>(&p, &home).ok_or_else(|| {
-        Error::usage(format!(
-            "{}: hopping needs a body that rises along a prismatic joint (a vertical slider) and none raises its contacts",
-            L::NAME
-        ))
-    })?;
+    let h = height_joint::<L, f64, NQ, NC, NU, NK>(&p, &home)
+        .ok_or_else(|| Error::usage(format!("{}: {}", L::NAME, HopSetupError::NoHeightJoint)))?;
     let mut sim = HybridSimulator::<L, f64, NQ, NC, NU, NK>::new(p, s.dt);
     sim.options.control = leg_models::integrate::ControlUpdate::PerStep;
     let apex = s.apex.unwrap_or(home[h] + 0.05);
@@ -93,36 +88,21 @@ pub fn run<
             L::JOINT_NAMES[h]
         )));
     }
-    let posture = SVector::<f64, NU>::from_fn(|k, _| home[L::ACTUATED[k]]);
-    // Flight posture gains from the motors' inertia at home (a 30 rad/s, damped loop).
-    let inertia = joint_inertias::<L, f64, NQ, NC, NU>(&p, &home)
-        .map(|i| i.mean())
-        .unwrap_or(1e-3);
-    let limit = s.torque_limit.unwrap_or(f64::INFINITY);
-    let settings = HopSettings {
-        height_joint: h,
-        apex,
-        posture,
-        kp: inertia * 900.0,
-        kd: inertia * 2.0 * 0.7 * 30.0,
-        stance_frequency: 18.0,
-        height_gain: 0.8,
-        torque_limits: SVector::from_element(limit),
-        gravity: {
-            // The spec's gravity against the ground's normal (every model has the
-            // parameters `gravity_x`, `gravity_y`).
-            let get = |name: &str| {
-                let names = <L::Params<f64> as Parameters<f64>>::NAMES;
-                names
-                    .iter()
-                    .position(|n| *n == name)
-                    .and_then(|i| p.get(i))
-                    .unwrap_or(0.0)
-            };
-            let n = Ground::<f64>::of::<L, NQ, NC, NU, NK>().normal;
-            -(get("gravity_x") * n[0] + get("gravity_y") * n[1])
-        },
+    // Hopping forward where the body can move along the ground (in place unless --speed).
+    let speed = match forward_joint::<L, f64, NQ, NC, NU, NK>(&p, &home) {
+        Some(_) => Some(s.speed.unwrap_or(0.0)),
+        None if s.speed.is_some() && !s.passive() => {
+            return Err(Error::usage(format!(
+                "--speed: {}: {}",
+                L::NAME,
+                HopSetupError::NoForwardJoint
+            )))
+        }
+        None => None,
     };
+    let limit = s.torque_limit.unwrap_or(f64::INFINITY);
+    let settings = HopSettings::for_leg::<L, NQ, NC, NK>(&p, &home, apex, speed, limit)
+        .map_err(|e| fail("the hopping controller", &e))?;
     // Released 3 cm above standing, at rest.
     let mut q0 = home;
     q0[h] += 0.03;
@@ -139,7 +119,7 @@ pub fn run<
     let source = if s.passive() {
         Source::Passive
     } else {
-        // Stance authority at home, toes held: zero for series-elastic hips.
+        // Stance authority at home, toes held: the drives must move the body's height.
         let mut stance = HybridState::flight(State {
             q: home,
             qd: SVector::zeros(),
@@ -155,7 +135,7 @@ pub fn run<
             .map_err(|e| fail("the hopping controller", &e))?;
         if authority < 1e-9 {
             return Err(Error::usage(format!(
-                "{}: the hopping controller does not apply: in stance the motors do not move the body's height directly (they act through springs, as series-elastic actuators do); run it with --controller passive",
+                "{}: the hopping controller does not apply: in stance the motors do not move the body's height; run it with --controller passive",
                 L::NAME
             )));
         }
@@ -196,6 +176,30 @@ pub fn run<
         }
     }
     let settled: Vec<f64> = apexes.iter().skip(5).map(|(_, y)| y - apex).collect();
+    // Forward speed per hop: the body's advance from one apex to the next over the time.
+    let forward =
+        speed.and_then(|v| forward_joint::<L, f64, NQ, NC, NU, NK>(&p, &home).map(|j| (j, v)));
+    let apex_x: Vec<(f64, f64)> = match forward {
+        Some((j, _)) => samples
+            .windows(2)
+            .filter(|w| {
+                in_flight(&w[0])
+                    && in_flight(&w[1])
+                    && w[0].state.state.qd[h] > 0.0
+                    && w[1].state.state.qd[h] <= 0.0
+            })
+            .map(|w| (w[0].t, w[0].state.state.q[j]))
+            .collect(),
+        None => Vec::new(),
+    };
+    let hop_speeds: Vec<f64> = apex_x
+        .windows(2)
+        .map(|w| (w[1].1 - w[0].1) / (w[1].0 - w[0].0))
+        .collect();
+    let speed_errors: Vec<f64> = match forward {
+        Some((_, v)) => hop_speeds.iter().skip(5).map(|s| s - v).collect(),
+        None => Vec::new(),
+    };
     let count = |k: EventKind| events.iter().filter(|e| e.kind == k).count();
     // A slip in the last millisecond before the same contact lifts off: the normal force
     // is vanishing, so any tangential force, however small, leaves the cone.
@@ -242,6 +246,15 @@ pub fn run<
             "max": max(settled.iter().map(|e| e.abs())),
             "rms": (settled.iter().map(|e| e * e).sum::<f64>() / settled.len() as f64).sqrt(),
         }) },
+        "speed_command_m_s": match forward { Some((_, v)) if !passive => json!(v), _ => json!(null) },
+        "hop_speeds_m_s": if forward.is_some() && !passive { json!(hop_speeds) } else { json!(null) },
+        "speed_error_after_five_hops_m_s": match forward {
+            Some((_, v)) if !passive && !speed_errors.is_empty() => json!({
+                "max": max(speed_errors.iter().map(|e| e.abs())),
+                "max_relative": if v != 0.0 { json!(max(speed_errors.iter().map(|e| (e / v).abs()))) } else { json!(null) },
+            }),
+            _ => json!(null),
+        },
         "events": {
             "touchdowns": count(EventKind::Touchdown),
             "liftoffs": count(EventKind::Liftoff),
@@ -467,6 +480,16 @@ pub fn run<
         s.dt,
         out.display()
     );
+    if let (Some((_, v)), false) = (forward, passive) {
+        println!(
+            "  forward speed command {v} m/s; after five hops speed error max {}",
+            if speed_errors.is_empty() {
+                "— (fewer than seven hops)".to_string()
+            } else {
+                format!("{:.3} m/s", max(speed_errors.iter().map(|e| e.abs())))
+            }
+        );
+    }
     if !passive {
         println!(
             "  {} hops, apex command {apex} m; after five hops apex error max {}",

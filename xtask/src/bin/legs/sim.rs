@@ -45,7 +45,8 @@ enum Trajectory {
 pub struct Settings {
     controller: Option<Controller>,
     trajectory: Option<Trajectory>,
-    speed: f64,
+    /// The spin trajectory's motor speed, or a leg on the ground's forward speed.
+    pub(crate) speed: Option<f64>,
     pub(crate) duration: f64,
     pub(crate) dt: f64,
     kp: Option<f64>,
@@ -56,6 +57,11 @@ pub struct Settings {
 }
 
 impl Settings {
+    /// The spin trajectory's motor speed (1 turn/s unless `--speed` says).
+    fn spin_speed(&self) -> f64 {
+        self.speed.unwrap_or(std::f64::consts::TAU)
+    }
+
     /// Whether the run is passive (no torque): `--controller passive`.
     pub(crate) fn passive(&self) -> bool {
         self.controller == Some(Controller::Passive)
@@ -145,6 +151,7 @@ impl Settings {
         if let (Some(c), Some(t)) = (controller, trajectory) {
             settings.check_pair(c, t)?;
         }
+
         Ok(settings)
     }
 
@@ -407,10 +414,16 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
         }),
         _ => FootRef::Hold(foot_home),
     };
+    if s.speed == Some(0.0) {
+        return Err(Error::usage(format!(
+            "--speed 0: on a leg in the air ({}) the speed is the spin trajectory's motor speed, which is not zero",
+            L::NAME
+        )));
+    }
     let joint_ref = match trajectory {
         Trajectory::Spin => JointRef::Spin(Ramp {
             start: theta_home,
-            rate: SVector::from_element(s.speed),
+            rate: SVector::from_element(s.spin_speed()),
         }),
         Trajectory::MinJerk => JointRef::MinJerk(MinimumJerk {
             start: theta_home,
@@ -640,7 +653,7 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
             "torque_update": "once per step (zero-order hold)",
             "gains": gains_text,
             "torque_limit_nm": s.torque_limit,
-            "spin_speed_rad_s": if trajectory == Trajectory::Spin { json!(s.speed) } else { json!(null) },
+            "spin_speed_rad_s": if trajectory == Trajectory::Spin { json!(s.spin_speed()) } else { json!(null) },
         },
         "samples": samples.len(),
         "tracking_error": if tracked { json!({
