@@ -182,13 +182,59 @@ pub struct Pitch<T: Real> {
     pub target: T,
     /// The attitude servo's natural frequency [rad/s] (critically damped).
     pub frequency: T,
-    /// With foot placement, the servo's target leads by this share of the leg's swing
-    /// still to come (rad per rad, from the leg's angle now to its next touchdown angle):
-    /// in flight the body turns against the swinging leg (and against the motors'
-    /// rotors), so it leaves the ground turned by what the swing will take back. Tuned:
-    /// 0.8 holds `atrias_hopper`; the free body's momentum alone (`M_bb⁻¹ M_bl`, the
-    /// leg swung rigidly) gives 0.3, too little to keep the speed from running away.
+    /// `r`, how far the body turns back for each radian the leg swings in flight
+    /// ([`flight_turn`], negated). The servo acts on `ψ = θ + r φ` (`φ` the leg's angle
+    /// from the hip to the foot), which in flight changes only with the body's angular
+    /// momentum: it drives `ψ` to `θ* + r φ_next` (`φ_next` the leg's angle at the next
+    /// touchdown) and `ψ̇` to zero, so that the body leaves the ground without momentum
+    /// and lands at `θ*` once the leg has swung to `φ_next`.
     pub flight_lead: T,
+    /// `φ_next` without foot placement: the leg's angle at home [rad].
+    pub neutral_leg_angle: T,
+}
+
+/// How far the body of leg `L` turns (rad) for each radian the whole leg swings about the
+/// hip in flight, at `q`: the free body's momentum `M_bb q̇_b + M_bl q̇_l` is unchanged
+/// by the swing (gravity acts on body and leg alike), so `q̇_b = −M_bb⁻¹ M_bl e φ̇`, `e`
+/// the swing (every joint hung from the pitch joint turning at `φ̇`, the joints below
+/// them still). Negative: the body turns against the leg. `None` if the body has more
+/// than three joints or `M_bb` is singular.
+pub fn flight_turn<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+    pitch: usize,
+) -> Option<T>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let body = body_joints::<L, NQ, NC, NU>();
+    let m = L::mass_matrix(q, params);
+    let mut index = [0usize; 3];
+    let mut nb = 0;
+    for (i, &b) in body.iter().enumerate() {
+        if b {
+            if nb == 3 {
+                return None;
+            }
+            index[nb] = i;
+            nb += 1;
+        }
+    }
+    let mut mbb = SMatrix::<T, 3, 3>::identity();
+    let mut rhs = SVector::<T, 3>::zeros();
+    for (a, &i) in index.iter().enumerate().take(nb) {
+        for (b, &j) in index.iter().enumerate().take(nb) {
+            mbb[(a, b)] = m[(i, j)];
+        }
+        rhs[a] = (0..NQ)
+            .filter(|&j| L::PARENTS[j] == Some(pitch))
+            .fold(T::zero(), |s, j| s + m[(i, j)]);
+    }
+    let chol = Cholesky::new(&mbb)?;
+    chol.solve_mut(&mut rhs);
+    let k = index.iter().take(nb).position(|&i| i == pitch)?;
+    Some(-rhs[k])
 }
 
 /// Forward hopping: foot placement in flight (Raibert).
@@ -207,6 +253,11 @@ pub struct Forward<T: Real> {
     pub neutral: SVector<T, 2>,
     /// How much the leg is shortened while the body rises in flight [m].
     pub retraction: T,
+    /// The share of the body's speed at which the foot swings back before touchdown
+    /// (1: the foot meets the ground at rest along it).
+    pub retraction_speed: T,
+    /// How long before touchdown the swing back starts [s].
+    pub retraction_time: T,
     /// The largest foot placement either way [m].
     pub reach: T,
 }
@@ -334,10 +385,12 @@ impl<T: Real, const NU: usize> HopSettings<T, NU> {
                 Some(Forward {
                     joint,
                     speed,
-                    gain: T::lit(0.1),
-                    learn_rate: T::lit(0.05),
+                    gain: T::lit(0.3),
+                    learn_rate: T::lit(0.08),
                     neutral,
-                    retraction: T::zero() * length,
+                    retraction: T::lit(0.03) * length,
+                    retraction_speed: T::one(),
+                    retraction_time: T::lit(0.1),
                     reach: T::lit(0.4) * length,
                 })
             }
@@ -357,7 +410,14 @@ impl<T: Real, const NU: usize> HopSettings<T, NU> {
                 joint,
                 target: home[joint],
                 frequency: T::lit(20.0),
-                flight_lead: T::lit(0.8),
+                flight_lead: flight_turn::<L, T, NQ, NC, NU>(params, home, joint)
+                    .map_or(T::zero(), |turn| -turn),
+                neutral_leg_angle: {
+                    let ground = Ground::<T>::of::<L, NQ, NC, NU, NK>();
+                    let d = L::foot_position(home, params)
+                        - hip(&L::joint_positions(home, params), drives[0].motor);
+                    ground.tangent().dot(&d).atan2(-ground.normal.dot(&d))
+                },
             }),
             forward,
             drive_frequency: T::lit(150.0),
@@ -365,6 +425,17 @@ impl<T: Real, const NU: usize> HopSettings<T, NU> {
             posture_time: T::lit(0.03),
         })
     }
+}
+
+/// The speed of the centre of mass along a body slider `joint`: the slider's generalized
+/// momentum `(M q̇)_j` is the whole leg's momentum along it, `M_jj` its mass. (Not the
+/// slider's own rate: the body turning in flight moves the hip under its centre of mass.)
+pub fn centre_of_mass_speed<T: Real, const NQ: usize>(
+    m: &SMatrix<T, NQ, NQ>,
+    qd: &SVector<T, NQ>,
+    joint: usize,
+) -> T {
+    (0..NQ).fold(T::zero(), |s, j| s + m[(joint, j)] * qd[j]) / m[(joint, joint)]
 }
 
 /// The hip: where the first motor's joint is.
@@ -531,17 +602,39 @@ where
             return self.settings.posture;
         };
         let q = &hs.state.q;
-        let v = hs.state.qd[fw.joint];
+        let v = centre_of_mass_speed(&L::mass_matrix(q, &self.params), &hs.state.qd, fw.joint);
         let half = T::lit(0.5);
-        let x_f = (v * self.stance_time * half + fw.gain * (v - fw.speed) + self.learnt_placement)
-            .max(-fw.reach)
-            .min(fw.reach);
-        let up = if self.rising {
-            fw.retraction
+        let ground = self.options.ground;
+        // Swing-leg retraction: the foot ahead of its touchdown placement by what the body
+        // covers until touchdown (a ballistic fall of the foot's gap), so that it swings
+        // back at the body's speed and meets the ground at rest (no tangential impulse).
+        let gap =
+            (ground.normal.dot(&L::foot_position(q, &self.params)) - ground.offset).max(T::zero());
+        let (vy, g) = (
+            hs.state.qd[self.settings.height_joint],
+            self.settings.gravity,
+        );
+        let to_touchdown = if g > T::zero() {
+            (vy + (vy * vy + (g + g) * gap).sqrt()) / g
         } else {
             T::zero()
         };
-        let ground = self.options.ground;
+        let x_f = (v * self.stance_time * half
+            + fw.gain * (v - fw.speed)
+            + self.learnt_placement
+            + fw.retraction_speed * v * to_touchdown.min(fw.retraction_time))
+        .max(-fw.reach)
+        .min(fw.reach);
+        // Shortened while rising; back to full length smoothly (zero rate) from 0.15 s
+        // to 0.05 s before touchdown, so the foot meets the ground with the leg at rest.
+        let up = if self.rising {
+            fw.retraction
+        } else {
+            let u = ((to_touchdown - T::lit(0.1)) / T::lit(0.1))
+                .max(T::zero())
+                .min(T::one());
+            fw.retraction * u * u * (T::lit(3.0) - u - u)
+        };
         let hip = hip(&L::joint_positions(q, &self.params), self.drives[0].motor);
         let target =
             hip + ground.tangent() * (fw.neutral[0] + x_f) + ground.normal * (fw.neutral[1] + up);
@@ -697,30 +790,43 @@ where
         }
         let omega2 = s.stance_frequency * s.stance_frequency;
         let mut target = omega2 * (self.touchdown_height - q[h]) - s.gravity;
+        // The thrust while the body rises, phased in over its first 0.1 m/s (a step in
+        // the efforts asked would be a spike in their rate).
         if qd[h] > T::zero() {
-            target += self.thrust;
+            target += self.thrust * (qd[h] / T::lit(0.1)).min(T::one());
         }
         let pitch_goal = match s.pitch {
             Some(p) => {
                 let w = p.frequency;
-                let lead = match s.forward {
+                // The leg's angle from the hip to the foot (from straight down, along
+                // the ground positive), and its rate (central difference along q̇).
+                let ground = self.options.ground;
+                let leg_angle = |q: &SVector<T, NQ>| {
+                    let hip = hip(&L::joint_positions(q, &self.params), self.drives[0].motor);
+                    let d = L::foot_position(q, &self.params) - hip;
+                    ground.tangent().dot(&d).atan2(-ground.normal.dot(&d))
+                };
+                let now = leg_angle(q);
+                let eps = T::lit(1e-6);
+                let rate = (leg_angle(&(q + qd * eps)) - leg_angle(&(q - qd * eps))) / (eps + eps);
+                let next = match s.forward {
                     Some(fw) => {
-                        let ground = self.options.ground;
-                        let hip = hip(&L::joint_positions(q, &self.params), self.drives[0].motor);
-                        let d = L::foot_position(q, &self.params) - hip;
-                        let now = (ground.tangent().dot(&d)).atan2(-ground.normal.dot(&d));
-                        let v = qd[fw.joint];
+                        let v = centre_of_mass_speed(&system.mass_matrix, qd, fw.joint);
                         let x_f = (v * self.stance_time * T::lit(0.5)
                             + fw.gain * (v - fw.speed)
                             + self.learnt_placement)
                             .max(-fw.reach)
                             .min(fw.reach);
-                        let next = (fw.neutral[0] + x_f).atan2(-fw.neutral[1]);
-                        p.flight_lead * (next - now)
+                        (fw.neutral[0] + x_f).atan2(-fw.neutral[1])
                     }
-                    None => T::zero(),
+                    None => p.neutral_leg_angle,
                 };
-                w * w * (p.target + lead - q[p.joint]) - (w + w) * qd[p.joint] - base.x[p.joint]
+                // ψ = θ + r φ changes in flight only with the body's momentum: servo it to
+                // the pitch target plus the turn the coming swing will take back, at rest.
+                let r = p.flight_lead;
+                w * w * (p.target + r * (next - now) - q[p.joint])
+                    - (w + w) * (qd[p.joint] + r * rate)
+                    - base.x[p.joint]
             }
             None => T::zero(),
         };

@@ -215,6 +215,37 @@ pub fn run<
             })
         })
         .count();
+    // A rebound: the contact leaves the ground within 10 ms of touching down (a light
+    // leg whose springs were relaxed in flight bounces off before it presses).
+    let rebounds = events
+        .iter()
+        .filter(|e| e.kind == EventKind::Touchdown)
+        .filter(|e| {
+            events.iter().any(|l| {
+                l.kind == EventKind::Liftoff
+                    && l.contact == e.contact
+                    && l.t >= e.t
+                    && l.t - e.t < 1e-2
+            })
+        })
+        .count();
+    // Slips in stance after the fifth apex, other than those as a liftoff's normal force
+    // vanishes.
+    let settled_from = apexes.get(5).map(|a| a.0);
+    let slips_after_five = settled_from.map(|t0| {
+        events
+            .iter()
+            .filter(|e| e.kind == EventKind::Slip && e.t > t0)
+            .filter(|e| {
+                !events.iter().any(|l| {
+                    l.kind == EventKind::Liftoff
+                        && l.contact == e.contact
+                        && l.t >= e.t
+                        && l.t - e.t < 1e-3
+                })
+            })
+            .count()
+    });
     let energy_lost: f64 = events.iter().map(|e| e.energy_lost).sum();
     let (saturations, passive) = match &source {
         Source::Hop(c) => (c.saturations.to_vec(), false),
@@ -260,6 +291,8 @@ pub fn run<
             "liftoffs": count(EventKind::Liftoff),
             "slips": count(EventKind::Slip),
             "slips_within_1_ms_of_liftoff": slips_at_liftoff,
+            "slips_in_stance_after_five_hops": slips_after_five,
+            "rebounds_within_10_ms": rebounds,
             "sticks": count(EventKind::Stick),
         },
         "impact_energy_lost_j": energy_lost,
@@ -340,6 +373,22 @@ pub fn run<
         .map(|x| frame_at::<L, NQ, NC, NU>(&p, &members, x.t, &x.state.state.q, None))
         .collect();
     let t: Vec<f64> = samples.iter().map(|x| x.t).collect();
+    // Stance phases (any contact on the ground), shaded in every plot over time.
+    let mut stance: Vec<(f64, f64)> = Vec::new();
+    let mut since: Option<f64> = None;
+    for x in samples {
+        match (in_flight(x), since) {
+            (false, None) => since = Some(x.t),
+            (true, Some(t0)) => {
+                stance.push((t0, x.t));
+                since = None;
+            }
+            _ => {}
+        }
+    }
+    if let (Some(t0), Some(last)) = (since, samples.last()) {
+        stance.push((t0, last.t));
+    }
     let mut plots = vec![Series::new(
         &format!("body height {} (m); apexes and command", L::JOINT_NAMES[h]),
         &t,
@@ -451,6 +500,7 @@ pub fn run<
             ),
         ],
     ));
+    let plots: Vec<Series> = plots.into_iter().map(|p| p.shaded(&stance)).collect();
     let ground = Ground::<f64>::of::<L, NQ, NC, NU, NK>();
     let html = report::html(&Report {
         title: format!(
@@ -502,11 +552,12 @@ pub fn run<
         );
     }
     println!(
-        "  {} touchdowns ({:.4} J lost in impacts), {} liftoffs, {} slips ({slips_at_liftoff} within 1 ms of a liftoff, as the normal force vanishes); peak torque {:.3} N m, saturations {:?}; max residual closures {:.1e} m, contacts {:.1e} m",
+        "  {} touchdowns ({:.4} J lost in impacts; {rebounds} rebounds within 10 ms), {} liftoffs, {} slips ({slips_at_liftoff} within 1 ms of a liftoff, as the normal force vanishes; {} in stance after five hops); peak torque {:.3} N m, saturations {:?}; max residual closures {:.1e} m, contacts {:.1e} m",
         count(EventKind::Touchdown),
         energy_lost,
         count(EventKind::Liftoff),
         count(EventKind::Slip),
+        slips_after_five.map_or("—".to_string(), |n| n.to_string()),
         max(samples.iter().map(|x| x.u.amax())),
         saturations,
         max(samples.iter().map(|x| x.closure_residual)),

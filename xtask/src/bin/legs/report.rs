@@ -12,6 +12,8 @@ pub struct Series {
     lines: Vec<(String, Vec<f64>)>,
     /// A logarithmic y axis, for magnitudes that span decades (residuals).
     log: bool,
+    /// Time intervals shaded behind the curves (a leg's stance phases).
+    shade: Vec<(f64, f64)>,
 }
 
 impl Series {
@@ -21,7 +23,14 @@ impl Series {
             t: t.to_vec(),
             lines,
             log: false,
+            shade: Vec::new(),
         }
+    }
+
+    /// The intervals `[t0, t1]` shaded grey behind the curves.
+    pub fn shaded(mut self, intervals: &[(f64, f64)]) -> Series {
+        self.shade = intervals.to_vec();
+        self
     }
 
     /// Magnitudes on a log scale; exact zeros are drawn on the axis's floor, a decade
@@ -110,6 +119,14 @@ fn plot(series: &Series) -> Result<String, String> {
                 }
             })
             .draw()
+            .map_err(|e| e.to_string())?;
+        let (bottom, top) = (lo - pad, hi + pad + legend_room);
+        chart
+            .draw_series(
+                series.shade.iter().map(|&(a, b)| {
+                    Rectangle::new([(a, bottom), (b, top)], BLACK.mix(0.08).filled())
+                }),
+            )
             .map_err(|e| e.to_string())?;
         for (i, (name, values)) in series.lines.iter().enumerate() {
             let color = COLORS[i % COLORS.len()];
@@ -408,6 +425,20 @@ mod tests {
             );
         }
         assert!(svg.contains("(log)") && !svg.contains("NaN"));
+    }
+
+    #[test]
+    fn shaded_intervals_are_drawn_behind_the_curves() {
+        let t: Vec<f64> = (0..100).map(|i| i as f64 * 0.01).collect();
+        let plain = Series::new("x", &t, vec![("x".into(), t.clone())]);
+        let shaded =
+            Series::new("x", &t, vec![("x".into(), t.clone())]).shaded(&[(0.1, 0.2), (0.5, 0.7)]);
+        let rects = |svg: &str| svg.matches("<rect").count();
+        let (a, b) = (plot(&plain).unwrap(), plot(&shaded).unwrap());
+        assert_eq!(rects(&b), rects(&a) + 2, "{b}");
+        // Behind: the rectangles come before the curve's path.
+        let last_rect = b.rfind("<rect").unwrap();
+        assert!(b.rfind("<polyline").unwrap() > last_rect, "{b}");
         // Nothing positive at all still draws (a nominal decade), never a NaN axis.
         let zeros = Series::log("r", &t, vec![("r".into(), vec![0.0; 4])]);
         assert!(!plot(&zeros).unwrap().contains("NaN"));
