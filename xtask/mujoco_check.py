@@ -10,8 +10,10 @@ the leg with `legs eval --project` (near its home pose), lets MuJoCo simulate it
 and checks that its (soft) closure constraints hold. A leg with contact points is dropped
 in both (ours: `legs sim --controller passive`, the hybrid simulator; MuJoCo: its soft
 contact against the exported floor) and the first touchdown times must agree within
-2.5 ms (MuJoCo's 1 ms step and soft contact). Prints one line per model; exits 1 on a
-mismatch.
+2.5 ms (MuJoCo's 1 ms step and soft contact); then it hops for 2 s in both under our
+hopping controller (in MuJoCo through `legs sim --serve`, asked each step with MuJoCo's
+state and contacts), and the apex heights must agree within 1 cm hop by hop (at least
+three hops). Prints one line per model; exits 1 on a mismatch.
 """
 
 import json
@@ -27,6 +29,91 @@ from legs_eval import ours
 STATES = 20
 REL_TOL = 1e-9
 CLOSURE_TOL = 1e-3  # m; MuJoCo's equality constraints are soft
+
+
+HOPS = 3  # at least, in 2 s
+APEX_TOL = 1e-2  # m: MuJoCo's soft contact takes and returns energy differently
+
+
+def hop_closed_loop(legs, name, m, d, joints, qadr, vadr, ir):
+    """Our hopping controller on both simulators for 2 s from the same state: ours
+    (`legs sim NAME`) and MuJoCo, its torques asked each step from the same controller
+    (`legs sim NAME --serve`) with MuJoCo's state and contacts (a contact is on the
+    ground while MuJoCo has it touching the floor, anchored where it touched down). The
+    apex heights of the body in both, or None where our hopping controller does not apply
+    (it is refused)."""
+    import csv
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as out:
+        run = subprocess.run(
+            [legs, "sim", name, "--duration", "2", "--out", out], capture_output=True, text=True
+        )
+        if run.returncode != 0 and not (pathlib.Path(out) / "trajectory.csv").exists():
+            return None
+        summary = json.loads((pathlib.Path(out) / "summary.json").read_text())
+        if summary["stopped"] is not None:
+            print(f"{name}: our hopping run stopped ({summary['stopped']['cause']}): not compared in MuJoCo")
+            return None
+        with open(pathlib.Path(out) / "trajectory.csv") as f:
+            rows = list(csv.DictReader(f))
+    h = summary["height_joint"]
+    motors = [k[2:] for k in rows[0] if k.startswith("u_")]
+    ours_apex = [
+        float(a[f"q_{h}"])
+        for a, b in zip(rows, rows[1:])
+        if all(a[k] == "flight" for k in a if k.startswith("mode_"))
+        and float(a[f"qd_{h}"]) > 0.0 >= float(b[f"qd_{h}"])
+    ]
+    n = ir["model"]["ground_normal"]
+    tangent = np.array([n[1], -n[0]])
+    contacts = [m.geom(f"{c}_geom").id for c in ir["model"]["contacts"]]
+    floor = m.geom("floor").id
+    server = subprocess.Popen(
+        [legs, "sim", name, "--serve"], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, bufsize=1
+    )
+    mujoco.mj_resetData(m, d)
+    d.qpos[qadr] = [float(rows[0][f"q_{j}"]) for j in joints]
+    d.qvel[vadr] = [float(rows[0][f"qd_{j}"]) for j in joints]
+    mujoco.mj_forward(m, d)
+    hq, hv = m.joint(h).qposadr[0], m.joint(h).dofadr[0]
+    act = [m.actuator(j).id for j in motors]
+    anchors = [None] * len(contacts)
+    mj_apex = []
+    try:
+        for _ in range(int(round(2.0 / m.opt.timestep))):
+            touching = {
+                g
+                for i in range(d.ncon)
+                for g in (d.contact[i].geom1, d.contact[i].geom2)
+                if floor in (d.contact[i].geom1, d.contact[i].geom2)
+            }
+            flags = []
+            for k, g in enumerate(contacts):
+                if g in touching:
+                    if anchors[k] is None:
+                        anchors[k] = float(tangent @ d.geom_xpos[g][:2])
+                    flags += [1.0, anchors[k]]
+                else:
+                    anchors[k] = None
+                    flags += [0.0, 0.0]
+            state = [d.time, *d.qpos[qadr], *d.qvel[vadr], *flags]
+            server.stdin.write(" ".join(repr(float(x)) for x in state) + "\n")
+            answer = server.stdout.readline().strip()
+            if not answer or answer.startswith("error"):
+                print(f"{name}: the controller in MuJoCo at t = {d.time:.3f} s: {answer or 'no answer'}")
+                break
+            d.ctrl[act] = [float(x) for x in answer.split()]
+            v0 = d.qvel[hv]
+            mujoco.mj_step(m, d)
+            if not np.all(np.isfinite(d.qpos)):
+                break
+            if not touching and v0 > 0.0 >= d.qvel[hv]:
+                mj_apex.append(float(d.qpos[hq]))
+    finally:
+        server.stdin.close()
+        server.wait()
+    return ours_apex, mj_apex
 
 
 def main():
@@ -123,6 +210,20 @@ def main():
                 print(f"{name}: touchdown in MuJoCo at {mj_td} s, ours at {ours_td} s")
                 ok = False
             landing = f"; passive drop: first touchdown {ours_td:.4f} s ours, {mj_td} s MuJoCo (soft contact)"
+        hop = hop_closed_loop(legs, name, m, d, joints, qadr, vadr, ir)
+        if hop is not None:
+            ours_apex, mj_apex = hop
+            n = min(len(ours_apex), len(mj_apex))
+            diff = max((abs(a - b) for a, b in zip(ours_apex[:n], mj_apex[:n])), default=None)
+            if n < HOPS or diff is None or diff > APEX_TOL:
+                print(f"{name}: apexes under our hopping controller, ours {ours_apex}, MuJoCo {mj_apex}")
+                ok = False
+            else:
+                landing += (
+                    f"; hopping under our controller in both: first {n} apexes "
+                    + ", ".join(f"{a:.4f}/{b:.4f}" for a, b in zip(ours_apex[:n], mj_apex[:n]))
+                    + f" m (ours/MuJoCo), at most {diff * 1e3:.1f} mm apart"
+                )
     print(
         f"{name:<16} MuJoCo {mujoco.__version__}: max relative difference M {worst_m:.1e}, N {worst_n:.1e} "
         f"over {STATES} states; closure in a 1 s MuJoCo run {closure:.1e} m{landing} -> {'ok' if ok else 'MISMATCH'}"

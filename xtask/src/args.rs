@@ -142,6 +142,11 @@ pub struct SimArgs {
     /// home pose's height + 5 cm); the leg hops to it
     #[arg(long, value_name = "H", value_parser = number("a height in m", |x| x.abs() <= 1e3))]
     pub apex: Option<f64>,
+    /// On a leg with contacts: serve the hopping controller's torques on stdin/stdout
+    /// instead of simulating (one line `t q… q̇… (on_ground anchor)…` in, one line of
+    /// torques out), for the MuJoCo cross-check's closed loop
+    #[arg(long, hide = true)]
+    pub serve: bool,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]

@@ -141,6 +141,14 @@ pub fn run<
         }
         Source::Hop(Box::new(controller))
     };
+    if s.serve {
+        return match source {
+            Source::Hop(mut c) => serve::<L, NQ, NC, NU, NK>(&mut c),
+            Source::Passive => Err(Error::usage(
+                "--serve serves the hopping controller's torques; --controller passive has none",
+            )),
+        };
+    }
     let steps = (s.duration / s.dt).round() as usize;
     let mut source = WithProgress {
         source,
@@ -569,4 +577,54 @@ pub fn run<
             "the simulation stopped at t = {t} s: {why} (the output holds everything until then)"
         ))),
     }
+}
+
+/// The hopping controller as a torque server (`--serve`): each line on stdin is a state,
+/// `t`, the NQ positions, the NQ rates, then per contact `on_ground` (0 or 1) and its
+/// anchor (the tangential ground coordinate where it touched down); each answer on stdout
+/// is the NU torques, or `error: …`. Another simulator (the MuJoCo cross-check) closes
+/// the loop through it.
+fn serve<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    controller: &mut HopController<L, f64, NQ, NC, NU, NK>,
+) -> Result<(), Error>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+{
+    use leg_models::hybrid::HybridTorqueSource;
+    use std::io::{BufRead, Write};
+    let stdin = std::io::stdin();
+    let mut stdout = std::io::stdout().lock();
+    let width = 1 + 2 * NQ + NK;
+    for line in stdin.lock().lines() {
+        let line = line.map_err(|e| Error::Failed(format!("stdin: {e}")))?;
+        let values: Result<Vec<f64>, _> = line.split_whitespace().map(str::parse).collect();
+        let answer = match values {
+            Ok(v) if v.len() == width => {
+                let mut hs = HybridState::flight(State {
+                    q: SVector::from_column_slice(&v[1..1 + NQ]),
+                    qd: SVector::from_column_slice(&v[1 + NQ..1 + 2 * NQ]),
+                });
+                for k in 0..NK / 2 {
+                    if v[1 + 2 * NQ + 2 * k] != 0.0 {
+                        hs.modes.set(k, ContactMode::Stick);
+                        hs.anchors[2 * k] = v[2 + 2 * NQ + 2 * k];
+                    }
+                }
+                match controller.torque(v[0], &hs) {
+                    Ok(u) => u
+                        .iter()
+                        .map(|x| format!("{x:e}"))
+                        .collect::<Vec<_>>()
+                        .join(" "),
+                    Err(e) => format!("error: {e}"),
+                }
+            }
+            Ok(v) => format!("error: {} numbers, expected {width}", v.len()),
+            Err(e) => format!("error: {e}"),
+        };
+        writeln!(stdout, "{answer}")
+            .and_then(|_| stdout.flush())
+            .map_err(|e| Error::Failed(format!("stdout: {e}")))?;
+    }
+    Ok(())
 }

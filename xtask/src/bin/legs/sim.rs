@@ -54,6 +54,8 @@ pub struct Settings {
     pub(crate) out: Option<PathBuf>,
     /// Commanded apex height (legs with contacts).
     pub(crate) apex: Option<f64>,
+    /// Serve the hopping controller's torques on stdin/stdout (the MuJoCo closed loop).
+    pub(crate) serve: bool,
 }
 
 impl Settings {
@@ -147,6 +149,7 @@ impl Settings {
             torque_limit: a.torque_limit,
             out: a.out.clone(),
             apex: a.apex,
+            serve: a.serve,
         };
         if let (Some(c), Some(t)) = (controller, trajectory) {
             settings.check_pair(c, t)?;
