@@ -140,11 +140,13 @@ pub struct Drive {
 }
 
 /// Each motor's drive (see the module docs): series-elastic where a coupling spring joins
-/// the motor's joint to a joint no motor drives.
+/// the motor's joint to a leg joint no motor drives (not to the body that carries the
+/// motor: a spring from the hip to the body acts beside the motor, not in series).
 pub fn drives<L, const NQ: usize, const NC: usize, const NU: usize>() -> [Drive; NU]
 where
     L: LegModel<NQ, NC, NU>,
 {
+    let body = body_joints::<L, NQ, NC, NU>();
     core::array::from_fn(|k| {
         let motor = L::ACTUATED[k];
         let series = L::SPRINGS.iter().enumerate().find_map(|(i, s)| {
@@ -156,7 +158,7 @@ where
             } else {
                 return None;
             };
-            (!L::ACTUATED.contains(&other)).then_some((i, other, motor_is_a))
+            (!L::ACTUATED.contains(&other) && !body[other]).then_some((i, other, motor_is_a))
         });
         match series {
             Some((i, joint, a)) => Drive {

@@ -545,6 +545,40 @@ fn sim_hops_a_leg_with_contacts() {
     assert!(!bad.exists(), "bad input left {}", bad.display());
 }
 
+/// `sim --serve`: the hopping controller answers each state line with the motors'
+/// torques (the MuJoCo closed loop), and a malformed line with an error line, going on.
+#[test]
+fn sim_serve_answers_torques_for_states() {
+    use std::io::Write;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_legs"))
+        .args(["sim", "minitaur_hopper", "--serve"])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // In flight at the home pose raised 3 cm, then on the ground; then a short line.
+    let home = "0.29 -0.7076 -1.253 -2.434 1.253";
+    let rest = "0 0 0 0 0";
+    let lines = format!("0 {home} {rest} 0 0\n0.001 {home} {rest} 1 0\n0.002 1 2 3\n");
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(lines.as_bytes())
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8(out.stdout).unwrap();
+    let answers: Vec<&str> = text.lines().collect();
+    assert_eq!(answers.len(), 3, "{text}");
+    for a in &answers[..2] {
+        let u: Vec<f64> = a.split_whitespace().map(|x| x.parse().unwrap()).collect();
+        assert_eq!(u.len(), 2, "{a}");
+        assert!(u.iter().all(|x| x.is_finite()), "{a}");
+    }
+    assert_eq!(answers[2], "error: 4 numbers, expected 13");
+}
+
 /// `eval --impact`: the impact map at a state, against its own identities (the toe at
 /// rest after it, the energy lost equal to ½ Δq̇ᵀ M Δq̇, a pushing normal impulse).
 #[test]
