@@ -6,29 +6,38 @@
 //!
 //! - **Drives.** A motor joined to a leg joint by a coupling spring (a series-elastic
 //!   actuator, as on ATRIAS) drives that joint through the spring: the controller computes
-//!   the effort wanted on the driven joint (the spring's torque) and an inner loop puts
-//!   the motor where the spring's deflection gives it, `q_m* = q_d + σ r + τ*/k`, with
-//!   `u = τ_spring + I_m (ω² (q_m* − q_m) + 2 ω (q̇_d − q̇_m))` (critically damped, `I_m`
-//!   the motor's inertia; `ω` [`HopSettings::drive_frequency`]). Any other motor drives
-//!   its own joint. [`drives`] finds them from the spec's springs.
+//!   the effort wanted on the driven joint (the spring's torque `τ*`) and, in stance, an
+//!   inner loop puts the motor where the spring's deflection gives it, `q_m* = q_d + σ r +
+//!   τ*/k`, with `u = τ_spring + I_m (q̈_d + ω² (q_m* − q_m) + 2 ω (q̇_d + τ̇*/k − q̇_m))`
+//!   (critically damped, `I_m` the motor's inertia, `q̈_d` the driven joint's acceleration
+//!   under `τ*`, `τ̇*` from the last evaluation; `ω` [`HopSettings::drive_frequency`]:
+//!   without the two feedforwards the spring lags and pumps energy into each hop). In
+//!   flight the motor goes where its spring is relaxed at the target, one slower loop
+//!   ([`HopSettings::flight_drive_frequency`]: each motor's acceleration turns the body
+//!   the other way). Any other motor drives its own joint. [`drives`] finds them from the
+//!   spec's springs.
 //! - **Flight**: the driven joints go to a touchdown posture (joint PD; in free fall the
-//!   leg's relative motion needs no gravity compensation). With a forward coordinate the
-//!   posture places the foot (Raibert): `x_f = v T_st / 2 + k (v − v_des) + x_learnt`
-//!   ahead of the hip, where `T_st` is the last stance's duration and `x_learnt` an
-//!   integral of each hop's speed error (what the model's asymmetries need); the posture
-//!   is the leg's inverse kinematics with the body held ([`foot_inverse_holding`]), the
-//!   leg shortened by [`Forward::retraction`] while the body rises (clearance) and at
-//!   full length after the apex.
+//!   leg's relative motion needs no gravity compensation), the targets following it in a
+//!   first-order lag. With a forward coordinate the posture places the foot (Raibert): `x_f
+//!   = v T_st / 2 + k (v − v_des) + x_learnt` ahead of the hip, `v` the centre of mass's
+//!   speed ([`centre_of_mass_speed`]), `T_st` the last stance's duration and `x_learnt` an
+//!   integral of each hop's mean-speed error (what the estimate of the neutral point
+//!   misses); the foot swings back at the body's speed over the last
+//!   [`Forward::retraction_time`] before touchdown (swing-leg retraction: it meets the
+//!   ground at rest along it), the leg is shortened by [`Forward::retraction`] while the
+//!   body rises and back at full length 0.1 s before touchdown. The posture is the leg's
+//!   inverse kinematics with the body held ([`foot_inverse_holding`]).
 //! - **Stance**: inverse dynamics through the hybrid model. The accelerations and the
 //!   ground forces of the stance (loop closures and held contacts in one structured
 //!   solve, [`ContactSystem`]) are affine in the drive efforts, `q̈ = a₀ + Q δ`, `λ = λ₀ +
 //!   Λ δ` (NU + 1 solves of one factorization); the efforts meet up to three tasks in the
 //!   least-squares sense: the body height follows a virtual leg spring, `ÿ = ω² (y_td −
-//!   y) − g + a_thrust` (`a_thrust` only while the body rises); a body that can pitch is
-//!   held upright (`θ̈ = ω_θ² (θ* − θ) − 2 ω_θ θ̇`, Raibert's attitude servo); and, when
-//!   the body cannot move along the ground and a motor is left, the first held contact's
-//!   tangential force is zero (no push along the ground, so no slip). Torques are clipped
-//!   to the motors' limits.
+//!   y) − g + a_thrust` (`a_thrust` while the body rises, phased in over its first
+//!   0.1 m/s); a body that can pitch is held by Raibert's attitude servo, here on `ψ = θ
+//!   + r φ` ([`Pitch::flight_lead`]: it leaves the ground without angular momentum and
+//!   lands upright after the leg's swing); and, when the body cannot move along the
+//!   ground and a motor is left, the first held contact's tangential force is zero (no
+//!   push along the ground, so no slip). Torques are clipped to the motors' limits.
 //! - **Height regulation**: at each apex (the body's vertical rate crossing zero in flight)
 //!   the energy the apex missed, `m g (h_cmd − h_apex)`, spread over the last stance's
 //!   rise as a thrust (`m a · stroke`), sets the next thrust: a share `k_h` of it
@@ -180,9 +189,9 @@ where
 pub struct Pitch<T: Real> {
     /// The body's pitch joint ([`pitch_joint`]).
     pub joint: usize,
-    /// The pitch held [rad].
+    /// The pitch held (rad).
     pub target: T,
-    /// The attitude servo's natural frequency [rad/s] (critically damped).
+    /// The attitude servo's natural frequency (rad/s) (critically damped).
     pub frequency: T,
     /// `r`, how far the body turns back for each radian the leg swings in flight
     /// ([`flight_turn`], negated). The servo acts on `ψ = θ + r φ` (`φ` the leg's angle
@@ -191,7 +200,7 @@ pub struct Pitch<T: Real> {
     /// touchdown) and `ψ̇` to zero, so that the body leaves the ground without momentum
     /// and lands at `θ*` once the leg has swung to `φ_next`.
     pub flight_lead: T,
-    /// `φ_next` without foot placement: the leg's angle at home [rad].
+    /// `φ_next` without foot placement: the leg's angle at home (rad).
     pub neutral_leg_angle: T,
 }
 
@@ -244,23 +253,23 @@ where
 pub struct Forward<T: Real> {
     /// The body's forward coordinate ([`forward_joint`]).
     pub joint: usize,
-    /// Commanded speed along the ground [m/s].
+    /// Commanded speed along the ground (m/s).
     pub speed: T,
-    /// `k` in `x_f = v T_st / 2 + k (v − v_des)` [s].
+    /// `k` in `x_f = v T_st / 2 + k (v − v_des)` (s).
     pub gain: T,
-    /// The share of each hop's mean-speed error added to the learnt placement [s].
+    /// The share of each hop's mean-speed error added to the learnt placement (s).
     pub learn_rate: T,
     /// The foot's offset from the hip at touchdown, in ground coordinates (along, up),
-    /// with the foot placement added along the ground [m].
+    /// with the foot placement added along the ground (m).
     pub neutral: SVector<T, 2>,
-    /// How much the leg is shortened while the body rises in flight [m].
+    /// How much the leg is shortened while the body rises in flight (m).
     pub retraction: T,
     /// The share of the body's speed at which the foot swings back before touchdown
     /// (1: the foot meets the ground at rest along it).
     pub retraction_speed: T,
-    /// How long before touchdown the swing back starts [s].
+    /// How long before touchdown the swing back starts (s).
     pub retraction_time: T,
-    /// The largest foot placement either way [m].
+    /// The largest foot placement either way (m).
     pub reach: T,
 }
 
@@ -269,32 +278,32 @@ pub struct Forward<T: Real> {
 pub struct HopSettings<T: Real, const NU: usize> {
     /// The body coordinate that is the height (a vertical slider).
     pub height_joint: usize,
-    /// Commanded apex of `q[height_joint]` [m].
+    /// Commanded apex of `q[height_joint]` (m).
     pub apex: T,
     /// Angles of the driven joints ([`drives`]) held in flight without foot placement.
     pub posture: SVector<T, NU>,
     /// Flight PD gains on the driven joints.
     pub kp: SVector<T, NU>,
     pub kd: SVector<T, NU>,
-    /// The virtual leg spring's natural frequency in stance [rad/s].
+    /// The virtual leg spring's natural frequency in stance (rad/s).
     pub stance_frequency: T,
     /// The share of each hop's apex error corrected at the next hop (0 to 1): the thrust
     /// is `learnt + share · g (h_cmd − h_apex) / stroke`, the energy `m g Δh` spread over
     /// the last stance's rise.
     pub height_gain: T,
-    /// `|u_k|` limits [N m].
+    /// `|u_k|` limits (N m).
     pub torque_limits: SVector<T, NU>,
-    /// Gravity's magnitude along the height [m/s²].
+    /// Gravity's magnitude along the height (m/s²).
     pub gravity: T,
     /// The body's attitude servo, for a body that can pitch.
     pub pitch: Option<Pitch<T>>,
     /// Foot placement, for a body that can move along the ground.
     pub forward: Option<Forward<T>>,
-    /// The series-elastic drives' inner loop natural frequency in stance [rad/s].
+    /// The series-elastic drives' inner loop natural frequency in stance (rad/s).
     pub drive_frequency: T,
-    /// The same in flight [rad/s].
+    /// The same in flight (rad/s).
     pub flight_drive_frequency: T,
-    /// The time constant with which the flight targets follow the posture wanted [s].
+    /// The time constant with which the flight targets follow the posture wanted (s).
     pub posture_time: T,
 }
 
@@ -466,19 +475,19 @@ pub struct HopController<
     pub thrust: T,
     /// Its learnt part: what pays for each hop's impact loss.
     pub loss_thrust: T,
-    /// The learnt part of the foot placement [m].
+    /// The learnt part of the foot placement (m).
     pub learnt_placement: T,
     /// Body height at the last touchdown.
     pub touchdown_height: T,
     /// The lowest body height of the last stance.
     pub bottom: T,
-    /// The last stance's duration [s].
+    /// The last stance's duration (s).
     pub stance_time: T,
     /// Apexes seen (hops completed).
     pub hops: usize,
     /// The last apex height.
     pub last_apex: Option<T>,
-    /// The mean forward speed from the apex before the last to the last [m/s].
+    /// The mean forward speed from the apex before the last to the last (m/s).
     pub last_speed: Option<T>,
     /// Evaluations in which motor `k` was clipped.
     pub saturations: [usize; NU],

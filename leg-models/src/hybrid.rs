@@ -77,7 +77,7 @@ pub struct Event<T: Real> {
     pub contact: usize,
     /// The ground's impulse on the leg at a touchdown `(Λ_t, Λ_n)` [N s]; zero otherwise.
     pub impulse: [T; 2],
-    /// Kinetic energy the impact took [J]; zero for other events.
+    /// Kinetic energy the impact took (J); zero for other events.
     pub energy_lost: T,
 }
 
@@ -226,7 +226,7 @@ pub struct HybridOptions<T: Real, const NK: usize> {
     pub baumgarte: Option<Baumgarte<T>>,
     /// For the position projection.
     pub tolerance: Tolerance<T>,
-    /// How closely an event's time is located [s].
+    /// How closely an event's time is located (s).
     pub time_tolerance: T,
     /// Torques held over each step (and re-asked after each event), or asked at every
     /// integrator stage and guard evaluation (a continuous-time law).

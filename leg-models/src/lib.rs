@@ -6,7 +6,7 @@
 //! algorithms that use the generated terms: constrained forward dynamics
 //! ([`dynamics`]), loop assembly ([`assembly`]), time stepping with drift control
 //! ([`integrate`]), control in the actuated coordinates ([`control`]) with reference
-//! trajectories ([`reference`]) and, with the `std` feature, a recording
+//! trajectories ([`mod@reference`]) and, with the `std` feature, a recording
 //! [`simulate::Simulator`].
 //! Everything but the simulator's record is fixed-size and allocation-free, and the
 //! crate is `no_std` without the default `std` feature. The geometry specs the generator

@@ -180,7 +180,7 @@ pub trait ContactModel<const NQ: usize, const NC: usize, const NU: usize, const 
     const CONTACT_FRICTION: &'static [f64];
     /// The spec's ground normal `n` (unit, base frame).
     const GROUND_NORMAL: [f64; 2];
-    /// The spec's ground offset `d` [m].
+    /// The spec's ground offset `d` (m).
     const GROUND_OFFSET: f64;
 
     /// The contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
