@@ -33,8 +33,8 @@
 //!   Λ δ` (NU + 1 solves of one factorization); the efforts meet up to three tasks in the
 //!   least-squares sense: the body height follows a virtual leg spring, `ÿ = ω² (y_td −
 //!   y) − g + a_thrust` (`a_thrust` while the body rises, phased in over its first
-//!   0.1 m/s); a body that can pitch is held by Raibert's attitude servo, here on `ψ = θ
-//!   + r φ` ([`Pitch::flight_lead`]: it leaves the ground without angular momentum and
+//!   0.1 m/s); a body that can pitch is held by Raibert's attitude servo, here on
+//!   `ψ = θ + r φ` ([`Pitch::flight_lead`]: it leaves the ground without angular momentum and
 //!   lands upright after the leg's swing); and, when the body cannot move along the
 //!   ground and a motor is left, the first held contact's tangential force is zero (no
 //!   push along the ground, so no slip). Torques are clipped to the motors' limits.

@@ -143,7 +143,7 @@ pub fn run<
     };
     if s.serve {
         return match source {
-            Source::Hop(mut c) => serve::<L, NQ, NC, NU, NK>(&mut c),
+            Source::Hop(mut c) => serve::<L, NQ, NC, NU, NK>(&sim, &mut c),
             Source::Passive => Err(Error::usage(
                 "--serve serves the hopping controller's torques; --controller passive has none",
             )),
@@ -583,8 +583,12 @@ pub fn run<
 /// `t`, the NQ positions, the NQ rates, then per contact `on_ground` (0 or 1) and its
 /// anchor (the tangential ground coordinate where it touched down); each answer on stdout
 /// is the NU torques, or `error: …`. Another simulator (the MuJoCo cross-check) closes
-/// the loop through it.
+/// the loop through it. The state is first projected onto the closures and the contacts
+/// on the ground, at their anchors (`HybridSimulator::project`): another simulator's
+/// soft contact lets a flat foot rock and sink a little, which the exact stance's
+/// repeated rows of two contacts on one foot would refuse.
 fn serve<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    sim: &HybridSimulator<L, f64, NQ, NC, NU, NK>,
     controller: &mut HopController<L, f64, NQ, NC, NU, NK>,
 ) -> Result<(), Error>
 where
@@ -609,6 +613,10 @@ where
                         hs.modes.set(k, ContactMode::Stick);
                         hs.anchors[2 * k] = v[2 + 2 * NQ + 2 * k];
                     }
+                }
+                let mut projected = hs;
+                if sim.project(&mut projected).is_ok() {
+                    hs = projected;
                 }
                 match controller.torque(v[0], &hs) {
                     Ok(u) => u
