@@ -12,6 +12,32 @@ use leg_models::integrate::State;
 use leg_models::nalgebra::SVector;
 use leg_models::LegModel;
 
+/// Apexes from a record, `(t, q[forward], q[height])`: the height's rate crossing zero
+/// with every contact in flight.
+fn apexes<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    record: &leg_models::hybrid::HybridRecord<f64, NQ, NC, NU, NK>,
+    height: usize,
+    forward: usize,
+) -> Vec<(f64, f64, f64)> {
+    let flight = |s: &leg_models::hybrid::HybridSample<f64, NQ, NC, NU, NK>| {
+        (0..NK / 2).all(|k| !s.state.modes.get(k).on_ground())
+    };
+    record
+        .samples
+        .windows(2)
+        .filter(|w| {
+            flight(&w[0])
+                && flight(&w[1])
+                && w[0].state.state.qd[height] > 0.0
+                && w[1].state.state.qd[height] <= 0.0
+        })
+        .map(|w| {
+            let (a, b) = (&w[0].state.state.q, &w[1].state.state.q);
+            (w[0].t, a[forward], a[height].max(b[height]))
+        })
+        .collect()
+}
+
 /// The hop controller for `minitaur_hopper`, commanding `apex` (body height, m).
 pub fn minitaur_hopper_run(
     apex: f64,
@@ -59,20 +85,7 @@ pub fn minitaur_hopper_run(
 fn minitaur_hopper_hops_to_the_commanded_apex() {
     let apex = 0.30;
     let (record, controller) = minitaur_hopper_run(apex, 12.0);
-    // Apexes from the record: the body's rate crossing zero in flight.
-    let mut apexes = Vec::new();
-    for w in record.samples.windows(2) {
-        let flight = |s: &leg_models::hybrid::HybridSample<f64, NQ, NC, NU, NK>| {
-            !s.state.modes.get(0).on_ground()
-        };
-        if flight(&w[0])
-            && flight(&w[1])
-            && w[0].state.state.qd[0] > 0.0
-            && w[1].state.state.qd[0] <= 0.0
-        {
-            apexes.push(w[0].state.state.q[0].max(w[1].state.state.q[0]));
-        }
-    }
+    let apexes: Vec<f64> = apexes(&record, 0, 0).iter().map(|a| a.2).collect();
     let touchdowns = record
         .events
         .iter()
@@ -141,19 +154,7 @@ fn atrias_hopper_hops_forward_at(speed: f64) {
         Ok(r) => r,
         Err(stopped) => panic!("{stopped}"),
     };
-    let mut apexes = Vec::new();
-    for w in record.samples.windows(2) {
-        let flight = |s: &leg_models::hybrid::HybridSample<f64, NQ, NC, NU, NK>| {
-            !s.state.modes.get(0).on_ground()
-        };
-        if flight(&w[0])
-            && flight(&w[1])
-            && w[0].state.state.qd[1] > 0.0
-            && w[1].state.state.qd[1] <= 0.0
-        {
-            apexes.push((w[0].t, w[0].state.state.q[0], w[0].state.state.q[1]));
-        }
-    }
+    let apexes = apexes(&record, 1, 0);
     let speeds: Vec<f64> = apexes
         .windows(2)
         .map(|w| (w[1].1 - w[0].1) / (w[1].0 - w[0].0))

@@ -176,28 +176,31 @@ pub fn run<
     let in_flight = |x: &HybridSample<f64, NQ, NC, NU, NK>| {
         (0..NK / 2).all(|k| !x.state.modes.get(k).on_ground())
     };
-    let mut apexes: Vec<(f64, f64)> = Vec::new();
-    for w in samples.windows(2) {
-        let (a, b) = (&w[0], &w[1]);
-        if in_flight(a) && in_flight(b) && a.state.state.qd[h] > 0.0 && b.state.state.qd[h] <= 0.0 {
-            apexes.push((a.t, a.state.state.q[h].max(b.state.state.q[h])));
-        }
-    }
-    let settled: Vec<f64> = apexes.iter().skip(5).map(|(_, y)| y - apex).collect();
-    // Forward speed per hop: the body's advance from one apex to the next over the time.
+    // Apexes (time, height, the forward coordinate if any): the height's rate crossing
+    // zero in flight.
     let forward =
         speed.and_then(|v| forward_joint::<L, f64, NQ, NC, NU, NK>(&p, &home).map(|j| (j, v)));
+    let apexes: Vec<(f64, f64, f64)> = samples
+        .windows(2)
+        .filter(|w| {
+            in_flight(&w[0])
+                && in_flight(&w[1])
+                && w[0].state.state.qd[h] > 0.0
+                && w[1].state.state.qd[h] <= 0.0
+        })
+        .map(|w| {
+            let (a, b) = (&w[0].state.state, &w[1].state.state);
+            (
+                w[0].t,
+                a.q[h].max(b.q[h]),
+                forward.map_or(0.0, |(j, _)| a.q[j]),
+            )
+        })
+        .collect();
+    let settled: Vec<f64> = apexes.iter().skip(5).map(|a| a.1 - apex).collect();
+    // Forward speed per hop: the body's advance from one apex to the next over the time.
     let apex_x: Vec<(f64, f64)> = match forward {
-        Some((j, _)) => samples
-            .windows(2)
-            .filter(|w| {
-                in_flight(&w[0])
-                    && in_flight(&w[1])
-                    && w[0].state.state.qd[h] > 0.0
-                    && w[1].state.state.qd[h] <= 0.0
-            })
-            .map(|w| (w[0].t, w[0].state.state.q[j]))
-            .collect(),
+        Some(_) => apexes.iter().map(|a| (a.0, a.2)).collect(),
         None => Vec::new(),
     };
     let hop_speeds: Vec<f64> = apex_x
@@ -209,33 +212,26 @@ pub fn run<
         None => Vec::new(),
     };
     let count = |k: EventKind| events.iter().filter(|e| e.kind == k).count();
+    // Whether the contact of `e` lifts off within `within` seconds after it.
+    let lifts_off_within = |e: &leg_models::hybrid::Event<f64>, within: f64| {
+        events.iter().any(|l| {
+            l.kind == EventKind::Liftoff
+                && l.contact == e.contact
+                && l.t >= e.t
+                && l.t - e.t < within
+        })
+    };
     // A slip in the last millisecond before the same contact lifts off: the normal force
     // is vanishing, so any tangential force, however small, leaves the cone.
     let slips_at_liftoff = events
         .iter()
-        .filter(|e| e.kind == EventKind::Slip)
-        .filter(|e| {
-            events.iter().any(|l| {
-                l.kind == EventKind::Liftoff
-                    && l.contact == e.contact
-                    && l.t >= e.t
-                    && l.t - e.t < 1e-3
-            })
-        })
+        .filter(|e| e.kind == EventKind::Slip && lifts_off_within(e, 1e-3))
         .count();
     // A rebound: the contact leaves the ground within 10 ms of touching down (a light
     // leg whose springs were relaxed in flight bounces off before it presses).
     let rebounds = events
         .iter()
-        .filter(|e| e.kind == EventKind::Touchdown)
-        .filter(|e| {
-            events.iter().any(|l| {
-                l.kind == EventKind::Liftoff
-                    && l.contact == e.contact
-                    && l.t >= e.t
-                    && l.t - e.t < 1e-2
-            })
-        })
+        .filter(|e| e.kind == EventKind::Touchdown && lifts_off_within(e, 1e-2))
         .count();
     // Slips in stance after the fifth apex, other than those as a liftoff's normal force
     // vanishes.
@@ -243,15 +239,7 @@ pub fn run<
     let slips_after_five = settled_from.map(|t0| {
         events
             .iter()
-            .filter(|e| e.kind == EventKind::Slip && e.t > t0)
-            .filter(|e| {
-                !events.iter().any(|l| {
-                    l.kind == EventKind::Liftoff
-                        && l.contact == e.contact
-                        && l.t >= e.t
-                        && l.t - e.t < 1e-3
-                })
-            })
+            .filter(|e| e.kind == EventKind::Slip && e.t > t0 && !lifts_off_within(e, 1e-3))
             .count()
     });
     let energy_lost: f64 = events.iter().map(|e| e.energy_lost).sum();
@@ -280,7 +268,7 @@ pub fn run<
             "friction": sim.options.friction.iter().step_by(2).copied().collect::<Vec<_>>(),
         },
         "hops": if passive { json!(null) } else { json!(apexes.len()) },
-        "apex_heights_m": if passive { json!(null) } else { json!(apexes.iter().map(|(_, y)| *y).collect::<Vec<_>>()) },
+        "apex_heights_m": if passive { json!(null) } else { json!(apexes.iter().map(|a| a.1).collect::<Vec<_>>()) },
         "apex_error_after_five_hops_m": if settled.is_empty() || passive { json!(null) } else { json!({
             "max": max(settled.iter().map(|e| e.abs())),
             "rms": (settled.iter().map(|e| e * e).sum::<f64>() / settled.len() as f64).sqrt(),
