@@ -17,6 +17,8 @@ pub mod klann_linkage;
 pub use klann_linkage::KlannLinkage;
 pub mod knee_hopper;
 pub use knee_hopper::KneeHopper;
+pub mod knee_runner;
+pub use knee_runner::KneeRunner;
 pub mod minitaur;
 pub use minitaur::Minitaur;
 pub mod minitaur_hopper;
@@ -45,6 +47,7 @@ macro_rules! for_each_model {
         (five_bar_offset, $crate::five_bar_offset::FiveBarOffset, 4, 2, 2, 0); $callback
         ! (klann_linkage, $crate::klann_linkage::KlannLinkage, 7, 6, 1, 0); $callback !
         (knee_hopper, $crate::knee_hopper::KneeHopper, 3, 0, 2, 2); $callback !
+        (knee_runner, $crate::knee_runner::KneeRunner, 5, 0, 2, 2); $callback !
         (minitaur, $crate::minitaur::Minitaur, 4, 2, 2, 0); $callback ! (minitaur_hopper,
         $crate::minitaur_hopper::MinitaurHopper, 5, 2, 2, 2); $callback !
         (minitaur_pinned_toe, $crate::minitaur_pinned_toe::MinitaurPinnedToe, 5, 4, 2,

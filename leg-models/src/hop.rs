@@ -107,17 +107,28 @@ where
         })
 }
 
-/// The body's joints: every ancestor of a motor's joint (the joints that carry the
-/// motors; for a leg hung from the base, none).
+/// The body's joints: the joints that carry the motors, every ancestor of a motor's
+/// joint that neither is a motor's nor hangs below one (a knee motor's thigh, driven by
+/// the hip motor, is the leg's, not the body's; for a leg hung from the base, none).
 pub fn body_joints<L, const NQ: usize, const NC: usize, const NU: usize>() -> [bool; NQ]
 where
     L: LegModel<NQ, NC, NU>,
 {
+    let below_a_motor = |j: usize| {
+        let mut a = Some(j);
+        while let Some(i) = a {
+            if L::ACTUATED.contains(&i) {
+                return true;
+            }
+            a = L::PARENTS[i];
+        }
+        false
+    };
     let mut body = [false; NQ];
     for &a in &L::ACTUATED {
         let mut j = L::PARENTS[a];
         while let Some(p) = j {
-            body[p] = true;
+            body[p] = !below_a_motor(p);
             j = L::PARENTS[p];
         }
     }
@@ -255,9 +266,12 @@ pub struct Forward<T: Real> {
     pub joint: usize,
     /// Commanded speed along the ground (m/s).
     pub speed: T,
-    /// `k` in `x_f = v T_st / 2 + k (v − v_des)` (s).
+    /// The share of a speed error the placement corrects in one stance: `k` in `x_f =
+    /// v T_st / 2 + k (v − v_des)` is `gain · ℓ / (g T_st)`, the foot placed `Δx` ahead
+    /// slowing an inverted pendulum of length `ℓ` by about `g T_st Δx / ℓ` over the stance
+    /// (so one share fits legs of every size and stance time).
     pub gain: T,
-    /// The share of each hop's mean-speed error added to the learnt placement (s).
+    /// The same share for each hop's mean-speed error, added to the learnt placement.
     pub learn_rate: T,
     /// The foot's offset from the hip at touchdown, in ground coordinates (along, up),
     /// with the foot placement added along the ground (m).
@@ -396,8 +410,8 @@ impl<T: Real, const NU: usize> HopSettings<T, NU> {
                 Some(Forward {
                     joint,
                     speed,
-                    gain: T::lit(0.3),
-                    learn_rate: T::lit(0.08),
+                    gain: T::lit(0.63),
+                    learn_rate: T::lit(0.17),
                     neutral,
                     retraction: T::lit(0.03) * length,
                     retraction_speed: T::one(),
@@ -553,6 +567,12 @@ where
         u
     }
 
+    /// `ℓ / (g T_st)` (s): the inverted pendulum's placement per unit of speed change.
+    fn placement_scale(&self, fw: &Forward<T>) -> T {
+        let g = self.settings.gravity.max(T::lit(1e-9));
+        fw.neutral.norm() / (g * self.stance_time.max(T::lit(1e-3)))
+    }
+
     /// A series-elastic drive's spring: stiffness, and its rest value as seen from the
     /// motor (`τ = k (q_m − q_d − r)`).
     fn spring(&self, k: usize) -> Option<(T, T)> {
@@ -631,7 +651,7 @@ where
             T::zero()
         };
         let x_f = (v * self.stance_time * half
-            + fw.gain * (v - fw.speed)
+            + fw.gain * self.placement_scale(&fw) * (v - fw.speed)
             + self.learnt_placement
             + fw.retraction_speed * v * to_touchdown.min(fw.retraction_time))
         .max(-fw.reach)
@@ -785,11 +805,16 @@ where
         let mut rows = SMatrix::<T, 3, NU>::zeros();
         // The driven joints' accelerations per unit effort.
         let mut drive_rows = SMatrix::<T, NU, NU>::zeros();
+        // The ground forces per unit effort.
+        let mut force_rows = SMatrix::<T, NK, NU>::zeros();
         for k in 0..NU {
             let unit = solve(&(applied + self.unit_effort(k)))?;
             for i in 0..NU {
                 let j = self.drives[i].joint;
                 drive_rows[(i, k)] = unit.x[j] - base.x[j];
+            }
+            for c in 0..NK {
+                force_rows[(c, k)] = unit.contact[c] - base.contact[c];
             }
             rows[(0, k)] = unit.x[h] - base.x[h];
             if let Some(p) = s.pitch {
@@ -824,7 +849,7 @@ where
                     Some(fw) => {
                         let v = centre_of_mass_speed(&system.mass_matrix, qd, fw.joint);
                         let x_f = (v * self.stance_time * T::lit(0.5)
-                            + fw.gain * (v - fw.speed)
+                            + fw.gain * self.placement_scale(&fw) * (v - fw.speed)
                             + self.learnt_placement)
                             .max(-fw.reach)
                             .min(fw.reach);
@@ -870,6 +895,33 @@ where
         let chol = Cholesky::new(&normal).ok_or(ControlError::NonFinite)?;
         let mut delta = w.transpose() * g;
         chol.solve_mut(&mut delta);
+        if s.pitch.is_some() {
+            // The attitude servo's share is cut where it would push a sticking contact
+            // out of the friction cone (a touchdown, where the leg pushes little yet):
+            // the largest share in [0, 1] that keeps every sticking contact within 0.7 of
+            // its cone (the efforts are linear in the share).
+            let mut without = g;
+            without[1] = T::zero();
+            let mut delta0 = w.transpose() * without;
+            chol.solve_mut(&mut delta0);
+            let (f0, f1) = (
+                base.contact + force_rows * delta0,
+                base.contact + force_rows * delta,
+            );
+            let mut share = T::one();
+            for k in (0..NK / 2).filter(|&k| hs.modes.get(k) == ContactMode::Stick) {
+                let mu = T::lit(0.7) * self.options.friction[2 * k];
+                for side in [T::one(), -T::one()] {
+                    // side λ_t − μ λ_n ≤ 0 along the share.
+                    let at = |f: &SVector<T, NK>| side * f[2 * k] - mu * f[2 * k + 1];
+                    let (a0, a1) = (at(&f0), at(&f1));
+                    if a1 > T::zero() && a0 < a1 {
+                        share = share.min((-a0 / (a1 - a0)).max(T::zero()));
+                    }
+                }
+            }
+            delta = delta0 + (delta - delta0) * share;
+        }
         let drive_acceleration =
             SVector::<T, NU>::from_fn(|i, _| base.x[self.drives[i].joint]) + drive_rows * delta;
         Ok((present + delta, drive_acceleration, system.mass_matrix))
@@ -922,7 +974,8 @@ where
                         if t > t0 {
                             let speed = (x - x0) / (t - t0);
                             self.last_speed = Some(speed);
-                            self.learnt_placement += fw.learn_rate * (speed - fw.speed);
+                            self.learnt_placement +=
+                                fw.learn_rate * self.placement_scale(&fw) * (speed - fw.speed);
                         }
                     }
                     self.apex_at = Some((t, x));

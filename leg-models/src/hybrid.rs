@@ -540,20 +540,44 @@ where
             let forces = self.dynamics(hs, u)?.contact;
             let (x, v) = self.contact_coordinates(&hs.state);
             let floor = self.force_floor(&hs.state.q, u);
+            // A contact speed below rounding (as in `step`).
+            let still = self.options.tolerance.relative_residual
+                * leg_size::<L, T, NQ, NC, NU>(&self.params, &hs.state.q)
+                / self.options.dt;
             let mut change = None;
             for k in 0..NK / 2 {
                 let (ti, ni) = (2 * k, 2 * k + 1);
                 let mu = self.options.friction[ti];
                 match hs.modes.get(k) {
                     ContactMode::Flight => {}
+                    mode @ ContactMode::Slide { .. } if forces[ni] < T::zero() => {
+                        // A slide that would pull: at rest along the ground (it just
+                        // started), the mode consistent with the forces and motions
+                        // (Painlevé: Coulomb sliding may pull where sticking pushes
+                        // out of the cone and flight would sink); else it lifts off.
+                        let next = if v[ti].abs() <= still {
+                            self.consistent_mode(hs, k, u, floor)?
+                                .filter(|m| *m != mode)
+                                .unwrap_or(ContactMode::Flight)
+                        } else {
+                            ContactMode::Flight
+                        };
+                        change = Some((k, next, kind_of(next)));
+                    }
                     _ if forces[ni] < T::zero() => {
                         change = Some((k, ContactMode::Flight, EventKind::Liftoff))
                     }
                     ContactMode::Stick if forces[ti].abs() > mu * forces[ni] + floor => {
+                        // It slips: the way the unheld demand pushes it, if that slide
+                        // is consistent, else the other way (or off the ground).
                         let slide = ContactMode::Slide {
                             forward: forces[ti] < T::zero(),
                         };
-                        change = Some((k, slide, EventKind::Slip));
+                        let next = match self.consistent_mode(hs, k, u, floor)? {
+                            Some(m) if m != ContactMode::Stick => m,
+                            _ => slide,
+                        };
+                        change = Some((k, next, kind_of(next)));
                     }
                     ContactMode::Slide { forward } => {
                         let speed = if forward { v[ti] } else { -v[ti] };
@@ -590,6 +614,60 @@ where
             }
         }
         Err(HybridError::TooManyEvents { t: to_f64(t) })
+    }
+
+    /// The first mode of contact `k` (others as they are) that its forces and motion are
+    /// consistent with, in the order stick, slide either way (the way the sticking force
+    /// points first), flight; `None` if none is. Stick: `λ_n ≥ 0` in the cone. Slide from
+    /// rest: `λ_n ≥ 0` and the contact accelerating the way it slides. Flight: the contact
+    /// not accelerating into the ground.
+    fn consistent_mode(
+        &self,
+        hs: &HybridState<T, NQ, NK>,
+        k: usize,
+        u: &SVector<T, NU>,
+        floor: T,
+    ) -> Result<Option<ContactMode>, HybridError> {
+        let (ti, ni) = (2 * k, 2 * k + 1);
+        let mu = self.options.friction[ti];
+        let (x, _) = self.contact_coordinates(&hs.state);
+        let with = |mode: ContactMode| {
+            let mut trial = *hs;
+            trial.modes.set(k, mode);
+            if mode == ContactMode::Stick {
+                trial.anchors[ti] = x[ti];
+            }
+            trial
+        };
+        let acceleration = |trial: &HybridState<T, NQ, NK>, qdd: &SVector<T, NQ>| {
+            let (q, qd) = (&trial.state.q, &trial.state.qd);
+            self.options.ground.rows(
+                &(L::contact_jacobian(q, &self.params) * qdd
+                    + L::contact_bias(q, qd, &self.params)),
+            )
+        };
+        let stick = with(ContactMode::Stick);
+        let f = self.dynamics(&stick, u)?.contact;
+        if f[ni] >= T::zero() && f[ti].abs() <= mu * f[ni] + floor {
+            return Ok(Some(ContactMode::Stick));
+        }
+        let first = f[ti] < T::zero();
+        for forward in [first, !first] {
+            let mode = ContactMode::Slide { forward };
+            let trial = with(mode);
+            let sol = self.dynamics(&trial, u)?;
+            let a = acceleration(&trial, &sol.x)[ti];
+            let along = if forward { a } else { -a };
+            if sol.contact[ni] >= T::zero() && along >= T::zero() {
+                return Ok(Some(mode));
+            }
+        }
+        let flight = with(ContactMode::Flight);
+        let sol = self.dynamics(&flight, u)?;
+        if acceleration(&flight, &sol.x)[ni] >= T::zero() {
+            return Ok(Some(ContactMode::Flight));
+        }
+        Ok(None)
     }
 
     /// Puts resting contacts on the ground: flight contacts at or below the ground
@@ -721,6 +799,15 @@ where
             self.settle(hs, &u, now, &mut events)?;
         }
         Ok(events)
+    }
+}
+
+/// The event a switch to `mode` is.
+fn kind_of(mode: ContactMode) -> EventKind {
+    match mode {
+        ContactMode::Flight => EventKind::Liftoff,
+        ContactMode::Stick => EventKind::Stick,
+        ContactMode::Slide { .. } => EventKind::Slip,
     }
 }
 

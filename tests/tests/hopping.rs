@@ -216,3 +216,68 @@ fn atrias_hopper_hops_forward_at_half_a_metre_per_second() {
 fn atrias_hopper_hops_forward_at_one_metre_per_second() {
     atrias_hopper_hops_forward_at(1.0);
 }
+
+/// `knee_runner` (a user's leg, written from the README alone: a floating body on a hip
+/// and a knee motor) hops in place and forward at 0.5 m/s under the same controller with
+/// no setting of its own, from rest for 10 s.
+#[test]
+fn knee_runner_hops_in_place_and_forward() {
+    use generated::knee_runner::{Params, NC, NK, NQ, NU};
+    use generated::KneeRunner as K;
+    let p = Params::<f64>::default();
+    let mut sim = HybridSimulator::<K, f64, NQ, NC, NU, NK>::new(p, 1e-3);
+    sim.options.control = leg_models::integrate::ControlUpdate::PerStep;
+    let mut home = SVector::<f64, NQ>::from(K::HOME);
+    project_position::<K, f64, NQ, NC, NU>(&p, &mut home, &Default::default()).unwrap();
+    let apex = home[1] + 0.05;
+    // (command, largest speed error after five hops), m/s.
+    for (speed, tolerance) in [(0.0, 0.1), (0.5, 0.05)] {
+        let settings =
+            HopSettings::for_leg::<K, NQ, NC, NK>(&p, &home, apex, Some(speed), f64::INFINITY)
+                .unwrap();
+        let mut controller = HopController::<K, f64, NQ, NC, NU, NK>::new(p, sim.options, settings);
+        let mut q = home;
+        q[1] += 0.03;
+        let start = sim
+            .start(
+                State {
+                    q,
+                    qd: SVector::zeros(),
+                },
+                &SVector::zeros(),
+            )
+            .unwrap();
+        let record = match sim.run(start, 10_000, &mut controller) {
+            Ok(r) => r,
+            Err(stopped) => panic!("{speed} m/s: {stopped}"),
+        };
+        let apexes = apexes(&record, 1, 0);
+        let speeds: Vec<f64> = apexes
+            .windows(2)
+            .map(|w| (w[1].1 - w[0].1) / (w[1].0 - w[0].0))
+            .collect();
+        eprintln!("{speed} m/s: hop speeds {speeds:?}");
+        assert!(apexes.len() >= 20, "{} hops", apexes.len());
+        let error = |from: usize| {
+            speeds[from..]
+                .iter()
+                .map(|v| (v - speed).abs())
+                .fold(0.0, f64::max)
+        };
+        assert!(
+            error(5) < tolerance,
+            "{speed} m/s: speed error {} m/s after five hops",
+            error(5)
+        );
+        let last = error(speeds.len() - 5);
+        assert!(
+            last < 0.02,
+            "{speed} m/s: speed error {last} m/s over the last five hops"
+        );
+        let apex_error = apexes[5..]
+            .iter()
+            .map(|a| (a.2 - apex).abs())
+            .fold(0.0, f64::max);
+        assert!(apex_error < 5e-3, "{speed} m/s: apex error {apex_error} m");
+    }
+}
