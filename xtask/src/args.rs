@@ -253,7 +253,8 @@ fn number(
 ) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync + 'static {
     move |text: &str| match text.parse::<f64>() {
         Ok(x) if x.is_finite() && ok(x) => Ok(x),
-        _ => Err(format!("expected {expected}")),
+        Ok(_) => Err(format!("expected {expected}")),
+        Err(_) => Err(format!("not a number: expected {expected}")),
     }
 }
 

@@ -528,6 +528,14 @@ fn sim_hops_a_leg_with_contacts() {
         "--apex -1: at or below the standing height",
     );
     refused(
+        &legs(&["sim", "minitaur_hopper", "--kp", "50", "--out", b]),
+        "minitaur_hopper has contacts: `--kp` sets the swing-leg controllers' stiffness",
+    );
+    refused(
+        &legs(&["sim", "minitaur_hopper", "--speed", "fast", "--out", b]),
+        "invalid value 'fast' for '--speed <V>': not a number: expected",
+    );
+    refused(
         &legs(&["sim", "minitaur_hopper", "--speed", "0.5", "--out", b]),
         "--speed: minitaur_hopper: a forward speed needs a body that moves along the ground",
     );
@@ -587,7 +595,7 @@ fn eval_prints_the_impact_map() {
         "eval",
         "minitaur_hopper",
         "--q",
-        "0.26,-0.7076,-1.253,-2.434,1.253",
+        "0.2499991,-0.7076,-1.253,-2.434,1.253",
         "--project",
         "--qd=-1,0,0,0,0",
         "--impact",
@@ -622,4 +630,23 @@ fn eval_prints_the_impact_map() {
     );
     assert!(vec(&imp["impulses"])[1] > 0.0);
     assert_eq!(imp["mode_after"], "stick");
+    assert!(v.get("warnings").is_none(), "{v}");
+    // Away from the ground the map is computed as asked, and said so.
+    let raised = legs(&[
+        "eval",
+        "minitaur_hopper",
+        "--q",
+        "0.26,-0.7076,-1.253,-2.434,1.253",
+        "--project",
+        "--qd=-1,0,0,0,0",
+        "--impact",
+        "toe_contact",
+        "--json",
+    ]);
+    let w: Value = serde_json::from_slice(&raised.stdout).unwrap();
+    let said = w["warnings"]["impact"].as_str().unwrap_or_default();
+    assert!(
+        said.contains("contact `toe_contact` is") && said.contains("from the ground"),
+        "{w}"
+    );
 }

@@ -130,6 +130,7 @@ pub fn run<
     let terms = L::dynamics_terms(&q, &qd, &p);
     let mut out = Map::new();
     let mut errors = Map::new();
+    let mut warnings = Map::new();
     out.insert("model".into(), json!(L::NAME));
     out.insert("joints".into(), json!(L::JOINT_NAMES.to_vec()));
     out.insert("q".into(), vector(&q));
@@ -194,6 +195,19 @@ pub fn run<
                     ContactMode::Stick => "stick",
                     _ => "slide",
                 };
+                // An impact happens at the ground: the map at a state away from it is
+                // computed as asked, and said so.
+                let gap = coords[2 * k + 1];
+                let size = leg_models::assembly::leg_size::<L, f64, NQ, NC, NU>(&p, &q);
+                if gap.abs() > 1e-6 * size.max(1.0) {
+                    warnings.insert(
+                        "impact".into(),
+                        json!(format!(
+                            "contact `{}` is {gap:.3e} m from the ground (its gap): an impact happens at the ground; this is the map at the state given",
+                            L::CONTACT_NAMES[k]
+                        )),
+                    );
+                }
                 out.insert(
                     "impact".into(),
                     json!({
@@ -208,12 +222,22 @@ pub fn run<
             }
             Err(e) => {
                 out.insert("impact".into(), Value::Null);
-                errors.insert("impact".into(), json!(e.to_string()));
+                let why = match e {
+                    leg_models::contact::ImpactError::Pulling { normal_impulse, .. } => format!(
+                        "impact: contact `{}` would need a pulling normal impulse ({normal_impulse:.3e} N s): it separates instead",
+                        L::CONTACT_NAMES[k]
+                    ),
+                    other => other.to_string(),
+                };
+                errors.insert("impact".into(), json!(why));
             }
         }
     }
     if !errors.is_empty() {
         out.insert("errors".into(), Value::Object(errors));
+    }
+    if !warnings.is_empty() {
+        out.insert("warnings".into(), Value::Object(warnings));
     }
     if json_out {
         println!("{}", Value::Object(out));

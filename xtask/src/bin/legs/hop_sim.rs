@@ -72,6 +72,12 @@ pub fn run<
             L::NAME
         )));
     }
+    if s.kp_given() {
+        return Err(Error::usage(format!(
+            "{} has contacts: `--kp` sets the swing-leg controllers' stiffness; the hopping controller's gains come from the leg's inertias",
+            L::NAME
+        )));
+    }
     let mut home = SVector::<f64, NQ>::from_column_slice(&L::HOME);
     project_position::<L, f64, NQ, NC, NU>(&p, &mut home, &Tolerance::default())
         .map_err(|e| fail("the home pose does not assemble", &e))?;

@@ -69,6 +69,11 @@ impl Settings {
         self.controller == Some(Controller::Passive)
     }
 
+    /// Whether `--kp` was given (the swing controllers' gain).
+    pub(crate) fn kp_given(&self) -> bool {
+        self.kp.is_some()
+    }
+
     /// A controller or trajectory named for the swing leg, which a leg on the ground does
     /// not run.
     pub(crate) fn swing_only(&self) -> Option<&'static str> {
