@@ -11,7 +11,9 @@ open chain with Lagrangian L_i = T_i - V_i; L = sum L_i - V_springs; M = d2L/dqd
 N = (d2L/dqd dq) qd - dL/dq; the closure residual phi is point a minus point b per
 closure; J = dphi/dq and Jdot qd = d(J qd)/dq qd. Joints are revolute (q turns the link)
 or prismatic (q slides it along a fixed axis of the parent); contact points get their
-positions, J_c and Jc_dot qd (§3.1).
+positions, J_c and Jc_dot qd (§3.1). The emitted terms are those quantities in
+link-local closed form (`LinkKinematics`, `coriolis`); the Lagrange derivatives stay as
+CasADi's C peer and agree with them to rounding.
 """
 
 import hashlib
@@ -61,6 +63,291 @@ class DerivationError(Exception):
 def rotate(angle, v):
     c, s = cs.cos(angle), cs.sin(angle)
     return cs.vertcat(c * v[0] - s * v[1], s * v[0] + c * v[1])
+
+
+
+def _is_constant(e, state):
+    return not cs.depends_on(e, state)
+
+
+class LinkKinematics:
+    """A planar tree in link-local terms. Each link's frame is at its joint point, turned
+    by its absolute angle; `rel[i]` is (cos q_i, sin q_i) of a revolute joint (None, the
+    identity, for a prismatic one), `abs[i]` the absolute orientation composed from the
+    parent's by angle addition, `offset[i]` the joint point in the parent's frame (the
+    base's for a base link), `segment[i]` that offset turned into the base frame and
+    `joint[i]` the joint point in the base frame. 2-vectors are lists of two scalars."""
+
+    def __init__(self, model, sym, q, qd):
+        self.links = links = model["links"]
+        self.sym, self.q, self.qd = sym, q, qd
+        self.state = cs.vertcat(q, qd)
+        self.gravity = self.vec(model["gravity"])
+        n = len(links)
+        self.rel, self.abs, self.offset, self.segment, self.joint = [None] * n, [None] * n, [None] * n, [None] * n, [None] * n
+        self.axis, self.omega = [None] * n, [None] * n
+        for i, link in enumerate(links):
+            parent = link["parent"]
+            d = self.vec(link["origin"])
+            if link["joint"] == "prismatic":
+                a = [cs.SX(x) for x in link["axis"]]
+                self.axis[i] = a
+                self.offset[i] = [d[0] + q[i] * a[0], d[1] + q[i] * a[1]]
+            else:
+                self.offset[i] = d
+                self.rel[i] = (cs.cos(q[i]), cs.sin(q[i]))
+            spin = qd[i] if link["joint"] == "revolute" else cs.SX(0)
+            if parent is None:
+                self.abs[i] = self.rel[i]
+                self.segment[i] = self.offset[i]
+                self.joint[i] = self.offset[i]
+                self.omega[i] = spin
+            else:
+                self.abs[i] = self.compose(self.abs[parent], self.rel[i])
+                self.segment[i] = self.rot(self.abs[parent], self.offset[i])
+                self.joint[i] = self.add(self.joint[parent], self.segment[i])
+                self.omega[i] = self.omega[parent] + spin
+
+    def vec(self, pair):
+        return [self.sym[pair[0]], self.sym[pair[1]]]
+
+    def constant(self, *xs):
+        return all(_is_constant(x, self.state) for x in xs)
+
+    @staticmethod
+    def add(a, b):
+        return [a[0] + b[0], a[1] + b[1]]
+
+    @staticmethod
+    def dot(a, b):
+        return a[0] * b[0] + a[1] * b[1]
+
+    @staticmethod
+    def cross(a, b):
+        return a[0] * b[1] - a[1] * b[0]
+
+    @staticmethod
+    def compose(a, b):
+        if a is None:
+            return b
+        if b is None:
+            return a
+        return (a[0] * b[0] - a[1] * b[1], a[1] * b[0] + a[0] * b[1])
+
+    @staticmethod
+    def rot(rc, v):
+        if rc is None:
+            return list(v)
+        c, s = rc
+        return [c * v[0] - s * v[1], s * v[0] + c * v[1]]
+
+    @staticmethod
+    def rot_t(rc, v):
+        if rc is None:
+            return list(v)
+        c, s = rc
+        return [c * v[0] + s * v[1], c * v[1] - s * v[0]]
+
+    def dot_rot(self, r, rc, v):
+        """r · (R v), as c (r·v) − s (r×v) when r and v are parameters only."""
+        if rc is not None and self.constant(*r, *v):
+            c, s = rc
+            return c * self.dot(r, v) - s * self.cross(r, v)
+        return self.dot(r, self.rot(rc, v))
+
+    def cross_rot(self, r, rc, v):
+        """r × (R v), as c (r×v) + s (r·v) when r and v are parameters only."""
+        if rc is not None and self.constant(*r, *v):
+            c, s = rc
+            return c * self.cross(r, v) + s * self.dot(r, v)
+        return self.cross(r, self.rot(rc, v))
+
+    def own_inertia(self, i):
+        """Mass, first moment m c (link frame) and inertia about the joint I + m |c|²."""
+        link = self.links[i]
+        m, inertia = self.sym[link["mass"]], self.sym[link["inertia"]]
+        c = self.vec(link["com"])
+        return m, [m * c[0], m * c[1]], inertia + m * self.dot(c, c)
+
+    def composite(self):
+        """Each subtree's mass, first moment and inertia about its joint, in its link's frame."""
+        comp = [list(self.own_inertia(i)) for i in range(len(self.links))]
+        for j in reversed(range(len(self.links))):
+            parent = self.links[j]["parent"]
+            if parent is None:
+                continue
+            m, h, inertia = comp[j]
+            r, rc = self.offset[j], self.rel[j]
+            rh = self.rot(rc, h)
+            moved_h = [rh[0] + m * r[0], rh[1] + m * r[1]]
+            moved_inertia = inertia + 2 * self.dot_rot(r, rc, h) + m * self.dot(r, r)
+            pm, ph, pi = comp[parent]
+            comp[parent] = [pm + m, self.add(ph, moved_h), pi + moved_inertia]
+        return comp
+
+    def motion_force(self, i, m, h, inertia):
+        """The force I S_i of an inertia (m, h, I) moved along joint i: (moment, force)."""
+        if self.links[i]["joint"] == "revolute":
+            return inertia, [-h[1], h[0]]
+        a = self.axis[i]
+        return self.cross(h, a), [m * a[0], m * a[1]]
+
+    def project(self, i, moment, force):
+        """S_iᵀ f of a force at joint i (its frame)."""
+        if self.links[i]["joint"] == "revolute":
+            return moment
+        return self.dot(self.axis[i], force)
+
+    def mass_matrix(self):
+        """M by the composite-rigid-body recursion: M_ii = S_iᵀ I_i^c S_i, and M_ji for each
+        ancestor j the same force carried up the chain. Reflected rotor inertia on the
+        diagonal."""
+        n = len(self.links)
+        comp = self.composite()
+        M = [[None] * n for _ in range(n)]
+        for i in range(n):
+            moment, force = self.motion_force(i, *comp[i])
+            M[i][i] = self.project(i, moment, force)
+            rotor = self.links[i]["rotor"]
+            if rotor is not None:
+                M[i][i] = M[i][i] + self.sym[rotor[0]] * self.sym[rotor[1]] ** 2
+            j = i
+            while self.links[j]["parent"] is not None:
+                r, rc = self.offset[j], self.rel[j]
+                moment = moment + self.cross_rot(r, rc, force)
+                force = self.rot(rc, force)
+                j = self.links[j]["parent"]
+                M[i][j] = M[j][i] = self.project(j, moment, force)
+        return cs.vertcat(*[cs.horzcat(*[M[r][c] if M[r][c] is not None else cs.SX(0) for c in range(n)]) for r in range(n)])
+
+    def frame_moments(self):
+        """The first moments each frame carries, for gravity: `H_f = h_f + Σ_c m_c r_c` over
+        the children c of link f (m_c the mass of c's subtree, r_c its joint offset), and
+        `H_base` for the base links' offsets. Then V = −g·H_base − Σ_f g·(R_f H_f)."""
+        n = len(self.links)
+        subtree_mass = [self.sym[link["mass"]] for link in self.links]
+        for j in reversed(range(n)):
+            parent = self.links[j]["parent"]
+            if parent is not None:
+                subtree_mass[parent] = subtree_mass[parent] + subtree_mass[j]
+        H = [self.own_inertia(i)[1] for i in range(n)]
+        base = [cs.SX(0), cs.SX(0)]
+        for j, link in enumerate(self.links):
+            moved = [subtree_mass[j] * self.offset[j][0], subtree_mass[j] * self.offset[j][1]]
+            if link["parent"] is None:
+                base = self.add(base, moved)
+            else:
+                H[link["parent"]] = self.add(H[link["parent"]], moved)
+        return subtree_mass, H, base
+
+    def gravity_forces(self):
+        """G = ∂V/∂q. A revolute joint j turns every frame f of its subtree, and
+        ∂(−g·R_f H_f)/∂θ_f = −g·(ẑ × R_f H_f) = g × (R_f H_f): G_j = Σ_f g × (R_f H_f). A
+        prismatic joint j moves its subtree's mass m_j along R a_j: G_j = −m_j g·(R a_j)."""
+        n = len(self.links)
+        subtree_mass, H, _ = self.frame_moments()
+        turn = [self.cross_rot(self.gravity, self.abs[f], H[f]) for f in range(n)]
+        # Subtree sums, leaves first.
+        total = list(turn)
+        for j in reversed(range(n)):
+            parent = self.links[j]["parent"]
+            if parent is not None:
+                total[parent] = total[parent] + total[j]
+        G = []
+        for j, link in enumerate(self.links):
+            if link["joint"] == "revolute":
+                G.append(total[j])
+            else:
+                parent = link["parent"]
+                rc = self.abs[parent] if parent is not None else None
+                G.append(-subtree_mass[j] * self.dot_rot(self.gravity, rc, self.axis[j]))
+        return cs.vertcat(*G)
+
+    def potential_energy(self):
+        """V = −Σ m g·x_c = −g·H_base − Σ_f g·(R_f H_f)."""
+        _, H, base = self.frame_moments()
+        V = -self.dot(self.gravity, base)
+        for f in range(len(self.links)):
+            V -= self.dot_rot(self.gravity, self.abs[f], H[f])
+        return V
+
+    def path(self, ref):
+        """The links from a point's link up to the base."""
+        i, out = ref["link"], []
+        while i is not None:
+            out.append(i)
+            i = self.links[i]["parent"]
+        return out
+
+    def local_segment(self, ref):
+        return self.rot(self.abs[ref["link"]], self.vec(ref["point"]))
+
+    def position(self, ref):
+        if ref["link"] is None:  # fixed in the base frame
+            return cs.vertcat(*self.vec(ref["point"]))
+        return cs.vertcat(*self.add(self.joint[ref["link"]], self.local_segment(ref)))
+
+    def jacobian(self, ref):
+        """∂x/∂q: ẑ × (x − o_j) for a revolute joint j on the path, R a_j for a prismatic one."""
+        n = len(self.links)
+        cols = [[cs.SX(0), cs.SX(0)] for _ in range(n)]
+        if ref["link"] is not None:
+            below = self.local_segment(ref)  # x − o_k
+            for k in self.path(ref):
+                parent = self.links[k]["parent"]
+                if self.links[k]["joint"] == "revolute":
+                    cols[k] = [-below[1], below[0]]
+                else:
+                    cols[k] = self.rot(self.abs[parent] if parent is not None else None, self.axis[k])
+                below = self.add(below, self.segment[k])
+        return cs.horzcat(*[cs.vertcat(*c) for c in cols])
+
+    def bias(self, ref):
+        """J̇ q̇, the acceleration at q̈ = 0: −Θ̇² w for each segment w turning with its frame's
+        absolute angle Θ, and 2 Θ̇ q̇_k ẑ × (R a_k) for a prismatic joint k."""
+        if ref["link"] is None:
+            return cs.vertcat(cs.SX(0), cs.SX(0))
+        i = ref["link"]
+        w = self.local_segment(ref)
+        acc = [-(self.omega[i] ** 2) * w[0], -(self.omega[i] ** 2) * w[1]]
+        for k in self.path(ref):
+            parent = self.links[k]["parent"]
+            if parent is None:
+                continue  # the base's offset does not turn (a base slider's q̈ is zero)
+            spin = self.omega[parent]
+            w = self.segment[k]
+            acc = self.add(acc, [-(spin**2) * w[0], -(spin**2) * w[1]])
+            if self.links[k]["joint"] == "prismatic":
+                ra = self.rot(self.abs[parent], self.axis[k])
+                coriolis = 2 * spin * self.qd[k]
+                acc = self.add(acc, [-coriolis * ra[1], coriolis * ra[0]])
+        return cs.vertcat(*acc)
+
+
+def coriolis(M, q, qd):
+    """C q̇ from M by its Christoffel symbols, grouped on the products q̇_j q̇_k:
+    (C q̇)_i = Σ_{j≤k} c_ijk q̇_j q̇_k with c_ijk = ∂M_ij/∂q_k + ∂M_ik/∂q_j − ∂M_jk/∂q_i
+    (j < k) and c_ijj = ∂M_ij/∂q_j − ½ ∂M_jj/∂q_i. Structurally zero symbols are left out."""
+    n = q.size1()
+    D = [cs.jacobian(M[:, c], q) for c in range(n)]  # D[c][r, k] = ∂M_rc/∂q_k
+
+    def d(r, c, k):
+        return D[c][r, k]
+
+    out = []
+    for i in range(n):
+        total = cs.SX(0)
+        for j in range(n):
+            for k in range(j, n):
+                if j < k:
+                    coef = d(i, j, k) + d(i, k, j) - d(j, k, i)
+                else:
+                    coef = d(i, j, j) - 0.5 * d(j, j, i)
+                if coef.is_zero():
+                    continue
+                total = total + coef * (qd[j] * qd[k])
+        out.append(total)
+    return cs.vertcat(*out)
 
 
 def derive(model):
@@ -128,8 +415,6 @@ def derive(model):
         G_springs[a] += k * stretch
         if b is not None:
             G_springs[b] -= k * stretch
-    T = sum(kinetic.values())
-    V = sum(potential.values()) + V_springs
     L = sum(kinetic[b] - potential[b] for b in kinetic) - V_springs
 
     # Lagrange's equations of L as written in the notes: what a CasADi user gets by
@@ -138,52 +423,54 @@ def derive(model):
     M_lagrange = cs.jacobian(dL_dqd, qd)
     N_lagrange = cs.jtimes(dL_dqd, q, qd) - cs.gradient(L, q)
 
-    # The same terms in closed form, which is what those derivatives are for this L:
-    # M = Σ m J_cᵀ J_c + I J_ωᵀ J_ω (+ rotors), G = ∂V/∂q = −Σ m J_cᵀ g, and
-    # N = Σ m J_cᵀ (J̇_c q̇) + G (a planar link's J_ω is constant, so its rotation adds
-    # nothing to N). Fewer operations, the same values; M is emitted as one triangle
-    # mirrored, so it is symmetric to the bit.
-    M = cs.SX(n, n)
-    G = G_springs
-    C_qd = cs.SX(n, 1)
-    for i, link in enumerate(links):
-        com = point({"link": i, "point": link["com"]})
-        J_c = cs.jacobian(com, q)
-        J_w = cs.jacobian(angle[i], q)
-        mass, inertia = sym[link["mass"]], sym[link["inertia"]]
-        M += mass * cs.mtimes(J_c.T, J_c) + inertia * cs.mtimes(J_w.T, J_w)
-        G -= mass * cs.mtimes(J_c.T, gravity)
-        C_qd += mass * cs.mtimes(J_c.T, cs.jtimes(cs.jtimes(com, q, qd), q, qd))
-        if link["rotor"] is not None:
-            rotor_inertia, gear_ratio = sym[link["rotor"][0]], sym[link["rotor"][1]]
-            M[i, i] += rotor_inertia * gear_ratio**2
-    M = cs.vertcat(*[cs.horzcat(*[M[max(r, c), min(r, c)] for c in range(n)]) for r in range(n)])
+    # The terms our generator emits, in link-local form (DESIGN.md §3): the mass matrix by
+    # the composite-rigid-body recursion in each link's frame, the gravity forces from each
+    # subtree's first moment and the gravity vector in that frame, C q̇ from that M
+    # (Ṁ q̇ − ½ ∂(q̇ᵀ M q̇)/∂q), and point Jacobians and J̇ q̇ from the chain's segments.
+    # Products of parameters are grouped apart from the joint angles' sines and cosines
+    # (`c·(r·h) − s·(r×h)`), so that the emitter can compute them once per parameter set;
+    # the entries of M then reduce to constants times sines and cosines of relative angles.
+    # One sine and cosine per revolute joint; absolute orientations by angle addition.
+    lk = LinkKinematics(model, sym, q, qd)
+    M = lk.mass_matrix()
+    G = lk.gravity_forces() + G_springs
+    M_qd = cs.mtimes(M, qd)
+    C_qd = coriolis(M, q, qd)
     N = C_qd + G
+    T = 0.5 * cs.dot(qd, M_qd)
+    V = lk.potential_energy() + V_springs
     D = cs.vertcat(*[sym[link["damping"]] * qd[i] for i, link in enumerate(links)])
+    point = lk.position
+    joint = [cs.vertcat(*o) for o in lk.joint]
+
+    def stacked(refs):
+        """Positions, Jacobian and J̇ q̇ of points (two rows each)."""
+        if not refs:
+            return cs.SX(0, 1), cs.SX(0, n), cs.SX(0, 1)
+        return (
+            cs.vertcat(*[lk.position(r) for r in refs]),
+            cs.vertcat(*[lk.jacobian(r) for r in refs]),
+            cs.vertcat(*[lk.bias(r) for r in refs]),
+        )
+
+    def difference(a, b):
+        return [x - y for x, y in zip(a, b)]
 
     closures = model["closures"]
     if closures:
-        phi = cs.vertcat(*[point(c["a"]) - point(c["b"]) for c in closures])
-        J = cs.jacobian(phi, q)
-        Jdot_qd = cs.jtimes(cs.jtimes(phi, q, qd), q, qd)
+        pa, Ja, ba = stacked([c["a"] for c in closures])
+        pb, Jb, bb = stacked([c["b"] for c in closures])
+        phi, J, Jdot_qd = pa - pb, Ja - Jb, ba - bb
         closure_points = cs.horzcat(*[cs.horzcat(point(c["a"]), point(c["b"])) for c in closures])
     else:
         phi, J, Jdot_qd, closure_points = cs.SX(0, 1), cs.SX(0, n), cs.SX(0, 1), cs.SX(2, 0)
 
-    foot = point(model["foot"])
-    Jf = cs.jacobian(foot, q)
-    Jf_dot_qd = cs.jtimes(cs.jtimes(foot, q, qd), q, qd)
+    foot, Jf, Jf_dot_qd = stacked([model["foot"]])
     tips = cs.horzcat(*[point({"link": i, "point": l["length"]}) for i, l in enumerate(links)])
 
     # Contact points: base-frame positions stacked (rows 2k, 2k + 1 are x, y of contact k),
     # their Jacobian and J̇_c q̇; the runtime projects them on the ground.
-    contacts = model["contacts"]
-    if contacts:
-        xc = cs.vertcat(*[point(c["point"]) for c in contacts])
-        Jc = cs.jacobian(xc, q)
-        Jc_dot_qd = cs.jtimes(cs.jtimes(xc, q, qd), q, qd)
-    else:
-        xc, Jc, Jc_dot_qd = cs.SX(0, 1), cs.SX(0, n), cs.SX(0, 1)
+    xc, Jc, Jc_dot_qd = stacked([c["point"] for c in model["contacts"]])
 
     inputs = {"q": q, "qd": qd, "p": params}
     Q, QQ = ["q", "p"], ["q", "qd", "p"]
@@ -312,9 +599,10 @@ def casadi_c(model, peer, redundant_rows):
     same terms: the notes' Lagrange form (`<model>_dynamics_terms`,
     `<model>_forward_dynamics`: M and N by differentiating L, what a CasADi user following
     the notes writes) and the closed form our generator uses (`<model>_closed_dynamics_terms`,
-    `<model>_closed_forward_dynamics`: M = Σ m J_cᵀ J_c + I J_ωᵀ J_ω, N = Σ m J_cᵀ J̇_c q̇ + G,
-    what a CasADi user who knows that form writes). Each pair is the fused terms (M, N, J,
-    J̇q̇) and forward dynamics (the KKT system solved by CasADi's `solve`)."""
+    `<model>_closed_forward_dynamics`: the very expressions we emit, M by the composite
+    rigid bodies in link frames, C q̇ by Christoffel symbols, G from the subtrees' first
+    moments; what a CasADi user who wrote that form gets). Each pair is the fused terms
+    (M, N, J, J̇q̇) and forward dynamics (the KKT system solved by CasADi's `solve`)."""
     name = model["name"]
     q, qd, p = peer["q"], peer["qd"], peer["p"]
     D, J, Jdot_qd = peer["D"], peer["J"], peer["Jdot_qd"]
