@@ -169,21 +169,42 @@ class LinkKinematics:
         c = self.vec(link["com"])
         return m, [m * c[0], m * c[1]], inertia + m * self.dot(c, c)
 
-    def composite(self):
-        """Each subtree's mass, first moment and inertia about its joint, in its link's frame."""
-        comp = [list(self.own_inertia(i)) for i in range(len(self.links))]
+    def grouped_sum(self, terms):
+        """Σ terms, the parameter-only ones added first (one prepared value), then the rest."""
+        constant = [t for t in terms if self.constant(t)]
+        varying = [t for t in terms if not self.constant(t)]
+        total = None
+        for t in constant + varying:
+            total = t if total is None else total + t
+        return total if total is not None else cs.SX(0)
+
+    def composite_terms(self):
+        """Each subtree's mass, first moment and inertia about its joint, in its link's
+        frame, as lists of terms (summed by `grouped_sum`)."""
+        comp = []
+        for i in range(len(self.links)):
+            m, h, inertia = self.own_inertia(i)
+            comp.append([[m], [[h[0]], [h[1]]], [inertia]])
         for j in reversed(range(len(self.links))):
             parent = self.links[j]["parent"]
             if parent is None:
                 continue
-            m, h, inertia = comp[j]
+            m, h, inertia = self.summed(comp[j])
             r, rc = self.offset[j], self.rel[j]
             rh = self.rot(rc, h)
-            moved_h = [rh[0] + m * r[0], rh[1] + m * r[1]]
-            moved_inertia = inertia + 2 * self.dot_rot(r, rc, h) + m * self.dot(r, r)
             pm, ph, pi = comp[parent]
-            comp[parent] = [pm + m, self.add(ph, moved_h), pi + moved_inertia]
+            pm.append(m)
+            ph[0] += [rh[0], m * r[0]]
+            ph[1] += [rh[1], m * r[1]]
+            pi += [inertia, m * self.dot(r, r), 2 * self.dot_rot(r, rc, h)]
         return comp
+
+    def summed(self, c):
+        m, h, inertia = c
+        return self.grouped_sum(m), [self.grouped_sum(h[0]), self.grouped_sum(h[1])], self.grouped_sum(inertia)
+
+    def composite(self):
+        return [self.summed(c) for c in self.composite_terms()]
 
     def motion_force(self, i, m, h, inertia):
         """The force I S_i of an inertia (m, h, I) moved along joint i: (moment, force)."""
@@ -203,14 +224,20 @@ class LinkKinematics:
         ancestor j the same force carried up the chain. Reflected rotor inertia on the
         diagonal."""
         n = len(self.links)
-        comp = self.composite()
+        terms = self.composite_terms()
+        comp = [self.summed(c) for c in terms]
         M = [[None] * n for _ in range(n)]
         for i in range(n):
             moment, force = self.motion_force(i, *comp[i])
-            M[i][i] = self.project(i, moment, force)
             rotor = self.links[i]["rotor"]
-            if rotor is not None:
-                M[i][i] = M[i][i] + self.sym[rotor[0]] * self.sym[rotor[1]] ** 2
+            if self.links[i]["joint"] == "revolute":
+                # I_i^c, with the rotor's reflected inertia among its constant terms.
+                extra = [self.sym[rotor[0]] * self.sym[rotor[1]] ** 2] if rotor is not None else []
+                M[i][i] = self.grouped_sum(terms[i][2] + extra)
+            else:
+                M[i][i] = self.project(i, moment, force)
+                if rotor is not None:
+                    M[i][i] = M[i][i] + self.sym[rotor[0]] * self.sym[rotor[1]] ** 2
             j = i
             while self.links[j]["parent"] is not None:
                 r, rc = self.offset[j], self.rel[j]
@@ -324,6 +351,24 @@ class LinkKinematics:
         return cs.vertcat(*acc)
 
 
+def state_operations(exprs, state, inputs):
+    """Operations of the CSE'd function of `exprs` that depend on `state` (the rest depends
+    on parameters only, and the emitter computes it once per parameter set)."""
+    f = cs.Function("count", inputs, cs.cse([cs.densify(e) for e in exprs]))
+    state_inputs = {k for k, x in enumerate(inputs) if any(x is s for s in state)}
+    varying, count = {}, 0
+    for k in range(f.n_instructions()):
+        op, args, res = f.instruction_id(k), f.instruction_input(k), f.instruction_output(k)
+        if op == cs.OP_INPUT:
+            varying[res[0]] = args[0] in state_inputs
+        elif op == cs.OP_CONST:
+            varying[res[0]] = False
+        elif op != cs.OP_OUTPUT:
+            varying[res[0]] = any(varying[a] for a in args if a >= 0)
+            count += varying[res[0]]
+    return count
+
+
 def coriolis(M, q, qd):
     """C q̇ from M by its Christoffel symbols, grouped on the products q̇_j q̇_k:
     (C q̇)_i = Σ_{j≤k} c_ijk q̇_j q̇_k with c_ijk = ∂M_ij/∂q_k + ∂M_ik/∂q_j − ∂M_jk/∂q_i
@@ -334,16 +379,33 @@ def coriolis(M, q, qd):
     def d(r, c, k):
         return D[c][r, k]
 
+    def combine(terms):
+        """Σ sign·term, with a term and its negative left out when they are the same
+        expression (M is symmetric, so ∂M_ik/∂q_j and ∂M_jk/∂q_i often are)."""
+        terms = [(w, t) for w, t in terms if not t.is_zero()]
+        kept = []
+        for w, t in terms:
+            match = next((x for x in kept if x[0] == -w and cs.is_equal(x[1], t, 64)), None)
+            if match is not None:
+                kept.remove(match)
+            else:
+                kept.append((w, t))
+        total = None
+        for w, t in kept:
+            term = t if w == 1 else -t if w == -1 else w * t
+            total = term if total is None else total + term
+        return total
+
     out = []
     for i in range(n):
         total = cs.SX(0)
         for j in range(n):
             for k in range(j, n):
                 if j < k:
-                    coef = d(i, j, k) + d(i, k, j) - d(j, k, i)
+                    coef = combine([(1, d(i, j, k)), (1, d(i, k, j)), (-1, d(j, k, i))])
                 else:
-                    coef = d(i, j, j) - 0.5 * d(j, j, i)
-                if coef.is_zero():
+                    coef = combine([(1, d(i, j, j)), (-0.5, d(j, j, i))])
+                if coef is None or coef.is_zero():
                     continue
                 total = total + coef * (qd[j] * qd[k])
         out.append(total)
@@ -435,8 +497,6 @@ def derive(model):
     M = lk.mass_matrix()
     G = lk.gravity_forces() + G_springs
     M_qd = cs.mtimes(M, qd)
-    C_qd = coriolis(M, q, qd)
-    N = C_qd + G
     T = 0.5 * cs.dot(qd, M_qd)
     V = lk.potential_energy() + V_springs
     D = cs.vertcat(*[sym[link["damping"]] * qd[i] for i, link in enumerate(links)])
@@ -464,6 +524,20 @@ def derive(model):
         closure_points = cs.horzcat(*[cs.horzcat(point(c["a"]), point(c["b"])) for c in closures])
     else:
         phi, J, Jdot_qd, closure_points = cs.SX(0, 1), cs.SX(0, n), cs.SX(0, 1), cs.SX(2, 0)
+
+    # C q̇ two ways, the same values: by the Christoffel symbols of the link-local M (compact
+    # for short chains), or Σ m_k J_kᵀ (J̇_k q̇) over the centres of mass (a planar link's
+    # rotation adds nothing, J_ω being constant), which grows more slowly with depth. The
+    # one whose fused terms (M, N, J, J̇q̇) take fewer state-dependent operations is emitted.
+    C_christoffel = coriolis(M, q, qd)
+    C_points = cs.SX(n, 1)
+    for i, link in enumerate(links):
+        com = {"link": i, "point": link["com"]}
+        C_points += sym[link["mass"]] * cs.mtimes(lk.jacobian(com).T, lk.bias(com))
+    N = min(
+        (C_christoffel + G, C_points + G),
+        key=lambda N: state_operations([M, N, J, Jdot_qd], [q, qd], [q, qd, params]),
+    )
 
     foot, Jf, Jf_dot_qd = stacked([model["foot"]])
     tips = cs.horzcat(*[point({"link": i, "point": l["length"]}) for i, l in enumerate(links)])

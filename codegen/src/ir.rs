@@ -31,19 +31,29 @@ pub struct Input {
 pub enum InputShape {
     /// `&SVector<T, len>`; element `i` is read as `name_i`.
     Vector { len: usize },
-    /// `&Type<T>`, a struct of scalar fields; element `i` is `name.fields[i]`.
+    /// `&Type<T>`, a struct of scalar fields; element `i` is `name.fields[i]`, and the
+    /// `prepared` elements after them are `name.prepared[i − fields]`, parameter-only
+    /// values computed once ([`crate::hoist`]).
     Struct {
         #[serde(rename = "type")]
         type_name: String,
         fields: Vec<String>,
+        #[serde(default, skip_serializing_if = "is_zero")]
+        prepared: usize,
     },
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 impl InputShape {
     pub fn len(&self) -> usize {
         match self {
             InputShape::Vector { len } => *len,
-            InputShape::Struct { fields, .. } => fields.len(),
+            InputShape::Struct {
+                fields, prepared, ..
+            } => fields.len() + prepared,
         }
     }
 

@@ -9,6 +9,7 @@
 //! tokens are built with `quote`, checked with `syn::parse2` and formatted with
 //! `prettyplease`.
 
+pub mod hoist;
 pub mod ir;
 pub mod optimize;
 
@@ -63,6 +64,8 @@ enum Value {
     Local(Ident),
     /// A struct field read in place: `p.mass`.
     Field(Ident, Ident),
+    /// A prepared parameter-only value: `p.prepared[3]`.
+    Prepared(Ident, usize),
     Const(f64),
 }
 
@@ -71,6 +74,10 @@ impl Value {
         match self {
             Value::Local(id) => quote!(#id),
             Value::Field(s, f) => quote!(#s.#f),
+            Value::Prepared(s, k) => {
+                let k = Literal::usize_unsuffixed(*k);
+                quote!(#s.prepared[#k])
+            }
             Value::Const(v) => scalar_literal(*v),
         }
     }
@@ -110,7 +117,10 @@ impl Program {
             if !names.insert(input.name.as_str()) {
                 return Err(err(ctx, format!("duplicate input `{}`", input.name)));
             }
-            if let InputShape::Struct { type_name, fields } = &input.shape {
+            if let InputShape::Struct {
+                type_name, fields, ..
+            } = &input.shape
+            {
                 ident(ctx, type_name)?;
                 let mut seen = HashSet::new();
                 for f in fields {
@@ -258,9 +268,10 @@ pub fn emit_function(prog: &Program, doc: &str) -> Result<TokenStream, Error> {
                         }
                         Value::Local(id)
                     }
-                    InputShape::Struct { fields, .. } => {
-                        Value::Field(arg, format_ident!("{}", fields[index]))
-                    }
+                    InputShape::Struct { fields, .. } => match fields.get(index) {
+                        Some(field) => Value::Field(arg, format_ident!("{}", field)),
+                        None => Value::Prepared(arg, index - fields.len()),
+                    },
                 }
             }
             Instr::Const(c) => Value::Const(c),
@@ -300,8 +311,8 @@ pub fn emit_function(prog: &Program, doc: &str) -> Result<TokenStream, Error> {
         }
     }
 
-    // `sin` and `cos` of one value become one `sin_cos` (one argument reduction), emitted
-    // where the first of the two was.
+    // `sin` and `cos` of one value become one `Real::sincos` (one argument reduction),
+    // emitted where the first of the two was.
     let mut sin_of = HashMap::new();
     let mut cos_of = HashMap::new();
     for (k, instr) in prog.instructions.iter().enumerate() {
@@ -326,7 +337,7 @@ pub fn emit_function(prog: &Program, doc: &str) -> Result<TokenStream, Error> {
                         unreachable!("computed values are locals")
                     };
                     let arg = values[a].tokens();
-                    body.push(quote!(let (#vs, #vc) = #arg.sin_cos();));
+                    body.push(quote!(let (#vs, #vc) = #arg.sincos();));
                 }
                 continue;
             }

@@ -10,6 +10,10 @@ use nalgebra::{RealField, SMatrix, SVector};
 
 pub trait Real: RealField + Copy {
     fn lit(v: f64) -> Self;
+    /// What `leg_models::Real::sincos` computes, here from `std`.
+    fn sincos(self) -> (Self, Self) {
+        self.sin_cos()
+    }
 }
 impl Real for f64 {
     fn lit(v: f64) -> Self {

@@ -20,10 +20,9 @@ pub const NK: usize = 2;
 /// The `atrias_hopper` leg: 9 joints, 1 closure(s), actuated joints ["thigh_motor", "four_bar_motor"]. Generated from `leg-models/specs/atrias_hopper.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct AtriasHopper;
-/// Physical parameters; `Default` holds the spec's values. Change them at run
-/// time without regenerating.
+/// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Params<T> {
+pub struct ParamValues<T> {
     /// Gravity in the base frame, x [m/s²].
     pub gravity_x: T,
     /// Gravity in the base frame, y [m/s²].
@@ -179,7 +178,7 @@ pub struct Params<T> {
     /// Rest value of spring `four_bar_spring` on `four_bar_motor` minus `four_bar_link` [rad].
     pub four_bar_spring_rest: T,
 }
-impl<T: Real> Default for Params<T> {
+impl<T: Real> Default for ParamValues<T> {
     fn default() -> Self {
         Self {
             gravity_x: T::lit(0.0),
@@ -260,6 +259,50 @@ impl<T: Real> Default for Params<T> {
             four_bar_spring_stiffness: T::lit(3000.0),
             four_bar_spring_rest: T::lit(0.0),
         }
+    }
+}
+/// Physical parameters, ready for evaluation: the values (read as fields through
+/// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
+/// computed once when a value changes instead of in every call. `Default` holds
+/// the spec's values; change them at run time, without regenerating, with
+/// [`Params::update`] or [`Parameters::set`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params<T> {
+    values: ParamValues<T>,
+    prepared: [T; 62],
+}
+impl<T: Real> Params<T> {
+    /// Parameters of these values.
+    pub fn new(values: ParamValues<T>) -> Self {
+        Self {
+            prepared: prepare(&values).data.0[0],
+            values,
+        }
+    }
+    /// The values.
+    pub fn values(&self) -> &ParamValues<T> {
+        &self.values
+    }
+    /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
+    pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
+        change(&mut self.values);
+        *self = Self::new(self.values);
+    }
+}
+impl<T> core::ops::Deref for Params<T> {
+    type Target = ParamValues<T>;
+    fn deref(&self) -> &ParamValues<T> {
+        &self.values
+    }
+}
+impl<T: Real> From<ParamValues<T>> for Params<T> {
+    fn from(values: ParamValues<T>) -> Self {
+        Self::new(values)
+    }
+}
+impl<T: Real> Default for Params<T> {
+    fn default() -> Self {
+        Self::new(ParamValues::default())
     }
 }
 impl<T: Real> Parameters<T> for Params<T> {
@@ -344,167 +387,168 @@ impl<T: Real> Parameters<T> for Params<T> {
     ];
     fn get(&self, i: usize) -> Option<T> {
         match i {
-            0 => Some(self.gravity_x),
-            1 => Some(self.gravity_y),
-            2 => Some(self.slide_x_origin_x),
-            3 => Some(self.slide_x_origin_y),
-            4 => Some(self.slide_x_length_x),
-            5 => Some(self.slide_x_length_y),
-            6 => Some(self.slide_x_mass),
-            7 => Some(self.slide_x_com_x),
-            8 => Some(self.slide_x_com_y),
-            9 => Some(self.slide_x_inertia),
-            10 => Some(self.slide_x_damping),
-            11 => Some(self.slide_y_length_x),
-            12 => Some(self.slide_y_length_y),
-            13 => Some(self.slide_y_mass),
-            14 => Some(self.slide_y_com_x),
-            15 => Some(self.slide_y_com_y),
-            16 => Some(self.slide_y_inertia),
-            17 => Some(self.slide_y_damping),
-            18 => Some(self.torso_length_x),
-            19 => Some(self.torso_length_y),
-            20 => Some(self.torso_mass),
-            21 => Some(self.torso_com_x),
-            22 => Some(self.torso_com_y),
-            23 => Some(self.torso_inertia),
-            24 => Some(self.torso_damping),
-            25 => Some(self.thigh_motor_length_x),
-            26 => Some(self.thigh_motor_length_y),
-            27 => Some(self.thigh_motor_mass),
-            28 => Some(self.thigh_motor_com_x),
-            29 => Some(self.thigh_motor_com_y),
-            30 => Some(self.thigh_motor_inertia),
-            31 => Some(self.thigh_motor_damping),
-            32 => Some(self.thigh_motor_rotor_inertia),
-            33 => Some(self.thigh_motor_gear_ratio),
-            34 => Some(self.four_bar_motor_length_x),
-            35 => Some(self.four_bar_motor_length_y),
-            36 => Some(self.four_bar_motor_mass),
-            37 => Some(self.four_bar_motor_com_x),
-            38 => Some(self.four_bar_motor_com_y),
-            39 => Some(self.four_bar_motor_inertia),
-            40 => Some(self.four_bar_motor_damping),
-            41 => Some(self.four_bar_motor_rotor_inertia),
-            42 => Some(self.four_bar_motor_gear_ratio),
-            43 => Some(self.thigh_length_x),
-            44 => Some(self.thigh_length_y),
-            45 => Some(self.thigh_mass),
-            46 => Some(self.thigh_com_x),
-            47 => Some(self.thigh_com_y),
-            48 => Some(self.thigh_inertia),
-            49 => Some(self.thigh_damping),
-            50 => Some(self.shin_length_x),
-            51 => Some(self.shin_length_y),
-            52 => Some(self.shin_mass),
-            53 => Some(self.shin_com_x),
-            54 => Some(self.shin_com_y),
-            55 => Some(self.shin_inertia),
-            56 => Some(self.shin_damping),
-            57 => Some(self.four_bar_link_length_x),
-            58 => Some(self.four_bar_link_length_y),
-            59 => Some(self.four_bar_link_mass),
-            60 => Some(self.four_bar_link_com_x),
-            61 => Some(self.four_bar_link_com_y),
-            62 => Some(self.four_bar_link_inertia),
-            63 => Some(self.four_bar_link_damping),
-            64 => Some(self.lower_leg_length_x),
-            65 => Some(self.lower_leg_length_y),
-            66 => Some(self.lower_leg_mass),
-            67 => Some(self.lower_leg_com_x),
-            68 => Some(self.lower_leg_com_y),
-            69 => Some(self.lower_leg_inertia),
-            70 => Some(self.lower_leg_damping),
-            71 => Some(self.shin_pin_a_x),
-            72 => Some(self.shin_pin_a_y),
-            73 => Some(self.thigh_spring_stiffness),
-            74 => Some(self.thigh_spring_rest),
-            75 => Some(self.four_bar_spring_stiffness),
-            76 => Some(self.four_bar_spring_rest),
+            0 => Some(self.values.gravity_x),
+            1 => Some(self.values.gravity_y),
+            2 => Some(self.values.slide_x_origin_x),
+            3 => Some(self.values.slide_x_origin_y),
+            4 => Some(self.values.slide_x_length_x),
+            5 => Some(self.values.slide_x_length_y),
+            6 => Some(self.values.slide_x_mass),
+            7 => Some(self.values.slide_x_com_x),
+            8 => Some(self.values.slide_x_com_y),
+            9 => Some(self.values.slide_x_inertia),
+            10 => Some(self.values.slide_x_damping),
+            11 => Some(self.values.slide_y_length_x),
+            12 => Some(self.values.slide_y_length_y),
+            13 => Some(self.values.slide_y_mass),
+            14 => Some(self.values.slide_y_com_x),
+            15 => Some(self.values.slide_y_com_y),
+            16 => Some(self.values.slide_y_inertia),
+            17 => Some(self.values.slide_y_damping),
+            18 => Some(self.values.torso_length_x),
+            19 => Some(self.values.torso_length_y),
+            20 => Some(self.values.torso_mass),
+            21 => Some(self.values.torso_com_x),
+            22 => Some(self.values.torso_com_y),
+            23 => Some(self.values.torso_inertia),
+            24 => Some(self.values.torso_damping),
+            25 => Some(self.values.thigh_motor_length_x),
+            26 => Some(self.values.thigh_motor_length_y),
+            27 => Some(self.values.thigh_motor_mass),
+            28 => Some(self.values.thigh_motor_com_x),
+            29 => Some(self.values.thigh_motor_com_y),
+            30 => Some(self.values.thigh_motor_inertia),
+            31 => Some(self.values.thigh_motor_damping),
+            32 => Some(self.values.thigh_motor_rotor_inertia),
+            33 => Some(self.values.thigh_motor_gear_ratio),
+            34 => Some(self.values.four_bar_motor_length_x),
+            35 => Some(self.values.four_bar_motor_length_y),
+            36 => Some(self.values.four_bar_motor_mass),
+            37 => Some(self.values.four_bar_motor_com_x),
+            38 => Some(self.values.four_bar_motor_com_y),
+            39 => Some(self.values.four_bar_motor_inertia),
+            40 => Some(self.values.four_bar_motor_damping),
+            41 => Some(self.values.four_bar_motor_rotor_inertia),
+            42 => Some(self.values.four_bar_motor_gear_ratio),
+            43 => Some(self.values.thigh_length_x),
+            44 => Some(self.values.thigh_length_y),
+            45 => Some(self.values.thigh_mass),
+            46 => Some(self.values.thigh_com_x),
+            47 => Some(self.values.thigh_com_y),
+            48 => Some(self.values.thigh_inertia),
+            49 => Some(self.values.thigh_damping),
+            50 => Some(self.values.shin_length_x),
+            51 => Some(self.values.shin_length_y),
+            52 => Some(self.values.shin_mass),
+            53 => Some(self.values.shin_com_x),
+            54 => Some(self.values.shin_com_y),
+            55 => Some(self.values.shin_inertia),
+            56 => Some(self.values.shin_damping),
+            57 => Some(self.values.four_bar_link_length_x),
+            58 => Some(self.values.four_bar_link_length_y),
+            59 => Some(self.values.four_bar_link_mass),
+            60 => Some(self.values.four_bar_link_com_x),
+            61 => Some(self.values.four_bar_link_com_y),
+            62 => Some(self.values.four_bar_link_inertia),
+            63 => Some(self.values.four_bar_link_damping),
+            64 => Some(self.values.lower_leg_length_x),
+            65 => Some(self.values.lower_leg_length_y),
+            66 => Some(self.values.lower_leg_mass),
+            67 => Some(self.values.lower_leg_com_x),
+            68 => Some(self.values.lower_leg_com_y),
+            69 => Some(self.values.lower_leg_inertia),
+            70 => Some(self.values.lower_leg_damping),
+            71 => Some(self.values.shin_pin_a_x),
+            72 => Some(self.values.shin_pin_a_y),
+            73 => Some(self.values.thigh_spring_stiffness),
+            74 => Some(self.values.thigh_spring_rest),
+            75 => Some(self.values.four_bar_spring_stiffness),
+            76 => Some(self.values.four_bar_spring_rest),
             _ => None,
         }
     }
     fn set(&mut self, i: usize, value: T) -> bool {
         match i {
-            0 => self.gravity_x = value,
-            1 => self.gravity_y = value,
-            2 => self.slide_x_origin_x = value,
-            3 => self.slide_x_origin_y = value,
-            4 => self.slide_x_length_x = value,
-            5 => self.slide_x_length_y = value,
-            6 => self.slide_x_mass = value,
-            7 => self.slide_x_com_x = value,
-            8 => self.slide_x_com_y = value,
-            9 => self.slide_x_inertia = value,
-            10 => self.slide_x_damping = value,
-            11 => self.slide_y_length_x = value,
-            12 => self.slide_y_length_y = value,
-            13 => self.slide_y_mass = value,
-            14 => self.slide_y_com_x = value,
-            15 => self.slide_y_com_y = value,
-            16 => self.slide_y_inertia = value,
-            17 => self.slide_y_damping = value,
-            18 => self.torso_length_x = value,
-            19 => self.torso_length_y = value,
-            20 => self.torso_mass = value,
-            21 => self.torso_com_x = value,
-            22 => self.torso_com_y = value,
-            23 => self.torso_inertia = value,
-            24 => self.torso_damping = value,
-            25 => self.thigh_motor_length_x = value,
-            26 => self.thigh_motor_length_y = value,
-            27 => self.thigh_motor_mass = value,
-            28 => self.thigh_motor_com_x = value,
-            29 => self.thigh_motor_com_y = value,
-            30 => self.thigh_motor_inertia = value,
-            31 => self.thigh_motor_damping = value,
-            32 => self.thigh_motor_rotor_inertia = value,
-            33 => self.thigh_motor_gear_ratio = value,
-            34 => self.four_bar_motor_length_x = value,
-            35 => self.four_bar_motor_length_y = value,
-            36 => self.four_bar_motor_mass = value,
-            37 => self.four_bar_motor_com_x = value,
-            38 => self.four_bar_motor_com_y = value,
-            39 => self.four_bar_motor_inertia = value,
-            40 => self.four_bar_motor_damping = value,
-            41 => self.four_bar_motor_rotor_inertia = value,
-            42 => self.four_bar_motor_gear_ratio = value,
-            43 => self.thigh_length_x = value,
-            44 => self.thigh_length_y = value,
-            45 => self.thigh_mass = value,
-            46 => self.thigh_com_x = value,
-            47 => self.thigh_com_y = value,
-            48 => self.thigh_inertia = value,
-            49 => self.thigh_damping = value,
-            50 => self.shin_length_x = value,
-            51 => self.shin_length_y = value,
-            52 => self.shin_mass = value,
-            53 => self.shin_com_x = value,
-            54 => self.shin_com_y = value,
-            55 => self.shin_inertia = value,
-            56 => self.shin_damping = value,
-            57 => self.four_bar_link_length_x = value,
-            58 => self.four_bar_link_length_y = value,
-            59 => self.four_bar_link_mass = value,
-            60 => self.four_bar_link_com_x = value,
-            61 => self.four_bar_link_com_y = value,
-            62 => self.four_bar_link_inertia = value,
-            63 => self.four_bar_link_damping = value,
-            64 => self.lower_leg_length_x = value,
-            65 => self.lower_leg_length_y = value,
-            66 => self.lower_leg_mass = value,
-            67 => self.lower_leg_com_x = value,
-            68 => self.lower_leg_com_y = value,
-            69 => self.lower_leg_inertia = value,
-            70 => self.lower_leg_damping = value,
-            71 => self.shin_pin_a_x = value,
-            72 => self.shin_pin_a_y = value,
-            73 => self.thigh_spring_stiffness = value,
-            74 => self.thigh_spring_rest = value,
-            75 => self.four_bar_spring_stiffness = value,
-            76 => self.four_bar_spring_rest = value,
+            0 => self.values.gravity_x = value,
+            1 => self.values.gravity_y = value,
+            2 => self.values.slide_x_origin_x = value,
+            3 => self.values.slide_x_origin_y = value,
+            4 => self.values.slide_x_length_x = value,
+            5 => self.values.slide_x_length_y = value,
+            6 => self.values.slide_x_mass = value,
+            7 => self.values.slide_x_com_x = value,
+            8 => self.values.slide_x_com_y = value,
+            9 => self.values.slide_x_inertia = value,
+            10 => self.values.slide_x_damping = value,
+            11 => self.values.slide_y_length_x = value,
+            12 => self.values.slide_y_length_y = value,
+            13 => self.values.slide_y_mass = value,
+            14 => self.values.slide_y_com_x = value,
+            15 => self.values.slide_y_com_y = value,
+            16 => self.values.slide_y_inertia = value,
+            17 => self.values.slide_y_damping = value,
+            18 => self.values.torso_length_x = value,
+            19 => self.values.torso_length_y = value,
+            20 => self.values.torso_mass = value,
+            21 => self.values.torso_com_x = value,
+            22 => self.values.torso_com_y = value,
+            23 => self.values.torso_inertia = value,
+            24 => self.values.torso_damping = value,
+            25 => self.values.thigh_motor_length_x = value,
+            26 => self.values.thigh_motor_length_y = value,
+            27 => self.values.thigh_motor_mass = value,
+            28 => self.values.thigh_motor_com_x = value,
+            29 => self.values.thigh_motor_com_y = value,
+            30 => self.values.thigh_motor_inertia = value,
+            31 => self.values.thigh_motor_damping = value,
+            32 => self.values.thigh_motor_rotor_inertia = value,
+            33 => self.values.thigh_motor_gear_ratio = value,
+            34 => self.values.four_bar_motor_length_x = value,
+            35 => self.values.four_bar_motor_length_y = value,
+            36 => self.values.four_bar_motor_mass = value,
+            37 => self.values.four_bar_motor_com_x = value,
+            38 => self.values.four_bar_motor_com_y = value,
+            39 => self.values.four_bar_motor_inertia = value,
+            40 => self.values.four_bar_motor_damping = value,
+            41 => self.values.four_bar_motor_rotor_inertia = value,
+            42 => self.values.four_bar_motor_gear_ratio = value,
+            43 => self.values.thigh_length_x = value,
+            44 => self.values.thigh_length_y = value,
+            45 => self.values.thigh_mass = value,
+            46 => self.values.thigh_com_x = value,
+            47 => self.values.thigh_com_y = value,
+            48 => self.values.thigh_inertia = value,
+            49 => self.values.thigh_damping = value,
+            50 => self.values.shin_length_x = value,
+            51 => self.values.shin_length_y = value,
+            52 => self.values.shin_mass = value,
+            53 => self.values.shin_com_x = value,
+            54 => self.values.shin_com_y = value,
+            55 => self.values.shin_inertia = value,
+            56 => self.values.shin_damping = value,
+            57 => self.values.four_bar_link_length_x = value,
+            58 => self.values.four_bar_link_length_y = value,
+            59 => self.values.four_bar_link_mass = value,
+            60 => self.values.four_bar_link_com_x = value,
+            61 => self.values.four_bar_link_com_y = value,
+            62 => self.values.four_bar_link_inertia = value,
+            63 => self.values.four_bar_link_damping = value,
+            64 => self.values.lower_leg_length_x = value,
+            65 => self.values.lower_leg_length_y = value,
+            66 => self.values.lower_leg_mass = value,
+            67 => self.values.lower_leg_com_x = value,
+            68 => self.values.lower_leg_com_y = value,
+            69 => self.values.lower_leg_inertia = value,
+            70 => self.values.lower_leg_damping = value,
+            71 => self.values.shin_pin_a_x = value,
+            72 => self.values.shin_pin_a_y = value,
+            73 => self.values.thigh_spring_stiffness = value,
+            74 => self.values.thigh_spring_rest = value,
+            75 => self.values.four_bar_spring_stiffness = value,
+            76 => self.values.four_bar_spring_rest = value,
             _ => return false,
         }
+        *self = Self::new(self.values);
         true
     }
 }
@@ -675,329 +719,475 @@ impl ContactModel<NQ, NC, NU, NK> for AtriasHopper {
         contact_bias(q, qd, p)
     }
 }
+/// The parameter-only quantities the terms read (products of masses, lengths and
+/// centres of mass, inertias about the joints, …), computed once per parameter set
+/// by [`Params::new`].
+pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 62> {
+    let v0 = values.four_bar_link_mass + values.lower_leg_mass;
+    let v1 = values.torso_mass + v0;
+    let v2 = values.thigh_mass + values.shin_mass;
+    let v3 = v1 + v2;
+    let v4 = v3 + values.four_bar_motor_mass;
+    let v5 = v4 + values.thigh_motor_mass;
+    let v6 = values.slide_y_mass + v5;
+    let v7 = values.slide_x_mass + v6;
+    let v8 = values.torso_mass * values.torso_com_y;
+    let v9 = v0 * values.torso_length_y;
+    let v10 = v8 + v9;
+    let v11 = v2 * values.torso_length_y;
+    let v12 = v10 + v11;
+    let v13 = values.four_bar_motor_mass * values.torso_length_y;
+    let v14 = v12 + v13;
+    let v15 = values.thigh_motor_mass * values.torso_length_y;
+    let v16 = v14 + v15;
+    let v17 = values.four_bar_link_mass * values.four_bar_link_com_x;
+    let v18 = values.lower_leg_mass * values.four_bar_link_length_x;
+    let v19 = v17 + v18;
+    let v20 = values.lower_leg_mass * values.lower_leg_com_x;
+    let v21 = values.lower_leg_mass * values.lower_leg_com_y;
+    let v22 = values.four_bar_link_mass * values.four_bar_link_com_y;
+    let v23 = values.lower_leg_mass * values.four_bar_link_length_y;
+    let v24 = v22 + v23;
+    let v25 = values.thigh_mass * values.thigh_com_x;
+    let v26 = values.shin_mass * values.thigh_length_x;
+    let v27 = v25 + v26;
+    let v28 = values.shin_mass * values.shin_com_x;
+    let v29 = values.shin_mass * values.shin_com_y;
+    let v30 = values.thigh_mass * values.thigh_com_y;
+    let v31 = values.shin_mass * values.thigh_length_y;
+    let v32 = v30 + v31;
+    let v33 = values.four_bar_motor_mass * values.four_bar_motor_com_x;
+    let v34 = values.four_bar_motor_mass * values.four_bar_motor_com_y;
+    let v35 = values.thigh_motor_mass * values.thigh_motor_com_x;
+    let v36 = values.thigh_motor_mass * values.thigh_motor_com_y;
+    let v37 = values.torso_mass * values.torso_com_x;
+    let v38 = v0 * values.torso_length_x;
+    let v39 = v37 + v38;
+    let v40 = v2 * values.torso_length_x;
+    let v41 = v39 + v40;
+    let v42 = values.four_bar_motor_mass * values.torso_length_x;
+    let v43 = v41 + v42;
+    let v44 = values.thigh_motor_mass * values.torso_length_x;
+    let v45 = v43 + v44;
+    let v46 = values.torso_com_x * values.torso_com_x;
+    let v47 = values.torso_com_y * values.torso_com_y;
+    let v48 = v46 + v47;
+    let v49 = values.torso_mass * v48;
+    let v50 = values.torso_inertia + v49;
+    let v51 = values.torso_length_x * values.torso_length_x;
+    let v52 = values.torso_length_y * values.torso_length_y;
+    let v53 = v51 + v52;
+    let v54 = v0 * v53;
+    let v55 = v50 + v54;
+    let v56 = v2 * v53;
+    let v57 = v55 + v56;
+    let v58 = values.four_bar_motor_com_x * values.four_bar_motor_com_x;
+    let v59 = values.four_bar_motor_com_y * values.four_bar_motor_com_y;
+    let v60 = v58 + v59;
+    let v61 = values.four_bar_motor_mass * v60;
+    let v62 = values.four_bar_motor_inertia + v61;
+    let v63 = v57 + v62;
+    let v64 = values.four_bar_motor_mass * v53;
+    let v65 = v63 + v64;
+    let v66 = values.thigh_motor_com_x * values.thigh_motor_com_x;
+    let v67 = values.thigh_motor_com_y * values.thigh_motor_com_y;
+    let v68 = v66 + v67;
+    let v69 = values.thigh_motor_mass * v68;
+    let v70 = values.thigh_motor_inertia + v69;
+    let v71 = v65 + v70;
+    let v72 = values.thigh_motor_mass * v53;
+    let v73 = v71 + v72;
+    let v74 = values.four_bar_link_com_x * values.four_bar_link_com_x;
+    let v75 = values.four_bar_link_com_y * values.four_bar_link_com_y;
+    let v76 = v74 + v75;
+    let v77 = values.four_bar_link_mass * v76;
+    let v78 = values.four_bar_link_inertia + v77;
+    let v79 = values.lower_leg_com_x * values.lower_leg_com_x;
+    let v80 = values.lower_leg_com_y * values.lower_leg_com_y;
+    let v81 = v79 + v80;
+    let v82 = values.lower_leg_mass * v81;
+    let v83 = values.lower_leg_inertia + v82;
+    let v84 = v78 + v83;
+    let v85 = values.four_bar_link_length_x * values.four_bar_link_length_x;
+    let v86 = values.four_bar_link_length_y * values.four_bar_link_length_y;
+    let v87 = v85 + v86;
+    let v88 = values.lower_leg_mass * v87;
+    let v89 = v84 + v88;
+    let v90 = values.four_bar_link_length_x * v20;
+    let v91 = v21 * values.four_bar_link_length_y;
+    let v92 = v90 + v91;
+    let v93 = values.four_bar_link_length_x * v21;
+    let v94 = v20 * values.four_bar_link_length_y;
+    let v95 = v93 - v94;
+    let v96 = values.thigh_com_x * values.thigh_com_x;
+    let v97 = values.thigh_com_y * values.thigh_com_y;
+    let v98 = v96 + v97;
+    let v99 = values.thigh_mass * v98;
+    let v100 = values.thigh_inertia + v99;
+    let v101 = values.shin_com_x * values.shin_com_x;
+    let v102 = values.shin_com_y * values.shin_com_y;
+    let v103 = v101 + v102;
+    let v104 = values.shin_mass * v103;
+    let v105 = values.shin_inertia + v104;
+    let v106 = v100 + v105;
+    let v107 = values.thigh_length_x * values.thigh_length_x;
+    let v108 = values.thigh_length_y * values.thigh_length_y;
+    let v109 = v107 + v108;
+    let v110 = values.shin_mass * v109;
+    let v111 = v106 + v110;
+    let v112 = values.thigh_length_x * v28;
+    let v113 = v29 * values.thigh_length_y;
+    let v114 = v112 + v113;
+    let v115 = values.thigh_length_x * v29;
+    let v116 = v28 * values.thigh_length_y;
+    let v117 = v115 - v116;
+    let v118 = v33 * values.torso_length_x;
+    let v119 = values.torso_length_y * v34;
+    let v120 = v118 + v119;
+    let v121 = v34 * values.torso_length_x;
+    let v122 = values.torso_length_y * v33;
+    let v123 = v121 - v122;
+    let v124 = v35 * values.torso_length_x;
+    let v125 = values.torso_length_y * v36;
+    let v126 = v124 + v125;
+    let v127 = v36 * values.torso_length_x;
+    let v128 = values.torso_length_y * v35;
+    let v129 = v127 - v128;
+    let v130 = v128 - v127;
+    let v131 = v122 - v121;
+    let v132 = v116 - v115;
+    let v133 = v94 - v93;
+    let v134 = values.thigh_motor_gear_ratio * values.thigh_motor_gear_ratio;
+    let v135 = values.thigh_motor_rotor_inertia * v134;
+    let v136 = v70 + v135;
+    let v137 = values.four_bar_motor_gear_ratio * values.four_bar_motor_gear_ratio;
+    let v138 = values.four_bar_motor_rotor_inertia * v137;
+    let v139 = v62 + v138;
+    let v140 = v7 * values.gravity_x;
+    let v141 = v6 * values.gravity_y;
+    let v142 = v8 + v15;
+    let v143 = v13 + v142;
+    let v144 = v11 + v143;
+    let v145 = v9 + v144;
+    let v146 = values.gravity_x * v145;
+    let v147 = v37 + v44;
+    let v148 = v42 + v147;
+    let v149 = v40 + v148;
+    let v150 = v38 + v149;
+    let v151 = values.gravity_y * v150;
+    let v152 = v146 - v151;
+    let v153 = values.gravity_x * v150;
+    let v154 = values.gravity_y * v145;
+    let v155 = v153 + v154;
+    let v156 = v24 * values.gravity_x;
+    let v157 = v19 * values.gravity_y;
+    let v158 = v156 - v157;
+    let v159 = v19 * values.gravity_x;
+    let v160 = v24 * values.gravity_y;
+    let v161 = v159 + v160;
+    let v162 = v21 * values.gravity_x;
+    let v163 = v20 * values.gravity_y;
+    let v164 = v162 - v163;
+    let v165 = v20 * values.gravity_x;
+    let v166 = v21 * values.gravity_y;
+    let v167 = v165 + v166;
+    let v168 = v32 * values.gravity_x;
+    let v169 = v27 * values.gravity_y;
+    let v170 = v168 - v169;
+    let v171 = v27 * values.gravity_x;
+    let v172 = v32 * values.gravity_y;
+    let v173 = v171 + v172;
+    let v174 = v29 * values.gravity_x;
+    let v175 = v28 * values.gravity_y;
+    let v176 = v174 - v175;
+    let v177 = v28 * values.gravity_x;
+    let v178 = v29 * values.gravity_y;
+    let v179 = v177 + v178;
+    let v180 = v34 * values.gravity_x;
+    let v181 = v33 * values.gravity_y;
+    let v182 = v180 - v181;
+    let v183 = v33 * values.gravity_x;
+    let v184 = v34 * values.gravity_y;
+    let v185 = v183 + v184;
+    let v186 = v36 * values.gravity_x;
+    let v187 = v35 * values.gravity_y;
+    let v188 = v186 - v187;
+    let v189 = v35 * values.gravity_x;
+    let v190 = v36 * values.gravity_y;
+    let v191 = v189 + v190;
+    let v192 = -v140;
+    let v193 = -v141;
+    let v194 = values.thigh_spring_stiffness * T::lit(0.5);
+    let v195 = values.four_bar_spring_stiffness * T::lit(0.5);
+    let v196 = v7 * values.slide_x_origin_y;
+    let v197 = values.gravity_y * v196;
+    let v198 = values.slide_x_mass * values.slide_x_com_x;
+    let v199 = v6 * values.slide_x_length_x;
+    let v200 = v198 + v199;
+    let v201 = values.gravity_x * v200;
+    let v202 = values.slide_x_mass * values.slide_x_com_y;
+    let v203 = values.slide_y_mass * values.slide_y_com_x;
+    let v204 = v5 * values.slide_y_length_x;
+    let v205 = v203 + v204;
+    let v206 = values.gravity_x * v205;
+    let v207 = values.slide_y_mass * values.slide_y_com_y;
+    let v208 = v5 * values.slide_y_length_y;
+    let v209 = v207 + v208;
+    let v210 = values.gravity_y * v209;
+    let v211 = v206 + v210;
+    let v212 = values.slide_x_origin_y + values.slide_x_length_y;
+    SMatrix::from_data(
+        ArrayStorage([
+            [
+                v6,
+                v7,
+                v16,
+                v19,
+                v20,
+                v21,
+                v24,
+                v27,
+                v28,
+                v29,
+                v32,
+                v33,
+                v34,
+                v35,
+                v36,
+                v45,
+                v62,
+                v70,
+                v73,
+                v83,
+                v89,
+                v92,
+                v95,
+                v105,
+                v111,
+                v114,
+                v117,
+                v120,
+                v123,
+                v126,
+                v129,
+                v130,
+                v131,
+                v132,
+                v133,
+                v136,
+                v139,
+                v140,
+                v141,
+                v152,
+                v155,
+                v158,
+                v161,
+                v164,
+                v167,
+                v170,
+                v173,
+                v176,
+                v179,
+                v182,
+                v185,
+                v188,
+                v191,
+                v192,
+                v193,
+                v194,
+                v195,
+                v197,
+                v201,
+                v202,
+                v211,
+                v212,
+            ],
+        ]),
+    )
+}
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
 pub fn mass_matrix<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 9, 9> {
     let [_, _, q_2, q_3, q_4, q_5, q_6, q_7, q_8] = q.data.0[0];
-    let v0 = p.four_bar_link_mass + p.lower_leg_mass;
-    let v1 = p.torso_mass + v0;
-    let v2 = p.thigh_mass + p.shin_mass;
-    let v3 = v1 + v2;
-    let v4 = v3 + p.four_bar_motor_mass;
-    let v5 = v4 + p.thigh_motor_mass;
-    let v6 = p.slide_y_mass + v5;
-    let v7 = p.slide_x_mass + v6;
-    let (v83, v8) = q_2.sin_cos();
-    let v9 = p.torso_mass * p.torso_com_y;
-    let (v10, v23) = q_7.sin_cos();
-    let v11 = p.four_bar_link_mass * p.four_bar_link_com_x;
-    let (v15, v12) = q_8.sin_cos();
-    let v13 = p.lower_leg_mass * p.lower_leg_com_x;
-    let v14 = v12 * v13;
-    let v16 = p.lower_leg_mass * p.lower_leg_com_y;
-    let v17 = v15 * v16;
-    let v18 = v14 - v17;
-    let v19 = p.lower_leg_mass * p.four_bar_link_length_x;
-    let v20 = v18 + v19;
-    let v21 = v11 + v20;
-    let v22 = v10 * v21;
-    let v24 = p.four_bar_link_mass * p.four_bar_link_com_y;
-    let v25 = v13 * v15;
-    let v26 = v12 * v16;
-    let v27 = v25 + v26;
-    let v28 = p.lower_leg_mass * p.four_bar_link_length_y;
-    let v29 = v27 + v28;
-    let v30 = v24 + v29;
-    let v31 = v23 * v30;
-    let v32 = v22 + v31;
-    let v33 = v0 * p.torso_length_y;
-    let v34 = v32 + v33;
-    let v35 = v9 + v34;
-    let (v36, v49) = q_5.sin_cos();
-    let v37 = p.thigh_mass * p.thigh_com_x;
-    let (v41, v38) = q_6.sin_cos();
-    let v39 = p.shin_mass * p.shin_com_x;
-    let v40 = v38 * v39;
-    let v42 = p.shin_mass * p.shin_com_y;
-    let v43 = v41 * v42;
-    let v44 = v40 - v43;
-    let v45 = p.shin_mass * p.thigh_length_x;
-    let v46 = v44 + v45;
-    let v47 = v37 + v46;
-    let v48 = v36 * v47;
-    let v50 = p.thigh_mass * p.thigh_com_y;
-    let v51 = v39 * v41;
-    let v52 = v38 * v42;
-    let v53 = v51 + v52;
-    let v54 = p.shin_mass * p.thigh_length_y;
-    let v55 = v53 + v54;
-    let v56 = v50 + v55;
-    let v57 = v49 * v56;
-    let v58 = v48 + v57;
-    let v59 = v2 * p.torso_length_y;
-    let v60 = v58 + v59;
-    let v61 = v35 + v60;
-    let (v62, v65) = q_4.sin_cos();
-    let v63 = p.four_bar_motor_mass * p.four_bar_motor_com_x;
-    let v64 = v62 * v63;
-    let v66 = p.four_bar_motor_mass * p.four_bar_motor_com_y;
-    let v67 = v65 * v66;
-    let v68 = v64 + v67;
-    let v69 = p.four_bar_motor_mass * p.torso_length_y;
-    let v70 = v68 + v69;
-    let v71 = v61 + v70;
-    let (v72, v75) = q_3.sin_cos();
-    let v73 = p.thigh_motor_mass * p.thigh_motor_com_x;
-    let v74 = v72 * v73;
-    let v76 = p.thigh_motor_mass * p.thigh_motor_com_y;
-    let v77 = v75 * v76;
-    let v78 = v74 + v77;
-    let v79 = p.thigh_motor_mass * p.torso_length_y;
+    let (v46, v0) = q_2.sincos();
+    let (v1, v9) = q_7.sincos();
+    let (v4, v2) = q_8.sincos();
+    let v3 = v2 * p.prepared[4];
+    let v5 = v4 * p.prepared[5];
+    let v6 = v3 - v5;
+    let v7 = p.prepared[3] + v6;
+    let v8 = v1 * v7;
+    let v10 = p.prepared[4] * v4;
+    let v11 = v2 * p.prepared[5];
+    let v12 = v10 + v11;
+    let v13 = p.prepared[6] + v12;
+    let v14 = v9 * v13;
+    let v15 = v8 + v14;
+    let v16 = p.prepared[2] + v15;
+    let (v17, v25) = q_5.sincos();
+    let (v20, v18) = q_6.sincos();
+    let v19 = v18 * p.prepared[8];
+    let v21 = v20 * p.prepared[9];
+    let v22 = v19 - v21;
+    let v23 = p.prepared[7] + v22;
+    let v24 = v17 * v23;
+    let v26 = p.prepared[8] * v20;
+    let v27 = v18 * p.prepared[9];
+    let v28 = v26 + v27;
+    let v29 = p.prepared[10] + v28;
+    let v30 = v25 * v29;
+    let v31 = v24 + v30;
+    let v32 = v16 + v31;
+    let (v33, v35) = q_4.sincos();
+    let v34 = v33 * p.prepared[11];
+    let v36 = v35 * p.prepared[12];
+    let v37 = v34 + v36;
+    let v38 = v32 + v37;
+    let (v39, v41) = q_3.sincos();
+    let v40 = v39 * p.prepared[13];
+    let v42 = v41 * p.prepared[14];
+    let v43 = v40 + v42;
+    let v44 = v38 + v43;
+    let v45 = v0 * v44;
+    let v47 = v7 * v9;
+    let v48 = v1 * v13;
+    let v49 = v47 - v48;
+    let v50 = p.prepared[15] + v49;
+    let v51 = v23 * v25;
+    let v52 = v17 * v29;
+    let v53 = v51 - v52;
+    let v54 = v50 + v53;
+    let v55 = p.prepared[11] * v35;
+    let v56 = v33 * p.prepared[12];
+    let v57 = v55 - v56;
+    let v58 = v54 + v57;
+    let v59 = p.prepared[13] * v41;
+    let v60 = v39 * p.prepared[14];
+    let v61 = v59 - v60;
+    let v62 = v58 + v61;
+    let v63 = v46 * v62;
+    let v64 = v45 + v63;
+    let v65 = -v64;
+    let v66 = v0 * v43;
+    let v67 = v46 * v61;
+    let v68 = v66 + v67;
+    let v69 = -v68;
+    let v70 = v0 * v37;
+    let v71 = v46 * v57;
+    let v72 = v70 + v71;
+    let v73 = -v72;
+    let v74 = v0 * v31;
+    let v75 = v46 * v53;
+    let v76 = v74 + v75;
+    let v77 = -v76;
+    let v78 = v25 * v28;
+    let v79 = v17 * v22;
     let v80 = v78 + v79;
-    let v81 = v71 + v80;
-    let v82 = v8 * v81;
-    let v84 = p.torso_mass * p.torso_com_x;
-    let v85 = v21 * v23;
-    let v86 = v10 * v30;
-    let v87 = v85 - v86;
-    let v88 = v0 * p.torso_length_x;
-    let v89 = v87 + v88;
-    let v90 = v84 + v89;
-    let v91 = v47 * v49;
-    let v92 = v36 * v56;
-    let v93 = v91 - v92;
-    let v94 = v2 * p.torso_length_x;
-    let v95 = v93 + v94;
-    let v96 = v90 + v95;
-    let v97 = v63 * v65;
-    let v98 = v62 * v66;
-    let v99 = v97 - v98;
-    let v100 = p.four_bar_motor_mass * p.torso_length_x;
-    let v101 = v99 + v100;
-    let v102 = v96 + v101;
-    let v103 = v73 * v75;
-    let v104 = v72 * v76;
-    let v105 = v103 - v104;
-    let v106 = p.thigh_motor_mass * p.torso_length_x;
-    let v107 = v105 + v106;
-    let v108 = v102 + v107;
-    let v109 = v83 * v108;
-    let v110 = v82 + v109;
-    let v111 = -v110;
-    let v112 = v8 * v78;
-    let v113 = v83 * v105;
-    let v114 = v112 + v113;
-    let v115 = -v114;
-    let v116 = v8 * v68;
-    let v117 = v83 * v99;
-    let v118 = v116 + v117;
-    let v119 = -v118;
-    let v120 = v8 * v58;
-    let v121 = v83 * v93;
-    let v122 = v120 + v121;
-    let v123 = -v122;
-    let v124 = v49 * v53;
-    let v125 = v36 * v44;
-    let v126 = v124 + v125;
-    let v127 = v8 * v126;
-    let v128 = v44 * v49;
-    let v129 = v36 * v53;
-    let v130 = v128 - v129;
-    let v131 = v83 * v130;
-    let v132 = v127 + v131;
-    let v133 = -v132;
-    let v134 = v8 * v32;
-    let v135 = v83 * v87;
-    let v136 = v134 + v135;
-    let v137 = -v136;
-    let v138 = v23 * v27;
-    let v139 = v10 * v18;
-    let v140 = v138 + v139;
-    let v141 = v8 * v140;
-    let v142 = v18 * v23;
-    let v143 = v10 * v27;
-    let v144 = v142 - v143;
-    let v145 = v83 * v144;
-    let v146 = v141 + v145;
-    let v147 = -v146;
-    let v148 = v8 * v108;
-    let v149 = v81 * v83;
-    let v150 = v148 - v149;
-    let v151 = v8 * v105;
-    let v152 = v78 * v83;
-    let v153 = v151 - v152;
-    let v154 = v8 * v99;
-    let v155 = v68 * v83;
-    let v156 = v154 - v155;
-    let v157 = v8 * v93;
-    let v158 = v58 * v83;
-    let v159 = v157 - v158;
-    let v160 = v8 * v130;
-    let v161 = v83 * v126;
-    let v162 = v160 - v161;
-    let v163 = v8 * v87;
-    let v164 = v32 * v83;
-    let v165 = v163 - v164;
-    let v166 = v8 * v144;
-    let v167 = v83 * v140;
-    let v168 = v166 - v167;
-    let v169 = p.torso_com_x * p.torso_com_x;
-    let v170 = p.torso_com_y * p.torso_com_y;
-    let v171 = v169 + v170;
-    let v172 = p.torso_mass * v171;
-    let v173 = p.torso_inertia + v172;
-    let v174 = p.four_bar_link_com_x * p.four_bar_link_com_x;
-    let v175 = p.four_bar_link_com_y * p.four_bar_link_com_y;
-    let v176 = v174 + v175;
-    let v177 = p.four_bar_link_mass * v176;
-    let v178 = p.four_bar_link_inertia + v177;
-    let v179 = p.lower_leg_com_x * p.lower_leg_com_x;
-    let v180 = p.lower_leg_com_y * p.lower_leg_com_y;
-    let v181 = v179 + v180;
-    let v182 = p.lower_leg_mass * v181;
-    let v183 = p.lower_leg_inertia + v182;
-    let v184 = v13 * p.four_bar_link_length_x;
-    let v185 = v16 * p.four_bar_link_length_y;
-    let v186 = v184 + v185;
-    let v187 = v12 * v186;
-    let v188 = v16 * p.four_bar_link_length_x;
-    let v189 = v13 * p.four_bar_link_length_y;
-    let v190 = v188 - v189;
-    let v191 = v15 * v190;
-    let v192 = v187 - v191;
-    let v193 = v192 + v192;
-    let v194 = v183 + v193;
-    let v195 = p.four_bar_link_length_x * p.four_bar_link_length_x;
-    let v196 = p.four_bar_link_length_y * p.four_bar_link_length_y;
-    let v197 = v195 + v196;
-    let v198 = p.lower_leg_mass * v197;
-    let v199 = v194 + v198;
-    let v200 = v178 + v199;
-    let v201 = v87 * p.torso_length_x;
-    let v202 = v32 * p.torso_length_y;
-    let v203 = v201 + v202;
-    let v204 = v203 + v203;
-    let v205 = v200 + v204;
-    let v206 = p.torso_length_x * p.torso_length_x;
-    let v207 = p.torso_length_y * p.torso_length_y;
-    let v208 = v206 + v207;
-    let v209 = v0 * v208;
-    let v210 = v205 + v209;
-    let v211 = v173 + v210;
-    let v212 = p.thigh_com_x * p.thigh_com_x;
-    let v213 = p.thigh_com_y * p.thigh_com_y;
-    let v214 = v212 + v213;
-    let v215 = p.thigh_mass * v214;
-    let v216 = p.thigh_inertia + v215;
-    let v217 = p.shin_com_x * p.shin_com_x;
-    let v218 = p.shin_com_y * p.shin_com_y;
-    let v219 = v217 + v218;
-    let v220 = p.shin_mass * v219;
-    let v221 = p.shin_inertia + v220;
-    let v222 = v39 * p.thigh_length_x;
-    let v223 = v42 * p.thigh_length_y;
-    let v224 = v222 + v223;
-    let v225 = v38 * v224;
-    let v226 = v42 * p.thigh_length_x;
-    let v227 = v39 * p.thigh_length_y;
-    let v228 = v226 - v227;
-    let v229 = v41 * v228;
-    let v230 = v225 - v229;
-    let v231 = v230 + v230;
-    let v232 = v221 + v231;
-    let v233 = p.thigh_length_x * p.thigh_length_x;
-    let v234 = p.thigh_length_y * p.thigh_length_y;
-    let v235 = v233 + v234;
-    let v236 = p.shin_mass * v235;
-    let v237 = v232 + v236;
-    let v238 = v216 + v237;
-    let v239 = p.torso_length_x * v93;
-    let v240 = p.torso_length_y * v58;
-    let v241 = v239 + v240;
-    let v242 = v241 + v241;
-    let v243 = v238 + v242;
-    let v244 = v2 * v208;
-    let v245 = v243 + v244;
-    let v246 = v211 + v245;
-    let v247 = p.four_bar_motor_com_x * p.four_bar_motor_com_x;
-    let v248 = p.four_bar_motor_com_y * p.four_bar_motor_com_y;
-    let v249 = v247 + v248;
-    let v250 = p.four_bar_motor_mass * v249;
-    let v251 = p.four_bar_motor_inertia + v250;
-    let v252 = v63 * p.torso_length_x;
-    let v253 = p.torso_length_y * v66;
-    let v254 = v252 + v253;
-    let v255 = v65 * v254;
-    let v256 = v66 * p.torso_length_x;
-    let v257 = p.torso_length_y * v63;
-    let v258 = v256 - v257;
-    let v259 = v62 * v258;
-    let v260 = v255 - v259;
-    let v261 = v260 + v260;
-    let v262 = v251 + v261;
-    let v263 = p.four_bar_motor_mass * v208;
-    let v264 = v262 + v263;
-    let v265 = v246 + v264;
-    let v266 = p.thigh_motor_com_x * p.thigh_motor_com_x;
-    let v267 = p.thigh_motor_com_y * p.thigh_motor_com_y;
-    let v268 = v266 + v267;
-    let v269 = p.thigh_motor_mass * v268;
-    let v270 = p.thigh_motor_inertia + v269;
-    let v271 = v73 * p.torso_length_x;
-    let v272 = p.torso_length_y * v76;
-    let v273 = v271 + v272;
-    let v274 = v75 * v273;
-    let v275 = v76 * p.torso_length_x;
-    let v276 = p.torso_length_y * v73;
-    let v277 = v275 - v276;
-    let v278 = v72 * v277;
-    let v279 = v274 - v278;
-    let v280 = v279 + v279;
-    let v281 = v270 + v280;
-    let v282 = p.thigh_motor_mass * v208;
-    let v283 = v281 + v282;
-    let v284 = v265 + v283;
-    let v285 = v276 - v275;
-    let v286 = v72 * v285;
-    let v287 = v274 + v286;
-    let v288 = v270 + v287;
-    let v289 = v257 - v256;
-    let v290 = v62 * v289;
-    let v291 = v255 + v290;
-    let v292 = v251 + v291;
-    let v293 = v238 + v241;
-    let v294 = v227 - v226;
-    let v295 = v41 * v294;
-    let v296 = v225 + v295;
-    let v297 = v221 + v296;
-    let v298 = p.torso_length_x * v130;
-    let v299 = p.torso_length_y * v126;
-    let v300 = v298 + v299;
-    let v301 = v297 + v300;
-    let v302 = v200 + v203;
-    let v303 = v189 - v188;
-    let v304 = v15 * v303;
-    let v305 = v187 + v304;
-    let v306 = v183 + v305;
-    let v307 = p.torso_length_x * v144;
-    let v308 = p.torso_length_y * v140;
-    let v309 = v307 + v308;
-    let v310 = v306 + v309;
-    let v311 = p.thigh_motor_gear_ratio * p.thigh_motor_gear_ratio;
-    let v312 = p.thigh_motor_rotor_inertia * v311;
-    let v313 = v270 + v312;
-    let v314 = p.four_bar_motor_gear_ratio * p.four_bar_motor_gear_ratio;
-    let v315 = p.four_bar_motor_rotor_inertia * v314;
-    let v316 = v251 + v315;
+    let v81 = v0 * v80;
+    let v82 = v22 * v25;
+    let v83 = v17 * v28;
+    let v84 = v82 - v83;
+    let v85 = v46 * v84;
+    let v86 = v81 + v85;
+    let v87 = -v86;
+    let v88 = v0 * v15;
+    let v89 = v46 * v49;
+    let v90 = v88 + v89;
+    let v91 = -v90;
+    let v92 = v9 * v12;
+    let v93 = v1 * v6;
+    let v94 = v92 + v93;
+    let v95 = v0 * v94;
+    let v96 = v6 * v9;
+    let v97 = v1 * v12;
+    let v98 = v96 - v97;
+    let v99 = v46 * v98;
+    let v100 = v95 + v99;
+    let v101 = -v100;
+    let v102 = v0 * v62;
+    let v103 = v44 * v46;
+    let v104 = v102 - v103;
+    let v105 = v0 * v61;
+    let v106 = v43 * v46;
+    let v107 = v105 - v106;
+    let v108 = v0 * v57;
+    let v109 = v37 * v46;
+    let v110 = v108 - v109;
+    let v111 = v0 * v53;
+    let v112 = v31 * v46;
+    let v113 = v111 - v112;
+    let v114 = v0 * v84;
+    let v115 = v46 * v80;
+    let v116 = v114 - v115;
+    let v117 = v0 * v49;
+    let v118 = v15 * v46;
+    let v119 = v117 - v118;
+    let v120 = v0 * v98;
+    let v121 = v46 * v94;
+    let v122 = v120 - v121;
+    let v123 = v2 * p.prepared[21];
+    let v124 = v4 * p.prepared[22];
+    let v125 = v123 - v124;
+    let v126 = v125 + v125;
+    let v127 = p.prepared[20] + v126;
+    let v128 = p.prepared[18] + v127;
+    let v129 = p.torso_length_x * v49;
+    let v130 = p.torso_length_y * v15;
+    let v131 = v129 + v130;
+    let v132 = v131 + v131;
+    let v133 = v128 + v132;
+    let v134 = v18 * p.prepared[25];
+    let v135 = v20 * p.prepared[26];
+    let v136 = v134 - v135;
+    let v137 = v136 + v136;
+    let v138 = p.prepared[24] + v137;
+    let v139 = v133 + v138;
+    let v140 = p.torso_length_x * v53;
+    let v141 = p.torso_length_y * v31;
+    let v142 = v140 + v141;
+    let v143 = v142 + v142;
+    let v144 = v139 + v143;
+    let v145 = v35 * p.prepared[27];
+    let v146 = v33 * p.prepared[28];
+    let v147 = v145 - v146;
+    let v148 = v147 + v147;
+    let v149 = v144 + v148;
+    let v150 = v41 * p.prepared[29];
+    let v151 = v39 * p.prepared[30];
+    let v152 = v150 - v151;
+    let v153 = v152 + v152;
+    let v154 = v149 + v153;
+    let v155 = v39 * p.prepared[31];
+    let v156 = v150 + v155;
+    let v157 = p.prepared[17] + v156;
+    let v158 = v33 * p.prepared[32];
+    let v159 = v145 + v158;
+    let v160 = p.prepared[16] + v159;
+    let v161 = v138 + v142;
+    let v162 = v20 * p.prepared[33];
+    let v163 = v134 + v162;
+    let v164 = p.prepared[23] + v163;
+    let v165 = p.torso_length_x * v84;
+    let v166 = p.torso_length_y * v80;
+    let v167 = v165 + v166;
+    let v168 = v164 + v167;
+    let v169 = v127 + v131;
+    let v170 = v4 * p.prepared[34];
+    let v171 = v123 + v170;
+    let v172 = p.prepared[19] + v171;
+    let v173 = p.torso_length_x * v98;
+    let v174 = p.torso_length_y * v94;
+    let v175 = v173 + v174;
+    let v176 = v172 + v175;
     SMatrix::from_data(
         ArrayStorage([
-            [v7, T::lit(0.0), v111, v115, v119, v123, v133, v137, v147],
-            [T::lit(0.0), v6, v150, v153, v156, v159, v162, v165, v168],
-            [v111, v150, v284, v288, v292, v293, v301, v302, v310],
+            [p.prepared[1], T::lit(0.0), v65, v69, v73, v77, v87, v91, v101],
+            [T::lit(0.0), p.prepared[0], v104, v107, v110, v113, v116, v119, v122],
+            [v65, v104, v154, v157, v160, v161, v168, v169, v176],
             [
-                v115,
-                v153,
-                v288,
-                v313,
+                v69,
+                v107,
+                v157,
+                p.prepared[35],
                 T::lit(0.0),
                 T::lit(0.0),
                 T::lit(0.0),
@@ -1005,59 +1195,59 @@ pub fn mass_matrix<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 9, 9
                 T::lit(0.0),
             ],
             [
-                v119,
-                v156,
-                v292,
+                v73,
+                v110,
+                v160,
                 T::lit(0.0),
-                v316,
+                p.prepared[36],
                 T::lit(0.0),
                 T::lit(0.0),
                 T::lit(0.0),
                 T::lit(0.0),
             ],
             [
-                v123,
-                v159,
-                v293,
+                v77,
+                v113,
+                v161,
                 T::lit(0.0),
                 T::lit(0.0),
-                v238,
-                v297,
-                T::lit(0.0),
-                T::lit(0.0),
-            ],
-            [
-                v133,
-                v162,
-                v301,
-                T::lit(0.0),
-                T::lit(0.0),
-                v297,
-                v221,
+                v138,
+                v164,
                 T::lit(0.0),
                 T::lit(0.0),
             ],
             [
-                v137,
-                v165,
-                v302,
-                T::lit(0.0),
-                T::lit(0.0),
-                T::lit(0.0),
-                T::lit(0.0),
-                v200,
-                v306,
-            ],
-            [
-                v147,
+                v87,
+                v116,
                 v168,
-                v310,
+                T::lit(0.0),
+                T::lit(0.0),
+                v164,
+                p.prepared[23],
+                T::lit(0.0),
+                T::lit(0.0),
+            ],
+            [
+                v91,
+                v119,
+                v169,
                 T::lit(0.0),
                 T::lit(0.0),
                 T::lit(0.0),
                 T::lit(0.0),
-                v306,
-                v183,
+                v127,
+                v172,
+            ],
+            [
+                v101,
+                v122,
+                v176,
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                v172,
+                p.prepared[19],
             ],
         ]),
     )
@@ -1069,793 +1259,408 @@ pub fn bias_forces<T: Real>(
     p: &Params<T>,
 ) -> SVector<T, 9> {
     let [_, _, q_2, q_3, q_4, q_5, q_6, q_7, q_8] = q.data.0[0];
-    let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6, qd_7, qd_8] = qd.data.0[0];
-    let v0 = p.torso_mass * p.torso_com_x;
-    let (v14, v1) = q_7.sin_cos();
-    let v2 = p.four_bar_link_mass * p.four_bar_link_com_x;
-    let (v6, v3) = q_8.sin_cos();
-    let v4 = p.lower_leg_mass * p.lower_leg_com_x;
-    let v5 = v3 * v4;
-    let v7 = p.lower_leg_mass * p.lower_leg_com_y;
-    let v8 = v6 * v7;
-    let v9 = v5 - v8;
-    let v10 = p.lower_leg_mass * p.four_bar_link_length_x;
-    let v11 = v9 + v10;
-    let v12 = v2 + v11;
-    let v13 = v1 * v12;
-    let v15 = p.four_bar_link_mass * p.four_bar_link_com_y;
-    let v16 = v4 * v6;
-    let v17 = v3 * v7;
+    let [_, _, qd_2, qd_3, qd_4, qd_5, qd_6, qd_7, qd_8] = qd.data.0[0];
+    let v0 = qd_2 * qd_2;
+    let (v3, v1) = q_2.sincos();
+    let v2 = v1 * p.torso_com_x;
+    let v4 = v3 * p.torso_com_y;
+    let v5 = v2 - v4;
+    let v6 = v0 * v5;
+    let v7 = p.torso_mass * v6;
+    let v8 = qd_2 + qd_3;
+    let v9 = v8 * v8;
+    let (v12, v10) = q_3.sincos();
+    let v11 = v1 * v10;
+    let v13 = v3 * v12;
+    let v14 = v11 - v13;
+    let v15 = v14 * p.thigh_motor_com_x;
+    let v16 = v3 * v10;
+    let v17 = v1 * v12;
     let v18 = v16 + v17;
-    let v19 = p.lower_leg_mass * p.four_bar_link_length_y;
-    let v20 = v18 + v19;
-    let v21 = v15 + v20;
-    let v22 = v14 * v21;
-    let v23 = v13 - v22;
-    let v24 = p.four_bar_link_mass + p.lower_leg_mass;
-    let v25 = v24 * p.torso_length_x;
-    let v26 = v23 + v25;
-    let v27 = v0 + v26;
-    let (v41, v28) = q_5.sin_cos();
-    let v29 = p.thigh_mass * p.thigh_com_x;
-    let (v33, v30) = q_6.sin_cos();
-    let v31 = p.shin_mass * p.shin_com_x;
-    let v32 = v30 * v31;
-    let v34 = p.shin_mass * p.shin_com_y;
-    let v35 = v33 * v34;
-    let v36 = v32 - v35;
-    let v37 = p.shin_mass * p.thigh_length_x;
-    let v38 = v36 + v37;
-    let v39 = v29 + v38;
-    let v40 = v28 * v39;
-    let v42 = p.thigh_mass * p.thigh_com_y;
-    let v43 = v31 * v33;
-    let v44 = v30 * v34;
-    let v45 = v43 + v44;
-    let v46 = p.shin_mass * p.thigh_length_y;
-    let v47 = v45 + v46;
-    let v48 = v42 + v47;
-    let v49 = v41 * v48;
-    let v50 = v40 - v49;
-    let v51 = p.thigh_mass + p.shin_mass;
-    let v52 = p.torso_length_x * v51;
-    let v53 = v50 + v52;
-    let v54 = v27 + v53;
-    let (v58, v55) = q_4.sin_cos();
-    let v56 = p.four_bar_motor_mass * p.four_bar_motor_com_x;
-    let v57 = v55 * v56;
-    let v59 = p.four_bar_motor_mass * p.four_bar_motor_com_y;
-    let v60 = v58 * v59;
-    let v61 = v57 - v60;
-    let v62 = p.torso_length_x * p.four_bar_motor_mass;
-    let v63 = v61 + v62;
-    let v64 = v54 + v63;
-    let (v68, v65) = q_3.sin_cos();
-    let v66 = p.thigh_motor_mass * p.thigh_motor_com_x;
-    let v67 = v65 * v66;
-    let v69 = p.thigh_motor_mass * p.thigh_motor_com_y;
-    let v70 = v68 * v69;
-    let v71 = v67 - v70;
-    let v72 = p.torso_length_x * p.thigh_motor_mass;
+    let v19 = v18 * p.thigh_motor_com_y;
+    let v20 = v15 - v19;
+    let v21 = v9 * v20;
+    let v22 = v1 * p.torso_length_x;
+    let v23 = v3 * p.torso_length_y;
+    let v24 = v22 - v23;
+    let v25 = v0 * v24;
+    let v26 = v21 + v25;
+    let v27 = p.thigh_motor_mass * v26;
+    let v28 = v7 + v27;
+    let v29 = qd_2 + qd_4;
+    let v30 = v29 * v29;
+    let (v33, v31) = q_4.sincos();
+    let v32 = v1 * v31;
+    let v34 = v3 * v33;
+    let v35 = v32 - v34;
+    let v36 = v35 * p.four_bar_motor_com_x;
+    let v37 = v3 * v31;
+    let v38 = v1 * v33;
+    let v39 = v37 + v38;
+    let v40 = v39 * p.four_bar_motor_com_y;
+    let v41 = v36 - v40;
+    let v42 = v30 * v41;
+    let v43 = v25 + v42;
+    let v44 = p.four_bar_motor_mass * v43;
+    let v45 = v28 + v44;
+    let v46 = qd_2 + qd_5;
+    let v47 = v46 * v46;
+    let (v50, v48) = q_5.sincos();
+    let v49 = v1 * v48;
+    let v51 = v3 * v50;
+    let v52 = v49 - v51;
+    let v53 = v52 * p.thigh_com_x;
+    let v54 = v3 * v48;
+    let v55 = v1 * v50;
+    let v56 = v54 + v55;
+    let v57 = v56 * p.thigh_com_y;
+    let v58 = v53 - v57;
+    let v59 = v47 * v58;
+    let v60 = v25 + v59;
+    let v61 = p.thigh_mass * v60;
+    let v62 = v45 + v61;
+    let v63 = v46 + qd_6;
+    let v64 = v63 * v63;
+    let (v67, v65) = q_6.sincos();
+    let v66 = v52 * v65;
+    let v68 = v56 * v67;
+    let v69 = v66 - v68;
+    let v70 = v69 * p.shin_com_x;
+    let v71 = v56 * v65;
+    let v72 = v52 * v67;
     let v73 = v71 + v72;
-    let v74 = v64 + v73;
-    let (v102, v75) = q_2.sin_cos();
-    let v76 = v74 * v75;
-    let v77 = p.torso_mass * p.torso_com_y;
-    let v78 = v12 * v14;
-    let v79 = v1 * v21;
-    let v80 = v78 + v79;
-    let v81 = v24 * p.torso_length_y;
-    let v82 = v80 + v81;
-    let v83 = v77 + v82;
-    let v84 = v39 * v41;
-    let v85 = v28 * v48;
-    let v86 = v84 + v85;
-    let v87 = v51 * p.torso_length_y;
-    let v88 = v86 + v87;
-    let v89 = v83 + v88;
-    let v90 = v56 * v58;
-    let v91 = v55 * v59;
-    let v92 = v90 + v91;
-    let v93 = p.four_bar_motor_mass * p.torso_length_y;
-    let v94 = v92 + v93;
-    let v95 = v89 + v94;
-    let v96 = v66 * v68;
-    let v97 = v65 * v69;
-    let v98 = v96 + v97;
-    let v99 = p.thigh_motor_mass * p.torso_length_y;
-    let v100 = v98 + v99;
-    let v101 = v95 + v100;
-    let v103 = v101 * v102;
-    let v104 = v76 - v103;
-    let v105 = qd_2 * qd_2;
-    let v106 = v104 * v105;
-    let v107 = v71 * v75;
-    let v108 = v98 * v102;
-    let v109 = v107 - v108;
-    let v110 = v109 + v109;
-    let v111 = qd_2 * qd_3;
-    let v112 = v110 * v111;
-    let v113 = v106 + v112;
-    let v114 = v61 * v75;
-    let v115 = v92 * v102;
-    let v116 = v114 - v115;
-    let v117 = v116 + v116;
-    let v118 = qd_2 * qd_4;
-    let v119 = v117 * v118;
-    let v120 = v113 + v119;
-    let v121 = v50 * v75;
-    let v122 = v86 * v102;
-    let v123 = v121 - v122;
-    let v124 = v123 + v123;
-    let v125 = qd_2 * qd_5;
-    let v126 = v124 * v125;
-    let v127 = v120 + v126;
-    let v128 = v28 * v36;
-    let v129 = v41 * v45;
-    let v130 = v128 - v129;
-    let v131 = v75 * v130;
-    let v132 = v28 * v45;
-    let v133 = v36 * v41;
-    let v134 = v132 + v133;
-    let v135 = v102 * v134;
-    let v136 = v131 - v135;
-    let v137 = v136 + v136;
-    let v138 = qd_2 * qd_6;
-    let v139 = v137 * v138;
-    let v140 = v127 + v139;
-    let v141 = v23 * v75;
-    let v142 = v80 * v102;
-    let v143 = v141 - v142;
-    let v144 = v143 + v143;
-    let v145 = qd_2 * qd_7;
-    let v146 = v144 * v145;
-    let v147 = v140 + v146;
-    let v148 = v1 * v9;
-    let v149 = v14 * v18;
-    let v150 = v148 - v149;
-    let v151 = v75 * v150;
-    let v152 = v1 * v18;
-    let v153 = v9 * v14;
-    let v154 = v152 + v153;
-    let v155 = v102 * v154;
-    let v156 = v151 - v155;
-    let v157 = v156 + v156;
-    let v158 = qd_2 * qd_8;
-    let v159 = v157 * v158;
-    let v160 = v147 + v159;
-    let v161 = qd_3 * qd_3;
-    let v162 = v109 * v161;
-    let v163 = v160 + v162;
-    let v164 = qd_4 * qd_4;
-    let v165 = v116 * v164;
-    let v166 = v163 + v165;
-    let v167 = qd_5 * qd_5;
-    let v168 = v123 * v167;
-    let v169 = v166 + v168;
-    let v170 = qd_5 * qd_6;
-    let v171 = v137 * v170;
-    let v172 = v169 + v171;
-    let v173 = qd_6 * qd_6;
-    let v174 = v136 * v173;
-    let v175 = v172 + v174;
-    let v176 = qd_7 * qd_7;
-    let v177 = v143 * v176;
-    let v178 = v175 + v177;
-    let v179 = qd_7 * qd_8;
-    let v180 = v157 * v179;
-    let v181 = v178 + v180;
-    let v182 = qd_8 * qd_8;
-    let v183 = v156 * v182;
-    let v184 = v181 + v183;
-    let v185 = p.torso_mass + v24;
-    let v186 = v51 + v185;
-    let v187 = p.four_bar_motor_mass + v186;
-    let v188 = p.thigh_motor_mass + v187;
-    let v189 = p.slide_y_mass + v188;
-    let v190 = p.slide_x_mass + v189;
-    let v191 = v190 * p.gravity_x;
-    let v192 = v184 + v191;
-    let v193 = -v192;
-    let v194 = v74 * v102;
-    let v195 = v75 * v101;
-    let v196 = v194 + v195;
-    let v197 = v105 * v196;
-    let v198 = v75 * v98;
-    let v199 = v71 * v102;
-    let v200 = v198 + v199;
-    let v201 = v200 + v200;
-    let v202 = v111 * v201;
-    let v203 = v197 + v202;
-    let v204 = v75 * v92;
-    let v205 = v61 * v102;
-    let v206 = v204 + v205;
-    let v207 = v206 + v206;
-    let v208 = v118 * v207;
-    let v209 = v203 + v208;
-    let v210 = v75 * v86;
-    let v211 = v50 * v102;
-    let v212 = v210 + v211;
-    let v213 = v212 + v212;
-    let v214 = v125 * v213;
-    let v215 = v209 + v214;
-    let v216 = v75 * v134;
-    let v217 = v102 * v130;
-    let v218 = v216 + v217;
-    let v219 = v218 + v218;
-    let v220 = v138 * v219;
-    let v221 = v215 + v220;
-    let v222 = v75 * v80;
-    let v223 = v23 * v102;
-    let v224 = v222 + v223;
-    let v225 = v224 + v224;
-    let v226 = v145 * v225;
-    let v227 = v221 + v226;
-    let v228 = v75 * v154;
-    let v229 = v102 * v150;
-    let v230 = v228 + v229;
-    let v231 = v230 + v230;
-    let v232 = v158 * v231;
-    let v233 = v227 + v232;
-    let v234 = v161 * v200;
-    let v235 = v233 + v234;
-    let v236 = v164 * v206;
-    let v237 = v235 + v236;
-    let v238 = v167 * v212;
-    let v239 = v237 + v238;
-    let v240 = v170 * v219;
+    let v74 = v73 * p.shin_com_y;
+    let v75 = v70 - v74;
+    let v76 = v64 * v75;
+    let v77 = v52 * p.thigh_length_x;
+    let v78 = v56 * p.thigh_length_y;
+    let v79 = v77 - v78;
+    let v80 = v47 * v79;
+    let v81 = v76 + v80;
+    let v82 = v25 + v81;
+    let v83 = p.shin_mass * v82;
+    let v84 = v62 + v83;
+    let v85 = qd_2 + qd_7;
+    let v86 = v85 * v85;
+    let (v89, v87) = q_7.sincos();
+    let v88 = v1 * v87;
+    let v90 = v3 * v89;
+    let v91 = v88 - v90;
+    let v92 = v91 * p.four_bar_link_com_x;
+    let v93 = v3 * v87;
+    let v94 = v1 * v89;
+    let v95 = v93 + v94;
+    let v96 = v95 * p.four_bar_link_com_y;
+    let v97 = v92 - v96;
+    let v98 = v86 * v97;
+    let v99 = v25 + v98;
+    let v100 = p.four_bar_link_mass * v99;
+    let v101 = v84 + v100;
+    let v102 = v85 + qd_8;
+    let v103 = v102 * v102;
+    let (v106, v104) = q_8.sincos();
+    let v105 = v91 * v104;
+    let v107 = v95 * v106;
+    let v108 = v105 - v107;
+    let v109 = v108 * p.lower_leg_com_x;
+    let v110 = v95 * v104;
+    let v111 = v91 * v106;
+    let v112 = v110 + v111;
+    let v113 = v112 * p.lower_leg_com_y;
+    let v114 = v109 - v113;
+    let v115 = v103 * v114;
+    let v116 = v91 * p.four_bar_link_length_x;
+    let v117 = v95 * p.four_bar_link_length_y;
+    let v118 = v116 - v117;
+    let v119 = v86 * v118;
+    let v120 = v115 + v119;
+    let v121 = v25 + v120;
+    let v122 = p.lower_leg_mass * v121;
+    let v123 = v101 + v122;
+    let v124 = v123 + p.prepared[37];
+    let v125 = -v124;
+    let v126 = p.torso_com_x * v3;
+    let v127 = v1 * p.torso_com_y;
+    let v128 = v126 + v127;
+    let v129 = v0 * v128;
+    let v130 = p.torso_mass * v129;
+    let v131 = p.thigh_motor_com_x * v18;
+    let v132 = v14 * p.thigh_motor_com_y;
+    let v133 = v131 + v132;
+    let v134 = v9 * v133;
+    let v135 = v3 * p.torso_length_x;
+    let v136 = v1 * p.torso_length_y;
+    let v137 = v135 + v136;
+    let v138 = v0 * v137;
+    let v139 = v134 + v138;
+    let v140 = p.thigh_motor_mass * v139;
+    let v141 = v130 + v140;
+    let v142 = p.four_bar_motor_com_x * v39;
+    let v143 = v35 * p.four_bar_motor_com_y;
+    let v144 = v142 + v143;
+    let v145 = v30 * v144;
+    let v146 = v138 + v145;
+    let v147 = p.four_bar_motor_mass * v146;
+    let v148 = v141 + v147;
+    let v149 = p.thigh_com_x * v56;
+    let v150 = v52 * p.thigh_com_y;
+    let v151 = v149 + v150;
+    let v152 = v47 * v151;
+    let v153 = v138 + v152;
+    let v154 = p.thigh_mass * v153;
+    let v155 = v148 + v154;
+    let v156 = p.shin_com_x * v73;
+    let v157 = v69 * p.shin_com_y;
+    let v158 = v156 + v157;
+    let v159 = v64 * v158;
+    let v160 = v56 * p.thigh_length_x;
+    let v161 = v52 * p.thigh_length_y;
+    let v162 = v160 + v161;
+    let v163 = v47 * v162;
+    let v164 = v159 + v163;
+    let v165 = v138 + v164;
+    let v166 = p.shin_mass * v165;
+    let v167 = v155 + v166;
+    let v168 = p.four_bar_link_com_x * v95;
+    let v169 = v91 * p.four_bar_link_com_y;
+    let v170 = v168 + v169;
+    let v171 = v86 * v170;
+    let v172 = v138 + v171;
+    let v173 = p.four_bar_link_mass * v172;
+    let v174 = v167 + v173;
+    let v175 = p.lower_leg_com_x * v112;
+    let v176 = v108 * p.lower_leg_com_y;
+    let v177 = v175 + v176;
+    let v178 = v103 * v177;
+    let v179 = v95 * p.four_bar_link_length_x;
+    let v180 = v91 * p.four_bar_link_length_y;
+    let v181 = v179 + v180;
+    let v182 = v86 * v181;
+    let v183 = v178 + v182;
+    let v184 = v138 + v183;
+    let v185 = p.lower_leg_mass * v184;
+    let v186 = v174 + v185;
+    let v187 = v186 + p.prepared[38];
+    let v188 = -v187;
+    let v189 = v6 * v128;
+    let v190 = v5 * v129;
+    let v191 = v189 - v190;
+    let v192 = p.torso_mass * v191;
+    let v193 = v133 + v137;
+    let v194 = v26 * v193;
+    let v195 = v20 + v24;
+    let v196 = v139 * v195;
+    let v197 = v194 - v196;
+    let v198 = p.thigh_motor_mass * v197;
+    let v199 = v192 + v198;
+    let v200 = v137 + v144;
+    let v201 = v43 * v200;
+    let v202 = v24 + v41;
+    let v203 = v146 * v202;
+    let v204 = v201 - v203;
+    let v205 = p.four_bar_motor_mass * v204;
+    let v206 = v199 + v205;
+    let v207 = v137 + v151;
+    let v208 = v60 * v207;
+    let v209 = v24 + v58;
+    let v210 = v153 * v209;
+    let v211 = v208 - v210;
+    let v212 = p.thigh_mass * v211;
+    let v213 = v206 + v212;
+    let v214 = v158 + v162;
+    let v215 = v137 + v214;
+    let v216 = v82 * v215;
+    let v217 = v75 + v79;
+    let v218 = v24 + v217;
+    let v219 = v165 * v218;
+    let v220 = v216 - v219;
+    let v221 = p.shin_mass * v220;
+    let v222 = v213 + v221;
+    let v223 = v137 + v170;
+    let v224 = v99 * v223;
+    let v225 = v24 + v97;
+    let v226 = v172 * v225;
+    let v227 = v224 - v226;
+    let v228 = p.four_bar_link_mass * v227;
+    let v229 = v222 + v228;
+    let v230 = v177 + v181;
+    let v231 = v137 + v230;
+    let v232 = v121 * v231;
+    let v233 = v114 + v118;
+    let v234 = v24 + v233;
+    let v235 = v184 * v234;
+    let v236 = v232 - v235;
+    let v237 = p.lower_leg_mass * v236;
+    let v238 = v229 + v237;
+    let v239 = v1 * p.prepared[39];
+    let v240 = v3 * p.prepared[40];
     let v241 = v239 + v240;
-    let v242 = v173 * v218;
-    let v243 = v241 + v242;
-    let v244 = v176 * v224;
-    let v245 = v243 + v244;
-    let v246 = v179 * v231;
+    let v242 = v91 * p.prepared[41];
+    let v243 = v95 * p.prepared[42];
+    let v244 = v242 + v243;
+    let v245 = v108 * p.prepared[43];
+    let v246 = v112 * p.prepared[44];
     let v247 = v245 + v246;
-    let v248 = v182 * v230;
-    let v249 = v247 + v248;
-    let v250 = v189 * p.gravity_y;
-    let v251 = v249 + v250;
-    let v252 = -v251;
-    let v253 = v109 - v109;
-    let v254 = qd_3 * qd_0;
-    let v255 = v253 * v254;
-    let v256 = v116 - v116;
-    let v257 = qd_4 * qd_0;
-    let v258 = v256 * v257;
-    let v259 = v255 + v258;
-    let v260 = v123 - v123;
-    let v261 = qd_5 * qd_0;
-    let v262 = v260 * v261;
-    let v263 = v259 + v262;
-    let v264 = v136 - v136;
-    let v265 = qd_6 * qd_0;
-    let v266 = v264 * v265;
-    let v267 = v263 + v266;
-    let v268 = v143 - v143;
-    let v269 = qd_7 * qd_0;
-    let v270 = v268 * v269;
-    let v271 = v267 + v270;
-    let v272 = v156 - v156;
-    let v273 = qd_8 * qd_0;
-    let v274 = v272 * v273;
-    let v275 = v271 + v274;
-    let v276 = v200 - v200;
-    let v277 = qd_3 * qd_1;
-    let v278 = v276 * v277;
-    let v279 = v275 + v278;
-    let v280 = v206 - v206;
-    let v281 = qd_4 * qd_1;
-    let v282 = v280 * v281;
-    let v283 = v279 + v282;
-    let v284 = v212 - v212;
-    let v285 = qd_5 * qd_1;
-    let v286 = v284 * v285;
-    let v287 = v283 + v286;
-    let v288 = v218 - v218;
-    let v289 = qd_6 * qd_1;
-    let v290 = v288 * v289;
-    let v291 = v287 + v290;
-    let v292 = v224 - v224;
-    let v293 = qd_7 * qd_1;
-    let v294 = v292 * v293;
-    let v295 = v291 + v294;
-    let v296 = v230 - v230;
-    let v297 = qd_8 * qd_1;
-    let v298 = v296 * v297;
-    let v299 = v295 + v298;
-    let v300 = p.torso_length_x * v66;
-    let v301 = v69 * p.torso_length_y;
-    let v302 = v300 + v301;
-    let v303 = v68 * v302;
-    let v304 = p.torso_length_x * v69;
-    let v305 = v66 * p.torso_length_y;
-    let v306 = v304 - v305;
-    let v307 = v65 * v306;
-    let v308 = v303 + v307;
-    let v309 = -v308;
-    let v310 = v309 + v309;
-    let v311 = v111 * v310;
-    let v312 = v299 + v311;
-    let v313 = p.torso_length_x * v56;
-    let v314 = v59 * p.torso_length_y;
-    let v315 = v313 + v314;
-    let v316 = v58 * v315;
-    let v317 = p.torso_length_x * v59;
-    let v318 = v56 * p.torso_length_y;
-    let v319 = v317 - v318;
-    let v320 = v55 * v319;
-    let v321 = v316 + v320;
-    let v322 = -v321;
-    let v323 = v322 + v322;
-    let v324 = v118 * v323;
-    let v325 = v312 + v324;
-    let v326 = v50 * p.torso_length_y;
-    let v327 = p.torso_length_x * v86;
-    let v328 = v326 - v327;
-    let v329 = v328 + v328;
-    let v330 = v125 * v329;
-    let v331 = v325 + v330;
-    let v332 = v31 * p.thigh_length_x;
-    let v333 = v34 * p.thigh_length_y;
-    let v334 = v332 + v333;
-    let v335 = v33 * v334;
-    let v336 = v34 * p.thigh_length_x;
-    let v337 = v31 * p.thigh_length_y;
-    let v338 = v336 - v337;
-    let v339 = v30 * v338;
-    let v340 = v335 + v339;
-    let v341 = -v340;
-    let v342 = v341 + v341;
-    let v343 = p.torso_length_y * v130;
-    let v344 = p.torso_length_x * v134;
-    let v345 = v343 - v344;
-    let v346 = v345 + v345;
-    let v347 = v342 + v346;
-    let v348 = v138 * v347;
-    let v349 = v331 + v348;
-    let v350 = v23 * p.torso_length_y;
-    let v351 = p.torso_length_x * v80;
-    let v352 = v350 - v351;
-    let v353 = v352 + v352;
-    let v354 = v145 * v353;
-    let v355 = v349 + v354;
-    let v356 = v4 * p.four_bar_link_length_x;
-    let v357 = v7 * p.four_bar_link_length_y;
-    let v358 = v356 + v357;
-    let v359 = v6 * v358;
-    let v360 = v7 * p.four_bar_link_length_x;
-    let v361 = v4 * p.four_bar_link_length_y;
-    let v362 = v360 - v361;
-    let v363 = v3 * v362;
-    let v364 = v359 + v363;
-    let v365 = -v364;
-    let v366 = v365 + v365;
-    let v367 = p.torso_length_y * v150;
-    let v368 = p.torso_length_x * v154;
-    let v369 = v367 - v368;
-    let v370 = v369 + v369;
-    let v371 = v366 + v370;
-    let v372 = v158 * v371;
-    let v373 = v355 + v372;
-    let v374 = v305 - v304;
-    let v375 = v65 * v374;
-    let v376 = v375 - v303;
-    let v377 = v161 * v376;
-    let v378 = v373 + v377;
-    let v379 = v318 - v317;
-    let v380 = v55 * v379;
-    let v381 = v380 - v316;
-    let v382 = v164 * v381;
-    let v383 = v378 + v382;
-    let v384 = v167 * v328;
-    let v385 = v383 + v384;
-    let v386 = v342 + v345;
-    let v387 = v345 + v386;
-    let v388 = v170 * v387;
-    let v389 = v385 + v388;
-    let v390 = v337 - v336;
-    let v391 = v30 * v390;
-    let v392 = v391 - v335;
-    let v393 = v345 + v392;
-    let v394 = v173 * v393;
-    let v395 = v389 + v394;
-    let v396 = v176 * v352;
-    let v397 = v395 + v396;
-    let v398 = v366 + v369;
-    let v399 = v369 + v398;
-    let v400 = v179 * v399;
-    let v401 = v397 + v400;
-    let v402 = v361 - v360;
-    let v403 = v3 * v402;
-    let v404 = v403 - v359;
-    let v405 = v369 + v404;
-    let v406 = v182 * v405;
-    let v407 = v401 + v406;
-    let v408 = v77 + v99;
-    let v409 = v93 + v408;
-    let v410 = v87 + v409;
-    let v411 = v81 + v410;
-    let v412 = p.gravity_x * v411;
-    let v413 = v0 + v72;
-    let v414 = v62 + v413;
-    let v415 = v52 + v414;
-    let v416 = v25 + v415;
-    let v417 = p.gravity_y * v416;
-    let v418 = v412 - v417;
-    let v419 = v75 * v418;
-    let v420 = p.gravity_x * v416;
-    let v421 = p.gravity_y * v411;
-    let v422 = v420 + v421;
-    let v423 = v102 * v422;
-    let v424 = v419 + v423;
-    let v425 = v1 * v75;
-    let v426 = v14 * v102;
-    let v427 = v425 - v426;
-    let v428 = v15 + v19;
-    let v429 = p.gravity_x * v428;
-    let v430 = v2 + v10;
-    let v431 = p.gravity_y * v430;
-    let v432 = v429 - v431;
-    let v433 = v427 * v432;
-    let v434 = v1 * v102;
-    let v435 = v14 * v75;
-    let v436 = v434 + v435;
-    let v437 = p.gravity_x * v430;
-    let v438 = p.gravity_y * v428;
-    let v439 = v437 + v438;
-    let v440 = v436 * v439;
-    let v441 = v433 + v440;
-    let v442 = v3 * v427;
-    let v443 = v6 * v436;
-    let v444 = v442 - v443;
-    let v445 = v7 * p.gravity_x;
-    let v446 = v4 * p.gravity_y;
-    let v447 = v445 - v446;
-    let v448 = v444 * v447;
-    let v449 = v3 * v436;
-    let v450 = v6 * v427;
-    let v451 = v449 + v450;
-    let v452 = v4 * p.gravity_x;
-    let v453 = v7 * p.gravity_y;
-    let v454 = v452 + v453;
-    let v455 = v451 * v454;
-    let v456 = v448 + v455;
-    let v457 = v441 + v456;
-    let v458 = v424 + v457;
-    let v459 = v28 * v75;
-    let v460 = v41 * v102;
-    let v461 = v459 - v460;
-    let v462 = v42 + v46;
-    let v463 = p.gravity_x * v462;
-    let v464 = v29 + v37;
-    let v465 = p.gravity_y * v464;
-    let v466 = v463 - v465;
-    let v467 = v461 * v466;
-    let v468 = v28 * v102;
-    let v469 = v41 * v75;
-    let v470 = v468 + v469;
-    let v471 = p.gravity_x * v464;
-    let v472 = p.gravity_y * v462;
-    let v473 = v471 + v472;
-    let v474 = v470 * v473;
-    let v475 = v467 + v474;
-    let v476 = v30 * v461;
-    let v477 = v33 * v470;
-    let v478 = v476 - v477;
-    let v479 = v34 * p.gravity_x;
-    let v480 = v31 * p.gravity_y;
-    let v481 = v479 - v480;
-    let v482 = v478 * v481;
-    let v483 = v30 * v470;
-    let v484 = v33 * v461;
-    let v485 = v483 + v484;
-    let v486 = v31 * p.gravity_x;
-    let v487 = v34 * p.gravity_y;
-    let v488 = v486 + v487;
-    let v489 = v485 * v488;
-    let v490 = v482 + v489;
-    let v491 = v475 + v490;
-    let v492 = v458 + v491;
-    let v493 = v55 * v75;
-    let v494 = v58 * v102;
-    let v495 = v493 - v494;
-    let v496 = v59 * p.gravity_x;
-    let v497 = v56 * p.gravity_y;
-    let v498 = v496 - v497;
-    let v499 = v495 * v498;
-    let v500 = v55 * v102;
-    let v501 = v58 * v75;
-    let v502 = v500 + v501;
-    let v503 = v56 * p.gravity_x;
-    let v504 = v59 * p.gravity_y;
-    let v505 = v503 + v504;
-    let v506 = v502 * v505;
-    let v507 = v499 + v506;
-    let v508 = v492 + v507;
-    let v509 = v65 * v75;
-    let v510 = v68 * v102;
-    let v511 = v509 - v510;
-    let v512 = v69 * p.gravity_x;
-    let v513 = v66 * p.gravity_y;
-    let v514 = v512 - v513;
-    let v515 = v511 * v514;
-    let v516 = v65 * v102;
-    let v517 = v68 * v75;
-    let v518 = v516 + v517;
-    let v519 = v66 * p.gravity_x;
-    let v520 = v69 * p.gravity_y;
-    let v521 = v519 + v520;
-    let v522 = v518 * v521;
-    let v523 = v515 + v522;
-    let v524 = v508 + v523;
-    let v525 = v407 + v524;
-    let v526 = qd_2 * qd_0;
-    let v527 = v253 * v526;
-    let v528 = qd_2 * qd_1;
-    let v529 = v276 * v528;
-    let v530 = v527 + v529;
-    let v531 = v105 * v308;
-    let v532 = v530 + v531;
-    let v533 = q_3 - q_5;
-    let v534 = v533 - p.thigh_spring_rest;
-    let v535 = p.thigh_spring_stiffness * v534;
-    let v536 = v523 + v535;
-    let v537 = v532 + v536;
-    let v538 = v256 * v526;
-    let v539 = v280 * v528;
-    let v540 = v538 + v539;
-    let v541 = v105 * v321;
-    let v542 = v540 + v541;
-    let v543 = q_4 - q_7;
-    let v544 = v543 - p.four_bar_spring_rest;
-    let v545 = p.four_bar_spring_stiffness * v544;
-    let v546 = v507 + v545;
-    let v547 = v542 + v546;
-    let v548 = v260 * v526;
-    let v549 = v266 + v548;
-    let v550 = v284 * v528;
-    let v551 = v549 + v550;
-    let v552 = v290 + v551;
-    let v553 = v105 * v328;
-    let v554 = v552 - v553;
-    let v555 = v386 - v345;
-    let v556 = v138 * v555;
-    let v557 = v554 + v556;
-    let v558 = v170 * v342;
-    let v559 = v557 + v558;
-    let v560 = v173 * v392;
-    let v561 = v559 + v560;
-    let v562 = v491 - v535;
-    let v563 = v561 + v562;
-    let v564 = v264 * v526;
-    let v565 = v261 * v264;
-    let v566 = v564 + v565;
-    let v567 = v288 * v528;
-    let v568 = v566 + v567;
-    let v569 = v285 * v288;
-    let v570 = v568 + v569;
-    let v571 = v347 * T::lit(0.5);
-    let v572 = v105 * v571;
-    let v573 = v570 - v572;
-    let v574 = v345 - v386;
-    let v575 = v125 * v574;
-    let v576 = v573 + v575;
-    let v577 = v167 * v340;
-    let v578 = v576 + v577;
-    let v579 = v490 + v578;
-    let v580 = v268 * v526;
-    let v581 = v274 + v580;
-    let v582 = v292 * v528;
-    let v583 = v581 + v582;
-    let v584 = v298 + v583;
-    let v585 = v105 * v352;
-    let v586 = v584 - v585;
-    let v587 = v398 - v369;
-    let v588 = v158 * v587;
-    let v589 = v586 + v588;
-    let v590 = v179 * v366;
-    let v591 = v589 + v590;
-    let v592 = v182 * v404;
-    let v593 = v591 + v592;
-    let v594 = v457 - v545;
-    let v595 = v593 + v594;
-    let v596 = v272 * v526;
-    let v597 = v269 * v272;
-    let v598 = v596 + v597;
-    let v599 = v296 * v528;
-    let v600 = v598 + v599;
-    let v601 = v293 * v296;
-    let v602 = v600 + v601;
-    let v603 = v371 * T::lit(0.5);
-    let v604 = v105 * v603;
-    let v605 = v602 - v604;
-    let v606 = v369 - v398;
-    let v607 = v145 * v606;
-    let v608 = v605 + v607;
-    let v609 = v176 * v364;
-    let v610 = v608 + v609;
-    let v611 = v456 + v610;
+    let v248 = v244 + v247;
+    let v249 = v241 + v248;
+    let v250 = v52 * p.prepared[45];
+    let v251 = v56 * p.prepared[46];
+    let v252 = v250 + v251;
+    let v253 = v69 * p.prepared[47];
+    let v254 = v73 * p.prepared[48];
+    let v255 = v253 + v254;
+    let v256 = v252 + v255;
+    let v257 = v249 + v256;
+    let v258 = v35 * p.prepared[49];
+    let v259 = v39 * p.prepared[50];
+    let v260 = v258 + v259;
+    let v261 = v257 + v260;
+    let v262 = v14 * p.prepared[51];
+    let v263 = v18 * p.prepared[52];
+    let v264 = v262 + v263;
+    let v265 = v261 + v264;
+    let v266 = v238 + v265;
+    let v267 = v26 * v133;
+    let v268 = v20 * v139;
+    let v269 = v267 - v268;
+    let v270 = p.thigh_motor_mass * v269;
+    let v271 = q_3 - q_5;
+    let v272 = v271 - p.thigh_spring_rest;
+    let v273 = p.thigh_spring_stiffness * v272;
+    let v274 = v264 + v273;
+    let v275 = v270 + v274;
+    let v276 = v43 * v144;
+    let v277 = v41 * v146;
+    let v278 = v276 - v277;
+    let v279 = p.four_bar_motor_mass * v278;
+    let v280 = q_4 - q_7;
+    let v281 = v280 - p.four_bar_spring_rest;
+    let v282 = p.four_bar_spring_stiffness * v281;
+    let v283 = v260 + v282;
+    let v284 = v279 + v283;
+    let v285 = v60 * v151;
+    let v286 = v58 * v153;
+    let v287 = v285 - v286;
+    let v288 = p.thigh_mass * v287;
+    let v289 = v82 * v214;
+    let v290 = v165 * v217;
+    let v291 = v289 - v290;
+    let v292 = p.shin_mass * v291;
+    let v293 = v288 + v292;
+    let v294 = v256 - v273;
+    let v295 = v293 + v294;
+    let v296 = v82 * v158;
+    let v297 = v75 * v165;
+    let v298 = v296 - v297;
+    let v299 = p.shin_mass * v298;
+    let v300 = v255 + v299;
+    let v301 = v99 * v170;
+    let v302 = v97 * v172;
+    let v303 = v301 - v302;
+    let v304 = p.four_bar_link_mass * v303;
+    let v305 = v121 * v230;
+    let v306 = v184 * v233;
+    let v307 = v305 - v306;
+    let v308 = p.lower_leg_mass * v307;
+    let v309 = v304 + v308;
+    let v310 = v248 - v282;
+    let v311 = v309 + v310;
+    let v312 = v121 * v177;
+    let v313 = v114 * v184;
+    let v314 = v312 - v313;
+    let v315 = p.lower_leg_mass * v314;
+    let v316 = v247 + v315;
     SMatrix::from_data(
-        ArrayStorage([[v193, v252, v525, v537, v547, v563, v579, v595, v611]]),
+        ArrayStorage([[v125, v188, v266, v275, v284, v295, v300, v311, v316]]),
     )
 }
 /// `G(q) = ∂V/∂q`.
 pub fn gravity_forces<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 9> {
     let [_, _, q_2, q_3, q_4, q_5, q_6, q_7, q_8] = q.data.0[0];
-    let v0 = p.four_bar_link_mass + p.lower_leg_mass;
-    let v1 = p.torso_mass + v0;
-    let v2 = p.thigh_mass + p.shin_mass;
-    let v3 = v1 + v2;
-    let v4 = v3 + p.four_bar_motor_mass;
-    let v5 = v4 + p.thigh_motor_mass;
-    let v6 = p.slide_y_mass + v5;
-    let v7 = p.slide_x_mass + v6;
-    let v8 = v7 * p.gravity_x;
-    let v9 = -v8;
-    let v10 = v6 * p.gravity_y;
-    let v11 = -v10;
-    let (v35, v12) = q_2.sin_cos();
-    let v13 = p.torso_mass * p.torso_com_y;
-    let v14 = p.thigh_motor_mass * p.torso_length_y;
-    let v15 = v13 + v14;
-    let v16 = p.four_bar_motor_mass * p.torso_length_y;
-    let v17 = v15 + v16;
-    let v18 = v2 * p.torso_length_y;
-    let v19 = v17 + v18;
-    let v20 = v0 * p.torso_length_y;
-    let v21 = v19 + v20;
-    let v22 = p.gravity_x * v21;
-    let v23 = p.torso_mass * p.torso_com_x;
-    let v24 = p.thigh_motor_mass * p.torso_length_x;
-    let v25 = v23 + v24;
-    let v26 = p.four_bar_motor_mass * p.torso_length_x;
-    let v27 = v25 + v26;
-    let v28 = v2 * p.torso_length_x;
-    let v29 = v27 + v28;
-    let v30 = v0 * p.torso_length_x;
-    let v31 = v29 + v30;
-    let v32 = p.gravity_y * v31;
-    let v33 = v22 - v32;
-    let v34 = v12 * v33;
-    let v36 = p.gravity_x * v31;
-    let v37 = p.gravity_y * v21;
-    let v38 = v36 + v37;
-    let v39 = v35 * v38;
-    let v40 = v34 + v39;
-    let (v43, v41) = q_7.sin_cos();
-    let v42 = v12 * v41;
-    let v44 = v35 * v43;
-    let v45 = v42 - v44;
-    let v46 = p.four_bar_link_mass * p.four_bar_link_com_y;
-    let v47 = p.lower_leg_mass * p.four_bar_link_length_y;
+    let (v2, v0) = q_2.sincos();
+    let v1 = v0 * p.prepared[39];
+    let v3 = v2 * p.prepared[40];
+    let v4 = v1 + v3;
+    let (v7, v5) = q_7.sincos();
+    let v6 = v0 * v5;
+    let v8 = v2 * v7;
+    let v9 = v6 - v8;
+    let v10 = v9 * p.prepared[41];
+    let v11 = v2 * v5;
+    let v12 = v0 * v7;
+    let v13 = v11 + v12;
+    let v14 = v13 * p.prepared[42];
+    let v15 = v10 + v14;
+    let (v18, v16) = q_8.sincos();
+    let v17 = v9 * v16;
+    let v19 = v13 * v18;
+    let v20 = v17 - v19;
+    let v21 = v20 * p.prepared[43];
+    let v22 = v13 * v16;
+    let v23 = v9 * v18;
+    let v24 = v22 + v23;
+    let v25 = v24 * p.prepared[44];
+    let v26 = v21 + v25;
+    let v27 = v15 + v26;
+    let v28 = v4 + v27;
+    let (v31, v29) = q_5.sincos();
+    let v30 = v0 * v29;
+    let v32 = v2 * v31;
+    let v33 = v30 - v32;
+    let v34 = v33 * p.prepared[45];
+    let v35 = v2 * v29;
+    let v36 = v0 * v31;
+    let v37 = v35 + v36;
+    let v38 = v37 * p.prepared[46];
+    let v39 = v34 + v38;
+    let (v42, v40) = q_6.sincos();
+    let v41 = v33 * v40;
+    let v43 = v37 * v42;
+    let v44 = v41 - v43;
+    let v45 = v44 * p.prepared[47];
+    let v46 = v37 * v40;
+    let v47 = v33 * v42;
     let v48 = v46 + v47;
-    let v49 = p.gravity_x * v48;
-    let v50 = p.four_bar_link_mass * p.four_bar_link_com_x;
-    let v51 = p.lower_leg_mass * p.four_bar_link_length_x;
-    let v52 = v50 + v51;
-    let v53 = p.gravity_y * v52;
-    let v54 = v49 - v53;
-    let v55 = v45 * v54;
-    let v56 = v35 * v41;
-    let v57 = v12 * v43;
-    let v58 = v56 + v57;
-    let v59 = p.gravity_x * v52;
-    let v60 = p.gravity_y * v48;
+    let v49 = v48 * p.prepared[48];
+    let v50 = v45 + v49;
+    let v51 = v39 + v50;
+    let v52 = v28 + v51;
+    let (v55, v53) = q_4.sincos();
+    let v54 = v0 * v53;
+    let v56 = v2 * v55;
+    let v57 = v54 - v56;
+    let v58 = v57 * p.prepared[49];
+    let v59 = v2 * v53;
+    let v60 = v0 * v55;
     let v61 = v59 + v60;
-    let v62 = v58 * v61;
-    let v63 = v55 + v62;
-    let (v66, v64) = q_8.sin_cos();
-    let v65 = v45 * v64;
-    let v67 = v58 * v66;
-    let v68 = v65 - v67;
-    let v69 = p.lower_leg_mass * p.lower_leg_com_y;
-    let v70 = p.gravity_x * v69;
-    let v71 = p.lower_leg_mass * p.lower_leg_com_x;
-    let v72 = p.gravity_y * v71;
-    let v73 = v70 - v72;
-    let v74 = v68 * v73;
-    let v75 = v58 * v64;
-    let v76 = v45 * v66;
-    let v77 = v75 + v76;
-    let v78 = p.gravity_x * v71;
-    let v79 = p.gravity_y * v69;
-    let v80 = v78 + v79;
-    let v81 = v77 * v80;
-    let v82 = v74 + v81;
-    let v83 = v63 + v82;
-    let v84 = v40 + v83;
-    let (v87, v85) = q_5.sin_cos();
-    let v86 = v12 * v85;
-    let v88 = v35 * v87;
-    let v89 = v86 - v88;
-    let v90 = p.thigh_mass * p.thigh_com_y;
-    let v91 = p.shin_mass * p.thigh_length_y;
-    let v92 = v90 + v91;
-    let v93 = p.gravity_x * v92;
-    let v94 = p.thigh_mass * p.thigh_com_x;
-    let v95 = p.shin_mass * p.thigh_length_x;
-    let v96 = v94 + v95;
-    let v97 = p.gravity_y * v96;
-    let v98 = v93 - v97;
-    let v99 = v89 * v98;
-    let v100 = v35 * v85;
-    let v101 = v12 * v87;
-    let v102 = v100 + v101;
-    let v103 = p.gravity_x * v96;
-    let v104 = p.gravity_y * v92;
-    let v105 = v103 + v104;
-    let v106 = v102 * v105;
-    let v107 = v99 + v106;
-    let (v110, v108) = q_6.sin_cos();
-    let v109 = v89 * v108;
-    let v111 = v102 * v110;
-    let v112 = v109 - v111;
-    let v113 = p.shin_mass * p.shin_com_y;
-    let v114 = p.gravity_x * v113;
-    let v115 = p.shin_mass * p.shin_com_x;
-    let v116 = p.gravity_y * v115;
-    let v117 = v114 - v116;
-    let v118 = v112 * v117;
-    let v119 = v102 * v108;
-    let v120 = v89 * v110;
-    let v121 = v119 + v120;
-    let v122 = p.gravity_x * v115;
-    let v123 = p.gravity_y * v113;
-    let v124 = v122 + v123;
-    let v125 = v121 * v124;
-    let v126 = v118 + v125;
-    let v127 = v107 + v126;
-    let v128 = v84 + v127;
-    let (v131, v129) = q_4.sin_cos();
-    let v130 = v12 * v129;
-    let v132 = v35 * v131;
-    let v133 = v130 - v132;
-    let v134 = p.four_bar_motor_mass * p.four_bar_motor_com_y;
-    let v135 = p.gravity_x * v134;
-    let v136 = p.four_bar_motor_mass * p.four_bar_motor_com_x;
-    let v137 = p.gravity_y * v136;
-    let v138 = v135 - v137;
-    let v139 = v133 * v138;
-    let v140 = v35 * v129;
-    let v141 = v12 * v131;
-    let v142 = v140 + v141;
-    let v143 = p.gravity_x * v136;
-    let v144 = p.gravity_y * v134;
-    let v145 = v143 + v144;
-    let v146 = v142 * v145;
-    let v147 = v139 + v146;
-    let v148 = v128 + v147;
-    let (v151, v149) = q_3.sin_cos();
-    let v150 = v12 * v149;
-    let v152 = v35 * v151;
-    let v153 = v150 - v152;
-    let v154 = p.thigh_motor_mass * p.thigh_motor_com_y;
-    let v155 = p.gravity_x * v154;
-    let v156 = p.thigh_motor_mass * p.thigh_motor_com_x;
-    let v157 = p.gravity_y * v156;
-    let v158 = v155 - v157;
-    let v159 = v153 * v158;
-    let v160 = v35 * v149;
-    let v161 = v12 * v151;
-    let v162 = v160 + v161;
-    let v163 = p.gravity_x * v156;
-    let v164 = p.gravity_y * v154;
-    let v165 = v163 + v164;
-    let v166 = v162 * v165;
-    let v167 = v159 + v166;
-    let v168 = v148 + v167;
-    let v169 = q_3 - q_5;
-    let v170 = v169 - p.thigh_spring_rest;
-    let v171 = p.thigh_spring_stiffness * v170;
-    let v172 = v167 + v171;
-    let v173 = q_4 - q_7;
-    let v174 = v173 - p.four_bar_spring_rest;
-    let v175 = p.four_bar_spring_stiffness * v174;
-    let v176 = v147 + v175;
-    let v177 = v127 - v171;
-    let v178 = v83 - v175;
+    let v62 = v61 * p.prepared[50];
+    let v63 = v58 + v62;
+    let v64 = v52 + v63;
+    let (v67, v65) = q_3.sincos();
+    let v66 = v0 * v65;
+    let v68 = v2 * v67;
+    let v69 = v66 - v68;
+    let v70 = v69 * p.prepared[51];
+    let v71 = v2 * v65;
+    let v72 = v0 * v67;
+    let v73 = v71 + v72;
+    let v74 = v73 * p.prepared[52];
+    let v75 = v70 + v74;
+    let v76 = v64 + v75;
+    let v77 = q_3 - q_5;
+    let v78 = v77 - p.thigh_spring_rest;
+    let v79 = p.thigh_spring_stiffness * v78;
+    let v80 = v75 + v79;
+    let v81 = q_4 - q_7;
+    let v82 = v81 - p.four_bar_spring_rest;
+    let v83 = p.four_bar_spring_stiffness * v82;
+    let v84 = v63 + v83;
+    let v85 = v51 - v79;
+    let v86 = v27 - v83;
     SMatrix::from_data(
-        ArrayStorage([[v9, v11, v168, v172, v176, v177, v126, v178, v82]]),
+        ArrayStorage([
+            [p.prepared[53], p.prepared[54], v76, v80, v84, v85, v50, v86, v26],
+        ]),
     )
 }
 /// Viscous joint damping `D q̇`.
@@ -1878,12 +1683,12 @@ pub fn closure_residual<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T,
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
     let v2 = v1 + p.slide_y_length_x;
-    let (v5, v3) = q_2.sin_cos();
+    let (v5, v3) = q_2.sincos();
     let v4 = v3 * p.torso_length_x;
     let v6 = v5 * p.torso_length_y;
     let v7 = v4 - v6;
     let v8 = v2 + v7;
-    let (v11, v9) = q_5.sin_cos();
+    let (v11, v9) = q_5.sincos();
     let v10 = v3 * v9;
     let v12 = v5 * v11;
     let v13 = v10 - v12;
@@ -1894,7 +1699,7 @@ pub fn closure_residual<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T,
     let v18 = v17 * p.thigh_length_y;
     let v19 = v14 - v18;
     let v20 = v8 + v19;
-    let (v23, v21) = q_6.sin_cos();
+    let (v23, v21) = q_6.sincos();
     let v22 = v13 * v21;
     let v24 = v17 * v23;
     let v25 = v22 - v24;
@@ -1905,7 +1710,7 @@ pub fn closure_residual<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T,
     let v30 = v29 * p.shin_pin_a_y;
     let v31 = v26 - v30;
     let v32 = v20 + v31;
-    let (v35, v33) = q_7.sin_cos();
+    let (v35, v33) = q_7.sincos();
     let v34 = v3 * v33;
     let v36 = v5 * v35;
     let v37 = v34 - v36;
@@ -1916,7 +1721,7 @@ pub fn closure_residual<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T,
     let v42 = v41 * p.four_bar_link_length_y;
     let v43 = v38 - v42;
     let v44 = v8 + v43;
-    let (v47, v45) = q_8.sin_cos();
+    let (v47, v45) = q_8.sincos();
     let v46 = v37 * v45;
     let v48 = v41 * v47;
     let v49 = v46 - v48;
@@ -1960,12 +1765,12 @@ pub fn constraint_jacobian<T: Real>(
     p: &Params<T>,
 ) -> SMatrix<T, 2, 9> {
     let [_, _, q_2, _, _, q_5, q_6, q_7, q_8] = q.data.0[0];
-    let (v0, v3) = q_2.sin_cos();
-    let (v4, v1) = q_7.sin_cos();
+    let (v0, v3) = q_2.sincos();
+    let (v4, v1) = q_7.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
-    let (v12, v7) = q_8.sin_cos();
+    let (v12, v7) = q_8.sincos();
     let v8 = v6 * v7;
     let v9 = v1 * v3;
     let v10 = v0 * v4;
@@ -1986,11 +1791,11 @@ pub fn constraint_jacobian<T: Real>(
     let v26 = v3 * p.torso_length_y;
     let v27 = v25 + v26;
     let v28 = v24 + v27;
-    let (v31, v29) = q_5.sin_cos();
+    let (v31, v29) = q_5.sincos();
     let v30 = v0 * v29;
     let v32 = v3 * v31;
     let v33 = v30 + v32;
-    let (v39, v34) = q_6.sin_cos();
+    let (v39, v34) = q_6.sincos();
     let v35 = v33 * v34;
     let v36 = v3 * v29;
     let v37 = v0 * v31;
@@ -2058,12 +1863,12 @@ pub fn constraint_bias<T: Real>(
     let v0 = qd_2 + qd_7;
     let v1 = v0 + qd_8;
     let v2 = v1 * v1;
-    let (v6, v3) = q_2.sin_cos();
-    let (v7, v4) = q_7.sin_cos();
+    let (v6, v3) = q_2.sincos();
+    let (v7, v4) = q_7.sincos();
     let v5 = v3 * v4;
     let v8 = v6 * v7;
     let v9 = v5 - v8;
-    let (v15, v10) = q_8.sin_cos();
+    let (v15, v10) = q_8.sincos();
     let v11 = v9 * v10;
     let v12 = v4 * v6;
     let v13 = v3 * v7;
@@ -2092,11 +1897,11 @@ pub fn constraint_bias<T: Real>(
     let v37 = qd_2 + qd_5;
     let v38 = v37 + qd_6;
     let v39 = v38 * v38;
-    let (v42, v40) = q_5.sin_cos();
+    let (v42, v40) = q_5.sincos();
     let v41 = v3 * v40;
     let v43 = v6 * v42;
     let v44 = v41 - v43;
-    let (v50, v45) = q_6.sin_cos();
+    let (v50, v45) = q_6.sincos();
     let v46 = v44 * v45;
     let v47 = v6 * v40;
     let v48 = v3 * v42;
@@ -2151,12 +1956,12 @@ pub fn foot_position<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 2>
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
     let v2 = v1 + p.slide_y_length_x;
-    let (v5, v3) = q_2.sin_cos();
+    let (v5, v3) = q_2.sincos();
     let v4 = v3 * p.torso_length_x;
     let v6 = v5 * p.torso_length_y;
     let v7 = v4 - v6;
     let v8 = v2 + v7;
-    let (v11, v9) = q_5.sin_cos();
+    let (v11, v9) = q_5.sincos();
     let v10 = v3 * v9;
     let v12 = v5 * v11;
     let v13 = v10 - v12;
@@ -2167,7 +1972,7 @@ pub fn foot_position<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 2>
     let v18 = v17 * p.thigh_length_y;
     let v19 = v14 - v18;
     let v20 = v8 + v19;
-    let (v23, v21) = q_6.sin_cos();
+    let (v23, v21) = q_6.sincos();
     let v22 = v13 * v21;
     let v24 = v17 * v23;
     let v25 = v22 - v24;
@@ -2198,12 +2003,12 @@ pub fn foot_position<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 2>
 /// `J_f(q) = ∂(foot)/∂q`.
 pub fn foot_jacobian<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 9> {
     let [_, _, q_2, _, _, q_5, q_6, _, _] = q.data.0[0];
-    let (v0, v3) = q_2.sin_cos();
-    let (v4, v1) = q_5.sin_cos();
+    let (v0, v3) = q_2.sincos();
+    let (v4, v1) = q_5.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
-    let (v12, v7) = q_6.sin_cos();
+    let (v12, v7) = q_6.sincos();
     let v8 = v6 * v7;
     let v9 = v1 * v3;
     let v10 = v0 * v4;
@@ -2263,12 +2068,12 @@ pub fn foot_bias<T: Real>(
     let v0 = qd_2 + qd_5;
     let v1 = v0 + qd_6;
     let v2 = v1 * v1;
-    let (v6, v3) = q_2.sin_cos();
-    let (v7, v4) = q_5.sin_cos();
+    let (v6, v3) = q_2.sincos();
+    let (v7, v4) = q_5.sincos();
     let v5 = v3 * v4;
     let v8 = v6 * v7;
     let v9 = v5 - v8;
-    let (v15, v10) = q_6.sin_cos();
+    let (v15, v10) = q_6.sincos();
     let v11 = v9 * v10;
     let v12 = v4 * v6;
     let v13 = v3 * v7;
@@ -2320,628 +2125,382 @@ pub fn kinetic_energy<T: Real>(
 ) -> T {
     let [_, _, q_2, q_3, q_4, q_5, q_6, q_7, q_8] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6, qd_7, qd_8] = qd.data.0[0];
-    let v0 = p.four_bar_link_mass + p.lower_leg_mass;
-    let v1 = p.torso_mass + v0;
-    let v2 = p.thigh_mass + p.shin_mass;
-    let v3 = v1 + v2;
-    let v4 = v3 + p.four_bar_motor_mass;
-    let v5 = v4 + p.thigh_motor_mass;
-    let v6 = p.slide_y_mass + v5;
-    let v7 = p.slide_x_mass + v6;
-    let v8 = qd_0 * v7;
-    let (v84, v9) = q_2.sin_cos();
-    let v10 = p.torso_mass * p.torso_com_y;
-    let (v11, v24) = q_7.sin_cos();
-    let v12 = p.four_bar_link_mass * p.four_bar_link_com_x;
-    let (v16, v13) = q_8.sin_cos();
-    let v14 = p.lower_leg_mass * p.lower_leg_com_x;
-    let v15 = v13 * v14;
-    let v17 = p.lower_leg_mass * p.lower_leg_com_y;
-    let v18 = v16 * v17;
-    let v19 = v15 - v18;
-    let v20 = p.lower_leg_mass * p.four_bar_link_length_x;
-    let v21 = v19 + v20;
-    let v22 = v12 + v21;
-    let v23 = v11 * v22;
-    let v25 = p.four_bar_link_mass * p.four_bar_link_com_y;
-    let v26 = v14 * v16;
-    let v27 = v13 * v17;
-    let v28 = v26 + v27;
-    let v29 = p.lower_leg_mass * p.four_bar_link_length_y;
-    let v30 = v28 + v29;
-    let v31 = v25 + v30;
-    let v32 = v24 * v31;
-    let v33 = v23 + v32;
-    let v34 = v0 * p.torso_length_y;
-    let v35 = v33 + v34;
-    let v36 = v10 + v35;
-    let (v37, v50) = q_5.sin_cos();
-    let v38 = p.thigh_mass * p.thigh_com_x;
-    let (v42, v39) = q_6.sin_cos();
-    let v40 = p.shin_mass * p.shin_com_x;
-    let v41 = v39 * v40;
-    let v43 = p.shin_mass * p.shin_com_y;
-    let v44 = v42 * v43;
-    let v45 = v41 - v44;
-    let v46 = p.shin_mass * p.thigh_length_x;
-    let v47 = v45 + v46;
-    let v48 = v38 + v47;
-    let v49 = v37 * v48;
-    let v51 = p.thigh_mass * p.thigh_com_y;
-    let v52 = v40 * v42;
-    let v53 = v39 * v43;
-    let v54 = v52 + v53;
-    let v55 = p.shin_mass * p.thigh_length_y;
-    let v56 = v54 + v55;
-    let v57 = v51 + v56;
-    let v58 = v50 * v57;
-    let v59 = v49 + v58;
-    let v60 = v2 * p.torso_length_y;
-    let v61 = v59 + v60;
-    let v62 = v36 + v61;
-    let (v63, v66) = q_4.sin_cos();
-    let v64 = p.four_bar_motor_mass * p.four_bar_motor_com_x;
-    let v65 = v63 * v64;
-    let v67 = p.four_bar_motor_mass * p.four_bar_motor_com_y;
-    let v68 = v66 * v67;
-    let v69 = v65 + v68;
-    let v70 = p.four_bar_motor_mass * p.torso_length_y;
-    let v71 = v69 + v70;
-    let v72 = v62 + v71;
-    let (v73, v76) = q_3.sin_cos();
-    let v74 = p.thigh_motor_mass * p.thigh_motor_com_x;
-    let v75 = v73 * v74;
-    let v77 = p.thigh_motor_mass * p.thigh_motor_com_y;
-    let v78 = v76 * v77;
-    let v79 = v75 + v78;
-    let v80 = p.thigh_motor_mass * p.torso_length_y;
-    let v81 = v79 + v80;
-    let v82 = v72 + v81;
-    let v83 = v9 * v82;
-    let v85 = p.torso_mass * p.torso_com_x;
-    let v86 = v22 * v24;
-    let v87 = v11 * v31;
-    let v88 = v86 - v87;
-    let v89 = v0 * p.torso_length_x;
-    let v90 = v88 + v89;
-    let v91 = v85 + v90;
-    let v92 = v48 * v50;
-    let v93 = v37 * v57;
-    let v94 = v92 - v93;
-    let v95 = v2 * p.torso_length_x;
+    let v0 = qd_0 * p.prepared[1];
+    let (v47, v1) = q_2.sincos();
+    let (v2, v10) = q_7.sincos();
+    let (v5, v3) = q_8.sincos();
+    let v4 = v3 * p.prepared[4];
+    let v6 = v5 * p.prepared[5];
+    let v7 = v4 - v6;
+    let v8 = p.prepared[3] + v7;
+    let v9 = v2 * v8;
+    let v11 = p.prepared[4] * v5;
+    let v12 = v3 * p.prepared[5];
+    let v13 = v11 + v12;
+    let v14 = p.prepared[6] + v13;
+    let v15 = v10 * v14;
+    let v16 = v9 + v15;
+    let v17 = p.prepared[2] + v16;
+    let (v18, v26) = q_5.sincos();
+    let (v21, v19) = q_6.sincos();
+    let v20 = v19 * p.prepared[8];
+    let v22 = v21 * p.prepared[9];
+    let v23 = v20 - v22;
+    let v24 = p.prepared[7] + v23;
+    let v25 = v18 * v24;
+    let v27 = p.prepared[8] * v21;
+    let v28 = v19 * p.prepared[9];
+    let v29 = v27 + v28;
+    let v30 = p.prepared[10] + v29;
+    let v31 = v26 * v30;
+    let v32 = v25 + v31;
+    let v33 = v17 + v32;
+    let (v34, v36) = q_4.sincos();
+    let v35 = v34 * p.prepared[11];
+    let v37 = v36 * p.prepared[12];
+    let v38 = v35 + v37;
+    let v39 = v33 + v38;
+    let (v40, v42) = q_3.sincos();
+    let v41 = v40 * p.prepared[13];
+    let v43 = v42 * p.prepared[14];
+    let v44 = v41 + v43;
+    let v45 = v39 + v44;
+    let v46 = v1 * v45;
+    let v48 = v8 * v10;
+    let v49 = v2 * v14;
+    let v50 = v48 - v49;
+    let v51 = p.prepared[15] + v50;
+    let v52 = v24 * v26;
+    let v53 = v18 * v30;
+    let v54 = v52 - v53;
+    let v55 = v51 + v54;
+    let v56 = p.prepared[11] * v36;
+    let v57 = v34 * p.prepared[12];
+    let v58 = v56 - v57;
+    let v59 = v55 + v58;
+    let v60 = p.prepared[13] * v42;
+    let v61 = v40 * p.prepared[14];
+    let v62 = v60 - v61;
+    let v63 = v59 + v62;
+    let v64 = v47 * v63;
+    let v65 = v46 + v64;
+    let v66 = v65 * qd_2;
+    let v67 = v0 - v66;
+    let v68 = v1 * v44;
+    let v69 = v47 * v62;
+    let v70 = v68 + v69;
+    let v71 = v70 * qd_3;
+    let v72 = v67 - v71;
+    let v73 = v1 * v38;
+    let v74 = v47 * v58;
+    let v75 = v73 + v74;
+    let v76 = v75 * qd_4;
+    let v77 = v72 - v76;
+    let v78 = v1 * v32;
+    let v79 = v47 * v54;
+    let v80 = v78 + v79;
+    let v81 = v80 * qd_5;
+    let v82 = v77 - v81;
+    let v83 = v26 * v29;
+    let v84 = v18 * v23;
+    let v85 = v83 + v84;
+    let v86 = v1 * v85;
+    let v87 = v23 * v26;
+    let v88 = v18 * v29;
+    let v89 = v87 - v88;
+    let v90 = v47 * v89;
+    let v91 = v86 + v90;
+    let v92 = v91 * qd_6;
+    let v93 = v82 - v92;
+    let v94 = v1 * v16;
+    let v95 = v47 * v50;
     let v96 = v94 + v95;
-    let v97 = v91 + v96;
-    let v98 = v64 * v66;
-    let v99 = v63 * v67;
-    let v100 = v98 - v99;
-    let v101 = p.four_bar_motor_mass * p.torso_length_x;
-    let v102 = v100 + v101;
-    let v103 = v97 + v102;
-    let v104 = v74 * v76;
-    let v105 = v73 * v77;
-    let v106 = v104 - v105;
-    let v107 = p.thigh_motor_mass * p.torso_length_x;
-    let v108 = v106 + v107;
-    let v109 = v103 + v108;
-    let v110 = v84 * v109;
-    let v111 = v83 + v110;
-    let v112 = v111 * qd_2;
-    let v113 = v8 - v112;
-    let v114 = v9 * v79;
-    let v115 = v84 * v106;
-    let v116 = v114 + v115;
-    let v117 = v116 * qd_3;
-    let v118 = v113 - v117;
-    let v119 = v9 * v69;
-    let v120 = v84 * v100;
-    let v121 = v119 + v120;
-    let v122 = v121 * qd_4;
-    let v123 = v118 - v122;
-    let v124 = v9 * v59;
-    let v125 = v84 * v94;
-    let v126 = v124 + v125;
-    let v127 = v126 * qd_5;
-    let v128 = v123 - v127;
-    let v129 = v50 * v54;
-    let v130 = v37 * v45;
-    let v131 = v129 + v130;
-    let v132 = v9 * v131;
-    let v133 = v45 * v50;
-    let v134 = v37 * v54;
-    let v135 = v133 - v134;
-    let v136 = v84 * v135;
-    let v137 = v132 + v136;
-    let v138 = v137 * qd_6;
-    let v139 = v128 - v138;
-    let v140 = v9 * v33;
-    let v141 = v84 * v88;
-    let v142 = v140 + v141;
-    let v143 = v142 * qd_7;
-    let v144 = v139 - v143;
-    let v145 = v24 * v28;
-    let v146 = v11 * v19;
-    let v147 = v145 + v146;
-    let v148 = v9 * v147;
-    let v149 = v19 * v24;
-    let v150 = v11 * v28;
+    let v97 = v96 * qd_7;
+    let v98 = v93 - v97;
+    let v99 = v10 * v13;
+    let v100 = v2 * v7;
+    let v101 = v99 + v100;
+    let v102 = v1 * v101;
+    let v103 = v7 * v10;
+    let v104 = v2 * v13;
+    let v105 = v103 - v104;
+    let v106 = v47 * v105;
+    let v107 = v102 + v106;
+    let v108 = v107 * qd_8;
+    let v109 = v98 - v108;
+    let v110 = qd_0 * v109;
+    let v111 = p.prepared[0] * qd_1;
+    let v112 = v1 * v63;
+    let v113 = v45 * v47;
+    let v114 = v112 - v113;
+    let v115 = qd_2 * v114;
+    let v116 = v111 + v115;
+    let v117 = v1 * v62;
+    let v118 = v44 * v47;
+    let v119 = v117 - v118;
+    let v120 = qd_3 * v119;
+    let v121 = v116 + v120;
+    let v122 = v1 * v58;
+    let v123 = v38 * v47;
+    let v124 = v122 - v123;
+    let v125 = qd_4 * v124;
+    let v126 = v121 + v125;
+    let v127 = v1 * v54;
+    let v128 = v32 * v47;
+    let v129 = v127 - v128;
+    let v130 = qd_5 * v129;
+    let v131 = v126 + v130;
+    let v132 = v1 * v89;
+    let v133 = v47 * v85;
+    let v134 = v132 - v133;
+    let v135 = qd_6 * v134;
+    let v136 = v131 + v135;
+    let v137 = v1 * v50;
+    let v138 = v16 * v47;
+    let v139 = v137 - v138;
+    let v140 = qd_7 * v139;
+    let v141 = v136 + v140;
+    let v142 = v1 * v105;
+    let v143 = v47 * v101;
+    let v144 = v142 - v143;
+    let v145 = qd_8 * v144;
+    let v146 = v141 + v145;
+    let v147 = qd_1 * v146;
+    let v148 = v110 + v147;
+    let v149 = qd_1 * v114;
+    let v150 = qd_0 * v65;
     let v151 = v149 - v150;
-    let v152 = v84 * v151;
-    let v153 = v148 + v152;
-    let v154 = v153 * qd_8;
-    let v155 = v144 - v154;
-    let v156 = qd_0 * v155;
-    let v157 = v6 * qd_1;
-    let v158 = v9 * v109;
-    let v159 = v82 * v84;
-    let v160 = v158 - v159;
-    let v161 = qd_2 * v160;
+    let v152 = v3 * p.prepared[21];
+    let v153 = v5 * p.prepared[22];
+    let v154 = v152 - v153;
+    let v155 = v154 + v154;
+    let v156 = p.prepared[20] + v155;
+    let v157 = p.prepared[18] + v156;
+    let v158 = p.torso_length_x * v50;
+    let v159 = p.torso_length_y * v16;
+    let v160 = v158 + v159;
+    let v161 = v160 + v160;
     let v162 = v157 + v161;
-    let v163 = v9 * v106;
-    let v164 = v79 * v84;
+    let v163 = v19 * p.prepared[25];
+    let v164 = v21 * p.prepared[26];
     let v165 = v163 - v164;
-    let v166 = qd_3 * v165;
-    let v167 = v162 + v166;
-    let v168 = v9 * v100;
-    let v169 = v69 * v84;
-    let v170 = v168 - v169;
-    let v171 = qd_4 * v170;
-    let v172 = v167 + v171;
-    let v173 = v9 * v94;
-    let v174 = v59 * v84;
-    let v175 = v173 - v174;
-    let v176 = qd_5 * v175;
-    let v177 = v172 + v176;
-    let v178 = v9 * v135;
-    let v179 = v84 * v131;
-    let v180 = v178 - v179;
-    let v181 = qd_6 * v180;
-    let v182 = v177 + v181;
-    let v183 = v9 * v88;
-    let v184 = v33 * v84;
-    let v185 = v183 - v184;
-    let v186 = qd_7 * v185;
-    let v187 = v182 + v186;
-    let v188 = v9 * v151;
-    let v189 = v84 * v147;
-    let v190 = v188 - v189;
-    let v191 = qd_8 * v190;
-    let v192 = v187 + v191;
-    let v193 = qd_1 * v192;
-    let v194 = v156 + v193;
-    let v195 = qd_1 * v160;
-    let v196 = qd_0 * v111;
-    let v197 = v195 - v196;
-    let v198 = p.torso_com_x * p.torso_com_x;
-    let v199 = p.torso_com_y * p.torso_com_y;
-    let v200 = v198 + v199;
-    let v201 = p.torso_mass * v200;
-    let v202 = p.torso_inertia + v201;
-    let v203 = p.four_bar_link_com_x * p.four_bar_link_com_x;
-    let v204 = p.four_bar_link_com_y * p.four_bar_link_com_y;
-    let v205 = v203 + v204;
-    let v206 = p.four_bar_link_mass * v205;
-    let v207 = p.four_bar_link_inertia + v206;
-    let v208 = p.lower_leg_com_x * p.lower_leg_com_x;
-    let v209 = p.lower_leg_com_y * p.lower_leg_com_y;
-    let v210 = v208 + v209;
-    let v211 = p.lower_leg_mass * v210;
-    let v212 = p.lower_leg_inertia + v211;
-    let v213 = v14 * p.four_bar_link_length_x;
-    let v214 = v17 * p.four_bar_link_length_y;
-    let v215 = v213 + v214;
-    let v216 = v13 * v215;
-    let v217 = v17 * p.four_bar_link_length_x;
-    let v218 = v14 * p.four_bar_link_length_y;
-    let v219 = v217 - v218;
-    let v220 = v16 * v219;
-    let v221 = v216 - v220;
-    let v222 = v221 + v221;
-    let v223 = v212 + v222;
-    let v224 = p.four_bar_link_length_x * p.four_bar_link_length_x;
-    let v225 = p.four_bar_link_length_y * p.four_bar_link_length_y;
+    let v166 = v165 + v165;
+    let v167 = p.prepared[24] + v166;
+    let v168 = v162 + v167;
+    let v169 = p.torso_length_x * v54;
+    let v170 = p.torso_length_y * v32;
+    let v171 = v169 + v170;
+    let v172 = v171 + v171;
+    let v173 = v168 + v172;
+    let v174 = v36 * p.prepared[27];
+    let v175 = v34 * p.prepared[28];
+    let v176 = v174 - v175;
+    let v177 = v176 + v176;
+    let v178 = v173 + v177;
+    let v179 = v42 * p.prepared[29];
+    let v180 = v40 * p.prepared[30];
+    let v181 = v179 - v180;
+    let v182 = v181 + v181;
+    let v183 = v178 + v182;
+    let v184 = qd_2 * v183;
+    let v185 = v151 + v184;
+    let v186 = v40 * p.prepared[31];
+    let v187 = v179 + v186;
+    let v188 = p.prepared[17] + v187;
+    let v189 = qd_3 * v188;
+    let v190 = v185 + v189;
+    let v191 = v34 * p.prepared[32];
+    let v192 = v174 + v191;
+    let v193 = p.prepared[16] + v192;
+    let v194 = qd_4 * v193;
+    let v195 = v190 + v194;
+    let v196 = v167 + v171;
+    let v197 = qd_5 * v196;
+    let v198 = v195 + v197;
+    let v199 = v21 * p.prepared[33];
+    let v200 = v163 + v199;
+    let v201 = p.prepared[23] + v200;
+    let v202 = p.torso_length_x * v89;
+    let v203 = p.torso_length_y * v85;
+    let v204 = v202 + v203;
+    let v205 = v201 + v204;
+    let v206 = qd_6 * v205;
+    let v207 = v198 + v206;
+    let v208 = v156 + v160;
+    let v209 = qd_7 * v208;
+    let v210 = v207 + v209;
+    let v211 = v5 * p.prepared[34];
+    let v212 = v152 + v211;
+    let v213 = p.prepared[19] + v212;
+    let v214 = p.torso_length_x * v105;
+    let v215 = p.torso_length_y * v101;
+    let v216 = v214 + v215;
+    let v217 = v213 + v216;
+    let v218 = qd_8 * v217;
+    let v219 = v210 + v218;
+    let v220 = qd_2 * v219;
+    let v221 = v148 + v220;
+    let v222 = qd_1 * v119;
+    let v223 = qd_0 * v70;
+    let v224 = v222 - v223;
+    let v225 = qd_2 * v188;
     let v226 = v224 + v225;
-    let v227 = p.lower_leg_mass * v226;
-    let v228 = v223 + v227;
-    let v229 = v207 + v228;
-    let v230 = v88 * p.torso_length_x;
-    let v231 = v33 * p.torso_length_y;
-    let v232 = v230 + v231;
-    let v233 = v232 + v232;
-    let v234 = v229 + v233;
-    let v235 = p.torso_length_x * p.torso_length_x;
-    let v236 = p.torso_length_y * p.torso_length_y;
+    let v227 = qd_3 * p.prepared[35];
+    let v228 = v226 + v227;
+    let v229 = qd_3 * v228;
+    let v230 = v221 + v229;
+    let v231 = qd_1 * v124;
+    let v232 = qd_0 * v75;
+    let v233 = v231 - v232;
+    let v234 = qd_2 * v193;
+    let v235 = v233 + v234;
+    let v236 = qd_4 * p.prepared[36];
     let v237 = v235 + v236;
-    let v238 = v0 * v237;
-    let v239 = v234 + v238;
-    let v240 = v202 + v239;
-    let v241 = p.thigh_com_x * p.thigh_com_x;
-    let v242 = p.thigh_com_y * p.thigh_com_y;
-    let v243 = v241 + v242;
-    let v244 = p.thigh_mass * v243;
-    let v245 = p.thigh_inertia + v244;
-    let v246 = p.shin_com_x * p.shin_com_x;
-    let v247 = p.shin_com_y * p.shin_com_y;
+    let v238 = qd_4 * v237;
+    let v239 = v230 + v238;
+    let v240 = qd_1 * v129;
+    let v241 = qd_0 * v80;
+    let v242 = v240 - v241;
+    let v243 = qd_2 * v196;
+    let v244 = v242 + v243;
+    let v245 = qd_5 * v167;
+    let v246 = v244 + v245;
+    let v247 = qd_6 * v201;
     let v248 = v246 + v247;
-    let v249 = p.shin_mass * v248;
-    let v250 = p.shin_inertia + v249;
-    let v251 = v40 * p.thigh_length_x;
-    let v252 = v43 * p.thigh_length_y;
-    let v253 = v251 + v252;
-    let v254 = v39 * v253;
-    let v255 = v43 * p.thigh_length_x;
-    let v256 = v40 * p.thigh_length_y;
-    let v257 = v255 - v256;
-    let v258 = v42 * v257;
-    let v259 = v254 - v258;
-    let v260 = v259 + v259;
+    let v249 = qd_5 * v248;
+    let v250 = v239 + v249;
+    let v251 = qd_1 * v134;
+    let v252 = qd_0 * v91;
+    let v253 = v251 - v252;
+    let v254 = qd_2 * v205;
+    let v255 = v253 + v254;
+    let v256 = qd_5 * v201;
+    let v257 = v255 + v256;
+    let v258 = qd_6 * p.prepared[23];
+    let v259 = v257 + v258;
+    let v260 = qd_6 * v259;
     let v261 = v250 + v260;
-    let v262 = p.thigh_length_x * p.thigh_length_x;
-    let v263 = p.thigh_length_y * p.thigh_length_y;
-    let v264 = v262 + v263;
-    let v265 = p.shin_mass * v264;
-    let v266 = v261 + v265;
-    let v267 = v245 + v266;
-    let v268 = p.torso_length_x * v94;
-    let v269 = p.torso_length_y * v59;
+    let v262 = qd_1 * v139;
+    let v263 = qd_0 * v96;
+    let v264 = v262 - v263;
+    let v265 = qd_2 * v208;
+    let v266 = v264 + v265;
+    let v267 = qd_7 * v156;
+    let v268 = v266 + v267;
+    let v269 = qd_8 * v213;
     let v270 = v268 + v269;
-    let v271 = v270 + v270;
-    let v272 = v267 + v271;
-    let v273 = v2 * v237;
-    let v274 = v272 + v273;
-    let v275 = v240 + v274;
-    let v276 = p.four_bar_motor_com_x * p.four_bar_motor_com_x;
-    let v277 = p.four_bar_motor_com_y * p.four_bar_motor_com_y;
-    let v278 = v276 + v277;
-    let v279 = p.four_bar_motor_mass * v278;
-    let v280 = p.four_bar_motor_inertia + v279;
-    let v281 = v64 * p.torso_length_x;
-    let v282 = p.torso_length_y * v67;
-    let v283 = v281 + v282;
-    let v284 = v66 * v283;
-    let v285 = v67 * p.torso_length_x;
-    let v286 = p.torso_length_y * v64;
-    let v287 = v285 - v286;
-    let v288 = v63 * v287;
-    let v289 = v284 - v288;
-    let v290 = v289 + v289;
-    let v291 = v280 + v290;
-    let v292 = p.four_bar_motor_mass * v237;
-    let v293 = v291 + v292;
-    let v294 = v275 + v293;
-    let v295 = p.thigh_motor_com_x * p.thigh_motor_com_x;
-    let v296 = p.thigh_motor_com_y * p.thigh_motor_com_y;
-    let v297 = v295 + v296;
-    let v298 = p.thigh_motor_mass * v297;
-    let v299 = p.thigh_motor_inertia + v298;
-    let v300 = v74 * p.torso_length_x;
-    let v301 = p.torso_length_y * v77;
-    let v302 = v300 + v301;
-    let v303 = v76 * v302;
-    let v304 = v77 * p.torso_length_x;
-    let v305 = p.torso_length_y * v74;
-    let v306 = v304 - v305;
-    let v307 = v73 * v306;
-    let v308 = v303 - v307;
-    let v309 = v308 + v308;
-    let v310 = v299 + v309;
-    let v311 = p.thigh_motor_mass * v237;
-    let v312 = v310 + v311;
-    let v313 = v294 + v312;
-    let v314 = qd_2 * v313;
-    let v315 = v197 + v314;
-    let v316 = v305 - v304;
-    let v317 = v73 * v316;
-    let v318 = v303 + v317;
-    let v319 = v299 + v318;
-    let v320 = qd_3 * v319;
-    let v321 = v315 + v320;
-    let v322 = v286 - v285;
-    let v323 = v63 * v322;
-    let v324 = v284 + v323;
-    let v325 = v280 + v324;
-    let v326 = qd_4 * v325;
-    let v327 = v321 + v326;
-    let v328 = v267 + v270;
-    let v329 = qd_5 * v328;
-    let v330 = v327 + v329;
-    let v331 = v256 - v255;
-    let v332 = v42 * v331;
-    let v333 = v254 + v332;
-    let v334 = v250 + v333;
-    let v335 = p.torso_length_x * v135;
-    let v336 = p.torso_length_y * v131;
-    let v337 = v335 + v336;
-    let v338 = v334 + v337;
-    let v339 = qd_6 * v338;
-    let v340 = v330 + v339;
-    let v341 = v229 + v232;
-    let v342 = qd_7 * v341;
-    let v343 = v340 + v342;
-    let v344 = v218 - v217;
-    let v345 = v16 * v344;
-    let v346 = v216 + v345;
-    let v347 = v212 + v346;
-    let v348 = p.torso_length_x * v151;
-    let v349 = p.torso_length_y * v147;
-    let v350 = v348 + v349;
-    let v351 = v347 + v350;
-    let v352 = qd_8 * v351;
-    let v353 = v343 + v352;
-    let v354 = qd_2 * v353;
-    let v355 = v194 + v354;
-    let v356 = qd_1 * v165;
-    let v357 = qd_0 * v116;
-    let v358 = v356 - v357;
-    let v359 = qd_2 * v319;
-    let v360 = v358 + v359;
-    let v361 = p.thigh_motor_gear_ratio * p.thigh_motor_gear_ratio;
-    let v362 = p.thigh_motor_rotor_inertia * v361;
-    let v363 = v299 + v362;
-    let v364 = qd_3 * v363;
-    let v365 = v360 + v364;
-    let v366 = qd_3 * v365;
-    let v367 = v355 + v366;
-    let v368 = qd_1 * v170;
-    let v369 = qd_0 * v121;
-    let v370 = v368 - v369;
-    let v371 = qd_2 * v325;
-    let v372 = v370 + v371;
-    let v373 = p.four_bar_motor_gear_ratio * p.four_bar_motor_gear_ratio;
-    let v374 = p.four_bar_motor_rotor_inertia * v373;
-    let v375 = v280 + v374;
-    let v376 = qd_4 * v375;
-    let v377 = v372 + v376;
-    let v378 = qd_4 * v377;
-    let v379 = v367 + v378;
-    let v380 = qd_1 * v175;
-    let v381 = qd_0 * v126;
-    let v382 = v380 - v381;
-    let v383 = qd_2 * v328;
-    let v384 = v382 + v383;
-    let v385 = qd_5 * v267;
-    let v386 = v384 + v385;
-    let v387 = qd_6 * v334;
-    let v388 = v386 + v387;
-    let v389 = qd_5 * v388;
-    let v390 = v379 + v389;
-    let v391 = qd_1 * v180;
-    let v392 = qd_0 * v137;
-    let v393 = v391 - v392;
-    let v394 = qd_2 * v338;
-    let v395 = v393 + v394;
-    let v396 = qd_5 * v334;
-    let v397 = v395 + v396;
-    let v398 = qd_6 * v250;
-    let v399 = v397 + v398;
-    let v400 = qd_6 * v399;
-    let v401 = v390 + v400;
-    let v402 = qd_1 * v185;
-    let v403 = qd_0 * v142;
-    let v404 = v402 - v403;
-    let v405 = qd_2 * v341;
-    let v406 = v404 + v405;
-    let v407 = qd_7 * v229;
-    let v408 = v406 + v407;
-    let v409 = qd_8 * v347;
-    let v410 = v408 + v409;
-    let v411 = qd_7 * v410;
-    let v412 = v401 + v411;
-    let v413 = qd_1 * v190;
-    let v414 = qd_0 * v153;
-    let v415 = v413 - v414;
-    let v416 = qd_2 * v351;
-    let v417 = v415 + v416;
-    let v418 = qd_7 * v347;
-    let v419 = v417 + v418;
-    let v420 = qd_8 * v212;
-    let v421 = v419 + v420;
-    let v422 = qd_8 * v421;
-    let v423 = v412 + v422;
-    let v424 = T::lit(0.5) * v423;
-    v424
+    let v271 = qd_7 * v270;
+    let v272 = v261 + v271;
+    let v273 = qd_1 * v144;
+    let v274 = qd_0 * v107;
+    let v275 = v273 - v274;
+    let v276 = qd_2 * v217;
+    let v277 = v275 + v276;
+    let v278 = qd_7 * v213;
+    let v279 = v277 + v278;
+    let v280 = qd_8 * p.prepared[19];
+    let v281 = v279 + v280;
+    let v282 = qd_8 * v281;
+    let v283 = v272 + v282;
+    let v284 = T::lit(0.5) * v283;
+    v284
 }
 /// Potential energy `−Σ m g·c`.
 pub fn potential_energy<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> T {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6, q_7, q_8] = q.data.0[0];
-    let v0 = T::lit(0.5) * p.thigh_spring_stiffness;
-    let v1 = q_3 - q_5;
-    let v2 = v1 - p.thigh_spring_rest;
-    let v3 = v2 * v2;
-    let v4 = v0 * v3;
-    let v5 = T::lit(0.5) * p.four_bar_spring_stiffness;
-    let v6 = q_4 - q_7;
-    let v7 = v6 - p.four_bar_spring_rest;
-    let v8 = v7 * v7;
-    let v9 = v5 * v8;
-    let v10 = v4 + v9;
-    let v11 = p.four_bar_link_mass + p.lower_leg_mass;
-    let v12 = p.torso_mass + v11;
-    let v13 = p.thigh_mass + p.shin_mass;
-    let v14 = v12 + v13;
-    let v15 = v14 + p.four_bar_motor_mass;
-    let v16 = v15 + p.thigh_motor_mass;
-    let v17 = p.slide_y_mass + v16;
-    let v18 = p.slide_x_mass + v17;
-    let v19 = p.slide_x_origin_x + q_0;
-    let v20 = v18 * v19;
-    let v21 = p.gravity_x * v20;
-    let v22 = v18 * p.slide_x_origin_y;
-    let v23 = p.gravity_y * v22;
-    let v24 = v21 + v23;
-    let v25 = p.slide_x_mass * p.slide_x_com_x;
-    let v26 = v17 * p.slide_x_length_x;
-    let v27 = v25 + v26;
-    let v28 = p.gravity_x * v27;
-    let v29 = p.slide_x_mass * p.slide_x_com_y;
-    let v30 = p.slide_x_length_y + q_1;
-    let v31 = v17 * v30;
-    let v32 = v29 + v31;
-    let v33 = p.gravity_y * v32;
-    let v34 = v28 + v33;
-    let v35 = v24 + v34;
-    let v36 = p.slide_y_mass * p.slide_y_com_x;
-    let v37 = v16 * p.slide_y_length_x;
-    let v38 = v36 + v37;
-    let v39 = p.gravity_x * v38;
-    let v40 = p.slide_y_mass * p.slide_y_com_y;
-    let v41 = v16 * p.slide_y_length_y;
-    let v42 = v40 + v41;
-    let v43 = p.gravity_y * v42;
-    let v44 = v39 + v43;
-    let v45 = v35 + v44;
-    let (v69, v46) = q_2.sin_cos();
-    let v47 = p.torso_mass * p.torso_com_x;
-    let v48 = p.thigh_motor_mass * p.torso_length_x;
-    let v49 = v47 + v48;
-    let v50 = p.four_bar_motor_mass * p.torso_length_x;
-    let v51 = v49 + v50;
-    let v52 = v13 * p.torso_length_x;
-    let v53 = v51 + v52;
-    let v54 = v11 * p.torso_length_x;
-    let v55 = v53 + v54;
-    let v56 = p.gravity_x * v55;
-    let v57 = p.torso_mass * p.torso_com_y;
-    let v58 = p.thigh_motor_mass * p.torso_length_y;
-    let v59 = v57 + v58;
-    let v60 = p.four_bar_motor_mass * p.torso_length_y;
-    let v61 = v59 + v60;
-    let v62 = v13 * p.torso_length_y;
-    let v63 = v61 + v62;
-    let v64 = v11 * p.torso_length_y;
-    let v65 = v63 + v64;
-    let v66 = p.gravity_y * v65;
-    let v67 = v56 + v66;
-    let v68 = v46 * v67;
-    let v70 = p.gravity_x * v65;
-    let v71 = p.gravity_y * v55;
-    let v72 = v70 - v71;
-    let v73 = v69 * v72;
-    let v74 = v68 - v73;
-    let v75 = v45 + v74;
-    let (v78, v76) = q_3.sin_cos();
-    let v77 = v46 * v76;
-    let v79 = v69 * v78;
-    let v80 = v77 - v79;
-    let v81 = p.thigh_motor_mass * p.thigh_motor_com_x;
-    let v82 = p.gravity_x * v81;
-    let v83 = p.thigh_motor_mass * p.thigh_motor_com_y;
-    let v84 = p.gravity_y * v83;
-    let v85 = v82 + v84;
-    let v86 = v80 * v85;
-    let v87 = v69 * v76;
-    let v88 = v46 * v78;
-    let v89 = v87 + v88;
-    let v90 = p.gravity_x * v83;
-    let v91 = p.gravity_y * v81;
-    let v92 = v90 - v91;
-    let v93 = v89 * v92;
-    let v94 = v86 - v93;
-    let v95 = v75 + v94;
-    let (v98, v96) = q_4.sin_cos();
-    let v97 = v46 * v96;
-    let v99 = v69 * v98;
-    let v100 = v97 - v99;
-    let v101 = p.four_bar_motor_mass * p.four_bar_motor_com_x;
-    let v102 = p.gravity_x * v101;
-    let v103 = p.four_bar_motor_mass * p.four_bar_motor_com_y;
-    let v104 = p.gravity_y * v103;
-    let v105 = v102 + v104;
-    let v106 = v100 * v105;
-    let v107 = v69 * v96;
-    let v108 = v46 * v98;
-    let v109 = v107 + v108;
-    let v110 = p.gravity_x * v103;
-    let v111 = p.gravity_y * v101;
-    let v112 = v110 - v111;
-    let v113 = v109 * v112;
-    let v114 = v106 - v113;
-    let v115 = v95 + v114;
-    let (v118, v116) = q_5.sin_cos();
-    let v117 = v46 * v116;
-    let v119 = v69 * v118;
-    let v120 = v117 - v119;
-    let v121 = p.thigh_mass * p.thigh_com_x;
-    let v122 = p.shin_mass * p.thigh_length_x;
-    let v123 = v121 + v122;
-    let v124 = p.gravity_x * v123;
-    let v125 = p.thigh_mass * p.thigh_com_y;
-    let v126 = p.shin_mass * p.thigh_length_y;
-    let v127 = v125 + v126;
-    let v128 = p.gravity_y * v127;
-    let v129 = v124 + v128;
-    let v130 = v120 * v129;
-    let v131 = v69 * v116;
-    let v132 = v46 * v118;
-    let v133 = v131 + v132;
-    let v134 = p.gravity_x * v127;
-    let v135 = p.gravity_y * v123;
-    let v136 = v134 - v135;
-    let v137 = v133 * v136;
-    let v138 = v130 - v137;
-    let v139 = v115 + v138;
-    let (v142, v140) = q_6.sin_cos();
-    let v141 = v120 * v140;
-    let v143 = v133 * v142;
-    let v144 = v141 - v143;
-    let v145 = p.shin_mass * p.shin_com_x;
-    let v146 = p.gravity_x * v145;
-    let v147 = p.shin_mass * p.shin_com_y;
-    let v148 = p.gravity_y * v147;
-    let v149 = v146 + v148;
-    let v150 = v144 * v149;
-    let v151 = v133 * v140;
-    let v152 = v120 * v142;
-    let v153 = v151 + v152;
-    let v154 = p.gravity_x * v147;
-    let v155 = p.gravity_y * v145;
-    let v156 = v154 - v155;
-    let v157 = v153 * v156;
-    let v158 = v150 - v157;
-    let v159 = v139 + v158;
-    let (v162, v160) = q_7.sin_cos();
-    let v161 = v46 * v160;
-    let v163 = v69 * v162;
-    let v164 = v161 - v163;
-    let v165 = p.four_bar_link_mass * p.four_bar_link_com_x;
-    let v166 = p.lower_leg_mass * p.four_bar_link_length_x;
-    let v167 = v165 + v166;
-    let v168 = p.gravity_x * v167;
-    let v169 = p.four_bar_link_mass * p.four_bar_link_com_y;
-    let v170 = p.lower_leg_mass * p.four_bar_link_length_y;
-    let v171 = v169 + v170;
-    let v172 = p.gravity_y * v171;
-    let v173 = v168 + v172;
-    let v174 = v164 * v173;
-    let v175 = v69 * v160;
-    let v176 = v46 * v162;
-    let v177 = v175 + v176;
-    let v178 = p.gravity_x * v171;
-    let v179 = p.gravity_y * v167;
-    let v180 = v178 - v179;
-    let v181 = v177 * v180;
-    let v182 = v174 - v181;
-    let v183 = v159 + v182;
-    let (v186, v184) = q_8.sin_cos();
-    let v185 = v164 * v184;
-    let v187 = v177 * v186;
-    let v188 = v185 - v187;
-    let v189 = p.lower_leg_mass * p.lower_leg_com_x;
-    let v190 = p.gravity_x * v189;
-    let v191 = p.lower_leg_mass * p.lower_leg_com_y;
-    let v192 = p.gravity_y * v191;
-    let v193 = v190 + v192;
-    let v194 = v188 * v193;
-    let v195 = v177 * v184;
-    let v196 = v164 * v186;
-    let v197 = v195 + v196;
-    let v198 = p.gravity_x * v191;
-    let v199 = p.gravity_y * v189;
-    let v200 = v198 - v199;
-    let v201 = v197 * v200;
-    let v202 = v194 - v201;
-    let v203 = v183 + v202;
-    let v204 = v10 - v203;
-    v204
+    let v0 = q_3 - q_5;
+    let v1 = v0 - p.thigh_spring_rest;
+    let v2 = v1 * v1;
+    let v3 = p.prepared[55] * v2;
+    let v4 = q_4 - q_7;
+    let v5 = v4 - p.four_bar_spring_rest;
+    let v6 = v5 * v5;
+    let v7 = p.prepared[56] * v6;
+    let v8 = v3 + v7;
+    let v9 = p.slide_x_origin_x + q_0;
+    let v10 = p.prepared[1] * v9;
+    let v11 = p.gravity_x * v10;
+    let v12 = v11 + p.prepared[57];
+    let v13 = p.slide_x_length_y + q_1;
+    let v14 = p.prepared[0] * v13;
+    let v15 = p.prepared[59] + v14;
+    let v16 = p.gravity_y * v15;
+    let v17 = p.prepared[58] + v16;
+    let v18 = v12 + v17;
+    let v19 = v18 + p.prepared[60];
+    let (v22, v20) = q_2.sincos();
+    let v21 = v20 * p.prepared[40];
+    let v23 = v22 * p.prepared[39];
+    let v24 = v21 - v23;
+    let v25 = v19 + v24;
+    let (v28, v26) = q_3.sincos();
+    let v27 = v20 * v26;
+    let v29 = v22 * v28;
+    let v30 = v27 - v29;
+    let v31 = v30 * p.prepared[52];
+    let v32 = v22 * v26;
+    let v33 = v20 * v28;
+    let v34 = v32 + v33;
+    let v35 = v34 * p.prepared[51];
+    let v36 = v31 - v35;
+    let v37 = v25 + v36;
+    let (v40, v38) = q_4.sincos();
+    let v39 = v20 * v38;
+    let v41 = v22 * v40;
+    let v42 = v39 - v41;
+    let v43 = v42 * p.prepared[50];
+    let v44 = v22 * v38;
+    let v45 = v20 * v40;
+    let v46 = v44 + v45;
+    let v47 = v46 * p.prepared[49];
+    let v48 = v43 - v47;
+    let v49 = v37 + v48;
+    let (v52, v50) = q_5.sincos();
+    let v51 = v20 * v50;
+    let v53 = v22 * v52;
+    let v54 = v51 - v53;
+    let v55 = v54 * p.prepared[46];
+    let v56 = v22 * v50;
+    let v57 = v20 * v52;
+    let v58 = v56 + v57;
+    let v59 = v58 * p.prepared[45];
+    let v60 = v55 - v59;
+    let v61 = v49 + v60;
+    let (v64, v62) = q_6.sincos();
+    let v63 = v54 * v62;
+    let v65 = v58 * v64;
+    let v66 = v63 - v65;
+    let v67 = v66 * p.prepared[48];
+    let v68 = v58 * v62;
+    let v69 = v54 * v64;
+    let v70 = v68 + v69;
+    let v71 = v70 * p.prepared[47];
+    let v72 = v67 - v71;
+    let v73 = v61 + v72;
+    let (v76, v74) = q_7.sincos();
+    let v75 = v20 * v74;
+    let v77 = v22 * v76;
+    let v78 = v75 - v77;
+    let v79 = v78 * p.prepared[42];
+    let v80 = v22 * v74;
+    let v81 = v20 * v76;
+    let v82 = v80 + v81;
+    let v83 = v82 * p.prepared[41];
+    let v84 = v79 - v83;
+    let v85 = v73 + v84;
+    let (v88, v86) = q_8.sincos();
+    let v87 = v78 * v86;
+    let v89 = v82 * v88;
+    let v90 = v87 - v89;
+    let v91 = v90 * p.prepared[44];
+    let v92 = v82 * v86;
+    let v93 = v78 * v88;
+    let v94 = v92 + v93;
+    let v95 = v94 * p.prepared[43];
+    let v96 = v91 - v95;
+    let v97 = v85 + v96;
+    let v98 = v8 - v97;
+    v98
 }
 /// Joint positions in the base frame, one column per joint.
 pub fn joint_positions<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 9> {
@@ -2952,7 +2511,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 
     let v3 = p.slide_x_origin_y + v2;
     let v4 = v1 + p.slide_y_length_x;
     let v5 = v3 + p.slide_y_length_y;
-    let (v8, v6) = q_2.sin_cos();
+    let (v8, v6) = q_2.sincos();
     let v7 = v6 * p.torso_length_x;
     let v9 = v8 * p.torso_length_y;
     let v10 = v7 - v9;
@@ -2961,7 +2520,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 
     let v13 = v6 * p.torso_length_y;
     let v14 = v12 + v13;
     let v15 = v5 + v14;
-    let (v18, v16) = q_5.sin_cos();
+    let (v18, v16) = q_5.sincos();
     let v17 = v6 * v16;
     let v19 = v8 * v18;
     let v20 = v17 - v19;
@@ -2976,7 +2535,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 
     let v29 = v20 * p.thigh_length_y;
     let v30 = v28 + v29;
     let v31 = v15 + v30;
-    let (v34, v32) = q_7.sin_cos();
+    let (v34, v32) = q_7.sincos();
     let v33 = v6 * v32;
     let v35 = v8 * v34;
     let v36 = v33 - v35;
@@ -3010,121 +2569,120 @@ pub fn link_tips<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 9> 
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6, q_7, q_8] = q.data.0[0];
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
-    let v2 = p.slide_x_origin_y + p.slide_x_length_y;
-    let v3 = v1 + p.slide_y_length_x;
-    let v4 = p.slide_x_length_y + q_1;
-    let v5 = p.slide_x_origin_y + v4;
-    let v6 = v5 + p.slide_y_length_y;
-    let (v9, v7) = q_2.sin_cos();
-    let v8 = v7 * p.torso_length_x;
-    let v10 = v9 * p.torso_length_y;
-    let v11 = v8 - v10;
-    let v12 = v3 + v11;
-    let v13 = p.torso_length_x * v9;
-    let v14 = v7 * p.torso_length_y;
-    let v15 = v13 + v14;
-    let v16 = v6 + v15;
-    let (v19, v17) = q_3.sin_cos();
-    let v18 = v7 * v17;
-    let v20 = v9 * v19;
-    let v21 = v18 - v20;
-    let v22 = v21 * p.thigh_motor_length_x;
-    let v23 = v9 * v17;
-    let v24 = v7 * v19;
-    let v25 = v23 + v24;
-    let v26 = v25 * p.thigh_motor_length_y;
-    let v27 = v22 - v26;
-    let v28 = v12 + v27;
-    let v29 = p.thigh_motor_length_x * v25;
-    let v30 = v21 * p.thigh_motor_length_y;
-    let v31 = v29 + v30;
-    let v32 = v16 + v31;
-    let (v35, v33) = q_4.sin_cos();
-    let v34 = v7 * v33;
-    let v36 = v9 * v35;
-    let v37 = v34 - v36;
-    let v38 = v37 * p.four_bar_motor_length_x;
-    let v39 = v9 * v33;
-    let v40 = v7 * v35;
-    let v41 = v39 + v40;
-    let v42 = v41 * p.four_bar_motor_length_y;
-    let v43 = v38 - v42;
-    let v44 = v12 + v43;
-    let v45 = p.four_bar_motor_length_x * v41;
-    let v46 = v37 * p.four_bar_motor_length_y;
-    let v47 = v45 + v46;
-    let v48 = v16 + v47;
-    let (v51, v49) = q_5.sin_cos();
-    let v50 = v7 * v49;
-    let v52 = v9 * v51;
-    let v53 = v50 - v52;
-    let v54 = v53 * p.thigh_length_x;
-    let v55 = v9 * v49;
-    let v56 = v7 * v51;
-    let v57 = v55 + v56;
-    let v58 = v57 * p.thigh_length_y;
-    let v59 = v54 - v58;
-    let v60 = v12 + v59;
-    let v61 = p.thigh_length_x * v57;
-    let v62 = v53 * p.thigh_length_y;
-    let v63 = v61 + v62;
-    let v64 = v16 + v63;
-    let (v67, v65) = q_6.sin_cos();
-    let v66 = v53 * v65;
-    let v68 = v57 * v67;
-    let v69 = v66 - v68;
-    let v70 = v69 * p.shin_length_x;
-    let v71 = v57 * v65;
-    let v72 = v53 * v67;
-    let v73 = v71 + v72;
-    let v74 = v73 * p.shin_length_y;
-    let v75 = v70 - v74;
-    let v76 = v60 + v75;
-    let v77 = p.shin_length_x * v73;
-    let v78 = v69 * p.shin_length_y;
-    let v79 = v77 + v78;
-    let v80 = v64 + v79;
-    let (v83, v81) = q_7.sin_cos();
-    let v82 = v7 * v81;
-    let v84 = v9 * v83;
-    let v85 = v82 - v84;
-    let v86 = v85 * p.four_bar_link_length_x;
-    let v87 = v9 * v81;
-    let v88 = v7 * v83;
-    let v89 = v87 + v88;
-    let v90 = v89 * p.four_bar_link_length_y;
-    let v91 = v86 - v90;
-    let v92 = v12 + v91;
-    let v93 = p.four_bar_link_length_x * v89;
-    let v94 = v85 * p.four_bar_link_length_y;
-    let v95 = v93 + v94;
-    let v96 = v16 + v95;
-    let (v99, v97) = q_8.sin_cos();
-    let v98 = v85 * v97;
-    let v100 = v89 * v99;
-    let v101 = v98 - v100;
-    let v102 = v101 * p.lower_leg_length_x;
-    let v103 = v89 * v97;
-    let v104 = v85 * v99;
-    let v105 = v103 + v104;
-    let v106 = v105 * p.lower_leg_length_y;
-    let v107 = v102 - v106;
-    let v108 = v92 + v107;
-    let v109 = p.lower_leg_length_x * v105;
-    let v110 = v101 * p.lower_leg_length_y;
-    let v111 = v109 + v110;
-    let v112 = v96 + v111;
+    let v2 = v1 + p.slide_y_length_x;
+    let v3 = p.slide_x_length_y + q_1;
+    let v4 = p.slide_x_origin_y + v3;
+    let v5 = v4 + p.slide_y_length_y;
+    let (v8, v6) = q_2.sincos();
+    let v7 = v6 * p.torso_length_x;
+    let v9 = v8 * p.torso_length_y;
+    let v10 = v7 - v9;
+    let v11 = v2 + v10;
+    let v12 = p.torso_length_x * v8;
+    let v13 = v6 * p.torso_length_y;
+    let v14 = v12 + v13;
+    let v15 = v5 + v14;
+    let (v18, v16) = q_3.sincos();
+    let v17 = v6 * v16;
+    let v19 = v8 * v18;
+    let v20 = v17 - v19;
+    let v21 = v20 * p.thigh_motor_length_x;
+    let v22 = v8 * v16;
+    let v23 = v6 * v18;
+    let v24 = v22 + v23;
+    let v25 = v24 * p.thigh_motor_length_y;
+    let v26 = v21 - v25;
+    let v27 = v11 + v26;
+    let v28 = p.thigh_motor_length_x * v24;
+    let v29 = v20 * p.thigh_motor_length_y;
+    let v30 = v28 + v29;
+    let v31 = v15 + v30;
+    let (v34, v32) = q_4.sincos();
+    let v33 = v6 * v32;
+    let v35 = v8 * v34;
+    let v36 = v33 - v35;
+    let v37 = v36 * p.four_bar_motor_length_x;
+    let v38 = v8 * v32;
+    let v39 = v6 * v34;
+    let v40 = v38 + v39;
+    let v41 = v40 * p.four_bar_motor_length_y;
+    let v42 = v37 - v41;
+    let v43 = v11 + v42;
+    let v44 = p.four_bar_motor_length_x * v40;
+    let v45 = v36 * p.four_bar_motor_length_y;
+    let v46 = v44 + v45;
+    let v47 = v15 + v46;
+    let (v50, v48) = q_5.sincos();
+    let v49 = v6 * v48;
+    let v51 = v8 * v50;
+    let v52 = v49 - v51;
+    let v53 = v52 * p.thigh_length_x;
+    let v54 = v8 * v48;
+    let v55 = v6 * v50;
+    let v56 = v54 + v55;
+    let v57 = v56 * p.thigh_length_y;
+    let v58 = v53 - v57;
+    let v59 = v11 + v58;
+    let v60 = p.thigh_length_x * v56;
+    let v61 = v52 * p.thigh_length_y;
+    let v62 = v60 + v61;
+    let v63 = v15 + v62;
+    let (v66, v64) = q_6.sincos();
+    let v65 = v52 * v64;
+    let v67 = v56 * v66;
+    let v68 = v65 - v67;
+    let v69 = v68 * p.shin_length_x;
+    let v70 = v56 * v64;
+    let v71 = v52 * v66;
+    let v72 = v70 + v71;
+    let v73 = v72 * p.shin_length_y;
+    let v74 = v69 - v73;
+    let v75 = v59 + v74;
+    let v76 = p.shin_length_x * v72;
+    let v77 = v68 * p.shin_length_y;
+    let v78 = v76 + v77;
+    let v79 = v63 + v78;
+    let (v82, v80) = q_7.sincos();
+    let v81 = v6 * v80;
+    let v83 = v8 * v82;
+    let v84 = v81 - v83;
+    let v85 = v84 * p.four_bar_link_length_x;
+    let v86 = v8 * v80;
+    let v87 = v6 * v82;
+    let v88 = v86 + v87;
+    let v89 = v88 * p.four_bar_link_length_y;
+    let v90 = v85 - v89;
+    let v91 = v11 + v90;
+    let v92 = p.four_bar_link_length_x * v88;
+    let v93 = v84 * p.four_bar_link_length_y;
+    let v94 = v92 + v93;
+    let v95 = v15 + v94;
+    let (v98, v96) = q_8.sincos();
+    let v97 = v84 * v96;
+    let v99 = v88 * v98;
+    let v100 = v97 - v99;
+    let v101 = v100 * p.lower_leg_length_x;
+    let v102 = v88 * v96;
+    let v103 = v84 * v98;
+    let v104 = v102 + v103;
+    let v105 = v104 * p.lower_leg_length_y;
+    let v106 = v101 - v105;
+    let v107 = v91 + v106;
+    let v108 = p.lower_leg_length_x * v104;
+    let v109 = v100 * p.lower_leg_length_y;
+    let v110 = v108 + v109;
+    let v111 = v95 + v110;
     SMatrix::from_data(
         ArrayStorage([
-            [v1, v2],
-            [v3, v6],
-            [v12, v16],
-            [v28, v32],
-            [v44, v48],
-            [v60, v64],
-            [v76, v80],
-            [v92, v96],
-            [v108, v112],
+            [v1, p.prepared[61]],
+            [v2, v5],
+            [v11, v15],
+            [v27, v31],
+            [v43, v47],
+            [v59, v63],
+            [v75, v79],
+            [v91, v95],
+            [v107, v111],
         ]),
     )
 }
@@ -3134,12 +2692,12 @@ pub fn closure_points<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
     let v2 = v1 + p.slide_y_length_x;
-    let (v5, v3) = q_2.sin_cos();
+    let (v5, v3) = q_2.sincos();
     let v4 = v3 * p.torso_length_x;
     let v6 = v5 * p.torso_length_y;
     let v7 = v4 - v6;
     let v8 = v2 + v7;
-    let (v11, v9) = q_5.sin_cos();
+    let (v11, v9) = q_5.sincos();
     let v10 = v3 * v9;
     let v12 = v5 * v11;
     let v13 = v10 - v12;
@@ -3150,7 +2708,7 @@ pub fn closure_points<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2
     let v18 = v17 * p.thigh_length_y;
     let v19 = v14 - v18;
     let v20 = v8 + v19;
-    let (v23, v21) = q_6.sin_cos();
+    let (v23, v21) = q_6.sincos();
     let v22 = v13 * v21;
     let v24 = v17 * v23;
     let v25 = v22 - v24;
@@ -3176,7 +2734,7 @@ pub fn closure_points<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2
     let v45 = v25 * p.shin_pin_a_y;
     let v46 = v44 + v45;
     let v47 = v43 + v46;
-    let (v50, v48) = q_7.sin_cos();
+    let (v50, v48) = q_7.sincos();
     let v49 = v3 * v48;
     let v51 = v5 * v50;
     let v52 = v49 - v51;
@@ -3187,7 +2745,7 @@ pub fn closure_points<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2
     let v57 = v56 * p.four_bar_link_length_y;
     let v58 = v53 - v57;
     let v59 = v8 + v58;
-    let (v62, v60) = q_8.sin_cos();
+    let (v62, v60) = q_8.sincos();
     let v61 = v52 * v60;
     let v63 = v56 * v62;
     let v64 = v61 - v63;
@@ -3214,12 +2772,12 @@ pub fn contact_positions<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
     let v2 = v1 + p.slide_y_length_x;
-    let (v5, v3) = q_2.sin_cos();
+    let (v5, v3) = q_2.sincos();
     let v4 = v3 * p.torso_length_x;
     let v6 = v5 * p.torso_length_y;
     let v7 = v4 - v6;
     let v8 = v2 + v7;
-    let (v11, v9) = q_5.sin_cos();
+    let (v11, v9) = q_5.sincos();
     let v10 = v3 * v9;
     let v12 = v5 * v11;
     let v13 = v10 - v12;
@@ -3230,7 +2788,7 @@ pub fn contact_positions<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T
     let v18 = v17 * p.thigh_length_y;
     let v19 = v14 - v18;
     let v20 = v8 + v19;
-    let (v23, v21) = q_6.sin_cos();
+    let (v23, v21) = q_6.sincos();
     let v22 = v13 * v21;
     let v24 = v17 * v23;
     let v25 = v22 - v24;
@@ -3261,12 +2819,12 @@ pub fn contact_positions<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T
 /// `J_c(q) = ∂x_c/∂q`.
 pub fn contact_jacobian<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 9> {
     let [_, _, q_2, _, _, q_5, q_6, _, _] = q.data.0[0];
-    let (v0, v3) = q_2.sin_cos();
-    let (v4, v1) = q_5.sin_cos();
+    let (v0, v3) = q_2.sincos();
+    let (v4, v1) = q_5.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
-    let (v12, v7) = q_6.sin_cos();
+    let (v12, v7) = q_6.sincos();
     let v8 = v6 * v7;
     let v9 = v1 * v3;
     let v10 = v0 * v4;
@@ -3326,12 +2884,12 @@ pub fn contact_bias<T: Real>(
     let v0 = qd_2 + qd_5;
     let v1 = v0 + qd_6;
     let v2 = v1 * v1;
-    let (v6, v3) = q_2.sin_cos();
-    let (v7, v4) = q_5.sin_cos();
+    let (v6, v3) = q_2.sincos();
+    let (v7, v4) = q_5.sincos();
     let v5 = v3 * v4;
     let v8 = v6 * v7;
     let v9 = v5 - v8;
-    let (v15, v10) = q_6.sin_cos();
+    let (v15, v10) = q_6.sincos();
     let v11 = v9 * v10;
     let v12 = v4 * v6;
     let v13 = v3 * v7;
@@ -3382,822 +2940,531 @@ pub fn dynamics_terms<T: Real>(
     p: &Params<T>,
 ) -> (SMatrix<T, 9, 9>, SVector<T, 9>, SMatrix<T, 2, 9>, SVector<T, 2>) {
     let [_, _, q_2, q_3, q_4, q_5, q_6, q_7, q_8] = q.data.0[0];
-    let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6, qd_7, qd_8] = qd.data.0[0];
-    let v0 = p.four_bar_link_mass + p.lower_leg_mass;
-    let v1 = p.torso_mass + v0;
-    let v2 = p.thigh_mass + p.shin_mass;
-    let v3 = v1 + v2;
-    let v4 = v3 + p.four_bar_motor_mass;
-    let v5 = v4 + p.thigh_motor_mass;
-    let v6 = p.slide_y_mass + v5;
-    let v7 = p.slide_x_mass + v6;
-    let (v83, v8) = q_2.sin_cos();
-    let v9 = p.torso_mass * p.torso_com_y;
-    let (v10, v23) = q_7.sin_cos();
-    let v11 = p.four_bar_link_mass * p.four_bar_link_com_x;
-    let (v15, v12) = q_8.sin_cos();
-    let v13 = p.lower_leg_mass * p.lower_leg_com_x;
-    let v14 = v12 * v13;
-    let v16 = p.lower_leg_mass * p.lower_leg_com_y;
-    let v17 = v15 * v16;
-    let v18 = v14 - v17;
-    let v19 = p.lower_leg_mass * p.four_bar_link_length_x;
-    let v20 = v18 + v19;
-    let v21 = v11 + v20;
-    let v22 = v10 * v21;
-    let v24 = p.four_bar_link_mass * p.four_bar_link_com_y;
-    let v25 = v13 * v15;
-    let v26 = v12 * v16;
-    let v27 = v25 + v26;
-    let v28 = p.lower_leg_mass * p.four_bar_link_length_y;
-    let v29 = v27 + v28;
-    let v30 = v24 + v29;
-    let v31 = v23 * v30;
-    let v32 = v22 + v31;
-    let v33 = v0 * p.torso_length_y;
-    let v34 = v32 + v33;
-    let v35 = v9 + v34;
-    let (v36, v49) = q_5.sin_cos();
-    let v37 = p.thigh_mass * p.thigh_com_x;
-    let (v41, v38) = q_6.sin_cos();
-    let v39 = p.shin_mass * p.shin_com_x;
-    let v40 = v38 * v39;
-    let v42 = p.shin_mass * p.shin_com_y;
-    let v43 = v41 * v42;
-    let v44 = v40 - v43;
-    let v45 = p.shin_mass * p.thigh_length_x;
-    let v46 = v44 + v45;
-    let v47 = v37 + v46;
-    let v48 = v36 * v47;
-    let v50 = p.thigh_mass * p.thigh_com_y;
-    let v51 = v39 * v41;
-    let v52 = v38 * v42;
-    let v53 = v51 + v52;
-    let v54 = p.shin_mass * p.thigh_length_y;
-    let v55 = v53 + v54;
-    let v56 = v50 + v55;
-    let v57 = v49 * v56;
-    let v58 = v48 + v57;
-    let v59 = v2 * p.torso_length_y;
-    let v60 = v58 + v59;
-    let v61 = v35 + v60;
-    let (v62, v65) = q_4.sin_cos();
-    let v63 = p.four_bar_motor_mass * p.four_bar_motor_com_x;
-    let v64 = v62 * v63;
-    let v66 = p.four_bar_motor_mass * p.four_bar_motor_com_y;
-    let v67 = v65 * v66;
-    let v68 = v64 + v67;
-    let v69 = p.four_bar_motor_mass * p.torso_length_y;
-    let v70 = v68 + v69;
-    let v71 = v61 + v70;
-    let (v72, v75) = q_3.sin_cos();
-    let v73 = p.thigh_motor_mass * p.thigh_motor_com_x;
-    let v74 = v72 * v73;
-    let v76 = p.thigh_motor_mass * p.thigh_motor_com_y;
-    let v77 = v75 * v76;
-    let v78 = v74 + v77;
-    let v79 = p.thigh_motor_mass * p.torso_length_y;
+    let [_, _, qd_2, qd_3, qd_4, qd_5, qd_6, qd_7, qd_8] = qd.data.0[0];
+    let (v46, v0) = q_2.sincos();
+    let (v1, v9) = q_7.sincos();
+    let (v4, v2) = q_8.sincos();
+    let v3 = v2 * p.prepared[4];
+    let v5 = v4 * p.prepared[5];
+    let v6 = v3 - v5;
+    let v7 = p.prepared[3] + v6;
+    let v8 = v1 * v7;
+    let v10 = p.prepared[4] * v4;
+    let v11 = v2 * p.prepared[5];
+    let v12 = v10 + v11;
+    let v13 = p.prepared[6] + v12;
+    let v14 = v9 * v13;
+    let v15 = v8 + v14;
+    let v16 = p.prepared[2] + v15;
+    let (v17, v25) = q_5.sincos();
+    let (v20, v18) = q_6.sincos();
+    let v19 = v18 * p.prepared[8];
+    let v21 = v20 * p.prepared[9];
+    let v22 = v19 - v21;
+    let v23 = p.prepared[7] + v22;
+    let v24 = v17 * v23;
+    let v26 = p.prepared[8] * v20;
+    let v27 = v18 * p.prepared[9];
+    let v28 = v26 + v27;
+    let v29 = p.prepared[10] + v28;
+    let v30 = v25 * v29;
+    let v31 = v24 + v30;
+    let v32 = v16 + v31;
+    let (v33, v35) = q_4.sincos();
+    let v34 = v33 * p.prepared[11];
+    let v36 = v35 * p.prepared[12];
+    let v37 = v34 + v36;
+    let v38 = v32 + v37;
+    let (v39, v41) = q_3.sincos();
+    let v40 = v39 * p.prepared[13];
+    let v42 = v41 * p.prepared[14];
+    let v43 = v40 + v42;
+    let v44 = v38 + v43;
+    let v45 = v0 * v44;
+    let v47 = v7 * v9;
+    let v48 = v1 * v13;
+    let v49 = v47 - v48;
+    let v50 = p.prepared[15] + v49;
+    let v51 = v23 * v25;
+    let v52 = v17 * v29;
+    let v53 = v51 - v52;
+    let v54 = v50 + v53;
+    let v55 = p.prepared[11] * v35;
+    let v56 = v33 * p.prepared[12];
+    let v57 = v55 - v56;
+    let v58 = v54 + v57;
+    let v59 = p.prepared[13] * v41;
+    let v60 = v39 * p.prepared[14];
+    let v61 = v59 - v60;
+    let v62 = v58 + v61;
+    let v63 = v46 * v62;
+    let v64 = v45 + v63;
+    let v65 = -v64;
+    let v66 = v0 * v43;
+    let v67 = v46 * v61;
+    let v68 = v66 + v67;
+    let v69 = -v68;
+    let v70 = v0 * v37;
+    let v71 = v46 * v57;
+    let v72 = v70 + v71;
+    let v73 = -v72;
+    let v74 = v0 * v31;
+    let v75 = v46 * v53;
+    let v76 = v74 + v75;
+    let v77 = -v76;
+    let v78 = v25 * v28;
+    let v79 = v17 * v22;
     let v80 = v78 + v79;
-    let v81 = v71 + v80;
-    let v82 = v8 * v81;
-    let v84 = p.torso_mass * p.torso_com_x;
-    let v85 = v21 * v23;
-    let v86 = v10 * v30;
-    let v87 = v85 - v86;
-    let v88 = v0 * p.torso_length_x;
-    let v89 = v87 + v88;
-    let v90 = v84 + v89;
-    let v91 = v47 * v49;
-    let v92 = v36 * v56;
-    let v93 = v91 - v92;
-    let v94 = v2 * p.torso_length_x;
-    let v95 = v93 + v94;
-    let v96 = v90 + v95;
-    let v97 = v63 * v65;
-    let v98 = v62 * v66;
-    let v99 = v97 - v98;
-    let v100 = p.four_bar_motor_mass * p.torso_length_x;
-    let v101 = v99 + v100;
-    let v102 = v96 + v101;
-    let v103 = v73 * v75;
-    let v104 = v72 * v76;
-    let v105 = v103 - v104;
-    let v106 = p.thigh_motor_mass * p.torso_length_x;
-    let v107 = v105 + v106;
-    let v108 = v102 + v107;
-    let v109 = v83 * v108;
-    let v110 = v82 + v109;
-    let v111 = -v110;
-    let v112 = v8 * v78;
-    let v113 = v83 * v105;
-    let v114 = v112 + v113;
-    let v115 = -v114;
-    let v116 = v8 * v68;
-    let v117 = v83 * v99;
-    let v118 = v116 + v117;
-    let v119 = -v118;
-    let v120 = v8 * v58;
-    let v121 = v83 * v93;
-    let v122 = v120 + v121;
-    let v123 = -v122;
-    let v124 = v49 * v53;
-    let v125 = v36 * v44;
-    let v126 = v124 + v125;
-    let v127 = v8 * v126;
-    let v128 = v44 * v49;
-    let v129 = v36 * v53;
-    let v130 = v128 - v129;
-    let v131 = v83 * v130;
-    let v132 = v127 + v131;
-    let v133 = -v132;
-    let v134 = v8 * v32;
-    let v135 = v83 * v87;
-    let v136 = v134 + v135;
-    let v137 = -v136;
-    let v138 = v23 * v27;
-    let v139 = v10 * v18;
-    let v140 = v138 + v139;
-    let v141 = v8 * v140;
-    let v142 = v18 * v23;
-    let v143 = v10 * v27;
-    let v144 = v142 - v143;
-    let v145 = v83 * v144;
-    let v146 = v141 + v145;
-    let v147 = -v146;
-    let v148 = v8 * v108;
-    let v149 = v81 * v83;
-    let v150 = v148 - v149;
-    let v151 = v8 * v105;
-    let v152 = v78 * v83;
-    let v153 = v151 - v152;
-    let v154 = v8 * v99;
-    let v155 = v68 * v83;
-    let v156 = v154 - v155;
-    let v157 = v8 * v93;
-    let v158 = v58 * v83;
-    let v159 = v157 - v158;
-    let v160 = v8 * v130;
-    let v161 = v83 * v126;
-    let v162 = v160 - v161;
-    let v163 = v8 * v87;
-    let v164 = v32 * v83;
-    let v165 = v163 - v164;
-    let v166 = v8 * v144;
-    let v167 = v83 * v140;
-    let v168 = v166 - v167;
-    let v169 = p.torso_com_x * p.torso_com_x;
-    let v170 = p.torso_com_y * p.torso_com_y;
-    let v171 = v169 + v170;
-    let v172 = p.torso_mass * v171;
-    let v173 = p.torso_inertia + v172;
-    let v174 = p.four_bar_link_com_x * p.four_bar_link_com_x;
-    let v175 = p.four_bar_link_com_y * p.four_bar_link_com_y;
-    let v176 = v174 + v175;
-    let v177 = p.four_bar_link_mass * v176;
-    let v178 = p.four_bar_link_inertia + v177;
-    let v179 = p.lower_leg_com_x * p.lower_leg_com_x;
-    let v180 = p.lower_leg_com_y * p.lower_leg_com_y;
-    let v181 = v179 + v180;
-    let v182 = p.lower_leg_mass * v181;
-    let v183 = p.lower_leg_inertia + v182;
-    let v184 = v13 * p.four_bar_link_length_x;
-    let v185 = v16 * p.four_bar_link_length_y;
-    let v186 = v184 + v185;
-    let v187 = v12 * v186;
-    let v188 = v16 * p.four_bar_link_length_x;
-    let v189 = v13 * p.four_bar_link_length_y;
-    let v190 = v188 - v189;
-    let v191 = v15 * v190;
-    let v192 = v187 - v191;
-    let v193 = v192 + v192;
-    let v194 = v183 + v193;
-    let v195 = p.four_bar_link_length_x * p.four_bar_link_length_x;
-    let v196 = p.four_bar_link_length_y * p.four_bar_link_length_y;
-    let v197 = v195 + v196;
-    let v198 = p.lower_leg_mass * v197;
+    let v81 = v0 * v80;
+    let v82 = v22 * v25;
+    let v83 = v17 * v28;
+    let v84 = v82 - v83;
+    let v85 = v46 * v84;
+    let v86 = v81 + v85;
+    let v87 = -v86;
+    let v88 = v0 * v15;
+    let v89 = v46 * v49;
+    let v90 = v88 + v89;
+    let v91 = -v90;
+    let v92 = v9 * v12;
+    let v93 = v1 * v6;
+    let v94 = v92 + v93;
+    let v95 = v0 * v94;
+    let v96 = v6 * v9;
+    let v97 = v1 * v12;
+    let v98 = v96 - v97;
+    let v99 = v46 * v98;
+    let v100 = v95 + v99;
+    let v101 = -v100;
+    let v102 = v0 * v62;
+    let v103 = v44 * v46;
+    let v104 = v102 - v103;
+    let v105 = v0 * v61;
+    let v106 = v43 * v46;
+    let v107 = v105 - v106;
+    let v108 = v0 * v57;
+    let v109 = v37 * v46;
+    let v110 = v108 - v109;
+    let v111 = v0 * v53;
+    let v112 = v31 * v46;
+    let v113 = v111 - v112;
+    let v114 = v0 * v84;
+    let v115 = v46 * v80;
+    let v116 = v114 - v115;
+    let v117 = v0 * v49;
+    let v118 = v15 * v46;
+    let v119 = v117 - v118;
+    let v120 = v0 * v98;
+    let v121 = v46 * v94;
+    let v122 = v120 - v121;
+    let v123 = v2 * p.prepared[21];
+    let v124 = v4 * p.prepared[22];
+    let v125 = v123 - v124;
+    let v126 = v125 + v125;
+    let v127 = p.prepared[20] + v126;
+    let v128 = p.prepared[18] + v127;
+    let v129 = p.torso_length_x * v49;
+    let v130 = p.torso_length_y * v15;
+    let v131 = v129 + v130;
+    let v132 = v131 + v131;
+    let v133 = v128 + v132;
+    let v134 = v18 * p.prepared[25];
+    let v135 = v20 * p.prepared[26];
+    let v136 = v134 - v135;
+    let v137 = v136 + v136;
+    let v138 = p.prepared[24] + v137;
+    let v139 = v133 + v138;
+    let v140 = p.torso_length_x * v53;
+    let v141 = p.torso_length_y * v31;
+    let v142 = v140 + v141;
+    let v143 = v142 + v142;
+    let v144 = v139 + v143;
+    let v145 = v35 * p.prepared[27];
+    let v146 = v33 * p.prepared[28];
+    let v147 = v145 - v146;
+    let v148 = v147 + v147;
+    let v149 = v144 + v148;
+    let v150 = v41 * p.prepared[29];
+    let v151 = v39 * p.prepared[30];
+    let v152 = v150 - v151;
+    let v153 = v152 + v152;
+    let v154 = v149 + v153;
+    let v155 = v39 * p.prepared[31];
+    let v156 = v150 + v155;
+    let v157 = p.prepared[17] + v156;
+    let v158 = v33 * p.prepared[32];
+    let v159 = v145 + v158;
+    let v160 = p.prepared[16] + v159;
+    let v161 = v138 + v142;
+    let v162 = v20 * p.prepared[33];
+    let v163 = v134 + v162;
+    let v164 = p.prepared[23] + v163;
+    let v165 = p.torso_length_x * v84;
+    let v166 = p.torso_length_y * v80;
+    let v167 = v165 + v166;
+    let v168 = v164 + v167;
+    let v169 = v127 + v131;
+    let v170 = v4 * p.prepared[34];
+    let v171 = v123 + v170;
+    let v172 = p.prepared[19] + v171;
+    let v173 = p.torso_length_x * v98;
+    let v174 = p.torso_length_y * v94;
+    let v175 = v173 + v174;
+    let v176 = v172 + v175;
+    let v177 = qd_2 * qd_2;
+    let v178 = v0 * p.torso_com_x;
+    let v179 = p.torso_com_y * v46;
+    let v180 = v178 - v179;
+    let v181 = v177 * v180;
+    let v182 = p.torso_mass * v181;
+    let v183 = qd_2 + qd_3;
+    let v184 = v183 * v183;
+    let v185 = v0 * v41;
+    let v186 = v39 * v46;
+    let v187 = v185 - v186;
+    let v188 = p.thigh_motor_com_x * v187;
+    let v189 = v41 * v46;
+    let v190 = v0 * v39;
+    let v191 = v189 + v190;
+    let v192 = p.thigh_motor_com_y * v191;
+    let v193 = v188 - v192;
+    let v194 = v184 * v193;
+    let v195 = v0 * p.torso_length_x;
+    let v196 = p.torso_length_y * v46;
+    let v197 = v195 - v196;
+    let v198 = v177 * v197;
     let v199 = v194 + v198;
-    let v200 = v178 + v199;
-    let v201 = v87 * p.torso_length_x;
-    let v202 = v32 * p.torso_length_y;
-    let v203 = v201 + v202;
-    let v204 = v203 + v203;
-    let v205 = v200 + v204;
-    let v206 = p.torso_length_x * p.torso_length_x;
-    let v207 = p.torso_length_y * p.torso_length_y;
-    let v208 = v206 + v207;
-    let v209 = v0 * v208;
-    let v210 = v205 + v209;
-    let v211 = v173 + v210;
-    let v212 = p.thigh_com_x * p.thigh_com_x;
-    let v213 = p.thigh_com_y * p.thigh_com_y;
-    let v214 = v212 + v213;
-    let v215 = p.thigh_mass * v214;
-    let v216 = p.thigh_inertia + v215;
-    let v217 = p.shin_com_x * p.shin_com_x;
-    let v218 = p.shin_com_y * p.shin_com_y;
-    let v219 = v217 + v218;
-    let v220 = p.shin_mass * v219;
-    let v221 = p.shin_inertia + v220;
-    let v222 = v39 * p.thigh_length_x;
-    let v223 = v42 * p.thigh_length_y;
-    let v224 = v222 + v223;
-    let v225 = v38 * v224;
-    let v226 = v42 * p.thigh_length_x;
-    let v227 = v39 * p.thigh_length_y;
-    let v228 = v226 - v227;
-    let v229 = v41 * v228;
-    let v230 = v225 - v229;
-    let v231 = v230 + v230;
-    let v232 = v221 + v231;
-    let v233 = p.thigh_length_x * p.thigh_length_x;
-    let v234 = p.thigh_length_y * p.thigh_length_y;
-    let v235 = v233 + v234;
-    let v236 = p.shin_mass * v235;
-    let v237 = v232 + v236;
-    let v238 = v216 + v237;
-    let v239 = p.torso_length_x * v93;
-    let v240 = p.torso_length_y * v58;
-    let v241 = v239 + v240;
-    let v242 = v241 + v241;
-    let v243 = v238 + v242;
-    let v244 = v2 * v208;
-    let v245 = v243 + v244;
-    let v246 = v211 + v245;
-    let v247 = p.four_bar_motor_com_x * p.four_bar_motor_com_x;
-    let v248 = p.four_bar_motor_com_y * p.four_bar_motor_com_y;
-    let v249 = v247 + v248;
-    let v250 = p.four_bar_motor_mass * v249;
-    let v251 = p.four_bar_motor_inertia + v250;
-    let v252 = v63 * p.torso_length_x;
-    let v253 = p.torso_length_y * v66;
-    let v254 = v252 + v253;
-    let v255 = v65 * v254;
-    let v256 = v66 * p.torso_length_x;
-    let v257 = p.torso_length_y * v63;
-    let v258 = v256 - v257;
-    let v259 = v62 * v258;
-    let v260 = v255 - v259;
-    let v261 = v260 + v260;
-    let v262 = v251 + v261;
-    let v263 = p.four_bar_motor_mass * v208;
-    let v264 = v262 + v263;
-    let v265 = v246 + v264;
-    let v266 = p.thigh_motor_com_x * p.thigh_motor_com_x;
-    let v267 = p.thigh_motor_com_y * p.thigh_motor_com_y;
-    let v268 = v266 + v267;
-    let v269 = p.thigh_motor_mass * v268;
-    let v270 = p.thigh_motor_inertia + v269;
-    let v271 = v73 * p.torso_length_x;
-    let v272 = p.torso_length_y * v76;
-    let v273 = v271 + v272;
-    let v274 = v75 * v273;
-    let v275 = v76 * p.torso_length_x;
-    let v276 = p.torso_length_y * v73;
-    let v277 = v275 - v276;
-    let v278 = v72 * v277;
-    let v279 = v274 - v278;
-    let v280 = v279 + v279;
-    let v281 = v270 + v280;
-    let v282 = p.thigh_motor_mass * v208;
-    let v283 = v281 + v282;
-    let v284 = v265 + v283;
-    let v285 = v276 - v275;
-    let v286 = v72 * v285;
-    let v287 = v274 + v286;
-    let v288 = v270 + v287;
-    let v289 = v257 - v256;
-    let v290 = v62 * v289;
-    let v291 = v255 + v290;
-    let v292 = v251 + v291;
-    let v293 = v238 + v241;
-    let v294 = v227 - v226;
-    let v295 = v41 * v294;
-    let v296 = v225 + v295;
-    let v297 = v221 + v296;
-    let v298 = p.torso_length_x * v130;
-    let v299 = p.torso_length_y * v126;
+    let v200 = p.thigh_motor_mass * v199;
+    let v201 = v182 + v200;
+    let v202 = qd_2 + qd_4;
+    let v203 = v202 * v202;
+    let v204 = v0 * v35;
+    let v205 = v33 * v46;
+    let v206 = v204 - v205;
+    let v207 = p.four_bar_motor_com_x * v206;
+    let v208 = v35 * v46;
+    let v209 = v0 * v33;
+    let v210 = v208 + v209;
+    let v211 = p.four_bar_motor_com_y * v210;
+    let v212 = v207 - v211;
+    let v213 = v203 * v212;
+    let v214 = v198 + v213;
+    let v215 = p.four_bar_motor_mass * v214;
+    let v216 = v201 + v215;
+    let v217 = qd_2 + qd_5;
+    let v218 = v217 * v217;
+    let v219 = v0 * v25;
+    let v220 = v17 * v46;
+    let v221 = v219 - v220;
+    let v222 = p.thigh_com_x * v221;
+    let v223 = v25 * v46;
+    let v224 = v0 * v17;
+    let v225 = v223 + v224;
+    let v226 = p.thigh_com_y * v225;
+    let v227 = v222 - v226;
+    let v228 = v218 * v227;
+    let v229 = v198 + v228;
+    let v230 = p.thigh_mass * v229;
+    let v231 = v216 + v230;
+    let v232 = v217 + qd_6;
+    let v233 = v232 * v232;
+    let v234 = v18 * v221;
+    let v235 = v20 * v225;
+    let v236 = v234 - v235;
+    let v237 = p.shin_com_x * v236;
+    let v238 = v18 * v225;
+    let v239 = v20 * v221;
+    let v240 = v238 + v239;
+    let v241 = p.shin_com_y * v240;
+    let v242 = v237 - v241;
+    let v243 = v233 * v242;
+    let v244 = p.thigh_length_x * v221;
+    let v245 = p.thigh_length_y * v225;
+    let v246 = v244 - v245;
+    let v247 = v218 * v246;
+    let v248 = v243 + v247;
+    let v249 = v198 + v248;
+    let v250 = p.shin_mass * v249;
+    let v251 = v231 + v250;
+    let v252 = qd_2 + qd_7;
+    let v253 = v252 * v252;
+    let v254 = v0 * v9;
+    let v255 = v1 * v46;
+    let v256 = v254 - v255;
+    let v257 = p.four_bar_link_com_x * v256;
+    let v258 = v9 * v46;
+    let v259 = v0 * v1;
+    let v260 = v258 + v259;
+    let v261 = p.four_bar_link_com_y * v260;
+    let v262 = v257 - v261;
+    let v263 = v253 * v262;
+    let v264 = v198 + v263;
+    let v265 = p.four_bar_link_mass * v264;
+    let v266 = v251 + v265;
+    let v267 = v252 + qd_8;
+    let v268 = v267 * v267;
+    let v269 = v2 * v256;
+    let v270 = v4 * v260;
+    let v271 = v269 - v270;
+    let v272 = p.lower_leg_com_x * v271;
+    let v273 = v2 * v260;
+    let v274 = v4 * v256;
+    let v275 = v273 + v274;
+    let v276 = p.lower_leg_com_y * v275;
+    let v277 = v272 - v276;
+    let v278 = v268 * v277;
+    let v279 = p.four_bar_link_length_x * v256;
+    let v280 = p.four_bar_link_length_y * v260;
+    let v281 = v279 - v280;
+    let v282 = v253 * v281;
+    let v283 = v278 + v282;
+    let v284 = v198 + v283;
+    let v285 = p.lower_leg_mass * v284;
+    let v286 = v266 + v285;
+    let v287 = v286 + p.prepared[37];
+    let v288 = -v287;
+    let v289 = v46 * p.torso_com_x;
+    let v290 = v0 * p.torso_com_y;
+    let v291 = v289 + v290;
+    let v292 = v177 * v291;
+    let v293 = p.torso_mass * v292;
+    let v294 = p.thigh_motor_com_x * v191;
+    let v295 = p.thigh_motor_com_y * v187;
+    let v296 = v294 + v295;
+    let v297 = v184 * v296;
+    let v298 = v46 * p.torso_length_x;
+    let v299 = v0 * p.torso_length_y;
     let v300 = v298 + v299;
-    let v301 = v297 + v300;
-    let v302 = v200 + v203;
-    let v303 = v189 - v188;
-    let v304 = v15 * v303;
-    let v305 = v187 + v304;
-    let v306 = v183 + v305;
-    let v307 = p.torso_length_x * v144;
-    let v308 = p.torso_length_y * v140;
-    let v309 = v307 + v308;
-    let v310 = v306 + v309;
-    let v311 = p.thigh_motor_gear_ratio * p.thigh_motor_gear_ratio;
-    let v312 = p.thigh_motor_rotor_inertia * v311;
-    let v313 = v270 + v312;
-    let v314 = p.four_bar_motor_gear_ratio * p.four_bar_motor_gear_ratio;
-    let v315 = p.four_bar_motor_rotor_inertia * v314;
-    let v316 = v251 + v315;
-    let v317 = qd_2 * qd_2;
-    let v318 = v150 * v317;
-    let v319 = v153 + v153;
-    let v320 = qd_2 * qd_3;
-    let v321 = v319 * v320;
-    let v322 = v318 + v321;
-    let v323 = v156 + v156;
-    let v324 = qd_2 * qd_4;
-    let v325 = v323 * v324;
-    let v326 = v322 + v325;
-    let v327 = v159 + v159;
-    let v328 = qd_2 * qd_5;
-    let v329 = v327 * v328;
-    let v330 = v326 + v329;
-    let v331 = v162 + v162;
-    let v332 = qd_2 * qd_6;
-    let v333 = v331 * v332;
-    let v334 = v330 + v333;
-    let v335 = v165 + v165;
-    let v336 = qd_2 * qd_7;
-    let v337 = v335 * v336;
-    let v338 = v334 + v337;
-    let v339 = v168 + v168;
-    let v340 = qd_2 * qd_8;
-    let v341 = v339 * v340;
-    let v342 = v338 + v341;
-    let v343 = qd_3 * qd_3;
-    let v344 = v153 * v343;
-    let v345 = v342 + v344;
-    let v346 = qd_4 * qd_4;
-    let v347 = v156 * v346;
-    let v348 = v345 + v347;
-    let v349 = qd_5 * qd_5;
-    let v350 = v159 * v349;
-    let v351 = v348 + v350;
-    let v352 = qd_5 * qd_6;
-    let v353 = v331 * v352;
-    let v354 = v351 + v353;
-    let v355 = qd_6 * qd_6;
-    let v356 = v162 * v355;
-    let v357 = v354 + v356;
-    let v358 = qd_7 * qd_7;
-    let v359 = v165 * v358;
-    let v360 = v357 + v359;
-    let v361 = qd_7 * qd_8;
-    let v362 = v339 * v361;
-    let v363 = v360 + v362;
-    let v364 = qd_8 * qd_8;
-    let v365 = v168 * v364;
-    let v366 = v363 + v365;
-    let v367 = v7 * p.gravity_x;
-    let v368 = v366 + v367;
-    let v369 = -v368;
-    let v370 = v110 * v317;
-    let v371 = v114 + v114;
-    let v372 = v320 * v371;
-    let v373 = v370 + v372;
-    let v374 = v118 + v118;
-    let v375 = v324 * v374;
-    let v376 = v373 + v375;
-    let v377 = v122 + v122;
-    let v378 = v328 * v377;
-    let v379 = v376 + v378;
-    let v380 = v132 + v132;
-    let v381 = v332 * v380;
-    let v382 = v379 + v381;
-    let v383 = v136 + v136;
-    let v384 = v336 * v383;
-    let v385 = v382 + v384;
-    let v386 = v146 + v146;
-    let v387 = v340 * v386;
-    let v388 = v385 + v387;
-    let v389 = v114 * v343;
-    let v390 = v388 + v389;
-    let v391 = v118 * v346;
-    let v392 = v390 + v391;
-    let v393 = v122 * v349;
-    let v394 = v392 + v393;
-    let v395 = v352 * v380;
-    let v396 = v394 + v395;
-    let v397 = v132 * v355;
-    let v398 = v396 + v397;
-    let v399 = v136 * v358;
-    let v400 = v398 + v399;
-    let v401 = v361 * v386;
-    let v402 = v400 + v401;
-    let v403 = v146 * v364;
+    let v301 = v177 * v300;
+    let v302 = v297 + v301;
+    let v303 = p.thigh_motor_mass * v302;
+    let v304 = v293 + v303;
+    let v305 = p.four_bar_motor_com_x * v210;
+    let v306 = p.four_bar_motor_com_y * v206;
+    let v307 = v305 + v306;
+    let v308 = v203 * v307;
+    let v309 = v301 + v308;
+    let v310 = p.four_bar_motor_mass * v309;
+    let v311 = v304 + v310;
+    let v312 = p.thigh_com_x * v225;
+    let v313 = p.thigh_com_y * v221;
+    let v314 = v312 + v313;
+    let v315 = v218 * v314;
+    let v316 = v301 + v315;
+    let v317 = p.thigh_mass * v316;
+    let v318 = v311 + v317;
+    let v319 = p.shin_com_x * v240;
+    let v320 = p.shin_com_y * v236;
+    let v321 = v319 + v320;
+    let v322 = v233 * v321;
+    let v323 = p.thigh_length_x * v225;
+    let v324 = p.thigh_length_y * v221;
+    let v325 = v323 + v324;
+    let v326 = v218 * v325;
+    let v327 = v322 + v326;
+    let v328 = v301 + v327;
+    let v329 = p.shin_mass * v328;
+    let v330 = v318 + v329;
+    let v331 = p.four_bar_link_com_x * v260;
+    let v332 = p.four_bar_link_com_y * v256;
+    let v333 = v331 + v332;
+    let v334 = v253 * v333;
+    let v335 = v301 + v334;
+    let v336 = p.four_bar_link_mass * v335;
+    let v337 = v330 + v336;
+    let v338 = p.lower_leg_com_x * v275;
+    let v339 = p.lower_leg_com_y * v271;
+    let v340 = v338 + v339;
+    let v341 = v268 * v340;
+    let v342 = p.four_bar_link_length_x * v260;
+    let v343 = p.four_bar_link_length_y * v256;
+    let v344 = v342 + v343;
+    let v345 = v253 * v344;
+    let v346 = v341 + v345;
+    let v347 = v301 + v346;
+    let v348 = p.lower_leg_mass * v347;
+    let v349 = v337 + v348;
+    let v350 = v349 + p.prepared[38];
+    let v351 = -v350;
+    let v352 = v181 * v291;
+    let v353 = v180 * v292;
+    let v354 = v352 - v353;
+    let v355 = p.torso_mass * v354;
+    let v356 = v296 + v300;
+    let v357 = v199 * v356;
+    let v358 = v193 + v197;
+    let v359 = v302 * v358;
+    let v360 = v357 - v359;
+    let v361 = p.thigh_motor_mass * v360;
+    let v362 = v355 + v361;
+    let v363 = v300 + v307;
+    let v364 = v214 * v363;
+    let v365 = v197 + v212;
+    let v366 = v309 * v365;
+    let v367 = v364 - v366;
+    let v368 = p.four_bar_motor_mass * v367;
+    let v369 = v362 + v368;
+    let v370 = v300 + v314;
+    let v371 = v229 * v370;
+    let v372 = v197 + v227;
+    let v373 = v316 * v372;
+    let v374 = v371 - v373;
+    let v375 = p.thigh_mass * v374;
+    let v376 = v369 + v375;
+    let v377 = v321 + v325;
+    let v378 = v300 + v377;
+    let v379 = v249 * v378;
+    let v380 = v242 + v246;
+    let v381 = v197 + v380;
+    let v382 = v328 * v381;
+    let v383 = v379 - v382;
+    let v384 = p.shin_mass * v383;
+    let v385 = v376 + v384;
+    let v386 = v300 + v333;
+    let v387 = v264 * v386;
+    let v388 = v197 + v262;
+    let v389 = v335 * v388;
+    let v390 = v387 - v389;
+    let v391 = p.four_bar_link_mass * v390;
+    let v392 = v385 + v391;
+    let v393 = v340 + v344;
+    let v394 = v300 + v393;
+    let v395 = v284 * v394;
+    let v396 = v277 + v281;
+    let v397 = v197 + v396;
+    let v398 = v347 * v397;
+    let v399 = v395 - v398;
+    let v400 = p.lower_leg_mass * v399;
+    let v401 = v392 + v400;
+    let v402 = v0 * p.prepared[39];
+    let v403 = v46 * p.prepared[40];
     let v404 = v402 + v403;
-    let v405 = v6 * p.gravity_y;
-    let v406 = v404 + v405;
-    let v407 = -v406;
-    let v408 = v153 - v153;
-    let v409 = qd_3 * qd_0;
-    let v410 = v408 * v409;
-    let v411 = v156 - v156;
-    let v412 = qd_4 * qd_0;
-    let v413 = v411 * v412;
-    let v414 = v410 + v413;
-    let v415 = v159 - v159;
-    let v416 = qd_5 * qd_0;
-    let v417 = v415 * v416;
-    let v418 = v414 + v417;
-    let v419 = v162 - v162;
-    let v420 = qd_6 * qd_0;
-    let v421 = v419 * v420;
-    let v422 = v418 + v421;
-    let v423 = v165 - v165;
-    let v424 = qd_7 * qd_0;
-    let v425 = v423 * v424;
-    let v426 = v422 + v425;
-    let v427 = v168 - v168;
-    let v428 = qd_8 * qd_0;
-    let v429 = v427 * v428;
-    let v430 = v426 + v429;
-    let v431 = v114 - v114;
-    let v432 = qd_3 * qd_1;
-    let v433 = v431 * v432;
-    let v434 = v430 + v433;
-    let v435 = v118 - v118;
-    let v436 = qd_4 * qd_1;
-    let v437 = v435 * v436;
-    let v438 = v434 + v437;
-    let v439 = v122 - v122;
-    let v440 = qd_5 * qd_1;
-    let v441 = v439 * v440;
-    let v442 = v438 + v441;
-    let v443 = v132 - v132;
-    let v444 = qd_6 * qd_1;
-    let v445 = v443 * v444;
-    let v446 = v442 + v445;
-    let v447 = v136 - v136;
-    let v448 = qd_7 * qd_1;
-    let v449 = v447 * v448;
-    let v450 = v446 + v449;
-    let v451 = v146 - v146;
-    let v452 = qd_8 * qd_1;
-    let v453 = v451 * v452;
-    let v454 = v450 + v453;
-    let v455 = v72 * v273;
-    let v456 = v75 * v277;
-    let v457 = v455 + v456;
-    let v458 = -v457;
-    let v459 = v458 + v458;
-    let v460 = v320 * v459;
-    let v461 = v454 + v460;
-    let v462 = v62 * v254;
-    let v463 = v65 * v258;
-    let v464 = v462 + v463;
-    let v465 = -v464;
-    let v466 = v465 + v465;
-    let v467 = v324 * v466;
-    let v468 = v461 + v467;
-    let v469 = p.torso_length_y * v93;
-    let v470 = v58 * p.torso_length_x;
-    let v471 = v469 - v470;
-    let v472 = v471 + v471;
-    let v473 = v328 * v472;
-    let v474 = v468 + v473;
-    let v475 = v41 * v224;
-    let v476 = v38 * v228;
-    let v477 = v475 + v476;
-    let v478 = -v477;
-    let v479 = v478 + v478;
-    let v480 = p.torso_length_y * v130;
-    let v481 = p.torso_length_x * v126;
-    let v482 = v480 - v481;
-    let v483 = v482 + v482;
-    let v484 = v479 + v483;
-    let v485 = v332 * v484;
-    let v486 = v474 + v485;
-    let v487 = p.torso_length_y * v87;
-    let v488 = v32 * p.torso_length_x;
-    let v489 = v487 - v488;
-    let v490 = v489 + v489;
-    let v491 = v336 * v490;
-    let v492 = v486 + v491;
-    let v493 = v15 * v186;
-    let v494 = v12 * v190;
-    let v495 = v493 + v494;
-    let v496 = -v495;
-    let v497 = v496 + v496;
-    let v498 = p.torso_length_y * v144;
-    let v499 = p.torso_length_x * v140;
-    let v500 = v498 - v499;
-    let v501 = v500 + v500;
-    let v502 = v497 + v501;
-    let v503 = v340 * v502;
-    let v504 = v492 + v503;
-    let v505 = v75 * v285;
-    let v506 = v505 - v455;
-    let v507 = v343 * v506;
-    let v508 = v504 + v507;
-    let v509 = v65 * v289;
-    let v510 = v509 - v462;
-    let v511 = v346 * v510;
-    let v512 = v508 + v511;
-    let v513 = v349 * v471;
-    let v514 = v512 + v513;
-    let v515 = v479 + v482;
-    let v516 = v482 + v515;
-    let v517 = v352 * v516;
-    let v518 = v514 + v517;
-    let v519 = v38 * v294;
-    let v520 = v519 - v475;
-    let v521 = v482 + v520;
-    let v522 = v355 * v521;
-    let v523 = v518 + v522;
-    let v524 = v358 * v489;
-    let v525 = v523 + v524;
-    let v526 = v497 + v500;
-    let v527 = v500 + v526;
-    let v528 = v361 * v527;
-    let v529 = v525 + v528;
-    let v530 = v12 * v303;
-    let v531 = v530 - v493;
-    let v532 = v500 + v531;
-    let v533 = v364 * v532;
-    let v534 = v529 + v533;
-    let v535 = v9 + v79;
-    let v536 = v69 + v535;
-    let v537 = v59 + v536;
-    let v538 = v33 + v537;
-    let v539 = p.gravity_x * v538;
-    let v540 = v84 + v106;
-    let v541 = v100 + v540;
-    let v542 = v94 + v541;
-    let v543 = v88 + v542;
-    let v544 = p.gravity_y * v543;
-    let v545 = v539 - v544;
-    let v546 = v8 * v545;
-    let v547 = p.gravity_x * v543;
-    let v548 = p.gravity_y * v538;
-    let v549 = v547 + v548;
-    let v550 = v83 * v549;
-    let v551 = v546 + v550;
-    let v552 = v8 * v23;
-    let v553 = v10 * v83;
-    let v554 = v552 - v553;
-    let v555 = v24 + v28;
-    let v556 = p.gravity_x * v555;
-    let v557 = v11 + v19;
-    let v558 = p.gravity_y * v557;
-    let v559 = v556 - v558;
-    let v560 = v554 * v559;
-    let v561 = v23 * v83;
-    let v562 = v8 * v10;
-    let v563 = v561 + v562;
-    let v564 = p.gravity_x * v557;
-    let v565 = p.gravity_y * v555;
-    let v566 = v564 + v565;
-    let v567 = v563 * v566;
-    let v568 = v560 + v567;
-    let v569 = v12 * v554;
-    let v570 = v15 * v563;
-    let v571 = v569 - v570;
-    let v572 = v16 * p.gravity_x;
-    let v573 = v13 * p.gravity_y;
-    let v574 = v572 - v573;
-    let v575 = v571 * v574;
-    let v576 = v12 * v563;
-    let v577 = v15 * v554;
-    let v578 = v576 + v577;
-    let v579 = v13 * p.gravity_x;
-    let v580 = v16 * p.gravity_y;
-    let v581 = v579 + v580;
-    let v582 = v578 * v581;
-    let v583 = v575 + v582;
-    let v584 = v568 + v583;
-    let v585 = v551 + v584;
-    let v586 = v8 * v49;
-    let v587 = v36 * v83;
-    let v588 = v586 - v587;
-    let v589 = v50 + v54;
-    let v590 = p.gravity_x * v589;
-    let v591 = v37 + v45;
-    let v592 = p.gravity_y * v591;
-    let v593 = v590 - v592;
-    let v594 = v588 * v593;
-    let v595 = v49 * v83;
-    let v596 = v8 * v36;
-    let v597 = v595 + v596;
-    let v598 = p.gravity_x * v591;
-    let v599 = p.gravity_y * v589;
-    let v600 = v598 + v599;
-    let v601 = v597 * v600;
-    let v602 = v594 + v601;
-    let v603 = v38 * v588;
-    let v604 = v41 * v597;
-    let v605 = v603 - v604;
-    let v606 = v42 * p.gravity_x;
-    let v607 = v39 * p.gravity_y;
-    let v608 = v606 - v607;
-    let v609 = v605 * v608;
-    let v610 = v38 * v597;
-    let v611 = v41 * v588;
-    let v612 = v610 + v611;
-    let v613 = v39 * p.gravity_x;
-    let v614 = v42 * p.gravity_y;
-    let v615 = v613 + v614;
-    let v616 = v612 * v615;
-    let v617 = v609 + v616;
-    let v618 = v602 + v617;
-    let v619 = v585 + v618;
-    let v620 = v8 * v65;
-    let v621 = v62 * v83;
-    let v622 = v620 - v621;
-    let v623 = v66 * p.gravity_x;
-    let v624 = v63 * p.gravity_y;
-    let v625 = v623 - v624;
-    let v626 = v622 * v625;
-    let v627 = v65 * v83;
-    let v628 = v8 * v62;
-    let v629 = v627 + v628;
-    let v630 = v63 * p.gravity_x;
-    let v631 = v66 * p.gravity_y;
-    let v632 = v630 + v631;
-    let v633 = v629 * v632;
-    let v634 = v626 + v633;
-    let v635 = v619 + v634;
-    let v636 = v8 * v75;
-    let v637 = v72 * v83;
-    let v638 = v636 - v637;
-    let v639 = v76 * p.gravity_x;
-    let v640 = v73 * p.gravity_y;
-    let v641 = v639 - v640;
-    let v642 = v638 * v641;
-    let v643 = v75 * v83;
-    let v644 = v8 * v72;
-    let v645 = v643 + v644;
-    let v646 = v73 * p.gravity_x;
-    let v647 = v76 * p.gravity_y;
-    let v648 = v646 + v647;
-    let v649 = v645 * v648;
-    let v650 = v642 + v649;
-    let v651 = v635 + v650;
-    let v652 = v534 + v651;
-    let v653 = qd_2 * qd_0;
-    let v654 = v408 * v653;
-    let v655 = qd_2 * qd_1;
-    let v656 = v431 * v655;
-    let v657 = v654 + v656;
-    let v658 = v317 * v457;
-    let v659 = v657 + v658;
-    let v660 = q_3 - q_5;
-    let v661 = v660 - p.thigh_spring_rest;
-    let v662 = p.thigh_spring_stiffness * v661;
-    let v663 = v650 + v662;
-    let v664 = v659 + v663;
-    let v665 = v411 * v653;
-    let v666 = v435 * v655;
-    let v667 = v665 + v666;
-    let v668 = v317 * v464;
-    let v669 = v667 + v668;
-    let v670 = q_4 - q_7;
-    let v671 = v670 - p.four_bar_spring_rest;
-    let v672 = p.four_bar_spring_stiffness * v671;
-    let v673 = v634 + v672;
-    let v674 = v669 + v673;
-    let v675 = v415 * v653;
-    let v676 = v421 + v675;
-    let v677 = v439 * v655;
-    let v678 = v676 + v677;
-    let v679 = v445 + v678;
-    let v680 = v317 * v471;
-    let v681 = v679 - v680;
-    let v682 = v515 - v482;
-    let v683 = v332 * v682;
-    let v684 = v681 + v683;
-    let v685 = v352 * v479;
-    let v686 = v684 + v685;
-    let v687 = v355 * v520;
-    let v688 = v686 + v687;
-    let v689 = v618 - v662;
-    let v690 = v688 + v689;
-    let v691 = v419 * v653;
-    let v692 = v416 * v419;
-    let v693 = v691 + v692;
-    let v694 = v443 * v655;
-    let v695 = v693 + v694;
-    let v696 = v440 * v443;
-    let v697 = v695 + v696;
-    let v698 = v484 * T::lit(0.5);
-    let v699 = v317 * v698;
-    let v700 = v697 - v699;
-    let v701 = v482 - v515;
-    let v702 = v328 * v701;
-    let v703 = v700 + v702;
-    let v704 = v349 * v477;
-    let v705 = v703 + v704;
-    let v706 = v617 + v705;
-    let v707 = v423 * v653;
-    let v708 = v429 + v707;
-    let v709 = v447 * v655;
-    let v710 = v708 + v709;
-    let v711 = v453 + v710;
-    let v712 = v317 * v489;
-    let v713 = v711 - v712;
-    let v714 = v526 - v500;
-    let v715 = v340 * v714;
-    let v716 = v713 + v715;
-    let v717 = v361 * v497;
-    let v718 = v716 + v717;
-    let v719 = v364 * v531;
-    let v720 = v718 + v719;
-    let v721 = v584 - v672;
-    let v722 = v720 + v721;
-    let v723 = v427 * v653;
-    let v724 = v424 * v427;
-    let v725 = v723 + v724;
-    let v726 = v451 * v655;
-    let v727 = v725 + v726;
-    let v728 = v448 * v451;
-    let v729 = v727 + v728;
-    let v730 = v502 * T::lit(0.5);
-    let v731 = v317 * v730;
-    let v732 = v729 - v731;
-    let v733 = v500 - v526;
-    let v734 = v336 * v733;
-    let v735 = v732 + v734;
-    let v736 = v358 * v495;
-    let v737 = v735 + v736;
-    let v738 = v583 + v737;
-    let v739 = v578 * p.lower_leg_length_x;
-    let v740 = v571 * p.lower_leg_length_y;
-    let v741 = v739 + v740;
-    let v742 = p.four_bar_link_length_x * v563;
-    let v743 = p.four_bar_link_length_y * v554;
-    let v744 = v742 + v743;
-    let v745 = v741 + v744;
-    let v746 = v83 * p.torso_length_x;
-    let v747 = v8 * p.torso_length_y;
-    let v748 = v746 + v747;
-    let v749 = v745 + v748;
-    let v750 = v612 * p.shin_pin_a_x;
-    let v751 = v605 * p.shin_pin_a_y;
-    let v752 = v750 + v751;
-    let v753 = p.thigh_length_x * v597;
-    let v754 = p.thigh_length_y * v588;
-    let v755 = v753 + v754;
-    let v756 = v752 + v755;
-    let v757 = v748 + v756;
-    let v758 = v749 - v757;
-    let v759 = v605 * p.shin_pin_a_x;
-    let v760 = v612 * p.shin_pin_a_y;
-    let v761 = v759 - v760;
-    let v762 = p.thigh_length_x * v588;
-    let v763 = p.thigh_length_y * v597;
-    let v764 = v762 - v763;
-    let v765 = v761 + v764;
-    let v766 = v8 * p.torso_length_x;
-    let v767 = p.torso_length_y * v83;
-    let v768 = v766 - v767;
-    let v769 = v765 + v768;
-    let v770 = v571 * p.lower_leg_length_x;
-    let v771 = v578 * p.lower_leg_length_y;
-    let v772 = v770 - v771;
-    let v773 = p.four_bar_link_length_x * v554;
-    let v774 = p.four_bar_link_length_y * v563;
-    let v775 = v773 - v774;
-    let v776 = v772 + v775;
-    let v777 = v768 + v776;
-    let v778 = v769 - v777;
-    let v779 = -v756;
-    let v780 = -v752;
-    let v781 = -v776;
-    let v782 = -v772;
-    let v783 = qd_2 + qd_7;
-    let v784 = qd_8 + v783;
-    let v785 = v784 * v784;
-    let v786 = v772 * v785;
-    let v787 = v783 * v783;
-    let v788 = v775 * v787;
-    let v789 = v786 + v788;
-    let v790 = v317 * v768;
-    let v791 = v789 + v790;
-    let v792 = qd_2 + qd_5;
-    let v793 = qd_6 + v792;
-    let v794 = v793 * v793;
-    let v795 = v761 * v794;
-    let v796 = v792 * v792;
-    let v797 = v764 * v796;
-    let v798 = v795 + v797;
-    let v799 = v790 + v798;
-    let v800 = v791 - v799;
-    let v801 = v741 * v785;
-    let v802 = v744 * v787;
-    let v803 = v801 + v802;
-    let v804 = v317 * v748;
-    let v805 = v803 + v804;
-    let v806 = v752 * v794;
-    let v807 = v755 * v796;
-    let v808 = v806 + v807;
-    let v809 = v804 + v808;
-    let v810 = v805 - v809;
+    let v405 = v256 * p.prepared[41];
+    let v406 = v260 * p.prepared[42];
+    let v407 = v405 + v406;
+    let v408 = v271 * p.prepared[43];
+    let v409 = v275 * p.prepared[44];
+    let v410 = v408 + v409;
+    let v411 = v407 + v410;
+    let v412 = v404 + v411;
+    let v413 = v221 * p.prepared[45];
+    let v414 = v225 * p.prepared[46];
+    let v415 = v413 + v414;
+    let v416 = v236 * p.prepared[47];
+    let v417 = v240 * p.prepared[48];
+    let v418 = v416 + v417;
+    let v419 = v415 + v418;
+    let v420 = v412 + v419;
+    let v421 = v206 * p.prepared[49];
+    let v422 = v210 * p.prepared[50];
+    let v423 = v421 + v422;
+    let v424 = v420 + v423;
+    let v425 = v187 * p.prepared[51];
+    let v426 = v191 * p.prepared[52];
+    let v427 = v425 + v426;
+    let v428 = v424 + v427;
+    let v429 = v401 + v428;
+    let v430 = v199 * v296;
+    let v431 = v193 * v302;
+    let v432 = v430 - v431;
+    let v433 = p.thigh_motor_mass * v432;
+    let v434 = q_3 - q_5;
+    let v435 = v434 - p.thigh_spring_rest;
+    let v436 = p.thigh_spring_stiffness * v435;
+    let v437 = v427 + v436;
+    let v438 = v433 + v437;
+    let v439 = v214 * v307;
+    let v440 = v212 * v309;
+    let v441 = v439 - v440;
+    let v442 = p.four_bar_motor_mass * v441;
+    let v443 = q_4 - q_7;
+    let v444 = v443 - p.four_bar_spring_rest;
+    let v445 = p.four_bar_spring_stiffness * v444;
+    let v446 = v423 + v445;
+    let v447 = v442 + v446;
+    let v448 = v229 * v314;
+    let v449 = v227 * v316;
+    let v450 = v448 - v449;
+    let v451 = p.thigh_mass * v450;
+    let v452 = v249 * v377;
+    let v453 = v328 * v380;
+    let v454 = v452 - v453;
+    let v455 = p.shin_mass * v454;
+    let v456 = v451 + v455;
+    let v457 = v419 - v436;
+    let v458 = v456 + v457;
+    let v459 = v249 * v321;
+    let v460 = v242 * v328;
+    let v461 = v459 - v460;
+    let v462 = p.shin_mass * v461;
+    let v463 = v418 + v462;
+    let v464 = v264 * v333;
+    let v465 = v262 * v335;
+    let v466 = v464 - v465;
+    let v467 = p.four_bar_link_mass * v466;
+    let v468 = v284 * v393;
+    let v469 = v347 * v396;
+    let v470 = v468 - v469;
+    let v471 = p.lower_leg_mass * v470;
+    let v472 = v467 + v471;
+    let v473 = v411 - v445;
+    let v474 = v472 + v473;
+    let v475 = v284 * v340;
+    let v476 = v277 * v347;
+    let v477 = v475 - v476;
+    let v478 = p.lower_leg_mass * v477;
+    let v479 = v410 + v478;
+    let v480 = v275 * p.lower_leg_length_x;
+    let v481 = v271 * p.lower_leg_length_y;
+    let v482 = v480 + v481;
+    let v483 = v344 + v482;
+    let v484 = v300 + v483;
+    let v485 = v240 * p.shin_pin_a_x;
+    let v486 = v236 * p.shin_pin_a_y;
+    let v487 = v485 + v486;
+    let v488 = v325 + v487;
+    let v489 = v300 + v488;
+    let v490 = v484 - v489;
+    let v491 = v236 * p.shin_pin_a_x;
+    let v492 = v240 * p.shin_pin_a_y;
+    let v493 = v491 - v492;
+    let v494 = v246 + v493;
+    let v495 = v197 + v494;
+    let v496 = v271 * p.lower_leg_length_x;
+    let v497 = v275 * p.lower_leg_length_y;
+    let v498 = v496 - v497;
+    let v499 = v281 + v498;
+    let v500 = v197 + v499;
+    let v501 = v495 - v500;
+    let v502 = -v488;
+    let v503 = -v487;
+    let v504 = -v499;
+    let v505 = -v498;
+    let v506 = v268 * v498;
+    let v507 = v282 + v506;
+    let v508 = v198 + v507;
+    let v509 = v233 * v493;
+    let v510 = v247 + v509;
+    let v511 = v198 + v510;
+    let v512 = v508 - v511;
+    let v513 = v268 * v482;
+    let v514 = v345 + v513;
+    let v515 = v301 + v514;
+    let v516 = v233 * v487;
+    let v517 = v326 + v516;
+    let v518 = v301 + v517;
+    let v519 = v515 - v518;
     (
         SMatrix::from_data(
             ArrayStorage([
-                [v7, T::lit(0.0), v111, v115, v119, v123, v133, v137, v147],
-                [T::lit(0.0), v6, v150, v153, v156, v159, v162, v165, v168],
-                [v111, v150, v284, v288, v292, v293, v301, v302, v310],
+                [p.prepared[1], T::lit(0.0), v65, v69, v73, v77, v87, v91, v101],
+                [T::lit(0.0), p.prepared[0], v104, v107, v110, v113, v116, v119, v122],
+                [v65, v104, v154, v157, v160, v161, v168, v169, v176],
                 [
-                    v115,
-                    v153,
-                    v288,
-                    v313,
+                    v69,
+                    v107,
+                    v157,
+                    p.prepared[35],
                     T::lit(0.0),
                     T::lit(0.0),
                     T::lit(0.0),
@@ -4205,78 +3472,78 @@ pub fn dynamics_terms<T: Real>(
                     T::lit(0.0),
                 ],
                 [
-                    v119,
-                    v156,
-                    v292,
+                    v73,
+                    v110,
+                    v160,
                     T::lit(0.0),
-                    v316,
+                    p.prepared[36],
                     T::lit(0.0),
                     T::lit(0.0),
                     T::lit(0.0),
                     T::lit(0.0),
                 ],
                 [
-                    v123,
-                    v159,
-                    v293,
+                    v77,
+                    v113,
+                    v161,
                     T::lit(0.0),
                     T::lit(0.0),
-                    v238,
-                    v297,
-                    T::lit(0.0),
-                    T::lit(0.0),
-                ],
-                [
-                    v133,
-                    v162,
-                    v301,
-                    T::lit(0.0),
-                    T::lit(0.0),
-                    v297,
-                    v221,
+                    v138,
+                    v164,
                     T::lit(0.0),
                     T::lit(0.0),
                 ],
                 [
-                    v137,
-                    v165,
-                    v302,
-                    T::lit(0.0),
-                    T::lit(0.0),
-                    T::lit(0.0),
-                    T::lit(0.0),
-                    v200,
-                    v306,
-                ],
-                [
-                    v147,
+                    v87,
+                    v116,
                     v168,
-                    v310,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v164,
+                    p.prepared[23],
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    v91,
+                    v119,
+                    v169,
                     T::lit(0.0),
                     T::lit(0.0),
                     T::lit(0.0),
                     T::lit(0.0),
-                    v306,
-                    v183,
+                    v127,
+                    v172,
+                ],
+                [
+                    v101,
+                    v122,
+                    v176,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v172,
+                    p.prepared[19],
                 ],
             ]),
         ),
         SMatrix::from_data(
-            ArrayStorage([[v369, v407, v652, v664, v674, v690, v706, v722, v738]]),
+            ArrayStorage([[v288, v351, v429, v438, v447, v458, v463, v474, v479]]),
         ),
         SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0)],
-                [v758, v778],
+                [v490, v501],
                 [T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0)],
-                [v779, v765],
-                [v780, v761],
-                [v745, v781],
-                [v741, v782],
+                [v502, v494],
+                [v503, v493],
+                [v483, v504],
+                [v482, v505],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v800, v810]])),
+        SMatrix::from_data(ArrayStorage([[v512, v519]])),
     )
 }

@@ -20,10 +20,9 @@ pub const NK: usize = 0;
 /// The `braced_parallelogram` leg: 5 joints, 2 closure(s), actuated joints ["thigh", "four_bar_link"]. Generated from `leg-models/specs/braced_parallelogram.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct BracedParallelogram;
-/// Physical parameters; `Default` holds the spec's values. Change them at run
-/// time without regenerating.
+/// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Params<T> {
+pub struct ParamValues<T> {
     /// Gravity in the base frame, x [m/s²].
     pub gravity_x: T,
     /// Gravity in the base frame, y [m/s²].
@@ -127,7 +126,7 @@ pub struct Params<T> {
     /// Point b of closure `brace_pin`, link frame, y [m].
     pub brace_pin_b_y: T,
 }
-impl<T: Real> Default for Params<T> {
+impl<T: Real> Default for ParamValues<T> {
     fn default() -> Self {
         Self {
             gravity_x: T::lit(0.0),
@@ -182,6 +181,50 @@ impl<T: Real> Default for Params<T> {
             brace_pin_b_x: T::lit(0.25),
             brace_pin_b_y: T::lit(0.0),
         }
+    }
+}
+/// Physical parameters, ready for evaluation: the values (read as fields through
+/// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
+/// computed once when a value changes instead of in every call. `Default` holds
+/// the spec's values; change them at run time, without regenerating, with
+/// [`Params::update`] or [`Parameters::set`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params<T> {
+    values: ParamValues<T>,
+    prepared: [T; 25],
+}
+impl<T: Real> Params<T> {
+    /// Parameters of these values.
+    pub fn new(values: ParamValues<T>) -> Self {
+        Self {
+            prepared: prepare(&values).data.0[0],
+            values,
+        }
+    }
+    /// The values.
+    pub fn values(&self) -> &ParamValues<T> {
+        &self.values
+    }
+    /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
+    pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
+        change(&mut self.values);
+        *self = Self::new(self.values);
+    }
+}
+impl<T> core::ops::Deref for Params<T> {
+    type Target = ParamValues<T>;
+    fn deref(&self) -> &ParamValues<T> {
+        &self.values
+    }
+}
+impl<T: Real> From<ParamValues<T>> for Params<T> {
+    fn from(values: ParamValues<T>) -> Self {
+        Self::new(values)
+    }
+}
+impl<T: Real> Default for Params<T> {
+    fn default() -> Self {
+        Self::new(ParamValues::default())
     }
 }
 impl<T: Real> Parameters<T> for Params<T> {
@@ -240,115 +283,116 @@ impl<T: Real> Parameters<T> for Params<T> {
     ];
     fn get(&self, i: usize) -> Option<T> {
         match i {
-            0 => Some(self.gravity_x),
-            1 => Some(self.gravity_y),
-            2 => Some(self.thigh_origin_x),
-            3 => Some(self.thigh_origin_y),
-            4 => Some(self.thigh_length_x),
-            5 => Some(self.thigh_length_y),
-            6 => Some(self.thigh_mass),
-            7 => Some(self.thigh_com_x),
-            8 => Some(self.thigh_com_y),
-            9 => Some(self.thigh_inertia),
-            10 => Some(self.thigh_damping),
-            11 => Some(self.thigh_rotor_inertia),
-            12 => Some(self.thigh_gear_ratio),
-            13 => Some(self.shin_length_x),
-            14 => Some(self.shin_length_y),
-            15 => Some(self.shin_mass),
-            16 => Some(self.shin_com_x),
-            17 => Some(self.shin_com_y),
-            18 => Some(self.shin_inertia),
-            19 => Some(self.shin_damping),
-            20 => Some(self.four_bar_link_origin_x),
-            21 => Some(self.four_bar_link_origin_y),
-            22 => Some(self.four_bar_link_length_x),
-            23 => Some(self.four_bar_link_length_y),
-            24 => Some(self.four_bar_link_mass),
-            25 => Some(self.four_bar_link_com_x),
-            26 => Some(self.four_bar_link_com_y),
-            27 => Some(self.four_bar_link_inertia),
-            28 => Some(self.four_bar_link_damping),
-            29 => Some(self.four_bar_link_rotor_inertia),
-            30 => Some(self.four_bar_link_gear_ratio),
-            31 => Some(self.lower_leg_length_x),
-            32 => Some(self.lower_leg_length_y),
-            33 => Some(self.lower_leg_mass),
-            34 => Some(self.lower_leg_com_x),
-            35 => Some(self.lower_leg_com_y),
-            36 => Some(self.lower_leg_inertia),
-            37 => Some(self.lower_leg_damping),
-            38 => Some(self.brace_origin_x),
-            39 => Some(self.brace_origin_y),
-            40 => Some(self.brace_length_x),
-            41 => Some(self.brace_length_y),
-            42 => Some(self.brace_mass),
-            43 => Some(self.brace_com_x),
-            44 => Some(self.brace_com_y),
-            45 => Some(self.brace_inertia),
-            46 => Some(self.brace_damping),
-            47 => Some(self.knee_a_x),
-            48 => Some(self.knee_a_y),
-            49 => Some(self.brace_pin_b_x),
-            50 => Some(self.brace_pin_b_y),
+            0 => Some(self.values.gravity_x),
+            1 => Some(self.values.gravity_y),
+            2 => Some(self.values.thigh_origin_x),
+            3 => Some(self.values.thigh_origin_y),
+            4 => Some(self.values.thigh_length_x),
+            5 => Some(self.values.thigh_length_y),
+            6 => Some(self.values.thigh_mass),
+            7 => Some(self.values.thigh_com_x),
+            8 => Some(self.values.thigh_com_y),
+            9 => Some(self.values.thigh_inertia),
+            10 => Some(self.values.thigh_damping),
+            11 => Some(self.values.thigh_rotor_inertia),
+            12 => Some(self.values.thigh_gear_ratio),
+            13 => Some(self.values.shin_length_x),
+            14 => Some(self.values.shin_length_y),
+            15 => Some(self.values.shin_mass),
+            16 => Some(self.values.shin_com_x),
+            17 => Some(self.values.shin_com_y),
+            18 => Some(self.values.shin_inertia),
+            19 => Some(self.values.shin_damping),
+            20 => Some(self.values.four_bar_link_origin_x),
+            21 => Some(self.values.four_bar_link_origin_y),
+            22 => Some(self.values.four_bar_link_length_x),
+            23 => Some(self.values.four_bar_link_length_y),
+            24 => Some(self.values.four_bar_link_mass),
+            25 => Some(self.values.four_bar_link_com_x),
+            26 => Some(self.values.four_bar_link_com_y),
+            27 => Some(self.values.four_bar_link_inertia),
+            28 => Some(self.values.four_bar_link_damping),
+            29 => Some(self.values.four_bar_link_rotor_inertia),
+            30 => Some(self.values.four_bar_link_gear_ratio),
+            31 => Some(self.values.lower_leg_length_x),
+            32 => Some(self.values.lower_leg_length_y),
+            33 => Some(self.values.lower_leg_mass),
+            34 => Some(self.values.lower_leg_com_x),
+            35 => Some(self.values.lower_leg_com_y),
+            36 => Some(self.values.lower_leg_inertia),
+            37 => Some(self.values.lower_leg_damping),
+            38 => Some(self.values.brace_origin_x),
+            39 => Some(self.values.brace_origin_y),
+            40 => Some(self.values.brace_length_x),
+            41 => Some(self.values.brace_length_y),
+            42 => Some(self.values.brace_mass),
+            43 => Some(self.values.brace_com_x),
+            44 => Some(self.values.brace_com_y),
+            45 => Some(self.values.brace_inertia),
+            46 => Some(self.values.brace_damping),
+            47 => Some(self.values.knee_a_x),
+            48 => Some(self.values.knee_a_y),
+            49 => Some(self.values.brace_pin_b_x),
+            50 => Some(self.values.brace_pin_b_y),
             _ => None,
         }
     }
     fn set(&mut self, i: usize, value: T) -> bool {
         match i {
-            0 => self.gravity_x = value,
-            1 => self.gravity_y = value,
-            2 => self.thigh_origin_x = value,
-            3 => self.thigh_origin_y = value,
-            4 => self.thigh_length_x = value,
-            5 => self.thigh_length_y = value,
-            6 => self.thigh_mass = value,
-            7 => self.thigh_com_x = value,
-            8 => self.thigh_com_y = value,
-            9 => self.thigh_inertia = value,
-            10 => self.thigh_damping = value,
-            11 => self.thigh_rotor_inertia = value,
-            12 => self.thigh_gear_ratio = value,
-            13 => self.shin_length_x = value,
-            14 => self.shin_length_y = value,
-            15 => self.shin_mass = value,
-            16 => self.shin_com_x = value,
-            17 => self.shin_com_y = value,
-            18 => self.shin_inertia = value,
-            19 => self.shin_damping = value,
-            20 => self.four_bar_link_origin_x = value,
-            21 => self.four_bar_link_origin_y = value,
-            22 => self.four_bar_link_length_x = value,
-            23 => self.four_bar_link_length_y = value,
-            24 => self.four_bar_link_mass = value,
-            25 => self.four_bar_link_com_x = value,
-            26 => self.four_bar_link_com_y = value,
-            27 => self.four_bar_link_inertia = value,
-            28 => self.four_bar_link_damping = value,
-            29 => self.four_bar_link_rotor_inertia = value,
-            30 => self.four_bar_link_gear_ratio = value,
-            31 => self.lower_leg_length_x = value,
-            32 => self.lower_leg_length_y = value,
-            33 => self.lower_leg_mass = value,
-            34 => self.lower_leg_com_x = value,
-            35 => self.lower_leg_com_y = value,
-            36 => self.lower_leg_inertia = value,
-            37 => self.lower_leg_damping = value,
-            38 => self.brace_origin_x = value,
-            39 => self.brace_origin_y = value,
-            40 => self.brace_length_x = value,
-            41 => self.brace_length_y = value,
-            42 => self.brace_mass = value,
-            43 => self.brace_com_x = value,
-            44 => self.brace_com_y = value,
-            45 => self.brace_inertia = value,
-            46 => self.brace_damping = value,
-            47 => self.knee_a_x = value,
-            48 => self.knee_a_y = value,
-            49 => self.brace_pin_b_x = value,
-            50 => self.brace_pin_b_y = value,
+            0 => self.values.gravity_x = value,
+            1 => self.values.gravity_y = value,
+            2 => self.values.thigh_origin_x = value,
+            3 => self.values.thigh_origin_y = value,
+            4 => self.values.thigh_length_x = value,
+            5 => self.values.thigh_length_y = value,
+            6 => self.values.thigh_mass = value,
+            7 => self.values.thigh_com_x = value,
+            8 => self.values.thigh_com_y = value,
+            9 => self.values.thigh_inertia = value,
+            10 => self.values.thigh_damping = value,
+            11 => self.values.thigh_rotor_inertia = value,
+            12 => self.values.thigh_gear_ratio = value,
+            13 => self.values.shin_length_x = value,
+            14 => self.values.shin_length_y = value,
+            15 => self.values.shin_mass = value,
+            16 => self.values.shin_com_x = value,
+            17 => self.values.shin_com_y = value,
+            18 => self.values.shin_inertia = value,
+            19 => self.values.shin_damping = value,
+            20 => self.values.four_bar_link_origin_x = value,
+            21 => self.values.four_bar_link_origin_y = value,
+            22 => self.values.four_bar_link_length_x = value,
+            23 => self.values.four_bar_link_length_y = value,
+            24 => self.values.four_bar_link_mass = value,
+            25 => self.values.four_bar_link_com_x = value,
+            26 => self.values.four_bar_link_com_y = value,
+            27 => self.values.four_bar_link_inertia = value,
+            28 => self.values.four_bar_link_damping = value,
+            29 => self.values.four_bar_link_rotor_inertia = value,
+            30 => self.values.four_bar_link_gear_ratio = value,
+            31 => self.values.lower_leg_length_x = value,
+            32 => self.values.lower_leg_length_y = value,
+            33 => self.values.lower_leg_mass = value,
+            34 => self.values.lower_leg_com_x = value,
+            35 => self.values.lower_leg_com_y = value,
+            36 => self.values.lower_leg_inertia = value,
+            37 => self.values.lower_leg_damping = value,
+            38 => self.values.brace_origin_x = value,
+            39 => self.values.brace_origin_y = value,
+            40 => self.values.brace_length_x = value,
+            41 => self.values.brace_length_y = value,
+            42 => self.values.brace_mass = value,
+            43 => self.values.brace_com_x = value,
+            44 => self.values.brace_com_y = value,
+            45 => self.values.brace_inertia = value,
+            46 => self.values.brace_damping = value,
+            47 => self.values.knee_a_x = value,
+            48 => self.values.knee_a_y = value,
+            49 => self.values.brace_pin_b_x = value,
+            50 => self.values.brace_pin_b_y = value,
             _ => return false,
         }
+        *self = Self::new(self.values);
         true
     }
 }
@@ -476,119 +520,213 @@ impl ContactModel<NQ, NC, NU, NK> for BracedParallelogram {
         contact_bias(q, qd, p)
     }
 }
+/// The parameter-only quantities the terms read (products of masses, lengths and
+/// centres of mass, inertias about the joints, …), computed once per parameter set
+/// by [`Params::new`].
+pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 25> {
+    let v0 = values.thigh_com_x * values.thigh_com_x;
+    let v1 = values.thigh_com_y * values.thigh_com_y;
+    let v2 = v0 + v1;
+    let v3 = values.thigh_mass * v2;
+    let v4 = values.thigh_inertia + v3;
+    let v5 = values.shin_com_x * values.shin_com_x;
+    let v6 = values.shin_com_y * values.shin_com_y;
+    let v7 = v5 + v6;
+    let v8 = values.shin_mass * v7;
+    let v9 = values.shin_inertia + v8;
+    let v10 = v4 + v9;
+    let v11 = values.thigh_length_x * values.thigh_length_x;
+    let v12 = values.thigh_length_y * values.thigh_length_y;
+    let v13 = v11 + v12;
+    let v14 = values.shin_mass * v13;
+    let v15 = v10 + v14;
+    let v16 = values.thigh_gear_ratio * values.thigh_gear_ratio;
+    let v17 = values.thigh_rotor_inertia * v16;
+    let v18 = v15 + v17;
+    let v19 = values.shin_mass * values.shin_com_x;
+    let v20 = values.thigh_length_x * v19;
+    let v21 = values.shin_mass * values.shin_com_y;
+    let v22 = values.thigh_length_y * v21;
+    let v23 = v20 + v22;
+    let v24 = values.thigh_length_x * v21;
+    let v25 = values.thigh_length_y * v19;
+    let v26 = v24 - v25;
+    let v27 = v25 - v24;
+    let v28 = values.four_bar_link_com_x * values.four_bar_link_com_x;
+    let v29 = values.four_bar_link_com_y * values.four_bar_link_com_y;
+    let v30 = v28 + v29;
+    let v31 = values.four_bar_link_mass * v30;
+    let v32 = values.four_bar_link_inertia + v31;
+    let v33 = values.brace_com_x * values.brace_com_x;
+    let v34 = values.brace_com_y * values.brace_com_y;
+    let v35 = v33 + v34;
+    let v36 = values.brace_mass * v35;
+    let v37 = values.brace_inertia + v36;
+    let v38 = v32 + v37;
+    let v39 = values.brace_origin_x * values.brace_origin_x;
+    let v40 = values.brace_origin_y * values.brace_origin_y;
+    let v41 = v39 + v40;
+    let v42 = values.brace_mass * v41;
+    let v43 = v38 + v42;
+    let v44 = values.lower_leg_com_x * values.lower_leg_com_x;
+    let v45 = values.lower_leg_com_y * values.lower_leg_com_y;
+    let v46 = v44 + v45;
+    let v47 = values.lower_leg_mass * v46;
+    let v48 = values.lower_leg_inertia + v47;
+    let v49 = v43 + v48;
+    let v50 = values.four_bar_link_length_x * values.four_bar_link_length_x;
+    let v51 = values.four_bar_link_length_y * values.four_bar_link_length_y;
+    let v52 = v50 + v51;
+    let v53 = values.lower_leg_mass * v52;
+    let v54 = v49 + v53;
+    let v55 = values.four_bar_link_gear_ratio * values.four_bar_link_gear_ratio;
+    let v56 = values.four_bar_link_rotor_inertia * v55;
+    let v57 = v54 + v56;
+    let v58 = values.brace_mass * values.brace_com_x;
+    let v59 = values.brace_origin_x * v58;
+    let v60 = values.brace_mass * values.brace_com_y;
+    let v61 = values.brace_origin_y * v60;
+    let v62 = v59 + v61;
+    let v63 = values.brace_origin_x * v60;
+    let v64 = values.brace_origin_y * v58;
+    let v65 = v63 - v64;
+    let v66 = values.lower_leg_mass * values.lower_leg_com_x;
+    let v67 = values.four_bar_link_length_x * v66;
+    let v68 = values.lower_leg_mass * values.lower_leg_com_y;
+    let v69 = values.four_bar_link_length_y * v68;
+    let v70 = v67 + v69;
+    let v71 = values.four_bar_link_length_x * v68;
+    let v72 = values.four_bar_link_length_y * v66;
+    let v73 = v71 - v72;
+    let v74 = v72 - v71;
+    let v75 = v64 - v63;
+    let v76 = values.thigh_mass * values.thigh_com_y;
+    let v77 = values.shin_mass * values.thigh_length_y;
+    let v78 = v76 + v77;
+    let v79 = values.gravity_x * v78;
+    let v80 = values.thigh_mass * values.thigh_com_x;
+    let v81 = values.shin_mass * values.thigh_length_x;
+    let v82 = v80 + v81;
+    let v83 = values.gravity_y * v82;
+    let v84 = v79 - v83;
+    let v85 = values.gravity_x * v82;
+    let v86 = v78 * values.gravity_y;
+    let v87 = v85 + v86;
+    let v88 = v21 * values.gravity_x;
+    let v89 = v19 * values.gravity_y;
+    let v90 = v88 - v89;
+    let v91 = v19 * values.gravity_x;
+    let v92 = v21 * values.gravity_y;
+    let v93 = v91 + v92;
+    let v94 = values.four_bar_link_mass * values.four_bar_link_com_y;
+    let v95 = values.lower_leg_mass * values.four_bar_link_length_y;
+    let v96 = v94 + v95;
+    let v97 = values.brace_mass * values.brace_origin_y;
+    let v98 = v96 + v97;
+    let v99 = values.gravity_x * v98;
+    let v100 = values.four_bar_link_mass * values.four_bar_link_com_x;
+    let v101 = values.lower_leg_mass * values.four_bar_link_length_x;
+    let v102 = v100 + v101;
+    let v103 = values.brace_mass * values.brace_origin_x;
+    let v104 = v102 + v103;
+    let v105 = values.gravity_y * v104;
+    let v106 = v99 - v105;
+    let v107 = values.gravity_x * v104;
+    let v108 = values.gravity_y * v98;
+    let v109 = v107 + v108;
+    let v110 = v60 * values.gravity_x;
+    let v111 = v58 * values.gravity_y;
+    let v112 = v110 - v111;
+    let v113 = v58 * values.gravity_x;
+    let v114 = v60 * values.gravity_y;
+    let v115 = v113 + v114;
+    let v116 = v68 * values.gravity_x;
+    let v117 = v66 * values.gravity_y;
+    let v118 = v116 - v117;
+    let v119 = v66 * values.gravity_x;
+    let v120 = v68 * values.gravity_y;
+    let v121 = v119 + v120;
+    let v122 = values.thigh_mass + values.shin_mass;
+    let v123 = values.thigh_origin_x * v122;
+    let v124 = values.four_bar_link_mass + values.brace_mass;
+    let v125 = values.lower_leg_mass + v124;
+    let v126 = values.four_bar_link_origin_x * v125;
+    let v127 = v123 + v126;
+    let v128 = values.gravity_x * v127;
+    let v129 = values.thigh_origin_y * v122;
+    let v130 = values.four_bar_link_origin_y * v125;
+    let v131 = v129 + v130;
+    let v132 = values.gravity_y * v131;
+    let v133 = v128 + v132;
+    SMatrix::from_data(
+        ArrayStorage([
+            [
+                v9,
+                v18,
+                v23,
+                v26,
+                v27,
+                v37,
+                v48,
+                v57,
+                v62,
+                v65,
+                v70,
+                v73,
+                v74,
+                v75,
+                v84,
+                v87,
+                v90,
+                v93,
+                v106,
+                v109,
+                v112,
+                v115,
+                v118,
+                v121,
+                v133,
+            ],
+        ]),
+    )
+}
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
 pub fn mass_matrix<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5> {
     let [_, q_1, _, q_3, q_4] = q.data.0[0];
-    let v0 = p.thigh_com_x * p.thigh_com_x;
-    let v1 = p.thigh_com_y * p.thigh_com_y;
-    let v2 = v0 + v1;
-    let v3 = p.thigh_mass * v2;
-    let v4 = p.thigh_inertia + v3;
-    let v5 = p.shin_com_x * p.shin_com_x;
-    let v6 = p.shin_com_y * p.shin_com_y;
-    let v7 = v5 + v6;
-    let v8 = p.shin_mass * v7;
-    let v9 = p.shin_inertia + v8;
-    let (v17, v10) = q_1.sin_cos();
-    let v11 = p.shin_mass * p.shin_com_x;
-    let v12 = p.thigh_length_x * v11;
-    let v13 = p.shin_mass * p.shin_com_y;
-    let v14 = p.thigh_length_y * v13;
-    let v15 = v12 + v14;
-    let v16 = v10 * v15;
-    let v18 = p.thigh_length_x * v13;
-    let v19 = v11 * p.thigh_length_y;
-    let v20 = v18 - v19;
-    let v21 = v17 * v20;
-    let v22 = v16 - v21;
-    let v23 = v22 + v22;
-    let v24 = v9 + v23;
-    let v25 = p.thigh_length_x * p.thigh_length_x;
-    let v26 = p.thigh_length_y * p.thigh_length_y;
-    let v27 = v25 + v26;
-    let v28 = p.shin_mass * v27;
-    let v29 = v24 + v28;
-    let v30 = v4 + v29;
-    let v31 = p.thigh_gear_ratio * p.thigh_gear_ratio;
-    let v32 = p.thigh_rotor_inertia * v31;
-    let v33 = v30 + v32;
-    let v34 = v19 - v18;
-    let v35 = v17 * v34;
-    let v36 = v16 + v35;
-    let v37 = v9 + v36;
-    let v38 = p.four_bar_link_com_x * p.four_bar_link_com_x;
-    let v39 = p.four_bar_link_com_y * p.four_bar_link_com_y;
-    let v40 = v38 + v39;
-    let v41 = p.four_bar_link_mass * v40;
-    let v42 = p.four_bar_link_inertia + v41;
-    let v43 = p.brace_com_x * p.brace_com_x;
-    let v44 = p.brace_com_y * p.brace_com_y;
-    let v45 = v43 + v44;
-    let v46 = p.brace_mass * v45;
-    let v47 = p.brace_inertia + v46;
-    let (v55, v48) = q_4.sin_cos();
-    let v49 = p.brace_mass * p.brace_com_x;
-    let v50 = p.brace_origin_x * v49;
-    let v51 = p.brace_mass * p.brace_com_y;
-    let v52 = p.brace_origin_y * v51;
-    let v53 = v50 + v52;
-    let v54 = v48 * v53;
-    let v56 = p.brace_origin_x * v51;
-    let v57 = v49 * p.brace_origin_y;
-    let v58 = v56 - v57;
-    let v59 = v55 * v58;
-    let v60 = v54 - v59;
-    let v61 = v60 + v60;
-    let v62 = v47 + v61;
-    let v63 = p.brace_origin_x * p.brace_origin_x;
-    let v64 = p.brace_origin_y * p.brace_origin_y;
-    let v65 = v63 + v64;
-    let v66 = p.brace_mass * v65;
-    let v67 = v62 + v66;
-    let v68 = v42 + v67;
-    let v69 = p.lower_leg_com_x * p.lower_leg_com_x;
-    let v70 = p.lower_leg_com_y * p.lower_leg_com_y;
-    let v71 = v69 + v70;
-    let v72 = p.lower_leg_mass * v71;
-    let v73 = p.lower_leg_inertia + v72;
-    let (v81, v74) = q_3.sin_cos();
-    let v75 = p.lower_leg_mass * p.lower_leg_com_x;
-    let v76 = p.four_bar_link_length_x * v75;
-    let v77 = p.lower_leg_mass * p.lower_leg_com_y;
-    let v78 = p.four_bar_link_length_y * v77;
-    let v79 = v76 + v78;
-    let v80 = v74 * v79;
-    let v82 = p.four_bar_link_length_x * v77;
-    let v83 = v75 * p.four_bar_link_length_y;
-    let v84 = v82 - v83;
-    let v85 = v81 * v84;
-    let v86 = v80 - v85;
-    let v87 = v86 + v86;
-    let v88 = v73 + v87;
-    let v89 = p.four_bar_link_length_x * p.four_bar_link_length_x;
-    let v90 = p.four_bar_link_length_y * p.four_bar_link_length_y;
-    let v91 = v89 + v90;
-    let v92 = p.lower_leg_mass * v91;
-    let v93 = v88 + v92;
-    let v94 = v68 + v93;
-    let v95 = p.four_bar_link_gear_ratio * p.four_bar_link_gear_ratio;
-    let v96 = p.four_bar_link_rotor_inertia * v95;
-    let v97 = v94 + v96;
-    let v98 = v83 - v82;
-    let v99 = v81 * v98;
-    let v100 = v80 + v99;
-    let v101 = v73 + v100;
-    let v102 = v57 - v56;
-    let v103 = v55 * v102;
-    let v104 = v54 + v103;
-    let v105 = v47 + v104;
+    let (v2, v0) = q_1.sincos();
+    let v1 = v0 * p.prepared[2];
+    let v3 = v2 * p.prepared[3];
+    let v4 = v1 - v3;
+    let v5 = v4 + v4;
+    let v6 = p.prepared[1] + v5;
+    let v7 = v2 * p.prepared[4];
+    let v8 = v1 + v7;
+    let v9 = p.prepared[0] + v8;
+    let (v12, v10) = q_4.sincos();
+    let v11 = v10 * p.prepared[8];
+    let v13 = v12 * p.prepared[9];
+    let v14 = v11 - v13;
+    let v15 = v14 + v14;
+    let v16 = p.prepared[7] + v15;
+    let (v19, v17) = q_3.sincos();
+    let v18 = v17 * p.prepared[10];
+    let v20 = v19 * p.prepared[11];
+    let v21 = v18 - v20;
+    let v22 = v21 + v21;
+    let v23 = v16 + v22;
+    let v24 = v19 * p.prepared[12];
+    let v25 = v18 + v24;
+    let v26 = p.prepared[6] + v25;
+    let v27 = v12 * p.prepared[13];
+    let v28 = v11 + v27;
+    let v29 = p.prepared[5] + v28;
     SMatrix::from_data(
         ArrayStorage([
-            [v33, v37, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
-            [v37, v9, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
-            [T::lit(0.0), T::lit(0.0), v97, v101, v105],
-            [T::lit(0.0), T::lit(0.0), v101, v73, T::lit(0.0)],
-            [T::lit(0.0), T::lit(0.0), v105, T::lit(0.0), v47],
+            [v6, v9, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            [v9, p.prepared[0], T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            [T::lit(0.0), T::lit(0.0), v23, v26, v29],
+            [T::lit(0.0), T::lit(0.0), v26, p.prepared[6], T::lit(0.0)],
+            [T::lit(0.0), T::lit(0.0), v29, T::lit(0.0), p.prepared[5]],
         ]),
     )
 }
@@ -600,266 +738,141 @@ pub fn bias_forces<T: Real>(
 ) -> SVector<T, 5> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
-    let v0 = p.shin_mass * p.shin_com_x;
-    let v1 = p.thigh_length_x * v0;
-    let v2 = p.shin_mass * p.shin_com_y;
-    let v3 = p.thigh_length_y * v2;
+    let (v0, v2) = q_1.sincos();
+    let v1 = p.prepared[2] * v0;
+    let v3 = p.prepared[3] * v2;
     let v4 = v1 + v3;
-    let (v5, v10) = q_1.sin_cos();
-    let v6 = v4 * v5;
-    let v7 = p.thigh_length_x * v2;
-    let v8 = v0 * p.thigh_length_y;
-    let v9 = v7 - v8;
-    let v11 = v9 * v10;
-    let v12 = v6 + v11;
-    let v13 = -v12;
-    let v14 = v13 + v13;
-    let v15 = qd_0 * qd_1;
-    let v16 = v14 * v15;
-    let v17 = v8 - v7;
-    let v18 = v10 * v17;
-    let v19 = v18 - v6;
-    let v20 = qd_1 * qd_1;
-    let v21 = v19 * v20;
-    let v22 = v16 + v21;
-    let (v34, v23) = q_0.sin_cos();
-    let v24 = p.thigh_mass * p.thigh_com_y;
-    let v25 = p.shin_mass * p.thigh_length_y;
-    let v26 = v24 + v25;
-    let v27 = p.gravity_x * v26;
-    let v28 = p.thigh_mass * p.thigh_com_x;
-    let v29 = p.thigh_length_x * p.shin_mass;
-    let v30 = v28 + v29;
-    let v31 = p.gravity_y * v30;
-    let v32 = v27 - v31;
-    let v33 = v23 * v32;
-    let v35 = p.gravity_x * v30;
-    let v36 = v26 * p.gravity_y;
-    let v37 = v35 + v36;
-    let v38 = v34 * v37;
-    let v39 = v33 + v38;
-    let v40 = v10 * v23;
-    let v41 = v5 * v34;
-    let v42 = v40 - v41;
-    let v43 = v2 * p.gravity_x;
-    let v44 = v0 * p.gravity_y;
-    let v45 = v43 - v44;
-    let v46 = v42 * v45;
-    let v47 = v10 * v34;
-    let v48 = v5 * v23;
-    let v49 = v47 + v48;
-    let v50 = v0 * p.gravity_x;
-    let v51 = v2 * p.gravity_y;
-    let v52 = v50 + v51;
-    let v53 = v49 * v52;
-    let v54 = v46 + v53;
-    let v55 = v39 + v54;
-    let v56 = v22 + v55;
-    let v57 = qd_0 * qd_0;
-    let v58 = v12 * v57;
-    let v59 = v54 + v58;
-    let v60 = p.lower_leg_mass * p.lower_leg_com_x;
-    let v61 = p.four_bar_link_length_x * v60;
-    let v62 = p.lower_leg_mass * p.lower_leg_com_y;
-    let v63 = p.four_bar_link_length_y * v62;
-    let v64 = v61 + v63;
-    let (v65, v70) = q_3.sin_cos();
-    let v66 = v64 * v65;
-    let v67 = p.four_bar_link_length_x * v62;
-    let v68 = v60 * p.four_bar_link_length_y;
+    let v5 = -v4;
+    let v6 = v5 + v5;
+    let v7 = qd_0 * qd_1;
+    let v8 = v6 * v7;
+    let v9 = v2 * p.prepared[4];
+    let v10 = v9 - v1;
+    let v11 = qd_1 * qd_1;
+    let v12 = v10 * v11;
+    let v13 = v8 + v12;
+    let (v16, v14) = q_0.sincos();
+    let v15 = v14 * p.prepared[14];
+    let v17 = v16 * p.prepared[15];
+    let v18 = v15 + v17;
+    let v19 = v2 * v14;
+    let v20 = v0 * v16;
+    let v21 = v19 - v20;
+    let v22 = v21 * p.prepared[16];
+    let v23 = v2 * v16;
+    let v24 = v0 * v14;
+    let v25 = v23 + v24;
+    let v26 = v25 * p.prepared[17];
+    let v27 = v22 + v26;
+    let v28 = v18 + v27;
+    let v29 = v13 + v28;
+    let v30 = qd_0 * qd_0;
+    let v31 = v4 * v30;
+    let v32 = v27 + v31;
+    let (v33, v35) = q_3.sincos();
+    let v34 = p.prepared[10] * v33;
+    let v36 = p.prepared[11] * v35;
+    let v37 = v34 + v36;
+    let v38 = -v37;
+    let v39 = v38 + v38;
+    let v40 = qd_2 * qd_3;
+    let v41 = v39 * v40;
+    let (v42, v44) = q_4.sincos();
+    let v43 = p.prepared[8] * v42;
+    let v45 = p.prepared[9] * v44;
+    let v46 = v43 + v45;
+    let v47 = -v46;
+    let v48 = v47 + v47;
+    let v49 = qd_2 * qd_4;
+    let v50 = v48 * v49;
+    let v51 = v41 + v50;
+    let v52 = v35 * p.prepared[12];
+    let v53 = v52 - v34;
+    let v54 = qd_3 * qd_3;
+    let v55 = v53 * v54;
+    let v56 = v51 + v55;
+    let v57 = v44 * p.prepared[13];
+    let v58 = v57 - v43;
+    let v59 = qd_4 * qd_4;
+    let v60 = v58 * v59;
+    let v61 = v56 + v60;
+    let (v64, v62) = q_2.sincos();
+    let v63 = v62 * p.prepared[18];
+    let v65 = v64 * p.prepared[19];
+    let v66 = v63 + v65;
+    let v67 = v44 * v62;
+    let v68 = v42 * v64;
     let v69 = v67 - v68;
-    let v71 = v69 * v70;
-    let v72 = v66 + v71;
-    let v73 = -v72;
-    let v74 = v73 + v73;
-    let v75 = qd_2 * qd_3;
-    let v76 = v74 * v75;
-    let v77 = p.brace_mass * p.brace_com_x;
-    let v78 = p.brace_origin_x * v77;
-    let v79 = p.brace_mass * p.brace_com_y;
-    let v80 = p.brace_origin_y * v79;
-    let v81 = v78 + v80;
-    let (v82, v87) = q_4.sin_cos();
-    let v83 = v81 * v82;
-    let v84 = p.brace_origin_x * v79;
-    let v85 = v77 * p.brace_origin_y;
-    let v86 = v84 - v85;
-    let v88 = v86 * v87;
-    let v89 = v83 + v88;
-    let v90 = -v89;
-    let v91 = v90 + v90;
-    let v92 = qd_2 * qd_4;
-    let v93 = v91 * v92;
-    let v94 = v76 + v93;
-    let v95 = v68 - v67;
-    let v96 = v70 * v95;
-    let v97 = v96 - v66;
-    let v98 = qd_3 * qd_3;
-    let v99 = v97 * v98;
-    let v100 = v94 + v99;
-    let v101 = v85 - v84;
-    let v102 = v87 * v101;
-    let v103 = v102 - v83;
-    let v104 = qd_4 * qd_4;
-    let v105 = v103 * v104;
-    let v106 = v100 + v105;
-    let (v122, v107) = q_2.sin_cos();
-    let v108 = p.four_bar_link_mass * p.four_bar_link_com_y;
-    let v109 = p.lower_leg_mass * p.four_bar_link_length_y;
-    let v110 = v108 + v109;
-    let v111 = p.brace_mass * p.brace_origin_y;
-    let v112 = v110 + v111;
-    let v113 = p.gravity_x * v112;
-    let v114 = p.four_bar_link_mass * p.four_bar_link_com_x;
-    let v115 = p.four_bar_link_length_x * p.lower_leg_mass;
-    let v116 = v114 + v115;
-    let v117 = p.brace_origin_x * p.brace_mass;
-    let v118 = v116 + v117;
-    let v119 = p.gravity_y * v118;
-    let v120 = v113 - v119;
-    let v121 = v107 * v120;
-    let v123 = p.gravity_x * v118;
-    let v124 = p.gravity_y * v112;
-    let v125 = v123 + v124;
-    let v126 = v122 * v125;
-    let v127 = v121 + v126;
-    let v128 = v87 * v107;
-    let v129 = v82 * v122;
-    let v130 = v128 - v129;
-    let v131 = p.gravity_x * v79;
-    let v132 = p.gravity_y * v77;
-    let v133 = v131 - v132;
-    let v134 = v130 * v133;
-    let v135 = v87 * v122;
-    let v136 = v82 * v107;
-    let v137 = v135 + v136;
-    let v138 = p.gravity_x * v77;
-    let v139 = p.gravity_y * v79;
-    let v140 = v138 + v139;
-    let v141 = v137 * v140;
-    let v142 = v134 + v141;
-    let v143 = v127 + v142;
-    let v144 = v70 * v107;
-    let v145 = v65 * v122;
-    let v146 = v144 - v145;
-    let v147 = p.gravity_x * v62;
-    let v148 = p.gravity_y * v60;
-    let v149 = v147 - v148;
-    let v150 = v146 * v149;
-    let v151 = v70 * v122;
-    let v152 = v65 * v107;
-    let v153 = v151 + v152;
-    let v154 = p.gravity_x * v60;
-    let v155 = p.gravity_y * v62;
-    let v156 = v154 + v155;
-    let v157 = v153 * v156;
-    let v158 = v150 + v157;
-    let v159 = v143 + v158;
-    let v160 = v106 + v159;
-    let v161 = qd_2 * qd_2;
-    let v162 = v72 * v161;
-    let v163 = v158 + v162;
-    let v164 = v89 * v161;
-    let v165 = v142 + v164;
-    SMatrix::from_data(ArrayStorage([[v56, v59, v160, v163, v165]]))
+    let v70 = v69 * p.prepared[20];
+    let v71 = v44 * v64;
+    let v72 = v42 * v62;
+    let v73 = v71 + v72;
+    let v74 = v73 * p.prepared[21];
+    let v75 = v70 + v74;
+    let v76 = v66 + v75;
+    let v77 = v35 * v62;
+    let v78 = v33 * v64;
+    let v79 = v77 - v78;
+    let v80 = v79 * p.prepared[22];
+    let v81 = v35 * v64;
+    let v82 = v33 * v62;
+    let v83 = v81 + v82;
+    let v84 = v83 * p.prepared[23];
+    let v85 = v80 + v84;
+    let v86 = v76 + v85;
+    let v87 = v61 + v86;
+    let v88 = qd_2 * qd_2;
+    let v89 = v37 * v88;
+    let v90 = v85 + v89;
+    let v91 = v46 * v88;
+    let v92 = v75 + v91;
+    SMatrix::from_data(ArrayStorage([[v29, v32, v87, v90, v92]]))
 }
 /// `G(q) = ∂V/∂q`.
 pub fn gravity_forces<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
-    let (v11, v0) = q_0.sin_cos();
-    let v1 = p.thigh_mass * p.thigh_com_y;
-    let v2 = p.shin_mass * p.thigh_length_y;
-    let v3 = v1 + v2;
-    let v4 = p.gravity_x * v3;
-    let v5 = p.thigh_mass * p.thigh_com_x;
-    let v6 = p.shin_mass * p.thigh_length_x;
-    let v7 = v5 + v6;
-    let v8 = p.gravity_y * v7;
-    let v9 = v4 - v8;
-    let v10 = v0 * v9;
-    let v12 = p.gravity_x * v7;
-    let v13 = v3 * p.gravity_y;
-    let v14 = v12 + v13;
-    let v15 = v11 * v14;
-    let v16 = v10 + v15;
-    let (v19, v17) = q_1.sin_cos();
-    let v18 = v0 * v17;
-    let v20 = v11 * v19;
-    let v21 = v18 - v20;
-    let v22 = p.shin_mass * p.shin_com_y;
-    let v23 = p.gravity_x * v22;
-    let v24 = p.shin_mass * p.shin_com_x;
-    let v25 = p.gravity_y * v24;
+    let (v2, v0) = q_0.sincos();
+    let v1 = v0 * p.prepared[14];
+    let v3 = v2 * p.prepared[15];
+    let v4 = v1 + v3;
+    let (v7, v5) = q_1.sincos();
+    let v6 = v0 * v5;
+    let v8 = v2 * v7;
+    let v9 = v6 - v8;
+    let v10 = v9 * p.prepared[16];
+    let v11 = v2 * v5;
+    let v12 = v0 * v7;
+    let v13 = v11 + v12;
+    let v14 = v13 * p.prepared[17];
+    let v15 = v10 + v14;
+    let v16 = v4 + v15;
+    let (v19, v17) = q_2.sincos();
+    let v18 = v17 * p.prepared[18];
+    let v20 = v19 * p.prepared[19];
+    let v21 = v18 + v20;
+    let (v24, v22) = q_4.sincos();
+    let v23 = v17 * v22;
+    let v25 = v19 * v24;
     let v26 = v23 - v25;
-    let v27 = v21 * v26;
-    let v28 = v11 * v17;
-    let v29 = v0 * v19;
+    let v27 = v26 * p.prepared[20];
+    let v28 = v19 * v22;
+    let v29 = v17 * v24;
     let v30 = v28 + v29;
-    let v31 = p.gravity_x * v24;
-    let v32 = p.gravity_y * v22;
-    let v33 = v31 + v32;
-    let v34 = v30 * v33;
-    let v35 = v27 + v34;
-    let v36 = v16 + v35;
-    let (v52, v37) = q_2.sin_cos();
-    let v38 = p.four_bar_link_mass * p.four_bar_link_com_y;
-    let v39 = p.lower_leg_mass * p.four_bar_link_length_y;
-    let v40 = v38 + v39;
-    let v41 = p.brace_mass * p.brace_origin_y;
+    let v31 = v30 * p.prepared[21];
+    let v32 = v27 + v31;
+    let v33 = v21 + v32;
+    let (v36, v34) = q_3.sincos();
+    let v35 = v17 * v34;
+    let v37 = v19 * v36;
+    let v38 = v35 - v37;
+    let v39 = v38 * p.prepared[22];
+    let v40 = v19 * v34;
+    let v41 = v17 * v36;
     let v42 = v40 + v41;
-    let v43 = p.gravity_x * v42;
-    let v44 = p.four_bar_link_mass * p.four_bar_link_com_x;
-    let v45 = p.lower_leg_mass * p.four_bar_link_length_x;
-    let v46 = v44 + v45;
-    let v47 = p.brace_mass * p.brace_origin_x;
-    let v48 = v46 + v47;
-    let v49 = p.gravity_y * v48;
-    let v50 = v43 - v49;
-    let v51 = v37 * v50;
-    let v53 = p.gravity_x * v48;
-    let v54 = p.gravity_y * v42;
-    let v55 = v53 + v54;
-    let v56 = v52 * v55;
-    let v57 = v51 + v56;
-    let (v60, v58) = q_4.sin_cos();
-    let v59 = v37 * v58;
-    let v61 = v52 * v60;
-    let v62 = v59 - v61;
-    let v63 = p.brace_mass * p.brace_com_y;
-    let v64 = p.gravity_x * v63;
-    let v65 = p.brace_mass * p.brace_com_x;
-    let v66 = p.gravity_y * v65;
-    let v67 = v64 - v66;
-    let v68 = v62 * v67;
-    let v69 = v52 * v58;
-    let v70 = v37 * v60;
-    let v71 = v69 + v70;
-    let v72 = p.gravity_x * v65;
-    let v73 = p.gravity_y * v63;
-    let v74 = v72 + v73;
-    let v75 = v71 * v74;
-    let v76 = v68 + v75;
-    let v77 = v57 + v76;
-    let (v80, v78) = q_3.sin_cos();
-    let v79 = v37 * v78;
-    let v81 = v52 * v80;
-    let v82 = v79 - v81;
-    let v83 = p.lower_leg_mass * p.lower_leg_com_y;
-    let v84 = p.gravity_x * v83;
-    let v85 = p.lower_leg_mass * p.lower_leg_com_x;
-    let v86 = p.gravity_y * v85;
-    let v87 = v84 - v86;
-    let v88 = v82 * v87;
-    let v89 = v52 * v78;
-    let v90 = v37 * v80;
-    let v91 = v89 + v90;
-    let v92 = p.gravity_x * v85;
-    let v93 = p.gravity_y * v83;
-    let v94 = v92 + v93;
-    let v95 = v91 * v94;
-    let v96 = v88 + v95;
-    let v97 = v77 + v96;
-    SMatrix::from_data(ArrayStorage([[v36, v35, v97, v96, v76]]))
+    let v43 = v42 * p.prepared[23];
+    let v44 = v39 + v43;
+    let v45 = v33 + v44;
+    SMatrix::from_data(ArrayStorage([[v16, v15, v45, v44, v32]]))
 }
 /// Viscous joint damping `D q̇`.
 pub fn damping_forces<T: Real>(qd: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
@@ -874,12 +887,12 @@ pub fn damping_forces<T: Real>(qd: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 
 /// `φ(q)`: point a minus point b of each closure.
 pub fn closure_residual<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 4> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.thigh_length_x;
     let v3 = v2 * p.thigh_length_y;
     let v4 = v1 - v3;
     let v5 = p.thigh_origin_x + v4;
-    let (v8, v6) = q_1.sin_cos();
+    let (v8, v6) = q_1.sincos();
     let v7 = v0 * v6;
     let v9 = v2 * v8;
     let v10 = v7 - v9;
@@ -890,12 +903,12 @@ pub fn closure_residual<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T,
     let v15 = v14 * p.knee_a_y;
     let v16 = v11 - v15;
     let v17 = v5 + v16;
-    let (v20, v18) = q_2.sin_cos();
+    let (v20, v18) = q_2.sincos();
     let v19 = v18 * p.four_bar_link_length_x;
     let v21 = v20 * p.four_bar_link_length_y;
     let v22 = v19 - v21;
     let v23 = p.four_bar_link_origin_x + v22;
-    let (v26, v24) = q_3.sin_cos();
+    let (v26, v24) = q_3.sincos();
     let v25 = v18 * v24;
     let v27 = v20 * v26;
     let v28 = v25 - v27;
@@ -928,7 +941,7 @@ pub fn closure_residual<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T,
     let v55 = v20 * p.brace_origin_y;
     let v56 = v54 - v55;
     let v57 = p.four_bar_link_origin_x + v56;
-    let (v60, v58) = q_4.sin_cos();
+    let (v60, v58) = q_4.sincos();
     let v59 = v18 * v58;
     let v61 = v20 * v60;
     let v62 = v59 - v61;
@@ -965,8 +978,8 @@ pub fn constraint_jacobian<T: Real>(
     p: &Params<T>,
 ) -> SMatrix<T, 4, 5> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
-    let (v0, v3) = q_0.sin_cos();
-    let (v4, v1) = q_1.sin_cos();
+    let (v0, v3) = q_0.sincos();
+    let (v4, v1) = q_1.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
@@ -999,8 +1012,8 @@ pub fn constraint_jacobian<T: Real>(
     let v33 = -v32;
     let v34 = -v12;
     let v35 = -v31;
-    let (v36, v39) = q_2.sin_cos();
-    let (v40, v37) = q_3.sin_cos();
+    let (v36, v39) = q_2.sincos();
+    let (v40, v37) = q_3.sincos();
     let v38 = v36 * v37;
     let v41 = v39 * v40;
     let v42 = v38 + v41;
@@ -1022,7 +1035,7 @@ pub fn constraint_jacobian<T: Real>(
     let v58 = v56 - v57;
     let v59 = v55 + v58;
     let v60 = -v59;
-    let (v63, v61) = q_4.sin_cos();
+    let (v63, v61) = q_4.sincos();
     let v62 = v36 * v61;
     let v64 = v39 * v63;
     let v65 = v62 + v64;
@@ -1066,8 +1079,8 @@ pub fn constraint_bias<T: Real>(
     let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
     let v0 = qd_2 + qd_3;
     let v1 = v0 * v0;
-    let (v5, v2) = q_2.sin_cos();
-    let (v6, v3) = q_3.sin_cos();
+    let (v5, v2) = q_2.sincos();
+    let (v6, v3) = q_3.sincos();
     let v4 = v2 * v3;
     let v7 = v5 * v6;
     let v8 = v4 - v7;
@@ -1086,8 +1099,8 @@ pub fn constraint_bias<T: Real>(
     let v21 = v15 + v20;
     let v22 = qd_0 + qd_1;
     let v23 = v22 * v22;
-    let (v27, v24) = q_0.sin_cos();
-    let (v28, v25) = q_1.sin_cos();
+    let (v27, v24) = q_0.sincos();
+    let (v28, v25) = q_1.sincos();
     let v26 = v24 * v25;
     let v29 = v27 * v28;
     let v30 = v26 - v29;
@@ -1131,7 +1144,7 @@ pub fn constraint_bias<T: Real>(
     let v68 = v42 + v67;
     let v69 = qd_2 + qd_4;
     let v70 = v69 * v69;
-    let (v73, v71) = q_4.sin_cos();
+    let (v73, v71) = q_4.sincos();
     let v72 = v2 * v71;
     let v74 = v5 * v73;
     let v75 = v72 - v74;
@@ -1168,12 +1181,12 @@ pub fn constraint_bias<T: Real>(
 /// The foot point in the base frame.
 pub fn foot_position<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
     let [q_0, q_1, _, _, _] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.thigh_length_x;
     let v3 = v2 * p.thigh_length_y;
     let v4 = v1 - v3;
     let v5 = p.thigh_origin_x + v4;
-    let (v8, v6) = q_1.sin_cos();
+    let (v8, v6) = q_1.sincos();
     let v7 = v0 * v6;
     let v9 = v2 * v8;
     let v10 = v7 - v9;
@@ -1197,8 +1210,8 @@ pub fn foot_position<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2>
 /// `J_f(q) = ∂(foot)/∂q`.
 pub fn foot_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
     let [q_0, q_1, _, _, _] = q.data.0[0];
-    let (v0, v3) = q_0.sin_cos();
-    let (v4, v1) = q_1.sin_cos();
+    let (v0, v3) = q_0.sincos();
+    let (v4, v1) = q_1.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
@@ -1241,8 +1254,8 @@ pub fn foot_bias<T: Real>(
     let [qd_0, qd_1, _, _, _] = qd.data.0[0];
     let v0 = qd_0 + qd_1;
     let v1 = v0 * v0;
-    let (v5, v2) = q_0.sin_cos();
-    let (v6, v3) = q_1.sin_cos();
+    let (v5, v2) = q_0.sincos();
+    let (v6, v3) = q_1.sincos();
     let v4 = v2 * v3;
     let v7 = v5 * v6;
     let v8 = v4 - v7;
@@ -1280,255 +1293,115 @@ pub fn kinetic_energy<T: Real>(
 ) -> T {
     let [_, q_1, _, q_3, q_4] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
-    let v0 = p.thigh_com_x * p.thigh_com_x;
-    let v1 = p.thigh_com_y * p.thigh_com_y;
-    let v2 = v0 + v1;
-    let v3 = p.thigh_mass * v2;
-    let v4 = p.thigh_inertia + v3;
-    let v5 = p.shin_com_x * p.shin_com_x;
-    let v6 = p.shin_com_y * p.shin_com_y;
-    let v7 = v5 + v6;
-    let v8 = p.shin_mass * v7;
-    let v9 = p.shin_inertia + v8;
-    let (v17, v10) = q_1.sin_cos();
-    let v11 = p.shin_mass * p.shin_com_x;
-    let v12 = p.thigh_length_x * v11;
-    let v13 = p.shin_mass * p.shin_com_y;
-    let v14 = p.thigh_length_y * v13;
-    let v15 = v12 + v14;
-    let v16 = v10 * v15;
-    let v18 = p.thigh_length_x * v13;
-    let v19 = v11 * p.thigh_length_y;
-    let v20 = v18 - v19;
-    let v21 = v17 * v20;
-    let v22 = v16 - v21;
-    let v23 = v22 + v22;
-    let v24 = v9 + v23;
-    let v25 = p.thigh_length_x * p.thigh_length_x;
-    let v26 = p.thigh_length_y * p.thigh_length_y;
-    let v27 = v25 + v26;
-    let v28 = p.shin_mass * v27;
-    let v29 = v24 + v28;
-    let v30 = v4 + v29;
-    let v31 = p.thigh_gear_ratio * p.thigh_gear_ratio;
-    let v32 = p.thigh_rotor_inertia * v31;
-    let v33 = v30 + v32;
-    let v34 = qd_0 * v33;
-    let v35 = v19 - v18;
-    let v36 = v17 * v35;
-    let v37 = v16 + v36;
-    let v38 = v9 + v37;
-    let v39 = v38 * qd_1;
-    let v40 = v34 + v39;
-    let v41 = qd_0 * v40;
-    let v42 = qd_0 * v38;
-    let v43 = v9 * qd_1;
-    let v44 = v42 + v43;
-    let v45 = qd_1 * v44;
-    let v46 = v41 + v45;
-    let v47 = p.four_bar_link_com_x * p.four_bar_link_com_x;
-    let v48 = p.four_bar_link_com_y * p.four_bar_link_com_y;
-    let v49 = v47 + v48;
-    let v50 = p.four_bar_link_mass * v49;
-    let v51 = p.four_bar_link_inertia + v50;
-    let v52 = p.brace_com_x * p.brace_com_x;
-    let v53 = p.brace_com_y * p.brace_com_y;
-    let v54 = v52 + v53;
-    let v55 = p.brace_mass * v54;
-    let v56 = p.brace_inertia + v55;
-    let (v64, v57) = q_4.sin_cos();
-    let v58 = p.brace_mass * p.brace_com_x;
-    let v59 = p.brace_origin_x * v58;
-    let v60 = p.brace_mass * p.brace_com_y;
-    let v61 = p.brace_origin_y * v60;
-    let v62 = v59 + v61;
-    let v63 = v57 * v62;
-    let v65 = p.brace_origin_x * v60;
-    let v66 = v58 * p.brace_origin_y;
-    let v67 = v65 - v66;
-    let v68 = v64 * v67;
-    let v69 = v63 - v68;
-    let v70 = v69 + v69;
-    let v71 = v56 + v70;
-    let v72 = p.brace_origin_x * p.brace_origin_x;
-    let v73 = p.brace_origin_y * p.brace_origin_y;
-    let v74 = v72 + v73;
-    let v75 = p.brace_mass * v74;
-    let v76 = v71 + v75;
-    let v77 = v51 + v76;
-    let v78 = p.lower_leg_com_x * p.lower_leg_com_x;
-    let v79 = p.lower_leg_com_y * p.lower_leg_com_y;
-    let v80 = v78 + v79;
-    let v81 = p.lower_leg_mass * v80;
-    let v82 = p.lower_leg_inertia + v81;
-    let (v90, v83) = q_3.sin_cos();
-    let v84 = p.lower_leg_mass * p.lower_leg_com_x;
-    let v85 = p.four_bar_link_length_x * v84;
-    let v86 = p.lower_leg_mass * p.lower_leg_com_y;
-    let v87 = p.four_bar_link_length_y * v86;
-    let v88 = v85 + v87;
-    let v89 = v83 * v88;
-    let v91 = p.four_bar_link_length_x * v86;
-    let v92 = v84 * p.four_bar_link_length_y;
-    let v93 = v91 - v92;
-    let v94 = v90 * v93;
-    let v95 = v89 - v94;
-    let v96 = v95 + v95;
-    let v97 = v82 + v96;
-    let v98 = p.four_bar_link_length_x * p.four_bar_link_length_x;
-    let v99 = p.four_bar_link_length_y * p.four_bar_link_length_y;
-    let v100 = v98 + v99;
-    let v101 = p.lower_leg_mass * v100;
-    let v102 = v97 + v101;
-    let v103 = v77 + v102;
-    let v104 = p.four_bar_link_gear_ratio * p.four_bar_link_gear_ratio;
-    let v105 = p.four_bar_link_rotor_inertia * v104;
-    let v106 = v103 + v105;
-    let v107 = qd_2 * v106;
-    let v108 = v92 - v91;
-    let v109 = v90 * v108;
-    let v110 = v89 + v109;
-    let v111 = v82 + v110;
-    let v112 = v111 * qd_3;
-    let v113 = v107 + v112;
-    let v114 = v66 - v65;
-    let v115 = v64 * v114;
-    let v116 = v63 + v115;
-    let v117 = v56 + v116;
-    let v118 = v117 * qd_4;
-    let v119 = v113 + v118;
-    let v120 = qd_2 * v119;
-    let v121 = v46 + v120;
-    let v122 = qd_2 * v111;
-    let v123 = v82 * qd_3;
-    let v124 = v122 + v123;
-    let v125 = qd_3 * v124;
-    let v126 = v121 + v125;
-    let v127 = qd_2 * v117;
-    let v128 = v56 * qd_4;
-    let v129 = v127 + v128;
-    let v130 = qd_4 * v129;
-    let v131 = v126 + v130;
-    let v132 = T::lit(0.5) * v131;
-    v132
+    let (v2, v0) = q_1.sincos();
+    let v1 = v0 * p.prepared[2];
+    let v3 = v2 * p.prepared[3];
+    let v4 = v1 - v3;
+    let v5 = v4 + v4;
+    let v6 = p.prepared[1] + v5;
+    let v7 = qd_0 * v6;
+    let v8 = v2 * p.prepared[4];
+    let v9 = v1 + v8;
+    let v10 = p.prepared[0] + v9;
+    let v11 = v10 * qd_1;
+    let v12 = v7 + v11;
+    let v13 = qd_0 * v12;
+    let v14 = qd_0 * v10;
+    let v15 = p.prepared[0] * qd_1;
+    let v16 = v14 + v15;
+    let v17 = qd_1 * v16;
+    let v18 = v13 + v17;
+    let (v21, v19) = q_4.sincos();
+    let v20 = v19 * p.prepared[8];
+    let v22 = v21 * p.prepared[9];
+    let v23 = v20 - v22;
+    let v24 = v23 + v23;
+    let v25 = p.prepared[7] + v24;
+    let (v28, v26) = q_3.sincos();
+    let v27 = v26 * p.prepared[10];
+    let v29 = v28 * p.prepared[11];
+    let v30 = v27 - v29;
+    let v31 = v30 + v30;
+    let v32 = v25 + v31;
+    let v33 = qd_2 * v32;
+    let v34 = v28 * p.prepared[12];
+    let v35 = v27 + v34;
+    let v36 = p.prepared[6] + v35;
+    let v37 = v36 * qd_3;
+    let v38 = v33 + v37;
+    let v39 = v21 * p.prepared[13];
+    let v40 = v20 + v39;
+    let v41 = p.prepared[5] + v40;
+    let v42 = v41 * qd_4;
+    let v43 = v38 + v42;
+    let v44 = qd_2 * v43;
+    let v45 = v18 + v44;
+    let v46 = qd_2 * v36;
+    let v47 = p.prepared[6] * qd_3;
+    let v48 = v46 + v47;
+    let v49 = qd_3 * v48;
+    let v50 = v45 + v49;
+    let v51 = qd_2 * v41;
+    let v52 = p.prepared[5] * qd_4;
+    let v53 = v51 + v52;
+    let v54 = qd_4 * v53;
+    let v55 = v50 + v54;
+    let v56 = T::lit(0.5) * v55;
+    v56
 }
 /// Potential energy `−Σ m g·c`.
 pub fn potential_energy<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> T {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
-    let v0 = p.thigh_mass + p.shin_mass;
-    let v1 = v0 * p.thigh_origin_x;
-    let v2 = p.four_bar_link_mass + p.brace_mass;
-    let v3 = v2 + p.lower_leg_mass;
-    let v4 = v3 * p.four_bar_link_origin_x;
-    let v5 = v1 + v4;
-    let v6 = p.gravity_x * v5;
-    let v7 = v0 * p.thigh_origin_y;
-    let v8 = v3 * p.four_bar_link_origin_y;
-    let v9 = v7 + v8;
-    let v10 = p.gravity_y * v9;
-    let v11 = v6 + v10;
-    let (v23, v12) = q_0.sin_cos();
-    let v13 = p.thigh_mass * p.thigh_com_x;
-    let v14 = p.shin_mass * p.thigh_length_x;
-    let v15 = v13 + v14;
-    let v16 = p.gravity_x * v15;
-    let v17 = p.thigh_mass * p.thigh_com_y;
-    let v18 = p.shin_mass * p.thigh_length_y;
-    let v19 = v17 + v18;
-    let v20 = p.gravity_y * v19;
-    let v21 = v16 + v20;
-    let v22 = v12 * v21;
-    let v24 = p.gravity_x * v19;
-    let v25 = p.gravity_y * v15;
-    let v26 = v24 - v25;
-    let v27 = v23 * v26;
-    let v28 = v22 - v27;
-    let v29 = v11 + v28;
-    let (v32, v30) = q_1.sin_cos();
-    let v31 = v12 * v30;
-    let v33 = v23 * v32;
-    let v34 = v31 - v33;
-    let v35 = p.shin_mass * p.shin_com_x;
-    let v36 = p.gravity_x * v35;
-    let v37 = p.shin_mass * p.shin_com_y;
-    let v38 = p.gravity_y * v37;
-    let v39 = v36 + v38;
-    let v40 = v34 * v39;
-    let v41 = v23 * v30;
-    let v42 = v12 * v32;
-    let v43 = v41 + v42;
-    let v44 = p.gravity_x * v37;
-    let v45 = p.gravity_y * v35;
-    let v46 = v44 - v45;
-    let v47 = v43 * v46;
-    let v48 = v40 - v47;
-    let v49 = v29 + v48;
-    let (v65, v50) = q_2.sin_cos();
-    let v51 = p.four_bar_link_mass * p.four_bar_link_com_x;
-    let v52 = p.lower_leg_mass * p.four_bar_link_length_x;
-    let v53 = v51 + v52;
-    let v54 = p.brace_mass * p.brace_origin_x;
-    let v55 = v53 + v54;
-    let v56 = p.gravity_x * v55;
-    let v57 = p.four_bar_link_mass * p.four_bar_link_com_y;
-    let v58 = p.lower_leg_mass * p.four_bar_link_length_y;
-    let v59 = v57 + v58;
-    let v60 = p.brace_mass * p.brace_origin_y;
-    let v61 = v59 + v60;
-    let v62 = p.gravity_y * v61;
-    let v63 = v56 + v62;
-    let v64 = v50 * v63;
-    let v66 = p.gravity_x * v61;
-    let v67 = p.gravity_y * v55;
-    let v68 = v66 - v67;
-    let v69 = v65 * v68;
-    let v70 = v64 - v69;
-    let v71 = v49 + v70;
-    let (v74, v72) = q_3.sin_cos();
-    let v73 = v50 * v72;
-    let v75 = v65 * v74;
-    let v76 = v73 - v75;
-    let v77 = p.lower_leg_mass * p.lower_leg_com_x;
-    let v78 = p.gravity_x * v77;
-    let v79 = p.lower_leg_mass * p.lower_leg_com_y;
-    let v80 = p.gravity_y * v79;
-    let v81 = v78 + v80;
-    let v82 = v76 * v81;
-    let v83 = v65 * v72;
-    let v84 = v50 * v74;
-    let v85 = v83 + v84;
-    let v86 = p.gravity_x * v79;
-    let v87 = p.gravity_y * v77;
-    let v88 = v86 - v87;
-    let v89 = v85 * v88;
-    let v90 = v82 - v89;
-    let v91 = v71 + v90;
-    let (v94, v92) = q_4.sin_cos();
-    let v93 = v50 * v92;
-    let v95 = v65 * v94;
-    let v96 = v93 - v95;
-    let v97 = p.brace_mass * p.brace_com_x;
-    let v98 = p.gravity_x * v97;
-    let v99 = p.brace_mass * p.brace_com_y;
-    let v100 = p.gravity_y * v99;
-    let v101 = v98 + v100;
-    let v102 = v96 * v101;
-    let v103 = v65 * v92;
-    let v104 = v50 * v94;
-    let v105 = v103 + v104;
-    let v106 = p.gravity_x * v99;
-    let v107 = p.gravity_y * v97;
-    let v108 = v106 - v107;
-    let v109 = v105 * v108;
-    let v110 = v102 - v109;
-    let v111 = v91 + v110;
-    let v112 = -v111;
-    v112
+    let (v2, v0) = q_0.sincos();
+    let v1 = v0 * p.prepared[15];
+    let v3 = v2 * p.prepared[14];
+    let v4 = v1 - v3;
+    let v5 = p.prepared[24] + v4;
+    let (v8, v6) = q_1.sincos();
+    let v7 = v0 * v6;
+    let v9 = v2 * v8;
+    let v10 = v7 - v9;
+    let v11 = v10 * p.prepared[17];
+    let v12 = v2 * v6;
+    let v13 = v0 * v8;
+    let v14 = v12 + v13;
+    let v15 = v14 * p.prepared[16];
+    let v16 = v11 - v15;
+    let v17 = v5 + v16;
+    let (v20, v18) = q_2.sincos();
+    let v19 = v18 * p.prepared[19];
+    let v21 = v20 * p.prepared[18];
+    let v22 = v19 - v21;
+    let v23 = v17 + v22;
+    let (v26, v24) = q_3.sincos();
+    let v25 = v18 * v24;
+    let v27 = v20 * v26;
+    let v28 = v25 - v27;
+    let v29 = v28 * p.prepared[23];
+    let v30 = v20 * v24;
+    let v31 = v18 * v26;
+    let v32 = v30 + v31;
+    let v33 = v32 * p.prepared[22];
+    let v34 = v29 - v33;
+    let v35 = v23 + v34;
+    let (v38, v36) = q_4.sincos();
+    let v37 = v18 * v36;
+    let v39 = v20 * v38;
+    let v40 = v37 - v39;
+    let v41 = v40 * p.prepared[21];
+    let v42 = v20 * v36;
+    let v43 = v18 * v38;
+    let v44 = v42 + v43;
+    let v45 = v44 * p.prepared[20];
+    let v46 = v41 - v45;
+    let v47 = v35 + v46;
+    let v48 = -v47;
+    v48
 }
 /// Joint positions in the base frame, one column per joint.
 pub fn joint_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
     let [q_0, _, q_2, _, _] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.thigh_length_x;
     let v3 = v2 * p.thigh_length_y;
     let v4 = v1 - v3;
@@ -1537,7 +1410,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 
     let v7 = v0 * p.thigh_length_y;
     let v8 = v6 + v7;
     let v9 = p.thigh_origin_y + v8;
-    let (v12, v10) = q_2.sin_cos();
+    let (v12, v10) = q_2.sincos();
     let v11 = v10 * p.four_bar_link_length_x;
     let v13 = v12 * p.four_bar_link_length_y;
     let v14 = v11 - v13;
@@ -1567,7 +1440,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 
 /// Link tips in the base frame, one column per link.
 pub fn link_tips<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.thigh_length_x;
     let v3 = v2 * p.thigh_length_y;
     let v4 = v1 - v3;
@@ -1576,7 +1449,7 @@ pub fn link_tips<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> 
     let v7 = v0 * p.thigh_length_y;
     let v8 = v6 + v7;
     let v9 = p.thigh_origin_y + v8;
-    let (v12, v10) = q_1.sin_cos();
+    let (v12, v10) = q_1.sincos();
     let v11 = v0 * v10;
     let v13 = v2 * v12;
     let v14 = v11 - v13;
@@ -1591,7 +1464,7 @@ pub fn link_tips<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> 
     let v23 = v14 * p.shin_length_y;
     let v24 = v22 + v23;
     let v25 = v9 + v24;
-    let (v28, v26) = q_2.sin_cos();
+    let (v28, v26) = q_2.sincos();
     let v27 = v26 * p.four_bar_link_length_x;
     let v29 = v28 * p.four_bar_link_length_y;
     let v30 = v27 - v29;
@@ -1600,7 +1473,7 @@ pub fn link_tips<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> 
     let v33 = v26 * p.four_bar_link_length_y;
     let v34 = v32 + v33;
     let v35 = p.four_bar_link_origin_y + v34;
-    let (v38, v36) = q_3.sin_cos();
+    let (v38, v36) = q_3.sincos();
     let v37 = v26 * v36;
     let v39 = v28 * v38;
     let v40 = v37 - v39;
@@ -1619,7 +1492,7 @@ pub fn link_tips<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> 
     let v53 = v28 * p.brace_origin_y;
     let v54 = v52 - v53;
     let v55 = p.four_bar_link_origin_x + v54;
-    let (v58, v56) = q_4.sin_cos();
+    let (v58, v56) = q_4.sincos();
     let v57 = v26 * v56;
     let v59 = v28 * v58;
     let v60 = v57 - v59;
@@ -1645,12 +1518,12 @@ pub fn link_tips<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> 
 /// Closure points a, b of each closure in the base frame.
 pub fn closure_points<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 4> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.thigh_length_x;
     let v3 = v2 * p.thigh_length_y;
     let v4 = v1 - v3;
     let v5 = p.thigh_origin_x + v4;
-    let (v8, v6) = q_1.sin_cos();
+    let (v8, v6) = q_1.sincos();
     let v7 = v0 * v6;
     let v9 = v2 * v8;
     let v10 = v7 - v9;
@@ -1669,12 +1542,12 @@ pub fn closure_points<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2
     let v23 = v10 * p.knee_a_y;
     let v24 = v22 + v23;
     let v25 = v21 + v24;
-    let (v28, v26) = q_2.sin_cos();
+    let (v28, v26) = q_2.sincos();
     let v27 = v26 * p.four_bar_link_length_x;
     let v29 = v28 * p.four_bar_link_length_y;
     let v30 = v27 - v29;
     let v31 = p.four_bar_link_origin_x + v30;
-    let (v34, v32) = q_3.sin_cos();
+    let (v34, v32) = q_3.sincos();
     let v33 = v26 * v32;
     let v35 = v28 * v34;
     let v36 = v33 - v35;
@@ -1697,7 +1570,7 @@ pub fn closure_points<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2
     let v53 = v28 * p.brace_origin_y;
     let v54 = v52 - v53;
     let v55 = p.four_bar_link_origin_x + v54;
-    let (v58, v56) = q_4.sin_cos();
+    let (v58, v56) = q_4.sincos();
     let v57 = v26 * v56;
     let v59 = v28 * v58;
     let v60 = v57 - v59;
@@ -1753,350 +1626,228 @@ pub fn dynamics_terms<T: Real>(
 ) -> (SMatrix<T, 5, 5>, SVector<T, 5>, SMatrix<T, 4, 5>, SVector<T, 4>) {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
-    let v0 = p.thigh_com_x * p.thigh_com_x;
-    let v1 = p.thigh_com_y * p.thigh_com_y;
-    let v2 = v0 + v1;
-    let v3 = p.thigh_mass * v2;
-    let v4 = p.thigh_inertia + v3;
-    let v5 = p.shin_com_x * p.shin_com_x;
-    let v6 = p.shin_com_y * p.shin_com_y;
-    let v7 = v5 + v6;
-    let v8 = p.shin_mass * v7;
-    let v9 = p.shin_inertia + v8;
-    let (v17, v10) = q_1.sin_cos();
-    let v11 = p.shin_mass * p.shin_com_x;
-    let v12 = p.thigh_length_x * v11;
-    let v13 = p.shin_mass * p.shin_com_y;
-    let v14 = p.thigh_length_y * v13;
-    let v15 = v12 + v14;
-    let v16 = v10 * v15;
-    let v18 = p.thigh_length_x * v13;
-    let v19 = v11 * p.thigh_length_y;
-    let v20 = v18 - v19;
-    let v21 = v17 * v20;
-    let v22 = v16 - v21;
-    let v23 = v22 + v22;
-    let v24 = v9 + v23;
-    let v25 = p.thigh_length_x * p.thigh_length_x;
-    let v26 = p.thigh_length_y * p.thigh_length_y;
-    let v27 = v25 + v26;
-    let v28 = p.shin_mass * v27;
-    let v29 = v24 + v28;
-    let v30 = v4 + v29;
-    let v31 = p.thigh_gear_ratio * p.thigh_gear_ratio;
-    let v32 = p.thigh_rotor_inertia * v31;
-    let v33 = v30 + v32;
-    let v34 = v19 - v18;
-    let v35 = v17 * v34;
-    let v36 = v16 + v35;
-    let v37 = v9 + v36;
-    let v38 = p.four_bar_link_com_x * p.four_bar_link_com_x;
-    let v39 = p.four_bar_link_com_y * p.four_bar_link_com_y;
-    let v40 = v38 + v39;
-    let v41 = p.four_bar_link_mass * v40;
-    let v42 = p.four_bar_link_inertia + v41;
-    let v43 = p.brace_com_x * p.brace_com_x;
-    let v44 = p.brace_com_y * p.brace_com_y;
-    let v45 = v43 + v44;
-    let v46 = p.brace_mass * v45;
-    let v47 = p.brace_inertia + v46;
-    let (v55, v48) = q_4.sin_cos();
-    let v49 = p.brace_mass * p.brace_com_x;
-    let v50 = p.brace_origin_x * v49;
-    let v51 = p.brace_mass * p.brace_com_y;
-    let v52 = p.brace_origin_y * v51;
-    let v53 = v50 + v52;
-    let v54 = v48 * v53;
-    let v56 = p.brace_origin_x * v51;
-    let v57 = v49 * p.brace_origin_y;
-    let v58 = v56 - v57;
-    let v59 = v55 * v58;
-    let v60 = v54 - v59;
-    let v61 = v60 + v60;
-    let v62 = v47 + v61;
-    let v63 = p.brace_origin_x * p.brace_origin_x;
-    let v64 = p.brace_origin_y * p.brace_origin_y;
-    let v65 = v63 + v64;
-    let v66 = p.brace_mass * v65;
-    let v67 = v62 + v66;
-    let v68 = v42 + v67;
-    let v69 = p.lower_leg_com_x * p.lower_leg_com_x;
-    let v70 = p.lower_leg_com_y * p.lower_leg_com_y;
-    let v71 = v69 + v70;
-    let v72 = p.lower_leg_mass * v71;
-    let v73 = p.lower_leg_inertia + v72;
-    let (v81, v74) = q_3.sin_cos();
-    let v75 = p.lower_leg_mass * p.lower_leg_com_x;
-    let v76 = p.four_bar_link_length_x * v75;
-    let v77 = p.lower_leg_mass * p.lower_leg_com_y;
-    let v78 = p.four_bar_link_length_y * v77;
-    let v79 = v76 + v78;
-    let v80 = v74 * v79;
-    let v82 = p.four_bar_link_length_x * v77;
-    let v83 = v75 * p.four_bar_link_length_y;
-    let v84 = v82 - v83;
-    let v85 = v81 * v84;
-    let v86 = v80 - v85;
-    let v87 = v86 + v86;
-    let v88 = v73 + v87;
-    let v89 = p.four_bar_link_length_x * p.four_bar_link_length_x;
-    let v90 = p.four_bar_link_length_y * p.four_bar_link_length_y;
-    let v91 = v89 + v90;
-    let v92 = p.lower_leg_mass * v91;
-    let v93 = v88 + v92;
-    let v94 = v68 + v93;
-    let v95 = p.four_bar_link_gear_ratio * p.four_bar_link_gear_ratio;
-    let v96 = p.four_bar_link_rotor_inertia * v95;
-    let v97 = v94 + v96;
-    let v98 = v83 - v82;
-    let v99 = v81 * v98;
-    let v100 = v80 + v99;
-    let v101 = v73 + v100;
-    let v102 = v57 - v56;
-    let v103 = v55 * v102;
-    let v104 = v54 + v103;
-    let v105 = v47 + v104;
-    let v106 = v15 * v17;
-    let v107 = v10 * v20;
-    let v108 = v106 + v107;
-    let v109 = -v108;
-    let v110 = v109 + v109;
-    let v111 = qd_0 * qd_1;
-    let v112 = v110 * v111;
-    let v113 = v10 * v34;
-    let v114 = v113 - v106;
-    let v115 = qd_1 * qd_1;
-    let v116 = v114 * v115;
-    let v117 = v112 + v116;
-    let (v129, v118) = q_0.sin_cos();
-    let v119 = p.thigh_mass * p.thigh_com_y;
-    let v120 = p.shin_mass * p.thigh_length_y;
-    let v121 = v119 + v120;
-    let v122 = p.gravity_x * v121;
-    let v123 = p.thigh_mass * p.thigh_com_x;
-    let v124 = p.shin_mass * p.thigh_length_x;
-    let v125 = v123 + v124;
-    let v126 = p.gravity_y * v125;
-    let v127 = v122 - v126;
-    let v128 = v118 * v127;
-    let v130 = p.gravity_x * v125;
-    let v131 = v121 * p.gravity_y;
-    let v132 = v130 + v131;
-    let v133 = v129 * v132;
-    let v134 = v128 + v133;
-    let v135 = v10 * v118;
-    let v136 = v17 * v129;
-    let v137 = v135 - v136;
-    let v138 = v13 * p.gravity_x;
-    let v139 = v11 * p.gravity_y;
-    let v140 = v138 - v139;
-    let v141 = v137 * v140;
-    let v142 = v10 * v129;
-    let v143 = v17 * v118;
-    let v144 = v142 + v143;
-    let v145 = v11 * p.gravity_x;
-    let v146 = v13 * p.gravity_y;
-    let v147 = v145 + v146;
-    let v148 = v144 * v147;
-    let v149 = v141 + v148;
-    let v150 = v134 + v149;
-    let v151 = v117 + v150;
-    let v152 = qd_0 * qd_0;
-    let v153 = v108 * v152;
-    let v154 = v149 + v153;
-    let v155 = v79 * v81;
-    let v156 = v74 * v84;
-    let v157 = v155 + v156;
-    let v158 = -v157;
-    let v159 = v158 + v158;
-    let v160 = qd_2 * qd_3;
-    let v161 = v159 * v160;
-    let v162 = v53 * v55;
-    let v163 = v48 * v58;
-    let v164 = v162 + v163;
+    let (v2, v0) = q_1.sincos();
+    let v1 = v0 * p.prepared[2];
+    let v3 = v2 * p.prepared[3];
+    let v4 = v1 - v3;
+    let v5 = v4 + v4;
+    let v6 = p.prepared[1] + v5;
+    let v7 = v2 * p.prepared[4];
+    let v8 = v1 + v7;
+    let v9 = p.prepared[0] + v8;
+    let (v12, v10) = q_4.sincos();
+    let v11 = v10 * p.prepared[8];
+    let v13 = v12 * p.prepared[9];
+    let v14 = v11 - v13;
+    let v15 = v14 + v14;
+    let v16 = p.prepared[7] + v15;
+    let (v19, v17) = q_3.sincos();
+    let v18 = v17 * p.prepared[10];
+    let v20 = v19 * p.prepared[11];
+    let v21 = v18 - v20;
+    let v22 = v21 + v21;
+    let v23 = v16 + v22;
+    let v24 = v19 * p.prepared[12];
+    let v25 = v18 + v24;
+    let v26 = p.prepared[6] + v25;
+    let v27 = v12 * p.prepared[13];
+    let v28 = v11 + v27;
+    let v29 = p.prepared[5] + v28;
+    let v30 = p.prepared[2] * v2;
+    let v31 = v0 * p.prepared[3];
+    let v32 = v30 + v31;
+    let v33 = -v32;
+    let v34 = v33 + v33;
+    let v35 = qd_0 * qd_1;
+    let v36 = v34 * v35;
+    let v37 = v0 * p.prepared[4];
+    let v38 = v37 - v30;
+    let v39 = qd_1 * qd_1;
+    let v40 = v38 * v39;
+    let v41 = v36 + v40;
+    let (v44, v42) = q_0.sincos();
+    let v43 = v42 * p.prepared[14];
+    let v45 = v44 * p.prepared[15];
+    let v46 = v43 + v45;
+    let v47 = v0 * v42;
+    let v48 = v2 * v44;
+    let v49 = v47 - v48;
+    let v50 = v49 * p.prepared[16];
+    let v51 = v0 * v44;
+    let v52 = v2 * v42;
+    let v53 = v51 + v52;
+    let v54 = v53 * p.prepared[17];
+    let v55 = v50 + v54;
+    let v56 = v46 + v55;
+    let v57 = v41 + v56;
+    let v58 = qd_0 * qd_0;
+    let v59 = v32 * v58;
+    let v60 = v55 + v59;
+    let v61 = p.prepared[10] * v19;
+    let v62 = v17 * p.prepared[11];
+    let v63 = v61 + v62;
+    let v64 = -v63;
+    let v65 = v64 + v64;
+    let v66 = qd_2 * qd_3;
+    let v67 = v65 * v66;
+    let v68 = p.prepared[8] * v12;
+    let v69 = v10 * p.prepared[9];
+    let v70 = v68 + v69;
+    let v71 = -v70;
+    let v72 = v71 + v71;
+    let v73 = qd_2 * qd_4;
+    let v74 = v72 * v73;
+    let v75 = v67 + v74;
+    let v76 = v17 * p.prepared[12];
+    let v77 = v76 - v61;
+    let v78 = qd_3 * qd_3;
+    let v79 = v77 * v78;
+    let v80 = v75 + v79;
+    let v81 = v10 * p.prepared[13];
+    let v82 = v81 - v68;
+    let v83 = qd_4 * qd_4;
+    let v84 = v82 * v83;
+    let v85 = v80 + v84;
+    let (v88, v86) = q_2.sincos();
+    let v87 = v86 * p.prepared[18];
+    let v89 = v88 * p.prepared[19];
+    let v90 = v87 + v89;
+    let v91 = v10 * v86;
+    let v92 = v12 * v88;
+    let v93 = v91 - v92;
+    let v94 = v93 * p.prepared[20];
+    let v95 = v10 * v88;
+    let v96 = v12 * v86;
+    let v97 = v95 + v96;
+    let v98 = v97 * p.prepared[21];
+    let v99 = v94 + v98;
+    let v100 = v90 + v99;
+    let v101 = v17 * v86;
+    let v102 = v19 * v88;
+    let v103 = v101 - v102;
+    let v104 = v103 * p.prepared[22];
+    let v105 = v17 * v88;
+    let v106 = v19 * v86;
+    let v107 = v105 + v106;
+    let v108 = v107 * p.prepared[23];
+    let v109 = v104 + v108;
+    let v110 = v100 + v109;
+    let v111 = v85 + v110;
+    let v112 = qd_2 * qd_2;
+    let v113 = v63 * v112;
+    let v114 = v109 + v113;
+    let v115 = v70 * v112;
+    let v116 = v99 + v115;
+    let v117 = v53 * p.knee_a_x;
+    let v118 = v49 * p.knee_a_y;
+    let v119 = v117 + v118;
+    let v120 = p.thigh_length_x * v44;
+    let v121 = p.thigh_length_y * v42;
+    let v122 = v120 + v121;
+    let v123 = v119 + v122;
+    let v124 = -v123;
+    let v125 = v49 * p.knee_a_x;
+    let v126 = v53 * p.knee_a_y;
+    let v127 = v125 - v126;
+    let v128 = p.thigh_length_x * v42;
+    let v129 = p.thigh_length_y * v44;
+    let v130 = v128 - v129;
+    let v131 = v127 + v130;
+    let v132 = v53 * p.brace_pin_b_x;
+    let v133 = v49 * p.brace_pin_b_y;
+    let v134 = v132 + v133;
+    let v135 = v122 + v134;
+    let v136 = v49 * p.brace_pin_b_x;
+    let v137 = v53 * p.brace_pin_b_y;
+    let v138 = v136 - v137;
+    let v139 = v130 + v138;
+    let v140 = -v139;
+    let v141 = -v119;
+    let v142 = -v138;
+    let v143 = v107 * p.lower_leg_length_x;
+    let v144 = v103 * p.lower_leg_length_y;
+    let v145 = v143 + v144;
+    let v146 = p.four_bar_link_length_x * v88;
+    let v147 = p.four_bar_link_length_y * v86;
+    let v148 = v146 + v147;
+    let v149 = v145 + v148;
+    let v150 = v103 * p.lower_leg_length_x;
+    let v151 = v107 * p.lower_leg_length_y;
+    let v152 = v150 - v151;
+    let v153 = p.four_bar_link_length_x * v86;
+    let v154 = p.four_bar_link_length_y * v88;
+    let v155 = v153 - v154;
+    let v156 = v152 + v155;
+    let v157 = -v156;
+    let v158 = v97 * p.brace_length_x;
+    let v159 = v93 * p.brace_length_y;
+    let v160 = v158 + v159;
+    let v161 = p.brace_origin_x * v88;
+    let v162 = p.brace_origin_y * v86;
+    let v163 = v161 + v162;
+    let v164 = v160 + v163;
     let v165 = -v164;
-    let v166 = v165 + v165;
-    let v167 = qd_2 * qd_4;
-    let v168 = v166 * v167;
-    let v169 = v161 + v168;
-    let v170 = v74 * v98;
-    let v171 = v170 - v155;
-    let v172 = qd_3 * qd_3;
-    let v173 = v171 * v172;
-    let v174 = v169 + v173;
-    let v175 = v48 * v102;
-    let v176 = v175 - v162;
-    let v177 = qd_4 * qd_4;
-    let v178 = v176 * v177;
-    let v179 = v174 + v178;
-    let (v195, v180) = q_2.sin_cos();
-    let v181 = p.four_bar_link_mass * p.four_bar_link_com_y;
-    let v182 = p.lower_leg_mass * p.four_bar_link_length_y;
-    let v183 = v181 + v182;
-    let v184 = p.brace_mass * p.brace_origin_y;
-    let v185 = v183 + v184;
-    let v186 = p.gravity_x * v185;
-    let v187 = p.four_bar_link_mass * p.four_bar_link_com_x;
-    let v188 = p.lower_leg_mass * p.four_bar_link_length_x;
-    let v189 = v187 + v188;
-    let v190 = p.brace_mass * p.brace_origin_x;
+    let v166 = v93 * p.brace_length_x;
+    let v167 = v97 * p.brace_length_y;
+    let v168 = v166 - v167;
+    let v169 = p.brace_origin_x * v86;
+    let v170 = p.brace_origin_y * v88;
+    let v171 = v169 - v170;
+    let v172 = v168 + v171;
+    let v173 = -v152;
+    let v174 = -v160;
+    let v175 = qd_2 + qd_3;
+    let v176 = v175 * v175;
+    let v177 = v152 * v176;
+    let v178 = v112 * v155;
+    let v179 = v177 + v178;
+    let v180 = qd_0 + qd_1;
+    let v181 = v180 * v180;
+    let v182 = v127 * v181;
+    let v183 = v58 * v130;
+    let v184 = v182 + v183;
+    let v185 = v179 - v184;
+    let v186 = v145 * v176;
+    let v187 = v112 * v148;
+    let v188 = v186 + v187;
+    let v189 = v119 * v181;
+    let v190 = v58 * v122;
     let v191 = v189 + v190;
-    let v192 = p.gravity_y * v191;
-    let v193 = v186 - v192;
-    let v194 = v180 * v193;
-    let v196 = p.gravity_x * v191;
-    let v197 = p.gravity_y * v185;
-    let v198 = v196 + v197;
-    let v199 = v195 * v198;
-    let v200 = v194 + v199;
-    let v201 = v48 * v180;
-    let v202 = v55 * v195;
-    let v203 = v201 - v202;
-    let v204 = v51 * p.gravity_x;
-    let v205 = v49 * p.gravity_y;
-    let v206 = v204 - v205;
-    let v207 = v203 * v206;
-    let v208 = v48 * v195;
-    let v209 = v55 * v180;
-    let v210 = v208 + v209;
-    let v211 = v49 * p.gravity_x;
-    let v212 = v51 * p.gravity_y;
-    let v213 = v211 + v212;
-    let v214 = v210 * v213;
-    let v215 = v207 + v214;
-    let v216 = v200 + v215;
-    let v217 = v74 * v180;
-    let v218 = v81 * v195;
-    let v219 = v217 - v218;
-    let v220 = v77 * p.gravity_x;
-    let v221 = v75 * p.gravity_y;
-    let v222 = v220 - v221;
-    let v223 = v219 * v222;
-    let v224 = v74 * v195;
-    let v225 = v81 * v180;
-    let v226 = v224 + v225;
-    let v227 = v75 * p.gravity_x;
-    let v228 = v77 * p.gravity_y;
-    let v229 = v227 + v228;
-    let v230 = v226 * v229;
-    let v231 = v223 + v230;
-    let v232 = v216 + v231;
-    let v233 = v179 + v232;
-    let v234 = qd_2 * qd_2;
-    let v235 = v157 * v234;
-    let v236 = v231 + v235;
-    let v237 = v164 * v234;
-    let v238 = v215 + v237;
-    let v239 = v144 * p.knee_a_x;
-    let v240 = v137 * p.knee_a_y;
-    let v241 = v239 + v240;
-    let v242 = p.thigh_length_x * v129;
-    let v243 = p.thigh_length_y * v118;
-    let v244 = v242 + v243;
-    let v245 = v241 + v244;
-    let v246 = -v245;
-    let v247 = v137 * p.knee_a_x;
-    let v248 = v144 * p.knee_a_y;
-    let v249 = v247 - v248;
-    let v250 = p.thigh_length_x * v118;
-    let v251 = p.thigh_length_y * v129;
-    let v252 = v250 - v251;
-    let v253 = v249 + v252;
-    let v254 = v144 * p.brace_pin_b_x;
-    let v255 = v137 * p.brace_pin_b_y;
-    let v256 = v254 + v255;
-    let v257 = v244 + v256;
-    let v258 = v137 * p.brace_pin_b_x;
-    let v259 = v144 * p.brace_pin_b_y;
-    let v260 = v258 - v259;
-    let v261 = v252 + v260;
-    let v262 = -v261;
-    let v263 = -v241;
-    let v264 = -v260;
-    let v265 = v226 * p.lower_leg_length_x;
-    let v266 = v219 * p.lower_leg_length_y;
-    let v267 = v265 + v266;
-    let v268 = p.four_bar_link_length_x * v195;
-    let v269 = p.four_bar_link_length_y * v180;
-    let v270 = v268 + v269;
-    let v271 = v267 + v270;
-    let v272 = v219 * p.lower_leg_length_x;
-    let v273 = v226 * p.lower_leg_length_y;
-    let v274 = v272 - v273;
-    let v275 = p.four_bar_link_length_x * v180;
-    let v276 = p.four_bar_link_length_y * v195;
-    let v277 = v275 - v276;
-    let v278 = v274 + v277;
-    let v279 = -v278;
-    let v280 = v210 * p.brace_length_x;
-    let v281 = v203 * p.brace_length_y;
-    let v282 = v280 + v281;
-    let v283 = p.brace_origin_x * v195;
-    let v284 = p.brace_origin_y * v180;
-    let v285 = v283 + v284;
-    let v286 = v282 + v285;
-    let v287 = -v286;
-    let v288 = v203 * p.brace_length_x;
-    let v289 = v210 * p.brace_length_y;
-    let v290 = v288 - v289;
-    let v291 = p.brace_origin_x * v180;
-    let v292 = p.brace_origin_y * v195;
-    let v293 = v291 - v292;
-    let v294 = v290 + v293;
-    let v295 = -v274;
-    let v296 = -v282;
-    let v297 = qd_2 + qd_3;
-    let v298 = v297 * v297;
-    let v299 = v274 * v298;
-    let v300 = v234 * v277;
-    let v301 = v299 + v300;
-    let v302 = qd_0 + qd_1;
-    let v303 = v302 * v302;
-    let v304 = v249 * v303;
-    let v305 = v152 * v252;
-    let v306 = v304 + v305;
-    let v307 = v301 - v306;
-    let v308 = v267 * v298;
-    let v309 = v234 * v270;
-    let v310 = v308 + v309;
-    let v311 = v241 * v303;
-    let v312 = v152 * v244;
-    let v313 = v311 + v312;
-    let v314 = v310 - v313;
-    let v315 = v260 * v303;
-    let v316 = v305 + v315;
-    let v317 = qd_2 + qd_4;
-    let v318 = v317 * v317;
-    let v319 = v290 * v318;
-    let v320 = v234 * v293;
-    let v321 = v319 + v320;
-    let v322 = v316 - v321;
-    let v323 = v256 * v303;
-    let v324 = v312 + v323;
-    let v325 = v282 * v318;
-    let v326 = v234 * v285;
-    let v327 = v325 + v326;
-    let v328 = v324 - v327;
+    let v192 = v188 - v191;
+    let v193 = v138 * v181;
+    let v194 = v183 + v193;
+    let v195 = qd_2 + qd_4;
+    let v196 = v195 * v195;
+    let v197 = v168 * v196;
+    let v198 = v112 * v171;
+    let v199 = v197 + v198;
+    let v200 = v194 - v199;
+    let v201 = v134 * v181;
+    let v202 = v190 + v201;
+    let v203 = v160 * v196;
+    let v204 = v112 * v163;
+    let v205 = v203 + v204;
+    let v206 = v202 - v205;
     (
         SMatrix::from_data(
             ArrayStorage([
-                [v33, v37, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
-                [v37, v9, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
-                [T::lit(0.0), T::lit(0.0), v97, v101, v105],
-                [T::lit(0.0), T::lit(0.0), v101, v73, T::lit(0.0)],
-                [T::lit(0.0), T::lit(0.0), v105, T::lit(0.0), v47],
+                [v6, v9, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v9, p.prepared[0], T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v23, v26, v29],
+                [T::lit(0.0), T::lit(0.0), v26, p.prepared[6], T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v29, T::lit(0.0), p.prepared[5]],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v151, v154, v233, v236, v238]])),
+        SMatrix::from_data(ArrayStorage([[v57, v60, v111, v114, v116]])),
         SMatrix::from_data(
             ArrayStorage([
-                [v246, v253, v257, v262],
-                [v263, v249, v256, v264],
-                [v271, v279, v287, v294],
-                [v267, v295, T::lit(0.0), T::lit(0.0)],
-                [T::lit(0.0), T::lit(0.0), v296, v290],
+                [v124, v131, v135, v140],
+                [v141, v127, v134, v142],
+                [v149, v157, v165, v172],
+                [v145, v173, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v174, v168],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v307, v314, v322, v328]])),
+        SMatrix::from_data(ArrayStorage([[v185, v192, v200, v206]])),
     )
 }

@@ -20,10 +20,9 @@ pub const NK: usize = 0;
 /// The `klann_linkage` leg: 7 joints, 3 closure(s), actuated joints ["crank"]. Generated from `leg-models/specs/klann_linkage.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct KlannLinkage;
-/// Physical parameters; `Default` holds the spec's values. Change them at run
-/// time without regenerating.
+/// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Params<T> {
+pub struct ParamValues<T> {
     /// Gravity in the base frame, x [m/s²].
     pub gravity_x: T,
     /// Gravity in the base frame, y [m/s²].
@@ -159,7 +158,7 @@ pub struct Params<T> {
     /// Point b of closure `ankle`, link frame, y [m].
     pub ankle_b_y: T,
 }
-impl<T: Real> Default for Params<T> {
+impl<T: Real> Default for ParamValues<T> {
     fn default() -> Self {
         Self {
             gravity_x: T::lit(0.0),
@@ -230,6 +229,50 @@ impl<T: Real> Default for Params<T> {
             ankle_b_x: T::lit(0.1009852487),
             ankle_b_y: T::lit(0.0),
         }
+    }
+}
+/// Physical parameters, ready for evaluation: the values (read as fields through
+/// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
+/// computed once when a value changes instead of in every call. `Default` holds
+/// the spec's values; change them at run time, without regenerating, with
+/// [`Params::update`] or [`Parameters::set`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params<T> {
+    values: ParamValues<T>,
+    prepared: [T; 34],
+}
+impl<T: Real> Params<T> {
+    /// Parameters of these values.
+    pub fn new(values: ParamValues<T>) -> Self {
+        Self {
+            prepared: prepare(&values).data.0[0],
+            values,
+        }
+    }
+    /// The values.
+    pub fn values(&self) -> &ParamValues<T> {
+        &self.values
+    }
+    /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
+    pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
+        change(&mut self.values);
+        *self = Self::new(self.values);
+    }
+}
+impl<T> core::ops::Deref for Params<T> {
+    type Target = ParamValues<T>;
+    fn deref(&self) -> &ParamValues<T> {
+        &self.values
+    }
+}
+impl<T: Real> From<ParamValues<T>> for Params<T> {
+    fn from(values: ParamValues<T>) -> Self {
+        Self::new(values)
+    }
+}
+impl<T: Real> Default for Params<T> {
+    fn default() -> Self {
+        Self::new(ParamValues::default())
     }
 }
 impl<T: Real> Parameters<T> for Params<T> {
@@ -304,147 +347,148 @@ impl<T: Real> Parameters<T> for Params<T> {
     ];
     fn get(&self, i: usize) -> Option<T> {
         match i {
-            0 => Some(self.gravity_x),
-            1 => Some(self.gravity_y),
-            2 => Some(self.crank_origin_x),
-            3 => Some(self.crank_origin_y),
-            4 => Some(self.crank_length_x),
-            5 => Some(self.crank_length_y),
-            6 => Some(self.crank_mass),
-            7 => Some(self.crank_com_x),
-            8 => Some(self.crank_com_y),
-            9 => Some(self.crank_inertia),
-            10 => Some(self.crank_damping),
-            11 => Some(self.crank_rotor_inertia),
-            12 => Some(self.crank_gear_ratio),
-            13 => Some(self.coupler_length_x),
-            14 => Some(self.coupler_length_y),
-            15 => Some(self.coupler_mass),
-            16 => Some(self.coupler_com_x),
-            17 => Some(self.coupler_com_y),
-            18 => Some(self.coupler_inertia),
-            19 => Some(self.coupler_damping),
-            20 => Some(self.rocker_origin_x),
-            21 => Some(self.rocker_origin_y),
-            22 => Some(self.rocker_length_x),
-            23 => Some(self.rocker_length_y),
-            24 => Some(self.rocker_mass),
-            25 => Some(self.rocker_com_x),
-            26 => Some(self.rocker_com_y),
-            27 => Some(self.rocker_inertia),
-            28 => Some(self.rocker_damping),
-            29 => Some(self.leg_origin_x),
-            30 => Some(self.leg_origin_y),
-            31 => Some(self.leg_length_x),
-            32 => Some(self.leg_length_y),
-            33 => Some(self.leg_mass),
-            34 => Some(self.leg_com_x),
-            35 => Some(self.leg_com_y),
-            36 => Some(self.leg_inertia),
-            37 => Some(self.leg_damping),
-            38 => Some(self.guide_origin_x),
-            39 => Some(self.guide_origin_y),
-            40 => Some(self.guide_length_x),
-            41 => Some(self.guide_length_y),
-            42 => Some(self.guide_mass),
-            43 => Some(self.guide_com_x),
-            44 => Some(self.guide_com_y),
-            45 => Some(self.guide_inertia),
-            46 => Some(self.guide_damping),
-            47 => Some(self.strut_length_x),
-            48 => Some(self.strut_length_y),
-            49 => Some(self.strut_mass),
-            50 => Some(self.strut_com_x),
-            51 => Some(self.strut_com_y),
-            52 => Some(self.strut_inertia),
-            53 => Some(self.strut_damping),
-            54 => Some(self.brace_origin_x),
-            55 => Some(self.brace_origin_y),
-            56 => Some(self.brace_length_x),
-            57 => Some(self.brace_length_y),
-            58 => Some(self.brace_mass),
-            59 => Some(self.brace_com_x),
-            60 => Some(self.brace_com_y),
-            61 => Some(self.brace_inertia),
-            62 => Some(self.brace_damping),
-            63 => Some(self.hip_guide_b_x),
-            64 => Some(self.hip_guide_b_y),
-            65 => Some(self.ankle_b_x),
-            66 => Some(self.ankle_b_y),
+            0 => Some(self.values.gravity_x),
+            1 => Some(self.values.gravity_y),
+            2 => Some(self.values.crank_origin_x),
+            3 => Some(self.values.crank_origin_y),
+            4 => Some(self.values.crank_length_x),
+            5 => Some(self.values.crank_length_y),
+            6 => Some(self.values.crank_mass),
+            7 => Some(self.values.crank_com_x),
+            8 => Some(self.values.crank_com_y),
+            9 => Some(self.values.crank_inertia),
+            10 => Some(self.values.crank_damping),
+            11 => Some(self.values.crank_rotor_inertia),
+            12 => Some(self.values.crank_gear_ratio),
+            13 => Some(self.values.coupler_length_x),
+            14 => Some(self.values.coupler_length_y),
+            15 => Some(self.values.coupler_mass),
+            16 => Some(self.values.coupler_com_x),
+            17 => Some(self.values.coupler_com_y),
+            18 => Some(self.values.coupler_inertia),
+            19 => Some(self.values.coupler_damping),
+            20 => Some(self.values.rocker_origin_x),
+            21 => Some(self.values.rocker_origin_y),
+            22 => Some(self.values.rocker_length_x),
+            23 => Some(self.values.rocker_length_y),
+            24 => Some(self.values.rocker_mass),
+            25 => Some(self.values.rocker_com_x),
+            26 => Some(self.values.rocker_com_y),
+            27 => Some(self.values.rocker_inertia),
+            28 => Some(self.values.rocker_damping),
+            29 => Some(self.values.leg_origin_x),
+            30 => Some(self.values.leg_origin_y),
+            31 => Some(self.values.leg_length_x),
+            32 => Some(self.values.leg_length_y),
+            33 => Some(self.values.leg_mass),
+            34 => Some(self.values.leg_com_x),
+            35 => Some(self.values.leg_com_y),
+            36 => Some(self.values.leg_inertia),
+            37 => Some(self.values.leg_damping),
+            38 => Some(self.values.guide_origin_x),
+            39 => Some(self.values.guide_origin_y),
+            40 => Some(self.values.guide_length_x),
+            41 => Some(self.values.guide_length_y),
+            42 => Some(self.values.guide_mass),
+            43 => Some(self.values.guide_com_x),
+            44 => Some(self.values.guide_com_y),
+            45 => Some(self.values.guide_inertia),
+            46 => Some(self.values.guide_damping),
+            47 => Some(self.values.strut_length_x),
+            48 => Some(self.values.strut_length_y),
+            49 => Some(self.values.strut_mass),
+            50 => Some(self.values.strut_com_x),
+            51 => Some(self.values.strut_com_y),
+            52 => Some(self.values.strut_inertia),
+            53 => Some(self.values.strut_damping),
+            54 => Some(self.values.brace_origin_x),
+            55 => Some(self.values.brace_origin_y),
+            56 => Some(self.values.brace_length_x),
+            57 => Some(self.values.brace_length_y),
+            58 => Some(self.values.brace_mass),
+            59 => Some(self.values.brace_com_x),
+            60 => Some(self.values.brace_com_y),
+            61 => Some(self.values.brace_inertia),
+            62 => Some(self.values.brace_damping),
+            63 => Some(self.values.hip_guide_b_x),
+            64 => Some(self.values.hip_guide_b_y),
+            65 => Some(self.values.ankle_b_x),
+            66 => Some(self.values.ankle_b_y),
             _ => None,
         }
     }
     fn set(&mut self, i: usize, value: T) -> bool {
         match i {
-            0 => self.gravity_x = value,
-            1 => self.gravity_y = value,
-            2 => self.crank_origin_x = value,
-            3 => self.crank_origin_y = value,
-            4 => self.crank_length_x = value,
-            5 => self.crank_length_y = value,
-            6 => self.crank_mass = value,
-            7 => self.crank_com_x = value,
-            8 => self.crank_com_y = value,
-            9 => self.crank_inertia = value,
-            10 => self.crank_damping = value,
-            11 => self.crank_rotor_inertia = value,
-            12 => self.crank_gear_ratio = value,
-            13 => self.coupler_length_x = value,
-            14 => self.coupler_length_y = value,
-            15 => self.coupler_mass = value,
-            16 => self.coupler_com_x = value,
-            17 => self.coupler_com_y = value,
-            18 => self.coupler_inertia = value,
-            19 => self.coupler_damping = value,
-            20 => self.rocker_origin_x = value,
-            21 => self.rocker_origin_y = value,
-            22 => self.rocker_length_x = value,
-            23 => self.rocker_length_y = value,
-            24 => self.rocker_mass = value,
-            25 => self.rocker_com_x = value,
-            26 => self.rocker_com_y = value,
-            27 => self.rocker_inertia = value,
-            28 => self.rocker_damping = value,
-            29 => self.leg_origin_x = value,
-            30 => self.leg_origin_y = value,
-            31 => self.leg_length_x = value,
-            32 => self.leg_length_y = value,
-            33 => self.leg_mass = value,
-            34 => self.leg_com_x = value,
-            35 => self.leg_com_y = value,
-            36 => self.leg_inertia = value,
-            37 => self.leg_damping = value,
-            38 => self.guide_origin_x = value,
-            39 => self.guide_origin_y = value,
-            40 => self.guide_length_x = value,
-            41 => self.guide_length_y = value,
-            42 => self.guide_mass = value,
-            43 => self.guide_com_x = value,
-            44 => self.guide_com_y = value,
-            45 => self.guide_inertia = value,
-            46 => self.guide_damping = value,
-            47 => self.strut_length_x = value,
-            48 => self.strut_length_y = value,
-            49 => self.strut_mass = value,
-            50 => self.strut_com_x = value,
-            51 => self.strut_com_y = value,
-            52 => self.strut_inertia = value,
-            53 => self.strut_damping = value,
-            54 => self.brace_origin_x = value,
-            55 => self.brace_origin_y = value,
-            56 => self.brace_length_x = value,
-            57 => self.brace_length_y = value,
-            58 => self.brace_mass = value,
-            59 => self.brace_com_x = value,
-            60 => self.brace_com_y = value,
-            61 => self.brace_inertia = value,
-            62 => self.brace_damping = value,
-            63 => self.hip_guide_b_x = value,
-            64 => self.hip_guide_b_y = value,
-            65 => self.ankle_b_x = value,
-            66 => self.ankle_b_y = value,
+            0 => self.values.gravity_x = value,
+            1 => self.values.gravity_y = value,
+            2 => self.values.crank_origin_x = value,
+            3 => self.values.crank_origin_y = value,
+            4 => self.values.crank_length_x = value,
+            5 => self.values.crank_length_y = value,
+            6 => self.values.crank_mass = value,
+            7 => self.values.crank_com_x = value,
+            8 => self.values.crank_com_y = value,
+            9 => self.values.crank_inertia = value,
+            10 => self.values.crank_damping = value,
+            11 => self.values.crank_rotor_inertia = value,
+            12 => self.values.crank_gear_ratio = value,
+            13 => self.values.coupler_length_x = value,
+            14 => self.values.coupler_length_y = value,
+            15 => self.values.coupler_mass = value,
+            16 => self.values.coupler_com_x = value,
+            17 => self.values.coupler_com_y = value,
+            18 => self.values.coupler_inertia = value,
+            19 => self.values.coupler_damping = value,
+            20 => self.values.rocker_origin_x = value,
+            21 => self.values.rocker_origin_y = value,
+            22 => self.values.rocker_length_x = value,
+            23 => self.values.rocker_length_y = value,
+            24 => self.values.rocker_mass = value,
+            25 => self.values.rocker_com_x = value,
+            26 => self.values.rocker_com_y = value,
+            27 => self.values.rocker_inertia = value,
+            28 => self.values.rocker_damping = value,
+            29 => self.values.leg_origin_x = value,
+            30 => self.values.leg_origin_y = value,
+            31 => self.values.leg_length_x = value,
+            32 => self.values.leg_length_y = value,
+            33 => self.values.leg_mass = value,
+            34 => self.values.leg_com_x = value,
+            35 => self.values.leg_com_y = value,
+            36 => self.values.leg_inertia = value,
+            37 => self.values.leg_damping = value,
+            38 => self.values.guide_origin_x = value,
+            39 => self.values.guide_origin_y = value,
+            40 => self.values.guide_length_x = value,
+            41 => self.values.guide_length_y = value,
+            42 => self.values.guide_mass = value,
+            43 => self.values.guide_com_x = value,
+            44 => self.values.guide_com_y = value,
+            45 => self.values.guide_inertia = value,
+            46 => self.values.guide_damping = value,
+            47 => self.values.strut_length_x = value,
+            48 => self.values.strut_length_y = value,
+            49 => self.values.strut_mass = value,
+            50 => self.values.strut_com_x = value,
+            51 => self.values.strut_com_y = value,
+            52 => self.values.strut_inertia = value,
+            53 => self.values.strut_damping = value,
+            54 => self.values.brace_origin_x = value,
+            55 => self.values.brace_origin_y = value,
+            56 => self.values.brace_length_x = value,
+            57 => self.values.brace_length_y = value,
+            58 => self.values.brace_mass = value,
+            59 => self.values.brace_com_x = value,
+            60 => self.values.brace_com_y = value,
+            61 => self.values.brace_inertia = value,
+            62 => self.values.brace_damping = value,
+            63 => self.values.hip_guide_b_x = value,
+            64 => self.values.hip_guide_b_y = value,
+            65 => self.values.ankle_b_x = value,
+            66 => self.values.ankle_b_y = value,
             _ => return false,
         }
+        *self = Self::new(self.values);
         true
     }
 }
@@ -592,212 +636,328 @@ impl ContactModel<NQ, NC, NU, NK> for KlannLinkage {
         contact_bias(q, qd, p)
     }
 }
+/// The parameter-only quantities the terms read (products of masses, lengths and
+/// centres of mass, inertias about the joints, …), computed once per parameter set
+/// by [`Params::new`].
+pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 34> {
+    let v0 = values.crank_com_x * values.crank_com_x;
+    let v1 = values.crank_com_y * values.crank_com_y;
+    let v2 = v0 + v1;
+    let v3 = values.crank_mass * v2;
+    let v4 = values.crank_inertia + v3;
+    let v5 = values.leg_mass + values.strut_mass;
+    let v6 = values.coupler_mass + v5;
+    let v7 = values.crank_length_x * values.crank_length_x;
+    let v8 = values.crank_length_y * values.crank_length_y;
+    let v9 = v7 + v8;
+    let v10 = v6 * v9;
+    let v11 = v4 + v10;
+    let v12 = values.crank_gear_ratio * values.crank_gear_ratio;
+    let v13 = values.crank_rotor_inertia * v12;
+    let v14 = v11 + v13;
+    let v15 = values.coupler_com_x * values.coupler_com_x;
+    let v16 = values.coupler_com_y * values.coupler_com_y;
+    let v17 = v15 + v16;
+    let v18 = values.coupler_mass * v17;
+    let v19 = values.coupler_inertia + v18;
+    let v20 = values.leg_origin_x * values.leg_origin_x;
+    let v21 = values.leg_origin_y * values.leg_origin_y;
+    let v22 = v20 + v21;
+    let v23 = v5 * v22;
+    let v24 = v19 + v23;
+    let v25 = values.leg_com_x * values.leg_com_x;
+    let v26 = values.leg_com_y * values.leg_com_y;
+    let v27 = v25 + v26;
+    let v28 = values.leg_mass * v27;
+    let v29 = values.leg_inertia + v28;
+    let v30 = values.strut_com_x * values.strut_com_x;
+    let v31 = values.strut_com_y * values.strut_com_y;
+    let v32 = v30 + v31;
+    let v33 = values.strut_mass * v32;
+    let v34 = values.strut_inertia + v33;
+    let v35 = v29 + v34;
+    let v36 = values.leg_length_x * values.leg_length_x;
+    let v37 = values.leg_length_y * values.leg_length_y;
+    let v38 = v36 + v37;
+    let v39 = values.strut_mass * v38;
+    let v40 = v35 + v39;
+    let v41 = values.strut_mass * values.strut_com_x;
+    let v42 = values.leg_length_x * v41;
+    let v43 = values.strut_mass * values.strut_com_y;
+    let v44 = values.leg_length_y * v43;
+    let v45 = v42 + v44;
+    let v46 = values.leg_length_x * v43;
+    let v47 = values.leg_length_y * v41;
+    let v48 = v46 - v47;
+    let v49 = values.leg_mass * values.leg_com_x;
+    let v50 = values.strut_mass * values.leg_length_x;
+    let v51 = v49 + v50;
+    let v52 = values.leg_mass * values.leg_com_y;
+    let v53 = values.strut_mass * values.leg_length_y;
+    let v54 = v52 + v53;
+    let v55 = values.coupler_mass * values.coupler_com_x;
+    let v56 = v5 * values.leg_origin_x;
+    let v57 = v55 + v56;
+    let v58 = values.coupler_mass * values.coupler_com_y;
+    let v59 = v5 * values.leg_origin_y;
+    let v60 = v58 + v59;
+    let v61 = v47 - v46;
+    let v62 = values.rocker_com_x * values.rocker_com_x;
+    let v63 = values.rocker_com_y * values.rocker_com_y;
+    let v64 = v62 + v63;
+    let v65 = values.rocker_mass * v64;
+    let v66 = values.rocker_inertia + v65;
+    let v67 = values.brace_com_x * values.brace_com_x;
+    let v68 = values.brace_com_y * values.brace_com_y;
+    let v69 = v67 + v68;
+    let v70 = values.brace_mass * v69;
+    let v71 = values.brace_inertia + v70;
+    let v72 = v66 + v71;
+    let v73 = values.brace_origin_x * values.brace_origin_x;
+    let v74 = values.brace_origin_y * values.brace_origin_y;
+    let v75 = v73 + v74;
+    let v76 = values.brace_mass * v75;
+    let v77 = v72 + v76;
+    let v78 = values.brace_mass * values.brace_com_x;
+    let v79 = values.brace_origin_x * v78;
+    let v80 = values.brace_mass * values.brace_com_y;
+    let v81 = values.brace_origin_y * v80;
+    let v82 = v79 + v81;
+    let v83 = values.brace_origin_x * v80;
+    let v84 = values.brace_origin_y * v78;
+    let v85 = v83 - v84;
+    let v86 = v84 - v83;
+    let v87 = values.guide_com_x * values.guide_com_x;
+    let v88 = values.guide_com_y * values.guide_com_y;
+    let v89 = v87 + v88;
+    let v90 = values.guide_mass * v89;
+    let v91 = values.guide_inertia + v90;
+    let v92 = values.crank_mass * values.crank_com_y;
+    let v93 = v6 * values.crank_length_y;
+    let v94 = v92 + v93;
+    let v95 = values.gravity_x * v94;
+    let v96 = values.crank_mass * values.crank_com_x;
+    let v97 = v6 * values.crank_length_x;
+    let v98 = v96 + v97;
+    let v99 = values.gravity_y * v98;
+    let v100 = v95 - v99;
+    let v101 = values.gravity_x * v98;
+    let v102 = v94 * values.gravity_y;
+    let v103 = v101 + v102;
+    let v104 = v60 * values.gravity_x;
+    let v105 = v57 * values.gravity_y;
+    let v106 = v104 - v105;
+    let v107 = v57 * values.gravity_x;
+    let v108 = v60 * values.gravity_y;
+    let v109 = v107 + v108;
+    let v110 = v54 * values.gravity_x;
+    let v111 = v51 * values.gravity_y;
+    let v112 = v110 - v111;
+    let v113 = v51 * values.gravity_x;
+    let v114 = v54 * values.gravity_y;
+    let v115 = v113 + v114;
+    let v116 = v43 * values.gravity_x;
+    let v117 = v41 * values.gravity_y;
+    let v118 = v116 - v117;
+    let v119 = v41 * values.gravity_x;
+    let v120 = v43 * values.gravity_y;
+    let v121 = v119 + v120;
+    let v122 = values.rocker_mass * values.rocker_com_y;
+    let v123 = values.brace_mass * values.brace_origin_y;
+    let v124 = v122 + v123;
+    let v125 = values.gravity_x * v124;
+    let v126 = values.rocker_mass * values.rocker_com_x;
+    let v127 = values.brace_mass * values.brace_origin_x;
+    let v128 = v126 + v127;
+    let v129 = values.gravity_y * v128;
+    let v130 = v125 - v129;
+    let v131 = values.gravity_x * v128;
+    let v132 = values.gravity_y * v124;
+    let v133 = v131 + v132;
+    let v134 = v80 * values.gravity_x;
+    let v135 = v78 * values.gravity_y;
+    let v136 = v134 - v135;
+    let v137 = v78 * values.gravity_x;
+    let v138 = v80 * values.gravity_y;
+    let v139 = v137 + v138;
+    let v140 = values.guide_mass * values.guide_com_y;
+    let v141 = values.gravity_x * v140;
+    let v142 = values.guide_mass * values.guide_com_x;
+    let v143 = values.gravity_y * v142;
+    let v144 = v141 - v143;
+    let v145 = values.gravity_x * v142;
+    let v146 = values.gravity_y * v140;
+    let v147 = v145 + v146;
+    let v148 = values.crank_mass + v6;
+    let v149 = values.crank_origin_x * v148;
+    let v150 = values.rocker_mass + values.brace_mass;
+    let v151 = values.rocker_origin_x * v150;
+    let v152 = v149 + v151;
+    let v153 = values.guide_mass * values.guide_origin_x;
+    let v154 = v152 + v153;
+    let v155 = values.gravity_x * v154;
+    let v156 = values.crank_origin_y * v148;
+    let v157 = values.rocker_origin_y * v150;
+    let v158 = v156 + v157;
+    let v159 = values.guide_mass * values.guide_origin_y;
+    let v160 = v158 + v159;
+    let v161 = values.gravity_y * v160;
+    let v162 = v155 + v161;
+    SMatrix::from_data(
+        ArrayStorage([
+            [
+                v14,
+                v24,
+                v34,
+                v40,
+                v41,
+                v43,
+                v45,
+                v48,
+                v51,
+                v54,
+                v57,
+                v60,
+                v61,
+                v71,
+                v77,
+                v82,
+                v85,
+                v86,
+                v91,
+                v100,
+                v103,
+                v106,
+                v109,
+                v112,
+                v115,
+                v118,
+                v121,
+                v130,
+                v133,
+                v136,
+                v139,
+                v144,
+                v147,
+                v162,
+            ],
+        ]),
+    )
+}
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
 pub fn mass_matrix<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 7, 7> {
     let [_, q_1, _, q_3, _, q_5, q_6] = q.data.0[0];
-    let v0 = p.crank_com_x * p.crank_com_x;
-    let v1 = p.crank_com_y * p.crank_com_y;
-    let v2 = v0 + v1;
-    let v3 = p.crank_mass * v2;
-    let v4 = p.crank_inertia + v3;
-    let v5 = p.coupler_com_x * p.coupler_com_x;
-    let v6 = p.coupler_com_y * p.coupler_com_y;
-    let v7 = v5 + v6;
-    let v8 = p.coupler_mass * v7;
-    let v9 = p.coupler_inertia + v8;
-    let v10 = p.leg_com_x * p.leg_com_x;
-    let v11 = p.leg_com_y * p.leg_com_y;
-    let v12 = v10 + v11;
-    let v13 = p.leg_mass * v12;
-    let v14 = p.leg_inertia + v13;
-    let v15 = p.strut_com_x * p.strut_com_x;
-    let v16 = p.strut_com_y * p.strut_com_y;
+    let (v2, v0) = q_5.sincos();
+    let v1 = v0 * p.prepared[6];
+    let v3 = v2 * p.prepared[7];
+    let v4 = v1 - v3;
+    let v5 = v4 + v4;
+    let v6 = p.prepared[3] + v5;
+    let v7 = p.prepared[1] + v6;
+    let (v14, v8) = q_3.sincos();
+    let v9 = v0 * p.prepared[4];
+    let v10 = p.prepared[5] * v2;
+    let v11 = v9 - v10;
+    let v12 = p.prepared[8] + v11;
+    let v13 = v8 * v12;
+    let v15 = p.prepared[4] * v2;
+    let v16 = v0 * p.prepared[5];
     let v17 = v15 + v16;
-    let v18 = p.strut_mass * v17;
-    let v19 = p.strut_inertia + v18;
-    let (v27, v20) = q_5.sin_cos();
-    let v21 = p.strut_mass * p.strut_com_x;
-    let v22 = p.leg_length_x * v21;
-    let v23 = p.strut_mass * p.strut_com_y;
-    let v24 = p.leg_length_y * v23;
-    let v25 = v22 + v24;
-    let v26 = v20 * v25;
-    let v28 = p.leg_length_x * v23;
-    let v29 = v21 * p.leg_length_y;
-    let v30 = v28 - v29;
-    let v31 = v27 * v30;
-    let v32 = v26 - v31;
-    let v33 = v32 + v32;
-    let v34 = v19 + v33;
-    let v35 = p.leg_length_x * p.leg_length_x;
-    let v36 = p.leg_length_y * p.leg_length_y;
-    let v37 = v35 + v36;
-    let v38 = p.strut_mass * v37;
-    let v39 = v34 + v38;
-    let v40 = v14 + v39;
-    let (v50, v41) = q_3.sin_cos();
-    let v42 = p.leg_mass * p.leg_com_x;
-    let v43 = v20 * v21;
-    let v44 = v23 * v27;
-    let v45 = v43 - v44;
-    let v46 = p.strut_mass * p.leg_length_x;
-    let v47 = v45 + v46;
-    let v48 = v42 + v47;
-    let v49 = v41 * v48;
-    let v51 = p.leg_mass * p.leg_com_y;
-    let v52 = v21 * v27;
-    let v53 = v20 * v23;
-    let v54 = v52 + v53;
-    let v55 = p.strut_mass * p.leg_length_y;
-    let v56 = v54 + v55;
-    let v57 = v51 + v56;
-    let v58 = v50 * v57;
-    let v59 = v49 - v58;
-    let v60 = p.leg_origin_x * v59;
-    let v61 = v48 * v50;
-    let v62 = v41 * v57;
-    let v63 = v61 + v62;
-    let v64 = p.leg_origin_y * v63;
-    let v65 = v60 + v64;
-    let v66 = v65 + v65;
-    let v67 = v40 + v66;
-    let v68 = p.leg_mass + p.strut_mass;
-    let v69 = p.leg_origin_x * p.leg_origin_x;
-    let v70 = p.leg_origin_y * p.leg_origin_y;
-    let v71 = v69 + v70;
-    let v72 = v68 * v71;
-    let v73 = v67 + v72;
-    let v74 = v9 + v73;
-    let (v81, v75) = q_1.sin_cos();
-    let v76 = p.coupler_mass * p.coupler_com_x;
-    let v77 = p.leg_origin_x * v68;
-    let v78 = v59 + v77;
-    let v79 = v76 + v78;
-    let v80 = v75 * v79;
-    let v82 = p.coupler_mass * p.coupler_com_y;
-    let v83 = p.leg_origin_y * v68;
-    let v84 = v63 + v83;
-    let v85 = v82 + v84;
-    let v86 = v81 * v85;
-    let v87 = v80 - v86;
-    let v88 = p.crank_length_x * v87;
-    let v89 = v79 * v81;
-    let v90 = v75 * v85;
-    let v91 = v89 + v90;
-    let v92 = p.crank_length_y * v91;
-    let v93 = v88 + v92;
-    let v94 = v93 + v93;
-    let v95 = v74 + v94;
-    let v96 = p.coupler_mass + v68;
-    let v97 = p.crank_length_x * p.crank_length_x;
-    let v98 = p.crank_length_y * p.crank_length_y;
-    let v99 = v97 + v98;
-    let v100 = v96 * v99;
-    let v101 = v95 + v100;
-    let v102 = v4 + v101;
-    let v103 = p.crank_gear_ratio * p.crank_gear_ratio;
-    let v104 = p.crank_rotor_inertia * v103;
-    let v105 = v102 + v104;
-    let v106 = v74 + v93;
-    let v107 = v40 + v65;
-    let v108 = v59 * v75;
-    let v109 = v63 * v81;
-    let v110 = v108 - v109;
-    let v111 = p.crank_length_x * v110;
-    let v112 = v63 * v75;
-    let v113 = v59 * v81;
-    let v114 = v112 + v113;
-    let v115 = p.crank_length_y * v114;
-    let v116 = v111 + v115;
-    let v117 = v107 + v116;
-    let v118 = v29 - v28;
-    let v119 = v27 * v118;
-    let v120 = v26 + v119;
-    let v121 = v19 + v120;
-    let v122 = v41 * v45;
-    let v123 = v50 * v54;
-    let v124 = v122 - v123;
-    let v125 = p.leg_origin_x * v124;
-    let v126 = v41 * v54;
-    let v127 = v45 * v50;
-    let v128 = v126 + v127;
-    let v129 = p.leg_origin_y * v128;
-    let v130 = v125 + v129;
-    let v131 = v121 + v130;
-    let v132 = v75 * v124;
-    let v133 = v81 * v128;
-    let v134 = v132 - v133;
-    let v135 = p.crank_length_x * v134;
-    let v136 = v75 * v128;
-    let v137 = v81 * v124;
-    let v138 = v136 + v137;
-    let v139 = p.crank_length_y * v138;
-    let v140 = v135 + v139;
-    let v141 = v131 + v140;
-    let v142 = p.rocker_com_x * p.rocker_com_x;
-    let v143 = p.rocker_com_y * p.rocker_com_y;
-    let v144 = v142 + v143;
-    let v145 = p.rocker_mass * v144;
-    let v146 = p.rocker_inertia + v145;
-    let v147 = p.brace_com_x * p.brace_com_x;
-    let v148 = p.brace_com_y * p.brace_com_y;
-    let v149 = v147 + v148;
-    let v150 = p.brace_mass * v149;
-    let v151 = p.brace_inertia + v150;
-    let (v159, v152) = q_6.sin_cos();
-    let v153 = p.brace_mass * p.brace_com_x;
-    let v154 = p.brace_origin_x * v153;
-    let v155 = p.brace_mass * p.brace_com_y;
-    let v156 = p.brace_origin_y * v155;
-    let v157 = v154 + v156;
-    let v158 = v152 * v157;
-    let v160 = p.brace_origin_x * v155;
-    let v161 = v153 * p.brace_origin_y;
-    let v162 = v160 - v161;
-    let v163 = v159 * v162;
-    let v164 = v158 - v163;
-    let v165 = v164 + v164;
-    let v166 = v151 + v165;
-    let v167 = p.brace_origin_x * p.brace_origin_x;
-    let v168 = p.brace_origin_y * p.brace_origin_y;
-    let v169 = v167 + v168;
-    let v170 = p.brace_mass * v169;
-    let v171 = v166 + v170;
-    let v172 = v146 + v171;
-    let v173 = v161 - v160;
-    let v174 = v159 * v173;
-    let v175 = v158 + v174;
-    let v176 = v151 + v175;
-    let v177 = p.guide_com_x * p.guide_com_x;
-    let v178 = p.guide_com_y * p.guide_com_y;
-    let v179 = v177 + v178;
-    let v180 = p.guide_mass * v179;
-    let v181 = p.guide_inertia + v180;
+    let v18 = p.prepared[9] + v17;
+    let v19 = v14 * v18;
+    let v20 = v13 - v19;
+    let v21 = p.leg_origin_x * v20;
+    let v22 = v12 * v14;
+    let v23 = v8 * v18;
+    let v24 = v22 + v23;
+    let v25 = p.leg_origin_y * v24;
+    let v26 = v21 + v25;
+    let v27 = v26 + v26;
+    let v28 = v7 + v27;
+    let v29 = p.prepared[0] + v28;
+    let (v33, v30) = q_1.sincos();
+    let v31 = v20 + p.prepared[10];
+    let v32 = v30 * v31;
+    let v34 = v24 + p.prepared[11];
+    let v35 = v33 * v34;
+    let v36 = v32 - v35;
+    let v37 = p.crank_length_x * v36;
+    let v38 = v31 * v33;
+    let v39 = v30 * v34;
+    let v40 = v38 + v39;
+    let v41 = p.crank_length_y * v40;
+    let v42 = v37 + v41;
+    let v43 = v42 + v42;
+    let v44 = v29 + v43;
+    let v45 = v28 + v42;
+    let v46 = v6 + v26;
+    let v47 = v20 * v30;
+    let v48 = v24 * v33;
+    let v49 = v47 - v48;
+    let v50 = p.crank_length_x * v49;
+    let v51 = v24 * v30;
+    let v52 = v20 * v33;
+    let v53 = v51 + v52;
+    let v54 = p.crank_length_y * v53;
+    let v55 = v50 + v54;
+    let v56 = v46 + v55;
+    let v57 = v2 * p.prepared[12];
+    let v58 = v1 + v57;
+    let v59 = p.prepared[2] + v58;
+    let v60 = v8 * v11;
+    let v61 = v14 * v17;
+    let v62 = v60 - v61;
+    let v63 = p.leg_origin_x * v62;
+    let v64 = v8 * v17;
+    let v65 = v11 * v14;
+    let v66 = v64 + v65;
+    let v67 = p.leg_origin_y * v66;
+    let v68 = v63 + v67;
+    let v69 = v59 + v68;
+    let v70 = v30 * v62;
+    let v71 = v33 * v66;
+    let v72 = v70 - v71;
+    let v73 = p.crank_length_x * v72;
+    let v74 = v30 * v66;
+    let v75 = v33 * v62;
+    let v76 = v74 + v75;
+    let v77 = p.crank_length_y * v76;
+    let v78 = v73 + v77;
+    let v79 = v69 + v78;
+    let (v82, v80) = q_6.sincos();
+    let v81 = v80 * p.prepared[15];
+    let v83 = v82 * p.prepared[16];
+    let v84 = v81 - v83;
+    let v85 = v84 + v84;
+    let v86 = p.prepared[14] + v85;
+    let v87 = v82 * p.prepared[17];
+    let v88 = v81 + v87;
+    let v89 = p.prepared[13] + v88;
     SMatrix::from_data(
         ArrayStorage([
-            [v105, v106, T::lit(0.0), v117, T::lit(0.0), v141, T::lit(0.0)],
-            [v106, v74, T::lit(0.0), v107, T::lit(0.0), v131, T::lit(0.0)],
-            [
-                T::lit(0.0),
-                T::lit(0.0),
-                v172,
-                T::lit(0.0),
-                T::lit(0.0),
-                T::lit(0.0),
-                v176,
-            ],
-            [v117, v107, T::lit(0.0), v40, T::lit(0.0), v121, T::lit(0.0)],
+            [v44, v45, T::lit(0.0), v56, T::lit(0.0), v79, T::lit(0.0)],
+            [v45, v28, T::lit(0.0), v46, T::lit(0.0), v69, T::lit(0.0)],
+            [T::lit(0.0), T::lit(0.0), v86, T::lit(0.0), T::lit(0.0), T::lit(0.0), v89],
+            [v56, v46, T::lit(0.0), v6, T::lit(0.0), v59, T::lit(0.0)],
             [
                 T::lit(0.0),
                 T::lit(0.0),
                 T::lit(0.0),
                 T::lit(0.0),
-                v181,
+                p.prepared[18],
                 T::lit(0.0),
                 T::lit(0.0),
             ],
-            [v141, v131, T::lit(0.0), v121, T::lit(0.0), v19, T::lit(0.0)],
-            [T::lit(0.0), T::lit(0.0), v176, T::lit(0.0), T::lit(0.0), T::lit(0.0), v151],
+            [v79, v69, T::lit(0.0), v59, T::lit(0.0), p.prepared[2], T::lit(0.0)],
+            [
+                T::lit(0.0),
+                T::lit(0.0),
+                v89,
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                p.prepared[13],
+            ],
         ]),
     )
 }
@@ -808,470 +968,322 @@ pub fn bias_forces<T: Real>(
     p: &Params<T>,
 ) -> SVector<T, 7> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
-    let [qd_0, qd_1, qd_2, qd_3, _, qd_5, qd_6] = qd.data.0[0];
-    let v0 = p.coupler_mass * p.coupler_com_x;
-    let (v14, v1) = q_3.sin_cos();
-    let v2 = p.leg_mass * p.leg_com_x;
-    let (v6, v3) = q_5.sin_cos();
-    let v4 = p.strut_mass * p.strut_com_x;
-    let v5 = v3 * v4;
-    let v7 = p.strut_mass * p.strut_com_y;
-    let v8 = v6 * v7;
-    let v9 = v5 - v8;
-    let v10 = p.strut_mass * p.leg_length_x;
-    let v11 = v9 + v10;
-    let v12 = v2 + v11;
-    let v13 = v1 * v12;
-    let v15 = p.leg_mass * p.leg_com_y;
-    let v16 = v4 * v6;
-    let v17 = v3 * v7;
-    let v18 = v16 + v17;
-    let v19 = p.strut_mass * p.leg_length_y;
-    let v20 = v18 + v19;
-    let v21 = v15 + v20;
-    let v22 = v14 * v21;
-    let v23 = v13 - v22;
-    let v24 = p.leg_mass + p.strut_mass;
-    let v25 = v24 * p.leg_origin_x;
-    let v26 = v23 + v25;
-    let v27 = v0 + v26;
-    let (v37, v28) = q_1.sin_cos();
-    let v29 = v27 * v28;
-    let v30 = p.coupler_mass * p.coupler_com_y;
-    let v31 = v12 * v14;
-    let v32 = v1 * v21;
-    let v33 = v31 + v32;
-    let v34 = v24 * p.leg_origin_y;
-    let v35 = v33 + v34;
-    let v36 = v30 + v35;
-    let v38 = v36 * v37;
-    let v39 = v29 - v38;
-    let v40 = p.crank_length_y * v39;
-    let v41 = v27 * v37;
-    let v42 = v28 * v36;
-    let v43 = v41 + v42;
-    let v44 = p.crank_length_x * v43;
-    let v45 = v40 - v44;
-    let v46 = v45 + v45;
-    let v47 = qd_0 * qd_1;
-    let v48 = v46 * v47;
-    let v49 = v23 * p.leg_origin_y;
-    let v50 = p.leg_origin_x * v33;
-    let v51 = v49 - v50;
-    let v52 = v51 + v51;
-    let v53 = v23 * v28;
-    let v54 = v33 * v37;
-    let v55 = v53 - v54;
-    let v56 = p.crank_length_y * v55;
-    let v57 = v28 * v33;
-    let v58 = v23 * v37;
-    let v59 = v57 + v58;
-    let v60 = p.crank_length_x * v59;
-    let v61 = v56 - v60;
-    let v62 = v61 + v61;
-    let v63 = v52 + v62;
-    let v64 = qd_0 * qd_3;
-    let v65 = v63 * v64;
-    let v66 = v48 + v65;
-    let v67 = v4 * p.leg_length_x;
-    let v68 = v7 * p.leg_length_y;
-    let v69 = v67 + v68;
-    let v70 = v6 * v69;
-    let v71 = v7 * p.leg_length_x;
-    let v72 = v4 * p.leg_length_y;
-    let v73 = v71 - v72;
-    let v74 = v3 * v73;
-    let v75 = v70 + v74;
-    let v76 = -v75;
-    let v77 = v76 + v76;
-    let v78 = v1 * v9;
-    let v79 = v14 * v18;
-    let v80 = v78 - v79;
-    let v81 = p.leg_origin_y * v80;
-    let v82 = v1 * v18;
-    let v83 = v9 * v14;
-    let v84 = v82 + v83;
-    let v85 = p.leg_origin_x * v84;
-    let v86 = v81 - v85;
-    let v87 = v86 + v86;
-    let v88 = v77 + v87;
-    let v89 = v28 * v80;
-    let v90 = v37 * v84;
-    let v91 = v89 - v90;
-    let v92 = p.crank_length_y * v91;
-    let v93 = v28 * v84;
-    let v94 = v37 * v80;
-    let v95 = v93 + v94;
-    let v96 = p.crank_length_x * v95;
-    let v97 = v92 - v96;
-    let v98 = v97 + v97;
-    let v99 = v88 + v98;
-    let v100 = qd_0 * qd_5;
-    let v101 = v99 * v100;
-    let v102 = v66 + v101;
-    let v103 = qd_1 * qd_1;
-    let v104 = v45 * v103;
-    let v105 = v102 + v104;
-    let v106 = v52 + v61;
-    let v107 = v61 + v106;
-    let v108 = qd_1 * qd_3;
-    let v109 = v107 * v108;
-    let v110 = v105 + v109;
-    let v111 = v88 + v97;
-    let v112 = v97 + v111;
-    let v113 = qd_1 * qd_5;
-    let v114 = v112 * v113;
-    let v115 = v110 + v114;
-    let v116 = v51 + v61;
-    let v117 = qd_3 * qd_3;
-    let v118 = v116 * v117;
-    let v119 = v115 + v118;
-    let v120 = v77 + v86;
-    let v121 = v97 + v120;
-    let v122 = v86 + v97;
-    let v123 = v121 + v122;
-    let v124 = qd_3 * qd_5;
-    let v125 = v123 * v124;
-    let v126 = v119 + v125;
-    let v127 = v72 - v71;
-    let v128 = v3 * v127;
-    let v129 = v128 - v70;
-    let v130 = v86 + v129;
-    let v131 = v97 + v130;
-    let v132 = qd_5 * qd_5;
-    let v133 = v131 * v132;
-    let v134 = v126 + v133;
-    let (v147, v135) = q_0.sin_cos();
-    let v136 = p.crank_mass * p.crank_com_y;
-    let v137 = p.coupler_mass + v24;
-    let v138 = p.crank_length_y * v137;
-    let v139 = v136 + v138;
-    let v140 = p.gravity_x * v139;
-    let v141 = p.crank_mass * p.crank_com_x;
-    let v142 = p.crank_length_x * v137;
+    let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6] = qd.data.0[0];
+    let (v0, v2) = q_0.sincos();
+    let v1 = v0 * p.crank_com_x;
+    let v3 = v2 * p.crank_com_y;
+    let v4 = v1 + v3;
+    let v5 = qd_0 * qd_0;
+    let v6 = p.crank_com_x * v2;
+    let v7 = v0 * p.crank_com_y;
+    let v8 = v6 - v7;
+    let v9 = v5 * v8;
+    let v10 = v4 * v9;
+    let v11 = v4 * v5;
+    let v12 = v8 * v11;
+    let v13 = v10 - v12;
+    let v14 = p.crank_mass * v13;
+    let (v17, v15) = q_1.sincos();
+    let v16 = v0 * v15;
+    let v18 = v2 * v17;
+    let v19 = v16 + v18;
+    let v20 = v19 * p.coupler_com_x;
+    let v21 = v2 * v15;
+    let v22 = v0 * v17;
+    let v23 = v21 - v22;
+    let v24 = v23 * p.coupler_com_y;
+    let v25 = v20 + v24;
+    let v26 = v0 * p.crank_length_x;
+    let v27 = v2 * p.crank_length_y;
+    let v28 = v26 + v27;
+    let v29 = v25 + v28;
+    let v30 = qd_0 + qd_1;
+    let v31 = v30 * v30;
+    let v32 = p.coupler_com_x * v23;
+    let v33 = v19 * p.coupler_com_y;
+    let v34 = v32 - v33;
+    let v35 = v31 * v34;
+    let v36 = v2 * p.crank_length_x;
+    let v37 = v0 * p.crank_length_y;
+    let v38 = v36 - v37;
+    let v39 = v5 * v38;
+    let v40 = v35 + v39;
+    let v41 = v29 * v40;
+    let v42 = v34 + v38;
+    let v43 = v25 * v31;
+    let v44 = v5 * v28;
+    let v45 = v43 + v44;
+    let v46 = v42 * v45;
+    let v47 = v41 - v46;
+    let v48 = p.coupler_mass * v47;
+    let v49 = v14 + v48;
+    let (v52, v50) = q_3.sincos();
+    let v51 = v19 * v50;
+    let v53 = v23 * v52;
+    let v54 = v51 + v53;
+    let v55 = v54 * p.leg_com_x;
+    let v56 = v23 * v50;
+    let v57 = v19 * v52;
+    let v58 = v56 - v57;
+    let v59 = v58 * p.leg_com_y;
+    let v60 = v55 + v59;
+    let v61 = v19 * p.leg_origin_x;
+    let v62 = v23 * p.leg_origin_y;
+    let v63 = v61 + v62;
+    let v64 = v60 + v63;
+    let v65 = v28 + v64;
+    let v66 = v30 + qd_3;
+    let v67 = v66 * v66;
+    let v68 = p.leg_com_x * v58;
+    let v69 = v54 * p.leg_com_y;
+    let v70 = v68 - v69;
+    let v71 = v67 * v70;
+    let v72 = v23 * p.leg_origin_x;
+    let v73 = v19 * p.leg_origin_y;
+    let v74 = v72 - v73;
+    let v75 = v31 * v74;
+    let v76 = v71 + v75;
+    let v77 = v39 + v76;
+    let v78 = v65 * v77;
+    let v79 = v70 + v74;
+    let v80 = v38 + v79;
+    let v81 = v60 * v67;
+    let v82 = v31 * v63;
+    let v83 = v81 + v82;
+    let v84 = v44 + v83;
+    let v85 = v80 * v84;
+    let v86 = v78 - v85;
+    let v87 = p.leg_mass * v86;
+    let v88 = v49 + v87;
+    let (v91, v89) = q_5.sincos();
+    let v90 = v54 * v89;
+    let v92 = v58 * v91;
+    let v93 = v90 + v92;
+    let v94 = v93 * p.strut_com_x;
+    let v95 = v58 * v89;
+    let v96 = v54 * v91;
+    let v97 = v95 - v96;
+    let v98 = v97 * p.strut_com_y;
+    let v99 = v94 + v98;
+    let v100 = v54 * p.leg_length_x;
+    let v101 = v58 * p.leg_length_y;
+    let v102 = v100 + v101;
+    let v103 = v99 + v102;
+    let v104 = v63 + v103;
+    let v105 = v28 + v104;
+    let v106 = v66 + qd_5;
+    let v107 = v106 * v106;
+    let v108 = p.strut_com_x * v97;
+    let v109 = v93 * p.strut_com_y;
+    let v110 = v108 - v109;
+    let v111 = v107 * v110;
+    let v112 = v58 * p.leg_length_x;
+    let v113 = v54 * p.leg_length_y;
+    let v114 = v112 - v113;
+    let v115 = v67 * v114;
+    let v116 = v111 + v115;
+    let v117 = v75 + v116;
+    let v118 = v39 + v117;
+    let v119 = v105 * v118;
+    let v120 = v110 + v114;
+    let v121 = v74 + v120;
+    let v122 = v38 + v121;
+    let v123 = v99 * v107;
+    let v124 = v67 * v102;
+    let v125 = v123 + v124;
+    let v126 = v82 + v125;
+    let v127 = v44 + v126;
+    let v128 = v122 * v127;
+    let v129 = v119 - v128;
+    let v130 = p.strut_mass * v129;
+    let v131 = v88 + v130;
+    let v132 = v2 * p.prepared[19];
+    let v133 = v0 * p.prepared[20];
+    let v134 = v132 + v133;
+    let v135 = v23 * p.prepared[21];
+    let v136 = v19 * p.prepared[22];
+    let v137 = v135 + v136;
+    let v138 = v58 * p.prepared[23];
+    let v139 = v54 * p.prepared[24];
+    let v140 = v138 + v139;
+    let v141 = v97 * p.prepared[25];
+    let v142 = v93 * p.prepared[26];
     let v143 = v141 + v142;
-    let v144 = p.gravity_y * v143;
-    let v145 = v140 - v144;
-    let v146 = v135 * v145;
-    let v148 = p.gravity_x * v143;
-    let v149 = v139 * p.gravity_y;
-    let v150 = v148 + v149;
-    let v151 = v147 * v150;
-    let v152 = v146 + v151;
-    let v153 = v28 * v135;
-    let v154 = v37 * v147;
-    let v155 = v153 - v154;
-    let v156 = v30 + v34;
-    let v157 = p.gravity_x * v156;
-    let v158 = v0 + v25;
-    let v159 = p.gravity_y * v158;
-    let v160 = v157 - v159;
-    let v161 = v155 * v160;
-    let v162 = v28 * v147;
-    let v163 = v37 * v135;
-    let v164 = v162 + v163;
-    let v165 = p.gravity_x * v158;
-    let v166 = p.gravity_y * v156;
-    let v167 = v165 + v166;
-    let v168 = v164 * v167;
-    let v169 = v161 + v168;
-    let v170 = v1 * v155;
-    let v171 = v14 * v164;
-    let v172 = v170 - v171;
-    let v173 = v15 + v19;
-    let v174 = p.gravity_x * v173;
-    let v175 = v2 + v10;
-    let v176 = p.gravity_y * v175;
-    let v177 = v174 - v176;
-    let v178 = v172 * v177;
-    let v179 = v1 * v164;
-    let v180 = v14 * v155;
-    let v181 = v179 + v180;
-    let v182 = p.gravity_x * v175;
-    let v183 = p.gravity_y * v173;
-    let v184 = v182 + v183;
-    let v185 = v181 * v184;
-    let v186 = v178 + v185;
-    let v187 = v3 * v172;
-    let v188 = v6 * v181;
-    let v189 = v187 - v188;
-    let v190 = v7 * p.gravity_x;
-    let v191 = v4 * p.gravity_y;
-    let v192 = v190 - v191;
-    let v193 = v189 * v192;
-    let v194 = v3 * v181;
-    let v195 = v6 * v172;
-    let v196 = v194 + v195;
-    let v197 = v4 * p.gravity_x;
-    let v198 = v7 * p.gravity_y;
-    let v199 = v197 + v198;
-    let v200 = v196 * v199;
-    let v201 = v193 + v200;
-    let v202 = v186 + v201;
-    let v203 = v169 + v202;
-    let v204 = v152 + v203;
-    let v205 = v134 + v204;
-    let v206 = v106 - v61;
-    let v207 = v64 * v206;
-    let v208 = qd_0 * qd_0;
-    let v209 = v45 * v208;
-    let v210 = v207 - v209;
-    let v211 = v111 - v97;
-    let v212 = v100 * v211;
-    let v213 = v210 + v212;
-    let v214 = v52 * v108;
+    let v144 = v140 + v143;
+    let v145 = v137 + v144;
+    let v146 = v134 + v145;
+    let v147 = v131 + v146;
+    let v148 = v25 * v40;
+    let v149 = v34 * v45;
+    let v150 = v148 - v149;
+    let v151 = p.coupler_mass * v150;
+    let v152 = v64 * v77;
+    let v153 = v79 * v84;
+    let v154 = v152 - v153;
+    let v155 = p.leg_mass * v154;
+    let v156 = v151 + v155;
+    let v157 = v104 * v118;
+    let v158 = v121 * v127;
+    let v159 = v157 - v158;
+    let v160 = p.strut_mass * v159;
+    let v161 = v156 + v160;
+    let v162 = v145 + v161;
+    let (v163, v165) = q_2.sincos();
+    let v164 = v163 * p.rocker_com_x;
+    let v166 = v165 * p.rocker_com_y;
+    let v167 = v164 + v166;
+    let v168 = qd_2 * qd_2;
+    let v169 = p.rocker_com_x * v165;
+    let v170 = v163 * p.rocker_com_y;
+    let v171 = v169 - v170;
+    let v172 = v168 * v171;
+    let v173 = v167 * v172;
+    let v174 = v167 * v168;
+    let v175 = v171 * v174;
+    let v176 = v173 - v175;
+    let v177 = p.rocker_mass * v176;
+    let (v180, v178) = q_6.sincos();
+    let v179 = v163 * v178;
+    let v181 = v165 * v180;
+    let v182 = v179 + v181;
+    let v183 = v182 * p.brace_com_x;
+    let v184 = v165 * v178;
+    let v185 = v163 * v180;
+    let v186 = v184 - v185;
+    let v187 = v186 * p.brace_com_y;
+    let v188 = v183 + v187;
+    let v189 = v163 * p.brace_origin_x;
+    let v190 = v165 * p.brace_origin_y;
+    let v191 = v189 + v190;
+    let v192 = v188 + v191;
+    let v193 = qd_2 + qd_6;
+    let v194 = v193 * v193;
+    let v195 = p.brace_com_x * v186;
+    let v196 = v182 * p.brace_com_y;
+    let v197 = v195 - v196;
+    let v198 = v194 * v197;
+    let v199 = v165 * p.brace_origin_x;
+    let v200 = v163 * p.brace_origin_y;
+    let v201 = v199 - v200;
+    let v202 = v168 * v201;
+    let v203 = v198 + v202;
+    let v204 = v192 * v203;
+    let v205 = v197 + v201;
+    let v206 = v188 * v194;
+    let v207 = v168 * v191;
+    let v208 = v206 + v207;
+    let v209 = v205 * v208;
+    let v210 = v204 - v209;
+    let v211 = p.brace_mass * v210;
+    let v212 = v177 + v211;
+    let v213 = v165 * p.prepared[27];
+    let v214 = v163 * p.prepared[28];
     let v215 = v213 + v214;
-    let v216 = v88 * v113;
-    let v217 = v215 + v216;
-    let v218 = v51 * v117;
-    let v219 = v217 + v218;
-    let v220 = v86 + v120;
-    let v221 = v124 * v220;
-    let v222 = v219 + v221;
-    let v223 = v130 * v132;
-    let v224 = v222 + v223;
-    let v225 = v203 + v224;
-    let v226 = p.brace_mass * p.brace_com_x;
-    let v227 = p.brace_origin_x * v226;
-    let v228 = p.brace_mass * p.brace_com_y;
-    let v229 = p.brace_origin_y * v228;
-    let v230 = v227 + v229;
-    let (v231, v236) = q_6.sin_cos();
-    let v232 = v230 * v231;
-    let v233 = p.brace_origin_x * v228;
-    let v234 = v226 * p.brace_origin_y;
-    let v235 = v233 - v234;
-    let v237 = v235 * v236;
-    let v238 = v232 + v237;
-    let v239 = -v238;
-    let v240 = v239 + v239;
-    let v241 = qd_2 * qd_6;
-    let v242 = v240 * v241;
-    let v243 = v234 - v233;
-    let v244 = v236 * v243;
-    let v245 = v244 - v232;
-    let v246 = qd_6 * qd_6;
-    let v247 = v245 * v246;
-    let v248 = v242 + v247;
-    let (v260, v249) = q_2.sin_cos();
-    let v250 = p.rocker_mass * p.rocker_com_y;
-    let v251 = p.brace_mass * p.brace_origin_y;
-    let v252 = v250 + v251;
-    let v253 = p.gravity_x * v252;
-    let v254 = p.rocker_mass * p.rocker_com_x;
-    let v255 = p.brace_origin_x * p.brace_mass;
-    let v256 = v254 + v255;
-    let v257 = p.gravity_y * v256;
-    let v258 = v253 - v257;
-    let v259 = v249 * v258;
-    let v261 = p.gravity_x * v256;
-    let v262 = p.gravity_y * v252;
-    let v263 = v261 + v262;
-    let v264 = v260 * v263;
-    let v265 = v259 + v264;
-    let v266 = v236 * v249;
-    let v267 = v231 * v260;
-    let v268 = v266 - v267;
-    let v269 = p.gravity_x * v228;
-    let v270 = p.gravity_y * v226;
-    let v271 = v269 - v270;
-    let v272 = v268 * v271;
-    let v273 = v236 * v260;
-    let v274 = v231 * v249;
-    let v275 = v273 + v274;
-    let v276 = p.gravity_x * v226;
-    let v277 = p.gravity_y * v228;
-    let v278 = v276 + v277;
-    let v279 = v275 * v278;
-    let v280 = v272 + v279;
-    let v281 = v265 + v280;
-    let v282 = v248 + v281;
-    let v283 = v61 - v106;
-    let v284 = v47 * v283;
-    let v285 = v63 * T::lit(0.5);
-    let v286 = v208 * v285;
-    let v287 = v284 - v286;
-    let v288 = v121 - v122;
-    let v289 = v100 * v288;
-    let v290 = v287 + v289;
-    let v291 = v51 * v103;
-    let v292 = v290 - v291;
-    let v293 = v120 - v86;
-    let v294 = v113 * v293;
-    let v295 = v292 + v294;
-    let v296 = v77 * v124;
-    let v297 = v295 + v296;
-    let v298 = v129 * v132;
-    let v299 = v297 + v298;
-    let v300 = v202 + v299;
-    let (v308, v301) = q_4.sin_cos();
-    let v302 = p.guide_mass * p.guide_com_y;
-    let v303 = p.gravity_x * v302;
-    let v304 = p.guide_mass * p.guide_com_x;
-    let v305 = p.gravity_y * v304;
-    let v306 = v303 - v305;
-    let v307 = v301 * v306;
-    let v309 = p.gravity_x * v304;
-    let v310 = p.gravity_y * v302;
-    let v311 = v309 + v310;
-    let v312 = v308 * v311;
-    let v313 = v307 + v312;
-    let v314 = v97 - v111;
-    let v315 = v47 * v314;
-    let v316 = v99 * T::lit(0.5);
-    let v317 = v208 * v316;
-    let v318 = v315 - v317;
-    let v319 = v122 - v121;
-    let v320 = v64 * v319;
-    let v321 = v318 + v320;
-    let v322 = v88 * T::lit(0.5);
-    let v323 = v103 * v322;
-    let v324 = v321 - v323;
-    let v325 = v86 - v120;
-    let v326 = v108 * v325;
-    let v327 = v324 + v326;
-    let v328 = v75 * v117;
-    let v329 = v327 + v328;
-    let v330 = v201 + v329;
-    let v331 = qd_2 * qd_2;
-    let v332 = v238 * v331;
-    let v333 = v280 + v332;
-    SMatrix::from_data(ArrayStorage([[v205, v225, v282, v300, v313, v330, v333]]))
+    let v216 = v186 * p.prepared[29];
+    let v217 = v182 * p.prepared[30];
+    let v218 = v216 + v217;
+    let v219 = v215 + v218;
+    let v220 = v212 + v219;
+    let v221 = v60 * v77;
+    let v222 = v70 * v84;
+    let v223 = v221 - v222;
+    let v224 = p.leg_mass * v223;
+    let v225 = v103 * v118;
+    let v226 = v120 * v127;
+    let v227 = v225 - v226;
+    let v228 = p.strut_mass * v227;
+    let v229 = v224 + v228;
+    let v230 = v144 + v229;
+    let (v231, v233) = q_4.sincos();
+    let v232 = v231 * p.guide_com_x;
+    let v234 = v233 * p.guide_com_y;
+    let v235 = v232 + v234;
+    let v236 = qd_4 * qd_4;
+    let v237 = p.guide_com_x * v233;
+    let v238 = v231 * p.guide_com_y;
+    let v239 = v237 - v238;
+    let v240 = v236 * v239;
+    let v241 = v235 * v240;
+    let v242 = v235 * v236;
+    let v243 = v239 * v242;
+    let v244 = v241 - v243;
+    let v245 = p.guide_mass * v244;
+    let v246 = v233 * p.prepared[31];
+    let v247 = v231 * p.prepared[32];
+    let v248 = v246 + v247;
+    let v249 = v245 + v248;
+    let v250 = v99 * v118;
+    let v251 = v110 * v127;
+    let v252 = v250 - v251;
+    let v253 = p.strut_mass * v252;
+    let v254 = v143 + v253;
+    let v255 = v188 * v203;
+    let v256 = v197 * v208;
+    let v257 = v255 - v256;
+    let v258 = p.brace_mass * v257;
+    let v259 = v218 + v258;
+    SMatrix::from_data(ArrayStorage([[v147, v162, v220, v230, v249, v254, v259]]))
 }
 /// `G(q) = ∂V/∂q`.
 pub fn gravity_forces<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 7> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
-    let (v13, v0) = q_0.sin_cos();
-    let v1 = p.crank_mass * p.crank_com_y;
-    let v2 = p.leg_mass + p.strut_mass;
-    let v3 = p.coupler_mass + v2;
-    let v4 = v3 * p.crank_length_y;
-    let v5 = v1 + v4;
-    let v6 = p.gravity_x * v5;
-    let v7 = p.crank_mass * p.crank_com_x;
-    let v8 = v3 * p.crank_length_x;
-    let v9 = v7 + v8;
-    let v10 = p.gravity_y * v9;
-    let v11 = v6 - v10;
-    let v12 = v0 * v11;
-    let v14 = p.gravity_x * v9;
-    let v15 = v5 * p.gravity_y;
-    let v16 = v14 + v15;
-    let v17 = v13 * v16;
-    let v18 = v12 + v17;
-    let (v21, v19) = q_1.sin_cos();
-    let v20 = v0 * v19;
-    let v22 = v13 * v21;
-    let v23 = v20 - v22;
-    let v24 = p.coupler_mass * p.coupler_com_y;
-    let v25 = v2 * p.leg_origin_y;
-    let v26 = v24 + v25;
-    let v27 = p.gravity_x * v26;
-    let v28 = p.coupler_mass * p.coupler_com_x;
-    let v29 = v2 * p.leg_origin_x;
-    let v30 = v28 + v29;
-    let v31 = p.gravity_y * v30;
-    let v32 = v27 - v31;
-    let v33 = v23 * v32;
-    let v34 = v13 * v19;
-    let v35 = v0 * v21;
-    let v36 = v34 + v35;
-    let v37 = p.gravity_x * v30;
-    let v38 = p.gravity_y * v26;
-    let v39 = v37 + v38;
-    let v40 = v36 * v39;
-    let v41 = v33 + v40;
-    let (v44, v42) = q_3.sin_cos();
-    let v43 = v23 * v42;
-    let v45 = v36 * v44;
-    let v46 = v43 - v45;
-    let v47 = p.leg_mass * p.leg_com_y;
-    let v48 = p.strut_mass * p.leg_length_y;
-    let v49 = v47 + v48;
-    let v50 = p.gravity_x * v49;
-    let v51 = p.leg_mass * p.leg_com_x;
-    let v52 = p.strut_mass * p.leg_length_x;
-    let v53 = v51 + v52;
-    let v54 = p.gravity_y * v53;
-    let v55 = v50 - v54;
-    let v56 = v46 * v55;
-    let v57 = v36 * v42;
-    let v58 = v23 * v44;
-    let v59 = v57 + v58;
-    let v60 = p.gravity_x * v53;
-    let v61 = p.gravity_y * v49;
-    let v62 = v60 + v61;
-    let v63 = v59 * v62;
-    let v64 = v56 + v63;
-    let (v67, v65) = q_5.sin_cos();
-    let v66 = v46 * v65;
-    let v68 = v59 * v67;
-    let v69 = v66 - v68;
-    let v70 = p.strut_mass * p.strut_com_y;
-    let v71 = p.gravity_x * v70;
-    let v72 = p.strut_mass * p.strut_com_x;
-    let v73 = p.gravity_y * v72;
-    let v74 = v71 - v73;
-    let v75 = v69 * v74;
-    let v76 = v59 * v65;
-    let v77 = v46 * v67;
-    let v78 = v76 + v77;
-    let v79 = p.gravity_x * v72;
-    let v80 = p.gravity_y * v70;
-    let v81 = v79 + v80;
-    let v82 = v78 * v81;
-    let v83 = v75 + v82;
-    let v84 = v64 + v83;
-    let v85 = v41 + v84;
-    let v86 = v18 + v85;
-    let (v98, v87) = q_2.sin_cos();
-    let v88 = p.rocker_mass * p.rocker_com_y;
-    let v89 = p.brace_mass * p.brace_origin_y;
-    let v90 = v88 + v89;
-    let v91 = p.gravity_x * v90;
-    let v92 = p.rocker_mass * p.rocker_com_x;
-    let v93 = p.brace_mass * p.brace_origin_x;
-    let v94 = v92 + v93;
-    let v95 = p.gravity_y * v94;
-    let v96 = v91 - v95;
-    let v97 = v87 * v96;
-    let v99 = p.gravity_x * v94;
-    let v100 = p.gravity_y * v90;
-    let v101 = v99 + v100;
-    let v102 = v98 * v101;
-    let v103 = v97 + v102;
-    let (v106, v104) = q_6.sin_cos();
-    let v105 = v87 * v104;
-    let v107 = v98 * v106;
-    let v108 = v105 - v107;
-    let v109 = p.brace_mass * p.brace_com_y;
-    let v110 = p.gravity_x * v109;
-    let v111 = p.brace_mass * p.brace_com_x;
-    let v112 = p.gravity_y * v111;
-    let v113 = v110 - v112;
-    let v114 = v108 * v113;
-    let v115 = v98 * v104;
-    let v116 = v87 * v106;
-    let v117 = v115 + v116;
-    let v118 = p.gravity_x * v111;
-    let v119 = p.gravity_y * v109;
-    let v120 = v118 + v119;
-    let v121 = v117 * v120;
-    let v122 = v114 + v121;
-    let v123 = v103 + v122;
-    let (v131, v124) = q_4.sin_cos();
-    let v125 = p.guide_mass * p.guide_com_y;
-    let v126 = p.gravity_x * v125;
-    let v127 = p.guide_mass * p.guide_com_x;
-    let v128 = p.gravity_y * v127;
-    let v129 = v126 - v128;
-    let v130 = v124 * v129;
-    let v132 = p.gravity_x * v127;
-    let v133 = p.gravity_y * v125;
-    let v134 = v132 + v133;
-    let v135 = v131 * v134;
-    let v136 = v130 + v135;
-    SMatrix::from_data(ArrayStorage([[v86, v85, v123, v84, v136, v83, v122]]))
+    let (v2, v0) = q_0.sincos();
+    let v1 = v0 * p.prepared[19];
+    let v3 = v2 * p.prepared[20];
+    let v4 = v1 + v3;
+    let (v7, v5) = q_1.sincos();
+    let v6 = v0 * v5;
+    let v8 = v2 * v7;
+    let v9 = v6 - v8;
+    let v10 = v9 * p.prepared[21];
+    let v11 = v2 * v5;
+    let v12 = v0 * v7;
+    let v13 = v11 + v12;
+    let v14 = v13 * p.prepared[22];
+    let v15 = v10 + v14;
+    let (v18, v16) = q_3.sincos();
+    let v17 = v9 * v16;
+    let v19 = v13 * v18;
+    let v20 = v17 - v19;
+    let v21 = v20 * p.prepared[23];
+    let v22 = v13 * v16;
+    let v23 = v9 * v18;
+    let v24 = v22 + v23;
+    let v25 = v24 * p.prepared[24];
+    let v26 = v21 + v25;
+    let (v29, v27) = q_5.sincos();
+    let v28 = v20 * v27;
+    let v30 = v24 * v29;
+    let v31 = v28 - v30;
+    let v32 = v31 * p.prepared[25];
+    let v33 = v24 * v27;
+    let v34 = v20 * v29;
+    let v35 = v33 + v34;
+    let v36 = v35 * p.prepared[26];
+    let v37 = v32 + v36;
+    let v38 = v26 + v37;
+    let v39 = v15 + v38;
+    let v40 = v4 + v39;
+    let (v43, v41) = q_2.sincos();
+    let v42 = v41 * p.prepared[27];
+    let v44 = v43 * p.prepared[28];
+    let v45 = v42 + v44;
+    let (v48, v46) = q_6.sincos();
+    let v47 = v41 * v46;
+    let v49 = v43 * v48;
+    let v50 = v47 - v49;
+    let v51 = v50 * p.prepared[29];
+    let v52 = v43 * v46;
+    let v53 = v41 * v48;
+    let v54 = v52 + v53;
+    let v55 = v54 * p.prepared[30];
+    let v56 = v51 + v55;
+    let v57 = v45 + v56;
+    let (v60, v58) = q_4.sincos();
+    let v59 = v58 * p.prepared[31];
+    let v61 = v60 * p.prepared[32];
+    let v62 = v59 + v61;
+    SMatrix::from_data(ArrayStorage([[v40, v39, v57, v38, v62, v37, v56]]))
 }
 /// Viscous joint damping `D q̇`.
 pub fn damping_forces<T: Real>(qd: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 7> {
@@ -1288,12 +1300,12 @@ pub fn damping_forces<T: Real>(qd: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 
 /// `φ(q)`: point a minus point b of each closure.
 pub fn closure_residual<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 6> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.crank_length_x;
     let v3 = v2 * p.crank_length_y;
     let v4 = v1 - v3;
     let v5 = p.crank_origin_x + v4;
-    let (v8, v6) = q_1.sin_cos();
+    let (v8, v6) = q_1.sincos();
     let v7 = v0 * v6;
     let v9 = v2 * v8;
     let v10 = v7 - v9;
@@ -1304,7 +1316,7 @@ pub fn closure_residual<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T,
     let v15 = v14 * p.coupler_length_y;
     let v16 = v11 - v15;
     let v17 = v5 + v16;
-    let (v20, v18) = q_2.sin_cos();
+    let (v20, v18) = q_2.sincos();
     let v19 = v18 * p.rocker_length_x;
     let v21 = v20 * p.rocker_length_y;
     let v22 = v19 - v21;
@@ -1323,7 +1335,7 @@ pub fn closure_residual<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T,
     let v35 = v33 + v34;
     let v36 = p.rocker_origin_y + v35;
     let v37 = v32 - v36;
-    let (v40, v38) = q_4.sin_cos();
+    let (v40, v38) = q_4.sincos();
     let v39 = v38 * p.guide_length_x;
     let v41 = v40 * p.guide_length_y;
     let v42 = v39 - v41;
@@ -1332,7 +1344,7 @@ pub fn closure_residual<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T,
     let v45 = v14 * p.leg_origin_y;
     let v46 = v44 - v45;
     let v47 = v5 + v46;
-    let (v50, v48) = q_3.sin_cos();
+    let (v50, v48) = q_3.sincos();
     let v49 = v10 * v48;
     let v51 = v14 * v50;
     let v52 = v49 - v51;
@@ -1361,7 +1373,7 @@ pub fn closure_residual<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T,
     let v75 = v20 * p.brace_origin_y;
     let v76 = v74 - v75;
     let v77 = p.rocker_origin_x + v76;
-    let (v80, v78) = q_6.sin_cos();
+    let (v80, v78) = q_6.sincos();
     let v79 = v18 * v78;
     let v81 = v20 * v80;
     let v82 = v79 - v81;
@@ -1376,7 +1388,7 @@ pub fn closure_residual<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T,
     let v91 = v56 * p.leg_length_y;
     let v92 = v90 - v91;
     let v93 = v47 + v92;
-    let (v96, v94) = q_5.sin_cos();
+    let (v96, v94) = q_5.sincos();
     let v95 = v52 * v94;
     let v97 = v56 * v96;
     let v98 = v95 - v97;
@@ -1413,8 +1425,8 @@ pub fn constraint_jacobian<T: Real>(
     p: &Params<T>,
 ) -> SMatrix<T, 6, 7> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
-    let (v0, v3) = q_0.sin_cos();
-    let (v4, v1) = q_1.sin_cos();
+    let (v0, v3) = q_0.sincos();
+    let (v4, v1) = q_1.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
@@ -1436,7 +1448,7 @@ pub fn constraint_jacobian<T: Real>(
     let v22 = v0 * p.crank_length_y;
     let v23 = v21 - v22;
     let v24 = v20 + v23;
-    let (v27, v25) = q_3.sin_cos();
+    let (v27, v25) = q_3.sincos();
     let v26 = v6 * v25;
     let v28 = v10 * v27;
     let v29 = v26 + v28;
@@ -1460,7 +1472,7 @@ pub fn constraint_jacobian<T: Real>(
     let v47 = v43 + v46;
     let v48 = v23 + v47;
     let v49 = -v48;
-    let (v52, v50) = q_5.sin_cos();
+    let (v52, v50) = q_5.sincos();
     let v51 = v29 * v50;
     let v53 = v33 * v52;
     let v54 = v51 + v53;
@@ -1489,7 +1501,7 @@ pub fn constraint_jacobian<T: Real>(
     let v77 = -v12;
     let v78 = -v47;
     let v79 = -v74;
-    let (v80, v82) = q_2.sin_cos();
+    let (v80, v82) = q_2.sincos();
     let v81 = v80 * p.rocker_length_x;
     let v83 = v82 * p.rocker_length_y;
     let v84 = v81 + v83;
@@ -1497,7 +1509,7 @@ pub fn constraint_jacobian<T: Real>(
     let v86 = v80 * p.rocker_length_y;
     let v87 = v85 - v86;
     let v88 = -v87;
-    let (v91, v89) = q_6.sin_cos();
+    let (v91, v89) = q_6.sincos();
     let v90 = v80 * v89;
     let v92 = v82 * v91;
     let v93 = v90 + v92;
@@ -1521,7 +1533,7 @@ pub fn constraint_jacobian<T: Real>(
     let v111 = v107 + v110;
     let v112 = -v43;
     let v113 = -v73;
-    let (v114, v116) = q_4.sin_cos();
+    let (v114, v116) = q_4.sincos();
     let v115 = v114 * p.guide_length_x;
     let v117 = v116 * p.guide_length_y;
     let v118 = v115 + v117;
@@ -1552,15 +1564,15 @@ pub fn constraint_bias<T: Real>(
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6] = qd.data.0[0];
     let v0 = qd_2 * qd_2;
-    let (v3, v1) = q_2.sin_cos();
+    let (v3, v1) = q_2.sincos();
     let v2 = v1 * p.rocker_length_x;
     let v4 = v3 * p.rocker_length_y;
     let v5 = v2 - v4;
     let v6 = v0 * v5;
     let v7 = qd_0 + qd_1;
     let v8 = v7 * v7;
-    let (v12, v9) = q_0.sin_cos();
-    let (v13, v10) = q_1.sin_cos();
+    let (v12, v9) = q_0.sincos();
+    let (v13, v10) = q_1.sincos();
     let v11 = v9 * v10;
     let v14 = v12 * v13;
     let v15 = v11 - v14;
@@ -1594,7 +1606,7 @@ pub fn constraint_bias<T: Real>(
     let v43 = v33 - v42;
     let v44 = v7 + qd_3;
     let v45 = v44 * v44;
-    let (v48, v46) = q_3.sin_cos();
+    let (v48, v46) = q_3.sincos();
     let v47 = v15 * v46;
     let v49 = v19 * v48;
     let v50 = v47 - v49;
@@ -1612,7 +1624,7 @@ pub fn constraint_bias<T: Real>(
     let v62 = v57 + v61;
     let v63 = v27 + v62;
     let v64 = qd_4 * qd_4;
-    let (v67, v65) = q_4.sin_cos();
+    let (v67, v65) = q_4.sincos();
     let v66 = v65 * p.guide_length_x;
     let v68 = v67 * p.guide_length_y;
     let v69 = v66 - v68;
@@ -1635,7 +1647,7 @@ pub fn constraint_bias<T: Real>(
     let v86 = v81 - v85;
     let v87 = v44 + qd_5;
     let v88 = v87 * v87;
-    let (v91, v89) = q_5.sin_cos();
+    let (v91, v89) = q_5.sincos();
     let v90 = v50 * v89;
     let v92 = v54 * v91;
     let v93 = v90 - v92;
@@ -1655,7 +1667,7 @@ pub fn constraint_bias<T: Real>(
     let v107 = v27 + v106;
     let v108 = qd_2 + qd_6;
     let v109 = v108 * v108;
-    let (v112, v110) = q_6.sin_cos();
+    let (v112, v110) = q_6.sincos();
     let v111 = v1 * v110;
     let v113 = v3 * v112;
     let v114 = v111 - v113;
@@ -1698,12 +1710,12 @@ pub fn constraint_bias<T: Real>(
 /// The foot point in the base frame.
 pub fn foot_position<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 2> {
     let [q_0, q_1, _, q_3, _, q_5, _] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.crank_length_x;
     let v3 = v2 * p.crank_length_y;
     let v4 = v1 - v3;
     let v5 = p.crank_origin_x + v4;
-    let (v8, v6) = q_1.sin_cos();
+    let (v8, v6) = q_1.sincos();
     let v7 = v0 * v6;
     let v9 = v2 * v8;
     let v10 = v7 - v9;
@@ -1714,7 +1726,7 @@ pub fn foot_position<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 2>
     let v15 = v14 * p.leg_origin_y;
     let v16 = v11 - v15;
     let v17 = v5 + v16;
-    let (v20, v18) = q_3.sin_cos();
+    let (v20, v18) = q_3.sincos();
     let v19 = v10 * v18;
     let v21 = v14 * v20;
     let v22 = v19 - v21;
@@ -1725,7 +1737,7 @@ pub fn foot_position<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 2>
     let v27 = v26 * p.leg_length_y;
     let v28 = v23 - v27;
     let v29 = v17 + v28;
-    let (v32, v30) = q_5.sin_cos();
+    let (v32, v30) = q_5.sincos();
     let v31 = v22 * v30;
     let v33 = v26 * v32;
     let v34 = v31 - v33;
@@ -1757,19 +1769,19 @@ pub fn foot_position<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 2>
 /// `J_f(q) = ∂(foot)/∂q`.
 pub fn foot_jacobian<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> {
     let [q_0, q_1, _, q_3, _, q_5, _] = q.data.0[0];
-    let (v0, v3) = q_0.sin_cos();
-    let (v4, v1) = q_1.sin_cos();
+    let (v0, v3) = q_0.sincos();
+    let (v4, v1) = q_1.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
-    let (v12, v7) = q_3.sin_cos();
+    let (v12, v7) = q_3.sincos();
     let v8 = v6 * v7;
     let v9 = v1 * v3;
     let v10 = v0 * v4;
     let v11 = v9 - v10;
     let v13 = v11 * v12;
     let v14 = v8 + v13;
-    let (v20, v15) = q_5.sin_cos();
+    let (v20, v15) = q_5.sincos();
     let v16 = v14 * v15;
     let v17 = v7 * v11;
     let v18 = v6 * v12;
@@ -1837,19 +1849,19 @@ pub fn foot_bias<T: Real>(
     let v1 = v0 + qd_3;
     let v2 = v1 + qd_5;
     let v3 = v2 * v2;
-    let (v7, v4) = q_0.sin_cos();
-    let (v8, v5) = q_1.sin_cos();
+    let (v7, v4) = q_0.sincos();
+    let (v8, v5) = q_1.sincos();
     let v6 = v4 * v5;
     let v9 = v7 * v8;
     let v10 = v6 - v9;
-    let (v16, v11) = q_3.sin_cos();
+    let (v16, v11) = q_3.sincos();
     let v12 = v10 * v11;
     let v13 = v5 * v7;
     let v14 = v4 * v8;
     let v15 = v13 + v14;
     let v17 = v15 * v16;
     let v18 = v12 - v17;
-    let (v24, v19) = q_5.sin_cos();
+    let (v24, v19) = q_5.sincos();
     let v20 = v18 * v19;
     let v21 = v11 * v15;
     let v22 = v10 * v16;
@@ -1912,393 +1924,212 @@ pub fn kinetic_energy<T: Real>(
 ) -> T {
     let [_, q_1, _, q_3, _, q_5, q_6] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6] = qd.data.0[0];
-    let v0 = p.crank_com_x * p.crank_com_x;
-    let v1 = p.crank_com_y * p.crank_com_y;
-    let v2 = v0 + v1;
-    let v3 = p.crank_mass * v2;
-    let v4 = p.crank_inertia + v3;
-    let v5 = p.coupler_com_x * p.coupler_com_x;
-    let v6 = p.coupler_com_y * p.coupler_com_y;
-    let v7 = v5 + v6;
-    let v8 = p.coupler_mass * v7;
-    let v9 = p.coupler_inertia + v8;
-    let v10 = p.leg_com_x * p.leg_com_x;
-    let v11 = p.leg_com_y * p.leg_com_y;
-    let v12 = v10 + v11;
-    let v13 = p.leg_mass * v12;
-    let v14 = p.leg_inertia + v13;
-    let v15 = p.strut_com_x * p.strut_com_x;
-    let v16 = p.strut_com_y * p.strut_com_y;
+    let (v2, v0) = q_5.sincos();
+    let v1 = v0 * p.prepared[6];
+    let v3 = v2 * p.prepared[7];
+    let v4 = v1 - v3;
+    let v5 = v4 + v4;
+    let v6 = p.prepared[3] + v5;
+    let v7 = p.prepared[1] + v6;
+    let (v14, v8) = q_3.sincos();
+    let v9 = v0 * p.prepared[4];
+    let v10 = p.prepared[5] * v2;
+    let v11 = v9 - v10;
+    let v12 = p.prepared[8] + v11;
+    let v13 = v8 * v12;
+    let v15 = p.prepared[4] * v2;
+    let v16 = v0 * p.prepared[5];
     let v17 = v15 + v16;
-    let v18 = p.strut_mass * v17;
-    let v19 = p.strut_inertia + v18;
-    let (v27, v20) = q_5.sin_cos();
-    let v21 = p.strut_mass * p.strut_com_x;
-    let v22 = p.leg_length_x * v21;
-    let v23 = p.strut_mass * p.strut_com_y;
-    let v24 = p.leg_length_y * v23;
-    let v25 = v22 + v24;
-    let v26 = v20 * v25;
-    let v28 = p.leg_length_x * v23;
-    let v29 = v21 * p.leg_length_y;
-    let v30 = v28 - v29;
-    let v31 = v27 * v30;
-    let v32 = v26 - v31;
-    let v33 = v32 + v32;
-    let v34 = v19 + v33;
-    let v35 = p.leg_length_x * p.leg_length_x;
-    let v36 = p.leg_length_y * p.leg_length_y;
-    let v37 = v35 + v36;
-    let v38 = p.strut_mass * v37;
-    let v39 = v34 + v38;
-    let v40 = v14 + v39;
-    let (v50, v41) = q_3.sin_cos();
-    let v42 = p.leg_mass * p.leg_com_x;
-    let v43 = v20 * v21;
-    let v44 = v23 * v27;
-    let v45 = v43 - v44;
-    let v46 = p.strut_mass * p.leg_length_x;
-    let v47 = v45 + v46;
-    let v48 = v42 + v47;
-    let v49 = v41 * v48;
-    let v51 = p.leg_mass * p.leg_com_y;
-    let v52 = v21 * v27;
-    let v53 = v20 * v23;
-    let v54 = v52 + v53;
-    let v55 = p.strut_mass * p.leg_length_y;
+    let v18 = p.prepared[9] + v17;
+    let v19 = v14 * v18;
+    let v20 = v13 - v19;
+    let v21 = p.leg_origin_x * v20;
+    let v22 = v12 * v14;
+    let v23 = v8 * v18;
+    let v24 = v22 + v23;
+    let v25 = p.leg_origin_y * v24;
+    let v26 = v21 + v25;
+    let v27 = v26 + v26;
+    let v28 = v7 + v27;
+    let v29 = p.prepared[0] + v28;
+    let (v33, v30) = q_1.sincos();
+    let v31 = v20 + p.prepared[10];
+    let v32 = v30 * v31;
+    let v34 = v24 + p.prepared[11];
+    let v35 = v33 * v34;
+    let v36 = v32 - v35;
+    let v37 = p.crank_length_x * v36;
+    let v38 = v31 * v33;
+    let v39 = v30 * v34;
+    let v40 = v38 + v39;
+    let v41 = p.crank_length_y * v40;
+    let v42 = v37 + v41;
+    let v43 = v42 + v42;
+    let v44 = v29 + v43;
+    let v45 = qd_0 * v44;
+    let v46 = v28 + v42;
+    let v47 = v46 * qd_1;
+    let v48 = v45 + v47;
+    let v49 = v6 + v26;
+    let v50 = v20 * v30;
+    let v51 = v24 * v33;
+    let v52 = v50 - v51;
+    let v53 = p.crank_length_x * v52;
+    let v54 = v24 * v30;
+    let v55 = v20 * v33;
     let v56 = v54 + v55;
-    let v57 = v51 + v56;
-    let v58 = v50 * v57;
-    let v59 = v49 - v58;
-    let v60 = p.leg_origin_x * v59;
-    let v61 = v48 * v50;
-    let v62 = v41 * v57;
-    let v63 = v61 + v62;
-    let v64 = p.leg_origin_y * v63;
-    let v65 = v60 + v64;
-    let v66 = v65 + v65;
-    let v67 = v40 + v66;
-    let v68 = p.leg_mass + p.strut_mass;
-    let v69 = p.leg_origin_x * p.leg_origin_x;
-    let v70 = p.leg_origin_y * p.leg_origin_y;
+    let v57 = p.crank_length_y * v56;
+    let v58 = v53 + v57;
+    let v59 = v49 + v58;
+    let v60 = v59 * qd_3;
+    let v61 = v48 + v60;
+    let v62 = v2 * p.prepared[12];
+    let v63 = v1 + v62;
+    let v64 = p.prepared[2] + v63;
+    let v65 = v8 * v11;
+    let v66 = v14 * v17;
+    let v67 = v65 - v66;
+    let v68 = p.leg_origin_x * v67;
+    let v69 = v8 * v17;
+    let v70 = v11 * v14;
     let v71 = v69 + v70;
-    let v72 = v68 * v71;
-    let v73 = v67 + v72;
-    let v74 = v9 + v73;
-    let (v81, v75) = q_1.sin_cos();
-    let v76 = p.coupler_mass * p.coupler_com_x;
-    let v77 = p.leg_origin_x * v68;
-    let v78 = v59 + v77;
-    let v79 = v76 + v78;
-    let v80 = v75 * v79;
-    let v82 = p.coupler_mass * p.coupler_com_y;
-    let v83 = p.leg_origin_y * v68;
-    let v84 = v63 + v83;
-    let v85 = v82 + v84;
-    let v86 = v81 * v85;
-    let v87 = v80 - v86;
-    let v88 = p.crank_length_x * v87;
-    let v89 = v79 * v81;
-    let v90 = v75 * v85;
-    let v91 = v89 + v90;
-    let v92 = p.crank_length_y * v91;
-    let v93 = v88 + v92;
-    let v94 = v93 + v93;
-    let v95 = v74 + v94;
-    let v96 = p.coupler_mass + v68;
-    let v97 = p.crank_length_x * p.crank_length_x;
-    let v98 = p.crank_length_y * p.crank_length_y;
-    let v99 = v97 + v98;
-    let v100 = v96 * v99;
-    let v101 = v95 + v100;
-    let v102 = v4 + v101;
-    let v103 = p.crank_gear_ratio * p.crank_gear_ratio;
-    let v104 = p.crank_rotor_inertia * v103;
-    let v105 = v102 + v104;
-    let v106 = qd_0 * v105;
-    let v107 = v74 + v93;
-    let v108 = v107 * qd_1;
-    let v109 = v106 + v108;
-    let v110 = v40 + v65;
-    let v111 = v59 * v75;
-    let v112 = v63 * v81;
-    let v113 = v111 - v112;
-    let v114 = p.crank_length_x * v113;
-    let v115 = v63 * v75;
-    let v116 = v59 * v81;
-    let v117 = v115 + v116;
-    let v118 = p.crank_length_y * v117;
-    let v119 = v114 + v118;
-    let v120 = v110 + v119;
-    let v121 = v120 * qd_3;
-    let v122 = v109 + v121;
-    let v123 = v29 - v28;
-    let v124 = v27 * v123;
-    let v125 = v26 + v124;
-    let v126 = v19 + v125;
-    let v127 = v41 * v45;
-    let v128 = v50 * v54;
-    let v129 = v127 - v128;
-    let v130 = p.leg_origin_x * v129;
-    let v131 = v41 * v54;
-    let v132 = v45 * v50;
-    let v133 = v131 + v132;
-    let v134 = p.leg_origin_y * v133;
-    let v135 = v130 + v134;
-    let v136 = v126 + v135;
-    let v137 = v75 * v129;
-    let v138 = v81 * v133;
-    let v139 = v137 - v138;
-    let v140 = p.crank_length_x * v139;
-    let v141 = v75 * v133;
-    let v142 = v81 * v129;
-    let v143 = v141 + v142;
-    let v144 = p.crank_length_y * v143;
-    let v145 = v140 + v144;
-    let v146 = v136 + v145;
-    let v147 = v146 * qd_5;
-    let v148 = v122 + v147;
-    let v149 = qd_0 * v148;
-    let v150 = qd_0 * v107;
-    let v151 = v74 * qd_1;
-    let v152 = v150 + v151;
-    let v153 = v110 * qd_3;
-    let v154 = v152 + v153;
-    let v155 = v136 * qd_5;
-    let v156 = v154 + v155;
-    let v157 = qd_1 * v156;
-    let v158 = v149 + v157;
-    let v159 = p.rocker_com_x * p.rocker_com_x;
-    let v160 = p.rocker_com_y * p.rocker_com_y;
-    let v161 = v159 + v160;
-    let v162 = p.rocker_mass * v161;
-    let v163 = p.rocker_inertia + v162;
-    let v164 = p.brace_com_x * p.brace_com_x;
-    let v165 = p.brace_com_y * p.brace_com_y;
-    let v166 = v164 + v165;
-    let v167 = p.brace_mass * v166;
-    let v168 = p.brace_inertia + v167;
-    let (v176, v169) = q_6.sin_cos();
-    let v170 = p.brace_mass * p.brace_com_x;
-    let v171 = p.brace_origin_x * v170;
-    let v172 = p.brace_mass * p.brace_com_y;
-    let v173 = p.brace_origin_y * v172;
-    let v174 = v171 + v173;
-    let v175 = v169 * v174;
-    let v177 = p.brace_origin_x * v172;
-    let v178 = v170 * p.brace_origin_y;
-    let v179 = v177 - v178;
-    let v180 = v176 * v179;
-    let v181 = v175 - v180;
-    let v182 = v181 + v181;
-    let v183 = v168 + v182;
-    let v184 = p.brace_origin_x * p.brace_origin_x;
-    let v185 = p.brace_origin_y * p.brace_origin_y;
-    let v186 = v184 + v185;
-    let v187 = p.brace_mass * v186;
-    let v188 = v183 + v187;
-    let v189 = v163 + v188;
-    let v190 = qd_2 * v189;
-    let v191 = v178 - v177;
-    let v192 = v176 * v191;
-    let v193 = v175 + v192;
-    let v194 = v168 + v193;
-    let v195 = v194 * qd_6;
-    let v196 = v190 + v195;
-    let v197 = qd_2 * v196;
-    let v198 = v158 + v197;
-    let v199 = qd_0 * v120;
-    let v200 = qd_1 * v110;
-    let v201 = v199 + v200;
-    let v202 = v40 * qd_3;
-    let v203 = v201 + v202;
-    let v204 = v126 * qd_5;
-    let v205 = v203 + v204;
-    let v206 = qd_3 * v205;
-    let v207 = v198 + v206;
-    let v208 = p.guide_com_x * p.guide_com_x;
-    let v209 = p.guide_com_y * p.guide_com_y;
-    let v210 = v208 + v209;
-    let v211 = p.guide_mass * v210;
-    let v212 = p.guide_inertia + v211;
-    let v213 = qd_4 * v212;
-    let v214 = qd_4 * v213;
-    let v215 = v207 + v214;
-    let v216 = qd_0 * v146;
-    let v217 = qd_1 * v136;
-    let v218 = v216 + v217;
-    let v219 = qd_3 * v126;
-    let v220 = v218 + v219;
-    let v221 = v19 * qd_5;
-    let v222 = v220 + v221;
-    let v223 = qd_5 * v222;
-    let v224 = v215 + v223;
-    let v225 = qd_2 * v194;
-    let v226 = v168 * qd_6;
-    let v227 = v225 + v226;
-    let v228 = qd_6 * v227;
-    let v229 = v224 + v228;
-    let v230 = T::lit(0.5) * v229;
-    v230
+    let v72 = p.leg_origin_y * v71;
+    let v73 = v68 + v72;
+    let v74 = v64 + v73;
+    let v75 = v30 * v67;
+    let v76 = v33 * v71;
+    let v77 = v75 - v76;
+    let v78 = p.crank_length_x * v77;
+    let v79 = v30 * v71;
+    let v80 = v33 * v67;
+    let v81 = v79 + v80;
+    let v82 = p.crank_length_y * v81;
+    let v83 = v78 + v82;
+    let v84 = v74 + v83;
+    let v85 = v84 * qd_5;
+    let v86 = v61 + v85;
+    let v87 = qd_0 * v86;
+    let v88 = qd_0 * v46;
+    let v89 = v28 * qd_1;
+    let v90 = v88 + v89;
+    let v91 = v49 * qd_3;
+    let v92 = v90 + v91;
+    let v93 = v74 * qd_5;
+    let v94 = v92 + v93;
+    let v95 = qd_1 * v94;
+    let v96 = v87 + v95;
+    let (v99, v97) = q_6.sincos();
+    let v98 = v97 * p.prepared[15];
+    let v100 = v99 * p.prepared[16];
+    let v101 = v98 - v100;
+    let v102 = v101 + v101;
+    let v103 = p.prepared[14] + v102;
+    let v104 = qd_2 * v103;
+    let v105 = v99 * p.prepared[17];
+    let v106 = v98 + v105;
+    let v107 = p.prepared[13] + v106;
+    let v108 = v107 * qd_6;
+    let v109 = v104 + v108;
+    let v110 = qd_2 * v109;
+    let v111 = v96 + v110;
+    let v112 = qd_0 * v59;
+    let v113 = qd_1 * v49;
+    let v114 = v112 + v113;
+    let v115 = v6 * qd_3;
+    let v116 = v114 + v115;
+    let v117 = v64 * qd_5;
+    let v118 = v116 + v117;
+    let v119 = qd_3 * v118;
+    let v120 = v111 + v119;
+    let v121 = qd_4 * p.prepared[18];
+    let v122 = qd_4 * v121;
+    let v123 = v120 + v122;
+    let v124 = qd_0 * v84;
+    let v125 = qd_1 * v74;
+    let v126 = v124 + v125;
+    let v127 = qd_3 * v64;
+    let v128 = v126 + v127;
+    let v129 = p.prepared[2] * qd_5;
+    let v130 = v128 + v129;
+    let v131 = qd_5 * v130;
+    let v132 = v123 + v131;
+    let v133 = qd_2 * v107;
+    let v134 = p.prepared[13] * qd_6;
+    let v135 = v133 + v134;
+    let v136 = qd_6 * v135;
+    let v137 = v132 + v136;
+    let v138 = T::lit(0.5) * v137;
+    v138
 }
 /// Potential energy `−Σ m g·c`.
 pub fn potential_energy<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> T {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
-    let v0 = p.leg_mass + p.strut_mass;
-    let v1 = p.coupler_mass + v0;
-    let v2 = p.crank_mass + v1;
-    let v3 = v2 * p.crank_origin_x;
-    let v4 = p.rocker_mass + p.brace_mass;
-    let v5 = v4 * p.rocker_origin_x;
-    let v6 = v3 + v5;
-    let v7 = p.guide_mass * p.guide_origin_x;
-    let v8 = v6 + v7;
-    let v9 = p.gravity_x * v8;
-    let v10 = v2 * p.crank_origin_y;
-    let v11 = v4 * p.rocker_origin_y;
-    let v12 = v10 + v11;
-    let v13 = p.guide_mass * p.guide_origin_y;
+    let (v2, v0) = q_0.sincos();
+    let v1 = v0 * p.prepared[20];
+    let v3 = v2 * p.prepared[19];
+    let v4 = v1 - v3;
+    let v5 = p.prepared[33] + v4;
+    let (v8, v6) = q_1.sincos();
+    let v7 = v0 * v6;
+    let v9 = v2 * v8;
+    let v10 = v7 - v9;
+    let v11 = v10 * p.prepared[22];
+    let v12 = v2 * v6;
+    let v13 = v0 * v8;
     let v14 = v12 + v13;
-    let v15 = p.gravity_y * v14;
-    let v16 = v9 + v15;
-    let (v28, v17) = q_0.sin_cos();
-    let v18 = p.crank_mass * p.crank_com_x;
-    let v19 = v1 * p.crank_length_x;
-    let v20 = v18 + v19;
-    let v21 = p.gravity_x * v20;
-    let v22 = p.crank_mass * p.crank_com_y;
-    let v23 = v1 * p.crank_length_y;
-    let v24 = v22 + v23;
-    let v25 = p.gravity_y * v24;
-    let v26 = v21 + v25;
-    let v27 = v17 * v26;
-    let v29 = p.gravity_x * v24;
-    let v30 = p.gravity_y * v20;
-    let v31 = v29 - v30;
-    let v32 = v28 * v31;
-    let v33 = v27 - v32;
-    let v34 = v16 + v33;
-    let (v37, v35) = q_1.sin_cos();
-    let v36 = v17 * v35;
-    let v38 = v28 * v37;
-    let v39 = v36 - v38;
-    let v40 = p.coupler_mass * p.coupler_com_x;
-    let v41 = v0 * p.leg_origin_x;
-    let v42 = v40 + v41;
-    let v43 = p.gravity_x * v42;
-    let v44 = p.coupler_mass * p.coupler_com_y;
-    let v45 = v0 * p.leg_origin_y;
-    let v46 = v44 + v45;
-    let v47 = p.gravity_y * v46;
-    let v48 = v43 + v47;
-    let v49 = v39 * v48;
-    let v50 = v28 * v35;
-    let v51 = v17 * v37;
-    let v52 = v50 + v51;
-    let v53 = p.gravity_x * v46;
-    let v54 = p.gravity_y * v42;
-    let v55 = v53 - v54;
-    let v56 = v52 * v55;
-    let v57 = v49 - v56;
-    let v58 = v34 + v57;
-    let (v70, v59) = q_2.sin_cos();
-    let v60 = p.rocker_mass * p.rocker_com_x;
-    let v61 = p.brace_mass * p.brace_origin_x;
+    let v15 = v14 * p.prepared[21];
+    let v16 = v11 - v15;
+    let v17 = v5 + v16;
+    let (v20, v18) = q_2.sincos();
+    let v19 = v18 * p.prepared[28];
+    let v21 = v20 * p.prepared[27];
+    let v22 = v19 - v21;
+    let v23 = v17 + v22;
+    let (v26, v24) = q_3.sincos();
+    let v25 = v10 * v24;
+    let v27 = v14 * v26;
+    let v28 = v25 - v27;
+    let v29 = v28 * p.prepared[24];
+    let v30 = v14 * v24;
+    let v31 = v10 * v26;
+    let v32 = v30 + v31;
+    let v33 = v32 * p.prepared[23];
+    let v34 = v29 - v33;
+    let v35 = v23 + v34;
+    let (v38, v36) = q_4.sincos();
+    let v37 = v36 * p.prepared[32];
+    let v39 = v38 * p.prepared[31];
+    let v40 = v37 - v39;
+    let v41 = v35 + v40;
+    let (v44, v42) = q_5.sincos();
+    let v43 = v28 * v42;
+    let v45 = v32 * v44;
+    let v46 = v43 - v45;
+    let v47 = v46 * p.prepared[26];
+    let v48 = v32 * v42;
+    let v49 = v28 * v44;
+    let v50 = v48 + v49;
+    let v51 = v50 * p.prepared[25];
+    let v52 = v47 - v51;
+    let v53 = v41 + v52;
+    let (v56, v54) = q_6.sincos();
+    let v55 = v18 * v54;
+    let v57 = v20 * v56;
+    let v58 = v55 - v57;
+    let v59 = v58 * p.prepared[30];
+    let v60 = v20 * v54;
+    let v61 = v18 * v56;
     let v62 = v60 + v61;
-    let v63 = p.gravity_x * v62;
-    let v64 = p.rocker_mass * p.rocker_com_y;
-    let v65 = p.brace_mass * p.brace_origin_y;
-    let v66 = v64 + v65;
-    let v67 = p.gravity_y * v66;
-    let v68 = v63 + v67;
-    let v69 = v59 * v68;
-    let v71 = p.gravity_x * v66;
-    let v72 = p.gravity_y * v62;
-    let v73 = v71 - v72;
-    let v74 = v70 * v73;
-    let v75 = v69 - v74;
-    let v76 = v58 + v75;
-    let (v79, v77) = q_3.sin_cos();
-    let v78 = v39 * v77;
-    let v80 = v52 * v79;
-    let v81 = v78 - v80;
-    let v82 = p.leg_mass * p.leg_com_x;
-    let v83 = p.strut_mass * p.leg_length_x;
-    let v84 = v82 + v83;
-    let v85 = p.gravity_x * v84;
-    let v86 = p.leg_mass * p.leg_com_y;
-    let v87 = p.strut_mass * p.leg_length_y;
-    let v88 = v86 + v87;
-    let v89 = p.gravity_y * v88;
-    let v90 = v85 + v89;
-    let v91 = v81 * v90;
-    let v92 = v52 * v77;
-    let v93 = v39 * v79;
-    let v94 = v92 + v93;
-    let v95 = p.gravity_x * v88;
-    let v96 = p.gravity_y * v84;
-    let v97 = v95 - v96;
-    let v98 = v94 * v97;
-    let v99 = v91 - v98;
-    let v100 = v76 + v99;
-    let (v108, v101) = q_4.sin_cos();
-    let v102 = p.guide_mass * p.guide_com_x;
-    let v103 = p.gravity_x * v102;
-    let v104 = p.guide_mass * p.guide_com_y;
-    let v105 = p.gravity_y * v104;
-    let v106 = v103 + v105;
-    let v107 = v101 * v106;
-    let v109 = p.gravity_x * v104;
-    let v110 = p.gravity_y * v102;
-    let v111 = v109 - v110;
-    let v112 = v108 * v111;
-    let v113 = v107 - v112;
-    let v114 = v100 + v113;
-    let (v117, v115) = q_5.sin_cos();
-    let v116 = v81 * v115;
-    let v118 = v94 * v117;
-    let v119 = v116 - v118;
-    let v120 = p.strut_mass * p.strut_com_x;
-    let v121 = p.gravity_x * v120;
-    let v122 = p.strut_mass * p.strut_com_y;
-    let v123 = p.gravity_y * v122;
-    let v124 = v121 + v123;
-    let v125 = v119 * v124;
-    let v126 = v94 * v115;
-    let v127 = v81 * v117;
-    let v128 = v126 + v127;
-    let v129 = p.gravity_x * v122;
-    let v130 = p.gravity_y * v120;
-    let v131 = v129 - v130;
-    let v132 = v128 * v131;
-    let v133 = v125 - v132;
-    let v134 = v114 + v133;
-    let (v137, v135) = q_6.sin_cos();
-    let v136 = v59 * v135;
-    let v138 = v70 * v137;
-    let v139 = v136 - v138;
-    let v140 = p.brace_mass * p.brace_com_x;
-    let v141 = p.gravity_x * v140;
-    let v142 = p.brace_mass * p.brace_com_y;
-    let v143 = p.gravity_y * v142;
-    let v144 = v141 + v143;
-    let v145 = v139 * v144;
-    let v146 = v70 * v135;
-    let v147 = v59 * v137;
-    let v148 = v146 + v147;
-    let v149 = p.gravity_x * v142;
-    let v150 = p.gravity_y * v140;
-    let v151 = v149 - v150;
-    let v152 = v148 * v151;
-    let v153 = v145 - v152;
-    let v154 = v134 + v153;
-    let v155 = -v154;
-    v155
+    let v63 = v62 * p.prepared[29];
+    let v64 = v59 - v63;
+    let v65 = v53 + v64;
+    let v66 = -v65;
+    v66
 }
 /// Joint positions in the base frame, one column per joint.
 pub fn joint_positions<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> {
     let [q_0, q_1, q_2, q_3, _, _, _] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.crank_length_x;
     let v3 = v2 * p.crank_length_y;
     let v4 = v1 - v3;
@@ -2307,7 +2138,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 
     let v7 = v0 * p.crank_length_y;
     let v8 = v6 + v7;
     let v9 = p.crank_origin_y + v8;
-    let (v12, v10) = q_1.sin_cos();
+    let (v12, v10) = q_1.sincos();
     let v11 = v0 * v10;
     let v13 = v2 * v12;
     let v14 = v11 - v13;
@@ -2322,7 +2153,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 
     let v23 = v14 * p.leg_origin_y;
     let v24 = v22 + v23;
     let v25 = v9 + v24;
-    let (v28, v26) = q_3.sin_cos();
+    let (v28, v26) = q_3.sincos();
     let v27 = v14 * v26;
     let v29 = v18 * v28;
     let v30 = v27 - v29;
@@ -2337,7 +2168,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 
     let v39 = v30 * p.leg_length_y;
     let v40 = v38 + v39;
     let v41 = v25 + v40;
-    let (v44, v42) = q_2.sin_cos();
+    let (v44, v42) = q_2.sincos();
     let v43 = v42 * p.brace_origin_x;
     let v45 = v44 * p.brace_origin_y;
     let v46 = v43 - v45;
@@ -2361,7 +2192,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 
 /// Link tips in the base frame, one column per link.
 pub fn link_tips<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.crank_length_x;
     let v3 = v2 * p.crank_length_y;
     let v4 = v1 - v3;
@@ -2370,7 +2201,7 @@ pub fn link_tips<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> 
     let v7 = v0 * p.crank_length_y;
     let v8 = v6 + v7;
     let v9 = p.crank_origin_y + v8;
-    let (v12, v10) = q_1.sin_cos();
+    let (v12, v10) = q_1.sincos();
     let v11 = v0 * v10;
     let v13 = v2 * v12;
     let v14 = v11 - v13;
@@ -2385,7 +2216,7 @@ pub fn link_tips<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> 
     let v23 = v14 * p.coupler_length_y;
     let v24 = v22 + v23;
     let v25 = v9 + v24;
-    let (v28, v26) = q_2.sin_cos();
+    let (v28, v26) = q_2.sincos();
     let v27 = v26 * p.rocker_length_x;
     let v29 = v28 * p.rocker_length_y;
     let v30 = v27 - v29;
@@ -2398,7 +2229,7 @@ pub fn link_tips<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> 
     let v37 = v18 * p.leg_origin_y;
     let v38 = v36 - v37;
     let v39 = v5 + v38;
-    let (v42, v40) = q_3.sin_cos();
+    let (v42, v40) = q_3.sincos();
     let v41 = v14 * v40;
     let v43 = v18 * v42;
     let v44 = v41 - v43;
@@ -2417,7 +2248,7 @@ pub fn link_tips<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> 
     let v57 = v44 * p.leg_length_y;
     let v58 = v56 + v57;
     let v59 = v55 + v58;
-    let (v62, v60) = q_4.sin_cos();
+    let (v62, v60) = q_4.sincos();
     let v61 = v60 * p.guide_length_x;
     let v63 = v62 * p.guide_length_y;
     let v64 = v61 - v63;
@@ -2426,7 +2257,7 @@ pub fn link_tips<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> 
     let v67 = v60 * p.guide_length_y;
     let v68 = v66 + v67;
     let v69 = p.guide_origin_y + v68;
-    let (v72, v70) = q_5.sin_cos();
+    let (v72, v70) = q_5.sincos();
     let v71 = v44 * v70;
     let v73 = v48 * v72;
     let v74 = v71 - v73;
@@ -2445,7 +2276,7 @@ pub fn link_tips<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> 
     let v87 = v28 * p.brace_origin_y;
     let v88 = v86 - v87;
     let v89 = p.rocker_origin_x + v88;
-    let (v92, v90) = q_6.sin_cos();
+    let (v92, v90) = q_6.sincos();
     let v91 = v26 * v90;
     let v93 = v28 * v92;
     let v94 = v91 - v93;
@@ -2479,12 +2310,12 @@ pub fn link_tips<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> 
 /// Closure points a, b of each closure in the base frame.
 pub fn closure_points<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 6> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.crank_length_x;
     let v3 = v2 * p.crank_length_y;
     let v4 = v1 - v3;
     let v5 = p.crank_origin_x + v4;
-    let (v8, v6) = q_1.sin_cos();
+    let (v8, v6) = q_1.sincos();
     let v7 = v0 * v6;
     let v9 = v2 * v8;
     let v10 = v7 - v9;
@@ -2503,7 +2334,7 @@ pub fn closure_points<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2
     let v23 = v10 * p.coupler_length_y;
     let v24 = v22 + v23;
     let v25 = v21 + v24;
-    let (v28, v26) = q_2.sin_cos();
+    let (v28, v26) = q_2.sincos();
     let v27 = v26 * p.rocker_length_x;
     let v29 = v28 * p.rocker_length_y;
     let v30 = v27 - v29;
@@ -2512,7 +2343,7 @@ pub fn closure_points<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2
     let v33 = v26 * p.rocker_length_y;
     let v34 = v32 + v33;
     let v35 = p.rocker_origin_y + v34;
-    let (v38, v36) = q_4.sin_cos();
+    let (v38, v36) = q_4.sincos();
     let v37 = v36 * p.guide_length_x;
     let v39 = v38 * p.guide_length_y;
     let v40 = v37 - v39;
@@ -2525,7 +2356,7 @@ pub fn closure_points<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2
     let v47 = v14 * p.leg_origin_y;
     let v48 = v46 - v47;
     let v49 = v5 + v48;
-    let (v52, v50) = q_3.sin_cos();
+    let (v52, v50) = q_3.sincos();
     let v51 = v10 * v50;
     let v53 = v14 * v52;
     let v54 = v51 - v53;
@@ -2548,7 +2379,7 @@ pub fn closure_points<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2
     let v71 = v28 * p.brace_origin_y;
     let v72 = v70 - v71;
     let v73 = p.rocker_origin_x + v72;
-    let (v76, v74) = q_6.sin_cos();
+    let (v76, v74) = q_6.sincos();
     let v75 = v26 * v74;
     let v77 = v28 * v76;
     let v78 = v75 - v77;
@@ -2571,7 +2402,7 @@ pub fn closure_points<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2
     let v95 = v58 * p.leg_length_y;
     let v96 = v94 - v95;
     let v97 = v49 + v96;
-    let (v100, v98) = q_5.sin_cos();
+    let (v100, v98) = q_5.sincos();
     let v99 = v54 * v98;
     let v101 = v58 * v100;
     let v102 = v99 - v101;
@@ -2628,619 +2459,484 @@ pub fn dynamics_terms<T: Real>(
 ) -> (SMatrix<T, 7, 7>, SVector<T, 7>, SMatrix<T, 6, 7>, SVector<T, 6>) {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6] = qd.data.0[0];
-    let v0 = p.crank_com_x * p.crank_com_x;
-    let v1 = p.crank_com_y * p.crank_com_y;
-    let v2 = v0 + v1;
-    let v3 = p.crank_mass * v2;
-    let v4 = p.crank_inertia + v3;
-    let v5 = p.coupler_com_x * p.coupler_com_x;
-    let v6 = p.coupler_com_y * p.coupler_com_y;
-    let v7 = v5 + v6;
-    let v8 = p.coupler_mass * v7;
-    let v9 = p.coupler_inertia + v8;
-    let v10 = p.leg_com_x * p.leg_com_x;
-    let v11 = p.leg_com_y * p.leg_com_y;
-    let v12 = v10 + v11;
-    let v13 = p.leg_mass * v12;
-    let v14 = p.leg_inertia + v13;
-    let v15 = p.strut_com_x * p.strut_com_x;
-    let v16 = p.strut_com_y * p.strut_com_y;
+    let (v2, v0) = q_5.sincos();
+    let v1 = v0 * p.prepared[6];
+    let v3 = v2 * p.prepared[7];
+    let v4 = v1 - v3;
+    let v5 = v4 + v4;
+    let v6 = p.prepared[3] + v5;
+    let v7 = p.prepared[1] + v6;
+    let (v14, v8) = q_3.sincos();
+    let v9 = v0 * p.prepared[4];
+    let v10 = p.prepared[5] * v2;
+    let v11 = v9 - v10;
+    let v12 = p.prepared[8] + v11;
+    let v13 = v8 * v12;
+    let v15 = p.prepared[4] * v2;
+    let v16 = v0 * p.prepared[5];
     let v17 = v15 + v16;
-    let v18 = p.strut_mass * v17;
-    let v19 = p.strut_inertia + v18;
-    let (v27, v20) = q_5.sin_cos();
-    let v21 = p.strut_mass * p.strut_com_x;
-    let v22 = p.leg_length_x * v21;
-    let v23 = p.strut_mass * p.strut_com_y;
-    let v24 = p.leg_length_y * v23;
-    let v25 = v22 + v24;
-    let v26 = v20 * v25;
-    let v28 = p.leg_length_x * v23;
-    let v29 = v21 * p.leg_length_y;
-    let v30 = v28 - v29;
-    let v31 = v27 * v30;
-    let v32 = v26 - v31;
-    let v33 = v32 + v32;
-    let v34 = v19 + v33;
-    let v35 = p.leg_length_x * p.leg_length_x;
-    let v36 = p.leg_length_y * p.leg_length_y;
-    let v37 = v35 + v36;
-    let v38 = p.strut_mass * v37;
-    let v39 = v34 + v38;
-    let v40 = v14 + v39;
-    let (v50, v41) = q_3.sin_cos();
-    let v42 = p.leg_mass * p.leg_com_x;
-    let v43 = v20 * v21;
-    let v44 = v23 * v27;
-    let v45 = v43 - v44;
-    let v46 = p.strut_mass * p.leg_length_x;
-    let v47 = v45 + v46;
-    let v48 = v42 + v47;
-    let v49 = v41 * v48;
-    let v51 = p.leg_mass * p.leg_com_y;
-    let v52 = v21 * v27;
-    let v53 = v20 * v23;
-    let v54 = v52 + v53;
-    let v55 = p.strut_mass * p.leg_length_y;
-    let v56 = v54 + v55;
-    let v57 = v51 + v56;
-    let v58 = v50 * v57;
-    let v59 = v49 - v58;
-    let v60 = p.leg_origin_x * v59;
-    let v61 = v48 * v50;
-    let v62 = v41 * v57;
-    let v63 = v61 + v62;
-    let v64 = p.leg_origin_y * v63;
-    let v65 = v60 + v64;
-    let v66 = v65 + v65;
-    let v67 = v40 + v66;
-    let v68 = p.leg_mass + p.strut_mass;
-    let v69 = p.leg_origin_x * p.leg_origin_x;
-    let v70 = p.leg_origin_y * p.leg_origin_y;
-    let v71 = v69 + v70;
-    let v72 = v68 * v71;
-    let v73 = v67 + v72;
-    let v74 = v9 + v73;
-    let (v81, v75) = q_1.sin_cos();
-    let v76 = p.coupler_mass * p.coupler_com_x;
-    let v77 = p.leg_origin_x * v68;
-    let v78 = v59 + v77;
-    let v79 = v76 + v78;
-    let v80 = v75 * v79;
-    let v82 = p.coupler_mass * p.coupler_com_y;
-    let v83 = p.leg_origin_y * v68;
-    let v84 = v63 + v83;
-    let v85 = v82 + v84;
-    let v86 = v81 * v85;
-    let v87 = v80 - v86;
-    let v88 = p.crank_length_x * v87;
-    let v89 = v79 * v81;
-    let v90 = v75 * v85;
-    let v91 = v89 + v90;
-    let v92 = p.crank_length_y * v91;
-    let v93 = v88 + v92;
-    let v94 = v93 + v93;
-    let v95 = v74 + v94;
-    let v96 = p.coupler_mass + v68;
-    let v97 = p.crank_length_x * p.crank_length_x;
-    let v98 = p.crank_length_y * p.crank_length_y;
-    let v99 = v97 + v98;
-    let v100 = v96 * v99;
-    let v101 = v95 + v100;
-    let v102 = v4 + v101;
-    let v103 = p.crank_gear_ratio * p.crank_gear_ratio;
-    let v104 = p.crank_rotor_inertia * v103;
-    let v105 = v102 + v104;
-    let v106 = v74 + v93;
-    let v107 = v40 + v65;
-    let v108 = v59 * v75;
-    let v109 = v63 * v81;
-    let v110 = v108 - v109;
-    let v111 = p.crank_length_x * v110;
-    let v112 = v63 * v75;
-    let v113 = v59 * v81;
-    let v114 = v112 + v113;
-    let v115 = p.crank_length_y * v114;
-    let v116 = v111 + v115;
-    let v117 = v107 + v116;
-    let v118 = v29 - v28;
-    let v119 = v27 * v118;
-    let v120 = v26 + v119;
-    let v121 = v19 + v120;
-    let v122 = v41 * v45;
-    let v123 = v50 * v54;
-    let v124 = v122 - v123;
-    let v125 = p.leg_origin_x * v124;
-    let v126 = v41 * v54;
-    let v127 = v45 * v50;
-    let v128 = v126 + v127;
-    let v129 = p.leg_origin_y * v128;
-    let v130 = v125 + v129;
-    let v131 = v121 + v130;
-    let v132 = v75 * v124;
-    let v133 = v81 * v128;
-    let v134 = v132 - v133;
-    let v135 = p.crank_length_x * v134;
-    let v136 = v75 * v128;
-    let v137 = v81 * v124;
-    let v138 = v136 + v137;
-    let v139 = p.crank_length_y * v138;
-    let v140 = v135 + v139;
-    let v141 = v131 + v140;
-    let v142 = p.rocker_com_x * p.rocker_com_x;
-    let v143 = p.rocker_com_y * p.rocker_com_y;
-    let v144 = v142 + v143;
-    let v145 = p.rocker_mass * v144;
-    let v146 = p.rocker_inertia + v145;
-    let v147 = p.brace_com_x * p.brace_com_x;
-    let v148 = p.brace_com_y * p.brace_com_y;
+    let v18 = p.prepared[9] + v17;
+    let v19 = v14 * v18;
+    let v20 = v13 - v19;
+    let v21 = p.leg_origin_x * v20;
+    let v22 = v12 * v14;
+    let v23 = v8 * v18;
+    let v24 = v22 + v23;
+    let v25 = p.leg_origin_y * v24;
+    let v26 = v21 + v25;
+    let v27 = v26 + v26;
+    let v28 = v7 + v27;
+    let v29 = p.prepared[0] + v28;
+    let (v33, v30) = q_1.sincos();
+    let v31 = v20 + p.prepared[10];
+    let v32 = v30 * v31;
+    let v34 = v24 + p.prepared[11];
+    let v35 = v33 * v34;
+    let v36 = v32 - v35;
+    let v37 = p.crank_length_x * v36;
+    let v38 = v31 * v33;
+    let v39 = v30 * v34;
+    let v40 = v38 + v39;
+    let v41 = p.crank_length_y * v40;
+    let v42 = v37 + v41;
+    let v43 = v42 + v42;
+    let v44 = v29 + v43;
+    let v45 = v28 + v42;
+    let v46 = v6 + v26;
+    let v47 = v20 * v30;
+    let v48 = v24 * v33;
+    let v49 = v47 - v48;
+    let v50 = p.crank_length_x * v49;
+    let v51 = v24 * v30;
+    let v52 = v20 * v33;
+    let v53 = v51 + v52;
+    let v54 = p.crank_length_y * v53;
+    let v55 = v50 + v54;
+    let v56 = v46 + v55;
+    let v57 = v2 * p.prepared[12];
+    let v58 = v1 + v57;
+    let v59 = p.prepared[2] + v58;
+    let v60 = v8 * v11;
+    let v61 = v14 * v17;
+    let v62 = v60 - v61;
+    let v63 = p.leg_origin_x * v62;
+    let v64 = v8 * v17;
+    let v65 = v11 * v14;
+    let v66 = v64 + v65;
+    let v67 = p.leg_origin_y * v66;
+    let v68 = v63 + v67;
+    let v69 = v59 + v68;
+    let v70 = v30 * v62;
+    let v71 = v33 * v66;
+    let v72 = v70 - v71;
+    let v73 = p.crank_length_x * v72;
+    let v74 = v30 * v66;
+    let v75 = v33 * v62;
+    let v76 = v74 + v75;
+    let v77 = p.crank_length_y * v76;
+    let v78 = v73 + v77;
+    let v79 = v69 + v78;
+    let (v82, v80) = q_6.sincos();
+    let v81 = v80 * p.prepared[15];
+    let v83 = v82 * p.prepared[16];
+    let v84 = v81 - v83;
+    let v85 = v84 + v84;
+    let v86 = p.prepared[14] + v85;
+    let v87 = v82 * p.prepared[17];
+    let v88 = v81 + v87;
+    let v89 = p.prepared[13] + v88;
+    let (v90, v92) = q_0.sincos();
+    let v91 = p.crank_com_x * v90;
+    let v93 = p.crank_com_y * v92;
+    let v94 = v91 + v93;
+    let v95 = qd_0 * qd_0;
+    let v96 = p.crank_com_x * v92;
+    let v97 = p.crank_com_y * v90;
+    let v98 = v96 - v97;
+    let v99 = v95 * v98;
+    let v100 = v94 * v99;
+    let v101 = v94 * v95;
+    let v102 = v98 * v101;
+    let v103 = v100 - v102;
+    let v104 = p.crank_mass * v103;
+    let v105 = v30 * v90;
+    let v106 = v33 * v92;
+    let v107 = v105 + v106;
+    let v108 = p.coupler_com_x * v107;
+    let v109 = v30 * v92;
+    let v110 = v33 * v90;
+    let v111 = v109 - v110;
+    let v112 = p.coupler_com_y * v111;
+    let v113 = v108 + v112;
+    let v114 = p.crank_length_x * v90;
+    let v115 = p.crank_length_y * v92;
+    let v116 = v114 + v115;
+    let v117 = v113 + v116;
+    let v118 = qd_0 + qd_1;
+    let v119 = v118 * v118;
+    let v120 = p.coupler_com_x * v111;
+    let v121 = p.coupler_com_y * v107;
+    let v122 = v120 - v121;
+    let v123 = v119 * v122;
+    let v124 = p.crank_length_x * v92;
+    let v125 = p.crank_length_y * v90;
+    let v126 = v124 - v125;
+    let v127 = v95 * v126;
+    let v128 = v123 + v127;
+    let v129 = v117 * v128;
+    let v130 = v122 + v126;
+    let v131 = v113 * v119;
+    let v132 = v95 * v116;
+    let v133 = v131 + v132;
+    let v134 = v130 * v133;
+    let v135 = v129 - v134;
+    let v136 = p.coupler_mass * v135;
+    let v137 = v104 + v136;
+    let v138 = v8 * v107;
+    let v139 = v14 * v111;
+    let v140 = v138 + v139;
+    let v141 = p.leg_com_x * v140;
+    let v142 = v8 * v111;
+    let v143 = v14 * v107;
+    let v144 = v142 - v143;
+    let v145 = p.leg_com_y * v144;
+    let v146 = v141 + v145;
+    let v147 = p.leg_origin_x * v107;
+    let v148 = p.leg_origin_y * v111;
     let v149 = v147 + v148;
-    let v150 = p.brace_mass * v149;
-    let v151 = p.brace_inertia + v150;
-    let (v159, v152) = q_6.sin_cos();
-    let v153 = p.brace_mass * p.brace_com_x;
-    let v154 = p.brace_origin_x * v153;
-    let v155 = p.brace_mass * p.brace_com_y;
-    let v156 = p.brace_origin_y * v155;
-    let v157 = v154 + v156;
-    let v158 = v152 * v157;
-    let v160 = p.brace_origin_x * v155;
-    let v161 = v153 * p.brace_origin_y;
-    let v162 = v160 - v161;
-    let v163 = v159 * v162;
-    let v164 = v158 - v163;
-    let v165 = v164 + v164;
-    let v166 = v151 + v165;
-    let v167 = p.brace_origin_x * p.brace_origin_x;
-    let v168 = p.brace_origin_y * p.brace_origin_y;
+    let v150 = v146 + v149;
+    let v151 = v116 + v150;
+    let v152 = v118 + qd_3;
+    let v153 = v152 * v152;
+    let v154 = p.leg_com_x * v144;
+    let v155 = p.leg_com_y * v140;
+    let v156 = v154 - v155;
+    let v157 = v153 * v156;
+    let v158 = p.leg_origin_x * v111;
+    let v159 = p.leg_origin_y * v107;
+    let v160 = v158 - v159;
+    let v161 = v119 * v160;
+    let v162 = v157 + v161;
+    let v163 = v127 + v162;
+    let v164 = v151 * v163;
+    let v165 = v156 + v160;
+    let v166 = v126 + v165;
+    let v167 = v146 * v153;
+    let v168 = v119 * v149;
     let v169 = v167 + v168;
-    let v170 = p.brace_mass * v169;
-    let v171 = v166 + v170;
-    let v172 = v146 + v171;
-    let v173 = v161 - v160;
-    let v174 = v159 * v173;
-    let v175 = v158 + v174;
-    let v176 = v151 + v175;
-    let v177 = p.guide_com_x * p.guide_com_x;
-    let v178 = p.guide_com_y * p.guide_com_y;
-    let v179 = v177 + v178;
-    let v180 = p.guide_mass * v179;
-    let v181 = p.guide_inertia + v180;
-    let v182 = v87 * p.crank_length_y;
-    let v183 = p.crank_length_x * v91;
-    let v184 = v182 - v183;
-    let v185 = v184 + v184;
-    let v186 = qd_0 * qd_1;
-    let v187 = v185 * v186;
-    let v188 = v59 * p.leg_origin_y;
-    let v189 = p.leg_origin_x * v63;
-    let v190 = v188 - v189;
-    let v191 = v190 + v190;
-    let v192 = p.crank_length_y * v110;
-    let v193 = p.crank_length_x * v114;
+    let v170 = v132 + v169;
+    let v171 = v166 * v170;
+    let v172 = v164 - v171;
+    let v173 = p.leg_mass * v172;
+    let v174 = v137 + v173;
+    let v175 = v0 * v140;
+    let v176 = v2 * v144;
+    let v177 = v175 + v176;
+    let v178 = p.strut_com_x * v177;
+    let v179 = v0 * v144;
+    let v180 = v2 * v140;
+    let v181 = v179 - v180;
+    let v182 = p.strut_com_y * v181;
+    let v183 = v178 + v182;
+    let v184 = p.leg_length_x * v140;
+    let v185 = p.leg_length_y * v144;
+    let v186 = v184 + v185;
+    let v187 = v183 + v186;
+    let v188 = v149 + v187;
+    let v189 = v116 + v188;
+    let v190 = v152 + qd_5;
+    let v191 = v190 * v190;
+    let v192 = p.strut_com_x * v181;
+    let v193 = p.strut_com_y * v177;
     let v194 = v192 - v193;
-    let v195 = v194 + v194;
-    let v196 = v191 + v195;
-    let v197 = qd_0 * qd_3;
-    let v198 = v196 * v197;
-    let v199 = v187 + v198;
-    let v200 = v25 * v27;
-    let v201 = v20 * v30;
-    let v202 = v200 + v201;
-    let v203 = -v202;
-    let v204 = v203 + v203;
-    let v205 = p.leg_origin_y * v124;
-    let v206 = p.leg_origin_x * v128;
-    let v207 = v205 - v206;
-    let v208 = v207 + v207;
-    let v209 = v204 + v208;
-    let v210 = p.crank_length_y * v134;
-    let v211 = p.crank_length_x * v138;
-    let v212 = v210 - v211;
-    let v213 = v212 + v212;
-    let v214 = v209 + v213;
-    let v215 = qd_0 * qd_5;
-    let v216 = v214 * v215;
-    let v217 = v199 + v216;
-    let v218 = qd_1 * qd_1;
-    let v219 = v184 * v218;
-    let v220 = v217 + v219;
-    let v221 = v191 + v194;
-    let v222 = v194 + v221;
-    let v223 = qd_1 * qd_3;
-    let v224 = v222 * v223;
-    let v225 = v220 + v224;
-    let v226 = v209 + v212;
-    let v227 = v212 + v226;
-    let v228 = qd_1 * qd_5;
-    let v229 = v227 * v228;
-    let v230 = v225 + v229;
-    let v231 = v190 + v194;
-    let v232 = qd_3 * qd_3;
-    let v233 = v231 * v232;
-    let v234 = v230 + v233;
-    let v235 = v204 + v207;
-    let v236 = v212 + v235;
-    let v237 = v207 + v212;
-    let v238 = v236 + v237;
-    let v239 = qd_3 * qd_5;
-    let v240 = v238 * v239;
-    let v241 = v234 + v240;
-    let v242 = v20 * v118;
-    let v243 = v242 - v200;
-    let v244 = v207 + v243;
-    let v245 = v212 + v244;
-    let v246 = qd_5 * qd_5;
-    let v247 = v245 * v246;
-    let v248 = v241 + v247;
-    let (v260, v249) = q_0.sin_cos();
-    let v250 = p.crank_mass * p.crank_com_y;
-    let v251 = p.crank_length_y * v96;
-    let v252 = v250 + v251;
-    let v253 = p.gravity_x * v252;
-    let v254 = p.crank_mass * p.crank_com_x;
-    let v255 = p.crank_length_x * v96;
-    let v256 = v254 + v255;
-    let v257 = p.gravity_y * v256;
-    let v258 = v253 - v257;
-    let v259 = v249 * v258;
-    let v261 = p.gravity_x * v256;
-    let v262 = v252 * p.gravity_y;
-    let v263 = v261 + v262;
-    let v264 = v260 * v263;
-    let v265 = v259 + v264;
-    let v266 = v75 * v249;
-    let v267 = v81 * v260;
+    let v195 = v191 * v194;
+    let v196 = p.leg_length_x * v144;
+    let v197 = p.leg_length_y * v140;
+    let v198 = v196 - v197;
+    let v199 = v153 * v198;
+    let v200 = v195 + v199;
+    let v201 = v161 + v200;
+    let v202 = v127 + v201;
+    let v203 = v189 * v202;
+    let v204 = v194 + v198;
+    let v205 = v160 + v204;
+    let v206 = v126 + v205;
+    let v207 = v183 * v191;
+    let v208 = v153 * v186;
+    let v209 = v207 + v208;
+    let v210 = v168 + v209;
+    let v211 = v132 + v210;
+    let v212 = v206 * v211;
+    let v213 = v203 - v212;
+    let v214 = p.strut_mass * v213;
+    let v215 = v174 + v214;
+    let v216 = v92 * p.prepared[19];
+    let v217 = v90 * p.prepared[20];
+    let v218 = v216 + v217;
+    let v219 = v111 * p.prepared[21];
+    let v220 = v107 * p.prepared[22];
+    let v221 = v219 + v220;
+    let v222 = v144 * p.prepared[23];
+    let v223 = v140 * p.prepared[24];
+    let v224 = v222 + v223;
+    let v225 = v181 * p.prepared[25];
+    let v226 = v177 * p.prepared[26];
+    let v227 = v225 + v226;
+    let v228 = v224 + v227;
+    let v229 = v221 + v228;
+    let v230 = v218 + v229;
+    let v231 = v215 + v230;
+    let v232 = v113 * v128;
+    let v233 = v122 * v133;
+    let v234 = v232 - v233;
+    let v235 = p.coupler_mass * v234;
+    let v236 = v150 * v163;
+    let v237 = v165 * v170;
+    let v238 = v236 - v237;
+    let v239 = p.leg_mass * v238;
+    let v240 = v235 + v239;
+    let v241 = v188 * v202;
+    let v242 = v205 * v211;
+    let v243 = v241 - v242;
+    let v244 = p.strut_mass * v243;
+    let v245 = v240 + v244;
+    let v246 = v229 + v245;
+    let (v247, v249) = q_2.sincos();
+    let v248 = p.rocker_com_x * v247;
+    let v250 = p.rocker_com_y * v249;
+    let v251 = v248 + v250;
+    let v252 = qd_2 * qd_2;
+    let v253 = p.rocker_com_x * v249;
+    let v254 = p.rocker_com_y * v247;
+    let v255 = v253 - v254;
+    let v256 = v252 * v255;
+    let v257 = v251 * v256;
+    let v258 = v251 * v252;
+    let v259 = v255 * v258;
+    let v260 = v257 - v259;
+    let v261 = p.rocker_mass * v260;
+    let v262 = v80 * v247;
+    let v263 = v82 * v249;
+    let v264 = v262 + v263;
+    let v265 = p.brace_com_x * v264;
+    let v266 = v80 * v249;
+    let v267 = v82 * v247;
     let v268 = v266 - v267;
-    let v269 = v82 + v83;
-    let v270 = p.gravity_x * v269;
-    let v271 = v76 + v77;
-    let v272 = p.gravity_y * v271;
-    let v273 = v270 - v272;
-    let v274 = v268 * v273;
-    let v275 = v75 * v260;
-    let v276 = v81 * v249;
-    let v277 = v275 + v276;
-    let v278 = p.gravity_x * v271;
-    let v279 = p.gravity_y * v269;
-    let v280 = v278 + v279;
-    let v281 = v277 * v280;
-    let v282 = v274 + v281;
-    let v283 = v41 * v268;
-    let v284 = v50 * v277;
-    let v285 = v283 - v284;
-    let v286 = v51 + v55;
-    let v287 = p.gravity_x * v286;
-    let v288 = v42 + v46;
-    let v289 = p.gravity_y * v288;
-    let v290 = v287 - v289;
-    let v291 = v285 * v290;
-    let v292 = v41 * v277;
-    let v293 = v50 * v268;
-    let v294 = v292 + v293;
-    let v295 = p.gravity_x * v288;
-    let v296 = p.gravity_y * v286;
+    let v269 = p.brace_com_y * v268;
+    let v270 = v265 + v269;
+    let v271 = p.brace_origin_x * v247;
+    let v272 = p.brace_origin_y * v249;
+    let v273 = v271 + v272;
+    let v274 = v270 + v273;
+    let v275 = qd_2 + qd_6;
+    let v276 = v275 * v275;
+    let v277 = p.brace_com_x * v268;
+    let v278 = p.brace_com_y * v264;
+    let v279 = v277 - v278;
+    let v280 = v276 * v279;
+    let v281 = p.brace_origin_x * v249;
+    let v282 = p.brace_origin_y * v247;
+    let v283 = v281 - v282;
+    let v284 = v252 * v283;
+    let v285 = v280 + v284;
+    let v286 = v274 * v285;
+    let v287 = v279 + v283;
+    let v288 = v270 * v276;
+    let v289 = v252 * v273;
+    let v290 = v288 + v289;
+    let v291 = v287 * v290;
+    let v292 = v286 - v291;
+    let v293 = p.brace_mass * v292;
+    let v294 = v261 + v293;
+    let v295 = v249 * p.prepared[27];
+    let v296 = v247 * p.prepared[28];
     let v297 = v295 + v296;
-    let v298 = v294 * v297;
-    let v299 = v291 + v298;
-    let v300 = v20 * v285;
-    let v301 = v27 * v294;
-    let v302 = v300 - v301;
-    let v303 = v23 * p.gravity_x;
-    let v304 = v21 * p.gravity_y;
+    let v298 = v268 * p.prepared[29];
+    let v299 = v264 * p.prepared[30];
+    let v300 = v298 + v299;
+    let v301 = v297 + v300;
+    let v302 = v294 + v301;
+    let v303 = v146 * v163;
+    let v304 = v156 * v170;
     let v305 = v303 - v304;
-    let v306 = v302 * v305;
-    let v307 = v20 * v294;
-    let v308 = v27 * v285;
-    let v309 = v307 + v308;
-    let v310 = v21 * p.gravity_x;
-    let v311 = v23 * p.gravity_y;
-    let v312 = v310 + v311;
-    let v313 = v309 * v312;
-    let v314 = v306 + v313;
-    let v315 = v299 + v314;
-    let v316 = v282 + v315;
-    let v317 = v265 + v316;
-    let v318 = v248 + v317;
-    let v319 = v221 - v194;
-    let v320 = v197 * v319;
-    let v321 = qd_0 * qd_0;
-    let v322 = v184 * v321;
-    let v323 = v320 - v322;
-    let v324 = v226 - v212;
-    let v325 = v215 * v324;
-    let v326 = v323 + v325;
-    let v327 = v191 * v223;
-    let v328 = v326 + v327;
-    let v329 = v209 * v228;
+    let v306 = p.leg_mass * v305;
+    let v307 = v187 * v202;
+    let v308 = v204 * v211;
+    let v309 = v307 - v308;
+    let v310 = p.strut_mass * v309;
+    let v311 = v306 + v310;
+    let v312 = v228 + v311;
+    let (v313, v315) = q_4.sincos();
+    let v314 = p.guide_com_x * v313;
+    let v316 = p.guide_com_y * v315;
+    let v317 = v314 + v316;
+    let v318 = qd_4 * qd_4;
+    let v319 = p.guide_com_x * v315;
+    let v320 = p.guide_com_y * v313;
+    let v321 = v319 - v320;
+    let v322 = v318 * v321;
+    let v323 = v317 * v322;
+    let v324 = v317 * v318;
+    let v325 = v321 * v324;
+    let v326 = v323 - v325;
+    let v327 = p.guide_mass * v326;
+    let v328 = v315 * p.prepared[31];
+    let v329 = v313 * p.prepared[32];
     let v330 = v328 + v329;
-    let v331 = v190 * v232;
-    let v332 = v330 + v331;
-    let v333 = v207 + v235;
-    let v334 = v239 * v333;
-    let v335 = v332 + v334;
-    let v336 = v244 * v246;
-    let v337 = v335 + v336;
-    let v338 = v316 + v337;
-    let v339 = v157 * v159;
-    let v340 = v152 * v162;
-    let v341 = v339 + v340;
-    let v342 = -v341;
-    let v343 = v342 + v342;
-    let v344 = qd_2 * qd_6;
-    let v345 = v343 * v344;
-    let v346 = v152 * v173;
-    let v347 = v346 - v339;
-    let v348 = qd_6 * qd_6;
-    let v349 = v347 * v348;
-    let v350 = v345 + v349;
-    let (v362, v351) = q_2.sin_cos();
-    let v352 = p.rocker_mass * p.rocker_com_y;
-    let v353 = p.brace_mass * p.brace_origin_y;
-    let v354 = v352 + v353;
-    let v355 = p.gravity_x * v354;
-    let v356 = p.rocker_mass * p.rocker_com_x;
-    let v357 = p.brace_mass * p.brace_origin_x;
-    let v358 = v356 + v357;
-    let v359 = p.gravity_y * v358;
-    let v360 = v355 - v359;
-    let v361 = v351 * v360;
-    let v363 = p.gravity_x * v358;
-    let v364 = p.gravity_y * v354;
-    let v365 = v363 + v364;
-    let v366 = v362 * v365;
-    let v367 = v361 + v366;
-    let v368 = v152 * v351;
-    let v369 = v159 * v362;
+    let v331 = v327 + v330;
+    let v332 = v183 * v202;
+    let v333 = v194 * v211;
+    let v334 = v332 - v333;
+    let v335 = p.strut_mass * v334;
+    let v336 = v227 + v335;
+    let v337 = v270 * v285;
+    let v338 = v279 * v290;
+    let v339 = v337 - v338;
+    let v340 = p.brace_mass * v339;
+    let v341 = v300 + v340;
+    let v342 = v107 * p.coupler_length_x;
+    let v343 = v111 * p.coupler_length_y;
+    let v344 = v342 + v343;
+    let v345 = v116 + v344;
+    let v346 = -v345;
+    let v347 = v111 * p.coupler_length_x;
+    let v348 = v107 * p.coupler_length_y;
+    let v349 = v347 - v348;
+    let v350 = v126 + v349;
+    let v351 = v140 * p.hip_guide_b_x;
+    let v352 = v144 * p.hip_guide_b_y;
+    let v353 = v351 + v352;
+    let v354 = v149 + v353;
+    let v355 = v116 + v354;
+    let v356 = v144 * p.hip_guide_b_x;
+    let v357 = v140 * p.hip_guide_b_y;
+    let v358 = v356 - v357;
+    let v359 = v160 + v358;
+    let v360 = v126 + v359;
+    let v361 = -v360;
+    let v362 = v177 * p.ankle_b_x;
+    let v363 = v181 * p.ankle_b_y;
+    let v364 = v362 + v363;
+    let v365 = v186 + v364;
+    let v366 = v149 + v365;
+    let v367 = v116 + v366;
+    let v368 = v181 * p.ankle_b_x;
+    let v369 = v177 * p.ankle_b_y;
     let v370 = v368 - v369;
-    let v371 = v155 * p.gravity_x;
-    let v372 = v153 * p.gravity_y;
-    let v373 = v371 - v372;
-    let v374 = v370 * v373;
-    let v375 = v152 * v362;
-    let v376 = v159 * v351;
-    let v377 = v375 + v376;
-    let v378 = v153 * p.gravity_x;
-    let v379 = v155 * p.gravity_y;
+    let v371 = v198 + v370;
+    let v372 = v160 + v371;
+    let v373 = v126 + v372;
+    let v374 = -v373;
+    let v375 = -v344;
+    let v376 = -v359;
+    let v377 = -v372;
+    let v378 = v247 * p.rocker_length_x;
+    let v379 = v249 * p.rocker_length_y;
     let v380 = v378 + v379;
-    let v381 = v377 * v380;
-    let v382 = v374 + v381;
-    let v383 = v367 + v382;
-    let v384 = v350 + v383;
-    let v385 = v194 - v221;
-    let v386 = v186 * v385;
-    let v387 = v196 * T::lit(0.5);
-    let v388 = v321 * v387;
-    let v389 = v386 - v388;
-    let v390 = v236 - v237;
-    let v391 = v215 * v390;
-    let v392 = v389 + v391;
-    let v393 = v190 * v218;
-    let v394 = v392 - v393;
-    let v395 = v235 - v207;
-    let v396 = v228 * v395;
-    let v397 = v394 + v396;
-    let v398 = v204 * v239;
-    let v399 = v397 + v398;
-    let v400 = v243 * v246;
-    let v401 = v399 + v400;
-    let v402 = v315 + v401;
-    let (v410, v403) = q_4.sin_cos();
-    let v404 = p.guide_mass * p.guide_com_y;
-    let v405 = p.gravity_x * v404;
-    let v406 = p.guide_mass * p.guide_com_x;
-    let v407 = p.gravity_y * v406;
+    let v381 = v249 * p.rocker_length_x;
+    let v382 = v247 * p.rocker_length_y;
+    let v383 = v381 - v382;
+    let v384 = -v383;
+    let v385 = v264 * p.brace_length_x;
+    let v386 = v268 * p.brace_length_y;
+    let v387 = v385 + v386;
+    let v388 = v273 + v387;
+    let v389 = -v388;
+    let v390 = v268 * p.brace_length_x;
+    let v391 = v264 * p.brace_length_y;
+    let v392 = v390 - v391;
+    let v393 = v283 + v392;
+    let v394 = -v358;
+    let v395 = -v371;
+    let v396 = v313 * p.guide_length_x;
+    let v397 = v315 * p.guide_length_y;
+    let v398 = v396 + v397;
+    let v399 = -v398;
+    let v400 = v315 * p.guide_length_x;
+    let v401 = v313 * p.guide_length_y;
+    let v402 = v400 - v401;
+    let v403 = -v370;
+    let v404 = -v387;
+    let v405 = v252 * v383;
+    let v406 = v119 * v349;
+    let v407 = v127 + v406;
     let v408 = v405 - v407;
-    let v409 = v403 * v408;
-    let v411 = p.gravity_x * v406;
-    let v412 = p.gravity_y * v404;
-    let v413 = v411 + v412;
-    let v414 = v410 * v413;
-    let v415 = v409 + v414;
-    let v416 = v212 - v226;
-    let v417 = v186 * v416;
-    let v418 = v214 * T::lit(0.5);
-    let v419 = v321 * v418;
-    let v420 = v417 - v419;
-    let v421 = v237 - v236;
-    let v422 = v197 * v421;
-    let v423 = v420 + v422;
-    let v424 = v209 * T::lit(0.5);
-    let v425 = v218 * v424;
-    let v426 = v423 - v425;
-    let v427 = v207 - v235;
-    let v428 = v223 * v427;
-    let v429 = v426 + v428;
-    let v430 = v202 * v232;
-    let v431 = v429 + v430;
-    let v432 = v314 + v431;
-    let v433 = qd_2 * qd_2;
-    let v434 = v341 * v433;
-    let v435 = v382 + v434;
-    let v436 = v277 * p.coupler_length_x;
-    let v437 = v268 * p.coupler_length_y;
-    let v438 = v436 + v437;
-    let v439 = p.crank_length_x * v260;
-    let v440 = p.crank_length_y * v249;
-    let v441 = v439 + v440;
-    let v442 = v438 + v441;
-    let v443 = -v442;
-    let v444 = v268 * p.coupler_length_x;
-    let v445 = v277 * p.coupler_length_y;
-    let v446 = v444 - v445;
-    let v447 = p.crank_length_x * v249;
-    let v448 = p.crank_length_y * v260;
-    let v449 = v447 - v448;
-    let v450 = v446 + v449;
-    let v451 = v294 * p.hip_guide_b_x;
-    let v452 = v285 * p.hip_guide_b_y;
-    let v453 = v451 + v452;
-    let v454 = p.leg_origin_x * v277;
-    let v455 = p.leg_origin_y * v268;
-    let v456 = v454 + v455;
-    let v457 = v453 + v456;
-    let v458 = v441 + v457;
-    let v459 = v285 * p.hip_guide_b_x;
-    let v460 = v294 * p.hip_guide_b_y;
-    let v461 = v459 - v460;
-    let v462 = p.leg_origin_x * v268;
-    let v463 = p.leg_origin_y * v277;
-    let v464 = v462 - v463;
-    let v465 = v461 + v464;
-    let v466 = v449 + v465;
-    let v467 = -v466;
-    let v468 = v309 * p.ankle_b_x;
-    let v469 = v302 * p.ankle_b_y;
-    let v470 = v468 + v469;
-    let v471 = p.leg_length_x * v294;
-    let v472 = p.leg_length_y * v285;
-    let v473 = v471 + v472;
-    let v474 = v470 + v473;
-    let v475 = v456 + v474;
-    let v476 = v441 + v475;
-    let v477 = v302 * p.ankle_b_x;
-    let v478 = v309 * p.ankle_b_y;
-    let v479 = v477 - v478;
-    let v480 = p.leg_length_x * v285;
-    let v481 = p.leg_length_y * v294;
-    let v482 = v480 - v481;
-    let v483 = v479 + v482;
-    let v484 = v464 + v483;
-    let v485 = v449 + v484;
-    let v486 = -v485;
-    let v487 = -v438;
-    let v488 = -v465;
-    let v489 = -v484;
-    let v490 = v362 * p.rocker_length_x;
-    let v491 = v351 * p.rocker_length_y;
-    let v492 = v490 + v491;
-    let v493 = v351 * p.rocker_length_x;
-    let v494 = v362 * p.rocker_length_y;
-    let v495 = v493 - v494;
-    let v496 = -v495;
-    let v497 = v377 * p.brace_length_x;
-    let v498 = v370 * p.brace_length_y;
-    let v499 = v497 + v498;
-    let v500 = p.brace_origin_x * v362;
-    let v501 = p.brace_origin_y * v351;
-    let v502 = v500 + v501;
-    let v503 = v499 + v502;
-    let v504 = -v503;
-    let v505 = v370 * p.brace_length_x;
-    let v506 = v377 * p.brace_length_y;
-    let v507 = v505 - v506;
-    let v508 = p.brace_origin_x * v351;
-    let v509 = p.brace_origin_y * v362;
-    let v510 = v508 - v509;
-    let v511 = v507 + v510;
-    let v512 = -v461;
-    let v513 = -v483;
-    let v514 = v410 * p.guide_length_x;
-    let v515 = v403 * p.guide_length_y;
-    let v516 = v514 + v515;
-    let v517 = -v516;
-    let v518 = v403 * p.guide_length_x;
-    let v519 = v410 * p.guide_length_y;
-    let v520 = v518 - v519;
-    let v521 = -v479;
-    let v522 = -v499;
-    let v523 = v433 * v495;
-    let v524 = qd_0 + qd_1;
-    let v525 = v524 * v524;
-    let v526 = v446 * v525;
-    let v527 = v321 * v449;
-    let v528 = v526 + v527;
-    let v529 = v523 - v528;
-    let v530 = v433 * v492;
-    let v531 = v438 * v525;
-    let v532 = v321 * v441;
-    let v533 = v531 + v532;
-    let v534 = v530 - v533;
-    let v535 = qd_3 + v524;
-    let v536 = v535 * v535;
-    let v537 = v461 * v536;
-    let v538 = v464 * v525;
-    let v539 = v537 + v538;
-    let v540 = v527 + v539;
-    let v541 = qd_4 * qd_4;
-    let v542 = v520 * v541;
-    let v543 = v540 - v542;
-    let v544 = v453 * v536;
-    let v545 = v456 * v525;
-    let v546 = v544 + v545;
-    let v547 = v532 + v546;
-    let v548 = v516 * v541;
-    let v549 = v547 - v548;
-    let v550 = qd_5 + v535;
-    let v551 = v550 * v550;
-    let v552 = v479 * v551;
-    let v553 = v482 * v536;
-    let v554 = v552 + v553;
-    let v555 = v538 + v554;
-    let v556 = v527 + v555;
-    let v557 = qd_2 + qd_6;
-    let v558 = v557 * v557;
-    let v559 = v507 * v558;
-    let v560 = v433 * v510;
-    let v561 = v559 + v560;
-    let v562 = v556 - v561;
-    let v563 = v470 * v551;
-    let v564 = v473 * v536;
-    let v565 = v563 + v564;
-    let v566 = v545 + v565;
-    let v567 = v532 + v566;
-    let v568 = v499 * v558;
-    let v569 = v433 * v502;
-    let v570 = v568 + v569;
-    let v571 = v567 - v570;
+    let v409 = v252 * v380;
+    let v410 = v119 * v344;
+    let v411 = v132 + v410;
+    let v412 = v409 - v411;
+    let v413 = v153 * v358;
+    let v414 = v161 + v413;
+    let v415 = v127 + v414;
+    let v416 = v318 * v402;
+    let v417 = v415 - v416;
+    let v418 = v153 * v353;
+    let v419 = v168 + v418;
+    let v420 = v132 + v419;
+    let v421 = v318 * v398;
+    let v422 = v420 - v421;
+    let v423 = v191 * v370;
+    let v424 = v199 + v423;
+    let v425 = v161 + v424;
+    let v426 = v127 + v425;
+    let v427 = v276 * v392;
+    let v428 = v284 + v427;
+    let v429 = v426 - v428;
+    let v430 = v191 * v364;
+    let v431 = v208 + v430;
+    let v432 = v168 + v431;
+    let v433 = v132 + v432;
+    let v434 = v276 * v387;
+    let v435 = v289 + v434;
+    let v436 = v433 - v435;
     (
         SMatrix::from_data(
             ArrayStorage([
-                [v105, v106, T::lit(0.0), v117, T::lit(0.0), v141, T::lit(0.0)],
-                [v106, v74, T::lit(0.0), v107, T::lit(0.0), v131, T::lit(0.0)],
+                [v44, v45, T::lit(0.0), v56, T::lit(0.0), v79, T::lit(0.0)],
+                [v45, v28, T::lit(0.0), v46, T::lit(0.0), v69, T::lit(0.0)],
                 [
                     T::lit(0.0),
                     T::lit(0.0),
-                    v172,
+                    v86,
                     T::lit(0.0),
                     T::lit(0.0),
                     T::lit(0.0),
-                    v176,
+                    v89,
                 ],
-                [v117, v107, T::lit(0.0), v40, T::lit(0.0), v121, T::lit(0.0)],
+                [v56, v46, T::lit(0.0), v6, T::lit(0.0), v59, T::lit(0.0)],
                 [
                     T::lit(0.0),
                     T::lit(0.0),
                     T::lit(0.0),
                     T::lit(0.0),
-                    v181,
+                    p.prepared[18],
                     T::lit(0.0),
                     T::lit(0.0),
                 ],
-                [v141, v131, T::lit(0.0), v121, T::lit(0.0), v19, T::lit(0.0)],
+                [v79, v69, T::lit(0.0), v59, T::lit(0.0), p.prepared[2], T::lit(0.0)],
                 [
                     T::lit(0.0),
                     T::lit(0.0),
-                    v176,
+                    v89,
                     T::lit(0.0),
                     T::lit(0.0),
                     T::lit(0.0),
-                    v151,
+                    p.prepared[13],
                 ],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v318, v338, v384, v402, v415, v432, v435]])),
+        SMatrix::from_data(ArrayStorage([[v231, v246, v302, v312, v331, v336, v341]])),
         SMatrix::from_data(
             ArrayStorage([
-                [v443, v450, v458, v467, v476, v486],
-                [v487, v446, v457, v488, v475, v489],
-                [v492, v496, T::lit(0.0), T::lit(0.0), v504, v511],
-                [T::lit(0.0), T::lit(0.0), v453, v512, v474, v513],
-                [T::lit(0.0), T::lit(0.0), v517, v520, T::lit(0.0), T::lit(0.0)],
-                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v470, v521],
-                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v522, v507],
+                [v346, v350, v355, v361, v367, v374],
+                [v375, v349, v354, v376, v366, v377],
+                [v380, v384, T::lit(0.0), T::lit(0.0), v389, v393],
+                [T::lit(0.0), T::lit(0.0), v353, v394, v365, v395],
+                [T::lit(0.0), T::lit(0.0), v399, v402, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v364, v403],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v404, v392],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v529, v534, v543, v549, v562, v571]])),
+        SMatrix::from_data(ArrayStorage([[v408, v412, v417, v422, v429, v436]])),
     )
 }

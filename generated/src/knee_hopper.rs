@@ -20,10 +20,9 @@ pub const NK: usize = 2;
 /// The `knee_hopper` leg: 3 joints, 0 closure(s), actuated joints ["thigh", "shin"]. Generated from `leg-models/specs/knee_hopper.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct KneeHopper;
-/// Physical parameters; `Default` holds the spec's values. Change them at run
-/// time without regenerating.
+/// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Params<T> {
+pub struct ParamValues<T> {
     /// Gravity in the base frame, x [m/s²].
     pub gravity_x: T,
     /// Gravity in the base frame, y [m/s²].
@@ -91,7 +90,7 @@ pub struct Params<T> {
     /// Rest value of spring `knee_spring` on the joint of `shin` [rad].
     pub knee_spring_rest: T,
 }
-impl<T: Real> Default for Params<T> {
+impl<T: Real> Default for ParamValues<T> {
     fn default() -> Self {
         Self {
             gravity_x: T::lit(0.0),
@@ -128,6 +127,50 @@ impl<T: Real> Default for Params<T> {
             knee_spring_stiffness: T::lit(5.0),
             knee_spring_rest: T::lit(-1.0),
         }
+    }
+}
+/// Physical parameters, ready for evaluation: the values (read as fields through
+/// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
+/// computed once when a value changes instead of in every call. `Default` holds
+/// the spec's values; change them at run time, without regenerating, with
+/// [`Params::update`] or [`Parameters::set`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params<T> {
+    values: ParamValues<T>,
+    prepared: [T; 22],
+}
+impl<T: Real> Params<T> {
+    /// Parameters of these values.
+    pub fn new(values: ParamValues<T>) -> Self {
+        Self {
+            prepared: prepare(&values).data.0[0],
+            values,
+        }
+    }
+    /// The values.
+    pub fn values(&self) -> &ParamValues<T> {
+        &self.values
+    }
+    /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
+    pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
+        change(&mut self.values);
+        *self = Self::new(self.values);
+    }
+}
+impl<T> core::ops::Deref for Params<T> {
+    type Target = ParamValues<T>;
+    fn deref(&self) -> &ParamValues<T> {
+        &self.values
+    }
+}
+impl<T: Real> From<ParamValues<T>> for Params<T> {
+    fn from(values: ParamValues<T>) -> Self {
+        Self::new(values)
+    }
+}
+impl<T: Real> Default for Params<T> {
+    fn default() -> Self {
+        Self::new(ParamValues::default())
     }
 }
 impl<T: Real> Parameters<T> for Params<T> {
@@ -168,79 +211,80 @@ impl<T: Real> Parameters<T> for Params<T> {
     ];
     fn get(&self, i: usize) -> Option<T> {
         match i {
-            0 => Some(self.gravity_x),
-            1 => Some(self.gravity_y),
-            2 => Some(self.body_origin_x),
-            3 => Some(self.body_origin_y),
-            4 => Some(self.body_length_x),
-            5 => Some(self.body_length_y),
-            6 => Some(self.body_mass),
-            7 => Some(self.body_com_x),
-            8 => Some(self.body_com_y),
-            9 => Some(self.body_inertia),
-            10 => Some(self.body_damping),
-            11 => Some(self.thigh_origin_x),
-            12 => Some(self.thigh_origin_y),
-            13 => Some(self.thigh_length_x),
-            14 => Some(self.thigh_length_y),
-            15 => Some(self.thigh_mass),
-            16 => Some(self.thigh_com_x),
-            17 => Some(self.thigh_com_y),
-            18 => Some(self.thigh_inertia),
-            19 => Some(self.thigh_damping),
-            20 => Some(self.thigh_rotor_inertia),
-            21 => Some(self.thigh_gear_ratio),
-            22 => Some(self.shin_length_x),
-            23 => Some(self.shin_length_y),
-            24 => Some(self.shin_mass),
-            25 => Some(self.shin_com_x),
-            26 => Some(self.shin_com_y),
-            27 => Some(self.shin_inertia),
-            28 => Some(self.shin_damping),
-            29 => Some(self.shin_rotor_inertia),
-            30 => Some(self.shin_gear_ratio),
-            31 => Some(self.knee_spring_stiffness),
-            32 => Some(self.knee_spring_rest),
+            0 => Some(self.values.gravity_x),
+            1 => Some(self.values.gravity_y),
+            2 => Some(self.values.body_origin_x),
+            3 => Some(self.values.body_origin_y),
+            4 => Some(self.values.body_length_x),
+            5 => Some(self.values.body_length_y),
+            6 => Some(self.values.body_mass),
+            7 => Some(self.values.body_com_x),
+            8 => Some(self.values.body_com_y),
+            9 => Some(self.values.body_inertia),
+            10 => Some(self.values.body_damping),
+            11 => Some(self.values.thigh_origin_x),
+            12 => Some(self.values.thigh_origin_y),
+            13 => Some(self.values.thigh_length_x),
+            14 => Some(self.values.thigh_length_y),
+            15 => Some(self.values.thigh_mass),
+            16 => Some(self.values.thigh_com_x),
+            17 => Some(self.values.thigh_com_y),
+            18 => Some(self.values.thigh_inertia),
+            19 => Some(self.values.thigh_damping),
+            20 => Some(self.values.thigh_rotor_inertia),
+            21 => Some(self.values.thigh_gear_ratio),
+            22 => Some(self.values.shin_length_x),
+            23 => Some(self.values.shin_length_y),
+            24 => Some(self.values.shin_mass),
+            25 => Some(self.values.shin_com_x),
+            26 => Some(self.values.shin_com_y),
+            27 => Some(self.values.shin_inertia),
+            28 => Some(self.values.shin_damping),
+            29 => Some(self.values.shin_rotor_inertia),
+            30 => Some(self.values.shin_gear_ratio),
+            31 => Some(self.values.knee_spring_stiffness),
+            32 => Some(self.values.knee_spring_rest),
             _ => None,
         }
     }
     fn set(&mut self, i: usize, value: T) -> bool {
         match i {
-            0 => self.gravity_x = value,
-            1 => self.gravity_y = value,
-            2 => self.body_origin_x = value,
-            3 => self.body_origin_y = value,
-            4 => self.body_length_x = value,
-            5 => self.body_length_y = value,
-            6 => self.body_mass = value,
-            7 => self.body_com_x = value,
-            8 => self.body_com_y = value,
-            9 => self.body_inertia = value,
-            10 => self.body_damping = value,
-            11 => self.thigh_origin_x = value,
-            12 => self.thigh_origin_y = value,
-            13 => self.thigh_length_x = value,
-            14 => self.thigh_length_y = value,
-            15 => self.thigh_mass = value,
-            16 => self.thigh_com_x = value,
-            17 => self.thigh_com_y = value,
-            18 => self.thigh_inertia = value,
-            19 => self.thigh_damping = value,
-            20 => self.thigh_rotor_inertia = value,
-            21 => self.thigh_gear_ratio = value,
-            22 => self.shin_length_x = value,
-            23 => self.shin_length_y = value,
-            24 => self.shin_mass = value,
-            25 => self.shin_com_x = value,
-            26 => self.shin_com_y = value,
-            27 => self.shin_inertia = value,
-            28 => self.shin_damping = value,
-            29 => self.shin_rotor_inertia = value,
-            30 => self.shin_gear_ratio = value,
-            31 => self.knee_spring_stiffness = value,
-            32 => self.knee_spring_rest = value,
+            0 => self.values.gravity_x = value,
+            1 => self.values.gravity_y = value,
+            2 => self.values.body_origin_x = value,
+            3 => self.values.body_origin_y = value,
+            4 => self.values.body_length_x = value,
+            5 => self.values.body_length_y = value,
+            6 => self.values.body_mass = value,
+            7 => self.values.body_com_x = value,
+            8 => self.values.body_com_y = value,
+            9 => self.values.body_inertia = value,
+            10 => self.values.body_damping = value,
+            11 => self.values.thigh_origin_x = value,
+            12 => self.values.thigh_origin_y = value,
+            13 => self.values.thigh_length_x = value,
+            14 => self.values.thigh_length_y = value,
+            15 => self.values.thigh_mass = value,
+            16 => self.values.thigh_com_x = value,
+            17 => self.values.thigh_com_y = value,
+            18 => self.values.thigh_inertia = value,
+            19 => self.values.thigh_damping = value,
+            20 => self.values.thigh_rotor_inertia = value,
+            21 => self.values.thigh_gear_ratio = value,
+            22 => self.values.shin_length_x = value,
+            23 => self.values.shin_length_y = value,
+            24 => self.values.shin_mass = value,
+            25 => self.values.shin_com_x = value,
+            26 => self.values.shin_com_y = value,
+            27 => self.values.shin_inertia = value,
+            28 => self.values.shin_damping = value,
+            29 => self.values.shin_rotor_inertia = value,
+            30 => self.values.shin_gear_ratio = value,
+            31 => self.values.knee_spring_stiffness = value,
+            32 => self.values.knee_spring_rest = value,
             _ => return false,
         }
+        *self = Self::new(self.values);
         true
     }
 }
@@ -368,73 +412,140 @@ impl ContactModel<NQ, NC, NU, NK> for KneeHopper {
         contact_bias(q, qd, p)
     }
 }
+/// The parameter-only quantities the terms read (products of masses, lengths and
+/// centres of mass, inertias about the joints, …), computed once per parameter set
+/// by [`Params::new`].
+pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 22> {
+    let v0 = values.thigh_mass + values.shin_mass;
+    let v1 = values.body_mass + v0;
+    let v2 = values.thigh_mass * values.thigh_com_x;
+    let v3 = values.shin_mass * values.thigh_length_x;
+    let v4 = v2 + v3;
+    let v5 = values.shin_mass * values.shin_com_x;
+    let v6 = values.shin_mass * values.shin_com_y;
+    let v7 = values.thigh_mass * values.thigh_com_y;
+    let v8 = values.shin_mass * values.thigh_length_y;
+    let v9 = v7 + v8;
+    let v10 = values.thigh_com_x * values.thigh_com_x;
+    let v11 = values.thigh_com_y * values.thigh_com_y;
+    let v12 = v10 + v11;
+    let v13 = values.thigh_mass * v12;
+    let v14 = values.thigh_inertia + v13;
+    let v15 = values.shin_com_x * values.shin_com_x;
+    let v16 = values.shin_com_y * values.shin_com_y;
+    let v17 = v15 + v16;
+    let v18 = values.shin_mass * v17;
+    let v19 = values.shin_inertia + v18;
+    let v20 = v14 + v19;
+    let v21 = values.thigh_length_x * values.thigh_length_x;
+    let v22 = values.thigh_length_y * values.thigh_length_y;
+    let v23 = v21 + v22;
+    let v24 = values.shin_mass * v23;
+    let v25 = v20 + v24;
+    let v26 = values.thigh_gear_ratio * values.thigh_gear_ratio;
+    let v27 = values.thigh_rotor_inertia * v26;
+    let v28 = v25 + v27;
+    let v29 = values.thigh_length_x * v5;
+    let v30 = v6 * values.thigh_length_y;
+    let v31 = v29 + v30;
+    let v32 = values.thigh_length_x * v6;
+    let v33 = v5 * values.thigh_length_y;
+    let v34 = v32 - v33;
+    let v35 = v33 - v32;
+    let v36 = values.shin_gear_ratio * values.shin_gear_ratio;
+    let v37 = values.shin_rotor_inertia * v36;
+    let v38 = v19 + v37;
+    let v39 = v1 * values.gravity_y;
+    let v40 = v9 * values.gravity_x;
+    let v41 = v4 * values.gravity_y;
+    let v42 = v40 - v41;
+    let v43 = v4 * values.gravity_x;
+    let v44 = v9 * values.gravity_y;
+    let v45 = v43 + v44;
+    let v46 = v6 * values.gravity_x;
+    let v47 = v5 * values.gravity_y;
+    let v48 = v46 - v47;
+    let v49 = v5 * values.gravity_x;
+    let v50 = v6 * values.gravity_y;
+    let v51 = v49 + v50;
+    let v52 = -v39;
+    let v53 = values.body_origin_x + values.thigh_origin_x;
+    let v54 = values.knee_spring_stiffness * T::lit(0.5);
+    let v55 = v1 * values.body_origin_x;
+    let v56 = values.gravity_x * v55;
+    let v57 = values.body_mass * values.body_com_x;
+    let v58 = v0 * values.thigh_origin_x;
+    let v59 = v57 + v58;
+    let v60 = values.gravity_x * v59;
+    let v61 = values.body_mass * values.body_com_y;
+    let v62 = v0 * values.thigh_origin_y;
+    let v63 = v61 + v62;
+    let v64 = values.gravity_y * v63;
+    let v65 = v60 + v64;
+    let v66 = values.body_origin_x + values.body_length_x;
+    SMatrix::from_data(
+        ArrayStorage([
+            [
+                v1,
+                v4,
+                v5,
+                v6,
+                v9,
+                v19,
+                v28,
+                v31,
+                v34,
+                v35,
+                v38,
+                v39,
+                v42,
+                v45,
+                v48,
+                v51,
+                v52,
+                v53,
+                v54,
+                v56,
+                v65,
+                v66,
+            ],
+        ]),
+    )
+}
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
 pub fn mass_matrix<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 3, 3> {
     let [_, q_1, q_2] = q.data.0[0];
-    let v0 = p.thigh_mass + p.shin_mass;
-    let v1 = p.body_mass + v0;
-    let (v15, v2) = q_1.sin_cos();
-    let v3 = p.thigh_mass * p.thigh_com_x;
-    let (v7, v4) = q_2.sin_cos();
-    let v5 = p.shin_mass * p.shin_com_x;
-    let v6 = v4 * v5;
-    let v8 = p.shin_mass * p.shin_com_y;
-    let v9 = v7 * v8;
-    let v10 = v6 - v9;
-    let v11 = p.shin_mass * p.thigh_length_x;
-    let v12 = v10 + v11;
-    let v13 = v3 + v12;
-    let v14 = v2 * v13;
-    let v16 = p.thigh_mass * p.thigh_com_y;
-    let v17 = v5 * v7;
-    let v18 = v4 * v8;
-    let v19 = v17 + v18;
-    let v20 = p.shin_mass * p.thigh_length_y;
-    let v21 = v19 + v20;
-    let v22 = v16 + v21;
-    let v23 = v15 * v22;
-    let v24 = v14 - v23;
-    let v25 = v2 * v10;
-    let v26 = v15 * v19;
-    let v27 = v25 - v26;
-    let v28 = p.thigh_com_x * p.thigh_com_x;
-    let v29 = p.thigh_com_y * p.thigh_com_y;
-    let v30 = v28 + v29;
-    let v31 = p.thigh_mass * v30;
-    let v32 = p.thigh_inertia + v31;
-    let v33 = p.shin_com_x * p.shin_com_x;
-    let v34 = p.shin_com_y * p.shin_com_y;
-    let v35 = v33 + v34;
-    let v36 = p.shin_mass * v35;
-    let v37 = p.shin_inertia + v36;
-    let v38 = v5 * p.thigh_length_x;
-    let v39 = v8 * p.thigh_length_y;
-    let v40 = v38 + v39;
-    let v41 = v4 * v40;
-    let v42 = v8 * p.thigh_length_x;
-    let v43 = v5 * p.thigh_length_y;
-    let v44 = v42 - v43;
-    let v45 = v7 * v44;
-    let v46 = v41 - v45;
-    let v47 = v46 + v46;
-    let v48 = v37 + v47;
-    let v49 = p.thigh_length_x * p.thigh_length_x;
-    let v50 = p.thigh_length_y * p.thigh_length_y;
-    let v51 = v49 + v50;
-    let v52 = p.shin_mass * v51;
-    let v53 = v48 + v52;
-    let v54 = v32 + v53;
-    let v55 = p.thigh_gear_ratio * p.thigh_gear_ratio;
-    let v56 = p.thigh_rotor_inertia * v55;
-    let v57 = v54 + v56;
-    let v58 = v43 - v42;
-    let v59 = v7 * v58;
-    let v60 = v41 + v59;
-    let v61 = v37 + v60;
-    let v62 = p.shin_gear_ratio * p.shin_gear_ratio;
-    let v63 = p.shin_rotor_inertia * v62;
-    let v64 = v37 + v63;
-    SMatrix::from_data(ArrayStorage([[v1, v24, v27], [v24, v57, v61], [v27, v61, v64]]))
+    let (v8, v0) = q_1.sincos();
+    let (v3, v1) = q_2.sincos();
+    let v2 = v1 * p.prepared[2];
+    let v4 = v3 * p.prepared[3];
+    let v5 = v2 - v4;
+    let v6 = p.prepared[1] + v5;
+    let v7 = v0 * v6;
+    let v9 = p.prepared[2] * v3;
+    let v10 = v1 * p.prepared[3];
+    let v11 = v9 + v10;
+    let v12 = p.prepared[4] + v11;
+    let v13 = v8 * v12;
+    let v14 = v7 - v13;
+    let v15 = v0 * v5;
+    let v16 = v8 * v11;
+    let v17 = v15 - v16;
+    let v18 = v1 * p.prepared[7];
+    let v19 = v3 * p.prepared[8];
+    let v20 = v18 - v19;
+    let v21 = v20 + v20;
+    let v22 = p.prepared[6] + v21;
+    let v23 = v3 * p.prepared[9];
+    let v24 = v18 + v23;
+    let v25 = p.prepared[5] + v24;
+    SMatrix::from_data(
+        ArrayStorage([
+            [p.prepared[0], v14, v17],
+            [v14, v22, v25],
+            [v17, v25, p.prepared[10]],
+        ]),
+    )
 }
 /// `N(q, q̇) = (∂²L/∂q̇∂q) q̇ − ∂L/∂q = C q̇ + G`.
 pub fn bias_forces<T: Real>(
@@ -443,150 +554,87 @@ pub fn bias_forces<T: Real>(
     p: &Params<T>,
 ) -> SVector<T, 3> {
     let [_, q_1, q_2] = q.data.0[0];
-    let [qd_0, qd_1, qd_2] = qd.data.0[0];
-    let v0 = p.thigh_mass * p.thigh_com_x;
-    let (v4, v1) = q_2.sin_cos();
-    let v2 = p.shin_mass * p.shin_com_x;
-    let v3 = v1 * v2;
-    let v5 = p.shin_mass * p.shin_com_y;
-    let v6 = v4 * v5;
-    let v7 = v3 - v6;
-    let v8 = p.shin_mass * p.thigh_length_x;
-    let v9 = v7 + v8;
-    let v10 = v0 + v9;
-    let (v11, v20) = q_1.sin_cos();
-    let v12 = v10 * v11;
-    let v13 = p.thigh_mass * p.thigh_com_y;
-    let v14 = v2 * v4;
-    let v15 = v1 * v5;
-    let v16 = v14 + v15;
-    let v17 = p.shin_mass * p.thigh_length_y;
-    let v18 = v16 + v17;
-    let v19 = v13 + v18;
-    let v21 = v19 * v20;
-    let v22 = v12 + v21;
-    let v23 = qd_1 * qd_1;
-    let v24 = v22 * v23;
-    let v25 = v16 * v20;
-    let v26 = v7 * v11;
-    let v27 = v25 + v26;
-    let v28 = v27 + v27;
-    let v29 = qd_1 * qd_2;
-    let v30 = v28 * v29;
-    let v31 = v24 + v30;
-    let v32 = qd_2 * qd_2;
-    let v33 = v27 * v32;
-    let v34 = v31 + v33;
-    let v35 = p.thigh_mass + p.shin_mass;
-    let v36 = p.body_mass + v35;
-    let v37 = v36 * p.gravity_y;
+    let [_, qd_1, qd_2] = qd.data.0[0];
+    let (v2, v0) = q_2.sincos();
+    let v1 = v0 * p.prepared[2];
+    let v3 = v2 * p.prepared[3];
+    let v4 = v1 - v3;
+    let v5 = p.prepared[1] + v4;
+    let (v6, v12) = q_1.sincos();
+    let v7 = v5 * v6;
+    let v8 = p.prepared[2] * v2;
+    let v9 = v0 * p.prepared[3];
+    let v10 = v8 + v9;
+    let v11 = p.prepared[4] + v10;
+    let v13 = v11 * v12;
+    let v14 = v7 + v13;
+    let v15 = qd_1 * qd_1;
+    let v16 = v14 * v15;
+    let v17 = v10 * v12;
+    let v18 = v4 * v6;
+    let v19 = v17 + v18;
+    let v20 = v19 + v19;
+    let v21 = qd_1 * qd_2;
+    let v22 = v20 * v21;
+    let v23 = v16 + v22;
+    let v24 = qd_2 * qd_2;
+    let v25 = v19 * v24;
+    let v26 = v23 + v25;
+    let v27 = v26 + p.prepared[11];
+    let v28 = -v27;
+    let v29 = v2 * p.prepared[7];
+    let v30 = v0 * p.prepared[8];
+    let v31 = v29 + v30;
+    let v32 = -v31;
+    let v33 = v32 + v32;
+    let v34 = v21 * v33;
+    let v35 = v0 * p.prepared[9];
+    let v36 = v35 - v29;
+    let v37 = v24 * v36;
     let v38 = v34 + v37;
-    let v39 = -v38;
-    let v40 = v27 - v27;
-    let v41 = qd_2 * qd_0;
-    let v42 = v40 * v41;
-    let v43 = v2 * p.thigh_length_x;
-    let v44 = v5 * p.thigh_length_y;
-    let v45 = v43 + v44;
-    let v46 = v4 * v45;
-    let v47 = v5 * p.thigh_length_x;
-    let v48 = v2 * p.thigh_length_y;
-    let v49 = v47 - v48;
-    let v50 = v1 * v49;
-    let v51 = v46 + v50;
-    let v52 = -v51;
-    let v53 = v52 + v52;
-    let v54 = v29 * v53;
-    let v55 = v42 + v54;
-    let v56 = v48 - v47;
-    let v57 = v1 * v56;
-    let v58 = v57 - v46;
-    let v59 = v32 * v58;
-    let v60 = v55 + v59;
-    let v61 = v13 + v17;
-    let v62 = p.gravity_x * v61;
-    let v63 = v0 + v8;
-    let v64 = p.gravity_y * v63;
-    let v65 = v62 - v64;
-    let v66 = v20 * v65;
-    let v67 = p.gravity_x * v63;
-    let v68 = p.gravity_y * v61;
-    let v69 = v67 + v68;
-    let v70 = v11 * v69;
-    let v71 = v66 + v70;
-    let v72 = v1 * v20;
-    let v73 = v4 * v11;
-    let v74 = v72 - v73;
-    let v75 = v5 * p.gravity_x;
-    let v76 = v2 * p.gravity_y;
-    let v77 = v75 - v76;
-    let v78 = v74 * v77;
-    let v79 = v1 * v11;
-    let v80 = v4 * v20;
-    let v81 = v79 + v80;
-    let v82 = v2 * p.gravity_x;
-    let v83 = v5 * p.gravity_y;
-    let v84 = v82 + v83;
-    let v85 = v81 * v84;
-    let v86 = v78 + v85;
-    let v87 = v71 + v86;
-    let v88 = v60 + v87;
-    let v89 = qd_1 * qd_0;
-    let v90 = v40 * v89;
-    let v91 = v23 * v51;
-    let v92 = v90 + v91;
-    let v93 = q_2 - p.knee_spring_rest;
-    let v94 = p.knee_spring_stiffness * v93;
-    let v95 = v86 + v94;
-    let v96 = v92 + v95;
-    SMatrix::from_data(ArrayStorage([[v39, v88, v96]]))
+    let v39 = v12 * p.prepared[12];
+    let v40 = v6 * p.prepared[13];
+    let v41 = v39 + v40;
+    let v42 = v0 * v12;
+    let v43 = v2 * v6;
+    let v44 = v42 - v43;
+    let v45 = v44 * p.prepared[14];
+    let v46 = v0 * v6;
+    let v47 = v2 * v12;
+    let v48 = v46 + v47;
+    let v49 = v48 * p.prepared[15];
+    let v50 = v45 + v49;
+    let v51 = v41 + v50;
+    let v52 = v38 + v51;
+    let v53 = v15 * v31;
+    let v54 = q_2 - p.knee_spring_rest;
+    let v55 = p.knee_spring_stiffness * v54;
+    let v56 = v50 + v55;
+    let v57 = v53 + v56;
+    SMatrix::from_data(ArrayStorage([[v28, v52, v57]]))
 }
 /// `G(q) = ∂V/∂q`.
 pub fn gravity_forces<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 3> {
     let [_, q_1, q_2] = q.data.0[0];
-    let v0 = p.thigh_mass + p.shin_mass;
-    let v1 = p.body_mass + v0;
-    let v2 = v1 * p.gravity_y;
-    let v3 = -v2;
-    let (v15, v4) = q_1.sin_cos();
-    let v5 = p.thigh_mass * p.thigh_com_y;
-    let v6 = p.shin_mass * p.thigh_length_y;
-    let v7 = v5 + v6;
-    let v8 = p.gravity_x * v7;
-    let v9 = p.thigh_mass * p.thigh_com_x;
-    let v10 = p.shin_mass * p.thigh_length_x;
-    let v11 = v9 + v10;
-    let v12 = p.gravity_y * v11;
-    let v13 = v8 - v12;
-    let v14 = v4 * v13;
-    let v16 = p.gravity_x * v11;
-    let v17 = p.gravity_y * v7;
-    let v18 = v16 + v17;
-    let v19 = v15 * v18;
-    let v20 = v14 + v19;
-    let (v23, v21) = q_2.sin_cos();
-    let v22 = v4 * v21;
-    let v24 = v15 * v23;
-    let v25 = v22 - v24;
-    let v26 = p.shin_mass * p.shin_com_y;
-    let v27 = p.gravity_x * v26;
-    let v28 = p.shin_mass * p.shin_com_x;
-    let v29 = p.gravity_y * v28;
-    let v30 = v27 - v29;
-    let v31 = v25 * v30;
-    let v32 = v15 * v21;
-    let v33 = v4 * v23;
-    let v34 = v32 + v33;
-    let v35 = p.gravity_x * v28;
-    let v36 = p.gravity_y * v26;
-    let v37 = v35 + v36;
-    let v38 = v34 * v37;
-    let v39 = v31 + v38;
-    let v40 = v20 + v39;
-    let v41 = q_2 - p.knee_spring_rest;
-    let v42 = p.knee_spring_stiffness * v41;
-    let v43 = v39 + v42;
-    SMatrix::from_data(ArrayStorage([[v3, v40, v43]]))
+    let (v2, v0) = q_1.sincos();
+    let v1 = v0 * p.prepared[12];
+    let v3 = v2 * p.prepared[13];
+    let v4 = v1 + v3;
+    let (v7, v5) = q_2.sincos();
+    let v6 = v0 * v5;
+    let v8 = v2 * v7;
+    let v9 = v6 - v8;
+    let v10 = v9 * p.prepared[14];
+    let v11 = v2 * v5;
+    let v12 = v0 * v7;
+    let v13 = v11 + v12;
+    let v14 = v13 * p.prepared[15];
+    let v15 = v10 + v14;
+    let v16 = v4 + v15;
+    let v17 = q_2 - p.knee_spring_rest;
+    let v18 = p.knee_spring_stiffness * v17;
+    let v19 = v15 + v18;
+    SMatrix::from_data(ArrayStorage([[p.prepared[16], v16, v19]]))
 }
 /// Viscous joint damping `D q̇`.
 pub fn damping_forces<T: Real>(qd: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 3> {
@@ -618,40 +666,39 @@ pub fn constraint_bias<T: Real>(
 /// The foot point in the base frame.
 pub fn foot_position<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 2> {
     let [q_0, q_1, q_2] = q.data.0[0];
-    let v0 = p.body_origin_x + p.thigh_origin_x;
-    let (v3, v1) = q_1.sin_cos();
-    let v2 = v1 * p.thigh_length_x;
-    let v4 = v3 * p.thigh_length_y;
-    let v5 = v2 - v4;
-    let v6 = v0 + v5;
-    let (v9, v7) = q_2.sin_cos();
-    let v8 = v1 * v7;
-    let v10 = v3 * v9;
-    let v11 = v8 - v10;
-    let v12 = v11 * p.shin_length_x;
-    let v13 = v3 * v7;
-    let v14 = v1 * v9;
-    let v15 = v13 + v14;
-    let v16 = v15 * p.shin_length_y;
-    let v17 = v12 - v16;
-    let v18 = v6 + v17;
-    let v19 = p.body_origin_y + q_0;
-    let v20 = v19 + p.thigh_origin_y;
-    let v21 = p.thigh_length_x * v3;
-    let v22 = v1 * p.thigh_length_y;
-    let v23 = v21 + v22;
-    let v24 = v20 + v23;
-    let v25 = p.shin_length_x * v15;
-    let v26 = v11 * p.shin_length_y;
-    let v27 = v25 + v26;
-    let v28 = v24 + v27;
-    SMatrix::from_data(ArrayStorage([[v18, v28]]))
+    let (v2, v0) = q_1.sincos();
+    let v1 = v0 * p.thigh_length_x;
+    let v3 = v2 * p.thigh_length_y;
+    let v4 = v1 - v3;
+    let v5 = p.prepared[17] + v4;
+    let (v8, v6) = q_2.sincos();
+    let v7 = v0 * v6;
+    let v9 = v2 * v8;
+    let v10 = v7 - v9;
+    let v11 = v10 * p.shin_length_x;
+    let v12 = v2 * v6;
+    let v13 = v0 * v8;
+    let v14 = v12 + v13;
+    let v15 = v14 * p.shin_length_y;
+    let v16 = v11 - v15;
+    let v17 = v5 + v16;
+    let v18 = p.body_origin_y + q_0;
+    let v19 = v18 + p.thigh_origin_y;
+    let v20 = p.thigh_length_x * v2;
+    let v21 = v0 * p.thigh_length_y;
+    let v22 = v20 + v21;
+    let v23 = v19 + v22;
+    let v24 = p.shin_length_x * v14;
+    let v25 = v10 * p.shin_length_y;
+    let v26 = v24 + v25;
+    let v27 = v23 + v26;
+    SMatrix::from_data(ArrayStorage([[v17, v27]]))
 }
 /// `J_f(q) = ∂(foot)/∂q`.
 pub fn foot_jacobian<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
     let [_, q_1, q_2] = q.data.0[0];
-    let (v0, v3) = q_1.sin_cos();
-    let (v4, v1) = q_2.sin_cos();
+    let (v0, v3) = q_1.sincos();
+    let (v4, v1) = q_2.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
@@ -688,8 +735,8 @@ pub fn foot_bias<T: Real>(
     let [_, qd_1, qd_2] = qd.data.0[0];
     let v0 = qd_1 + qd_2;
     let v1 = v0 * v0;
-    let (v5, v2) = q_1.sin_cos();
-    let (v6, v3) = q_2.sin_cos();
+    let (v5, v2) = q_1.sincos();
+    let (v6, v3) = q_2.sincos();
     let v4 = v2 * v3;
     let v7 = v5 * v6;
     let v8 = v4 - v7;
@@ -727,206 +774,132 @@ pub fn kinetic_energy<T: Real>(
 ) -> T {
     let [_, q_1, q_2] = q.data.0[0];
     let [qd_0, qd_1, qd_2] = qd.data.0[0];
-    let v0 = p.thigh_mass + p.shin_mass;
-    let v1 = p.body_mass + v0;
-    let v2 = qd_0 * v1;
-    let (v16, v3) = q_1.sin_cos();
-    let v4 = p.thigh_mass * p.thigh_com_x;
-    let (v8, v5) = q_2.sin_cos();
-    let v6 = p.shin_mass * p.shin_com_x;
-    let v7 = v5 * v6;
-    let v9 = p.shin_mass * p.shin_com_y;
-    let v10 = v8 * v9;
-    let v11 = v7 - v10;
-    let v12 = p.shin_mass * p.thigh_length_x;
-    let v13 = v11 + v12;
-    let v14 = v4 + v13;
-    let v15 = v3 * v14;
-    let v17 = p.thigh_mass * p.thigh_com_y;
-    let v18 = v6 * v8;
-    let v19 = v5 * v9;
-    let v20 = v18 + v19;
-    let v21 = p.shin_mass * p.thigh_length_y;
-    let v22 = v20 + v21;
-    let v23 = v17 + v22;
-    let v24 = v16 * v23;
-    let v25 = v15 - v24;
-    let v26 = v25 * qd_1;
-    let v27 = v2 + v26;
-    let v28 = v3 * v11;
-    let v29 = v16 * v20;
-    let v30 = v28 - v29;
-    let v31 = v30 * qd_2;
-    let v32 = v27 + v31;
-    let v33 = qd_0 * v32;
-    let v34 = qd_0 * v25;
-    let v35 = p.thigh_com_x * p.thigh_com_x;
-    let v36 = p.thigh_com_y * p.thigh_com_y;
-    let v37 = v35 + v36;
-    let v38 = p.thigh_mass * v37;
-    let v39 = p.thigh_inertia + v38;
-    let v40 = p.shin_com_x * p.shin_com_x;
-    let v41 = p.shin_com_y * p.shin_com_y;
-    let v42 = v40 + v41;
-    let v43 = p.shin_mass * v42;
-    let v44 = p.shin_inertia + v43;
-    let v45 = v6 * p.thigh_length_x;
-    let v46 = v9 * p.thigh_length_y;
-    let v47 = v45 + v46;
-    let v48 = v5 * v47;
-    let v49 = v9 * p.thigh_length_x;
-    let v50 = v6 * p.thigh_length_y;
-    let v51 = v49 - v50;
-    let v52 = v8 * v51;
-    let v53 = v48 - v52;
-    let v54 = v53 + v53;
-    let v55 = v44 + v54;
-    let v56 = p.thigh_length_x * p.thigh_length_x;
-    let v57 = p.thigh_length_y * p.thigh_length_y;
-    let v58 = v56 + v57;
-    let v59 = p.shin_mass * v58;
-    let v60 = v55 + v59;
-    let v61 = v39 + v60;
-    let v62 = p.thigh_gear_ratio * p.thigh_gear_ratio;
-    let v63 = p.thigh_rotor_inertia * v62;
-    let v64 = v61 + v63;
-    let v65 = qd_1 * v64;
-    let v66 = v34 + v65;
-    let v67 = v50 - v49;
-    let v68 = v8 * v67;
-    let v69 = v48 + v68;
-    let v70 = v44 + v69;
-    let v71 = qd_2 * v70;
-    let v72 = v66 + v71;
-    let v73 = qd_1 * v72;
-    let v74 = v33 + v73;
-    let v75 = qd_0 * v30;
-    let v76 = qd_1 * v70;
-    let v77 = v75 + v76;
-    let v78 = p.shin_gear_ratio * p.shin_gear_ratio;
-    let v79 = p.shin_rotor_inertia * v78;
-    let v80 = v44 + v79;
-    let v81 = qd_2 * v80;
-    let v82 = v77 + v81;
-    let v83 = qd_2 * v82;
-    let v84 = v74 + v83;
-    let v85 = T::lit(0.5) * v84;
-    v85
+    let v0 = qd_0 * p.prepared[0];
+    let (v9, v1) = q_1.sincos();
+    let (v4, v2) = q_2.sincos();
+    let v3 = v2 * p.prepared[2];
+    let v5 = v4 * p.prepared[3];
+    let v6 = v3 - v5;
+    let v7 = p.prepared[1] + v6;
+    let v8 = v1 * v7;
+    let v10 = p.prepared[2] * v4;
+    let v11 = v2 * p.prepared[3];
+    let v12 = v10 + v11;
+    let v13 = p.prepared[4] + v12;
+    let v14 = v9 * v13;
+    let v15 = v8 - v14;
+    let v16 = v15 * qd_1;
+    let v17 = v0 + v16;
+    let v18 = v1 * v6;
+    let v19 = v9 * v12;
+    let v20 = v18 - v19;
+    let v21 = v20 * qd_2;
+    let v22 = v17 + v21;
+    let v23 = qd_0 * v22;
+    let v24 = qd_0 * v15;
+    let v25 = v2 * p.prepared[7];
+    let v26 = v4 * p.prepared[8];
+    let v27 = v25 - v26;
+    let v28 = v27 + v27;
+    let v29 = p.prepared[6] + v28;
+    let v30 = qd_1 * v29;
+    let v31 = v24 + v30;
+    let v32 = v4 * p.prepared[9];
+    let v33 = v25 + v32;
+    let v34 = p.prepared[5] + v33;
+    let v35 = qd_2 * v34;
+    let v36 = v31 + v35;
+    let v37 = qd_1 * v36;
+    let v38 = v23 + v37;
+    let v39 = qd_0 * v20;
+    let v40 = qd_1 * v34;
+    let v41 = v39 + v40;
+    let v42 = qd_2 * p.prepared[10];
+    let v43 = v41 + v42;
+    let v44 = qd_2 * v43;
+    let v45 = v38 + v44;
+    let v46 = T::lit(0.5) * v45;
+    v46
 }
 /// Potential energy `−Σ m g·c`.
 pub fn potential_energy<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> T {
     let [q_0, q_1, q_2] = q.data.0[0];
-    let v0 = T::lit(0.5) * p.knee_spring_stiffness;
-    let v1 = q_2 - p.knee_spring_rest;
-    let v2 = v1 * v1;
-    let v3 = v0 * v2;
-    let v4 = p.thigh_mass + p.shin_mass;
-    let v5 = p.body_mass + v4;
-    let v6 = v5 * p.body_origin_x;
-    let v7 = p.gravity_x * v6;
-    let v8 = p.body_origin_y + q_0;
-    let v9 = v5 * v8;
-    let v10 = p.gravity_y * v9;
-    let v11 = v7 + v10;
-    let v12 = p.body_mass * p.body_com_x;
-    let v13 = v4 * p.thigh_origin_x;
-    let v14 = v12 + v13;
-    let v15 = p.gravity_x * v14;
-    let v16 = p.body_mass * p.body_com_y;
-    let v17 = v4 * p.thigh_origin_y;
-    let v18 = v16 + v17;
-    let v19 = p.gravity_y * v18;
-    let v20 = v15 + v19;
-    let v21 = v11 + v20;
-    let (v33, v22) = q_1.sin_cos();
-    let v23 = p.thigh_mass * p.thigh_com_x;
-    let v24 = p.shin_mass * p.thigh_length_x;
-    let v25 = v23 + v24;
-    let v26 = p.gravity_x * v25;
-    let v27 = p.thigh_mass * p.thigh_com_y;
-    let v28 = p.shin_mass * p.thigh_length_y;
-    let v29 = v27 + v28;
-    let v30 = p.gravity_y * v29;
-    let v31 = v26 + v30;
-    let v32 = v22 * v31;
-    let v34 = p.gravity_x * v29;
-    let v35 = p.gravity_y * v25;
-    let v36 = v34 - v35;
-    let v37 = v33 * v36;
-    let v38 = v32 - v37;
-    let v39 = v21 + v38;
-    let (v42, v40) = q_2.sin_cos();
-    let v41 = v22 * v40;
-    let v43 = v33 * v42;
-    let v44 = v41 - v43;
-    let v45 = p.shin_mass * p.shin_com_x;
-    let v46 = p.gravity_x * v45;
-    let v47 = p.shin_mass * p.shin_com_y;
-    let v48 = p.gravity_y * v47;
-    let v49 = v46 + v48;
-    let v50 = v44 * v49;
-    let v51 = v33 * v40;
-    let v52 = v22 * v42;
-    let v53 = v51 + v52;
-    let v54 = p.gravity_x * v47;
-    let v55 = p.gravity_y * v45;
-    let v56 = v54 - v55;
-    let v57 = v53 * v56;
-    let v58 = v50 - v57;
-    let v59 = v39 + v58;
-    let v60 = v3 - v59;
-    v60
+    let v0 = q_2 - p.knee_spring_rest;
+    let v1 = v0 * v0;
+    let v2 = p.prepared[18] * v1;
+    let v3 = p.body_origin_y + q_0;
+    let v4 = p.prepared[0] * v3;
+    let v5 = p.gravity_y * v4;
+    let v6 = p.prepared[19] + v5;
+    let v7 = v6 + p.prepared[20];
+    let (v10, v8) = q_1.sincos();
+    let v9 = v8 * p.prepared[13];
+    let v11 = v10 * p.prepared[12];
+    let v12 = v9 - v11;
+    let v13 = v7 + v12;
+    let (v16, v14) = q_2.sincos();
+    let v15 = v8 * v14;
+    let v17 = v10 * v16;
+    let v18 = v15 - v17;
+    let v19 = v18 * p.prepared[15];
+    let v20 = v10 * v14;
+    let v21 = v8 * v16;
+    let v22 = v20 + v21;
+    let v23 = v22 * p.prepared[14];
+    let v24 = v19 - v23;
+    let v25 = v13 + v24;
+    let v26 = v2 - v25;
+    v26
 }
 /// Joint positions in the base frame, one column per joint.
 pub fn joint_positions<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
     let [q_0, q_1, _] = q.data.0[0];
     let v0 = p.body_origin_y + q_0;
-    let v1 = p.body_origin_x + p.thigh_origin_x;
-    let v2 = v0 + p.thigh_origin_y;
-    let (v5, v3) = q_1.sin_cos();
-    let v4 = v3 * p.thigh_length_x;
-    let v6 = v5 * p.thigh_length_y;
-    let v7 = v4 - v6;
-    let v8 = v1 + v7;
-    let v9 = p.thigh_length_x * v5;
-    let v10 = v3 * p.thigh_length_y;
-    let v11 = v9 + v10;
-    let v12 = v2 + v11;
-    SMatrix::from_data(ArrayStorage([[p.body_origin_x, v0], [v1, v2], [v8, v12]]))
+    let v1 = v0 + p.thigh_origin_y;
+    let (v4, v2) = q_1.sincos();
+    let v3 = v2 * p.thigh_length_x;
+    let v5 = v4 * p.thigh_length_y;
+    let v6 = v3 - v5;
+    let v7 = p.prepared[17] + v6;
+    let v8 = p.thigh_length_x * v4;
+    let v9 = v2 * p.thigh_length_y;
+    let v10 = v8 + v9;
+    let v11 = v1 + v10;
+    SMatrix::from_data(
+        ArrayStorage([[p.body_origin_x, v0], [p.prepared[17], v1], [v7, v11]]),
+    )
 }
 /// Link tips in the base frame, one column per link.
 pub fn link_tips<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
     let [q_0, q_1, q_2] = q.data.0[0];
-    let v0 = p.body_origin_x + p.body_length_x;
-    let v1 = p.body_origin_y + q_0;
-    let v2 = v1 + p.body_length_y;
-    let v3 = p.body_origin_x + p.thigh_origin_x;
-    let (v6, v4) = q_1.sin_cos();
-    let v5 = v4 * p.thigh_length_x;
-    let v7 = v6 * p.thigh_length_y;
-    let v8 = v5 - v7;
-    let v9 = v3 + v8;
-    let v10 = v1 + p.thigh_origin_y;
-    let v11 = p.thigh_length_x * v6;
-    let v12 = v4 * p.thigh_length_y;
-    let v13 = v11 + v12;
-    let v14 = v10 + v13;
-    let (v17, v15) = q_2.sin_cos();
+    let v0 = p.body_origin_y + q_0;
+    let v1 = v0 + p.body_length_y;
+    let (v4, v2) = q_1.sincos();
+    let v3 = v2 * p.thigh_length_x;
+    let v5 = v4 * p.thigh_length_y;
+    let v6 = v3 - v5;
+    let v7 = p.prepared[17] + v6;
+    let v8 = v0 + p.thigh_origin_y;
+    let v9 = p.thigh_length_x * v4;
+    let v10 = v2 * p.thigh_length_y;
+    let v11 = v9 + v10;
+    let v12 = v8 + v11;
+    let (v15, v13) = q_2.sincos();
+    let v14 = v2 * v13;
     let v16 = v4 * v15;
-    let v18 = v6 * v17;
-    let v19 = v16 - v18;
-    let v20 = v19 * p.shin_length_x;
-    let v21 = v6 * v15;
-    let v22 = v4 * v17;
-    let v23 = v21 + v22;
-    let v24 = v23 * p.shin_length_y;
-    let v25 = v20 - v24;
-    let v26 = v9 + v25;
-    let v27 = p.shin_length_x * v23;
-    let v28 = v19 * p.shin_length_y;
-    let v29 = v27 + v28;
-    let v30 = v14 + v29;
-    SMatrix::from_data(ArrayStorage([[v0, v2], [v9, v14], [v26, v30]]))
+    let v17 = v14 - v16;
+    let v18 = v17 * p.shin_length_x;
+    let v19 = v4 * v13;
+    let v20 = v2 * v15;
+    let v21 = v19 + v20;
+    let v22 = v21 * p.shin_length_y;
+    let v23 = v18 - v22;
+    let v24 = v7 + v23;
+    let v25 = p.shin_length_x * v21;
+    let v26 = v17 * p.shin_length_y;
+    let v27 = v25 + v26;
+    let v28 = v12 + v27;
+    SMatrix::from_data(ArrayStorage([[p.prepared[21], v1], [v7, v12], [v24, v28]]))
 }
 /// Closure points a, b of each closure in the base frame.
 pub fn closure_points<T: Real>(_q: &SVector<T, 3>, _p: &Params<T>) -> SMatrix<T, 2, 0> {
@@ -935,40 +908,39 @@ pub fn closure_points<T: Real>(_q: &SVector<T, 3>, _p: &Params<T>) -> SMatrix<T,
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
 pub fn contact_positions<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 2> {
     let [q_0, q_1, q_2] = q.data.0[0];
-    let v0 = p.body_origin_x + p.thigh_origin_x;
-    let (v3, v1) = q_1.sin_cos();
-    let v2 = v1 * p.thigh_length_x;
-    let v4 = v3 * p.thigh_length_y;
-    let v5 = v2 - v4;
-    let v6 = v0 + v5;
-    let (v9, v7) = q_2.sin_cos();
-    let v8 = v1 * v7;
-    let v10 = v3 * v9;
-    let v11 = v8 - v10;
-    let v12 = v11 * p.shin_length_x;
-    let v13 = v3 * v7;
-    let v14 = v1 * v9;
-    let v15 = v13 + v14;
-    let v16 = v15 * p.shin_length_y;
-    let v17 = v12 - v16;
-    let v18 = v6 + v17;
-    let v19 = p.body_origin_y + q_0;
-    let v20 = v19 + p.thigh_origin_y;
-    let v21 = p.thigh_length_x * v3;
-    let v22 = v1 * p.thigh_length_y;
-    let v23 = v21 + v22;
-    let v24 = v20 + v23;
-    let v25 = p.shin_length_x * v15;
-    let v26 = v11 * p.shin_length_y;
-    let v27 = v25 + v26;
-    let v28 = v24 + v27;
-    SMatrix::from_data(ArrayStorage([[v18, v28]]))
+    let (v2, v0) = q_1.sincos();
+    let v1 = v0 * p.thigh_length_x;
+    let v3 = v2 * p.thigh_length_y;
+    let v4 = v1 - v3;
+    let v5 = p.prepared[17] + v4;
+    let (v8, v6) = q_2.sincos();
+    let v7 = v0 * v6;
+    let v9 = v2 * v8;
+    let v10 = v7 - v9;
+    let v11 = v10 * p.shin_length_x;
+    let v12 = v2 * v6;
+    let v13 = v0 * v8;
+    let v14 = v12 + v13;
+    let v15 = v14 * p.shin_length_y;
+    let v16 = v11 - v15;
+    let v17 = v5 + v16;
+    let v18 = p.body_origin_y + q_0;
+    let v19 = v18 + p.thigh_origin_y;
+    let v20 = p.thigh_length_x * v2;
+    let v21 = v0 * p.thigh_length_y;
+    let v22 = v20 + v21;
+    let v23 = v19 + v22;
+    let v24 = p.shin_length_x * v14;
+    let v25 = v10 * p.shin_length_y;
+    let v26 = v24 + v25;
+    let v27 = v23 + v26;
+    SMatrix::from_data(ArrayStorage([[v17, v27]]))
 }
 /// `J_c(q) = ∂x_c/∂q`.
 pub fn contact_jacobian<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
     let [_, q_1, q_2] = q.data.0[0];
-    let (v0, v3) = q_1.sin_cos();
-    let (v4, v1) = q_2.sin_cos();
+    let (v0, v3) = q_1.sincos();
+    let (v4, v1) = q_2.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
@@ -1005,8 +977,8 @@ pub fn contact_bias<T: Real>(
     let [_, qd_1, qd_2] = qd.data.0[0];
     let v0 = qd_1 + qd_2;
     let v1 = v0 * v0;
-    let (v5, v2) = q_1.sin_cos();
-    let (v6, v3) = q_2.sin_cos();
+    let (v5, v2) = q_1.sincos();
+    let (v6, v3) = q_2.sincos();
     let v4 = v2 * v3;
     let v7 = v5 * v6;
     let v8 = v4 - v7;
@@ -1043,143 +1015,86 @@ pub fn dynamics_terms<T: Real>(
     p: &Params<T>,
 ) -> (SMatrix<T, 3, 3>, SVector<T, 3>, SMatrix<T, 0, 3>, SVector<T, 0>) {
     let [_, q_1, q_2] = q.data.0[0];
-    let [qd_0, qd_1, qd_2] = qd.data.0[0];
-    let v0 = p.thigh_mass + p.shin_mass;
-    let v1 = p.body_mass + v0;
-    let (v15, v2) = q_1.sin_cos();
-    let v3 = p.thigh_mass * p.thigh_com_x;
-    let (v7, v4) = q_2.sin_cos();
-    let v5 = p.shin_mass * p.shin_com_x;
-    let v6 = v4 * v5;
-    let v8 = p.shin_mass * p.shin_com_y;
-    let v9 = v7 * v8;
-    let v10 = v6 - v9;
-    let v11 = p.shin_mass * p.thigh_length_x;
-    let v12 = v10 + v11;
-    let v13 = v3 + v12;
-    let v14 = v2 * v13;
-    let v16 = p.thigh_mass * p.thigh_com_y;
-    let v17 = v5 * v7;
-    let v18 = v4 * v8;
-    let v19 = v17 + v18;
-    let v20 = p.shin_mass * p.thigh_length_y;
-    let v21 = v19 + v20;
-    let v22 = v16 + v21;
-    let v23 = v15 * v22;
-    let v24 = v14 - v23;
-    let v25 = v2 * v10;
-    let v26 = v15 * v19;
-    let v27 = v25 - v26;
-    let v28 = p.thigh_com_x * p.thigh_com_x;
-    let v29 = p.thigh_com_y * p.thigh_com_y;
-    let v30 = v28 + v29;
-    let v31 = p.thigh_mass * v30;
-    let v32 = p.thigh_inertia + v31;
-    let v33 = p.shin_com_x * p.shin_com_x;
-    let v34 = p.shin_com_y * p.shin_com_y;
-    let v35 = v33 + v34;
-    let v36 = p.shin_mass * v35;
-    let v37 = p.shin_inertia + v36;
-    let v38 = v5 * p.thigh_length_x;
-    let v39 = v8 * p.thigh_length_y;
-    let v40 = v38 + v39;
-    let v41 = v4 * v40;
-    let v42 = v8 * p.thigh_length_x;
-    let v43 = v5 * p.thigh_length_y;
-    let v44 = v42 - v43;
-    let v45 = v7 * v44;
-    let v46 = v41 - v45;
+    let [_, qd_1, qd_2] = qd.data.0[0];
+    let (v8, v0) = q_1.sincos();
+    let (v3, v1) = q_2.sincos();
+    let v2 = v1 * p.prepared[2];
+    let v4 = v3 * p.prepared[3];
+    let v5 = v2 - v4;
+    let v6 = p.prepared[1] + v5;
+    let v7 = v0 * v6;
+    let v9 = p.prepared[2] * v3;
+    let v10 = v1 * p.prepared[3];
+    let v11 = v9 + v10;
+    let v12 = p.prepared[4] + v11;
+    let v13 = v8 * v12;
+    let v14 = v7 - v13;
+    let v15 = v0 * v5;
+    let v16 = v8 * v11;
+    let v17 = v15 - v16;
+    let v18 = v1 * p.prepared[7];
+    let v19 = v3 * p.prepared[8];
+    let v20 = v18 - v19;
+    let v21 = v20 + v20;
+    let v22 = p.prepared[6] + v21;
+    let v23 = v3 * p.prepared[9];
+    let v24 = v18 + v23;
+    let v25 = p.prepared[5] + v24;
+    let v26 = v6 * v8;
+    let v27 = v0 * v12;
+    let v28 = v26 + v27;
+    let v29 = qd_1 * qd_1;
+    let v30 = v28 * v29;
+    let v31 = v0 * v11;
+    let v32 = v5 * v8;
+    let v33 = v31 + v32;
+    let v34 = v33 + v33;
+    let v35 = qd_1 * qd_2;
+    let v36 = v34 * v35;
+    let v37 = v30 + v36;
+    let v38 = qd_2 * qd_2;
+    let v39 = v33 * v38;
+    let v40 = v37 + v39;
+    let v41 = v40 + p.prepared[11];
+    let v42 = -v41;
+    let v43 = v3 * p.prepared[7];
+    let v44 = v1 * p.prepared[8];
+    let v45 = v43 + v44;
+    let v46 = -v45;
     let v47 = v46 + v46;
-    let v48 = v37 + v47;
-    let v49 = p.thigh_length_x * p.thigh_length_x;
-    let v50 = p.thigh_length_y * p.thigh_length_y;
-    let v51 = v49 + v50;
-    let v52 = p.shin_mass * v51;
-    let v53 = v48 + v52;
-    let v54 = v32 + v53;
-    let v55 = p.thigh_gear_ratio * p.thigh_gear_ratio;
-    let v56 = p.thigh_rotor_inertia * v55;
-    let v57 = v54 + v56;
-    let v58 = v43 - v42;
-    let v59 = v7 * v58;
-    let v60 = v41 + v59;
-    let v61 = v37 + v60;
-    let v62 = p.shin_gear_ratio * p.shin_gear_ratio;
-    let v63 = p.shin_rotor_inertia * v62;
-    let v64 = v37 + v63;
-    let v65 = v13 * v15;
-    let v66 = v2 * v22;
-    let v67 = v65 + v66;
-    let v68 = qd_1 * qd_1;
-    let v69 = v67 * v68;
-    let v70 = v2 * v19;
-    let v71 = v10 * v15;
-    let v72 = v70 + v71;
-    let v73 = v72 + v72;
-    let v74 = qd_1 * qd_2;
-    let v75 = v73 * v74;
-    let v76 = v69 + v75;
-    let v77 = qd_2 * qd_2;
-    let v78 = v72 * v77;
-    let v79 = v76 + v78;
-    let v80 = v1 * p.gravity_y;
-    let v81 = v79 + v80;
-    let v82 = -v81;
-    let v83 = v72 - v72;
-    let v84 = qd_2 * qd_0;
-    let v85 = v83 * v84;
-    let v86 = v7 * v40;
-    let v87 = v4 * v44;
-    let v88 = v86 + v87;
-    let v89 = -v88;
-    let v90 = v89 + v89;
-    let v91 = v74 * v90;
-    let v92 = v85 + v91;
-    let v93 = v4 * v58;
-    let v94 = v93 - v86;
-    let v95 = v77 * v94;
-    let v96 = v92 + v95;
-    let v97 = v16 + v20;
-    let v98 = p.gravity_x * v97;
-    let v99 = v3 + v11;
-    let v100 = p.gravity_y * v99;
-    let v101 = v98 - v100;
-    let v102 = v2 * v101;
-    let v103 = p.gravity_x * v99;
-    let v104 = p.gravity_y * v97;
-    let v105 = v103 + v104;
-    let v106 = v15 * v105;
-    let v107 = v102 + v106;
-    let v108 = v2 * v4;
-    let v109 = v7 * v15;
-    let v110 = v108 - v109;
-    let v111 = v8 * p.gravity_x;
-    let v112 = v5 * p.gravity_y;
-    let v113 = v111 - v112;
-    let v114 = v110 * v113;
-    let v115 = v4 * v15;
-    let v116 = v2 * v7;
-    let v117 = v115 + v116;
-    let v118 = v5 * p.gravity_x;
-    let v119 = v8 * p.gravity_y;
-    let v120 = v118 + v119;
-    let v121 = v117 * v120;
-    let v122 = v114 + v121;
-    let v123 = v107 + v122;
-    let v124 = v96 + v123;
-    let v125 = qd_1 * qd_0;
-    let v126 = v83 * v125;
-    let v127 = v68 * v88;
-    let v128 = v126 + v127;
-    let v129 = q_2 - p.knee_spring_rest;
-    let v130 = p.knee_spring_stiffness * v129;
-    let v131 = v122 + v130;
-    let v132 = v128 + v131;
+    let v48 = v35 * v47;
+    let v49 = v1 * p.prepared[9];
+    let v50 = v49 - v43;
+    let v51 = v38 * v50;
+    let v52 = v48 + v51;
+    let v53 = v0 * p.prepared[12];
+    let v54 = v8 * p.prepared[13];
+    let v55 = v53 + v54;
+    let v56 = v0 * v1;
+    let v57 = v3 * v8;
+    let v58 = v56 - v57;
+    let v59 = v58 * p.prepared[14];
+    let v60 = v1 * v8;
+    let v61 = v0 * v3;
+    let v62 = v60 + v61;
+    let v63 = v62 * p.prepared[15];
+    let v64 = v59 + v63;
+    let v65 = v55 + v64;
+    let v66 = v52 + v65;
+    let v67 = v29 * v45;
+    let v68 = q_2 - p.knee_spring_rest;
+    let v69 = p.knee_spring_stiffness * v68;
+    let v70 = v64 + v69;
+    let v71 = v67 + v70;
     (
         SMatrix::from_data(
-            ArrayStorage([[v1, v24, v27], [v24, v57, v61], [v27, v61, v64]]),
+            ArrayStorage([
+                [p.prepared[0], v14, v17],
+                [v14, v22, v25],
+                [v17, v25, p.prepared[10]],
+            ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v82, v124, v132]])),
+        SMatrix::from_data(ArrayStorage([[v42, v66, v71]])),
         SMatrix::from_data(ArrayStorage([[], [], []])),
         SMatrix::from_data(ArrayStorage([[]])),
     )

@@ -20,10 +20,9 @@ pub const NK: usize = 2;
 /// The `knee_runner` leg: 5 joints, 0 closure(s), actuated joints ["thigh", "shin"]. Generated from `leg-models/specs/knee_runner.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct KneeRunner;
-/// Physical parameters; `Default` holds the spec's values. Change them at run
-/// time without regenerating.
+/// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Params<T> {
+pub struct ParamValues<T> {
     /// Gravity in the base frame, x [m/s²].
     pub gravity_x: T,
     /// Gravity in the base frame, y [m/s²].
@@ -119,7 +118,7 @@ pub struct Params<T> {
     /// Rest value of spring `knee_spring` on the joint of `shin` [rad].
     pub knee_spring_rest: T,
 }
-impl<T: Real> Default for Params<T> {
+impl<T: Real> Default for ParamValues<T> {
     fn default() -> Self {
         Self {
             gravity_x: T::lit(0.0),
@@ -170,6 +169,50 @@ impl<T: Real> Default for Params<T> {
             knee_spring_stiffness: T::lit(40.0),
             knee_spring_rest: T::lit(-1.0),
         }
+    }
+}
+/// Physical parameters, ready for evaluation: the values (read as fields through
+/// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
+/// computed once when a value changes instead of in every call. `Default` holds
+/// the spec's values; change them at run time, without regenerating, with
+/// [`Params::update`] or [`Parameters::set`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params<T> {
+    values: ParamValues<T>,
+    prepared: [T; 32],
+}
+impl<T: Real> Params<T> {
+    /// Parameters of these values.
+    pub fn new(values: ParamValues<T>) -> Self {
+        Self {
+            prepared: prepare(&values).data.0[0],
+            values,
+        }
+    }
+    /// The values.
+    pub fn values(&self) -> &ParamValues<T> {
+        &self.values
+    }
+    /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
+    pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
+        change(&mut self.values);
+        *self = Self::new(self.values);
+    }
+}
+impl<T> core::ops::Deref for Params<T> {
+    type Target = ParamValues<T>;
+    fn deref(&self) -> &ParamValues<T> {
+        &self.values
+    }
+}
+impl<T: Real> From<ParamValues<T>> for Params<T> {
+    fn from(values: ParamValues<T>) -> Self {
+        Self::new(values)
+    }
+}
+impl<T: Real> Default for Params<T> {
+    fn default() -> Self {
+        Self::new(ParamValues::default())
     }
 }
 impl<T: Real> Parameters<T> for Params<T> {
@@ -224,107 +267,108 @@ impl<T: Real> Parameters<T> for Params<T> {
     ];
     fn get(&self, i: usize) -> Option<T> {
         match i {
-            0 => Some(self.gravity_x),
-            1 => Some(self.gravity_y),
-            2 => Some(self.slide_x_origin_x),
-            3 => Some(self.slide_x_origin_y),
-            4 => Some(self.slide_x_length_x),
-            5 => Some(self.slide_x_length_y),
-            6 => Some(self.slide_x_mass),
-            7 => Some(self.slide_x_com_x),
-            8 => Some(self.slide_x_com_y),
-            9 => Some(self.slide_x_inertia),
-            10 => Some(self.slide_x_damping),
-            11 => Some(self.slide_y_length_x),
-            12 => Some(self.slide_y_length_y),
-            13 => Some(self.slide_y_mass),
-            14 => Some(self.slide_y_com_x),
-            15 => Some(self.slide_y_com_y),
-            16 => Some(self.slide_y_inertia),
-            17 => Some(self.slide_y_damping),
-            18 => Some(self.torso_length_x),
-            19 => Some(self.torso_length_y),
-            20 => Some(self.torso_mass),
-            21 => Some(self.torso_com_x),
-            22 => Some(self.torso_com_y),
-            23 => Some(self.torso_inertia),
-            24 => Some(self.torso_damping),
-            25 => Some(self.thigh_origin_x),
-            26 => Some(self.thigh_origin_y),
-            27 => Some(self.thigh_length_x),
-            28 => Some(self.thigh_length_y),
-            29 => Some(self.thigh_mass),
-            30 => Some(self.thigh_com_x),
-            31 => Some(self.thigh_com_y),
-            32 => Some(self.thigh_inertia),
-            33 => Some(self.thigh_damping),
-            34 => Some(self.thigh_rotor_inertia),
-            35 => Some(self.thigh_gear_ratio),
-            36 => Some(self.shin_length_x),
-            37 => Some(self.shin_length_y),
-            38 => Some(self.shin_mass),
-            39 => Some(self.shin_com_x),
-            40 => Some(self.shin_com_y),
-            41 => Some(self.shin_inertia),
-            42 => Some(self.shin_damping),
-            43 => Some(self.shin_rotor_inertia),
-            44 => Some(self.shin_gear_ratio),
-            45 => Some(self.knee_spring_stiffness),
-            46 => Some(self.knee_spring_rest),
+            0 => Some(self.values.gravity_x),
+            1 => Some(self.values.gravity_y),
+            2 => Some(self.values.slide_x_origin_x),
+            3 => Some(self.values.slide_x_origin_y),
+            4 => Some(self.values.slide_x_length_x),
+            5 => Some(self.values.slide_x_length_y),
+            6 => Some(self.values.slide_x_mass),
+            7 => Some(self.values.slide_x_com_x),
+            8 => Some(self.values.slide_x_com_y),
+            9 => Some(self.values.slide_x_inertia),
+            10 => Some(self.values.slide_x_damping),
+            11 => Some(self.values.slide_y_length_x),
+            12 => Some(self.values.slide_y_length_y),
+            13 => Some(self.values.slide_y_mass),
+            14 => Some(self.values.slide_y_com_x),
+            15 => Some(self.values.slide_y_com_y),
+            16 => Some(self.values.slide_y_inertia),
+            17 => Some(self.values.slide_y_damping),
+            18 => Some(self.values.torso_length_x),
+            19 => Some(self.values.torso_length_y),
+            20 => Some(self.values.torso_mass),
+            21 => Some(self.values.torso_com_x),
+            22 => Some(self.values.torso_com_y),
+            23 => Some(self.values.torso_inertia),
+            24 => Some(self.values.torso_damping),
+            25 => Some(self.values.thigh_origin_x),
+            26 => Some(self.values.thigh_origin_y),
+            27 => Some(self.values.thigh_length_x),
+            28 => Some(self.values.thigh_length_y),
+            29 => Some(self.values.thigh_mass),
+            30 => Some(self.values.thigh_com_x),
+            31 => Some(self.values.thigh_com_y),
+            32 => Some(self.values.thigh_inertia),
+            33 => Some(self.values.thigh_damping),
+            34 => Some(self.values.thigh_rotor_inertia),
+            35 => Some(self.values.thigh_gear_ratio),
+            36 => Some(self.values.shin_length_x),
+            37 => Some(self.values.shin_length_y),
+            38 => Some(self.values.shin_mass),
+            39 => Some(self.values.shin_com_x),
+            40 => Some(self.values.shin_com_y),
+            41 => Some(self.values.shin_inertia),
+            42 => Some(self.values.shin_damping),
+            43 => Some(self.values.shin_rotor_inertia),
+            44 => Some(self.values.shin_gear_ratio),
+            45 => Some(self.values.knee_spring_stiffness),
+            46 => Some(self.values.knee_spring_rest),
             _ => None,
         }
     }
     fn set(&mut self, i: usize, value: T) -> bool {
         match i {
-            0 => self.gravity_x = value,
-            1 => self.gravity_y = value,
-            2 => self.slide_x_origin_x = value,
-            3 => self.slide_x_origin_y = value,
-            4 => self.slide_x_length_x = value,
-            5 => self.slide_x_length_y = value,
-            6 => self.slide_x_mass = value,
-            7 => self.slide_x_com_x = value,
-            8 => self.slide_x_com_y = value,
-            9 => self.slide_x_inertia = value,
-            10 => self.slide_x_damping = value,
-            11 => self.slide_y_length_x = value,
-            12 => self.slide_y_length_y = value,
-            13 => self.slide_y_mass = value,
-            14 => self.slide_y_com_x = value,
-            15 => self.slide_y_com_y = value,
-            16 => self.slide_y_inertia = value,
-            17 => self.slide_y_damping = value,
-            18 => self.torso_length_x = value,
-            19 => self.torso_length_y = value,
-            20 => self.torso_mass = value,
-            21 => self.torso_com_x = value,
-            22 => self.torso_com_y = value,
-            23 => self.torso_inertia = value,
-            24 => self.torso_damping = value,
-            25 => self.thigh_origin_x = value,
-            26 => self.thigh_origin_y = value,
-            27 => self.thigh_length_x = value,
-            28 => self.thigh_length_y = value,
-            29 => self.thigh_mass = value,
-            30 => self.thigh_com_x = value,
-            31 => self.thigh_com_y = value,
-            32 => self.thigh_inertia = value,
-            33 => self.thigh_damping = value,
-            34 => self.thigh_rotor_inertia = value,
-            35 => self.thigh_gear_ratio = value,
-            36 => self.shin_length_x = value,
-            37 => self.shin_length_y = value,
-            38 => self.shin_mass = value,
-            39 => self.shin_com_x = value,
-            40 => self.shin_com_y = value,
-            41 => self.shin_inertia = value,
-            42 => self.shin_damping = value,
-            43 => self.shin_rotor_inertia = value,
-            44 => self.shin_gear_ratio = value,
-            45 => self.knee_spring_stiffness = value,
-            46 => self.knee_spring_rest = value,
+            0 => self.values.gravity_x = value,
+            1 => self.values.gravity_y = value,
+            2 => self.values.slide_x_origin_x = value,
+            3 => self.values.slide_x_origin_y = value,
+            4 => self.values.slide_x_length_x = value,
+            5 => self.values.slide_x_length_y = value,
+            6 => self.values.slide_x_mass = value,
+            7 => self.values.slide_x_com_x = value,
+            8 => self.values.slide_x_com_y = value,
+            9 => self.values.slide_x_inertia = value,
+            10 => self.values.slide_x_damping = value,
+            11 => self.values.slide_y_length_x = value,
+            12 => self.values.slide_y_length_y = value,
+            13 => self.values.slide_y_mass = value,
+            14 => self.values.slide_y_com_x = value,
+            15 => self.values.slide_y_com_y = value,
+            16 => self.values.slide_y_inertia = value,
+            17 => self.values.slide_y_damping = value,
+            18 => self.values.torso_length_x = value,
+            19 => self.values.torso_length_y = value,
+            20 => self.values.torso_mass = value,
+            21 => self.values.torso_com_x = value,
+            22 => self.values.torso_com_y = value,
+            23 => self.values.torso_inertia = value,
+            24 => self.values.torso_damping = value,
+            25 => self.values.thigh_origin_x = value,
+            26 => self.values.thigh_origin_y = value,
+            27 => self.values.thigh_length_x = value,
+            28 => self.values.thigh_length_y = value,
+            29 => self.values.thigh_mass = value,
+            30 => self.values.thigh_com_x = value,
+            31 => self.values.thigh_com_y = value,
+            32 => self.values.thigh_inertia = value,
+            33 => self.values.thigh_damping = value,
+            34 => self.values.thigh_rotor_inertia = value,
+            35 => self.values.thigh_gear_ratio = value,
+            36 => self.values.shin_length_x = value,
+            37 => self.values.shin_length_y = value,
+            38 => self.values.shin_mass = value,
+            39 => self.values.shin_com_x = value,
+            40 => self.values.shin_com_y = value,
+            41 => self.values.shin_inertia = value,
+            42 => self.values.shin_damping = value,
+            43 => self.values.shin_rotor_inertia = value,
+            44 => self.values.shin_gear_ratio = value,
+            45 => self.values.knee_spring_stiffness = value,
+            46 => self.values.knee_spring_rest = value,
             _ => return false,
         }
+        *self = Self::new(self.values);
         true
     }
 }
@@ -460,138 +504,222 @@ impl ContactModel<NQ, NC, NU, NK> for KneeRunner {
         contact_bias(q, qd, p)
     }
 }
+/// The parameter-only quantities the terms read (products of masses, lengths and
+/// centres of mass, inertias about the joints, …), computed once per parameter set
+/// by [`Params::new`].
+pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 32> {
+    let v0 = values.thigh_mass + values.shin_mass;
+    let v1 = values.torso_mass + v0;
+    let v2 = values.slide_y_mass + v1;
+    let v3 = values.slide_x_mass + v2;
+    let v4 = values.torso_mass * values.torso_com_y;
+    let v5 = v0 * values.thigh_origin_y;
+    let v6 = v4 + v5;
+    let v7 = values.thigh_mass * values.thigh_com_x;
+    let v8 = values.shin_mass * values.thigh_length_x;
+    let v9 = v7 + v8;
+    let v10 = values.shin_mass * values.shin_com_x;
+    let v11 = values.shin_mass * values.shin_com_y;
+    let v12 = values.thigh_mass * values.thigh_com_y;
+    let v13 = values.shin_mass * values.thigh_length_y;
+    let v14 = v12 + v13;
+    let v15 = values.torso_mass * values.torso_com_x;
+    let v16 = v0 * values.thigh_origin_x;
+    let v17 = v15 + v16;
+    let v18 = values.torso_com_x * values.torso_com_x;
+    let v19 = values.torso_com_y * values.torso_com_y;
+    let v20 = v18 + v19;
+    let v21 = values.torso_mass * v20;
+    let v22 = values.torso_inertia + v21;
+    let v23 = values.thigh_origin_x * values.thigh_origin_x;
+    let v24 = values.thigh_origin_y * values.thigh_origin_y;
+    let v25 = v23 + v24;
+    let v26 = v0 * v25;
+    let v27 = v22 + v26;
+    let v28 = values.thigh_com_x * values.thigh_com_x;
+    let v29 = values.thigh_com_y * values.thigh_com_y;
+    let v30 = v28 + v29;
+    let v31 = values.thigh_mass * v30;
+    let v32 = values.thigh_inertia + v31;
+    let v33 = values.shin_com_x * values.shin_com_x;
+    let v34 = values.shin_com_y * values.shin_com_y;
+    let v35 = v33 + v34;
+    let v36 = values.shin_mass * v35;
+    let v37 = values.shin_inertia + v36;
+    let v38 = v32 + v37;
+    let v39 = values.thigh_length_x * values.thigh_length_x;
+    let v40 = values.thigh_length_y * values.thigh_length_y;
+    let v41 = v39 + v40;
+    let v42 = values.shin_mass * v41;
+    let v43 = v38 + v42;
+    let v44 = values.thigh_length_x * v10;
+    let v45 = v11 * values.thigh_length_y;
+    let v46 = v44 + v45;
+    let v47 = values.thigh_length_x * v11;
+    let v48 = v10 * values.thigh_length_y;
+    let v49 = v47 - v48;
+    let v50 = v48 - v47;
+    let v51 = values.thigh_gear_ratio * values.thigh_gear_ratio;
+    let v52 = values.thigh_rotor_inertia * v51;
+    let v53 = v43 + v52;
+    let v54 = values.shin_gear_ratio * values.shin_gear_ratio;
+    let v55 = values.shin_rotor_inertia * v54;
+    let v56 = v37 + v55;
+    let v57 = v3 * values.gravity_x;
+    let v58 = v2 * values.gravity_y;
+    let v59 = v6 * values.gravity_x;
+    let v60 = v17 * values.gravity_y;
+    let v61 = v59 - v60;
+    let v62 = v17 * values.gravity_x;
+    let v63 = v6 * values.gravity_y;
+    let v64 = v62 + v63;
+    let v65 = v14 * values.gravity_x;
+    let v66 = v9 * values.gravity_y;
+    let v67 = v65 - v66;
+    let v68 = v9 * values.gravity_x;
+    let v69 = v14 * values.gravity_y;
+    let v70 = v68 + v69;
+    let v71 = v11 * values.gravity_x;
+    let v72 = v10 * values.gravity_y;
+    let v73 = v71 - v72;
+    let v74 = v10 * values.gravity_x;
+    let v75 = v11 * values.gravity_y;
+    let v76 = v74 + v75;
+    let v77 = -v57;
+    let v78 = -v58;
+    let v79 = values.knee_spring_stiffness * T::lit(0.5);
+    let v80 = v3 * values.slide_x_origin_y;
+    let v81 = values.gravity_y * v80;
+    let v82 = values.slide_x_mass * values.slide_x_com_x;
+    let v83 = v2 * values.slide_x_length_x;
+    let v84 = v82 + v83;
+    let v85 = values.gravity_x * v84;
+    let v86 = values.slide_x_mass * values.slide_x_com_y;
+    let v87 = values.slide_y_mass * values.slide_y_com_x;
+    let v88 = v1 * values.slide_y_length_x;
+    let v89 = v87 + v88;
+    let v90 = values.gravity_x * v89;
+    let v91 = values.slide_y_mass * values.slide_y_com_y;
+    let v92 = v1 * values.slide_y_length_y;
+    let v93 = v91 + v92;
+    let v94 = values.gravity_y * v93;
+    let v95 = v90 + v94;
+    let v96 = values.slide_x_origin_y + values.slide_x_length_y;
+    SMatrix::from_data(
+        ArrayStorage([
+            [
+                v2,
+                v3,
+                v6,
+                v9,
+                v10,
+                v11,
+                v14,
+                v17,
+                v27,
+                v37,
+                v43,
+                v46,
+                v49,
+                v50,
+                v53,
+                v56,
+                v57,
+                v58,
+                v61,
+                v64,
+                v67,
+                v70,
+                v73,
+                v76,
+                v77,
+                v78,
+                v79,
+                v81,
+                v85,
+                v86,
+                v95,
+                v96,
+            ],
+        ]),
+    )
+}
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
 pub fn mass_matrix<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
-    let v0 = p.thigh_mass + p.shin_mass;
-    let v1 = p.torso_mass + v0;
-    let v2 = p.slide_y_mass + v1;
-    let v3 = p.slide_x_mass + v2;
-    let (v33, v4) = q_2.sin_cos();
-    let v5 = p.torso_mass * p.torso_com_y;
-    let (v6, v19) = q_3.sin_cos();
-    let v7 = p.thigh_mass * p.thigh_com_x;
-    let (v11, v8) = q_4.sin_cos();
-    let v9 = p.shin_mass * p.shin_com_x;
-    let v10 = v8 * v9;
-    let v12 = p.shin_mass * p.shin_com_y;
-    let v13 = v11 * v12;
-    let v14 = v10 - v13;
-    let v15 = p.shin_mass * p.thigh_length_x;
-    let v16 = v14 + v15;
-    let v17 = v7 + v16;
-    let v18 = v6 * v17;
-    let v20 = p.thigh_mass * p.thigh_com_y;
-    let v21 = v9 * v11;
-    let v22 = v8 * v12;
-    let v23 = v21 + v22;
-    let v24 = p.shin_mass * p.thigh_length_y;
-    let v25 = v23 + v24;
-    let v26 = v20 + v25;
-    let v27 = v19 * v26;
-    let v28 = v18 + v27;
-    let v29 = v0 * p.thigh_origin_y;
-    let v30 = v28 + v29;
-    let v31 = v5 + v30;
-    let v32 = v4 * v31;
-    let v34 = p.torso_mass * p.torso_com_x;
-    let v35 = v17 * v19;
-    let v36 = v6 * v26;
-    let v37 = v35 - v36;
-    let v38 = v0 * p.thigh_origin_x;
-    let v39 = v37 + v38;
-    let v40 = v34 + v39;
-    let v41 = v33 * v40;
-    let v42 = v32 + v41;
-    let v43 = -v42;
-    let v44 = v4 * v28;
-    let v45 = v33 * v37;
-    let v46 = v44 + v45;
-    let v47 = -v46;
-    let v48 = v19 * v23;
-    let v49 = v6 * v14;
-    let v50 = v48 + v49;
-    let v51 = v4 * v50;
-    let v52 = v14 * v19;
-    let v53 = v6 * v23;
-    let v54 = v52 - v53;
-    let v55 = v33 * v54;
-    let v56 = v51 + v55;
-    let v57 = -v56;
-    let v58 = v4 * v40;
-    let v59 = v31 * v33;
-    let v60 = v58 - v59;
-    let v61 = v4 * v37;
-    let v62 = v28 * v33;
-    let v63 = v61 - v62;
-    let v64 = v4 * v54;
-    let v65 = v33 * v50;
-    let v66 = v64 - v65;
-    let v67 = p.torso_com_x * p.torso_com_x;
-    let v68 = p.torso_com_y * p.torso_com_y;
-    let v69 = v67 + v68;
-    let v70 = p.torso_mass * v69;
-    let v71 = p.torso_inertia + v70;
-    let v72 = p.thigh_com_x * p.thigh_com_x;
-    let v73 = p.thigh_com_y * p.thigh_com_y;
-    let v74 = v72 + v73;
-    let v75 = p.thigh_mass * v74;
-    let v76 = p.thigh_inertia + v75;
-    let v77 = p.shin_com_x * p.shin_com_x;
-    let v78 = p.shin_com_y * p.shin_com_y;
-    let v79 = v77 + v78;
-    let v80 = p.shin_mass * v79;
-    let v81 = p.shin_inertia + v80;
-    let v82 = v9 * p.thigh_length_x;
-    let v83 = v12 * p.thigh_length_y;
-    let v84 = v82 + v83;
-    let v85 = v8 * v84;
-    let v86 = v12 * p.thigh_length_x;
-    let v87 = v9 * p.thigh_length_y;
-    let v88 = v86 - v87;
-    let v89 = v11 * v88;
-    let v90 = v85 - v89;
-    let v91 = v90 + v90;
-    let v92 = v81 + v91;
-    let v93 = p.thigh_length_x * p.thigh_length_x;
-    let v94 = p.thigh_length_y * p.thigh_length_y;
-    let v95 = v93 + v94;
-    let v96 = p.shin_mass * v95;
-    let v97 = v92 + v96;
-    let v98 = v76 + v97;
-    let v99 = v37 * p.thigh_origin_x;
-    let v100 = v28 * p.thigh_origin_y;
-    let v101 = v99 + v100;
-    let v102 = v101 + v101;
-    let v103 = v98 + v102;
-    let v104 = p.thigh_origin_x * p.thigh_origin_x;
-    let v105 = p.thigh_origin_y * p.thigh_origin_y;
-    let v106 = v104 + v105;
-    let v107 = v0 * v106;
-    let v108 = v103 + v107;
-    let v109 = v71 + v108;
-    let v110 = v98 + v101;
-    let v111 = v87 - v86;
-    let v112 = v11 * v111;
-    let v113 = v85 + v112;
-    let v114 = v81 + v113;
-    let v115 = p.thigh_origin_x * v54;
-    let v116 = p.thigh_origin_y * v50;
-    let v117 = v115 + v116;
-    let v118 = v114 + v117;
-    let v119 = p.thigh_gear_ratio * p.thigh_gear_ratio;
-    let v120 = p.thigh_rotor_inertia * v119;
-    let v121 = v98 + v120;
-    let v122 = p.shin_gear_ratio * p.shin_gear_ratio;
-    let v123 = p.shin_rotor_inertia * v122;
-    let v124 = v81 + v123;
+    let (v18, v0) = q_2.sincos();
+    let (v1, v9) = q_3.sincos();
+    let (v4, v2) = q_4.sincos();
+    let v3 = v2 * p.prepared[4];
+    let v5 = v4 * p.prepared[5];
+    let v6 = v3 - v5;
+    let v7 = p.prepared[3] + v6;
+    let v8 = v1 * v7;
+    let v10 = p.prepared[4] * v4;
+    let v11 = v2 * p.prepared[5];
+    let v12 = v10 + v11;
+    let v13 = p.prepared[6] + v12;
+    let v14 = v9 * v13;
+    let v15 = v8 + v14;
+    let v16 = p.prepared[2] + v15;
+    let v17 = v0 * v16;
+    let v19 = v7 * v9;
+    let v20 = v1 * v13;
+    let v21 = v19 - v20;
+    let v22 = p.prepared[7] + v21;
+    let v23 = v18 * v22;
+    let v24 = v17 + v23;
+    let v25 = -v24;
+    let v26 = v0 * v15;
+    let v27 = v18 * v21;
+    let v28 = v26 + v27;
+    let v29 = -v28;
+    let v30 = v9 * v12;
+    let v31 = v1 * v6;
+    let v32 = v30 + v31;
+    let v33 = v0 * v32;
+    let v34 = v6 * v9;
+    let v35 = v1 * v12;
+    let v36 = v34 - v35;
+    let v37 = v18 * v36;
+    let v38 = v33 + v37;
+    let v39 = -v38;
+    let v40 = v0 * v22;
+    let v41 = v16 * v18;
+    let v42 = v40 - v41;
+    let v43 = v0 * v21;
+    let v44 = v15 * v18;
+    let v45 = v43 - v44;
+    let v46 = v0 * v36;
+    let v47 = v18 * v32;
+    let v48 = v46 - v47;
+    let v49 = v2 * p.prepared[11];
+    let v50 = v4 * p.prepared[12];
+    let v51 = v49 - v50;
+    let v52 = v51 + v51;
+    let v53 = p.prepared[10] + v52;
+    let v54 = p.prepared[8] + v53;
+    let v55 = p.thigh_origin_x * v21;
+    let v56 = p.thigh_origin_y * v15;
+    let v57 = v55 + v56;
+    let v58 = v57 + v57;
+    let v59 = v54 + v58;
+    let v60 = v53 + v57;
+    let v61 = v4 * p.prepared[13];
+    let v62 = v49 + v61;
+    let v63 = p.prepared[9] + v62;
+    let v64 = p.thigh_origin_x * v36;
+    let v65 = p.thigh_origin_y * v32;
+    let v66 = v64 + v65;
+    let v67 = v63 + v66;
+    let v68 = v52 + p.prepared[14];
     SMatrix::from_data(
         ArrayStorage([
-            [v3, T::lit(0.0), v43, v47, v57],
-            [T::lit(0.0), v2, v60, v63, v66],
-            [v43, v60, v109, v110, v118],
-            [v47, v63, v110, v121, v114],
-            [v57, v66, v118, v114, v124],
+            [p.prepared[1], T::lit(0.0), v25, v29, v39],
+            [T::lit(0.0), p.prepared[0], v42, v45, v48],
+            [v25, v42, v59, v60, v67],
+            [v29, v45, v60, v68, v63],
+            [v39, v48, v67, v63, p.prepared[15]],
         ]),
     )
 }
@@ -602,314 +730,172 @@ pub fn bias_forces<T: Real>(
     p: &Params<T>,
 ) -> SVector<T, 5> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
-    let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
-    let v0 = p.torso_mass * p.torso_com_x;
-    let (v14, v1) = q_3.sin_cos();
-    let v2 = p.thigh_mass * p.thigh_com_x;
-    let (v6, v3) = q_4.sin_cos();
-    let v4 = p.shin_mass * p.shin_com_x;
-    let v5 = v3 * v4;
-    let v7 = p.shin_mass * p.shin_com_y;
-    let v8 = v6 * v7;
-    let v9 = v5 - v8;
-    let v10 = p.shin_mass * p.thigh_length_x;
-    let v11 = v9 + v10;
-    let v12 = v2 + v11;
-    let v13 = v1 * v12;
-    let v15 = p.thigh_mass * p.thigh_com_y;
-    let v16 = v4 * v6;
-    let v17 = v3 * v7;
+    let [_, _, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let v0 = qd_2 * qd_2;
+    let (v3, v1) = q_2.sincos();
+    let v2 = v1 * p.torso_com_x;
+    let v4 = v3 * p.torso_com_y;
+    let v5 = v2 - v4;
+    let v6 = v0 * v5;
+    let v7 = p.torso_mass * v6;
+    let v8 = qd_2 + qd_3;
+    let v9 = v8 * v8;
+    let (v12, v10) = q_3.sincos();
+    let v11 = v1 * v10;
+    let v13 = v3 * v12;
+    let v14 = v11 - v13;
+    let v15 = v14 * p.thigh_com_x;
+    let v16 = v3 * v10;
+    let v17 = v1 * v12;
     let v18 = v16 + v17;
-    let v19 = p.shin_mass * p.thigh_length_y;
-    let v20 = v18 + v19;
-    let v21 = v15 + v20;
-    let v22 = v14 * v21;
-    let v23 = v13 - v22;
-    let v24 = p.thigh_mass + p.shin_mass;
-    let v25 = v24 * p.thigh_origin_x;
-    let v26 = v23 + v25;
-    let v27 = v0 + v26;
-    let (v37, v28) = q_2.sin_cos();
-    let v29 = v27 * v28;
-    let v30 = p.torso_mass * p.torso_com_y;
-    let v31 = v12 * v14;
-    let v32 = v1 * v21;
-    let v33 = v31 + v32;
-    let v34 = v24 * p.thigh_origin_y;
-    let v35 = v33 + v34;
-    let v36 = v30 + v35;
-    let v38 = v36 * v37;
-    let v39 = v29 - v38;
-    let v40 = qd_2 * qd_2;
-    let v41 = v39 * v40;
-    let v42 = v23 * v28;
-    let v43 = v33 * v37;
-    let v44 = v42 - v43;
-    let v45 = v44 + v44;
-    let v46 = qd_2 * qd_3;
-    let v47 = v45 * v46;
-    let v48 = v41 + v47;
-    let v49 = v1 * v9;
-    let v50 = v14 * v18;
-    let v51 = v49 - v50;
-    let v52 = v28 * v51;
-    let v53 = v1 * v18;
-    let v54 = v9 * v14;
+    let v19 = v18 * p.thigh_com_y;
+    let v20 = v15 - v19;
+    let v21 = v9 * v20;
+    let v22 = v1 * p.thigh_origin_x;
+    let v23 = v3 * p.thigh_origin_y;
+    let v24 = v22 - v23;
+    let v25 = v0 * v24;
+    let v26 = v21 + v25;
+    let v27 = p.thigh_mass * v26;
+    let v28 = v7 + v27;
+    let v29 = v8 + qd_4;
+    let v30 = v29 * v29;
+    let (v33, v31) = q_4.sincos();
+    let v32 = v14 * v31;
+    let v34 = v18 * v33;
+    let v35 = v32 - v34;
+    let v36 = v35 * p.shin_com_x;
+    let v37 = v18 * v31;
+    let v38 = v14 * v33;
+    let v39 = v37 + v38;
+    let v40 = v39 * p.shin_com_y;
+    let v41 = v36 - v40;
+    let v42 = v30 * v41;
+    let v43 = v14 * p.thigh_length_x;
+    let v44 = v18 * p.thigh_length_y;
+    let v45 = v43 - v44;
+    let v46 = v9 * v45;
+    let v47 = v42 + v46;
+    let v48 = v25 + v47;
+    let v49 = p.shin_mass * v48;
+    let v50 = v28 + v49;
+    let v51 = v50 + p.prepared[16];
+    let v52 = -v51;
+    let v53 = p.torso_com_x * v3;
+    let v54 = v1 * p.torso_com_y;
     let v55 = v53 + v54;
-    let v56 = v37 * v55;
-    let v57 = v52 - v56;
-    let v58 = v57 + v57;
-    let v59 = qd_2 * qd_4;
-    let v60 = v58 * v59;
-    let v61 = v48 + v60;
-    let v62 = qd_3 * qd_3;
-    let v63 = v44 * v62;
-    let v64 = v61 + v63;
-    let v65 = qd_3 * qd_4;
-    let v66 = v58 * v65;
-    let v67 = v64 + v66;
-    let v68 = qd_4 * qd_4;
-    let v69 = v57 * v68;
-    let v70 = v67 + v69;
-    let v71 = p.torso_mass + v24;
-    let v72 = p.slide_y_mass + v71;
-    let v73 = p.slide_x_mass + v72;
-    let v74 = v73 * p.gravity_x;
-    let v75 = v70 + v74;
-    let v76 = -v75;
-    let v77 = v27 * v37;
-    let v78 = v28 * v36;
-    let v79 = v77 + v78;
-    let v80 = v40 * v79;
-    let v81 = v28 * v33;
-    let v82 = v23 * v37;
-    let v83 = v81 + v82;
-    let v84 = v83 + v83;
-    let v85 = v46 * v84;
-    let v86 = v80 + v85;
-    let v87 = v28 * v55;
-    let v88 = v37 * v51;
-    let v89 = v87 + v88;
-    let v90 = v89 + v89;
-    let v91 = v59 * v90;
-    let v92 = v86 + v91;
-    let v93 = v62 * v83;
-    let v94 = v92 + v93;
-    let v95 = v65 * v90;
-    let v96 = v94 + v95;
-    let v97 = v68 * v89;
-    let v98 = v96 + v97;
-    let v99 = v72 * p.gravity_y;
-    let v100 = v98 + v99;
-    let v101 = -v100;
-    let v102 = v44 - v44;
-    let v103 = qd_3 * qd_0;
-    let v104 = v102 * v103;
-    let v105 = v57 - v57;
-    let v106 = qd_4 * qd_0;
-    let v107 = v105 * v106;
-    let v108 = v104 + v107;
-    let v109 = v83 - v83;
-    let v110 = qd_3 * qd_1;
-    let v111 = v109 * v110;
+    let v56 = v0 * v55;
+    let v57 = p.torso_mass * v56;
+    let v58 = p.thigh_com_x * v18;
+    let v59 = v14 * p.thigh_com_y;
+    let v60 = v58 + v59;
+    let v61 = v9 * v60;
+    let v62 = v3 * p.thigh_origin_x;
+    let v63 = v1 * p.thigh_origin_y;
+    let v64 = v62 + v63;
+    let v65 = v0 * v64;
+    let v66 = v61 + v65;
+    let v67 = p.thigh_mass * v66;
+    let v68 = v57 + v67;
+    let v69 = p.shin_com_x * v39;
+    let v70 = v35 * p.shin_com_y;
+    let v71 = v69 + v70;
+    let v72 = v30 * v71;
+    let v73 = v18 * p.thigh_length_x;
+    let v74 = v14 * p.thigh_length_y;
+    let v75 = v73 + v74;
+    let v76 = v9 * v75;
+    let v77 = v72 + v76;
+    let v78 = v65 + v77;
+    let v79 = p.shin_mass * v78;
+    let v80 = v68 + v79;
+    let v81 = v80 + p.prepared[17];
+    let v82 = -v81;
+    let v83 = v6 * v55;
+    let v84 = v5 * v56;
+    let v85 = v83 - v84;
+    let v86 = p.torso_mass * v85;
+    let v87 = v60 + v64;
+    let v88 = v26 * v87;
+    let v89 = v20 + v24;
+    let v90 = v66 * v89;
+    let v91 = v88 - v90;
+    let v92 = p.thigh_mass * v91;
+    let v93 = v86 + v92;
+    let v94 = v71 + v75;
+    let v95 = v64 + v94;
+    let v96 = v48 * v95;
+    let v97 = v41 + v45;
+    let v98 = v24 + v97;
+    let v99 = v78 * v98;
+    let v100 = v96 - v99;
+    let v101 = p.shin_mass * v100;
+    let v102 = v93 + v101;
+    let v103 = v1 * p.prepared[18];
+    let v104 = v3 * p.prepared[19];
+    let v105 = v103 + v104;
+    let v106 = v14 * p.prepared[20];
+    let v107 = v18 * p.prepared[21];
+    let v108 = v106 + v107;
+    let v109 = v35 * p.prepared[22];
+    let v110 = v39 * p.prepared[23];
+    let v111 = v109 + v110;
     let v112 = v108 + v111;
-    let v113 = v89 - v89;
-    let v114 = qd_4 * qd_1;
-    let v115 = v113 * v114;
-    let v116 = v112 + v115;
-    let v117 = v23 * p.thigh_origin_y;
-    let v118 = p.thigh_origin_x * v33;
-    let v119 = v117 - v118;
-    let v120 = v119 + v119;
-    let v121 = v46 * v120;
-    let v122 = v116 + v121;
-    let v123 = v4 * p.thigh_length_x;
-    let v124 = v7 * p.thigh_length_y;
-    let v125 = v123 + v124;
-    let v126 = v6 * v125;
-    let v127 = v7 * p.thigh_length_x;
-    let v128 = v4 * p.thigh_length_y;
-    let v129 = v127 - v128;
-    let v130 = v3 * v129;
-    let v131 = v126 + v130;
-    let v132 = -v131;
-    let v133 = v132 + v132;
-    let v134 = p.thigh_origin_y * v51;
-    let v135 = p.thigh_origin_x * v55;
-    let v136 = v134 - v135;
-    let v137 = v136 + v136;
-    let v138 = v133 + v137;
-    let v139 = v59 * v138;
-    let v140 = v122 + v139;
-    let v141 = v62 * v119;
-    let v142 = v140 + v141;
-    let v143 = v133 + v136;
-    let v144 = v136 + v143;
-    let v145 = v65 * v144;
-    let v146 = v142 + v145;
-    let v147 = v128 - v127;
-    let v148 = v3 * v147;
-    let v149 = v148 - v126;
-    let v150 = v136 + v149;
-    let v151 = v68 * v150;
-    let v152 = v146 + v151;
-    let v153 = v30 + v34;
-    let v154 = p.gravity_x * v153;
-    let v155 = v0 + v25;
-    let v156 = p.gravity_y * v155;
-    let v157 = v154 - v156;
-    let v158 = v28 * v157;
-    let v159 = p.gravity_x * v155;
-    let v160 = p.gravity_y * v153;
-    let v161 = v159 + v160;
-    let v162 = v37 * v161;
-    let v163 = v158 + v162;
-    let v164 = v1 * v28;
-    let v165 = v14 * v37;
-    let v166 = v164 - v165;
-    let v167 = v15 + v19;
-    let v168 = p.gravity_x * v167;
-    let v169 = v2 + v10;
-    let v170 = p.gravity_y * v169;
-    let v171 = v168 - v170;
-    let v172 = v166 * v171;
-    let v173 = v1 * v37;
-    let v174 = v14 * v28;
-    let v175 = v173 + v174;
-    let v176 = p.gravity_x * v169;
-    let v177 = p.gravity_y * v167;
-    let v178 = v176 + v177;
-    let v179 = v175 * v178;
-    let v180 = v172 + v179;
-    let v181 = v3 * v166;
-    let v182 = v6 * v175;
-    let v183 = v181 - v182;
-    let v184 = v7 * p.gravity_x;
-    let v185 = v4 * p.gravity_y;
-    let v186 = v184 - v185;
-    let v187 = v183 * v186;
-    let v188 = v3 * v175;
-    let v189 = v6 * v166;
-    let v190 = v188 + v189;
-    let v191 = v4 * p.gravity_x;
-    let v192 = v7 * p.gravity_y;
-    let v193 = v191 + v192;
-    let v194 = v190 * v193;
-    let v195 = v187 + v194;
-    let v196 = v180 + v195;
-    let v197 = v163 + v196;
-    let v198 = v152 + v197;
-    let v199 = qd_2 * qd_0;
-    let v200 = v102 * v199;
-    let v201 = v107 + v200;
-    let v202 = qd_2 * qd_1;
-    let v203 = v109 * v202;
-    let v204 = v201 + v203;
-    let v205 = v115 + v204;
-    let v206 = v40 * v119;
-    let v207 = v205 - v206;
-    let v208 = v143 - v136;
-    let v209 = v59 * v208;
-    let v210 = v207 + v209;
-    let v211 = v65 * v133;
-    let v212 = v210 + v211;
-    let v213 = v68 * v149;
-    let v214 = v212 + v213;
-    let v215 = v196 + v214;
-    let v216 = v105 * v199;
-    let v217 = v103 * v105;
-    let v218 = v216 + v217;
-    let v219 = v113 * v202;
-    let v220 = v218 + v219;
-    let v221 = v110 * v113;
-    let v222 = v220 + v221;
-    let v223 = v138 * T::lit(0.5);
-    let v224 = v40 * v223;
-    let v225 = v222 - v224;
-    let v226 = v136 - v143;
-    let v227 = v46 * v226;
-    let v228 = v225 + v227;
-    let v229 = v62 * v131;
-    let v230 = v228 + v229;
-    let v231 = q_4 - p.knee_spring_rest;
-    let v232 = p.knee_spring_stiffness * v231;
-    let v233 = v195 + v232;
-    let v234 = v230 + v233;
-    SMatrix::from_data(ArrayStorage([[v76, v101, v198, v215, v234]]))
+    let v113 = v105 + v112;
+    let v114 = v102 + v113;
+    let v115 = v26 * v60;
+    let v116 = v20 * v66;
+    let v117 = v115 - v116;
+    let v118 = p.thigh_mass * v117;
+    let v119 = v48 * v94;
+    let v120 = v78 * v97;
+    let v121 = v119 - v120;
+    let v122 = p.shin_mass * v121;
+    let v123 = v118 + v122;
+    let v124 = v112 + v123;
+    let v125 = v48 * v71;
+    let v126 = v41 * v78;
+    let v127 = v125 - v126;
+    let v128 = p.shin_mass * v127;
+    let v129 = q_4 - p.knee_spring_rest;
+    let v130 = p.knee_spring_stiffness * v129;
+    let v131 = v111 + v130;
+    let v132 = v128 + v131;
+    SMatrix::from_data(ArrayStorage([[v52, v82, v114, v124, v132]]))
 }
 /// `G(q) = ∂V/∂q`.
 pub fn gravity_forces<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
-    let v0 = p.thigh_mass + p.shin_mass;
-    let v1 = p.torso_mass + v0;
-    let v2 = p.slide_y_mass + v1;
-    let v3 = p.slide_x_mass + v2;
-    let v4 = v3 * p.gravity_x;
-    let v5 = -v4;
-    let v6 = v2 * p.gravity_y;
-    let v7 = -v6;
-    let (v19, v8) = q_2.sin_cos();
-    let v9 = p.torso_mass * p.torso_com_y;
-    let v10 = v0 * p.thigh_origin_y;
-    let v11 = v9 + v10;
-    let v12 = p.gravity_x * v11;
-    let v13 = p.torso_mass * p.torso_com_x;
-    let v14 = v0 * p.thigh_origin_x;
-    let v15 = v13 + v14;
-    let v16 = p.gravity_y * v15;
-    let v17 = v12 - v16;
-    let v18 = v8 * v17;
-    let v20 = p.gravity_x * v15;
-    let v21 = p.gravity_y * v11;
-    let v22 = v20 + v21;
-    let v23 = v19 * v22;
-    let v24 = v18 + v23;
-    let (v27, v25) = q_3.sin_cos();
-    let v26 = v8 * v25;
-    let v28 = v19 * v27;
-    let v29 = v26 - v28;
-    let v30 = p.thigh_mass * p.thigh_com_y;
-    let v31 = p.shin_mass * p.thigh_length_y;
-    let v32 = v30 + v31;
-    let v33 = p.gravity_x * v32;
-    let v34 = p.thigh_mass * p.thigh_com_x;
-    let v35 = p.shin_mass * p.thigh_length_x;
-    let v36 = v34 + v35;
-    let v37 = p.gravity_y * v36;
-    let v38 = v33 - v37;
-    let v39 = v29 * v38;
-    let v40 = v19 * v25;
-    let v41 = v8 * v27;
-    let v42 = v40 + v41;
-    let v43 = p.gravity_x * v36;
-    let v44 = p.gravity_y * v32;
-    let v45 = v43 + v44;
-    let v46 = v42 * v45;
-    let v47 = v39 + v46;
-    let (v50, v48) = q_4.sin_cos();
-    let v49 = v29 * v48;
-    let v51 = v42 * v50;
-    let v52 = v49 - v51;
-    let v53 = p.shin_mass * p.shin_com_y;
-    let v54 = p.gravity_x * v53;
-    let v55 = p.shin_mass * p.shin_com_x;
-    let v56 = p.gravity_y * v55;
-    let v57 = v54 - v56;
-    let v58 = v52 * v57;
-    let v59 = v42 * v48;
-    let v60 = v29 * v50;
-    let v61 = v59 + v60;
-    let v62 = p.gravity_x * v55;
-    let v63 = p.gravity_y * v53;
-    let v64 = v62 + v63;
-    let v65 = v61 * v64;
-    let v66 = v58 + v65;
-    let v67 = v47 + v66;
-    let v68 = v24 + v67;
-    let v69 = q_4 - p.knee_spring_rest;
-    let v70 = p.knee_spring_stiffness * v69;
-    let v71 = v66 + v70;
-    SMatrix::from_data(ArrayStorage([[v5, v7, v68, v67, v71]]))
+    let (v2, v0) = q_2.sincos();
+    let v1 = v0 * p.prepared[18];
+    let v3 = v2 * p.prepared[19];
+    let v4 = v1 + v3;
+    let (v7, v5) = q_3.sincos();
+    let v6 = v0 * v5;
+    let v8 = v2 * v7;
+    let v9 = v6 - v8;
+    let v10 = v9 * p.prepared[20];
+    let v11 = v2 * v5;
+    let v12 = v0 * v7;
+    let v13 = v11 + v12;
+    let v14 = v13 * p.prepared[21];
+    let v15 = v10 + v14;
+    let (v18, v16) = q_4.sincos();
+    let v17 = v9 * v16;
+    let v19 = v13 * v18;
+    let v20 = v17 - v19;
+    let v21 = v20 * p.prepared[22];
+    let v22 = v13 * v16;
+    let v23 = v9 * v18;
+    let v24 = v22 + v23;
+    let v25 = v24 * p.prepared[23];
+    let v26 = v21 + v25;
+    let v27 = v15 + v26;
+    let v28 = v4 + v27;
+    let v29 = q_4 - p.knee_spring_rest;
+    let v30 = p.knee_spring_stiffness * v29;
+    let v31 = v26 + v30;
+    SMatrix::from_data(ArrayStorage([[p.prepared[24], p.prepared[25], v28, v27, v31]]))
 }
 /// Viscous joint damping `D q̇`.
 pub fn damping_forces<T: Real>(qd: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
@@ -946,12 +932,12 @@ pub fn foot_position<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2>
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
     let v2 = v1 + p.slide_y_length_x;
-    let (v5, v3) = q_2.sin_cos();
+    let (v5, v3) = q_2.sincos();
     let v4 = v3 * p.thigh_origin_x;
     let v6 = v5 * p.thigh_origin_y;
     let v7 = v4 - v6;
     let v8 = v2 + v7;
-    let (v11, v9) = q_3.sin_cos();
+    let (v11, v9) = q_3.sincos();
     let v10 = v3 * v9;
     let v12 = v5 * v11;
     let v13 = v10 - v12;
@@ -962,7 +948,7 @@ pub fn foot_position<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2>
     let v18 = v17 * p.thigh_length_y;
     let v19 = v14 - v18;
     let v20 = v8 + v19;
-    let (v23, v21) = q_4.sin_cos();
+    let (v23, v21) = q_4.sincos();
     let v22 = v13 * v21;
     let v24 = v17 * v23;
     let v25 = v22 - v24;
@@ -993,12 +979,12 @@ pub fn foot_position<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2>
 /// `J_f(q) = ∂(foot)/∂q`.
 pub fn foot_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
-    let (v0, v3) = q_2.sin_cos();
-    let (v4, v1) = q_3.sin_cos();
+    let (v0, v3) = q_2.sincos();
+    let (v4, v1) = q_3.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
-    let (v12, v7) = q_4.sin_cos();
+    let (v12, v7) = q_4.sincos();
     let v8 = v6 * v7;
     let v9 = v1 * v3;
     let v10 = v0 * v4;
@@ -1054,12 +1040,12 @@ pub fn foot_bias<T: Real>(
     let v0 = qd_2 + qd_3;
     let v1 = v0 + qd_4;
     let v2 = v1 * v1;
-    let (v6, v3) = q_2.sin_cos();
-    let (v7, v4) = q_3.sin_cos();
+    let (v6, v3) = q_2.sincos();
+    let (v7, v4) = q_3.sincos();
     let v5 = v3 * v4;
     let v8 = v6 * v7;
     let v9 = v5 - v8;
-    let (v15, v10) = q_4.sin_cos();
+    let (v15, v10) = q_4.sincos();
     let v11 = v9 * v10;
     let v12 = v4 * v6;
     let v13 = v3 * v7;
@@ -1111,277 +1097,168 @@ pub fn kinetic_energy<T: Real>(
 ) -> T {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
-    let v0 = p.thigh_mass + p.shin_mass;
-    let v1 = p.torso_mass + v0;
-    let v2 = p.slide_y_mass + v1;
-    let v3 = p.slide_x_mass + v2;
-    let v4 = qd_0 * v3;
-    let (v34, v5) = q_2.sin_cos();
-    let v6 = p.torso_mass * p.torso_com_y;
-    let (v7, v20) = q_3.sin_cos();
-    let v8 = p.thigh_mass * p.thigh_com_x;
-    let (v12, v9) = q_4.sin_cos();
-    let v10 = p.shin_mass * p.shin_com_x;
-    let v11 = v9 * v10;
-    let v13 = p.shin_mass * p.shin_com_y;
-    let v14 = v12 * v13;
-    let v15 = v11 - v14;
-    let v16 = p.shin_mass * p.thigh_length_x;
-    let v17 = v15 + v16;
-    let v18 = v8 + v17;
-    let v19 = v7 * v18;
-    let v21 = p.thigh_mass * p.thigh_com_y;
-    let v22 = v10 * v12;
-    let v23 = v9 * v13;
-    let v24 = v22 + v23;
-    let v25 = p.shin_mass * p.thigh_length_y;
-    let v26 = v24 + v25;
-    let v27 = v21 + v26;
-    let v28 = v20 * v27;
-    let v29 = v19 + v28;
-    let v30 = v0 * p.thigh_origin_y;
-    let v31 = v29 + v30;
-    let v32 = v6 + v31;
-    let v33 = v5 * v32;
-    let v35 = p.torso_mass * p.torso_com_x;
-    let v36 = v18 * v20;
-    let v37 = v7 * v27;
-    let v38 = v36 - v37;
-    let v39 = v0 * p.thigh_origin_x;
-    let v40 = v38 + v39;
-    let v41 = v35 + v40;
-    let v42 = v34 * v41;
-    let v43 = v33 + v42;
-    let v44 = v43 * qd_2;
-    let v45 = v4 - v44;
-    let v46 = v5 * v29;
-    let v47 = v34 * v38;
-    let v48 = v46 + v47;
-    let v49 = v48 * qd_3;
-    let v50 = v45 - v49;
-    let v51 = v20 * v24;
-    let v52 = v7 * v15;
-    let v53 = v51 + v52;
-    let v54 = v5 * v53;
-    let v55 = v15 * v20;
-    let v56 = v7 * v24;
-    let v57 = v55 - v56;
-    let v58 = v34 * v57;
-    let v59 = v54 + v58;
-    let v60 = v59 * qd_4;
-    let v61 = v50 - v60;
-    let v62 = qd_0 * v61;
-    let v63 = v2 * qd_1;
-    let v64 = v5 * v41;
-    let v65 = v32 * v34;
-    let v66 = v64 - v65;
-    let v67 = qd_2 * v66;
-    let v68 = v63 + v67;
-    let v69 = v5 * v38;
-    let v70 = v29 * v34;
-    let v71 = v69 - v70;
-    let v72 = qd_3 * v71;
-    let v73 = v68 + v72;
-    let v74 = v5 * v57;
-    let v75 = v34 * v53;
-    let v76 = v74 - v75;
-    let v77 = qd_4 * v76;
-    let v78 = v73 + v77;
-    let v79 = qd_1 * v78;
-    let v80 = v62 + v79;
-    let v81 = qd_1 * v66;
-    let v82 = qd_0 * v43;
-    let v83 = v81 - v82;
-    let v84 = p.torso_com_x * p.torso_com_x;
-    let v85 = p.torso_com_y * p.torso_com_y;
-    let v86 = v84 + v85;
-    let v87 = p.torso_mass * v86;
-    let v88 = p.torso_inertia + v87;
-    let v89 = p.thigh_com_x * p.thigh_com_x;
-    let v90 = p.thigh_com_y * p.thigh_com_y;
-    let v91 = v89 + v90;
-    let v92 = p.thigh_mass * v91;
-    let v93 = p.thigh_inertia + v92;
-    let v94 = p.shin_com_x * p.shin_com_x;
-    let v95 = p.shin_com_y * p.shin_com_y;
-    let v96 = v94 + v95;
-    let v97 = p.shin_mass * v96;
-    let v98 = p.shin_inertia + v97;
-    let v99 = v10 * p.thigh_length_x;
-    let v100 = v13 * p.thigh_length_y;
-    let v101 = v99 + v100;
-    let v102 = v9 * v101;
-    let v103 = v13 * p.thigh_length_x;
-    let v104 = v10 * p.thigh_length_y;
-    let v105 = v103 - v104;
-    let v106 = v12 * v105;
-    let v107 = v102 - v106;
-    let v108 = v107 + v107;
-    let v109 = v98 + v108;
-    let v110 = p.thigh_length_x * p.thigh_length_x;
-    let v111 = p.thigh_length_y * p.thigh_length_y;
-    let v112 = v110 + v111;
-    let v113 = p.shin_mass * v112;
-    let v114 = v109 + v113;
-    let v115 = v93 + v114;
-    let v116 = v38 * p.thigh_origin_x;
-    let v117 = v29 * p.thigh_origin_y;
-    let v118 = v116 + v117;
-    let v119 = v118 + v118;
-    let v120 = v115 + v119;
-    let v121 = p.thigh_origin_x * p.thigh_origin_x;
-    let v122 = p.thigh_origin_y * p.thigh_origin_y;
-    let v123 = v121 + v122;
-    let v124 = v0 * v123;
-    let v125 = v120 + v124;
-    let v126 = v88 + v125;
-    let v127 = qd_2 * v126;
-    let v128 = v83 + v127;
-    let v129 = v115 + v118;
-    let v130 = qd_3 * v129;
-    let v131 = v128 + v130;
-    let v132 = v104 - v103;
-    let v133 = v12 * v132;
-    let v134 = v102 + v133;
-    let v135 = v98 + v134;
-    let v136 = p.thigh_origin_x * v57;
-    let v137 = p.thigh_origin_y * v53;
-    let v138 = v136 + v137;
-    let v139 = v135 + v138;
-    let v140 = qd_4 * v139;
-    let v141 = v131 + v140;
-    let v142 = qd_2 * v141;
-    let v143 = v80 + v142;
-    let v144 = qd_1 * v71;
-    let v145 = qd_0 * v48;
-    let v146 = v144 - v145;
-    let v147 = qd_2 * v129;
-    let v148 = v146 + v147;
-    let v149 = p.thigh_gear_ratio * p.thigh_gear_ratio;
-    let v150 = p.thigh_rotor_inertia * v149;
-    let v151 = v115 + v150;
-    let v152 = qd_3 * v151;
-    let v153 = v148 + v152;
-    let v154 = qd_4 * v135;
-    let v155 = v153 + v154;
-    let v156 = qd_3 * v155;
-    let v157 = v143 + v156;
-    let v158 = qd_1 * v76;
-    let v159 = qd_0 * v59;
-    let v160 = v158 - v159;
-    let v161 = qd_2 * v139;
-    let v162 = v160 + v161;
-    let v163 = qd_3 * v135;
-    let v164 = v162 + v163;
-    let v165 = p.shin_gear_ratio * p.shin_gear_ratio;
-    let v166 = p.shin_rotor_inertia * v165;
-    let v167 = v98 + v166;
-    let v168 = qd_4 * v167;
-    let v169 = v164 + v168;
-    let v170 = qd_4 * v169;
-    let v171 = v157 + v170;
-    let v172 = T::lit(0.5) * v171;
-    v172
+    let v0 = qd_0 * p.prepared[1];
+    let (v19, v1) = q_2.sincos();
+    let (v2, v10) = q_3.sincos();
+    let (v5, v3) = q_4.sincos();
+    let v4 = v3 * p.prepared[4];
+    let v6 = v5 * p.prepared[5];
+    let v7 = v4 - v6;
+    let v8 = p.prepared[3] + v7;
+    let v9 = v2 * v8;
+    let v11 = p.prepared[4] * v5;
+    let v12 = v3 * p.prepared[5];
+    let v13 = v11 + v12;
+    let v14 = p.prepared[6] + v13;
+    let v15 = v10 * v14;
+    let v16 = v9 + v15;
+    let v17 = p.prepared[2] + v16;
+    let v18 = v1 * v17;
+    let v20 = v8 * v10;
+    let v21 = v2 * v14;
+    let v22 = v20 - v21;
+    let v23 = p.prepared[7] + v22;
+    let v24 = v19 * v23;
+    let v25 = v18 + v24;
+    let v26 = v25 * qd_2;
+    let v27 = v0 - v26;
+    let v28 = v1 * v16;
+    let v29 = v19 * v22;
+    let v30 = v28 + v29;
+    let v31 = v30 * qd_3;
+    let v32 = v27 - v31;
+    let v33 = v10 * v13;
+    let v34 = v2 * v7;
+    let v35 = v33 + v34;
+    let v36 = v1 * v35;
+    let v37 = v7 * v10;
+    let v38 = v2 * v13;
+    let v39 = v37 - v38;
+    let v40 = v19 * v39;
+    let v41 = v36 + v40;
+    let v42 = v41 * qd_4;
+    let v43 = v32 - v42;
+    let v44 = qd_0 * v43;
+    let v45 = p.prepared[0] * qd_1;
+    let v46 = v1 * v23;
+    let v47 = v17 * v19;
+    let v48 = v46 - v47;
+    let v49 = qd_2 * v48;
+    let v50 = v45 + v49;
+    let v51 = v1 * v22;
+    let v52 = v16 * v19;
+    let v53 = v51 - v52;
+    let v54 = qd_3 * v53;
+    let v55 = v50 + v54;
+    let v56 = v1 * v39;
+    let v57 = v19 * v35;
+    let v58 = v56 - v57;
+    let v59 = qd_4 * v58;
+    let v60 = v55 + v59;
+    let v61 = qd_1 * v60;
+    let v62 = v44 + v61;
+    let v63 = qd_1 * v48;
+    let v64 = qd_0 * v25;
+    let v65 = v63 - v64;
+    let v66 = v3 * p.prepared[11];
+    let v67 = v5 * p.prepared[12];
+    let v68 = v66 - v67;
+    let v69 = v68 + v68;
+    let v70 = p.prepared[10] + v69;
+    let v71 = p.prepared[8] + v70;
+    let v72 = p.thigh_origin_x * v22;
+    let v73 = p.thigh_origin_y * v16;
+    let v74 = v72 + v73;
+    let v75 = v74 + v74;
+    let v76 = v71 + v75;
+    let v77 = qd_2 * v76;
+    let v78 = v65 + v77;
+    let v79 = v70 + v74;
+    let v80 = qd_3 * v79;
+    let v81 = v78 + v80;
+    let v82 = v5 * p.prepared[13];
+    let v83 = v66 + v82;
+    let v84 = p.prepared[9] + v83;
+    let v85 = p.thigh_origin_x * v39;
+    let v86 = p.thigh_origin_y * v35;
+    let v87 = v85 + v86;
+    let v88 = v84 + v87;
+    let v89 = qd_4 * v88;
+    let v90 = v81 + v89;
+    let v91 = qd_2 * v90;
+    let v92 = v62 + v91;
+    let v93 = qd_1 * v53;
+    let v94 = qd_0 * v30;
+    let v95 = v93 - v94;
+    let v96 = qd_2 * v79;
+    let v97 = v95 + v96;
+    let v98 = v69 + p.prepared[14];
+    let v99 = qd_3 * v98;
+    let v100 = v97 + v99;
+    let v101 = qd_4 * v84;
+    let v102 = v100 + v101;
+    let v103 = qd_3 * v102;
+    let v104 = v92 + v103;
+    let v105 = qd_1 * v58;
+    let v106 = qd_0 * v41;
+    let v107 = v105 - v106;
+    let v108 = qd_2 * v88;
+    let v109 = v107 + v108;
+    let v110 = qd_3 * v84;
+    let v111 = v109 + v110;
+    let v112 = qd_4 * p.prepared[15];
+    let v113 = v111 + v112;
+    let v114 = qd_4 * v113;
+    let v115 = v104 + v114;
+    let v116 = T::lit(0.5) * v115;
+    v116
 }
 /// Potential energy `−Σ m g·c`.
 pub fn potential_energy<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> T {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
-    let v0 = T::lit(0.5) * p.knee_spring_stiffness;
-    let v1 = q_4 - p.knee_spring_rest;
-    let v2 = v1 * v1;
-    let v3 = v0 * v2;
-    let v4 = p.thigh_mass + p.shin_mass;
-    let v5 = p.torso_mass + v4;
-    let v6 = p.slide_y_mass + v5;
-    let v7 = p.slide_x_mass + v6;
-    let v8 = p.slide_x_origin_x + q_0;
-    let v9 = v7 * v8;
-    let v10 = p.gravity_x * v9;
-    let v11 = v7 * p.slide_x_origin_y;
-    let v12 = p.gravity_y * v11;
-    let v13 = v10 + v12;
-    let v14 = p.slide_x_mass * p.slide_x_com_x;
-    let v15 = v6 * p.slide_x_length_x;
-    let v16 = v14 + v15;
-    let v17 = p.gravity_x * v16;
-    let v18 = p.slide_x_mass * p.slide_x_com_y;
-    let v19 = p.slide_x_length_y + q_1;
-    let v20 = v6 * v19;
-    let v21 = v18 + v20;
-    let v22 = p.gravity_y * v21;
-    let v23 = v17 + v22;
-    let v24 = v13 + v23;
-    let v25 = p.slide_y_mass * p.slide_y_com_x;
-    let v26 = v5 * p.slide_y_length_x;
-    let v27 = v25 + v26;
-    let v28 = p.gravity_x * v27;
-    let v29 = p.slide_y_mass * p.slide_y_com_y;
-    let v30 = v5 * p.slide_y_length_y;
-    let v31 = v29 + v30;
-    let v32 = p.gravity_y * v31;
-    let v33 = v28 + v32;
-    let v34 = v24 + v33;
-    let (v46, v35) = q_2.sin_cos();
-    let v36 = p.torso_mass * p.torso_com_x;
-    let v37 = v4 * p.thigh_origin_x;
-    let v38 = v36 + v37;
-    let v39 = p.gravity_x * v38;
-    let v40 = p.torso_mass * p.torso_com_y;
-    let v41 = v4 * p.thigh_origin_y;
-    let v42 = v40 + v41;
-    let v43 = p.gravity_y * v42;
-    let v44 = v39 + v43;
-    let v45 = v35 * v44;
-    let v47 = p.gravity_x * v42;
-    let v48 = p.gravity_y * v38;
-    let v49 = v47 - v48;
-    let v50 = v46 * v49;
-    let v51 = v45 - v50;
-    let v52 = v34 + v51;
-    let (v55, v53) = q_3.sin_cos();
-    let v54 = v35 * v53;
-    let v56 = v46 * v55;
-    let v57 = v54 - v56;
-    let v58 = p.thigh_mass * p.thigh_com_x;
-    let v59 = p.shin_mass * p.thigh_length_x;
-    let v60 = v58 + v59;
-    let v61 = p.gravity_x * v60;
-    let v62 = p.thigh_mass * p.thigh_com_y;
-    let v63 = p.shin_mass * p.thigh_length_y;
-    let v64 = v62 + v63;
-    let v65 = p.gravity_y * v64;
-    let v66 = v61 + v65;
-    let v67 = v57 * v66;
-    let v68 = v46 * v53;
-    let v69 = v35 * v55;
-    let v70 = v68 + v69;
-    let v71 = p.gravity_x * v64;
-    let v72 = p.gravity_y * v60;
-    let v73 = v71 - v72;
-    let v74 = v70 * v73;
-    let v75 = v67 - v74;
-    let v76 = v52 + v75;
-    let (v79, v77) = q_4.sin_cos();
-    let v78 = v57 * v77;
-    let v80 = v70 * v79;
-    let v81 = v78 - v80;
-    let v82 = p.shin_mass * p.shin_com_x;
-    let v83 = p.gravity_x * v82;
-    let v84 = p.shin_mass * p.shin_com_y;
-    let v85 = p.gravity_y * v84;
-    let v86 = v83 + v85;
-    let v87 = v81 * v86;
-    let v88 = v70 * v77;
-    let v89 = v57 * v79;
-    let v90 = v88 + v89;
-    let v91 = p.gravity_x * v84;
-    let v92 = p.gravity_y * v82;
-    let v93 = v91 - v92;
-    let v94 = v90 * v93;
-    let v95 = v87 - v94;
-    let v96 = v76 + v95;
-    let v97 = v3 - v96;
-    v97
+    let v0 = q_4 - p.knee_spring_rest;
+    let v1 = v0 * v0;
+    let v2 = p.prepared[26] * v1;
+    let v3 = p.slide_x_origin_x + q_0;
+    let v4 = p.prepared[1] * v3;
+    let v5 = p.gravity_x * v4;
+    let v6 = v5 + p.prepared[27];
+    let v7 = p.slide_x_length_y + q_1;
+    let v8 = p.prepared[0] * v7;
+    let v9 = p.prepared[29] + v8;
+    let v10 = p.gravity_y * v9;
+    let v11 = p.prepared[28] + v10;
+    let v12 = v6 + v11;
+    let v13 = v12 + p.prepared[30];
+    let (v16, v14) = q_2.sincos();
+    let v15 = v14 * p.prepared[19];
+    let v17 = v16 * p.prepared[18];
+    let v18 = v15 - v17;
+    let v19 = v13 + v18;
+    let (v22, v20) = q_3.sincos();
+    let v21 = v14 * v20;
+    let v23 = v16 * v22;
+    let v24 = v21 - v23;
+    let v25 = v24 * p.prepared[21];
+    let v26 = v16 * v20;
+    let v27 = v14 * v22;
+    let v28 = v26 + v27;
+    let v29 = v28 * p.prepared[20];
+    let v30 = v25 - v29;
+    let v31 = v19 + v30;
+    let (v34, v32) = q_4.sincos();
+    let v33 = v24 * v32;
+    let v35 = v28 * v34;
+    let v36 = v33 - v35;
+    let v37 = v36 * p.prepared[23];
+    let v38 = v28 * v32;
+    let v39 = v24 * v34;
+    let v40 = v38 + v39;
+    let v41 = v40 * p.prepared[22];
+    let v42 = v37 - v41;
+    let v43 = v31 + v42;
+    let v44 = v2 - v43;
+    v44
 }
 /// Joint positions in the base frame, one column per joint.
 pub fn joint_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
@@ -1392,7 +1269,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 
     let v3 = p.slide_x_origin_y + v2;
     let v4 = v1 + p.slide_y_length_x;
     let v5 = v3 + p.slide_y_length_y;
-    let (v8, v6) = q_2.sin_cos();
+    let (v8, v6) = q_2.sincos();
     let v7 = v6 * p.thigh_origin_x;
     let v9 = v8 * p.thigh_origin_y;
     let v10 = v7 - v9;
@@ -1401,7 +1278,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 
     let v13 = v6 * p.thigh_origin_y;
     let v14 = v12 + v13;
     let v15 = v5 + v14;
-    let (v18, v16) = q_3.sin_cos();
+    let (v18, v16) = q_3.sincos();
     let v17 = v6 * v16;
     let v19 = v8 * v18;
     let v20 = v17 - v19;
@@ -1431,60 +1308,65 @@ pub fn link_tips<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> 
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
-    let v2 = p.slide_x_origin_y + p.slide_x_length_y;
-    let v3 = v1 + p.slide_y_length_x;
-    let v4 = p.slide_x_length_y + q_1;
-    let v5 = p.slide_x_origin_y + v4;
-    let v6 = v5 + p.slide_y_length_y;
-    let (v9, v7) = q_2.sin_cos();
-    let v8 = v7 * p.torso_length_x;
-    let v10 = v9 * p.torso_length_y;
-    let v11 = v8 - v10;
-    let v12 = v3 + v11;
-    let v13 = p.torso_length_x * v9;
-    let v14 = v7 * p.torso_length_y;
-    let v15 = v13 + v14;
-    let v16 = v6 + v15;
-    let v17 = v7 * p.thigh_origin_x;
-    let v18 = v9 * p.thigh_origin_y;
-    let v19 = v17 - v18;
-    let v20 = v3 + v19;
-    let (v23, v21) = q_3.sin_cos();
-    let v22 = v7 * v21;
-    let v24 = v9 * v23;
-    let v25 = v22 - v24;
-    let v26 = v25 * p.thigh_length_x;
-    let v27 = v9 * v21;
-    let v28 = v7 * v23;
-    let v29 = v27 + v28;
-    let v30 = v29 * p.thigh_length_y;
-    let v31 = v26 - v30;
-    let v32 = v20 + v31;
-    let v33 = v9 * p.thigh_origin_x;
-    let v34 = v7 * p.thigh_origin_y;
-    let v35 = v33 + v34;
-    let v36 = v6 + v35;
-    let v37 = p.thigh_length_x * v29;
-    let v38 = v25 * p.thigh_length_y;
-    let v39 = v37 + v38;
-    let v40 = v36 + v39;
-    let (v43, v41) = q_4.sin_cos();
-    let v42 = v25 * v41;
-    let v44 = v29 * v43;
-    let v45 = v42 - v44;
-    let v46 = v45 * p.shin_length_x;
-    let v47 = v29 * v41;
-    let v48 = v25 * v43;
-    let v49 = v47 + v48;
-    let v50 = v49 * p.shin_length_y;
-    let v51 = v46 - v50;
-    let v52 = v32 + v51;
-    let v53 = p.shin_length_x * v49;
-    let v54 = v45 * p.shin_length_y;
-    let v55 = v53 + v54;
-    let v56 = v40 + v55;
+    let v2 = v1 + p.slide_y_length_x;
+    let v3 = p.slide_x_length_y + q_1;
+    let v4 = p.slide_x_origin_y + v3;
+    let v5 = v4 + p.slide_y_length_y;
+    let (v8, v6) = q_2.sincos();
+    let v7 = v6 * p.torso_length_x;
+    let v9 = v8 * p.torso_length_y;
+    let v10 = v7 - v9;
+    let v11 = v2 + v10;
+    let v12 = p.torso_length_x * v8;
+    let v13 = v6 * p.torso_length_y;
+    let v14 = v12 + v13;
+    let v15 = v5 + v14;
+    let v16 = v6 * p.thigh_origin_x;
+    let v17 = v8 * p.thigh_origin_y;
+    let v18 = v16 - v17;
+    let v19 = v2 + v18;
+    let (v22, v20) = q_3.sincos();
+    let v21 = v6 * v20;
+    let v23 = v8 * v22;
+    let v24 = v21 - v23;
+    let v25 = v24 * p.thigh_length_x;
+    let v26 = v8 * v20;
+    let v27 = v6 * v22;
+    let v28 = v26 + v27;
+    let v29 = v28 * p.thigh_length_y;
+    let v30 = v25 - v29;
+    let v31 = v19 + v30;
+    let v32 = v8 * p.thigh_origin_x;
+    let v33 = v6 * p.thigh_origin_y;
+    let v34 = v32 + v33;
+    let v35 = v5 + v34;
+    let v36 = p.thigh_length_x * v28;
+    let v37 = v24 * p.thigh_length_y;
+    let v38 = v36 + v37;
+    let v39 = v35 + v38;
+    let (v42, v40) = q_4.sincos();
+    let v41 = v24 * v40;
+    let v43 = v28 * v42;
+    let v44 = v41 - v43;
+    let v45 = v44 * p.shin_length_x;
+    let v46 = v28 * v40;
+    let v47 = v24 * v42;
+    let v48 = v46 + v47;
+    let v49 = v48 * p.shin_length_y;
+    let v50 = v45 - v49;
+    let v51 = v31 + v50;
+    let v52 = p.shin_length_x * v48;
+    let v53 = v44 * p.shin_length_y;
+    let v54 = v52 + v53;
+    let v55 = v39 + v54;
     SMatrix::from_data(
-        ArrayStorage([[v1, v2], [v3, v6], [v12, v16], [v32, v40], [v52, v56]]),
+        ArrayStorage([
+            [v1, p.prepared[31]],
+            [v2, v5],
+            [v11, v15],
+            [v31, v39],
+            [v51, v55],
+        ]),
     )
 }
 /// Closure points a, b of each closure in the base frame.
@@ -1497,12 +1379,12 @@ pub fn contact_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
     let v2 = v1 + p.slide_y_length_x;
-    let (v5, v3) = q_2.sin_cos();
+    let (v5, v3) = q_2.sincos();
     let v4 = v3 * p.thigh_origin_x;
     let v6 = v5 * p.thigh_origin_y;
     let v7 = v4 - v6;
     let v8 = v2 + v7;
-    let (v11, v9) = q_3.sin_cos();
+    let (v11, v9) = q_3.sincos();
     let v10 = v3 * v9;
     let v12 = v5 * v11;
     let v13 = v10 - v12;
@@ -1513,7 +1395,7 @@ pub fn contact_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T
     let v18 = v17 * p.thigh_length_y;
     let v19 = v14 - v18;
     let v20 = v8 + v19;
-    let (v23, v21) = q_4.sin_cos();
+    let (v23, v21) = q_4.sincos();
     let v22 = v13 * v21;
     let v24 = v17 * v23;
     let v25 = v22 - v24;
@@ -1544,12 +1426,12 @@ pub fn contact_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T
 /// `J_c(q) = ∂x_c/∂q`.
 pub fn contact_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
-    let (v0, v3) = q_2.sin_cos();
-    let (v4, v1) = q_3.sin_cos();
+    let (v0, v3) = q_2.sincos();
+    let (v4, v1) = q_3.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
-    let (v12, v7) = q_4.sin_cos();
+    let (v12, v7) = q_4.sincos();
     let v8 = v6 * v7;
     let v9 = v1 * v3;
     let v10 = v0 * v4;
@@ -1605,12 +1487,12 @@ pub fn contact_bias<T: Real>(
     let v0 = qd_2 + qd_3;
     let v1 = v0 + qd_4;
     let v2 = v1 * v1;
-    let (v6, v3) = q_2.sin_cos();
-    let (v7, v4) = q_3.sin_cos();
+    let (v6, v3) = q_2.sincos();
+    let (v7, v4) = q_3.sincos();
     let v5 = v3 * v4;
     let v8 = v6 * v7;
     let v9 = v5 - v8;
-    let (v15, v10) = q_4.sin_cos();
+    let (v15, v10) = q_4.sincos();
     let v11 = v9 * v10;
     let v12 = v4 * v6;
     let v13 = v3 * v7;
@@ -1661,304 +1543,211 @@ pub fn dynamics_terms<T: Real>(
     p: &Params<T>,
 ) -> (SMatrix<T, 5, 5>, SVector<T, 5>, SMatrix<T, 0, 5>, SVector<T, 0>) {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
-    let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
-    let v0 = p.thigh_mass + p.shin_mass;
-    let v1 = p.torso_mass + v0;
-    let v2 = p.slide_y_mass + v1;
-    let v3 = p.slide_x_mass + v2;
-    let (v33, v4) = q_2.sin_cos();
-    let v5 = p.torso_mass * p.torso_com_y;
-    let (v6, v19) = q_3.sin_cos();
-    let v7 = p.thigh_mass * p.thigh_com_x;
-    let (v11, v8) = q_4.sin_cos();
-    let v9 = p.shin_mass * p.shin_com_x;
-    let v10 = v8 * v9;
-    let v12 = p.shin_mass * p.shin_com_y;
-    let v13 = v11 * v12;
-    let v14 = v10 - v13;
-    let v15 = p.shin_mass * p.thigh_length_x;
-    let v16 = v14 + v15;
-    let v17 = v7 + v16;
-    let v18 = v6 * v17;
-    let v20 = p.thigh_mass * p.thigh_com_y;
-    let v21 = v9 * v11;
-    let v22 = v8 * v12;
-    let v23 = v21 + v22;
-    let v24 = p.shin_mass * p.thigh_length_y;
-    let v25 = v23 + v24;
-    let v26 = v20 + v25;
-    let v27 = v19 * v26;
-    let v28 = v18 + v27;
-    let v29 = v0 * p.thigh_origin_y;
-    let v30 = v28 + v29;
-    let v31 = v5 + v30;
-    let v32 = v4 * v31;
-    let v34 = p.torso_mass * p.torso_com_x;
-    let v35 = v17 * v19;
-    let v36 = v6 * v26;
-    let v37 = v35 - v36;
-    let v38 = v0 * p.thigh_origin_x;
-    let v39 = v37 + v38;
-    let v40 = v34 + v39;
-    let v41 = v33 * v40;
-    let v42 = v32 + v41;
-    let v43 = -v42;
-    let v44 = v4 * v28;
-    let v45 = v33 * v37;
-    let v46 = v44 + v45;
-    let v47 = -v46;
-    let v48 = v19 * v23;
-    let v49 = v6 * v14;
-    let v50 = v48 + v49;
-    let v51 = v4 * v50;
-    let v52 = v14 * v19;
-    let v53 = v6 * v23;
-    let v54 = v52 - v53;
-    let v55 = v33 * v54;
-    let v56 = v51 + v55;
-    let v57 = -v56;
-    let v58 = v4 * v40;
-    let v59 = v31 * v33;
-    let v60 = v58 - v59;
-    let v61 = v4 * v37;
-    let v62 = v28 * v33;
-    let v63 = v61 - v62;
-    let v64 = v4 * v54;
-    let v65 = v33 * v50;
-    let v66 = v64 - v65;
-    let v67 = p.torso_com_x * p.torso_com_x;
-    let v68 = p.torso_com_y * p.torso_com_y;
-    let v69 = v67 + v68;
-    let v70 = p.torso_mass * v69;
-    let v71 = p.torso_inertia + v70;
-    let v72 = p.thigh_com_x * p.thigh_com_x;
-    let v73 = p.thigh_com_y * p.thigh_com_y;
-    let v74 = v72 + v73;
-    let v75 = p.thigh_mass * v74;
-    let v76 = p.thigh_inertia + v75;
-    let v77 = p.shin_com_x * p.shin_com_x;
-    let v78 = p.shin_com_y * p.shin_com_y;
-    let v79 = v77 + v78;
-    let v80 = p.shin_mass * v79;
-    let v81 = p.shin_inertia + v80;
-    let v82 = v9 * p.thigh_length_x;
-    let v83 = v12 * p.thigh_length_y;
-    let v84 = v82 + v83;
-    let v85 = v8 * v84;
-    let v86 = v12 * p.thigh_length_x;
-    let v87 = v9 * p.thigh_length_y;
-    let v88 = v86 - v87;
-    let v89 = v11 * v88;
-    let v90 = v85 - v89;
-    let v91 = v90 + v90;
-    let v92 = v81 + v91;
-    let v93 = p.thigh_length_x * p.thigh_length_x;
-    let v94 = p.thigh_length_y * p.thigh_length_y;
-    let v95 = v93 + v94;
-    let v96 = p.shin_mass * v95;
-    let v97 = v92 + v96;
-    let v98 = v76 + v97;
-    let v99 = v37 * p.thigh_origin_x;
-    let v100 = v28 * p.thigh_origin_y;
-    let v101 = v99 + v100;
-    let v102 = v101 + v101;
-    let v103 = v98 + v102;
-    let v104 = p.thigh_origin_x * p.thigh_origin_x;
-    let v105 = p.thigh_origin_y * p.thigh_origin_y;
-    let v106 = v104 + v105;
-    let v107 = v0 * v106;
-    let v108 = v103 + v107;
-    let v109 = v71 + v108;
-    let v110 = v98 + v101;
-    let v111 = v87 - v86;
-    let v112 = v11 * v111;
-    let v113 = v85 + v112;
-    let v114 = v81 + v113;
-    let v115 = p.thigh_origin_x * v54;
-    let v116 = p.thigh_origin_y * v50;
-    let v117 = v115 + v116;
-    let v118 = v114 + v117;
-    let v119 = p.thigh_gear_ratio * p.thigh_gear_ratio;
-    let v120 = p.thigh_rotor_inertia * v119;
-    let v121 = v98 + v120;
-    let v122 = p.shin_gear_ratio * p.shin_gear_ratio;
-    let v123 = p.shin_rotor_inertia * v122;
-    let v124 = v81 + v123;
-    let v125 = qd_2 * qd_2;
-    let v126 = v60 * v125;
-    let v127 = v63 + v63;
-    let v128 = qd_2 * qd_3;
-    let v129 = v127 * v128;
-    let v130 = v126 + v129;
-    let v131 = v66 + v66;
-    let v132 = qd_2 * qd_4;
-    let v133 = v131 * v132;
-    let v134 = v130 + v133;
-    let v135 = qd_3 * qd_3;
-    let v136 = v63 * v135;
-    let v137 = v134 + v136;
-    let v138 = qd_3 * qd_4;
-    let v139 = v131 * v138;
-    let v140 = v137 + v139;
-    let v141 = qd_4 * qd_4;
-    let v142 = v66 * v141;
-    let v143 = v140 + v142;
-    let v144 = v3 * p.gravity_x;
-    let v145 = v143 + v144;
-    let v146 = -v145;
-    let v147 = v42 * v125;
-    let v148 = v46 + v46;
-    let v149 = v128 * v148;
-    let v150 = v147 + v149;
-    let v151 = v56 + v56;
-    let v152 = v132 * v151;
-    let v153 = v150 + v152;
-    let v154 = v46 * v135;
-    let v155 = v153 + v154;
-    let v156 = v138 * v151;
-    let v157 = v155 + v156;
-    let v158 = v56 * v141;
-    let v159 = v157 + v158;
-    let v160 = v2 * p.gravity_y;
-    let v161 = v159 + v160;
-    let v162 = -v161;
-    let v163 = v63 - v63;
-    let v164 = qd_3 * qd_0;
-    let v165 = v163 * v164;
-    let v166 = v66 - v66;
-    let v167 = qd_4 * qd_0;
-    let v168 = v166 * v167;
-    let v169 = v165 + v168;
-    let v170 = v46 - v46;
-    let v171 = qd_3 * qd_1;
-    let v172 = v170 * v171;
-    let v173 = v169 + v172;
-    let v174 = v56 - v56;
-    let v175 = qd_4 * qd_1;
-    let v176 = v174 * v175;
-    let v177 = v173 + v176;
-    let v178 = p.thigh_origin_y * v37;
-    let v179 = v28 * p.thigh_origin_x;
+    let [_, _, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let (v18, v0) = q_2.sincos();
+    let (v1, v9) = q_3.sincos();
+    let (v4, v2) = q_4.sincos();
+    let v3 = v2 * p.prepared[4];
+    let v5 = v4 * p.prepared[5];
+    let v6 = v3 - v5;
+    let v7 = p.prepared[3] + v6;
+    let v8 = v1 * v7;
+    let v10 = p.prepared[4] * v4;
+    let v11 = v2 * p.prepared[5];
+    let v12 = v10 + v11;
+    let v13 = p.prepared[6] + v12;
+    let v14 = v9 * v13;
+    let v15 = v8 + v14;
+    let v16 = p.prepared[2] + v15;
+    let v17 = v0 * v16;
+    let v19 = v7 * v9;
+    let v20 = v1 * v13;
+    let v21 = v19 - v20;
+    let v22 = p.prepared[7] + v21;
+    let v23 = v18 * v22;
+    let v24 = v17 + v23;
+    let v25 = -v24;
+    let v26 = v0 * v15;
+    let v27 = v18 * v21;
+    let v28 = v26 + v27;
+    let v29 = -v28;
+    let v30 = v9 * v12;
+    let v31 = v1 * v6;
+    let v32 = v30 + v31;
+    let v33 = v0 * v32;
+    let v34 = v6 * v9;
+    let v35 = v1 * v12;
+    let v36 = v34 - v35;
+    let v37 = v18 * v36;
+    let v38 = v33 + v37;
+    let v39 = -v38;
+    let v40 = v0 * v22;
+    let v41 = v16 * v18;
+    let v42 = v40 - v41;
+    let v43 = v0 * v21;
+    let v44 = v15 * v18;
+    let v45 = v43 - v44;
+    let v46 = v0 * v36;
+    let v47 = v18 * v32;
+    let v48 = v46 - v47;
+    let v49 = v2 * p.prepared[11];
+    let v50 = v4 * p.prepared[12];
+    let v51 = v49 - v50;
+    let v52 = v51 + v51;
+    let v53 = p.prepared[10] + v52;
+    let v54 = p.prepared[8] + v53;
+    let v55 = p.thigh_origin_x * v21;
+    let v56 = p.thigh_origin_y * v15;
+    let v57 = v55 + v56;
+    let v58 = v57 + v57;
+    let v59 = v54 + v58;
+    let v60 = v53 + v57;
+    let v61 = v4 * p.prepared[13];
+    let v62 = v49 + v61;
+    let v63 = p.prepared[9] + v62;
+    let v64 = p.thigh_origin_x * v36;
+    let v65 = p.thigh_origin_y * v32;
+    let v66 = v64 + v65;
+    let v67 = v63 + v66;
+    let v68 = v52 + p.prepared[14];
+    let v69 = qd_2 * qd_2;
+    let v70 = v0 * p.torso_com_x;
+    let v71 = p.torso_com_y * v18;
+    let v72 = v70 - v71;
+    let v73 = v69 * v72;
+    let v74 = p.torso_mass * v73;
+    let v75 = qd_2 + qd_3;
+    let v76 = v75 * v75;
+    let v77 = v0 * v9;
+    let v78 = v1 * v18;
+    let v79 = v77 - v78;
+    let v80 = p.thigh_com_x * v79;
+    let v81 = v9 * v18;
+    let v82 = v0 * v1;
+    let v83 = v81 + v82;
+    let v84 = p.thigh_com_y * v83;
+    let v85 = v80 - v84;
+    let v86 = v76 * v85;
+    let v87 = v0 * p.thigh_origin_x;
+    let v88 = p.thigh_origin_y * v18;
+    let v89 = v87 - v88;
+    let v90 = v69 * v89;
+    let v91 = v86 + v90;
+    let v92 = p.thigh_mass * v91;
+    let v93 = v74 + v92;
+    let v94 = v75 + qd_4;
+    let v95 = v94 * v94;
+    let v96 = v2 * v79;
+    let v97 = v4 * v83;
+    let v98 = v96 - v97;
+    let v99 = p.shin_com_x * v98;
+    let v100 = v2 * v83;
+    let v101 = v4 * v79;
+    let v102 = v100 + v101;
+    let v103 = p.shin_com_y * v102;
+    let v104 = v99 - v103;
+    let v105 = v95 * v104;
+    let v106 = p.thigh_length_x * v79;
+    let v107 = p.thigh_length_y * v83;
+    let v108 = v106 - v107;
+    let v109 = v76 * v108;
+    let v110 = v105 + v109;
+    let v111 = v90 + v110;
+    let v112 = p.shin_mass * v111;
+    let v113 = v93 + v112;
+    let v114 = v113 + p.prepared[16];
+    let v115 = -v114;
+    let v116 = v18 * p.torso_com_x;
+    let v117 = v0 * p.torso_com_y;
+    let v118 = v116 + v117;
+    let v119 = v69 * v118;
+    let v120 = p.torso_mass * v119;
+    let v121 = p.thigh_com_x * v83;
+    let v122 = p.thigh_com_y * v79;
+    let v123 = v121 + v122;
+    let v124 = v76 * v123;
+    let v125 = v18 * p.thigh_origin_x;
+    let v126 = v0 * p.thigh_origin_y;
+    let v127 = v125 + v126;
+    let v128 = v69 * v127;
+    let v129 = v124 + v128;
+    let v130 = p.thigh_mass * v129;
+    let v131 = v120 + v130;
+    let v132 = p.shin_com_x * v102;
+    let v133 = p.shin_com_y * v98;
+    let v134 = v132 + v133;
+    let v135 = v95 * v134;
+    let v136 = p.thigh_length_x * v83;
+    let v137 = p.thigh_length_y * v79;
+    let v138 = v136 + v137;
+    let v139 = v76 * v138;
+    let v140 = v135 + v139;
+    let v141 = v128 + v140;
+    let v142 = p.shin_mass * v141;
+    let v143 = v131 + v142;
+    let v144 = v143 + p.prepared[17];
+    let v145 = -v144;
+    let v146 = v73 * v118;
+    let v147 = v72 * v119;
+    let v148 = v146 - v147;
+    let v149 = p.torso_mass * v148;
+    let v150 = v123 + v127;
+    let v151 = v91 * v150;
+    let v152 = v85 + v89;
+    let v153 = v129 * v152;
+    let v154 = v151 - v153;
+    let v155 = p.thigh_mass * v154;
+    let v156 = v149 + v155;
+    let v157 = v134 + v138;
+    let v158 = v127 + v157;
+    let v159 = v111 * v158;
+    let v160 = v104 + v108;
+    let v161 = v89 + v160;
+    let v162 = v141 * v161;
+    let v163 = v159 - v162;
+    let v164 = p.shin_mass * v163;
+    let v165 = v156 + v164;
+    let v166 = v0 * p.prepared[18];
+    let v167 = v18 * p.prepared[19];
+    let v168 = v166 + v167;
+    let v169 = v79 * p.prepared[20];
+    let v170 = v83 * p.prepared[21];
+    let v171 = v169 + v170;
+    let v172 = v98 * p.prepared[22];
+    let v173 = v102 * p.prepared[23];
+    let v174 = v172 + v173;
+    let v175 = v171 + v174;
+    let v176 = v168 + v175;
+    let v177 = v165 + v176;
+    let v178 = v91 * v123;
+    let v179 = v85 * v129;
     let v180 = v178 - v179;
-    let v181 = v180 + v180;
-    let v182 = v128 * v181;
-    let v183 = v177 + v182;
-    let v184 = v11 * v84;
-    let v185 = v8 * v88;
-    let v186 = v184 + v185;
-    let v187 = -v186;
-    let v188 = v187 + v187;
-    let v189 = p.thigh_origin_y * v54;
-    let v190 = p.thigh_origin_x * v50;
-    let v191 = v189 - v190;
-    let v192 = v191 + v191;
-    let v193 = v188 + v192;
-    let v194 = v132 * v193;
-    let v195 = v183 + v194;
-    let v196 = v135 * v180;
-    let v197 = v195 + v196;
-    let v198 = v188 + v191;
-    let v199 = v191 + v198;
-    let v200 = v138 * v199;
-    let v201 = v197 + v200;
-    let v202 = v8 * v111;
-    let v203 = v202 - v184;
-    let v204 = v191 + v203;
-    let v205 = v141 * v204;
-    let v206 = v201 + v205;
-    let v207 = v5 + v29;
-    let v208 = p.gravity_x * v207;
-    let v209 = v34 + v38;
-    let v210 = p.gravity_y * v209;
-    let v211 = v208 - v210;
-    let v212 = v4 * v211;
-    let v213 = p.gravity_x * v209;
-    let v214 = p.gravity_y * v207;
-    let v215 = v213 + v214;
-    let v216 = v33 * v215;
-    let v217 = v212 + v216;
-    let v218 = v4 * v19;
-    let v219 = v6 * v33;
-    let v220 = v218 - v219;
-    let v221 = v20 + v24;
-    let v222 = p.gravity_x * v221;
-    let v223 = v7 + v15;
-    let v224 = p.gravity_y * v223;
-    let v225 = v222 - v224;
-    let v226 = v220 * v225;
-    let v227 = v19 * v33;
-    let v228 = v4 * v6;
-    let v229 = v227 + v228;
-    let v230 = p.gravity_x * v223;
-    let v231 = p.gravity_y * v221;
-    let v232 = v230 + v231;
-    let v233 = v229 * v232;
-    let v234 = v226 + v233;
-    let v235 = v8 * v220;
-    let v236 = v11 * v229;
-    let v237 = v235 - v236;
-    let v238 = v12 * p.gravity_x;
-    let v239 = v9 * p.gravity_y;
-    let v240 = v238 - v239;
-    let v241 = v237 * v240;
-    let v242 = v8 * v229;
-    let v243 = v11 * v220;
-    let v244 = v242 + v243;
-    let v245 = v9 * p.gravity_x;
-    let v246 = v12 * p.gravity_y;
-    let v247 = v245 + v246;
-    let v248 = v244 * v247;
-    let v249 = v241 + v248;
-    let v250 = v234 + v249;
-    let v251 = v217 + v250;
-    let v252 = v206 + v251;
-    let v253 = qd_2 * qd_0;
-    let v254 = v163 * v253;
-    let v255 = v168 + v254;
-    let v256 = qd_2 * qd_1;
-    let v257 = v170 * v256;
-    let v258 = v255 + v257;
-    let v259 = v176 + v258;
-    let v260 = v125 * v180;
-    let v261 = v259 - v260;
-    let v262 = v198 - v191;
-    let v263 = v132 * v262;
-    let v264 = v261 + v263;
-    let v265 = v138 * v188;
-    let v266 = v264 + v265;
-    let v267 = v141 * v203;
-    let v268 = v266 + v267;
-    let v269 = v250 + v268;
-    let v270 = v166 * v253;
-    let v271 = v164 * v166;
-    let v272 = v270 + v271;
-    let v273 = v174 * v256;
-    let v274 = v272 + v273;
-    let v275 = v171 * v174;
-    let v276 = v274 + v275;
-    let v277 = v193 * T::lit(0.5);
-    let v278 = v125 * v277;
-    let v279 = v276 - v278;
-    let v280 = v191 - v198;
-    let v281 = v128 * v280;
-    let v282 = v279 + v281;
-    let v283 = v135 * v186;
-    let v284 = v282 + v283;
-    let v285 = q_4 - p.knee_spring_rest;
-    let v286 = p.knee_spring_stiffness * v285;
-    let v287 = v249 + v286;
-    let v288 = v284 + v287;
+    let v181 = p.thigh_mass * v180;
+    let v182 = v111 * v157;
+    let v183 = v141 * v160;
+    let v184 = v182 - v183;
+    let v185 = p.shin_mass * v184;
+    let v186 = v181 + v185;
+    let v187 = v175 + v186;
+    let v188 = v111 * v134;
+    let v189 = v104 * v141;
+    let v190 = v188 - v189;
+    let v191 = p.shin_mass * v190;
+    let v192 = q_4 - p.knee_spring_rest;
+    let v193 = p.knee_spring_stiffness * v192;
+    let v194 = v174 + v193;
+    let v195 = v191 + v194;
     (
         SMatrix::from_data(
             ArrayStorage([
-                [v3, T::lit(0.0), v43, v47, v57],
-                [T::lit(0.0), v2, v60, v63, v66],
-                [v43, v60, v109, v110, v118],
-                [v47, v63, v110, v121, v114],
-                [v57, v66, v118, v114, v124],
+                [p.prepared[1], T::lit(0.0), v25, v29, v39],
+                [T::lit(0.0), p.prepared[0], v42, v45, v48],
+                [v25, v42, v59, v60, v67],
+                [v29, v45, v60, v68, v63],
+                [v39, v48, v67, v63, p.prepared[15]],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v146, v162, v252, v269, v288]])),
+        SMatrix::from_data(ArrayStorage([[v115, v145, v177, v187, v195]])),
         SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
         SMatrix::from_data(ArrayStorage([[]])),
     )

@@ -20,10 +20,9 @@ pub const NK: usize = 2;
 /// The `minitaur_hopper` leg: 5 joints, 1 closure(s), actuated joints ["upper_a", "upper_b"]. Generated from `leg-models/specs/minitaur_hopper.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct MinitaurHopper;
-/// Physical parameters; `Default` holds the spec's values. Change them at run
-/// time without regenerating.
+/// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Params<T> {
+pub struct ParamValues<T> {
     /// Gravity in the base frame, x [m/s²].
     pub gravity_x: T,
     /// Gravity in the base frame, y [m/s²].
@@ -119,7 +118,7 @@ pub struct Params<T> {
     /// Viscous damping of the joint of `lower_b` [N m s/rad].
     pub lower_b_damping: T,
 }
-impl<T: Real> Default for Params<T> {
+impl<T: Real> Default for ParamValues<T> {
     fn default() -> Self {
         Self {
             gravity_x: T::lit(0.0),
@@ -170,6 +169,50 @@ impl<T: Real> Default for Params<T> {
             lower_b_inertia: T::lit(0.00016666666666666666),
             lower_b_damping: T::lit(0.0),
         }
+    }
+}
+/// Physical parameters, ready for evaluation: the values (read as fields through
+/// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
+/// computed once when a value changes instead of in every call. `Default` holds
+/// the spec's values; change them at run time, without regenerating, with
+/// [`Params::update`] or [`Parameters::set`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params<T> {
+    values: ParamValues<T>,
+    prepared: [T; 34],
+}
+impl<T: Real> Params<T> {
+    /// Parameters of these values.
+    pub fn new(values: ParamValues<T>) -> Self {
+        Self {
+            prepared: prepare(&values).data.0[0],
+            values,
+        }
+    }
+    /// The values.
+    pub fn values(&self) -> &ParamValues<T> {
+        &self.values
+    }
+    /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
+    pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
+        change(&mut self.values);
+        *self = Self::new(self.values);
+    }
+}
+impl<T> core::ops::Deref for Params<T> {
+    type Target = ParamValues<T>;
+    fn deref(&self) -> &ParamValues<T> {
+        &self.values
+    }
+}
+impl<T: Real> From<ParamValues<T>> for Params<T> {
+    fn from(values: ParamValues<T>) -> Self {
+        Self::new(values)
+    }
+}
+impl<T: Real> Default for Params<T> {
+    fn default() -> Self {
+        Self::new(ParamValues::default())
     }
 }
 impl<T: Real> Parameters<T> for Params<T> {
@@ -224,107 +267,108 @@ impl<T: Real> Parameters<T> for Params<T> {
     ];
     fn get(&self, i: usize) -> Option<T> {
         match i {
-            0 => Some(self.gravity_x),
-            1 => Some(self.gravity_y),
-            2 => Some(self.body_origin_x),
-            3 => Some(self.body_origin_y),
-            4 => Some(self.body_length_x),
-            5 => Some(self.body_length_y),
-            6 => Some(self.body_mass),
-            7 => Some(self.body_com_x),
-            8 => Some(self.body_com_y),
-            9 => Some(self.body_inertia),
-            10 => Some(self.body_damping),
-            11 => Some(self.upper_a_origin_x),
-            12 => Some(self.upper_a_origin_y),
-            13 => Some(self.upper_a_length_x),
-            14 => Some(self.upper_a_length_y),
-            15 => Some(self.upper_a_mass),
-            16 => Some(self.upper_a_com_x),
-            17 => Some(self.upper_a_com_y),
-            18 => Some(self.upper_a_inertia),
-            19 => Some(self.upper_a_damping),
-            20 => Some(self.upper_a_rotor_inertia),
-            21 => Some(self.upper_a_gear_ratio),
-            22 => Some(self.lower_a_length_x),
-            23 => Some(self.lower_a_length_y),
-            24 => Some(self.lower_a_mass),
-            25 => Some(self.lower_a_com_x),
-            26 => Some(self.lower_a_com_y),
-            27 => Some(self.lower_a_inertia),
-            28 => Some(self.lower_a_damping),
-            29 => Some(self.upper_b_origin_x),
-            30 => Some(self.upper_b_origin_y),
-            31 => Some(self.upper_b_length_x),
-            32 => Some(self.upper_b_length_y),
-            33 => Some(self.upper_b_mass),
-            34 => Some(self.upper_b_com_x),
-            35 => Some(self.upper_b_com_y),
-            36 => Some(self.upper_b_inertia),
-            37 => Some(self.upper_b_damping),
-            38 => Some(self.upper_b_rotor_inertia),
-            39 => Some(self.upper_b_gear_ratio),
-            40 => Some(self.lower_b_length_x),
-            41 => Some(self.lower_b_length_y),
-            42 => Some(self.lower_b_mass),
-            43 => Some(self.lower_b_com_x),
-            44 => Some(self.lower_b_com_y),
-            45 => Some(self.lower_b_inertia),
-            46 => Some(self.lower_b_damping),
+            0 => Some(self.values.gravity_x),
+            1 => Some(self.values.gravity_y),
+            2 => Some(self.values.body_origin_x),
+            3 => Some(self.values.body_origin_y),
+            4 => Some(self.values.body_length_x),
+            5 => Some(self.values.body_length_y),
+            6 => Some(self.values.body_mass),
+            7 => Some(self.values.body_com_x),
+            8 => Some(self.values.body_com_y),
+            9 => Some(self.values.body_inertia),
+            10 => Some(self.values.body_damping),
+            11 => Some(self.values.upper_a_origin_x),
+            12 => Some(self.values.upper_a_origin_y),
+            13 => Some(self.values.upper_a_length_x),
+            14 => Some(self.values.upper_a_length_y),
+            15 => Some(self.values.upper_a_mass),
+            16 => Some(self.values.upper_a_com_x),
+            17 => Some(self.values.upper_a_com_y),
+            18 => Some(self.values.upper_a_inertia),
+            19 => Some(self.values.upper_a_damping),
+            20 => Some(self.values.upper_a_rotor_inertia),
+            21 => Some(self.values.upper_a_gear_ratio),
+            22 => Some(self.values.lower_a_length_x),
+            23 => Some(self.values.lower_a_length_y),
+            24 => Some(self.values.lower_a_mass),
+            25 => Some(self.values.lower_a_com_x),
+            26 => Some(self.values.lower_a_com_y),
+            27 => Some(self.values.lower_a_inertia),
+            28 => Some(self.values.lower_a_damping),
+            29 => Some(self.values.upper_b_origin_x),
+            30 => Some(self.values.upper_b_origin_y),
+            31 => Some(self.values.upper_b_length_x),
+            32 => Some(self.values.upper_b_length_y),
+            33 => Some(self.values.upper_b_mass),
+            34 => Some(self.values.upper_b_com_x),
+            35 => Some(self.values.upper_b_com_y),
+            36 => Some(self.values.upper_b_inertia),
+            37 => Some(self.values.upper_b_damping),
+            38 => Some(self.values.upper_b_rotor_inertia),
+            39 => Some(self.values.upper_b_gear_ratio),
+            40 => Some(self.values.lower_b_length_x),
+            41 => Some(self.values.lower_b_length_y),
+            42 => Some(self.values.lower_b_mass),
+            43 => Some(self.values.lower_b_com_x),
+            44 => Some(self.values.lower_b_com_y),
+            45 => Some(self.values.lower_b_inertia),
+            46 => Some(self.values.lower_b_damping),
             _ => None,
         }
     }
     fn set(&mut self, i: usize, value: T) -> bool {
         match i {
-            0 => self.gravity_x = value,
-            1 => self.gravity_y = value,
-            2 => self.body_origin_x = value,
-            3 => self.body_origin_y = value,
-            4 => self.body_length_x = value,
-            5 => self.body_length_y = value,
-            6 => self.body_mass = value,
-            7 => self.body_com_x = value,
-            8 => self.body_com_y = value,
-            9 => self.body_inertia = value,
-            10 => self.body_damping = value,
-            11 => self.upper_a_origin_x = value,
-            12 => self.upper_a_origin_y = value,
-            13 => self.upper_a_length_x = value,
-            14 => self.upper_a_length_y = value,
-            15 => self.upper_a_mass = value,
-            16 => self.upper_a_com_x = value,
-            17 => self.upper_a_com_y = value,
-            18 => self.upper_a_inertia = value,
-            19 => self.upper_a_damping = value,
-            20 => self.upper_a_rotor_inertia = value,
-            21 => self.upper_a_gear_ratio = value,
-            22 => self.lower_a_length_x = value,
-            23 => self.lower_a_length_y = value,
-            24 => self.lower_a_mass = value,
-            25 => self.lower_a_com_x = value,
-            26 => self.lower_a_com_y = value,
-            27 => self.lower_a_inertia = value,
-            28 => self.lower_a_damping = value,
-            29 => self.upper_b_origin_x = value,
-            30 => self.upper_b_origin_y = value,
-            31 => self.upper_b_length_x = value,
-            32 => self.upper_b_length_y = value,
-            33 => self.upper_b_mass = value,
-            34 => self.upper_b_com_x = value,
-            35 => self.upper_b_com_y = value,
-            36 => self.upper_b_inertia = value,
-            37 => self.upper_b_damping = value,
-            38 => self.upper_b_rotor_inertia = value,
-            39 => self.upper_b_gear_ratio = value,
-            40 => self.lower_b_length_x = value,
-            41 => self.lower_b_length_y = value,
-            42 => self.lower_b_mass = value,
-            43 => self.lower_b_com_x = value,
-            44 => self.lower_b_com_y = value,
-            45 => self.lower_b_inertia = value,
-            46 => self.lower_b_damping = value,
+            0 => self.values.gravity_x = value,
+            1 => self.values.gravity_y = value,
+            2 => self.values.body_origin_x = value,
+            3 => self.values.body_origin_y = value,
+            4 => self.values.body_length_x = value,
+            5 => self.values.body_length_y = value,
+            6 => self.values.body_mass = value,
+            7 => self.values.body_com_x = value,
+            8 => self.values.body_com_y = value,
+            9 => self.values.body_inertia = value,
+            10 => self.values.body_damping = value,
+            11 => self.values.upper_a_origin_x = value,
+            12 => self.values.upper_a_origin_y = value,
+            13 => self.values.upper_a_length_x = value,
+            14 => self.values.upper_a_length_y = value,
+            15 => self.values.upper_a_mass = value,
+            16 => self.values.upper_a_com_x = value,
+            17 => self.values.upper_a_com_y = value,
+            18 => self.values.upper_a_inertia = value,
+            19 => self.values.upper_a_damping = value,
+            20 => self.values.upper_a_rotor_inertia = value,
+            21 => self.values.upper_a_gear_ratio = value,
+            22 => self.values.lower_a_length_x = value,
+            23 => self.values.lower_a_length_y = value,
+            24 => self.values.lower_a_mass = value,
+            25 => self.values.lower_a_com_x = value,
+            26 => self.values.lower_a_com_y = value,
+            27 => self.values.lower_a_inertia = value,
+            28 => self.values.lower_a_damping = value,
+            29 => self.values.upper_b_origin_x = value,
+            30 => self.values.upper_b_origin_y = value,
+            31 => self.values.upper_b_length_x = value,
+            32 => self.values.upper_b_length_y = value,
+            33 => self.values.upper_b_mass = value,
+            34 => self.values.upper_b_com_x = value,
+            35 => self.values.upper_b_com_y = value,
+            36 => self.values.upper_b_inertia = value,
+            37 => self.values.upper_b_damping = value,
+            38 => self.values.upper_b_rotor_inertia = value,
+            39 => self.values.upper_b_gear_ratio = value,
+            40 => self.values.lower_b_length_x = value,
+            41 => self.values.lower_b_length_y = value,
+            42 => self.values.lower_b_mass = value,
+            43 => self.values.lower_b_com_x = value,
+            44 => self.values.lower_b_com_y = value,
+            45 => self.values.lower_b_inertia = value,
+            46 => self.values.lower_b_damping = value,
             _ => return false,
         }
+        *self = Self::new(self.values);
         true
     }
 }
@@ -452,136 +496,225 @@ impl ContactModel<NQ, NC, NU, NK> for MinitaurHopper {
         contact_bias(q, qd, p)
     }
 }
+/// The parameter-only quantities the terms read (products of masses, lengths and
+/// centres of mass, inertias about the joints, …), computed once per parameter set
+/// by [`Params::new`].
+pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 34> {
+    let v0 = values.upper_b_mass + values.lower_b_mass;
+    let v1 = values.body_mass + v0;
+    let v2 = values.upper_a_mass + values.lower_a_mass;
+    let v3 = v1 + v2;
+    let v4 = values.upper_a_mass * values.upper_a_com_x;
+    let v5 = values.lower_a_mass * values.upper_a_length_x;
+    let v6 = v4 + v5;
+    let v7 = values.lower_a_mass * values.lower_a_com_x;
+    let v8 = values.lower_a_mass * values.lower_a_com_y;
+    let v9 = values.upper_a_mass * values.upper_a_com_y;
+    let v10 = values.lower_a_mass * values.upper_a_length_y;
+    let v11 = v9 + v10;
+    let v12 = values.upper_b_mass * values.upper_b_com_x;
+    let v13 = values.lower_b_mass * values.upper_b_length_x;
+    let v14 = v12 + v13;
+    let v15 = values.lower_b_mass * values.lower_b_com_x;
+    let v16 = values.lower_b_mass * values.lower_b_com_y;
+    let v17 = values.upper_b_mass * values.upper_b_com_y;
+    let v18 = values.lower_b_mass * values.upper_b_length_y;
+    let v19 = v17 + v18;
+    let v20 = values.upper_a_com_x * values.upper_a_com_x;
+    let v21 = values.upper_a_com_y * values.upper_a_com_y;
+    let v22 = v20 + v21;
+    let v23 = values.upper_a_mass * v22;
+    let v24 = values.upper_a_inertia + v23;
+    let v25 = values.lower_a_com_x * values.lower_a_com_x;
+    let v26 = values.lower_a_com_y * values.lower_a_com_y;
+    let v27 = v25 + v26;
+    let v28 = values.lower_a_mass * v27;
+    let v29 = values.lower_a_inertia + v28;
+    let v30 = v24 + v29;
+    let v31 = values.upper_a_length_x * values.upper_a_length_x;
+    let v32 = values.upper_a_length_y * values.upper_a_length_y;
+    let v33 = v31 + v32;
+    let v34 = values.lower_a_mass * v33;
+    let v35 = v30 + v34;
+    let v36 = values.upper_a_gear_ratio * values.upper_a_gear_ratio;
+    let v37 = values.upper_a_rotor_inertia * v36;
+    let v38 = v35 + v37;
+    let v39 = values.upper_a_length_x * v7;
+    let v40 = v8 * values.upper_a_length_y;
+    let v41 = v39 + v40;
+    let v42 = values.upper_a_length_x * v8;
+    let v43 = v7 * values.upper_a_length_y;
+    let v44 = v42 - v43;
+    let v45 = v43 - v42;
+    let v46 = values.upper_b_com_x * values.upper_b_com_x;
+    let v47 = values.upper_b_com_y * values.upper_b_com_y;
+    let v48 = v46 + v47;
+    let v49 = values.upper_b_mass * v48;
+    let v50 = values.upper_b_inertia + v49;
+    let v51 = values.lower_b_com_x * values.lower_b_com_x;
+    let v52 = values.lower_b_com_y * values.lower_b_com_y;
+    let v53 = v51 + v52;
+    let v54 = values.lower_b_mass * v53;
+    let v55 = values.lower_b_inertia + v54;
+    let v56 = v50 + v55;
+    let v57 = values.upper_b_length_x * values.upper_b_length_x;
+    let v58 = values.upper_b_length_y * values.upper_b_length_y;
+    let v59 = v57 + v58;
+    let v60 = values.lower_b_mass * v59;
+    let v61 = v56 + v60;
+    let v62 = values.upper_b_gear_ratio * values.upper_b_gear_ratio;
+    let v63 = values.upper_b_rotor_inertia * v62;
+    let v64 = v61 + v63;
+    let v65 = values.upper_b_length_x * v15;
+    let v66 = v16 * values.upper_b_length_y;
+    let v67 = v65 + v66;
+    let v68 = values.upper_b_length_x * v16;
+    let v69 = v15 * values.upper_b_length_y;
+    let v70 = v68 - v69;
+    let v71 = v69 - v68;
+    let v72 = v3 * values.gravity_y;
+    let v73 = v11 * values.gravity_x;
+    let v74 = v6 * values.gravity_y;
+    let v75 = v73 - v74;
+    let v76 = v6 * values.gravity_x;
+    let v77 = v11 * values.gravity_y;
+    let v78 = v76 + v77;
+    let v79 = v8 * values.gravity_x;
+    let v80 = v7 * values.gravity_y;
+    let v81 = v79 - v80;
+    let v82 = v7 * values.gravity_x;
+    let v83 = v8 * values.gravity_y;
+    let v84 = v82 + v83;
+    let v85 = v19 * values.gravity_x;
+    let v86 = v14 * values.gravity_y;
+    let v87 = v85 - v86;
+    let v88 = v14 * values.gravity_x;
+    let v89 = v19 * values.gravity_y;
+    let v90 = v88 + v89;
+    let v91 = v16 * values.gravity_x;
+    let v92 = v15 * values.gravity_y;
+    let v93 = v91 - v92;
+    let v94 = v15 * values.gravity_x;
+    let v95 = v16 * values.gravity_y;
+    let v96 = v94 + v95;
+    let v97 = -v72;
+    let v98 = values.body_origin_x + values.upper_a_origin_x;
+    let v99 = values.body_origin_x + values.upper_b_origin_x;
+    let v100 = v3 * values.body_origin_x;
+    let v101 = values.gravity_x * v100;
+    let v102 = values.body_mass * values.body_com_x;
+    let v103 = v2 * values.upper_a_origin_x;
+    let v104 = v102 + v103;
+    let v105 = v0 * values.upper_b_origin_x;
+    let v106 = v104 + v105;
+    let v107 = values.gravity_x * v106;
+    let v108 = values.body_mass * values.body_com_y;
+    let v109 = v2 * values.upper_a_origin_y;
+    let v110 = v108 + v109;
+    let v111 = v0 * values.upper_b_origin_y;
+    let v112 = v110 + v111;
+    let v113 = values.gravity_y * v112;
+    let v114 = v107 + v113;
+    let v115 = values.body_origin_x + values.body_length_x;
+    SMatrix::from_data(
+        ArrayStorage([
+            [
+                v3,
+                v6,
+                v7,
+                v8,
+                v11,
+                v14,
+                v15,
+                v16,
+                v19,
+                v29,
+                v38,
+                v41,
+                v44,
+                v45,
+                v55,
+                v64,
+                v67,
+                v70,
+                v71,
+                v72,
+                v75,
+                v78,
+                v81,
+                v84,
+                v87,
+                v90,
+                v93,
+                v96,
+                v97,
+                v98,
+                v99,
+                v101,
+                v114,
+                v115,
+            ],
+        ]),
+    )
+}
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
 pub fn mass_matrix<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5> {
     let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
-    let v0 = p.upper_b_mass + p.lower_b_mass;
-    let v1 = p.body_mass + v0;
-    let v2 = p.upper_a_mass + p.lower_a_mass;
-    let v3 = v1 + v2;
-    let (v17, v4) = q_1.sin_cos();
-    let v5 = p.upper_a_mass * p.upper_a_com_x;
-    let (v9, v6) = q_2.sin_cos();
-    let v7 = p.lower_a_mass * p.lower_a_com_x;
-    let v8 = v6 * v7;
-    let v10 = p.lower_a_mass * p.lower_a_com_y;
-    let v11 = v9 * v10;
-    let v12 = v8 - v11;
-    let v13 = p.lower_a_mass * p.upper_a_length_x;
-    let v14 = v12 + v13;
-    let v15 = v5 + v14;
-    let v16 = v4 * v15;
-    let v18 = p.upper_a_mass * p.upper_a_com_y;
-    let v19 = v7 * v9;
-    let v20 = v6 * v10;
-    let v21 = v19 + v20;
-    let v22 = p.lower_a_mass * p.upper_a_length_y;
-    let v23 = v21 + v22;
-    let v24 = v18 + v23;
-    let v25 = v17 * v24;
-    let v26 = v16 - v25;
-    let v27 = v4 * v12;
-    let v28 = v17 * v21;
-    let v29 = v27 - v28;
-    let (v43, v30) = q_3.sin_cos();
-    let v31 = p.upper_b_mass * p.upper_b_com_x;
-    let (v35, v32) = q_4.sin_cos();
-    let v33 = p.lower_b_mass * p.lower_b_com_x;
-    let v34 = v32 * v33;
-    let v36 = p.lower_b_mass * p.lower_b_com_y;
-    let v37 = v35 * v36;
-    let v38 = v34 - v37;
-    let v39 = p.lower_b_mass * p.upper_b_length_x;
-    let v40 = v38 + v39;
-    let v41 = v31 + v40;
-    let v42 = v30 * v41;
-    let v44 = p.upper_b_mass * p.upper_b_com_y;
-    let v45 = v33 * v35;
-    let v46 = v32 * v36;
-    let v47 = v45 + v46;
-    let v48 = p.lower_b_mass * p.upper_b_length_y;
-    let v49 = v47 + v48;
+    let (v8, v0) = q_1.sincos();
+    let (v3, v1) = q_2.sincos();
+    let v2 = v1 * p.prepared[2];
+    let v4 = v3 * p.prepared[3];
+    let v5 = v2 - v4;
+    let v6 = p.prepared[1] + v5;
+    let v7 = v0 * v6;
+    let v9 = p.prepared[2] * v3;
+    let v10 = v1 * p.prepared[3];
+    let v11 = v9 + v10;
+    let v12 = p.prepared[4] + v11;
+    let v13 = v8 * v12;
+    let v14 = v7 - v13;
+    let v15 = v0 * v5;
+    let v16 = v8 * v11;
+    let v17 = v15 - v16;
+    let (v26, v18) = q_3.sincos();
+    let (v21, v19) = q_4.sincos();
+    let v20 = v19 * p.prepared[6];
+    let v22 = v21 * p.prepared[7];
+    let v23 = v20 - v22;
+    let v24 = p.prepared[5] + v23;
+    let v25 = v18 * v24;
+    let v27 = p.prepared[6] * v21;
+    let v28 = v19 * p.prepared[7];
+    let v29 = v27 + v28;
+    let v30 = p.prepared[8] + v29;
+    let v31 = v26 * v30;
+    let v32 = v25 - v31;
+    let v33 = v18 * v23;
+    let v34 = v26 * v29;
+    let v35 = v33 - v34;
+    let v36 = v1 * p.prepared[11];
+    let v37 = v3 * p.prepared[12];
+    let v38 = v36 - v37;
+    let v39 = v38 + v38;
+    let v40 = p.prepared[10] + v39;
+    let v41 = v3 * p.prepared[13];
+    let v42 = v36 + v41;
+    let v43 = p.prepared[9] + v42;
+    let v44 = v19 * p.prepared[16];
+    let v45 = v21 * p.prepared[17];
+    let v46 = v44 - v45;
+    let v47 = v46 + v46;
+    let v48 = p.prepared[15] + v47;
+    let v49 = v21 * p.prepared[18];
     let v50 = v44 + v49;
-    let v51 = v43 * v50;
-    let v52 = v42 - v51;
-    let v53 = v30 * v38;
-    let v54 = v43 * v47;
-    let v55 = v53 - v54;
-    let v56 = p.upper_a_com_x * p.upper_a_com_x;
-    let v57 = p.upper_a_com_y * p.upper_a_com_y;
-    let v58 = v56 + v57;
-    let v59 = p.upper_a_mass * v58;
-    let v60 = p.upper_a_inertia + v59;
-    let v61 = p.lower_a_com_x * p.lower_a_com_x;
-    let v62 = p.lower_a_com_y * p.lower_a_com_y;
-    let v63 = v61 + v62;
-    let v64 = p.lower_a_mass * v63;
-    let v65 = p.lower_a_inertia + v64;
-    let v66 = v7 * p.upper_a_length_x;
-    let v67 = v10 * p.upper_a_length_y;
-    let v68 = v66 + v67;
-    let v69 = v6 * v68;
-    let v70 = v10 * p.upper_a_length_x;
-    let v71 = v7 * p.upper_a_length_y;
-    let v72 = v70 - v71;
-    let v73 = v9 * v72;
-    let v74 = v69 - v73;
-    let v75 = v74 + v74;
-    let v76 = v65 + v75;
-    let v77 = p.upper_a_length_x * p.upper_a_length_x;
-    let v78 = p.upper_a_length_y * p.upper_a_length_y;
-    let v79 = v77 + v78;
-    let v80 = p.lower_a_mass * v79;
-    let v81 = v76 + v80;
-    let v82 = v60 + v81;
-    let v83 = p.upper_a_gear_ratio * p.upper_a_gear_ratio;
-    let v84 = p.upper_a_rotor_inertia * v83;
-    let v85 = v82 + v84;
-    let v86 = v71 - v70;
-    let v87 = v9 * v86;
-    let v88 = v69 + v87;
-    let v89 = v65 + v88;
-    let v90 = p.upper_b_com_x * p.upper_b_com_x;
-    let v91 = p.upper_b_com_y * p.upper_b_com_y;
-    let v92 = v90 + v91;
-    let v93 = p.upper_b_mass * v92;
-    let v94 = p.upper_b_inertia + v93;
-    let v95 = p.lower_b_com_x * p.lower_b_com_x;
-    let v96 = p.lower_b_com_y * p.lower_b_com_y;
-    let v97 = v95 + v96;
-    let v98 = p.lower_b_mass * v97;
-    let v99 = p.lower_b_inertia + v98;
-    let v100 = v33 * p.upper_b_length_x;
-    let v101 = v36 * p.upper_b_length_y;
-    let v102 = v100 + v101;
-    let v103 = v32 * v102;
-    let v104 = v36 * p.upper_b_length_x;
-    let v105 = v33 * p.upper_b_length_y;
-    let v106 = v104 - v105;
-    let v107 = v35 * v106;
-    let v108 = v103 - v107;
-    let v109 = v108 + v108;
-    let v110 = v99 + v109;
-    let v111 = p.upper_b_length_x * p.upper_b_length_x;
-    let v112 = p.upper_b_length_y * p.upper_b_length_y;
-    let v113 = v111 + v112;
-    let v114 = p.lower_b_mass * v113;
-    let v115 = v110 + v114;
-    let v116 = v94 + v115;
-    let v117 = p.upper_b_gear_ratio * p.upper_b_gear_ratio;
-    let v118 = p.upper_b_rotor_inertia * v117;
-    let v119 = v116 + v118;
-    let v120 = v105 - v104;
-    let v121 = v35 * v120;
-    let v122 = v103 + v121;
-    let v123 = v99 + v122;
+    let v51 = p.prepared[14] + v50;
     SMatrix::from_data(
         ArrayStorage([
-            [v3, v26, v29, v52, v55],
-            [v26, v85, v89, T::lit(0.0), T::lit(0.0)],
-            [v29, v89, v65, T::lit(0.0), T::lit(0.0)],
-            [v52, T::lit(0.0), T::lit(0.0), v119, v123],
-            [v55, T::lit(0.0), T::lit(0.0), v123, v99],
+            [p.prepared[0], v14, v17, v32, v35],
+            [v14, v40, v43, T::lit(0.0), T::lit(0.0)],
+            [v17, v43, p.prepared[9], T::lit(0.0), T::lit(0.0)],
+            [v32, T::lit(0.0), T::lit(0.0), v48, v51],
+            [v35, T::lit(0.0), T::lit(0.0), v51, p.prepared[14]],
         ]),
     )
 }
@@ -592,271 +725,148 @@ pub fn bias_forces<T: Real>(
     p: &Params<T>,
 ) -> SVector<T, 5> {
     let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
-    let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
-    let v0 = p.upper_a_mass * p.upper_a_com_x;
-    let (v4, v1) = q_2.sin_cos();
-    let v2 = p.lower_a_mass * p.lower_a_com_x;
-    let v3 = v1 * v2;
-    let v5 = p.lower_a_mass * p.lower_a_com_y;
-    let v6 = v4 * v5;
-    let v7 = v3 - v6;
-    let v8 = p.lower_a_mass * p.upper_a_length_x;
-    let v9 = v7 + v8;
-    let v10 = v0 + v9;
-    let (v11, v20) = q_1.sin_cos();
-    let v12 = v10 * v11;
-    let v13 = p.upper_a_mass * p.upper_a_com_y;
-    let v14 = v2 * v4;
-    let v15 = v1 * v5;
-    let v16 = v14 + v15;
-    let v17 = p.lower_a_mass * p.upper_a_length_y;
-    let v18 = v16 + v17;
-    let v19 = v13 + v18;
-    let v21 = v19 * v20;
-    let v22 = v12 + v21;
-    let v23 = qd_1 * qd_1;
-    let v24 = v22 * v23;
-    let v25 = v16 * v20;
-    let v26 = v7 * v11;
-    let v27 = v25 + v26;
-    let v28 = v27 + v27;
-    let v29 = qd_1 * qd_2;
-    let v30 = v28 * v29;
-    let v31 = v24 + v30;
-    let v32 = qd_2 * qd_2;
-    let v33 = v27 * v32;
-    let v34 = v31 + v33;
-    let v35 = p.upper_b_mass * p.upper_b_com_x;
-    let (v39, v36) = q_4.sin_cos();
-    let v37 = p.lower_b_mass * p.lower_b_com_x;
-    let v38 = v36 * v37;
-    let v40 = p.lower_b_mass * p.lower_b_com_y;
-    let v41 = v39 * v40;
-    let v42 = v38 - v41;
-    let v43 = p.lower_b_mass * p.upper_b_length_x;
-    let v44 = v42 + v43;
-    let v45 = v35 + v44;
-    let (v46, v55) = q_3.sin_cos();
-    let v47 = v45 * v46;
-    let v48 = p.upper_b_mass * p.upper_b_com_y;
-    let v49 = v37 * v39;
-    let v50 = v36 * v40;
-    let v51 = v49 + v50;
-    let v52 = p.lower_b_mass * p.upper_b_length_y;
-    let v53 = v51 + v52;
-    let v54 = v48 + v53;
-    let v56 = v54 * v55;
-    let v57 = v47 + v56;
-    let v58 = qd_3 * qd_3;
-    let v59 = v57 * v58;
-    let v60 = v34 + v59;
-    let v61 = v51 * v55;
-    let v62 = v42 * v46;
-    let v63 = v61 + v62;
-    let v64 = v63 + v63;
-    let v65 = qd_3 * qd_4;
-    let v66 = v64 * v65;
-    let v67 = v60 + v66;
-    let v68 = qd_4 * qd_4;
-    let v69 = v63 * v68;
-    let v70 = v67 + v69;
-    let v71 = p.upper_b_mass + p.lower_b_mass;
-    let v72 = p.body_mass + v71;
-    let v73 = p.upper_a_mass + p.lower_a_mass;
-    let v74 = v72 + v73;
-    let v75 = v74 * p.gravity_y;
-    let v76 = v70 + v75;
-    let v77 = -v76;
-    let v78 = v27 - v27;
-    let v79 = qd_2 * qd_0;
-    let v80 = v78 * v79;
-    let v81 = v2 * p.upper_a_length_x;
-    let v82 = v5 * p.upper_a_length_y;
-    let v83 = v81 + v82;
-    let v84 = v4 * v83;
-    let v85 = v5 * p.upper_a_length_x;
-    let v86 = v2 * p.upper_a_length_y;
-    let v87 = v85 - v86;
-    let v88 = v1 * v87;
-    let v89 = v84 + v88;
-    let v90 = -v89;
-    let v91 = v90 + v90;
-    let v92 = v29 * v91;
-    let v93 = v80 + v92;
-    let v94 = v86 - v85;
-    let v95 = v1 * v94;
-    let v96 = v95 - v84;
-    let v97 = v32 * v96;
-    let v98 = v93 + v97;
-    let v99 = v13 + v17;
-    let v100 = p.gravity_x * v99;
-    let v101 = v0 + v8;
-    let v102 = p.gravity_y * v101;
-    let v103 = v100 - v102;
-    let v104 = v20 * v103;
-    let v105 = p.gravity_x * v101;
-    let v106 = p.gravity_y * v99;
-    let v107 = v105 + v106;
-    let v108 = v11 * v107;
-    let v109 = v104 + v108;
-    let v110 = v1 * v20;
-    let v111 = v4 * v11;
-    let v112 = v110 - v111;
-    let v113 = v5 * p.gravity_x;
-    let v114 = v2 * p.gravity_y;
-    let v115 = v113 - v114;
-    let v116 = v112 * v115;
-    let v117 = v1 * v11;
-    let v118 = v4 * v20;
-    let v119 = v117 + v118;
-    let v120 = v2 * p.gravity_x;
-    let v121 = v5 * p.gravity_y;
-    let v122 = v120 + v121;
-    let v123 = v119 * v122;
-    let v124 = v116 + v123;
-    let v125 = v109 + v124;
-    let v126 = v98 + v125;
-    let v127 = qd_1 * qd_0;
-    let v128 = v78 * v127;
-    let v129 = v23 * v89;
-    let v130 = v128 + v129;
-    let v131 = v124 + v130;
-    let v132 = v63 - v63;
-    let v133 = qd_4 * qd_0;
-    let v134 = v132 * v133;
-    let v135 = v37 * p.upper_b_length_x;
-    let v136 = v40 * p.upper_b_length_y;
-    let v137 = v135 + v136;
-    let v138 = v39 * v137;
-    let v139 = v40 * p.upper_b_length_x;
-    let v140 = v37 * p.upper_b_length_y;
-    let v141 = v139 - v140;
-    let v142 = v36 * v141;
-    let v143 = v138 + v142;
-    let v144 = -v143;
-    let v145 = v144 + v144;
-    let v146 = v65 * v145;
-    let v147 = v134 + v146;
-    let v148 = v140 - v139;
-    let v149 = v36 * v148;
-    let v150 = v149 - v138;
-    let v151 = v68 * v150;
-    let v152 = v147 + v151;
-    let v153 = v48 + v52;
-    let v154 = p.gravity_x * v153;
-    let v155 = v35 + v43;
-    let v156 = p.gravity_y * v155;
-    let v157 = v154 - v156;
-    let v158 = v55 * v157;
-    let v159 = p.gravity_x * v155;
-    let v160 = p.gravity_y * v153;
-    let v161 = v159 + v160;
-    let v162 = v46 * v161;
-    let v163 = v158 + v162;
-    let v164 = v36 * v55;
-    let v165 = v39 * v46;
-    let v166 = v164 - v165;
-    let v167 = v40 * p.gravity_x;
-    let v168 = v37 * p.gravity_y;
-    let v169 = v167 - v168;
-    let v170 = v166 * v169;
-    let v171 = v36 * v46;
-    let v172 = v39 * v55;
-    let v173 = v171 + v172;
-    let v174 = v37 * p.gravity_x;
-    let v175 = v40 * p.gravity_y;
-    let v176 = v174 + v175;
-    let v177 = v173 * v176;
-    let v178 = v170 + v177;
-    let v179 = v163 + v178;
-    let v180 = v152 + v179;
-    let v181 = qd_3 * qd_0;
-    let v182 = v132 * v181;
-    let v183 = v58 * v143;
-    let v184 = v182 + v183;
-    let v185 = v178 + v184;
-    SMatrix::from_data(ArrayStorage([[v77, v126, v131, v180, v185]]))
+    let [_, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let (v2, v0) = q_2.sincos();
+    let v1 = v0 * p.prepared[2];
+    let v3 = v2 * p.prepared[3];
+    let v4 = v1 - v3;
+    let v5 = p.prepared[1] + v4;
+    let (v6, v12) = q_1.sincos();
+    let v7 = v5 * v6;
+    let v8 = p.prepared[2] * v2;
+    let v9 = v0 * p.prepared[3];
+    let v10 = v8 + v9;
+    let v11 = p.prepared[4] + v10;
+    let v13 = v11 * v12;
+    let v14 = v7 + v13;
+    let v15 = qd_1 * qd_1;
+    let v16 = v14 * v15;
+    let v17 = v10 * v12;
+    let v18 = v4 * v6;
+    let v19 = v17 + v18;
+    let v20 = v19 + v19;
+    let v21 = qd_1 * qd_2;
+    let v22 = v20 * v21;
+    let v23 = v16 + v22;
+    let v24 = qd_2 * qd_2;
+    let v25 = v19 * v24;
+    let v26 = v23 + v25;
+    let (v29, v27) = q_4.sincos();
+    let v28 = v27 * p.prepared[6];
+    let v30 = v29 * p.prepared[7];
+    let v31 = v28 - v30;
+    let v32 = p.prepared[5] + v31;
+    let (v33, v39) = q_3.sincos();
+    let v34 = v32 * v33;
+    let v35 = p.prepared[6] * v29;
+    let v36 = v27 * p.prepared[7];
+    let v37 = v35 + v36;
+    let v38 = p.prepared[8] + v37;
+    let v40 = v38 * v39;
+    let v41 = v34 + v40;
+    let v42 = qd_3 * qd_3;
+    let v43 = v41 * v42;
+    let v44 = v26 + v43;
+    let v45 = v37 * v39;
+    let v46 = v31 * v33;
+    let v47 = v45 + v46;
+    let v48 = v47 + v47;
+    let v49 = qd_3 * qd_4;
+    let v50 = v48 * v49;
+    let v51 = v44 + v50;
+    let v52 = qd_4 * qd_4;
+    let v53 = v47 * v52;
+    let v54 = v51 + v53;
+    let v55 = v54 + p.prepared[19];
+    let v56 = -v55;
+    let v57 = v2 * p.prepared[11];
+    let v58 = v0 * p.prepared[12];
+    let v59 = v57 + v58;
+    let v60 = -v59;
+    let v61 = v60 + v60;
+    let v62 = v21 * v61;
+    let v63 = v0 * p.prepared[13];
+    let v64 = v63 - v57;
+    let v65 = v24 * v64;
+    let v66 = v62 + v65;
+    let v67 = v12 * p.prepared[20];
+    let v68 = v6 * p.prepared[21];
+    let v69 = v67 + v68;
+    let v70 = v0 * v12;
+    let v71 = v2 * v6;
+    let v72 = v70 - v71;
+    let v73 = v72 * p.prepared[22];
+    let v74 = v0 * v6;
+    let v75 = v2 * v12;
+    let v76 = v74 + v75;
+    let v77 = v76 * p.prepared[23];
+    let v78 = v73 + v77;
+    let v79 = v69 + v78;
+    let v80 = v66 + v79;
+    let v81 = v15 * v59;
+    let v82 = v78 + v81;
+    let v83 = v29 * p.prepared[16];
+    let v84 = v27 * p.prepared[17];
+    let v85 = v83 + v84;
+    let v86 = -v85;
+    let v87 = v86 + v86;
+    let v88 = v49 * v87;
+    let v89 = v27 * p.prepared[18];
+    let v90 = v89 - v83;
+    let v91 = v52 * v90;
+    let v92 = v88 + v91;
+    let v93 = v39 * p.prepared[24];
+    let v94 = v33 * p.prepared[25];
+    let v95 = v93 + v94;
+    let v96 = v27 * v39;
+    let v97 = v29 * v33;
+    let v98 = v96 - v97;
+    let v99 = v98 * p.prepared[26];
+    let v100 = v27 * v33;
+    let v101 = v29 * v39;
+    let v102 = v100 + v101;
+    let v103 = v102 * p.prepared[27];
+    let v104 = v99 + v103;
+    let v105 = v95 + v104;
+    let v106 = v92 + v105;
+    let v107 = v42 * v85;
+    let v108 = v104 + v107;
+    SMatrix::from_data(ArrayStorage([[v56, v80, v82, v106, v108]]))
 }
 /// `G(q) = ∂V/∂q`.
 pub fn gravity_forces<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
     let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
-    let v0 = p.upper_b_mass + p.lower_b_mass;
-    let v1 = p.body_mass + v0;
-    let v2 = p.upper_a_mass + p.lower_a_mass;
-    let v3 = v1 + v2;
-    let v4 = v3 * p.gravity_y;
-    let v5 = -v4;
-    let (v17, v6) = q_1.sin_cos();
-    let v7 = p.upper_a_mass * p.upper_a_com_y;
-    let v8 = p.lower_a_mass * p.upper_a_length_y;
-    let v9 = v7 + v8;
-    let v10 = p.gravity_x * v9;
-    let v11 = p.upper_a_mass * p.upper_a_com_x;
-    let v12 = p.lower_a_mass * p.upper_a_length_x;
+    let (v2, v0) = q_1.sincos();
+    let v1 = v0 * p.prepared[20];
+    let v3 = v2 * p.prepared[21];
+    let v4 = v1 + v3;
+    let (v7, v5) = q_2.sincos();
+    let v6 = v0 * v5;
+    let v8 = v2 * v7;
+    let v9 = v6 - v8;
+    let v10 = v9 * p.prepared[22];
+    let v11 = v2 * v5;
+    let v12 = v0 * v7;
     let v13 = v11 + v12;
-    let v14 = p.gravity_y * v13;
-    let v15 = v10 - v14;
-    let v16 = v6 * v15;
-    let v18 = p.gravity_x * v13;
-    let v19 = p.gravity_y * v9;
-    let v20 = v18 + v19;
-    let v21 = v17 * v20;
-    let v22 = v16 + v21;
-    let (v25, v23) = q_2.sin_cos();
-    let v24 = v6 * v23;
-    let v26 = v17 * v25;
-    let v27 = v24 - v26;
-    let v28 = p.lower_a_mass * p.lower_a_com_y;
-    let v29 = p.gravity_x * v28;
-    let v30 = p.lower_a_mass * p.lower_a_com_x;
-    let v31 = p.gravity_y * v30;
-    let v32 = v29 - v31;
-    let v33 = v27 * v32;
-    let v34 = v17 * v23;
-    let v35 = v6 * v25;
-    let v36 = v34 + v35;
-    let v37 = p.gravity_x * v30;
-    let v38 = p.gravity_y * v28;
-    let v39 = v37 + v38;
-    let v40 = v36 * v39;
-    let v41 = v33 + v40;
-    let v42 = v22 + v41;
-    let (v54, v43) = q_3.sin_cos();
-    let v44 = p.upper_b_mass * p.upper_b_com_y;
-    let v45 = p.lower_b_mass * p.upper_b_length_y;
-    let v46 = v44 + v45;
-    let v47 = p.gravity_x * v46;
-    let v48 = p.upper_b_mass * p.upper_b_com_x;
-    let v49 = p.lower_b_mass * p.upper_b_length_x;
-    let v50 = v48 + v49;
-    let v51 = p.gravity_y * v50;
-    let v52 = v47 - v51;
-    let v53 = v43 * v52;
-    let v55 = p.gravity_x * v50;
-    let v56 = p.gravity_y * v46;
-    let v57 = v55 + v56;
-    let v58 = v54 * v57;
-    let v59 = v53 + v58;
-    let (v62, v60) = q_4.sin_cos();
-    let v61 = v43 * v60;
-    let v63 = v54 * v62;
-    let v64 = v61 - v63;
-    let v65 = p.lower_b_mass * p.lower_b_com_y;
-    let v66 = p.gravity_x * v65;
-    let v67 = p.lower_b_mass * p.lower_b_com_x;
-    let v68 = p.gravity_y * v67;
-    let v69 = v66 - v68;
-    let v70 = v64 * v69;
-    let v71 = v54 * v60;
-    let v72 = v43 * v62;
-    let v73 = v71 + v72;
-    let v74 = p.gravity_x * v67;
-    let v75 = p.gravity_y * v65;
-    let v76 = v74 + v75;
-    let v77 = v73 * v76;
-    let v78 = v70 + v77;
-    let v79 = v59 + v78;
-    SMatrix::from_data(ArrayStorage([[v5, v42, v41, v79, v78]]))
+    let v14 = v13 * p.prepared[23];
+    let v15 = v10 + v14;
+    let v16 = v4 + v15;
+    let (v19, v17) = q_3.sincos();
+    let v18 = v17 * p.prepared[24];
+    let v20 = v19 * p.prepared[25];
+    let v21 = v18 + v20;
+    let (v24, v22) = q_4.sincos();
+    let v23 = v17 * v22;
+    let v25 = v19 * v24;
+    let v26 = v23 - v25;
+    let v27 = v26 * p.prepared[26];
+    let v28 = v19 * v22;
+    let v29 = v17 * v24;
+    let v30 = v28 + v29;
+    let v31 = v30 * p.prepared[27];
+    let v32 = v27 + v31;
+    let v33 = v21 + v32;
+    SMatrix::from_data(ArrayStorage([[p.prepared[28], v16, v15, v33, v32]]))
 }
 /// Viscous joint damping `D q̇`.
 pub fn damping_forces<T: Real>(qd: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
@@ -871,62 +881,60 @@ pub fn damping_forces<T: Real>(qd: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 
 /// `φ(q)`: point a minus point b of each closure.
 pub fn closure_residual<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
-    let v0 = p.body_origin_x + p.upper_a_origin_x;
-    let (v3, v1) = q_1.sin_cos();
-    let v2 = v1 * p.upper_a_length_x;
-    let v4 = v3 * p.upper_a_length_y;
-    let v5 = v2 - v4;
-    let v6 = v0 + v5;
-    let (v9, v7) = q_2.sin_cos();
-    let v8 = v1 * v7;
-    let v10 = v3 * v9;
-    let v11 = v8 - v10;
-    let v12 = v11 * p.lower_a_length_x;
-    let v13 = v3 * v7;
-    let v14 = v1 * v9;
-    let v15 = v13 + v14;
-    let v16 = v15 * p.lower_a_length_y;
-    let v17 = v12 - v16;
-    let v18 = v6 + v17;
-    let v19 = p.body_origin_x + p.upper_b_origin_x;
-    let (v22, v20) = q_3.sin_cos();
-    let v21 = v20 * p.upper_b_length_x;
-    let v23 = v22 * p.upper_b_length_y;
-    let v24 = v21 - v23;
-    let v25 = v19 + v24;
-    let (v28, v26) = q_4.sin_cos();
+    let (v2, v0) = q_1.sincos();
+    let v1 = v0 * p.upper_a_length_x;
+    let v3 = v2 * p.upper_a_length_y;
+    let v4 = v1 - v3;
+    let v5 = p.prepared[29] + v4;
+    let (v8, v6) = q_2.sincos();
+    let v7 = v0 * v6;
+    let v9 = v2 * v8;
+    let v10 = v7 - v9;
+    let v11 = v10 * p.lower_a_length_x;
+    let v12 = v2 * v6;
+    let v13 = v0 * v8;
+    let v14 = v12 + v13;
+    let v15 = v14 * p.lower_a_length_y;
+    let v16 = v11 - v15;
+    let v17 = v5 + v16;
+    let (v20, v18) = q_3.sincos();
+    let v19 = v18 * p.upper_b_length_x;
+    let v21 = v20 * p.upper_b_length_y;
+    let v22 = v19 - v21;
+    let v23 = p.prepared[30] + v22;
+    let (v26, v24) = q_4.sincos();
+    let v25 = v18 * v24;
     let v27 = v20 * v26;
-    let v29 = v22 * v28;
-    let v30 = v27 - v29;
-    let v31 = v30 * p.lower_b_length_x;
-    let v32 = v22 * v26;
-    let v33 = v20 * v28;
-    let v34 = v32 + v33;
-    let v35 = v34 * p.lower_b_length_y;
-    let v36 = v31 - v35;
-    let v37 = v25 + v36;
-    let v38 = v18 - v37;
-    let v39 = p.body_origin_y + q_0;
-    let v40 = v39 + p.upper_a_origin_y;
-    let v41 = p.upper_a_length_x * v3;
-    let v42 = v1 * p.upper_a_length_y;
-    let v43 = v41 + v42;
-    let v44 = v40 + v43;
-    let v45 = p.lower_a_length_x * v15;
-    let v46 = v11 * p.lower_a_length_y;
-    let v47 = v45 + v46;
-    let v48 = v44 + v47;
-    let v49 = v39 + p.upper_b_origin_y;
-    let v50 = p.upper_b_length_x * v22;
-    let v51 = v20 * p.upper_b_length_y;
-    let v52 = v50 + v51;
-    let v53 = v49 + v52;
-    let v54 = p.lower_b_length_x * v34;
-    let v55 = v30 * p.lower_b_length_y;
-    let v56 = v54 + v55;
-    let v57 = v53 + v56;
-    let v58 = v48 - v57;
-    SMatrix::from_data(ArrayStorage([[v38, v58]]))
+    let v28 = v25 - v27;
+    let v29 = v28 * p.lower_b_length_x;
+    let v30 = v20 * v24;
+    let v31 = v18 * v26;
+    let v32 = v30 + v31;
+    let v33 = v32 * p.lower_b_length_y;
+    let v34 = v29 - v33;
+    let v35 = v23 + v34;
+    let v36 = v17 - v35;
+    let v37 = p.body_origin_y + q_0;
+    let v38 = v37 + p.upper_a_origin_y;
+    let v39 = p.upper_a_length_x * v2;
+    let v40 = v0 * p.upper_a_length_y;
+    let v41 = v39 + v40;
+    let v42 = v38 + v41;
+    let v43 = p.lower_a_length_x * v14;
+    let v44 = v10 * p.lower_a_length_y;
+    let v45 = v43 + v44;
+    let v46 = v42 + v45;
+    let v47 = v37 + p.upper_b_origin_y;
+    let v48 = p.upper_b_length_x * v20;
+    let v49 = v18 * p.upper_b_length_y;
+    let v50 = v48 + v49;
+    let v51 = v47 + v50;
+    let v52 = p.lower_b_length_x * v32;
+    let v53 = v28 * p.lower_b_length_y;
+    let v54 = v52 + v53;
+    let v55 = v51 + v54;
+    let v56 = v46 - v55;
+    SMatrix::from_data(ArrayStorage([[v36, v56]]))
 }
 /// `J(q) = ∂φ/∂q`.
 pub fn constraint_jacobian<T: Real>(
@@ -934,8 +942,8 @@ pub fn constraint_jacobian<T: Real>(
     p: &Params<T>,
 ) -> SMatrix<T, 2, 5> {
     let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
-    let (v0, v3) = q_1.sin_cos();
-    let (v4, v1) = q_2.sin_cos();
+    let (v0, v3) = q_1.sincos();
+    let (v4, v1) = q_2.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
@@ -958,8 +966,8 @@ pub fn constraint_jacobian<T: Real>(
     let v23 = v21 - v22;
     let v24 = v20 + v23;
     let v25 = -v12;
-    let (v26, v29) = q_3.sin_cos();
-    let (v30, v27) = q_4.sin_cos();
+    let (v26, v29) = q_3.sincos();
+    let (v30, v27) = q_4.sincos();
     let v28 = v26 * v27;
     let v31 = v29 * v30;
     let v32 = v28 + v31;
@@ -1002,8 +1010,8 @@ pub fn constraint_bias<T: Real>(
     let [_, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
     let v0 = qd_3 + qd_4;
     let v1 = v0 * v0;
-    let (v5, v2) = q_3.sin_cos();
-    let (v6, v3) = q_4.sin_cos();
+    let (v5, v2) = q_3.sincos();
+    let (v6, v3) = q_4.sincos();
     let v4 = v2 * v3;
     let v7 = v5 * v6;
     let v8 = v4 - v7;
@@ -1022,8 +1030,8 @@ pub fn constraint_bias<T: Real>(
     let v21 = v15 + v20;
     let v22 = qd_1 + qd_2;
     let v23 = v22 * v22;
-    let (v27, v24) = q_1.sin_cos();
-    let (v28, v25) = q_2.sin_cos();
+    let (v27, v24) = q_1.sincos();
+    let (v28, v25) = q_2.sincos();
     let v26 = v24 * v25;
     let v29 = v27 * v28;
     let v30 = v26 - v29;
@@ -1065,40 +1073,39 @@ pub fn constraint_bias<T: Real>(
 /// The foot point in the base frame.
 pub fn foot_position<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
     let [q_0, q_1, q_2, _, _] = q.data.0[0];
-    let v0 = p.body_origin_x + p.upper_a_origin_x;
-    let (v3, v1) = q_1.sin_cos();
-    let v2 = v1 * p.upper_a_length_x;
-    let v4 = v3 * p.upper_a_length_y;
-    let v5 = v2 - v4;
-    let v6 = v0 + v5;
-    let (v9, v7) = q_2.sin_cos();
-    let v8 = v1 * v7;
-    let v10 = v3 * v9;
-    let v11 = v8 - v10;
-    let v12 = v11 * p.lower_a_length_x;
-    let v13 = v3 * v7;
-    let v14 = v1 * v9;
-    let v15 = v13 + v14;
-    let v16 = v15 * p.lower_a_length_y;
-    let v17 = v12 - v16;
-    let v18 = v6 + v17;
-    let v19 = p.body_origin_y + q_0;
-    let v20 = v19 + p.upper_a_origin_y;
-    let v21 = p.upper_a_length_x * v3;
-    let v22 = v1 * p.upper_a_length_y;
-    let v23 = v21 + v22;
-    let v24 = v20 + v23;
-    let v25 = p.lower_a_length_x * v15;
-    let v26 = v11 * p.lower_a_length_y;
-    let v27 = v25 + v26;
-    let v28 = v24 + v27;
-    SMatrix::from_data(ArrayStorage([[v18, v28]]))
+    let (v2, v0) = q_1.sincos();
+    let v1 = v0 * p.upper_a_length_x;
+    let v3 = v2 * p.upper_a_length_y;
+    let v4 = v1 - v3;
+    let v5 = p.prepared[29] + v4;
+    let (v8, v6) = q_2.sincos();
+    let v7 = v0 * v6;
+    let v9 = v2 * v8;
+    let v10 = v7 - v9;
+    let v11 = v10 * p.lower_a_length_x;
+    let v12 = v2 * v6;
+    let v13 = v0 * v8;
+    let v14 = v12 + v13;
+    let v15 = v14 * p.lower_a_length_y;
+    let v16 = v11 - v15;
+    let v17 = v5 + v16;
+    let v18 = p.body_origin_y + q_0;
+    let v19 = v18 + p.upper_a_origin_y;
+    let v20 = p.upper_a_length_x * v2;
+    let v21 = v0 * p.upper_a_length_y;
+    let v22 = v20 + v21;
+    let v23 = v19 + v22;
+    let v24 = p.lower_a_length_x * v14;
+    let v25 = v10 * p.lower_a_length_y;
+    let v26 = v24 + v25;
+    let v27 = v23 + v26;
+    SMatrix::from_data(ArrayStorage([[v17, v27]]))
 }
 /// `J_f(q) = ∂(foot)/∂q`.
 pub fn foot_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
     let [_, q_1, q_2, _, _] = q.data.0[0];
-    let (v0, v3) = q_1.sin_cos();
-    let (v4, v1) = q_2.sin_cos();
+    let (v0, v3) = q_1.sincos();
+    let (v4, v1) = q_2.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
@@ -1141,8 +1148,8 @@ pub fn foot_bias<T: Real>(
     let [_, qd_1, qd_2, _, _] = qd.data.0[0];
     let v0 = qd_1 + qd_2;
     let v1 = v0 * v0;
-    let (v5, v2) = q_1.sin_cos();
-    let (v6, v3) = q_2.sin_cos();
+    let (v5, v2) = q_1.sincos();
+    let (v6, v3) = q_2.sincos();
     let v4 = v2 * v3;
     let v7 = v5 * v6;
     let v8 = v4 - v7;
@@ -1180,462 +1187,329 @@ pub fn kinetic_energy<T: Real>(
 ) -> T {
     let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
-    let v0 = p.upper_b_mass + p.lower_b_mass;
-    let v1 = p.body_mass + v0;
-    let v2 = p.upper_a_mass + p.lower_a_mass;
-    let v3 = v1 + v2;
-    let v4 = qd_0 * v3;
-    let (v18, v5) = q_1.sin_cos();
-    let v6 = p.upper_a_mass * p.upper_a_com_x;
-    let (v10, v7) = q_2.sin_cos();
-    let v8 = p.lower_a_mass * p.lower_a_com_x;
-    let v9 = v7 * v8;
-    let v11 = p.lower_a_mass * p.lower_a_com_y;
-    let v12 = v10 * v11;
-    let v13 = v9 - v12;
-    let v14 = p.lower_a_mass * p.upper_a_length_x;
-    let v15 = v13 + v14;
-    let v16 = v6 + v15;
-    let v17 = v5 * v16;
-    let v19 = p.upper_a_mass * p.upper_a_com_y;
-    let v20 = v8 * v10;
-    let v21 = v7 * v11;
-    let v22 = v20 + v21;
-    let v23 = p.lower_a_mass * p.upper_a_length_y;
-    let v24 = v22 + v23;
-    let v25 = v19 + v24;
-    let v26 = v18 * v25;
-    let v27 = v17 - v26;
-    let v28 = v27 * qd_1;
-    let v29 = v4 + v28;
-    let v30 = v5 * v13;
-    let v31 = v18 * v22;
-    let v32 = v30 - v31;
-    let v33 = v32 * qd_2;
-    let v34 = v29 + v33;
-    let (v48, v35) = q_3.sin_cos();
-    let v36 = p.upper_b_mass * p.upper_b_com_x;
-    let (v40, v37) = q_4.sin_cos();
-    let v38 = p.lower_b_mass * p.lower_b_com_x;
-    let v39 = v37 * v38;
-    let v41 = p.lower_b_mass * p.lower_b_com_y;
-    let v42 = v40 * v41;
-    let v43 = v39 - v42;
-    let v44 = p.lower_b_mass * p.upper_b_length_x;
-    let v45 = v43 + v44;
-    let v46 = v36 + v45;
-    let v47 = v35 * v46;
-    let v49 = p.upper_b_mass * p.upper_b_com_y;
-    let v50 = v38 * v40;
-    let v51 = v37 * v41;
-    let v52 = v50 + v51;
-    let v53 = p.lower_b_mass * p.upper_b_length_y;
-    let v54 = v52 + v53;
-    let v55 = v49 + v54;
-    let v56 = v48 * v55;
-    let v57 = v47 - v56;
-    let v58 = v57 * qd_3;
-    let v59 = v34 + v58;
-    let v60 = v35 * v43;
-    let v61 = v48 * v52;
-    let v62 = v60 - v61;
-    let v63 = v62 * qd_4;
-    let v64 = v59 + v63;
-    let v65 = qd_0 * v64;
-    let v66 = qd_0 * v27;
-    let v67 = p.upper_a_com_x * p.upper_a_com_x;
-    let v68 = p.upper_a_com_y * p.upper_a_com_y;
-    let v69 = v67 + v68;
-    let v70 = p.upper_a_mass * v69;
-    let v71 = p.upper_a_inertia + v70;
-    let v72 = p.lower_a_com_x * p.lower_a_com_x;
-    let v73 = p.lower_a_com_y * p.lower_a_com_y;
-    let v74 = v72 + v73;
-    let v75 = p.lower_a_mass * v74;
-    let v76 = p.lower_a_inertia + v75;
-    let v77 = v8 * p.upper_a_length_x;
-    let v78 = v11 * p.upper_a_length_y;
-    let v79 = v77 + v78;
-    let v80 = v7 * v79;
-    let v81 = v11 * p.upper_a_length_x;
-    let v82 = v8 * p.upper_a_length_y;
-    let v83 = v81 - v82;
-    let v84 = v10 * v83;
-    let v85 = v80 - v84;
-    let v86 = v85 + v85;
-    let v87 = v76 + v86;
-    let v88 = p.upper_a_length_x * p.upper_a_length_x;
-    let v89 = p.upper_a_length_y * p.upper_a_length_y;
-    let v90 = v88 + v89;
-    let v91 = p.lower_a_mass * v90;
-    let v92 = v87 + v91;
-    let v93 = v71 + v92;
-    let v94 = p.upper_a_gear_ratio * p.upper_a_gear_ratio;
-    let v95 = p.upper_a_rotor_inertia * v94;
-    let v96 = v93 + v95;
-    let v97 = qd_1 * v96;
-    let v98 = v66 + v97;
-    let v99 = v82 - v81;
-    let v100 = v10 * v99;
-    let v101 = v80 + v100;
-    let v102 = v76 + v101;
-    let v103 = qd_2 * v102;
-    let v104 = v98 + v103;
-    let v105 = qd_1 * v104;
-    let v106 = v65 + v105;
-    let v107 = qd_0 * v32;
-    let v108 = qd_1 * v102;
-    let v109 = v107 + v108;
-    let v110 = qd_2 * v76;
-    let v111 = v109 + v110;
-    let v112 = qd_2 * v111;
-    let v113 = v106 + v112;
-    let v114 = qd_0 * v57;
-    let v115 = p.upper_b_com_x * p.upper_b_com_x;
-    let v116 = p.upper_b_com_y * p.upper_b_com_y;
-    let v117 = v115 + v116;
-    let v118 = p.upper_b_mass * v117;
-    let v119 = p.upper_b_inertia + v118;
-    let v120 = p.lower_b_com_x * p.lower_b_com_x;
-    let v121 = p.lower_b_com_y * p.lower_b_com_y;
-    let v122 = v120 + v121;
-    let v123 = p.lower_b_mass * v122;
-    let v124 = p.lower_b_inertia + v123;
-    let v125 = v38 * p.upper_b_length_x;
-    let v126 = v41 * p.upper_b_length_y;
-    let v127 = v125 + v126;
-    let v128 = v37 * v127;
-    let v129 = v41 * p.upper_b_length_x;
-    let v130 = v38 * p.upper_b_length_y;
-    let v131 = v129 - v130;
-    let v132 = v40 * v131;
-    let v133 = v128 - v132;
-    let v134 = v133 + v133;
-    let v135 = v124 + v134;
-    let v136 = p.upper_b_length_x * p.upper_b_length_x;
-    let v137 = p.upper_b_length_y * p.upper_b_length_y;
-    let v138 = v136 + v137;
-    let v139 = p.lower_b_mass * v138;
-    let v140 = v135 + v139;
-    let v141 = v119 + v140;
-    let v142 = p.upper_b_gear_ratio * p.upper_b_gear_ratio;
-    let v143 = p.upper_b_rotor_inertia * v142;
-    let v144 = v141 + v143;
-    let v145 = qd_3 * v144;
-    let v146 = v114 + v145;
-    let v147 = v130 - v129;
-    let v148 = v40 * v147;
-    let v149 = v128 + v148;
-    let v150 = v124 + v149;
-    let v151 = qd_4 * v150;
-    let v152 = v146 + v151;
-    let v153 = qd_3 * v152;
-    let v154 = v113 + v153;
-    let v155 = qd_0 * v62;
-    let v156 = qd_3 * v150;
-    let v157 = v155 + v156;
-    let v158 = qd_4 * v124;
-    let v159 = v157 + v158;
-    let v160 = qd_4 * v159;
-    let v161 = v154 + v160;
-    let v162 = T::lit(0.5) * v161;
-    v162
+    let v0 = qd_0 * p.prepared[0];
+    let (v9, v1) = q_1.sincos();
+    let (v4, v2) = q_2.sincos();
+    let v3 = v2 * p.prepared[2];
+    let v5 = v4 * p.prepared[3];
+    let v6 = v3 - v5;
+    let v7 = p.prepared[1] + v6;
+    let v8 = v1 * v7;
+    let v10 = p.prepared[2] * v4;
+    let v11 = v2 * p.prepared[3];
+    let v12 = v10 + v11;
+    let v13 = p.prepared[4] + v12;
+    let v14 = v9 * v13;
+    let v15 = v8 - v14;
+    let v16 = v15 * qd_1;
+    let v17 = v0 + v16;
+    let v18 = v1 * v6;
+    let v19 = v9 * v12;
+    let v20 = v18 - v19;
+    let v21 = v20 * qd_2;
+    let v22 = v17 + v21;
+    let (v31, v23) = q_3.sincos();
+    let (v26, v24) = q_4.sincos();
+    let v25 = v24 * p.prepared[6];
+    let v27 = v26 * p.prepared[7];
+    let v28 = v25 - v27;
+    let v29 = p.prepared[5] + v28;
+    let v30 = v23 * v29;
+    let v32 = p.prepared[6] * v26;
+    let v33 = v24 * p.prepared[7];
+    let v34 = v32 + v33;
+    let v35 = p.prepared[8] + v34;
+    let v36 = v31 * v35;
+    let v37 = v30 - v36;
+    let v38 = v37 * qd_3;
+    let v39 = v22 + v38;
+    let v40 = v23 * v28;
+    let v41 = v31 * v34;
+    let v42 = v40 - v41;
+    let v43 = v42 * qd_4;
+    let v44 = v39 + v43;
+    let v45 = qd_0 * v44;
+    let v46 = qd_0 * v15;
+    let v47 = v2 * p.prepared[11];
+    let v48 = v4 * p.prepared[12];
+    let v49 = v47 - v48;
+    let v50 = v49 + v49;
+    let v51 = p.prepared[10] + v50;
+    let v52 = qd_1 * v51;
+    let v53 = v46 + v52;
+    let v54 = v4 * p.prepared[13];
+    let v55 = v47 + v54;
+    let v56 = p.prepared[9] + v55;
+    let v57 = qd_2 * v56;
+    let v58 = v53 + v57;
+    let v59 = qd_1 * v58;
+    let v60 = v45 + v59;
+    let v61 = qd_0 * v20;
+    let v62 = qd_1 * v56;
+    let v63 = v61 + v62;
+    let v64 = qd_2 * p.prepared[9];
+    let v65 = v63 + v64;
+    let v66 = qd_2 * v65;
+    let v67 = v60 + v66;
+    let v68 = qd_0 * v37;
+    let v69 = v24 * p.prepared[16];
+    let v70 = v26 * p.prepared[17];
+    let v71 = v69 - v70;
+    let v72 = v71 + v71;
+    let v73 = p.prepared[15] + v72;
+    let v74 = qd_3 * v73;
+    let v75 = v68 + v74;
+    let v76 = v26 * p.prepared[18];
+    let v77 = v69 + v76;
+    let v78 = p.prepared[14] + v77;
+    let v79 = qd_4 * v78;
+    let v80 = v75 + v79;
+    let v81 = qd_3 * v80;
+    let v82 = v67 + v81;
+    let v83 = qd_0 * v42;
+    let v84 = qd_3 * v78;
+    let v85 = v83 + v84;
+    let v86 = qd_4 * p.prepared[14];
+    let v87 = v85 + v86;
+    let v88 = qd_4 * v87;
+    let v89 = v82 + v88;
+    let v90 = T::lit(0.5) * v89;
+    v90
 }
 /// Potential energy `−Σ m g·c`.
 pub fn potential_energy<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> T {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
-    let v0 = p.upper_b_mass + p.lower_b_mass;
-    let v1 = p.body_mass + v0;
-    let v2 = p.upper_a_mass + p.lower_a_mass;
-    let v3 = v1 + v2;
-    let v4 = v3 * p.body_origin_x;
-    let v5 = p.gravity_x * v4;
-    let v6 = p.body_origin_y + q_0;
-    let v7 = v3 * v6;
-    let v8 = p.gravity_y * v7;
-    let v9 = v5 + v8;
-    let v10 = p.body_mass * p.body_com_x;
-    let v11 = v2 * p.upper_a_origin_x;
-    let v12 = v10 + v11;
-    let v13 = v0 * p.upper_b_origin_x;
-    let v14 = v12 + v13;
-    let v15 = p.gravity_x * v14;
-    let v16 = p.body_mass * p.body_com_y;
-    let v17 = v2 * p.upper_a_origin_y;
-    let v18 = v16 + v17;
-    let v19 = v0 * p.upper_b_origin_y;
-    let v20 = v18 + v19;
-    let v21 = p.gravity_y * v20;
-    let v22 = v15 + v21;
-    let v23 = v9 + v22;
-    let (v35, v24) = q_1.sin_cos();
-    let v25 = p.upper_a_mass * p.upper_a_com_x;
-    let v26 = p.lower_a_mass * p.upper_a_length_x;
-    let v27 = v25 + v26;
-    let v28 = p.gravity_x * v27;
-    let v29 = p.upper_a_mass * p.upper_a_com_y;
-    let v30 = p.lower_a_mass * p.upper_a_length_y;
-    let v31 = v29 + v30;
-    let v32 = p.gravity_y * v31;
-    let v33 = v28 + v32;
-    let v34 = v24 * v33;
-    let v36 = p.gravity_x * v31;
-    let v37 = p.gravity_y * v27;
-    let v38 = v36 - v37;
-    let v39 = v35 * v38;
-    let v40 = v34 - v39;
-    let v41 = v23 + v40;
-    let (v44, v42) = q_2.sin_cos();
-    let v43 = v24 * v42;
-    let v45 = v35 * v44;
-    let v46 = v43 - v45;
-    let v47 = p.lower_a_mass * p.lower_a_com_x;
-    let v48 = p.gravity_x * v47;
-    let v49 = p.lower_a_mass * p.lower_a_com_y;
-    let v50 = p.gravity_y * v49;
-    let v51 = v48 + v50;
-    let v52 = v46 * v51;
-    let v53 = v35 * v42;
-    let v54 = v24 * v44;
-    let v55 = v53 + v54;
-    let v56 = p.gravity_x * v49;
-    let v57 = p.gravity_y * v47;
-    let v58 = v56 - v57;
-    let v59 = v55 * v58;
-    let v60 = v52 - v59;
-    let v61 = v41 + v60;
-    let (v73, v62) = q_3.sin_cos();
-    let v63 = p.upper_b_mass * p.upper_b_com_x;
-    let v64 = p.lower_b_mass * p.upper_b_length_x;
-    let v65 = v63 + v64;
-    let v66 = p.gravity_x * v65;
-    let v67 = p.upper_b_mass * p.upper_b_com_y;
-    let v68 = p.lower_b_mass * p.upper_b_length_y;
-    let v69 = v67 + v68;
-    let v70 = p.gravity_y * v69;
-    let v71 = v66 + v70;
-    let v72 = v62 * v71;
-    let v74 = p.gravity_x * v69;
-    let v75 = p.gravity_y * v65;
-    let v76 = v74 - v75;
-    let v77 = v73 * v76;
-    let v78 = v72 - v77;
-    let v79 = v61 + v78;
-    let (v82, v80) = q_4.sin_cos();
-    let v81 = v62 * v80;
-    let v83 = v73 * v82;
-    let v84 = v81 - v83;
-    let v85 = p.lower_b_mass * p.lower_b_com_x;
-    let v86 = p.gravity_x * v85;
-    let v87 = p.lower_b_mass * p.lower_b_com_y;
-    let v88 = p.gravity_y * v87;
-    let v89 = v86 + v88;
-    let v90 = v84 * v89;
-    let v91 = v73 * v80;
-    let v92 = v62 * v82;
-    let v93 = v91 + v92;
-    let v94 = p.gravity_x * v87;
-    let v95 = p.gravity_y * v85;
-    let v96 = v94 - v95;
-    let v97 = v93 * v96;
-    let v98 = v90 - v97;
-    let v99 = v79 + v98;
-    let v100 = -v99;
-    v100
+    let v0 = p.body_origin_y + q_0;
+    let v1 = p.prepared[0] * v0;
+    let v2 = p.gravity_y * v1;
+    let v3 = p.prepared[31] + v2;
+    let v4 = v3 + p.prepared[32];
+    let (v7, v5) = q_1.sincos();
+    let v6 = v5 * p.prepared[21];
+    let v8 = v7 * p.prepared[20];
+    let v9 = v6 - v8;
+    let v10 = v4 + v9;
+    let (v13, v11) = q_2.sincos();
+    let v12 = v5 * v11;
+    let v14 = v7 * v13;
+    let v15 = v12 - v14;
+    let v16 = v15 * p.prepared[23];
+    let v17 = v7 * v11;
+    let v18 = v5 * v13;
+    let v19 = v17 + v18;
+    let v20 = v19 * p.prepared[22];
+    let v21 = v16 - v20;
+    let v22 = v10 + v21;
+    let (v25, v23) = q_3.sincos();
+    let v24 = v23 * p.prepared[25];
+    let v26 = v25 * p.prepared[24];
+    let v27 = v24 - v26;
+    let v28 = v22 + v27;
+    let (v31, v29) = q_4.sincos();
+    let v30 = v23 * v29;
+    let v32 = v25 * v31;
+    let v33 = v30 - v32;
+    let v34 = v33 * p.prepared[27];
+    let v35 = v25 * v29;
+    let v36 = v23 * v31;
+    let v37 = v35 + v36;
+    let v38 = v37 * p.prepared[26];
+    let v39 = v34 - v38;
+    let v40 = v28 + v39;
+    let v41 = -v40;
+    v41
 }
 /// Joint positions in the base frame, one column per joint.
 pub fn joint_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
     let [q_0, q_1, _, q_3, _] = q.data.0[0];
     let v0 = p.body_origin_y + q_0;
-    let v1 = p.body_origin_x + p.upper_a_origin_x;
-    let v2 = v0 + p.upper_a_origin_y;
-    let (v5, v3) = q_1.sin_cos();
-    let v4 = v3 * p.upper_a_length_x;
-    let v6 = v5 * p.upper_a_length_y;
-    let v7 = v4 - v6;
-    let v8 = v1 + v7;
-    let v9 = p.upper_a_length_x * v5;
-    let v10 = v3 * p.upper_a_length_y;
-    let v11 = v9 + v10;
-    let v12 = v2 + v11;
-    let v13 = p.body_origin_x + p.upper_b_origin_x;
-    let v14 = v0 + p.upper_b_origin_y;
-    let (v17, v15) = q_3.sin_cos();
-    let v16 = v15 * p.upper_b_length_x;
-    let v18 = v17 * p.upper_b_length_y;
-    let v19 = v16 - v18;
-    let v20 = v13 + v19;
-    let v21 = p.upper_b_length_x * v17;
-    let v22 = v15 * p.upper_b_length_y;
-    let v23 = v21 + v22;
-    let v24 = v14 + v23;
+    let v1 = v0 + p.upper_a_origin_y;
+    let (v4, v2) = q_1.sincos();
+    let v3 = v2 * p.upper_a_length_x;
+    let v5 = v4 * p.upper_a_length_y;
+    let v6 = v3 - v5;
+    let v7 = p.prepared[29] + v6;
+    let v8 = p.upper_a_length_x * v4;
+    let v9 = v2 * p.upper_a_length_y;
+    let v10 = v8 + v9;
+    let v11 = v1 + v10;
+    let v12 = v0 + p.upper_b_origin_y;
+    let (v15, v13) = q_3.sincos();
+    let v14 = v13 * p.upper_b_length_x;
+    let v16 = v15 * p.upper_b_length_y;
+    let v17 = v14 - v16;
+    let v18 = p.prepared[30] + v17;
+    let v19 = p.upper_b_length_x * v15;
+    let v20 = v13 * p.upper_b_length_y;
+    let v21 = v19 + v20;
+    let v22 = v12 + v21;
     SMatrix::from_data(
         ArrayStorage([
             [p.body_origin_x, v0],
-            [v1, v2],
-            [v8, v12],
-            [v13, v14],
-            [v20, v24],
+            [p.prepared[29], v1],
+            [v7, v11],
+            [p.prepared[30], v12],
+            [v18, v22],
         ]),
     )
 }
 /// Link tips in the base frame, one column per link.
 pub fn link_tips<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
-    let v0 = p.body_origin_x + p.body_length_x;
-    let v1 = p.body_origin_y + q_0;
-    let v2 = v1 + p.body_length_y;
-    let v3 = p.body_origin_x + p.upper_a_origin_x;
-    let (v6, v4) = q_1.sin_cos();
-    let v5 = v4 * p.upper_a_length_x;
-    let v7 = v6 * p.upper_a_length_y;
-    let v8 = v5 - v7;
-    let v9 = v3 + v8;
-    let v10 = v1 + p.upper_a_origin_y;
-    let v11 = p.upper_a_length_x * v6;
-    let v12 = v4 * p.upper_a_length_y;
-    let v13 = v11 + v12;
-    let v14 = v10 + v13;
-    let (v17, v15) = q_2.sin_cos();
+    let v0 = p.body_origin_y + q_0;
+    let v1 = v0 + p.body_length_y;
+    let (v4, v2) = q_1.sincos();
+    let v3 = v2 * p.upper_a_length_x;
+    let v5 = v4 * p.upper_a_length_y;
+    let v6 = v3 - v5;
+    let v7 = p.prepared[29] + v6;
+    let v8 = v0 + p.upper_a_origin_y;
+    let v9 = p.upper_a_length_x * v4;
+    let v10 = v2 * p.upper_a_length_y;
+    let v11 = v9 + v10;
+    let v12 = v8 + v11;
+    let (v15, v13) = q_2.sincos();
+    let v14 = v2 * v13;
     let v16 = v4 * v15;
-    let v18 = v6 * v17;
-    let v19 = v16 - v18;
-    let v20 = v19 * p.lower_a_length_x;
-    let v21 = v6 * v15;
-    let v22 = v4 * v17;
-    let v23 = v21 + v22;
-    let v24 = v23 * p.lower_a_length_y;
-    let v25 = v20 - v24;
-    let v26 = v9 + v25;
-    let v27 = p.lower_a_length_x * v23;
-    let v28 = v19 * p.lower_a_length_y;
-    let v29 = v27 + v28;
-    let v30 = v14 + v29;
-    let v31 = p.body_origin_x + p.upper_b_origin_x;
-    let (v34, v32) = q_3.sin_cos();
-    let v33 = v32 * p.upper_b_length_x;
-    let v35 = v34 * p.upper_b_length_y;
-    let v36 = v33 - v35;
-    let v37 = v31 + v36;
-    let v38 = v1 + p.upper_b_origin_y;
-    let v39 = p.upper_b_length_x * v34;
-    let v40 = v32 * p.upper_b_length_y;
-    let v41 = v39 + v40;
-    let v42 = v38 + v41;
-    let (v45, v43) = q_4.sin_cos();
-    let v44 = v32 * v43;
-    let v46 = v34 * v45;
-    let v47 = v44 - v46;
-    let v48 = v47 * p.lower_b_length_x;
-    let v49 = v34 * v43;
-    let v50 = v32 * v45;
-    let v51 = v49 + v50;
-    let v52 = v51 * p.lower_b_length_y;
-    let v53 = v48 - v52;
-    let v54 = v37 + v53;
-    let v55 = p.lower_b_length_x * v51;
-    let v56 = v47 * p.lower_b_length_y;
-    let v57 = v55 + v56;
-    let v58 = v42 + v57;
+    let v17 = v14 - v16;
+    let v18 = v17 * p.lower_a_length_x;
+    let v19 = v4 * v13;
+    let v20 = v2 * v15;
+    let v21 = v19 + v20;
+    let v22 = v21 * p.lower_a_length_y;
+    let v23 = v18 - v22;
+    let v24 = v7 + v23;
+    let v25 = p.lower_a_length_x * v21;
+    let v26 = v17 * p.lower_a_length_y;
+    let v27 = v25 + v26;
+    let v28 = v12 + v27;
+    let (v31, v29) = q_3.sincos();
+    let v30 = v29 * p.upper_b_length_x;
+    let v32 = v31 * p.upper_b_length_y;
+    let v33 = v30 - v32;
+    let v34 = p.prepared[30] + v33;
+    let v35 = v0 + p.upper_b_origin_y;
+    let v36 = p.upper_b_length_x * v31;
+    let v37 = v29 * p.upper_b_length_y;
+    let v38 = v36 + v37;
+    let v39 = v35 + v38;
+    let (v42, v40) = q_4.sincos();
+    let v41 = v29 * v40;
+    let v43 = v31 * v42;
+    let v44 = v41 - v43;
+    let v45 = v44 * p.lower_b_length_x;
+    let v46 = v31 * v40;
+    let v47 = v29 * v42;
+    let v48 = v46 + v47;
+    let v49 = v48 * p.lower_b_length_y;
+    let v50 = v45 - v49;
+    let v51 = v34 + v50;
+    let v52 = p.lower_b_length_x * v48;
+    let v53 = v44 * p.lower_b_length_y;
+    let v54 = v52 + v53;
+    let v55 = v39 + v54;
     SMatrix::from_data(
-        ArrayStorage([[v0, v2], [v9, v14], [v26, v30], [v37, v42], [v54, v58]]),
+        ArrayStorage([
+            [p.prepared[33], v1],
+            [v7, v12],
+            [v24, v28],
+            [v34, v39],
+            [v51, v55],
+        ]),
     )
 }
 /// Closure points a, b of each closure in the base frame.
 pub fn closure_points<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 2> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
-    let v0 = p.body_origin_x + p.upper_a_origin_x;
-    let (v3, v1) = q_1.sin_cos();
-    let v2 = v1 * p.upper_a_length_x;
-    let v4 = v3 * p.upper_a_length_y;
-    let v5 = v2 - v4;
-    let v6 = v0 + v5;
-    let (v9, v7) = q_2.sin_cos();
-    let v8 = v1 * v7;
-    let v10 = v3 * v9;
-    let v11 = v8 - v10;
-    let v12 = v11 * p.lower_a_length_x;
-    let v13 = v3 * v7;
-    let v14 = v1 * v9;
-    let v15 = v13 + v14;
-    let v16 = v15 * p.lower_a_length_y;
-    let v17 = v12 - v16;
-    let v18 = v6 + v17;
-    let v19 = p.body_origin_y + q_0;
-    let v20 = v19 + p.upper_a_origin_y;
-    let v21 = p.upper_a_length_x * v3;
-    let v22 = v1 * p.upper_a_length_y;
-    let v23 = v21 + v22;
-    let v24 = v20 + v23;
-    let v25 = p.lower_a_length_x * v15;
-    let v26 = v11 * p.lower_a_length_y;
-    let v27 = v25 + v26;
-    let v28 = v24 + v27;
-    let v29 = p.body_origin_x + p.upper_b_origin_x;
-    let (v32, v30) = q_3.sin_cos();
-    let v31 = v30 * p.upper_b_length_x;
-    let v33 = v32 * p.upper_b_length_y;
-    let v34 = v31 - v33;
-    let v35 = v29 + v34;
-    let (v38, v36) = q_4.sin_cos();
+    let (v2, v0) = q_1.sincos();
+    let v1 = v0 * p.upper_a_length_x;
+    let v3 = v2 * p.upper_a_length_y;
+    let v4 = v1 - v3;
+    let v5 = p.prepared[29] + v4;
+    let (v8, v6) = q_2.sincos();
+    let v7 = v0 * v6;
+    let v9 = v2 * v8;
+    let v10 = v7 - v9;
+    let v11 = v10 * p.lower_a_length_x;
+    let v12 = v2 * v6;
+    let v13 = v0 * v8;
+    let v14 = v12 + v13;
+    let v15 = v14 * p.lower_a_length_y;
+    let v16 = v11 - v15;
+    let v17 = v5 + v16;
+    let v18 = p.body_origin_y + q_0;
+    let v19 = v18 + p.upper_a_origin_y;
+    let v20 = p.upper_a_length_x * v2;
+    let v21 = v0 * p.upper_a_length_y;
+    let v22 = v20 + v21;
+    let v23 = v19 + v22;
+    let v24 = p.lower_a_length_x * v14;
+    let v25 = v10 * p.lower_a_length_y;
+    let v26 = v24 + v25;
+    let v27 = v23 + v26;
+    let (v30, v28) = q_3.sincos();
+    let v29 = v28 * p.upper_b_length_x;
+    let v31 = v30 * p.upper_b_length_y;
+    let v32 = v29 - v31;
+    let v33 = p.prepared[30] + v32;
+    let (v36, v34) = q_4.sincos();
+    let v35 = v28 * v34;
     let v37 = v30 * v36;
-    let v39 = v32 * v38;
-    let v40 = v37 - v39;
-    let v41 = v40 * p.lower_b_length_x;
-    let v42 = v32 * v36;
-    let v43 = v30 * v38;
-    let v44 = v42 + v43;
-    let v45 = v44 * p.lower_b_length_y;
-    let v46 = v41 - v45;
-    let v47 = v35 + v46;
-    let v48 = v19 + p.upper_b_origin_y;
-    let v49 = p.upper_b_length_x * v32;
-    let v50 = v30 * p.upper_b_length_y;
-    let v51 = v49 + v50;
-    let v52 = v48 + v51;
-    let v53 = p.lower_b_length_x * v44;
-    let v54 = v40 * p.lower_b_length_y;
-    let v55 = v53 + v54;
-    let v56 = v52 + v55;
-    SMatrix::from_data(ArrayStorage([[v18, v28], [v47, v56]]))
+    let v38 = v35 - v37;
+    let v39 = v38 * p.lower_b_length_x;
+    let v40 = v30 * v34;
+    let v41 = v28 * v36;
+    let v42 = v40 + v41;
+    let v43 = v42 * p.lower_b_length_y;
+    let v44 = v39 - v43;
+    let v45 = v33 + v44;
+    let v46 = v18 + p.upper_b_origin_y;
+    let v47 = p.upper_b_length_x * v30;
+    let v48 = v28 * p.upper_b_length_y;
+    let v49 = v47 + v48;
+    let v50 = v46 + v49;
+    let v51 = p.lower_b_length_x * v42;
+    let v52 = v38 * p.lower_b_length_y;
+    let v53 = v51 + v52;
+    let v54 = v50 + v53;
+    SMatrix::from_data(ArrayStorage([[v17, v27], [v45, v54]]))
 }
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
 pub fn contact_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
     let [q_0, q_1, q_2, _, _] = q.data.0[0];
-    let v0 = p.body_origin_x + p.upper_a_origin_x;
-    let (v3, v1) = q_1.sin_cos();
-    let v2 = v1 * p.upper_a_length_x;
-    let v4 = v3 * p.upper_a_length_y;
-    let v5 = v2 - v4;
-    let v6 = v0 + v5;
-    let (v9, v7) = q_2.sin_cos();
-    let v8 = v1 * v7;
-    let v10 = v3 * v9;
-    let v11 = v8 - v10;
-    let v12 = v11 * p.lower_a_length_x;
-    let v13 = v3 * v7;
-    let v14 = v1 * v9;
-    let v15 = v13 + v14;
-    let v16 = v15 * p.lower_a_length_y;
-    let v17 = v12 - v16;
-    let v18 = v6 + v17;
-    let v19 = p.body_origin_y + q_0;
-    let v20 = v19 + p.upper_a_origin_y;
-    let v21 = p.upper_a_length_x * v3;
-    let v22 = v1 * p.upper_a_length_y;
-    let v23 = v21 + v22;
-    let v24 = v20 + v23;
-    let v25 = p.lower_a_length_x * v15;
-    let v26 = v11 * p.lower_a_length_y;
-    let v27 = v25 + v26;
-    let v28 = v24 + v27;
-    SMatrix::from_data(ArrayStorage([[v18, v28]]))
+    let (v2, v0) = q_1.sincos();
+    let v1 = v0 * p.upper_a_length_x;
+    let v3 = v2 * p.upper_a_length_y;
+    let v4 = v1 - v3;
+    let v5 = p.prepared[29] + v4;
+    let (v8, v6) = q_2.sincos();
+    let v7 = v0 * v6;
+    let v9 = v2 * v8;
+    let v10 = v7 - v9;
+    let v11 = v10 * p.lower_a_length_x;
+    let v12 = v2 * v6;
+    let v13 = v0 * v8;
+    let v14 = v12 + v13;
+    let v15 = v14 * p.lower_a_length_y;
+    let v16 = v11 - v15;
+    let v17 = v5 + v16;
+    let v18 = p.body_origin_y + q_0;
+    let v19 = v18 + p.upper_a_origin_y;
+    let v20 = p.upper_a_length_x * v2;
+    let v21 = v0 * p.upper_a_length_y;
+    let v22 = v20 + v21;
+    let v23 = v19 + v22;
+    let v24 = p.lower_a_length_x * v14;
+    let v25 = v10 * p.lower_a_length_y;
+    let v26 = v24 + v25;
+    let v27 = v23 + v26;
+    SMatrix::from_data(ArrayStorage([[v17, v27]]))
 }
 /// `J_c(q) = ∂x_c/∂q`.
 pub fn contact_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
     let [_, q_1, q_2, _, _] = q.data.0[0];
-    let (v0, v3) = q_1.sin_cos();
-    let (v4, v1) = q_2.sin_cos();
+    let (v0, v3) = q_1.sincos();
+    let (v4, v1) = q_2.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
@@ -1678,8 +1552,8 @@ pub fn contact_bias<T: Real>(
     let [_, qd_1, qd_2, _, _] = qd.data.0[0];
     let v0 = qd_1 + qd_2;
     let v1 = v0 * v0;
-    let (v5, v2) = q_1.sin_cos();
-    let (v6, v3) = q_2.sin_cos();
+    let (v5, v2) = q_1.sincos();
+    let (v6, v3) = q_2.sincos();
     let v4 = v2 * v3;
     let v7 = v5 * v6;
     let v8 = v4 - v7;
@@ -1716,325 +1590,210 @@ pub fn dynamics_terms<T: Real>(
     p: &Params<T>,
 ) -> (SMatrix<T, 5, 5>, SVector<T, 5>, SMatrix<T, 2, 5>, SVector<T, 2>) {
     let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
-    let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
-    let v0 = p.upper_b_mass + p.lower_b_mass;
-    let v1 = p.body_mass + v0;
-    let v2 = p.upper_a_mass + p.lower_a_mass;
-    let v3 = v1 + v2;
-    let (v17, v4) = q_1.sin_cos();
-    let v5 = p.upper_a_mass * p.upper_a_com_x;
-    let (v9, v6) = q_2.sin_cos();
-    let v7 = p.lower_a_mass * p.lower_a_com_x;
-    let v8 = v6 * v7;
-    let v10 = p.lower_a_mass * p.lower_a_com_y;
-    let v11 = v9 * v10;
-    let v12 = v8 - v11;
-    let v13 = p.lower_a_mass * p.upper_a_length_x;
-    let v14 = v12 + v13;
-    let v15 = v5 + v14;
-    let v16 = v4 * v15;
-    let v18 = p.upper_a_mass * p.upper_a_com_y;
-    let v19 = v7 * v9;
-    let v20 = v6 * v10;
-    let v21 = v19 + v20;
-    let v22 = p.lower_a_mass * p.upper_a_length_y;
-    let v23 = v21 + v22;
-    let v24 = v18 + v23;
-    let v25 = v17 * v24;
-    let v26 = v16 - v25;
-    let v27 = v4 * v12;
-    let v28 = v17 * v21;
-    let v29 = v27 - v28;
-    let (v43, v30) = q_3.sin_cos();
-    let v31 = p.upper_b_mass * p.upper_b_com_x;
-    let (v35, v32) = q_4.sin_cos();
-    let v33 = p.lower_b_mass * p.lower_b_com_x;
-    let v34 = v32 * v33;
-    let v36 = p.lower_b_mass * p.lower_b_com_y;
-    let v37 = v35 * v36;
-    let v38 = v34 - v37;
-    let v39 = p.lower_b_mass * p.upper_b_length_x;
-    let v40 = v38 + v39;
-    let v41 = v31 + v40;
-    let v42 = v30 * v41;
-    let v44 = p.upper_b_mass * p.upper_b_com_y;
-    let v45 = v33 * v35;
-    let v46 = v32 * v36;
-    let v47 = v45 + v46;
-    let v48 = p.lower_b_mass * p.upper_b_length_y;
-    let v49 = v47 + v48;
+    let [_, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let (v8, v0) = q_1.sincos();
+    let (v3, v1) = q_2.sincos();
+    let v2 = v1 * p.prepared[2];
+    let v4 = v3 * p.prepared[3];
+    let v5 = v2 - v4;
+    let v6 = p.prepared[1] + v5;
+    let v7 = v0 * v6;
+    let v9 = p.prepared[2] * v3;
+    let v10 = v1 * p.prepared[3];
+    let v11 = v9 + v10;
+    let v12 = p.prepared[4] + v11;
+    let v13 = v8 * v12;
+    let v14 = v7 - v13;
+    let v15 = v0 * v5;
+    let v16 = v8 * v11;
+    let v17 = v15 - v16;
+    let (v26, v18) = q_3.sincos();
+    let (v21, v19) = q_4.sincos();
+    let v20 = v19 * p.prepared[6];
+    let v22 = v21 * p.prepared[7];
+    let v23 = v20 - v22;
+    let v24 = p.prepared[5] + v23;
+    let v25 = v18 * v24;
+    let v27 = p.prepared[6] * v21;
+    let v28 = v19 * p.prepared[7];
+    let v29 = v27 + v28;
+    let v30 = p.prepared[8] + v29;
+    let v31 = v26 * v30;
+    let v32 = v25 - v31;
+    let v33 = v18 * v23;
+    let v34 = v26 * v29;
+    let v35 = v33 - v34;
+    let v36 = v1 * p.prepared[11];
+    let v37 = v3 * p.prepared[12];
+    let v38 = v36 - v37;
+    let v39 = v38 + v38;
+    let v40 = p.prepared[10] + v39;
+    let v41 = v3 * p.prepared[13];
+    let v42 = v36 + v41;
+    let v43 = p.prepared[9] + v42;
+    let v44 = v19 * p.prepared[16];
+    let v45 = v21 * p.prepared[17];
+    let v46 = v44 - v45;
+    let v47 = v46 + v46;
+    let v48 = p.prepared[15] + v47;
+    let v49 = v21 * p.prepared[18];
     let v50 = v44 + v49;
-    let v51 = v43 * v50;
-    let v52 = v42 - v51;
-    let v53 = v30 * v38;
-    let v54 = v43 * v47;
-    let v55 = v53 - v54;
-    let v56 = p.upper_a_com_x * p.upper_a_com_x;
-    let v57 = p.upper_a_com_y * p.upper_a_com_y;
-    let v58 = v56 + v57;
-    let v59 = p.upper_a_mass * v58;
-    let v60 = p.upper_a_inertia + v59;
-    let v61 = p.lower_a_com_x * p.lower_a_com_x;
-    let v62 = p.lower_a_com_y * p.lower_a_com_y;
-    let v63 = v61 + v62;
-    let v64 = p.lower_a_mass * v63;
-    let v65 = p.lower_a_inertia + v64;
-    let v66 = v7 * p.upper_a_length_x;
-    let v67 = v10 * p.upper_a_length_y;
-    let v68 = v66 + v67;
-    let v69 = v6 * v68;
-    let v70 = v10 * p.upper_a_length_x;
-    let v71 = v7 * p.upper_a_length_y;
-    let v72 = v70 - v71;
-    let v73 = v9 * v72;
-    let v74 = v69 - v73;
-    let v75 = v74 + v74;
-    let v76 = v65 + v75;
-    let v77 = p.upper_a_length_x * p.upper_a_length_x;
-    let v78 = p.upper_a_length_y * p.upper_a_length_y;
-    let v79 = v77 + v78;
-    let v80 = p.lower_a_mass * v79;
-    let v81 = v76 + v80;
-    let v82 = v60 + v81;
-    let v83 = p.upper_a_gear_ratio * p.upper_a_gear_ratio;
-    let v84 = p.upper_a_rotor_inertia * v83;
-    let v85 = v82 + v84;
-    let v86 = v71 - v70;
-    let v87 = v9 * v86;
-    let v88 = v69 + v87;
-    let v89 = v65 + v88;
-    let v90 = p.upper_b_com_x * p.upper_b_com_x;
-    let v91 = p.upper_b_com_y * p.upper_b_com_y;
-    let v92 = v90 + v91;
-    let v93 = p.upper_b_mass * v92;
-    let v94 = p.upper_b_inertia + v93;
-    let v95 = p.lower_b_com_x * p.lower_b_com_x;
-    let v96 = p.lower_b_com_y * p.lower_b_com_y;
+    let v51 = p.prepared[14] + v50;
+    let v52 = v6 * v8;
+    let v53 = v0 * v12;
+    let v54 = v52 + v53;
+    let v55 = qd_1 * qd_1;
+    let v56 = v54 * v55;
+    let v57 = v0 * v11;
+    let v58 = v5 * v8;
+    let v59 = v57 + v58;
+    let v60 = v59 + v59;
+    let v61 = qd_1 * qd_2;
+    let v62 = v60 * v61;
+    let v63 = v56 + v62;
+    let v64 = qd_2 * qd_2;
+    let v65 = v59 * v64;
+    let v66 = v63 + v65;
+    let v67 = v24 * v26;
+    let v68 = v18 * v30;
+    let v69 = v67 + v68;
+    let v70 = qd_3 * qd_3;
+    let v71 = v69 * v70;
+    let v72 = v66 + v71;
+    let v73 = v18 * v29;
+    let v74 = v23 * v26;
+    let v75 = v73 + v74;
+    let v76 = v75 + v75;
+    let v77 = qd_3 * qd_4;
+    let v78 = v76 * v77;
+    let v79 = v72 + v78;
+    let v80 = qd_4 * qd_4;
+    let v81 = v75 * v80;
+    let v82 = v79 + v81;
+    let v83 = v82 + p.prepared[19];
+    let v84 = -v83;
+    let v85 = v3 * p.prepared[11];
+    let v86 = v1 * p.prepared[12];
+    let v87 = v85 + v86;
+    let v88 = -v87;
+    let v89 = v88 + v88;
+    let v90 = v61 * v89;
+    let v91 = v1 * p.prepared[13];
+    let v92 = v91 - v85;
+    let v93 = v64 * v92;
+    let v94 = v90 + v93;
+    let v95 = v0 * p.prepared[20];
+    let v96 = v8 * p.prepared[21];
     let v97 = v95 + v96;
-    let v98 = p.lower_b_mass * v97;
-    let v99 = p.lower_b_inertia + v98;
-    let v100 = v33 * p.upper_b_length_x;
-    let v101 = v36 * p.upper_b_length_y;
-    let v102 = v100 + v101;
-    let v103 = v32 * v102;
-    let v104 = v36 * p.upper_b_length_x;
-    let v105 = v33 * p.upper_b_length_y;
-    let v106 = v104 - v105;
-    let v107 = v35 * v106;
-    let v108 = v103 - v107;
-    let v109 = v108 + v108;
-    let v110 = v99 + v109;
-    let v111 = p.upper_b_length_x * p.upper_b_length_x;
-    let v112 = p.upper_b_length_y * p.upper_b_length_y;
+    let v98 = v0 * v1;
+    let v99 = v3 * v8;
+    let v100 = v98 - v99;
+    let v101 = v100 * p.prepared[22];
+    let v102 = v1 * v8;
+    let v103 = v0 * v3;
+    let v104 = v102 + v103;
+    let v105 = v104 * p.prepared[23];
+    let v106 = v101 + v105;
+    let v107 = v97 + v106;
+    let v108 = v94 + v107;
+    let v109 = v55 * v87;
+    let v110 = v106 + v109;
+    let v111 = v21 * p.prepared[16];
+    let v112 = v19 * p.prepared[17];
     let v113 = v111 + v112;
-    let v114 = p.lower_b_mass * v113;
-    let v115 = v110 + v114;
-    let v116 = v94 + v115;
-    let v117 = p.upper_b_gear_ratio * p.upper_b_gear_ratio;
-    let v118 = p.upper_b_rotor_inertia * v117;
-    let v119 = v116 + v118;
-    let v120 = v105 - v104;
-    let v121 = v35 * v120;
-    let v122 = v103 + v121;
-    let v123 = v99 + v122;
-    let v124 = v15 * v17;
-    let v125 = v4 * v24;
-    let v126 = v124 + v125;
-    let v127 = qd_1 * qd_1;
-    let v128 = v126 * v127;
-    let v129 = v4 * v21;
-    let v130 = v12 * v17;
-    let v131 = v129 + v130;
-    let v132 = v131 + v131;
-    let v133 = qd_1 * qd_2;
-    let v134 = v132 * v133;
-    let v135 = v128 + v134;
-    let v136 = qd_2 * qd_2;
-    let v137 = v131 * v136;
-    let v138 = v135 + v137;
-    let v139 = v41 * v43;
-    let v140 = v30 * v50;
-    let v141 = v139 + v140;
-    let v142 = qd_3 * qd_3;
-    let v143 = v141 * v142;
-    let v144 = v138 + v143;
-    let v145 = v30 * v47;
-    let v146 = v38 * v43;
-    let v147 = v145 + v146;
-    let v148 = v147 + v147;
-    let v149 = qd_3 * qd_4;
-    let v150 = v148 * v149;
-    let v151 = v144 + v150;
-    let v152 = qd_4 * qd_4;
-    let v153 = v147 * v152;
-    let v154 = v151 + v153;
-    let v155 = v3 * p.gravity_y;
-    let v156 = v154 + v155;
-    let v157 = -v156;
-    let v158 = v131 - v131;
-    let v159 = qd_2 * qd_0;
-    let v160 = v158 * v159;
-    let v161 = v9 * v68;
-    let v162 = v6 * v72;
-    let v163 = v161 + v162;
-    let v164 = -v163;
-    let v165 = v164 + v164;
-    let v166 = v133 * v165;
-    let v167 = v160 + v166;
-    let v168 = v6 * v86;
-    let v169 = v168 - v161;
-    let v170 = v136 * v169;
-    let v171 = v167 + v170;
-    let v172 = v18 + v22;
-    let v173 = p.gravity_x * v172;
-    let v174 = v5 + v13;
-    let v175 = p.gravity_y * v174;
-    let v176 = v173 - v175;
-    let v177 = v4 * v176;
-    let v178 = p.gravity_x * v174;
-    let v179 = p.gravity_y * v172;
-    let v180 = v178 + v179;
-    let v181 = v17 * v180;
-    let v182 = v177 + v181;
-    let v183 = v4 * v6;
-    let v184 = v9 * v17;
-    let v185 = v183 - v184;
-    let v186 = v10 * p.gravity_x;
-    let v187 = v7 * p.gravity_y;
-    let v188 = v186 - v187;
-    let v189 = v185 * v188;
-    let v190 = v6 * v17;
-    let v191 = v4 * v9;
-    let v192 = v190 + v191;
-    let v193 = v7 * p.gravity_x;
-    let v194 = v10 * p.gravity_y;
-    let v195 = v193 + v194;
-    let v196 = v192 * v195;
-    let v197 = v189 + v196;
-    let v198 = v182 + v197;
-    let v199 = v171 + v198;
-    let v200 = qd_1 * qd_0;
-    let v201 = v158 * v200;
-    let v202 = v127 * v163;
-    let v203 = v201 + v202;
-    let v204 = v197 + v203;
-    let v205 = v147 - v147;
-    let v206 = qd_4 * qd_0;
-    let v207 = v205 * v206;
-    let v208 = v35 * v102;
-    let v209 = v32 * v106;
-    let v210 = v208 + v209;
-    let v211 = -v210;
-    let v212 = v211 + v211;
-    let v213 = v149 * v212;
-    let v214 = v207 + v213;
-    let v215 = v32 * v120;
-    let v216 = v215 - v208;
-    let v217 = v152 * v216;
-    let v218 = v214 + v217;
-    let v219 = v44 + v48;
-    let v220 = p.gravity_x * v219;
-    let v221 = v31 + v39;
-    let v222 = p.gravity_y * v221;
-    let v223 = v220 - v222;
-    let v224 = v30 * v223;
-    let v225 = p.gravity_x * v221;
-    let v226 = p.gravity_y * v219;
-    let v227 = v225 + v226;
-    let v228 = v43 * v227;
-    let v229 = v224 + v228;
-    let v230 = v30 * v32;
-    let v231 = v35 * v43;
-    let v232 = v230 - v231;
-    let v233 = v36 * p.gravity_x;
-    let v234 = v33 * p.gravity_y;
-    let v235 = v233 - v234;
-    let v236 = v232 * v235;
-    let v237 = v32 * v43;
-    let v238 = v30 * v35;
-    let v239 = v237 + v238;
-    let v240 = v33 * p.gravity_x;
-    let v241 = v36 * p.gravity_y;
-    let v242 = v240 + v241;
-    let v243 = v239 * v242;
-    let v244 = v236 + v243;
-    let v245 = v229 + v244;
-    let v246 = v218 + v245;
-    let v247 = qd_3 * qd_0;
-    let v248 = v205 * v247;
-    let v249 = v142 * v210;
-    let v250 = v248 + v249;
-    let v251 = v244 + v250;
-    let v252 = v192 * p.lower_a_length_x;
-    let v253 = v185 * p.lower_a_length_y;
-    let v254 = v252 + v253;
-    let v255 = p.upper_a_length_x * v17;
-    let v256 = v4 * p.upper_a_length_y;
-    let v257 = v255 + v256;
-    let v258 = v254 + v257;
-    let v259 = -v258;
-    let v260 = v185 * p.lower_a_length_x;
-    let v261 = v192 * p.lower_a_length_y;
-    let v262 = v260 - v261;
-    let v263 = v4 * p.upper_a_length_x;
-    let v264 = v17 * p.upper_a_length_y;
-    let v265 = v263 - v264;
-    let v266 = v262 + v265;
-    let v267 = -v254;
-    let v268 = v239 * p.lower_b_length_x;
-    let v269 = v232 * p.lower_b_length_y;
-    let v270 = v268 + v269;
-    let v271 = p.upper_b_length_x * v43;
-    let v272 = v30 * p.upper_b_length_y;
-    let v273 = v271 + v272;
-    let v274 = v270 + v273;
-    let v275 = v232 * p.lower_b_length_x;
-    let v276 = v239 * p.lower_b_length_y;
-    let v277 = v275 - v276;
-    let v278 = v30 * p.upper_b_length_x;
-    let v279 = v43 * p.upper_b_length_y;
-    let v280 = v278 - v279;
-    let v281 = v277 + v280;
-    let v282 = -v281;
-    let v283 = -v277;
-    let v284 = qd_3 + qd_4;
-    let v285 = v284 * v284;
-    let v286 = v277 * v285;
-    let v287 = v142 * v280;
-    let v288 = v286 + v287;
-    let v289 = qd_1 + qd_2;
-    let v290 = v289 * v289;
-    let v291 = v262 * v290;
-    let v292 = v127 * v265;
-    let v293 = v291 + v292;
-    let v294 = v288 - v293;
-    let v295 = v270 * v285;
-    let v296 = v142 * v273;
-    let v297 = v295 + v296;
-    let v298 = v254 * v290;
-    let v299 = v127 * v257;
-    let v300 = v298 + v299;
-    let v301 = v297 - v300;
+    let v114 = -v113;
+    let v115 = v114 + v114;
+    let v116 = v77 * v115;
+    let v117 = v19 * p.prepared[18];
+    let v118 = v117 - v111;
+    let v119 = v80 * v118;
+    let v120 = v116 + v119;
+    let v121 = v18 * p.prepared[24];
+    let v122 = v26 * p.prepared[25];
+    let v123 = v121 + v122;
+    let v124 = v18 * v19;
+    let v125 = v21 * v26;
+    let v126 = v124 - v125;
+    let v127 = v126 * p.prepared[26];
+    let v128 = v19 * v26;
+    let v129 = v18 * v21;
+    let v130 = v128 + v129;
+    let v131 = v130 * p.prepared[27];
+    let v132 = v127 + v131;
+    let v133 = v123 + v132;
+    let v134 = v120 + v133;
+    let v135 = v70 * v113;
+    let v136 = v132 + v135;
+    let v137 = v104 * p.lower_a_length_x;
+    let v138 = v100 * p.lower_a_length_y;
+    let v139 = v137 + v138;
+    let v140 = p.upper_a_length_x * v8;
+    let v141 = v0 * p.upper_a_length_y;
+    let v142 = v140 + v141;
+    let v143 = v139 + v142;
+    let v144 = -v143;
+    let v145 = v100 * p.lower_a_length_x;
+    let v146 = v104 * p.lower_a_length_y;
+    let v147 = v145 - v146;
+    let v148 = v0 * p.upper_a_length_x;
+    let v149 = v8 * p.upper_a_length_y;
+    let v150 = v148 - v149;
+    let v151 = v147 + v150;
+    let v152 = -v139;
+    let v153 = v130 * p.lower_b_length_x;
+    let v154 = v126 * p.lower_b_length_y;
+    let v155 = v153 + v154;
+    let v156 = p.upper_b_length_x * v26;
+    let v157 = v18 * p.upper_b_length_y;
+    let v158 = v156 + v157;
+    let v159 = v155 + v158;
+    let v160 = v126 * p.lower_b_length_x;
+    let v161 = v130 * p.lower_b_length_y;
+    let v162 = v160 - v161;
+    let v163 = v18 * p.upper_b_length_x;
+    let v164 = v26 * p.upper_b_length_y;
+    let v165 = v163 - v164;
+    let v166 = v162 + v165;
+    let v167 = -v166;
+    let v168 = -v162;
+    let v169 = qd_3 + qd_4;
+    let v170 = v169 * v169;
+    let v171 = v162 * v170;
+    let v172 = v70 * v165;
+    let v173 = v171 + v172;
+    let v174 = qd_1 + qd_2;
+    let v175 = v174 * v174;
+    let v176 = v147 * v175;
+    let v177 = v55 * v150;
+    let v178 = v176 + v177;
+    let v179 = v173 - v178;
+    let v180 = v155 * v170;
+    let v181 = v70 * v158;
+    let v182 = v180 + v181;
+    let v183 = v139 * v175;
+    let v184 = v55 * v142;
+    let v185 = v183 + v184;
+    let v186 = v182 - v185;
     (
         SMatrix::from_data(
             ArrayStorage([
-                [v3, v26, v29, v52, v55],
-                [v26, v85, v89, T::lit(0.0), T::lit(0.0)],
-                [v29, v89, v65, T::lit(0.0), T::lit(0.0)],
-                [v52, T::lit(0.0), T::lit(0.0), v119, v123],
-                [v55, T::lit(0.0), T::lit(0.0), v123, v99],
+                [p.prepared[0], v14, v17, v32, v35],
+                [v14, v40, v43, T::lit(0.0), T::lit(0.0)],
+                [v17, v43, p.prepared[9], T::lit(0.0), T::lit(0.0)],
+                [v32, T::lit(0.0), T::lit(0.0), v48, v51],
+                [v35, T::lit(0.0), T::lit(0.0), v51, p.prepared[14]],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v157, v199, v204, v246, v251]])),
+        SMatrix::from_data(ArrayStorage([[v84, v108, v110, v134, v136]])),
         SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
-                [v259, v266],
-                [v267, v262],
-                [v274, v282],
-                [v270, v283],
+                [v144, v151],
+                [v152, v147],
+                [v159, v167],
+                [v155, v168],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v294, v301]])),
+        SMatrix::from_data(ArrayStorage([[v179, v186]])),
     )
 }

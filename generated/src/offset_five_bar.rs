@@ -20,10 +20,9 @@ pub const NK: usize = 0;
 /// The `offset_five_bar` leg: 4 joints, 1 closure(s), actuated joints ["upper_a", "upper_b"]. Generated from `leg-models/specs/offset_five_bar.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct OffsetFiveBar;
-/// Physical parameters; `Default` holds the spec's values. Change them at run
-/// time without regenerating.
+/// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Params<T> {
+pub struct ParamValues<T> {
     /// Gravity in the base frame, x [m/s²].
     pub gravity_x: T,
     /// Gravity in the base frame, y [m/s²].
@@ -121,7 +120,7 @@ pub struct Params<T> {
     /// Foot point, link frame, y [m].
     pub foot_y: T,
 }
-impl<T: Real> Default for Params<T> {
+impl<T: Real> Default for ParamValues<T> {
     fn default() -> Self {
         Self {
             gravity_x: T::lit(0.0),
@@ -173,6 +172,50 @@ impl<T: Real> Default for Params<T> {
             foot_x: T::lit(0.1872657719),
             foot_y: T::lit(0.006747643156),
         }
+    }
+}
+/// Physical parameters, ready for evaluation: the values (read as fields through
+/// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
+/// computed once when a value changes instead of in every call. `Default` holds
+/// the spec's values; change them at run time, without regenerating, with
+/// [`Params::update`] or [`Parameters::set`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params<T> {
+    values: ParamValues<T>,
+    prepared: [T; 19],
+}
+impl<T: Real> Params<T> {
+    /// Parameters of these values.
+    pub fn new(values: ParamValues<T>) -> Self {
+        Self {
+            prepared: prepare(&values).data.0[0],
+            values,
+        }
+    }
+    /// The values.
+    pub fn values(&self) -> &ParamValues<T> {
+        &self.values
+    }
+    /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
+    pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
+        change(&mut self.values);
+        *self = Self::new(self.values);
+    }
+}
+impl<T> core::ops::Deref for Params<T> {
+    type Target = ParamValues<T>;
+    fn deref(&self) -> &ParamValues<T> {
+        &self.values
+    }
+}
+impl<T: Real> From<ParamValues<T>> for Params<T> {
+    fn from(values: ParamValues<T>) -> Self {
+        Self::new(values)
+    }
+}
+impl<T: Real> Default for Params<T> {
+    fn default() -> Self {
+        Self::new(ParamValues::default())
     }
 }
 impl<T: Real> Parameters<T> for Params<T> {
@@ -228,109 +271,110 @@ impl<T: Real> Parameters<T> for Params<T> {
     ];
     fn get(&self, i: usize) -> Option<T> {
         match i {
-            0 => Some(self.gravity_x),
-            1 => Some(self.gravity_y),
-            2 => Some(self.upper_a_origin_x),
-            3 => Some(self.upper_a_origin_y),
-            4 => Some(self.upper_a_length_x),
-            5 => Some(self.upper_a_length_y),
-            6 => Some(self.upper_a_mass),
-            7 => Some(self.upper_a_com_x),
-            8 => Some(self.upper_a_com_y),
-            9 => Some(self.upper_a_inertia),
-            10 => Some(self.upper_a_damping),
-            11 => Some(self.upper_a_rotor_inertia),
-            12 => Some(self.upper_a_gear_ratio),
-            13 => Some(self.lower_a_origin_x),
-            14 => Some(self.lower_a_origin_y),
-            15 => Some(self.lower_a_length_x),
-            16 => Some(self.lower_a_length_y),
-            17 => Some(self.lower_a_mass),
-            18 => Some(self.lower_a_com_x),
-            19 => Some(self.lower_a_com_y),
-            20 => Some(self.lower_a_inertia),
-            21 => Some(self.lower_a_damping),
-            22 => Some(self.upper_b_origin_x),
-            23 => Some(self.upper_b_origin_y),
-            24 => Some(self.upper_b_length_x),
-            25 => Some(self.upper_b_length_y),
-            26 => Some(self.upper_b_mass),
-            27 => Some(self.upper_b_com_x),
-            28 => Some(self.upper_b_com_y),
-            29 => Some(self.upper_b_inertia),
-            30 => Some(self.upper_b_damping),
-            31 => Some(self.upper_b_rotor_inertia),
-            32 => Some(self.upper_b_gear_ratio),
-            33 => Some(self.lower_b_origin_x),
-            34 => Some(self.lower_b_origin_y),
-            35 => Some(self.lower_b_length_x),
-            36 => Some(self.lower_b_length_y),
-            37 => Some(self.lower_b_mass),
-            38 => Some(self.lower_b_com_x),
-            39 => Some(self.lower_b_com_y),
-            40 => Some(self.lower_b_inertia),
-            41 => Some(self.lower_b_damping),
-            42 => Some(self.toe_a_x),
-            43 => Some(self.toe_a_y),
-            44 => Some(self.toe_b_x),
-            45 => Some(self.toe_b_y),
-            46 => Some(self.foot_x),
-            47 => Some(self.foot_y),
+            0 => Some(self.values.gravity_x),
+            1 => Some(self.values.gravity_y),
+            2 => Some(self.values.upper_a_origin_x),
+            3 => Some(self.values.upper_a_origin_y),
+            4 => Some(self.values.upper_a_length_x),
+            5 => Some(self.values.upper_a_length_y),
+            6 => Some(self.values.upper_a_mass),
+            7 => Some(self.values.upper_a_com_x),
+            8 => Some(self.values.upper_a_com_y),
+            9 => Some(self.values.upper_a_inertia),
+            10 => Some(self.values.upper_a_damping),
+            11 => Some(self.values.upper_a_rotor_inertia),
+            12 => Some(self.values.upper_a_gear_ratio),
+            13 => Some(self.values.lower_a_origin_x),
+            14 => Some(self.values.lower_a_origin_y),
+            15 => Some(self.values.lower_a_length_x),
+            16 => Some(self.values.lower_a_length_y),
+            17 => Some(self.values.lower_a_mass),
+            18 => Some(self.values.lower_a_com_x),
+            19 => Some(self.values.lower_a_com_y),
+            20 => Some(self.values.lower_a_inertia),
+            21 => Some(self.values.lower_a_damping),
+            22 => Some(self.values.upper_b_origin_x),
+            23 => Some(self.values.upper_b_origin_y),
+            24 => Some(self.values.upper_b_length_x),
+            25 => Some(self.values.upper_b_length_y),
+            26 => Some(self.values.upper_b_mass),
+            27 => Some(self.values.upper_b_com_x),
+            28 => Some(self.values.upper_b_com_y),
+            29 => Some(self.values.upper_b_inertia),
+            30 => Some(self.values.upper_b_damping),
+            31 => Some(self.values.upper_b_rotor_inertia),
+            32 => Some(self.values.upper_b_gear_ratio),
+            33 => Some(self.values.lower_b_origin_x),
+            34 => Some(self.values.lower_b_origin_y),
+            35 => Some(self.values.lower_b_length_x),
+            36 => Some(self.values.lower_b_length_y),
+            37 => Some(self.values.lower_b_mass),
+            38 => Some(self.values.lower_b_com_x),
+            39 => Some(self.values.lower_b_com_y),
+            40 => Some(self.values.lower_b_inertia),
+            41 => Some(self.values.lower_b_damping),
+            42 => Some(self.values.toe_a_x),
+            43 => Some(self.values.toe_a_y),
+            44 => Some(self.values.toe_b_x),
+            45 => Some(self.values.toe_b_y),
+            46 => Some(self.values.foot_x),
+            47 => Some(self.values.foot_y),
             _ => None,
         }
     }
     fn set(&mut self, i: usize, value: T) -> bool {
         match i {
-            0 => self.gravity_x = value,
-            1 => self.gravity_y = value,
-            2 => self.upper_a_origin_x = value,
-            3 => self.upper_a_origin_y = value,
-            4 => self.upper_a_length_x = value,
-            5 => self.upper_a_length_y = value,
-            6 => self.upper_a_mass = value,
-            7 => self.upper_a_com_x = value,
-            8 => self.upper_a_com_y = value,
-            9 => self.upper_a_inertia = value,
-            10 => self.upper_a_damping = value,
-            11 => self.upper_a_rotor_inertia = value,
-            12 => self.upper_a_gear_ratio = value,
-            13 => self.lower_a_origin_x = value,
-            14 => self.lower_a_origin_y = value,
-            15 => self.lower_a_length_x = value,
-            16 => self.lower_a_length_y = value,
-            17 => self.lower_a_mass = value,
-            18 => self.lower_a_com_x = value,
-            19 => self.lower_a_com_y = value,
-            20 => self.lower_a_inertia = value,
-            21 => self.lower_a_damping = value,
-            22 => self.upper_b_origin_x = value,
-            23 => self.upper_b_origin_y = value,
-            24 => self.upper_b_length_x = value,
-            25 => self.upper_b_length_y = value,
-            26 => self.upper_b_mass = value,
-            27 => self.upper_b_com_x = value,
-            28 => self.upper_b_com_y = value,
-            29 => self.upper_b_inertia = value,
-            30 => self.upper_b_damping = value,
-            31 => self.upper_b_rotor_inertia = value,
-            32 => self.upper_b_gear_ratio = value,
-            33 => self.lower_b_origin_x = value,
-            34 => self.lower_b_origin_y = value,
-            35 => self.lower_b_length_x = value,
-            36 => self.lower_b_length_y = value,
-            37 => self.lower_b_mass = value,
-            38 => self.lower_b_com_x = value,
-            39 => self.lower_b_com_y = value,
-            40 => self.lower_b_inertia = value,
-            41 => self.lower_b_damping = value,
-            42 => self.toe_a_x = value,
-            43 => self.toe_a_y = value,
-            44 => self.toe_b_x = value,
-            45 => self.toe_b_y = value,
-            46 => self.foot_x = value,
-            47 => self.foot_y = value,
+            0 => self.values.gravity_x = value,
+            1 => self.values.gravity_y = value,
+            2 => self.values.upper_a_origin_x = value,
+            3 => self.values.upper_a_origin_y = value,
+            4 => self.values.upper_a_length_x = value,
+            5 => self.values.upper_a_length_y = value,
+            6 => self.values.upper_a_mass = value,
+            7 => self.values.upper_a_com_x = value,
+            8 => self.values.upper_a_com_y = value,
+            9 => self.values.upper_a_inertia = value,
+            10 => self.values.upper_a_damping = value,
+            11 => self.values.upper_a_rotor_inertia = value,
+            12 => self.values.upper_a_gear_ratio = value,
+            13 => self.values.lower_a_origin_x = value,
+            14 => self.values.lower_a_origin_y = value,
+            15 => self.values.lower_a_length_x = value,
+            16 => self.values.lower_a_length_y = value,
+            17 => self.values.lower_a_mass = value,
+            18 => self.values.lower_a_com_x = value,
+            19 => self.values.lower_a_com_y = value,
+            20 => self.values.lower_a_inertia = value,
+            21 => self.values.lower_a_damping = value,
+            22 => self.values.upper_b_origin_x = value,
+            23 => self.values.upper_b_origin_y = value,
+            24 => self.values.upper_b_length_x = value,
+            25 => self.values.upper_b_length_y = value,
+            26 => self.values.upper_b_mass = value,
+            27 => self.values.upper_b_com_x = value,
+            28 => self.values.upper_b_com_y = value,
+            29 => self.values.upper_b_inertia = value,
+            30 => self.values.upper_b_damping = value,
+            31 => self.values.upper_b_rotor_inertia = value,
+            32 => self.values.upper_b_gear_ratio = value,
+            33 => self.values.lower_b_origin_x = value,
+            34 => self.values.lower_b_origin_y = value,
+            35 => self.values.lower_b_length_x = value,
+            36 => self.values.lower_b_length_y = value,
+            37 => self.values.lower_b_mass = value,
+            38 => self.values.lower_b_com_x = value,
+            39 => self.values.lower_b_com_y = value,
+            40 => self.values.lower_b_inertia = value,
+            41 => self.values.lower_b_damping = value,
+            42 => self.values.toe_a_x = value,
+            43 => self.values.toe_a_y = value,
+            44 => self.values.toe_b_x = value,
+            45 => self.values.toe_b_y = value,
+            46 => self.values.foot_x = value,
+            47 => self.values.foot_y = value,
             _ => return false,
         }
+        *self = Self::new(self.values);
         true
     }
 }
@@ -451,89 +495,166 @@ impl ContactModel<NQ, NC, NU, NK> for OffsetFiveBar {
         contact_bias(q, qd, p)
     }
 }
+/// The parameter-only quantities the terms read (products of masses, lengths and
+/// centres of mass, inertias about the joints, …), computed once per parameter set
+/// by [`Params::new`].
+pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 19> {
+    let v0 = values.upper_a_com_x * values.upper_a_com_x;
+    let v1 = values.upper_a_com_y * values.upper_a_com_y;
+    let v2 = v0 + v1;
+    let v3 = values.upper_a_mass * v2;
+    let v4 = values.upper_a_inertia + v3;
+    let v5 = values.lower_a_com_x * values.lower_a_com_x;
+    let v6 = values.lower_a_com_y * values.lower_a_com_y;
+    let v7 = v5 + v6;
+    let v8 = values.lower_a_mass * v7;
+    let v9 = values.lower_a_inertia + v8;
+    let v10 = v4 + v9;
+    let v11 = values.lower_a_origin_x * values.lower_a_origin_x;
+    let v12 = values.lower_a_origin_y * values.lower_a_origin_y;
+    let v13 = v11 + v12;
+    let v14 = values.lower_a_mass * v13;
+    let v15 = v10 + v14;
+    let v16 = values.upper_a_gear_ratio * values.upper_a_gear_ratio;
+    let v17 = values.upper_a_rotor_inertia * v16;
+    let v18 = v15 + v17;
+    let v19 = values.lower_a_mass * values.lower_a_com_x;
+    let v20 = values.lower_a_origin_x * v19;
+    let v21 = values.lower_a_mass * values.lower_a_com_y;
+    let v22 = values.lower_a_origin_y * v21;
+    let v23 = v20 + v22;
+    let v24 = values.lower_a_origin_x * v21;
+    let v25 = values.lower_a_origin_y * v19;
+    let v26 = v24 - v25;
+    let v27 = v25 - v24;
+    let v28 = values.upper_b_com_x * values.upper_b_com_x;
+    let v29 = values.upper_b_com_y * values.upper_b_com_y;
+    let v30 = v28 + v29;
+    let v31 = values.upper_b_mass * v30;
+    let v32 = values.upper_b_inertia + v31;
+    let v33 = values.lower_b_com_x * values.lower_b_com_x;
+    let v34 = values.lower_b_com_y * values.lower_b_com_y;
+    let v35 = v33 + v34;
+    let v36 = values.lower_b_mass * v35;
+    let v37 = values.lower_b_inertia + v36;
+    let v38 = v32 + v37;
+    let v39 = values.lower_b_origin_x * values.lower_b_origin_x;
+    let v40 = values.lower_b_origin_y * values.lower_b_origin_y;
+    let v41 = v39 + v40;
+    let v42 = values.lower_b_mass * v41;
+    let v43 = v38 + v42;
+    let v44 = values.upper_b_gear_ratio * values.upper_b_gear_ratio;
+    let v45 = values.upper_b_rotor_inertia * v44;
+    let v46 = v43 + v45;
+    let v47 = values.lower_b_mass * values.lower_b_com_x;
+    let v48 = values.lower_b_origin_x * v47;
+    let v49 = values.lower_b_mass * values.lower_b_com_y;
+    let v50 = values.lower_b_origin_y * v49;
+    let v51 = v48 + v50;
+    let v52 = values.lower_b_origin_x * v49;
+    let v53 = values.lower_b_origin_y * v47;
+    let v54 = v52 - v53;
+    let v55 = v53 - v52;
+    let v56 = values.upper_a_mass * values.upper_a_com_y;
+    let v57 = values.lower_a_mass * values.lower_a_origin_y;
+    let v58 = v56 + v57;
+    let v59 = values.gravity_x * v58;
+    let v60 = values.upper_a_mass * values.upper_a_com_x;
+    let v61 = values.lower_a_mass * values.lower_a_origin_x;
+    let v62 = v60 + v61;
+    let v63 = values.gravity_y * v62;
+    let v64 = v59 - v63;
+    let v65 = values.gravity_x * v62;
+    let v66 = v58 * values.gravity_y;
+    let v67 = v65 + v66;
+    let v68 = v21 * values.gravity_x;
+    let v69 = v19 * values.gravity_y;
+    let v70 = v68 - v69;
+    let v71 = v19 * values.gravity_x;
+    let v72 = v21 * values.gravity_y;
+    let v73 = v71 + v72;
+    let v74 = values.upper_b_mass * values.upper_b_com_y;
+    let v75 = values.lower_b_mass * values.lower_b_origin_y;
+    let v76 = v74 + v75;
+    let v77 = values.gravity_x * v76;
+    let v78 = values.upper_b_mass * values.upper_b_com_x;
+    let v79 = values.lower_b_mass * values.lower_b_origin_x;
+    let v80 = v78 + v79;
+    let v81 = values.gravity_y * v80;
+    let v82 = v77 - v81;
+    let v83 = values.gravity_x * v80;
+    let v84 = values.gravity_y * v76;
+    let v85 = v83 + v84;
+    let v86 = v49 * values.gravity_x;
+    let v87 = v47 * values.gravity_y;
+    let v88 = v86 - v87;
+    let v89 = v47 * values.gravity_x;
+    let v90 = v49 * values.gravity_y;
+    let v91 = v89 + v90;
+    let v92 = values.upper_a_mass + values.lower_a_mass;
+    let v93 = values.upper_a_origin_x * v92;
+    let v94 = values.upper_b_mass + values.lower_b_mass;
+    let v95 = values.upper_b_origin_x * v94;
+    let v96 = v93 + v95;
+    let v97 = values.gravity_x * v96;
+    let v98 = values.upper_a_origin_y * v92;
+    let v99 = values.upper_b_origin_y * v94;
+    let v100 = v98 + v99;
+    let v101 = values.gravity_y * v100;
+    let v102 = v97 + v101;
+    SMatrix::from_data(
+        ArrayStorage([
+            [
+                v9,
+                v18,
+                v23,
+                v26,
+                v27,
+                v37,
+                v46,
+                v51,
+                v54,
+                v55,
+                v64,
+                v67,
+                v70,
+                v73,
+                v82,
+                v85,
+                v88,
+                v91,
+                v102,
+            ],
+        ]),
+    )
+}
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
 pub fn mass_matrix<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 4, 4> {
     let [_, q_1, _, q_3] = q.data.0[0];
-    let v0 = p.upper_a_com_x * p.upper_a_com_x;
-    let v1 = p.upper_a_com_y * p.upper_a_com_y;
-    let v2 = v0 + v1;
-    let v3 = p.upper_a_mass * v2;
-    let v4 = p.upper_a_inertia + v3;
-    let v5 = p.lower_a_com_x * p.lower_a_com_x;
-    let v6 = p.lower_a_com_y * p.lower_a_com_y;
-    let v7 = v5 + v6;
-    let v8 = p.lower_a_mass * v7;
-    let v9 = p.lower_a_inertia + v8;
-    let (v17, v10) = q_1.sin_cos();
-    let v11 = p.lower_a_mass * p.lower_a_com_x;
-    let v12 = p.lower_a_origin_x * v11;
-    let v13 = p.lower_a_mass * p.lower_a_com_y;
-    let v14 = p.lower_a_origin_y * v13;
-    let v15 = v12 + v14;
-    let v16 = v10 * v15;
-    let v18 = p.lower_a_origin_x * v13;
-    let v19 = v11 * p.lower_a_origin_y;
-    let v20 = v18 - v19;
-    let v21 = v17 * v20;
-    let v22 = v16 - v21;
-    let v23 = v22 + v22;
-    let v24 = v9 + v23;
-    let v25 = p.lower_a_origin_x * p.lower_a_origin_x;
-    let v26 = p.lower_a_origin_y * p.lower_a_origin_y;
-    let v27 = v25 + v26;
-    let v28 = p.lower_a_mass * v27;
-    let v29 = v24 + v28;
-    let v30 = v4 + v29;
-    let v31 = p.upper_a_gear_ratio * p.upper_a_gear_ratio;
-    let v32 = p.upper_a_rotor_inertia * v31;
-    let v33 = v30 + v32;
-    let v34 = v19 - v18;
-    let v35 = v17 * v34;
-    let v36 = v16 + v35;
-    let v37 = v9 + v36;
-    let v38 = p.upper_b_com_x * p.upper_b_com_x;
-    let v39 = p.upper_b_com_y * p.upper_b_com_y;
-    let v40 = v38 + v39;
-    let v41 = p.upper_b_mass * v40;
-    let v42 = p.upper_b_inertia + v41;
-    let v43 = p.lower_b_com_x * p.lower_b_com_x;
-    let v44 = p.lower_b_com_y * p.lower_b_com_y;
-    let v45 = v43 + v44;
-    let v46 = p.lower_b_mass * v45;
-    let v47 = p.lower_b_inertia + v46;
-    let (v55, v48) = q_3.sin_cos();
-    let v49 = p.lower_b_mass * p.lower_b_com_x;
-    let v50 = p.lower_b_origin_x * v49;
-    let v51 = p.lower_b_mass * p.lower_b_com_y;
-    let v52 = p.lower_b_origin_y * v51;
-    let v53 = v50 + v52;
-    let v54 = v48 * v53;
-    let v56 = p.lower_b_origin_x * v51;
-    let v57 = v49 * p.lower_b_origin_y;
-    let v58 = v56 - v57;
-    let v59 = v55 * v58;
-    let v60 = v54 - v59;
-    let v61 = v60 + v60;
-    let v62 = v47 + v61;
-    let v63 = p.lower_b_origin_x * p.lower_b_origin_x;
-    let v64 = p.lower_b_origin_y * p.lower_b_origin_y;
-    let v65 = v63 + v64;
-    let v66 = p.lower_b_mass * v65;
-    let v67 = v62 + v66;
-    let v68 = v42 + v67;
-    let v69 = p.upper_b_gear_ratio * p.upper_b_gear_ratio;
-    let v70 = p.upper_b_rotor_inertia * v69;
-    let v71 = v68 + v70;
-    let v72 = v57 - v56;
-    let v73 = v55 * v72;
-    let v74 = v54 + v73;
-    let v75 = v47 + v74;
+    let (v2, v0) = q_1.sincos();
+    let v1 = v0 * p.prepared[2];
+    let v3 = v2 * p.prepared[3];
+    let v4 = v1 - v3;
+    let v5 = v4 + v4;
+    let v6 = p.prepared[1] + v5;
+    let v7 = v2 * p.prepared[4];
+    let v8 = v1 + v7;
+    let v9 = p.prepared[0] + v8;
+    let (v12, v10) = q_3.sincos();
+    let v11 = v10 * p.prepared[7];
+    let v13 = v12 * p.prepared[8];
+    let v14 = v11 - v13;
+    let v15 = v14 + v14;
+    let v16 = p.prepared[6] + v15;
+    let v17 = v12 * p.prepared[9];
+    let v18 = v11 + v17;
+    let v19 = p.prepared[5] + v18;
     SMatrix::from_data(
         ArrayStorage([
-            [v33, v37, T::lit(0.0), T::lit(0.0)],
-            [v37, v9, T::lit(0.0), T::lit(0.0)],
-            [T::lit(0.0), T::lit(0.0), v71, v75],
-            [T::lit(0.0), T::lit(0.0), v75, v47],
+            [v6, v9, T::lit(0.0), T::lit(0.0)],
+            [v9, p.prepared[0], T::lit(0.0), T::lit(0.0)],
+            [T::lit(0.0), T::lit(0.0), v16, v19],
+            [T::lit(0.0), T::lit(0.0), v19, p.prepared[5]],
         ]),
     )
 }
@@ -545,198 +666,104 @@ pub fn bias_forces<T: Real>(
 ) -> SVector<T, 4> {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3] = qd.data.0[0];
-    let v0 = p.lower_a_mass * p.lower_a_com_x;
-    let v1 = p.lower_a_origin_x * v0;
-    let v2 = p.lower_a_mass * p.lower_a_com_y;
-    let v3 = p.lower_a_origin_y * v2;
+    let (v0, v2) = q_1.sincos();
+    let v1 = p.prepared[2] * v0;
+    let v3 = p.prepared[3] * v2;
     let v4 = v1 + v3;
-    let (v5, v10) = q_1.sin_cos();
-    let v6 = v4 * v5;
-    let v7 = p.lower_a_origin_x * v2;
-    let v8 = v0 * p.lower_a_origin_y;
-    let v9 = v7 - v8;
-    let v11 = v9 * v10;
-    let v12 = v6 + v11;
-    let v13 = -v12;
-    let v14 = v13 + v13;
-    let v15 = qd_0 * qd_1;
-    let v16 = v14 * v15;
-    let v17 = v8 - v7;
-    let v18 = v10 * v17;
-    let v19 = v18 - v6;
-    let v20 = qd_1 * qd_1;
-    let v21 = v19 * v20;
-    let v22 = v16 + v21;
-    let (v34, v23) = q_0.sin_cos();
-    let v24 = p.upper_a_mass * p.upper_a_com_y;
-    let v25 = p.lower_a_mass * p.lower_a_origin_y;
-    let v26 = v24 + v25;
-    let v27 = p.gravity_x * v26;
-    let v28 = p.upper_a_mass * p.upper_a_com_x;
-    let v29 = p.lower_a_origin_x * p.lower_a_mass;
-    let v30 = v28 + v29;
-    let v31 = p.gravity_y * v30;
-    let v32 = v27 - v31;
-    let v33 = v23 * v32;
-    let v35 = p.gravity_x * v30;
-    let v36 = v26 * p.gravity_y;
-    let v37 = v35 + v36;
-    let v38 = v34 * v37;
-    let v39 = v33 + v38;
-    let v40 = v10 * v23;
-    let v41 = v5 * v34;
-    let v42 = v40 - v41;
-    let v43 = v2 * p.gravity_x;
-    let v44 = v0 * p.gravity_y;
-    let v45 = v43 - v44;
-    let v46 = v42 * v45;
-    let v47 = v10 * v34;
-    let v48 = v5 * v23;
-    let v49 = v47 + v48;
-    let v50 = v0 * p.gravity_x;
-    let v51 = v2 * p.gravity_y;
-    let v52 = v50 + v51;
-    let v53 = v49 * v52;
-    let v54 = v46 + v53;
-    let v55 = v39 + v54;
-    let v56 = v22 + v55;
-    let v57 = qd_0 * qd_0;
-    let v58 = v12 * v57;
-    let v59 = v54 + v58;
-    let v60 = p.lower_b_mass * p.lower_b_com_x;
-    let v61 = p.lower_b_origin_x * v60;
-    let v62 = p.lower_b_mass * p.lower_b_com_y;
-    let v63 = p.lower_b_origin_y * v62;
-    let v64 = v61 + v63;
-    let (v65, v70) = q_3.sin_cos();
-    let v66 = v64 * v65;
-    let v67 = p.lower_b_origin_x * v62;
-    let v68 = v60 * p.lower_b_origin_y;
-    let v69 = v67 - v68;
-    let v71 = v69 * v70;
-    let v72 = v66 + v71;
-    let v73 = -v72;
-    let v74 = v73 + v73;
-    let v75 = qd_2 * qd_3;
-    let v76 = v74 * v75;
-    let v77 = v68 - v67;
-    let v78 = v70 * v77;
-    let v79 = v78 - v66;
-    let v80 = qd_3 * qd_3;
-    let v81 = v79 * v80;
-    let v82 = v76 + v81;
-    let (v94, v83) = q_2.sin_cos();
-    let v84 = p.upper_b_mass * p.upper_b_com_y;
-    let v85 = p.lower_b_mass * p.lower_b_origin_y;
-    let v86 = v84 + v85;
-    let v87 = p.gravity_x * v86;
-    let v88 = p.upper_b_mass * p.upper_b_com_x;
-    let v89 = p.lower_b_origin_x * p.lower_b_mass;
-    let v90 = v88 + v89;
-    let v91 = p.gravity_y * v90;
-    let v92 = v87 - v91;
-    let v93 = v83 * v92;
-    let v95 = p.gravity_x * v90;
-    let v96 = p.gravity_y * v86;
-    let v97 = v95 + v96;
-    let v98 = v94 * v97;
-    let v99 = v93 + v98;
-    let v100 = v70 * v83;
-    let v101 = v65 * v94;
-    let v102 = v100 - v101;
-    let v103 = p.gravity_x * v62;
-    let v104 = p.gravity_y * v60;
-    let v105 = v103 - v104;
-    let v106 = v102 * v105;
-    let v107 = v70 * v94;
-    let v108 = v65 * v83;
-    let v109 = v107 + v108;
-    let v110 = p.gravity_x * v60;
-    let v111 = p.gravity_y * v62;
-    let v112 = v110 + v111;
-    let v113 = v109 * v112;
-    let v114 = v106 + v113;
-    let v115 = v99 + v114;
-    let v116 = v82 + v115;
-    let v117 = qd_2 * qd_2;
-    let v118 = v72 * v117;
-    let v119 = v114 + v118;
-    SMatrix::from_data(ArrayStorage([[v56, v59, v116, v119]]))
+    let v5 = -v4;
+    let v6 = v5 + v5;
+    let v7 = qd_0 * qd_1;
+    let v8 = v6 * v7;
+    let v9 = v2 * p.prepared[4];
+    let v10 = v9 - v1;
+    let v11 = qd_1 * qd_1;
+    let v12 = v10 * v11;
+    let v13 = v8 + v12;
+    let (v16, v14) = q_0.sincos();
+    let v15 = v14 * p.prepared[10];
+    let v17 = v16 * p.prepared[11];
+    let v18 = v15 + v17;
+    let v19 = v2 * v14;
+    let v20 = v0 * v16;
+    let v21 = v19 - v20;
+    let v22 = v21 * p.prepared[12];
+    let v23 = v2 * v16;
+    let v24 = v0 * v14;
+    let v25 = v23 + v24;
+    let v26 = v25 * p.prepared[13];
+    let v27 = v22 + v26;
+    let v28 = v18 + v27;
+    let v29 = v13 + v28;
+    let v30 = qd_0 * qd_0;
+    let v31 = v4 * v30;
+    let v32 = v27 + v31;
+    let (v33, v35) = q_3.sincos();
+    let v34 = p.prepared[7] * v33;
+    let v36 = p.prepared[8] * v35;
+    let v37 = v34 + v36;
+    let v38 = -v37;
+    let v39 = v38 + v38;
+    let v40 = qd_2 * qd_3;
+    let v41 = v39 * v40;
+    let v42 = v35 * p.prepared[9];
+    let v43 = v42 - v34;
+    let v44 = qd_3 * qd_3;
+    let v45 = v43 * v44;
+    let v46 = v41 + v45;
+    let (v49, v47) = q_2.sincos();
+    let v48 = v47 * p.prepared[14];
+    let v50 = v49 * p.prepared[15];
+    let v51 = v48 + v50;
+    let v52 = v35 * v47;
+    let v53 = v33 * v49;
+    let v54 = v52 - v53;
+    let v55 = v54 * p.prepared[16];
+    let v56 = v35 * v49;
+    let v57 = v33 * v47;
+    let v58 = v56 + v57;
+    let v59 = v58 * p.prepared[17];
+    let v60 = v55 + v59;
+    let v61 = v51 + v60;
+    let v62 = v46 + v61;
+    let v63 = qd_2 * qd_2;
+    let v64 = v37 * v63;
+    let v65 = v60 + v64;
+    SMatrix::from_data(ArrayStorage([[v29, v32, v62, v65]]))
 }
 /// `G(q) = ∂V/∂q`.
 pub fn gravity_forces<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 4> {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
-    let (v11, v0) = q_0.sin_cos();
-    let v1 = p.upper_a_mass * p.upper_a_com_y;
-    let v2 = p.lower_a_mass * p.lower_a_origin_y;
-    let v3 = v1 + v2;
-    let v4 = p.gravity_x * v3;
-    let v5 = p.upper_a_mass * p.upper_a_com_x;
-    let v6 = p.lower_a_mass * p.lower_a_origin_x;
-    let v7 = v5 + v6;
-    let v8 = p.gravity_y * v7;
-    let v9 = v4 - v8;
-    let v10 = v0 * v9;
-    let v12 = p.gravity_x * v7;
-    let v13 = v3 * p.gravity_y;
-    let v14 = v12 + v13;
-    let v15 = v11 * v14;
-    let v16 = v10 + v15;
-    let (v19, v17) = q_1.sin_cos();
-    let v18 = v0 * v17;
-    let v20 = v11 * v19;
-    let v21 = v18 - v20;
-    let v22 = p.lower_a_mass * p.lower_a_com_y;
-    let v23 = p.gravity_x * v22;
-    let v24 = p.lower_a_mass * p.lower_a_com_x;
-    let v25 = p.gravity_y * v24;
+    let (v2, v0) = q_0.sincos();
+    let v1 = v0 * p.prepared[10];
+    let v3 = v2 * p.prepared[11];
+    let v4 = v1 + v3;
+    let (v7, v5) = q_1.sincos();
+    let v6 = v0 * v5;
+    let v8 = v2 * v7;
+    let v9 = v6 - v8;
+    let v10 = v9 * p.prepared[12];
+    let v11 = v2 * v5;
+    let v12 = v0 * v7;
+    let v13 = v11 + v12;
+    let v14 = v13 * p.prepared[13];
+    let v15 = v10 + v14;
+    let v16 = v4 + v15;
+    let (v19, v17) = q_2.sincos();
+    let v18 = v17 * p.prepared[14];
+    let v20 = v19 * p.prepared[15];
+    let v21 = v18 + v20;
+    let (v24, v22) = q_3.sincos();
+    let v23 = v17 * v22;
+    let v25 = v19 * v24;
     let v26 = v23 - v25;
-    let v27 = v21 * v26;
-    let v28 = v11 * v17;
-    let v29 = v0 * v19;
+    let v27 = v26 * p.prepared[16];
+    let v28 = v19 * v22;
+    let v29 = v17 * v24;
     let v30 = v28 + v29;
-    let v31 = p.gravity_x * v24;
-    let v32 = p.gravity_y * v22;
-    let v33 = v31 + v32;
-    let v34 = v30 * v33;
-    let v35 = v27 + v34;
-    let v36 = v16 + v35;
-    let (v48, v37) = q_2.sin_cos();
-    let v38 = p.upper_b_mass * p.upper_b_com_y;
-    let v39 = p.lower_b_mass * p.lower_b_origin_y;
-    let v40 = v38 + v39;
-    let v41 = p.gravity_x * v40;
-    let v42 = p.upper_b_mass * p.upper_b_com_x;
-    let v43 = p.lower_b_mass * p.lower_b_origin_x;
-    let v44 = v42 + v43;
-    let v45 = p.gravity_y * v44;
-    let v46 = v41 - v45;
-    let v47 = v37 * v46;
-    let v49 = p.gravity_x * v44;
-    let v50 = p.gravity_y * v40;
-    let v51 = v49 + v50;
-    let v52 = v48 * v51;
-    let v53 = v47 + v52;
-    let (v56, v54) = q_3.sin_cos();
-    let v55 = v37 * v54;
-    let v57 = v48 * v56;
-    let v58 = v55 - v57;
-    let v59 = p.lower_b_mass * p.lower_b_com_y;
-    let v60 = p.gravity_x * v59;
-    let v61 = p.lower_b_mass * p.lower_b_com_x;
-    let v62 = p.gravity_y * v61;
-    let v63 = v60 - v62;
-    let v64 = v58 * v63;
-    let v65 = v48 * v54;
-    let v66 = v37 * v56;
-    let v67 = v65 + v66;
-    let v68 = p.gravity_x * v61;
-    let v69 = p.gravity_y * v59;
-    let v70 = v68 + v69;
-    let v71 = v67 * v70;
-    let v72 = v64 + v71;
-    let v73 = v53 + v72;
-    SMatrix::from_data(ArrayStorage([[v36, v35, v73, v72]]))
+    let v31 = v30 * p.prepared[17];
+    let v32 = v27 + v31;
+    let v33 = v21 + v32;
+    SMatrix::from_data(ArrayStorage([[v16, v15, v33, v32]]))
 }
 /// Viscous joint damping `D q̇`.
 pub fn damping_forces<T: Real>(qd: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 4> {
@@ -750,12 +777,12 @@ pub fn damping_forces<T: Real>(qd: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 
 /// `φ(q)`: point a minus point b of each closure.
 pub fn closure_residual<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 2> {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.lower_a_origin_x;
     let v3 = v2 * p.lower_a_origin_y;
     let v4 = v1 - v3;
     let v5 = p.upper_a_origin_x + v4;
-    let (v8, v6) = q_1.sin_cos();
+    let (v8, v6) = q_1.sincos();
     let v7 = v0 * v6;
     let v9 = v2 * v8;
     let v10 = v7 - v9;
@@ -766,12 +793,12 @@ pub fn closure_residual<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T,
     let v15 = v14 * p.toe_a_y;
     let v16 = v11 - v15;
     let v17 = v5 + v16;
-    let (v20, v18) = q_2.sin_cos();
+    let (v20, v18) = q_2.sincos();
     let v19 = v18 * p.lower_b_origin_x;
     let v21 = v20 * p.lower_b_origin_y;
     let v22 = v19 - v21;
     let v23 = p.upper_b_origin_x + v22;
-    let (v26, v24) = q_3.sin_cos();
+    let (v26, v24) = q_3.sincos();
     let v25 = v18 * v24;
     let v27 = v20 * v26;
     let v28 = v25 - v27;
@@ -808,8 +835,8 @@ pub fn constraint_jacobian<T: Real>(
     p: &Params<T>,
 ) -> SMatrix<T, 2, 4> {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
-    let (v0, v3) = q_0.sin_cos();
-    let (v4, v1) = q_1.sin_cos();
+    let (v0, v3) = q_0.sincos();
+    let (v4, v1) = q_1.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
@@ -832,8 +859,8 @@ pub fn constraint_jacobian<T: Real>(
     let v23 = v21 - v22;
     let v24 = v20 + v23;
     let v25 = -v12;
-    let (v26, v29) = q_2.sin_cos();
-    let (v30, v27) = q_3.sin_cos();
+    let (v26, v29) = q_2.sincos();
+    let (v30, v27) = q_3.sincos();
     let v28 = v26 * v27;
     let v31 = v29 * v30;
     let v32 = v28 + v31;
@@ -868,8 +895,8 @@ pub fn constraint_bias<T: Real>(
     let [qd_0, qd_1, qd_2, qd_3] = qd.data.0[0];
     let v0 = qd_2 + qd_3;
     let v1 = v0 * v0;
-    let (v5, v2) = q_2.sin_cos();
-    let (v6, v3) = q_3.sin_cos();
+    let (v5, v2) = q_2.sincos();
+    let (v6, v3) = q_3.sincos();
     let v4 = v2 * v3;
     let v7 = v5 * v6;
     let v8 = v4 - v7;
@@ -888,8 +915,8 @@ pub fn constraint_bias<T: Real>(
     let v21 = v15 + v20;
     let v22 = qd_0 + qd_1;
     let v23 = v22 * v22;
-    let (v27, v24) = q_0.sin_cos();
-    let (v28, v25) = q_1.sin_cos();
+    let (v27, v24) = q_0.sincos();
+    let (v28, v25) = q_1.sincos();
     let v26 = v24 * v25;
     let v29 = v27 * v28;
     let v30 = v26 - v29;
@@ -931,12 +958,12 @@ pub fn constraint_bias<T: Real>(
 /// The foot point in the base frame.
 pub fn foot_position<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 2> {
     let [q_0, q_1, _, _] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.lower_a_origin_x;
     let v3 = v2 * p.lower_a_origin_y;
     let v4 = v1 - v3;
     let v5 = p.upper_a_origin_x + v4;
-    let (v8, v6) = q_1.sin_cos();
+    let (v8, v6) = q_1.sincos();
     let v7 = v0 * v6;
     let v9 = v2 * v8;
     let v10 = v7 - v9;
@@ -960,8 +987,8 @@ pub fn foot_position<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 2>
 /// `J_f(q) = ∂(foot)/∂q`.
 pub fn foot_jacobian<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> {
     let [q_0, q_1, _, _] = q.data.0[0];
-    let (v0, v3) = q_0.sin_cos();
-    let (v4, v1) = q_1.sin_cos();
+    let (v0, v3) = q_0.sincos();
+    let (v4, v1) = q_1.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
@@ -1003,8 +1030,8 @@ pub fn foot_bias<T: Real>(
     let [qd_0, qd_1, _, _] = qd.data.0[0];
     let v0 = qd_0 + qd_1;
     let v1 = v0 * v0;
-    let (v5, v2) = q_0.sin_cos();
-    let (v6, v3) = q_1.sin_cos();
+    let (v5, v2) = q_0.sincos();
+    let (v6, v3) = q_1.sincos();
     let v4 = v2 * v3;
     let v7 = v5 * v6;
     let v8 = v4 - v7;
@@ -1042,195 +1069,88 @@ pub fn kinetic_energy<T: Real>(
 ) -> T {
     let [_, q_1, _, q_3] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3] = qd.data.0[0];
-    let v0 = p.upper_a_com_x * p.upper_a_com_x;
-    let v1 = p.upper_a_com_y * p.upper_a_com_y;
-    let v2 = v0 + v1;
-    let v3 = p.upper_a_mass * v2;
-    let v4 = p.upper_a_inertia + v3;
-    let v5 = p.lower_a_com_x * p.lower_a_com_x;
-    let v6 = p.lower_a_com_y * p.lower_a_com_y;
-    let v7 = v5 + v6;
-    let v8 = p.lower_a_mass * v7;
-    let v9 = p.lower_a_inertia + v8;
-    let (v17, v10) = q_1.sin_cos();
-    let v11 = p.lower_a_mass * p.lower_a_com_x;
-    let v12 = p.lower_a_origin_x * v11;
-    let v13 = p.lower_a_mass * p.lower_a_com_y;
-    let v14 = p.lower_a_origin_y * v13;
-    let v15 = v12 + v14;
-    let v16 = v10 * v15;
-    let v18 = p.lower_a_origin_x * v13;
-    let v19 = v11 * p.lower_a_origin_y;
-    let v20 = v18 - v19;
-    let v21 = v17 * v20;
-    let v22 = v16 - v21;
-    let v23 = v22 + v22;
-    let v24 = v9 + v23;
-    let v25 = p.lower_a_origin_x * p.lower_a_origin_x;
-    let v26 = p.lower_a_origin_y * p.lower_a_origin_y;
-    let v27 = v25 + v26;
-    let v28 = p.lower_a_mass * v27;
-    let v29 = v24 + v28;
-    let v30 = v4 + v29;
-    let v31 = p.upper_a_gear_ratio * p.upper_a_gear_ratio;
-    let v32 = p.upper_a_rotor_inertia * v31;
-    let v33 = v30 + v32;
-    let v34 = qd_0 * v33;
-    let v35 = v19 - v18;
-    let v36 = v17 * v35;
-    let v37 = v16 + v36;
-    let v38 = v9 + v37;
-    let v39 = v38 * qd_1;
-    let v40 = v34 + v39;
-    let v41 = qd_0 * v40;
-    let v42 = qd_0 * v38;
-    let v43 = v9 * qd_1;
-    let v44 = v42 + v43;
-    let v45 = qd_1 * v44;
-    let v46 = v41 + v45;
-    let v47 = p.upper_b_com_x * p.upper_b_com_x;
-    let v48 = p.upper_b_com_y * p.upper_b_com_y;
-    let v49 = v47 + v48;
-    let v50 = p.upper_b_mass * v49;
-    let v51 = p.upper_b_inertia + v50;
-    let v52 = p.lower_b_com_x * p.lower_b_com_x;
-    let v53 = p.lower_b_com_y * p.lower_b_com_y;
-    let v54 = v52 + v53;
-    let v55 = p.lower_b_mass * v54;
-    let v56 = p.lower_b_inertia + v55;
-    let (v64, v57) = q_3.sin_cos();
-    let v58 = p.lower_b_mass * p.lower_b_com_x;
-    let v59 = p.lower_b_origin_x * v58;
-    let v60 = p.lower_b_mass * p.lower_b_com_y;
-    let v61 = p.lower_b_origin_y * v60;
-    let v62 = v59 + v61;
-    let v63 = v57 * v62;
-    let v65 = p.lower_b_origin_x * v60;
-    let v66 = v58 * p.lower_b_origin_y;
-    let v67 = v65 - v66;
-    let v68 = v64 * v67;
-    let v69 = v63 - v68;
-    let v70 = v69 + v69;
-    let v71 = v56 + v70;
-    let v72 = p.lower_b_origin_x * p.lower_b_origin_x;
-    let v73 = p.lower_b_origin_y * p.lower_b_origin_y;
-    let v74 = v72 + v73;
-    let v75 = p.lower_b_mass * v74;
-    let v76 = v71 + v75;
-    let v77 = v51 + v76;
-    let v78 = p.upper_b_gear_ratio * p.upper_b_gear_ratio;
-    let v79 = p.upper_b_rotor_inertia * v78;
-    let v80 = v77 + v79;
-    let v81 = qd_2 * v80;
-    let v82 = v66 - v65;
-    let v83 = v64 * v82;
-    let v84 = v63 + v83;
-    let v85 = v56 + v84;
-    let v86 = v85 * qd_3;
-    let v87 = v81 + v86;
-    let v88 = qd_2 * v87;
-    let v89 = v46 + v88;
-    let v90 = qd_2 * v85;
-    let v91 = v56 * qd_3;
-    let v92 = v90 + v91;
-    let v93 = qd_3 * v92;
-    let v94 = v89 + v93;
-    let v95 = T::lit(0.5) * v94;
-    v95
+    let (v2, v0) = q_1.sincos();
+    let v1 = v0 * p.prepared[2];
+    let v3 = v2 * p.prepared[3];
+    let v4 = v1 - v3;
+    let v5 = v4 + v4;
+    let v6 = p.prepared[1] + v5;
+    let v7 = qd_0 * v6;
+    let v8 = v2 * p.prepared[4];
+    let v9 = v1 + v8;
+    let v10 = p.prepared[0] + v9;
+    let v11 = v10 * qd_1;
+    let v12 = v7 + v11;
+    let v13 = qd_0 * v12;
+    let v14 = qd_0 * v10;
+    let v15 = p.prepared[0] * qd_1;
+    let v16 = v14 + v15;
+    let v17 = qd_1 * v16;
+    let v18 = v13 + v17;
+    let (v21, v19) = q_3.sincos();
+    let v20 = v19 * p.prepared[7];
+    let v22 = v21 * p.prepared[8];
+    let v23 = v20 - v22;
+    let v24 = v23 + v23;
+    let v25 = p.prepared[6] + v24;
+    let v26 = qd_2 * v25;
+    let v27 = v21 * p.prepared[9];
+    let v28 = v20 + v27;
+    let v29 = p.prepared[5] + v28;
+    let v30 = v29 * qd_3;
+    let v31 = v26 + v30;
+    let v32 = qd_2 * v31;
+    let v33 = v18 + v32;
+    let v34 = qd_2 * v29;
+    let v35 = p.prepared[5] * qd_3;
+    let v36 = v34 + v35;
+    let v37 = qd_3 * v36;
+    let v38 = v33 + v37;
+    let v39 = T::lit(0.5) * v38;
+    v39
 }
 /// Potential energy `−Σ m g·c`.
 pub fn potential_energy<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> T {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
-    let v0 = p.upper_a_mass + p.lower_a_mass;
-    let v1 = v0 * p.upper_a_origin_x;
-    let v2 = p.upper_b_mass + p.lower_b_mass;
-    let v3 = v2 * p.upper_b_origin_x;
-    let v4 = v1 + v3;
-    let v5 = p.gravity_x * v4;
-    let v6 = v0 * p.upper_a_origin_y;
-    let v7 = v2 * p.upper_b_origin_y;
-    let v8 = v6 + v7;
-    let v9 = p.gravity_y * v8;
-    let v10 = v5 + v9;
-    let (v22, v11) = q_0.sin_cos();
-    let v12 = p.upper_a_mass * p.upper_a_com_x;
-    let v13 = p.lower_a_mass * p.lower_a_origin_x;
+    let (v2, v0) = q_0.sincos();
+    let v1 = v0 * p.prepared[11];
+    let v3 = v2 * p.prepared[10];
+    let v4 = v1 - v3;
+    let v5 = p.prepared[18] + v4;
+    let (v8, v6) = q_1.sincos();
+    let v7 = v0 * v6;
+    let v9 = v2 * v8;
+    let v10 = v7 - v9;
+    let v11 = v10 * p.prepared[13];
+    let v12 = v2 * v6;
+    let v13 = v0 * v8;
     let v14 = v12 + v13;
-    let v15 = p.gravity_x * v14;
-    let v16 = p.upper_a_mass * p.upper_a_com_y;
-    let v17 = p.lower_a_mass * p.lower_a_origin_y;
-    let v18 = v16 + v17;
-    let v19 = p.gravity_y * v18;
-    let v20 = v15 + v19;
-    let v21 = v11 * v20;
-    let v23 = p.gravity_x * v18;
-    let v24 = p.gravity_y * v14;
-    let v25 = v23 - v24;
-    let v26 = v22 * v25;
-    let v27 = v21 - v26;
-    let v28 = v10 + v27;
-    let (v31, v29) = q_1.sin_cos();
-    let v30 = v11 * v29;
-    let v32 = v22 * v31;
-    let v33 = v30 - v32;
-    let v34 = p.lower_a_mass * p.lower_a_com_x;
-    let v35 = p.gravity_x * v34;
-    let v36 = p.lower_a_mass * p.lower_a_com_y;
-    let v37 = p.gravity_y * v36;
-    let v38 = v35 + v37;
-    let v39 = v33 * v38;
-    let v40 = v22 * v29;
-    let v41 = v11 * v31;
-    let v42 = v40 + v41;
-    let v43 = p.gravity_x * v36;
-    let v44 = p.gravity_y * v34;
-    let v45 = v43 - v44;
-    let v46 = v42 * v45;
-    let v47 = v39 - v46;
-    let v48 = v28 + v47;
-    let (v60, v49) = q_2.sin_cos();
-    let v50 = p.upper_b_mass * p.upper_b_com_x;
-    let v51 = p.lower_b_mass * p.lower_b_origin_x;
-    let v52 = v50 + v51;
-    let v53 = p.gravity_x * v52;
-    let v54 = p.upper_b_mass * p.upper_b_com_y;
-    let v55 = p.lower_b_mass * p.lower_b_origin_y;
-    let v56 = v54 + v55;
-    let v57 = p.gravity_y * v56;
-    let v58 = v53 + v57;
-    let v59 = v49 * v58;
-    let v61 = p.gravity_x * v56;
-    let v62 = p.gravity_y * v52;
-    let v63 = v61 - v62;
-    let v64 = v60 * v63;
-    let v65 = v59 - v64;
-    let v66 = v48 + v65;
-    let (v69, v67) = q_3.sin_cos();
-    let v68 = v49 * v67;
-    let v70 = v60 * v69;
-    let v71 = v68 - v70;
-    let v72 = p.lower_b_mass * p.lower_b_com_x;
-    let v73 = p.gravity_x * v72;
-    let v74 = p.lower_b_mass * p.lower_b_com_y;
-    let v75 = p.gravity_y * v74;
-    let v76 = v73 + v75;
-    let v77 = v71 * v76;
-    let v78 = v60 * v67;
-    let v79 = v49 * v69;
-    let v80 = v78 + v79;
-    let v81 = p.gravity_x * v74;
-    let v82 = p.gravity_y * v72;
-    let v83 = v81 - v82;
-    let v84 = v80 * v83;
-    let v85 = v77 - v84;
-    let v86 = v66 + v85;
-    let v87 = -v86;
-    v87
+    let v15 = v14 * p.prepared[12];
+    let v16 = v11 - v15;
+    let v17 = v5 + v16;
+    let (v20, v18) = q_2.sincos();
+    let v19 = v18 * p.prepared[15];
+    let v21 = v20 * p.prepared[14];
+    let v22 = v19 - v21;
+    let v23 = v17 + v22;
+    let (v26, v24) = q_3.sincos();
+    let v25 = v18 * v24;
+    let v27 = v20 * v26;
+    let v28 = v25 - v27;
+    let v29 = v28 * p.prepared[17];
+    let v30 = v20 * v24;
+    let v31 = v18 * v26;
+    let v32 = v30 + v31;
+    let v33 = v32 * p.prepared[16];
+    let v34 = v29 - v33;
+    let v35 = v23 + v34;
+    let v36 = -v35;
+    v36
 }
 /// Joint positions in the base frame, one column per joint.
 pub fn joint_positions<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> {
     let [q_0, _, q_2, _] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.lower_a_origin_x;
     let v3 = v2 * p.lower_a_origin_y;
     let v4 = v1 - v3;
@@ -1239,7 +1159,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 
     let v7 = v0 * p.lower_a_origin_y;
     let v8 = v6 + v7;
     let v9 = p.upper_a_origin_y + v8;
-    let (v12, v10) = q_2.sin_cos();
+    let (v12, v10) = q_2.sincos();
     let v11 = v10 * p.lower_b_origin_x;
     let v13 = v12 * p.lower_b_origin_y;
     let v14 = v11 - v13;
@@ -1260,7 +1180,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 
 /// Link tips in the base frame, one column per link.
 pub fn link_tips<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.upper_a_length_x;
     let v3 = v2 * p.upper_a_length_y;
     let v4 = v1 - v3;
@@ -1273,7 +1193,7 @@ pub fn link_tips<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> 
     let v11 = v2 * p.lower_a_origin_y;
     let v12 = v10 - v11;
     let v13 = p.upper_a_origin_x + v12;
-    let (v16, v14) = q_1.sin_cos();
+    let (v16, v14) = q_1.sincos();
     let v15 = v0 * v14;
     let v17 = v2 * v16;
     let v18 = v15 - v17;
@@ -1292,7 +1212,7 @@ pub fn link_tips<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> 
     let v31 = v18 * p.lower_a_length_y;
     let v32 = v30 + v31;
     let v33 = v29 + v32;
-    let (v36, v34) = q_2.sin_cos();
+    let (v36, v34) = q_2.sincos();
     let v35 = v34 * p.upper_b_length_x;
     let v37 = v36 * p.upper_b_length_y;
     let v38 = v35 - v37;
@@ -1305,7 +1225,7 @@ pub fn link_tips<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> 
     let v45 = v36 * p.lower_b_origin_y;
     let v46 = v44 - v45;
     let v47 = p.upper_b_origin_x + v46;
-    let (v50, v48) = q_3.sin_cos();
+    let (v50, v48) = q_3.sincos();
     let v49 = v34 * v48;
     let v51 = v36 * v50;
     let v52 = v49 - v51;
@@ -1329,12 +1249,12 @@ pub fn link_tips<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> 
 /// Closure points a, b of each closure in the base frame.
 pub fn closure_points<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 2> {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.lower_a_origin_x;
     let v3 = v2 * p.lower_a_origin_y;
     let v4 = v1 - v3;
     let v5 = p.upper_a_origin_x + v4;
-    let (v8, v6) = q_1.sin_cos();
+    let (v8, v6) = q_1.sincos();
     let v7 = v0 * v6;
     let v9 = v2 * v8;
     let v10 = v7 - v9;
@@ -1353,12 +1273,12 @@ pub fn closure_points<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2
     let v23 = v10 * p.toe_a_y;
     let v24 = v22 + v23;
     let v25 = v21 + v24;
-    let (v28, v26) = q_2.sin_cos();
+    let (v28, v26) = q_2.sincos();
     let v27 = v26 * p.lower_b_origin_x;
     let v29 = v28 * p.lower_b_origin_y;
     let v30 = v27 - v29;
     let v31 = p.upper_b_origin_x + v30;
-    let (v34, v32) = q_3.sin_cos();
+    let (v34, v32) = q_3.sincos();
     let v33 = v26 * v32;
     let v35 = v28 * v34;
     let v36 = v33 - v35;
@@ -1406,239 +1326,147 @@ pub fn dynamics_terms<T: Real>(
 ) -> (SMatrix<T, 4, 4>, SVector<T, 4>, SMatrix<T, 2, 4>, SVector<T, 2>) {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3] = qd.data.0[0];
-    let v0 = p.upper_a_com_x * p.upper_a_com_x;
-    let v1 = p.upper_a_com_y * p.upper_a_com_y;
-    let v2 = v0 + v1;
-    let v3 = p.upper_a_mass * v2;
-    let v4 = p.upper_a_inertia + v3;
-    let v5 = p.lower_a_com_x * p.lower_a_com_x;
-    let v6 = p.lower_a_com_y * p.lower_a_com_y;
-    let v7 = v5 + v6;
-    let v8 = p.lower_a_mass * v7;
-    let v9 = p.lower_a_inertia + v8;
-    let (v17, v10) = q_1.sin_cos();
-    let v11 = p.lower_a_mass * p.lower_a_com_x;
-    let v12 = p.lower_a_origin_x * v11;
-    let v13 = p.lower_a_mass * p.lower_a_com_y;
-    let v14 = p.lower_a_origin_y * v13;
-    let v15 = v12 + v14;
-    let v16 = v10 * v15;
-    let v18 = p.lower_a_origin_x * v13;
-    let v19 = v11 * p.lower_a_origin_y;
-    let v20 = v18 - v19;
-    let v21 = v17 * v20;
-    let v22 = v16 - v21;
-    let v23 = v22 + v22;
-    let v24 = v9 + v23;
-    let v25 = p.lower_a_origin_x * p.lower_a_origin_x;
-    let v26 = p.lower_a_origin_y * p.lower_a_origin_y;
-    let v27 = v25 + v26;
-    let v28 = p.lower_a_mass * v27;
-    let v29 = v24 + v28;
-    let v30 = v4 + v29;
-    let v31 = p.upper_a_gear_ratio * p.upper_a_gear_ratio;
-    let v32 = p.upper_a_rotor_inertia * v31;
-    let v33 = v30 + v32;
-    let v34 = v19 - v18;
-    let v35 = v17 * v34;
-    let v36 = v16 + v35;
-    let v37 = v9 + v36;
-    let v38 = p.upper_b_com_x * p.upper_b_com_x;
-    let v39 = p.upper_b_com_y * p.upper_b_com_y;
-    let v40 = v38 + v39;
-    let v41 = p.upper_b_mass * v40;
-    let v42 = p.upper_b_inertia + v41;
-    let v43 = p.lower_b_com_x * p.lower_b_com_x;
-    let v44 = p.lower_b_com_y * p.lower_b_com_y;
-    let v45 = v43 + v44;
-    let v46 = p.lower_b_mass * v45;
-    let v47 = p.lower_b_inertia + v46;
-    let (v55, v48) = q_3.sin_cos();
-    let v49 = p.lower_b_mass * p.lower_b_com_x;
-    let v50 = p.lower_b_origin_x * v49;
-    let v51 = p.lower_b_mass * p.lower_b_com_y;
-    let v52 = p.lower_b_origin_y * v51;
-    let v53 = v50 + v52;
-    let v54 = v48 * v53;
-    let v56 = p.lower_b_origin_x * v51;
-    let v57 = v49 * p.lower_b_origin_y;
-    let v58 = v56 - v57;
-    let v59 = v55 * v58;
-    let v60 = v54 - v59;
-    let v61 = v60 + v60;
-    let v62 = v47 + v61;
-    let v63 = p.lower_b_origin_x * p.lower_b_origin_x;
-    let v64 = p.lower_b_origin_y * p.lower_b_origin_y;
-    let v65 = v63 + v64;
-    let v66 = p.lower_b_mass * v65;
-    let v67 = v62 + v66;
-    let v68 = v42 + v67;
-    let v69 = p.upper_b_gear_ratio * p.upper_b_gear_ratio;
-    let v70 = p.upper_b_rotor_inertia * v69;
-    let v71 = v68 + v70;
-    let v72 = v57 - v56;
-    let v73 = v55 * v72;
-    let v74 = v54 + v73;
-    let v75 = v47 + v74;
-    let v76 = v15 * v17;
-    let v77 = v10 * v20;
-    let v78 = v76 + v77;
-    let v79 = -v78;
-    let v80 = v79 + v79;
-    let v81 = qd_0 * qd_1;
-    let v82 = v80 * v81;
-    let v83 = v10 * v34;
-    let v84 = v83 - v76;
-    let v85 = qd_1 * qd_1;
-    let v86 = v84 * v85;
-    let v87 = v82 + v86;
-    let (v99, v88) = q_0.sin_cos();
-    let v89 = p.upper_a_mass * p.upper_a_com_y;
-    let v90 = p.lower_a_mass * p.lower_a_origin_y;
-    let v91 = v89 + v90;
-    let v92 = p.gravity_x * v91;
-    let v93 = p.upper_a_mass * p.upper_a_com_x;
-    let v94 = p.lower_a_mass * p.lower_a_origin_x;
-    let v95 = v93 + v94;
-    let v96 = p.gravity_y * v95;
-    let v97 = v92 - v96;
-    let v98 = v88 * v97;
-    let v100 = p.gravity_x * v95;
-    let v101 = v91 * p.gravity_y;
-    let v102 = v100 + v101;
-    let v103 = v99 * v102;
-    let v104 = v98 + v103;
-    let v105 = v10 * v88;
-    let v106 = v17 * v99;
+    let (v2, v0) = q_1.sincos();
+    let v1 = v0 * p.prepared[2];
+    let v3 = v2 * p.prepared[3];
+    let v4 = v1 - v3;
+    let v5 = v4 + v4;
+    let v6 = p.prepared[1] + v5;
+    let v7 = v2 * p.prepared[4];
+    let v8 = v1 + v7;
+    let v9 = p.prepared[0] + v8;
+    let (v12, v10) = q_3.sincos();
+    let v11 = v10 * p.prepared[7];
+    let v13 = v12 * p.prepared[8];
+    let v14 = v11 - v13;
+    let v15 = v14 + v14;
+    let v16 = p.prepared[6] + v15;
+    let v17 = v12 * p.prepared[9];
+    let v18 = v11 + v17;
+    let v19 = p.prepared[5] + v18;
+    let v20 = p.prepared[2] * v2;
+    let v21 = v0 * p.prepared[3];
+    let v22 = v20 + v21;
+    let v23 = -v22;
+    let v24 = v23 + v23;
+    let v25 = qd_0 * qd_1;
+    let v26 = v24 * v25;
+    let v27 = v0 * p.prepared[4];
+    let v28 = v27 - v20;
+    let v29 = qd_1 * qd_1;
+    let v30 = v28 * v29;
+    let v31 = v26 + v30;
+    let (v34, v32) = q_0.sincos();
+    let v33 = v32 * p.prepared[10];
+    let v35 = v34 * p.prepared[11];
+    let v36 = v33 + v35;
+    let v37 = v0 * v32;
+    let v38 = v2 * v34;
+    let v39 = v37 - v38;
+    let v40 = v39 * p.prepared[12];
+    let v41 = v0 * v34;
+    let v42 = v2 * v32;
+    let v43 = v41 + v42;
+    let v44 = v43 * p.prepared[13];
+    let v45 = v40 + v44;
+    let v46 = v36 + v45;
+    let v47 = v31 + v46;
+    let v48 = qd_0 * qd_0;
+    let v49 = v22 * v48;
+    let v50 = v45 + v49;
+    let v51 = p.prepared[7] * v12;
+    let v52 = v10 * p.prepared[8];
+    let v53 = v51 + v52;
+    let v54 = -v53;
+    let v55 = v54 + v54;
+    let v56 = qd_2 * qd_3;
+    let v57 = v55 * v56;
+    let v58 = v10 * p.prepared[9];
+    let v59 = v58 - v51;
+    let v60 = qd_3 * qd_3;
+    let v61 = v59 * v60;
+    let v62 = v57 + v61;
+    let (v65, v63) = q_2.sincos();
+    let v64 = v63 * p.prepared[14];
+    let v66 = v65 * p.prepared[15];
+    let v67 = v64 + v66;
+    let v68 = v10 * v63;
+    let v69 = v12 * v65;
+    let v70 = v68 - v69;
+    let v71 = v70 * p.prepared[16];
+    let v72 = v10 * v65;
+    let v73 = v12 * v63;
+    let v74 = v72 + v73;
+    let v75 = v74 * p.prepared[17];
+    let v76 = v71 + v75;
+    let v77 = v67 + v76;
+    let v78 = v62 + v77;
+    let v79 = qd_2 * qd_2;
+    let v80 = v53 * v79;
+    let v81 = v76 + v80;
+    let v82 = v43 * p.toe_a_x;
+    let v83 = v39 * p.toe_a_y;
+    let v84 = v82 + v83;
+    let v85 = p.lower_a_origin_x * v34;
+    let v86 = p.lower_a_origin_y * v32;
+    let v87 = v85 + v86;
+    let v88 = v84 + v87;
+    let v89 = -v88;
+    let v90 = v39 * p.toe_a_x;
+    let v91 = v43 * p.toe_a_y;
+    let v92 = v90 - v91;
+    let v93 = p.lower_a_origin_x * v32;
+    let v94 = p.lower_a_origin_y * v34;
+    let v95 = v93 - v94;
+    let v96 = v92 + v95;
+    let v97 = -v84;
+    let v98 = v74 * p.toe_b_x;
+    let v99 = v70 * p.toe_b_y;
+    let v100 = v98 + v99;
+    let v101 = p.lower_b_origin_x * v65;
+    let v102 = p.lower_b_origin_y * v63;
+    let v103 = v101 + v102;
+    let v104 = v100 + v103;
+    let v105 = v70 * p.toe_b_x;
+    let v106 = v74 * p.toe_b_y;
     let v107 = v105 - v106;
-    let v108 = v13 * p.gravity_x;
-    let v109 = v11 * p.gravity_y;
+    let v108 = p.lower_b_origin_x * v63;
+    let v109 = p.lower_b_origin_y * v65;
     let v110 = v108 - v109;
-    let v111 = v107 * v110;
-    let v112 = v10 * v99;
-    let v113 = v17 * v88;
-    let v114 = v112 + v113;
-    let v115 = v11 * p.gravity_x;
-    let v116 = v13 * p.gravity_y;
-    let v117 = v115 + v116;
-    let v118 = v114 * v117;
-    let v119 = v111 + v118;
-    let v120 = v104 + v119;
-    let v121 = v87 + v120;
-    let v122 = qd_0 * qd_0;
-    let v123 = v78 * v122;
-    let v124 = v119 + v123;
-    let v125 = v53 * v55;
-    let v126 = v48 * v58;
+    let v111 = v107 + v110;
+    let v112 = -v111;
+    let v113 = -v107;
+    let v114 = qd_2 + qd_3;
+    let v115 = v114 * v114;
+    let v116 = v107 * v115;
+    let v117 = v79 * v110;
+    let v118 = v116 + v117;
+    let v119 = qd_0 + qd_1;
+    let v120 = v119 * v119;
+    let v121 = v92 * v120;
+    let v122 = v48 * v95;
+    let v123 = v121 + v122;
+    let v124 = v118 - v123;
+    let v125 = v100 * v115;
+    let v126 = v79 * v103;
     let v127 = v125 + v126;
-    let v128 = -v127;
-    let v129 = v128 + v128;
-    let v130 = qd_2 * qd_3;
-    let v131 = v129 * v130;
-    let v132 = v48 * v72;
-    let v133 = v132 - v125;
-    let v134 = qd_3 * qd_3;
-    let v135 = v133 * v134;
-    let v136 = v131 + v135;
-    let (v148, v137) = q_2.sin_cos();
-    let v138 = p.upper_b_mass * p.upper_b_com_y;
-    let v139 = p.lower_b_mass * p.lower_b_origin_y;
-    let v140 = v138 + v139;
-    let v141 = p.gravity_x * v140;
-    let v142 = p.upper_b_mass * p.upper_b_com_x;
-    let v143 = p.lower_b_mass * p.lower_b_origin_x;
-    let v144 = v142 + v143;
-    let v145 = p.gravity_y * v144;
-    let v146 = v141 - v145;
-    let v147 = v137 * v146;
-    let v149 = p.gravity_x * v144;
-    let v150 = p.gravity_y * v140;
-    let v151 = v149 + v150;
-    let v152 = v148 * v151;
-    let v153 = v147 + v152;
-    let v154 = v48 * v137;
-    let v155 = v55 * v148;
-    let v156 = v154 - v155;
-    let v157 = v51 * p.gravity_x;
-    let v158 = v49 * p.gravity_y;
-    let v159 = v157 - v158;
-    let v160 = v156 * v159;
-    let v161 = v48 * v148;
-    let v162 = v55 * v137;
-    let v163 = v161 + v162;
-    let v164 = v49 * p.gravity_x;
-    let v165 = v51 * p.gravity_y;
-    let v166 = v164 + v165;
-    let v167 = v163 * v166;
-    let v168 = v160 + v167;
-    let v169 = v153 + v168;
-    let v170 = v136 + v169;
-    let v171 = qd_2 * qd_2;
-    let v172 = v127 * v171;
-    let v173 = v168 + v172;
-    let v174 = v114 * p.toe_a_x;
-    let v175 = v107 * p.toe_a_y;
-    let v176 = v174 + v175;
-    let v177 = p.lower_a_origin_x * v99;
-    let v178 = p.lower_a_origin_y * v88;
-    let v179 = v177 + v178;
-    let v180 = v176 + v179;
-    let v181 = -v180;
-    let v182 = v107 * p.toe_a_x;
-    let v183 = v114 * p.toe_a_y;
-    let v184 = v182 - v183;
-    let v185 = p.lower_a_origin_x * v88;
-    let v186 = p.lower_a_origin_y * v99;
-    let v187 = v185 - v186;
-    let v188 = v184 + v187;
-    let v189 = -v176;
-    let v190 = v163 * p.toe_b_x;
-    let v191 = v156 * p.toe_b_y;
-    let v192 = v190 + v191;
-    let v193 = p.lower_b_origin_x * v148;
-    let v194 = p.lower_b_origin_y * v137;
-    let v195 = v193 + v194;
-    let v196 = v192 + v195;
-    let v197 = v156 * p.toe_b_x;
-    let v198 = v163 * p.toe_b_y;
-    let v199 = v197 - v198;
-    let v200 = p.lower_b_origin_x * v137;
-    let v201 = p.lower_b_origin_y * v148;
-    let v202 = v200 - v201;
-    let v203 = v199 + v202;
-    let v204 = -v203;
-    let v205 = -v199;
-    let v206 = qd_2 + qd_3;
-    let v207 = v206 * v206;
-    let v208 = v199 * v207;
-    let v209 = v171 * v202;
-    let v210 = v208 + v209;
-    let v211 = qd_0 + qd_1;
-    let v212 = v211 * v211;
-    let v213 = v184 * v212;
-    let v214 = v122 * v187;
-    let v215 = v213 + v214;
-    let v216 = v210 - v215;
-    let v217 = v192 * v207;
-    let v218 = v171 * v195;
-    let v219 = v217 + v218;
-    let v220 = v176 * v212;
-    let v221 = v122 * v179;
-    let v222 = v220 + v221;
-    let v223 = v219 - v222;
+    let v128 = v84 * v120;
+    let v129 = v48 * v87;
+    let v130 = v128 + v129;
+    let v131 = v127 - v130;
     (
         SMatrix::from_data(
             ArrayStorage([
-                [v33, v37, T::lit(0.0), T::lit(0.0)],
-                [v37, v9, T::lit(0.0), T::lit(0.0)],
-                [T::lit(0.0), T::lit(0.0), v71, v75],
-                [T::lit(0.0), T::lit(0.0), v75, v47],
+                [v6, v9, T::lit(0.0), T::lit(0.0)],
+                [v9, p.prepared[0], T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v16, v19],
+                [T::lit(0.0), T::lit(0.0), v19, p.prepared[5]],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v121, v124, v170, v173]])),
+        SMatrix::from_data(ArrayStorage([[v47, v50, v78, v81]])),
         SMatrix::from_data(
-            ArrayStorage([[v181, v188], [v189, v184], [v196, v204], [v192, v205]]),
+            ArrayStorage([[v89, v96], [v97, v92], [v104, v112], [v100, v113]]),
         ),
-        SMatrix::from_data(ArrayStorage([[v216, v223]])),
+        SMatrix::from_data(ArrayStorage([[v124, v131]])),
     )
 }

@@ -20,10 +20,9 @@ pub const NK: usize = 0;
 /// The `open_three_link` leg: 3 joints, 0 closure(s), actuated joints ["thigh", "shin"]. Generated from `leg-models/specs/open_three_link.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct OpenThreeLink;
-/// Physical parameters; `Default` holds the spec's values. Change them at run
-/// time without regenerating.
+/// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Params<T> {
+pub struct ParamValues<T> {
     /// Gravity in the base frame, x [m/s²].
     pub gravity_x: T,
     /// Gravity in the base frame, y [m/s²].
@@ -83,7 +82,7 @@ pub struct Params<T> {
     /// Viscous damping of the joint of `ankle` [N m s/rad].
     pub ankle_damping: T,
 }
-impl<T: Real> Default for Params<T> {
+impl<T: Real> Default for ParamValues<T> {
     fn default() -> Self {
         Self {
             gravity_x: T::lit(0.0),
@@ -116,6 +115,50 @@ impl<T: Real> Default for Params<T> {
             ankle_inertia: T::lit(6.083333333e-5),
             ankle_damping: T::lit(0.0),
         }
+    }
+}
+/// Physical parameters, ready for evaluation: the values (read as fields through
+/// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
+/// computed once when a value changes instead of in every call. `Default` holds
+/// the spec's values; change them at run time, without regenerating, with
+/// [`Params::update`] or [`Parameters::set`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params<T> {
+    values: ParamValues<T>,
+    prepared: [T; 18],
+}
+impl<T: Real> Params<T> {
+    /// Parameters of these values.
+    pub fn new(values: ParamValues<T>) -> Self {
+        Self {
+            prepared: prepare(&values).data.0[0],
+            values,
+        }
+    }
+    /// The values.
+    pub fn values(&self) -> &ParamValues<T> {
+        &self.values
+    }
+    /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
+    pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
+        change(&mut self.values);
+        *self = Self::new(self.values);
+    }
+}
+impl<T> core::ops::Deref for Params<T> {
+    type Target = ParamValues<T>;
+    fn deref(&self) -> &ParamValues<T> {
+        &self.values
+    }
+}
+impl<T: Real> From<ParamValues<T>> for Params<T> {
+    fn from(values: ParamValues<T>) -> Self {
+        Self::new(values)
+    }
+}
+impl<T: Real> Default for Params<T> {
+    fn default() -> Self {
+        Self::new(ParamValues::default())
     }
 }
 impl<T: Real> Parameters<T> for Params<T> {
@@ -152,71 +195,72 @@ impl<T: Real> Parameters<T> for Params<T> {
     ];
     fn get(&self, i: usize) -> Option<T> {
         match i {
-            0 => Some(self.gravity_x),
-            1 => Some(self.gravity_y),
-            2 => Some(self.thigh_origin_x),
-            3 => Some(self.thigh_origin_y),
-            4 => Some(self.thigh_length_x),
-            5 => Some(self.thigh_length_y),
-            6 => Some(self.thigh_mass),
-            7 => Some(self.thigh_com_x),
-            8 => Some(self.thigh_com_y),
-            9 => Some(self.thigh_inertia),
-            10 => Some(self.thigh_damping),
-            11 => Some(self.thigh_rotor_inertia),
-            12 => Some(self.thigh_gear_ratio),
-            13 => Some(self.shin_length_x),
-            14 => Some(self.shin_length_y),
-            15 => Some(self.shin_mass),
-            16 => Some(self.shin_com_x),
-            17 => Some(self.shin_com_y),
-            18 => Some(self.shin_inertia),
-            19 => Some(self.shin_damping),
-            20 => Some(self.shin_rotor_inertia),
-            21 => Some(self.shin_gear_ratio),
-            22 => Some(self.ankle_length_x),
-            23 => Some(self.ankle_length_y),
-            24 => Some(self.ankle_mass),
-            25 => Some(self.ankle_com_x),
-            26 => Some(self.ankle_com_y),
-            27 => Some(self.ankle_inertia),
-            28 => Some(self.ankle_damping),
+            0 => Some(self.values.gravity_x),
+            1 => Some(self.values.gravity_y),
+            2 => Some(self.values.thigh_origin_x),
+            3 => Some(self.values.thigh_origin_y),
+            4 => Some(self.values.thigh_length_x),
+            5 => Some(self.values.thigh_length_y),
+            6 => Some(self.values.thigh_mass),
+            7 => Some(self.values.thigh_com_x),
+            8 => Some(self.values.thigh_com_y),
+            9 => Some(self.values.thigh_inertia),
+            10 => Some(self.values.thigh_damping),
+            11 => Some(self.values.thigh_rotor_inertia),
+            12 => Some(self.values.thigh_gear_ratio),
+            13 => Some(self.values.shin_length_x),
+            14 => Some(self.values.shin_length_y),
+            15 => Some(self.values.shin_mass),
+            16 => Some(self.values.shin_com_x),
+            17 => Some(self.values.shin_com_y),
+            18 => Some(self.values.shin_inertia),
+            19 => Some(self.values.shin_damping),
+            20 => Some(self.values.shin_rotor_inertia),
+            21 => Some(self.values.shin_gear_ratio),
+            22 => Some(self.values.ankle_length_x),
+            23 => Some(self.values.ankle_length_y),
+            24 => Some(self.values.ankle_mass),
+            25 => Some(self.values.ankle_com_x),
+            26 => Some(self.values.ankle_com_y),
+            27 => Some(self.values.ankle_inertia),
+            28 => Some(self.values.ankle_damping),
             _ => None,
         }
     }
     fn set(&mut self, i: usize, value: T) -> bool {
         match i {
-            0 => self.gravity_x = value,
-            1 => self.gravity_y = value,
-            2 => self.thigh_origin_x = value,
-            3 => self.thigh_origin_y = value,
-            4 => self.thigh_length_x = value,
-            5 => self.thigh_length_y = value,
-            6 => self.thigh_mass = value,
-            7 => self.thigh_com_x = value,
-            8 => self.thigh_com_y = value,
-            9 => self.thigh_inertia = value,
-            10 => self.thigh_damping = value,
-            11 => self.thigh_rotor_inertia = value,
-            12 => self.thigh_gear_ratio = value,
-            13 => self.shin_length_x = value,
-            14 => self.shin_length_y = value,
-            15 => self.shin_mass = value,
-            16 => self.shin_com_x = value,
-            17 => self.shin_com_y = value,
-            18 => self.shin_inertia = value,
-            19 => self.shin_damping = value,
-            20 => self.shin_rotor_inertia = value,
-            21 => self.shin_gear_ratio = value,
-            22 => self.ankle_length_x = value,
-            23 => self.ankle_length_y = value,
-            24 => self.ankle_mass = value,
-            25 => self.ankle_com_x = value,
-            26 => self.ankle_com_y = value,
-            27 => self.ankle_inertia = value,
-            28 => self.ankle_damping = value,
+            0 => self.values.gravity_x = value,
+            1 => self.values.gravity_y = value,
+            2 => self.values.thigh_origin_x = value,
+            3 => self.values.thigh_origin_y = value,
+            4 => self.values.thigh_length_x = value,
+            5 => self.values.thigh_length_y = value,
+            6 => self.values.thigh_mass = value,
+            7 => self.values.thigh_com_x = value,
+            8 => self.values.thigh_com_y = value,
+            9 => self.values.thigh_inertia = value,
+            10 => self.values.thigh_damping = value,
+            11 => self.values.thigh_rotor_inertia = value,
+            12 => self.values.thigh_gear_ratio = value,
+            13 => self.values.shin_length_x = value,
+            14 => self.values.shin_length_y = value,
+            15 => self.values.shin_mass = value,
+            16 => self.values.shin_com_x = value,
+            17 => self.values.shin_com_y = value,
+            18 => self.values.shin_inertia = value,
+            19 => self.values.shin_damping = value,
+            20 => self.values.shin_rotor_inertia = value,
+            21 => self.values.shin_gear_ratio = value,
+            22 => self.values.ankle_length_x = value,
+            23 => self.values.ankle_length_y = value,
+            24 => self.values.ankle_mass = value,
+            25 => self.values.ankle_com_x = value,
+            26 => self.values.ankle_com_y = value,
+            27 => self.values.ankle_inertia = value,
+            28 => self.values.ankle_damping = value,
             _ => return false,
         }
+        *self = Self::new(self.values);
         true
     }
 }
@@ -336,99 +380,161 @@ impl ContactModel<NQ, NC, NU, NK> for OpenThreeLink {
         contact_bias(q, qd, p)
     }
 }
+/// The parameter-only quantities the terms read (products of masses, lengths and
+/// centres of mass, inertias about the joints, …), computed once per parameter set
+/// by [`Params::new`].
+pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 18> {
+    let v0 = values.thigh_com_x * values.thigh_com_x;
+    let v1 = values.thigh_com_y * values.thigh_com_y;
+    let v2 = v0 + v1;
+    let v3 = values.thigh_mass * v2;
+    let v4 = values.thigh_inertia + v3;
+    let v5 = values.shin_mass + values.ankle_mass;
+    let v6 = values.thigh_length_x * values.thigh_length_x;
+    let v7 = values.thigh_length_y * values.thigh_length_y;
+    let v8 = v6 + v7;
+    let v9 = v5 * v8;
+    let v10 = v4 + v9;
+    let v11 = values.thigh_gear_ratio * values.thigh_gear_ratio;
+    let v12 = values.thigh_rotor_inertia * v11;
+    let v13 = v10 + v12;
+    let v14 = values.shin_com_x * values.shin_com_x;
+    let v15 = values.shin_com_y * values.shin_com_y;
+    let v16 = v14 + v15;
+    let v17 = values.shin_mass * v16;
+    let v18 = values.shin_inertia + v17;
+    let v19 = values.ankle_com_x * values.ankle_com_x;
+    let v20 = values.ankle_com_y * values.ankle_com_y;
+    let v21 = v19 + v20;
+    let v22 = values.ankle_mass * v21;
+    let v23 = values.ankle_inertia + v22;
+    let v24 = v18 + v23;
+    let v25 = values.shin_length_x * values.shin_length_x;
+    let v26 = values.shin_length_y * values.shin_length_y;
+    let v27 = v25 + v26;
+    let v28 = values.ankle_mass * v27;
+    let v29 = v24 + v28;
+    let v30 = values.ankle_mass * values.ankle_com_x;
+    let v31 = values.shin_length_x * v30;
+    let v32 = values.ankle_mass * values.ankle_com_y;
+    let v33 = values.shin_length_y * v32;
+    let v34 = v31 + v33;
+    let v35 = values.shin_length_x * v32;
+    let v36 = values.shin_length_y * v30;
+    let v37 = v35 - v36;
+    let v38 = values.shin_mass * values.shin_com_x;
+    let v39 = values.ankle_mass * values.shin_length_x;
+    let v40 = v38 + v39;
+    let v41 = values.shin_mass * values.shin_com_y;
+    let v42 = values.ankle_mass * values.shin_length_y;
+    let v43 = v41 + v42;
+    let v44 = v36 - v35;
+    let v45 = values.shin_gear_ratio * values.shin_gear_ratio;
+    let v46 = values.shin_rotor_inertia * v45;
+    let v47 = v29 + v46;
+    let v48 = values.thigh_mass * values.thigh_com_y;
+    let v49 = v5 * values.thigh_length_y;
+    let v50 = v48 + v49;
+    let v51 = values.gravity_x * v50;
+    let v52 = values.thigh_mass * values.thigh_com_x;
+    let v53 = v5 * values.thigh_length_x;
+    let v54 = v52 + v53;
+    let v55 = values.gravity_y * v54;
+    let v56 = v51 - v55;
+    let v57 = values.gravity_x * v54;
+    let v58 = v50 * values.gravity_y;
+    let v59 = v57 + v58;
+    let v60 = v43 * values.gravity_x;
+    let v61 = v40 * values.gravity_y;
+    let v62 = v60 - v61;
+    let v63 = v40 * values.gravity_x;
+    let v64 = v43 * values.gravity_y;
+    let v65 = v63 + v64;
+    let v66 = v32 * values.gravity_x;
+    let v67 = v30 * values.gravity_y;
+    let v68 = v66 - v67;
+    let v69 = v30 * values.gravity_x;
+    let v70 = v32 * values.gravity_y;
+    let v71 = v69 + v70;
+    let v72 = values.thigh_mass + v5;
+    let v73 = values.thigh_origin_x * v72;
+    let v74 = values.gravity_x * v73;
+    let v75 = values.thigh_origin_y * v72;
+    let v76 = values.gravity_y * v75;
+    let v77 = v74 + v76;
+    SMatrix::from_data(
+        ArrayStorage([
+            [
+                v13,
+                v23,
+                v29,
+                v30,
+                v32,
+                v34,
+                v37,
+                v40,
+                v43,
+                v44,
+                v47,
+                v56,
+                v59,
+                v62,
+                v65,
+                v68,
+                v71,
+                v77,
+            ],
+        ]),
+    )
+}
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
 pub fn mass_matrix<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 3, 3> {
     let [_, q_1, q_2] = q.data.0[0];
-    let v0 = p.thigh_com_x * p.thigh_com_x;
-    let v1 = p.thigh_com_y * p.thigh_com_y;
-    let v2 = v0 + v1;
-    let v3 = p.thigh_mass * v2;
-    let v4 = p.thigh_inertia + v3;
-    let v5 = p.shin_com_x * p.shin_com_x;
-    let v6 = p.shin_com_y * p.shin_com_y;
-    let v7 = v5 + v6;
-    let v8 = p.shin_mass * v7;
-    let v9 = p.shin_inertia + v8;
-    let v10 = p.ankle_com_x * p.ankle_com_x;
-    let v11 = p.ankle_com_y * p.ankle_com_y;
-    let v12 = v10 + v11;
-    let v13 = p.ankle_mass * v12;
-    let v14 = p.ankle_inertia + v13;
-    let (v22, v15) = q_2.sin_cos();
-    let v16 = p.ankle_mass * p.ankle_com_x;
-    let v17 = p.shin_length_x * v16;
-    let v18 = p.ankle_mass * p.ankle_com_y;
-    let v19 = p.shin_length_y * v18;
-    let v20 = v17 + v19;
-    let v21 = v15 * v20;
-    let v23 = p.shin_length_x * v18;
-    let v24 = v16 * p.shin_length_y;
-    let v25 = v23 - v24;
-    let v26 = v22 * v25;
-    let v27 = v21 - v26;
-    let v28 = v27 + v27;
-    let v29 = v14 + v28;
-    let v30 = p.shin_length_x * p.shin_length_x;
-    let v31 = p.shin_length_y * p.shin_length_y;
-    let v32 = v30 + v31;
-    let v33 = p.ankle_mass * v32;
-    let v34 = v29 + v33;
-    let v35 = v9 + v34;
-    let (v45, v36) = q_1.sin_cos();
-    let v37 = p.shin_mass * p.shin_com_x;
-    let v38 = v15 * v16;
-    let v39 = v18 * v22;
-    let v40 = v38 - v39;
-    let v41 = p.ankle_mass * p.shin_length_x;
-    let v42 = v40 + v41;
-    let v43 = v37 + v42;
-    let v44 = v36 * v43;
-    let v46 = p.shin_mass * p.shin_com_y;
-    let v47 = v16 * v22;
-    let v48 = v15 * v18;
-    let v49 = v47 + v48;
-    let v50 = p.ankle_mass * p.shin_length_y;
-    let v51 = v49 + v50;
-    let v52 = v46 + v51;
-    let v53 = v45 * v52;
-    let v54 = v44 - v53;
-    let v55 = p.thigh_length_x * v54;
-    let v56 = v43 * v45;
-    let v57 = v36 * v52;
-    let v58 = v56 + v57;
-    let v59 = p.thigh_length_y * v58;
-    let v60 = v55 + v59;
-    let v61 = v60 + v60;
-    let v62 = v35 + v61;
-    let v63 = p.shin_mass + p.ankle_mass;
-    let v64 = p.thigh_length_x * p.thigh_length_x;
-    let v65 = p.thigh_length_y * p.thigh_length_y;
-    let v66 = v64 + v65;
-    let v67 = v63 * v66;
-    let v68 = v62 + v67;
-    let v69 = v4 + v68;
-    let v70 = p.thigh_gear_ratio * p.thigh_gear_ratio;
-    let v71 = p.thigh_rotor_inertia * v70;
-    let v72 = v69 + v71;
-    let v73 = v35 + v60;
-    let v74 = v24 - v23;
-    let v75 = v22 * v74;
-    let v76 = v21 + v75;
-    let v77 = v14 + v76;
-    let v78 = v36 * v40;
-    let v79 = v45 * v49;
-    let v80 = v78 - v79;
-    let v81 = p.thigh_length_x * v80;
-    let v82 = v36 * v49;
-    let v83 = v40 * v45;
-    let v84 = v82 + v83;
-    let v85 = p.thigh_length_y * v84;
-    let v86 = v81 + v85;
-    let v87 = v77 + v86;
-    let v88 = p.shin_gear_ratio * p.shin_gear_ratio;
-    let v89 = p.shin_rotor_inertia * v88;
-    let v90 = v35 + v89;
-    SMatrix::from_data(ArrayStorage([[v72, v73, v87], [v73, v90, v77], [v87, v77, v14]]))
+    let (v2, v0) = q_2.sincos();
+    let v1 = v0 * p.prepared[5];
+    let v3 = v2 * p.prepared[6];
+    let v4 = v1 - v3;
+    let v5 = v4 + v4;
+    let v6 = p.prepared[2] + v5;
+    let v7 = p.prepared[0] + v6;
+    let (v14, v8) = q_1.sincos();
+    let v9 = v0 * p.prepared[3];
+    let v10 = p.prepared[4] * v2;
+    let v11 = v9 - v10;
+    let v12 = p.prepared[7] + v11;
+    let v13 = v8 * v12;
+    let v15 = p.prepared[3] * v2;
+    let v16 = v0 * p.prepared[4];
+    let v17 = v15 + v16;
+    let v18 = p.prepared[8] + v17;
+    let v19 = v14 * v18;
+    let v20 = v13 - v19;
+    let v21 = p.thigh_length_x * v20;
+    let v22 = v12 * v14;
+    let v23 = v8 * v18;
+    let v24 = v22 + v23;
+    let v25 = p.thigh_length_y * v24;
+    let v26 = v21 + v25;
+    let v27 = v26 + v26;
+    let v28 = v7 + v27;
+    let v29 = v6 + v26;
+    let v30 = v2 * p.prepared[9];
+    let v31 = v1 + v30;
+    let v32 = p.prepared[1] + v31;
+    let v33 = v8 * v11;
+    let v34 = v14 * v17;
+    let v35 = v33 - v34;
+    let v36 = p.thigh_length_x * v35;
+    let v37 = v8 * v17;
+    let v38 = v11 * v14;
+    let v39 = v37 + v38;
+    let v40 = p.thigh_length_y * v39;
+    let v41 = v36 + v40;
+    let v42 = v32 + v41;
+    let v43 = v5 + p.prepared[10];
+    SMatrix::from_data(
+        ArrayStorage([[v28, v29, v42], [v29, v43, v32], [v42, v32, p.prepared[1]]]),
+    )
 }
 /// `N(q, q̇) = (∂²L/∂q̇∂q) q̇ − ∂L/∂q = C q̇ + G`.
 pub fn bias_forces<T: Real>(
@@ -438,211 +544,136 @@ pub fn bias_forces<T: Real>(
 ) -> SVector<T, 3> {
     let [q_0, q_1, q_2] = q.data.0[0];
     let [qd_0, qd_1, qd_2] = qd.data.0[0];
-    let v0 = p.shin_mass * p.shin_com_x;
-    let (v4, v1) = q_2.sin_cos();
-    let v2 = p.ankle_mass * p.ankle_com_x;
-    let v3 = v1 * v2;
-    let v5 = p.ankle_mass * p.ankle_com_y;
-    let v6 = v4 * v5;
-    let v7 = v3 - v6;
-    let v8 = p.ankle_mass * p.shin_length_x;
-    let v9 = v7 + v8;
-    let v10 = v0 + v9;
-    let (v20, v11) = q_1.sin_cos();
-    let v12 = v10 * v11;
-    let v13 = p.shin_mass * p.shin_com_y;
-    let v14 = v2 * v4;
-    let v15 = v1 * v5;
-    let v16 = v14 + v15;
-    let v17 = p.ankle_mass * p.shin_length_y;
+    let (v2, v0) = q_2.sincos();
+    let v1 = v0 * p.prepared[3];
+    let v3 = v2 * p.prepared[4];
+    let v4 = v1 - v3;
+    let v5 = p.prepared[7] + v4;
+    let (v12, v6) = q_1.sincos();
+    let v7 = v5 * v6;
+    let v8 = p.prepared[3] * v2;
+    let v9 = v0 * p.prepared[4];
+    let v10 = v8 + v9;
+    let v11 = p.prepared[8] + v10;
+    let v13 = v11 * v12;
+    let v14 = v7 - v13;
+    let v15 = p.thigh_length_y * v14;
+    let v16 = v5 * v12;
+    let v17 = v6 * v11;
     let v18 = v16 + v17;
-    let v19 = v13 + v18;
-    let v21 = v19 * v20;
-    let v22 = v12 - v21;
-    let v23 = p.thigh_length_y * v22;
-    let v24 = v10 * v20;
-    let v25 = v11 * v19;
+    let v19 = p.thigh_length_x * v18;
+    let v20 = v15 - v19;
+    let v21 = v20 + v20;
+    let v22 = qd_0 * qd_1;
+    let v23 = v21 * v22;
+    let v24 = v2 * p.prepared[5];
+    let v25 = v0 * p.prepared[6];
     let v26 = v24 + v25;
-    let v27 = p.thigh_length_x * v26;
-    let v28 = v23 - v27;
-    let v29 = v28 + v28;
-    let v30 = qd_0 * qd_1;
-    let v31 = v29 * v30;
-    let v32 = v2 * p.shin_length_x;
-    let v33 = v5 * p.shin_length_y;
-    let v34 = v32 + v33;
-    let v35 = v4 * v34;
-    let v36 = v5 * p.shin_length_x;
-    let v37 = v2 * p.shin_length_y;
-    let v38 = v36 - v37;
-    let v39 = v1 * v38;
-    let v40 = v35 + v39;
-    let v41 = -v40;
-    let v42 = v41 + v41;
-    let v43 = v7 * v11;
-    let v44 = v16 * v20;
-    let v45 = v43 - v44;
-    let v46 = p.thigh_length_y * v45;
-    let v47 = v11 * v16;
-    let v48 = v7 * v20;
-    let v49 = v47 + v48;
-    let v50 = p.thigh_length_x * v49;
-    let v51 = v46 - v50;
-    let v52 = v51 + v51;
-    let v53 = v42 + v52;
-    let v54 = qd_0 * qd_2;
+    let v27 = -v26;
+    let v28 = v27 + v27;
+    let v29 = v4 * v6;
+    let v30 = v10 * v12;
+    let v31 = v29 - v30;
+    let v32 = p.thigh_length_y * v31;
+    let v33 = v6 * v10;
+    let v34 = v4 * v12;
+    let v35 = v33 + v34;
+    let v36 = p.thigh_length_x * v35;
+    let v37 = v32 - v36;
+    let v38 = v37 + v37;
+    let v39 = v28 + v38;
+    let v40 = qd_0 * qd_2;
+    let v41 = v39 * v40;
+    let v42 = v23 + v41;
+    let v43 = qd_1 * qd_1;
+    let v44 = v20 * v43;
+    let v45 = v42 + v44;
+    let v46 = v28 + v37;
+    let v47 = v37 + v46;
+    let v48 = qd_1 * qd_2;
+    let v49 = v47 * v48;
+    let v50 = v45 + v49;
+    let v51 = v0 * p.prepared[9];
+    let v52 = v51 - v24;
+    let v53 = v37 + v52;
+    let v54 = qd_2 * qd_2;
     let v55 = v53 * v54;
-    let v56 = v31 + v55;
-    let v57 = qd_1 * qd_1;
-    let v58 = v28 * v57;
-    let v59 = v56 + v58;
-    let v60 = v42 + v51;
-    let v61 = v51 + v60;
-    let v62 = qd_1 * qd_2;
-    let v63 = v61 * v62;
-    let v64 = v59 + v63;
-    let v65 = v37 - v36;
-    let v66 = v1 * v65;
-    let v67 = v66 - v35;
-    let v68 = v51 + v67;
-    let v69 = qd_2 * qd_2;
-    let v70 = v68 * v69;
-    let v71 = v64 + v70;
-    let (v84, v72) = q_0.sin_cos();
-    let v73 = p.thigh_mass * p.thigh_com_y;
-    let v74 = p.shin_mass + p.ankle_mass;
-    let v75 = p.thigh_length_y * v74;
-    let v76 = v73 + v75;
-    let v77 = p.gravity_x * v76;
-    let v78 = p.thigh_mass * p.thigh_com_x;
-    let v79 = p.thigh_length_x * v74;
-    let v80 = v78 + v79;
-    let v81 = p.gravity_y * v80;
-    let v82 = v77 - v81;
-    let v83 = v72 * v82;
-    let v85 = p.gravity_x * v80;
-    let v86 = v76 * p.gravity_y;
-    let v87 = v85 + v86;
-    let v88 = v84 * v87;
-    let v89 = v83 + v88;
-    let v90 = v11 * v72;
-    let v91 = v20 * v84;
-    let v92 = v90 - v91;
-    let v93 = v13 + v17;
-    let v94 = p.gravity_x * v93;
-    let v95 = v0 + v8;
-    let v96 = p.gravity_y * v95;
-    let v97 = v94 - v96;
-    let v98 = v92 * v97;
-    let v99 = v11 * v84;
-    let v100 = v20 * v72;
-    let v101 = v99 + v100;
-    let v102 = p.gravity_x * v95;
-    let v103 = p.gravity_y * v93;
-    let v104 = v102 + v103;
-    let v105 = v101 * v104;
-    let v106 = v98 + v105;
-    let v107 = v1 * v92;
-    let v108 = v4 * v101;
-    let v109 = v107 - v108;
-    let v110 = v5 * p.gravity_x;
-    let v111 = v2 * p.gravity_y;
-    let v112 = v110 - v111;
-    let v113 = v109 * v112;
-    let v114 = v1 * v101;
-    let v115 = v4 * v92;
-    let v116 = v114 + v115;
-    let v117 = v2 * p.gravity_x;
-    let v118 = v5 * p.gravity_y;
-    let v119 = v117 + v118;
-    let v120 = v116 * v119;
-    let v121 = v113 + v120;
-    let v122 = v106 + v121;
-    let v123 = v89 + v122;
-    let v124 = v71 + v123;
-    let v125 = v60 - v51;
-    let v126 = v54 * v125;
-    let v127 = qd_0 * qd_0;
-    let v128 = v28 * v127;
-    let v129 = v126 - v128;
-    let v130 = v42 * v62;
-    let v131 = v129 + v130;
-    let v132 = v67 * v69;
-    let v133 = v131 + v132;
-    let v134 = v122 + v133;
-    let v135 = v51 - v60;
-    let v136 = v30 * v135;
-    let v137 = v53 * T::lit(0.5);
-    let v138 = v127 * v137;
-    let v139 = v136 - v138;
-    let v140 = v40 * v57;
-    let v141 = v139 + v140;
-    let v142 = v121 + v141;
-    SMatrix::from_data(ArrayStorage([[v124, v134, v142]]))
+    let v56 = v50 + v55;
+    let (v59, v57) = q_0.sincos();
+    let v58 = v57 * p.prepared[11];
+    let v60 = v59 * p.prepared[12];
+    let v61 = v58 + v60;
+    let v62 = v6 * v57;
+    let v63 = v12 * v59;
+    let v64 = v62 - v63;
+    let v65 = v64 * p.prepared[13];
+    let v66 = v6 * v59;
+    let v67 = v12 * v57;
+    let v68 = v66 + v67;
+    let v69 = v68 * p.prepared[14];
+    let v70 = v65 + v69;
+    let v71 = v0 * v64;
+    let v72 = v2 * v68;
+    let v73 = v71 - v72;
+    let v74 = v73 * p.prepared[15];
+    let v75 = v0 * v68;
+    let v76 = v2 * v64;
+    let v77 = v75 + v76;
+    let v78 = v77 * p.prepared[16];
+    let v79 = v74 + v78;
+    let v80 = v70 + v79;
+    let v81 = v61 + v80;
+    let v82 = v56 + v81;
+    let v83 = v46 - v37;
+    let v84 = v40 * v83;
+    let v85 = qd_0 * qd_0;
+    let v86 = v20 * v85;
+    let v87 = v84 - v86;
+    let v88 = v28 * v48;
+    let v89 = v87 + v88;
+    let v90 = v52 * v54;
+    let v91 = v89 + v90;
+    let v92 = v80 + v91;
+    let v93 = v39 * T::lit(-0.5);
+    let v94 = v85 * v93;
+    let v95 = v37 - v46;
+    let v96 = v22 * v95;
+    let v97 = v94 + v96;
+    let v98 = v26 * v43;
+    let v99 = v97 + v98;
+    let v100 = v79 + v99;
+    SMatrix::from_data(ArrayStorage([[v82, v92, v100]]))
 }
 /// `G(q) = ∂V/∂q`.
 pub fn gravity_forces<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 3> {
     let [q_0, q_1, q_2] = q.data.0[0];
-    let (v12, v0) = q_0.sin_cos();
-    let v1 = p.thigh_mass * p.thigh_com_y;
-    let v2 = p.shin_mass + p.ankle_mass;
-    let v3 = v2 * p.thigh_length_y;
+    let (v2, v0) = q_0.sincos();
+    let v1 = v0 * p.prepared[11];
+    let v3 = v2 * p.prepared[12];
     let v4 = v1 + v3;
-    let v5 = p.gravity_x * v4;
-    let v6 = p.thigh_mass * p.thigh_com_x;
-    let v7 = v2 * p.thigh_length_x;
-    let v8 = v6 + v7;
-    let v9 = p.gravity_y * v8;
-    let v10 = v5 - v9;
-    let v11 = v0 * v10;
-    let v13 = p.gravity_x * v8;
-    let v14 = v4 * p.gravity_y;
-    let v15 = v13 + v14;
-    let v16 = v12 * v15;
-    let v17 = v11 + v16;
-    let (v20, v18) = q_1.sin_cos();
-    let v19 = v0 * v18;
-    let v21 = v12 * v20;
-    let v22 = v19 - v21;
-    let v23 = p.shin_mass * p.shin_com_y;
-    let v24 = p.ankle_mass * p.shin_length_y;
-    let v25 = v23 + v24;
-    let v26 = p.gravity_x * v25;
-    let v27 = p.shin_mass * p.shin_com_x;
-    let v28 = p.ankle_mass * p.shin_length_x;
-    let v29 = v27 + v28;
-    let v30 = p.gravity_y * v29;
-    let v31 = v26 - v30;
-    let v32 = v22 * v31;
-    let v33 = v12 * v18;
-    let v34 = v0 * v20;
-    let v35 = v33 + v34;
-    let v36 = p.gravity_x * v29;
-    let v37 = p.gravity_y * v25;
-    let v38 = v36 + v37;
-    let v39 = v35 * v38;
-    let v40 = v32 + v39;
-    let (v43, v41) = q_2.sin_cos();
-    let v42 = v22 * v41;
-    let v44 = v35 * v43;
-    let v45 = v42 - v44;
-    let v46 = p.ankle_mass * p.ankle_com_y;
-    let v47 = p.gravity_x * v46;
-    let v48 = p.ankle_mass * p.ankle_com_x;
-    let v49 = p.gravity_y * v48;
-    let v50 = v47 - v49;
-    let v51 = v45 * v50;
-    let v52 = v35 * v41;
-    let v53 = v22 * v43;
-    let v54 = v52 + v53;
-    let v55 = p.gravity_x * v48;
-    let v56 = p.gravity_y * v46;
-    let v57 = v55 + v56;
-    let v58 = v54 * v57;
-    let v59 = v51 + v58;
-    let v60 = v40 + v59;
-    let v61 = v17 + v60;
-    SMatrix::from_data(ArrayStorage([[v61, v60, v59]]))
+    let (v7, v5) = q_1.sincos();
+    let v6 = v0 * v5;
+    let v8 = v2 * v7;
+    let v9 = v6 - v8;
+    let v10 = v9 * p.prepared[13];
+    let v11 = v2 * v5;
+    let v12 = v0 * v7;
+    let v13 = v11 + v12;
+    let v14 = v13 * p.prepared[14];
+    let v15 = v10 + v14;
+    let (v18, v16) = q_2.sincos();
+    let v17 = v9 * v16;
+    let v19 = v13 * v18;
+    let v20 = v17 - v19;
+    let v21 = v20 * p.prepared[15];
+    let v22 = v13 * v16;
+    let v23 = v9 * v18;
+    let v24 = v22 + v23;
+    let v25 = v24 * p.prepared[16];
+    let v26 = v21 + v25;
+    let v27 = v15 + v26;
+    let v28 = v4 + v27;
+    SMatrix::from_data(ArrayStorage([[v28, v27, v26]]))
 }
 /// Viscous joint damping `D q̇`.
 pub fn damping_forces<T: Real>(qd: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 3> {
@@ -674,12 +705,12 @@ pub fn constraint_bias<T: Real>(
 /// The foot point in the base frame.
 pub fn foot_position<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 2> {
     let [q_0, q_1, q_2] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.thigh_length_x;
     let v3 = v2 * p.thigh_length_y;
     let v4 = v1 - v3;
     let v5 = p.thigh_origin_x + v4;
-    let (v8, v6) = q_1.sin_cos();
+    let (v8, v6) = q_1.sincos();
     let v7 = v0 * v6;
     let v9 = v2 * v8;
     let v10 = v7 - v9;
@@ -690,7 +721,7 @@ pub fn foot_position<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 2>
     let v15 = v14 * p.shin_length_y;
     let v16 = v11 - v15;
     let v17 = v5 + v16;
-    let (v20, v18) = q_2.sin_cos();
+    let (v20, v18) = q_2.sincos();
     let v19 = v10 * v18;
     let v21 = v14 * v20;
     let v22 = v19 - v21;
@@ -718,12 +749,12 @@ pub fn foot_position<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 2>
 /// `J_f(q) = ∂(foot)/∂q`.
 pub fn foot_jacobian<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
     let [q_0, q_1, q_2] = q.data.0[0];
-    let (v0, v3) = q_0.sin_cos();
-    let (v4, v1) = q_1.sin_cos();
+    let (v0, v3) = q_0.sincos();
+    let (v4, v1) = q_1.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
-    let (v12, v7) = q_2.sin_cos();
+    let (v12, v7) = q_2.sincos();
     let v8 = v6 * v7;
     let v9 = v1 * v3;
     let v10 = v0 * v4;
@@ -771,12 +802,12 @@ pub fn foot_bias<T: Real>(
     let v0 = qd_0 + qd_1;
     let v1 = v0 + qd_2;
     let v2 = v1 * v1;
-    let (v6, v3) = q_0.sin_cos();
-    let (v7, v4) = q_1.sin_cos();
+    let (v6, v3) = q_0.sincos();
+    let (v7, v4) = q_1.sincos();
     let v5 = v3 * v4;
     let v8 = v6 * v7;
     let v9 = v5 - v8;
-    let (v15, v10) = q_2.sin_cos();
+    let (v15, v10) = q_2.sincos();
     let v11 = v9 * v10;
     let v12 = v4 * v6;
     let v13 = v3 * v7;
@@ -828,194 +859,108 @@ pub fn kinetic_energy<T: Real>(
 ) -> T {
     let [_, q_1, q_2] = q.data.0[0];
     let [qd_0, qd_1, qd_2] = qd.data.0[0];
-    let v0 = p.thigh_com_x * p.thigh_com_x;
-    let v1 = p.thigh_com_y * p.thigh_com_y;
-    let v2 = v0 + v1;
-    let v3 = p.thigh_mass * v2;
-    let v4 = p.thigh_inertia + v3;
-    let v5 = p.shin_com_x * p.shin_com_x;
-    let v6 = p.shin_com_y * p.shin_com_y;
-    let v7 = v5 + v6;
-    let v8 = p.shin_mass * v7;
-    let v9 = p.shin_inertia + v8;
-    let v10 = p.ankle_com_x * p.ankle_com_x;
-    let v11 = p.ankle_com_y * p.ankle_com_y;
-    let v12 = v10 + v11;
-    let v13 = p.ankle_mass * v12;
-    let v14 = p.ankle_inertia + v13;
-    let (v22, v15) = q_2.sin_cos();
-    let v16 = p.ankle_mass * p.ankle_com_x;
-    let v17 = p.shin_length_x * v16;
-    let v18 = p.ankle_mass * p.ankle_com_y;
-    let v19 = p.shin_length_y * v18;
-    let v20 = v17 + v19;
-    let v21 = v15 * v20;
-    let v23 = p.shin_length_x * v18;
-    let v24 = v16 * p.shin_length_y;
-    let v25 = v23 - v24;
-    let v26 = v22 * v25;
-    let v27 = v21 - v26;
-    let v28 = v27 + v27;
-    let v29 = v14 + v28;
-    let v30 = p.shin_length_x * p.shin_length_x;
-    let v31 = p.shin_length_y * p.shin_length_y;
-    let v32 = v30 + v31;
-    let v33 = p.ankle_mass * v32;
-    let v34 = v29 + v33;
-    let v35 = v9 + v34;
-    let (v45, v36) = q_1.sin_cos();
-    let v37 = p.shin_mass * p.shin_com_x;
-    let v38 = v15 * v16;
-    let v39 = v18 * v22;
-    let v40 = v38 - v39;
-    let v41 = p.ankle_mass * p.shin_length_x;
+    let (v2, v0) = q_2.sincos();
+    let v1 = v0 * p.prepared[5];
+    let v3 = v2 * p.prepared[6];
+    let v4 = v1 - v3;
+    let v5 = v4 + v4;
+    let v6 = p.prepared[2] + v5;
+    let v7 = p.prepared[0] + v6;
+    let (v14, v8) = q_1.sincos();
+    let v9 = v0 * p.prepared[3];
+    let v10 = p.prepared[4] * v2;
+    let v11 = v9 - v10;
+    let v12 = p.prepared[7] + v11;
+    let v13 = v8 * v12;
+    let v15 = p.prepared[3] * v2;
+    let v16 = v0 * p.prepared[4];
+    let v17 = v15 + v16;
+    let v18 = p.prepared[8] + v17;
+    let v19 = v14 * v18;
+    let v20 = v13 - v19;
+    let v21 = p.thigh_length_x * v20;
+    let v22 = v12 * v14;
+    let v23 = v8 * v18;
+    let v24 = v22 + v23;
+    let v25 = p.thigh_length_y * v24;
+    let v26 = v21 + v25;
+    let v27 = v26 + v26;
+    let v28 = v7 + v27;
+    let v29 = qd_0 * v28;
+    let v30 = v6 + v26;
+    let v31 = v30 * qd_1;
+    let v32 = v29 + v31;
+    let v33 = v2 * p.prepared[9];
+    let v34 = v1 + v33;
+    let v35 = p.prepared[1] + v34;
+    let v36 = v8 * v11;
+    let v37 = v14 * v17;
+    let v38 = v36 - v37;
+    let v39 = p.thigh_length_x * v38;
+    let v40 = v8 * v17;
+    let v41 = v11 * v14;
     let v42 = v40 + v41;
-    let v43 = v37 + v42;
-    let v44 = v36 * v43;
-    let v46 = p.shin_mass * p.shin_com_y;
-    let v47 = v16 * v22;
-    let v48 = v15 * v18;
-    let v49 = v47 + v48;
-    let v50 = p.ankle_mass * p.shin_length_y;
-    let v51 = v49 + v50;
-    let v52 = v46 + v51;
-    let v53 = v45 * v52;
-    let v54 = v44 - v53;
-    let v55 = p.thigh_length_x * v54;
-    let v56 = v43 * v45;
-    let v57 = v36 * v52;
-    let v58 = v56 + v57;
-    let v59 = p.thigh_length_y * v58;
-    let v60 = v55 + v59;
-    let v61 = v60 + v60;
-    let v62 = v35 + v61;
-    let v63 = p.shin_mass + p.ankle_mass;
-    let v64 = p.thigh_length_x * p.thigh_length_x;
-    let v65 = p.thigh_length_y * p.thigh_length_y;
-    let v66 = v64 + v65;
-    let v67 = v63 * v66;
-    let v68 = v62 + v67;
-    let v69 = v4 + v68;
-    let v70 = p.thigh_gear_ratio * p.thigh_gear_ratio;
-    let v71 = p.thigh_rotor_inertia * v70;
-    let v72 = v69 + v71;
-    let v73 = qd_0 * v72;
-    let v74 = v35 + v60;
-    let v75 = v74 * qd_1;
-    let v76 = v73 + v75;
-    let v77 = v24 - v23;
-    let v78 = v22 * v77;
-    let v79 = v21 + v78;
-    let v80 = v14 + v79;
-    let v81 = v36 * v40;
-    let v82 = v45 * v49;
-    let v83 = v81 - v82;
-    let v84 = p.thigh_length_x * v83;
-    let v85 = v36 * v49;
-    let v86 = v40 * v45;
-    let v87 = v85 + v86;
-    let v88 = p.thigh_length_y * v87;
-    let v89 = v84 + v88;
-    let v90 = v80 + v89;
-    let v91 = v90 * qd_2;
-    let v92 = v76 + v91;
-    let v93 = qd_0 * v92;
-    let v94 = qd_0 * v74;
-    let v95 = p.shin_gear_ratio * p.shin_gear_ratio;
-    let v96 = p.shin_rotor_inertia * v95;
-    let v97 = v35 + v96;
-    let v98 = qd_1 * v97;
-    let v99 = v94 + v98;
-    let v100 = v80 * qd_2;
-    let v101 = v99 + v100;
-    let v102 = qd_1 * v101;
-    let v103 = v93 + v102;
-    let v104 = qd_0 * v90;
-    let v105 = qd_1 * v80;
-    let v106 = v104 + v105;
-    let v107 = v14 * qd_2;
-    let v108 = v106 + v107;
-    let v109 = qd_2 * v108;
-    let v110 = v103 + v109;
-    let v111 = T::lit(0.5) * v110;
-    v111
+    let v43 = p.thigh_length_y * v42;
+    let v44 = v39 + v43;
+    let v45 = v35 + v44;
+    let v46 = v45 * qd_2;
+    let v47 = v32 + v46;
+    let v48 = qd_0 * v47;
+    let v49 = qd_0 * v30;
+    let v50 = v5 + p.prepared[10];
+    let v51 = qd_1 * v50;
+    let v52 = v49 + v51;
+    let v53 = v35 * qd_2;
+    let v54 = v52 + v53;
+    let v55 = qd_1 * v54;
+    let v56 = v48 + v55;
+    let v57 = qd_0 * v45;
+    let v58 = qd_1 * v35;
+    let v59 = v57 + v58;
+    let v60 = p.prepared[1] * qd_2;
+    let v61 = v59 + v60;
+    let v62 = qd_2 * v61;
+    let v63 = v56 + v62;
+    let v64 = T::lit(0.5) * v63;
+    v64
 }
 /// Potential energy `−Σ m g·c`.
 pub fn potential_energy<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> T {
     let [q_0, q_1, q_2] = q.data.0[0];
-    let v0 = p.shin_mass + p.ankle_mass;
-    let v1 = p.thigh_mass + v0;
-    let v2 = v1 * p.thigh_origin_x;
-    let v3 = p.gravity_x * v2;
-    let v4 = v1 * p.thigh_origin_y;
-    let v5 = p.gravity_y * v4;
-    let v6 = v3 + v5;
-    let (v18, v7) = q_0.sin_cos();
-    let v8 = p.thigh_mass * p.thigh_com_x;
-    let v9 = v0 * p.thigh_length_x;
-    let v10 = v8 + v9;
-    let v11 = p.gravity_x * v10;
-    let v12 = p.thigh_mass * p.thigh_com_y;
-    let v13 = v0 * p.thigh_length_y;
+    let (v2, v0) = q_0.sincos();
+    let v1 = v0 * p.prepared[12];
+    let v3 = v2 * p.prepared[11];
+    let v4 = v1 - v3;
+    let v5 = p.prepared[17] + v4;
+    let (v8, v6) = q_1.sincos();
+    let v7 = v0 * v6;
+    let v9 = v2 * v8;
+    let v10 = v7 - v9;
+    let v11 = v10 * p.prepared[14];
+    let v12 = v2 * v6;
+    let v13 = v0 * v8;
     let v14 = v12 + v13;
-    let v15 = p.gravity_y * v14;
-    let v16 = v11 + v15;
-    let v17 = v7 * v16;
-    let v19 = p.gravity_x * v14;
-    let v20 = p.gravity_y * v10;
-    let v21 = v19 - v20;
-    let v22 = v18 * v21;
-    let v23 = v17 - v22;
-    let v24 = v6 + v23;
-    let (v27, v25) = q_1.sin_cos();
-    let v26 = v7 * v25;
-    let v28 = v18 * v27;
-    let v29 = v26 - v28;
-    let v30 = p.shin_mass * p.shin_com_x;
-    let v31 = p.ankle_mass * p.shin_length_x;
-    let v32 = v30 + v31;
-    let v33 = p.gravity_x * v32;
-    let v34 = p.shin_mass * p.shin_com_y;
-    let v35 = p.ankle_mass * p.shin_length_y;
-    let v36 = v34 + v35;
-    let v37 = p.gravity_y * v36;
-    let v38 = v33 + v37;
-    let v39 = v29 * v38;
-    let v40 = v18 * v25;
-    let v41 = v7 * v27;
-    let v42 = v40 + v41;
-    let v43 = p.gravity_x * v36;
-    let v44 = p.gravity_y * v32;
-    let v45 = v43 - v44;
-    let v46 = v42 * v45;
-    let v47 = v39 - v46;
-    let v48 = v24 + v47;
-    let (v51, v49) = q_2.sin_cos();
-    let v50 = v29 * v49;
-    let v52 = v42 * v51;
-    let v53 = v50 - v52;
-    let v54 = p.ankle_mass * p.ankle_com_x;
-    let v55 = p.gravity_x * v54;
-    let v56 = p.ankle_mass * p.ankle_com_y;
-    let v57 = p.gravity_y * v56;
-    let v58 = v55 + v57;
-    let v59 = v53 * v58;
-    let v60 = v42 * v49;
-    let v61 = v29 * v51;
-    let v62 = v60 + v61;
-    let v63 = p.gravity_x * v56;
-    let v64 = p.gravity_y * v54;
-    let v65 = v63 - v64;
-    let v66 = v62 * v65;
-    let v67 = v59 - v66;
-    let v68 = v48 + v67;
-    let v69 = -v68;
-    v69
+    let v15 = v14 * p.prepared[13];
+    let v16 = v11 - v15;
+    let v17 = v5 + v16;
+    let (v20, v18) = q_2.sincos();
+    let v19 = v10 * v18;
+    let v21 = v14 * v20;
+    let v22 = v19 - v21;
+    let v23 = v22 * p.prepared[16];
+    let v24 = v14 * v18;
+    let v25 = v10 * v20;
+    let v26 = v24 + v25;
+    let v27 = v26 * p.prepared[15];
+    let v28 = v23 - v27;
+    let v29 = v17 + v28;
+    let v30 = -v29;
+    v30
 }
 /// Joint positions in the base frame, one column per joint.
 pub fn joint_positions<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
     let [q_0, q_1, _] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.thigh_length_x;
     let v3 = v2 * p.thigh_length_y;
     let v4 = v1 - v3;
@@ -1024,7 +969,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 
     let v7 = v0 * p.thigh_length_y;
     let v8 = v6 + v7;
     let v9 = p.thigh_origin_y + v8;
-    let (v12, v10) = q_1.sin_cos();
+    let (v12, v10) = q_1.sincos();
     let v11 = v0 * v10;
     let v13 = v2 * v12;
     let v14 = v11 - v13;
@@ -1046,7 +991,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 
 /// Link tips in the base frame, one column per link.
 pub fn link_tips<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
     let [q_0, q_1, q_2] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.thigh_length_x;
     let v3 = v2 * p.thigh_length_y;
     let v4 = v1 - v3;
@@ -1055,7 +1000,7 @@ pub fn link_tips<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> 
     let v7 = v0 * p.thigh_length_y;
     let v8 = v6 + v7;
     let v9 = p.thigh_origin_y + v8;
-    let (v12, v10) = q_1.sin_cos();
+    let (v12, v10) = q_1.sincos();
     let v11 = v0 * v10;
     let v13 = v2 * v12;
     let v14 = v11 - v13;
@@ -1070,7 +1015,7 @@ pub fn link_tips<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> 
     let v23 = v14 * p.shin_length_y;
     let v24 = v22 + v23;
     let v25 = v9 + v24;
-    let (v28, v26) = q_2.sin_cos();
+    let (v28, v26) = q_2.sincos();
     let v27 = v14 * v26;
     let v29 = v18 * v28;
     let v30 = v27 - v29;
@@ -1118,202 +1063,129 @@ pub fn dynamics_terms<T: Real>(
 ) -> (SMatrix<T, 3, 3>, SVector<T, 3>, SMatrix<T, 0, 3>, SVector<T, 0>) {
     let [q_0, q_1, q_2] = q.data.0[0];
     let [qd_0, qd_1, qd_2] = qd.data.0[0];
-    let v0 = p.thigh_com_x * p.thigh_com_x;
-    let v1 = p.thigh_com_y * p.thigh_com_y;
-    let v2 = v0 + v1;
-    let v3 = p.thigh_mass * v2;
-    let v4 = p.thigh_inertia + v3;
-    let v5 = p.shin_com_x * p.shin_com_x;
-    let v6 = p.shin_com_y * p.shin_com_y;
-    let v7 = v5 + v6;
-    let v8 = p.shin_mass * v7;
-    let v9 = p.shin_inertia + v8;
-    let v10 = p.ankle_com_x * p.ankle_com_x;
-    let v11 = p.ankle_com_y * p.ankle_com_y;
-    let v12 = v10 + v11;
-    let v13 = p.ankle_mass * v12;
-    let v14 = p.ankle_inertia + v13;
-    let (v22, v15) = q_2.sin_cos();
-    let v16 = p.ankle_mass * p.ankle_com_x;
-    let v17 = p.shin_length_x * v16;
-    let v18 = p.ankle_mass * p.ankle_com_y;
-    let v19 = p.shin_length_y * v18;
-    let v20 = v17 + v19;
-    let v21 = v15 * v20;
-    let v23 = p.shin_length_x * v18;
-    let v24 = v16 * p.shin_length_y;
-    let v25 = v23 - v24;
-    let v26 = v22 * v25;
-    let v27 = v21 - v26;
-    let v28 = v27 + v27;
-    let v29 = v14 + v28;
-    let v30 = p.shin_length_x * p.shin_length_x;
-    let v31 = p.shin_length_y * p.shin_length_y;
-    let v32 = v30 + v31;
-    let v33 = p.ankle_mass * v32;
-    let v34 = v29 + v33;
-    let v35 = v9 + v34;
-    let (v45, v36) = q_1.sin_cos();
-    let v37 = p.shin_mass * p.shin_com_x;
-    let v38 = v15 * v16;
-    let v39 = v18 * v22;
-    let v40 = v38 - v39;
-    let v41 = p.ankle_mass * p.shin_length_x;
-    let v42 = v40 + v41;
-    let v43 = v37 + v42;
-    let v44 = v36 * v43;
-    let v46 = p.shin_mass * p.shin_com_y;
-    let v47 = v16 * v22;
-    let v48 = v15 * v18;
-    let v49 = v47 + v48;
-    let v50 = p.ankle_mass * p.shin_length_y;
-    let v51 = v49 + v50;
-    let v52 = v46 + v51;
-    let v53 = v45 * v52;
-    let v54 = v44 - v53;
-    let v55 = p.thigh_length_x * v54;
-    let v56 = v43 * v45;
-    let v57 = v36 * v52;
-    let v58 = v56 + v57;
-    let v59 = p.thigh_length_y * v58;
-    let v60 = v55 + v59;
-    let v61 = v60 + v60;
-    let v62 = v35 + v61;
-    let v63 = p.shin_mass + p.ankle_mass;
-    let v64 = p.thigh_length_x * p.thigh_length_x;
-    let v65 = p.thigh_length_y * p.thigh_length_y;
-    let v66 = v64 + v65;
-    let v67 = v63 * v66;
-    let v68 = v62 + v67;
-    let v69 = v4 + v68;
-    let v70 = p.thigh_gear_ratio * p.thigh_gear_ratio;
-    let v71 = p.thigh_rotor_inertia * v70;
-    let v72 = v69 + v71;
-    let v73 = v35 + v60;
-    let v74 = v24 - v23;
-    let v75 = v22 * v74;
-    let v76 = v21 + v75;
-    let v77 = v14 + v76;
-    let v78 = v36 * v40;
-    let v79 = v45 * v49;
-    let v80 = v78 - v79;
-    let v81 = p.thigh_length_x * v80;
-    let v82 = v36 * v49;
-    let v83 = v40 * v45;
-    let v84 = v82 + v83;
-    let v85 = p.thigh_length_y * v84;
-    let v86 = v81 + v85;
-    let v87 = v77 + v86;
-    let v88 = p.shin_gear_ratio * p.shin_gear_ratio;
-    let v89 = p.shin_rotor_inertia * v88;
-    let v90 = v35 + v89;
-    let v91 = v54 * p.thigh_length_y;
-    let v92 = p.thigh_length_x * v58;
+    let (v2, v0) = q_2.sincos();
+    let v1 = v0 * p.prepared[5];
+    let v3 = v2 * p.prepared[6];
+    let v4 = v1 - v3;
+    let v5 = v4 + v4;
+    let v6 = p.prepared[2] + v5;
+    let v7 = p.prepared[0] + v6;
+    let (v14, v8) = q_1.sincos();
+    let v9 = v0 * p.prepared[3];
+    let v10 = p.prepared[4] * v2;
+    let v11 = v9 - v10;
+    let v12 = p.prepared[7] + v11;
+    let v13 = v8 * v12;
+    let v15 = p.prepared[3] * v2;
+    let v16 = v0 * p.prepared[4];
+    let v17 = v15 + v16;
+    let v18 = p.prepared[8] + v17;
+    let v19 = v14 * v18;
+    let v20 = v13 - v19;
+    let v21 = p.thigh_length_x * v20;
+    let v22 = v12 * v14;
+    let v23 = v8 * v18;
+    let v24 = v22 + v23;
+    let v25 = p.thigh_length_y * v24;
+    let v26 = v21 + v25;
+    let v27 = v26 + v26;
+    let v28 = v7 + v27;
+    let v29 = v6 + v26;
+    let v30 = v2 * p.prepared[9];
+    let v31 = v1 + v30;
+    let v32 = p.prepared[1] + v31;
+    let v33 = v8 * v11;
+    let v34 = v14 * v17;
+    let v35 = v33 - v34;
+    let v36 = p.thigh_length_x * v35;
+    let v37 = v8 * v17;
+    let v38 = v11 * v14;
+    let v39 = v37 + v38;
+    let v40 = p.thigh_length_y * v39;
+    let v41 = v36 + v40;
+    let v42 = v32 + v41;
+    let v43 = v5 + p.prepared[10];
+    let v44 = p.thigh_length_y * v20;
+    let v45 = p.thigh_length_x * v24;
+    let v46 = v44 - v45;
+    let v47 = v46 + v46;
+    let v48 = qd_0 * qd_1;
+    let v49 = v47 * v48;
+    let v50 = p.prepared[5] * v2;
+    let v51 = v0 * p.prepared[6];
+    let v52 = v50 + v51;
+    let v53 = -v52;
+    let v54 = v53 + v53;
+    let v55 = p.thigh_length_y * v35;
+    let v56 = p.thigh_length_x * v39;
+    let v57 = v55 - v56;
+    let v58 = v57 + v57;
+    let v59 = v54 + v58;
+    let v60 = qd_0 * qd_2;
+    let v61 = v59 * v60;
+    let v62 = v49 + v61;
+    let v63 = qd_1 * qd_1;
+    let v64 = v46 * v63;
+    let v65 = v62 + v64;
+    let v66 = v54 + v57;
+    let v67 = v57 + v66;
+    let v68 = qd_1 * qd_2;
+    let v69 = v67 * v68;
+    let v70 = v65 + v69;
+    let v71 = v0 * p.prepared[9];
+    let v72 = v71 - v50;
+    let v73 = v57 + v72;
+    let v74 = qd_2 * qd_2;
+    let v75 = v73 * v74;
+    let v76 = v70 + v75;
+    let (v79, v77) = q_0.sincos();
+    let v78 = v77 * p.prepared[11];
+    let v80 = v79 * p.prepared[12];
+    let v81 = v78 + v80;
+    let v82 = v8 * v77;
+    let v83 = v14 * v79;
+    let v84 = v82 - v83;
+    let v85 = v84 * p.prepared[13];
+    let v86 = v8 * v79;
+    let v87 = v14 * v77;
+    let v88 = v86 + v87;
+    let v89 = v88 * p.prepared[14];
+    let v90 = v85 + v89;
+    let v91 = v0 * v84;
+    let v92 = v2 * v88;
     let v93 = v91 - v92;
-    let v94 = v93 + v93;
-    let v95 = qd_0 * qd_1;
-    let v96 = v94 * v95;
-    let v97 = v20 * v22;
-    let v98 = v15 * v25;
-    let v99 = v97 + v98;
-    let v100 = -v99;
-    let v101 = v100 + v100;
-    let v102 = p.thigh_length_y * v80;
-    let v103 = p.thigh_length_x * v84;
-    let v104 = v102 - v103;
-    let v105 = v104 + v104;
-    let v106 = v101 + v105;
-    let v107 = qd_0 * qd_2;
-    let v108 = v106 * v107;
-    let v109 = v96 + v108;
-    let v110 = qd_1 * qd_1;
-    let v111 = v93 * v110;
-    let v112 = v109 + v111;
-    let v113 = v101 + v104;
-    let v114 = v104 + v113;
-    let v115 = qd_1 * qd_2;
-    let v116 = v114 * v115;
-    let v117 = v112 + v116;
-    let v118 = v15 * v74;
-    let v119 = v118 - v97;
-    let v120 = v104 + v119;
-    let v121 = qd_2 * qd_2;
-    let v122 = v120 * v121;
-    let v123 = v117 + v122;
-    let (v135, v124) = q_0.sin_cos();
-    let v125 = p.thigh_mass * p.thigh_com_y;
-    let v126 = p.thigh_length_y * v63;
-    let v127 = v125 + v126;
-    let v128 = p.gravity_x * v127;
-    let v129 = p.thigh_mass * p.thigh_com_x;
-    let v130 = p.thigh_length_x * v63;
-    let v131 = v129 + v130;
-    let v132 = p.gravity_y * v131;
-    let v133 = v128 - v132;
-    let v134 = v124 * v133;
-    let v136 = p.gravity_x * v131;
-    let v137 = v127 * p.gravity_y;
-    let v138 = v136 + v137;
-    let v139 = v135 * v138;
-    let v140 = v134 + v139;
-    let v141 = v36 * v124;
-    let v142 = v45 * v135;
-    let v143 = v141 - v142;
-    let v144 = v46 + v50;
-    let v145 = p.gravity_x * v144;
-    let v146 = v37 + v41;
-    let v147 = p.gravity_y * v146;
-    let v148 = v145 - v147;
-    let v149 = v143 * v148;
-    let v150 = v36 * v135;
-    let v151 = v45 * v124;
-    let v152 = v150 + v151;
-    let v153 = p.gravity_x * v146;
-    let v154 = p.gravity_y * v144;
-    let v155 = v153 + v154;
-    let v156 = v152 * v155;
-    let v157 = v149 + v156;
-    let v158 = v15 * v143;
-    let v159 = v22 * v152;
-    let v160 = v158 - v159;
-    let v161 = v18 * p.gravity_x;
-    let v162 = v16 * p.gravity_y;
-    let v163 = v161 - v162;
-    let v164 = v160 * v163;
-    let v165 = v15 * v152;
-    let v166 = v22 * v143;
-    let v167 = v165 + v166;
-    let v168 = v16 * p.gravity_x;
-    let v169 = v18 * p.gravity_y;
-    let v170 = v168 + v169;
-    let v171 = v167 * v170;
-    let v172 = v164 + v171;
-    let v173 = v157 + v172;
-    let v174 = v140 + v173;
-    let v175 = v123 + v174;
-    let v176 = v113 - v104;
-    let v177 = v107 * v176;
-    let v178 = qd_0 * qd_0;
-    let v179 = v93 * v178;
-    let v180 = v177 - v179;
-    let v181 = v101 * v115;
-    let v182 = v180 + v181;
-    let v183 = v119 * v121;
-    let v184 = v182 + v183;
-    let v185 = v173 + v184;
-    let v186 = v104 - v113;
-    let v187 = v95 * v186;
-    let v188 = v106 * T::lit(0.5);
-    let v189 = v178 * v188;
-    let v190 = v187 - v189;
-    let v191 = v99 * v110;
-    let v192 = v190 + v191;
-    let v193 = v172 + v192;
+    let v94 = v93 * p.prepared[15];
+    let v95 = v0 * v88;
+    let v96 = v2 * v84;
+    let v97 = v95 + v96;
+    let v98 = v97 * p.prepared[16];
+    let v99 = v94 + v98;
+    let v100 = v90 + v99;
+    let v101 = v81 + v100;
+    let v102 = v76 + v101;
+    let v103 = v66 - v57;
+    let v104 = v60 * v103;
+    let v105 = qd_0 * qd_0;
+    let v106 = v46 * v105;
+    let v107 = v104 - v106;
+    let v108 = v54 * v68;
+    let v109 = v107 + v108;
+    let v110 = v72 * v74;
+    let v111 = v109 + v110;
+    let v112 = v100 + v111;
+    let v113 = v59 * T::lit(-0.5);
+    let v114 = v105 * v113;
+    let v115 = v57 - v66;
+    let v116 = v48 * v115;
+    let v117 = v114 + v116;
+    let v118 = v52 * v63;
+    let v119 = v117 + v118;
+    let v120 = v99 + v119;
     (
         SMatrix::from_data(
-            ArrayStorage([[v72, v73, v87], [v73, v90, v77], [v87, v77, v14]]),
+            ArrayStorage([[v28, v29, v42], [v29, v43, v32], [v42, v32, p.prepared[1]]]),
         ),
-        SMatrix::from_data(ArrayStorage([[v175, v185, v193]])),
+        SMatrix::from_data(ArrayStorage([[v102, v112, v120]])),
         SMatrix::from_data(ArrayStorage([[], [], []])),
         SMatrix::from_data(ArrayStorage([[]])),
     )

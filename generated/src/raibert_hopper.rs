@@ -20,10 +20,9 @@ pub const NK: usize = 4;
 /// The `raibert_hopper` leg: 5 joints, 0 closure(s), actuated joints ["thigh", "shin"]. Generated from `leg-models/specs/raibert_hopper.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct RaibertHopper;
-/// Physical parameters; `Default` holds the spec's values. Change them at run
-/// time without regenerating.
+/// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Params<T> {
+pub struct ParamValues<T> {
     /// Gravity in the base frame, x [m/s²].
     pub gravity_x: T,
     /// Gravity in the base frame, y [m/s²].
@@ -127,7 +126,7 @@ pub struct Params<T> {
     /// Contact point `heel`, link frame, y [m].
     pub heel_y: T,
 }
-impl<T: Real> Default for Params<T> {
+impl<T: Real> Default for ParamValues<T> {
     fn default() -> Self {
         Self {
             gravity_x: T::lit(0.0),
@@ -182,6 +181,50 @@ impl<T: Real> Default for Params<T> {
             heel_x: T::lit(-0.04),
             heel_y: T::lit(-0.2),
         }
+    }
+}
+/// Physical parameters, ready for evaluation: the values (read as fields through
+/// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
+/// computed once when a value changes instead of in every call. `Default` holds
+/// the spec's values; change them at run time, without regenerating, with
+/// [`Params::update`] or [`Parameters::set`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params<T> {
+    values: ParamValues<T>,
+    prepared: [T; 34],
+}
+impl<T: Real> Params<T> {
+    /// Parameters of these values.
+    pub fn new(values: ParamValues<T>) -> Self {
+        Self {
+            prepared: prepare(&values).data.0[0],
+            values,
+        }
+    }
+    /// The values.
+    pub fn values(&self) -> &ParamValues<T> {
+        &self.values
+    }
+    /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
+    pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
+        change(&mut self.values);
+        *self = Self::new(self.values);
+    }
+}
+impl<T> core::ops::Deref for Params<T> {
+    type Target = ParamValues<T>;
+    fn deref(&self) -> &ParamValues<T> {
+        &self.values
+    }
+}
+impl<T: Real> From<ParamValues<T>> for Params<T> {
+    fn from(values: ParamValues<T>) -> Self {
+        Self::new(values)
+    }
+}
+impl<T: Real> Default for Params<T> {
+    fn default() -> Self {
+        Self::new(ParamValues::default())
     }
 }
 impl<T: Real> Parameters<T> for Params<T> {
@@ -240,115 +283,116 @@ impl<T: Real> Parameters<T> for Params<T> {
     ];
     fn get(&self, i: usize) -> Option<T> {
         match i {
-            0 => Some(self.gravity_x),
-            1 => Some(self.gravity_y),
-            2 => Some(self.slide_x_origin_x),
-            3 => Some(self.slide_x_origin_y),
-            4 => Some(self.slide_x_length_x),
-            5 => Some(self.slide_x_length_y),
-            6 => Some(self.slide_x_mass),
-            7 => Some(self.slide_x_com_x),
-            8 => Some(self.slide_x_com_y),
-            9 => Some(self.slide_x_inertia),
-            10 => Some(self.slide_x_damping),
-            11 => Some(self.slide_y_length_x),
-            12 => Some(self.slide_y_length_y),
-            13 => Some(self.slide_y_mass),
-            14 => Some(self.slide_y_com_x),
-            15 => Some(self.slide_y_com_y),
-            16 => Some(self.slide_y_inertia),
-            17 => Some(self.slide_y_damping),
-            18 => Some(self.torso_length_x),
-            19 => Some(self.torso_length_y),
-            20 => Some(self.torso_mass),
-            21 => Some(self.torso_com_x),
-            22 => Some(self.torso_com_y),
-            23 => Some(self.torso_inertia),
-            24 => Some(self.torso_damping),
-            25 => Some(self.thigh_length_x),
-            26 => Some(self.thigh_length_y),
-            27 => Some(self.thigh_mass),
-            28 => Some(self.thigh_com_x),
-            29 => Some(self.thigh_com_y),
-            30 => Some(self.thigh_inertia),
-            31 => Some(self.thigh_damping),
-            32 => Some(self.thigh_rotor_inertia),
-            33 => Some(self.thigh_gear_ratio),
-            34 => Some(self.shin_origin_x),
-            35 => Some(self.shin_origin_y),
-            36 => Some(self.shin_length_x),
-            37 => Some(self.shin_length_y),
-            38 => Some(self.shin_mass),
-            39 => Some(self.shin_com_x),
-            40 => Some(self.shin_com_y),
-            41 => Some(self.shin_inertia),
-            42 => Some(self.shin_damping),
-            43 => Some(self.shin_rotor_inertia),
-            44 => Some(self.shin_gear_ratio),
-            45 => Some(self.leg_spring_stiffness),
-            46 => Some(self.leg_spring_rest),
-            47 => Some(self.hip_spring_stiffness),
-            48 => Some(self.hip_spring_rest),
-            49 => Some(self.heel_x),
-            50 => Some(self.heel_y),
+            0 => Some(self.values.gravity_x),
+            1 => Some(self.values.gravity_y),
+            2 => Some(self.values.slide_x_origin_x),
+            3 => Some(self.values.slide_x_origin_y),
+            4 => Some(self.values.slide_x_length_x),
+            5 => Some(self.values.slide_x_length_y),
+            6 => Some(self.values.slide_x_mass),
+            7 => Some(self.values.slide_x_com_x),
+            8 => Some(self.values.slide_x_com_y),
+            9 => Some(self.values.slide_x_inertia),
+            10 => Some(self.values.slide_x_damping),
+            11 => Some(self.values.slide_y_length_x),
+            12 => Some(self.values.slide_y_length_y),
+            13 => Some(self.values.slide_y_mass),
+            14 => Some(self.values.slide_y_com_x),
+            15 => Some(self.values.slide_y_com_y),
+            16 => Some(self.values.slide_y_inertia),
+            17 => Some(self.values.slide_y_damping),
+            18 => Some(self.values.torso_length_x),
+            19 => Some(self.values.torso_length_y),
+            20 => Some(self.values.torso_mass),
+            21 => Some(self.values.torso_com_x),
+            22 => Some(self.values.torso_com_y),
+            23 => Some(self.values.torso_inertia),
+            24 => Some(self.values.torso_damping),
+            25 => Some(self.values.thigh_length_x),
+            26 => Some(self.values.thigh_length_y),
+            27 => Some(self.values.thigh_mass),
+            28 => Some(self.values.thigh_com_x),
+            29 => Some(self.values.thigh_com_y),
+            30 => Some(self.values.thigh_inertia),
+            31 => Some(self.values.thigh_damping),
+            32 => Some(self.values.thigh_rotor_inertia),
+            33 => Some(self.values.thigh_gear_ratio),
+            34 => Some(self.values.shin_origin_x),
+            35 => Some(self.values.shin_origin_y),
+            36 => Some(self.values.shin_length_x),
+            37 => Some(self.values.shin_length_y),
+            38 => Some(self.values.shin_mass),
+            39 => Some(self.values.shin_com_x),
+            40 => Some(self.values.shin_com_y),
+            41 => Some(self.values.shin_inertia),
+            42 => Some(self.values.shin_damping),
+            43 => Some(self.values.shin_rotor_inertia),
+            44 => Some(self.values.shin_gear_ratio),
+            45 => Some(self.values.leg_spring_stiffness),
+            46 => Some(self.values.leg_spring_rest),
+            47 => Some(self.values.hip_spring_stiffness),
+            48 => Some(self.values.hip_spring_rest),
+            49 => Some(self.values.heel_x),
+            50 => Some(self.values.heel_y),
             _ => None,
         }
     }
     fn set(&mut self, i: usize, value: T) -> bool {
         match i {
-            0 => self.gravity_x = value,
-            1 => self.gravity_y = value,
-            2 => self.slide_x_origin_x = value,
-            3 => self.slide_x_origin_y = value,
-            4 => self.slide_x_length_x = value,
-            5 => self.slide_x_length_y = value,
-            6 => self.slide_x_mass = value,
-            7 => self.slide_x_com_x = value,
-            8 => self.slide_x_com_y = value,
-            9 => self.slide_x_inertia = value,
-            10 => self.slide_x_damping = value,
-            11 => self.slide_y_length_x = value,
-            12 => self.slide_y_length_y = value,
-            13 => self.slide_y_mass = value,
-            14 => self.slide_y_com_x = value,
-            15 => self.slide_y_com_y = value,
-            16 => self.slide_y_inertia = value,
-            17 => self.slide_y_damping = value,
-            18 => self.torso_length_x = value,
-            19 => self.torso_length_y = value,
-            20 => self.torso_mass = value,
-            21 => self.torso_com_x = value,
-            22 => self.torso_com_y = value,
-            23 => self.torso_inertia = value,
-            24 => self.torso_damping = value,
-            25 => self.thigh_length_x = value,
-            26 => self.thigh_length_y = value,
-            27 => self.thigh_mass = value,
-            28 => self.thigh_com_x = value,
-            29 => self.thigh_com_y = value,
-            30 => self.thigh_inertia = value,
-            31 => self.thigh_damping = value,
-            32 => self.thigh_rotor_inertia = value,
-            33 => self.thigh_gear_ratio = value,
-            34 => self.shin_origin_x = value,
-            35 => self.shin_origin_y = value,
-            36 => self.shin_length_x = value,
-            37 => self.shin_length_y = value,
-            38 => self.shin_mass = value,
-            39 => self.shin_com_x = value,
-            40 => self.shin_com_y = value,
-            41 => self.shin_inertia = value,
-            42 => self.shin_damping = value,
-            43 => self.shin_rotor_inertia = value,
-            44 => self.shin_gear_ratio = value,
-            45 => self.leg_spring_stiffness = value,
-            46 => self.leg_spring_rest = value,
-            47 => self.hip_spring_stiffness = value,
-            48 => self.hip_spring_rest = value,
-            49 => self.heel_x = value,
-            50 => self.heel_y = value,
+            0 => self.values.gravity_x = value,
+            1 => self.values.gravity_y = value,
+            2 => self.values.slide_x_origin_x = value,
+            3 => self.values.slide_x_origin_y = value,
+            4 => self.values.slide_x_length_x = value,
+            5 => self.values.slide_x_length_y = value,
+            6 => self.values.slide_x_mass = value,
+            7 => self.values.slide_x_com_x = value,
+            8 => self.values.slide_x_com_y = value,
+            9 => self.values.slide_x_inertia = value,
+            10 => self.values.slide_x_damping = value,
+            11 => self.values.slide_y_length_x = value,
+            12 => self.values.slide_y_length_y = value,
+            13 => self.values.slide_y_mass = value,
+            14 => self.values.slide_y_com_x = value,
+            15 => self.values.slide_y_com_y = value,
+            16 => self.values.slide_y_inertia = value,
+            17 => self.values.slide_y_damping = value,
+            18 => self.values.torso_length_x = value,
+            19 => self.values.torso_length_y = value,
+            20 => self.values.torso_mass = value,
+            21 => self.values.torso_com_x = value,
+            22 => self.values.torso_com_y = value,
+            23 => self.values.torso_inertia = value,
+            24 => self.values.torso_damping = value,
+            25 => self.values.thigh_length_x = value,
+            26 => self.values.thigh_length_y = value,
+            27 => self.values.thigh_mass = value,
+            28 => self.values.thigh_com_x = value,
+            29 => self.values.thigh_com_y = value,
+            30 => self.values.thigh_inertia = value,
+            31 => self.values.thigh_damping = value,
+            32 => self.values.thigh_rotor_inertia = value,
+            33 => self.values.thigh_gear_ratio = value,
+            34 => self.values.shin_origin_x = value,
+            35 => self.values.shin_origin_y = value,
+            36 => self.values.shin_length_x = value,
+            37 => self.values.shin_length_y = value,
+            38 => self.values.shin_mass = value,
+            39 => self.values.shin_com_x = value,
+            40 => self.values.shin_com_y = value,
+            41 => self.values.shin_inertia = value,
+            42 => self.values.shin_damping = value,
+            43 => self.values.shin_rotor_inertia = value,
+            44 => self.values.shin_gear_ratio = value,
+            45 => self.values.leg_spring_stiffness = value,
+            46 => self.values.leg_spring_rest = value,
+            47 => self.values.hip_spring_stiffness = value,
+            48 => self.values.hip_spring_rest = value,
+            49 => self.values.heel_x = value,
+            50 => self.values.heel_y = value,
             _ => return false,
         }
+        *self = Self::new(self.values);
         true
     }
 }
@@ -491,121 +535,205 @@ impl ContactModel<NQ, NC, NU, NK> for RaibertHopper {
         contact_bias(q, qd, p)
     }
 }
+/// The parameter-only quantities the terms read (products of masses, lengths and
+/// centres of mass, inertias about the joints, …), computed once per parameter set
+/// by [`Params::new`].
+pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 34> {
+    let v0 = values.thigh_mass + values.shin_mass;
+    let v1 = values.torso_mass + v0;
+    let v2 = values.slide_y_mass + v1;
+    let v3 = values.slide_x_mass + v2;
+    let v4 = values.torso_mass * values.torso_com_y;
+    let v5 = v0 * values.torso_length_y;
+    let v6 = v4 + v5;
+    let v7 = values.thigh_mass * values.thigh_com_x;
+    let v8 = values.shin_mass * values.shin_com_x;
+    let v9 = v7 + v8;
+    let v10 = values.shin_mass * values.shin_origin_x;
+    let v11 = v9 + v10;
+    let v12 = values.thigh_mass * values.thigh_com_y;
+    let v13 = values.shin_mass * values.shin_com_y;
+    let v14 = v12 + v13;
+    let v15 = values.torso_mass * values.torso_com_x;
+    let v16 = v0 * values.torso_length_x;
+    let v17 = v15 + v16;
+    let v18 = values.torso_com_x * values.torso_com_x;
+    let v19 = values.torso_com_y * values.torso_com_y;
+    let v20 = v18 + v19;
+    let v21 = values.torso_mass * v20;
+    let v22 = values.torso_inertia + v21;
+    let v23 = values.torso_length_x * values.torso_length_x;
+    let v24 = values.torso_length_y * values.torso_length_y;
+    let v25 = v23 + v24;
+    let v26 = v0 * v25;
+    let v27 = v22 + v26;
+    let v28 = values.thigh_com_x * values.thigh_com_x;
+    let v29 = values.thigh_com_y * values.thigh_com_y;
+    let v30 = v28 + v29;
+    let v31 = values.thigh_mass * v30;
+    let v32 = values.thigh_inertia + v31;
+    let v33 = values.shin_com_x * values.shin_com_x;
+    let v34 = values.shin_com_y * values.shin_com_y;
+    let v35 = v33 + v34;
+    let v36 = values.shin_mass * v35;
+    let v37 = values.shin_inertia + v36;
+    let v38 = v32 + v37;
+    let v39 = values.shin_origin_x * values.shin_origin_x;
+    let v40 = v8 * values.shin_origin_x;
+    let v41 = v8 + v10;
+    let v42 = values.shin_mass * values.torso_length_x;
+    let v43 = values.shin_mass * values.torso_length_y;
+    let v44 = values.thigh_gear_ratio * values.thigh_gear_ratio;
+    let v45 = values.thigh_rotor_inertia * v44;
+    let v46 = v38 + v45;
+    let v47 = -v41;
+    let v48 = values.shin_gear_ratio * values.shin_gear_ratio;
+    let v49 = values.shin_rotor_inertia * v48;
+    let v50 = values.shin_mass + v49;
+    let v51 = v3 * values.gravity_x;
+    let v52 = v2 * values.gravity_y;
+    let v53 = v6 * values.gravity_x;
+    let v54 = v17 * values.gravity_y;
+    let v55 = v53 - v54;
+    let v56 = v17 * values.gravity_x;
+    let v57 = v6 * values.gravity_y;
+    let v58 = v56 + v57;
+    let v59 = v7 + v10;
+    let v60 = v13 * values.gravity_x;
+    let v61 = v8 * values.gravity_y;
+    let v62 = v60 - v61;
+    let v63 = v8 * values.gravity_x;
+    let v64 = v13 * values.gravity_y;
+    let v65 = v63 + v64;
+    let v66 = -v51;
+    let v67 = -v52;
+    let v68 = values.leg_spring_stiffness * T::lit(0.5);
+    let v69 = values.hip_spring_stiffness * T::lit(0.5);
+    let v70 = v3 * values.slide_x_origin_y;
+    let v71 = values.gravity_y * v70;
+    let v72 = values.slide_x_mass * values.slide_x_com_x;
+    let v73 = v2 * values.slide_x_length_x;
+    let v74 = v72 + v73;
+    let v75 = values.gravity_x * v74;
+    let v76 = values.slide_x_mass * values.slide_x_com_y;
+    let v77 = values.slide_y_mass * values.slide_y_com_x;
+    let v78 = v1 * values.slide_y_length_x;
+    let v79 = v77 + v78;
+    let v80 = values.gravity_x * v79;
+    let v81 = values.slide_y_mass * values.slide_y_com_y;
+    let v82 = v1 * values.slide_y_length_y;
+    let v83 = v81 + v82;
+    let v84 = values.gravity_y * v83;
+    let v85 = v80 + v84;
+    let v86 = values.slide_x_origin_y + values.slide_x_length_y;
+    SMatrix::from_data(
+        ArrayStorage([
+            [
+                v2,
+                v3,
+                v6,
+                v11,
+                v13,
+                v14,
+                v17,
+                v27,
+                v38,
+                v39,
+                v40,
+                v41,
+                v42,
+                v43,
+                v46,
+                v47,
+                v50,
+                v51,
+                v52,
+                v55,
+                v58,
+                v59,
+                v12,
+                v62,
+                v65,
+                v66,
+                v67,
+                v68,
+                v69,
+                v71,
+                v75,
+                v76,
+                v85,
+                v86,
+            ],
+        ]),
+    )
+}
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
 pub fn mass_matrix<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
-    let v0 = p.thigh_mass + p.shin_mass;
-    let v1 = p.torso_mass + v0;
-    let v2 = p.slide_y_mass + v1;
-    let v3 = p.slide_x_mass + v2;
-    let (v26, v4) = q_2.sin_cos();
-    let v5 = p.torso_mass * p.torso_com_y;
-    let (v6, v13) = q_3.sin_cos();
-    let v7 = p.thigh_mass * p.thigh_com_x;
-    let v8 = p.shin_mass * p.shin_com_x;
-    let v9 = p.shin_mass * p.shin_origin_x;
-    let v10 = v8 + v9;
-    let v11 = v7 + v10;
-    let v12 = v6 * v11;
-    let v14 = p.thigh_mass * p.thigh_com_y;
-    let v15 = p.shin_mass * p.shin_com_y;
-    let v16 = p.shin_origin_y - q_4;
-    let v17 = p.shin_mass * v16;
-    let v18 = v15 + v17;
-    let v19 = v14 + v18;
-    let v20 = v13 * v19;
-    let v21 = v12 + v20;
-    let v22 = v0 * p.torso_length_y;
-    let v23 = v21 + v22;
-    let v24 = v5 + v23;
-    let v25 = v4 * v24;
-    let v27 = p.torso_mass * p.torso_com_x;
-    let v28 = v11 * v13;
-    let v29 = v6 * v19;
+    let (v11, v0) = q_2.sincos();
+    let (v1, v3) = q_3.sincos();
+    let v2 = v1 * p.prepared[3];
+    let v4 = p.shin_origin_y - q_4;
+    let v5 = p.shin_mass * v4;
+    let v6 = p.prepared[5] + v5;
+    let v7 = v3 * v6;
+    let v8 = v2 + v7;
+    let v9 = p.prepared[2] + v8;
+    let v10 = v0 * v9;
+    let v12 = p.prepared[3] * v3;
+    let v13 = v1 * v6;
+    let v14 = v12 - v13;
+    let v15 = p.prepared[6] + v14;
+    let v16 = v11 * v15;
+    let v17 = v10 + v16;
+    let v18 = -v17;
+    let v19 = v0 * v8;
+    let v20 = v11 * v14;
+    let v21 = v19 + v20;
+    let v22 = -v21;
+    let v23 = p.shin_mass * v1;
+    let v24 = v0 * v23;
+    let v25 = p.shin_mass * v3;
+    let v26 = v11 * v25;
+    let v27 = v24 + v26;
+    let v28 = v0 * v15;
+    let v29 = v9 * v11;
     let v30 = v28 - v29;
-    let v31 = v0 * p.torso_length_x;
-    let v32 = v30 + v31;
-    let v33 = v27 + v32;
-    let v34 = v26 * v33;
-    let v35 = v25 + v34;
-    let v36 = -v35;
-    let v37 = v4 * v21;
-    let v38 = v26 * v30;
-    let v39 = v37 + v38;
-    let v40 = -v39;
-    let v41 = p.shin_mass * v6;
-    let v42 = v4 * v41;
-    let v43 = p.shin_mass * v13;
-    let v44 = v26 * v43;
-    let v45 = v42 + v44;
-    let v46 = v4 * v33;
-    let v47 = v24 * v26;
-    let v48 = v46 - v47;
-    let v49 = v4 * v30;
-    let v50 = v21 * v26;
-    let v51 = v49 - v50;
-    let v52 = v26 * v41;
-    let v53 = v4 * v43;
-    let v54 = v52 - v53;
-    let v55 = p.torso_com_x * p.torso_com_x;
-    let v56 = p.torso_com_y * p.torso_com_y;
-    let v57 = v55 + v56;
-    let v58 = p.torso_mass * v57;
-    let v59 = p.torso_inertia + v58;
-    let v60 = p.thigh_com_x * p.thigh_com_x;
-    let v61 = p.thigh_com_y * p.thigh_com_y;
-    let v62 = v60 + v61;
-    let v63 = p.thigh_mass * v62;
-    let v64 = p.thigh_inertia + v63;
-    let v65 = p.shin_com_x * p.shin_com_x;
-    let v66 = p.shin_com_y * p.shin_com_y;
-    let v67 = v65 + v66;
-    let v68 = p.shin_mass * v67;
-    let v69 = p.shin_inertia + v68;
-    let v70 = v8 * p.shin_origin_x;
-    let v71 = v15 * v16;
-    let v72 = v70 + v71;
-    let v73 = v72 + v72;
-    let v74 = v69 + v73;
-    let v75 = p.shin_origin_x * p.shin_origin_x;
-    let v76 = v16 * v16;
-    let v77 = v75 + v76;
-    let v78 = p.shin_mass * v77;
-    let v79 = v74 + v78;
-    let v80 = v64 + v79;
-    let v81 = v30 * p.torso_length_x;
-    let v82 = v21 * p.torso_length_y;
-    let v83 = v81 + v82;
-    let v84 = v83 + v83;
-    let v85 = v80 + v84;
-    let v86 = p.torso_length_x * p.torso_length_x;
-    let v87 = p.torso_length_y * p.torso_length_y;
-    let v88 = v86 + v87;
-    let v89 = v0 * v88;
-    let v90 = v85 + v89;
-    let v91 = v59 + v90;
-    let v92 = v80 + v83;
-    let v93 = p.shin_mass * p.torso_length_x;
-    let v94 = v13 * v93;
-    let v95 = p.shin_mass * p.torso_length_y;
-    let v96 = v6 * v95;
-    let v97 = v94 + v96;
-    let v98 = v10 + v97;
-    let v99 = -v98;
-    let v100 = p.thigh_gear_ratio * p.thigh_gear_ratio;
-    let v101 = p.thigh_rotor_inertia * v100;
-    let v102 = v80 + v101;
-    let v103 = -v10;
-    let v104 = p.shin_gear_ratio * p.shin_gear_ratio;
-    let v105 = p.shin_rotor_inertia * v104;
-    let v106 = p.shin_mass + v105;
+    let v31 = v0 * v14;
+    let v32 = v8 * v11;
+    let v33 = v31 - v32;
+    let v34 = v11 * v23;
+    let v35 = v0 * v25;
+    let v36 = v34 - v35;
+    let v37 = v4 * v4;
+    let v38 = p.prepared[9] + v37;
+    let v39 = p.shin_mass * v38;
+    let v40 = p.prepared[8] + v39;
+    let v41 = p.prepared[4] * v4;
+    let v42 = p.prepared[10] + v41;
+    let v43 = v42 + v42;
+    let v44 = v40 + v43;
+    let v45 = p.prepared[7] + v44;
+    let v46 = p.torso_length_x * v14;
+    let v47 = p.torso_length_y * v8;
+    let v48 = v46 + v47;
+    let v49 = v48 + v48;
+    let v50 = v45 + v49;
+    let v51 = v44 + v48;
+    let v52 = v3 * p.prepared[12];
+    let v53 = v1 * p.prepared[13];
+    let v54 = v52 + v53;
+    let v55 = p.prepared[11] + v54;
+    let v56 = -v55;
+    let v57 = v39 + p.prepared[14];
+    let v58 = v43 + v57;
     SMatrix::from_data(
         ArrayStorage([
-            [v3, T::lit(0.0), v36, v40, v45],
-            [T::lit(0.0), v2, v48, v51, v54],
-            [v36, v48, v91, v92, v99],
-            [v40, v51, v92, v102, v103],
-            [v45, v54, v99, v103, v106],
+            [p.prepared[1], T::lit(0.0), v18, v22, v27],
+            [T::lit(0.0), p.prepared[0], v30, v33, v36],
+            [v18, v30, v50, v51, v56],
+            [v22, v33, v51, v58, p.prepared[15]],
+            [v27, v36, v56, p.prepared[15], p.prepared[16]],
         ]),
     )
 }
@@ -616,295 +744,196 @@ pub fn bias_forces<T: Real>(
     p: &Params<T>,
 ) -> SVector<T, 5> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
-    let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
-    let (v4, v0) = q_3.sin_cos();
-    let v1 = v0 * p.shin_mass;
-    let (v6, v2) = q_2.sin_cos();
-    let v3 = v1 * v2;
-    let v5 = p.shin_mass * v4;
-    let v7 = v5 * v6;
-    let v8 = v3 - v7;
-    let v9 = v7 - v3;
-    let v10 = v8 - v9;
-    let v11 = qd_2 * qd_4;
-    let v12 = v10 * v11;
-    let v13 = p.torso_mass * p.torso_com_x;
-    let v14 = p.thigh_mass * p.thigh_com_x;
-    let v15 = p.shin_mass * p.shin_com_x;
-    let v16 = p.shin_mass * p.shin_origin_x;
-    let v17 = v15 + v16;
-    let v18 = v14 + v17;
-    let v19 = v0 * v18;
-    let v20 = p.thigh_mass * p.thigh_com_y;
-    let v21 = p.shin_mass * p.shin_com_y;
-    let v22 = p.shin_origin_y - q_4;
-    let v23 = p.shin_mass * v22;
-    let v24 = v21 + v23;
-    let v25 = v20 + v24;
-    let v26 = v4 * v25;
-    let v27 = v19 - v26;
-    let v28 = p.shin_mass + p.thigh_mass;
-    let v29 = v28 * p.torso_length_x;
-    let v30 = v27 + v29;
-    let v31 = v13 + v30;
-    let v32 = v2 * v31;
-    let v33 = p.torso_mass * p.torso_com_y;
-    let v34 = v4 * v18;
-    let v35 = v0 * v25;
-    let v36 = v34 + v35;
-    let v37 = v28 * p.torso_length_y;
-    let v38 = v36 + v37;
-    let v39 = v33 + v38;
-    let v40 = v6 * v39;
-    let v41 = v32 - v40;
-    let v42 = qd_2 * qd_2;
-    let v43 = v41 * v42;
-    let v44 = v2 * v27;
-    let v45 = v6 * v36;
-    let v46 = v44 - v45;
-    let v47 = v46 + v46;
-    let v48 = qd_2 * qd_3;
-    let v49 = v47 * v48;
-    let v50 = v43 + v49;
-    let v51 = v12 - v50;
-    let v52 = qd_3 * qd_3;
-    let v53 = v46 * v52;
-    let v54 = v51 - v53;
-    let v55 = qd_4 * qd_3;
-    let v56 = v10 * v55;
-    let v57 = v54 + v56;
-    let v58 = p.torso_mass + v28;
-    let v59 = p.slide_y_mass + v58;
-    let v60 = p.slide_x_mass + v59;
-    let v61 = v60 * p.gravity_x;
+    let [_, _, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let v0 = qd_2 + qd_3;
+    let v1 = v0 + v0;
+    let v2 = v1 * qd_4;
+    let (v6, v3) = q_2.sincos();
+    let (v7, v4) = q_3.sincos();
+    let v5 = v3 * v4;
+    let v8 = v6 * v7;
+    let v9 = v5 - v8;
+    let v10 = v2 * v9;
+    let v11 = v0 * v0;
+    let v12 = v9 * p.shin_com_x;
+    let v13 = v4 * v6;
+    let v14 = v3 * v7;
+    let v15 = v13 + v14;
+    let v16 = v15 * p.shin_com_y;
+    let v17 = v12 - v16;
+    let v18 = v11 * v17;
+    let v19 = v9 * p.shin_origin_x;
+    let v20 = p.shin_origin_y - q_4;
+    let v21 = v15 * v20;
+    let v22 = v19 - v21;
+    let v23 = v11 * v22;
+    let v24 = v18 + v23;
+    let v25 = v10 - v24;
+    let v26 = qd_2 * qd_2;
+    let v27 = v3 * p.torso_length_x;
+    let v28 = v6 * p.torso_length_y;
+    let v29 = v27 - v28;
+    let v30 = v26 * v29;
+    let v31 = v25 - v30;
+    let v32 = p.shin_mass * v31;
+    let v33 = v3 * p.torso_com_x;
+    let v34 = v6 * p.torso_com_y;
+    let v35 = v33 - v34;
+    let v36 = v26 * v35;
+    let v37 = p.torso_mass * v36;
+    let v38 = v9 * p.thigh_com_x;
+    let v39 = v15 * p.thigh_com_y;
+    let v40 = v38 - v39;
+    let v41 = v11 * v40;
+    let v42 = v30 + v41;
+    let v43 = p.thigh_mass * v42;
+    let v44 = v37 + v43;
+    let v45 = v32 - v44;
+    let v46 = v45 - p.prepared[17];
+    let v47 = v2 * v15;
+    let v48 = p.shin_com_x * v15;
+    let v49 = v9 * p.shin_com_y;
+    let v50 = v48 + v49;
+    let v51 = v11 * v50;
+    let v52 = v15 * p.shin_origin_x;
+    let v53 = v9 * v20;
+    let v54 = v52 + v53;
+    let v55 = v11 * v54;
+    let v56 = v51 + v55;
+    let v57 = v47 - v56;
+    let v58 = v6 * p.torso_length_x;
+    let v59 = v3 * p.torso_length_y;
+    let v60 = v58 + v59;
+    let v61 = v26 * v60;
     let v62 = v57 - v61;
-    let v63 = v2 * v5;
-    let v64 = v1 * v6;
-    let v65 = v63 + v64;
-    let v66 = v65 + v65;
-    let v67 = v11 * v66;
-    let v68 = v6 * v31;
-    let v69 = v2 * v39;
-    let v70 = v68 + v69;
-    let v71 = v42 * v70;
-    let v72 = v2 * v36;
-    let v73 = v6 * v27;
-    let v74 = v72 + v73;
-    let v75 = v74 + v74;
-    let v76 = v48 * v75;
-    let v77 = v71 + v76;
-    let v78 = v67 - v77;
-    let v79 = v52 * v74;
+    let v63 = p.shin_mass * v62;
+    let v64 = v6 * p.torso_com_x;
+    let v65 = v3 * p.torso_com_y;
+    let v66 = v64 + v65;
+    let v67 = v26 * v66;
+    let v68 = p.torso_mass * v67;
+    let v69 = v15 * p.thigh_com_x;
+    let v70 = v9 * p.thigh_com_y;
+    let v71 = v69 + v70;
+    let v72 = v11 * v71;
+    let v73 = v61 + v72;
+    let v74 = p.thigh_mass * v73;
+    let v75 = v68 + v74;
+    let v76 = v63 - v75;
+    let v77 = v76 - p.prepared[18];
+    let v78 = v36 * v66;
+    let v79 = v35 * v67;
     let v80 = v78 - v79;
-    let v81 = v55 * v66;
-    let v82 = v80 + v81;
-    let v83 = v59 * p.gravity_y;
-    let v84 = v82 - v83;
-    let v85 = v46 - v46;
-    let v86 = qd_3 * qd_0;
-    let v87 = v85 * v86;
-    let v88 = v8 + v9;
-    let v89 = qd_4 * qd_0;
-    let v90 = v88 * v89;
-    let v91 = v87 - v90;
-    let v92 = v74 - v74;
-    let v93 = qd_3 * qd_1;
-    let v94 = v92 * v93;
-    let v95 = v91 + v94;
-    let v96 = v65 - v65;
-    let v97 = qd_4 * qd_1;
-    let v98 = v96 * v97;
-    let v99 = v95 + v98;
-    let v100 = v27 * p.torso_length_y;
-    let v101 = p.torso_length_x * v36;
-    let v102 = v100 - v101;
-    let v103 = v102 + v102;
-    let v104 = v48 * v103;
-    let v105 = v99 + v104;
-    let v106 = -v21;
-    let v107 = v106 + v106;
-    let v108 = v22 + v22;
-    let v109 = p.shin_mass * v108;
-    let v110 = v107 - v109;
-    let v111 = v5 * p.torso_length_x;
-    let v112 = v1 * p.torso_length_y;
-    let v113 = v111 - v112;
-    let v114 = v113 + v113;
-    let v115 = v110 + v114;
-    let v116 = v11 * v115;
-    let v117 = v105 + v116;
-    let v118 = v52 * v102;
-    let v119 = v117 + v118;
-    let v120 = v110 + v113;
-    let v121 = p.shin_mass * p.torso_length_y;
-    let v122 = v0 * v121;
-    let v123 = p.shin_mass * p.torso_length_x;
-    let v124 = v4 * v123;
-    let v125 = v122 - v124;
-    let v126 = v120 - v125;
-    let v127 = v55 * v126;
-    let v128 = v119 + v127;
-    let v129 = v33 + v37;
-    let v130 = p.gravity_x * v129;
-    let v131 = v13 + v29;
-    let v132 = p.gravity_y * v131;
-    let v133 = v130 - v132;
-    let v134 = v2 * v133;
-    let v135 = p.gravity_x * v131;
-    let v136 = p.gravity_y * v129;
-    let v137 = v135 + v136;
-    let v138 = v6 * v137;
-    let v139 = v134 + v138;
-    let v140 = v0 * v6;
-    let v141 = v2 * v4;
-    let v142 = v140 + v141;
-    let v143 = v14 + v16;
-    let v144 = v142 * v143;
-    let v145 = v0 * v2;
-    let v146 = v4 * v6;
-    let v147 = v145 - v146;
-    let v148 = v20 + v23;
-    let v149 = v147 * v148;
-    let v150 = v144 + v149;
-    let v151 = p.gravity_x * v150;
-    let v152 = v143 * v147;
-    let v153 = v142 * v148;
-    let v154 = v152 - v153;
-    let v155 = p.gravity_y * v154;
-    let v156 = v151 - v155;
-    let v157 = v21 * p.gravity_x;
-    let v158 = v15 * p.gravity_y;
-    let v159 = v157 - v158;
-    let v160 = v147 * v159;
-    let v161 = v15 * p.gravity_x;
-    let v162 = v21 * p.gravity_y;
-    let v163 = v161 + v162;
-    let v164 = v142 * v163;
-    let v165 = v160 + v164;
-    let v166 = v156 + v165;
-    let v167 = v139 + v166;
-    let v168 = q_3 - q_2;
-    let v169 = v168 - p.hip_spring_rest;
-    let v170 = p.hip_spring_stiffness * v169;
-    let v171 = v167 - v170;
-    let v172 = v128 + v171;
-    let v173 = qd_2 * qd_0;
-    let v174 = v85 * v173;
-    let v175 = v174 - v90;
-    let v176 = qd_2 * qd_1;
-    let v177 = v92 * v176;
-    let v178 = v175 + v177;
-    let v179 = v98 + v178;
-    let v180 = v42 * v102;
-    let v181 = v179 - v180;
-    let v182 = v120 + v125;
-    let v183 = v11 * v182;
-    let v184 = v181 + v183;
-    let v185 = v55 * v110;
-    let v186 = v184 + v185;
-    let v187 = v166 + v170;
-    let v188 = v186 + v187;
-    let v189 = v88 * v173;
-    let v190 = v86 * v88;
-    let v191 = v189 + v190;
-    let v192 = v96 * v176;
-    let v193 = v191 + v192;
-    let v194 = v93 * v96;
-    let v195 = v193 + v194;
-    let v196 = v115 * T::lit(0.5);
-    let v197 = v42 * v196;
-    let v198 = v195 - v197;
-    let v199 = v48 * v182;
-    let v200 = v198 - v199;
-    let v201 = v110 * T::lit(0.5);
-    let v202 = v52 * v201;
-    let v203 = v200 - v202;
-    let v204 = q_4 - p.leg_spring_rest;
-    let v205 = p.leg_spring_stiffness * v204;
-    let v206 = p.gravity_x * v142;
-    let v207 = p.gravity_y * v147;
-    let v208 = v206 - v207;
-    let v209 = p.shin_mass * v208;
-    let v210 = v205 - v209;
-    let v211 = v203 + v210;
-    SMatrix::from_data(ArrayStorage([[v62, v84, v172, v188, v211]]))
+    let v81 = p.torso_mass * v80;
+    let v82 = v60 + v71;
+    let v83 = v42 * v82;
+    let v84 = v29 + v40;
+    let v85 = v73 * v84;
+    let v86 = v83 - v85;
+    let v87 = p.thigh_mass * v86;
+    let v88 = v81 + v87;
+    let v89 = v17 + v22;
+    let v90 = v29 + v89;
+    let v91 = v62 * v90;
+    let v92 = v50 + v54;
+    let v93 = v60 + v92;
+    let v94 = v31 * v93;
+    let v95 = v91 - v94;
+    let v96 = p.shin_mass * v95;
+    let v97 = v88 + v96;
+    let v98 = v3 * p.prepared[19];
+    let v99 = v6 * p.prepared[20];
+    let v100 = v98 + v99;
+    let v101 = v15 * p.prepared[21];
+    let v102 = p.shin_mass * v20;
+    let v103 = p.prepared[22] + v102;
+    let v104 = v9 * v103;
+    let v105 = v101 + v104;
+    let v106 = p.gravity_x * v105;
+    let v107 = v9 * p.prepared[21];
+    let v108 = v15 * v103;
+    let v109 = v107 - v108;
+    let v110 = p.gravity_y * v109;
+    let v111 = v106 - v110;
+    let v112 = v9 * p.prepared[23];
+    let v113 = v15 * p.prepared[24];
+    let v114 = v112 + v113;
+    let v115 = v111 + v114;
+    let v116 = v100 + v115;
+    let v117 = q_3 - q_2;
+    let v118 = v117 - p.hip_spring_rest;
+    let v119 = p.hip_spring_stiffness * v118;
+    let v120 = v116 - v119;
+    let v121 = v97 + v120;
+    let v122 = v42 * v71;
+    let v123 = v40 * v73;
+    let v124 = v122 - v123;
+    let v125 = p.thigh_mass * v124;
+    let v126 = v62 * v89;
+    let v127 = v31 * v92;
+    let v128 = v126 - v127;
+    let v129 = p.shin_mass * v128;
+    let v130 = v125 + v129;
+    let v131 = v115 + v119;
+    let v132 = v130 + v131;
+    let v133 = v15 * v31;
+    let v134 = v9 * v62;
+    let v135 = v133 - v134;
+    let v136 = p.shin_mass * v135;
+    let v137 = q_4 - p.leg_spring_rest;
+    let v138 = p.leg_spring_stiffness * v137;
+    let v139 = v15 * p.gravity_x;
+    let v140 = v9 * p.gravity_y;
+    let v141 = v139 - v140;
+    let v142 = p.shin_mass * v141;
+    let v143 = v138 - v142;
+    let v144 = v136 + v143;
+    SMatrix::from_data(ArrayStorage([[v46, v77, v121, v132, v144]]))
 }
 /// `G(q) = ∂V/∂q`.
 pub fn gravity_forces<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
-    let v0 = p.thigh_mass + p.shin_mass;
-    let v1 = p.torso_mass + v0;
-    let v2 = p.slide_y_mass + v1;
-    let v3 = p.slide_x_mass + v2;
-    let v4 = v3 * p.gravity_x;
-    let v5 = -v4;
-    let v6 = v2 * p.gravity_y;
-    let v7 = -v6;
-    let (v19, v8) = q_2.sin_cos();
-    let v9 = p.torso_mass * p.torso_com_y;
-    let v10 = v0 * p.torso_length_y;
-    let v11 = v9 + v10;
-    let v12 = p.gravity_x * v11;
-    let v13 = p.torso_mass * p.torso_com_x;
-    let v14 = v0 * p.torso_length_x;
-    let v15 = v13 + v14;
-    let v16 = p.gravity_y * v15;
-    let v17 = v12 - v16;
-    let v18 = v8 * v17;
-    let v20 = p.gravity_x * v15;
-    let v21 = p.gravity_y * v11;
-    let v22 = v20 + v21;
-    let v23 = v19 * v22;
-    let v24 = v18 + v23;
-    let (v27, v25) = q_3.sin_cos();
-    let v26 = v19 * v25;
-    let v28 = v8 * v27;
-    let v29 = v26 + v28;
-    let v30 = p.thigh_mass * p.thigh_com_x;
-    let v31 = p.shin_mass * p.shin_origin_x;
-    let v32 = v30 + v31;
-    let v33 = v29 * v32;
-    let v34 = v8 * v25;
-    let v35 = v19 * v27;
-    let v36 = v34 - v35;
-    let v37 = p.thigh_mass * p.thigh_com_y;
-    let v38 = p.shin_origin_y - q_4;
-    let v39 = p.shin_mass * v38;
-    let v40 = v37 + v39;
-    let v41 = v36 * v40;
-    let v42 = v33 + v41;
-    let v43 = p.gravity_x * v42;
-    let v44 = v32 * v36;
-    let v45 = v29 * v40;
-    let v46 = v44 - v45;
-    let v47 = p.gravity_y * v46;
-    let v48 = v43 - v47;
-    let v49 = p.shin_mass * p.shin_com_y;
-    let v50 = p.gravity_x * v49;
-    let v51 = p.shin_mass * p.shin_com_x;
-    let v52 = p.gravity_y * v51;
-    let v53 = v50 - v52;
-    let v54 = v36 * v53;
-    let v55 = p.gravity_x * v51;
-    let v56 = p.gravity_y * v49;
-    let v57 = v55 + v56;
-    let v58 = v29 * v57;
-    let v59 = v54 + v58;
-    let v60 = v48 + v59;
-    let v61 = v24 + v60;
-    let v62 = q_3 - q_2;
-    let v63 = v62 - p.hip_spring_rest;
-    let v64 = p.hip_spring_stiffness * v63;
-    let v65 = v61 - v64;
-    let v66 = v60 + v64;
-    let v67 = q_4 - p.leg_spring_rest;
-    let v68 = p.leg_spring_stiffness * v67;
-    let v69 = p.gravity_x * v29;
-    let v70 = p.gravity_y * v36;
-    let v71 = v69 - v70;
-    let v72 = p.shin_mass * v71;
-    let v73 = v68 - v72;
-    SMatrix::from_data(ArrayStorage([[v5, v7, v65, v66, v73]]))
+    let (v2, v0) = q_2.sincos();
+    let v1 = v0 * p.prepared[19];
+    let v3 = v2 * p.prepared[20];
+    let v4 = v1 + v3;
+    let (v7, v5) = q_3.sincos();
+    let v6 = v2 * v5;
+    let v8 = v0 * v7;
+    let v9 = v6 + v8;
+    let v10 = v9 * p.prepared[21];
+    let v11 = v0 * v5;
+    let v12 = v2 * v7;
+    let v13 = v11 - v12;
+    let v14 = p.shin_origin_y - q_4;
+    let v15 = p.shin_mass * v14;
+    let v16 = p.prepared[22] + v15;
+    let v17 = v13 * v16;
+    let v18 = v10 + v17;
+    let v19 = p.gravity_x * v18;
+    let v20 = p.prepared[21] * v13;
+    let v21 = v9 * v16;
+    let v22 = v20 - v21;
+    let v23 = p.gravity_y * v22;
+    let v24 = v19 - v23;
+    let v25 = v13 * p.prepared[23];
+    let v26 = v9 * p.prepared[24];
+    let v27 = v25 + v26;
+    let v28 = v24 + v27;
+    let v29 = v4 + v28;
+    let v30 = q_3 - q_2;
+    let v31 = v30 - p.hip_spring_rest;
+    let v32 = p.hip_spring_stiffness * v31;
+    let v33 = v29 - v32;
+    let v34 = v28 + v32;
+    let v35 = q_4 - p.leg_spring_rest;
+    let v36 = p.leg_spring_stiffness * v35;
+    let v37 = p.gravity_x * v9;
+    let v38 = p.gravity_y * v13;
+    let v39 = v37 - v38;
+    let v40 = p.shin_mass * v39;
+    let v41 = v36 - v40;
+    SMatrix::from_data(ArrayStorage([[p.prepared[25], p.prepared[26], v33, v34, v41]]))
 }
 /// Viscous joint damping `D q̇`.
 pub fn damping_forces<T: Real>(qd: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
@@ -941,12 +970,12 @@ pub fn foot_position<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2>
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
     let v2 = v1 + p.slide_y_length_x;
-    let (v5, v3) = q_2.sin_cos();
+    let (v5, v3) = q_2.sincos();
     let v4 = v3 * p.torso_length_x;
     let v6 = v5 * p.torso_length_y;
     let v7 = v4 - v6;
     let v8 = v2 + v7;
-    let (v11, v9) = q_3.sin_cos();
+    let (v11, v9) = q_3.sincos();
     let v10 = v3 * v9;
     let v12 = v5 * v11;
     let v13 = v10 - v12;
@@ -982,8 +1011,8 @@ pub fn foot_position<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2>
 /// `J_f(q) = ∂(foot)/∂q`.
 pub fn foot_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
-    let (v0, v3) = q_2.sin_cos();
-    let (v4, v1) = q_3.sin_cos();
+    let (v0, v3) = q_2.sincos();
+    let (v4, v1) = q_3.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
@@ -1037,8 +1066,8 @@ pub fn foot_bias<T: Real>(
     let v0 = qd_2 + qd_3;
     let v1 = v0 + v0;
     let v2 = v1 * qd_4;
-    let (v6, v3) = q_2.sin_cos();
-    let (v7, v4) = q_3.sin_cos();
+    let (v6, v3) = q_2.sincos();
+    let (v7, v4) = q_3.sincos();
     let v5 = v3 * v4;
     let v8 = v6 * v7;
     let v9 = v5 - v8;
@@ -1090,259 +1119,166 @@ pub fn kinetic_energy<T: Real>(
 ) -> T {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
-    let v0 = p.thigh_mass + p.shin_mass;
-    let v1 = p.torso_mass + v0;
-    let v2 = p.slide_y_mass + v1;
-    let v3 = p.slide_x_mass + v2;
-    let v4 = qd_0 * v3;
-    let (v27, v5) = q_2.sin_cos();
-    let v6 = p.torso_mass * p.torso_com_y;
-    let (v7, v14) = q_3.sin_cos();
-    let v8 = p.thigh_mass * p.thigh_com_x;
-    let v9 = p.shin_mass * p.shin_com_x;
-    let v10 = p.shin_mass * p.shin_origin_x;
-    let v11 = v9 + v10;
-    let v12 = v8 + v11;
-    let v13 = v7 * v12;
-    let v15 = p.thigh_mass * p.thigh_com_y;
-    let v16 = p.shin_mass * p.shin_com_y;
-    let v17 = p.shin_origin_y - q_4;
-    let v18 = p.shin_mass * v17;
-    let v19 = v16 + v18;
-    let v20 = v15 + v19;
-    let v21 = v14 * v20;
-    let v22 = v13 + v21;
-    let v23 = v0 * p.torso_length_y;
-    let v24 = v22 + v23;
-    let v25 = v6 + v24;
-    let v26 = v5 * v25;
-    let v28 = p.torso_mass * p.torso_com_x;
-    let v29 = v12 * v14;
-    let v30 = v7 * v20;
-    let v31 = v29 - v30;
-    let v32 = v0 * p.torso_length_x;
-    let v33 = v31 + v32;
-    let v34 = v28 + v33;
-    let v35 = v27 * v34;
-    let v36 = v26 + v35;
-    let v37 = v36 * qd_2;
-    let v38 = v4 - v37;
-    let v39 = v5 * v22;
-    let v40 = v27 * v31;
-    let v41 = v39 + v40;
-    let v42 = v41 * qd_3;
-    let v43 = v38 - v42;
-    let v44 = p.shin_mass * v7;
-    let v45 = v5 * v44;
-    let v46 = p.shin_mass * v14;
-    let v47 = v27 * v46;
-    let v48 = v45 + v47;
-    let v49 = v48 * qd_4;
-    let v50 = v43 + v49;
-    let v51 = qd_0 * v50;
-    let v52 = v2 * qd_1;
-    let v53 = v5 * v34;
-    let v54 = v25 * v27;
-    let v55 = v53 - v54;
-    let v56 = qd_2 * v55;
-    let v57 = v52 + v56;
-    let v58 = v5 * v31;
-    let v59 = v22 * v27;
-    let v60 = v58 - v59;
-    let v61 = qd_3 * v60;
-    let v62 = v57 + v61;
-    let v63 = v27 * v44;
-    let v64 = v5 * v46;
-    let v65 = v63 - v64;
-    let v66 = qd_4 * v65;
-    let v67 = v62 + v66;
-    let v68 = qd_1 * v67;
-    let v69 = v51 + v68;
-    let v70 = qd_1 * v55;
-    let v71 = qd_0 * v36;
-    let v72 = v70 - v71;
-    let v73 = p.torso_com_x * p.torso_com_x;
-    let v74 = p.torso_com_y * p.torso_com_y;
-    let v75 = v73 + v74;
-    let v76 = p.torso_mass * v75;
-    let v77 = p.torso_inertia + v76;
-    let v78 = p.thigh_com_x * p.thigh_com_x;
-    let v79 = p.thigh_com_y * p.thigh_com_y;
-    let v80 = v78 + v79;
-    let v81 = p.thigh_mass * v80;
-    let v82 = p.thigh_inertia + v81;
-    let v83 = p.shin_com_x * p.shin_com_x;
-    let v84 = p.shin_com_y * p.shin_com_y;
-    let v85 = v83 + v84;
-    let v86 = p.shin_mass * v85;
-    let v87 = p.shin_inertia + v86;
-    let v88 = v9 * p.shin_origin_x;
-    let v89 = v16 * v17;
-    let v90 = v88 + v89;
-    let v91 = v90 + v90;
-    let v92 = v87 + v91;
-    let v93 = p.shin_origin_x * p.shin_origin_x;
-    let v94 = v17 * v17;
-    let v95 = v93 + v94;
-    let v96 = p.shin_mass * v95;
-    let v97 = v92 + v96;
-    let v98 = v82 + v97;
-    let v99 = v31 * p.torso_length_x;
-    let v100 = v22 * p.torso_length_y;
-    let v101 = v99 + v100;
-    let v102 = v101 + v101;
-    let v103 = v98 + v102;
-    let v104 = p.torso_length_x * p.torso_length_x;
-    let v105 = p.torso_length_y * p.torso_length_y;
-    let v106 = v104 + v105;
-    let v107 = v0 * v106;
-    let v108 = v103 + v107;
-    let v109 = v77 + v108;
-    let v110 = qd_2 * v109;
-    let v111 = v72 + v110;
-    let v112 = v98 + v101;
-    let v113 = qd_3 * v112;
-    let v114 = v111 + v113;
-    let v115 = p.shin_mass * p.torso_length_x;
-    let v116 = v14 * v115;
-    let v117 = p.shin_mass * p.torso_length_y;
-    let v118 = v7 * v117;
-    let v119 = v116 + v118;
-    let v120 = v11 + v119;
-    let v121 = qd_4 * v120;
-    let v122 = v114 - v121;
-    let v123 = qd_2 * v122;
-    let v124 = v69 + v123;
-    let v125 = qd_1 * v60;
-    let v126 = qd_0 * v41;
-    let v127 = v125 - v126;
-    let v128 = qd_2 * v112;
-    let v129 = v127 + v128;
-    let v130 = p.thigh_gear_ratio * p.thigh_gear_ratio;
-    let v131 = p.thigh_rotor_inertia * v130;
-    let v132 = v98 + v131;
-    let v133 = qd_3 * v132;
-    let v134 = v129 + v133;
-    let v135 = v11 * qd_4;
-    let v136 = v134 - v135;
-    let v137 = qd_3 * v136;
-    let v138 = v124 + v137;
-    let v139 = qd_0 * v48;
-    let v140 = qd_1 * v65;
-    let v141 = v139 + v140;
-    let v142 = qd_2 * v120;
-    let v143 = v141 - v142;
-    let v144 = v11 * qd_3;
-    let v145 = v143 - v144;
-    let v146 = p.shin_gear_ratio * p.shin_gear_ratio;
-    let v147 = p.shin_rotor_inertia * v146;
-    let v148 = p.shin_mass + v147;
-    let v149 = qd_4 * v148;
-    let v150 = v145 + v149;
-    let v151 = qd_4 * v150;
-    let v152 = v138 + v151;
-    let v153 = T::lit(0.5) * v152;
-    v153
+    let v0 = qd_0 * p.prepared[1];
+    let (v12, v1) = q_2.sincos();
+    let (v2, v4) = q_3.sincos();
+    let v3 = v2 * p.prepared[3];
+    let v5 = p.shin_origin_y - q_4;
+    let v6 = p.shin_mass * v5;
+    let v7 = p.prepared[5] + v6;
+    let v8 = v4 * v7;
+    let v9 = v3 + v8;
+    let v10 = p.prepared[2] + v9;
+    let v11 = v1 * v10;
+    let v13 = p.prepared[3] * v4;
+    let v14 = v2 * v7;
+    let v15 = v13 - v14;
+    let v16 = p.prepared[6] + v15;
+    let v17 = v12 * v16;
+    let v18 = v11 + v17;
+    let v19 = v18 * qd_2;
+    let v20 = v0 - v19;
+    let v21 = v1 * v9;
+    let v22 = v12 * v15;
+    let v23 = v21 + v22;
+    let v24 = v23 * qd_3;
+    let v25 = v20 - v24;
+    let v26 = p.shin_mass * v2;
+    let v27 = v1 * v26;
+    let v28 = p.shin_mass * v4;
+    let v29 = v12 * v28;
+    let v30 = v27 + v29;
+    let v31 = v30 * qd_4;
+    let v32 = v25 + v31;
+    let v33 = qd_0 * v32;
+    let v34 = p.prepared[0] * qd_1;
+    let v35 = v1 * v16;
+    let v36 = v10 * v12;
+    let v37 = v35 - v36;
+    let v38 = qd_2 * v37;
+    let v39 = v34 + v38;
+    let v40 = v1 * v15;
+    let v41 = v9 * v12;
+    let v42 = v40 - v41;
+    let v43 = qd_3 * v42;
+    let v44 = v39 + v43;
+    let v45 = v12 * v26;
+    let v46 = v1 * v28;
+    let v47 = v45 - v46;
+    let v48 = qd_4 * v47;
+    let v49 = v44 + v48;
+    let v50 = qd_1 * v49;
+    let v51 = v33 + v50;
+    let v52 = qd_1 * v37;
+    let v53 = qd_0 * v18;
+    let v54 = v52 - v53;
+    let v55 = v5 * v5;
+    let v56 = p.prepared[9] + v55;
+    let v57 = p.shin_mass * v56;
+    let v58 = p.prepared[8] + v57;
+    let v59 = p.prepared[4] * v5;
+    let v60 = p.prepared[10] + v59;
+    let v61 = v60 + v60;
+    let v62 = v58 + v61;
+    let v63 = p.prepared[7] + v62;
+    let v64 = p.torso_length_x * v15;
+    let v65 = p.torso_length_y * v9;
+    let v66 = v64 + v65;
+    let v67 = v66 + v66;
+    let v68 = v63 + v67;
+    let v69 = qd_2 * v68;
+    let v70 = v54 + v69;
+    let v71 = v62 + v66;
+    let v72 = qd_3 * v71;
+    let v73 = v70 + v72;
+    let v74 = v4 * p.prepared[12];
+    let v75 = v2 * p.prepared[13];
+    let v76 = v74 + v75;
+    let v77 = p.prepared[11] + v76;
+    let v78 = qd_4 * v77;
+    let v79 = v73 - v78;
+    let v80 = qd_2 * v79;
+    let v81 = v51 + v80;
+    let v82 = qd_1 * v42;
+    let v83 = qd_0 * v23;
+    let v84 = v82 - v83;
+    let v85 = qd_2 * v71;
+    let v86 = v84 + v85;
+    let v87 = v57 + p.prepared[14];
+    let v88 = v61 + v87;
+    let v89 = qd_3 * v88;
+    let v90 = v86 + v89;
+    let v91 = qd_4 * p.prepared[11];
+    let v92 = v90 - v91;
+    let v93 = qd_3 * v92;
+    let v94 = v81 + v93;
+    let v95 = qd_0 * v30;
+    let v96 = qd_1 * v47;
+    let v97 = v95 + v96;
+    let v98 = qd_2 * v77;
+    let v99 = v97 - v98;
+    let v100 = qd_3 * p.prepared[11];
+    let v101 = v99 - v100;
+    let v102 = qd_4 * p.prepared[16];
+    let v103 = v101 + v102;
+    let v104 = qd_4 * v103;
+    let v105 = v94 + v104;
+    let v106 = T::lit(0.5) * v105;
+    v106
 }
 /// Potential energy `−Σ m g·c`.
 pub fn potential_energy<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> T {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
-    let v0 = T::lit(0.5) * p.leg_spring_stiffness;
-    let v1 = q_4 - p.leg_spring_rest;
-    let v2 = v1 * v1;
-    let v3 = v0 * v2;
-    let v4 = T::lit(0.5) * p.hip_spring_stiffness;
-    let v5 = q_3 - q_2;
-    let v6 = v5 - p.hip_spring_rest;
-    let v7 = v6 * v6;
-    let v8 = v4 * v7;
-    let v9 = v3 + v8;
-    let v10 = p.thigh_mass + p.shin_mass;
-    let v11 = p.torso_mass + v10;
-    let v12 = p.slide_y_mass + v11;
-    let v13 = p.slide_x_mass + v12;
-    let v14 = p.slide_x_origin_x + q_0;
-    let v15 = v13 * v14;
-    let v16 = p.gravity_x * v15;
-    let v17 = v13 * p.slide_x_origin_y;
-    let v18 = p.gravity_y * v17;
-    let v19 = v16 + v18;
-    let v20 = p.slide_x_mass * p.slide_x_com_x;
-    let v21 = v12 * p.slide_x_length_x;
-    let v22 = v20 + v21;
-    let v23 = p.gravity_x * v22;
-    let v24 = p.slide_x_mass * p.slide_x_com_y;
-    let v25 = p.slide_x_length_y + q_1;
-    let v26 = v12 * v25;
-    let v27 = v24 + v26;
-    let v28 = p.gravity_y * v27;
-    let v29 = v23 + v28;
-    let v30 = v19 + v29;
-    let v31 = p.slide_y_mass * p.slide_y_com_x;
-    let v32 = v11 * p.slide_y_length_x;
+    let v0 = q_4 - p.leg_spring_rest;
+    let v1 = v0 * v0;
+    let v2 = p.prepared[27] * v1;
+    let v3 = q_3 - q_2;
+    let v4 = v3 - p.hip_spring_rest;
+    let v5 = v4 * v4;
+    let v6 = p.prepared[28] * v5;
+    let v7 = v2 + v6;
+    let v8 = p.slide_x_origin_x + q_0;
+    let v9 = p.prepared[1] * v8;
+    let v10 = p.gravity_x * v9;
+    let v11 = v10 + p.prepared[29];
+    let v12 = p.slide_x_length_y + q_1;
+    let v13 = p.prepared[0] * v12;
+    let v14 = p.prepared[31] + v13;
+    let v15 = p.gravity_y * v14;
+    let v16 = p.prepared[30] + v15;
+    let v17 = v11 + v16;
+    let v18 = v17 + p.prepared[32];
+    let (v21, v19) = q_2.sincos();
+    let v20 = v19 * p.prepared[20];
+    let v22 = v21 * p.prepared[19];
+    let v23 = v20 - v22;
+    let v24 = v18 + v23;
+    let (v27, v25) = q_3.sincos();
+    let v26 = v19 * v25;
+    let v28 = v21 * v27;
+    let v29 = v26 - v28;
+    let v30 = v29 * p.prepared[21];
+    let v31 = v21 * v25;
+    let v32 = v19 * v27;
     let v33 = v31 + v32;
-    let v34 = p.gravity_x * v33;
-    let v35 = p.slide_y_mass * p.slide_y_com_y;
-    let v36 = v11 * p.slide_y_length_y;
-    let v37 = v35 + v36;
-    let v38 = p.gravity_y * v37;
-    let v39 = v34 + v38;
-    let v40 = v30 + v39;
-    let (v52, v41) = q_2.sin_cos();
-    let v42 = p.torso_mass * p.torso_com_x;
-    let v43 = v10 * p.torso_length_x;
-    let v44 = v42 + v43;
-    let v45 = p.gravity_x * v44;
-    let v46 = p.torso_mass * p.torso_com_y;
-    let v47 = v10 * p.torso_length_y;
-    let v48 = v46 + v47;
-    let v49 = p.gravity_y * v48;
-    let v50 = v45 + v49;
-    let v51 = v41 * v50;
-    let v53 = p.gravity_x * v48;
-    let v54 = p.gravity_y * v44;
-    let v55 = v53 - v54;
-    let v56 = v52 * v55;
-    let v57 = v51 - v56;
-    let v58 = v40 + v57;
-    let (v61, v59) = q_3.sin_cos();
-    let v60 = v41 * v59;
-    let v62 = v52 * v61;
-    let v63 = v60 - v62;
-    let v64 = p.thigh_mass * p.thigh_com_x;
-    let v65 = p.shin_mass * p.shin_origin_x;
-    let v66 = v64 + v65;
-    let v67 = v63 * v66;
-    let v68 = v52 * v59;
-    let v69 = v41 * v61;
-    let v70 = v68 + v69;
-    let v71 = p.thigh_mass * p.thigh_com_y;
-    let v72 = p.shin_origin_y - q_4;
-    let v73 = p.shin_mass * v72;
-    let v74 = v71 + v73;
-    let v75 = v70 * v74;
-    let v76 = v67 - v75;
-    let v77 = p.gravity_x * v76;
-    let v78 = v66 * v70;
-    let v79 = v63 * v74;
-    let v80 = v78 + v79;
-    let v81 = p.gravity_y * v80;
-    let v82 = v77 + v81;
-    let v83 = v58 + v82;
-    let v84 = p.shin_mass * p.shin_com_x;
-    let v85 = p.gravity_x * v84;
-    let v86 = p.shin_mass * p.shin_com_y;
-    let v87 = p.gravity_y * v86;
-    let v88 = v85 + v87;
-    let v89 = v63 * v88;
-    let v90 = p.gravity_x * v86;
-    let v91 = p.gravity_y * v84;
-    let v92 = v90 - v91;
-    let v93 = v70 * v92;
-    let v94 = v89 - v93;
-    let v95 = v83 + v94;
-    let v96 = v9 - v95;
-    v96
+    let v34 = p.shin_origin_y - q_4;
+    let v35 = p.shin_mass * v34;
+    let v36 = p.prepared[22] + v35;
+    let v37 = v33 * v36;
+    let v38 = v30 - v37;
+    let v39 = p.gravity_x * v38;
+    let v40 = p.prepared[21] * v33;
+    let v41 = v29 * v36;
+    let v42 = v40 + v41;
+    let v43 = p.gravity_y * v42;
+    let v44 = v39 + v43;
+    let v45 = v24 + v44;
+    let v46 = v29 * p.prepared[24];
+    let v47 = v33 * p.prepared[23];
+    let v48 = v46 - v47;
+    let v49 = v45 + v48;
+    let v50 = v7 - v49;
+    v50
 }
 /// Joint positions in the base frame, one column per joint.
 pub fn joint_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
@@ -1353,7 +1289,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 
     let v3 = p.slide_x_origin_y + v2;
     let v4 = v1 + p.slide_y_length_x;
     let v5 = v3 + p.slide_y_length_y;
-    let (v8, v6) = q_2.sin_cos();
+    let (v8, v6) = q_2.sincos();
     let v7 = v6 * p.torso_length_x;
     let v9 = v8 * p.torso_length_y;
     let v10 = v7 - v9;
@@ -1362,7 +1298,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 
     let v13 = v6 * p.torso_length_y;
     let v14 = v12 + v13;
     let v15 = v5 + v14;
-    let (v18, v16) = q_3.sin_cos();
+    let (v18, v16) = q_3.sincos();
     let v17 = v6 * v16;
     let v19 = v8 * v18;
     let v20 = v17 - v19;
@@ -1393,54 +1329,59 @@ pub fn link_tips<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> 
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
-    let v2 = p.slide_x_origin_y + p.slide_x_length_y;
-    let v3 = v1 + p.slide_y_length_x;
-    let v4 = p.slide_x_length_y + q_1;
-    let v5 = p.slide_x_origin_y + v4;
-    let v6 = v5 + p.slide_y_length_y;
-    let (v9, v7) = q_2.sin_cos();
-    let v8 = v7 * p.torso_length_x;
-    let v10 = v9 * p.torso_length_y;
-    let v11 = v8 - v10;
-    let v12 = v3 + v11;
-    let v13 = p.torso_length_x * v9;
-    let v14 = v7 * p.torso_length_y;
-    let v15 = v13 + v14;
-    let v16 = v6 + v15;
-    let (v19, v17) = q_3.sin_cos();
-    let v18 = v7 * v17;
-    let v20 = v9 * v19;
-    let v21 = v18 - v20;
-    let v22 = v21 * p.thigh_length_x;
-    let v23 = v9 * v17;
-    let v24 = v7 * v19;
-    let v25 = v23 + v24;
-    let v26 = v25 * p.thigh_length_y;
-    let v27 = v22 - v26;
-    let v28 = v12 + v27;
-    let v29 = p.thigh_length_x * v25;
-    let v30 = v21 * p.thigh_length_y;
-    let v31 = v29 + v30;
-    let v32 = v16 + v31;
-    let v33 = v21 * p.shin_origin_x;
-    let v34 = p.shin_origin_y - q_4;
-    let v35 = v25 * v34;
-    let v36 = v33 - v35;
-    let v37 = v12 + v36;
-    let v38 = v21 * p.shin_length_x;
-    let v39 = v25 * p.shin_length_y;
-    let v40 = v38 - v39;
-    let v41 = v37 + v40;
-    let v42 = v25 * p.shin_origin_x;
-    let v43 = v21 * v34;
-    let v44 = v42 + v43;
-    let v45 = v16 + v44;
-    let v46 = v25 * p.shin_length_x;
-    let v47 = v21 * p.shin_length_y;
-    let v48 = v46 + v47;
-    let v49 = v45 + v48;
+    let v2 = v1 + p.slide_y_length_x;
+    let v3 = p.slide_x_length_y + q_1;
+    let v4 = p.slide_x_origin_y + v3;
+    let v5 = v4 + p.slide_y_length_y;
+    let (v8, v6) = q_2.sincos();
+    let v7 = v6 * p.torso_length_x;
+    let v9 = v8 * p.torso_length_y;
+    let v10 = v7 - v9;
+    let v11 = v2 + v10;
+    let v12 = p.torso_length_x * v8;
+    let v13 = v6 * p.torso_length_y;
+    let v14 = v12 + v13;
+    let v15 = v5 + v14;
+    let (v18, v16) = q_3.sincos();
+    let v17 = v6 * v16;
+    let v19 = v8 * v18;
+    let v20 = v17 - v19;
+    let v21 = v20 * p.thigh_length_x;
+    let v22 = v8 * v16;
+    let v23 = v6 * v18;
+    let v24 = v22 + v23;
+    let v25 = v24 * p.thigh_length_y;
+    let v26 = v21 - v25;
+    let v27 = v11 + v26;
+    let v28 = p.thigh_length_x * v24;
+    let v29 = v20 * p.thigh_length_y;
+    let v30 = v28 + v29;
+    let v31 = v15 + v30;
+    let v32 = v20 * p.shin_origin_x;
+    let v33 = p.shin_origin_y - q_4;
+    let v34 = v24 * v33;
+    let v35 = v32 - v34;
+    let v36 = v11 + v35;
+    let v37 = v20 * p.shin_length_x;
+    let v38 = v24 * p.shin_length_y;
+    let v39 = v37 - v38;
+    let v40 = v36 + v39;
+    let v41 = v24 * p.shin_origin_x;
+    let v42 = v20 * v33;
+    let v43 = v41 + v42;
+    let v44 = v15 + v43;
+    let v45 = v24 * p.shin_length_x;
+    let v46 = v20 * p.shin_length_y;
+    let v47 = v45 + v46;
+    let v48 = v44 + v47;
     SMatrix::from_data(
-        ArrayStorage([[v1, v2], [v3, v6], [v12, v16], [v28, v32], [v41, v49]]),
+        ArrayStorage([
+            [v1, p.prepared[33]],
+            [v2, v5],
+            [v11, v15],
+            [v27, v31],
+            [v40, v48],
+        ]),
     )
 }
 /// Closure points a, b of each closure in the base frame.
@@ -1453,12 +1394,12 @@ pub fn contact_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
     let v2 = v1 + p.slide_y_length_x;
-    let (v5, v3) = q_2.sin_cos();
+    let (v5, v3) = q_2.sincos();
     let v4 = v3 * p.torso_length_x;
     let v6 = v5 * p.torso_length_y;
     let v7 = v4 - v6;
     let v8 = v2 + v7;
-    let (v11, v9) = q_3.sin_cos();
+    let (v11, v9) = q_3.sincos();
     let v10 = v3 * v9;
     let v12 = v5 * v11;
     let v13 = v10 - v12;
@@ -1502,8 +1443,8 @@ pub fn contact_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T
 /// `J_c(q) = ∂x_c/∂q`.
 pub fn contact_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 4, 5> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
-    let (v0, v3) = q_2.sin_cos();
-    let (v4, v1) = q_3.sin_cos();
+    let (v0, v3) = q_2.sincos();
+    let (v4, v1) = q_3.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
@@ -1569,8 +1510,8 @@ pub fn contact_bias<T: Real>(
     let v0 = qd_2 + qd_3;
     let v1 = v0 + v0;
     let v2 = v1 * qd_4;
-    let (v6, v3) = q_2.sin_cos();
-    let (v7, v4) = q_3.sin_cos();
+    let (v6, v3) = q_2.sincos();
+    let (v7, v4) = q_3.sincos();
     let v5 = v3 * v4;
     let v8 = v6 * v7;
     let v9 = v5 - v8;
@@ -1635,280 +1576,214 @@ pub fn dynamics_terms<T: Real>(
     p: &Params<T>,
 ) -> (SMatrix<T, 5, 5>, SVector<T, 5>, SMatrix<T, 0, 5>, SVector<T, 0>) {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
-    let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
-    let v0 = p.thigh_mass + p.shin_mass;
-    let v1 = p.torso_mass + v0;
-    let v2 = p.slide_y_mass + v1;
-    let v3 = p.slide_x_mass + v2;
-    let (v26, v4) = q_2.sin_cos();
-    let v5 = p.torso_mass * p.torso_com_y;
-    let (v6, v13) = q_3.sin_cos();
-    let v7 = p.thigh_mass * p.thigh_com_x;
-    let v8 = p.shin_mass * p.shin_com_x;
-    let v9 = p.shin_mass * p.shin_origin_x;
-    let v10 = v8 + v9;
-    let v11 = v7 + v10;
-    let v12 = v6 * v11;
-    let v14 = p.thigh_mass * p.thigh_com_y;
-    let v15 = p.shin_mass * p.shin_com_y;
-    let v16 = p.shin_origin_y - q_4;
-    let v17 = p.shin_mass * v16;
-    let v18 = v15 + v17;
-    let v19 = v14 + v18;
-    let v20 = v13 * v19;
-    let v21 = v12 + v20;
-    let v22 = v0 * p.torso_length_y;
-    let v23 = v21 + v22;
-    let v24 = v5 + v23;
-    let v25 = v4 * v24;
-    let v27 = p.torso_mass * p.torso_com_x;
-    let v28 = v11 * v13;
-    let v29 = v6 * v19;
+    let [_, _, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let (v11, v0) = q_2.sincos();
+    let (v1, v3) = q_3.sincos();
+    let v2 = v1 * p.prepared[3];
+    let v4 = p.shin_origin_y - q_4;
+    let v5 = p.shin_mass * v4;
+    let v6 = p.prepared[5] + v5;
+    let v7 = v3 * v6;
+    let v8 = v2 + v7;
+    let v9 = p.prepared[2] + v8;
+    let v10 = v0 * v9;
+    let v12 = p.prepared[3] * v3;
+    let v13 = v1 * v6;
+    let v14 = v12 - v13;
+    let v15 = p.prepared[6] + v14;
+    let v16 = v11 * v15;
+    let v17 = v10 + v16;
+    let v18 = -v17;
+    let v19 = v0 * v8;
+    let v20 = v11 * v14;
+    let v21 = v19 + v20;
+    let v22 = -v21;
+    let v23 = p.shin_mass * v1;
+    let v24 = v0 * v23;
+    let v25 = p.shin_mass * v3;
+    let v26 = v11 * v25;
+    let v27 = v24 + v26;
+    let v28 = v0 * v15;
+    let v29 = v9 * v11;
     let v30 = v28 - v29;
-    let v31 = v0 * p.torso_length_x;
-    let v32 = v30 + v31;
-    let v33 = v27 + v32;
-    let v34 = v26 * v33;
-    let v35 = v25 + v34;
-    let v36 = -v35;
-    let v37 = v4 * v21;
-    let v38 = v26 * v30;
-    let v39 = v37 + v38;
-    let v40 = -v39;
-    let v41 = p.shin_mass * v6;
-    let v42 = v4 * v41;
-    let v43 = p.shin_mass * v13;
-    let v44 = v26 * v43;
-    let v45 = v42 + v44;
-    let v46 = v4 * v33;
-    let v47 = v24 * v26;
-    let v48 = v46 - v47;
-    let v49 = v4 * v30;
-    let v50 = v21 * v26;
-    let v51 = v49 - v50;
-    let v52 = v26 * v41;
-    let v53 = v4 * v43;
-    let v54 = v52 - v53;
-    let v55 = p.torso_com_x * p.torso_com_x;
-    let v56 = p.torso_com_y * p.torso_com_y;
-    let v57 = v55 + v56;
-    let v58 = p.torso_mass * v57;
-    let v59 = p.torso_inertia + v58;
-    let v60 = p.thigh_com_x * p.thigh_com_x;
-    let v61 = p.thigh_com_y * p.thigh_com_y;
-    let v62 = v60 + v61;
-    let v63 = p.thigh_mass * v62;
-    let v64 = p.thigh_inertia + v63;
-    let v65 = p.shin_com_x * p.shin_com_x;
-    let v66 = p.shin_com_y * p.shin_com_y;
-    let v67 = v65 + v66;
-    let v68 = p.shin_mass * v67;
-    let v69 = p.shin_inertia + v68;
-    let v70 = v8 * p.shin_origin_x;
-    let v71 = v15 * v16;
-    let v72 = v70 + v71;
-    let v73 = v72 + v72;
-    let v74 = v69 + v73;
-    let v75 = p.shin_origin_x * p.shin_origin_x;
-    let v76 = v16 * v16;
-    let v77 = v75 + v76;
-    let v78 = p.shin_mass * v77;
-    let v79 = v74 + v78;
-    let v80 = v64 + v79;
-    let v81 = v30 * p.torso_length_x;
-    let v82 = v21 * p.torso_length_y;
-    let v83 = v81 + v82;
-    let v84 = v83 + v83;
-    let v85 = v80 + v84;
-    let v86 = p.torso_length_x * p.torso_length_x;
-    let v87 = p.torso_length_y * p.torso_length_y;
-    let v88 = v86 + v87;
-    let v89 = v0 * v88;
-    let v90 = v85 + v89;
-    let v91 = v59 + v90;
-    let v92 = v80 + v83;
-    let v93 = p.shin_mass * p.torso_length_x;
-    let v94 = v13 * v93;
-    let v95 = p.shin_mass * p.torso_length_y;
-    let v96 = v6 * v95;
-    let v97 = v94 + v96;
-    let v98 = v10 + v97;
-    let v99 = -v98;
-    let v100 = p.thigh_gear_ratio * p.thigh_gear_ratio;
-    let v101 = p.thigh_rotor_inertia * v100;
-    let v102 = v80 + v101;
-    let v103 = -v10;
-    let v104 = p.shin_gear_ratio * p.shin_gear_ratio;
-    let v105 = p.shin_rotor_inertia * v104;
-    let v106 = p.shin_mass + v105;
-    let v107 = v53 - v52;
-    let v108 = v107 - v54;
-    let v109 = qd_2 * qd_4;
-    let v110 = v108 * v109;
-    let v111 = qd_2 * qd_2;
-    let v112 = v48 * v111;
-    let v113 = v51 + v51;
-    let v114 = qd_2 * qd_3;
-    let v115 = v113 * v114;
-    let v116 = v112 + v115;
-    let v117 = v110 - v116;
-    let v118 = qd_3 * qd_3;
-    let v119 = v51 * v118;
-    let v120 = v117 - v119;
-    let v121 = qd_4 * qd_3;
-    let v122 = v108 * v121;
-    let v123 = v120 + v122;
-    let v124 = v3 * p.gravity_x;
-    let v125 = v123 - v124;
-    let v126 = v45 + v45;
-    let v127 = v109 * v126;
-    let v128 = v35 * v111;
-    let v129 = v39 + v39;
-    let v130 = v114 * v129;
-    let v131 = v128 + v130;
-    let v132 = v127 - v131;
-    let v133 = v39 * v118;
+    let v31 = v0 * v14;
+    let v32 = v8 * v11;
+    let v33 = v31 - v32;
+    let v34 = v11 * v23;
+    let v35 = v0 * v25;
+    let v36 = v34 - v35;
+    let v37 = v4 * v4;
+    let v38 = p.prepared[9] + v37;
+    let v39 = p.shin_mass * v38;
+    let v40 = p.prepared[8] + v39;
+    let v41 = p.prepared[4] * v4;
+    let v42 = p.prepared[10] + v41;
+    let v43 = v42 + v42;
+    let v44 = v40 + v43;
+    let v45 = p.prepared[7] + v44;
+    let v46 = p.torso_length_x * v14;
+    let v47 = p.torso_length_y * v8;
+    let v48 = v46 + v47;
+    let v49 = v48 + v48;
+    let v50 = v45 + v49;
+    let v51 = v44 + v48;
+    let v52 = v3 * p.prepared[12];
+    let v53 = v1 * p.prepared[13];
+    let v54 = v52 + v53;
+    let v55 = p.prepared[11] + v54;
+    let v56 = -v55;
+    let v57 = v39 + p.prepared[14];
+    let v58 = v43 + v57;
+    let v59 = qd_2 + qd_3;
+    let v60 = v59 + v59;
+    let v61 = v60 * qd_4;
+    let v62 = v0 * v3;
+    let v63 = v1 * v11;
+    let v64 = v62 - v63;
+    let v65 = v61 * v64;
+    let v66 = v59 * v59;
+    let v67 = p.shin_com_x * v64;
+    let v68 = v3 * v11;
+    let v69 = v0 * v1;
+    let v70 = v68 + v69;
+    let v71 = p.shin_com_y * v70;
+    let v72 = v67 - v71;
+    let v73 = v66 * v72;
+    let v74 = p.shin_origin_x * v64;
+    let v75 = v4 * v70;
+    let v76 = v74 - v75;
+    let v77 = v66 * v76;
+    let v78 = v73 + v77;
+    let v79 = v65 - v78;
+    let v80 = qd_2 * qd_2;
+    let v81 = v0 * p.torso_length_x;
+    let v82 = p.torso_length_y * v11;
+    let v83 = v81 - v82;
+    let v84 = v80 * v83;
+    let v85 = v79 - v84;
+    let v86 = p.shin_mass * v85;
+    let v87 = v0 * p.torso_com_x;
+    let v88 = p.torso_com_y * v11;
+    let v89 = v87 - v88;
+    let v90 = v80 * v89;
+    let v91 = p.torso_mass * v90;
+    let v92 = p.thigh_com_x * v64;
+    let v93 = p.thigh_com_y * v70;
+    let v94 = v92 - v93;
+    let v95 = v66 * v94;
+    let v96 = v84 + v95;
+    let v97 = p.thigh_mass * v96;
+    let v98 = v91 + v97;
+    let v99 = v86 - v98;
+    let v100 = v99 - p.prepared[17];
+    let v101 = v61 * v70;
+    let v102 = p.shin_com_x * v70;
+    let v103 = p.shin_com_y * v64;
+    let v104 = v102 + v103;
+    let v105 = v66 * v104;
+    let v106 = p.shin_origin_x * v70;
+    let v107 = v4 * v64;
+    let v108 = v106 + v107;
+    let v109 = v66 * v108;
+    let v110 = v105 + v109;
+    let v111 = v101 - v110;
+    let v112 = v11 * p.torso_length_x;
+    let v113 = v0 * p.torso_length_y;
+    let v114 = v112 + v113;
+    let v115 = v80 * v114;
+    let v116 = v111 - v115;
+    let v117 = p.shin_mass * v116;
+    let v118 = v11 * p.torso_com_x;
+    let v119 = v0 * p.torso_com_y;
+    let v120 = v118 + v119;
+    let v121 = v80 * v120;
+    let v122 = p.torso_mass * v121;
+    let v123 = p.thigh_com_x * v70;
+    let v124 = p.thigh_com_y * v64;
+    let v125 = v123 + v124;
+    let v126 = v66 * v125;
+    let v127 = v115 + v126;
+    let v128 = p.thigh_mass * v127;
+    let v129 = v122 + v128;
+    let v130 = v117 - v129;
+    let v131 = v130 - p.prepared[18];
+    let v132 = v90 * v120;
+    let v133 = v89 * v121;
     let v134 = v132 - v133;
-    let v135 = v121 * v126;
-    let v136 = v134 + v135;
-    let v137 = v2 * p.gravity_y;
-    let v138 = v136 - v137;
-    let v139 = v51 - v51;
-    let v140 = qd_3 * qd_0;
-    let v141 = v139 * v140;
-    let v142 = v54 + v107;
-    let v143 = qd_4 * qd_0;
-    let v144 = v142 * v143;
-    let v145 = v141 - v144;
-    let v146 = v39 - v39;
-    let v147 = qd_3 * qd_1;
-    let v148 = v146 * v147;
-    let v149 = v145 + v148;
-    let v150 = v45 - v45;
-    let v151 = qd_4 * qd_1;
-    let v152 = v150 * v151;
-    let v153 = v149 + v152;
-    let v154 = p.torso_length_y * v30;
-    let v155 = v21 * p.torso_length_x;
-    let v156 = v154 - v155;
-    let v157 = v156 + v156;
-    let v158 = v114 * v157;
-    let v159 = v153 + v158;
-    let v160 = -v15;
-    let v161 = v160 + v160;
-    let v162 = v16 + v16;
-    let v163 = p.shin_mass * v162;
-    let v164 = v161 - v163;
-    let v165 = p.torso_length_x * v41;
-    let v166 = p.torso_length_y * v43;
-    let v167 = v165 - v166;
-    let v168 = v167 + v167;
-    let v169 = v164 + v168;
-    let v170 = v109 * v169;
-    let v171 = v159 + v170;
-    let v172 = v118 * v156;
-    let v173 = v171 + v172;
-    let v174 = v164 + v167;
-    let v175 = v13 * v95;
-    let v176 = v6 * v93;
+    let v135 = p.torso_mass * v134;
+    let v136 = v114 + v125;
+    let v137 = v96 * v136;
+    let v138 = v83 + v94;
+    let v139 = v127 * v138;
+    let v140 = v137 - v139;
+    let v141 = p.thigh_mass * v140;
+    let v142 = v135 + v141;
+    let v143 = v72 + v76;
+    let v144 = v83 + v143;
+    let v145 = v116 * v144;
+    let v146 = v104 + v108;
+    let v147 = v114 + v146;
+    let v148 = v85 * v147;
+    let v149 = v145 - v148;
+    let v150 = p.shin_mass * v149;
+    let v151 = v142 + v150;
+    let v152 = v0 * p.prepared[19];
+    let v153 = v11 * p.prepared[20];
+    let v154 = v152 + v153;
+    let v155 = v70 * p.prepared[21];
+    let v156 = p.prepared[22] + v5;
+    let v157 = v64 * v156;
+    let v158 = v155 + v157;
+    let v159 = p.gravity_x * v158;
+    let v160 = v64 * p.prepared[21];
+    let v161 = v70 * v156;
+    let v162 = v160 - v161;
+    let v163 = p.gravity_y * v162;
+    let v164 = v159 - v163;
+    let v165 = v64 * p.prepared[23];
+    let v166 = v70 * p.prepared[24];
+    let v167 = v165 + v166;
+    let v168 = v164 + v167;
+    let v169 = v154 + v168;
+    let v170 = q_3 - q_2;
+    let v171 = v170 - p.hip_spring_rest;
+    let v172 = p.hip_spring_stiffness * v171;
+    let v173 = v169 - v172;
+    let v174 = v151 + v173;
+    let v175 = v96 * v125;
+    let v176 = v94 * v127;
     let v177 = v175 - v176;
-    let v178 = v174 - v177;
-    let v179 = v121 * v178;
-    let v180 = v173 + v179;
-    let v181 = v5 + v22;
-    let v182 = p.gravity_x * v181;
-    let v183 = v27 + v31;
-    let v184 = p.gravity_y * v183;
-    let v185 = v182 - v184;
-    let v186 = v4 * v185;
-    let v187 = p.gravity_x * v183;
-    let v188 = p.gravity_y * v181;
-    let v189 = v187 + v188;
-    let v190 = v26 * v189;
-    let v191 = v186 + v190;
-    let v192 = v13 * v26;
-    let v193 = v4 * v6;
-    let v194 = v192 + v193;
-    let v195 = v7 + v9;
-    let v196 = v194 * v195;
-    let v197 = v4 * v13;
-    let v198 = v6 * v26;
-    let v199 = v197 - v198;
-    let v200 = v14 + v17;
-    let v201 = v199 * v200;
-    let v202 = v196 + v201;
-    let v203 = p.gravity_x * v202;
-    let v204 = v195 * v199;
-    let v205 = v194 * v200;
-    let v206 = v204 - v205;
-    let v207 = p.gravity_y * v206;
-    let v208 = v203 - v207;
-    let v209 = v15 * p.gravity_x;
-    let v210 = v8 * p.gravity_y;
-    let v211 = v209 - v210;
-    let v212 = v199 * v211;
-    let v213 = v8 * p.gravity_x;
-    let v214 = v15 * p.gravity_y;
-    let v215 = v213 + v214;
-    let v216 = v194 * v215;
-    let v217 = v212 + v216;
-    let v218 = v208 + v217;
-    let v219 = v191 + v218;
-    let v220 = q_3 - q_2;
-    let v221 = v220 - p.hip_spring_rest;
-    let v222 = p.hip_spring_stiffness * v221;
-    let v223 = v219 - v222;
-    let v224 = v180 + v223;
-    let v225 = qd_2 * qd_0;
-    let v226 = v139 * v225;
-    let v227 = v226 - v144;
-    let v228 = qd_2 * qd_1;
-    let v229 = v146 * v228;
-    let v230 = v227 + v229;
-    let v231 = v152 + v230;
-    let v232 = v111 * v156;
-    let v233 = v231 - v232;
-    let v234 = v174 + v177;
-    let v235 = v109 * v234;
-    let v236 = v233 + v235;
-    let v237 = v121 * v164;
-    let v238 = v236 + v237;
-    let v239 = v218 + v222;
-    let v240 = v238 + v239;
-    let v241 = v142 * v225;
-    let v242 = v140 * v142;
-    let v243 = v241 + v242;
-    let v244 = v150 * v228;
-    let v245 = v243 + v244;
-    let v246 = v147 * v150;
-    let v247 = v245 + v246;
-    let v248 = v169 * T::lit(0.5);
-    let v249 = v111 * v248;
-    let v250 = v247 - v249;
-    let v251 = v114 * v234;
-    let v252 = v250 - v251;
-    let v253 = v164 * T::lit(0.5);
-    let v254 = v118 * v253;
-    let v255 = v252 - v254;
-    let v256 = q_4 - p.leg_spring_rest;
-    let v257 = p.leg_spring_stiffness * v256;
-    let v258 = p.gravity_x * v194;
-    let v259 = p.gravity_y * v199;
-    let v260 = v258 - v259;
-    let v261 = p.shin_mass * v260;
-    let v262 = v257 - v261;
-    let v263 = v255 + v262;
+    let v178 = p.thigh_mass * v177;
+    let v179 = v116 * v143;
+    let v180 = v85 * v146;
+    let v181 = v179 - v180;
+    let v182 = p.shin_mass * v181;
+    let v183 = v178 + v182;
+    let v184 = v168 + v172;
+    let v185 = v183 + v184;
+    let v186 = v70 * v85;
+    let v187 = v64 * v116;
+    let v188 = v186 - v187;
+    let v189 = p.shin_mass * v188;
+    let v190 = q_4 - p.leg_spring_rest;
+    let v191 = p.leg_spring_stiffness * v190;
+    let v192 = v70 * p.gravity_x;
+    let v193 = v64 * p.gravity_y;
+    let v194 = v192 - v193;
+    let v195 = p.shin_mass * v194;
+    let v196 = v191 - v195;
+    let v197 = v189 + v196;
     (
         SMatrix::from_data(
             ArrayStorage([
-                [v3, T::lit(0.0), v36, v40, v45],
-                [T::lit(0.0), v2, v48, v51, v54],
-                [v36, v48, v91, v92, v99],
-                [v40, v51, v92, v102, v103],
-                [v45, v54, v99, v103, v106],
+                [p.prepared[1], T::lit(0.0), v18, v22, v27],
+                [T::lit(0.0), p.prepared[0], v30, v33, v36],
+                [v18, v30, v50, v51, v56],
+                [v22, v33, v51, v58, p.prepared[15]],
+                [v27, v36, v56, p.prepared[15], p.prepared[16]],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v125, v138, v224, v240, v263]])),
+        SMatrix::from_data(ArrayStorage([[v100, v131, v174, v185, v197]])),
         SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
         SMatrix::from_data(ArrayStorage([[]])),
     )

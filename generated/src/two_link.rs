@@ -20,10 +20,9 @@ pub const NK: usize = 0;
 /// The `two_link` leg: 2 joints, 0 closure(s), actuated joints ["upper_arm", "forearm"]. Generated from `leg-models/specs/two_link.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct TwoLink;
-/// Physical parameters; `Default` holds the spec's values. Change them at run
-/// time without regenerating.
+/// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Params<T> {
+pub struct ParamValues<T> {
     /// Gravity in the base frame, x [m/s²].
     pub gravity_x: T,
     /// Gravity in the base frame, y [m/s²].
@@ -69,7 +68,7 @@ pub struct Params<T> {
     /// Gear ratio of the motor of `forearm` (reflected inertia I·N²).
     pub forearm_gear_ratio: T,
 }
-impl<T: Real> Default for Params<T> {
+impl<T: Real> Default for ParamValues<T> {
     fn default() -> Self {
         Self {
             gravity_x: T::lit(0.0),
@@ -95,6 +94,50 @@ impl<T: Real> Default for Params<T> {
             forearm_rotor_inertia: T::lit(0.0),
             forearm_gear_ratio: T::lit(1.0),
         }
+    }
+}
+/// Physical parameters, ready for evaluation: the values (read as fields through
+/// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
+/// computed once when a value changes instead of in every call. `Default` holds
+/// the spec's values; change them at run time, without regenerating, with
+/// [`Params::update`] or [`Parameters::set`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params<T> {
+    values: ParamValues<T>,
+    prepared: [T; 11],
+}
+impl<T: Real> Params<T> {
+    /// Parameters of these values.
+    pub fn new(values: ParamValues<T>) -> Self {
+        Self {
+            prepared: prepare(&values).data.0[0],
+            values,
+        }
+    }
+    /// The values.
+    pub fn values(&self) -> &ParamValues<T> {
+        &self.values
+    }
+    /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
+    pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
+        change(&mut self.values);
+        *self = Self::new(self.values);
+    }
+}
+impl<T> core::ops::Deref for Params<T> {
+    type Target = ParamValues<T>;
+    fn deref(&self) -> &ParamValues<T> {
+        &self.values
+    }
+}
+impl<T: Real> From<ParamValues<T>> for Params<T> {
+    fn from(values: ParamValues<T>) -> Self {
+        Self::new(values)
+    }
+}
+impl<T: Real> Default for Params<T> {
+    fn default() -> Self {
+        Self::new(ParamValues::default())
     }
 }
 impl<T: Real> Parameters<T> for Params<T> {
@@ -124,57 +167,58 @@ impl<T: Real> Parameters<T> for Params<T> {
     ];
     fn get(&self, i: usize) -> Option<T> {
         match i {
-            0 => Some(self.gravity_x),
-            1 => Some(self.gravity_y),
-            2 => Some(self.upper_arm_origin_x),
-            3 => Some(self.upper_arm_origin_y),
-            4 => Some(self.upper_arm_length_x),
-            5 => Some(self.upper_arm_length_y),
-            6 => Some(self.upper_arm_mass),
-            7 => Some(self.upper_arm_com_x),
-            8 => Some(self.upper_arm_com_y),
-            9 => Some(self.upper_arm_inertia),
-            10 => Some(self.upper_arm_damping),
-            11 => Some(self.upper_arm_rotor_inertia),
-            12 => Some(self.upper_arm_gear_ratio),
-            13 => Some(self.forearm_length_x),
-            14 => Some(self.forearm_length_y),
-            15 => Some(self.forearm_mass),
-            16 => Some(self.forearm_com_x),
-            17 => Some(self.forearm_com_y),
-            18 => Some(self.forearm_inertia),
-            19 => Some(self.forearm_damping),
-            20 => Some(self.forearm_rotor_inertia),
-            21 => Some(self.forearm_gear_ratio),
+            0 => Some(self.values.gravity_x),
+            1 => Some(self.values.gravity_y),
+            2 => Some(self.values.upper_arm_origin_x),
+            3 => Some(self.values.upper_arm_origin_y),
+            4 => Some(self.values.upper_arm_length_x),
+            5 => Some(self.values.upper_arm_length_y),
+            6 => Some(self.values.upper_arm_mass),
+            7 => Some(self.values.upper_arm_com_x),
+            8 => Some(self.values.upper_arm_com_y),
+            9 => Some(self.values.upper_arm_inertia),
+            10 => Some(self.values.upper_arm_damping),
+            11 => Some(self.values.upper_arm_rotor_inertia),
+            12 => Some(self.values.upper_arm_gear_ratio),
+            13 => Some(self.values.forearm_length_x),
+            14 => Some(self.values.forearm_length_y),
+            15 => Some(self.values.forearm_mass),
+            16 => Some(self.values.forearm_com_x),
+            17 => Some(self.values.forearm_com_y),
+            18 => Some(self.values.forearm_inertia),
+            19 => Some(self.values.forearm_damping),
+            20 => Some(self.values.forearm_rotor_inertia),
+            21 => Some(self.values.forearm_gear_ratio),
             _ => None,
         }
     }
     fn set(&mut self, i: usize, value: T) -> bool {
         match i {
-            0 => self.gravity_x = value,
-            1 => self.gravity_y = value,
-            2 => self.upper_arm_origin_x = value,
-            3 => self.upper_arm_origin_y = value,
-            4 => self.upper_arm_length_x = value,
-            5 => self.upper_arm_length_y = value,
-            6 => self.upper_arm_mass = value,
-            7 => self.upper_arm_com_x = value,
-            8 => self.upper_arm_com_y = value,
-            9 => self.upper_arm_inertia = value,
-            10 => self.upper_arm_damping = value,
-            11 => self.upper_arm_rotor_inertia = value,
-            12 => self.upper_arm_gear_ratio = value,
-            13 => self.forearm_length_x = value,
-            14 => self.forearm_length_y = value,
-            15 => self.forearm_mass = value,
-            16 => self.forearm_com_x = value,
-            17 => self.forearm_com_y = value,
-            18 => self.forearm_inertia = value,
-            19 => self.forearm_damping = value,
-            20 => self.forearm_rotor_inertia = value,
-            21 => self.forearm_gear_ratio = value,
+            0 => self.values.gravity_x = value,
+            1 => self.values.gravity_y = value,
+            2 => self.values.upper_arm_origin_x = value,
+            3 => self.values.upper_arm_origin_y = value,
+            4 => self.values.upper_arm_length_x = value,
+            5 => self.values.upper_arm_length_y = value,
+            6 => self.values.upper_arm_mass = value,
+            7 => self.values.upper_arm_com_x = value,
+            8 => self.values.upper_arm_com_y = value,
+            9 => self.values.upper_arm_inertia = value,
+            10 => self.values.upper_arm_damping = value,
+            11 => self.values.upper_arm_rotor_inertia = value,
+            12 => self.values.upper_arm_gear_ratio = value,
+            13 => self.values.forearm_length_x = value,
+            14 => self.values.forearm_length_y = value,
+            15 => self.values.forearm_mass = value,
+            16 => self.values.forearm_com_x = value,
+            17 => self.values.forearm_com_y = value,
+            18 => self.values.forearm_inertia = value,
+            19 => self.values.forearm_damping = value,
+            20 => self.values.forearm_rotor_inertia = value,
+            21 => self.values.forearm_gear_ratio = value,
             _ => return false,
         }
+        *self = Self::new(self.values);
         true
     }
 }
@@ -290,50 +334,82 @@ impl ContactModel<NQ, NC, NU, NK> for TwoLink {
         contact_bias(q, qd, p)
     }
 }
+/// The parameter-only quantities the terms read (products of masses, lengths and
+/// centres of mass, inertias about the joints, …), computed once per parameter set
+/// by [`Params::new`].
+pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 11> {
+    let v0 = values.upper_arm_com_x * values.upper_arm_com_x;
+    let v1 = values.upper_arm_com_y * values.upper_arm_com_y;
+    let v2 = v0 + v1;
+    let v3 = values.upper_arm_mass * v2;
+    let v4 = values.upper_arm_inertia + v3;
+    let v5 = values.forearm_com_x * values.forearm_com_x;
+    let v6 = values.forearm_com_y * values.forearm_com_y;
+    let v7 = v5 + v6;
+    let v8 = values.forearm_mass * v7;
+    let v9 = values.forearm_inertia + v8;
+    let v10 = v4 + v9;
+    let v11 = values.upper_arm_length_x * values.upper_arm_length_x;
+    let v12 = values.upper_arm_length_y * values.upper_arm_length_y;
+    let v13 = v11 + v12;
+    let v14 = values.forearm_mass * v13;
+    let v15 = v10 + v14;
+    let v16 = values.upper_arm_gear_ratio * values.upper_arm_gear_ratio;
+    let v17 = values.upper_arm_rotor_inertia * v16;
+    let v18 = v15 + v17;
+    let v19 = values.forearm_mass * values.forearm_com_x;
+    let v20 = values.upper_arm_length_x * v19;
+    let v21 = values.forearm_mass * values.forearm_com_y;
+    let v22 = values.upper_arm_length_y * v21;
+    let v23 = v20 + v22;
+    let v24 = values.upper_arm_length_x * v21;
+    let v25 = values.upper_arm_length_y * v19;
+    let v26 = v24 - v25;
+    let v27 = v25 - v24;
+    let v28 = values.forearm_gear_ratio * values.forearm_gear_ratio;
+    let v29 = values.forearm_rotor_inertia * v28;
+    let v30 = v9 + v29;
+    let v31 = values.upper_arm_mass * values.upper_arm_com_y;
+    let v32 = values.forearm_mass * values.upper_arm_length_y;
+    let v33 = v31 + v32;
+    let v34 = values.gravity_x * v33;
+    let v35 = values.upper_arm_mass * values.upper_arm_com_x;
+    let v36 = values.forearm_mass * values.upper_arm_length_x;
+    let v37 = v35 + v36;
+    let v38 = values.gravity_y * v37;
+    let v39 = v34 - v38;
+    let v40 = values.gravity_x * v37;
+    let v41 = v33 * values.gravity_y;
+    let v42 = v40 + v41;
+    let v43 = v21 * values.gravity_x;
+    let v44 = v19 * values.gravity_y;
+    let v45 = v43 - v44;
+    let v46 = v19 * values.gravity_x;
+    let v47 = v21 * values.gravity_y;
+    let v48 = v46 + v47;
+    let v49 = values.upper_arm_mass + values.forearm_mass;
+    let v50 = values.upper_arm_origin_x * v49;
+    let v51 = values.gravity_x * v50;
+    let v52 = values.upper_arm_origin_y * v49;
+    let v53 = values.gravity_y * v52;
+    let v54 = v51 + v53;
+    SMatrix::from_data(
+        ArrayStorage([[v9, v18, v23, v26, v27, v30, v39, v42, v45, v48, v54]]),
+    )
+}
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
 pub fn mass_matrix<T: Real>(q: &SVector<T, 2>, p: &Params<T>) -> SMatrix<T, 2, 2> {
     let [_, q_1] = q.data.0[0];
-    let v0 = p.upper_arm_com_x * p.upper_arm_com_x;
-    let v1 = p.upper_arm_com_y * p.upper_arm_com_y;
-    let v2 = v0 + v1;
-    let v3 = p.upper_arm_mass * v2;
-    let v4 = p.upper_arm_inertia + v3;
-    let v5 = p.forearm_com_x * p.forearm_com_x;
-    let v6 = p.forearm_com_y * p.forearm_com_y;
-    let v7 = v5 + v6;
-    let v8 = p.forearm_mass * v7;
-    let v9 = p.forearm_inertia + v8;
-    let (v17, v10) = q_1.sin_cos();
-    let v11 = p.forearm_mass * p.forearm_com_x;
-    let v12 = p.upper_arm_length_x * v11;
-    let v13 = p.forearm_mass * p.forearm_com_y;
-    let v14 = p.upper_arm_length_y * v13;
-    let v15 = v12 + v14;
-    let v16 = v10 * v15;
-    let v18 = p.upper_arm_length_x * v13;
-    let v19 = v11 * p.upper_arm_length_y;
-    let v20 = v18 - v19;
-    let v21 = v17 * v20;
-    let v22 = v16 - v21;
-    let v23 = v22 + v22;
-    let v24 = v9 + v23;
-    let v25 = p.upper_arm_length_x * p.upper_arm_length_x;
-    let v26 = p.upper_arm_length_y * p.upper_arm_length_y;
-    let v27 = v25 + v26;
-    let v28 = p.forearm_mass * v27;
-    let v29 = v24 + v28;
-    let v30 = v4 + v29;
-    let v31 = p.upper_arm_gear_ratio * p.upper_arm_gear_ratio;
-    let v32 = p.upper_arm_rotor_inertia * v31;
-    let v33 = v30 + v32;
-    let v34 = v19 - v18;
-    let v35 = v17 * v34;
-    let v36 = v16 + v35;
-    let v37 = v9 + v36;
-    let v38 = p.forearm_gear_ratio * p.forearm_gear_ratio;
-    let v39 = p.forearm_rotor_inertia * v38;
-    let v40 = v9 + v39;
-    SMatrix::from_data(ArrayStorage([[v33, v37], [v37, v40]]))
+    let (v2, v0) = q_1.sincos();
+    let v1 = v0 * p.prepared[2];
+    let v3 = v2 * p.prepared[3];
+    let v4 = v1 - v3;
+    let v5 = v4 + v4;
+    let v6 = p.prepared[1] + v5;
+    let v7 = v2 * p.prepared[4];
+    let v8 = v1 + v7;
+    let v9 = p.prepared[0] + v8;
+    SMatrix::from_data(ArrayStorage([[v6, v9], [v9, p.prepared[5]]]))
 }
 /// `N(q, q̇) = (∂²L/∂q̇∂q) q̇ − ∂L/∂q = C q̇ + G`.
 pub fn bias_forces<T: Real>(
@@ -343,105 +419,58 @@ pub fn bias_forces<T: Real>(
 ) -> SVector<T, 2> {
     let [q_0, q_1] = q.data.0[0];
     let [qd_0, qd_1] = qd.data.0[0];
-    let v0 = p.forearm_mass * p.forearm_com_x;
-    let v1 = p.upper_arm_length_x * v0;
-    let v2 = p.forearm_mass * p.forearm_com_y;
-    let v3 = p.upper_arm_length_y * v2;
+    let (v0, v2) = q_1.sincos();
+    let v1 = p.prepared[2] * v0;
+    let v3 = p.prepared[3] * v2;
     let v4 = v1 + v3;
-    let (v5, v10) = q_1.sin_cos();
-    let v6 = v4 * v5;
-    let v7 = p.upper_arm_length_x * v2;
-    let v8 = v0 * p.upper_arm_length_y;
-    let v9 = v7 - v8;
-    let v11 = v9 * v10;
-    let v12 = v6 + v11;
-    let v13 = -v12;
-    let v14 = v13 + v13;
-    let v15 = qd_0 * qd_1;
-    let v16 = v14 * v15;
-    let v17 = v8 - v7;
-    let v18 = v10 * v17;
-    let v19 = v18 - v6;
-    let v20 = qd_1 * qd_1;
-    let v21 = v19 * v20;
-    let v22 = v16 + v21;
-    let (v34, v23) = q_0.sin_cos();
-    let v24 = p.upper_arm_mass * p.upper_arm_com_y;
-    let v25 = p.forearm_mass * p.upper_arm_length_y;
-    let v26 = v24 + v25;
-    let v27 = p.gravity_x * v26;
-    let v28 = p.upper_arm_mass * p.upper_arm_com_x;
-    let v29 = p.upper_arm_length_x * p.forearm_mass;
-    let v30 = v28 + v29;
-    let v31 = p.gravity_y * v30;
-    let v32 = v27 - v31;
-    let v33 = v23 * v32;
-    let v35 = p.gravity_x * v30;
-    let v36 = v26 * p.gravity_y;
-    let v37 = v35 + v36;
-    let v38 = v34 * v37;
-    let v39 = v33 + v38;
-    let v40 = v10 * v23;
-    let v41 = v5 * v34;
-    let v42 = v40 - v41;
-    let v43 = v2 * p.gravity_x;
-    let v44 = v0 * p.gravity_y;
-    let v45 = v43 - v44;
-    let v46 = v42 * v45;
-    let v47 = v10 * v34;
-    let v48 = v5 * v23;
-    let v49 = v47 + v48;
-    let v50 = v0 * p.gravity_x;
-    let v51 = v2 * p.gravity_y;
-    let v52 = v50 + v51;
-    let v53 = v49 * v52;
-    let v54 = v46 + v53;
-    let v55 = v39 + v54;
-    let v56 = v22 + v55;
-    let v57 = qd_0 * qd_0;
-    let v58 = v12 * v57;
-    let v59 = v54 + v58;
-    SMatrix::from_data(ArrayStorage([[v56, v59]]))
+    let v5 = -v4;
+    let v6 = v5 + v5;
+    let v7 = qd_0 * qd_1;
+    let v8 = v6 * v7;
+    let v9 = v2 * p.prepared[4];
+    let v10 = v9 - v1;
+    let v11 = qd_1 * qd_1;
+    let v12 = v10 * v11;
+    let v13 = v8 + v12;
+    let (v16, v14) = q_0.sincos();
+    let v15 = v14 * p.prepared[6];
+    let v17 = v16 * p.prepared[7];
+    let v18 = v15 + v17;
+    let v19 = v2 * v14;
+    let v20 = v0 * v16;
+    let v21 = v19 - v20;
+    let v22 = v21 * p.prepared[8];
+    let v23 = v2 * v16;
+    let v24 = v0 * v14;
+    let v25 = v23 + v24;
+    let v26 = v25 * p.prepared[9];
+    let v27 = v22 + v26;
+    let v28 = v18 + v27;
+    let v29 = v13 + v28;
+    let v30 = qd_0 * qd_0;
+    let v31 = v4 * v30;
+    let v32 = v27 + v31;
+    SMatrix::from_data(ArrayStorage([[v29, v32]]))
 }
 /// `G(q) = ∂V/∂q`.
 pub fn gravity_forces<T: Real>(q: &SVector<T, 2>, p: &Params<T>) -> SVector<T, 2> {
     let [q_0, q_1] = q.data.0[0];
-    let (v11, v0) = q_0.sin_cos();
-    let v1 = p.upper_arm_mass * p.upper_arm_com_y;
-    let v2 = p.forearm_mass * p.upper_arm_length_y;
-    let v3 = v1 + v2;
-    let v4 = p.gravity_x * v3;
-    let v5 = p.upper_arm_mass * p.upper_arm_com_x;
-    let v6 = p.forearm_mass * p.upper_arm_length_x;
-    let v7 = v5 + v6;
-    let v8 = p.gravity_y * v7;
-    let v9 = v4 - v8;
-    let v10 = v0 * v9;
-    let v12 = p.gravity_x * v7;
-    let v13 = v3 * p.gravity_y;
-    let v14 = v12 + v13;
-    let v15 = v11 * v14;
-    let v16 = v10 + v15;
-    let (v19, v17) = q_1.sin_cos();
-    let v18 = v0 * v17;
-    let v20 = v11 * v19;
-    let v21 = v18 - v20;
-    let v22 = p.forearm_mass * p.forearm_com_y;
-    let v23 = p.gravity_x * v22;
-    let v24 = p.forearm_mass * p.forearm_com_x;
-    let v25 = p.gravity_y * v24;
-    let v26 = v23 - v25;
-    let v27 = v21 * v26;
-    let v28 = v11 * v17;
-    let v29 = v0 * v19;
-    let v30 = v28 + v29;
-    let v31 = p.gravity_x * v24;
-    let v32 = p.gravity_y * v22;
-    let v33 = v31 + v32;
-    let v34 = v30 * v33;
-    let v35 = v27 + v34;
-    let v36 = v16 + v35;
-    SMatrix::from_data(ArrayStorage([[v36, v35]]))
+    let (v2, v0) = q_0.sincos();
+    let v1 = v0 * p.prepared[6];
+    let v3 = v2 * p.prepared[7];
+    let v4 = v1 + v3;
+    let (v7, v5) = q_1.sincos();
+    let v6 = v0 * v5;
+    let v8 = v2 * v7;
+    let v9 = v6 - v8;
+    let v10 = v9 * p.prepared[8];
+    let v11 = v2 * v5;
+    let v12 = v0 * v7;
+    let v13 = v11 + v12;
+    let v14 = v13 * p.prepared[9];
+    let v15 = v10 + v14;
+    let v16 = v4 + v15;
+    SMatrix::from_data(ArrayStorage([[v16, v15]]))
 }
 /// Viscous joint damping `D q̇`.
 pub fn damping_forces<T: Real>(qd: &SVector<T, 2>, p: &Params<T>) -> SVector<T, 2> {
@@ -472,12 +501,12 @@ pub fn constraint_bias<T: Real>(
 /// The foot point in the base frame.
 pub fn foot_position<T: Real>(q: &SVector<T, 2>, p: &Params<T>) -> SVector<T, 2> {
     let [q_0, q_1] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.upper_arm_length_x;
     let v3 = v2 * p.upper_arm_length_y;
     let v4 = v1 - v3;
     let v5 = p.upper_arm_origin_x + v4;
-    let (v8, v6) = q_1.sin_cos();
+    let (v8, v6) = q_1.sincos();
     let v7 = v0 * v6;
     let v9 = v2 * v8;
     let v10 = v7 - v9;
@@ -501,8 +530,8 @@ pub fn foot_position<T: Real>(q: &SVector<T, 2>, p: &Params<T>) -> SVector<T, 2>
 /// `J_f(q) = ∂(foot)/∂q`.
 pub fn foot_jacobian<T: Real>(q: &SVector<T, 2>, p: &Params<T>) -> SMatrix<T, 2, 2> {
     let [q_0, q_1] = q.data.0[0];
-    let (v0, v3) = q_0.sin_cos();
-    let (v4, v1) = q_1.sin_cos();
+    let (v0, v3) = q_0.sincos();
+    let (v4, v1) = q_1.sincos();
     let v2 = v0 * v1;
     let v5 = v3 * v4;
     let v6 = v2 + v5;
@@ -537,8 +566,8 @@ pub fn foot_bias<T: Real>(
     let [qd_0, qd_1] = qd.data.0[0];
     let v0 = qd_0 + qd_1;
     let v1 = v0 * v0;
-    let (v5, v2) = q_0.sin_cos();
-    let (v6, v3) = q_1.sin_cos();
+    let (v5, v2) = q_0.sincos();
+    let (v6, v3) = q_1.sincos();
     let v4 = v2 * v3;
     let v7 = v5 * v6;
     let v8 = v4 - v7;
@@ -576,110 +605,53 @@ pub fn kinetic_energy<T: Real>(
 ) -> T {
     let [_, q_1] = q.data.0[0];
     let [qd_0, qd_1] = qd.data.0[0];
-    let v0 = p.upper_arm_com_x * p.upper_arm_com_x;
-    let v1 = p.upper_arm_com_y * p.upper_arm_com_y;
-    let v2 = v0 + v1;
-    let v3 = p.upper_arm_mass * v2;
-    let v4 = p.upper_arm_inertia + v3;
-    let v5 = p.forearm_com_x * p.forearm_com_x;
-    let v6 = p.forearm_com_y * p.forearm_com_y;
-    let v7 = v5 + v6;
-    let v8 = p.forearm_mass * v7;
-    let v9 = p.forearm_inertia + v8;
-    let (v17, v10) = q_1.sin_cos();
-    let v11 = p.forearm_mass * p.forearm_com_x;
-    let v12 = p.upper_arm_length_x * v11;
-    let v13 = p.forearm_mass * p.forearm_com_y;
-    let v14 = p.upper_arm_length_y * v13;
-    let v15 = v12 + v14;
-    let v16 = v10 * v15;
-    let v18 = p.upper_arm_length_x * v13;
-    let v19 = v11 * p.upper_arm_length_y;
-    let v20 = v18 - v19;
-    let v21 = v17 * v20;
-    let v22 = v16 - v21;
-    let v23 = v22 + v22;
-    let v24 = v9 + v23;
-    let v25 = p.upper_arm_length_x * p.upper_arm_length_x;
-    let v26 = p.upper_arm_length_y * p.upper_arm_length_y;
-    let v27 = v25 + v26;
-    let v28 = p.forearm_mass * v27;
-    let v29 = v24 + v28;
-    let v30 = v4 + v29;
-    let v31 = p.upper_arm_gear_ratio * p.upper_arm_gear_ratio;
-    let v32 = p.upper_arm_rotor_inertia * v31;
-    let v33 = v30 + v32;
-    let v34 = qd_0 * v33;
-    let v35 = v19 - v18;
-    let v36 = v17 * v35;
-    let v37 = v16 + v36;
-    let v38 = v9 + v37;
-    let v39 = v38 * qd_1;
-    let v40 = v34 + v39;
-    let v41 = qd_0 * v40;
-    let v42 = qd_0 * v38;
-    let v43 = p.forearm_gear_ratio * p.forearm_gear_ratio;
-    let v44 = p.forearm_rotor_inertia * v43;
-    let v45 = v9 + v44;
-    let v46 = qd_1 * v45;
-    let v47 = v42 + v46;
-    let v48 = qd_1 * v47;
-    let v49 = v41 + v48;
-    let v50 = T::lit(0.5) * v49;
-    v50
+    let (v2, v0) = q_1.sincos();
+    let v1 = v0 * p.prepared[2];
+    let v3 = v2 * p.prepared[3];
+    let v4 = v1 - v3;
+    let v5 = v4 + v4;
+    let v6 = p.prepared[1] + v5;
+    let v7 = qd_0 * v6;
+    let v8 = v2 * p.prepared[4];
+    let v9 = v1 + v8;
+    let v10 = p.prepared[0] + v9;
+    let v11 = v10 * qd_1;
+    let v12 = v7 + v11;
+    let v13 = qd_0 * v12;
+    let v14 = qd_0 * v10;
+    let v15 = qd_1 * p.prepared[5];
+    let v16 = v14 + v15;
+    let v17 = qd_1 * v16;
+    let v18 = v13 + v17;
+    let v19 = T::lit(0.5) * v18;
+    v19
 }
 /// Potential energy `−Σ m g·c`.
 pub fn potential_energy<T: Real>(q: &SVector<T, 2>, p: &Params<T>) -> T {
     let [q_0, q_1] = q.data.0[0];
-    let v0 = p.upper_arm_mass + p.forearm_mass;
-    let v1 = v0 * p.upper_arm_origin_x;
-    let v2 = p.gravity_x * v1;
-    let v3 = v0 * p.upper_arm_origin_y;
-    let v4 = p.gravity_y * v3;
-    let v5 = v2 + v4;
-    let (v17, v6) = q_0.sin_cos();
-    let v7 = p.upper_arm_mass * p.upper_arm_com_x;
-    let v8 = p.forearm_mass * p.upper_arm_length_x;
-    let v9 = v7 + v8;
-    let v10 = p.gravity_x * v9;
-    let v11 = p.upper_arm_mass * p.upper_arm_com_y;
-    let v12 = p.forearm_mass * p.upper_arm_length_y;
-    let v13 = v11 + v12;
-    let v14 = p.gravity_y * v13;
-    let v15 = v10 + v14;
-    let v16 = v6 * v15;
-    let v18 = p.gravity_x * v13;
-    let v19 = p.gravity_y * v9;
-    let v20 = v18 - v19;
-    let v21 = v17 * v20;
-    let v22 = v16 - v21;
-    let v23 = v5 + v22;
-    let (v26, v24) = q_1.sin_cos();
-    let v25 = v6 * v24;
-    let v27 = v17 * v26;
-    let v28 = v25 - v27;
-    let v29 = p.forearm_mass * p.forearm_com_x;
-    let v30 = p.gravity_x * v29;
-    let v31 = p.forearm_mass * p.forearm_com_y;
-    let v32 = p.gravity_y * v31;
-    let v33 = v30 + v32;
-    let v34 = v28 * v33;
-    let v35 = v17 * v24;
-    let v36 = v6 * v26;
-    let v37 = v35 + v36;
-    let v38 = p.gravity_x * v31;
-    let v39 = p.gravity_y * v29;
-    let v40 = v38 - v39;
-    let v41 = v37 * v40;
-    let v42 = v34 - v41;
-    let v43 = v23 + v42;
-    let v44 = -v43;
-    v44
+    let (v2, v0) = q_0.sincos();
+    let v1 = v0 * p.prepared[7];
+    let v3 = v2 * p.prepared[6];
+    let v4 = v1 - v3;
+    let v5 = p.prepared[10] + v4;
+    let (v8, v6) = q_1.sincos();
+    let v7 = v0 * v6;
+    let v9 = v2 * v8;
+    let v10 = v7 - v9;
+    let v11 = v10 * p.prepared[9];
+    let v12 = v2 * v6;
+    let v13 = v0 * v8;
+    let v14 = v12 + v13;
+    let v15 = v14 * p.prepared[8];
+    let v16 = v11 - v15;
+    let v17 = v5 + v16;
+    let v18 = -v17;
+    v18
 }
 /// Joint positions in the base frame, one column per joint.
 pub fn joint_positions<T: Real>(q: &SVector<T, 2>, p: &Params<T>) -> SMatrix<T, 2, 2> {
     let [q_0, _] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.upper_arm_length_x;
     let v3 = v2 * p.upper_arm_length_y;
     let v4 = v1 - v3;
@@ -695,7 +667,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 2>, p: &Params<T>) -> SMatrix<T, 
 /// Link tips in the base frame, one column per link.
 pub fn link_tips<T: Real>(q: &SVector<T, 2>, p: &Params<T>) -> SMatrix<T, 2, 2> {
     let [q_0, q_1] = q.data.0[0];
-    let (v2, v0) = q_0.sin_cos();
+    let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.upper_arm_length_x;
     let v3 = v2 * p.upper_arm_length_y;
     let v4 = v1 - v3;
@@ -704,7 +676,7 @@ pub fn link_tips<T: Real>(q: &SVector<T, 2>, p: &Params<T>) -> SMatrix<T, 2, 2> 
     let v7 = v0 * p.upper_arm_length_y;
     let v8 = v6 + v7;
     let v9 = p.upper_arm_origin_y + v8;
-    let (v12, v10) = q_1.sin_cos();
+    let (v12, v10) = q_1.sincos();
     let v11 = v0 * v10;
     let v13 = v2 * v12;
     let v14 = v11 - v13;
@@ -752,97 +724,48 @@ pub fn dynamics_terms<T: Real>(
 ) -> (SMatrix<T, 2, 2>, SVector<T, 2>, SMatrix<T, 0, 2>, SVector<T, 0>) {
     let [q_0, q_1] = q.data.0[0];
     let [qd_0, qd_1] = qd.data.0[0];
-    let v0 = p.upper_arm_com_x * p.upper_arm_com_x;
-    let v1 = p.upper_arm_com_y * p.upper_arm_com_y;
-    let v2 = v0 + v1;
-    let v3 = p.upper_arm_mass * v2;
-    let v4 = p.upper_arm_inertia + v3;
-    let v5 = p.forearm_com_x * p.forearm_com_x;
-    let v6 = p.forearm_com_y * p.forearm_com_y;
-    let v7 = v5 + v6;
-    let v8 = p.forearm_mass * v7;
-    let v9 = p.forearm_inertia + v8;
-    let (v17, v10) = q_1.sin_cos();
-    let v11 = p.forearm_mass * p.forearm_com_x;
-    let v12 = p.upper_arm_length_x * v11;
-    let v13 = p.forearm_mass * p.forearm_com_y;
-    let v14 = p.upper_arm_length_y * v13;
-    let v15 = v12 + v14;
-    let v16 = v10 * v15;
-    let v18 = p.upper_arm_length_x * v13;
-    let v19 = v11 * p.upper_arm_length_y;
-    let v20 = v18 - v19;
-    let v21 = v17 * v20;
-    let v22 = v16 - v21;
-    let v23 = v22 + v22;
-    let v24 = v9 + v23;
-    let v25 = p.upper_arm_length_x * p.upper_arm_length_x;
-    let v26 = p.upper_arm_length_y * p.upper_arm_length_y;
-    let v27 = v25 + v26;
-    let v28 = p.forearm_mass * v27;
-    let v29 = v24 + v28;
-    let v30 = v4 + v29;
-    let v31 = p.upper_arm_gear_ratio * p.upper_arm_gear_ratio;
-    let v32 = p.upper_arm_rotor_inertia * v31;
-    let v33 = v30 + v32;
-    let v34 = v19 - v18;
-    let v35 = v17 * v34;
-    let v36 = v16 + v35;
-    let v37 = v9 + v36;
-    let v38 = p.forearm_gear_ratio * p.forearm_gear_ratio;
-    let v39 = p.forearm_rotor_inertia * v38;
-    let v40 = v9 + v39;
-    let v41 = v15 * v17;
-    let v42 = v10 * v20;
-    let v43 = v41 + v42;
-    let v44 = -v43;
-    let v45 = v44 + v44;
-    let v46 = qd_0 * qd_1;
-    let v47 = v45 * v46;
-    let v48 = v10 * v34;
-    let v49 = v48 - v41;
-    let v50 = qd_1 * qd_1;
-    let v51 = v49 * v50;
-    let v52 = v47 + v51;
-    let (v64, v53) = q_0.sin_cos();
-    let v54 = p.upper_arm_mass * p.upper_arm_com_y;
-    let v55 = p.forearm_mass * p.upper_arm_length_y;
-    let v56 = v54 + v55;
-    let v57 = p.gravity_x * v56;
-    let v58 = p.upper_arm_mass * p.upper_arm_com_x;
-    let v59 = p.forearm_mass * p.upper_arm_length_x;
-    let v60 = v58 + v59;
-    let v61 = p.gravity_y * v60;
-    let v62 = v57 - v61;
-    let v63 = v53 * v62;
-    let v65 = p.gravity_x * v60;
-    let v66 = v56 * p.gravity_y;
-    let v67 = v65 + v66;
-    let v68 = v64 * v67;
-    let v69 = v63 + v68;
-    let v70 = v10 * v53;
-    let v71 = v17 * v64;
-    let v72 = v70 - v71;
-    let v73 = v13 * p.gravity_x;
-    let v74 = v11 * p.gravity_y;
-    let v75 = v73 - v74;
-    let v76 = v72 * v75;
-    let v77 = v10 * v64;
-    let v78 = v17 * v53;
-    let v79 = v77 + v78;
-    let v80 = v11 * p.gravity_x;
-    let v81 = v13 * p.gravity_y;
-    let v82 = v80 + v81;
-    let v83 = v79 * v82;
-    let v84 = v76 + v83;
-    let v85 = v69 + v84;
-    let v86 = v52 + v85;
-    let v87 = qd_0 * qd_0;
-    let v88 = v43 * v87;
-    let v89 = v84 + v88;
+    let (v2, v0) = q_1.sincos();
+    let v1 = v0 * p.prepared[2];
+    let v3 = v2 * p.prepared[3];
+    let v4 = v1 - v3;
+    let v5 = v4 + v4;
+    let v6 = p.prepared[1] + v5;
+    let v7 = v2 * p.prepared[4];
+    let v8 = v1 + v7;
+    let v9 = p.prepared[0] + v8;
+    let v10 = p.prepared[2] * v2;
+    let v11 = v0 * p.prepared[3];
+    let v12 = v10 + v11;
+    let v13 = -v12;
+    let v14 = v13 + v13;
+    let v15 = qd_0 * qd_1;
+    let v16 = v14 * v15;
+    let v17 = v0 * p.prepared[4];
+    let v18 = v17 - v10;
+    let v19 = qd_1 * qd_1;
+    let v20 = v18 * v19;
+    let v21 = v16 + v20;
+    let (v24, v22) = q_0.sincos();
+    let v23 = v22 * p.prepared[6];
+    let v25 = v24 * p.prepared[7];
+    let v26 = v23 + v25;
+    let v27 = v0 * v22;
+    let v28 = v2 * v24;
+    let v29 = v27 - v28;
+    let v30 = v29 * p.prepared[8];
+    let v31 = v0 * v24;
+    let v32 = v2 * v22;
+    let v33 = v31 + v32;
+    let v34 = v33 * p.prepared[9];
+    let v35 = v30 + v34;
+    let v36 = v26 + v35;
+    let v37 = v21 + v36;
+    let v38 = qd_0 * qd_0;
+    let v39 = v12 * v38;
+    let v40 = v35 + v39;
     (
-        SMatrix::from_data(ArrayStorage([[v33, v37], [v37, v40]])),
-        SMatrix::from_data(ArrayStorage([[v86, v89]])),
+        SMatrix::from_data(ArrayStorage([[v6, v9], [v9, p.prepared[5]]])),
+        SMatrix::from_data(ArrayStorage([[v37, v40]])),
         SMatrix::from_data(ArrayStorage([[], []])),
         SMatrix::from_data(ArrayStorage([[]])),
     )

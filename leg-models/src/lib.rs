@@ -31,6 +31,7 @@ pub mod reference;
 #[cfg(feature = "std")]
 pub mod simulate;
 pub mod structure;
+mod trig;
 
 pub use model::{ContactModel, DynamicsTerms, JointKind, LegModel, Parameters, Real, Spring};
 pub use nalgebra;

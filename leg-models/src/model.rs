@@ -11,6 +11,14 @@ use nalgebra::{RealField, SMatrix, SVector};
 pub trait Real: RealField + Copy {
     /// Converts an `f64` literal of generated code into this scalar.
     fn lit(value: f64) -> Self;
+
+    /// `(sin self, cos self)` with one argument reduction: the one trigonometric call
+    /// generated code makes per revolute joint. Within an ulp of `(sin, cos)`; the
+    /// default is nalgebra's `sin_cos`.
+    #[inline(always)]
+    fn sincos(self) -> (Self, Self) {
+        self.sin_cos()
+    }
 }
 
 impl Real for f64 {
@@ -18,12 +26,24 @@ impl Real for f64 {
     fn lit(value: f64) -> Self {
         value
     }
+
+    #[inline(always)]
+    fn sincos(self) -> (Self, Self) {
+        crate::trig::sincos(self)
+    }
 }
 
 impl Real for f32 {
     #[inline(always)]
     fn lit(value: f64) -> Self {
         value as f32
+    }
+
+    /// In `f64`, rounded once to `f32`.
+    #[inline(always)]
+    fn sincos(self) -> (Self, Self) {
+        let (s, c) = crate::trig::sincos(self as f64);
+        (s as f32, c as f32)
     }
 }
 

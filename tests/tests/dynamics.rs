@@ -399,8 +399,10 @@ mod minitaur_singularities {
     #[test]
     fn unreachable_motor_angles_are_a_typed_error() {
         let mut p = params();
-        p.lower_a_length_x = 0.05;
-        p.lower_b_length_x = 0.05;
+        p.update(|v| {
+            v.lower_a_length_x = 0.05;
+            v.lower_b_length_x = 0.05;
+        });
         let guess = SVector::<f64, 4>::from_column_slice(&Minitaur::HOME);
         let theta = SVector::<f64, 2>::new(0.0, std::f64::consts::PI);
         let r = assemble::<Minitaur, f64, 4, 2, 2>(&p, &theta, &guess, &Tolerance::default());

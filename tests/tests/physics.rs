@@ -624,13 +624,13 @@ fn minitaur_closes_at_the_law_of_cosines_pose() {
 /// generalized forces `G` are its gradient, written out by hand.
 #[test]
 fn raibert_hopper_springs_follow_their_formula() {
-    use generated::raibert_hopper::Params;
+    use generated::raibert_hopper::{ParamValues, Params};
     use generated::RaibertHopper;
-    let p = Params::<f64> {
+    let p = Params::new(ParamValues::<f64> {
         gravity_x: 0.0,
         gravity_y: 0.0,
         ..Default::default()
-    };
+    });
     let mut rng = Rng::new(11);
     for _ in 0..STATES {
         let (q, _) = random_state::<5>(&mut rng);
@@ -698,4 +698,73 @@ fn minitaur_hopper_is_minitaur_on_a_rail() {
             m * 9.81
         );
     }
+}
+
+/// Parameters changed at run time (`Parameters::set`, which prepares the parameter-only
+/// quantities again) give the terms that CasADi's C of the same closed form computes from
+/// the raw parameter vector, which has no prepared values: a stale prepared value would
+/// show here. Every parameter is changed, one state per change.
+#[cfg(feature = "peers")]
+fn check_prepared_parameters_follow_set<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>() {
+    use leg_tests::casadi;
+    let peer = casadi::functions(L::NAME).closed;
+    let mut rng = Rng::new(29);
+    let mut p = L::Params::<f64>::default();
+    for i in 0..<L::Params<f64> as Parameters<f64>>::NAMES.len() {
+        let value = p.get(i).unwrap();
+        assert!(p.set(i, value * rng.range(0.8, 1.25) + rng.range(-0.01, 0.01)));
+        let (q, qd) = random_state::<NQ>(&mut rng);
+        let ours = L::dynamics_terms(&q, &qd, &p);
+        let raw = casadi::parameter_vector(&p);
+        let (mut m, mut n, mut j, mut jd) = (
+            vec![0.0; NQ * NQ],
+            vec![0.0; NQ],
+            vec![0.0; NC * NQ],
+            vec![0.0; NC],
+        );
+        let call = casadi::Prepared::new(
+            peer.terms,
+            &[q.as_slice(), qd.as_slice(), &raw],
+            &mut [&mut m, &mut n, &mut j, &mut jd],
+        );
+        // SAFETY: the buffers live to the end of this iteration and have the dense sizes.
+        assert_eq!(unsafe { call.call() }, 0);
+        let close = |a: &[f64], b: &[f64], what: &str| {
+            let scale = b.iter().fold(1e-9f64, |s, x| s.max(x.abs()));
+            for (x, y) in a.iter().zip(b) {
+                assert!(
+                    (x - y).abs() <= 1e-12 * scale,
+                    "{}: {what} after setting {}: ours {x}, CasADi {y}",
+                    L::NAME,
+                    <L::Params<f64> as Parameters<f64>>::NAMES[i]
+                );
+            }
+        };
+        close(ours.mass_matrix.as_slice(), &m, "M");
+        close(ours.bias_forces.as_slice(), &n, "N");
+        close(ours.constraint_jacobian.as_slice(), &j, "J");
+        close(ours.constraint_bias.as_slice(), &jd, "J̇q̇");
+    }
+}
+
+#[cfg(feature = "peers")]
+macro_rules! prepared {
+    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
+        mod $module {
+            #[test]
+            fn prepared_parameters_follow_set() {
+                super::super::check_prepared_parameters_follow_set::<$ty, $nq, $nc, $nu>();
+            }
+        }
+    };
+}
+
+#[cfg(feature = "peers")]
+mod prepared_parameters {
+    generated::for_each_model!(prepared);
 }

@@ -285,6 +285,7 @@ fn assemble(spec: &Spec, model: &Model, derived: Derived) -> IrFile {
                         InputShape::Struct {
                             type_name: "Params".into(),
                             fields: fields.clone(),
+                            prepared: 0,
                         }
                     } else {
                         InputShape::Vector { len: n }

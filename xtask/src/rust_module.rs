@@ -341,15 +341,23 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         let v = codegen::scalar_literal(p.default);
         defaults.push(quote!(#id: #v));
         let i = lit(param_names.len());
-        getters.push(quote!(#i => Some(self.#id)));
-        setters.push(quote!(#i => self.#id = value));
+        getters.push(quote!(#i => Some(self.values.#id)));
+        setters.push(quote!(#i => self.values.#id = value));
         param_names.push(p.name.clone());
     }
 
-    let mut functions = Vec::new();
+    // Parameter-only work is done once per parameter set (`Params::new`), not per call.
+    let hoisted = codegen::hoist::hoist(&ir.functions, "p", "ParamValues");
+    let prepared = lit(hoisted.prepare.outputs[0].rows);
+    let mut functions = vec![codegen::emit_function(
+        &hoisted.prepare,
+        "The parameter-only quantities the terms read (products of masses, lengths and\n\
+         centres of mass, inertias about the joints, …), computed once per parameter set\n\
+         by [`Params::new`].",
+    )?];
     let mut methods = Vec::new();
     let mut contact_methods = Vec::new();
-    for (f, t) in ir.functions.iter().zip(terms(nq, nc, nk)) {
+    for (f, t) in hoisted.programs.iter().zip(terms(nq, nc, nk)) {
         functions.push(codegen::emit_function(f, t.doc)?);
         if f.name.starts_with("contact_") {
             contact_methods.push(trait_method(f, nq, nc));
@@ -393,16 +401,63 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
         pub struct #ty;
 
-        /// Physical parameters; `Default` holds the spec's values. Change them at run
-        /// time without regenerating.
+        /// The physical quantities of the spec; `Default` holds its values.
+        #[derive(Clone, Copy, Debug, PartialEq)]
+        pub struct ParamValues<T> {
+            #(#fields,)*
+        }
+
+        impl<T: Real> Default for ParamValues<T> {
+            fn default() -> Self {
+                Self { #(#defaults,)* }
+            }
+        }
+
+        /// Physical parameters, ready for evaluation: the values (read as fields through
+        /// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
+        /// computed once when a value changes instead of in every call. `Default` holds
+        /// the spec's values; change them at run time, without regenerating, with
+        /// [`Params::update`] or [`Parameters::set`].
         #[derive(Clone, Copy, Debug, PartialEq)]
         pub struct Params<T> {
-            #(#fields,)*
+            values: ParamValues<T>,
+            prepared: [T; #prepared],
+        }
+
+        impl<T: Real> Params<T> {
+            /// Parameters of these values.
+            pub fn new(values: ParamValues<T>) -> Self {
+                Self { prepared: prepare(&values).data.0[0], values }
+            }
+
+            /// The values.
+            pub fn values(&self) -> &ParamValues<T> {
+                &self.values
+            }
+
+            /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
+            pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
+                change(&mut self.values);
+                *self = Self::new(self.values);
+            }
+        }
+
+        impl<T> core::ops::Deref for Params<T> {
+            type Target = ParamValues<T>;
+            fn deref(&self) -> &ParamValues<T> {
+                &self.values
+            }
+        }
+
+        impl<T: Real> From<ParamValues<T>> for Params<T> {
+            fn from(values: ParamValues<T>) -> Self {
+                Self::new(values)
+            }
         }
 
         impl<T: Real> Default for Params<T> {
             fn default() -> Self {
-                Self { #(#defaults,)* }
+                Self::new(ParamValues::default())
             }
         }
 
@@ -419,6 +474,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
                     #(#setters,)*
                     _ => return false,
                 }
+                *self = Self::new(self.values);
                 true
             }
         }

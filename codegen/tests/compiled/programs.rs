@@ -10,7 +10,7 @@ pub fn unary<T: Real>(x: &SVector<T, 1>) -> SVector<T, 17> {
     let v2 = x_0 + x_0;
     let v3 = T::lit(1.0) / x_0;
     let v4 = x_0.sqrt();
-    let (v5, v6) = x_0.sin_cos();
+    let (v5, v6) = x_0.sincos();
     let v7 = x_0.tan();
     let v8 = x_0.asin();
     let v9 = x_0.acos();
