@@ -484,6 +484,13 @@ def derive(model):
     dL_dqd = cs.gradient(L, qd)
     M_lagrange = cs.jacobian(dL_dqd, qd)
     N_lagrange = cs.jtimes(dL_dqd, q, qd) - cs.gradient(L, q)
+    # And the closure's J = ∂φ/∂q and J̇ q̇ of the same kinematics, as the notes write them.
+    if model["closures"]:
+        phi_lagrange = cs.vertcat(*[point(c["a"]) - point(c["b"]) for c in model["closures"]])
+        J_lagrange = cs.jacobian(phi_lagrange, q)
+        Jdot_qd_lagrange = cs.jtimes(cs.jtimes(phi_lagrange, q, qd), q, qd)
+    else:
+        J_lagrange, Jdot_qd_lagrange = cs.SX(0, n), cs.SX(0, 1)
 
     # The terms our generator emits, in link-local form (DESIGN.md §3): the mass matrix by
     # the composite-rigid-body recursion in each link's frame, the gravity forces from each
@@ -588,6 +595,8 @@ def derive(model):
         "D": D,
         "J": J,
         "Jdot_qd": Jdot_qd,
+        "J_lagrange": J_lagrange,
+        "Jdot_qd_lagrange": Jdot_qd_lagrange,
     }
     points = cs.horzcat(cs.horzcat(*joint), tips, closure_points, foot)
     numeric = cs.Function("home_check", [q, params], [phi, J, points, M])
@@ -679,19 +688,23 @@ def casadi_c(model, peer, redundant_rows):
     (M, N, J, J̇q̇) and forward dynamics (the KKT system solved by CasADi's `solve`)."""
     name = model["name"]
     q, qd, p = peer["q"], peer["qd"], peer["p"]
-    D, J, Jdot_qd = peer["D"], peer["J"], peer["Jdot_qd"]
-    n, nu, nc = q.size1(), len(model["actuated"]), J.size1()
+    D = peer["D"]
+    n, nu, nc = q.size1(), len(model["actuated"]), peer["J"].size1()
     # Closure rows that repeat the others carry no force (the runtime's convention): CasADi
     # solves the KKT system of the independent rows.
     keep = [r for r in range(nc) if r not in redundant_rows]
-    Jk, Jdot_qd_k = J[keep, :], Jdot_qd[keep]
     u = cs.SX.sym("u", nu)
     B = cs.SX(n, nu)
     for k, a in enumerate(model["actuated"]):
         B[a, k] = 1
     dense = lambda exprs: cs.cse([cs.densify(e) for e in exprs])
     cg = cs.CodeGenerator(f"{name}_casadi", {"with_header": False})
-    for prefix, M, N in [("", peer["M"], peer["N"]), ("closed_", peer["M_closed"], peer["N_closed"])]:
+    forms = [
+        ("", peer["M"], peer["N"], peer["J_lagrange"], peer["Jdot_qd_lagrange"]),
+        ("closed_", peer["M_closed"], peer["N_closed"], peer["J"], peer["Jdot_qd"]),
+    ]
+    for prefix, M, N, J, Jdot_qd in forms:
+        Jk, Jdot_qd_k = J[keep, :], Jdot_qd[keep]
         fused = cs.Function(f"{name}_{prefix}dynamics_terms", [q, qd, p], dense([M, N, J, Jdot_qd]))
         if keep:
             A = cs.blockcat([[M, -Jk.T], [Jk, cs.SX(len(keep), len(keep))]])
