@@ -1,6 +1,6 @@
 //! IR → Rust: straight-line programs to straight-line Rust functions.
 //!
-//! The emitted functions are generic over a scalar `T: Real` (the caller brings `Real`,
+//! The emitted functions are generic over a scalar `T: Arithmetic` (the caller brings `Arithmetic`,
 //! `SVector`, `SMatrix` and `ArrayStorage` into scope), take vector inputs as
 //! `&SVector<T, n>` (destructured, so there is no indexing and no panic path) and struct
 //! inputs as `&Type<T>` (read as fields), and return `T`, `SVector` or `SMatrix` values
@@ -224,7 +224,7 @@ fn output_type(kind: OutputKind, rows: usize, cols: usize) -> TokenStream {
     }
 }
 
-/// Emits `prog` as `pub fn name<T: Real>(inputs…) -> outputs { … }` with `doc` as its
+/// Emits `prog` as `pub fn name<T: Arithmetic>(inputs…) -> outputs { … }` with `doc` as its
 /// documentation. Values no output needs are not emitted.
 pub fn emit_function(prog: &Program, doc: &str) -> Result<TokenStream, Error> {
     prog.validate()?;
@@ -311,7 +311,7 @@ pub fn emit_function(prog: &Program, doc: &str) -> Result<TokenStream, Error> {
         }
     }
 
-    // `sin` and `cos` of one value become one `Real::sincos` (one argument reduction),
+    // `sin` and `cos` of one value become one `Arithmetic::sincos` (one argument reduction),
     // emitted where the first of the two was.
     let mut sin_of = HashMap::new();
     let mut cos_of = HashMap::new();
@@ -391,7 +391,7 @@ pub fn emit_function(prog: &Program, doc: &str) -> Result<TokenStream, Error> {
     });
     Ok(quote! {
         #(#doc_lines)*
-        pub fn #name<T: Real>(#(#args),*) -> #ret {
+        pub fn #name<T: Arithmetic>(#(#args),*) -> #ret {
             #(#body)*
             #result
         }

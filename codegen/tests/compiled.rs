@@ -26,6 +26,9 @@ impl Real for f32 {
     }
 }
 
+/// The emitted functions' bound: here this test's `Real`.
+pub use Real as Arithmetic;
+
 pub struct FixtureParams<T> {
     pub mass: T,
     pub length: T,

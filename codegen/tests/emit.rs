@@ -249,7 +249,7 @@ fn programs_source() -> String {
     let functions: Vec<TokenStream> = FIXTURES.iter().map(|n| emit(&fixture(n))).collect();
     let tokens = quote::quote! {
         #![cfg_attr(rustfmt, rustfmt::skip)]
-        use super::{FixtureParams, Real};
+        use super::{Arithmetic, FixtureParams};
         use nalgebra::{ArrayStorage, SMatrix, SVector};
         #(#functions)*
     };

@@ -8,7 +8,9 @@
     clippy::too_many_lines
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
-use leg_models::{ContactModel, DynamicsTerms, JointKind, LegModel, Parameters, Real};
+use leg_models::{
+    Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters,
+};
 /// Number of joints.
 pub const NQ: usize = 4;
 /// Number of closure rows (two per closure).
@@ -104,7 +106,7 @@ pub struct ParamValues<T> {
     /// Point a of closure `shin_pin`, link frame, y [m].
     pub shin_pin_a_y: T,
 }
-impl<T: Real> Default for ParamValues<T> {
+impl<T: Arithmetic> Default for ParamValues<T> {
     fn default() -> Self {
         Self {
             gravity_x: T::lit(0.0),
@@ -160,7 +162,7 @@ pub struct Params<T> {
     values: ParamValues<T>,
     prepared: [T; 19],
 }
-impl<T: Real> Params<T> {
+impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
     pub fn new(values: ParamValues<T>) -> Self {
         Self {
@@ -184,17 +186,17 @@ impl<T> core::ops::Deref for Params<T> {
         &self.values
     }
 }
-impl<T: Real> From<ParamValues<T>> for Params<T> {
+impl<T: Arithmetic> From<ParamValues<T>> for Params<T> {
     fn from(values: ParamValues<T>) -> Self {
         Self::new(values)
     }
 }
-impl<T: Real> Default for Params<T> {
+impl<T: Arithmetic> Default for Params<T> {
     fn default() -> Self {
         Self::new(ParamValues::default())
     }
 }
-impl<T: Real> Parameters<T> for Params<T> {
+impl<T: Arithmetic> Parameters<T> for Params<T> {
     const NAMES: &'static [&'static str] = &[
         "gravity_x",
         "gravity_y",
@@ -350,72 +352,87 @@ impl LegModel<NQ, NC, NU> for Atrias {
     const HOME: [f64; NQ] = [-2.1708, 1.2, -0.9708, -1.2];
     const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 2;
-    type Params<T: Real> = Params<T>;
-    fn mass_matrix<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 4, 4> {
+    type Params<T: Arithmetic> = Params<T>;
+    fn mass_matrix<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 4, 4> {
         mass_matrix(q, p)
     }
-    fn bias_forces<T: Real>(
+    fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SVector<T, 4> {
         bias_forces(q, qd, p)
     }
-    fn gravity_forces<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 4> {
+    fn gravity_forces<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 4> {
         gravity_forces(q, p)
     }
-    fn damping_forces<T: Real>(qd: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 4> {
+    fn damping_forces<T: Arithmetic>(
+        qd: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> SVector<T, 4> {
         damping_forces(qd, p)
     }
-    fn closure_residual<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 2> {
+    fn closure_residual<T: Arithmetic>(
+        q: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> SVector<T, 2> {
         closure_residual(q, p)
     }
-    fn constraint_jacobian<T: Real>(
+    fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 4> {
         constraint_jacobian(q, p)
     }
-    fn constraint_bias<T: Real>(
+    fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SVector<T, 2> {
         constraint_bias(q, qd, p)
     }
-    fn foot_position<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 2> {
+    fn foot_position<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 2> {
         foot_position(q, p)
     }
-    fn foot_jacobian<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> {
+    fn foot_jacobian<T: Arithmetic>(
+        q: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 4> {
         foot_jacobian(q, p)
     }
-    fn foot_bias<T: Real>(
+    fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SVector<T, 2> {
         foot_bias(q, qd, p)
     }
-    fn kinetic_energy<T: Real>(
+    fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
         p: &Params<T>,
     ) -> T {
         kinetic_energy(q, qd, p)
     }
-    fn potential_energy<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> T {
+    fn potential_energy<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
-    fn joint_positions<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> {
+    fn joint_positions<T: Arithmetic>(
+        q: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 4> {
         joint_positions(q, p)
     }
-    fn link_tips<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> {
+    fn link_tips<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> {
         link_tips(q, p)
     }
-    fn closure_points<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 2> {
+    fn closure_points<T: Arithmetic>(
+        q: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 2> {
         closure_points(q, p)
     }
-    fn dynamics_terms<T: Real>(
+    fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
         p: &Params<T>,
@@ -438,13 +455,19 @@ impl ContactModel<NQ, NC, NU, NK> for Atrias {
     const CONTACT_FRICTION: &'static [f64] = &[];
     const GROUND_NORMAL: [f64; 2] = [0.0, 1.0];
     const GROUND_OFFSET: f64 = 0.0;
-    fn contact_positions<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 0> {
+    fn contact_positions<T: Arithmetic>(
+        q: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> SVector<T, 0> {
         contact_positions(q, p)
     }
-    fn contact_jacobian<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 0, 4> {
+    fn contact_jacobian<T: Arithmetic>(
+        q: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 0, 4> {
         contact_jacobian(q, p)
     }
-    fn contact_bias<T: Real>(
+    fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
         p: &Params<T>,
@@ -455,7 +478,7 @@ impl ContactModel<NQ, NC, NU, NK> for Atrias {
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 19> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 19> {
     let v0 = values.thigh_com_x * values.thigh_com_x;
     let v1 = values.thigh_com_y * values.thigh_com_y;
     let v2 = v0 + v1;
@@ -586,7 +609,7 @@ pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 19> {
     )
 }
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
-pub fn mass_matrix<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 4, 4> {
+pub fn mass_matrix<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 4, 4> {
     let [_, q_1, _, q_3] = q.data.0[0];
     let (v2, v0) = q_1.sincos();
     let v1 = v0 * p.prepared[2];
@@ -616,7 +639,7 @@ pub fn mass_matrix<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 4, 4
     )
 }
 /// `N(q, q̇) = (∂²L/∂q̇∂q) q̇ − ∂L/∂q = C q̇ + G`.
-pub fn bias_forces<T: Real>(
+pub fn bias_forces<T: Arithmetic>(
     q: &SVector<T, 4>,
     qd: &SVector<T, 4>,
     p: &Params<T>,
@@ -688,7 +711,7 @@ pub fn bias_forces<T: Real>(
     SMatrix::from_data(ArrayStorage([[v29, v32, v62, v65]]))
 }
 /// `G(q) = ∂V/∂q`.
-pub fn gravity_forces<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 4> {
+pub fn gravity_forces<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 4> {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
     let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.prepared[10];
@@ -723,7 +746,10 @@ pub fn gravity_forces<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 4
     SMatrix::from_data(ArrayStorage([[v16, v15, v33, v32]]))
 }
 /// Viscous joint damping `D q̇`.
-pub fn damping_forces<T: Real>(qd: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 4> {
+pub fn damping_forces<T: Arithmetic>(
+    qd: &SVector<T, 4>,
+    p: &Params<T>,
+) -> SVector<T, 4> {
     let [qd_0, qd_1, qd_2, qd_3] = qd.data.0[0];
     let v0 = p.thigh_damping * qd_0;
     let v1 = p.shin_damping * qd_1;
@@ -732,7 +758,10 @@ pub fn damping_forces<T: Real>(qd: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 
     SMatrix::from_data(ArrayStorage([[v0, v1, v2, v3]]))
 }
 /// `φ(q)`: point a minus point b of each closure.
-pub fn closure_residual<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 2> {
+pub fn closure_residual<T: Arithmetic>(
+    q: &SVector<T, 4>,
+    p: &Params<T>,
+) -> SVector<T, 2> {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
     let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.thigh_length_x;
@@ -787,7 +816,7 @@ pub fn closure_residual<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T,
     SMatrix::from_data(ArrayStorage([[v36, v53]]))
 }
 /// `J(q) = ∂φ/∂q`.
-pub fn constraint_jacobian<T: Real>(
+pub fn constraint_jacobian<T: Arithmetic>(
     q: &SVector<T, 4>,
     p: &Params<T>,
 ) -> SMatrix<T, 2, 4> {
@@ -843,7 +872,7 @@ pub fn constraint_jacobian<T: Real>(
     SMatrix::from_data(ArrayStorage([[v17, v24], [v25, v20], [v42, v50], [v38, v51]]))
 }
 /// `J̇(q, q̇) q̇`.
-pub fn constraint_bias<T: Real>(
+pub fn constraint_bias<T: Arithmetic>(
     q: &SVector<T, 4>,
     qd: &SVector<T, 4>,
     p: &Params<T>,
@@ -913,7 +942,7 @@ pub fn constraint_bias<T: Real>(
     SMatrix::from_data(ArrayStorage([[v44, v63]]))
 }
 /// The foot point in the base frame.
-pub fn foot_position<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 2> {
+pub fn foot_position<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 2> {
     let [q_0, q_1, _, _] = q.data.0[0];
     let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.thigh_length_x;
@@ -942,7 +971,10 @@ pub fn foot_position<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 2>
     SMatrix::from_data(ArrayStorage([[v17, v25]]))
 }
 /// `J_f(q) = ∂(foot)/∂q`.
-pub fn foot_jacobian<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> {
+pub fn foot_jacobian<T: Arithmetic>(
+    q: &SVector<T, 4>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 4> {
     let [q_0, q_1, _, _] = q.data.0[0];
     let (v0, v3) = q_0.sincos();
     let (v4, v1) = q_1.sincos();
@@ -978,7 +1010,7 @@ pub fn foot_jacobian<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2,
     )
 }
 /// `J̇_f(q, q̇) q̇`.
-pub fn foot_bias<T: Real>(
+pub fn foot_bias<T: Arithmetic>(
     q: &SVector<T, 4>,
     qd: &SVector<T, 4>,
     p: &Params<T>,
@@ -1019,7 +1051,7 @@ pub fn foot_bias<T: Real>(
     SMatrix::from_data(ArrayStorage([[v22, v32]]))
 }
 /// Kinetic energy of links and rotors.
-pub fn kinetic_energy<T: Real>(
+pub fn kinetic_energy<T: Arithmetic>(
     q: &SVector<T, 4>,
     qd: &SVector<T, 4>,
     p: &Params<T>,
@@ -1067,7 +1099,7 @@ pub fn kinetic_energy<T: Real>(
     v39
 }
 /// Potential energy `−Σ m g·c`.
-pub fn potential_energy<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> T {
+pub fn potential_energy<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> T {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
     let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.prepared[11];
@@ -1105,7 +1137,10 @@ pub fn potential_energy<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> T {
     v36
 }
 /// Joint positions in the base frame, one column per joint.
-pub fn joint_positions<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> {
+pub fn joint_positions<T: Arithmetic>(
+    q: &SVector<T, 4>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 4> {
     let [q_0, _, q_2, _] = q.data.0[0];
     let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.thigh_length_x;
@@ -1135,7 +1170,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 
     )
 }
 /// Link tips in the base frame, one column per link.
-pub fn link_tips<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> {
+pub fn link_tips<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
     let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.thigh_length_x;
@@ -1188,7 +1223,10 @@ pub fn link_tips<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> 
     SMatrix::from_data(ArrayStorage([[v5, v9], [v21, v25], [v31, v35], [v47, v51]]))
 }
 /// Closure points a, b of each closure in the base frame.
-pub fn closure_points<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 2> {
+pub fn closure_points<T: Arithmetic>(
+    q: &SVector<T, 4>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 2> {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
     let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.thigh_length_x;
@@ -1241,18 +1279,21 @@ pub fn closure_points<T: Real>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2
     SMatrix::from_data(ArrayStorage([[v17, v25], [v43, v51]]))
 }
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
-pub fn contact_positions<T: Real>(_q: &SVector<T, 4>, _p: &Params<T>) -> SVector<T, 0> {
+pub fn contact_positions<T: Arithmetic>(
+    _q: &SVector<T, 4>,
+    _p: &Params<T>,
+) -> SVector<T, 0> {
     SMatrix::from_data(ArrayStorage([[]]))
 }
 /// `J_c(q) = ∂x_c/∂q`.
-pub fn contact_jacobian<T: Real>(
+pub fn contact_jacobian<T: Arithmetic>(
     _q: &SVector<T, 4>,
     _p: &Params<T>,
 ) -> SMatrix<T, 0, 4> {
     SMatrix::from_data(ArrayStorage([[], [], [], []]))
 }
 /// `J̇_c(q, q̇) q̇`.
-pub fn contact_bias<T: Real>(
+pub fn contact_bias<T: Arithmetic>(
     _q: &SVector<T, 4>,
     _qd: &SVector<T, 4>,
     _p: &Params<T>,
@@ -1260,7 +1301,7 @@ pub fn contact_bias<T: Real>(
     SMatrix::from_data(ArrayStorage([[]]))
 }
 /// `M`, `N`, `J` and `J̇ q̇` together, sharing subexpressions.
-pub fn dynamics_terms<T: Real>(
+pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 4>,
     qd: &SVector<T, 4>,
     p: &Params<T>,

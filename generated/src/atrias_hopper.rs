@@ -8,7 +8,9 @@
     clippy::too_many_lines
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
-use leg_models::{ContactModel, DynamicsTerms, JointKind, LegModel, Parameters, Real};
+use leg_models::{
+    Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters,
+};
 /// Number of joints.
 pub const NQ: usize = 9;
 /// Number of closure rows (two per closure).
@@ -178,7 +180,7 @@ pub struct ParamValues<T> {
     /// Rest value of spring `four_bar_spring` on `four_bar_motor` minus `four_bar_link` [rad].
     pub four_bar_spring_rest: T,
 }
-impl<T: Real> Default for ParamValues<T> {
+impl<T: Arithmetic> Default for ParamValues<T> {
     fn default() -> Self {
         Self {
             gravity_x: T::lit(0.0),
@@ -271,7 +273,7 @@ pub struct Params<T> {
     values: ParamValues<T>,
     prepared: [T; 62],
 }
-impl<T: Real> Params<T> {
+impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
     pub fn new(values: ParamValues<T>) -> Self {
         Self {
@@ -295,17 +297,17 @@ impl<T> core::ops::Deref for Params<T> {
         &self.values
     }
 }
-impl<T: Real> From<ParamValues<T>> for Params<T> {
+impl<T: Arithmetic> From<ParamValues<T>> for Params<T> {
     fn from(values: ParamValues<T>) -> Self {
         Self::new(values)
     }
 }
-impl<T: Real> Default for Params<T> {
+impl<T: Arithmetic> Default for Params<T> {
     fn default() -> Self {
         Self::new(ParamValues::default())
     }
 }
-impl<T: Real> Parameters<T> for Params<T> {
+impl<T: Arithmetic> Parameters<T> for Params<T> {
     const NAMES: &'static [&'static str] = &[
         "gravity_x",
         "gravity_y",
@@ -617,72 +619,87 @@ impl LegModel<NQ, NC, NU> for AtriasHopper {
     ];
     const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 7;
-    type Params<T: Real> = Params<T>;
-    fn mass_matrix<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 9, 9> {
+    type Params<T: Arithmetic> = Params<T>;
+    fn mass_matrix<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 9, 9> {
         mass_matrix(q, p)
     }
-    fn bias_forces<T: Real>(
+    fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
         p: &Params<T>,
     ) -> SVector<T, 9> {
         bias_forces(q, qd, p)
     }
-    fn gravity_forces<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 9> {
+    fn gravity_forces<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 9> {
         gravity_forces(q, p)
     }
-    fn damping_forces<T: Real>(qd: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 9> {
+    fn damping_forces<T: Arithmetic>(
+        qd: &SVector<T, 9>,
+        p: &Params<T>,
+    ) -> SVector<T, 9> {
         damping_forces(qd, p)
     }
-    fn closure_residual<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 2> {
+    fn closure_residual<T: Arithmetic>(
+        q: &SVector<T, 9>,
+        p: &Params<T>,
+    ) -> SVector<T, 2> {
         closure_residual(q, p)
     }
-    fn constraint_jacobian<T: Real>(
+    fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 9>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 9> {
         constraint_jacobian(q, p)
     }
-    fn constraint_bias<T: Real>(
+    fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
         p: &Params<T>,
     ) -> SVector<T, 2> {
         constraint_bias(q, qd, p)
     }
-    fn foot_position<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 2> {
+    fn foot_position<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 2> {
         foot_position(q, p)
     }
-    fn foot_jacobian<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 9> {
+    fn foot_jacobian<T: Arithmetic>(
+        q: &SVector<T, 9>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 9> {
         foot_jacobian(q, p)
     }
-    fn foot_bias<T: Real>(
+    fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
         p: &Params<T>,
     ) -> SVector<T, 2> {
         foot_bias(q, qd, p)
     }
-    fn kinetic_energy<T: Real>(
+    fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
         p: &Params<T>,
     ) -> T {
         kinetic_energy(q, qd, p)
     }
-    fn potential_energy<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> T {
+    fn potential_energy<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
-    fn joint_positions<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 9> {
+    fn joint_positions<T: Arithmetic>(
+        q: &SVector<T, 9>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 9> {
         joint_positions(q, p)
     }
-    fn link_tips<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 9> {
+    fn link_tips<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 9> {
         link_tips(q, p)
     }
-    fn closure_points<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 2> {
+    fn closure_points<T: Arithmetic>(
+        q: &SVector<T, 9>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 2> {
         closure_points(q, p)
     }
-    fn dynamics_terms<T: Real>(
+    fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
         p: &Params<T>,
@@ -705,13 +722,19 @@ impl ContactModel<NQ, NC, NU, NK> for AtriasHopper {
     const CONTACT_FRICTION: &'static [f64] = &[0.8];
     const GROUND_NORMAL: [f64; 2] = [0.0, 1.0];
     const GROUND_OFFSET: f64 = 0.0;
-    fn contact_positions<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 2> {
+    fn contact_positions<T: Arithmetic>(
+        q: &SVector<T, 9>,
+        p: &Params<T>,
+    ) -> SVector<T, 2> {
         contact_positions(q, p)
     }
-    fn contact_jacobian<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 9> {
+    fn contact_jacobian<T: Arithmetic>(
+        q: &SVector<T, 9>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 9> {
         contact_jacobian(q, p)
     }
-    fn contact_bias<T: Real>(
+    fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
         p: &Params<T>,
@@ -722,7 +745,7 @@ impl ContactModel<NQ, NC, NU, NK> for AtriasHopper {
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 62> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 62> {
     let v0 = values.four_bar_link_mass + values.lower_leg_mass;
     let v1 = values.torso_mass + v0;
     let v2 = values.thigh_mass + values.shin_mass;
@@ -1006,7 +1029,7 @@ pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 62> {
     )
 }
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
-pub fn mass_matrix<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 9, 9> {
+pub fn mass_matrix<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 9, 9> {
     let [_, _, q_2, q_3, q_4, q_5, q_6, q_7, q_8] = q.data.0[0];
     let (v46, v0) = q_2.sincos();
     let (v1, v9) = q_7.sincos();
@@ -1253,7 +1276,7 @@ pub fn mass_matrix<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 9, 9
     )
 }
 /// `N(q, q̇) = (∂²L/∂q̇∂q) q̇ − ∂L/∂q = C q̇ + G`.
-pub fn bias_forces<T: Real>(
+pub fn bias_forces<T: Arithmetic>(
     q: &SVector<T, 9>,
     qd: &SVector<T, 9>,
     p: &Params<T>,
@@ -1575,7 +1598,7 @@ pub fn bias_forces<T: Real>(
     )
 }
 /// `G(q) = ∂V/∂q`.
-pub fn gravity_forces<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 9> {
+pub fn gravity_forces<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 9> {
     let [_, _, q_2, q_3, q_4, q_5, q_6, q_7, q_8] = q.data.0[0];
     let (v2, v0) = q_2.sincos();
     let v1 = v0 * p.prepared[39];
@@ -1664,7 +1687,10 @@ pub fn gravity_forces<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 9
     )
 }
 /// Viscous joint damping `D q̇`.
-pub fn damping_forces<T: Real>(qd: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 9> {
+pub fn damping_forces<T: Arithmetic>(
+    qd: &SVector<T, 9>,
+    p: &Params<T>,
+) -> SVector<T, 9> {
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6, qd_7, qd_8] = qd.data.0[0];
     let v0 = p.slide_x_damping * qd_0;
     let v1 = p.slide_y_damping * qd_1;
@@ -1678,7 +1704,10 @@ pub fn damping_forces<T: Real>(qd: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 
     SMatrix::from_data(ArrayStorage([[v0, v1, v2, v3, v4, v5, v6, v7, v8]]))
 }
 /// `φ(q)`: point a minus point b of each closure.
-pub fn closure_residual<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 2> {
+pub fn closure_residual<T: Arithmetic>(
+    q: &SVector<T, 9>,
+    p: &Params<T>,
+) -> SVector<T, 2> {
     let [q_0, q_1, q_2, _, _, q_5, q_6, q_7, q_8] = q.data.0[0];
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
@@ -1760,7 +1789,7 @@ pub fn closure_residual<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T,
     SMatrix::from_data(ArrayStorage([[v57, v81]]))
 }
 /// `J(q) = ∂φ/∂q`.
-pub fn constraint_jacobian<T: Real>(
+pub fn constraint_jacobian<T: Arithmetic>(
     q: &SVector<T, 9>,
     p: &Params<T>,
 ) -> SMatrix<T, 2, 9> {
@@ -1853,7 +1882,7 @@ pub fn constraint_jacobian<T: Real>(
     )
 }
 /// `J̇(q, q̇) q̇`.
-pub fn constraint_bias<T: Real>(
+pub fn constraint_bias<T: Arithmetic>(
     q: &SVector<T, 9>,
     qd: &SVector<T, 9>,
     p: &Params<T>,
@@ -1951,7 +1980,7 @@ pub fn constraint_bias<T: Real>(
     SMatrix::from_data(ArrayStorage([[v67, v92]]))
 }
 /// The foot point in the base frame.
-pub fn foot_position<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 2> {
+pub fn foot_position<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 2> {
     let [q_0, q_1, q_2, _, _, q_5, q_6, _, _] = q.data.0[0];
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
@@ -2001,7 +2030,10 @@ pub fn foot_position<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 2>
     SMatrix::from_data(ArrayStorage([[v32, v47]]))
 }
 /// `J_f(q) = ∂(foot)/∂q`.
-pub fn foot_jacobian<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 9> {
+pub fn foot_jacobian<T: Arithmetic>(
+    q: &SVector<T, 9>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 9> {
     let [_, _, q_2, _, _, q_5, q_6, _, _] = q.data.0[0];
     let (v0, v3) = q_2.sincos();
     let (v4, v1) = q_5.sincos();
@@ -2058,7 +2090,7 @@ pub fn foot_jacobian<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2,
     )
 }
 /// `J̇_f(q, q̇) q̇`.
-pub fn foot_bias<T: Real>(
+pub fn foot_bias<T: Arithmetic>(
     q: &SVector<T, 9>,
     qd: &SVector<T, 9>,
     p: &Params<T>,
@@ -2118,7 +2150,7 @@ pub fn foot_bias<T: Real>(
     SMatrix::from_data(ArrayStorage([[v37, v52]]))
 }
 /// Kinetic energy of links and rotors.
-pub fn kinetic_energy<T: Real>(
+pub fn kinetic_energy<T: Arithmetic>(
     q: &SVector<T, 9>,
     qd: &SVector<T, 9>,
     p: &Params<T>,
@@ -2406,7 +2438,7 @@ pub fn kinetic_energy<T: Real>(
     v284
 }
 /// Potential energy `−Σ m g·c`.
-pub fn potential_energy<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> T {
+pub fn potential_energy<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> T {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6, q_7, q_8] = q.data.0[0];
     let v0 = q_3 - q_5;
     let v1 = v0 - p.thigh_spring_rest;
@@ -2503,7 +2535,10 @@ pub fn potential_energy<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> T {
     v98
 }
 /// Joint positions in the base frame, one column per joint.
-pub fn joint_positions<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 9> {
+pub fn joint_positions<T: Arithmetic>(
+    q: &SVector<T, 9>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 9> {
     let [q_0, q_1, q_2, _, _, q_5, _, q_7, _] = q.data.0[0];
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
@@ -2565,7 +2600,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 
     )
 }
 /// Link tips in the base frame, one column per link.
-pub fn link_tips<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 9> {
+pub fn link_tips<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 9> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6, q_7, q_8] = q.data.0[0];
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
@@ -2687,7 +2722,10 @@ pub fn link_tips<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 9> 
     )
 }
 /// Closure points a, b of each closure in the base frame.
-pub fn closure_points<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 2> {
+pub fn closure_points<T: Arithmetic>(
+    q: &SVector<T, 9>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 2> {
     let [q_0, q_1, q_2, _, _, q_5, q_6, q_7, q_8] = q.data.0[0];
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
@@ -2767,7 +2805,10 @@ pub fn closure_points<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2
     SMatrix::from_data(ArrayStorage([[v32, v47], [v71, v79]]))
 }
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
-pub fn contact_positions<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 2> {
+pub fn contact_positions<T: Arithmetic>(
+    q: &SVector<T, 9>,
+    p: &Params<T>,
+) -> SVector<T, 2> {
     let [q_0, q_1, q_2, _, _, q_5, q_6, _, _] = q.data.0[0];
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
@@ -2817,7 +2858,10 @@ pub fn contact_positions<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T
     SMatrix::from_data(ArrayStorage([[v32, v47]]))
 }
 /// `J_c(q) = ∂x_c/∂q`.
-pub fn contact_jacobian<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 9> {
+pub fn contact_jacobian<T: Arithmetic>(
+    q: &SVector<T, 9>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 9> {
     let [_, _, q_2, _, _, q_5, q_6, _, _] = q.data.0[0];
     let (v0, v3) = q_2.sincos();
     let (v4, v1) = q_5.sincos();
@@ -2874,7 +2918,7 @@ pub fn contact_jacobian<T: Real>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T,
     )
 }
 /// `J̇_c(q, q̇) q̇`.
-pub fn contact_bias<T: Real>(
+pub fn contact_bias<T: Arithmetic>(
     q: &SVector<T, 9>,
     qd: &SVector<T, 9>,
     p: &Params<T>,
@@ -2934,7 +2978,7 @@ pub fn contact_bias<T: Real>(
     SMatrix::from_data(ArrayStorage([[v37, v52]]))
 }
 /// `M`, `N`, `J` and `J̇ q̇` together, sharing subexpressions.
-pub fn dynamics_terms<T: Real>(
+pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 9>,
     qd: &SVector<T, 9>,
     p: &Params<T>,

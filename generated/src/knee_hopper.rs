@@ -8,7 +8,9 @@
     clippy::too_many_lines
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
-use leg_models::{ContactModel, DynamicsTerms, JointKind, LegModel, Parameters, Real};
+use leg_models::{
+    Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters,
+};
 /// Number of joints.
 pub const NQ: usize = 3;
 /// Number of closure rows (two per closure).
@@ -90,7 +92,7 @@ pub struct ParamValues<T> {
     /// Rest value of spring `knee_spring` on the joint of `shin` [rad].
     pub knee_spring_rest: T,
 }
-impl<T: Real> Default for ParamValues<T> {
+impl<T: Arithmetic> Default for ParamValues<T> {
     fn default() -> Self {
         Self {
             gravity_x: T::lit(0.0),
@@ -139,7 +141,7 @@ pub struct Params<T> {
     values: ParamValues<T>,
     prepared: [T; 22],
 }
-impl<T: Real> Params<T> {
+impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
     pub fn new(values: ParamValues<T>) -> Self {
         Self {
@@ -163,17 +165,17 @@ impl<T> core::ops::Deref for Params<T> {
         &self.values
     }
 }
-impl<T: Real> From<ParamValues<T>> for Params<T> {
+impl<T: Arithmetic> From<ParamValues<T>> for Params<T> {
     fn from(values: ParamValues<T>) -> Self {
         Self::new(values)
     }
 }
-impl<T: Real> Default for Params<T> {
+impl<T: Arithmetic> Default for Params<T> {
     fn default() -> Self {
         Self::new(ParamValues::default())
     }
 }
-impl<T: Real> Parameters<T> for Params<T> {
+impl<T: Arithmetic> Parameters<T> for Params<T> {
     const NAMES: &'static [&'static str] = &[
         "gravity_x",
         "gravity_y",
@@ -310,72 +312,87 @@ impl LegModel<NQ, NC, NU> for KneeHopper {
     const HOME: [f64; NQ] = [0.31593, -1.0708, -1.0];
     const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 3;
-    type Params<T: Real> = Params<T>;
-    fn mass_matrix<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 3, 3> {
+    type Params<T: Arithmetic> = Params<T>;
+    fn mass_matrix<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 3, 3> {
         mass_matrix(q, p)
     }
-    fn bias_forces<T: Real>(
+    fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
         p: &Params<T>,
     ) -> SVector<T, 3> {
         bias_forces(q, qd, p)
     }
-    fn gravity_forces<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 3> {
+    fn gravity_forces<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 3> {
         gravity_forces(q, p)
     }
-    fn damping_forces<T: Real>(qd: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 3> {
+    fn damping_forces<T: Arithmetic>(
+        qd: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> SVector<T, 3> {
         damping_forces(qd, p)
     }
-    fn closure_residual<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 0> {
+    fn closure_residual<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> SVector<T, 0> {
         closure_residual(q, p)
     }
-    fn constraint_jacobian<T: Real>(
+    fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 3>,
         p: &Params<T>,
     ) -> SMatrix<T, 0, 3> {
         constraint_jacobian(q, p)
     }
-    fn constraint_bias<T: Real>(
+    fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
         p: &Params<T>,
     ) -> SVector<T, 0> {
         constraint_bias(q, qd, p)
     }
-    fn foot_position<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 2> {
+    fn foot_position<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 2> {
         foot_position(q, p)
     }
-    fn foot_jacobian<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
+    fn foot_jacobian<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 3> {
         foot_jacobian(q, p)
     }
-    fn foot_bias<T: Real>(
+    fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
         p: &Params<T>,
     ) -> SVector<T, 2> {
         foot_bias(q, qd, p)
     }
-    fn kinetic_energy<T: Real>(
+    fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
         p: &Params<T>,
     ) -> T {
         kinetic_energy(q, qd, p)
     }
-    fn potential_energy<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> T {
+    fn potential_energy<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
-    fn joint_positions<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
+    fn joint_positions<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 3> {
         joint_positions(q, p)
     }
-    fn link_tips<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
+    fn link_tips<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
         link_tips(q, p)
     }
-    fn closure_points<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 0> {
+    fn closure_points<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 0> {
         closure_points(q, p)
     }
-    fn dynamics_terms<T: Real>(
+    fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
         p: &Params<T>,
@@ -398,13 +415,19 @@ impl ContactModel<NQ, NC, NU, NK> for KneeHopper {
     const CONTACT_FRICTION: &'static [f64] = &[0.8];
     const GROUND_NORMAL: [f64; 2] = [0.0, 1.0];
     const GROUND_OFFSET: f64 = 0.0;
-    fn contact_positions<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 2> {
+    fn contact_positions<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> SVector<T, 2> {
         contact_positions(q, p)
     }
-    fn contact_jacobian<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
+    fn contact_jacobian<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 3> {
         contact_jacobian(q, p)
     }
-    fn contact_bias<T: Real>(
+    fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
         p: &Params<T>,
@@ -415,7 +438,7 @@ impl ContactModel<NQ, NC, NU, NK> for KneeHopper {
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 22> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 22> {
     let v0 = values.thigh_mass + values.shin_mass;
     let v1 = values.body_mass + v0;
     let v2 = values.thigh_mass * values.thigh_com_x;
@@ -513,7 +536,7 @@ pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 22> {
     )
 }
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
-pub fn mass_matrix<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 3, 3> {
+pub fn mass_matrix<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 3, 3> {
     let [_, q_1, q_2] = q.data.0[0];
     let (v8, v0) = q_1.sincos();
     let (v3, v1) = q_2.sincos();
@@ -548,7 +571,7 @@ pub fn mass_matrix<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 3, 3
     )
 }
 /// `N(q, q̇) = (∂²L/∂q̇∂q) q̇ − ∂L/∂q = C q̇ + G`.
-pub fn bias_forces<T: Real>(
+pub fn bias_forces<T: Arithmetic>(
     q: &SVector<T, 3>,
     qd: &SVector<T, 3>,
     p: &Params<T>,
@@ -614,7 +637,7 @@ pub fn bias_forces<T: Real>(
     SMatrix::from_data(ArrayStorage([[v28, v52, v57]]))
 }
 /// `G(q) = ∂V/∂q`.
-pub fn gravity_forces<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 3> {
+pub fn gravity_forces<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 3> {
     let [_, q_1, q_2] = q.data.0[0];
     let (v2, v0) = q_1.sincos();
     let v1 = v0 * p.prepared[12];
@@ -637,7 +660,10 @@ pub fn gravity_forces<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 3
     SMatrix::from_data(ArrayStorage([[p.prepared[16], v16, v19]]))
 }
 /// Viscous joint damping `D q̇`.
-pub fn damping_forces<T: Real>(qd: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 3> {
+pub fn damping_forces<T: Arithmetic>(
+    qd: &SVector<T, 3>,
+    p: &Params<T>,
+) -> SVector<T, 3> {
     let [qd_0, qd_1, qd_2] = qd.data.0[0];
     let v0 = p.body_damping * qd_0;
     let v1 = p.thigh_damping * qd_1;
@@ -645,18 +671,21 @@ pub fn damping_forces<T: Real>(qd: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 
     SMatrix::from_data(ArrayStorage([[v0, v1, v2]]))
 }
 /// `φ(q)`: point a minus point b of each closure.
-pub fn closure_residual<T: Real>(_q: &SVector<T, 3>, _p: &Params<T>) -> SVector<T, 0> {
+pub fn closure_residual<T: Arithmetic>(
+    _q: &SVector<T, 3>,
+    _p: &Params<T>,
+) -> SVector<T, 0> {
     SMatrix::from_data(ArrayStorage([[]]))
 }
 /// `J(q) = ∂φ/∂q`.
-pub fn constraint_jacobian<T: Real>(
+pub fn constraint_jacobian<T: Arithmetic>(
     _q: &SVector<T, 3>,
     _p: &Params<T>,
 ) -> SMatrix<T, 0, 3> {
     SMatrix::from_data(ArrayStorage([[], [], []]))
 }
 /// `J̇(q, q̇) q̇`.
-pub fn constraint_bias<T: Real>(
+pub fn constraint_bias<T: Arithmetic>(
     _q: &SVector<T, 3>,
     _qd: &SVector<T, 3>,
     _p: &Params<T>,
@@ -664,7 +693,7 @@ pub fn constraint_bias<T: Real>(
     SMatrix::from_data(ArrayStorage([[]]))
 }
 /// The foot point in the base frame.
-pub fn foot_position<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 2> {
+pub fn foot_position<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 2> {
     let [q_0, q_1, q_2] = q.data.0[0];
     let (v2, v0) = q_1.sincos();
     let v1 = v0 * p.thigh_length_x;
@@ -695,7 +724,10 @@ pub fn foot_position<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 2>
     SMatrix::from_data(ArrayStorage([[v17, v27]]))
 }
 /// `J_f(q) = ∂(foot)/∂q`.
-pub fn foot_jacobian<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
+pub fn foot_jacobian<T: Arithmetic>(
+    q: &SVector<T, 3>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 3> {
     let [_, q_1, q_2] = q.data.0[0];
     let (v0, v3) = q_1.sincos();
     let (v4, v1) = q_2.sincos();
@@ -726,7 +758,7 @@ pub fn foot_jacobian<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2,
     )
 }
 /// `J̇_f(q, q̇) q̇`.
-pub fn foot_bias<T: Real>(
+pub fn foot_bias<T: Arithmetic>(
     q: &SVector<T, 3>,
     qd: &SVector<T, 3>,
     p: &Params<T>,
@@ -767,7 +799,7 @@ pub fn foot_bias<T: Real>(
     SMatrix::from_data(ArrayStorage([[v22, v32]]))
 }
 /// Kinetic energy of links and rotors.
-pub fn kinetic_energy<T: Real>(
+pub fn kinetic_energy<T: Arithmetic>(
     q: &SVector<T, 3>,
     qd: &SVector<T, 3>,
     p: &Params<T>,
@@ -822,7 +854,7 @@ pub fn kinetic_energy<T: Real>(
     v46
 }
 /// Potential energy `−Σ m g·c`.
-pub fn potential_energy<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> T {
+pub fn potential_energy<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> T {
     let [q_0, q_1, q_2] = q.data.0[0];
     let v0 = q_2 - p.knee_spring_rest;
     let v1 = v0 * v0;
@@ -852,7 +884,10 @@ pub fn potential_energy<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> T {
     v26
 }
 /// Joint positions in the base frame, one column per joint.
-pub fn joint_positions<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
+pub fn joint_positions<T: Arithmetic>(
+    q: &SVector<T, 3>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 3> {
     let [q_0, q_1, _] = q.data.0[0];
     let v0 = p.body_origin_y + q_0;
     let v1 = v0 + p.thigh_origin_y;
@@ -870,7 +905,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 
     )
 }
 /// Link tips in the base frame, one column per link.
-pub fn link_tips<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
+pub fn link_tips<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
     let [q_0, q_1, q_2] = q.data.0[0];
     let v0 = p.body_origin_y + q_0;
     let v1 = v0 + p.body_length_y;
@@ -902,11 +937,17 @@ pub fn link_tips<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> 
     SMatrix::from_data(ArrayStorage([[p.prepared[21], v1], [v7, v12], [v24, v28]]))
 }
 /// Closure points a, b of each closure in the base frame.
-pub fn closure_points<T: Real>(_q: &SVector<T, 3>, _p: &Params<T>) -> SMatrix<T, 2, 0> {
+pub fn closure_points<T: Arithmetic>(
+    _q: &SVector<T, 3>,
+    _p: &Params<T>,
+) -> SMatrix<T, 2, 0> {
     SMatrix::from_data(ArrayStorage([]))
 }
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
-pub fn contact_positions<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 2> {
+pub fn contact_positions<T: Arithmetic>(
+    q: &SVector<T, 3>,
+    p: &Params<T>,
+) -> SVector<T, 2> {
     let [q_0, q_1, q_2] = q.data.0[0];
     let (v2, v0) = q_1.sincos();
     let v1 = v0 * p.thigh_length_x;
@@ -937,7 +978,10 @@ pub fn contact_positions<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T
     SMatrix::from_data(ArrayStorage([[v17, v27]]))
 }
 /// `J_c(q) = ∂x_c/∂q`.
-pub fn contact_jacobian<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
+pub fn contact_jacobian<T: Arithmetic>(
+    q: &SVector<T, 3>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 3> {
     let [_, q_1, q_2] = q.data.0[0];
     let (v0, v3) = q_1.sincos();
     let (v4, v1) = q_2.sincos();
@@ -968,7 +1012,7 @@ pub fn contact_jacobian<T: Real>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T,
     )
 }
 /// `J̇_c(q, q̇) q̇`.
-pub fn contact_bias<T: Real>(
+pub fn contact_bias<T: Arithmetic>(
     q: &SVector<T, 3>,
     qd: &SVector<T, 3>,
     p: &Params<T>,
@@ -1009,7 +1053,7 @@ pub fn contact_bias<T: Real>(
     SMatrix::from_data(ArrayStorage([[v22, v32]]))
 }
 /// `M`, `N`, `J` and `J̇ q̇` together, sharing subexpressions.
-pub fn dynamics_terms<T: Real>(
+pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 3>,
     qd: &SVector<T, 3>,
     p: &Params<T>,

@@ -8,7 +8,9 @@
     clippy::too_many_lines
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
-use leg_models::{ContactModel, DynamicsTerms, JointKind, LegModel, Parameters, Real};
+use leg_models::{
+    Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters,
+};
 /// Number of joints.
 pub const NQ: usize = 5;
 /// Number of closure rows (two per closure).
@@ -118,7 +120,7 @@ pub struct ParamValues<T> {
     /// Viscous damping of the joint of `lower_b` [N m s/rad].
     pub lower_b_damping: T,
 }
-impl<T: Real> Default for ParamValues<T> {
+impl<T: Arithmetic> Default for ParamValues<T> {
     fn default() -> Self {
         Self {
             gravity_x: T::lit(0.0),
@@ -181,7 +183,7 @@ pub struct Params<T> {
     values: ParamValues<T>,
     prepared: [T; 34],
 }
-impl<T: Real> Params<T> {
+impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
     pub fn new(values: ParamValues<T>) -> Self {
         Self {
@@ -205,17 +207,17 @@ impl<T> core::ops::Deref for Params<T> {
         &self.values
     }
 }
-impl<T: Real> From<ParamValues<T>> for Params<T> {
+impl<T: Arithmetic> From<ParamValues<T>> for Params<T> {
     fn from(values: ParamValues<T>) -> Self {
         Self::new(values)
     }
 }
-impl<T: Real> Default for Params<T> {
+impl<T: Arithmetic> Default for Params<T> {
     fn default() -> Self {
         Self::new(ParamValues::default())
     }
 }
-impl<T: Real> Parameters<T> for Params<T> {
+impl<T: Arithmetic> Parameters<T> for Params<T> {
     const NAMES: &'static [&'static str] = &[
         "gravity_x",
         "gravity_y",
@@ -394,72 +396,87 @@ impl LegModel<NQ, NC, NU> for MinitaurHopper {
     const HOME: [f64; NQ] = [0.25, -0.7076, -1.253, -2.434, 1.253];
     const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 3;
-    type Params<T: Real> = Params<T>;
-    fn mass_matrix<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5> {
+    type Params<T: Arithmetic> = Params<T>;
+    fn mass_matrix<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5> {
         mass_matrix(q, p)
     }
-    fn bias_forces<T: Real>(
+    fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SVector<T, 5> {
         bias_forces(q, qd, p)
     }
-    fn gravity_forces<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
+    fn gravity_forces<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
         gravity_forces(q, p)
     }
-    fn damping_forces<T: Real>(qd: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
+    fn damping_forces<T: Arithmetic>(
+        qd: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SVector<T, 5> {
         damping_forces(qd, p)
     }
-    fn closure_residual<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
+    fn closure_residual<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SVector<T, 2> {
         closure_residual(q, p)
     }
-    fn constraint_jacobian<T: Real>(
+    fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 5> {
         constraint_jacobian(q, p)
     }
-    fn constraint_bias<T: Real>(
+    fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SVector<T, 2> {
         constraint_bias(q, qd, p)
     }
-    fn foot_position<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
+    fn foot_position<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
         foot_position(q, p)
     }
-    fn foot_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
+    fn foot_jacobian<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 5> {
         foot_jacobian(q, p)
     }
-    fn foot_bias<T: Real>(
+    fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SVector<T, 2> {
         foot_bias(q, qd, p)
     }
-    fn kinetic_energy<T: Real>(
+    fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
         p: &Params<T>,
     ) -> T {
         kinetic_energy(q, qd, p)
     }
-    fn potential_energy<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> T {
+    fn potential_energy<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
-    fn joint_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
+    fn joint_positions<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 5> {
         joint_positions(q, p)
     }
-    fn link_tips<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
+    fn link_tips<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
         link_tips(q, p)
     }
-    fn closure_points<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 2> {
+    fn closure_points<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 2> {
         closure_points(q, p)
     }
-    fn dynamics_terms<T: Real>(
+    fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
         p: &Params<T>,
@@ -482,13 +499,19 @@ impl ContactModel<NQ, NC, NU, NK> for MinitaurHopper {
     const CONTACT_FRICTION: &'static [f64] = &[0.8];
     const GROUND_NORMAL: [f64; 2] = [0.0, 1.0];
     const GROUND_OFFSET: f64 = 0.0;
-    fn contact_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
+    fn contact_positions<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SVector<T, 2> {
         contact_positions(q, p)
     }
-    fn contact_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
+    fn contact_jacobian<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 5> {
         contact_jacobian(q, p)
     }
-    fn contact_bias<T: Real>(
+    fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
         p: &Params<T>,
@@ -499,7 +522,7 @@ impl ContactModel<NQ, NC, NU, NK> for MinitaurHopper {
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 34> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 34> {
     let v0 = values.upper_b_mass + values.lower_b_mass;
     let v1 = values.body_mass + v0;
     let v2 = values.upper_a_mass + values.lower_a_mass;
@@ -658,7 +681,7 @@ pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 34> {
     )
 }
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
-pub fn mass_matrix<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5> {
+pub fn mass_matrix<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5> {
     let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
     let (v8, v0) = q_1.sincos();
     let (v3, v1) = q_2.sincos();
@@ -719,7 +742,7 @@ pub fn mass_matrix<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5
     )
 }
 /// `N(q, q̇) = (∂²L/∂q̇∂q) q̇ − ∂L/∂q = C q̇ + G`.
-pub fn bias_forces<T: Real>(
+pub fn bias_forces<T: Arithmetic>(
     q: &SVector<T, 5>,
     qd: &SVector<T, 5>,
     p: &Params<T>,
@@ -834,7 +857,7 @@ pub fn bias_forces<T: Real>(
     SMatrix::from_data(ArrayStorage([[v56, v80, v82, v106, v108]]))
 }
 /// `G(q) = ∂V/∂q`.
-pub fn gravity_forces<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
+pub fn gravity_forces<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
     let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
     let (v2, v0) = q_1.sincos();
     let v1 = v0 * p.prepared[20];
@@ -869,7 +892,10 @@ pub fn gravity_forces<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5
     SMatrix::from_data(ArrayStorage([[p.prepared[28], v16, v15, v33, v32]]))
 }
 /// Viscous joint damping `D q̇`.
-pub fn damping_forces<T: Real>(qd: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
+pub fn damping_forces<T: Arithmetic>(
+    qd: &SVector<T, 5>,
+    p: &Params<T>,
+) -> SVector<T, 5> {
     let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
     let v0 = p.body_damping * qd_0;
     let v1 = p.upper_a_damping * qd_1;
@@ -879,7 +905,10 @@ pub fn damping_forces<T: Real>(qd: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 
     SMatrix::from_data(ArrayStorage([[v0, v1, v2, v3, v4]]))
 }
 /// `φ(q)`: point a minus point b of each closure.
-pub fn closure_residual<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
+pub fn closure_residual<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    p: &Params<T>,
+) -> SVector<T, 2> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let (v2, v0) = q_1.sincos();
     let v1 = v0 * p.upper_a_length_x;
@@ -937,7 +966,7 @@ pub fn closure_residual<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T,
     SMatrix::from_data(ArrayStorage([[v36, v56]]))
 }
 /// `J(q) = ∂φ/∂q`.
-pub fn constraint_jacobian<T: Real>(
+pub fn constraint_jacobian<T: Arithmetic>(
     q: &SVector<T, 5>,
     p: &Params<T>,
 ) -> SMatrix<T, 2, 5> {
@@ -1001,7 +1030,7 @@ pub fn constraint_jacobian<T: Real>(
     )
 }
 /// `J̇(q, q̇) q̇`.
-pub fn constraint_bias<T: Real>(
+pub fn constraint_bias<T: Arithmetic>(
     q: &SVector<T, 5>,
     qd: &SVector<T, 5>,
     p: &Params<T>,
@@ -1071,7 +1100,7 @@ pub fn constraint_bias<T: Real>(
     SMatrix::from_data(ArrayStorage([[v44, v63]]))
 }
 /// The foot point in the base frame.
-pub fn foot_position<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
+pub fn foot_position<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
     let [q_0, q_1, q_2, _, _] = q.data.0[0];
     let (v2, v0) = q_1.sincos();
     let v1 = v0 * p.upper_a_length_x;
@@ -1102,7 +1131,10 @@ pub fn foot_position<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2>
     SMatrix::from_data(ArrayStorage([[v17, v27]]))
 }
 /// `J_f(q) = ∂(foot)/∂q`.
-pub fn foot_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
+pub fn foot_jacobian<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 5> {
     let [_, q_1, q_2, _, _] = q.data.0[0];
     let (v0, v3) = q_1.sincos();
     let (v4, v1) = q_2.sincos();
@@ -1139,7 +1171,7 @@ pub fn foot_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2,
     )
 }
 /// `J̇_f(q, q̇) q̇`.
-pub fn foot_bias<T: Real>(
+pub fn foot_bias<T: Arithmetic>(
     q: &SVector<T, 5>,
     qd: &SVector<T, 5>,
     p: &Params<T>,
@@ -1180,7 +1212,7 @@ pub fn foot_bias<T: Real>(
     SMatrix::from_data(ArrayStorage([[v22, v32]]))
 }
 /// Kinetic energy of links and rotors.
-pub fn kinetic_energy<T: Real>(
+pub fn kinetic_energy<T: Arithmetic>(
     q: &SVector<T, 5>,
     qd: &SVector<T, 5>,
     p: &Params<T>,
@@ -1277,7 +1309,7 @@ pub fn kinetic_energy<T: Real>(
     v90
 }
 /// Potential energy `−Σ m g·c`.
-pub fn potential_energy<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> T {
+pub fn potential_energy<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let v0 = p.body_origin_y + q_0;
     let v1 = p.prepared[0] * v0;
@@ -1320,7 +1352,10 @@ pub fn potential_energy<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> T {
     v41
 }
 /// Joint positions in the base frame, one column per joint.
-pub fn joint_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
+pub fn joint_positions<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 5> {
     let [q_0, q_1, _, q_3, _] = q.data.0[0];
     let v0 = p.body_origin_y + q_0;
     let v1 = v0 + p.upper_a_origin_y;
@@ -1354,7 +1389,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 
     )
 }
 /// Link tips in the base frame, one column per link.
-pub fn link_tips<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
+pub fn link_tips<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let v0 = p.body_origin_y + q_0;
     let v1 = v0 + p.body_length_y;
@@ -1419,7 +1454,10 @@ pub fn link_tips<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> 
     )
 }
 /// Closure points a, b of each closure in the base frame.
-pub fn closure_points<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 2> {
+pub fn closure_points<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 2> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let (v2, v0) = q_1.sincos();
     let v1 = v0 * p.upper_a_length_x;
@@ -1475,7 +1513,10 @@ pub fn closure_points<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2
     SMatrix::from_data(ArrayStorage([[v17, v27], [v45, v54]]))
 }
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
-pub fn contact_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
+pub fn contact_positions<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    p: &Params<T>,
+) -> SVector<T, 2> {
     let [q_0, q_1, q_2, _, _] = q.data.0[0];
     let (v2, v0) = q_1.sincos();
     let v1 = v0 * p.upper_a_length_x;
@@ -1506,7 +1547,10 @@ pub fn contact_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T
     SMatrix::from_data(ArrayStorage([[v17, v27]]))
 }
 /// `J_c(q) = ∂x_c/∂q`.
-pub fn contact_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
+pub fn contact_jacobian<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 5> {
     let [_, q_1, q_2, _, _] = q.data.0[0];
     let (v0, v3) = q_1.sincos();
     let (v4, v1) = q_2.sincos();
@@ -1543,7 +1587,7 @@ pub fn contact_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T,
     )
 }
 /// `J̇_c(q, q̇) q̇`.
-pub fn contact_bias<T: Real>(
+pub fn contact_bias<T: Arithmetic>(
     q: &SVector<T, 5>,
     qd: &SVector<T, 5>,
     p: &Params<T>,
@@ -1584,7 +1628,7 @@ pub fn contact_bias<T: Real>(
     SMatrix::from_data(ArrayStorage([[v22, v32]]))
 }
 /// `M`, `N`, `J` and `J̇ q̇` together, sharing subexpressions.
-pub fn dynamics_terms<T: Real>(
+pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 5>,
     qd: &SVector<T, 5>,
     p: &Params<T>,

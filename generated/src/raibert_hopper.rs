@@ -8,7 +8,9 @@
     clippy::too_many_lines
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
-use leg_models::{ContactModel, DynamicsTerms, JointKind, LegModel, Parameters, Real};
+use leg_models::{
+    Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters,
+};
 /// Number of joints.
 pub const NQ: usize = 5;
 /// Number of closure rows (two per closure).
@@ -126,7 +128,7 @@ pub struct ParamValues<T> {
     /// Contact point `heel`, link frame, y [m].
     pub heel_y: T,
 }
-impl<T: Real> Default for ParamValues<T> {
+impl<T: Arithmetic> Default for ParamValues<T> {
     fn default() -> Self {
         Self {
             gravity_x: T::lit(0.0),
@@ -193,7 +195,7 @@ pub struct Params<T> {
     values: ParamValues<T>,
     prepared: [T; 34],
 }
-impl<T: Real> Params<T> {
+impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
     pub fn new(values: ParamValues<T>) -> Self {
         Self {
@@ -217,17 +219,17 @@ impl<T> core::ops::Deref for Params<T> {
         &self.values
     }
 }
-impl<T: Real> From<ParamValues<T>> for Params<T> {
+impl<T: Arithmetic> From<ParamValues<T>> for Params<T> {
     fn from(values: ParamValues<T>) -> Self {
         Self::new(values)
     }
 }
-impl<T: Real> Default for Params<T> {
+impl<T: Arithmetic> Default for Params<T> {
     fn default() -> Self {
         Self::new(ParamValues::default())
     }
 }
-impl<T: Real> Parameters<T> for Params<T> {
+impl<T: Arithmetic> Parameters<T> for Params<T> {
     const NAMES: &'static [&'static str] = &[
         "gravity_x",
         "gravity_y",
@@ -433,72 +435,87 @@ impl LegModel<NQ, NC, NU> for RaibertHopper {
     const HOME: [f64; NQ] = [0.0, 0.9, 0.05, -0.1, 0.02];
     const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 5;
-    type Params<T: Real> = Params<T>;
-    fn mass_matrix<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5> {
+    type Params<T: Arithmetic> = Params<T>;
+    fn mass_matrix<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5> {
         mass_matrix(q, p)
     }
-    fn bias_forces<T: Real>(
+    fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SVector<T, 5> {
         bias_forces(q, qd, p)
     }
-    fn gravity_forces<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
+    fn gravity_forces<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
         gravity_forces(q, p)
     }
-    fn damping_forces<T: Real>(qd: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
+    fn damping_forces<T: Arithmetic>(
+        qd: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SVector<T, 5> {
         damping_forces(qd, p)
     }
-    fn closure_residual<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 0> {
+    fn closure_residual<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SVector<T, 0> {
         closure_residual(q, p)
     }
-    fn constraint_jacobian<T: Real>(
+    fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SMatrix<T, 0, 5> {
         constraint_jacobian(q, p)
     }
-    fn constraint_bias<T: Real>(
+    fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SVector<T, 0> {
         constraint_bias(q, qd, p)
     }
-    fn foot_position<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
+    fn foot_position<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
         foot_position(q, p)
     }
-    fn foot_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
+    fn foot_jacobian<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 5> {
         foot_jacobian(q, p)
     }
-    fn foot_bias<T: Real>(
+    fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SVector<T, 2> {
         foot_bias(q, qd, p)
     }
-    fn kinetic_energy<T: Real>(
+    fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
         p: &Params<T>,
     ) -> T {
         kinetic_energy(q, qd, p)
     }
-    fn potential_energy<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> T {
+    fn potential_energy<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
-    fn joint_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
+    fn joint_positions<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 5> {
         joint_positions(q, p)
     }
-    fn link_tips<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
+    fn link_tips<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
         link_tips(q, p)
     }
-    fn closure_points<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 0> {
+    fn closure_points<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 0> {
         closure_points(q, p)
     }
-    fn dynamics_terms<T: Real>(
+    fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
         p: &Params<T>,
@@ -521,13 +538,19 @@ impl ContactModel<NQ, NC, NU, NK> for RaibertHopper {
     const CONTACT_FRICTION: &'static [f64] = &[0.6, 0.6];
     const GROUND_NORMAL: [f64; 2] = [0.09950371902099893, 0.9950371902099893];
     const GROUND_OFFSET: f64 = -0.05;
-    fn contact_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 4> {
+    fn contact_positions<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SVector<T, 4> {
         contact_positions(q, p)
     }
-    fn contact_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 4, 5> {
+    fn contact_jacobian<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 4, 5> {
         contact_jacobian(q, p)
     }
-    fn contact_bias<T: Real>(
+    fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
         p: &Params<T>,
@@ -538,7 +561,7 @@ impl ContactModel<NQ, NC, NU, NK> for RaibertHopper {
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 34> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 34> {
     let v0 = values.thigh_mass + values.shin_mass;
     let v1 = values.torso_mass + v0;
     let v2 = values.slide_y_mass + v1;
@@ -668,7 +691,7 @@ pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 34> {
     )
 }
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
-pub fn mass_matrix<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5> {
+pub fn mass_matrix<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
     let (v11, v0) = q_2.sincos();
     let (v1, v3) = q_3.sincos();
@@ -738,7 +761,7 @@ pub fn mass_matrix<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5
     )
 }
 /// `N(q, q̇) = (∂²L/∂q̇∂q) q̇ − ∂L/∂q = C q̇ + G`.
-pub fn bias_forces<T: Real>(
+pub fn bias_forces<T: Arithmetic>(
     q: &SVector<T, 5>,
     qd: &SVector<T, 5>,
     p: &Params<T>,
@@ -891,7 +914,7 @@ pub fn bias_forces<T: Real>(
     SMatrix::from_data(ArrayStorage([[v46, v77, v121, v132, v144]]))
 }
 /// `G(q) = ∂V/∂q`.
-pub fn gravity_forces<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
+pub fn gravity_forces<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
     let (v2, v0) = q_2.sincos();
     let v1 = v0 * p.prepared[19];
@@ -936,7 +959,10 @@ pub fn gravity_forces<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5
     SMatrix::from_data(ArrayStorage([[p.prepared[25], p.prepared[26], v33, v34, v41]]))
 }
 /// Viscous joint damping `D q̇`.
-pub fn damping_forces<T: Real>(qd: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
+pub fn damping_forces<T: Arithmetic>(
+    qd: &SVector<T, 5>,
+    p: &Params<T>,
+) -> SVector<T, 5> {
     let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
     let v0 = p.slide_x_damping * qd_0;
     let v1 = p.slide_y_damping * qd_1;
@@ -946,18 +972,21 @@ pub fn damping_forces<T: Real>(qd: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 
     SMatrix::from_data(ArrayStorage([[v0, v1, v2, v3, v4]]))
 }
 /// `φ(q)`: point a minus point b of each closure.
-pub fn closure_residual<T: Real>(_q: &SVector<T, 5>, _p: &Params<T>) -> SVector<T, 0> {
+pub fn closure_residual<T: Arithmetic>(
+    _q: &SVector<T, 5>,
+    _p: &Params<T>,
+) -> SVector<T, 0> {
     SMatrix::from_data(ArrayStorage([[]]))
 }
 /// `J(q) = ∂φ/∂q`.
-pub fn constraint_jacobian<T: Real>(
+pub fn constraint_jacobian<T: Arithmetic>(
     _q: &SVector<T, 5>,
     _p: &Params<T>,
 ) -> SMatrix<T, 0, 5> {
     SMatrix::from_data(ArrayStorage([[], [], [], [], []]))
 }
 /// `J̇(q, q̇) q̇`.
-pub fn constraint_bias<T: Real>(
+pub fn constraint_bias<T: Arithmetic>(
     _q: &SVector<T, 5>,
     _qd: &SVector<T, 5>,
     _p: &Params<T>,
@@ -965,7 +994,7 @@ pub fn constraint_bias<T: Real>(
     SMatrix::from_data(ArrayStorage([[]]))
 }
 /// The foot point in the base frame.
-pub fn foot_position<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
+pub fn foot_position<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
@@ -1009,7 +1038,10 @@ pub fn foot_position<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2>
     SMatrix::from_data(ArrayStorage([[v25, v40]]))
 }
 /// `J_f(q) = ∂(foot)/∂q`.
-pub fn foot_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
+pub fn foot_jacobian<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 5> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
     let (v0, v3) = q_2.sincos();
     let (v4, v1) = q_3.sincos();
@@ -1056,7 +1088,7 @@ pub fn foot_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2,
     )
 }
 /// `J̇_f(q, q̇) q̇`.
-pub fn foot_bias<T: Real>(
+pub fn foot_bias<T: Arithmetic>(
     q: &SVector<T, 5>,
     qd: &SVector<T, 5>,
     p: &Params<T>,
@@ -1112,7 +1144,7 @@ pub fn foot_bias<T: Real>(
     SMatrix::from_data(ArrayStorage([[v31, v47]]))
 }
 /// Kinetic energy of links and rotors.
-pub fn kinetic_energy<T: Real>(
+pub fn kinetic_energy<T: Arithmetic>(
     q: &SVector<T, 5>,
     qd: &SVector<T, 5>,
     p: &Params<T>,
@@ -1227,7 +1259,7 @@ pub fn kinetic_energy<T: Real>(
     v106
 }
 /// Potential energy `−Σ m g·c`.
-pub fn potential_energy<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> T {
+pub fn potential_energy<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let v0 = q_4 - p.leg_spring_rest;
     let v1 = v0 * v0;
@@ -1281,7 +1313,10 @@ pub fn potential_energy<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> T {
     v50
 }
 /// Joint positions in the base frame, one column per joint.
-pub fn joint_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
+pub fn joint_positions<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 5> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
@@ -1325,7 +1360,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 
     )
 }
 /// Link tips in the base frame, one column per link.
-pub fn link_tips<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
+pub fn link_tips<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
@@ -1385,11 +1420,17 @@ pub fn link_tips<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> 
     )
 }
 /// Closure points a, b of each closure in the base frame.
-pub fn closure_points<T: Real>(_q: &SVector<T, 5>, _p: &Params<T>) -> SMatrix<T, 2, 0> {
+pub fn closure_points<T: Arithmetic>(
+    _q: &SVector<T, 5>,
+    _p: &Params<T>,
+) -> SMatrix<T, 2, 0> {
     SMatrix::from_data(ArrayStorage([]))
 }
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
-pub fn contact_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 4> {
+pub fn contact_positions<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    p: &Params<T>,
+) -> SVector<T, 4> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let v0 = p.slide_x_origin_x + q_0;
     let v1 = v0 + p.slide_x_length_x;
@@ -1441,7 +1482,10 @@ pub fn contact_positions<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T
     SMatrix::from_data(ArrayStorage([[v25, v40, v44, v48]]))
 }
 /// `J_c(q) = ∂x_c/∂q`.
-pub fn contact_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 4, 5> {
+pub fn contact_jacobian<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    p: &Params<T>,
+) -> SMatrix<T, 4, 5> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
     let (v0, v3) = q_2.sincos();
     let (v4, v1) = q_3.sincos();
@@ -1500,7 +1544,7 @@ pub fn contact_jacobian<T: Real>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T,
     )
 }
 /// `J̇_c(q, q̇) q̇`.
-pub fn contact_bias<T: Real>(
+pub fn contact_bias<T: Arithmetic>(
     q: &SVector<T, 5>,
     qd: &SVector<T, 5>,
     p: &Params<T>,
@@ -1570,7 +1614,7 @@ pub fn contact_bias<T: Real>(
     SMatrix::from_data(ArrayStorage([[v31, v47, v54, v61]]))
 }
 /// `M`, `N`, `J` and `J̇ q̇` together, sharing subexpressions.
-pub fn dynamics_terms<T: Real>(
+pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 5>,
     qd: &SVector<T, 5>,
     p: &Params<T>,

@@ -8,7 +8,9 @@
     clippy::too_many_lines
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
-use leg_models::{ContactModel, DynamicsTerms, JointKind, LegModel, Parameters, Real};
+use leg_models::{
+    Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters,
+};
 /// Number of joints.
 pub const NQ: usize = 7;
 /// Number of closure rows (two per closure).
@@ -158,7 +160,7 @@ pub struct ParamValues<T> {
     /// Point b of closure `plantar`, link frame, y [m].
     pub plantar_b_y: T,
 }
-impl<T: Real> Default for ParamValues<T> {
+impl<T: Arithmetic> Default for ParamValues<T> {
     fn default() -> Self {
         Self {
             gravity_x: T::lit(0.0),
@@ -241,7 +243,7 @@ pub struct Params<T> {
     values: ParamValues<T>,
     prepared: [T; 43],
 }
-impl<T: Real> Params<T> {
+impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
     pub fn new(values: ParamValues<T>) -> Self {
         Self {
@@ -265,17 +267,17 @@ impl<T> core::ops::Deref for Params<T> {
         &self.values
     }
 }
-impl<T: Real> From<ParamValues<T>> for Params<T> {
+impl<T: Arithmetic> From<ParamValues<T>> for Params<T> {
     fn from(values: ParamValues<T>) -> Self {
         Self::new(values)
     }
 }
-impl<T: Real> Default for Params<T> {
+impl<T: Arithmetic> Default for Params<T> {
     fn default() -> Self {
         Self::new(ParamValues::default())
     }
 }
-impl<T: Real> Parameters<T> for Params<T> {
+impl<T: Arithmetic> Parameters<T> for Params<T> {
     const NAMES: &'static [&'static str] = &[
         "gravity_x",
         "gravity_y",
@@ -534,72 +536,87 @@ impl LegModel<NQ, NC, NU> for ThreeMotorLeg {
     ];
     const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 3;
-    type Params<T: Real> = Params<T>;
-    fn mass_matrix<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 7, 7> {
+    type Params<T: Arithmetic> = Params<T>;
+    fn mass_matrix<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 7, 7> {
         mass_matrix(q, p)
     }
-    fn bias_forces<T: Real>(
+    fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
         p: &Params<T>,
     ) -> SVector<T, 7> {
         bias_forces(q, qd, p)
     }
-    fn gravity_forces<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 7> {
+    fn gravity_forces<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 7> {
         gravity_forces(q, p)
     }
-    fn damping_forces<T: Real>(qd: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 7> {
+    fn damping_forces<T: Arithmetic>(
+        qd: &SVector<T, 7>,
+        p: &Params<T>,
+    ) -> SVector<T, 7> {
         damping_forces(qd, p)
     }
-    fn closure_residual<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 4> {
+    fn closure_residual<T: Arithmetic>(
+        q: &SVector<T, 7>,
+        p: &Params<T>,
+    ) -> SVector<T, 4> {
         closure_residual(q, p)
     }
-    fn constraint_jacobian<T: Real>(
+    fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 7>,
         p: &Params<T>,
     ) -> SMatrix<T, 4, 7> {
         constraint_jacobian(q, p)
     }
-    fn constraint_bias<T: Real>(
+    fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
         p: &Params<T>,
     ) -> SVector<T, 4> {
         constraint_bias(q, qd, p)
     }
-    fn foot_position<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 2> {
+    fn foot_position<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 2> {
         foot_position(q, p)
     }
-    fn foot_jacobian<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> {
+    fn foot_jacobian<T: Arithmetic>(
+        q: &SVector<T, 7>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 7> {
         foot_jacobian(q, p)
     }
-    fn foot_bias<T: Real>(
+    fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
         p: &Params<T>,
     ) -> SVector<T, 2> {
         foot_bias(q, qd, p)
     }
-    fn kinetic_energy<T: Real>(
+    fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
         p: &Params<T>,
     ) -> T {
         kinetic_energy(q, qd, p)
     }
-    fn potential_energy<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> T {
+    fn potential_energy<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
-    fn joint_positions<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> {
+    fn joint_positions<T: Arithmetic>(
+        q: &SVector<T, 7>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 7> {
         joint_positions(q, p)
     }
-    fn link_tips<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> {
+    fn link_tips<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> {
         link_tips(q, p)
     }
-    fn closure_points<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 4> {
+    fn closure_points<T: Arithmetic>(
+        q: &SVector<T, 7>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 4> {
         closure_points(q, p)
     }
-    fn dynamics_terms<T: Real>(
+    fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
         p: &Params<T>,
@@ -622,13 +639,19 @@ impl ContactModel<NQ, NC, NU, NK> for ThreeMotorLeg {
     const CONTACT_FRICTION: &'static [f64] = &[];
     const GROUND_NORMAL: [f64; 2] = [0.0, 1.0];
     const GROUND_OFFSET: f64 = 0.0;
-    fn contact_positions<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 0> {
+    fn contact_positions<T: Arithmetic>(
+        q: &SVector<T, 7>,
+        p: &Params<T>,
+    ) -> SVector<T, 0> {
         contact_positions(q, p)
     }
-    fn contact_jacobian<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 0, 7> {
+    fn contact_jacobian<T: Arithmetic>(
+        q: &SVector<T, 7>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 0, 7> {
         contact_jacobian(q, p)
     }
-    fn contact_bias<T: Real>(
+    fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
         p: &Params<T>,
@@ -639,7 +662,7 @@ impl ContactModel<NQ, NC, NU, NK> for ThreeMotorLeg {
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 43> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 43> {
     let v0 = values.thigh_com_x * values.thigh_com_x;
     let v1 = values.thigh_com_y * values.thigh_com_y;
     let v2 = v0 + v1;
@@ -884,7 +907,7 @@ pub fn prepare<T: Real>(values: &ParamValues<T>) -> SVector<T, 43> {
     )
 }
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
-pub fn mass_matrix<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 7, 7> {
+pub fn mass_matrix<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 7, 7> {
     let [_, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
     let (v2, v0) = q_4.sincos();
     let v1 = v0 * p.prepared[2];
@@ -1079,7 +1102,7 @@ pub fn mass_matrix<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 7, 7
     )
 }
 /// `N(q, q̇) = (∂²L/∂q̇∂q) q̇ − ∂L/∂q = C q̇ + G`.
-pub fn bias_forces<T: Real>(
+pub fn bias_forces<T: Arithmetic>(
     q: &SVector<T, 7>,
     qd: &SVector<T, 7>,
     p: &Params<T>,
@@ -1437,7 +1460,7 @@ pub fn bias_forces<T: Real>(
     SMatrix::from_data(ArrayStorage([[v284, v309, v329, v334, v339, v349, v354]]))
 }
 /// `G(q) = ∂V/∂q`.
-pub fn gravity_forces<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 7> {
+pub fn gravity_forces<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 7> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
     let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.prepared[28];
@@ -1512,7 +1535,10 @@ pub fn gravity_forces<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 7
     SMatrix::from_data(ArrayStorage([[v76, v75, v74, v73, v15, v61, v60]]))
 }
 /// Viscous joint damping `D q̇`.
-pub fn damping_forces<T: Real>(qd: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 7> {
+pub fn damping_forces<T: Arithmetic>(
+    qd: &SVector<T, 7>,
+    p: &Params<T>,
+) -> SVector<T, 7> {
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6] = qd.data.0[0];
     let v0 = p.thigh_damping * qd_0;
     let v1 = p.shin_damping * qd_1;
@@ -1524,7 +1550,10 @@ pub fn damping_forces<T: Real>(qd: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 
     SMatrix::from_data(ArrayStorage([[v0, v1, v2, v3, v4, v5, v6]]))
 }
 /// `φ(q)`: point a minus point b of each closure.
-pub fn closure_residual<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 4> {
+pub fn closure_residual<T: Arithmetic>(
+    q: &SVector<T, 7>,
+    p: &Params<T>,
+) -> SVector<T, 4> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
     let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.heel_rod_origin_x;
@@ -1656,7 +1685,7 @@ pub fn closure_residual<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T,
     SMatrix::from_data(ArrayStorage([[v46, v67, v112, v133]]))
 }
 /// `J(q) = ∂φ/∂q`.
-pub fn constraint_jacobian<T: Real>(
+pub fn constraint_jacobian<T: Arithmetic>(
     q: &SVector<T, 7>,
     p: &Params<T>,
 ) -> SMatrix<T, 4, 7> {
@@ -1811,7 +1840,7 @@ pub fn constraint_jacobian<T: Real>(
     )
 }
 /// `J̇(q, q̇) q̇`.
-pub fn constraint_bias<T: Real>(
+pub fn constraint_bias<T: Arithmetic>(
     q: &SVector<T, 7>,
     qd: &SVector<T, 7>,
     p: &Params<T>,
@@ -1981,7 +2010,7 @@ pub fn constraint_bias<T: Real>(
     SMatrix::from_data(ArrayStorage([[v56, v80, v138, v166]]))
 }
 /// The foot point in the base frame.
-pub fn foot_position<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 2> {
+pub fn foot_position<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 2> {
     let [q_0, q_1, q_2, q_3, _, _, _] = q.data.0[0];
     let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.thigh_length_x;
@@ -2040,7 +2069,10 @@ pub fn foot_position<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 2>
     SMatrix::from_data(ArrayStorage([[v41, v57]]))
 }
 /// `J_f(q) = ∂(foot)/∂q`.
-pub fn foot_jacobian<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> {
+pub fn foot_jacobian<T: Arithmetic>(
+    q: &SVector<T, 7>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 7> {
     let [q_0, q_1, q_2, q_3, _, _, _] = q.data.0[0];
     let (v0, v3) = q_0.sincos();
     let (v4, v1) = q_1.sincos();
@@ -2111,7 +2143,7 @@ pub fn foot_jacobian<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2,
     )
 }
 /// `J̇_f(q, q̇) q̇`.
-pub fn foot_bias<T: Real>(
+pub fn foot_bias<T: Arithmetic>(
     q: &SVector<T, 7>,
     qd: &SVector<T, 7>,
     p: &Params<T>,
@@ -2190,7 +2222,7 @@ pub fn foot_bias<T: Real>(
     SMatrix::from_data(ArrayStorage([[v52, v72]]))
 }
 /// Kinetic energy of links and rotors.
-pub fn kinetic_energy<T: Real>(
+pub fn kinetic_energy<T: Arithmetic>(
     q: &SVector<T, 7>,
     qd: &SVector<T, 7>,
     p: &Params<T>,
@@ -2449,7 +2481,7 @@ pub fn kinetic_energy<T: Real>(
     v254
 }
 /// Potential energy `−Σ m g·c`.
-pub fn potential_energy<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> T {
+pub fn potential_energy<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> T {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
     let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.prepared[29];
@@ -2526,7 +2558,10 @@ pub fn potential_energy<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> T {
     v78
 }
 /// Joint positions in the base frame, one column per joint.
-pub fn joint_positions<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> {
+pub fn joint_positions<T: Arithmetic>(
+    q: &SVector<T, 7>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 7> {
     let [q_0, q_1, q_2, _, _, q_5, _] = q.data.0[0];
     let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.thigh_length_x;
@@ -2611,7 +2646,7 @@ pub fn joint_positions<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 
     )
 }
 /// Link tips in the base frame, one column per link.
-pub fn link_tips<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> {
+pub fn link_tips<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
     let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.thigh_length_x;
@@ -2741,7 +2776,10 @@ pub fn link_tips<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> 
     )
 }
 /// Closure points a, b of each closure in the base frame.
-pub fn closure_points<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 4> {
+pub fn closure_points<T: Arithmetic>(
+    q: &SVector<T, 7>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 4> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
     let (v2, v0) = q_0.sincos();
     let v1 = v0 * p.heel_rod_origin_x;
@@ -2869,18 +2907,21 @@ pub fn closure_points<T: Real>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2
     SMatrix::from_data(ArrayStorage([[v17, v25], [v53, v65], [v93, v105], [v121, v129]]))
 }
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
-pub fn contact_positions<T: Real>(_q: &SVector<T, 7>, _p: &Params<T>) -> SVector<T, 0> {
+pub fn contact_positions<T: Arithmetic>(
+    _q: &SVector<T, 7>,
+    _p: &Params<T>,
+) -> SVector<T, 0> {
     SMatrix::from_data(ArrayStorage([[]]))
 }
 /// `J_c(q) = ∂x_c/∂q`.
-pub fn contact_jacobian<T: Real>(
+pub fn contact_jacobian<T: Arithmetic>(
     _q: &SVector<T, 7>,
     _p: &Params<T>,
 ) -> SMatrix<T, 0, 7> {
     SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []]))
 }
 /// `J̇_c(q, q̇) q̇`.
-pub fn contact_bias<T: Real>(
+pub fn contact_bias<T: Arithmetic>(
     _q: &SVector<T, 7>,
     _qd: &SVector<T, 7>,
     _p: &Params<T>,
@@ -2888,7 +2929,7 @@ pub fn contact_bias<T: Real>(
     SMatrix::from_data(ArrayStorage([[]]))
 }
 /// `M`, `N`, `J` and `J̇ q̇` together, sharing subexpressions.
-pub fn dynamics_terms<T: Real>(
+pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 7>,
     qd: &SVector<T, 7>,
     p: &Params<T>,

@@ -19,6 +19,7 @@
 #![cfg_attr(not(feature = "std"), no_std)]
 
 pub mod assembly;
+pub mod batch;
 pub mod contact;
 pub mod control;
 pub mod dynamics;
@@ -28,10 +29,13 @@ pub mod integrate;
 pub mod linalg;
 mod model;
 pub mod reference;
+pub mod simd;
 #[cfg(feature = "std")]
 pub mod simulate;
 pub mod structure;
 mod trig;
 
-pub use model::{ContactModel, DynamicsTerms, JointKind, LegModel, Parameters, Real, Spring};
+pub use model::{
+    Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters, Real, Spring,
+};
 pub use nalgebra;

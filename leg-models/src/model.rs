@@ -1,7 +1,8 @@
 //! The model trait: what generated code provides and the runtime consumes.
 
 use core::fmt::Debug;
-use nalgebra::{RealField, SMatrix, SVector};
+use core::ops::{Add, Div, Mul, Neg, Sub};
+use nalgebra::{ComplexField, RealField, SMatrix, SVector};
 
 /// The scalar the generated code is generic over (`f32` and `f64`).
 ///
@@ -47,6 +48,123 @@ impl Real for f32 {
     }
 }
 
+/// The arithmetic generated code does, and nothing more: the runtime's scalars (every
+/// [`Real`], `f64` and `f32`) and SIMD lanes ([`crate::simd::F64x4`], several states in
+/// one call) implement it. Generated functions and the [`LegModel`] methods are generic
+/// over it; the runtime's algorithms, which compare and branch, over [`Real`].
+pub trait Arithmetic:
+    Copy
+    + Debug
+    + PartialEq
+    + 'static
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+{
+    /// An `f64` literal of generated code in this scalar ([`Real::lit`]).
+    fn lit(value: f64) -> Self;
+    /// `(sin self, cos self)` with one argument reduction ([`Real::sincos`]).
+    fn sincos(self) -> (Self, Self);
+    fn sqrt(self) -> Self;
+    fn sin(self) -> Self;
+    fn cos(self) -> Self;
+    fn tan(self) -> Self;
+    fn asin(self) -> Self;
+    fn acos(self) -> Self;
+    fn atan(self) -> Self;
+    fn sinh(self) -> Self;
+    fn cosh(self) -> Self;
+    fn tanh(self) -> Self;
+    fn exp(self) -> Self;
+    fn ln(self) -> Self;
+    fn abs(self) -> Self;
+    fn powf(self, exponent: Self) -> Self;
+    fn atan2(self, x: Self) -> Self;
+    fn min(self, other: Self) -> Self;
+    fn max(self, other: Self) -> Self;
+}
+
+impl<T: Real> Arithmetic for T {
+    #[inline(always)]
+    fn lit(value: f64) -> Self {
+        <T as Real>::lit(value)
+    }
+    #[inline(always)]
+    fn sincos(self) -> (Self, Self) {
+        <T as Real>::sincos(self)
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        ComplexField::sqrt(self)
+    }
+    #[inline(always)]
+    fn sin(self) -> Self {
+        ComplexField::sin(self)
+    }
+    #[inline(always)]
+    fn cos(self) -> Self {
+        ComplexField::cos(self)
+    }
+    #[inline(always)]
+    fn tan(self) -> Self {
+        ComplexField::tan(self)
+    }
+    #[inline(always)]
+    fn asin(self) -> Self {
+        ComplexField::asin(self)
+    }
+    #[inline(always)]
+    fn acos(self) -> Self {
+        ComplexField::acos(self)
+    }
+    #[inline(always)]
+    fn atan(self) -> Self {
+        ComplexField::atan(self)
+    }
+    #[inline(always)]
+    fn sinh(self) -> Self {
+        ComplexField::sinh(self)
+    }
+    #[inline(always)]
+    fn cosh(self) -> Self {
+        ComplexField::cosh(self)
+    }
+    #[inline(always)]
+    fn tanh(self) -> Self {
+        ComplexField::tanh(self)
+    }
+    #[inline(always)]
+    fn exp(self) -> Self {
+        ComplexField::exp(self)
+    }
+    #[inline(always)]
+    fn ln(self) -> Self {
+        ComplexField::ln(self)
+    }
+    #[inline(always)]
+    fn abs(self) -> Self {
+        ComplexField::abs(self)
+    }
+    #[inline(always)]
+    fn powf(self, exponent: Self) -> Self {
+        ComplexField::powf(self, exponent)
+    }
+    #[inline(always)]
+    fn atan2(self, x: Self) -> Self {
+        RealField::atan2(self, x)
+    }
+    #[inline(always)]
+    fn min(self, other: Self) -> Self {
+        RealField::min(self, other)
+    }
+    #[inline(always)]
+    fn max(self, other: Self) -> Self {
+        RealField::max(self, other)
+    }
+}
+
 /// Named access to a model's parameters, for identification, randomization and tools
 /// that treat every geometry alike.
 pub trait Parameters<T>: Sized {
@@ -61,7 +179,7 @@ pub trait Parameters<T>: Sized {
 /// The terms of the constrained equations of motion at one state, evaluated together so
 /// that they share subexpressions (`M q̈ + N = Jᵀ F + B u`, `J q̈ + J̇ q̇ = 0`).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct DynamicsTerms<T: Real, const NQ: usize, const NC: usize> {
+pub struct DynamicsTerms<T: Arithmetic, const NQ: usize, const NC: usize> {
     /// `M(q)`, including the reflected rotor inertia `I_rotor · gear²` of actuated joints.
     pub mass_matrix: SMatrix<T, NQ, NQ>,
     /// `N(q, q̇) = C(q, q̇) q̇ + G(q)`.
@@ -131,53 +249,61 @@ pub trait LegModel<const NQ: usize, const NC: usize, const NU: usize> {
 
     /// The physical parameters (lengths, masses, centres of mass, inertias, rotor
     /// inertias and gear ratios, damping, gravity). `Default` holds the spec's values.
-    type Params<T: Real>: Clone + Copy + Debug + PartialEq + Default + Parameters<T>;
+    type Params<T: Arithmetic>: Clone + Copy + Debug + PartialEq + Default + Parameters<T>;
 
     /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on the actuated joints.
-    fn mass_matrix<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, NQ, NQ>;
+    fn mass_matrix<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, NQ, NQ>;
     /// `N(q, q̇) = (∂²L/∂q̇∂q) q̇ − ∂L/∂q = C q̇ + G` (without damping).
-    fn bias_forces<T: Real>(
+    fn bias_forces<T: Arithmetic>(
         q: &SVector<T, NQ>,
         qd: &SVector<T, NQ>,
         p: &Self::Params<T>,
     ) -> SVector<T, NQ>;
     /// `G(q) = ∂V/∂q`.
-    fn gravity_forces<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SVector<T, NQ>;
+    fn gravity_forces<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SVector<T, NQ>;
     /// Viscous joint damping torques `D q̇` (they enter as `M q̈ + N + D q̇ = …`).
-    fn damping_forces<T: Real>(qd: &SVector<T, NQ>, p: &Self::Params<T>) -> SVector<T, NQ>;
+    fn damping_forces<T: Arithmetic>(qd: &SVector<T, NQ>, p: &Self::Params<T>) -> SVector<T, NQ>;
     /// The closure residual `φ(q)`: for each closure, point a minus point b.
-    fn closure_residual<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SVector<T, NC>;
+    fn closure_residual<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SVector<T, NC>;
     /// `J(q) = ∂φ/∂q`.
-    fn constraint_jacobian<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, NC, NQ>;
+    fn constraint_jacobian<T: Arithmetic>(
+        q: &SVector<T, NQ>,
+        p: &Self::Params<T>,
+    ) -> SMatrix<T, NC, NQ>;
     /// `J̇(q, q̇) q̇`.
-    fn constraint_bias<T: Real>(
+    fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, NQ>,
         qd: &SVector<T, NQ>,
         p: &Self::Params<T>,
     ) -> SVector<T, NC>;
     /// The foot point in the base frame.
-    fn foot_position<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SVector<T, 2>;
+    fn foot_position<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SVector<T, 2>;
     /// `J_f(q) = ∂(foot)/∂q`.
-    fn foot_jacobian<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, 2, NQ>;
+    fn foot_jacobian<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, 2, NQ>;
     /// `J̇_f(q, q̇) q̇`.
-    fn foot_bias<T: Real>(
+    fn foot_bias<T: Arithmetic>(
         q: &SVector<T, NQ>,
         qd: &SVector<T, NQ>,
         p: &Self::Params<T>,
     ) -> SVector<T, 2>;
     /// Kinetic energy `½ q̇ᵀ M q̇` (links and rotors).
-    fn kinetic_energy<T: Real>(q: &SVector<T, NQ>, qd: &SVector<T, NQ>, p: &Self::Params<T>) -> T;
+    fn kinetic_energy<T: Arithmetic>(
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        p: &Self::Params<T>,
+    ) -> T;
     /// Potential energy `−Σ m g·c` (zero at the base origin).
-    fn potential_energy<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> T;
+    fn potential_energy<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> T;
     /// Each link's joint position in the base frame (column `i` for joint `i`).
-    fn joint_positions<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, 2, NQ>;
+    fn joint_positions<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>)
+        -> SMatrix<T, 2, NQ>;
     /// Each link's tip (the end of its length vector) in the base frame.
-    fn link_tips<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, 2, NQ>;
+    fn link_tips<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, 2, NQ>;
     /// The closure points in the base frame: columns `2k` and `2k + 1` are points a and b
     /// of closure `k` (they coincide on an assembled leg).
-    fn closure_points<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, 2, NC>;
+    fn closure_points<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, 2, NC>;
     /// `M`, `N`, `J` and `J̇ q̇` together, sharing subexpressions.
-    fn dynamics_terms<T: Real>(
+    fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, NQ>,
         qd: &SVector<T, NQ>,
         p: &Self::Params<T>,
@@ -204,11 +330,14 @@ pub trait ContactModel<const NQ: usize, const NC: usize, const NU: usize, const 
     const GROUND_OFFSET: f64;
 
     /// The contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
-    fn contact_positions<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SVector<T, NK>;
+    fn contact_positions<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SVector<T, NK>;
     /// `J_c(q) = ∂x_c/∂q`, the rows of [`ContactModel::contact_positions`].
-    fn contact_jacobian<T: Real>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, NK, NQ>;
+    fn contact_jacobian<T: Arithmetic>(
+        q: &SVector<T, NQ>,
+        p: &Self::Params<T>,
+    ) -> SMatrix<T, NK, NQ>;
     /// `J̇_c(q, q̇) q̇`.
-    fn contact_bias<T: Real>(
+    fn contact_bias<T: Arithmetic>(
         q: &SVector<T, NQ>,
         qd: &SVector<T, NQ>,
         p: &Self::Params<T>,

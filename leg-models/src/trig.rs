@@ -5,10 +5,12 @@
 //! (about 125 instructions per pair here, callgrind). This is musl's `sincos` (FreeBSD's
 //! kernels `__sin` and `__cos`, and the medium case of `__rem_pio2`, exact to 118 or 151
 //! bits as needed): one reduction modulo π/2 and both kernel polynomials, evaluated side
-//! by side (about 65 instructions); within an ulp of libm (tested). Arguments larger
+//! by side (about 70 instructions); within an ulp of libm (tested). Arguments larger
 //! than about 1.6e6 rad (far beyond any joint angle) and non-finite ones go to
 //! `f64::sin` and `f64::cos`.
 #![allow(clippy::excessive_precision, clippy::unreadable_literal)]
+
+use nalgebra::ComplexField;
 
 const S1: f64 = -1.66666666666666324348e-01;
 const S2: f64 = 8.33333333332248946124e-03;
@@ -25,24 +27,28 @@ const C5: f64 = 2.08757232129817482790e-09;
 const C6: f64 = -1.13596475577881948265e-11;
 
 /// `(sin(x + y), cos(x + y))` on [−π/4, π/4], `y` the tail of the reduced argument:
-/// musl's `__sin` and `__cos`, their two polynomials in `z = x²` evaluated side by side
-/// (Horner, one multiply-add of each per step, which the compiler pairs into SIMD lanes).
+/// musl's `__sin` and `__cos` with their operations in musl's order (the same bits), the
+/// two polynomials' like-shaped halves evaluated side by side, which the compiler pairs
+/// into SIMD lanes.
 #[inline(always)]
 fn kernels(x: f64, y: f64) -> (f64, f64) {
     let z = x * x;
-    let mut p = [S6, C6];
-    for (s, c) in [(S5, C5), (S4, C4), (S3, C3), (S2, C2)] {
-        p = [p[0] * z + s, p[1] * z + c];
-    }
-    let (r, rc) = (p[0], p[1] * z + C1);
+    let w = z * z;
+    // sin: r = S2 + z(S3 + z S4) + z w (S5 + z S6); cos: r = z(C1 + z(C2 + z C3)) + w²(C4 + z(C5 + z C6)).
+    let a = [S2 + z * (S3 + z * S4), C1 + z * (C2 + z * C3)];
+    let b = [S5 + z * S6, C4 + z * (C5 + z * C6)];
+    let r = a[0] + z * w * b[0];
+    let rc = z * a[1] + w * w * b[1];
     let v = z * x;
     let sin = x - ((z * (0.5 * y - v * r) - y) - v * S1);
     let hz = 0.5 * z;
     let w = 1.0 - hz;
-    let cos = w + (((1.0 - w) - hz) + (z * (z * rc) - x * y));
+    let cos = w + (((1.0 - w) - hz) + (z * rc - x * y));
     (sin, cos)
 }
 
+/// 2²⁰ π/2, beyond which the reduction needs more of π's bits (libm takes over).
+const FAR: f64 = 1.6470993291652855e6;
 const TOINT: f64 = 1.5 / f64::EPSILON;
 const INVPIO2: f64 = core::f64::consts::FRAC_2_PI; // musl's invpio2, the same bits
 const PIO2_1: f64 = 1.57079632673412561417e+00;
@@ -89,9 +95,8 @@ pub fn sincos(x: f64) -> (f64, f64) {
     if ax <= core::f64::consts::FRAC_PI_4 {
         return kernels(x, 0.0);
     }
-    // 2²⁰ π/2, beyond which the reduction needs more of π's bits.
-    if ax.is_nan() || ax >= 1.6470993291652855e6 {
-        return (x.sin(), x.cos());
+    if ax.is_nan() || ax >= FAR {
+        return (ComplexField::sin(x), ComplexField::cos(x));
     }
     let (n, y0, y1) = rem_pio2(x);
     let (s, c) = kernels(y0, y1);
@@ -103,9 +108,65 @@ pub fn sincos(x: f64) -> (f64, f64) {
     }
 }
 
+/// [`sincos`] of four lanes without branches, bit for bit: every reduction round is
+/// computed and the one the scalar path would use is selected, quadrants by bit masks;
+/// lanes out of the reduction's range go to libm (a branch taken only for them).
+#[inline(always)]
+pub fn sincos_lanes(x: [f64; 4]) -> ([f64; 4], [f64; 4]) {
+    let mut s = [0.0; 4];
+    let mut c = [0.0; 4];
+    let mut far = false;
+    for k in 0..4 {
+        let x = x[k];
+        let ax = x.abs();
+        far |= ax.is_nan() || ax >= FAR;
+        let shifted = x * INVPIO2 + TOINT;
+        let fnum = shifted - TOINT;
+        let r1 = x - fnum * PIO2_1;
+        let w1 = fnum * PIO2_1T;
+        let y1 = r1 - w1;
+        let r2 = r1 - fnum * PIO2_2;
+        let w2 = fnum * PIO2_2T - ((r1 - r2) - fnum * PIO2_2);
+        let y2 = r2 - w2;
+        let r3 = r2 - fnum * PIO2_3;
+        let w3 = fnum * PIO2_3T - ((r2 - r3) - fnum * PIO2_3);
+        let y3 = r3 - w3;
+        // The scalar path's choice of round.
+        let second = y1.abs() < ax * (1.0 / 32768.0);
+        let third = second && y2.abs() < ax * (1.0 / 281474976710656.0);
+        let (r, w, y0) = if third {
+            (r3, w3, y3)
+        } else if second {
+            (r2, w2, y2)
+        } else {
+            (r1, w1, y1)
+        };
+        let tail = (r - y0) - w;
+        let (ks, kc) = kernels(y0, tail);
+        // n mod 4 from the low bits of the shifted sum (1.5·2⁵² + n).
+        let n = shifted.to_bits() & 3;
+        let swap = n & 1 == 1;
+        let (mut sk, mut ck) = if swap { (kc, ks) } else { (ks, kc) };
+        let flip_sin = (n & 2) << 62;
+        let flip_cos = ((n + 1) & 2) << 62;
+        sk = f64::from_bits(sk.to_bits() ^ flip_sin);
+        ck = f64::from_bits(ck.to_bits() ^ flip_cos);
+        s[k] = sk;
+        c[k] = ck;
+    }
+    if far {
+        for k in 0..4 {
+            if x[k].is_nan() || x[k].abs() >= FAR {
+                (s[k], c[k]) = (ComplexField::sin(x[k]), ComplexField::cos(x[k]));
+            }
+        }
+    }
+    (s, c)
+}
+
 #[cfg(test)]
 mod tests {
-    use super::sincos;
+    use super::{sincos, sincos_lanes};
 
     /// Distance in ulps between two doubles of the same sign (or both near zero).
     fn ulps(a: f64, b: f64) -> f64 {
@@ -170,6 +231,43 @@ mod tests {
         }
         eprintln!("sincos: worst {worst:.2} ulp from libm");
         assert!(worst <= 2.0);
+    }
+
+    /// The lanes give the scalar path's bits, reduction rounds and quadrants included.
+    #[test]
+    fn lanes_match_the_scalar_path() {
+        let mut seed = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut xs: Vec<f64> = Vec::new();
+        for scale in [1e-9, 0.5, 1.0, 4.0, 100.0, 1e5, 1e7] {
+            xs.extend((0..4000).map(|_| (2.0 * next() - 1.0) * scale));
+        }
+        for k in -300..300 {
+            let x = k as f64 * core::f64::consts::FRAC_PI_2;
+            xs.extend([x, x + x.abs() * f64::EPSILON, x - x.abs() * f64::EPSILON]);
+        }
+        xs.extend([0.0, -0.0, f64::NAN, f64::INFINITY, -1e300]);
+        while !xs.len().is_multiple_of(4) {
+            xs.push(1.0);
+        }
+        for chunk in xs.chunks(4) {
+            let x = [chunk[0], chunk[1], chunk[2], chunk[3]];
+            let (s, c) = sincos_lanes(x);
+            for k in 0..4 {
+                let (ss, cc) = sincos(x[k]);
+                assert_eq!(
+                    (s[k].to_bits(), c[k].to_bits()),
+                    (ss.to_bits(), cc.to_bits()),
+                    "lane of {:e}",
+                    x[k]
+                );
+            }
+        }
     }
 
     #[test]

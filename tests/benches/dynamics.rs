@@ -128,6 +128,30 @@ fn bench_model<
             )
         })
     });
+    // Four states per call on `F64x4` lanes (the table divides by four); legs whose closure
+    // repeats rows have no batched forward dynamics.
+    {
+        use leg_models::simd::pack;
+        let p4 = leg_models::batch::broadcast::<L, NQ, NC, NU>(&p);
+        let q4 = pack([&q; 4]);
+        let qd4 = pack([&qd; 4]);
+        let u4 = pack([&u; 4]);
+        g.bench_function("fused-batch", |bch| {
+            bch.iter(|| L::dynamics_terms(black_box(&q4), black_box(&qd4), black_box(&p4)))
+        });
+        if L::REDUNDANT_ROWS == 0 {
+            g.bench_function("fd-batch", |bch| {
+                bch.iter(|| {
+                    leg_models::batch::forward_dynamics::<L, NQ, NC, NU>(
+                        black_box(&p4),
+                        black_box(&q4),
+                        black_box(&qd4),
+                        black_box(&u4),
+                    )
+                })
+            });
+        }
+    }
     g.bench_function("mass_matrix-ours", |bch| {
         bch.iter(|| L::mass_matrix(black_box(&q), black_box(&p)))
     });

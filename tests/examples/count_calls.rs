@@ -3,7 +3,8 @@
 //! is the cost of one call (`cargo xtask bench --instructions`, and the budgets
 //! `cargo xtask test` checks).
 //!
-//! `count_calls MODEL PATH CALLS`, PATH one of `empty`, `fused`, `forward_dynamics` and,
+//! `count_calls MODEL PATH CALLS`, PATH one of `empty`, `fused`, `forward_dynamics`,
+//! `batch_fused`, `batch_forward_dynamics` (four states per call, `F64x4` lanes) and,
 //! with the `peers` feature, `casadi_fused`, `casadi_forward_dynamics`,
 //! `casadi_closed_fused`, `casadi_closed_forward_dynamics`.
 //!
@@ -64,6 +65,38 @@ fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usiz
             ))
             .map_or(0.0, |a| a.qdd[0])
         }),
+        // Four states per call on `F64x4` lanes (`cargo xtask bench` divides by four).
+        // (A leg whose closure repeats rows has no batched forward dynamics.)
+        "batch_forward_dynamics" if L::REDUNDANT_ROWS > 0 => return None,
+        "batch_fused" | "batch_forward_dynamics" => {
+            use leg_models::simd::{pack, F64x4};
+            let p4 = leg_models::batch::broadcast::<L, NQ, NC, NU>(&p);
+            let qs: Vec<SVector<f64, NQ>> = (0..4).map(|k| q.add_scalar(1e-3 * k as f64)).collect();
+            let q4 = pack([&qs[0], &qs[1], &qs[2], &qs[3]]);
+            let qd4 = pack([&qd; 4]);
+            let u4 = SVector::<F64x4, NU>::from_element(F64x4::splat(0.1));
+            if what == "batch_fused" {
+                measure(n, || {
+                    black_box(L::dynamics_terms(
+                        black_box(&q4),
+                        black_box(&qd4),
+                        black_box(&p4),
+                    ))
+                    .mass_matrix[(0, 0)]
+                        .lane(0)
+                })
+            } else {
+                measure(n, || {
+                    black_box(leg_models::batch::forward_dynamics::<L, NQ, NC, NU>(
+                        black_box(&p4),
+                        black_box(&q4),
+                        black_box(&qd4),
+                        black_box(&u4),
+                    ))
+                    .map_or(0.0, |a| a.qdd[0].lane(0))
+                })
+            }
+        }
         #[cfg(feature = "peers")]
         peer if peer.starts_with("casadi_") => {
             use leg_tests::casadi::{functions, parameter_vector, Prepared};

@@ -109,15 +109,16 @@ pub fn compare_instructions(root: &Path) -> Result<String, String> {
     let models = crate::cli::model_names(root)?;
     let mut progress = Progress::new(models.len() as u64, "counting CasADi's C (callgrind)");
     let mut lines = vec![
-        "| model | harness | fused ours | CasADi C, closed form | ratio | CasADi C, Lagrange | ratio | FD ours | CasADi C, closed form | ratio | CasADi C, Lagrange | ratio |"
+        "| model | harness | fused ours | CasADi C, closed form | ratio | CasADi C, Lagrange | ratio | FD ours | CasADi C, closed form | ratio | CasADi C, Lagrange | ratio | fused batch per state | × scalar | FD batch per state | × scalar |"
             .to_string(),
-        "|---|---|---|---|---|---|---|---|---|---|---|---|".to_string(),
+        format!("|{}", "---|".repeat(16)),
     ];
     let ratio = |a: u64, b: u64| format!("{:.2}", a as f64 / b.max(1) as f64);
     for (k, m) in models.iter().enumerate() {
         progress.set(k as u64);
         let harness = Harness::of(&bin, m)?;
         let mut cells = vec![m.clone(), harness.per_call().to_string()];
+        let mut scalar = Vec::new();
         for path in PATHS {
             let ours = harness.net(&bin, m, path)?;
             let closed = harness.net(&bin, m, &format!("casadi_closed_{path}"))?;
@@ -129,12 +130,23 @@ pub fn compare_instructions(root: &Path) -> Result<String, String> {
                 lagrange.to_string(),
                 ratio(ours, lagrange),
             ]);
+            scalar.push(ours);
+        }
+        // Four states per call; a leg without a batched path shows a dash.
+        for (path, ours) in PATHS.iter().zip(scalar) {
+            match harness.net(&bin, m, &format!("batch_{path}")) {
+                Ok(four) => {
+                    let per = four as f64 / 4.0;
+                    cells.extend([format!("{per:.0}"), format!("{:.2}", ours as f64 / per)]);
+                }
+                Err(_) => cells.extend(["–".to_string(), "–".to_string()]),
+            }
         }
         lines.push(format!("| {} |", cells.join(" | ")));
     }
     lines.push(String::new());
     lines.push(format!(
-        "instructions per call (callgrind, {CALLS} calls less none, less the harness's empty loop, shown as `harness`); every contender's inputs are prepared once and its outputs preallocated; ratios are ours / peer"
+        "instructions per call (callgrind, {CALLS} calls less none, less the harness's empty loop, shown as `harness`); every contender's inputs are prepared once and its outputs preallocated; ratios are ours / peer; batch: four states per call on F64x4 lanes, per state, and the scalar path's count over it"
     ));
     Ok(lines.join("\n"))
 }
@@ -215,6 +227,11 @@ fn ratio(a: Option<f64>, b: Option<f64>) -> String {
     }
 }
 
+/// A batched call's time per state (four states per call).
+fn per_state(v: Option<f64>) -> Option<f64> {
+    v.map(|x| x / 4.0)
+}
+
 /// Runs the criterion benchmarks (and Pinocchio's pipeline when `pinocchio`), then
 /// prints the table.
 pub fn run(root: &Path, pinocchio: bool) -> Result<(), String> {
@@ -237,8 +254,8 @@ pub fn run(root: &Path, pinocchio: bool) -> Result<(), String> {
     };
     let models = crate::cli::model_names(root)?;
     println!();
-    println!("| model | harness | fused ours | CasADi C closed | ratio | CasADi C Lagrange | ratio | Pinocchio-on-CasADi C | ratio | FD ours | CasADi C closed | ratio | CasADi C Lagrange | ratio | Pinocchio-on-CasADi C | ratio | Pinocchio C++ | ratio | control step | control / FD | fused f32/f64 | FD f32/f64 | sim step |");
-    println!("|{}", "---|".repeat(23));
+    println!("| model | harness | fused ours | CasADi C closed | ratio | CasADi C Lagrange | ratio | Pinocchio-on-CasADi C | ratio | FD ours | CasADi C closed | ratio | CasADi C Lagrange | ratio | Pinocchio-on-CasADi C | ratio | Pinocchio C++ | ratio | control step | control / FD | fused f32/f64 | FD f32/f64 | sim step | fused batch per state | × scalar | FD batch per state | × scalar |");
+    println!("|{}", "---|".repeat(27));
     for m in &models {
         let g = |id: &str| median(root, m, id);
         let (fo, fcc, fcl, dd, dcc, dcl, c) = (
@@ -274,9 +291,13 @@ pub fn run(root: &Path, pinocchio: bool) -> Result<(), String> {
             ratio(g("fused-ours-f32"), fo),
             ratio(g("fd-ours-f32"), dd),
             ns(g("step-ours")),
+            ns(per_state(g("fused-batch"))),
+            ratio(fo, per_state(g("fused-batch"))),
+            ns(per_state(g("fd-batch"))),
+            ratio(dd, per_state(g("fd-batch"))),
         ];
         println!("| {m} | {} |", cells.join(" | "));
     }
-    println!("\nmedians of criterion (target/criterion/); `harness` is the measured loop with no contender (included in every other figure); ratios are ours / peer, measured in this one run");
+    println!("\nmedians of criterion (target/criterion/); `harness` is the measured loop with no contender (included in every other figure); ratios are ours / peer, measured in this one run; batch: four states per call on F64x4 lanes, per state, and the scalar time over it (states per second over the scalar path's)");
     Ok(())
 }

@@ -386,7 +386,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         )]
 
         use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
-        use leg_models::{ContactModel, DynamicsTerms, JointKind, LegModel, Parameters, Real};
+        use leg_models::{Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters};
 
         /// Number of joints.
         pub const NQ: usize = #lq;
@@ -407,7 +407,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             #(#fields,)*
         }
 
-        impl<T: Real> Default for ParamValues<T> {
+        impl<T: Arithmetic> Default for ParamValues<T> {
             fn default() -> Self {
                 Self { #(#defaults,)* }
             }
@@ -424,7 +424,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             prepared: [T; #prepared],
         }
 
-        impl<T: Real> Params<T> {
+        impl<T: Arithmetic> Params<T> {
             /// Parameters of these values.
             pub fn new(values: ParamValues<T>) -> Self {
                 Self { prepared: prepare(&values).data.0[0], values }
@@ -449,19 +449,19 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             }
         }
 
-        impl<T: Real> From<ParamValues<T>> for Params<T> {
+        impl<T: Arithmetic> From<ParamValues<T>> for Params<T> {
             fn from(values: ParamValues<T>) -> Self {
                 Self::new(values)
             }
         }
 
-        impl<T: Real> Default for Params<T> {
+        impl<T: Arithmetic> Default for Params<T> {
             fn default() -> Self {
                 Self::new(ParamValues::default())
             }
         }
 
-        impl<T: Real> Parameters<T> for Params<T> {
+        impl<T: Arithmetic> Parameters<T> for Params<T> {
             const NAMES: &'static [&'static str] = &[#(#param_names),*];
             fn get(&self, i: usize) -> Option<T> {
                 match i {
@@ -489,7 +489,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             const HOME: [f64; NQ] = [#(#home),*];
             const REDUNDANT_ROWS: usize = #redundant;
             const MOBILITY: usize = #mobility;
-            type Params<T: Real> = Params<T>;
+            type Params<T: Arithmetic> = Params<T>;
             #(#methods)*
         }
 
@@ -528,7 +528,7 @@ fn trait_method(f: &Program, nq: usize, nc: usize) -> TokenStream {
         .collect();
     if f.name == "dynamics_terms" {
         return quote! {
-            fn #name<T: Real>(#(#args),*) -> DynamicsTerms<T, #lq, #lc> {
+            fn #name<T: Arithmetic>(#(#args),*) -> DynamicsTerms<T, #lq, #lc> {
                 let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = #name(#(#pass),*);
                 DynamicsTerms { mass_matrix, bias_forces, constraint_jacobian, constraint_bias }
             }
@@ -542,7 +542,7 @@ fn trait_method(f: &Program, nq: usize, nc: usize) -> TokenStream {
         OutputKind::Matrix => quote!(SMatrix<T, #r, #c>),
     };
     quote! {
-        fn #name<T: Real>(#(#args),*) -> #ret {
+        fn #name<T: Arithmetic>(#(#args),*) -> #ret {
             #name(#(#pass),*)
         }
     }
