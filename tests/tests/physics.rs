@@ -701,9 +701,11 @@ fn minitaur_hopper_is_minitaur_on_a_rail() {
 }
 
 /// Parameters changed at run time (`Parameters::set`, which prepares the parameter-only
-/// quantities again) give the terms that CasADi's C of the same closed form computes from
-/// the raw parameter vector, which has no prepared values: a stale prepared value would
-/// show here. Every parameter is changed, one state per change.
+/// quantities again) give the terms that CasADi's C computes from the raw parameter
+/// vector, which has no prepared values: a stale prepared value would show here. Two
+/// peers: the same closed form (to 1e-12), and the notes' Lagrange form (`M`, `N` by
+/// differentiating `L` written on absolute positions, `J = ∂φ/∂q`: a derivation
+/// independent of ours, to 1e-10). Every parameter is changed, one state per change.
 #[cfg(feature = "peers")]
 fn check_prepared_parameters_follow_set<
     L: LegModel<NQ, NC, NU>,
@@ -712,12 +714,21 @@ fn check_prepared_parameters_follow_set<
     const NU: usize,
 >() {
     use leg_tests::casadi;
-    let peer = casadi::functions(L::NAME).closed;
+    let peers = casadi::functions(L::NAME);
     let mut rng = Rng::new(29);
     let mut p = L::Params::<f64>::default();
-    for i in 0..<L::Params<f64> as Parameters<f64>>::NAMES.len() {
-        let value = p.get(i).unwrap();
-        assert!(p.set(i, value * rng.range(0.8, 1.25) + rng.range(-0.01, 0.01)));
+    for (i, (peer, form, tol)) in
+        (0..<L::Params<f64> as Parameters<f64>>::NAMES.len()).flat_map(|i| {
+            [
+                (i, (peers.closed, "closed form", 1e-12)),
+                (i, (peers.lagrange, "Lagrange form", 1e-10)),
+            ]
+        })
+    {
+        if form == "closed form" {
+            let value = p.get(i).unwrap();
+            assert!(p.set(i, value * rng.range(0.8, 1.25) + rng.range(-0.01, 0.01)));
+        }
         let (q, qd) = random_state::<NQ>(&mut rng);
         let ours = L::dynamics_terms(&q, &qd, &p);
         let raw = casadi::parameter_vector(&p);
@@ -738,8 +749,8 @@ fn check_prepared_parameters_follow_set<
             let scale = b.iter().fold(1e-9f64, |s, x| s.max(x.abs()));
             for (x, y) in a.iter().zip(b) {
                 assert!(
-                    (x - y).abs() <= 1e-12 * scale,
-                    "{}: {what} after setting {}: ours {x}, CasADi {y}",
+                    (x - y).abs() <= tol * scale,
+                    "{}: {what} after setting {}: ours {x}, CasADi's C of the {form} {y}",
                     L::NAME,
                     <L::Params<f64> as Parameters<f64>>::NAMES[i]
                 );
