@@ -35,23 +35,6 @@ fn parameter_only(prog: &Program, param: usize) -> Vec<bool> {
     only
 }
 
-fn live(prog: &Program) -> Vec<bool> {
-    let mut live = vec![false; prog.instructions.len()];
-    for out in &prog.outputs {
-        for &e in &out.entries {
-            live[e] = true;
-        }
-    }
-    for k in (0..live.len()).rev() {
-        if live[k] {
-            for a in prog.instructions[k].operands() {
-                live[a] = true;
-            }
-        }
-    }
-    live
-}
-
 /// Hoists the parameter-only values of `programs` that read the struct input named
 /// `param` (programs without it are returned optimized and otherwise unchanged).
 pub fn hoist(programs: &[Program], param: &str, values_type: &str) -> Hoisted {
@@ -77,7 +60,7 @@ pub fn hoist(programs: &[Program], param: &str, values_type: &str) -> Hoisted {
             continue;
         };
         let only = parameter_only(prog, pi);
-        let live = live(prog);
+        let live = prog.live();
         let computed = |k: usize| {
             only[k] && !matches!(prog.instructions[k], Instr::Input { .. } | Instr::Const(_))
         };

@@ -255,6 +255,26 @@ impl<'de> Deserialize<'de> for Instr {
     }
 }
 
+impl Program {
+    /// Which values some output depends on (the others are not emitted).
+    pub fn live(&self) -> Vec<bool> {
+        let mut live = vec![false; self.instructions.len()];
+        for out in &self.outputs {
+            for &e in &out.entries {
+                live[e] = true;
+            }
+        }
+        for k in (0..live.len()).rev() {
+            if live[k] {
+                for a in self.instructions[k].operands() {
+                    live[a] = true;
+                }
+            }
+        }
+        live
+    }
+}
+
 impl Instr {
     /// The values this instruction reads.
     pub fn operands(&self) -> impl Iterator<Item = usize> {

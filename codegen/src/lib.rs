@@ -232,19 +232,7 @@ pub fn emit_function(prog: &Program, doc: &str) -> Result<TokenStream, Error> {
     let n = prog.instructions.len();
 
     // Liveness: only values some output depends on are emitted.
-    let mut live = vec![false; n];
-    for out in &prog.outputs {
-        for &e in &out.entries {
-            live[e] = true;
-        }
-    }
-    for k in (0..n).rev() {
-        if live[k] {
-            for a in prog.instructions[k].operands() {
-                live[a] = true;
-            }
-        }
-    }
+    let live = prog.live();
 
     // Name every value: vector elements `q_0`, struct fields `p.mass`, constants inline,
     // computed values `v{k}`.
