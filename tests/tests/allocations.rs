@@ -65,6 +65,26 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
         "forward dynamics",
         allocations(|| forward_dynamics::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None)).0,
     );
+    // Four states on SIMD lanes, and a change of parameters (which prepares them again).
+    let p4 = leg_models::batch::broadcast::<L, NQ, NC, NU>(&p);
+    let (q4, qd4, u4) = (
+        leg_models::simd::pack([&q; 4]),
+        leg_models::simd::pack([&qd; 4]),
+        leg_models::simd::pack([&u; 4]),
+    );
+    zero(
+        "batched dynamics_terms",
+        allocations(|| L::dynamics_terms(&q4, &qd4, &p4)).0,
+    );
+    zero(
+        "batched forward dynamics",
+        allocations(|| leg_models::batch::forward_dynamics::<L, NQ, NC, NU>(&p4, &q4, &qd4, &u4)).0,
+    );
+    let mut changed = p;
+    zero(
+        "setting a parameter",
+        allocations(|| leg_models::Parameters::set(&mut changed, 0, 0.0)).0,
+    );
     let b = Some(Baumgarte {
         alpha: 10.0,
         beta: 10.0,
