@@ -141,13 +141,6 @@ class LinkKinematics:
         c, s = rc
         return [c * v[0] - s * v[1], s * v[0] + c * v[1]]
 
-    @staticmethod
-    def rot_t(rc, v):
-        if rc is None:
-            return list(v)
-        c, s = rc
-        return [c * v[0] + s * v[1], c * v[1] - s * v[0]]
-
     def dot_rot(self, r, rc, v):
         """r · (R v), as c (r·v) − s (r×v) when r and v are parameters only."""
         if rc is not None and self.constant(*r, *v):
@@ -203,9 +196,6 @@ class LinkKinematics:
         m, h, inertia = c
         return self.grouped_sum(m), [self.grouped_sum(h[0]), self.grouped_sum(h[1])], self.grouped_sum(inertia)
 
-    def composite(self):
-        return [self.summed(c) for c in self.composite_terms()]
-
     def motion_force(self, i, m, h, inertia):
         """The force I S_i of an inertia (m, h, I) moved along joint i: (moment, force)."""
         if self.links[i]["joint"] == "revolute":
@@ -230,14 +220,11 @@ class LinkKinematics:
         for i in range(n):
             moment, force = self.motion_force(i, *comp[i])
             rotor = self.links[i]["rotor"]
-            if self.links[i]["joint"] == "revolute":
-                # I_i^c, with the rotor's reflected inertia among its constant terms.
-                extra = [self.sym[rotor[0]] * self.sym[rotor[1]] ** 2] if rotor is not None else []
-                M[i][i] = self.grouped_sum(terms[i][2] + extra)
-            else:
-                M[i][i] = self.project(i, moment, force)
-                if rotor is not None:
-                    M[i][i] = M[i][i] + self.sym[rotor[0]] * self.sym[rotor[1]] ** 2
+            extra = [self.sym[rotor[0]] * self.sym[rotor[1]] ** 2] if rotor is not None else []
+            # A revolute joint's M_ii is I_i^c: its terms, with the reflected rotor inertia
+            # among the constant ones.
+            own = terms[i][2] if self.links[i]["joint"] == "revolute" else [self.project(i, moment, force)]
+            M[i][i] = self.grouped_sum(own + extra)
             j = i
             while self.links[j]["parent"] is not None:
                 r, rc = self.offset[j], self.rel[j]
@@ -494,8 +481,8 @@ def derive(model):
 
     # The terms our generator emits, in link-local form (DESIGN.md §3): the mass matrix by
     # the composite-rigid-body recursion in each link's frame, the gravity forces from each
-    # subtree's first moment and the gravity vector in that frame, C q̇ from that M
-    # (Ṁ q̇ − ½ ∂(q̇ᵀ M q̇)/∂q), and point Jacobians and J̇ q̇ from the chain's segments.
+    # subtree's first moment and the gravity vector, C q̇ (below) from that M or from the
+    # centres of mass, and point Jacobians and J̇ q̇ from the chain's segments.
     # Products of parameters are grouped apart from the joint angles' sines and cosines
     # (`c·(r·h) − s·(r×h)`), so that the emitter can compute them once per parameter set;
     # the entries of M then reduce to constants times sines and cosines of relative angles.
@@ -519,9 +506,6 @@ def derive(model):
             cs.vertcat(*[lk.jacobian(r) for r in refs]),
             cs.vertcat(*[lk.bias(r) for r in refs]),
         )
-
-    def difference(a, b):
-        return [x - y for x, y in zip(a, b)]
 
     closures = model["closures"]
     if closures:

@@ -118,18 +118,18 @@ pub fn hoist(programs: &[Program], param: &str, values_type: &str) -> Hoisted {
     });
     // Value numbering made equal quantities one value: one slot each, in first-use order.
     let mut slots: Vec<usize> = Vec::new();
+    let mut slot_of_value = std::collections::HashMap::new();
     let slot_of: Vec<usize> = combined.outputs[0]
         .entries
         .iter()
-        .map(|&v| match slots.iter().position(|&s| s == v) {
-            Some(i) => i,
-            None => {
+        .map(|&v| {
+            *slot_of_value.entry(v).or_insert_with(|| {
                 slots.push(v);
                 slots.len() - 1
-            }
+            })
         })
         .collect();
-    let mut prepare = combined.clone();
+    let mut prepare = combined;
     prepare.outputs[0].entries = slots.clone();
     prepare.outputs[0].rows = slots.len();
 

@@ -58,34 +58,43 @@ const PIO2_2T: f64 = 2.02226624879595063154e-21;
 const PIO2_3: f64 = 2.02226624871116645580e-21;
 const PIO2_3T: f64 = 8.47842766036889956997e-32;
 
+/// Below these fractions of |x|, the reduced argument has cancelled enough bits for a
+/// second (118 bits) and a third (151 bits, every double) round (musl: exponents 16 and
+/// 49 apart; these magnitudes refine at least as often).
+const SECOND: f64 = 1.0 / 32768.0;
+const THIRD: f64 = 1.0 / 281474976710656.0;
+
+/// The first round: `(x·2/π + 1.5·2⁵², n, r, w)` with `x − n π/2 ≈ r − w` (Rust rounds
+/// to nearest, so musl's corrections for directed rounding are left out).
+#[inline(always)]
+fn first_round(x: f64) -> (f64, f64, f64, f64) {
+    let shifted = x * INVPIO2 + TOINT;
+    let fnum = shifted - TOINT;
+    (shifted, fnum, x - fnum * PIO2_1, fnum * PIO2_1T)
+}
+
+/// A further round with the next part `p` of π/2 and its tail `pt`: `(r, w, r − w)`.
+#[inline(always)]
+fn refine(r: f64, fnum: f64, p: f64, pt: f64) -> (f64, f64, f64) {
+    let w = fnum * p;
+    let next = r - w;
+    let w = fnum * pt - ((r - next) - w);
+    (next, w, next - w)
+}
+
 /// `x − n π/2` as a head and a tail, and `n`, for |x| < 2²⁰ π/2 (musl's `__rem_pio2`).
 #[inline(always)]
 fn rem_pio2(x: f64) -> (i32, f64, f64) {
-    // Rust rounds to nearest (musl's corrections for directed rounding are left out).
-    let fnum = x * INVPIO2 + TOINT - TOINT;
-    let mut r = x - fnum * PIO2_1;
-    let mut w = fnum * PIO2_1T;
-    let mut y0 = r - w;
-    // Cancellation (musl: the exponents of x and y0 more than 16 apart; here |y0| below
-    // |x|/2¹⁵, which refines at least as often): a second round, good to 118 bits.
+    let (_, fnum, r1, w1) = first_round(x);
+    let (mut r, mut w, mut y0) = (r1, w1, r1 - w1);
     let ax = x.abs();
-    if y0.abs() < ax * (1.0 / 32768.0) {
-        let t = r;
-        w = fnum * PIO2_2;
-        r = t - w;
-        w = fnum * PIO2_2T - ((t - r) - w);
-        y0 = r - w;
-        if y0.abs() < ax * (1.0 / 281474976710656.0) {
-            // A third (|y0| below |x|/2⁴⁸), good to 151 bits: every double.
-            let t = r;
-            w = fnum * PIO2_3;
-            r = t - w;
-            w = fnum * PIO2_3T - ((t - r) - w);
-            y0 = r - w;
+    if y0.abs() < ax * SECOND {
+        (r, w, y0) = refine(r, fnum, PIO2_2, PIO2_2T);
+        if y0.abs() < ax * THIRD {
+            (r, w, y0) = refine(r, fnum, PIO2_3, PIO2_3T);
         }
     }
-    let y1 = (r - y0) - w;
-    (fnum as i32, y0, y1)
+    (fnum as i32, y0, (r - y0) - w)
 }
 
 /// `(sin x, cos x)` with one argument reduction.
@@ -120,20 +129,13 @@ pub fn sincos_lanes(x: [f64; 4]) -> ([f64; 4], [f64; 4]) {
         let x = x[k];
         let ax = x.abs();
         far |= ax.is_nan() || ax >= FAR;
-        let shifted = x * INVPIO2 + TOINT;
-        let fnum = shifted - TOINT;
-        let r1 = x - fnum * PIO2_1;
-        let w1 = fnum * PIO2_1T;
+        let (shifted, fnum, r1, w1) = first_round(x);
         let y1 = r1 - w1;
-        let r2 = r1 - fnum * PIO2_2;
-        let w2 = fnum * PIO2_2T - ((r1 - r2) - fnum * PIO2_2);
-        let y2 = r2 - w2;
-        let r3 = r2 - fnum * PIO2_3;
-        let w3 = fnum * PIO2_3T - ((r2 - r3) - fnum * PIO2_3);
-        let y3 = r3 - w3;
+        let (r2, w2, y2) = refine(r1, fnum, PIO2_2, PIO2_2T);
+        let (r3, w3, y3) = refine(r2, fnum, PIO2_3, PIO2_3T);
         // The scalar path's choice of round.
-        let second = y1.abs() < ax * (1.0 / 32768.0);
-        let third = second && y2.abs() < ax * (1.0 / 281474976710656.0);
+        let second = y1.abs() < ax * SECOND;
+        let third = second && y2.abs() < ax * THIRD;
         let (r, w, y0) = if third {
             (r3, w3, y3)
         } else if second {

@@ -4,7 +4,8 @@
 //! `cargo xtask test` checks).
 //!
 //! `count_calls MODEL PATH CALLS`, PATH one of `empty`, `fused`, `forward_dynamics`,
-//! `batch_fused`, `batch_forward_dynamics` (four states per call, `F64x4` lanes) and,
+//! `batch_fused`, `batch_forward_dynamics` (four states per call, `F64x4` lanes),
+//! `set_parameter` (one parameter set, everything prepared again) and,
 //! with the `peers` feature, `casadi_fused`, `casadi_forward_dynamics`,
 //! `casadi_closed_fused`, `casadi_closed_forward_dynamics`.
 //!
@@ -20,7 +21,7 @@ use std::hint::black_box;
 
 use leg_models::dynamics::forward_dynamics;
 use leg_models::nalgebra::SVector;
-use leg_models::LegModel;
+use leg_models::{LegModel, Parameters};
 
 /// The measured loop, the same for every contender: `call` once per iteration, its result
 /// kept so that nothing is dropped as unused.
@@ -65,6 +66,16 @@ fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usiz
             ))
             .map_or(0.0, |a| a.qdd[0])
         }),
+        // What a change of parameters costs: one value set, every prepared value computed
+        // again (the work the per-state functions no longer do).
+        "set_parameter" => {
+            let mut changed = p;
+            let value = p.get(0).unwrap_or(0.0);
+            measure(n, || {
+                black_box(&mut changed).set(0, black_box(value));
+                black_box(&changed).get(0).unwrap_or(0.0)
+            })
+        }
         // Four states per call on `F64x4` lanes (`cargo xtask bench` divides by four).
         // (A leg whose closure repeats rows has no batched forward dynamics.)
         "batch_forward_dynamics" if L::REDUNDANT_ROWS > 0 => return None,

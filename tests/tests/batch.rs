@@ -61,10 +61,13 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
             }
         }
     }
-    // A parameter sweep: lane k's first mass scaled by 1 + k/10.
-    let mass = <L::Params<f64> as Parameters<f64>>::NAMES
-        .iter()
-        .position(|n| n.ends_with("_mass"))
+    // A parameter sweep: lane k's first nonzero mass scaled by 1 + k/10 (a massless
+    // slider's would sweep nothing).
+    let mass = (0..<L::Params<f64> as Parameters<f64>>::NAMES.len())
+        .find(|&i| {
+            <L::Params<f64> as Parameters<f64>>::NAMES[i].ends_with("_mass")
+                && p.get(i).unwrap() > 0.0
+        })
         .unwrap();
     let m = p.get(mass).unwrap();
     let mut swept = p4;
