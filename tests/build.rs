@@ -24,19 +24,23 @@ mod peers {
         let mut build = cc::Build::new();
         build.opt_level(3).flag("-O3").warnings(false);
         let mut decls = String::from("extern \"C\" {\n");
-        let mut table = String::from("/// CasADi's C functions by model: the Lagrange form's and the closed form's fused terms and\n/// forward dynamics.\npub const CASADI_C: &[(&str, Peers)] = &[\n");
+        let mut table = String::from("/// CasADi's C functions by model: the Lagrange form's and the closed form's fused terms and\n/// forward dynamics, and `jacobian` of the closed form's forward dynamics.\npub const CASADI_C: &[(&str, Peers)] = &[\n");
         for f in &files {
             println!("cargo:rerun-if-changed={}", f.display());
             build.file(f);
             let name = f.file_stem().unwrap().to_str().unwrap();
-            for form in ["", "closed_"] {
-                for what in ["dynamics_terms", "forward_dynamics"] {
-                    let _ = writeln!(decls, "    fn {name}_{form}{what}(arg: *const *const f64, res: *const *mut f64, iw: *mut i64, w: *mut f64, mem: i32) -> i32;");
-                }
+            for what in [
+                "dynamics_terms",
+                "forward_dynamics",
+                "closed_dynamics_terms",
+                "closed_forward_dynamics",
+                "closed_forward_dynamics_derivatives",
+            ] {
+                let _ = writeln!(decls, "    fn {name}_{what}(arg: *const *const f64, res: *const *mut f64, iw: *mut i64, w: *mut f64, mem: i32) -> i32;");
             }
             let _ = writeln!(
                 table,
-                "    (\"{name}\", Peers {{ lagrange: Pair {{ terms: {name}_dynamics_terms, forward_dynamics: {name}_forward_dynamics }}, closed: Pair {{ terms: {name}_closed_dynamics_terms, forward_dynamics: {name}_closed_forward_dynamics }} }}),"
+                "    (\"{name}\", Peers {{ lagrange: Pair {{ terms: {name}_dynamics_terms, forward_dynamics: {name}_forward_dynamics }}, closed: Pair {{ terms: {name}_closed_dynamics_terms, forward_dynamics: {name}_closed_forward_dynamics }}, derivatives: {name}_closed_forward_dynamics_derivatives }}),"
             );
         }
         decls.push_str("}\n");

@@ -24,12 +24,15 @@
 #define casadi_f1 CASADI_PREFIX(f1)
 #define casadi_f2 CASADI_PREFIX(f2)
 #define casadi_f3 CASADI_PREFIX(f3)
+#define casadi_f4 CASADI_PREFIX(f4)
 #define casadi_s0 CASADI_PREFIX(s0)
 #define casadi_s1 CASADI_PREFIX(s1)
 #define casadi_s2 CASADI_PREFIX(s2)
 #define casadi_s3 CASADI_PREFIX(s3)
 #define casadi_s4 CASADI_PREFIX(s4)
 #define casadi_s5 CASADI_PREFIX(s5)
+#define casadi_s6 CASADI_PREFIX(s6)
+#define casadi_s7 CASADI_PREFIX(s7)
 #define casadi_sq CASADI_PREFIX(sq)
 
 /* Symbol visibility in DLLs */
@@ -64,6 +67,8 @@ static const casadi_int casadi_s2[3] = {3, 3, 1};
 static const casadi_int casadi_s3[3] = {0, 3, 1};
 static const casadi_int casadi_s4[3] = {0, 1, 1};
 static const casadi_int casadi_s5[3] = {2, 1, 1};
+static const casadi_int casadi_s6[3] = {3, 2, 1};
+static const casadi_int casadi_s7[3] = {0, 2, 1};
 
 /* knee_hopper_dynamics_terms:(i0[3],i1[3],i2[33])->(o0[3x3],o1[3],o2[0x3],o3[0]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
@@ -1567,6 +1572,645 @@ CASADI_SYMBOL_EXPORT int knee_hopper_closed_forward_dynamics_work(casadi_int *sz
 CASADI_SYMBOL_EXPORT int knee_hopper_closed_forward_dynamics_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 4*sizeof(const casadi_real*);
   if (sz_res) *sz_res = 2*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  return 0;
+}
+
+/* knee_hopper_closed_forward_dynamics_derivatives:(i0[3],i1[3],i2[2],i3[33])->(o0[3],o1[0],o2[3x3],o3[3x3],o4[3x2],o5[0x3],o6[0x3],o7[0x2]) */
+static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
+  casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
+  casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34, a35;
+  casadi_real a36, a37, a38, a39, a40, a41, a42, a43, a44, a45, a46, a47;
+  casadi_real a48, a49, a50, a51, a52, a53, a54, a55, a56, a57, a58, a59;
+  casadi_real a60, a61, a62, a63, a64, a65, a66;
+  a00=arg[3]? arg[3][18] : 0;
+  a01=arg[3]? arg[3][15] : 0;
+  a02=arg[3]? arg[3][16] : 0;
+  a03=casadi_sq(a02);
+  a04=arg[3]? arg[3][17] : 0;
+  a05=casadi_sq(a04);
+  a03=(a03+a05);
+  a03=(a01*a03);
+  a00=(a00+a03);
+  a03=arg[3]? arg[3][27] : 0;
+  a05=arg[3]? arg[3][24] : 0;
+  a06=arg[3]? arg[3][25] : 0;
+  a07=casadi_sq(a06);
+  a08=arg[3]? arg[3][26] : 0;
+  a09=casadi_sq(a08);
+  a07=(a07+a09);
+  a07=(a05*a07);
+  a03=(a03+a07);
+  a00=(a00+a03);
+  a07=arg[3]? arg[3][13] : 0;
+  a09=casadi_sq(a07);
+  a10=arg[3]? arg[3][14] : 0;
+  a11=casadi_sq(a10);
+  a09=(a09+a11);
+  a09=(a05*a09);
+  a00=(a00+a09);
+  a09=arg[3]? arg[3][20] : 0;
+  a11=arg[3]? arg[3][21] : 0;
+  a11=casadi_sq(a11);
+  a09=(a09*a11);
+  a00=(a00+a09);
+  a09=arg[0]? arg[0][2] : 0;
+  a11=cos(a09);
+  a06=(a05*a06);
+  a12=(a07*a06);
+  a08=(a05*a08);
+  a13=(a10*a08);
+  a12=(a12+a13);
+  a13=(a11*a12);
+  a14=sin(a09);
+  a15=(a07*a08);
+  a16=(a10*a06);
+  a17=(a15-a16);
+  a18=(a14*a17);
+  a18=(a13-a18);
+  a18=(2.*a18);
+  a00=(a00+a18);
+  a18=arg[3]? arg[3][29] : 0;
+  a19=arg[3]? arg[3][30] : 0;
+  a19=casadi_sq(a19);
+  a18=(a18*a19);
+  a18=(a03+a18);
+  a19=(a00*a18);
+  a16=(a16-a15);
+  a15=(a14*a16);
+  a13=(a13+a15);
+  a03=(a03+a13);
+  a13=casadi_sq(a03);
+  a19=(a19-a13);
+  a13=arg[3]? arg[3][6] : 0;
+  a15=(a01+a05);
+  a13=(a13+a15);
+  a15=(a13*a19);
+  a20=arg[0]? arg[0][1] : 0;
+  a21=cos(a20);
+  a02=(a01*a02);
+  a07=(a05*a07);
+  a02=(a02+a07);
+  a07=(a11*a06);
+  a22=(a14*a08);
+  a07=(a07-a22);
+  a22=(a02+a07);
+  a23=(a21*a22);
+  a20=sin(a20);
+  a01=(a01*a04);
+  a05=(a05*a10);
+  a01=(a01+a05);
+  a05=(a14*a06);
+  a10=(a11*a08);
+  a04=(a05+a10);
+  a04=(a01+a04);
+  a24=(a20*a04);
+  a23=(a23-a24);
+  a24=(a23*a18);
+  a25=(a21*a07);
+  a10=(a10+a05);
+  a05=(a20*a10);
+  a25=(a25-a05);
+  a05=(a03*a25);
+  a05=(a24-a05);
+  a26=(a23*a05);
+  a15=(a15-a26);
+  a26=(a23*a03);
+  a27=(a00*a25);
+  a27=(a26-a27);
+  a28=(a25*a27);
+  a15=(a15+a28);
+  a19=(a19/a15);
+  a28=(a22*a20);
+  a29=(a04*a21);
+  a28=(a28+a29);
+  a29=arg[1]? arg[1][1] : 0;
+  a30=casadi_sq(a29);
+  a31=(a28*a30);
+  a32=(a06*a14);
+  a33=(a08*a11);
+  a32=(a32+a33);
+  a33=(a21*a32);
+  a34=(a06*a11);
+  a35=(a08*a14);
+  a34=(a34-a35);
+  a35=(a20*a34);
+  a33=(a33+a35);
+  a35=(a07*a20);
+  a36=(a10*a21);
+  a35=(a35+a36);
+  a36=(a33+a35);
+  a37=arg[1]? arg[1][2] : 0;
+  a38=(a29*a37);
+  a39=(a36*a38);
+  a31=(a31+a39);
+  a39=casadi_sq(a37);
+  a40=(a33*a39);
+  a31=(a31+a40);
+  a40=arg[3]? arg[3][1] : 0;
+  a41=(a13*a40);
+  a31=(a31+a41);
+  a41=arg[3]? arg[3][10] : 0;
+  a42=arg[1]? arg[1][0] : 0;
+  a42=(a41*a42);
+  a31=(a31-a42);
+  a42=(a19*a31);
+  a43=(a25*a03);
+  a24=(a24-a43);
+  a24=(a24/a15);
+  a43=arg[2]? arg[2][0] : 0;
+  a44=(a12*a14);
+  a45=(a17*a11);
+  a45=(a44+a45);
+  a46=(-a45);
+  a46=(2.*a46);
+  a47=(a46*a38);
+  a48=(a16*a11);
+  a48=(a48-a44);
+  a44=(a48*a39);
+  a47=(a47+a44);
+  a44=arg[3]? arg[3][0] : 0;
+  a49=(a44*a01);
+  a50=(a40*a02);
+  a49=(a49-a50);
+  a50=(a21*a49);
+  a02=(a44*a02);
+  a01=(a40*a01);
+  a02=(a02+a01);
+  a01=(a20*a02);
+  a50=(a50+a01);
+  a01=(a21*a11);
+  a51=(a20*a14);
+  a01=(a01-a51);
+  a51=(a44*a08);
+  a52=(a40*a06);
+  a51=(a51-a52);
+  a52=(a01*a51);
+  a53=(a20*a11);
+  a54=(a21*a14);
+  a55=(a53+a54);
+  a44=(a44*a06);
+  a40=(a40*a08);
+  a44=(a44+a40);
+  a55=(a55*a44);
+  a52=(a52+a55);
+  a50=(a50+a52);
+  a47=(a47+a50);
+  a43=(a43-a47);
+  a47=arg[3]? arg[3][19] : 0;
+  a50=(a47*a29);
+  a43=(a43-a50);
+  a50=(a24*a43);
+  a42=(a42-a50);
+  a50=(a25*a00);
+  a26=(a26-a50);
+  a26=(a26/a15);
+  a50=arg[2]? arg[2][1] : 0;
+  a55=(a45*a30);
+  a40=arg[3]? arg[3][31] : 0;
+  a08=arg[3]? arg[3][32] : 0;
+  a09=(a09-a08);
+  a09=(a40*a09);
+  a52=(a52+a09);
+  a55=(a55+a52);
+  a50=(a50-a55);
+  a55=arg[3]? arg[3][28] : 0;
+  a52=(a55*a37);
+  a50=(a50-a52);
+  a52=(a26*a50);
+  a42=(a42+a52);
+  if (res[0]!=0) res[0][0]=a42;
+  a42=(a13*a18);
+  a52=casadi_sq(a25);
+  a42=(a42-a52);
+  a42=(a42/a15);
+  a52=(a42*a43);
+  a09=(a05/a15);
+  a08=(a09*a31);
+  a52=(a52-a08);
+  a08=(a13*a03);
+  a06=(a25*a23);
+  a06=(a08-a06);
+  a06=(a06/a15);
+  a56=(a06*a50);
+  a52=(a52-a56);
+  if (res[0]!=0) res[0][1]=a52;
+  a52=(a27/a15);
+  a56=(a52*a31);
+  a57=(a23*a25);
+  a08=(a08-a57);
+  a08=(a08/a15);
+  a57=(a08*a43);
+  a56=(a56-a57);
+  a57=(a13*a00);
+  a58=casadi_sq(a23);
+  a57=(a57-a58);
+  a57=(a57/a15);
+  a58=(a57*a50);
+  a56=(a56+a58);
+  if (res[0]!=0) res[0][2]=a56;
+  a56=0.;
+  if (res[2]!=0) res[2][0]=a56;
+  if (res[2]!=0) res[2][1]=a56;
+  if (res[2]!=0) res[2][2]=a56;
+  a22=(a22*a21);
+  a04=(a04*a20);
+  a22=(a22-a04);
+  a22=(a30*a22);
+  a04=(a34*a21);
+  a56=(a32*a20);
+  a04=(a04-a56);
+  a07=(a07*a21);
+  a10=(a10*a20);
+  a07=(a07-a10);
+  a07=(a04+a07);
+  a07=(a38*a07);
+  a22=(a22+a07);
+  a04=(a39*a04);
+  a22=(a22+a04);
+  a04=(a19*a22);
+  a07=(a19/a15);
+  a10=(a00*a35);
+  a56=(a03*a28);
+  a10=(a10-a56);
+  a56=(a25*a10);
+  a58=(a27*a35);
+  a56=(a56-a58);
+  a58=(a03*a35);
+  a59=(a18*a28);
+  a58=(a58-a59);
+  a59=(a23*a58);
+  a60=(a05*a28);
+  a59=(a59-a60);
+  a56=(a56-a59);
+  a59=(a07*a56);
+  a59=(a31*a59);
+  a04=(a04-a59);
+  a58=(a58/a15);
+  a59=(a24/a15);
+  a60=(a59*a56);
+  a60=(a58-a60);
+  a60=(a43*a60);
+  a02=(a02*a21);
+  a49=(a49*a20);
+  a02=(a02-a49);
+  a49=(a11*a21);
+  a61=(a14*a20);
+  a49=(a49-a61);
+  a49=(a44*a49);
+  a61=(a11*a20);
+  a62=(a14*a21);
+  a61=(a61+a62);
+  a61=(a51*a61);
+  a49=(a49-a61);
+  a02=(a02+a49);
+  a61=(a24*a02);
+  a60=(a60-a61);
+  a04=(a04-a60);
+  a10=(a10/a15);
+  a60=(a26/a15);
+  a61=(a60*a56);
+  a61=(a10-a61);
+  a61=(a50*a61);
+  a62=(a26*a49);
+  a61=(a61-a62);
+  a04=(a04+a61);
+  if (res[2]!=0) res[2][3]=a04;
+  a04=(2.*a25);
+  a61=(a04*a35);
+  a61=(a61/a15);
+  a62=(a42/a15);
+  a63=(a62*a56);
+  a61=(a61-a63);
+  a61=(a43*a61);
+  a63=(a42*a02);
+  a61=(a61-a63);
+  a63=(a09/a15);
+  a64=(a63*a56);
+  a58=(a58-a64);
+  a58=(a31*a58);
+  a64=(a09*a22);
+  a58=(a58+a64);
+  a61=(a61-a58);
+  a35=(a23*a35);
+  a58=(a25*a28);
+  a64=(a35+a58);
+  a64=(a64/a15);
+  a65=(a06/a15);
+  a66=(a65*a56);
+  a64=(a64-a66);
+  a64=(a50*a64);
+  a66=(a06*a49);
+  a64=(a64-a66);
+  a61=(a61-a64);
+  if (res[2]!=0) res[2][4]=a61;
+  a61=(a52/a15);
+  a64=(a61*a56);
+  a10=(a10-a64);
+  a10=(a31*a10);
+  a22=(a52*a22);
+  a10=(a10+a22);
+  a58=(a58+a35);
+  a58=(a58/a15);
+  a35=(a08/a15);
+  a22=(a35*a56);
+  a58=(a58-a22);
+  a58=(a43*a58);
+  a02=(a08*a02);
+  a58=(a58-a02);
+  a10=(a10-a58);
+  a58=(2.*a23);
+  a02=(a58*a28);
+  a02=(a02/a15);
+  a22=(a57/a15);
+  a56=(a22*a56);
+  a02=(a02-a56);
+  a02=(a50*a02);
+  a49=(a57*a49);
+  a02=(a02-a49);
+  a10=(a10+a02);
+  if (res[2]!=0) res[2][5]=a10;
+  a10=(a18*a46);
+  a02=(2.*a03);
+  a02=(a02*a48);
+  a10=(a10-a02);
+  a02=(a10/a15);
+  a10=(a13*a10);
+  a05=(a05*a33);
+  a18=(a18*a33);
+  a49=(a25*a48);
+  a03=(a03*a33);
+  a49=(a49-a03);
+  a18=(a18+a49);
+  a49=(a23*a18);
+  a05=(a05+a49);
+  a10=(a10+a05);
+  a05=(a23*a48);
+  a05=(a05-a03);
+  a03=(a25*a46);
+  a00=(a00*a33);
+  a03=(a03-a00);
+  a05=(a05-a03);
+  a03=(a25*a05);
+  a27=(a27*a33);
+  a03=(a03-a27);
+  a10=(a10+a03);
+  a07=(a07*a10);
+  a02=(a02-a07);
+  a02=(a31*a02);
+  a21=(a21*a34);
+  a20=(a20*a32);
+  a21=(a21-a20);
+  a20=(a30*a21);
+  a32=(2.*a21);
+  a32=(a38*a32);
+  a20=(a20+a32);
+  a21=(a39*a21);
+  a20=(a20+a21);
+  a21=(a19*a20);
+  a02=(a02+a21);
+  a18=(a18/a15);
+  a59=(a59*a10);
+  a59=(a18+a59);
+  a59=(a43*a59);
+  a12=(a12*a11);
+  a17=(a17*a14);
+  a17=(a12-a17);
+  a11=(-a17);
+  a11=(2.*a11);
+  a38=(a38*a11);
+  a16=(a16*a14);
+  a16=(a16+a12);
+  a39=(a39*a16);
+  a38=(a38-a39);
+  a44=(a44*a01);
+  a54=(a54+a53);
+  a51=(a51*a54);
+  a44=(a44-a51);
+  a38=(a38+a44);
+  a51=(a24*a38);
+  a59=(a59+a51);
+  a02=(a02+a59);
+  a05=(a05/a15);
+  a60=(a60*a10);
+  a60=(a05-a60);
+  a60=(a50*a60);
+  a30=(a30*a17);
+  a44=(a44+a40);
+  a30=(a30+a44);
+  a44=(a26*a30);
+  a60=(a60-a44);
+  a02=(a02+a60);
+  if (res[2]!=0) res[2][6]=a02;
+  a04=(a04*a33);
+  a04=(a04/a15);
+  a62=(a62*a10);
+  a04=(a04-a62);
+  a04=(a43*a04);
+  a62=(a42*a38);
+  a04=(a04-a62);
+  a62=(a09*a20);
+  a63=(a63*a10);
+  a18=(a18+a63);
+  a18=(a31*a18);
+  a62=(a62-a18);
+  a04=(a04-a62);
+  a62=(a13*a48);
+  a23=(a23*a33);
+  a25=(a25*a33);
+  a18=(a23+a25);
+  a18=(a62+a18);
+  a18=(a18/a15);
+  a65=(a65*a10);
+  a18=(a18-a65);
+  a18=(a50*a18);
+  a65=(a06*a30);
+  a18=(a18-a65);
+  a04=(a04-a18);
+  if (res[2]!=0) res[2][7]=a04;
+  a61=(a61*a10);
+  a05=(a05-a61);
+  a31=(a31*a05);
+  a20=(a52*a20);
+  a31=(a31+a20);
+  a25=(a25+a23);
+  a62=(a62+a25);
+  a62=(a62/a15);
+  a35=(a35*a10);
+  a62=(a62-a35);
+  a43=(a43*a62);
+  a38=(a08*a38);
+  a43=(a43-a38);
+  a31=(a31-a43);
+  a13=(a13*a46);
+  a58=(a58*a33);
+  a13=(a13+a58);
+  a13=(a13/a15);
+  a22=(a22*a10);
+  a13=(a13-a22);
+  a50=(a50*a13);
+  a30=(a57*a30);
+  a50=(a50-a30);
+  a31=(a31+a50);
+  if (res[2]!=0) res[2][8]=a31;
+  a31=(a19*a41);
+  a31=(-a31);
+  if (res[3]!=0) res[3][0]=a31;
+  a31=(a09*a41);
+  if (res[3]!=0) res[3][1]=a31;
+  a41=(a52*a41);
+  a41=(-a41);
+  if (res[3]!=0) res[3][2]=a41;
+  a41=(2.*a29);
+  a28=(a28*a41);
+  a31=(a36*a37);
+  a28=(a28+a31);
+  a31=(a19*a28);
+  a50=(a46*a37);
+  a50=(a50+a47);
+  a47=(a24*a50);
+  a31=(a31+a47);
+  a45=(a45*a41);
+  a41=(a26*a45);
+  a31=(a31-a41);
+  if (res[3]!=0) res[3][3]=a31;
+  a31=(a06*a45);
+  a41=(a42*a50);
+  a47=(a09*a28);
+  a41=(a41+a47);
+  a31=(a31-a41);
+  if (res[3]!=0) res[3][4]=a31;
+  a28=(a52*a28);
+  a50=(a08*a50);
+  a28=(a28+a50);
+  a45=(a57*a45);
+  a28=(a28-a45);
+  if (res[3]!=0) res[3][5]=a28;
+  a36=(a36*a29);
+  a37=(2.*a37);
+  a33=(a33*a37);
+  a36=(a36+a33);
+  a19=(a19*a36);
+  a46=(a46*a29);
+  a48=(a48*a37);
+  a46=(a46+a48);
+  a48=(a24*a46);
+  a19=(a19+a48);
+  a48=(a26*a55);
+  a19=(a19-a48);
+  if (res[3]!=0) res[3][6]=a19;
+  a19=(a06*a55);
+  a48=(a42*a46);
+  a09=(a09*a36);
+  a48=(a48+a09);
+  a19=(a19-a48);
+  if (res[3]!=0) res[3][7]=a19;
+  a52=(a52*a36);
+  a46=(a08*a46);
+  a52=(a52+a46);
+  a55=(a57*a55);
+  a52=(a52-a55);
+  if (res[3]!=0) res[3][8]=a52;
+  a24=(-a24);
+  if (res[4]!=0) res[4][0]=a24;
+  if (res[4]!=0) res[4][1]=a42;
+  a08=(-a08);
+  if (res[4]!=0) res[4][2]=a08;
+  if (res[4]!=0) res[4][3]=a26;
+  a06=(-a06);
+  if (res[4]!=0) res[4][4]=a06;
+  if (res[4]!=0) res[4][5]=a57;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int knee_hopper_closed_forward_dynamics_derivatives(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  return casadi_f4(arg, res, iw, w, mem);
+}
+
+CASADI_SYMBOL_EXPORT int knee_hopper_closed_forward_dynamics_derivatives_checkout(void) {
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT void knee_hopper_closed_forward_dynamics_derivatives_release(int mem) {
+}
+
+CASADI_SYMBOL_EXPORT void knee_hopper_closed_forward_dynamics_derivatives_incref(void) {
+}
+
+CASADI_SYMBOL_EXPORT void knee_hopper_closed_forward_dynamics_derivatives_decref(void) {
+}
+
+CASADI_SYMBOL_EXPORT casadi_int knee_hopper_closed_forward_dynamics_derivatives_n_in(void) { return 4;}
+
+CASADI_SYMBOL_EXPORT casadi_int knee_hopper_closed_forward_dynamics_derivatives_n_out(void) { return 8;}
+
+CASADI_SYMBOL_EXPORT casadi_real knee_hopper_closed_forward_dynamics_derivatives_default_in(casadi_int i) {
+  switch (i) {
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* knee_hopper_closed_forward_dynamics_derivatives_name_in(casadi_int i) {
+  switch (i) {
+    case 0: return "i0";
+    case 1: return "i1";
+    case 2: return "i2";
+    case 3: return "i3";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* knee_hopper_closed_forward_dynamics_derivatives_name_out(casadi_int i) {
+  switch (i) {
+    case 0: return "o0";
+    case 1: return "o1";
+    case 2: return "o2";
+    case 3: return "o3";
+    case 4: return "o4";
+    case 5: return "o5";
+    case 6: return "o6";
+    case 7: return "o7";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* knee_hopper_closed_forward_dynamics_derivatives_sparsity_in(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s0;
+    case 1: return casadi_s0;
+    case 2: return casadi_s5;
+    case 3: return casadi_s1;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* knee_hopper_closed_forward_dynamics_derivatives_sparsity_out(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s0;
+    case 1: return casadi_s4;
+    case 2: return casadi_s2;
+    case 3: return casadi_s2;
+    case 4: return casadi_s6;
+    case 5: return casadi_s3;
+    case 6: return casadi_s3;
+    case 7: return casadi_s7;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT int knee_hopper_closed_forward_dynamics_derivatives_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 4;
+  if (sz_res) *sz_res = 8;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 0;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int knee_hopper_closed_forward_dynamics_derivatives_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 4*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 8*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
   if (sz_w) *sz_w = 0*sizeof(casadi_real);
   return 0;

@@ -24,6 +24,7 @@
 #define casadi_f1 CASADI_PREFIX(f1)
 #define casadi_f2 CASADI_PREFIX(f2)
 #define casadi_f3 CASADI_PREFIX(f3)
+#define casadi_f4 CASADI_PREFIX(f4)
 #define casadi_s0 CASADI_PREFIX(s0)
 #define casadi_s1 CASADI_PREFIX(s1)
 #define casadi_s2 CASADI_PREFIX(s2)
@@ -1292,6 +1293,337 @@ CASADI_SYMBOL_EXPORT int two_link_closed_forward_dynamics_work(casadi_int *sz_ar
 CASADI_SYMBOL_EXPORT int two_link_closed_forward_dynamics_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 4*sizeof(const casadi_real*);
   if (sz_res) *sz_res = 2*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 0*sizeof(casadi_real);
+  return 0;
+}
+
+/* two_link_closed_forward_dynamics_derivatives:(i0[2],i1[2],i2[2],i3[22])->(o0[2],o1[0],o2[2x2],o3[2x2],o4[2x2],o5[0x2],o6[0x2],o7[0x2]) */
+static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
+  casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
+  casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34;
+  a00=arg[3]? arg[3][18] : 0;
+  a01=arg[3]? arg[3][15] : 0;
+  a02=arg[3]? arg[3][16] : 0;
+  a03=casadi_sq(a02);
+  a04=arg[3]? arg[3][17] : 0;
+  a05=casadi_sq(a04);
+  a03=(a03+a05);
+  a03=(a01*a03);
+  a00=(a00+a03);
+  a03=arg[3]? arg[3][20] : 0;
+  a05=arg[3]? arg[3][21] : 0;
+  a05=casadi_sq(a05);
+  a03=(a03*a05);
+  a03=(a00+a03);
+  a05=arg[3]? arg[3][9] : 0;
+  a06=arg[3]? arg[3][6] : 0;
+  a07=arg[3]? arg[3][7] : 0;
+  a08=casadi_sq(a07);
+  a09=arg[3]? arg[3][8] : 0;
+  a10=casadi_sq(a09);
+  a08=(a08+a10);
+  a08=(a06*a08);
+  a05=(a05+a08);
+  a05=(a05+a00);
+  a08=arg[3]? arg[3][4] : 0;
+  a10=casadi_sq(a08);
+  a11=arg[3]? arg[3][5] : 0;
+  a12=casadi_sq(a11);
+  a10=(a10+a12);
+  a10=(a01*a10);
+  a05=(a05+a10);
+  a10=arg[3]? arg[3][11] : 0;
+  a12=arg[3]? arg[3][12] : 0;
+  a12=casadi_sq(a12);
+  a10=(a10*a12);
+  a05=(a05+a10);
+  a10=arg[0]? arg[0][1] : 0;
+  a12=cos(a10);
+  a02=(a01*a02);
+  a13=(a08*a02);
+  a04=(a01*a04);
+  a14=(a11*a04);
+  a13=(a13+a14);
+  a14=(a12*a13);
+  a10=sin(a10);
+  a15=(a08*a04);
+  a16=(a11*a02);
+  a17=(a15-a16);
+  a18=(a10*a17);
+  a18=(a14-a18);
+  a18=(2.*a18);
+  a05=(a05+a18);
+  a18=(a05*a03);
+  a16=(a16-a15);
+  a15=(a10*a16);
+  a14=(a14+a15);
+  a00=(a00+a14);
+  a14=casadi_sq(a00);
+  a18=(a18-a14);
+  a14=(a03/a18);
+  a15=arg[2]? arg[2][0] : 0;
+  a19=(a13*a10);
+  a20=(a17*a12);
+  a20=(a19+a20);
+  a21=(-a20);
+  a21=(2.*a21);
+  a22=arg[1]? arg[1][0] : 0;
+  a23=arg[1]? arg[1][1] : 0;
+  a24=(a22*a23);
+  a25=(a21*a24);
+  a26=(a16*a12);
+  a26=(a26-a19);
+  a19=casadi_sq(a23);
+  a27=(a26*a19);
+  a25=(a25+a27);
+  a27=arg[0]? arg[0][0] : 0;
+  a28=cos(a27);
+  a29=arg[3]? arg[3][0] : 0;
+  a09=(a06*a09);
+  a11=(a01*a11);
+  a09=(a09+a11);
+  a11=(a29*a09);
+  a30=arg[3]? arg[3][1] : 0;
+  a06=(a06*a07);
+  a01=(a01*a08);
+  a06=(a06+a01);
+  a01=(a30*a06);
+  a11=(a11-a01);
+  a01=(a28*a11);
+  a27=sin(a27);
+  a06=(a29*a06);
+  a09=(a30*a09);
+  a06=(a06+a09);
+  a09=(a27*a06);
+  a01=(a01+a09);
+  a09=(a28*a12);
+  a08=(a27*a10);
+  a09=(a09-a08);
+  a08=(a29*a04);
+  a07=(a30*a02);
+  a08=(a08-a07);
+  a07=(a09*a08);
+  a31=(a27*a12);
+  a32=(a28*a10);
+  a33=(a31+a32);
+  a29=(a29*a02);
+  a30=(a30*a04);
+  a29=(a29+a30);
+  a33=(a33*a29);
+  a07=(a07+a33);
+  a01=(a01+a07);
+  a25=(a25+a01);
+  a15=(a15-a25);
+  a25=arg[3]? arg[3][10] : 0;
+  a01=(a25*a22);
+  a15=(a15-a01);
+  a01=(a14*a15);
+  a33=(a00/a18);
+  a30=arg[2]? arg[2][1] : 0;
+  a04=casadi_sq(a22);
+  a02=(a20*a04);
+  a02=(a02+a07);
+  a30=(a30-a02);
+  a02=arg[3]? arg[3][19] : 0;
+  a07=(a02*a23);
+  a30=(a30-a07);
+  a07=(a33*a30);
+  a01=(a01-a07);
+  if (res[0]!=0) res[0][0]=a01;
+  a05=(a05/a18);
+  a01=(a05*a30);
+  a07=(a33*a15);
+  a01=(a01-a07);
+  if (res[0]!=0) res[0][1]=a01;
+  a01=(a12*a28);
+  a07=(a10*a27);
+  a01=(a01-a07);
+  a01=(a29*a01);
+  a07=(a12*a27);
+  a34=(a10*a28);
+  a07=(a07+a34);
+  a07=(a08*a07);
+  a01=(a01-a07);
+  a07=(a33*a01);
+  a06=(a06*a28);
+  a11=(a11*a27);
+  a06=(a06-a11);
+  a06=(a06+a01);
+  a11=(a14*a06);
+  a07=(a07-a11);
+  if (res[2]!=0) res[2][0]=a07;
+  a06=(a33*a06);
+  a01=(a05*a01);
+  a06=(a06-a01);
+  if (res[2]!=0) res[2][1]=a06;
+  a06=(a14/a18);
+  a03=(a03*a21);
+  a00=(2.*a00);
+  a00=(a00*a26);
+  a03=(a03-a00);
+  a06=(a06*a03);
+  a06=(a15*a06);
+  a13=(a13*a12);
+  a17=(a17*a10);
+  a17=(a13-a17);
+  a12=(-a17);
+  a12=(2.*a12);
+  a24=(a24*a12);
+  a16=(a16*a10);
+  a16=(a16+a13);
+  a19=(a19*a16);
+  a24=(a24-a19);
+  a29=(a29*a09);
+  a32=(a32+a31);
+  a08=(a08*a32);
+  a29=(a29-a08);
+  a24=(a24+a29);
+  a08=(a14*a24);
+  a06=(a06+a08);
+  a08=(a26/a18);
+  a32=(a33/a18);
+  a32=(a32*a03);
+  a08=(a08-a32);
+  a32=(a30*a08);
+  a04=(a04*a17);
+  a04=(a04+a29);
+  a29=(a33*a04);
+  a32=(a32-a29);
+  a06=(a06+a32);
+  a06=(-a06);
+  if (res[2]!=0) res[2][2]=a06;
+  a06=(a21/a18);
+  a18=(a05/a18);
+  a18=(a18*a03);
+  a06=(a06-a18);
+  a30=(a30*a06);
+  a04=(a05*a04);
+  a30=(a30-a04);
+  a15=(a15*a08);
+  a24=(a33*a24);
+  a15=(a15-a24);
+  a30=(a30-a15);
+  if (res[2]!=0) res[2][3]=a30;
+  a30=(2.*a22);
+  a20=(a20*a30);
+  a30=(a33*a20);
+  a15=(a21*a23);
+  a15=(a15+a25);
+  a25=(a14*a15);
+  a30=(a30-a25);
+  if (res[3]!=0) res[3][0]=a30;
+  a15=(a33*a15);
+  a20=(a05*a20);
+  a15=(a15-a20);
+  if (res[3]!=0) res[3][1]=a15;
+  a15=(a33*a02);
+  a21=(a21*a22);
+  a23=(2.*a23);
+  a26=(a26*a23);
+  a21=(a21+a26);
+  a26=(a14*a21);
+  a15=(a15-a26);
+  if (res[3]!=0) res[3][2]=a15;
+  a21=(a33*a21);
+  a02=(a05*a02);
+  a21=(a21-a02);
+  if (res[3]!=0) res[3][3]=a21;
+  if (res[4]!=0) res[4][0]=a14;
+  a33=(-a33);
+  if (res[4]!=0) res[4][1]=a33;
+  if (res[4]!=0) res[4][2]=a33;
+  if (res[4]!=0) res[4][3]=a05;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int two_link_closed_forward_dynamics_derivatives(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  return casadi_f4(arg, res, iw, w, mem);
+}
+
+CASADI_SYMBOL_EXPORT int two_link_closed_forward_dynamics_derivatives_checkout(void) {
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT void two_link_closed_forward_dynamics_derivatives_release(int mem) {
+}
+
+CASADI_SYMBOL_EXPORT void two_link_closed_forward_dynamics_derivatives_incref(void) {
+}
+
+CASADI_SYMBOL_EXPORT void two_link_closed_forward_dynamics_derivatives_decref(void) {
+}
+
+CASADI_SYMBOL_EXPORT casadi_int two_link_closed_forward_dynamics_derivatives_n_in(void) { return 4;}
+
+CASADI_SYMBOL_EXPORT casadi_int two_link_closed_forward_dynamics_derivatives_n_out(void) { return 8;}
+
+CASADI_SYMBOL_EXPORT casadi_real two_link_closed_forward_dynamics_derivatives_default_in(casadi_int i) {
+  switch (i) {
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* two_link_closed_forward_dynamics_derivatives_name_in(casadi_int i) {
+  switch (i) {
+    case 0: return "i0";
+    case 1: return "i1";
+    case 2: return "i2";
+    case 3: return "i3";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* two_link_closed_forward_dynamics_derivatives_name_out(casadi_int i) {
+  switch (i) {
+    case 0: return "o0";
+    case 1: return "o1";
+    case 2: return "o2";
+    case 3: return "o3";
+    case 4: return "o4";
+    case 5: return "o5";
+    case 6: return "o6";
+    case 7: return "o7";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* two_link_closed_forward_dynamics_derivatives_sparsity_in(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s0;
+    case 1: return casadi_s0;
+    case 2: return casadi_s0;
+    case 3: return casadi_s1;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* two_link_closed_forward_dynamics_derivatives_sparsity_out(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s0;
+    case 1: return casadi_s4;
+    case 2: return casadi_s2;
+    case 3: return casadi_s2;
+    case 4: return casadi_s2;
+    case 5: return casadi_s3;
+    case 6: return casadi_s3;
+    case 7: return casadi_s3;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT int two_link_closed_forward_dynamics_derivatives_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 4;
+  if (sz_res) *sz_res = 8;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 0;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int two_link_closed_forward_dynamics_derivatives_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 4*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 8*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
   if (sz_w) *sz_w = 0*sizeof(casadi_real);
   return 0;

@@ -9,7 +9,8 @@
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
-    Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters,
+    Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
+    JointKind, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 9;
@@ -271,7 +272,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
-    prepared: [T; 62],
+    prepared: [T; 64],
 }
 impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
@@ -716,6 +717,62 @@ impl LegModel<NQ, NC, NU> for AtriasHopper {
             constraint_bias,
         }
     }
+    fn mass_matrix_derivative<T: Arithmetic>(
+        q: &SVector<T, 9>,
+        a: &SVector<T, 9>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 9, 9> {
+        mass_matrix_derivative(q, a, p)
+    }
+    fn bias_forces_derivatives<T: Arithmetic>(
+        q: &SVector<T, 9>,
+        qd: &SVector<T, 9>,
+        p: &Params<T>,
+    ) -> (SMatrix<T, 9, 9>, SMatrix<T, 9, 9>) {
+        bias_forces_derivatives(q, qd, p)
+    }
+    fn constraint_derivatives<T: Arithmetic>(
+        q: &SVector<T, 9>,
+        qd: &SVector<T, 9>,
+        a: &SVector<T, 9>,
+        f: &SVector<T, 2>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 9, 2> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
+    }
+    fn dynamics_derivatives<T: Arithmetic>(
+        q: &SVector<T, 9>,
+        qd: &SVector<T, 9>,
+        a: &SVector<T, 9>,
+        f: &SVector<T, 2>,
+        p: &Params<T>,
+    ) -> DynamicsDerivatives<T, 9, 2> {
+        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        DynamicsDerivatives {
+            dynamics_q,
+            dynamics_qd,
+            constraint_q,
+            jacobian_rate,
+        }
+    }
 }
 impl ContactModel<NQ, NC, NU, NK> for AtriasHopper {
     const CONTACT_NAMES: &'static [&'static str] = &["toe"];
@@ -741,11 +798,32 @@ impl ContactModel<NQ, NC, NU, NK> for AtriasHopper {
     ) -> SVector<T, 2> {
         contact_bias(q, qd, p)
     }
+    fn contact_derivatives<T: Arithmetic>(
+        q: &SVector<T, 9>,
+        qd: &SVector<T, 9>,
+        a: &SVector<T, 9>,
+        lambda: &SVector<T, 2>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 9, 2> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
+            q,
+            qd,
+            a,
+            lambda,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
+    }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 62> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 64> {
     let v0 = values.four_bar_link_mass + values.lower_leg_mass;
     let v1 = values.torso_mass + v0;
     let v2 = values.thigh_mass + values.shin_mass;
@@ -959,6 +1037,8 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 62> {
     let v210 = values.gravity_y * v209;
     let v211 = v206 + v210;
     let v212 = values.slide_x_origin_y + values.slide_x_length_y;
+    let v213 = -values.thigh_spring_stiffness;
+    let v214 = -values.four_bar_spring_stiffness;
     SMatrix::from_data(
         ArrayStorage([
             [
@@ -1024,6 +1104,8 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 62> {
                 v202,
                 v211,
                 v212,
+                v213,
+                v214,
             ],
         ]),
     )
@@ -3589,5 +3671,3990 @@ pub fn dynamics_terms<T: Arithmetic>(
             ]),
         ),
         SMatrix::from_data(ArrayStorage([[v512, v519]])),
+    )
+}
+/// `∂(M a)/∂q` at the accelerations `a`.
+pub fn mass_matrix_derivative<T: Arithmetic>(
+    q: &SVector<T, 9>,
+    a: &SVector<T, 9>,
+    p: &Params<T>,
+) -> SMatrix<T, 9, 9> {
+    let [_, _, q_2, q_3, q_4, q_5, q_6, q_7, q_8] = q.data.0[0];
+    let [a_0, a_1, a_2, a_3, a_4, a_5, a_6, a_7, a_8] = a.data.0[0];
+    let (v8, v0) = q_7.sincos();
+    let (v3, v1) = q_8.sincos();
+    let v2 = v1 * p.prepared[4];
+    let v4 = v3 * p.prepared[5];
+    let v5 = v2 - v4;
+    let v6 = p.prepared[3] + v5;
+    let v7 = v0 * v6;
+    let v9 = p.prepared[4] * v3;
+    let v10 = v1 * p.prepared[5];
+    let v11 = v9 + v10;
+    let v12 = p.prepared[6] + v11;
+    let v13 = v8 * v12;
+    let v14 = v7 - v13;
+    let v15 = p.prepared[15] + v14;
+    let (v24, v16) = q_5.sincos();
+    let (v19, v17) = q_6.sincos();
+    let v18 = v17 * p.prepared[8];
+    let v20 = v19 * p.prepared[9];
+    let v21 = v18 - v20;
+    let v22 = p.prepared[7] + v21;
+    let v23 = v16 * v22;
+    let v25 = p.prepared[8] * v19;
+    let v26 = v17 * p.prepared[9];
+    let v27 = v25 + v26;
+    let v28 = p.prepared[10] + v27;
+    let v29 = v24 * v28;
+    let v30 = v23 - v29;
+    let v31 = v15 + v30;
+    let (v34, v32) = q_4.sincos();
+    let v33 = v32 * p.prepared[11];
+    let v35 = v34 * p.prepared[12];
+    let v36 = v33 - v35;
+    let v37 = v31 + v36;
+    let (v40, v38) = q_3.sincos();
+    let v39 = v38 * p.prepared[13];
+    let v41 = v40 * p.prepared[14];
+    let v42 = v39 - v41;
+    let v43 = v37 + v42;
+    let (v62, v44) = q_2.sincos();
+    let v45 = v43 * v44;
+    let v46 = v6 * v8;
+    let v47 = v0 * v12;
+    let v48 = v46 + v47;
+    let v49 = p.prepared[2] + v48;
+    let v50 = v22 * v24;
+    let v51 = v16 * v28;
+    let v52 = v50 + v51;
+    let v53 = v49 + v52;
+    let v54 = p.prepared[11] * v34;
+    let v55 = v32 * p.prepared[12];
+    let v56 = v54 + v55;
+    let v57 = v53 + v56;
+    let v58 = p.prepared[13] * v40;
+    let v59 = v38 * p.prepared[14];
+    let v60 = v58 + v59;
+    let v61 = v57 + v60;
+    let v63 = v61 * v62;
+    let v64 = v45 - v63;
+    let v65 = a_2 * v64;
+    let v66 = v42 * v44;
+    let v67 = v60 * v62;
+    let v68 = v66 - v67;
+    let v69 = a_3 * v68;
+    let v70 = v65 + v69;
+    let v71 = v36 * v44;
+    let v72 = v56 * v62;
+    let v73 = v71 - v72;
+    let v74 = a_4 * v73;
+    let v75 = v70 + v74;
+    let v76 = v30 * v44;
+    let v77 = v52 * v62;
+    let v78 = v76 - v77;
+    let v79 = a_5 * v78;
+    let v80 = v75 + v79;
+    let v81 = v16 * v21;
+    let v82 = v24 * v27;
+    let v83 = v81 - v82;
+    let v84 = v44 * v83;
+    let v85 = v16 * v27;
+    let v86 = v21 * v24;
+    let v87 = v85 + v86;
+    let v88 = v62 * v87;
+    let v89 = v84 - v88;
+    let v90 = a_6 * v89;
+    let v91 = v80 + v90;
+    let v92 = v14 * v44;
+    let v93 = v48 * v62;
+    let v94 = v92 - v93;
+    let v95 = a_7 * v94;
+    let v96 = v91 + v95;
+    let v97 = v0 * v5;
+    let v98 = v8 * v11;
+    let v99 = v97 - v98;
+    let v100 = v44 * v99;
+    let v101 = v0 * v11;
+    let v102 = v5 * v8;
+    let v103 = v101 + v102;
+    let v104 = v62 * v103;
+    let v105 = v100 - v104;
+    let v106 = a_8 * v105;
+    let v107 = v96 + v106;
+    let v108 = -v107;
+    let v109 = v43 * v62;
+    let v110 = v44 * v61;
+    let v111 = v109 + v110;
+    let v112 = a_2 * v111;
+    let v113 = v42 * v62;
+    let v114 = v44 * v60;
+    let v115 = v113 + v114;
+    let v116 = a_3 * v115;
+    let v117 = v112 + v116;
+    let v118 = v36 * v62;
+    let v119 = v44 * v56;
+    let v120 = v118 + v119;
+    let v121 = a_4 * v120;
+    let v122 = v117 + v121;
+    let v123 = v30 * v62;
+    let v124 = v44 * v52;
+    let v125 = v123 + v124;
+    let v126 = a_5 * v125;
+    let v127 = v122 + v126;
+    let v128 = v62 * v83;
+    let v129 = v44 * v87;
+    let v130 = v128 + v129;
+    let v131 = a_6 * v130;
+    let v132 = v127 + v131;
+    let v133 = v14 * v62;
+    let v134 = v44 * v48;
+    let v135 = v133 + v134;
+    let v136 = a_7 * v135;
+    let v137 = v132 + v136;
+    let v138 = v62 * v99;
+    let v139 = v44 * v103;
+    let v140 = v138 + v139;
+    let v141 = a_8 * v140;
+    let v142 = v137 + v141;
+    let v143 = -v142;
+    let v144 = v111 * a_1;
+    let v145 = v64 * a_0;
+    let v146 = v144 + v145;
+    let v147 = -v146;
+    let v148 = v115 * a_1;
+    let v149 = v68 * a_0;
+    let v150 = v148 + v149;
+    let v151 = -v150;
+    let v152 = v120 * a_1;
+    let v153 = v73 * a_0;
+    let v154 = v152 + v153;
+    let v155 = -v154;
+    let v156 = v125 * a_1;
+    let v157 = v78 * a_0;
+    let v158 = v156 + v157;
+    let v159 = -v158;
+    let v160 = v130 * a_1;
+    let v161 = v89 * a_0;
+    let v162 = v160 + v161;
+    let v163 = -v162;
+    let v164 = v135 * a_1;
+    let v165 = v94 * a_0;
+    let v166 = v164 + v165;
+    let v167 = -v166;
+    let v168 = v140 * a_1;
+    let v169 = v105 * a_0;
+    let v170 = v168 + v169;
+    let v171 = -v170;
+    let v172 = a_2 * v68;
+    let v173 = v69 + v172;
+    let v174 = -v173;
+    let v175 = a_2 * v115;
+    let v176 = v116 + v175;
+    let v177 = -v176;
+    let v178 = v40 * p.prepared[29];
+    let v179 = v38 * p.prepared[30];
+    let v180 = v178 + v179;
+    let v181 = -v180;
+    let v182 = v181 + v181;
+    let v183 = a_2 * v182;
+    let v184 = v183 - v150;
+    let v185 = v38 * p.prepared[31];
+    let v186 = v185 - v178;
+    let v187 = a_3 * v186;
+    let v188 = v184 + v187;
+    let v189 = a_2 * v186;
+    let v190 = v189 - v150;
+    let v191 = a_2 * v73;
+    let v192 = v74 + v191;
+    let v193 = -v192;
+    let v194 = a_2 * v120;
+    let v195 = v121 + v194;
+    let v196 = -v195;
+    let v197 = v34 * p.prepared[27];
+    let v198 = v32 * p.prepared[28];
+    let v199 = v197 + v198;
+    let v200 = -v199;
+    let v201 = v200 + v200;
+    let v202 = a_2 * v201;
+    let v203 = v202 - v154;
+    let v204 = v32 * p.prepared[32];
+    let v205 = v204 - v197;
+    let v206 = a_4 * v205;
+    let v207 = v203 + v206;
+    let v208 = a_2 * v205;
+    let v209 = v208 - v154;
+    let v210 = a_2 * v78;
+    let v211 = v79 + v210;
+    let v212 = v90 + v211;
+    let v213 = -v212;
+    let v214 = a_2 * v125;
+    let v215 = v126 + v214;
+    let v216 = v131 + v215;
+    let v217 = -v216;
+    let v218 = v30 * p.torso_length_y;
+    let v219 = p.torso_length_x * v52;
+    let v220 = v218 - v219;
+    let v221 = v220 + v220;
+    let v222 = a_2 * v221;
+    let v223 = v222 - v158;
+    let v224 = a_5 * v220;
+    let v225 = v223 + v224;
+    let v226 = p.torso_length_y * v83;
+    let v227 = p.torso_length_x * v87;
+    let v228 = v226 - v227;
+    let v229 = a_6 * v228;
+    let v230 = v225 + v229;
+    let v231 = a_2 * v220;
+    let v232 = v231 - v158;
+    let v233 = a_2 * v228;
+    let v234 = v233 - v162;
+    let v235 = a_2 * v89;
+    let v236 = a_5 * v89;
+    let v237 = v235 + v236;
+    let v238 = v90 + v237;
+    let v239 = -v238;
+    let v240 = a_2 * v130;
+    let v241 = a_5 * v130;
+    let v242 = v240 + v241;
+    let v243 = v131 + v242;
+    let v244 = -v243;
+    let v245 = v19 * p.prepared[25];
+    let v246 = v17 * p.prepared[26];
+    let v247 = v245 + v246;
+    let v248 = -v247;
+    let v249 = v248 + v248;
+    let v250 = v228 + v228;
+    let v251 = v249 + v250;
+    let v252 = a_2 * v251;
+    let v253 = v252 - v162;
+    let v254 = v228 + v249;
+    let v255 = a_5 * v254;
+    let v256 = v253 + v255;
+    let v257 = v17 * p.prepared[33];
+    let v258 = v257 - v245;
+    let v259 = v228 + v258;
+    let v260 = a_6 * v259;
+    let v261 = v256 + v260;
+    let v262 = a_2 * v254;
+    let v263 = v262 - v162;
+    let v264 = a_5 * v249;
+    let v265 = v263 + v264;
+    let v266 = a_6 * v258;
+    let v267 = v265 + v266;
+    let v268 = a_2 * v259;
+    let v269 = v268 - v162;
+    let v270 = a_5 * v258;
+    let v271 = v269 + v270;
+    let v272 = a_2 * v94;
+    let v273 = v95 + v272;
+    let v274 = v106 + v273;
+    let v275 = -v274;
+    let v276 = a_2 * v135;
+    let v277 = v136 + v276;
+    let v278 = v141 + v277;
+    let v279 = -v278;
+    let v280 = v14 * p.torso_length_y;
+    let v281 = p.torso_length_x * v48;
+    let v282 = v280 - v281;
+    let v283 = v282 + v282;
+    let v284 = a_2 * v283;
+    let v285 = v284 - v166;
+    let v286 = a_7 * v282;
+    let v287 = v285 + v286;
+    let v288 = p.torso_length_y * v99;
+    let v289 = p.torso_length_x * v103;
+    let v290 = v288 - v289;
+    let v291 = a_8 * v290;
+    let v292 = v287 + v291;
+    let v293 = a_2 * v282;
+    let v294 = v293 - v166;
+    let v295 = a_2 * v290;
+    let v296 = v295 - v170;
+    let v297 = a_2 * v105;
+    let v298 = a_7 * v105;
+    let v299 = v297 + v298;
+    let v300 = v106 + v299;
+    let v301 = -v300;
+    let v302 = a_2 * v140;
+    let v303 = a_7 * v140;
+    let v304 = v302 + v303;
+    let v305 = v141 + v304;
+    let v306 = -v305;
+    let v307 = v3 * p.prepared[21];
+    let v308 = v1 * p.prepared[22];
+    let v309 = v307 + v308;
+    let v310 = -v309;
+    let v311 = v310 + v310;
+    let v312 = v290 + v290;
+    let v313 = v311 + v312;
+    let v314 = a_2 * v313;
+    let v315 = v314 - v170;
+    let v316 = v290 + v311;
+    let v317 = a_7 * v316;
+    let v318 = v315 + v317;
+    let v319 = v1 * p.prepared[34];
+    let v320 = v319 - v307;
+    let v321 = v290 + v320;
+    let v322 = a_8 * v321;
+    let v323 = v318 + v322;
+    let v324 = a_2 * v316;
+    let v325 = v324 - v170;
+    let v326 = a_7 * v311;
+    let v327 = v325 + v326;
+    let v328 = a_8 * v320;
+    let v329 = v327 + v328;
+    let v330 = a_2 * v321;
+    let v331 = v330 - v170;
+    let v332 = a_7 * v320;
+    let v333 = v331 + v332;
+    SMatrix::from_data(
+        ArrayStorage([
+            [
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+            ],
+            [
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+            ],
+            [v108, v143, v147, v151, v155, v159, v163, v167, v171],
+            [
+                v174,
+                v177,
+                v188,
+                v190,
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+            ],
+            [
+                v193,
+                v196,
+                v207,
+                T::lit(0.0),
+                v209,
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+            ],
+            [
+                v213,
+                v217,
+                v230,
+                T::lit(0.0),
+                T::lit(0.0),
+                v232,
+                v234,
+                T::lit(0.0),
+                T::lit(0.0),
+            ],
+            [
+                v239,
+                v244,
+                v261,
+                T::lit(0.0),
+                T::lit(0.0),
+                v267,
+                v271,
+                T::lit(0.0),
+                T::lit(0.0),
+            ],
+            [
+                v275,
+                v279,
+                v292,
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                v294,
+                v296,
+            ],
+            [
+                v301,
+                v306,
+                v323,
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                v329,
+                v333,
+            ],
+        ]),
+    )
+}
+/// `∂N/∂q` and `∂N/∂q̇`.
+pub fn bias_forces_derivatives<T: Arithmetic>(
+    q: &SVector<T, 9>,
+    qd: &SVector<T, 9>,
+    p: &Params<T>,
+) -> (SMatrix<T, 9, 9>, SMatrix<T, 9, 9>) {
+    let [_, _, q_2, q_3, q_4, q_5, q_6, q_7, q_8] = q.data.0[0];
+    let [_, _, qd_2, qd_3, qd_4, qd_5, qd_6, qd_7, qd_8] = qd.data.0[0];
+    let v0 = qd_2 * qd_2;
+    let (v1, v3) = q_2.sincos();
+    let v2 = p.torso_com_x * v1;
+    let v4 = p.torso_com_y * v3;
+    let v5 = v2 + v4;
+    let v6 = v0 * v5;
+    let v7 = p.torso_mass * v6;
+    let v8 = qd_2 + qd_3;
+    let v9 = v8 * v8;
+    let (v12, v10) = q_3.sincos();
+    let v11 = v1 * v10;
+    let v13 = v3 * v12;
+    let v14 = v11 + v13;
+    let v15 = p.thigh_motor_com_x * v14;
+    let v16 = v3 * v10;
+    let v17 = v1 * v12;
+    let v18 = v16 - v17;
+    let v19 = p.thigh_motor_com_y * v18;
+    let v20 = v15 + v19;
+    let v21 = v9 * v20;
+    let v22 = v1 * p.torso_length_x;
+    let v23 = v3 * p.torso_length_y;
+    let v24 = v22 + v23;
+    let v25 = v0 * v24;
+    let v26 = v21 + v25;
+    let v27 = p.thigh_motor_mass * v26;
+    let v28 = v7 + v27;
+    let v29 = qd_2 + qd_4;
+    let v30 = v29 * v29;
+    let (v33, v31) = q_4.sincos();
+    let v32 = v1 * v31;
+    let v34 = v3 * v33;
+    let v35 = v32 + v34;
+    let v36 = p.four_bar_motor_com_x * v35;
+    let v37 = v3 * v31;
+    let v38 = v1 * v33;
+    let v39 = v37 - v38;
+    let v40 = p.four_bar_motor_com_y * v39;
+    let v41 = v36 + v40;
+    let v42 = v30 * v41;
+    let v43 = v25 + v42;
+    let v44 = p.four_bar_motor_mass * v43;
+    let v45 = v28 + v44;
+    let v46 = qd_2 + qd_5;
+    let v47 = v46 * v46;
+    let (v50, v48) = q_5.sincos();
+    let v49 = v1 * v48;
+    let v51 = v3 * v50;
+    let v52 = v49 + v51;
+    let v53 = p.thigh_com_x * v52;
+    let v54 = v3 * v48;
+    let v55 = v1 * v50;
+    let v56 = v54 - v55;
+    let v57 = p.thigh_com_y * v56;
+    let v58 = v53 + v57;
+    let v59 = v47 * v58;
+    let v60 = v25 + v59;
+    let v61 = p.thigh_mass * v60;
+    let v62 = v45 + v61;
+    let v63 = v46 + qd_6;
+    let v64 = v63 * v63;
+    let (v67, v65) = q_6.sincos();
+    let v66 = v52 * v65;
+    let v68 = v56 * v67;
+    let v69 = v66 + v68;
+    let v70 = p.shin_com_x * v69;
+    let v71 = v56 * v65;
+    let v72 = v52 * v67;
+    let v73 = v71 - v72;
+    let v74 = p.shin_com_y * v73;
+    let v75 = v70 + v74;
+    let v76 = v64 * v75;
+    let v77 = v52 * p.thigh_length_x;
+    let v78 = v56 * p.thigh_length_y;
+    let v79 = v77 + v78;
+    let v80 = v47 * v79;
+    let v81 = v76 + v80;
+    let v82 = v25 + v81;
+    let v83 = p.shin_mass * v82;
+    let v84 = v62 + v83;
+    let v85 = qd_2 + qd_7;
+    let v86 = v85 * v85;
+    let (v89, v87) = q_7.sincos();
+    let v88 = v1 * v87;
+    let v90 = v3 * v89;
+    let v91 = v88 + v90;
+    let v92 = p.four_bar_link_com_x * v91;
+    let v93 = v3 * v87;
+    let v94 = v1 * v89;
+    let v95 = v93 - v94;
+    let v96 = p.four_bar_link_com_y * v95;
+    let v97 = v92 + v96;
+    let v98 = v86 * v97;
+    let v99 = v25 + v98;
+    let v100 = p.four_bar_link_mass * v99;
+    let v101 = v84 + v100;
+    let v102 = v85 + qd_8;
+    let v103 = v102 * v102;
+    let (v106, v104) = q_8.sincos();
+    let v105 = v91 * v104;
+    let v107 = v95 * v106;
+    let v108 = v105 + v107;
+    let v109 = p.lower_leg_com_x * v108;
+    let v110 = v95 * v104;
+    let v111 = v91 * v106;
+    let v112 = v110 - v111;
+    let v113 = p.lower_leg_com_y * v112;
+    let v114 = v109 + v113;
+    let v115 = v103 * v114;
+    let v116 = v91 * p.four_bar_link_length_x;
+    let v117 = v95 * p.four_bar_link_length_y;
+    let v118 = v116 + v117;
+    let v119 = v86 * v118;
+    let v120 = v115 + v119;
+    let v121 = v25 + v120;
+    let v122 = p.lower_leg_mass * v121;
+    let v123 = v101 + v122;
+    let v124 = p.torso_com_x * v3;
+    let v125 = v1 * p.torso_com_y;
+    let v126 = v124 - v125;
+    let v127 = v0 * v126;
+    let v128 = p.torso_mass * v127;
+    let v129 = p.thigh_motor_com_x * v18;
+    let v130 = v14 * p.thigh_motor_com_y;
+    let v131 = v129 - v130;
+    let v132 = v9 * v131;
+    let v133 = v3 * p.torso_length_x;
+    let v134 = v1 * p.torso_length_y;
+    let v135 = v133 - v134;
+    let v136 = v0 * v135;
+    let v137 = v132 + v136;
+    let v138 = p.thigh_motor_mass * v137;
+    let v139 = v128 + v138;
+    let v140 = p.four_bar_motor_com_x * v39;
+    let v141 = v35 * p.four_bar_motor_com_y;
+    let v142 = v140 - v141;
+    let v143 = v30 * v142;
+    let v144 = v136 + v143;
+    let v145 = p.four_bar_motor_mass * v144;
+    let v146 = v139 + v145;
+    let v147 = p.thigh_com_x * v56;
+    let v148 = v52 * p.thigh_com_y;
+    let v149 = v147 - v148;
+    let v150 = v47 * v149;
+    let v151 = v136 + v150;
+    let v152 = p.thigh_mass * v151;
+    let v153 = v146 + v152;
+    let v154 = p.shin_com_x * v73;
+    let v155 = v69 * p.shin_com_y;
+    let v156 = v154 - v155;
+    let v157 = v64 * v156;
+    let v158 = v56 * p.thigh_length_x;
+    let v159 = v52 * p.thigh_length_y;
+    let v160 = v158 - v159;
+    let v161 = v47 * v160;
+    let v162 = v157 + v161;
+    let v163 = v136 + v162;
+    let v164 = p.shin_mass * v163;
+    let v165 = v153 + v164;
+    let v166 = p.four_bar_link_com_x * v95;
+    let v167 = v91 * p.four_bar_link_com_y;
+    let v168 = v166 - v167;
+    let v169 = v86 * v168;
+    let v170 = v136 + v169;
+    let v171 = p.four_bar_link_mass * v170;
+    let v172 = v165 + v171;
+    let v173 = p.lower_leg_com_x * v112;
+    let v174 = v108 * p.lower_leg_com_y;
+    let v175 = v173 - v174;
+    let v176 = v103 * v175;
+    let v177 = v95 * p.four_bar_link_length_x;
+    let v178 = v91 * p.four_bar_link_length_y;
+    let v179 = v177 - v178;
+    let v180 = v86 * v179;
+    let v181 = v176 + v180;
+    let v182 = v136 + v181;
+    let v183 = p.lower_leg_mass * v182;
+    let v184 = v172 + v183;
+    let v185 = -v184;
+    let v186 = v126 * v127;
+    let v187 = v5 * v6;
+    let v188 = v186 - v187;
+    let v189 = v188 - v188;
+    let v190 = p.torso_mass * v189;
+    let v191 = v131 + v135;
+    let v192 = v137 * v191;
+    let v193 = v20 + v24;
+    let v194 = v26 * v193;
+    let v195 = v192 - v194;
+    let v196 = v195 - v195;
+    let v197 = p.thigh_motor_mass * v196;
+    let v198 = v190 + v197;
+    let v199 = v135 + v142;
+    let v200 = v144 * v199;
+    let v201 = v24 + v41;
+    let v202 = v43 * v201;
+    let v203 = v200 - v202;
+    let v204 = v203 - v203;
+    let v205 = p.four_bar_motor_mass * v204;
+    let v206 = v198 + v205;
+    let v207 = v135 + v149;
+    let v208 = v151 * v207;
+    let v209 = v24 + v58;
+    let v210 = v60 * v209;
+    let v211 = v208 - v210;
+    let v212 = v211 - v211;
+    let v213 = p.thigh_mass * v212;
+    let v214 = v206 + v213;
+    let v215 = v156 + v160;
+    let v216 = v135 + v215;
+    let v217 = v163 * v216;
+    let v218 = v75 + v79;
+    let v219 = v24 + v218;
+    let v220 = v82 * v219;
+    let v221 = v217 - v220;
+    let v222 = v221 - v221;
+    let v223 = p.shin_mass * v222;
+    let v224 = v214 + v223;
+    let v225 = v135 + v168;
+    let v226 = v170 * v225;
+    let v227 = v24 + v97;
+    let v228 = v99 * v227;
+    let v229 = v226 - v228;
+    let v230 = v229 - v229;
+    let v231 = p.four_bar_link_mass * v230;
+    let v232 = v224 + v231;
+    let v233 = v175 + v179;
+    let v234 = v135 + v233;
+    let v235 = v182 * v234;
+    let v236 = v114 + v118;
+    let v237 = v24 + v236;
+    let v238 = v121 * v237;
+    let v239 = v235 - v238;
+    let v240 = v239 - v239;
+    let v241 = p.lower_leg_mass * v240;
+    let v242 = v232 + v241;
+    let v243 = v3 * p.prepared[40];
+    let v244 = v1 * p.prepared[39];
+    let v245 = v243 - v244;
+    let v246 = v95 * p.prepared[42];
+    let v247 = v91 * p.prepared[41];
+    let v248 = v246 - v247;
+    let v249 = v112 * p.prepared[44];
+    let v250 = v108 * p.prepared[43];
+    let v251 = v249 - v250;
+    let v252 = v248 + v251;
+    let v253 = v245 + v252;
+    let v254 = v56 * p.prepared[46];
+    let v255 = v52 * p.prepared[45];
+    let v256 = v254 - v255;
+    let v257 = v73 * p.prepared[48];
+    let v258 = v69 * p.prepared[47];
+    let v259 = v257 - v258;
+    let v260 = v256 + v259;
+    let v261 = v253 + v260;
+    let v262 = v39 * p.prepared[50];
+    let v263 = v35 * p.prepared[49];
+    let v264 = v262 - v263;
+    let v265 = v261 + v264;
+    let v266 = v18 * p.prepared[52];
+    let v267 = v14 * p.prepared[51];
+    let v268 = v266 - v267;
+    let v269 = v265 + v268;
+    let v270 = v242 + v269;
+    let v271 = v131 * v137;
+    let v272 = v20 * v26;
+    let v273 = v271 - v272;
+    let v274 = v273 - v273;
+    let v275 = p.thigh_motor_mass * v274;
+    let v276 = v268 + v275;
+    let v277 = v142 * v144;
+    let v278 = v41 * v43;
+    let v279 = v277 - v278;
+    let v280 = v279 - v279;
+    let v281 = p.four_bar_motor_mass * v280;
+    let v282 = v264 + v281;
+    let v283 = v149 * v151;
+    let v284 = v58 * v60;
+    let v285 = v283 - v284;
+    let v286 = v285 - v285;
+    let v287 = p.thigh_mass * v286;
+    let v288 = v163 * v215;
+    let v289 = v82 * v218;
+    let v290 = v288 - v289;
+    let v291 = v290 - v290;
+    let v292 = p.shin_mass * v291;
+    let v293 = v287 + v292;
+    let v294 = v260 + v293;
+    let v295 = v156 * v163;
+    let v296 = v75 * v82;
+    let v297 = v295 - v296;
+    let v298 = v297 - v297;
+    let v299 = p.shin_mass * v298;
+    let v300 = v259 + v299;
+    let v301 = v168 * v170;
+    let v302 = v97 * v99;
+    let v303 = v301 - v302;
+    let v304 = v303 - v303;
+    let v305 = p.four_bar_link_mass * v304;
+    let v306 = v182 * v233;
+    let v307 = v121 * v236;
+    let v308 = v306 - v307;
+    let v309 = v308 - v308;
+    let v310 = p.lower_leg_mass * v309;
+    let v311 = v305 + v310;
+    let v312 = v252 + v311;
+    let v313 = v175 * v182;
+    let v314 = v114 * v121;
+    let v315 = v313 - v314;
+    let v316 = v315 - v315;
+    let v317 = p.lower_leg_mass * v316;
+    let v318 = v251 + v317;
+    let v319 = p.thigh_motor_mass * v21;
+    let v320 = p.thigh_motor_mass * v132;
+    let v321 = -v320;
+    let v322 = v21 * v193;
+    let v323 = v271 - v322;
+    let v324 = v132 * v191;
+    let v325 = v324 - v272;
+    let v326 = v323 - v325;
+    let v327 = p.thigh_motor_mass * v326;
+    let v328 = v268 + v327;
+    let v329 = v20 * v21;
+    let v330 = v271 - v329;
+    let v331 = v131 * v132;
+    let v332 = v331 - v272;
+    let v333 = v330 - v332;
+    let v334 = p.thigh_motor_mass * v333;
+    let v335 = v268 + p.thigh_spring_stiffness;
+    let v336 = v334 + v335;
+    let v337 = p.four_bar_motor_mass * v42;
+    let v338 = p.four_bar_motor_mass * v143;
+    let v339 = -v338;
+    let v340 = v42 * v201;
+    let v341 = v277 - v340;
+    let v342 = v143 * v199;
+    let v343 = v342 - v278;
+    let v344 = v341 - v343;
+    let v345 = p.four_bar_motor_mass * v344;
+    let v346 = v264 + v345;
+    let v347 = v41 * v42;
+    let v348 = v277 - v347;
+    let v349 = v142 * v143;
+    let v350 = v349 - v278;
+    let v351 = v348 - v350;
+    let v352 = p.four_bar_motor_mass * v351;
+    let v353 = v264 + p.four_bar_spring_stiffness;
+    let v354 = v352 + v353;
+    let v355 = p.thigh_mass * v59;
+    let v356 = p.shin_mass * v81;
+    let v357 = v355 + v356;
+    let v358 = p.thigh_mass * v150;
+    let v359 = p.shin_mass * v162;
+    let v360 = v358 + v359;
+    let v361 = -v360;
+    let v362 = v59 * v209;
+    let v363 = v283 - v362;
+    let v364 = v150 * v207;
+    let v365 = v364 - v284;
+    let v366 = v363 - v365;
+    let v367 = p.thigh_mass * v366;
+    let v368 = v81 * v219;
+    let v369 = v288 - v368;
+    let v370 = v162 * v216;
+    let v371 = v370 - v289;
+    let v372 = v369 - v371;
+    let v373 = p.shin_mass * v372;
+    let v374 = v367 + v373;
+    let v375 = v260 + v374;
+    let v376 = v58 * v59;
+    let v377 = v283 - v376;
+    let v378 = v149 * v150;
+    let v379 = v378 - v284;
+    let v380 = v377 - v379;
+    let v381 = p.thigh_mass * v380;
+    let v382 = v81 * v218;
+    let v383 = v288 - v382;
+    let v384 = v162 * v215;
+    let v385 = v384 - v289;
+    let v386 = v383 - v385;
+    let v387 = p.shin_mass * v386;
+    let v388 = v381 + v387;
+    let v389 = v260 + p.thigh_spring_stiffness;
+    let v390 = v388 + v389;
+    let v391 = v75 * v81;
+    let v392 = v295 - v391;
+    let v393 = v156 * v162;
+    let v394 = v393 - v296;
+    let v395 = v392 - v394;
+    let v396 = p.shin_mass * v395;
+    let v397 = v259 + v396;
+    let v398 = p.shin_mass * v76;
+    let v399 = p.shin_mass * v157;
+    let v400 = -v399;
+    let v401 = v76 * v219;
+    let v402 = v295 - v401;
+    let v403 = v157 * v216;
+    let v404 = v403 - v296;
+    let v405 = v402 - v404;
+    let v406 = p.shin_mass * v405;
+    let v407 = v259 + v406;
+    let v408 = v76 * v218;
+    let v409 = v295 - v408;
+    let v410 = v157 * v215;
+    let v411 = v410 - v296;
+    let v412 = v409 - v411;
+    let v413 = p.shin_mass * v412;
+    let v414 = v259 + v413;
+    let v415 = v75 * v76;
+    let v416 = v295 - v415;
+    let v417 = v156 * v157;
+    let v418 = v417 - v296;
+    let v419 = v416 - v418;
+    let v420 = p.shin_mass * v419;
+    let v421 = v259 + v420;
+    let v422 = p.four_bar_link_mass * v98;
+    let v423 = p.lower_leg_mass * v120;
+    let v424 = v422 + v423;
+    let v425 = p.four_bar_link_mass * v169;
+    let v426 = p.lower_leg_mass * v181;
+    let v427 = v425 + v426;
+    let v428 = -v427;
+    let v429 = v98 * v227;
+    let v430 = v301 - v429;
+    let v431 = v169 * v225;
+    let v432 = v431 - v302;
+    let v433 = v430 - v432;
+    let v434 = p.four_bar_link_mass * v433;
+    let v435 = v120 * v237;
+    let v436 = v306 - v435;
+    let v437 = v181 * v234;
+    let v438 = v437 - v307;
+    let v439 = v436 - v438;
+    let v440 = p.lower_leg_mass * v439;
+    let v441 = v434 + v440;
+    let v442 = v252 + v441;
+    let v443 = v97 * v98;
+    let v444 = v301 - v443;
+    let v445 = v168 * v169;
+    let v446 = v445 - v302;
+    let v447 = v444 - v446;
+    let v448 = p.four_bar_link_mass * v447;
+    let v449 = v120 * v236;
+    let v450 = v306 - v449;
+    let v451 = v181 * v233;
+    let v452 = v451 - v307;
+    let v453 = v450 - v452;
+    let v454 = p.lower_leg_mass * v453;
+    let v455 = v448 + v454;
+    let v456 = v252 + p.four_bar_spring_stiffness;
+    let v457 = v455 + v456;
+    let v458 = v114 * v120;
+    let v459 = v313 - v458;
+    let v460 = v175 * v181;
+    let v461 = v460 - v314;
+    let v462 = v459 - v461;
+    let v463 = p.lower_leg_mass * v462;
+    let v464 = v251 + v463;
+    let v465 = p.lower_leg_mass * v115;
+    let v466 = p.lower_leg_mass * v176;
+    let v467 = -v466;
+    let v468 = v115 * v237;
+    let v469 = v313 - v468;
+    let v470 = v176 * v234;
+    let v471 = v470 - v314;
+    let v472 = v469 - v471;
+    let v473 = p.lower_leg_mass * v472;
+    let v474 = v251 + v473;
+    let v475 = v115 * v236;
+    let v476 = v313 - v475;
+    let v477 = v176 * v233;
+    let v478 = v477 - v314;
+    let v479 = v476 - v478;
+    let v480 = p.lower_leg_mass * v479;
+    let v481 = v251 + v480;
+    let v482 = v114 * v115;
+    let v483 = v313 - v482;
+    let v484 = v175 * v176;
+    let v485 = v484 - v314;
+    let v486 = v483 - v485;
+    let v487 = p.lower_leg_mass * v486;
+    let v488 = v251 + v487;
+    let v489 = qd_2 + qd_2;
+    let v490 = v126 * v489;
+    let v491 = p.torso_mass * v490;
+    let v492 = v8 + v8;
+    let v493 = v131 * v492;
+    let v494 = v135 * v489;
+    let v495 = v493 + v494;
+    let v496 = p.thigh_motor_mass * v495;
+    let v497 = v491 + v496;
+    let v498 = v29 + v29;
+    let v499 = v142 * v498;
+    let v500 = v494 + v499;
+    let v501 = p.four_bar_motor_mass * v500;
+    let v502 = v497 + v501;
+    let v503 = v46 + v46;
+    let v504 = v149 * v503;
+    let v505 = v494 + v504;
+    let v506 = p.thigh_mass * v505;
+    let v507 = v502 + v506;
+    let v508 = v63 + v63;
+    let v509 = v156 * v508;
+    let v510 = v160 * v503;
+    let v511 = v509 + v510;
+    let v512 = v494 + v511;
+    let v513 = p.shin_mass * v512;
+    let v514 = v507 + v513;
+    let v515 = v85 + v85;
+    let v516 = v168 * v515;
+    let v517 = v494 + v516;
+    let v518 = p.four_bar_link_mass * v517;
+    let v519 = v514 + v518;
+    let v520 = v102 + v102;
+    let v521 = v175 * v520;
+    let v522 = v179 * v515;
+    let v523 = v521 + v522;
+    let v524 = v494 + v523;
+    let v525 = p.lower_leg_mass * v524;
+    let v526 = v519 + v525;
+    let v527 = -v526;
+    let v528 = v5 * v489;
+    let v529 = p.torso_mass * v528;
+    let v530 = v20 * v492;
+    let v531 = v24 * v489;
+    let v532 = v530 + v531;
+    let v533 = p.thigh_motor_mass * v532;
+    let v534 = v529 + v533;
+    let v535 = v41 * v498;
+    let v536 = v531 + v535;
+    let v537 = p.four_bar_motor_mass * v536;
+    let v538 = v534 + v537;
+    let v539 = v58 * v503;
+    let v540 = v531 + v539;
+    let v541 = p.thigh_mass * v540;
+    let v542 = v538 + v541;
+    let v543 = v75 * v508;
+    let v544 = v79 * v503;
+    let v545 = v543 + v544;
+    let v546 = v531 + v545;
+    let v547 = p.shin_mass * v546;
+    let v548 = v542 + v547;
+    let v549 = v97 * v515;
+    let v550 = v531 + v549;
+    let v551 = p.four_bar_link_mass * v550;
+    let v552 = v548 + v551;
+    let v553 = v114 * v520;
+    let v554 = v118 * v515;
+    let v555 = v553 + v554;
+    let v556 = v531 + v555;
+    let v557 = p.lower_leg_mass * v556;
+    let v558 = v552 + v557;
+    let v559 = -v558;
+    let v560 = v5 * v490;
+    let v561 = v126 * v528;
+    let v562 = v560 - v561;
+    let v563 = p.torso_mass * v562;
+    let v564 = v193 * v495;
+    let v565 = v191 * v532;
+    let v566 = v564 - v565;
+    let v567 = p.thigh_motor_mass * v566;
+    let v568 = v563 + v567;
+    let v569 = v201 * v500;
+    let v570 = v199 * v536;
+    let v571 = v569 - v570;
+    let v572 = p.four_bar_motor_mass * v571;
+    let v573 = v568 + v572;
+    let v574 = v209 * v505;
+    let v575 = v207 * v540;
+    let v576 = v574 - v575;
+    let v577 = p.thigh_mass * v576;
+    let v578 = v573 + v577;
+    let v579 = v219 * v512;
+    let v580 = v216 * v546;
+    let v581 = v579 - v580;
+    let v582 = p.shin_mass * v581;
+    let v583 = v578 + v582;
+    let v584 = v227 * v517;
+    let v585 = v225 * v550;
+    let v586 = v584 - v585;
+    let v587 = p.four_bar_link_mass * v586;
+    let v588 = v583 + v587;
+    let v589 = v237 * v524;
+    let v590 = v234 * v556;
+    let v591 = v589 - v590;
+    let v592 = p.lower_leg_mass * v591;
+    let v593 = v588 + v592;
+    let v594 = v20 * v495;
+    let v595 = v131 * v532;
+    let v596 = v594 - v595;
+    let v597 = p.thigh_motor_mass * v596;
+    let v598 = v41 * v500;
+    let v599 = v142 * v536;
+    let v600 = v598 - v599;
+    let v601 = p.four_bar_motor_mass * v600;
+    let v602 = v58 * v505;
+    let v603 = v149 * v540;
+    let v604 = v602 - v603;
+    let v605 = p.thigh_mass * v604;
+    let v606 = v218 * v512;
+    let v607 = v215 * v546;
+    let v608 = v606 - v607;
+    let v609 = p.shin_mass * v608;
+    let v610 = v605 + v609;
+    let v611 = v75 * v512;
+    let v612 = v156 * v546;
+    let v613 = v611 - v612;
+    let v614 = p.shin_mass * v613;
+    let v615 = v97 * v517;
+    let v616 = v168 * v550;
+    let v617 = v615 - v616;
+    let v618 = p.four_bar_link_mass * v617;
+    let v619 = v236 * v524;
+    let v620 = v233 * v556;
+    let v621 = v619 - v620;
+    let v622 = p.lower_leg_mass * v621;
+    let v623 = v618 + v622;
+    let v624 = v114 * v524;
+    let v625 = v175 * v556;
+    let v626 = v624 - v625;
+    let v627 = p.lower_leg_mass * v626;
+    let v628 = p.thigh_motor_mass * v493;
+    let v629 = -v628;
+    let v630 = p.thigh_motor_mass * v530;
+    let v631 = -v630;
+    let v632 = v193 * v493;
+    let v633 = v191 * v530;
+    let v634 = v632 - v633;
+    let v635 = p.thigh_motor_mass * v634;
+    let v636 = v20 * v493;
+    let v637 = v131 * v530;
+    let v638 = v636 - v637;
+    let v639 = p.thigh_motor_mass * v638;
+    let v640 = p.four_bar_motor_mass * v499;
+    let v641 = -v640;
+    let v642 = p.four_bar_motor_mass * v535;
+    let v643 = -v642;
+    let v644 = v201 * v499;
+    let v645 = v199 * v535;
+    let v646 = v644 - v645;
+    let v647 = p.four_bar_motor_mass * v646;
+    let v648 = v41 * v499;
+    let v649 = v142 * v535;
+    let v650 = v648 - v649;
+    let v651 = p.four_bar_motor_mass * v650;
+    let v652 = p.thigh_mass * v504;
+    let v653 = p.shin_mass * v511;
+    let v654 = v652 + v653;
+    let v655 = -v654;
+    let v656 = p.thigh_mass * v539;
+    let v657 = p.shin_mass * v545;
+    let v658 = v656 + v657;
+    let v659 = -v658;
+    let v660 = v209 * v504;
+    let v661 = v207 * v539;
+    let v662 = v660 - v661;
+    let v663 = p.thigh_mass * v662;
+    let v664 = v219 * v511;
+    let v665 = v216 * v545;
+    let v666 = v664 - v665;
+    let v667 = p.shin_mass * v666;
+    let v668 = v663 + v667;
+    let v669 = v58 * v504;
+    let v670 = v149 * v539;
+    let v671 = v669 - v670;
+    let v672 = p.thigh_mass * v671;
+    let v673 = v218 * v511;
+    let v674 = v215 * v545;
+    let v675 = v673 - v674;
+    let v676 = p.shin_mass * v675;
+    let v677 = v672 + v676;
+    let v678 = v75 * v511;
+    let v679 = v156 * v545;
+    let v680 = v678 - v679;
+    let v681 = p.shin_mass * v680;
+    let v682 = p.shin_mass * v509;
+    let v683 = -v682;
+    let v684 = p.shin_mass * v543;
+    let v685 = -v684;
+    let v686 = v219 * v509;
+    let v687 = v216 * v543;
+    let v688 = v686 - v687;
+    let v689 = p.shin_mass * v688;
+    let v690 = v218 * v509;
+    let v691 = v215 * v543;
+    let v692 = v690 - v691;
+    let v693 = p.shin_mass * v692;
+    let v694 = v75 * v509;
+    let v695 = v156 * v543;
+    let v696 = v694 - v695;
+    let v697 = p.shin_mass * v696;
+    let v698 = p.four_bar_link_mass * v516;
+    let v699 = p.lower_leg_mass * v523;
+    let v700 = v698 + v699;
+    let v701 = -v700;
+    let v702 = p.four_bar_link_mass * v549;
+    let v703 = p.lower_leg_mass * v555;
+    let v704 = v702 + v703;
+    let v705 = -v704;
+    let v706 = v227 * v516;
+    let v707 = v225 * v549;
+    let v708 = v706 - v707;
+    let v709 = p.four_bar_link_mass * v708;
+    let v710 = v237 * v523;
+    let v711 = v234 * v555;
+    let v712 = v710 - v711;
+    let v713 = p.lower_leg_mass * v712;
+    let v714 = v709 + v713;
+    let v715 = v97 * v516;
+    let v716 = v168 * v549;
+    let v717 = v715 - v716;
+    let v718 = p.four_bar_link_mass * v717;
+    let v719 = v236 * v523;
+    let v720 = v233 * v555;
+    let v721 = v719 - v720;
+    let v722 = p.lower_leg_mass * v721;
+    let v723 = v718 + v722;
+    let v724 = v114 * v523;
+    let v725 = v175 * v555;
+    let v726 = v724 - v725;
+    let v727 = p.lower_leg_mass * v726;
+    let v728 = p.lower_leg_mass * v521;
+    let v729 = -v728;
+    let v730 = p.lower_leg_mass * v553;
+    let v731 = -v730;
+    let v732 = v237 * v521;
+    let v733 = v234 * v553;
+    let v734 = v732 - v733;
+    let v735 = p.lower_leg_mass * v734;
+    let v736 = v236 * v521;
+    let v737 = v233 * v553;
+    let v738 = v736 - v737;
+    let v739 = p.lower_leg_mass * v738;
+    let v740 = v114 * v521;
+    let v741 = v175 * v553;
+    let v742 = v740 - v741;
+    let v743 = p.lower_leg_mass * v742;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [v123, v185, v270, v276, v282, v294, v300, v312, v318],
+                [
+                    v319,
+                    v321,
+                    v328,
+                    v336,
+                    T::lit(0.0),
+                    p.prepared[62],
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    v337,
+                    v339,
+                    v346,
+                    T::lit(0.0),
+                    v354,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    p.prepared[63],
+                    T::lit(0.0),
+                ],
+                [
+                    v357,
+                    v361,
+                    v375,
+                    p.prepared[62],
+                    T::lit(0.0),
+                    v390,
+                    v397,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    v398,
+                    v400,
+                    v407,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v414,
+                    v421,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    v424,
+                    v428,
+                    v442,
+                    T::lit(0.0),
+                    p.prepared[63],
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v457,
+                    v464,
+                ],
+                [
+                    v465,
+                    v467,
+                    v474,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v481,
+                    v488,
+                ],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [v527, v559, v593, v597, v601, v610, v614, v623, v627],
+                [
+                    v629,
+                    v631,
+                    v635,
+                    v639,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    v641,
+                    v643,
+                    v647,
+                    T::lit(0.0),
+                    v651,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    v655,
+                    v659,
+                    v668,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v677,
+                    v681,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    v683,
+                    v685,
+                    v689,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v693,
+                    v697,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    v701,
+                    v705,
+                    v714,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v723,
+                    v727,
+                ],
+                [
+                    v729,
+                    v731,
+                    v735,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v739,
+                    v743,
+                ],
+            ]),
+        ),
+    )
+}
+/// `∂(Jᵀ f)/∂q`, `∂(J a)/∂q`, `∂(J̇ q̇)/∂q` and `J̇` at the closure forces `f` and the
+/// accelerations `a`.
+pub fn constraint_derivatives<T: Arithmetic>(
+    q: &SVector<T, 9>,
+    qd: &SVector<T, 9>,
+    a: &SVector<T, 9>,
+    f: &SVector<T, 2>,
+    p: &Params<T>,
+) -> (SMatrix<T, 9, 9>, SMatrix<T, 2, 9>, SMatrix<T, 2, 9>, SMatrix<T, 2, 9>) {
+    let [_, _, q_2, _, _, q_5, q_6, q_7, q_8] = q.data.0[0];
+    let [_, _, qd_2, _, _, qd_5, qd_6, qd_7, qd_8] = qd.data.0[0];
+    let [_, _, a_2, _, _, a_5, a_6, a_7, a_8] = a.data.0[0];
+    let [f_0, f_1] = f.data.0[0];
+    let (v9, v0) = q_8.sincos();
+    let (v4, v1) = q_7.sincos();
+    let (v5, v2) = q_2.sincos();
+    let v3 = v1 * v2;
+    let v6 = v4 * v5;
+    let v7 = v3 - v6;
+    let v8 = v0 * v7;
+    let v10 = v1 * v5;
+    let v11 = v2 * v4;
+    let v12 = v10 + v11;
+    let v13 = v9 * v12;
+    let v14 = v8 - v13;
+    let v15 = p.lower_leg_length_x * v14;
+    let v16 = v0 * v12;
+    let v17 = v7 * v9;
+    let v18 = v16 + v17;
+    let v19 = p.lower_leg_length_y * v18;
+    let v20 = v15 - v19;
+    let v21 = v7 * p.four_bar_link_length_x;
+    let v22 = v12 * p.four_bar_link_length_y;
+    let v23 = v21 - v22;
+    let v24 = v20 + v23;
+    let v25 = v2 * p.torso_length_x;
+    let v26 = v5 * p.torso_length_y;
+    let v27 = v25 - v26;
+    let v28 = v24 + v27;
+    let (v36, v29) = q_6.sincos();
+    let (v32, v30) = q_5.sincos();
+    let v31 = v2 * v30;
+    let v33 = v5 * v32;
+    let v34 = v31 - v33;
+    let v35 = v29 * v34;
+    let v37 = v5 * v30;
+    let v38 = v2 * v32;
+    let v39 = v37 + v38;
+    let v40 = v36 * v39;
+    let v41 = v35 - v40;
+    let v42 = p.shin_pin_a_x * v41;
+    let v43 = v29 * v39;
+    let v44 = v34 * v36;
+    let v45 = v43 + v44;
+    let v46 = p.shin_pin_a_y * v45;
+    let v47 = v42 - v46;
+    let v48 = v34 * p.thigh_length_x;
+    let v49 = v39 * p.thigh_length_y;
+    let v50 = v48 - v49;
+    let v51 = v47 + v50;
+    let v52 = v27 + v51;
+    let v53 = v28 - v52;
+    let v54 = f_0 * v53;
+    let v55 = p.lower_leg_length_x * v18;
+    let v56 = v14 * p.lower_leg_length_y;
+    let v57 = v55 + v56;
+    let v58 = v12 * p.four_bar_link_length_x;
+    let v59 = v7 * p.four_bar_link_length_y;
+    let v60 = v58 + v59;
+    let v61 = v57 + v60;
+    let v62 = v5 * p.torso_length_x;
+    let v63 = v2 * p.torso_length_y;
+    let v64 = v62 + v63;
+    let v65 = v61 + v64;
+    let v66 = p.shin_pin_a_x * v45;
+    let v67 = v41 * p.shin_pin_a_y;
+    let v68 = v66 + v67;
+    let v69 = v39 * p.thigh_length_x;
+    let v70 = v34 * p.thigh_length_y;
+    let v71 = v69 + v70;
+    let v72 = v68 + v71;
+    let v73 = v64 + v72;
+    let v74 = v65 - v73;
+    let v75 = f_1 * v74;
+    let v76 = v54 + v75;
+    let v77 = f_1 * v72;
+    let v78 = f_0 * v51;
+    let v79 = v77 + v78;
+    let v80 = -v79;
+    let v81 = f_1 * v68;
+    let v82 = f_0 * v47;
+    let v83 = v81 + v82;
+    let v84 = -v83;
+    let v85 = f_0 * v24;
+    let v86 = f_1 * v61;
+    let v87 = v85 + v86;
+    let v88 = f_0 * v20;
+    let v89 = f_1 * v57;
+    let v90 = v88 + v89;
+    let v91 = a_5 + a_2;
+    let v92 = p.thigh_length_y * v91;
+    let v93 = v91 + a_6;
+    let v94 = p.shin_pin_a_y * v93;
+    let v95 = v29 * v94;
+    let v96 = v92 + v95;
+    let v97 = p.shin_pin_a_x * v93;
+    let v98 = v36 * v97;
+    let v99 = v96 + v98;
+    let v100 = v32 * v99;
+    let v101 = p.torso_length_x * a_2;
+    let v102 = v100 - v101;
+    let v103 = v36 * v94;
+    let v104 = p.thigh_length_x * v91;
+    let v105 = v103 - v104;
+    let v106 = v29 * v97;
+    let v107 = v105 - v106;
+    let v108 = v30 * v107;
+    let v109 = v102 + v108;
+    let v110 = v101 + v109;
+    let v111 = a_2 + a_7;
+    let v112 = p.four_bar_link_length_y * v111;
+    let v113 = v111 + a_8;
+    let v114 = p.lower_leg_length_y * v113;
+    let v115 = v0 * v114;
+    let v116 = v112 + v115;
+    let v117 = p.lower_leg_length_x * v113;
+    let v118 = v9 * v117;
+    let v119 = v116 + v118;
+    let v120 = v4 * v119;
+    let v121 = v110 - v120;
+    let v122 = p.four_bar_link_length_x * v111;
+    let v123 = v9 * v114;
+    let v124 = v122 - v123;
+    let v125 = v0 * v117;
+    let v126 = v124 + v125;
+    let v127 = v1 * v126;
+    let v128 = v121 + v127;
+    let v129 = v2 * v128;
+    let v130 = v32 * v107;
+    let v131 = p.torso_length_y * a_2;
+    let v132 = v30 * v99;
+    let v133 = v131 + v132;
+    let v134 = v130 - v133;
+    let v135 = v131 + v134;
+    let v136 = v1 * v119;
+    let v137 = v135 + v136;
+    let v138 = v4 * v126;
+    let v139 = v137 + v138;
+    let v140 = v5 * v139;
+    let v141 = v129 - v140;
+    let v142 = v112 + v118;
+    let v143 = v115 + v142;
+    let v144 = v1 * v143;
+    let v145 = v104 + v106;
+    let v146 = v145 - v103;
+    let v147 = v32 * v146;
+    let v148 = v92 + v98;
+    let v149 = v95 + v148;
+    let v150 = v30 * v149;
+    let v151 = v147 + v150;
+    let v152 = v122 + v125;
+    let v153 = v123 - v152;
+    let v154 = v4 * v153;
+    let v155 = v151 + v154;
+    let v156 = v144 - v155;
+    let v157 = v2 * v156;
+    let v158 = v30 * v146;
+    let v159 = v32 * v149;
+    let v160 = v158 - v159;
+    let v161 = v1 * v153;
+    let v162 = v160 + v161;
+    let v163 = v4 * v143;
+    let v164 = v162 + v163;
+    let v165 = v5 * v164;
+    let v166 = v157 - v165;
+    let v167 = v5 * v99;
+    let v168 = v2 * v107;
+    let v169 = v167 + v168;
+    let v170 = v30 * v169;
+    let v171 = v5 * v107;
+    let v172 = v2 * v99;
+    let v173 = v171 - v172;
+    let v174 = v32 * v173;
+    let v175 = v170 - v174;
+    let v176 = v5 * v146;
+    let v177 = v2 * v149;
+    let v178 = v176 + v177;
+    let v179 = v30 * v178;
+    let v180 = v2 * v146;
+    let v181 = v5 * v149;
+    let v182 = v180 - v181;
+    let v183 = v32 * v182;
+    let v184 = v179 + v183;
+    let v185 = -v184;
+    let v186 = v39 * v94;
+    let v187 = v34 * v97;
+    let v188 = v186 - v187;
+    let v189 = v29 * v188;
+    let v190 = v34 * v94;
+    let v191 = v39 * v97;
+    let v192 = v190 + v191;
+    let v193 = v36 * v192;
+    let v194 = v189 + v193;
+    let v195 = v29 * v192;
+    let v196 = v187 - v186;
+    let v197 = v36 * v196;
+    let v198 = v195 + v197;
+    let v199 = -v198;
+    let v200 = v2 * v126;
+    let v201 = v5 * v119;
+    let v202 = v200 - v201;
+    let v203 = v1 * v202;
+    let v204 = v2 * v119;
+    let v205 = v5 * v126;
+    let v206 = v204 + v205;
+    let v207 = v4 * v206;
+    let v208 = v203 - v207;
+    let v209 = v2 * v143;
+    let v210 = v5 * v153;
+    let v211 = v209 - v210;
+    let v212 = v1 * v211;
+    let v213 = v2 * v153;
+    let v214 = v5 * v143;
+    let v215 = v213 + v214;
+    let v216 = v4 * v215;
+    let v217 = v212 - v216;
+    let v218 = v7 * v117;
+    let v219 = v12 * v114;
+    let v220 = v218 - v219;
+    let v221 = v0 * v220;
+    let v222 = v7 * v114;
+    let v223 = v12 * v117;
+    let v224 = v222 + v223;
+    let v225 = v9 * v224;
+    let v226 = v221 - v225;
+    let v227 = v0 * v224;
+    let v228 = v219 - v218;
+    let v229 = v9 * v228;
+    let v230 = v227 - v229;
+    let v231 = qd_2 * qd_2;
+    let v232 = p.torso_length_y * v231;
+    let v233 = qd_2 + qd_5;
+    let v234 = v233 * v233;
+    let v235 = p.thigh_length_y * v234;
+    let v236 = v233 + qd_6;
+    let v237 = v236 * v236;
+    let v238 = p.shin_pin_a_y * v237;
+    let v239 = v29 * v238;
+    let v240 = v235 + v239;
+    let v241 = p.shin_pin_a_x * v237;
+    let v242 = v36 * v241;
+    let v243 = v240 + v242;
+    let v244 = v30 * v243;
+    let v245 = v232 + v244;
+    let v246 = v36 * v238;
+    let v247 = p.thigh_length_x * v234;
+    let v248 = v246 - v247;
+    let v249 = v29 * v241;
+    let v250 = v248 - v249;
+    let v251 = v32 * v250;
+    let v252 = v245 - v251;
+    let v253 = v252 - v232;
+    let v254 = qd_2 + qd_7;
+    let v255 = v254 * v254;
+    let v256 = p.four_bar_link_length_y * v255;
+    let v257 = v254 + qd_8;
+    let v258 = v257 * v257;
+    let v259 = p.lower_leg_length_y * v258;
+    let v260 = v0 * v259;
+    let v261 = v256 + v260;
+    let v262 = p.lower_leg_length_x * v258;
+    let v263 = v9 * v262;
+    let v264 = v261 + v263;
+    let v265 = v1 * v264;
+    let v266 = v253 - v265;
+    let v267 = p.four_bar_link_length_x * v255;
+    let v268 = v9 * v259;
+    let v269 = v267 - v268;
+    let v270 = v0 * v262;
+    let v271 = v269 + v270;
+    let v272 = v4 * v271;
+    let v273 = v266 - v272;
+    let v274 = v2 * v273;
+    let v275 = v32 * v243;
+    let v276 = p.torso_length_x * v231;
+    let v277 = v275 - v276;
+    let v278 = v30 * v250;
+    let v279 = v277 + v278;
+    let v280 = v276 + v279;
+    let v281 = v4 * v264;
+    let v282 = v280 - v281;
+    let v283 = v1 * v271;
+    let v284 = v282 + v283;
+    let v285 = v5 * v284;
+    let v286 = v274 - v285;
+    let v287 = v247 + v249;
+    let v288 = v246 - v287;
+    let v289 = v30 * v288;
+    let v290 = v235 + v242;
+    let v291 = v239 + v290;
+    let v292 = v32 * v291;
+    let v293 = v289 + v292;
+    let v294 = v267 + v270;
+    let v295 = v294 - v268;
+    let v296 = v1 * v295;
+    let v297 = v293 + v296;
+    let v298 = v256 + v263;
+    let v299 = v260 + v298;
+    let v300 = v4 * v299;
+    let v301 = v297 - v300;
+    let v302 = v2 * v301;
+    let v303 = v32 * v288;
+    let v304 = v30 * v291;
+    let v305 = v303 - v304;
+    let v306 = v4 * v295;
+    let v307 = v305 + v306;
+    let v308 = v1 * v299;
+    let v309 = v307 + v308;
+    let v310 = v5 * v309;
+    let v311 = v302 - v310;
+    let v312 = v2 * v243;
+    let v313 = v5 * v250;
+    let v314 = v312 - v313;
+    let v315 = v30 * v314;
+    let v316 = v5 * v243;
+    let v317 = v2 * v250;
+    let v318 = v316 + v317;
+    let v319 = v32 * v318;
+    let v320 = v315 - v319;
+    let v321 = v2 * v288;
+    let v322 = v5 * v291;
+    let v323 = v321 + v322;
+    let v324 = v30 * v323;
+    let v325 = v5 * v288;
+    let v326 = v2 * v291;
+    let v327 = v325 - v326;
+    let v328 = v32 * v327;
+    let v329 = v324 - v328;
+    let v330 = v34 * v238;
+    let v331 = v39 * v241;
+    let v332 = v330 + v331;
+    let v333 = v29 * v332;
+    let v334 = v39 * v238;
+    let v335 = v34 * v241;
+    let v336 = v334 - v335;
+    let v337 = v36 * v336;
+    let v338 = v333 - v337;
+    let v339 = v29 * v336;
+    let v340 = v36 * v332;
+    let v341 = v339 + v340;
+    let v342 = v2 * v264;
+    let v343 = v5 * v271;
+    let v344 = v342 + v343;
+    let v345 = v1 * v344;
+    let v346 = v2 * v271;
+    let v347 = v5 * v264;
+    let v348 = v346 - v347;
+    let v349 = v4 * v348;
+    let v350 = v345 + v349;
+    let v351 = -v350;
+    let v352 = v2 * v295;
+    let v353 = v5 * v299;
+    let v354 = v352 - v353;
+    let v355 = v1 * v354;
+    let v356 = v5 * v295;
+    let v357 = v2 * v299;
+    let v358 = v356 + v357;
+    let v359 = v4 * v358;
+    let v360 = v355 - v359;
+    let v361 = v7 * v259;
+    let v362 = v12 * v262;
+    let v363 = v361 + v362;
+    let v364 = v0 * v363;
+    let v365 = v7 * v262;
+    let v366 = v12 * v259;
+    let v367 = v365 - v366;
+    let v368 = v9 * v367;
+    let v369 = v364 + v368;
+    let v370 = -v369;
+    let v371 = v0 * v367;
+    let v372 = v9 * v363;
+    let v373 = v371 - v372;
+    let v374 = p.thigh_length_y * v233;
+    let v375 = p.shin_pin_a_y * v236;
+    let v376 = v29 * v375;
+    let v377 = v374 + v376;
+    let v378 = p.shin_pin_a_x * v236;
+    let v379 = v36 * v378;
+    let v380 = v377 + v379;
+    let v381 = v32 * v380;
+    let v382 = p.torso_length_x * qd_2;
+    let v383 = v381 - v382;
+    let v384 = v36 * v375;
+    let v385 = p.thigh_length_x * v233;
+    let v386 = v384 - v385;
+    let v387 = v29 * v378;
+    let v388 = v386 - v387;
+    let v389 = v30 * v388;
+    let v390 = v383 + v389;
+    let v391 = v382 + v390;
+    let v392 = p.four_bar_link_length_y * v254;
+    let v393 = p.lower_leg_length_y * v257;
+    let v394 = v0 * v393;
+    let v395 = v392 + v394;
+    let v396 = p.lower_leg_length_x * v257;
+    let v397 = v9 * v396;
+    let v398 = v395 + v397;
+    let v399 = v4 * v398;
+    let v400 = v391 - v399;
+    let v401 = p.four_bar_link_length_x * v254;
+    let v402 = v9 * v393;
+    let v403 = v401 - v402;
+    let v404 = v0 * v396;
+    let v405 = v403 + v404;
+    let v406 = v1 * v405;
+    let v407 = v400 + v406;
+    let v408 = v2 * v407;
+    let v409 = v32 * v388;
+    let v410 = p.torso_length_y * qd_2;
+    let v411 = v30 * v380;
+    let v412 = v410 + v411;
+    let v413 = v409 - v412;
+    let v414 = v410 + v413;
+    let v415 = v1 * v398;
+    let v416 = v414 + v415;
+    let v417 = v4 * v405;
+    let v418 = v416 + v417;
+    let v419 = v5 * v418;
+    let v420 = v408 - v419;
+    let v421 = v392 + v397;
+    let v422 = v394 + v421;
+    let v423 = v1 * v422;
+    let v424 = v385 + v387;
+    let v425 = v424 - v384;
+    let v426 = v32 * v425;
+    let v427 = v374 + v379;
+    let v428 = v376 + v427;
+    let v429 = v30 * v428;
+    let v430 = v426 + v429;
+    let v431 = v401 + v404;
+    let v432 = v402 - v431;
+    let v433 = v4 * v432;
+    let v434 = v430 + v433;
+    let v435 = v423 - v434;
+    let v436 = v2 * v435;
+    let v437 = v30 * v425;
+    let v438 = v32 * v428;
+    let v439 = v437 - v438;
+    let v440 = v1 * v432;
+    let v441 = v439 + v440;
+    let v442 = v4 * v422;
+    let v443 = v441 + v442;
+    let v444 = v5 * v443;
+    let v445 = v436 - v444;
+    let v446 = v5 * v380;
+    let v447 = v2 * v388;
+    let v448 = v446 + v447;
+    let v449 = v30 * v448;
+    let v450 = v5 * v388;
+    let v451 = v2 * v380;
+    let v452 = v450 - v451;
+    let v453 = v32 * v452;
+    let v454 = v449 - v453;
+    let v455 = v5 * v425;
+    let v456 = v2 * v428;
+    let v457 = v455 + v456;
+    let v458 = v30 * v457;
+    let v459 = v2 * v425;
+    let v460 = v5 * v428;
+    let v461 = v459 - v460;
+    let v462 = v32 * v461;
+    let v463 = v458 + v462;
+    let v464 = -v463;
+    let v465 = v39 * v375;
+    let v466 = v34 * v378;
+    let v467 = v465 - v466;
+    let v468 = v29 * v467;
+    let v469 = v34 * v375;
+    let v470 = v39 * v378;
+    let v471 = v469 + v470;
+    let v472 = v36 * v471;
+    let v473 = v468 + v472;
+    let v474 = v29 * v471;
+    let v475 = v466 - v465;
+    let v476 = v36 * v475;
+    let v477 = v474 + v476;
+    let v478 = -v477;
+    let v479 = v2 * v405;
+    let v480 = v5 * v398;
+    let v481 = v479 - v480;
+    let v482 = v1 * v481;
+    let v483 = v2 * v398;
+    let v484 = v5 * v405;
+    let v485 = v483 + v484;
+    let v486 = v4 * v485;
+    let v487 = v482 - v486;
+    let v488 = v2 * v422;
+    let v489 = v5 * v432;
+    let v490 = v488 - v489;
+    let v491 = v1 * v490;
+    let v492 = v2 * v432;
+    let v493 = v5 * v422;
+    let v494 = v492 + v493;
+    let v495 = v4 * v494;
+    let v496 = v491 - v495;
+    let v497 = v7 * v396;
+    let v498 = v12 * v393;
+    let v499 = v497 - v498;
+    let v500 = v0 * v499;
+    let v501 = v7 * v393;
+    let v502 = v12 * v396;
+    let v503 = v501 + v502;
+    let v504 = v9 * v503;
+    let v505 = v500 - v504;
+    let v506 = v0 * v503;
+    let v507 = v498 - v497;
+    let v508 = v9 * v507;
+    let v509 = v506 - v508;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v76,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v80,
+                    v84,
+                    v87,
+                    v90,
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v80,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v80,
+                    v84,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v84,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v84,
+                    v84,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v87,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v87,
+                    v90,
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v90,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v90,
+                    v90,
+                ],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+                [v141, v166],
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+                [v175, v185],
+                [v194, v199],
+                [v208, v217],
+                [v226, v230],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+                [v286, v311],
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+                [v320, v329],
+                [v338, v341],
+                [v351, v360],
+                [v370, v373],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+                [v420, v445],
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+                [v454, v464],
+                [v473, v478],
+                [v487, v496],
+                [v505, v509],
+            ]),
+        ),
+    )
+}
+/// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
+/// (base frame) and the accelerations `a`.
+pub fn contact_derivatives<T: Arithmetic>(
+    q: &SVector<T, 9>,
+    qd: &SVector<T, 9>,
+    a: &SVector<T, 9>,
+    lambda: &SVector<T, 2>,
+    p: &Params<T>,
+) -> (SMatrix<T, 9, 9>, SMatrix<T, 2, 9>, SMatrix<T, 2, 9>, SMatrix<T, 2, 9>) {
+    let [_, _, q_2, _, _, q_5, q_6, _, _] = q.data.0[0];
+    let [_, _, qd_2, _, _, qd_5, qd_6, _, _] = qd.data.0[0];
+    let [_, _, a_2, _, _, a_5, a_6, _, _] = a.data.0[0];
+    let [lambda_0, lambda_1] = lambda.data.0[0];
+    let (v9, v0) = q_6.sincos();
+    let (v4, v1) = q_5.sincos();
+    let (v2, v5) = q_2.sincos();
+    let v3 = v1 * v2;
+    let v6 = v4 * v5;
+    let v7 = v3 + v6;
+    let v8 = v0 * v7;
+    let v10 = v1 * v5;
+    let v11 = v2 * v4;
+    let v12 = v10 - v11;
+    let v13 = v9 * v12;
+    let v14 = v8 + v13;
+    let v15 = p.shin_length_x * v14;
+    let v16 = v0 * v12;
+    let v17 = v7 * v9;
+    let v18 = v16 - v17;
+    let v19 = p.shin_length_y * v18;
+    let v20 = v15 + v19;
+    let v21 = v7 * p.thigh_length_x;
+    let v22 = v12 * p.thigh_length_y;
+    let v23 = v21 + v22;
+    let v24 = v20 + v23;
+    let v25 = v2 * p.torso_length_x;
+    let v26 = v5 * p.torso_length_y;
+    let v27 = v25 + v26;
+    let v28 = v24 + v27;
+    let v29 = lambda_1 * v28;
+    let v30 = p.shin_length_x * v18;
+    let v31 = v14 * p.shin_length_y;
+    let v32 = v30 - v31;
+    let v33 = v12 * p.thigh_length_x;
+    let v34 = v7 * p.thigh_length_y;
+    let v35 = v33 - v34;
+    let v36 = v32 + v35;
+    let v37 = v5 * p.torso_length_x;
+    let v38 = v2 * p.torso_length_y;
+    let v39 = v37 - v38;
+    let v40 = v36 + v39;
+    let v41 = lambda_0 * v40;
+    let v42 = v29 + v41;
+    let v43 = -v42;
+    let v44 = lambda_1 * v24;
+    let v45 = lambda_0 * v36;
+    let v46 = v44 + v45;
+    let v47 = -v46;
+    let v48 = lambda_1 * v20;
+    let v49 = lambda_0 * v32;
+    let v50 = v48 + v49;
+    let v51 = -v50;
+    let v52 = v40 * a_2;
+    let v53 = v36 * a_5;
+    let v54 = v52 + v53;
+    let v55 = v32 * a_6;
+    let v56 = v54 + v55;
+    let v57 = -v56;
+    let v58 = v28 * a_2;
+    let v59 = v24 * a_5;
+    let v60 = v58 + v59;
+    let v61 = v20 * a_6;
+    let v62 = v60 + v61;
+    let v63 = -v62;
+    let v64 = v36 * a_2;
+    let v65 = v53 + v64;
+    let v66 = v55 + v65;
+    let v67 = -v66;
+    let v68 = v24 * a_2;
+    let v69 = v59 + v68;
+    let v70 = v61 + v69;
+    let v71 = -v70;
+    let v72 = v32 * a_2;
+    let v73 = v32 * a_5;
+    let v74 = v72 + v73;
+    let v75 = v55 + v74;
+    let v76 = -v75;
+    let v77 = v20 * a_2;
+    let v78 = v20 * a_5;
+    let v79 = v77 + v78;
+    let v80 = v61 + v79;
+    let v81 = -v80;
+    let v82 = qd_2 + qd_5;
+    let v83 = v82 + qd_6;
+    let v84 = v83 * v83;
+    let v85 = v20 * v84;
+    let v86 = v82 * v82;
+    let v87 = v23 * v86;
+    let v88 = v85 + v87;
+    let v89 = qd_2 * qd_2;
+    let v90 = v27 * v89;
+    let v91 = v88 + v90;
+    let v92 = v32 * v84;
+    let v93 = v35 * v86;
+    let v94 = v92 + v93;
+    let v95 = v39 * v89;
+    let v96 = v94 + v95;
+    let v97 = -v96;
+    let v98 = -v94;
+    let v99 = -v92;
+    let v100 = v40 * qd_2;
+    let v101 = v36 * qd_5;
+    let v102 = v100 + v101;
+    let v103 = v32 * qd_6;
+    let v104 = v102 + v103;
+    let v105 = -v104;
+    let v106 = v28 * qd_2;
+    let v107 = v24 * qd_5;
+    let v108 = v106 + v107;
+    let v109 = v20 * qd_6;
+    let v110 = v108 + v109;
+    let v111 = -v110;
+    let v112 = v36 * qd_2;
+    let v113 = v101 + v112;
+    let v114 = v103 + v113;
+    let v115 = -v114;
+    let v116 = v24 * qd_2;
+    let v117 = v107 + v116;
+    let v118 = v109 + v117;
+    let v119 = -v118;
+    let v120 = v32 * qd_2;
+    let v121 = v32 * qd_5;
+    let v122 = v120 + v121;
+    let v123 = v103 + v122;
+    let v124 = -v123;
+    let v125 = v20 * qd_2;
+    let v126 = v20 * qd_5;
+    let v127 = v125 + v126;
+    let v128 = v109 + v127;
+    let v129 = -v128;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v43,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v47,
+                    v51,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v47,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v47,
+                    v51,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v51,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v51,
+                    v51,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+                [v57, v63],
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+                [v67, v71],
+                [v76, v81],
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+                [v91, v97],
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+                [v88, v98],
+                [v85, v99],
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+                [v105, v111],
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+                [v115, v119],
+                [v124, v129],
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+    )
+}
+/// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
+/// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
+pub fn dynamics_derivatives<T: Arithmetic>(
+    q: &SVector<T, 9>,
+    qd: &SVector<T, 9>,
+    a: &SVector<T, 9>,
+    f: &SVector<T, 2>,
+    p: &Params<T>,
+) -> (SMatrix<T, 9, 9>, SMatrix<T, 9, 9>, SMatrix<T, 2, 9>, SMatrix<T, 2, 9>) {
+    let [_, _, q_2, q_3, q_4, q_5, q_6, q_7, q_8] = q.data.0[0];
+    let [_, _, qd_2, qd_3, qd_4, qd_5, qd_6, qd_7, qd_8] = qd.data.0[0];
+    let [a_0, a_1, a_2, a_3, a_4, a_5, a_6, a_7, a_8] = a.data.0[0];
+    let [f_0, f_1] = f.data.0[0];
+    let v0 = qd_2 * qd_2;
+    let (v1, v3) = q_2.sincos();
+    let v2 = p.torso_com_x * v1;
+    let v4 = p.torso_com_y * v3;
+    let v5 = v2 + v4;
+    let v6 = v0 * v5;
+    let v7 = p.torso_mass * v6;
+    let v8 = qd_2 + qd_3;
+    let v9 = v8 * v8;
+    let (v12, v10) = q_3.sincos();
+    let v11 = v1 * v10;
+    let v13 = v3 * v12;
+    let v14 = v11 + v13;
+    let v15 = p.thigh_motor_com_x * v14;
+    let v16 = v3 * v10;
+    let v17 = v1 * v12;
+    let v18 = v16 - v17;
+    let v19 = p.thigh_motor_com_y * v18;
+    let v20 = v15 + v19;
+    let v21 = v9 * v20;
+    let v22 = v1 * p.torso_length_x;
+    let v23 = v3 * p.torso_length_y;
+    let v24 = v22 + v23;
+    let v25 = v0 * v24;
+    let v26 = v21 + v25;
+    let v27 = p.thigh_motor_mass * v26;
+    let v28 = v7 + v27;
+    let v29 = qd_2 + qd_4;
+    let v30 = v29 * v29;
+    let (v33, v31) = q_4.sincos();
+    let v32 = v1 * v31;
+    let v34 = v3 * v33;
+    let v35 = v32 + v34;
+    let v36 = p.four_bar_motor_com_x * v35;
+    let v37 = v3 * v31;
+    let v38 = v1 * v33;
+    let v39 = v37 - v38;
+    let v40 = p.four_bar_motor_com_y * v39;
+    let v41 = v36 + v40;
+    let v42 = v30 * v41;
+    let v43 = v25 + v42;
+    let v44 = p.four_bar_motor_mass * v43;
+    let v45 = v28 + v44;
+    let v46 = qd_2 + qd_5;
+    let v47 = v46 * v46;
+    let (v50, v48) = q_5.sincos();
+    let v49 = v1 * v48;
+    let v51 = v3 * v50;
+    let v52 = v49 + v51;
+    let v53 = p.thigh_com_x * v52;
+    let v54 = v3 * v48;
+    let v55 = v1 * v50;
+    let v56 = v54 - v55;
+    let v57 = p.thigh_com_y * v56;
+    let v58 = v53 + v57;
+    let v59 = v47 * v58;
+    let v60 = v25 + v59;
+    let v61 = p.thigh_mass * v60;
+    let v62 = v45 + v61;
+    let v63 = v46 + qd_6;
+    let v64 = v63 * v63;
+    let (v67, v65) = q_6.sincos();
+    let v66 = v52 * v65;
+    let v68 = v56 * v67;
+    let v69 = v66 + v68;
+    let v70 = p.shin_com_x * v69;
+    let v71 = v56 * v65;
+    let v72 = v52 * v67;
+    let v73 = v71 - v72;
+    let v74 = p.shin_com_y * v73;
+    let v75 = v70 + v74;
+    let v76 = v64 * v75;
+    let v77 = v52 * p.thigh_length_x;
+    let v78 = v56 * p.thigh_length_y;
+    let v79 = v77 + v78;
+    let v80 = v47 * v79;
+    let v81 = v76 + v80;
+    let v82 = v25 + v81;
+    let v83 = p.shin_mass * v82;
+    let v84 = v62 + v83;
+    let v85 = qd_2 + qd_7;
+    let v86 = v85 * v85;
+    let (v89, v87) = q_7.sincos();
+    let v88 = v1 * v87;
+    let v90 = v3 * v89;
+    let v91 = v88 + v90;
+    let v92 = p.four_bar_link_com_x * v91;
+    let v93 = v3 * v87;
+    let v94 = v1 * v89;
+    let v95 = v93 - v94;
+    let v96 = p.four_bar_link_com_y * v95;
+    let v97 = v92 + v96;
+    let v98 = v86 * v97;
+    let v99 = v25 + v98;
+    let v100 = p.four_bar_link_mass * v99;
+    let v101 = v84 + v100;
+    let v102 = v85 + qd_8;
+    let v103 = v102 * v102;
+    let (v106, v104) = q_8.sincos();
+    let v105 = v91 * v104;
+    let v107 = v95 * v106;
+    let v108 = v105 + v107;
+    let v109 = p.lower_leg_com_x * v108;
+    let v110 = v95 * v104;
+    let v111 = v91 * v106;
+    let v112 = v110 - v111;
+    let v113 = p.lower_leg_com_y * v112;
+    let v114 = v109 + v113;
+    let v115 = v103 * v114;
+    let v116 = v91 * p.four_bar_link_length_x;
+    let v117 = v95 * p.four_bar_link_length_y;
+    let v118 = v116 + v117;
+    let v119 = v86 * v118;
+    let v120 = v115 + v119;
+    let v121 = v25 + v120;
+    let v122 = p.lower_leg_mass * v121;
+    let v123 = v101 + v122;
+    let v124 = v104 * p.prepared[4];
+    let v125 = v106 * p.prepared[5];
+    let v126 = v124 - v125;
+    let v127 = p.prepared[3] + v126;
+    let v128 = v87 * v127;
+    let v129 = v106 * p.prepared[4];
+    let v130 = v104 * p.prepared[5];
+    let v131 = v129 + v130;
+    let v132 = p.prepared[6] + v131;
+    let v133 = v89 * v132;
+    let v134 = v128 - v133;
+    let v135 = p.prepared[15] + v134;
+    let v136 = v65 * p.prepared[8];
+    let v137 = v67 * p.prepared[9];
+    let v138 = v136 - v137;
+    let v139 = p.prepared[7] + v138;
+    let v140 = v48 * v139;
+    let v141 = v67 * p.prepared[8];
+    let v142 = v65 * p.prepared[9];
+    let v143 = v141 + v142;
+    let v144 = p.prepared[10] + v143;
+    let v145 = v50 * v144;
+    let v146 = v140 - v145;
+    let v147 = v135 + v146;
+    let v148 = v31 * p.prepared[11];
+    let v149 = v33 * p.prepared[12];
+    let v150 = v148 - v149;
+    let v151 = v147 + v150;
+    let v152 = v10 * p.prepared[13];
+    let v153 = v12 * p.prepared[14];
+    let v154 = v152 - v153;
+    let v155 = v151 + v154;
+    let v156 = v3 * v155;
+    let v157 = v89 * v127;
+    let v158 = v87 * v132;
+    let v159 = v157 + v158;
+    let v160 = p.prepared[2] + v159;
+    let v161 = v50 * v139;
+    let v162 = v48 * v144;
+    let v163 = v161 + v162;
+    let v164 = v160 + v163;
+    let v165 = v33 * p.prepared[11];
+    let v166 = v31 * p.prepared[12];
+    let v167 = v165 + v166;
+    let v168 = v164 + v167;
+    let v169 = v12 * p.prepared[13];
+    let v170 = v10 * p.prepared[14];
+    let v171 = v169 + v170;
+    let v172 = v168 + v171;
+    let v173 = v1 * v172;
+    let v174 = v156 - v173;
+    let v175 = a_2 * v174;
+    let v176 = v3 * v154;
+    let v177 = v1 * v171;
+    let v178 = v176 - v177;
+    let v179 = a_3 * v178;
+    let v180 = v175 + v179;
+    let v181 = v3 * v150;
+    let v182 = v1 * v167;
+    let v183 = v181 - v182;
+    let v184 = a_4 * v183;
+    let v185 = v180 + v184;
+    let v186 = v3 * v146;
+    let v187 = v1 * v163;
+    let v188 = v186 - v187;
+    let v189 = a_5 * v188;
+    let v190 = v185 + v189;
+    let v191 = v48 * v138;
+    let v192 = v50 * v143;
+    let v193 = v191 - v192;
+    let v194 = v3 * v193;
+    let v195 = v48 * v143;
+    let v196 = v50 * v138;
+    let v197 = v195 + v196;
+    let v198 = v1 * v197;
+    let v199 = v194 - v198;
+    let v200 = a_6 * v199;
+    let v201 = v190 + v200;
+    let v202 = v3 * v134;
+    let v203 = v1 * v159;
+    let v204 = v202 - v203;
+    let v205 = a_7 * v204;
+    let v206 = v201 + v205;
+    let v207 = v87 * v126;
+    let v208 = v89 * v131;
+    let v209 = v207 - v208;
+    let v210 = v3 * v209;
+    let v211 = v87 * v131;
+    let v212 = v89 * v126;
+    let v213 = v211 + v212;
+    let v214 = v1 * v213;
+    let v215 = v210 - v214;
+    let v216 = a_8 * v215;
+    let v217 = v206 + v216;
+    let v218 = v123 - v217;
+    let v219 = v1 * v155;
+    let v220 = v3 * v172;
+    let v221 = v219 + v220;
+    let v222 = a_2 * v221;
+    let v223 = v1 * v154;
+    let v224 = v3 * v171;
+    let v225 = v223 + v224;
+    let v226 = a_3 * v225;
+    let v227 = v222 + v226;
+    let v228 = v1 * v150;
+    let v229 = v3 * v167;
+    let v230 = v228 + v229;
+    let v231 = a_4 * v230;
+    let v232 = v227 + v231;
+    let v233 = v1 * v146;
+    let v234 = v3 * v163;
+    let v235 = v233 + v234;
+    let v236 = a_5 * v235;
+    let v237 = v232 + v236;
+    let v238 = v1 * v193;
+    let v239 = v3 * v197;
+    let v240 = v238 + v239;
+    let v241 = a_6 * v240;
+    let v242 = v237 + v241;
+    let v243 = v1 * v134;
+    let v244 = v3 * v159;
+    let v245 = v243 + v244;
+    let v246 = a_7 * v245;
+    let v247 = v242 + v246;
+    let v248 = v1 * v209;
+    let v249 = v3 * v213;
+    let v250 = v248 + v249;
+    let v251 = a_8 * v250;
+    let v252 = v247 + v251;
+    let v253 = p.torso_com_x * v3;
+    let v254 = v1 * p.torso_com_y;
+    let v255 = v253 - v254;
+    let v256 = v0 * v255;
+    let v257 = p.torso_mass * v256;
+    let v258 = p.thigh_motor_com_x * v18;
+    let v259 = v14 * p.thigh_motor_com_y;
+    let v260 = v258 - v259;
+    let v261 = v9 * v260;
+    let v262 = v3 * p.torso_length_x;
+    let v263 = v1 * p.torso_length_y;
+    let v264 = v262 - v263;
+    let v265 = v0 * v264;
+    let v266 = v261 + v265;
+    let v267 = p.thigh_motor_mass * v266;
+    let v268 = v257 + v267;
+    let v269 = p.four_bar_motor_com_x * v39;
+    let v270 = v35 * p.four_bar_motor_com_y;
+    let v271 = v269 - v270;
+    let v272 = v30 * v271;
+    let v273 = v265 + v272;
+    let v274 = p.four_bar_motor_mass * v273;
+    let v275 = v268 + v274;
+    let v276 = p.thigh_com_x * v56;
+    let v277 = v52 * p.thigh_com_y;
+    let v278 = v276 - v277;
+    let v279 = v47 * v278;
+    let v280 = v265 + v279;
+    let v281 = p.thigh_mass * v280;
+    let v282 = v275 + v281;
+    let v283 = p.shin_com_x * v73;
+    let v284 = v69 * p.shin_com_y;
+    let v285 = v283 - v284;
+    let v286 = v64 * v285;
+    let v287 = v56 * p.thigh_length_x;
+    let v288 = v52 * p.thigh_length_y;
+    let v289 = v287 - v288;
+    let v290 = v47 * v289;
+    let v291 = v286 + v290;
+    let v292 = v265 + v291;
+    let v293 = p.shin_mass * v292;
+    let v294 = v282 + v293;
+    let v295 = p.four_bar_link_com_x * v95;
+    let v296 = v91 * p.four_bar_link_com_y;
+    let v297 = v295 - v296;
+    let v298 = v86 * v297;
+    let v299 = v265 + v298;
+    let v300 = p.four_bar_link_mass * v299;
+    let v301 = v294 + v300;
+    let v302 = p.lower_leg_com_x * v112;
+    let v303 = v108 * p.lower_leg_com_y;
+    let v304 = v302 - v303;
+    let v305 = v103 * v304;
+    let v306 = v95 * p.four_bar_link_length_x;
+    let v307 = v91 * p.four_bar_link_length_y;
+    let v308 = v306 - v307;
+    let v309 = v86 * v308;
+    let v310 = v305 + v309;
+    let v311 = v265 + v310;
+    let v312 = p.lower_leg_mass * v311;
+    let v313 = v301 + v312;
+    let v314 = v252 + v313;
+    let v315 = -v314;
+    let v316 = v255 * v256;
+    let v317 = v5 * v6;
+    let v318 = v316 - v317;
+    let v319 = v318 - v318;
+    let v320 = p.torso_mass * v319;
+    let v321 = v260 + v264;
+    let v322 = v266 * v321;
+    let v323 = v20 + v24;
+    let v324 = v26 * v323;
+    let v325 = v322 - v324;
+    let v326 = v325 - v325;
+    let v327 = p.thigh_motor_mass * v326;
+    let v328 = v320 + v327;
+    let v329 = v264 + v271;
+    let v330 = v273 * v329;
+    let v331 = v24 + v41;
+    let v332 = v43 * v331;
+    let v333 = v330 - v332;
+    let v334 = v333 - v333;
+    let v335 = p.four_bar_motor_mass * v334;
+    let v336 = v328 + v335;
+    let v337 = v264 + v278;
+    let v338 = v280 * v337;
+    let v339 = v24 + v58;
+    let v340 = v60 * v339;
+    let v341 = v338 - v340;
+    let v342 = v341 - v341;
+    let v343 = p.thigh_mass * v342;
+    let v344 = v336 + v343;
+    let v345 = v285 + v289;
+    let v346 = v264 + v345;
+    let v347 = v292 * v346;
+    let v348 = v75 + v79;
+    let v349 = v24 + v348;
+    let v350 = v82 * v349;
+    let v351 = v347 - v350;
+    let v352 = v351 - v351;
+    let v353 = p.shin_mass * v352;
+    let v354 = v344 + v353;
+    let v355 = v264 + v297;
+    let v356 = v299 * v355;
+    let v357 = v24 + v97;
+    let v358 = v99 * v357;
+    let v359 = v356 - v358;
+    let v360 = v359 - v359;
+    let v361 = p.four_bar_link_mass * v360;
+    let v362 = v354 + v361;
+    let v363 = v304 + v308;
+    let v364 = v264 + v363;
+    let v365 = v311 * v364;
+    let v366 = v114 + v118;
+    let v367 = v24 + v366;
+    let v368 = v121 * v367;
+    let v369 = v365 - v368;
+    let v370 = v369 - v369;
+    let v371 = p.lower_leg_mass * v370;
+    let v372 = v362 + v371;
+    let v373 = v3 * p.prepared[40];
+    let v374 = v1 * p.prepared[39];
+    let v375 = v373 - v374;
+    let v376 = v95 * p.prepared[42];
+    let v377 = v91 * p.prepared[41];
+    let v378 = v376 - v377;
+    let v379 = v112 * p.prepared[44];
+    let v380 = v108 * p.prepared[43];
+    let v381 = v379 - v380;
+    let v382 = v378 + v381;
+    let v383 = v375 + v382;
+    let v384 = v56 * p.prepared[46];
+    let v385 = v52 * p.prepared[45];
+    let v386 = v384 - v385;
+    let v387 = v73 * p.prepared[48];
+    let v388 = v69 * p.prepared[47];
+    let v389 = v387 - v388;
+    let v390 = v386 + v389;
+    let v391 = v383 + v390;
+    let v392 = v39 * p.prepared[50];
+    let v393 = v35 * p.prepared[49];
+    let v394 = v392 - v393;
+    let v395 = v391 + v394;
+    let v396 = v18 * p.prepared[52];
+    let v397 = v14 * p.prepared[51];
+    let v398 = v396 - v397;
+    let v399 = v395 + v398;
+    let v400 = v372 + v399;
+    let v401 = v221 * a_1;
+    let v402 = v174 * a_0;
+    let v403 = v401 + v402;
+    let v404 = v400 - v403;
+    let v405 = v112 * p.lower_leg_length_x;
+    let v406 = v108 * p.lower_leg_length_y;
+    let v407 = v405 - v406;
+    let v408 = v308 + v407;
+    let v409 = v264 + v408;
+    let v410 = v73 * p.shin_pin_a_x;
+    let v411 = v69 * p.shin_pin_a_y;
+    let v412 = v410 - v411;
+    let v413 = v289 + v412;
+    let v414 = v264 + v413;
+    let v415 = v409 - v414;
+    let v416 = f_0 * v415;
+    let v417 = v108 * p.lower_leg_length_x;
+    let v418 = v112 * p.lower_leg_length_y;
+    let v419 = v417 + v418;
+    let v420 = v118 + v419;
+    let v421 = v24 + v420;
+    let v422 = v69 * p.shin_pin_a_x;
+    let v423 = v73 * p.shin_pin_a_y;
+    let v424 = v422 + v423;
+    let v425 = v79 + v424;
+    let v426 = v24 + v425;
+    let v427 = v421 - v426;
+    let v428 = f_1 * v427;
+    let v429 = v416 + v428;
+    let v430 = v404 - v429;
+    let v431 = v260 * v266;
+    let v432 = v20 * v26;
+    let v433 = v431 - v432;
+    let v434 = v433 - v433;
+    let v435 = p.thigh_motor_mass * v434;
+    let v436 = v398 + v435;
+    let v437 = v225 * a_1;
+    let v438 = v178 * a_0;
+    let v439 = v437 + v438;
+    let v440 = v436 - v439;
+    let v441 = v271 * v273;
+    let v442 = v41 * v43;
+    let v443 = v441 - v442;
+    let v444 = v443 - v443;
+    let v445 = p.four_bar_motor_mass * v444;
+    let v446 = v394 + v445;
+    let v447 = v230 * a_1;
+    let v448 = v183 * a_0;
+    let v449 = v447 + v448;
+    let v450 = v446 - v449;
+    let v451 = v278 * v280;
+    let v452 = v58 * v60;
+    let v453 = v451 - v452;
+    let v454 = v453 - v453;
+    let v455 = p.thigh_mass * v454;
+    let v456 = v292 * v345;
+    let v457 = v82 * v348;
+    let v458 = v456 - v457;
+    let v459 = v458 - v458;
+    let v460 = p.shin_mass * v459;
+    let v461 = v455 + v460;
+    let v462 = v390 + v461;
+    let v463 = v235 * a_1;
+    let v464 = v188 * a_0;
+    let v465 = v463 + v464;
+    let v466 = v462 - v465;
+    let v467 = f_1 * v425;
+    let v468 = f_0 * v413;
+    let v469 = v467 + v468;
+    let v470 = v466 + v469;
+    let v471 = v285 * v292;
+    let v472 = v75 * v82;
+    let v473 = v471 - v472;
+    let v474 = v473 - v473;
+    let v475 = p.shin_mass * v474;
+    let v476 = v389 + v475;
+    let v477 = v240 * a_1;
+    let v478 = v199 * a_0;
+    let v479 = v477 + v478;
+    let v480 = v476 - v479;
+    let v481 = f_1 * v424;
+    let v482 = f_0 * v412;
+    let v483 = v481 + v482;
+    let v484 = v480 + v483;
+    let v485 = v297 * v299;
+    let v486 = v97 * v99;
+    let v487 = v485 - v486;
+    let v488 = v487 - v487;
+    let v489 = p.four_bar_link_mass * v488;
+    let v490 = v311 * v363;
+    let v491 = v121 * v366;
+    let v492 = v490 - v491;
+    let v493 = v492 - v492;
+    let v494 = p.lower_leg_mass * v493;
+    let v495 = v489 + v494;
+    let v496 = v382 + v495;
+    let v497 = v245 * a_1;
+    let v498 = v204 * a_0;
+    let v499 = v497 + v498;
+    let v500 = v496 - v499;
+    let v501 = f_0 * v408;
+    let v502 = f_1 * v420;
+    let v503 = v501 + v502;
+    let v504 = v500 - v503;
+    let v505 = v304 * v311;
+    let v506 = v114 * v121;
+    let v507 = v505 - v506;
+    let v508 = v507 - v507;
+    let v509 = p.lower_leg_mass * v508;
+    let v510 = v381 + v509;
+    let v511 = v250 * a_1;
+    let v512 = v215 * a_0;
+    let v513 = v511 + v512;
+    let v514 = v510 - v513;
+    let v515 = f_0 * v407;
+    let v516 = f_1 * v419;
+    let v517 = v515 + v516;
+    let v518 = v514 - v517;
+    let v519 = p.thigh_motor_mass * v21;
+    let v520 = a_2 * v178;
+    let v521 = v179 + v520;
+    let v522 = v519 - v521;
+    let v523 = a_2 * v225;
+    let v524 = v226 + v523;
+    let v525 = p.thigh_motor_mass * v261;
+    let v526 = v524 + v525;
+    let v527 = -v526;
+    let v528 = v12 * p.prepared[29];
+    let v529 = v10 * p.prepared[30];
+    let v530 = v528 + v529;
+    let v531 = -v530;
+    let v532 = v531 + v531;
+    let v533 = a_2 * v532;
+    let v534 = v533 - v439;
+    let v535 = v10 * p.prepared[31];
+    let v536 = v535 - v528;
+    let v537 = a_3 * v536;
+    let v538 = v534 + v537;
+    let v539 = v21 * v323;
+    let v540 = v431 - v539;
+    let v541 = v261 * v321;
+    let v542 = v541 - v432;
+    let v543 = v540 - v542;
+    let v544 = p.thigh_motor_mass * v543;
+    let v545 = v398 + v544;
+    let v546 = v538 + v545;
+    let v547 = a_2 * v536;
+    let v548 = v547 - v439;
+    let v549 = v20 * v21;
+    let v550 = v431 - v549;
+    let v551 = v260 * v261;
+    let v552 = v551 - v432;
+    let v553 = v550 - v552;
+    let v554 = p.thigh_motor_mass * v553;
+    let v555 = v398 + p.thigh_spring_stiffness;
+    let v556 = v554 + v555;
+    let v557 = v548 + v556;
+    let v558 = p.four_bar_motor_mass * v42;
+    let v559 = a_2 * v183;
+    let v560 = v184 + v559;
+    let v561 = v558 - v560;
+    let v562 = a_2 * v230;
+    let v563 = v231 + v562;
+    let v564 = p.four_bar_motor_mass * v272;
+    let v565 = v563 + v564;
+    let v566 = -v565;
+    let v567 = v33 * p.prepared[27];
+    let v568 = v31 * p.prepared[28];
+    let v569 = v567 + v568;
+    let v570 = -v569;
+    let v571 = v570 + v570;
+    let v572 = a_2 * v571;
+    let v573 = v572 - v449;
+    let v574 = v31 * p.prepared[32];
+    let v575 = v574 - v567;
+    let v576 = a_4 * v575;
+    let v577 = v573 + v576;
+    let v578 = v42 * v331;
+    let v579 = v441 - v578;
+    let v580 = v272 * v329;
+    let v581 = v580 - v442;
+    let v582 = v579 - v581;
+    let v583 = p.four_bar_motor_mass * v582;
+    let v584 = v394 + v583;
+    let v585 = v577 + v584;
+    let v586 = a_2 * v575;
+    let v587 = v586 - v449;
+    let v588 = v41 * v42;
+    let v589 = v441 - v588;
+    let v590 = v271 * v272;
+    let v591 = v590 - v442;
+    let v592 = v589 - v591;
+    let v593 = p.four_bar_motor_mass * v592;
+    let v594 = v394 + p.four_bar_spring_stiffness;
+    let v595 = v593 + v594;
+    let v596 = v587 + v595;
+    let v597 = p.thigh_mass * v59;
+    let v598 = p.shin_mass * v81;
+    let v599 = v597 + v598;
+    let v600 = a_2 * v188;
+    let v601 = v189 + v600;
+    let v602 = v200 + v601;
+    let v603 = v599 - v602;
+    let v604 = a_2 * v235;
+    let v605 = v236 + v604;
+    let v606 = v241 + v605;
+    let v607 = p.thigh_mass * v279;
+    let v608 = p.shin_mass * v291;
+    let v609 = v607 + v608;
+    let v610 = v606 + v609;
+    let v611 = -v610;
+    let v612 = p.torso_length_y * v146;
+    let v613 = p.torso_length_x * v163;
+    let v614 = v612 - v613;
+    let v615 = v614 + v614;
+    let v616 = a_2 * v615;
+    let v617 = v616 - v465;
+    let v618 = a_5 * v614;
+    let v619 = v617 + v618;
+    let v620 = p.torso_length_y * v193;
+    let v621 = p.torso_length_x * v197;
+    let v622 = v620 - v621;
+    let v623 = a_6 * v622;
+    let v624 = v619 + v623;
+    let v625 = v59 * v339;
+    let v626 = v451 - v625;
+    let v627 = v279 * v337;
+    let v628 = v627 - v452;
+    let v629 = v626 - v628;
+    let v630 = p.thigh_mass * v629;
+    let v631 = v81 * v349;
+    let v632 = v456 - v631;
+    let v633 = v291 * v346;
+    let v634 = v633 - v457;
+    let v635 = v632 - v634;
+    let v636 = p.shin_mass * v635;
+    let v637 = v630 + v636;
+    let v638 = v390 + v637;
+    let v639 = v624 + v638;
+    let v640 = v469 + v639;
+    let v641 = a_2 * v614;
+    let v642 = v641 - v465;
+    let v643 = v58 * v59;
+    let v644 = v451 - v643;
+    let v645 = v278 * v279;
+    let v646 = v645 - v452;
+    let v647 = v644 - v646;
+    let v648 = p.thigh_mass * v647;
+    let v649 = v81 * v348;
+    let v650 = v456 - v649;
+    let v651 = v291 * v345;
+    let v652 = v651 - v457;
+    let v653 = v650 - v652;
+    let v654 = p.shin_mass * v653;
+    let v655 = v648 + v654;
+    let v656 = v390 + p.thigh_spring_stiffness;
+    let v657 = v655 + v656;
+    let v658 = v642 + v657;
+    let v659 = v469 + v658;
+    let v660 = a_2 * v622;
+    let v661 = v660 - v479;
+    let v662 = v75 * v81;
+    let v663 = v471 - v662;
+    let v664 = v285 * v291;
+    let v665 = v664 - v472;
+    let v666 = v663 - v665;
+    let v667 = p.shin_mass * v666;
+    let v668 = v389 + v667;
+    let v669 = v661 + v668;
+    let v670 = v483 + v669;
+    let v671 = p.shin_mass * v76;
+    let v672 = a_2 * v199;
+    let v673 = a_5 * v199;
+    let v674 = v672 + v673;
+    let v675 = v200 + v674;
+    let v676 = v671 - v675;
+    let v677 = a_2 * v240;
+    let v678 = a_5 * v240;
+    let v679 = v677 + v678;
+    let v680 = v241 + v679;
+    let v681 = p.shin_mass * v286;
+    let v682 = v680 + v681;
+    let v683 = -v682;
+    let v684 = v67 * p.prepared[25];
+    let v685 = v65 * p.prepared[26];
+    let v686 = v684 + v685;
+    let v687 = -v686;
+    let v688 = v687 + v687;
+    let v689 = v622 + v622;
+    let v690 = v688 + v689;
+    let v691 = a_2 * v690;
+    let v692 = v691 - v479;
+    let v693 = v622 + v688;
+    let v694 = a_5 * v693;
+    let v695 = v692 + v694;
+    let v696 = v65 * p.prepared[33];
+    let v697 = v696 - v684;
+    let v698 = v622 + v697;
+    let v699 = a_6 * v698;
+    let v700 = v695 + v699;
+    let v701 = v76 * v349;
+    let v702 = v471 - v701;
+    let v703 = v286 * v346;
+    let v704 = v703 - v472;
+    let v705 = v702 - v704;
+    let v706 = p.shin_mass * v705;
+    let v707 = v389 + v706;
+    let v708 = v700 + v707;
+    let v709 = v483 + v708;
+    let v710 = a_2 * v693;
+    let v711 = v710 - v479;
+    let v712 = a_5 * v688;
+    let v713 = v711 + v712;
+    let v714 = a_6 * v697;
+    let v715 = v713 + v714;
+    let v716 = v76 * v348;
+    let v717 = v471 - v716;
+    let v718 = v286 * v345;
+    let v719 = v718 - v472;
+    let v720 = v717 - v719;
+    let v721 = p.shin_mass * v720;
+    let v722 = v389 + v721;
+    let v723 = v715 + v722;
+    let v724 = v483 + v723;
+    let v725 = a_2 * v698;
+    let v726 = v725 - v479;
+    let v727 = a_5 * v697;
+    let v728 = v726 + v727;
+    let v729 = v75 * v76;
+    let v730 = v471 - v729;
+    let v731 = v285 * v286;
+    let v732 = v731 - v472;
+    let v733 = v730 - v732;
+    let v734 = p.shin_mass * v733;
+    let v735 = v389 + v734;
+    let v736 = v728 + v735;
+    let v737 = v483 + v736;
+    let v738 = p.four_bar_link_mass * v98;
+    let v739 = p.lower_leg_mass * v120;
+    let v740 = v738 + v739;
+    let v741 = a_2 * v204;
+    let v742 = v205 + v741;
+    let v743 = v216 + v742;
+    let v744 = v740 - v743;
+    let v745 = a_2 * v245;
+    let v746 = v246 + v745;
+    let v747 = v251 + v746;
+    let v748 = p.four_bar_link_mass * v298;
+    let v749 = p.lower_leg_mass * v310;
+    let v750 = v748 + v749;
+    let v751 = v747 + v750;
+    let v752 = -v751;
+    let v753 = p.torso_length_y * v134;
+    let v754 = p.torso_length_x * v159;
+    let v755 = v753 - v754;
+    let v756 = v755 + v755;
+    let v757 = a_2 * v756;
+    let v758 = v757 - v499;
+    let v759 = a_7 * v755;
+    let v760 = v758 + v759;
+    let v761 = p.torso_length_y * v209;
+    let v762 = p.torso_length_x * v213;
+    let v763 = v761 - v762;
+    let v764 = a_8 * v763;
+    let v765 = v760 + v764;
+    let v766 = v98 * v357;
+    let v767 = v485 - v766;
+    let v768 = v298 * v355;
+    let v769 = v768 - v486;
+    let v770 = v767 - v769;
+    let v771 = p.four_bar_link_mass * v770;
+    let v772 = v120 * v367;
+    let v773 = v490 - v772;
+    let v774 = v310 * v364;
+    let v775 = v774 - v491;
+    let v776 = v773 - v775;
+    let v777 = p.lower_leg_mass * v776;
+    let v778 = v771 + v777;
+    let v779 = v382 + v778;
+    let v780 = v765 + v779;
+    let v781 = v780 - v503;
+    let v782 = a_2 * v755;
+    let v783 = v782 - v499;
+    let v784 = v97 * v98;
+    let v785 = v485 - v784;
+    let v786 = v297 * v298;
+    let v787 = v786 - v486;
+    let v788 = v785 - v787;
+    let v789 = p.four_bar_link_mass * v788;
+    let v790 = v120 * v366;
+    let v791 = v490 - v790;
+    let v792 = v310 * v363;
+    let v793 = v792 - v491;
+    let v794 = v791 - v793;
+    let v795 = p.lower_leg_mass * v794;
+    let v796 = v789 + v795;
+    let v797 = v382 + p.four_bar_spring_stiffness;
+    let v798 = v796 + v797;
+    let v799 = v783 + v798;
+    let v800 = v799 - v503;
+    let v801 = a_2 * v763;
+    let v802 = v801 - v513;
+    let v803 = v114 * v120;
+    let v804 = v505 - v803;
+    let v805 = v304 * v310;
+    let v806 = v805 - v506;
+    let v807 = v804 - v806;
+    let v808 = p.lower_leg_mass * v807;
+    let v809 = v381 + v808;
+    let v810 = v802 + v809;
+    let v811 = v810 - v517;
+    let v812 = p.lower_leg_mass * v115;
+    let v813 = a_2 * v215;
+    let v814 = a_7 * v215;
+    let v815 = v813 + v814;
+    let v816 = v216 + v815;
+    let v817 = v812 - v816;
+    let v818 = a_2 * v250;
+    let v819 = a_7 * v250;
+    let v820 = v818 + v819;
+    let v821 = v251 + v820;
+    let v822 = p.lower_leg_mass * v305;
+    let v823 = v821 + v822;
+    let v824 = -v823;
+    let v825 = v106 * p.prepared[21];
+    let v826 = v104 * p.prepared[22];
+    let v827 = v825 + v826;
+    let v828 = -v827;
+    let v829 = v828 + v828;
+    let v830 = v763 + v763;
+    let v831 = v829 + v830;
+    let v832 = a_2 * v831;
+    let v833 = v832 - v513;
+    let v834 = v763 + v829;
+    let v835 = a_7 * v834;
+    let v836 = v833 + v835;
+    let v837 = v104 * p.prepared[34];
+    let v838 = v837 - v825;
+    let v839 = v763 + v838;
+    let v840 = a_8 * v839;
+    let v841 = v836 + v840;
+    let v842 = v115 * v367;
+    let v843 = v505 - v842;
+    let v844 = v305 * v364;
+    let v845 = v844 - v506;
+    let v846 = v843 - v845;
+    let v847 = p.lower_leg_mass * v846;
+    let v848 = v381 + v847;
+    let v849 = v841 + v848;
+    let v850 = v849 - v517;
+    let v851 = a_2 * v834;
+    let v852 = v851 - v513;
+    let v853 = a_7 * v829;
+    let v854 = v852 + v853;
+    let v855 = a_8 * v838;
+    let v856 = v854 + v855;
+    let v857 = v115 * v366;
+    let v858 = v505 - v857;
+    let v859 = v305 * v363;
+    let v860 = v859 - v506;
+    let v861 = v858 - v860;
+    let v862 = p.lower_leg_mass * v861;
+    let v863 = v381 + v862;
+    let v864 = v856 + v863;
+    let v865 = v864 - v517;
+    let v866 = a_2 * v839;
+    let v867 = v866 - v513;
+    let v868 = a_7 * v838;
+    let v869 = v867 + v868;
+    let v870 = v114 * v115;
+    let v871 = v505 - v870;
+    let v872 = v304 * v305;
+    let v873 = v872 - v506;
+    let v874 = v871 - v873;
+    let v875 = p.lower_leg_mass * v874;
+    let v876 = v381 + v875;
+    let v877 = v869 + v876;
+    let v878 = v877 - v517;
+    let v879 = qd_2 + qd_2;
+    let v880 = v255 * v879;
+    let v881 = p.torso_mass * v880;
+    let v882 = v8 + v8;
+    let v883 = v260 * v882;
+    let v884 = v264 * v879;
+    let v885 = v883 + v884;
+    let v886 = p.thigh_motor_mass * v885;
+    let v887 = v881 + v886;
+    let v888 = v29 + v29;
+    let v889 = v271 * v888;
+    let v890 = v884 + v889;
+    let v891 = p.four_bar_motor_mass * v890;
+    let v892 = v887 + v891;
+    let v893 = v46 + v46;
+    let v894 = v278 * v893;
+    let v895 = v884 + v894;
+    let v896 = p.thigh_mass * v895;
+    let v897 = v892 + v896;
+    let v898 = v63 + v63;
+    let v899 = v285 * v898;
+    let v900 = v289 * v893;
+    let v901 = v899 + v900;
+    let v902 = v884 + v901;
+    let v903 = p.shin_mass * v902;
+    let v904 = v897 + v903;
+    let v905 = v85 + v85;
+    let v906 = v297 * v905;
+    let v907 = v884 + v906;
+    let v908 = p.four_bar_link_mass * v907;
+    let v909 = v904 + v908;
+    let v910 = v102 + v102;
+    let v911 = v304 * v910;
+    let v912 = v308 * v905;
+    let v913 = v911 + v912;
+    let v914 = v884 + v913;
+    let v915 = p.lower_leg_mass * v914;
+    let v916 = v909 + v915;
+    let v917 = -v916;
+    let v918 = v5 * v879;
+    let v919 = p.torso_mass * v918;
+    let v920 = v20 * v882;
+    let v921 = v24 * v879;
+    let v922 = v920 + v921;
+    let v923 = p.thigh_motor_mass * v922;
+    let v924 = v919 + v923;
+    let v925 = v41 * v888;
+    let v926 = v921 + v925;
+    let v927 = p.four_bar_motor_mass * v926;
+    let v928 = v924 + v927;
+    let v929 = v58 * v893;
+    let v930 = v921 + v929;
+    let v931 = p.thigh_mass * v930;
+    let v932 = v928 + v931;
+    let v933 = v75 * v898;
+    let v934 = v79 * v893;
+    let v935 = v933 + v934;
+    let v936 = v921 + v935;
+    let v937 = p.shin_mass * v936;
+    let v938 = v932 + v937;
+    let v939 = v97 * v905;
+    let v940 = v921 + v939;
+    let v941 = p.four_bar_link_mass * v940;
+    let v942 = v938 + v941;
+    let v943 = v114 * v910;
+    let v944 = v118 * v905;
+    let v945 = v943 + v944;
+    let v946 = v921 + v945;
+    let v947 = p.lower_leg_mass * v946;
+    let v948 = v942 + v947;
+    let v949 = -v948;
+    let v950 = v5 * v880;
+    let v951 = v255 * v918;
+    let v952 = v950 - v951;
+    let v953 = p.torso_mass * v952;
+    let v954 = v323 * v885;
+    let v955 = v321 * v922;
+    let v956 = v954 - v955;
+    let v957 = p.thigh_motor_mass * v956;
+    let v958 = v953 + v957;
+    let v959 = v331 * v890;
+    let v960 = v329 * v926;
+    let v961 = v959 - v960;
+    let v962 = p.four_bar_motor_mass * v961;
+    let v963 = v958 + v962;
+    let v964 = v339 * v895;
+    let v965 = v337 * v930;
+    let v966 = v964 - v965;
+    let v967 = p.thigh_mass * v966;
+    let v968 = v963 + v967;
+    let v969 = v349 * v902;
+    let v970 = v346 * v936;
+    let v971 = v969 - v970;
+    let v972 = p.shin_mass * v971;
+    let v973 = v968 + v972;
+    let v974 = v357 * v907;
+    let v975 = v355 * v940;
+    let v976 = v974 - v975;
+    let v977 = p.four_bar_link_mass * v976;
+    let v978 = v973 + v977;
+    let v979 = v367 * v914;
+    let v980 = v364 * v946;
+    let v981 = v979 - v980;
+    let v982 = p.lower_leg_mass * v981;
+    let v983 = v978 + v982;
+    let v984 = v983 + p.torso_damping;
+    let v985 = v20 * v885;
+    let v986 = v260 * v922;
+    let v987 = v985 - v986;
+    let v988 = p.thigh_motor_mass * v987;
+    let v989 = v41 * v890;
+    let v990 = v271 * v926;
+    let v991 = v989 - v990;
+    let v992 = p.four_bar_motor_mass * v991;
+    let v993 = v58 * v895;
+    let v994 = v278 * v930;
+    let v995 = v993 - v994;
+    let v996 = p.thigh_mass * v995;
+    let v997 = v348 * v902;
+    let v998 = v345 * v936;
+    let v999 = v997 - v998;
+    let v1000 = p.shin_mass * v999;
+    let v1001 = v996 + v1000;
+    let v1002 = v75 * v902;
+    let v1003 = v285 * v936;
+    let v1004 = v1002 - v1003;
+    let v1005 = p.shin_mass * v1004;
+    let v1006 = v97 * v907;
+    let v1007 = v297 * v940;
+    let v1008 = v1006 - v1007;
+    let v1009 = p.four_bar_link_mass * v1008;
+    let v1010 = v366 * v914;
+    let v1011 = v363 * v946;
+    let v1012 = v1010 - v1011;
+    let v1013 = p.lower_leg_mass * v1012;
+    let v1014 = v1009 + v1013;
+    let v1015 = v114 * v914;
+    let v1016 = v304 * v946;
+    let v1017 = v1015 - v1016;
+    let v1018 = p.lower_leg_mass * v1017;
+    let v1019 = p.thigh_motor_mass * v883;
+    let v1020 = -v1019;
+    let v1021 = p.thigh_motor_mass * v920;
+    let v1022 = -v1021;
+    let v1023 = v323 * v883;
+    let v1024 = v321 * v920;
+    let v1025 = v1023 - v1024;
+    let v1026 = p.thigh_motor_mass * v1025;
+    let v1027 = v20 * v883;
+    let v1028 = v260 * v920;
+    let v1029 = v1027 - v1028;
+    let v1030 = p.thigh_motor_mass * v1029;
+    let v1031 = v1030 + p.thigh_motor_damping;
+    let v1032 = p.four_bar_motor_mass * v889;
+    let v1033 = -v1032;
+    let v1034 = p.four_bar_motor_mass * v925;
+    let v1035 = -v1034;
+    let v1036 = v331 * v889;
+    let v1037 = v329 * v925;
+    let v1038 = v1036 - v1037;
+    let v1039 = p.four_bar_motor_mass * v1038;
+    let v1040 = v41 * v889;
+    let v1041 = v271 * v925;
+    let v1042 = v1040 - v1041;
+    let v1043 = p.four_bar_motor_mass * v1042;
+    let v1044 = v1043 + p.four_bar_motor_damping;
+    let v1045 = p.thigh_mass * v894;
+    let v1046 = p.shin_mass * v901;
+    let v1047 = v1045 + v1046;
+    let v1048 = -v1047;
+    let v1049 = p.thigh_mass * v929;
+    let v1050 = p.shin_mass * v935;
+    let v1051 = v1049 + v1050;
+    let v1052 = -v1051;
+    let v1053 = v339 * v894;
+    let v1054 = v337 * v929;
+    let v1055 = v1053 - v1054;
+    let v1056 = p.thigh_mass * v1055;
+    let v1057 = v349 * v901;
+    let v1058 = v346 * v935;
+    let v1059 = v1057 - v1058;
+    let v1060 = p.shin_mass * v1059;
+    let v1061 = v1056 + v1060;
+    let v1062 = v58 * v894;
+    let v1063 = v278 * v929;
+    let v1064 = v1062 - v1063;
+    let v1065 = p.thigh_mass * v1064;
+    let v1066 = v348 * v901;
+    let v1067 = v345 * v935;
+    let v1068 = v1066 - v1067;
+    let v1069 = p.shin_mass * v1068;
+    let v1070 = v1065 + v1069;
+    let v1071 = v1070 + p.thigh_damping;
+    let v1072 = v75 * v901;
+    let v1073 = v285 * v935;
+    let v1074 = v1072 - v1073;
+    let v1075 = p.shin_mass * v1074;
+    let v1076 = p.shin_mass * v899;
+    let v1077 = -v1076;
+    let v1078 = p.shin_mass * v933;
+    let v1079 = -v1078;
+    let v1080 = v349 * v899;
+    let v1081 = v346 * v933;
+    let v1082 = v1080 - v1081;
+    let v1083 = p.shin_mass * v1082;
+    let v1084 = v348 * v899;
+    let v1085 = v345 * v933;
+    let v1086 = v1084 - v1085;
+    let v1087 = p.shin_mass * v1086;
+    let v1088 = v75 * v899;
+    let v1089 = v285 * v933;
+    let v1090 = v1088 - v1089;
+    let v1091 = p.shin_mass * v1090;
+    let v1092 = v1091 + p.shin_damping;
+    let v1093 = p.four_bar_link_mass * v906;
+    let v1094 = p.lower_leg_mass * v913;
+    let v1095 = v1093 + v1094;
+    let v1096 = -v1095;
+    let v1097 = p.four_bar_link_mass * v939;
+    let v1098 = p.lower_leg_mass * v945;
+    let v1099 = v1097 + v1098;
+    let v1100 = -v1099;
+    let v1101 = v357 * v906;
+    let v1102 = v355 * v939;
+    let v1103 = v1101 - v1102;
+    let v1104 = p.four_bar_link_mass * v1103;
+    let v1105 = v367 * v913;
+    let v1106 = v364 * v945;
+    let v1107 = v1105 - v1106;
+    let v1108 = p.lower_leg_mass * v1107;
+    let v1109 = v1104 + v1108;
+    let v1110 = v97 * v906;
+    let v1111 = v297 * v939;
+    let v1112 = v1110 - v1111;
+    let v1113 = p.four_bar_link_mass * v1112;
+    let v1114 = v366 * v913;
+    let v1115 = v363 * v945;
+    let v1116 = v1114 - v1115;
+    let v1117 = p.lower_leg_mass * v1116;
+    let v1118 = v1113 + v1117;
+    let v1119 = v1118 + p.four_bar_link_damping;
+    let v1120 = v114 * v913;
+    let v1121 = v304 * v945;
+    let v1122 = v1120 - v1121;
+    let v1123 = p.lower_leg_mass * v1122;
+    let v1124 = p.lower_leg_mass * v911;
+    let v1125 = -v1124;
+    let v1126 = p.lower_leg_mass * v943;
+    let v1127 = -v1126;
+    let v1128 = v367 * v911;
+    let v1129 = v364 * v943;
+    let v1130 = v1128 - v1129;
+    let v1131 = p.lower_leg_mass * v1130;
+    let v1132 = v366 * v911;
+    let v1133 = v363 * v943;
+    let v1134 = v1132 - v1133;
+    let v1135 = p.lower_leg_mass * v1134;
+    let v1136 = v114 * v911;
+    let v1137 = v304 * v943;
+    let v1138 = v1136 - v1137;
+    let v1139 = p.lower_leg_mass * v1138;
+    let v1140 = v1139 + p.lower_leg_damping;
+    let v1141 = v47 * p.thigh_length_y;
+    let v1142 = a_2 + a_5;
+    let v1143 = p.thigh_length_x * v1142;
+    let v1144 = v1141 - v1143;
+    let v1145 = v64 * p.shin_pin_a_x;
+    let v1146 = a_6 + v1142;
+    let v1147 = p.shin_pin_a_y * v1146;
+    let v1148 = v1145 + v1147;
+    let v1149 = v67 * v1148;
+    let v1150 = v1144 + v1149;
+    let v1151 = v64 * p.shin_pin_a_y;
+    let v1152 = p.shin_pin_a_x * v1146;
+    let v1153 = v1151 - v1152;
+    let v1154 = v65 * v1153;
+    let v1155 = v1150 + v1154;
+    let v1156 = v48 * v1155;
+    let v1157 = p.torso_length_x * a_2;
+    let v1158 = v67 * v1153;
+    let v1159 = v47 * p.thigh_length_x;
+    let v1160 = p.thigh_length_y * v1142;
+    let v1161 = v1159 + v1160;
+    let v1162 = v65 * v1148;
+    let v1163 = v1161 + v1162;
+    let v1164 = v1158 - v1163;
+    let v1165 = v50 * v1164;
+    let v1166 = v1157 + v1165;
+    let v1167 = v1156 - v1166;
+    let v1168 = v1157 + v1167;
+    let v1169 = v86 * p.four_bar_link_length_x;
+    let v1170 = a_2 + a_7;
+    let v1171 = p.four_bar_link_length_y * v1170;
+    let v1172 = v1169 + v1171;
+    let v1173 = v103 * p.lower_leg_length_x;
+    let v1174 = a_8 + v1170;
+    let v1175 = p.lower_leg_length_y * v1174;
+    let v1176 = v1173 + v1175;
+    let v1177 = v104 * v1176;
+    let v1178 = v1172 + v1177;
+    let v1179 = p.lower_leg_length_x * v1174;
+    let v1180 = v103 * p.lower_leg_length_y;
+    let v1181 = v1179 - v1180;
+    let v1182 = v106 * v1181;
+    let v1183 = v1178 + v1182;
+    let v1184 = v89 * v1183;
+    let v1185 = v1168 - v1184;
+    let v1186 = p.four_bar_link_length_x * v1170;
+    let v1187 = v86 * p.four_bar_link_length_y;
+    let v1188 = v1186 - v1187;
+    let v1189 = v106 * v1176;
+    let v1190 = v1188 - v1189;
+    let v1191 = v104 * v1181;
+    let v1192 = v1190 + v1191;
+    let v1193 = v87 * v1192;
+    let v1194 = v1185 + v1193;
+    let v1195 = v3 * v1194;
+    let v1196 = v48 * v1164;
+    let v1197 = p.torso_length_y * a_2;
+    let v1198 = v1196 - v1197;
+    let v1199 = v50 * v1155;
+    let v1200 = v1198 + v1199;
+    let v1201 = v1197 + v1200;
+    let v1202 = v87 * v1183;
+    let v1203 = v1201 + v1202;
+    let v1204 = v89 * v1192;
+    let v1205 = v1203 + v1204;
+    let v1206 = v1 * v1205;
+    let v1207 = v1195 - v1206;
+    let v1208 = v0 * p.torso_length_x;
+    let v1209 = v1143 - v1141;
+    let v1210 = v1152 - v1151;
+    let v1211 = v65 * v1210;
+    let v1212 = v1209 + v1211;
+    let v1213 = v1212 - v1149;
+    let v1214 = v50 * v1213;
+    let v1215 = v1208 + v1214;
+    let v1216 = v67 * v1210;
+    let v1217 = v1161 + v1216;
+    let v1218 = v1162 + v1217;
+    let v1219 = v48 * v1218;
+    let v1220 = v1215 + v1219;
+    let v1221 = v1208 - v1220;
+    let v1222 = v1187 - v1186;
+    let v1223 = v1180 - v1179;
+    let v1224 = v104 * v1223;
+    let v1225 = v1222 + v1224;
+    let v1226 = v1189 + v1225;
+    let v1227 = v89 * v1226;
+    let v1228 = v1221 - v1227;
+    let v1229 = v106 * v1223;
+    let v1230 = v1172 - v1229;
+    let v1231 = v1177 + v1230;
+    let v1232 = v87 * v1231;
+    let v1233 = v1228 + v1232;
+    let v1234 = v3 * v1233;
+    let v1235 = v48 * v1213;
+    let v1236 = v0 * p.torso_length_y;
+    let v1237 = v1235 - v1236;
+    let v1238 = v50 * v1218;
+    let v1239 = v1237 - v1238;
+    let v1240 = v1236 + v1239;
+    let v1241 = v87 * v1226;
+    let v1242 = v1240 + v1241;
+    let v1243 = v89 * v1231;
+    let v1244 = v1242 + v1243;
+    let v1245 = v1 * v1244;
+    let v1246 = v1234 - v1245;
+    let v1247 = v3 * v1155;
+    let v1248 = v1 * v1164;
+    let v1249 = v1247 - v1248;
+    let v1250 = v48 * v1249;
+    let v1251 = v3 * v1164;
+    let v1252 = v1 * v1155;
+    let v1253 = v1251 + v1252;
+    let v1254 = v50 * v1253;
+    let v1255 = v1250 - v1254;
+    let v1256 = v1 * v1213;
+    let v1257 = v3 * v1218;
+    let v1258 = v1256 + v1257;
+    let v1259 = v48 * v1258;
+    let v1260 = v3 * v1213;
+    let v1261 = v1 * v1218;
+    let v1262 = v1260 - v1261;
+    let v1263 = v50 * v1262;
+    let v1264 = v1259 + v1263;
+    let v1265 = -v1264;
+    let v1266 = v52 * v1148;
+    let v1267 = v56 * v1153;
+    let v1268 = v1266 + v1267;
+    let v1269 = v65 * v1268;
+    let v1270 = v52 * v1153;
+    let v1271 = v56 * v1148;
+    let v1272 = v1270 - v1271;
+    let v1273 = v67 * v1272;
+    let v1274 = v1269 - v1273;
+    let v1275 = v52 * v1210;
+    let v1276 = v1271 + v1275;
+    let v1277 = v65 * v1276;
+    let v1278 = v56 * v1210;
+    let v1279 = v1278 - v1266;
+    let v1280 = v67 * v1279;
+    let v1281 = v1277 + v1280;
+    let v1282 = -v1281;
+    let v1283 = v3 * v1192;
+    let v1284 = v1 * v1183;
+    let v1285 = v1283 - v1284;
+    let v1286 = v87 * v1285;
+    let v1287 = v3 * v1183;
+    let v1288 = v1 * v1192;
+    let v1289 = v1287 + v1288;
+    let v1290 = v89 * v1289;
+    let v1291 = v1286 - v1290;
+    let v1292 = v3 * v1231;
+    let v1293 = v1 * v1226;
+    let v1294 = v1292 - v1293;
+    let v1295 = v87 * v1294;
+    let v1296 = v3 * v1226;
+    let v1297 = v1 * v1231;
+    let v1298 = v1296 + v1297;
+    let v1299 = v89 * v1298;
+    let v1300 = v1295 - v1299;
+    let v1301 = v95 * v1181;
+    let v1302 = v91 * v1176;
+    let v1303 = v1301 - v1302;
+    let v1304 = v104 * v1303;
+    let v1305 = v95 * v1176;
+    let v1306 = v91 * v1181;
+    let v1307 = v1305 + v1306;
+    let v1308 = v106 * v1307;
+    let v1309 = v1304 - v1308;
+    let v1310 = v91 * v1223;
+    let v1311 = v1305 - v1310;
+    let v1312 = v104 * v1311;
+    let v1313 = v95 * v1223;
+    let v1314 = v1302 + v1313;
+    let v1315 = v106 * v1314;
+    let v1316 = v1312 - v1315;
+    let v1317 = v46 * p.thigh_length_y;
+    let v1318 = v63 * p.shin_pin_a_y;
+    let v1319 = v65 * v1318;
+    let v1320 = v1317 + v1319;
+    let v1321 = v63 * p.shin_pin_a_x;
+    let v1322 = v67 * v1321;
+    let v1323 = v1320 + v1322;
+    let v1324 = v50 * v1323;
+    let v1325 = qd_2 * p.torso_length_x;
+    let v1326 = v1324 - v1325;
+    let v1327 = v67 * v1318;
+    let v1328 = v46 * p.thigh_length_x;
+    let v1329 = v1327 - v1328;
+    let v1330 = v65 * v1321;
+    let v1331 = v1329 - v1330;
+    let v1332 = v48 * v1331;
+    let v1333 = v1326 + v1332;
+    let v1334 = v1325 + v1333;
+    let v1335 = v85 * p.four_bar_link_length_y;
+    let v1336 = v102 * p.lower_leg_length_y;
+    let v1337 = v104 * v1336;
+    let v1338 = v1335 + v1337;
+    let v1339 = v102 * p.lower_leg_length_x;
+    let v1340 = v106 * v1339;
+    let v1341 = v1338 + v1340;
+    let v1342 = v89 * v1341;
+    let v1343 = v1334 - v1342;
+    let v1344 = v85 * p.four_bar_link_length_x;
+    let v1345 = v106 * v1336;
+    let v1346 = v1344 - v1345;
+    let v1347 = v104 * v1339;
+    let v1348 = v1346 + v1347;
+    let v1349 = v87 * v1348;
+    let v1350 = v1343 + v1349;
+    let v1351 = v3 * v1350;
+    let v1352 = v50 * v1331;
+    let v1353 = qd_2 * p.torso_length_y;
+    let v1354 = v48 * v1323;
+    let v1355 = v1353 + v1354;
+    let v1356 = v1352 - v1355;
+    let v1357 = v1353 + v1356;
+    let v1358 = v87 * v1341;
+    let v1359 = v1357 + v1358;
+    let v1360 = v89 * v1348;
+    let v1361 = v1359 + v1360;
+    let v1362 = v1 * v1361;
+    let v1363 = v1351 - v1362;
+    let v1364 = v1335 + v1340;
+    let v1365 = v1337 + v1364;
+    let v1366 = v87 * v1365;
+    let v1367 = v1328 + v1330;
+    let v1368 = v1367 - v1327;
+    let v1369 = v50 * v1368;
+    let v1370 = v1317 + v1322;
+    let v1371 = v1319 + v1370;
+    let v1372 = v48 * v1371;
+    let v1373 = v1369 + v1372;
+    let v1374 = v1344 + v1347;
+    let v1375 = v1345 - v1374;
+    let v1376 = v89 * v1375;
+    let v1377 = v1373 + v1376;
+    let v1378 = v1366 - v1377;
+    let v1379 = v3 * v1378;
+    let v1380 = v48 * v1368;
+    let v1381 = v50 * v1371;
+    let v1382 = v1380 - v1381;
+    let v1383 = v87 * v1375;
+    let v1384 = v1382 + v1383;
+    let v1385 = v89 * v1365;
+    let v1386 = v1384 + v1385;
+    let v1387 = v1 * v1386;
+    let v1388 = v1379 - v1387;
+    let v1389 = v1 * v1323;
+    let v1390 = v3 * v1331;
+    let v1391 = v1389 + v1390;
+    let v1392 = v48 * v1391;
+    let v1393 = v1 * v1331;
+    let v1394 = v3 * v1323;
+    let v1395 = v1393 - v1394;
+    let v1396 = v50 * v1395;
+    let v1397 = v1392 - v1396;
+    let v1398 = v1 * v1368;
+    let v1399 = v3 * v1371;
+    let v1400 = v1398 + v1399;
+    let v1401 = v48 * v1400;
+    let v1402 = v3 * v1368;
+    let v1403 = v1 * v1371;
+    let v1404 = v1402 - v1403;
+    let v1405 = v50 * v1404;
+    let v1406 = v1401 + v1405;
+    let v1407 = -v1406;
+    let v1408 = v52 * v1318;
+    let v1409 = v56 * v1321;
+    let v1410 = v1408 - v1409;
+    let v1411 = v65 * v1410;
+    let v1412 = v56 * v1318;
+    let v1413 = v52 * v1321;
+    let v1414 = v1412 + v1413;
+    let v1415 = v67 * v1414;
+    let v1416 = v1411 + v1415;
+    let v1417 = v65 * v1414;
+    let v1418 = v1409 - v1408;
+    let v1419 = v67 * v1418;
+    let v1420 = v1417 + v1419;
+    let v1421 = -v1420;
+    let v1422 = v3 * v1348;
+    let v1423 = v1 * v1341;
+    let v1424 = v1422 - v1423;
+    let v1425 = v87 * v1424;
+    let v1426 = v3 * v1341;
+    let v1427 = v1 * v1348;
+    let v1428 = v1426 + v1427;
+    let v1429 = v89 * v1428;
+    let v1430 = v1425 - v1429;
+    let v1431 = v3 * v1365;
+    let v1432 = v1 * v1375;
+    let v1433 = v1431 - v1432;
+    let v1434 = v87 * v1433;
+    let v1435 = v3 * v1375;
+    let v1436 = v1 * v1365;
+    let v1437 = v1435 + v1436;
+    let v1438 = v89 * v1437;
+    let v1439 = v1434 - v1438;
+    let v1440 = v95 * v1339;
+    let v1441 = v91 * v1336;
+    let v1442 = v1440 - v1441;
+    let v1443 = v104 * v1442;
+    let v1444 = v95 * v1336;
+    let v1445 = v91 * v1339;
+    let v1446 = v1444 + v1445;
+    let v1447 = v106 * v1446;
+    let v1448 = v1443 - v1447;
+    let v1449 = v104 * v1446;
+    let v1450 = v1441 - v1440;
+    let v1451 = v106 * v1450;
+    let v1452 = v1449 - v1451;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [v218, v315, v430, v440, v450, v470, v484, v504, v518],
+                [
+                    v522,
+                    v527,
+                    v546,
+                    v557,
+                    T::lit(0.0),
+                    p.prepared[62],
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    v561,
+                    v566,
+                    v585,
+                    T::lit(0.0),
+                    v596,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    p.prepared[63],
+                    T::lit(0.0),
+                ],
+                [
+                    v603,
+                    v611,
+                    v640,
+                    p.prepared[62],
+                    T::lit(0.0),
+                    v659,
+                    v670,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    v676,
+                    v683,
+                    v709,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v724,
+                    v737,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    v744,
+                    v752,
+                    v781,
+                    T::lit(0.0),
+                    p.prepared[63],
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v800,
+                    v811,
+                ],
+                [
+                    v817,
+                    v824,
+                    v850,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v865,
+                    v878,
+                ],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [
+                    p.slide_x_damping,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    p.slide_y_damping,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [v917, v949, v984, v988, v992, v1001, v1005, v1014, v1018],
+                [
+                    v1020,
+                    v1022,
+                    v1026,
+                    v1031,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    v1033,
+                    v1035,
+                    v1039,
+                    T::lit(0.0),
+                    v1044,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    v1048,
+                    v1052,
+                    v1061,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v1071,
+                    v1075,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    v1077,
+                    v1079,
+                    v1083,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v1087,
+                    v1092,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    v1096,
+                    v1100,
+                    v1109,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v1119,
+                    v1123,
+                ],
+                [
+                    v1125,
+                    v1127,
+                    v1131,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v1135,
+                    v1140,
+                ],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+                [v1207, v1246],
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+                [v1255, v1265],
+                [v1274, v1282],
+                [v1291, v1300],
+                [v1309, v1316],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+                [v1363, v1388],
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+                [v1397, v1407],
+                [v1416, v1421],
+                [v1430, v1439],
+                [v1448, v1452],
+            ]),
+        ),
     )
 }

@@ -9,7 +9,8 @@
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
-    Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters,
+    Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
+    JointKind, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 5;
@@ -517,6 +518,62 @@ impl LegModel<NQ, NC, NU> for BracedParallelogram {
             constraint_bias,
         }
     }
+    fn mass_matrix_derivative<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 5, 5> {
+        mass_matrix_derivative(q, a, p)
+    }
+    fn bias_forces_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>) {
+        bias_forces_derivatives(q, qd, p)
+    }
+    fn constraint_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        f: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 5, 4> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
+    }
+    fn dynamics_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        f: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> DynamicsDerivatives<T, 5, 4> {
+        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        DynamicsDerivatives {
+            dynamics_q,
+            dynamics_qd,
+            constraint_q,
+            jacobian_rate,
+        }
+    }
 }
 impl ContactModel<NQ, NC, NU, NK> for BracedParallelogram {
     const CONTACT_NAMES: &'static [&'static str] = &[];
@@ -541,6 +598,27 @@ impl ContactModel<NQ, NC, NU, NK> for BracedParallelogram {
         p: &Params<T>,
     ) -> SVector<T, 0> {
         contact_bias(q, qd, p)
+    }
+    fn contact_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        lambda: &SVector<T, 0>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 5, 0> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
+            q,
+            qd,
+            a,
+            lambda,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -1890,5 +1968,955 @@ pub fn dynamics_terms<T: Arithmetic>(
             ]),
         ),
         SMatrix::from_data(ArrayStorage([[v185, v192, v200, v206]])),
+    )
+}
+/// `∂(M a)/∂q` at the accelerations `a`.
+pub fn mass_matrix_derivative<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    a: &SVector<T, 5>,
+    p: &Params<T>,
+) -> SMatrix<T, 5, 5> {
+    let [_, q_1, _, q_3, q_4] = q.data.0[0];
+    let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
+    let (v0, v2) = q_1.sincos();
+    let v1 = p.prepared[2] * v0;
+    let v3 = p.prepared[3] * v2;
+    let v4 = v1 + v3;
+    let v5 = -v4;
+    let v6 = v5 + v5;
+    let v7 = a_0 * v6;
+    let v8 = v2 * p.prepared[4];
+    let v9 = v8 - v1;
+    let v10 = a_1 * v9;
+    let v11 = v7 + v10;
+    let v12 = a_0 * v9;
+    let (v13, v15) = q_3.sincos();
+    let v14 = p.prepared[10] * v13;
+    let v16 = p.prepared[11] * v15;
+    let v17 = v14 + v16;
+    let v18 = -v17;
+    let v19 = v18 + v18;
+    let v20 = a_2 * v19;
+    let v21 = v15 * p.prepared[12];
+    let v22 = v21 - v14;
+    let v23 = a_3 * v22;
+    let v24 = v20 + v23;
+    let v25 = a_2 * v22;
+    let (v26, v28) = q_4.sincos();
+    let v27 = p.prepared[8] * v26;
+    let v29 = p.prepared[9] * v28;
+    let v30 = v27 + v29;
+    let v31 = -v30;
+    let v32 = v31 + v31;
+    let v33 = a_2 * v32;
+    let v34 = v28 * p.prepared[13];
+    let v35 = v34 - v27;
+    let v36 = a_4 * v35;
+    let v37 = v33 + v36;
+    let v38 = a_2 * v35;
+    SMatrix::from_data(
+        ArrayStorage([
+            [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            [v11, v12, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            [T::lit(0.0), T::lit(0.0), v24, v25, T::lit(0.0)],
+            [T::lit(0.0), T::lit(0.0), v37, T::lit(0.0), v38],
+        ]),
+    )
+}
+/// `∂N/∂q` and `∂N/∂q̇`.
+pub fn bias_forces_derivatives<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    qd: &SVector<T, 5>,
+    p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>) {
+    let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
+    let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let (v2, v0) = q_0.sincos();
+    let v1 = p.prepared[15] * v0;
+    let v3 = p.prepared[14] * v2;
+    let v4 = v1 - v3;
+    let (v7, v5) = q_1.sincos();
+    let v6 = v0 * v5;
+    let v8 = v2 * v7;
+    let v9 = v6 - v8;
+    let v10 = p.prepared[17] * v9;
+    let v11 = v2 * v5;
+    let v12 = v0 * v7;
+    let v13 = v11 + v12;
+    let v14 = p.prepared[16] * v13;
+    let v15 = v10 - v14;
+    let v16 = v4 + v15;
+    let v17 = qd_0 * qd_1;
+    let v18 = v5 * p.prepared[2];
+    let v19 = v7 * p.prepared[3];
+    let v20 = v18 - v19;
+    let v21 = -v20;
+    let v22 = v21 + v21;
+    let v23 = v17 * v22;
+    let v24 = qd_1 * qd_1;
+    let v25 = v7 * p.prepared[4];
+    let v26 = v18 + v25;
+    let v27 = v24 * v26;
+    let v28 = v23 - v27;
+    let v29 = v15 + v28;
+    let v30 = qd_0 * qd_0;
+    let v31 = v20 * v30;
+    let v32 = v15 + v31;
+    let (v35, v33) = q_2.sincos();
+    let v34 = p.prepared[19] * v33;
+    let v36 = p.prepared[18] * v35;
+    let v37 = v34 - v36;
+    let (v40, v38) = q_4.sincos();
+    let v39 = v33 * v38;
+    let v41 = v35 * v40;
+    let v42 = v39 - v41;
+    let v43 = p.prepared[21] * v42;
+    let v44 = v35 * v38;
+    let v45 = v33 * v40;
+    let v46 = v44 + v45;
+    let v47 = p.prepared[20] * v46;
+    let v48 = v43 - v47;
+    let v49 = v37 + v48;
+    let (v52, v50) = q_3.sincos();
+    let v51 = v33 * v50;
+    let v53 = v35 * v52;
+    let v54 = v51 - v53;
+    let v55 = p.prepared[23] * v54;
+    let v56 = v35 * v50;
+    let v57 = v33 * v52;
+    let v58 = v56 + v57;
+    let v59 = p.prepared[22] * v58;
+    let v60 = v55 - v59;
+    let v61 = v49 + v60;
+    let v62 = qd_2 * qd_3;
+    let v63 = v50 * p.prepared[10];
+    let v64 = v52 * p.prepared[11];
+    let v65 = v63 - v64;
+    let v66 = -v65;
+    let v67 = v66 + v66;
+    let v68 = v62 * v67;
+    let v69 = qd_3 * qd_3;
+    let v70 = v52 * p.prepared[12];
+    let v71 = v63 + v70;
+    let v72 = v69 * v71;
+    let v73 = v68 - v72;
+    let v74 = v60 + v73;
+    let v75 = qd_2 * qd_2;
+    let v76 = v65 * v75;
+    let v77 = v60 + v76;
+    let v78 = qd_2 * qd_4;
+    let v79 = v38 * p.prepared[8];
+    let v80 = v40 * p.prepared[9];
+    let v81 = v79 - v80;
+    let v82 = -v81;
+    let v83 = v82 + v82;
+    let v84 = v78 * v83;
+    let v85 = qd_4 * qd_4;
+    let v86 = v40 * p.prepared[13];
+    let v87 = v79 + v86;
+    let v88 = v85 * v87;
+    let v89 = v84 - v88;
+    let v90 = v48 + v89;
+    let v91 = v75 * v81;
+    let v92 = v48 + v91;
+    let v93 = v7 * p.prepared[2];
+    let v94 = v5 * p.prepared[3];
+    let v95 = v93 + v94;
+    let v96 = -v95;
+    let v97 = v96 + v96;
+    let v98 = qd_1 * v97;
+    let v99 = qd_0 + qd_0;
+    let v100 = v95 * v99;
+    let v101 = qd_0 * v97;
+    let v102 = v5 * p.prepared[4];
+    let v103 = v102 - v93;
+    let v104 = qd_1 + qd_1;
+    let v105 = v103 * v104;
+    let v106 = v101 + v105;
+    let v107 = v52 * p.prepared[10];
+    let v108 = v50 * p.prepared[11];
+    let v109 = v107 + v108;
+    let v110 = -v109;
+    let v111 = v110 + v110;
+    let v112 = qd_3 * v111;
+    let v113 = v40 * p.prepared[8];
+    let v114 = v38 * p.prepared[9];
+    let v115 = v113 + v114;
+    let v116 = -v115;
+    let v117 = v116 + v116;
+    let v118 = qd_4 * v117;
+    let v119 = v112 + v118;
+    let v120 = qd_2 + qd_2;
+    let v121 = v109 * v120;
+    let v122 = v115 * v120;
+    let v123 = qd_2 * v111;
+    let v124 = v50 * p.prepared[12];
+    let v125 = v124 - v107;
+    let v126 = qd_3 + qd_3;
+    let v127 = v125 * v126;
+    let v128 = v123 + v127;
+    let v129 = qd_2 * v117;
+    let v130 = v38 * p.prepared[13];
+    let v131 = v130 - v113;
+    let v132 = qd_4 + qd_4;
+    let v133 = v131 * v132;
+    let v134 = v129 + v133;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [v16, v15, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v29, v32, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v61, v60, v48],
+                [T::lit(0.0), T::lit(0.0), v74, v77, T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v90, T::lit(0.0), v92],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [v98, v100, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v106, T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v119, v121, v122],
+                [T::lit(0.0), T::lit(0.0), v128, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v134, T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+    )
+}
+/// `∂(Jᵀ f)/∂q`, `∂(J a)/∂q`, `∂(J̇ q̇)/∂q` and `J̇` at the closure forces `f` and the
+/// accelerations `a`.
+pub fn constraint_derivatives<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    qd: &SVector<T, 5>,
+    a: &SVector<T, 5>,
+    f: &SVector<T, 4>,
+    p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 4, 5>, SMatrix<T, 4, 5>, SMatrix<T, 4, 5>) {
+    let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
+    let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
+    let [f_0, f_1, f_2, f_3] = f.data.0[0];
+    let (v3, v0) = q_1.sincos();
+    let (v4, v1) = q_0.sincos();
+    let v2 = v0 * v1;
+    let v5 = v3 * v4;
+    let v6 = v2 - v5;
+    let v7 = p.brace_pin_b_x * v6;
+    let v8 = v0 * v4;
+    let v9 = v1 * v3;
+    let v10 = v8 + v9;
+    let v11 = p.brace_pin_b_y * v10;
+    let v12 = v7 - v11;
+    let v13 = v1 * p.thigh_length_x;
+    let v14 = v4 * p.thigh_length_y;
+    let v15 = v13 - v14;
+    let v16 = v12 + v15;
+    let v17 = f_2 * v16;
+    let v18 = v10 * p.knee_a_x;
+    let v19 = v6 * p.knee_a_y;
+    let v20 = v18 + v19;
+    let v21 = v4 * p.thigh_length_x;
+    let v22 = v1 * p.thigh_length_y;
+    let v23 = v21 + v22;
+    let v24 = v20 + v23;
+    let v25 = f_1 * v24;
+    let v26 = v6 * p.knee_a_x;
+    let v27 = v10 * p.knee_a_y;
+    let v28 = v26 - v27;
+    let v29 = v15 + v28;
+    let v30 = f_0 * v29;
+    let v31 = v25 + v30;
+    let v32 = v17 - v31;
+    let v33 = p.brace_pin_b_x * v10;
+    let v34 = v6 * p.brace_pin_b_y;
+    let v35 = v33 + v34;
+    let v36 = v23 + v35;
+    let v37 = f_3 * v36;
+    let v38 = v32 + v37;
+    let v39 = f_2 * v12;
+    let v40 = f_1 * v20;
+    let v41 = f_0 * v28;
+    let v42 = v40 + v41;
+    let v43 = v39 - v42;
+    let v44 = f_3 * v35;
+    let v45 = v43 + v44;
+    let (v49, v46) = q_3.sincos();
+    let (v50, v47) = q_2.sincos();
+    let v48 = v46 * v47;
+    let v51 = v49 * v50;
+    let v52 = v48 - v51;
+    let v53 = p.lower_leg_length_x * v52;
+    let v54 = v46 * v50;
+    let v55 = v47 * v49;
+    let v56 = v54 + v55;
+    let v57 = p.lower_leg_length_y * v56;
+    let v58 = v53 - v57;
+    let v59 = v47 * p.four_bar_link_length_x;
+    let v60 = v50 * p.four_bar_link_length_y;
+    let v61 = v59 - v60;
+    let v62 = v58 + v61;
+    let v63 = f_0 * v62;
+    let v64 = p.lower_leg_length_x * v56;
+    let v65 = v52 * p.lower_leg_length_y;
+    let v66 = v64 + v65;
+    let v67 = v50 * p.four_bar_link_length_x;
+    let v68 = v47 * p.four_bar_link_length_y;
+    let v69 = v67 + v68;
+    let v70 = v66 + v69;
+    let v71 = f_1 * v70;
+    let v72 = v63 + v71;
+    let (v75, v73) = q_4.sincos();
+    let v74 = v47 * v73;
+    let v76 = v50 * v75;
+    let v77 = v74 - v76;
+    let v78 = p.brace_length_x * v77;
+    let v79 = v50 * v73;
+    let v80 = v47 * v75;
+    let v81 = v79 + v80;
+    let v82 = p.brace_length_y * v81;
+    let v83 = v78 - v82;
+    let v84 = v47 * p.brace_origin_x;
+    let v85 = v50 * p.brace_origin_y;
+    let v86 = v84 - v85;
+    let v87 = v83 + v86;
+    let v88 = f_2 * v87;
+    let v89 = v72 - v88;
+    let v90 = p.brace_length_x * v81;
+    let v91 = v77 * p.brace_length_y;
+    let v92 = v90 + v91;
+    let v93 = v50 * p.brace_origin_x;
+    let v94 = v47 * p.brace_origin_y;
+    let v95 = v93 + v94;
+    let v96 = v92 + v95;
+    let v97 = f_3 * v96;
+    let v98 = v89 - v97;
+    let v99 = f_0 * v58;
+    let v100 = f_1 * v66;
+    let v101 = v99 + v100;
+    let v102 = f_3 * v92;
+    let v103 = f_2 * v83;
+    let v104 = v102 + v103;
+    let v105 = -v104;
+    let v106 = v29 * a_0;
+    let v107 = v28 * a_1;
+    let v108 = v106 + v107;
+    let v109 = -v108;
+    let v110 = v24 * a_0;
+    let v111 = v20 * a_1;
+    let v112 = v110 + v111;
+    let v113 = -v112;
+    let v114 = v16 * a_0;
+    let v115 = v12 * a_1;
+    let v116 = v114 + v115;
+    let v117 = v36 * a_0;
+    let v118 = v35 * a_1;
+    let v119 = v117 + v118;
+    let v120 = v28 * a_0;
+    let v121 = v107 + v120;
+    let v122 = -v121;
+    let v123 = v20 * a_0;
+    let v124 = v111 + v123;
+    let v125 = -v124;
+    let v126 = v12 * a_0;
+    let v127 = v115 + v126;
+    let v128 = v35 * a_0;
+    let v129 = v118 + v128;
+    let v130 = v62 * a_2;
+    let v131 = v58 * a_3;
+    let v132 = v130 + v131;
+    let v133 = v70 * a_2;
+    let v134 = v66 * a_3;
+    let v135 = v133 + v134;
+    let v136 = v87 * a_2;
+    let v137 = v83 * a_4;
+    let v138 = v136 + v137;
+    let v139 = -v138;
+    let v140 = v96 * a_2;
+    let v141 = v92 * a_4;
+    let v142 = v140 + v141;
+    let v143 = -v142;
+    let v144 = v58 * a_2;
+    let v145 = v131 + v144;
+    let v146 = v66 * a_2;
+    let v147 = v134 + v146;
+    let v148 = v83 * a_2;
+    let v149 = v137 + v148;
+    let v150 = -v149;
+    let v151 = v92 * a_2;
+    let v152 = v141 + v151;
+    let v153 = -v152;
+    let v154 = qd_0 + qd_1;
+    let v155 = v154 * v154;
+    let v156 = v20 * v155;
+    let v157 = qd_0 * qd_0;
+    let v158 = v23 * v157;
+    let v159 = v156 + v158;
+    let v160 = v28 * v155;
+    let v161 = v15 * v157;
+    let v162 = v160 + v161;
+    let v163 = -v162;
+    let v164 = v35 * v155;
+    let v165 = v158 + v164;
+    let v166 = -v165;
+    let v167 = v12 * v155;
+    let v168 = v161 + v167;
+    let v169 = -v160;
+    let v170 = -v164;
+    let v171 = qd_2 + qd_3;
+    let v172 = v171 * v171;
+    let v173 = v66 * v172;
+    let v174 = qd_2 * qd_2;
+    let v175 = v69 * v174;
+    let v176 = v173 + v175;
+    let v177 = -v176;
+    let v178 = v58 * v172;
+    let v179 = v61 * v174;
+    let v180 = v178 + v179;
+    let v181 = qd_2 + qd_4;
+    let v182 = v181 * v181;
+    let v183 = v92 * v182;
+    let v184 = v95 * v174;
+    let v185 = v183 + v184;
+    let v186 = v83 * v182;
+    let v187 = v86 * v174;
+    let v188 = v186 + v187;
+    let v189 = -v188;
+    let v190 = -v173;
+    let v191 = -v186;
+    let v192 = v29 * qd_0;
+    let v193 = v28 * qd_1;
+    let v194 = v192 + v193;
+    let v195 = -v194;
+    let v196 = v24 * qd_0;
+    let v197 = v20 * qd_1;
+    let v198 = v196 + v197;
+    let v199 = -v198;
+    let v200 = v16 * qd_0;
+    let v201 = v12 * qd_1;
+    let v202 = v200 + v201;
+    let v203 = v36 * qd_0;
+    let v204 = v35 * qd_1;
+    let v205 = v203 + v204;
+    let v206 = v28 * qd_0;
+    let v207 = v193 + v206;
+    let v208 = -v207;
+    let v209 = v20 * qd_0;
+    let v210 = v197 + v209;
+    let v211 = -v210;
+    let v212 = v12 * qd_0;
+    let v213 = v201 + v212;
+    let v214 = v35 * qd_0;
+    let v215 = v204 + v214;
+    let v216 = v62 * qd_2;
+    let v217 = v58 * qd_3;
+    let v218 = v216 + v217;
+    let v219 = v70 * qd_2;
+    let v220 = v66 * qd_3;
+    let v221 = v219 + v220;
+    let v222 = v87 * qd_2;
+    let v223 = v83 * qd_4;
+    let v224 = v222 + v223;
+    let v225 = -v224;
+    let v226 = v96 * qd_2;
+    let v227 = v92 * qd_4;
+    let v228 = v226 + v227;
+    let v229 = -v228;
+    let v230 = v58 * qd_2;
+    let v231 = v217 + v230;
+    let v232 = v66 * qd_2;
+    let v233 = v220 + v232;
+    let v234 = v83 * qd_2;
+    let v235 = v223 + v234;
+    let v236 = -v235;
+    let v237 = v92 * qd_2;
+    let v238 = v227 + v237;
+    let v239 = -v238;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [v38, v45, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v45, v45, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v98, v101, v105],
+                [T::lit(0.0), T::lit(0.0), v101, v101, T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v105, T::lit(0.0), v105],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [v109, v113, v116, v119],
+                [v122, v125, v127, v129],
+                [v132, v135, v139, v143],
+                [v145, v147, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v150, v153],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [v159, v163, v166, v168],
+                [v156, v169, v170, v167],
+                [v177, v180, v185, v189],
+                [v190, v178, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v183, v191],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [v195, v199, v202, v205],
+                [v208, v211, v213, v215],
+                [v218, v221, v225, v229],
+                [v231, v233, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v236, v239],
+            ]),
+        ),
+    )
+}
+/// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
+/// (base frame) and the accelerations `a`.
+pub fn contact_derivatives<T: Arithmetic>(
+    _q: &SVector<T, 5>,
+    _qd: &SVector<T, 5>,
+    _a: &SVector<T, 5>,
+    _lambda: &SVector<T, 0>,
+    _p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>) {
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+    )
+}
+/// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
+/// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
+pub fn dynamics_derivatives<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    qd: &SVector<T, 5>,
+    a: &SVector<T, 5>,
+    f: &SVector<T, 4>,
+    p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>, SMatrix<T, 4, 5>, SMatrix<T, 4, 5>) {
+    let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
+    let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
+    let [f_0, f_1, f_2, f_3] = f.data.0[0];
+    let (v2, v0) = q_0.sincos();
+    let v1 = p.prepared[15] * v0;
+    let v3 = p.prepared[14] * v2;
+    let v4 = v1 - v3;
+    let (v7, v5) = q_1.sincos();
+    let v6 = v0 * v5;
+    let v8 = v2 * v7;
+    let v9 = v6 - v8;
+    let v10 = p.prepared[17] * v9;
+    let v11 = v2 * v5;
+    let v12 = v0 * v7;
+    let v13 = v11 + v12;
+    let v14 = p.prepared[16] * v13;
+    let v15 = v10 - v14;
+    let v16 = v4 + v15;
+    let v17 = v9 * p.brace_pin_b_x;
+    let v18 = v13 * p.brace_pin_b_y;
+    let v19 = v17 - v18;
+    let v20 = p.thigh_length_x * v0;
+    let v21 = p.thigh_length_y * v2;
+    let v22 = v20 - v21;
+    let v23 = v19 + v22;
+    let v24 = f_2 * v23;
+    let v25 = v13 * p.knee_a_x;
+    let v26 = v9 * p.knee_a_y;
+    let v27 = v25 + v26;
+    let v28 = p.thigh_length_x * v2;
+    let v29 = p.thigh_length_y * v0;
+    let v30 = v28 + v29;
+    let v31 = v27 + v30;
+    let v32 = f_1 * v31;
+    let v33 = v9 * p.knee_a_x;
+    let v34 = v13 * p.knee_a_y;
+    let v35 = v33 - v34;
+    let v36 = v22 + v35;
+    let v37 = f_0 * v36;
+    let v38 = v32 + v37;
+    let v39 = v24 - v38;
+    let v40 = v13 * p.brace_pin_b_x;
+    let v41 = v9 * p.brace_pin_b_y;
+    let v42 = v40 + v41;
+    let v43 = v30 + v42;
+    let v44 = f_3 * v43;
+    let v45 = v39 + v44;
+    let v46 = v16 - v45;
+    let v47 = f_2 * v19;
+    let v48 = f_1 * v27;
+    let v49 = f_0 * v35;
+    let v50 = v48 + v49;
+    let v51 = v47 - v50;
+    let v52 = f_3 * v42;
+    let v53 = v51 + v52;
+    let v54 = v15 - v53;
+    let v55 = v7 * p.prepared[2];
+    let v56 = v5 * p.prepared[3];
+    let v57 = v55 + v56;
+    let v58 = -v57;
+    let v59 = v58 + v58;
+    let v60 = a_0 * v59;
+    let v61 = v5 * p.prepared[4];
+    let v62 = v61 - v55;
+    let v63 = a_1 * v62;
+    let v64 = v60 + v63;
+    let v65 = qd_0 * qd_1;
+    let v66 = v5 * p.prepared[2];
+    let v67 = v7 * p.prepared[3];
+    let v68 = v66 - v67;
+    let v69 = -v68;
+    let v70 = v69 + v69;
+    let v71 = v65 * v70;
+    let v72 = qd_1 * qd_1;
+    let v73 = v7 * p.prepared[4];
+    let v74 = v66 + v73;
+    let v75 = v72 * v74;
+    let v76 = v71 - v75;
+    let v77 = v15 + v76;
+    let v78 = v64 + v77;
+    let v79 = v78 - v53;
+    let v80 = a_0 * v62;
+    let v81 = qd_0 * qd_0;
+    let v82 = v68 * v81;
+    let v83 = v15 + v82;
+    let v84 = v80 + v83;
+    let v85 = v84 - v53;
+    let (v88, v86) = q_2.sincos();
+    let v87 = p.prepared[19] * v86;
+    let v89 = p.prepared[18] * v88;
+    let v90 = v87 - v89;
+    let (v93, v91) = q_4.sincos();
+    let v92 = v86 * v91;
+    let v94 = v88 * v93;
+    let v95 = v92 - v94;
+    let v96 = p.prepared[21] * v95;
+    let v97 = v88 * v91;
+    let v98 = v86 * v93;
+    let v99 = v97 + v98;
+    let v100 = p.prepared[20] * v99;
+    let v101 = v96 - v100;
+    let v102 = v90 + v101;
+    let (v105, v103) = q_3.sincos();
+    let v104 = v86 * v103;
+    let v106 = v88 * v105;
+    let v107 = v104 - v106;
+    let v108 = p.prepared[23] * v107;
+    let v109 = v88 * v103;
+    let v110 = v86 * v105;
+    let v111 = v109 + v110;
+    let v112 = p.prepared[22] * v111;
+    let v113 = v108 - v112;
+    let v114 = v102 + v113;
+    let v115 = v107 * p.lower_leg_length_x;
+    let v116 = v111 * p.lower_leg_length_y;
+    let v117 = v115 - v116;
+    let v118 = p.four_bar_link_length_x * v86;
+    let v119 = p.four_bar_link_length_y * v88;
+    let v120 = v118 - v119;
+    let v121 = v117 + v120;
+    let v122 = f_0 * v121;
+    let v123 = v111 * p.lower_leg_length_x;
+    let v124 = v107 * p.lower_leg_length_y;
+    let v125 = v123 + v124;
+    let v126 = p.four_bar_link_length_x * v88;
+    let v127 = p.four_bar_link_length_y * v86;
+    let v128 = v126 + v127;
+    let v129 = v125 + v128;
+    let v130 = f_1 * v129;
+    let v131 = v122 + v130;
+    let v132 = v95 * p.brace_length_x;
+    let v133 = v99 * p.brace_length_y;
+    let v134 = v132 - v133;
+    let v135 = p.brace_origin_x * v86;
+    let v136 = p.brace_origin_y * v88;
+    let v137 = v135 - v136;
+    let v138 = v134 + v137;
+    let v139 = f_2 * v138;
+    let v140 = v131 - v139;
+    let v141 = v99 * p.brace_length_x;
+    let v142 = v95 * p.brace_length_y;
+    let v143 = v141 + v142;
+    let v144 = p.brace_origin_x * v88;
+    let v145 = p.brace_origin_y * v86;
+    let v146 = v144 + v145;
+    let v147 = v143 + v146;
+    let v148 = f_3 * v147;
+    let v149 = v140 - v148;
+    let v150 = v114 - v149;
+    let v151 = f_0 * v117;
+    let v152 = f_1 * v125;
+    let v153 = v151 + v152;
+    let v154 = v113 - v153;
+    let v155 = f_3 * v143;
+    let v156 = f_2 * v134;
+    let v157 = v155 + v156;
+    let v158 = v101 + v157;
+    let v159 = v105 * p.prepared[10];
+    let v160 = v103 * p.prepared[11];
+    let v161 = v159 + v160;
+    let v162 = -v161;
+    let v163 = v162 + v162;
+    let v164 = a_2 * v163;
+    let v165 = v103 * p.prepared[12];
+    let v166 = v165 - v159;
+    let v167 = a_3 * v166;
+    let v168 = v164 + v167;
+    let v169 = qd_2 * qd_3;
+    let v170 = v103 * p.prepared[10];
+    let v171 = v105 * p.prepared[11];
+    let v172 = v170 - v171;
+    let v173 = -v172;
+    let v174 = v173 + v173;
+    let v175 = v169 * v174;
+    let v176 = qd_3 * qd_3;
+    let v177 = v105 * p.prepared[12];
+    let v178 = v170 + v177;
+    let v179 = v176 * v178;
+    let v180 = v175 - v179;
+    let v181 = v113 + v180;
+    let v182 = v168 + v181;
+    let v183 = v182 - v153;
+    let v184 = a_2 * v166;
+    let v185 = qd_2 * qd_2;
+    let v186 = v172 * v185;
+    let v187 = v113 + v186;
+    let v188 = v184 + v187;
+    let v189 = v188 - v153;
+    let v190 = v93 * p.prepared[8];
+    let v191 = v91 * p.prepared[9];
+    let v192 = v190 + v191;
+    let v193 = -v192;
+    let v194 = v193 + v193;
+    let v195 = a_2 * v194;
+    let v196 = v91 * p.prepared[13];
+    let v197 = v196 - v190;
+    let v198 = a_4 * v197;
+    let v199 = v195 + v198;
+    let v200 = qd_2 * qd_4;
+    let v201 = v91 * p.prepared[8];
+    let v202 = v93 * p.prepared[9];
+    let v203 = v201 - v202;
+    let v204 = -v203;
+    let v205 = v204 + v204;
+    let v206 = v200 * v205;
+    let v207 = qd_4 * qd_4;
+    let v208 = v93 * p.prepared[13];
+    let v209 = v201 + v208;
+    let v210 = v207 * v209;
+    let v211 = v206 - v210;
+    let v212 = v101 + v211;
+    let v213 = v199 + v212;
+    let v214 = v157 + v213;
+    let v215 = a_2 * v197;
+    let v216 = v185 * v203;
+    let v217 = v101 + v216;
+    let v218 = v215 + v217;
+    let v219 = v157 + v218;
+    let v220 = v59 * qd_1;
+    let v221 = v220 + p.thigh_damping;
+    let v222 = qd_0 + qd_0;
+    let v223 = v57 * v222;
+    let v224 = v59 * qd_0;
+    let v225 = qd_1 + qd_1;
+    let v226 = v62 * v225;
+    let v227 = v224 + v226;
+    let v228 = v163 * qd_3;
+    let v229 = v194 * qd_4;
+    let v230 = v228 + v229;
+    let v231 = v230 + p.four_bar_link_damping;
+    let v232 = qd_2 + qd_2;
+    let v233 = v161 * v232;
+    let v234 = v192 * v232;
+    let v235 = v163 * qd_2;
+    let v236 = qd_3 + qd_3;
+    let v237 = v166 * v236;
+    let v238 = v235 + v237;
+    let v239 = qd_2 * v194;
+    let v240 = qd_4 + qd_4;
+    let v241 = v197 * v240;
+    let v242 = v239 + v241;
+    let v243 = qd_0 + qd_1;
+    let v244 = v243 * v243;
+    let v245 = v27 * v244;
+    let v246 = v30 * v81;
+    let v247 = v245 + v246;
+    let v248 = v36 * a_0;
+    let v249 = v35 * a_1;
+    let v250 = v248 + v249;
+    let v251 = v247 - v250;
+    let v252 = v31 * a_0;
+    let v253 = v27 * a_1;
+    let v254 = v252 + v253;
+    let v255 = v35 * v244;
+    let v256 = v22 * v81;
+    let v257 = v255 + v256;
+    let v258 = v254 + v257;
+    let v259 = -v258;
+    let v260 = v23 * a_0;
+    let v261 = v19 * a_1;
+    let v262 = v260 + v261;
+    let v263 = v42 * v244;
+    let v264 = v246 + v263;
+    let v265 = v262 - v264;
+    let v266 = v43 * a_0;
+    let v267 = v42 * a_1;
+    let v268 = v266 + v267;
+    let v269 = v19 * v244;
+    let v270 = v256 + v269;
+    let v271 = v268 + v270;
+    let v272 = v35 * a_0;
+    let v273 = v249 + v272;
+    let v274 = v245 - v273;
+    let v275 = v27 * a_0;
+    let v276 = v253 + v275;
+    let v277 = v255 + v276;
+    let v278 = -v277;
+    let v279 = v19 * a_0;
+    let v280 = v261 + v279;
+    let v281 = v280 - v263;
+    let v282 = v42 * a_0;
+    let v283 = v267 + v282;
+    let v284 = v269 + v283;
+    let v285 = v121 * a_2;
+    let v286 = v117 * a_3;
+    let v287 = v285 + v286;
+    let v288 = qd_2 + qd_3;
+    let v289 = v288 * v288;
+    let v290 = v125 * v289;
+    let v291 = v128 * v185;
+    let v292 = v290 + v291;
+    let v293 = v287 - v292;
+    let v294 = v129 * a_2;
+    let v295 = v125 * a_3;
+    let v296 = v294 + v295;
+    let v297 = v117 * v289;
+    let v298 = v120 * v185;
+    let v299 = v297 + v298;
+    let v300 = v296 + v299;
+    let v301 = qd_2 + qd_4;
+    let v302 = v301 * v301;
+    let v303 = v143 * v302;
+    let v304 = v146 * v185;
+    let v305 = v303 + v304;
+    let v306 = v138 * a_2;
+    let v307 = v134 * a_4;
+    let v308 = v306 + v307;
+    let v309 = v305 - v308;
+    let v310 = v147 * a_2;
+    let v311 = v143 * a_4;
+    let v312 = v310 + v311;
+    let v313 = v134 * v302;
+    let v314 = v137 * v185;
+    let v315 = v313 + v314;
+    let v316 = v312 + v315;
+    let v317 = -v316;
+    let v318 = v117 * a_2;
+    let v319 = v286 + v318;
+    let v320 = v319 - v290;
+    let v321 = v125 * a_2;
+    let v322 = v295 + v321;
+    let v323 = v297 + v322;
+    let v324 = v134 * a_2;
+    let v325 = v307 + v324;
+    let v326 = v303 - v325;
+    let v327 = v143 * a_2;
+    let v328 = v311 + v327;
+    let v329 = v313 + v328;
+    let v330 = -v329;
+    let v331 = v36 * qd_0;
+    let v332 = v35 * qd_1;
+    let v333 = v331 + v332;
+    let v334 = -v333;
+    let v335 = v31 * qd_0;
+    let v336 = v27 * qd_1;
+    let v337 = v335 + v336;
+    let v338 = -v337;
+    let v339 = v23 * qd_0;
+    let v340 = v19 * qd_1;
+    let v341 = v339 + v340;
+    let v342 = v43 * qd_0;
+    let v343 = v42 * qd_1;
+    let v344 = v342 + v343;
+    let v345 = v35 * qd_0;
+    let v346 = v332 + v345;
+    let v347 = -v346;
+    let v348 = v27 * qd_0;
+    let v349 = v336 + v348;
+    let v350 = -v349;
+    let v351 = v19 * qd_0;
+    let v352 = v340 + v351;
+    let v353 = v42 * qd_0;
+    let v354 = v343 + v353;
+    let v355 = v121 * qd_2;
+    let v356 = v117 * qd_3;
+    let v357 = v355 + v356;
+    let v358 = v129 * qd_2;
+    let v359 = v125 * qd_3;
+    let v360 = v358 + v359;
+    let v361 = v138 * qd_2;
+    let v362 = v134 * qd_4;
+    let v363 = v361 + v362;
+    let v364 = -v363;
+    let v365 = v147 * qd_2;
+    let v366 = v143 * qd_4;
+    let v367 = v365 + v366;
+    let v368 = -v367;
+    let v369 = v117 * qd_2;
+    let v370 = v356 + v369;
+    let v371 = v125 * qd_2;
+    let v372 = v359 + v371;
+    let v373 = v134 * qd_2;
+    let v374 = v362 + v373;
+    let v375 = -v374;
+    let v376 = v143 * qd_2;
+    let v377 = v366 + v376;
+    let v378 = -v377;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [v46, v54, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v79, v85, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v150, v154, v158],
+                [T::lit(0.0), T::lit(0.0), v183, v189, T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v214, T::lit(0.0), v219],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [v221, v223, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v227, p.shin_damping, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v231, v233, v234],
+                [T::lit(0.0), T::lit(0.0), v238, p.lower_leg_damping, T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v242, T::lit(0.0), p.brace_damping],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [v251, v259, v265, v271],
+                [v274, v278, v281, v284],
+                [v293, v300, v309, v317],
+                [v320, v323, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v326, v330],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [v334, v338, v341, v344],
+                [v347, v350, v352, v354],
+                [v357, v360, v364, v368],
+                [v370, v372, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v375, v378],
+            ]),
+        ),
     )
 }

@@ -9,7 +9,8 @@
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
-    Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters,
+    Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
+    JointKind, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 4;
@@ -432,6 +433,62 @@ impl LegModel<NQ, NC, NU> for FiveBarOffset {
             constraint_bias,
         }
     }
+    fn mass_matrix_derivative<T: Arithmetic>(
+        q: &SVector<T, 4>,
+        a: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 4, 4> {
+        mass_matrix_derivative(q, a, p)
+    }
+    fn bias_forces_derivatives<T: Arithmetic>(
+        q: &SVector<T, 4>,
+        qd: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> (SMatrix<T, 4, 4>, SMatrix<T, 4, 4>) {
+        bias_forces_derivatives(q, qd, p)
+    }
+    fn constraint_derivatives<T: Arithmetic>(
+        q: &SVector<T, 4>,
+        qd: &SVector<T, 4>,
+        a: &SVector<T, 4>,
+        f: &SVector<T, 2>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 4, 2> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
+    }
+    fn dynamics_derivatives<T: Arithmetic>(
+        q: &SVector<T, 4>,
+        qd: &SVector<T, 4>,
+        a: &SVector<T, 4>,
+        f: &SVector<T, 2>,
+        p: &Params<T>,
+    ) -> DynamicsDerivatives<T, 4, 2> {
+        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        DynamicsDerivatives {
+            dynamics_q,
+            dynamics_qd,
+            constraint_q,
+            jacobian_rate,
+        }
+    }
 }
 impl ContactModel<NQ, NC, NU, NK> for FiveBarOffset {
     const CONTACT_NAMES: &'static [&'static str] = &[];
@@ -456,6 +513,27 @@ impl ContactModel<NQ, NC, NU, NK> for FiveBarOffset {
         p: &Params<T>,
     ) -> SVector<T, 0> {
         contact_bias(q, qd, p)
+    }
+    fn contact_derivatives<T: Arithmetic>(
+        q: &SVector<T, 4>,
+        qd: &SVector<T, 4>,
+        a: &SVector<T, 4>,
+        lambda: &SVector<T, 0>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 4, 0> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
+            q,
+            qd,
+            a,
+            lambda,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -1433,5 +1511,607 @@ pub fn dynamics_terms<T: Arithmetic>(
             ArrayStorage([[v89, v96], [v97, v92], [v104, v112], [v100, v113]]),
         ),
         SMatrix::from_data(ArrayStorage([[v124, v131]])),
+    )
+}
+/// `∂(M a)/∂q` at the accelerations `a`.
+pub fn mass_matrix_derivative<T: Arithmetic>(
+    q: &SVector<T, 4>,
+    a: &SVector<T, 4>,
+    p: &Params<T>,
+) -> SMatrix<T, 4, 4> {
+    let [_, q_1, _, q_3] = q.data.0[0];
+    let [a_0, a_1, a_2, a_3] = a.data.0[0];
+    let (v0, v2) = q_1.sincos();
+    let v1 = p.prepared[2] * v0;
+    let v3 = p.prepared[3] * v2;
+    let v4 = v1 + v3;
+    let v5 = -v4;
+    let v6 = v5 + v5;
+    let v7 = a_0 * v6;
+    let v8 = v2 * p.prepared[4];
+    let v9 = v8 - v1;
+    let v10 = a_1 * v9;
+    let v11 = v7 + v10;
+    let v12 = a_0 * v9;
+    let (v13, v15) = q_3.sincos();
+    let v14 = p.prepared[7] * v13;
+    let v16 = p.prepared[8] * v15;
+    let v17 = v14 + v16;
+    let v18 = -v17;
+    let v19 = v18 + v18;
+    let v20 = a_2 * v19;
+    let v21 = v15 * p.prepared[9];
+    let v22 = v21 - v14;
+    let v23 = a_3 * v22;
+    let v24 = v20 + v23;
+    let v25 = a_2 * v22;
+    SMatrix::from_data(
+        ArrayStorage([
+            [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            [v11, v12, T::lit(0.0), T::lit(0.0)],
+            [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            [T::lit(0.0), T::lit(0.0), v24, v25],
+        ]),
+    )
+}
+/// `∂N/∂q` and `∂N/∂q̇`.
+pub fn bias_forces_derivatives<T: Arithmetic>(
+    q: &SVector<T, 4>,
+    qd: &SVector<T, 4>,
+    p: &Params<T>,
+) -> (SMatrix<T, 4, 4>, SMatrix<T, 4, 4>) {
+    let [q_0, q_1, q_2, q_3] = q.data.0[0];
+    let [qd_0, qd_1, qd_2, qd_3] = qd.data.0[0];
+    let (v2, v0) = q_0.sincos();
+    let v1 = p.prepared[11] * v0;
+    let v3 = p.prepared[10] * v2;
+    let v4 = v1 - v3;
+    let (v7, v5) = q_1.sincos();
+    let v6 = v0 * v5;
+    let v8 = v2 * v7;
+    let v9 = v6 - v8;
+    let v10 = p.prepared[13] * v9;
+    let v11 = v2 * v5;
+    let v12 = v0 * v7;
+    let v13 = v11 + v12;
+    let v14 = p.prepared[12] * v13;
+    let v15 = v10 - v14;
+    let v16 = v4 + v15;
+    let v17 = qd_0 * qd_1;
+    let v18 = v5 * p.prepared[2];
+    let v19 = v7 * p.prepared[3];
+    let v20 = v18 - v19;
+    let v21 = -v20;
+    let v22 = v21 + v21;
+    let v23 = v17 * v22;
+    let v24 = qd_1 * qd_1;
+    let v25 = v7 * p.prepared[4];
+    let v26 = v18 + v25;
+    let v27 = v24 * v26;
+    let v28 = v23 - v27;
+    let v29 = v15 + v28;
+    let v30 = qd_0 * qd_0;
+    let v31 = v20 * v30;
+    let v32 = v15 + v31;
+    let (v35, v33) = q_2.sincos();
+    let v34 = p.prepared[15] * v33;
+    let v36 = p.prepared[14] * v35;
+    let v37 = v34 - v36;
+    let (v40, v38) = q_3.sincos();
+    let v39 = v33 * v38;
+    let v41 = v35 * v40;
+    let v42 = v39 - v41;
+    let v43 = p.prepared[17] * v42;
+    let v44 = v35 * v38;
+    let v45 = v33 * v40;
+    let v46 = v44 + v45;
+    let v47 = p.prepared[16] * v46;
+    let v48 = v43 - v47;
+    let v49 = v37 + v48;
+    let v50 = qd_2 * qd_3;
+    let v51 = v38 * p.prepared[7];
+    let v52 = v40 * p.prepared[8];
+    let v53 = v51 - v52;
+    let v54 = -v53;
+    let v55 = v54 + v54;
+    let v56 = v50 * v55;
+    let v57 = qd_3 * qd_3;
+    let v58 = v40 * p.prepared[9];
+    let v59 = v51 + v58;
+    let v60 = v57 * v59;
+    let v61 = v56 - v60;
+    let v62 = v48 + v61;
+    let v63 = qd_2 * qd_2;
+    let v64 = v53 * v63;
+    let v65 = v48 + v64;
+    let v66 = v7 * p.prepared[2];
+    let v67 = v5 * p.prepared[3];
+    let v68 = v66 + v67;
+    let v69 = -v68;
+    let v70 = v69 + v69;
+    let v71 = qd_1 * v70;
+    let v72 = qd_0 + qd_0;
+    let v73 = v68 * v72;
+    let v74 = qd_0 * v70;
+    let v75 = v5 * p.prepared[4];
+    let v76 = v75 - v66;
+    let v77 = qd_1 + qd_1;
+    let v78 = v76 * v77;
+    let v79 = v74 + v78;
+    let v80 = v40 * p.prepared[7];
+    let v81 = v38 * p.prepared[8];
+    let v82 = v80 + v81;
+    let v83 = -v82;
+    let v84 = v83 + v83;
+    let v85 = qd_3 * v84;
+    let v86 = qd_2 + qd_2;
+    let v87 = v82 * v86;
+    let v88 = qd_2 * v84;
+    let v89 = v38 * p.prepared[9];
+    let v90 = v89 - v80;
+    let v91 = qd_3 + qd_3;
+    let v92 = v90 * v91;
+    let v93 = v88 + v92;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [v16, v15, T::lit(0.0), T::lit(0.0)],
+                [v29, v32, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v49, v48],
+                [T::lit(0.0), T::lit(0.0), v62, v65],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [v71, v73, T::lit(0.0), T::lit(0.0)],
+                [v79, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v85, v87],
+                [T::lit(0.0), T::lit(0.0), v93, T::lit(0.0)],
+            ]),
+        ),
+    )
+}
+/// `∂(Jᵀ f)/∂q`, `∂(J a)/∂q`, `∂(J̇ q̇)/∂q` and `J̇` at the closure forces `f` and the
+/// accelerations `a`.
+pub fn constraint_derivatives<T: Arithmetic>(
+    q: &SVector<T, 4>,
+    qd: &SVector<T, 4>,
+    a: &SVector<T, 4>,
+    f: &SVector<T, 2>,
+    p: &Params<T>,
+) -> (SMatrix<T, 4, 4>, SMatrix<T, 2, 4>, SMatrix<T, 2, 4>, SMatrix<T, 2, 4>) {
+    let [q_0, q_1, q_2, q_3] = q.data.0[0];
+    let [qd_0, qd_1, qd_2, qd_3] = qd.data.0[0];
+    let [a_0, a_1, a_2, a_3] = a.data.0[0];
+    let [f_0, f_1] = f.data.0[0];
+    let (v3, v0) = q_1.sincos();
+    let (v1, v4) = q_0.sincos();
+    let v2 = v0 * v1;
+    let v5 = v3 * v4;
+    let v6 = v2 + v5;
+    let v7 = p.lower_a_length_x * v6;
+    let v8 = v0 * v4;
+    let v9 = v1 * v3;
+    let v10 = v8 - v9;
+    let v11 = p.lower_a_length_y * v10;
+    let v12 = v7 + v11;
+    let v13 = v1 * p.upper_a_length_x;
+    let v14 = v4 * p.upper_a_length_y;
+    let v15 = v13 + v14;
+    let v16 = v12 + v15;
+    let v17 = f_1 * v16;
+    let v18 = p.lower_a_length_x * v10;
+    let v19 = v6 * p.lower_a_length_y;
+    let v20 = v18 - v19;
+    let v21 = v4 * p.upper_a_length_x;
+    let v22 = v1 * p.upper_a_length_y;
+    let v23 = v21 - v22;
+    let v24 = v20 + v23;
+    let v25 = f_0 * v24;
+    let v26 = v17 + v25;
+    let v27 = -v26;
+    let v28 = f_1 * v12;
+    let v29 = f_0 * v20;
+    let v30 = v28 + v29;
+    let v31 = -v30;
+    let (v35, v32) = q_3.sincos();
+    let (v36, v33) = q_2.sincos();
+    let v34 = v32 * v33;
+    let v37 = v35 * v36;
+    let v38 = v34 - v37;
+    let v39 = p.lower_b_length_x * v38;
+    let v40 = v32 * v36;
+    let v41 = v33 * v35;
+    let v42 = v40 + v41;
+    let v43 = p.lower_b_length_y * v42;
+    let v44 = v39 - v43;
+    let v45 = v33 * p.upper_b_length_x;
+    let v46 = v36 * p.upper_b_length_y;
+    let v47 = v45 - v46;
+    let v48 = v44 + v47;
+    let v49 = f_0 * v48;
+    let v50 = p.lower_b_length_x * v42;
+    let v51 = v38 * p.lower_b_length_y;
+    let v52 = v50 + v51;
+    let v53 = v36 * p.upper_b_length_x;
+    let v54 = v33 * p.upper_b_length_y;
+    let v55 = v53 + v54;
+    let v56 = v52 + v55;
+    let v57 = f_1 * v56;
+    let v58 = v49 + v57;
+    let v59 = f_0 * v44;
+    let v60 = f_1 * v52;
+    let v61 = v59 + v60;
+    let v62 = v24 * a_0;
+    let v63 = v20 * a_1;
+    let v64 = v62 + v63;
+    let v65 = -v64;
+    let v66 = v16 * a_0;
+    let v67 = v12 * a_1;
+    let v68 = v66 + v67;
+    let v69 = -v68;
+    let v70 = v20 * a_0;
+    let v71 = v63 + v70;
+    let v72 = -v71;
+    let v73 = v12 * a_0;
+    let v74 = v67 + v73;
+    let v75 = -v74;
+    let v76 = v48 * a_2;
+    let v77 = v44 * a_3;
+    let v78 = v76 + v77;
+    let v79 = v56 * a_2;
+    let v80 = v52 * a_3;
+    let v81 = v79 + v80;
+    let v82 = v44 * a_2;
+    let v83 = v77 + v82;
+    let v84 = v52 * a_2;
+    let v85 = v80 + v84;
+    let v86 = qd_0 + qd_1;
+    let v87 = v86 * v86;
+    let v88 = v12 * v87;
+    let v89 = qd_0 * qd_0;
+    let v90 = v15 * v89;
+    let v91 = v88 + v90;
+    let v92 = v20 * v87;
+    let v93 = v23 * v89;
+    let v94 = v92 + v93;
+    let v95 = -v94;
+    let v96 = -v92;
+    let v97 = qd_2 + qd_3;
+    let v98 = v97 * v97;
+    let v99 = v52 * v98;
+    let v100 = qd_2 * qd_2;
+    let v101 = v55 * v100;
+    let v102 = v99 + v101;
+    let v103 = -v102;
+    let v104 = v44 * v98;
+    let v105 = v47 * v100;
+    let v106 = v104 + v105;
+    let v107 = -v99;
+    let v108 = v24 * qd_0;
+    let v109 = v20 * qd_1;
+    let v110 = v108 + v109;
+    let v111 = -v110;
+    let v112 = v16 * qd_0;
+    let v113 = v12 * qd_1;
+    let v114 = v112 + v113;
+    let v115 = -v114;
+    let v116 = v20 * qd_0;
+    let v117 = v109 + v116;
+    let v118 = -v117;
+    let v119 = v12 * qd_0;
+    let v120 = v113 + v119;
+    let v121 = -v120;
+    let v122 = v48 * qd_2;
+    let v123 = v44 * qd_3;
+    let v124 = v122 + v123;
+    let v125 = v56 * qd_2;
+    let v126 = v52 * qd_3;
+    let v127 = v125 + v126;
+    let v128 = v44 * qd_2;
+    let v129 = v123 + v128;
+    let v130 = v52 * qd_2;
+    let v131 = v126 + v130;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [v27, v31, T::lit(0.0), T::lit(0.0)],
+                [v31, v31, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v58, v61],
+                [T::lit(0.0), T::lit(0.0), v61, v61],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([[v65, v69], [v72, v75], [v78, v81], [v83, v85]]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([[v91, v95], [v88, v96], [v103, v106], [v107, v104]]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([[v111, v115], [v118, v121], [v124, v127], [v129, v131]]),
+        ),
+    )
+}
+/// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
+/// (base frame) and the accelerations `a`.
+pub fn contact_derivatives<T: Arithmetic>(
+    _q: &SVector<T, 4>,
+    _qd: &SVector<T, 4>,
+    _a: &SVector<T, 4>,
+    _lambda: &SVector<T, 0>,
+    _p: &Params<T>,
+) -> (SMatrix<T, 4, 4>, SMatrix<T, 0, 4>, SMatrix<T, 0, 4>, SMatrix<T, 0, 4>) {
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+        SMatrix::from_data(ArrayStorage([[], [], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], [], []])),
+    )
+}
+/// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
+/// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
+pub fn dynamics_derivatives<T: Arithmetic>(
+    q: &SVector<T, 4>,
+    qd: &SVector<T, 4>,
+    a: &SVector<T, 4>,
+    f: &SVector<T, 2>,
+    p: &Params<T>,
+) -> (SMatrix<T, 4, 4>, SMatrix<T, 4, 4>, SMatrix<T, 2, 4>, SMatrix<T, 2, 4>) {
+    let [q_0, q_1, q_2, q_3] = q.data.0[0];
+    let [qd_0, qd_1, qd_2, qd_3] = qd.data.0[0];
+    let [a_0, a_1, a_2, a_3] = a.data.0[0];
+    let [f_0, f_1] = f.data.0[0];
+    let (v2, v0) = q_0.sincos();
+    let v1 = p.prepared[11] * v0;
+    let v3 = p.prepared[10] * v2;
+    let v4 = v1 - v3;
+    let (v7, v5) = q_1.sincos();
+    let v6 = v0 * v5;
+    let v8 = v2 * v7;
+    let v9 = v6 - v8;
+    let v10 = p.prepared[13] * v9;
+    let v11 = v2 * v5;
+    let v12 = v0 * v7;
+    let v13 = v11 + v12;
+    let v14 = p.prepared[12] * v13;
+    let v15 = v10 - v14;
+    let v16 = v4 + v15;
+    let v17 = v13 * p.lower_a_length_x;
+    let v18 = v9 * p.lower_a_length_y;
+    let v19 = v17 + v18;
+    let v20 = p.upper_a_length_x * v2;
+    let v21 = p.upper_a_length_y * v0;
+    let v22 = v20 + v21;
+    let v23 = v19 + v22;
+    let v24 = f_1 * v23;
+    let v25 = v9 * p.lower_a_length_x;
+    let v26 = v13 * p.lower_a_length_y;
+    let v27 = v25 - v26;
+    let v28 = p.upper_a_length_x * v0;
+    let v29 = p.upper_a_length_y * v2;
+    let v30 = v28 - v29;
+    let v31 = v27 + v30;
+    let v32 = f_0 * v31;
+    let v33 = v24 + v32;
+    let v34 = v16 + v33;
+    let v35 = f_1 * v19;
+    let v36 = f_0 * v27;
+    let v37 = v35 + v36;
+    let v38 = v15 + v37;
+    let v39 = v7 * p.prepared[2];
+    let v40 = v5 * p.prepared[3];
+    let v41 = v39 + v40;
+    let v42 = -v41;
+    let v43 = v42 + v42;
+    let v44 = a_0 * v43;
+    let v45 = v5 * p.prepared[4];
+    let v46 = v45 - v39;
+    let v47 = a_1 * v46;
+    let v48 = v44 + v47;
+    let v49 = qd_0 * qd_1;
+    let v50 = v5 * p.prepared[2];
+    let v51 = v7 * p.prepared[3];
+    let v52 = v50 - v51;
+    let v53 = -v52;
+    let v54 = v53 + v53;
+    let v55 = v49 * v54;
+    let v56 = qd_1 * qd_1;
+    let v57 = v7 * p.prepared[4];
+    let v58 = v50 + v57;
+    let v59 = v56 * v58;
+    let v60 = v55 - v59;
+    let v61 = v15 + v60;
+    let v62 = v48 + v61;
+    let v63 = v37 + v62;
+    let v64 = a_0 * v46;
+    let v65 = qd_0 * qd_0;
+    let v66 = v52 * v65;
+    let v67 = v15 + v66;
+    let v68 = v64 + v67;
+    let v69 = v37 + v68;
+    let (v72, v70) = q_2.sincos();
+    let v71 = p.prepared[15] * v70;
+    let v73 = p.prepared[14] * v72;
+    let v74 = v71 - v73;
+    let (v77, v75) = q_3.sincos();
+    let v76 = v70 * v75;
+    let v78 = v72 * v77;
+    let v79 = v76 - v78;
+    let v80 = p.prepared[17] * v79;
+    let v81 = v72 * v75;
+    let v82 = v70 * v77;
+    let v83 = v81 + v82;
+    let v84 = p.prepared[16] * v83;
+    let v85 = v80 - v84;
+    let v86 = v74 + v85;
+    let v87 = v79 * p.lower_b_length_x;
+    let v88 = v83 * p.lower_b_length_y;
+    let v89 = v87 - v88;
+    let v90 = p.upper_b_length_x * v70;
+    let v91 = p.upper_b_length_y * v72;
+    let v92 = v90 - v91;
+    let v93 = v89 + v92;
+    let v94 = f_0 * v93;
+    let v95 = v83 * p.lower_b_length_x;
+    let v96 = v79 * p.lower_b_length_y;
+    let v97 = v95 + v96;
+    let v98 = p.upper_b_length_x * v72;
+    let v99 = p.upper_b_length_y * v70;
+    let v100 = v98 + v99;
+    let v101 = v97 + v100;
+    let v102 = f_1 * v101;
+    let v103 = v94 + v102;
+    let v104 = v86 - v103;
+    let v105 = f_0 * v89;
+    let v106 = f_1 * v97;
+    let v107 = v105 + v106;
+    let v108 = v85 - v107;
+    let v109 = v77 * p.prepared[7];
+    let v110 = v75 * p.prepared[8];
+    let v111 = v109 + v110;
+    let v112 = -v111;
+    let v113 = v112 + v112;
+    let v114 = a_2 * v113;
+    let v115 = v75 * p.prepared[9];
+    let v116 = v115 - v109;
+    let v117 = a_3 * v116;
+    let v118 = v114 + v117;
+    let v119 = qd_2 * qd_3;
+    let v120 = v75 * p.prepared[7];
+    let v121 = v77 * p.prepared[8];
+    let v122 = v120 - v121;
+    let v123 = -v122;
+    let v124 = v123 + v123;
+    let v125 = v119 * v124;
+    let v126 = qd_3 * qd_3;
+    let v127 = v77 * p.prepared[9];
+    let v128 = v120 + v127;
+    let v129 = v126 * v128;
+    let v130 = v125 - v129;
+    let v131 = v85 + v130;
+    let v132 = v118 + v131;
+    let v133 = v132 - v107;
+    let v134 = a_2 * v116;
+    let v135 = qd_2 * qd_2;
+    let v136 = v122 * v135;
+    let v137 = v85 + v136;
+    let v138 = v134 + v137;
+    let v139 = v138 - v107;
+    let v140 = v43 * qd_1;
+    let v141 = v140 + p.upper_a_damping;
+    let v142 = qd_0 + qd_0;
+    let v143 = v41 * v142;
+    let v144 = v43 * qd_0;
+    let v145 = qd_1 + qd_1;
+    let v146 = v46 * v145;
+    let v147 = v144 + v146;
+    let v148 = v113 * qd_3;
+    let v149 = v148 + p.upper_b_damping;
+    let v150 = qd_2 + qd_2;
+    let v151 = v111 * v150;
+    let v152 = v113 * qd_2;
+    let v153 = qd_3 + qd_3;
+    let v154 = v116 * v153;
+    let v155 = v152 + v154;
+    let v156 = qd_0 + qd_1;
+    let v157 = v156 * v156;
+    let v158 = v19 * v157;
+    let v159 = v22 * v65;
+    let v160 = v158 + v159;
+    let v161 = v31 * a_0;
+    let v162 = v27 * a_1;
+    let v163 = v161 + v162;
+    let v164 = v160 - v163;
+    let v165 = v23 * a_0;
+    let v166 = v19 * a_1;
+    let v167 = v165 + v166;
+    let v168 = v27 * v157;
+    let v169 = v30 * v65;
+    let v170 = v168 + v169;
+    let v171 = v167 + v170;
+    let v172 = -v171;
+    let v173 = v27 * a_0;
+    let v174 = v162 + v173;
+    let v175 = v158 - v174;
+    let v176 = v19 * a_0;
+    let v177 = v166 + v176;
+    let v178 = v168 + v177;
+    let v179 = -v178;
+    let v180 = v93 * a_2;
+    let v181 = v89 * a_3;
+    let v182 = v180 + v181;
+    let v183 = qd_2 + qd_3;
+    let v184 = v183 * v183;
+    let v185 = v97 * v184;
+    let v186 = v100 * v135;
+    let v187 = v185 + v186;
+    let v188 = v182 - v187;
+    let v189 = v101 * a_2;
+    let v190 = v97 * a_3;
+    let v191 = v189 + v190;
+    let v192 = v89 * v184;
+    let v193 = v92 * v135;
+    let v194 = v192 + v193;
+    let v195 = v191 + v194;
+    let v196 = v89 * a_2;
+    let v197 = v181 + v196;
+    let v198 = v197 - v185;
+    let v199 = v97 * a_2;
+    let v200 = v190 + v199;
+    let v201 = v192 + v200;
+    let v202 = v31 * qd_0;
+    let v203 = v27 * qd_1;
+    let v204 = v202 + v203;
+    let v205 = -v204;
+    let v206 = v23 * qd_0;
+    let v207 = v19 * qd_1;
+    let v208 = v206 + v207;
+    let v209 = -v208;
+    let v210 = v27 * qd_0;
+    let v211 = v203 + v210;
+    let v212 = -v211;
+    let v213 = v19 * qd_0;
+    let v214 = v207 + v213;
+    let v215 = -v214;
+    let v216 = v93 * qd_2;
+    let v217 = v89 * qd_3;
+    let v218 = v216 + v217;
+    let v219 = v101 * qd_2;
+    let v220 = v97 * qd_3;
+    let v221 = v219 + v220;
+    let v222 = v89 * qd_2;
+    let v223 = v217 + v222;
+    let v224 = v97 * qd_2;
+    let v225 = v220 + v224;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [v34, v38, T::lit(0.0), T::lit(0.0)],
+                [v63, v69, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v104, v108],
+                [T::lit(0.0), T::lit(0.0), v133, v139],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [v141, v143, T::lit(0.0), T::lit(0.0)],
+                [v147, p.lower_a_damping, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v149, v151],
+                [T::lit(0.0), T::lit(0.0), v155, p.lower_b_damping],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([[v164, v172], [v175, v179], [v188, v195], [v198, v201]]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([[v205, v209], [v212, v215], [v218, v221], [v223, v225]]),
+        ),
     )
 }

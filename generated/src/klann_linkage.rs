@@ -9,7 +9,8 @@
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
-    Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters,
+    Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
+    JointKind, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 7;
@@ -633,6 +634,62 @@ impl LegModel<NQ, NC, NU> for KlannLinkage {
             constraint_bias,
         }
     }
+    fn mass_matrix_derivative<T: Arithmetic>(
+        q: &SVector<T, 7>,
+        a: &SVector<T, 7>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 7, 7> {
+        mass_matrix_derivative(q, a, p)
+    }
+    fn bias_forces_derivatives<T: Arithmetic>(
+        q: &SVector<T, 7>,
+        qd: &SVector<T, 7>,
+        p: &Params<T>,
+    ) -> (SMatrix<T, 7, 7>, SMatrix<T, 7, 7>) {
+        bias_forces_derivatives(q, qd, p)
+    }
+    fn constraint_derivatives<T: Arithmetic>(
+        q: &SVector<T, 7>,
+        qd: &SVector<T, 7>,
+        a: &SVector<T, 7>,
+        f: &SVector<T, 6>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 7, 6> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
+    }
+    fn dynamics_derivatives<T: Arithmetic>(
+        q: &SVector<T, 7>,
+        qd: &SVector<T, 7>,
+        a: &SVector<T, 7>,
+        f: &SVector<T, 6>,
+        p: &Params<T>,
+    ) -> DynamicsDerivatives<T, 7, 6> {
+        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        DynamicsDerivatives {
+            dynamics_q,
+            dynamics_qd,
+            constraint_q,
+            jacobian_rate,
+        }
+    }
 }
 impl ContactModel<NQ, NC, NU, NK> for KlannLinkage {
     const CONTACT_NAMES: &'static [&'static str] = &[];
@@ -657,6 +714,27 @@ impl ContactModel<NQ, NC, NU, NK> for KlannLinkage {
         p: &Params<T>,
     ) -> SVector<T, 0> {
         contact_bias(q, qd, p)
+    }
+    fn contact_derivatives<T: Arithmetic>(
+        q: &SVector<T, 7>,
+        qd: &SVector<T, 7>,
+        a: &SVector<T, 7>,
+        lambda: &SVector<T, 0>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 7, 0> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
+            q,
+            qd,
+            a,
+            lambda,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -2979,5 +3057,2746 @@ pub fn dynamics_terms<T: Arithmetic>(
             ]),
         ),
         SMatrix::from_data(ArrayStorage([[v408, v412, v417, v422, v429, v436]])),
+    )
+}
+/// `∂(M a)/∂q` at the accelerations `a`.
+pub fn mass_matrix_derivative<T: Arithmetic>(
+    q: &SVector<T, 7>,
+    a: &SVector<T, 7>,
+    p: &Params<T>,
+) -> SMatrix<T, 7, 7> {
+    let [_, q_1, _, q_3, _, q_5, q_6] = q.data.0[0];
+    let [a_0, a_1, a_2, a_3, _, a_5, a_6] = a.data.0[0];
+    let (v8, v0) = q_3.sincos();
+    let (v3, v1) = q_5.sincos();
+    let v2 = v1 * p.prepared[4];
+    let v4 = v3 * p.prepared[5];
+    let v5 = v2 - v4;
+    let v6 = p.prepared[8] + v5;
+    let v7 = v0 * v6;
+    let v9 = p.prepared[4] * v3;
+    let v10 = v1 * p.prepared[5];
+    let v11 = v9 + v10;
+    let v12 = p.prepared[9] + v11;
+    let v13 = v8 * v12;
+    let v14 = v7 - v13;
+    let v15 = p.prepared[10] + v14;
+    let (v22, v16) = q_1.sincos();
+    let v17 = v15 * v16;
+    let v18 = v6 * v8;
+    let v19 = v0 * v12;
+    let v20 = v18 + v19;
+    let v21 = p.prepared[11] + v20;
+    let v23 = v21 * v22;
+    let v24 = v17 - v23;
+    let v25 = p.crank_length_y * v24;
+    let v26 = v15 * v22;
+    let v27 = v16 * v21;
+    let v28 = v26 + v27;
+    let v29 = p.crank_length_x * v28;
+    let v30 = v25 - v29;
+    let v31 = v30 + v30;
+    let v32 = a_0 * v31;
+    let v33 = v30 * a_1;
+    let v34 = v32 + v33;
+    let v35 = v14 * v16;
+    let v36 = v20 * v22;
+    let v37 = v35 - v36;
+    let v38 = p.crank_length_y * v37;
+    let v39 = v14 * v22;
+    let v40 = v16 * v20;
+    let v41 = v39 + v40;
+    let v42 = p.crank_length_x * v41;
+    let v43 = v38 - v42;
+    let v44 = a_3 * v43;
+    let v45 = v34 + v44;
+    let v46 = v0 * v5;
+    let v47 = v8 * v11;
+    let v48 = v46 - v47;
+    let v49 = v16 * v48;
+    let v50 = v0 * v11;
+    let v51 = v5 * v8;
+    let v52 = v50 + v51;
+    let v53 = v22 * v52;
+    let v54 = v49 - v53;
+    let v55 = p.crank_length_y * v54;
+    let v56 = v22 * v48;
+    let v57 = v16 * v52;
+    let v58 = v56 + v57;
+    let v59 = p.crank_length_x * v58;
+    let v60 = v55 - v59;
+    let v61 = a_5 * v60;
+    let v62 = v45 + v61;
+    let v63 = a_0 * v30;
+    let v64 = a_0 * v43;
+    let v65 = a_0 * v60;
+    let v66 = v14 * p.leg_origin_y;
+    let v67 = p.leg_origin_x * v20;
+    let v68 = v66 - v67;
+    let v69 = v68 + v68;
+    let v70 = v43 + v43;
+    let v71 = v69 + v70;
+    let v72 = a_0 * v71;
+    let v73 = v43 + v69;
+    let v74 = a_1 * v73;
+    let v75 = v72 + v74;
+    let v76 = v43 + v68;
+    let v77 = a_3 * v76;
+    let v78 = v75 + v77;
+    let v79 = p.leg_origin_y * v48;
+    let v80 = p.leg_origin_x * v52;
+    let v81 = v79 - v80;
+    let v82 = v60 + v81;
+    let v83 = a_5 * v82;
+    let v84 = v78 + v83;
+    let v85 = a_0 * v73;
+    let v86 = a_1 * v69;
+    let v87 = v85 + v86;
+    let v88 = a_3 * v68;
+    let v89 = v87 + v88;
+    let v90 = a_5 * v81;
+    let v91 = v89 + v90;
+    let v92 = a_0 * v76;
+    let v93 = a_1 * v68;
+    let v94 = v92 + v93;
+    let v95 = a_0 * v82;
+    let v96 = a_1 * v81;
+    let v97 = v95 + v96;
+    let v98 = v3 * p.prepared[6];
+    let v99 = v1 * p.prepared[7];
+    let v100 = v98 + v99;
+    let v101 = -v100;
+    let v102 = v101 + v101;
+    let v103 = v81 + v81;
+    let v104 = v102 + v103;
+    let v105 = v60 + v60;
+    let v106 = v104 + v105;
+    let v107 = a_0 * v106;
+    let v108 = v60 + v104;
+    let v109 = a_1 * v108;
+    let v110 = v107 + v109;
+    let v111 = v81 + v102;
+    let v112 = v60 + v111;
+    let v113 = a_3 * v112;
+    let v114 = v110 + v113;
+    let v115 = v1 * p.prepared[12];
+    let v116 = v115 - v98;
+    let v117 = v81 + v116;
+    let v118 = v60 + v117;
+    let v119 = a_5 * v118;
+    let v120 = v114 + v119;
+    let v121 = a_0 * v108;
+    let v122 = a_1 * v104;
+    let v123 = v121 + v122;
+    let v124 = a_3 * v111;
+    let v125 = v123 + v124;
+    let v126 = a_5 * v117;
+    let v127 = v125 + v126;
+    let v128 = a_0 * v112;
+    let v129 = a_1 * v111;
+    let v130 = v128 + v129;
+    let v131 = a_3 * v102;
+    let v132 = v130 + v131;
+    let v133 = a_5 * v116;
+    let v134 = v132 + v133;
+    let v135 = a_0 * v118;
+    let v136 = a_1 * v117;
+    let v137 = v135 + v136;
+    let v138 = a_3 * v116;
+    let v139 = v137 + v138;
+    let (v140, v142) = q_6.sincos();
+    let v141 = p.prepared[15] * v140;
+    let v143 = p.prepared[16] * v142;
+    let v144 = v141 + v143;
+    let v145 = -v144;
+    let v146 = v145 + v145;
+    let v147 = a_2 * v146;
+    let v148 = v142 * p.prepared[17];
+    let v149 = v148 - v141;
+    let v150 = a_6 * v149;
+    let v151 = v147 + v150;
+    let v152 = a_2 * v149;
+    SMatrix::from_data(
+        ArrayStorage([
+            [
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+            ],
+            [v62, v63, T::lit(0.0), v64, T::lit(0.0), v65, T::lit(0.0)],
+            [
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+            ],
+            [v84, v91, T::lit(0.0), v94, T::lit(0.0), v97, T::lit(0.0)],
+            [
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+                T::lit(0.0),
+            ],
+            [v120, v127, T::lit(0.0), v134, T::lit(0.0), v139, T::lit(0.0)],
+            [T::lit(0.0), T::lit(0.0), v151, T::lit(0.0), T::lit(0.0), T::lit(0.0), v152],
+        ]),
+    )
+}
+/// `∂N/∂q` and `∂N/∂q̇`.
+pub fn bias_forces_derivatives<T: Arithmetic>(
+    q: &SVector<T, 7>,
+    qd: &SVector<T, 7>,
+    p: &Params<T>,
+) -> (SMatrix<T, 7, 7>, SMatrix<T, 7, 7>) {
+    let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
+    let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6] = qd.data.0[0];
+    let v0 = qd_0 * qd_0;
+    let (v3, v1) = q_0.sincos();
+    let v2 = v1 * p.crank_com_x;
+    let v4 = v3 * p.crank_com_y;
+    let v5 = v2 - v4;
+    let v6 = v0 * v5;
+    let v7 = v5 * v6;
+    let v8 = p.crank_com_x * v3;
+    let v9 = v1 * p.crank_com_y;
+    let v10 = v8 + v9;
+    let v11 = v0 * v10;
+    let v12 = v10 * v11;
+    let v13 = v7 - v12;
+    let v14 = v13 - v13;
+    let v15 = p.crank_mass * v14;
+    let v16 = qd_0 + qd_1;
+    let v17 = v16 * v16;
+    let (v20, v18) = q_1.sincos();
+    let v19 = v1 * v18;
+    let v21 = v3 * v20;
+    let v22 = v19 - v21;
+    let v23 = v22 * p.coupler_com_x;
+    let v24 = v3 * v18;
+    let v25 = v1 * v20;
+    let v26 = v24 + v25;
+    let v27 = v26 * p.coupler_com_y;
+    let v28 = v23 - v27;
+    let v29 = v17 * v28;
+    let v30 = v1 * p.crank_length_x;
+    let v31 = v3 * p.crank_length_y;
+    let v32 = v30 - v31;
+    let v33 = v0 * v32;
+    let v34 = v29 + v33;
+    let v35 = v28 + v32;
+    let v36 = v34 * v35;
+    let v37 = p.coupler_com_x * v26;
+    let v38 = v22 * p.coupler_com_y;
+    let v39 = v37 + v38;
+    let v40 = v3 * p.crank_length_x;
+    let v41 = v1 * p.crank_length_y;
+    let v42 = v40 + v41;
+    let v43 = v39 + v42;
+    let v44 = v17 * v39;
+    let v45 = v0 * v42;
+    let v46 = v44 + v45;
+    let v47 = v43 * v46;
+    let v48 = v36 - v47;
+    let v49 = v48 - v48;
+    let v50 = p.coupler_mass * v49;
+    let v51 = v15 + v50;
+    let v52 = v16 + qd_3;
+    let v53 = v52 * v52;
+    let (v56, v54) = q_3.sincos();
+    let v55 = v22 * v54;
+    let v57 = v26 * v56;
+    let v58 = v55 - v57;
+    let v59 = v58 * p.leg_com_x;
+    let v60 = v26 * v54;
+    let v61 = v22 * v56;
+    let v62 = v60 + v61;
+    let v63 = v62 * p.leg_com_y;
+    let v64 = v59 - v63;
+    let v65 = v53 * v64;
+    let v66 = v22 * p.leg_origin_x;
+    let v67 = v26 * p.leg_origin_y;
+    let v68 = v66 - v67;
+    let v69 = v17 * v68;
+    let v70 = v65 + v69;
+    let v71 = v33 + v70;
+    let v72 = v64 + v68;
+    let v73 = v32 + v72;
+    let v74 = v71 * v73;
+    let v75 = p.leg_com_x * v62;
+    let v76 = v58 * p.leg_com_y;
+    let v77 = v75 + v76;
+    let v78 = v26 * p.leg_origin_x;
+    let v79 = v22 * p.leg_origin_y;
+    let v80 = v78 + v79;
+    let v81 = v77 + v80;
+    let v82 = v42 + v81;
+    let v83 = v53 * v77;
+    let v84 = v17 * v80;
+    let v85 = v83 + v84;
+    let v86 = v45 + v85;
+    let v87 = v82 * v86;
+    let v88 = v74 - v87;
+    let v89 = v88 - v88;
+    let v90 = p.leg_mass * v89;
+    let v91 = v51 + v90;
+    let v92 = v52 + qd_5;
+    let v93 = v92 * v92;
+    let (v96, v94) = q_5.sincos();
+    let v95 = v58 * v94;
+    let v97 = v62 * v96;
+    let v98 = v95 - v97;
+    let v99 = v98 * p.strut_com_x;
+    let v100 = v62 * v94;
+    let v101 = v58 * v96;
+    let v102 = v100 + v101;
+    let v103 = v102 * p.strut_com_y;
+    let v104 = v99 - v103;
+    let v105 = v93 * v104;
+    let v106 = v58 * p.leg_length_x;
+    let v107 = v62 * p.leg_length_y;
+    let v108 = v106 - v107;
+    let v109 = v53 * v108;
+    let v110 = v105 + v109;
+    let v111 = v69 + v110;
+    let v112 = v33 + v111;
+    let v113 = v104 + v108;
+    let v114 = v68 + v113;
+    let v115 = v32 + v114;
+    let v116 = v112 * v115;
+    let v117 = p.strut_com_x * v102;
+    let v118 = v98 * p.strut_com_y;
+    let v119 = v117 + v118;
+    let v120 = v62 * p.leg_length_x;
+    let v121 = v58 * p.leg_length_y;
+    let v122 = v120 + v121;
+    let v123 = v119 + v122;
+    let v124 = v80 + v123;
+    let v125 = v42 + v124;
+    let v126 = v93 * v119;
+    let v127 = v53 * v122;
+    let v128 = v126 + v127;
+    let v129 = v84 + v128;
+    let v130 = v45 + v129;
+    let v131 = v125 * v130;
+    let v132 = v116 - v131;
+    let v133 = v132 - v132;
+    let v134 = p.strut_mass * v133;
+    let v135 = v91 + v134;
+    let v136 = v1 * p.prepared[20];
+    let v137 = v3 * p.prepared[19];
+    let v138 = v136 - v137;
+    let v139 = v22 * p.prepared[22];
+    let v140 = v26 * p.prepared[21];
+    let v141 = v139 - v140;
+    let v142 = v58 * p.prepared[24];
+    let v143 = v62 * p.prepared[23];
+    let v144 = v142 - v143;
+    let v145 = v98 * p.prepared[26];
+    let v146 = v102 * p.prepared[25];
+    let v147 = v145 - v146;
+    let v148 = v144 + v147;
+    let v149 = v141 + v148;
+    let v150 = v138 + v149;
+    let v151 = v135 + v150;
+    let v152 = v28 * v34;
+    let v153 = v39 * v46;
+    let v154 = v152 - v153;
+    let v155 = v154 - v154;
+    let v156 = p.coupler_mass * v155;
+    let v157 = v71 * v72;
+    let v158 = v81 * v86;
+    let v159 = v157 - v158;
+    let v160 = v159 - v159;
+    let v161 = p.leg_mass * v160;
+    let v162 = v156 + v161;
+    let v163 = v112 * v114;
+    let v164 = v124 * v130;
+    let v165 = v163 - v164;
+    let v166 = v165 - v165;
+    let v167 = p.strut_mass * v166;
+    let v168 = v162 + v167;
+    let v169 = v149 + v168;
+    let v170 = v64 * v71;
+    let v171 = v77 * v86;
+    let v172 = v170 - v171;
+    let v173 = v172 - v172;
+    let v174 = p.leg_mass * v173;
+    let v175 = v112 * v113;
+    let v176 = v123 * v130;
+    let v177 = v175 - v176;
+    let v178 = v177 - v177;
+    let v179 = p.strut_mass * v178;
+    let v180 = v174 + v179;
+    let v181 = v148 + v180;
+    let v182 = v104 * v112;
+    let v183 = v119 * v130;
+    let v184 = v182 - v183;
+    let v185 = v184 - v184;
+    let v186 = p.strut_mass * v185;
+    let v187 = v147 + v186;
+    let v188 = v43 * v44;
+    let v189 = v152 - v188;
+    let v190 = v29 * v35;
+    let v191 = v190 - v153;
+    let v192 = v189 - v191;
+    let v193 = p.coupler_mass * v192;
+    let v194 = v82 * v85;
+    let v195 = v157 - v194;
+    let v196 = v70 * v73;
+    let v197 = v196 - v158;
+    let v198 = v195 - v197;
+    let v199 = p.leg_mass * v198;
+    let v200 = v193 + v199;
+    let v201 = v125 * v129;
+    let v202 = v163 - v201;
+    let v203 = v111 * v115;
+    let v204 = v203 - v164;
+    let v205 = v202 - v204;
+    let v206 = p.strut_mass * v205;
+    let v207 = v200 + v206;
+    let v208 = v149 + v207;
+    let v209 = v39 * v44;
+    let v210 = v152 - v209;
+    let v211 = v28 * v29;
+    let v212 = v211 - v153;
+    let v213 = v210 - v212;
+    let v214 = p.coupler_mass * v213;
+    let v215 = v81 * v85;
+    let v216 = v157 - v215;
+    let v217 = v70 * v72;
+    let v218 = v217 - v158;
+    let v219 = v216 - v218;
+    let v220 = p.leg_mass * v219;
+    let v221 = v214 + v220;
+    let v222 = v124 * v129;
+    let v223 = v163 - v222;
+    let v224 = v111 * v114;
+    let v225 = v224 - v164;
+    let v226 = v223 - v225;
+    let v227 = p.strut_mass * v226;
+    let v228 = v221 + v227;
+    let v229 = v149 + v228;
+    let v230 = v77 * v85;
+    let v231 = v170 - v230;
+    let v232 = v64 * v70;
+    let v233 = v232 - v171;
+    let v234 = v231 - v233;
+    let v235 = p.leg_mass * v234;
+    let v236 = v123 * v129;
+    let v237 = v175 - v236;
+    let v238 = v111 * v113;
+    let v239 = v238 - v176;
+    let v240 = v237 - v239;
+    let v241 = p.strut_mass * v240;
+    let v242 = v235 + v241;
+    let v243 = v148 + v242;
+    let v244 = v119 * v129;
+    let v245 = v182 - v244;
+    let v246 = v104 * v111;
+    let v247 = v246 - v183;
+    let v248 = v245 - v247;
+    let v249 = p.strut_mass * v248;
+    let v250 = v147 + v249;
+    let v251 = qd_2 * qd_2;
+    let (v254, v252) = q_2.sincos();
+    let v253 = v252 * p.rocker_com_x;
+    let v255 = v254 * p.rocker_com_y;
+    let v256 = v253 - v255;
+    let v257 = v251 * v256;
+    let v258 = v256 * v257;
+    let v259 = p.rocker_com_x * v254;
+    let v260 = v252 * p.rocker_com_y;
+    let v261 = v259 + v260;
+    let v262 = v251 * v261;
+    let v263 = v261 * v262;
+    let v264 = v258 - v263;
+    let v265 = v264 - v264;
+    let v266 = p.rocker_mass * v265;
+    let v267 = qd_2 + qd_6;
+    let v268 = v267 * v267;
+    let (v271, v269) = q_6.sincos();
+    let v270 = v252 * v269;
+    let v272 = v254 * v271;
+    let v273 = v270 - v272;
+    let v274 = v273 * p.brace_com_x;
+    let v275 = v254 * v269;
+    let v276 = v252 * v271;
+    let v277 = v275 + v276;
+    let v278 = v277 * p.brace_com_y;
+    let v279 = v274 - v278;
+    let v280 = v268 * v279;
+    let v281 = v252 * p.brace_origin_x;
+    let v282 = v254 * p.brace_origin_y;
+    let v283 = v281 - v282;
+    let v284 = v251 * v283;
+    let v285 = v280 + v284;
+    let v286 = v279 + v283;
+    let v287 = v285 * v286;
+    let v288 = p.brace_com_x * v277;
+    let v289 = v273 * p.brace_com_y;
+    let v290 = v288 + v289;
+    let v291 = v254 * p.brace_origin_x;
+    let v292 = v252 * p.brace_origin_y;
+    let v293 = v291 + v292;
+    let v294 = v290 + v293;
+    let v295 = v268 * v290;
+    let v296 = v251 * v293;
+    let v297 = v295 + v296;
+    let v298 = v294 * v297;
+    let v299 = v287 - v298;
+    let v300 = v299 - v299;
+    let v301 = p.brace_mass * v300;
+    let v302 = v266 + v301;
+    let v303 = v252 * p.prepared[28];
+    let v304 = v254 * p.prepared[27];
+    let v305 = v303 - v304;
+    let v306 = v273 * p.prepared[30];
+    let v307 = v277 * p.prepared[29];
+    let v308 = v306 - v307;
+    let v309 = v305 + v308;
+    let v310 = v302 + v309;
+    let v311 = v279 * v285;
+    let v312 = v290 * v297;
+    let v313 = v311 - v312;
+    let v314 = v313 - v313;
+    let v315 = p.brace_mass * v314;
+    let v316 = v308 + v315;
+    let v317 = v82 * v83;
+    let v318 = v170 - v317;
+    let v319 = v65 * v73;
+    let v320 = v319 - v171;
+    let v321 = v318 - v320;
+    let v322 = p.leg_mass * v321;
+    let v323 = v125 * v128;
+    let v324 = v175 - v323;
+    let v325 = v110 * v115;
+    let v326 = v325 - v176;
+    let v327 = v324 - v326;
+    let v328 = p.strut_mass * v327;
+    let v329 = v322 + v328;
+    let v330 = v148 + v329;
+    let v331 = v81 * v83;
+    let v332 = v170 - v331;
+    let v333 = v65 * v72;
+    let v334 = v333 - v171;
+    let v335 = v332 - v334;
+    let v336 = p.leg_mass * v335;
+    let v337 = v124 * v128;
+    let v338 = v175 - v337;
+    let v339 = v110 * v114;
+    let v340 = v339 - v176;
+    let v341 = v338 - v340;
+    let v342 = p.strut_mass * v341;
+    let v343 = v336 + v342;
+    let v344 = v148 + v343;
+    let v345 = v77 * v83;
+    let v346 = v170 - v345;
+    let v347 = v64 * v65;
+    let v348 = v347 - v171;
+    let v349 = v346 - v348;
+    let v350 = p.leg_mass * v349;
+    let v351 = v123 * v128;
+    let v352 = v175 - v351;
+    let v353 = v110 * v113;
+    let v354 = v353 - v176;
+    let v355 = v352 - v354;
+    let v356 = p.strut_mass * v355;
+    let v357 = v350 + v356;
+    let v358 = v148 + v357;
+    let v359 = v119 * v128;
+    let v360 = v182 - v359;
+    let v361 = v104 * v110;
+    let v362 = v361 - v183;
+    let v363 = v360 - v362;
+    let v364 = p.strut_mass * v363;
+    let v365 = v147 + v364;
+    let v366 = qd_4 * qd_4;
+    let (v369, v367) = q_4.sincos();
+    let v368 = v367 * p.guide_com_x;
+    let v370 = v369 * p.guide_com_y;
+    let v371 = v368 - v370;
+    let v372 = v366 * v371;
+    let v373 = v371 * v372;
+    let v374 = p.guide_com_x * v369;
+    let v375 = v367 * p.guide_com_y;
+    let v376 = v374 + v375;
+    let v377 = v366 * v376;
+    let v378 = v376 * v377;
+    let v379 = v373 - v378;
+    let v380 = v379 - v379;
+    let v381 = p.guide_mass * v380;
+    let v382 = v367 * p.prepared[32];
+    let v383 = v369 * p.prepared[31];
+    let v384 = v382 - v383;
+    let v385 = v381 + v384;
+    let v386 = v125 * v126;
+    let v387 = v182 - v386;
+    let v388 = v105 * v115;
+    let v389 = v388 - v183;
+    let v390 = v387 - v389;
+    let v391 = p.strut_mass * v390;
+    let v392 = v147 + v391;
+    let v393 = v124 * v126;
+    let v394 = v182 - v393;
+    let v395 = v105 * v114;
+    let v396 = v395 - v183;
+    let v397 = v394 - v396;
+    let v398 = p.strut_mass * v397;
+    let v399 = v147 + v398;
+    let v400 = v123 * v126;
+    let v401 = v182 - v400;
+    let v402 = v105 * v113;
+    let v403 = v402 - v183;
+    let v404 = v401 - v403;
+    let v405 = p.strut_mass * v404;
+    let v406 = v147 + v405;
+    let v407 = v119 * v126;
+    let v408 = v182 - v407;
+    let v409 = v104 * v105;
+    let v410 = v409 - v183;
+    let v411 = v408 - v410;
+    let v412 = p.strut_mass * v411;
+    let v413 = v147 + v412;
+    let v414 = v294 * v295;
+    let v415 = v311 - v414;
+    let v416 = v280 * v286;
+    let v417 = v416 - v312;
+    let v418 = v415 - v417;
+    let v419 = p.brace_mass * v418;
+    let v420 = v308 + v419;
+    let v421 = v290 * v295;
+    let v422 = v311 - v421;
+    let v423 = v279 * v280;
+    let v424 = v423 - v312;
+    let v425 = v422 - v424;
+    let v426 = p.brace_mass * v425;
+    let v427 = v308 + v426;
+    let v428 = qd_0 + qd_0;
+    let v429 = v5 * v428;
+    let v430 = v10 * v429;
+    let v431 = v10 * v428;
+    let v432 = v5 * v431;
+    let v433 = v430 - v432;
+    let v434 = p.crank_mass * v433;
+    let v435 = v16 + v16;
+    let v436 = v28 * v435;
+    let v437 = v32 * v428;
+    let v438 = v436 + v437;
+    let v439 = v43 * v438;
+    let v440 = v39 * v435;
+    let v441 = v42 * v428;
+    let v442 = v440 + v441;
+    let v443 = v35 * v442;
+    let v444 = v439 - v443;
+    let v445 = p.coupler_mass * v444;
+    let v446 = v434 + v445;
+    let v447 = v52 + v52;
+    let v448 = v64 * v447;
+    let v449 = v68 * v435;
+    let v450 = v448 + v449;
+    let v451 = v437 + v450;
+    let v452 = v82 * v451;
+    let v453 = v77 * v447;
+    let v454 = v80 * v435;
+    let v455 = v453 + v454;
+    let v456 = v441 + v455;
+    let v457 = v73 * v456;
+    let v458 = v452 - v457;
+    let v459 = p.leg_mass * v458;
+    let v460 = v446 + v459;
+    let v461 = v92 + v92;
+    let v462 = v104 * v461;
+    let v463 = v108 * v447;
+    let v464 = v462 + v463;
+    let v465 = v449 + v464;
+    let v466 = v437 + v465;
+    let v467 = v125 * v466;
+    let v468 = v119 * v461;
+    let v469 = v122 * v447;
+    let v470 = v468 + v469;
+    let v471 = v454 + v470;
+    let v472 = v441 + v471;
+    let v473 = v115 * v472;
+    let v474 = v467 - v473;
+    let v475 = p.strut_mass * v474;
+    let v476 = v460 + v475;
+    let v477 = v39 * v438;
+    let v478 = v28 * v442;
+    let v479 = v477 - v478;
+    let v480 = p.coupler_mass * v479;
+    let v481 = v81 * v451;
+    let v482 = v72 * v456;
+    let v483 = v481 - v482;
+    let v484 = p.leg_mass * v483;
+    let v485 = v480 + v484;
+    let v486 = v124 * v466;
+    let v487 = v114 * v472;
+    let v488 = v486 - v487;
+    let v489 = p.strut_mass * v488;
+    let v490 = v485 + v489;
+    let v491 = v77 * v451;
+    let v492 = v64 * v456;
+    let v493 = v491 - v492;
+    let v494 = p.leg_mass * v493;
+    let v495 = v123 * v466;
+    let v496 = v113 * v472;
+    let v497 = v495 - v496;
+    let v498 = p.strut_mass * v497;
+    let v499 = v494 + v498;
+    let v500 = v119 * v466;
+    let v501 = v104 * v472;
+    let v502 = v500 - v501;
+    let v503 = p.strut_mass * v502;
+    let v504 = v43 * v436;
+    let v505 = v35 * v440;
+    let v506 = v504 - v505;
+    let v507 = p.coupler_mass * v506;
+    let v508 = v82 * v450;
+    let v509 = v73 * v455;
+    let v510 = v508 - v509;
+    let v511 = p.leg_mass * v510;
+    let v512 = v507 + v511;
+    let v513 = v125 * v465;
+    let v514 = v115 * v471;
+    let v515 = v513 - v514;
+    let v516 = p.strut_mass * v515;
+    let v517 = v512 + v516;
+    let v518 = v39 * v436;
+    let v519 = v28 * v440;
+    let v520 = v518 - v519;
+    let v521 = p.coupler_mass * v520;
+    let v522 = v81 * v450;
+    let v523 = v72 * v455;
+    let v524 = v522 - v523;
+    let v525 = p.leg_mass * v524;
+    let v526 = v521 + v525;
+    let v527 = v124 * v465;
+    let v528 = v114 * v471;
+    let v529 = v527 - v528;
+    let v530 = p.strut_mass * v529;
+    let v531 = v526 + v530;
+    let v532 = v77 * v450;
+    let v533 = v64 * v455;
+    let v534 = v532 - v533;
+    let v535 = p.leg_mass * v534;
+    let v536 = v123 * v465;
+    let v537 = v113 * v471;
+    let v538 = v536 - v537;
+    let v539 = p.strut_mass * v538;
+    let v540 = v535 + v539;
+    let v541 = v119 * v465;
+    let v542 = v104 * v471;
+    let v543 = v541 - v542;
+    let v544 = p.strut_mass * v543;
+    let v545 = qd_2 + qd_2;
+    let v546 = v256 * v545;
+    let v547 = v261 * v546;
+    let v548 = v261 * v545;
+    let v549 = v256 * v548;
+    let v550 = v547 - v549;
+    let v551 = p.rocker_mass * v550;
+    let v552 = v267 + v267;
+    let v553 = v279 * v552;
+    let v554 = v283 * v545;
+    let v555 = v553 + v554;
+    let v556 = v294 * v555;
+    let v557 = v290 * v552;
+    let v558 = v293 * v545;
+    let v559 = v557 + v558;
+    let v560 = v286 * v559;
+    let v561 = v556 - v560;
+    let v562 = p.brace_mass * v561;
+    let v563 = v551 + v562;
+    let v564 = v290 * v555;
+    let v565 = v279 * v559;
+    let v566 = v564 - v565;
+    let v567 = p.brace_mass * v566;
+    let v568 = v82 * v448;
+    let v569 = v73 * v453;
+    let v570 = v568 - v569;
+    let v571 = p.leg_mass * v570;
+    let v572 = v125 * v464;
+    let v573 = v115 * v470;
+    let v574 = v572 - v573;
+    let v575 = p.strut_mass * v574;
+    let v576 = v571 + v575;
+    let v577 = v81 * v448;
+    let v578 = v72 * v453;
+    let v579 = v577 - v578;
+    let v580 = p.leg_mass * v579;
+    let v581 = v124 * v464;
+    let v582 = v114 * v470;
+    let v583 = v581 - v582;
+    let v584 = p.strut_mass * v583;
+    let v585 = v580 + v584;
+    let v586 = v77 * v448;
+    let v587 = v64 * v453;
+    let v588 = v586 - v587;
+    let v589 = p.leg_mass * v588;
+    let v590 = v123 * v464;
+    let v591 = v113 * v470;
+    let v592 = v590 - v591;
+    let v593 = p.strut_mass * v592;
+    let v594 = v589 + v593;
+    let v595 = v119 * v464;
+    let v596 = v104 * v470;
+    let v597 = v595 - v596;
+    let v598 = p.strut_mass * v597;
+    let v599 = qd_4 + qd_4;
+    let v600 = v371 * v599;
+    let v601 = v376 * v600;
+    let v602 = v376 * v599;
+    let v603 = v371 * v602;
+    let v604 = v601 - v603;
+    let v605 = p.guide_mass * v604;
+    let v606 = v125 * v462;
+    let v607 = v115 * v468;
+    let v608 = v606 - v607;
+    let v609 = p.strut_mass * v608;
+    let v610 = v124 * v462;
+    let v611 = v114 * v468;
+    let v612 = v610 - v611;
+    let v613 = p.strut_mass * v612;
+    let v614 = v123 * v462;
+    let v615 = v113 * v468;
+    let v616 = v614 - v615;
+    let v617 = p.strut_mass * v616;
+    let v618 = v119 * v462;
+    let v619 = v104 * v468;
+    let v620 = v618 - v619;
+    let v621 = p.strut_mass * v620;
+    let v622 = v294 * v553;
+    let v623 = v286 * v557;
+    let v624 = v622 - v623;
+    let v625 = p.brace_mass * v624;
+    let v626 = v290 * v553;
+    let v627 = v279 * v557;
+    let v628 = v626 - v627;
+    let v629 = p.brace_mass * v628;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [v151, v169, T::lit(0.0), v181, T::lit(0.0), v187, T::lit(0.0)],
+                [v208, v229, T::lit(0.0), v243, T::lit(0.0), v250, T::lit(0.0)],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v310,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v316,
+                ],
+                [v330, v344, T::lit(0.0), v358, T::lit(0.0), v365, T::lit(0.0)],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v385,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [v392, v399, T::lit(0.0), v406, T::lit(0.0), v413, T::lit(0.0)],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v420,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v427,
+                ],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [v476, v490, T::lit(0.0), v499, T::lit(0.0), v503, T::lit(0.0)],
+                [v517, v531, T::lit(0.0), v540, T::lit(0.0), v544, T::lit(0.0)],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v563,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v567,
+                ],
+                [v576, v585, T::lit(0.0), v594, T::lit(0.0), v598, T::lit(0.0)],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v605,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [v609, v613, T::lit(0.0), v617, T::lit(0.0), v621, T::lit(0.0)],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v625,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v629,
+                ],
+            ]),
+        ),
+    )
+}
+/// `∂(Jᵀ f)/∂q`, `∂(J a)/∂q`, `∂(J̇ q̇)/∂q` and `J̇` at the closure forces `f` and the
+/// accelerations `a`.
+pub fn constraint_derivatives<T: Arithmetic>(
+    q: &SVector<T, 7>,
+    qd: &SVector<T, 7>,
+    a: &SVector<T, 7>,
+    f: &SVector<T, 6>,
+    p: &Params<T>,
+) -> (SMatrix<T, 7, 7>, SMatrix<T, 6, 7>, SMatrix<T, 6, 7>, SMatrix<T, 6, 7>) {
+    let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
+    let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6] = qd.data.0[0];
+    let [a_0, a_1, a_2, a_3, a_4, a_5, a_6] = a.data.0[0];
+    let [f_0, f_1, f_2, f_3, f_4, f_5] = f.data.0[0];
+    let (v9, v0) = q_3.sincos();
+    let (v4, v1) = q_1.sincos();
+    let (v5, v2) = q_0.sincos();
+    let v3 = v1 * v2;
+    let v6 = v4 * v5;
+    let v7 = v3 - v6;
+    let v8 = v0 * v7;
+    let v10 = v1 * v5;
+    let v11 = v2 * v4;
+    let v12 = v10 + v11;
+    let v13 = v9 * v12;
+    let v14 = v8 - v13;
+    let v15 = p.hip_guide_b_x * v14;
+    let v16 = v0 * v12;
+    let v17 = v7 * v9;
+    let v18 = v16 + v17;
+    let v19 = p.hip_guide_b_y * v18;
+    let v20 = v15 - v19;
+    let v21 = v7 * p.leg_origin_x;
+    let v22 = v12 * p.leg_origin_y;
+    let v23 = v21 - v22;
+    let v24 = v20 + v23;
+    let v25 = v2 * p.crank_length_x;
+    let v26 = v5 * p.crank_length_y;
+    let v27 = v25 - v26;
+    let v28 = v24 + v27;
+    let v29 = f_2 * v28;
+    let v30 = v12 * p.coupler_length_x;
+    let v31 = v7 * p.coupler_length_y;
+    let v32 = v30 + v31;
+    let v33 = v5 * p.crank_length_x;
+    let v34 = v2 * p.crank_length_y;
+    let v35 = v33 + v34;
+    let v36 = v32 + v35;
+    let v37 = f_1 * v36;
+    let v38 = v7 * p.coupler_length_x;
+    let v39 = v12 * p.coupler_length_y;
+    let v40 = v38 - v39;
+    let v41 = v27 + v40;
+    let v42 = f_0 * v41;
+    let v43 = v37 + v42;
+    let v44 = v29 - v43;
+    let v45 = p.hip_guide_b_x * v18;
+    let v46 = v14 * p.hip_guide_b_y;
+    let v47 = v45 + v46;
+    let v48 = v12 * p.leg_origin_x;
+    let v49 = v7 * p.leg_origin_y;
+    let v50 = v48 + v49;
+    let v51 = v47 + v50;
+    let v52 = v35 + v51;
+    let v53 = f_3 * v52;
+    let v54 = v44 + v53;
+    let (v57, v55) = q_5.sincos();
+    let v56 = v14 * v55;
+    let v58 = v18 * v57;
+    let v59 = v56 - v58;
+    let v60 = p.ankle_b_x * v59;
+    let v61 = v18 * v55;
+    let v62 = v14 * v57;
+    let v63 = v61 + v62;
+    let v64 = p.ankle_b_y * v63;
+    let v65 = v60 - v64;
+    let v66 = v14 * p.leg_length_x;
+    let v67 = v18 * p.leg_length_y;
+    let v68 = v66 - v67;
+    let v69 = v65 + v68;
+    let v70 = v23 + v69;
+    let v71 = v27 + v70;
+    let v72 = f_4 * v71;
+    let v73 = v54 + v72;
+    let v74 = p.ankle_b_x * v63;
+    let v75 = v59 * p.ankle_b_y;
+    let v76 = v74 + v75;
+    let v77 = v18 * p.leg_length_x;
+    let v78 = v14 * p.leg_length_y;
+    let v79 = v77 + v78;
+    let v80 = v76 + v79;
+    let v81 = v50 + v80;
+    let v82 = v35 + v81;
+    let v83 = f_5 * v82;
+    let v84 = v73 + v83;
+    let v85 = f_2 * v24;
+    let v86 = f_1 * v32;
+    let v87 = f_0 * v40;
+    let v88 = v86 + v87;
+    let v89 = v85 - v88;
+    let v90 = f_3 * v51;
+    let v91 = v89 + v90;
+    let v92 = f_4 * v70;
+    let v93 = v91 + v92;
+    let v94 = f_5 * v81;
+    let v95 = v93 + v94;
+    let v96 = f_2 * v20;
+    let v97 = f_3 * v47;
+    let v98 = v96 + v97;
+    let v99 = f_4 * v69;
+    let v100 = v98 + v99;
+    let v101 = f_5 * v80;
+    let v102 = v100 + v101;
+    let v103 = f_4 * v65;
+    let v104 = f_5 * v76;
+    let v105 = v103 + v104;
+    let (v108, v106) = q_2.sincos();
+    let v107 = p.rocker_length_x * v106;
+    let v109 = p.rocker_length_y * v108;
+    let v110 = v107 - v109;
+    let v111 = f_0 * v110;
+    let v112 = p.rocker_length_x * v108;
+    let v113 = v106 * p.rocker_length_y;
+    let v114 = v112 + v113;
+    let v115 = f_1 * v114;
+    let v116 = v111 + v115;
+    let (v119, v117) = q_6.sincos();
+    let v118 = v106 * v117;
+    let v120 = v108 * v119;
+    let v121 = v118 - v120;
+    let v122 = p.brace_length_x * v121;
+    let v123 = v108 * v117;
+    let v124 = v106 * v119;
+    let v125 = v123 + v124;
+    let v126 = p.brace_length_y * v125;
+    let v127 = v122 - v126;
+    let v128 = v106 * p.brace_origin_x;
+    let v129 = v108 * p.brace_origin_y;
+    let v130 = v128 - v129;
+    let v131 = v127 + v130;
+    let v132 = f_4 * v131;
+    let v133 = v116 - v132;
+    let v134 = p.brace_length_x * v125;
+    let v135 = v121 * p.brace_length_y;
+    let v136 = v134 + v135;
+    let v137 = v108 * p.brace_origin_x;
+    let v138 = v106 * p.brace_origin_y;
+    let v139 = v137 + v138;
+    let v140 = v136 + v139;
+    let v141 = f_5 * v140;
+    let v142 = v133 - v141;
+    let v143 = f_5 * v136;
+    let v144 = f_4 * v127;
+    let v145 = v143 + v144;
+    let v146 = -v145;
+    let (v147, v149) = q_4.sincos();
+    let v148 = p.guide_length_x * v147;
+    let v150 = p.guide_length_y * v149;
+    let v151 = v148 + v150;
+    let v152 = f_3 * v151;
+    let v153 = p.guide_length_x * v149;
+    let v154 = v147 * p.guide_length_y;
+    let v155 = v153 - v154;
+    let v156 = f_2 * v155;
+    let v157 = v152 + v156;
+    let v158 = -v157;
+    let v159 = v41 * a_0;
+    let v160 = v40 * a_1;
+    let v161 = v159 + v160;
+    let v162 = -v161;
+    let v163 = v36 * a_0;
+    let v164 = v32 * a_1;
+    let v165 = v163 + v164;
+    let v166 = -v165;
+    let v167 = v28 * a_0;
+    let v168 = v24 * a_1;
+    let v169 = v167 + v168;
+    let v170 = v20 * a_3;
+    let v171 = v169 + v170;
+    let v172 = v52 * a_0;
+    let v173 = v51 * a_1;
+    let v174 = v172 + v173;
+    let v175 = v47 * a_3;
+    let v176 = v174 + v175;
+    let v177 = v71 * a_0;
+    let v178 = v70 * a_1;
+    let v179 = v177 + v178;
+    let v180 = v69 * a_3;
+    let v181 = v179 + v180;
+    let v182 = v65 * a_5;
+    let v183 = v181 + v182;
+    let v184 = v82 * a_0;
+    let v185 = v81 * a_1;
+    let v186 = v184 + v185;
+    let v187 = v80 * a_3;
+    let v188 = v186 + v187;
+    let v189 = v76 * a_5;
+    let v190 = v188 + v189;
+    let v191 = v40 * a_0;
+    let v192 = v160 + v191;
+    let v193 = -v192;
+    let v194 = v32 * a_0;
+    let v195 = v164 + v194;
+    let v196 = -v195;
+    let v197 = v24 * a_0;
+    let v198 = v168 + v197;
+    let v199 = v170 + v198;
+    let v200 = v51 * a_0;
+    let v201 = v173 + v200;
+    let v202 = v175 + v201;
+    let v203 = v70 * a_0;
+    let v204 = v178 + v203;
+    let v205 = v180 + v204;
+    let v206 = v182 + v205;
+    let v207 = v81 * a_0;
+    let v208 = v185 + v207;
+    let v209 = v187 + v208;
+    let v210 = v189 + v209;
+    let v211 = v110 * a_2;
+    let v212 = v114 * a_2;
+    let v213 = v131 * a_2;
+    let v214 = v127 * a_6;
+    let v215 = v213 + v214;
+    let v216 = -v215;
+    let v217 = v140 * a_2;
+    let v218 = v136 * a_6;
+    let v219 = v217 + v218;
+    let v220 = -v219;
+    let v221 = v20 * a_0;
+    let v222 = v20 * a_1;
+    let v223 = v221 + v222;
+    let v224 = v170 + v223;
+    let v225 = v47 * a_0;
+    let v226 = v47 * a_1;
+    let v227 = v225 + v226;
+    let v228 = v175 + v227;
+    let v229 = v69 * a_0;
+    let v230 = v69 * a_1;
+    let v231 = v229 + v230;
+    let v232 = v180 + v231;
+    let v233 = v182 + v232;
+    let v234 = v80 * a_0;
+    let v235 = v80 * a_1;
+    let v236 = v234 + v235;
+    let v237 = v187 + v236;
+    let v238 = v189 + v237;
+    let v239 = v155 * a_4;
+    let v240 = -v239;
+    let v241 = v151 * a_4;
+    let v242 = -v241;
+    let v243 = v65 * a_0;
+    let v244 = v65 * a_1;
+    let v245 = v243 + v244;
+    let v246 = v65 * a_3;
+    let v247 = v245 + v246;
+    let v248 = v182 + v247;
+    let v249 = v76 * a_0;
+    let v250 = v76 * a_1;
+    let v251 = v249 + v250;
+    let v252 = v76 * a_3;
+    let v253 = v251 + v252;
+    let v254 = v189 + v253;
+    let v255 = v127 * a_2;
+    let v256 = v214 + v255;
+    let v257 = -v256;
+    let v258 = v136 * a_2;
+    let v259 = v218 + v258;
+    let v260 = -v259;
+    let v261 = qd_0 + qd_1;
+    let v262 = v261 * v261;
+    let v263 = v32 * v262;
+    let v264 = qd_0 * qd_0;
+    let v265 = v35 * v264;
+    let v266 = v263 + v265;
+    let v267 = v40 * v262;
+    let v268 = v27 * v264;
+    let v269 = v267 + v268;
+    let v270 = -v269;
+    let v271 = v261 + qd_3;
+    let v272 = v271 * v271;
+    let v273 = v47 * v272;
+    let v274 = v50 * v262;
+    let v275 = v273 + v274;
+    let v276 = v265 + v275;
+    let v277 = -v276;
+    let v278 = v20 * v272;
+    let v279 = v23 * v262;
+    let v280 = v278 + v279;
+    let v281 = v268 + v280;
+    let v282 = v271 + qd_5;
+    let v283 = v282 * v282;
+    let v284 = v76 * v283;
+    let v285 = v79 * v272;
+    let v286 = v284 + v285;
+    let v287 = v274 + v286;
+    let v288 = v265 + v287;
+    let v289 = -v288;
+    let v290 = v65 * v283;
+    let v291 = v68 * v272;
+    let v292 = v290 + v291;
+    let v293 = v279 + v292;
+    let v294 = v268 + v293;
+    let v295 = -v267;
+    let v296 = -v275;
+    let v297 = -v287;
+    let v298 = qd_2 * qd_2;
+    let v299 = v114 * v298;
+    let v300 = -v299;
+    let v301 = v110 * v298;
+    let v302 = qd_2 + qd_6;
+    let v303 = v302 * v302;
+    let v304 = v136 * v303;
+    let v305 = v139 * v298;
+    let v306 = v304 + v305;
+    let v307 = v127 * v303;
+    let v308 = v130 * v298;
+    let v309 = v307 + v308;
+    let v310 = -v309;
+    let v311 = -v273;
+    let v312 = -v286;
+    let v313 = qd_4 * qd_4;
+    let v314 = v151 * v313;
+    let v315 = v155 * v313;
+    let v316 = -v315;
+    let v317 = -v284;
+    let v318 = -v307;
+    let v319 = v41 * qd_0;
+    let v320 = v40 * qd_1;
+    let v321 = v319 + v320;
+    let v322 = -v321;
+    let v323 = v36 * qd_0;
+    let v324 = v32 * qd_1;
+    let v325 = v323 + v324;
+    let v326 = -v325;
+    let v327 = v28 * qd_0;
+    let v328 = v24 * qd_1;
+    let v329 = v327 + v328;
+    let v330 = v20 * qd_3;
+    let v331 = v329 + v330;
+    let v332 = v52 * qd_0;
+    let v333 = v51 * qd_1;
+    let v334 = v332 + v333;
+    let v335 = v47 * qd_3;
+    let v336 = v334 + v335;
+    let v337 = v71 * qd_0;
+    let v338 = v70 * qd_1;
+    let v339 = v337 + v338;
+    let v340 = v69 * qd_3;
+    let v341 = v339 + v340;
+    let v342 = v65 * qd_5;
+    let v343 = v341 + v342;
+    let v344 = v82 * qd_0;
+    let v345 = v81 * qd_1;
+    let v346 = v344 + v345;
+    let v347 = v80 * qd_3;
+    let v348 = v346 + v347;
+    let v349 = v76 * qd_5;
+    let v350 = v348 + v349;
+    let v351 = v40 * qd_0;
+    let v352 = v320 + v351;
+    let v353 = -v352;
+    let v354 = v32 * qd_0;
+    let v355 = v324 + v354;
+    let v356 = -v355;
+    let v357 = v24 * qd_0;
+    let v358 = v328 + v357;
+    let v359 = v330 + v358;
+    let v360 = v51 * qd_0;
+    let v361 = v333 + v360;
+    let v362 = v335 + v361;
+    let v363 = v70 * qd_0;
+    let v364 = v338 + v363;
+    let v365 = v340 + v364;
+    let v366 = v342 + v365;
+    let v367 = v81 * qd_0;
+    let v368 = v345 + v367;
+    let v369 = v347 + v368;
+    let v370 = v349 + v369;
+    let v371 = v110 * qd_2;
+    let v372 = v114 * qd_2;
+    let v373 = v131 * qd_2;
+    let v374 = v127 * qd_6;
+    let v375 = v373 + v374;
+    let v376 = -v375;
+    let v377 = v140 * qd_2;
+    let v378 = v136 * qd_6;
+    let v379 = v377 + v378;
+    let v380 = -v379;
+    let v381 = v20 * qd_0;
+    let v382 = v20 * qd_1;
+    let v383 = v381 + v382;
+    let v384 = v330 + v383;
+    let v385 = v47 * qd_0;
+    let v386 = v47 * qd_1;
+    let v387 = v385 + v386;
+    let v388 = v335 + v387;
+    let v389 = v69 * qd_0;
+    let v390 = v69 * qd_1;
+    let v391 = v389 + v390;
+    let v392 = v340 + v391;
+    let v393 = v342 + v392;
+    let v394 = v80 * qd_0;
+    let v395 = v80 * qd_1;
+    let v396 = v394 + v395;
+    let v397 = v347 + v396;
+    let v398 = v349 + v397;
+    let v399 = v155 * qd_4;
+    let v400 = -v399;
+    let v401 = v151 * qd_4;
+    let v402 = -v401;
+    let v403 = v65 * qd_0;
+    let v404 = v65 * qd_1;
+    let v405 = v403 + v404;
+    let v406 = v65 * qd_3;
+    let v407 = v405 + v406;
+    let v408 = v342 + v407;
+    let v409 = v76 * qd_0;
+    let v410 = v76 * qd_1;
+    let v411 = v409 + v410;
+    let v412 = v76 * qd_3;
+    let v413 = v411 + v412;
+    let v414 = v349 + v413;
+    let v415 = v127 * qd_2;
+    let v416 = v374 + v415;
+    let v417 = -v416;
+    let v418 = v136 * qd_2;
+    let v419 = v378 + v418;
+    let v420 = -v419;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [v84, v95, T::lit(0.0), v102, T::lit(0.0), v105, T::lit(0.0)],
+                [v95, v95, T::lit(0.0), v102, T::lit(0.0), v105, T::lit(0.0)],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v142,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v146,
+                ],
+                [v102, v102, T::lit(0.0), v102, T::lit(0.0), v105, T::lit(0.0)],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v158,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [v105, v105, T::lit(0.0), v105, T::lit(0.0), v105, T::lit(0.0)],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v146,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v146,
+                ],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [v162, v166, v171, v176, v183, v190],
+                [v193, v196, v199, v202, v206, v210],
+                [v211, v212, T::lit(0.0), T::lit(0.0), v216, v220],
+                [T::lit(0.0), T::lit(0.0), v224, v228, v233, v238],
+                [T::lit(0.0), T::lit(0.0), v240, v242, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v248, v254],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v257, v260],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [v266, v270, v277, v281, v289, v294],
+                [v263, v295, v296, v280, v297, v293],
+                [v300, v301, T::lit(0.0), T::lit(0.0), v306, v310],
+                [T::lit(0.0), T::lit(0.0), v311, v278, v312, v292],
+                [T::lit(0.0), T::lit(0.0), v314, v316, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v317, v290],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v304, v318],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [v322, v326, v331, v336, v343, v350],
+                [v353, v356, v359, v362, v366, v370],
+                [v371, v372, T::lit(0.0), T::lit(0.0), v376, v380],
+                [T::lit(0.0), T::lit(0.0), v384, v388, v393, v398],
+                [T::lit(0.0), T::lit(0.0), v400, v402, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v408, v414],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v417, v420],
+            ]),
+        ),
+    )
+}
+/// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
+/// (base frame) and the accelerations `a`.
+pub fn contact_derivatives<T: Arithmetic>(
+    _q: &SVector<T, 7>,
+    _qd: &SVector<T, 7>,
+    _a: &SVector<T, 7>,
+    _lambda: &SVector<T, 0>,
+    _p: &Params<T>,
+) -> (SMatrix<T, 7, 7>, SMatrix<T, 0, 7>, SMatrix<T, 0, 7>, SMatrix<T, 0, 7>) {
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+            ]),
+        ),
+        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
+    )
+}
+/// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
+/// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
+pub fn dynamics_derivatives<T: Arithmetic>(
+    q: &SVector<T, 7>,
+    qd: &SVector<T, 7>,
+    a: &SVector<T, 7>,
+    f: &SVector<T, 6>,
+    p: &Params<T>,
+) -> (SMatrix<T, 7, 7>, SMatrix<T, 7, 7>, SMatrix<T, 6, 7>, SMatrix<T, 6, 7>) {
+    let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
+    let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6] = qd.data.0[0];
+    let [a_0, a_1, a_2, a_3, a_4, a_5, a_6] = a.data.0[0];
+    let [f_0, f_1, f_2, f_3, f_4, f_5] = f.data.0[0];
+    let v0 = qd_0 * qd_0;
+    let (v3, v1) = q_0.sincos();
+    let v2 = v1 * p.crank_com_x;
+    let v4 = v3 * p.crank_com_y;
+    let v5 = v2 - v4;
+    let v6 = v0 * v5;
+    let v7 = v5 * v6;
+    let v8 = p.crank_com_x * v3;
+    let v9 = v1 * p.crank_com_y;
+    let v10 = v8 + v9;
+    let v11 = v0 * v10;
+    let v12 = v10 * v11;
+    let v13 = v7 - v12;
+    let v14 = v13 - v13;
+    let v15 = p.crank_mass * v14;
+    let v16 = qd_0 + qd_1;
+    let v17 = v16 * v16;
+    let (v20, v18) = q_1.sincos();
+    let v19 = v1 * v18;
+    let v21 = v3 * v20;
+    let v22 = v19 - v21;
+    let v23 = v22 * p.coupler_com_x;
+    let v24 = v3 * v18;
+    let v25 = v1 * v20;
+    let v26 = v24 + v25;
+    let v27 = v26 * p.coupler_com_y;
+    let v28 = v23 - v27;
+    let v29 = v17 * v28;
+    let v30 = v1 * p.crank_length_x;
+    let v31 = v3 * p.crank_length_y;
+    let v32 = v30 - v31;
+    let v33 = v0 * v32;
+    let v34 = v29 + v33;
+    let v35 = v28 + v32;
+    let v36 = v34 * v35;
+    let v37 = p.coupler_com_x * v26;
+    let v38 = v22 * p.coupler_com_y;
+    let v39 = v37 + v38;
+    let v40 = v3 * p.crank_length_x;
+    let v41 = v1 * p.crank_length_y;
+    let v42 = v40 + v41;
+    let v43 = v39 + v42;
+    let v44 = v17 * v39;
+    let v45 = v0 * v42;
+    let v46 = v44 + v45;
+    let v47 = v43 * v46;
+    let v48 = v36 - v47;
+    let v49 = v48 - v48;
+    let v50 = p.coupler_mass * v49;
+    let v51 = v15 + v50;
+    let v52 = v16 + qd_3;
+    let v53 = v52 * v52;
+    let (v56, v54) = q_3.sincos();
+    let v55 = v22 * v54;
+    let v57 = v26 * v56;
+    let v58 = v55 - v57;
+    let v59 = v58 * p.leg_com_x;
+    let v60 = v26 * v54;
+    let v61 = v22 * v56;
+    let v62 = v60 + v61;
+    let v63 = v62 * p.leg_com_y;
+    let v64 = v59 - v63;
+    let v65 = v53 * v64;
+    let v66 = v22 * p.leg_origin_x;
+    let v67 = v26 * p.leg_origin_y;
+    let v68 = v66 - v67;
+    let v69 = v17 * v68;
+    let v70 = v65 + v69;
+    let v71 = v33 + v70;
+    let v72 = v64 + v68;
+    let v73 = v32 + v72;
+    let v74 = v71 * v73;
+    let v75 = p.leg_com_x * v62;
+    let v76 = v58 * p.leg_com_y;
+    let v77 = v75 + v76;
+    let v78 = v26 * p.leg_origin_x;
+    let v79 = v22 * p.leg_origin_y;
+    let v80 = v78 + v79;
+    let v81 = v77 + v80;
+    let v82 = v42 + v81;
+    let v83 = v53 * v77;
+    let v84 = v17 * v80;
+    let v85 = v83 + v84;
+    let v86 = v45 + v85;
+    let v87 = v82 * v86;
+    let v88 = v74 - v87;
+    let v89 = v88 - v88;
+    let v90 = p.leg_mass * v89;
+    let v91 = v51 + v90;
+    let v92 = v52 + qd_5;
+    let v93 = v92 * v92;
+    let (v96, v94) = q_5.sincos();
+    let v95 = v58 * v94;
+    let v97 = v62 * v96;
+    let v98 = v95 - v97;
+    let v99 = v98 * p.strut_com_x;
+    let v100 = v62 * v94;
+    let v101 = v58 * v96;
+    let v102 = v100 + v101;
+    let v103 = v102 * p.strut_com_y;
+    let v104 = v99 - v103;
+    let v105 = v93 * v104;
+    let v106 = v58 * p.leg_length_x;
+    let v107 = v62 * p.leg_length_y;
+    let v108 = v106 - v107;
+    let v109 = v53 * v108;
+    let v110 = v105 + v109;
+    let v111 = v69 + v110;
+    let v112 = v33 + v111;
+    let v113 = v104 + v108;
+    let v114 = v68 + v113;
+    let v115 = v32 + v114;
+    let v116 = v112 * v115;
+    let v117 = p.strut_com_x * v102;
+    let v118 = v98 * p.strut_com_y;
+    let v119 = v117 + v118;
+    let v120 = v62 * p.leg_length_x;
+    let v121 = v58 * p.leg_length_y;
+    let v122 = v120 + v121;
+    let v123 = v119 + v122;
+    let v124 = v80 + v123;
+    let v125 = v42 + v124;
+    let v126 = v93 * v119;
+    let v127 = v53 * v122;
+    let v128 = v126 + v127;
+    let v129 = v84 + v128;
+    let v130 = v45 + v129;
+    let v131 = v125 * v130;
+    let v132 = v116 - v131;
+    let v133 = v132 - v132;
+    let v134 = p.strut_mass * v133;
+    let v135 = v91 + v134;
+    let v136 = v1 * p.prepared[20];
+    let v137 = v3 * p.prepared[19];
+    let v138 = v136 - v137;
+    let v139 = v22 * p.prepared[22];
+    let v140 = v26 * p.prepared[21];
+    let v141 = v139 - v140;
+    let v142 = v58 * p.prepared[24];
+    let v143 = v62 * p.prepared[23];
+    let v144 = v142 - v143;
+    let v145 = v98 * p.prepared[26];
+    let v146 = v102 * p.prepared[25];
+    let v147 = v145 - v146;
+    let v148 = v144 + v147;
+    let v149 = v141 + v148;
+    let v150 = v138 + v149;
+    let v151 = v135 + v150;
+    let v152 = v58 * p.hip_guide_b_x;
+    let v153 = v62 * p.hip_guide_b_y;
+    let v154 = v152 - v153;
+    let v155 = v68 + v154;
+    let v156 = v32 + v155;
+    let v157 = f_2 * v156;
+    let v158 = v26 * p.coupler_length_x;
+    let v159 = v22 * p.coupler_length_y;
+    let v160 = v158 + v159;
+    let v161 = v42 + v160;
+    let v162 = f_1 * v161;
+    let v163 = v22 * p.coupler_length_x;
+    let v164 = v26 * p.coupler_length_y;
+    let v165 = v163 - v164;
+    let v166 = v32 + v165;
+    let v167 = f_0 * v166;
+    let v168 = v162 + v167;
+    let v169 = v157 - v168;
+    let v170 = v62 * p.hip_guide_b_x;
+    let v171 = v58 * p.hip_guide_b_y;
+    let v172 = v170 + v171;
+    let v173 = v80 + v172;
+    let v174 = v42 + v173;
+    let v175 = f_3 * v174;
+    let v176 = v169 + v175;
+    let v177 = v98 * p.ankle_b_x;
+    let v178 = v102 * p.ankle_b_y;
+    let v179 = v177 - v178;
+    let v180 = v108 + v179;
+    let v181 = v68 + v180;
+    let v182 = v32 + v181;
+    let v183 = f_4 * v182;
+    let v184 = v176 + v183;
+    let v185 = v102 * p.ankle_b_x;
+    let v186 = v98 * p.ankle_b_y;
+    let v187 = v185 + v186;
+    let v188 = v122 + v187;
+    let v189 = v80 + v188;
+    let v190 = v42 + v189;
+    let v191 = f_5 * v190;
+    let v192 = v184 + v191;
+    let v193 = v151 - v192;
+    let v194 = v28 * v34;
+    let v195 = v39 * v46;
+    let v196 = v194 - v195;
+    let v197 = v196 - v196;
+    let v198 = p.coupler_mass * v197;
+    let v199 = v71 * v72;
+    let v200 = v81 * v86;
+    let v201 = v199 - v200;
+    let v202 = v201 - v201;
+    let v203 = p.leg_mass * v202;
+    let v204 = v198 + v203;
+    let v205 = v112 * v114;
+    let v206 = v124 * v130;
+    let v207 = v205 - v206;
+    let v208 = v207 - v207;
+    let v209 = p.strut_mass * v208;
+    let v210 = v204 + v209;
+    let v211 = v149 + v210;
+    let v212 = f_2 * v155;
+    let v213 = f_1 * v160;
+    let v214 = f_0 * v165;
+    let v215 = v213 + v214;
+    let v216 = v212 - v215;
+    let v217 = f_3 * v173;
+    let v218 = v216 + v217;
+    let v219 = f_4 * v181;
+    let v220 = v218 + v219;
+    let v221 = f_5 * v189;
+    let v222 = v220 + v221;
+    let v223 = v211 - v222;
+    let v224 = v64 * v71;
+    let v225 = v77 * v86;
+    let v226 = v224 - v225;
+    let v227 = v226 - v226;
+    let v228 = p.leg_mass * v227;
+    let v229 = v112 * v113;
+    let v230 = v123 * v130;
+    let v231 = v229 - v230;
+    let v232 = v231 - v231;
+    let v233 = p.strut_mass * v232;
+    let v234 = v228 + v233;
+    let v235 = v148 + v234;
+    let v236 = f_2 * v154;
+    let v237 = f_3 * v172;
+    let v238 = v236 + v237;
+    let v239 = f_4 * v180;
+    let v240 = v238 + v239;
+    let v241 = f_5 * v188;
+    let v242 = v240 + v241;
+    let v243 = v235 - v242;
+    let v244 = v104 * v112;
+    let v245 = v119 * v130;
+    let v246 = v244 - v245;
+    let v247 = v246 - v246;
+    let v248 = p.strut_mass * v247;
+    let v249 = v147 + v248;
+    let v250 = f_4 * v179;
+    let v251 = f_5 * v187;
+    let v252 = v250 + v251;
+    let v253 = v249 - v252;
+    let v254 = v94 * p.prepared[4];
+    let v255 = v96 * p.prepared[5];
+    let v256 = v254 - v255;
+    let v257 = p.prepared[8] + v256;
+    let v258 = v54 * v257;
+    let v259 = v96 * p.prepared[4];
+    let v260 = v94 * p.prepared[5];
+    let v261 = v259 + v260;
+    let v262 = p.prepared[9] + v261;
+    let v263 = v56 * v262;
+    let v264 = v258 - v263;
+    let v265 = p.prepared[10] + v264;
+    let v266 = v18 * v265;
+    let v267 = v56 * v257;
+    let v268 = v54 * v262;
+    let v269 = v267 + v268;
+    let v270 = p.prepared[11] + v269;
+    let v271 = v20 * v270;
+    let v272 = v266 - v271;
+    let v273 = p.crank_length_y * v272;
+    let v274 = v20 * v265;
+    let v275 = v18 * v270;
+    let v276 = v274 + v275;
+    let v277 = p.crank_length_x * v276;
+    let v278 = v273 - v277;
+    let v279 = v278 + v278;
+    let v280 = a_0 * v279;
+    let v281 = v278 * a_1;
+    let v282 = v280 + v281;
+    let v283 = v18 * v264;
+    let v284 = v20 * v269;
+    let v285 = v283 - v284;
+    let v286 = p.crank_length_y * v285;
+    let v287 = v20 * v264;
+    let v288 = v18 * v269;
+    let v289 = v287 + v288;
+    let v290 = p.crank_length_x * v289;
+    let v291 = v286 - v290;
+    let v292 = a_3 * v291;
+    let v293 = v282 + v292;
+    let v294 = v54 * v256;
+    let v295 = v56 * v261;
+    let v296 = v294 - v295;
+    let v297 = v18 * v296;
+    let v298 = v54 * v261;
+    let v299 = v56 * v256;
+    let v300 = v298 + v299;
+    let v301 = v20 * v300;
+    let v302 = v297 - v301;
+    let v303 = p.crank_length_y * v302;
+    let v304 = v20 * v296;
+    let v305 = v18 * v300;
+    let v306 = v304 + v305;
+    let v307 = p.crank_length_x * v306;
+    let v308 = v303 - v307;
+    let v309 = a_5 * v308;
+    let v310 = v293 + v309;
+    let v311 = v43 * v44;
+    let v312 = v194 - v311;
+    let v313 = v29 * v35;
+    let v314 = v313 - v195;
+    let v315 = v312 - v314;
+    let v316 = p.coupler_mass * v315;
+    let v317 = v82 * v85;
+    let v318 = v199 - v317;
+    let v319 = v70 * v73;
+    let v320 = v319 - v200;
+    let v321 = v318 - v320;
+    let v322 = p.leg_mass * v321;
+    let v323 = v316 + v322;
+    let v324 = v125 * v129;
+    let v325 = v205 - v324;
+    let v326 = v111 * v115;
+    let v327 = v326 - v206;
+    let v328 = v325 - v327;
+    let v329 = p.strut_mass * v328;
+    let v330 = v323 + v329;
+    let v331 = v149 + v330;
+    let v332 = v310 + v331;
+    let v333 = v332 - v222;
+    let v334 = a_0 * v278;
+    let v335 = v39 * v44;
+    let v336 = v194 - v335;
+    let v337 = v28 * v29;
+    let v338 = v337 - v195;
+    let v339 = v336 - v338;
+    let v340 = p.coupler_mass * v339;
+    let v341 = v81 * v85;
+    let v342 = v199 - v341;
+    let v343 = v70 * v72;
+    let v344 = v343 - v200;
+    let v345 = v342 - v344;
+    let v346 = p.leg_mass * v345;
+    let v347 = v340 + v346;
+    let v348 = v124 * v129;
+    let v349 = v205 - v348;
+    let v350 = v111 * v114;
+    let v351 = v350 - v206;
+    let v352 = v349 - v351;
+    let v353 = p.strut_mass * v352;
+    let v354 = v347 + v353;
+    let v355 = v149 + v354;
+    let v356 = v334 + v355;
+    let v357 = v356 - v222;
+    let v358 = a_0 * v291;
+    let v359 = v77 * v85;
+    let v360 = v224 - v359;
+    let v361 = v64 * v70;
+    let v362 = v361 - v225;
+    let v363 = v360 - v362;
+    let v364 = p.leg_mass * v363;
+    let v365 = v123 * v129;
+    let v366 = v229 - v365;
+    let v367 = v111 * v113;
+    let v368 = v367 - v230;
+    let v369 = v366 - v368;
+    let v370 = p.strut_mass * v369;
+    let v371 = v364 + v370;
+    let v372 = v148 + v371;
+    let v373 = v358 + v372;
+    let v374 = v373 - v242;
+    let v375 = a_0 * v308;
+    let v376 = v119 * v129;
+    let v377 = v244 - v376;
+    let v378 = v104 * v111;
+    let v379 = v378 - v245;
+    let v380 = v377 - v379;
+    let v381 = p.strut_mass * v380;
+    let v382 = v147 + v381;
+    let v383 = v375 + v382;
+    let v384 = v383 - v252;
+    let v385 = qd_2 * qd_2;
+    let (v388, v386) = q_2.sincos();
+    let v387 = v386 * p.rocker_com_x;
+    let v389 = v388 * p.rocker_com_y;
+    let v390 = v387 - v389;
+    let v391 = v385 * v390;
+    let v392 = v390 * v391;
+    let v393 = p.rocker_com_x * v388;
+    let v394 = v386 * p.rocker_com_y;
+    let v395 = v393 + v394;
+    let v396 = v385 * v395;
+    let v397 = v395 * v396;
+    let v398 = v392 - v397;
+    let v399 = v398 - v398;
+    let v400 = p.rocker_mass * v399;
+    let v401 = qd_2 + qd_6;
+    let v402 = v401 * v401;
+    let (v405, v403) = q_6.sincos();
+    let v404 = v386 * v403;
+    let v406 = v388 * v405;
+    let v407 = v404 - v406;
+    let v408 = v407 * p.brace_com_x;
+    let v409 = v388 * v403;
+    let v410 = v386 * v405;
+    let v411 = v409 + v410;
+    let v412 = v411 * p.brace_com_y;
+    let v413 = v408 - v412;
+    let v414 = v402 * v413;
+    let v415 = v386 * p.brace_origin_x;
+    let v416 = v388 * p.brace_origin_y;
+    let v417 = v415 - v416;
+    let v418 = v385 * v417;
+    let v419 = v414 + v418;
+    let v420 = v413 + v417;
+    let v421 = v419 * v420;
+    let v422 = p.brace_com_x * v411;
+    let v423 = v407 * p.brace_com_y;
+    let v424 = v422 + v423;
+    let v425 = v388 * p.brace_origin_x;
+    let v426 = v386 * p.brace_origin_y;
+    let v427 = v425 + v426;
+    let v428 = v424 + v427;
+    let v429 = v402 * v424;
+    let v430 = v385 * v427;
+    let v431 = v429 + v430;
+    let v432 = v428 * v431;
+    let v433 = v421 - v432;
+    let v434 = v433 - v433;
+    let v435 = p.brace_mass * v434;
+    let v436 = v400 + v435;
+    let v437 = v386 * p.prepared[28];
+    let v438 = v388 * p.prepared[27];
+    let v439 = v437 - v438;
+    let v440 = v407 * p.prepared[30];
+    let v441 = v411 * p.prepared[29];
+    let v442 = v440 - v441;
+    let v443 = v439 + v442;
+    let v444 = v436 + v443;
+    let v445 = v386 * p.rocker_length_x;
+    let v446 = v388 * p.rocker_length_y;
+    let v447 = v445 - v446;
+    let v448 = f_0 * v447;
+    let v449 = v388 * p.rocker_length_x;
+    let v450 = v386 * p.rocker_length_y;
+    let v451 = v449 + v450;
+    let v452 = f_1 * v451;
+    let v453 = v448 + v452;
+    let v454 = v407 * p.brace_length_x;
+    let v455 = v411 * p.brace_length_y;
+    let v456 = v454 - v455;
+    let v457 = v417 + v456;
+    let v458 = f_4 * v457;
+    let v459 = v453 - v458;
+    let v460 = v411 * p.brace_length_x;
+    let v461 = v407 * p.brace_length_y;
+    let v462 = v460 + v461;
+    let v463 = v427 + v462;
+    let v464 = f_5 * v463;
+    let v465 = v459 - v464;
+    let v466 = v444 - v465;
+    let v467 = v413 * v419;
+    let v468 = v424 * v431;
+    let v469 = v467 - v468;
+    let v470 = v469 - v469;
+    let v471 = p.brace_mass * v470;
+    let v472 = v442 + v471;
+    let v473 = f_5 * v462;
+    let v474 = f_4 * v456;
+    let v475 = v473 + v474;
+    let v476 = v472 + v475;
+    let v477 = p.leg_origin_y * v264;
+    let v478 = p.leg_origin_x * v269;
+    let v479 = v477 - v478;
+    let v480 = v479 + v479;
+    let v481 = v291 + v291;
+    let v482 = v480 + v481;
+    let v483 = a_0 * v482;
+    let v484 = v291 + v480;
+    let v485 = a_1 * v484;
+    let v486 = v483 + v485;
+    let v487 = v291 + v479;
+    let v488 = a_3 * v487;
+    let v489 = v486 + v488;
+    let v490 = p.leg_origin_y * v296;
+    let v491 = p.leg_origin_x * v300;
+    let v492 = v490 - v491;
+    let v493 = v308 + v492;
+    let v494 = a_5 * v493;
+    let v495 = v489 + v494;
+    let v496 = v82 * v83;
+    let v497 = v224 - v496;
+    let v498 = v65 * v73;
+    let v499 = v498 - v225;
+    let v500 = v497 - v499;
+    let v501 = p.leg_mass * v500;
+    let v502 = v125 * v128;
+    let v503 = v229 - v502;
+    let v504 = v110 * v115;
+    let v505 = v504 - v230;
+    let v506 = v503 - v505;
+    let v507 = p.strut_mass * v506;
+    let v508 = v501 + v507;
+    let v509 = v148 + v508;
+    let v510 = v495 + v509;
+    let v511 = v510 - v242;
+    let v512 = a_0 * v484;
+    let v513 = a_1 * v480;
+    let v514 = v512 + v513;
+    let v515 = a_3 * v479;
+    let v516 = v514 + v515;
+    let v517 = a_5 * v492;
+    let v518 = v516 + v517;
+    let v519 = v81 * v83;
+    let v520 = v224 - v519;
+    let v521 = v65 * v72;
+    let v522 = v521 - v225;
+    let v523 = v520 - v522;
+    let v524 = p.leg_mass * v523;
+    let v525 = v124 * v128;
+    let v526 = v229 - v525;
+    let v527 = v110 * v114;
+    let v528 = v527 - v230;
+    let v529 = v526 - v528;
+    let v530 = p.strut_mass * v529;
+    let v531 = v524 + v530;
+    let v532 = v148 + v531;
+    let v533 = v518 + v532;
+    let v534 = v533 - v242;
+    let v535 = a_0 * v487;
+    let v536 = a_1 * v479;
+    let v537 = v535 + v536;
+    let v538 = v77 * v83;
+    let v539 = v224 - v538;
+    let v540 = v64 * v65;
+    let v541 = v540 - v225;
+    let v542 = v539 - v541;
+    let v543 = p.leg_mass * v542;
+    let v544 = v123 * v128;
+    let v545 = v229 - v544;
+    let v546 = v110 * v113;
+    let v547 = v546 - v230;
+    let v548 = v545 - v547;
+    let v549 = p.strut_mass * v548;
+    let v550 = v543 + v549;
+    let v551 = v148 + v550;
+    let v552 = v537 + v551;
+    let v553 = v552 - v242;
+    let v554 = a_0 * v493;
+    let v555 = a_1 * v492;
+    let v556 = v554 + v555;
+    let v557 = v119 * v128;
+    let v558 = v244 - v557;
+    let v559 = v104 * v110;
+    let v560 = v559 - v245;
+    let v561 = v558 - v560;
+    let v562 = p.strut_mass * v561;
+    let v563 = v147 + v562;
+    let v564 = v556 + v563;
+    let v565 = v564 - v252;
+    let v566 = qd_4 * qd_4;
+    let (v569, v567) = q_4.sincos();
+    let v568 = v567 * p.guide_com_x;
+    let v570 = v569 * p.guide_com_y;
+    let v571 = v568 - v570;
+    let v572 = v566 * v571;
+    let v573 = v571 * v572;
+    let v574 = p.guide_com_x * v569;
+    let v575 = v567 * p.guide_com_y;
+    let v576 = v574 + v575;
+    let v577 = v566 * v576;
+    let v578 = v576 * v577;
+    let v579 = v573 - v578;
+    let v580 = v579 - v579;
+    let v581 = p.guide_mass * v580;
+    let v582 = v567 * p.prepared[32];
+    let v583 = v569 * p.prepared[31];
+    let v584 = v582 - v583;
+    let v585 = v581 + v584;
+    let v586 = v569 * p.guide_length_x;
+    let v587 = v567 * p.guide_length_y;
+    let v588 = v586 + v587;
+    let v589 = f_3 * v588;
+    let v590 = v567 * p.guide_length_x;
+    let v591 = v569 * p.guide_length_y;
+    let v592 = v590 - v591;
+    let v593 = f_2 * v592;
+    let v594 = v589 + v593;
+    let v595 = v585 + v594;
+    let v596 = v96 * p.prepared[6];
+    let v597 = v94 * p.prepared[7];
+    let v598 = v596 + v597;
+    let v599 = -v598;
+    let v600 = v599 + v599;
+    let v601 = v492 + v492;
+    let v602 = v600 + v601;
+    let v603 = v308 + v308;
+    let v604 = v602 + v603;
+    let v605 = a_0 * v604;
+    let v606 = v308 + v602;
+    let v607 = a_1 * v606;
+    let v608 = v605 + v607;
+    let v609 = v492 + v600;
+    let v610 = v308 + v609;
+    let v611 = a_3 * v610;
+    let v612 = v608 + v611;
+    let v613 = v94 * p.prepared[12];
+    let v614 = v613 - v596;
+    let v615 = v492 + v614;
+    let v616 = v308 + v615;
+    let v617 = a_5 * v616;
+    let v618 = v612 + v617;
+    let v619 = v125 * v126;
+    let v620 = v244 - v619;
+    let v621 = v105 * v115;
+    let v622 = v621 - v245;
+    let v623 = v620 - v622;
+    let v624 = p.strut_mass * v623;
+    let v625 = v147 + v624;
+    let v626 = v618 + v625;
+    let v627 = v626 - v252;
+    let v628 = a_0 * v606;
+    let v629 = a_1 * v602;
+    let v630 = v628 + v629;
+    let v631 = a_3 * v609;
+    let v632 = v630 + v631;
+    let v633 = a_5 * v615;
+    let v634 = v632 + v633;
+    let v635 = v124 * v126;
+    let v636 = v244 - v635;
+    let v637 = v105 * v114;
+    let v638 = v637 - v245;
+    let v639 = v636 - v638;
+    let v640 = p.strut_mass * v639;
+    let v641 = v147 + v640;
+    let v642 = v634 + v641;
+    let v643 = v642 - v252;
+    let v644 = a_0 * v610;
+    let v645 = a_1 * v609;
+    let v646 = v644 + v645;
+    let v647 = a_3 * v600;
+    let v648 = v646 + v647;
+    let v649 = a_5 * v614;
+    let v650 = v648 + v649;
+    let v651 = v123 * v126;
+    let v652 = v244 - v651;
+    let v653 = v105 * v113;
+    let v654 = v653 - v245;
+    let v655 = v652 - v654;
+    let v656 = p.strut_mass * v655;
+    let v657 = v147 + v656;
+    let v658 = v650 + v657;
+    let v659 = v658 - v252;
+    let v660 = a_0 * v616;
+    let v661 = a_1 * v615;
+    let v662 = v660 + v661;
+    let v663 = a_3 * v614;
+    let v664 = v662 + v663;
+    let v665 = v119 * v126;
+    let v666 = v244 - v665;
+    let v667 = v104 * v105;
+    let v668 = v667 - v245;
+    let v669 = v666 - v668;
+    let v670 = p.strut_mass * v669;
+    let v671 = v147 + v670;
+    let v672 = v664 + v671;
+    let v673 = v672 - v252;
+    let v674 = v405 * p.prepared[15];
+    let v675 = v403 * p.prepared[16];
+    let v676 = v674 + v675;
+    let v677 = -v676;
+    let v678 = v677 + v677;
+    let v679 = a_2 * v678;
+    let v680 = v403 * p.prepared[17];
+    let v681 = v680 - v674;
+    let v682 = a_6 * v681;
+    let v683 = v679 + v682;
+    let v684 = v428 * v429;
+    let v685 = v467 - v684;
+    let v686 = v414 * v420;
+    let v687 = v686 - v468;
+    let v688 = v685 - v687;
+    let v689 = p.brace_mass * v688;
+    let v690 = v442 + v689;
+    let v691 = v683 + v690;
+    let v692 = v475 + v691;
+    let v693 = a_2 * v681;
+    let v694 = v424 * v429;
+    let v695 = v467 - v694;
+    let v696 = v413 * v414;
+    let v697 = v696 - v468;
+    let v698 = v695 - v697;
+    let v699 = p.brace_mass * v698;
+    let v700 = v442 + v699;
+    let v701 = v693 + v700;
+    let v702 = v475 + v701;
+    let v703 = qd_0 + qd_0;
+    let v704 = v5 * v703;
+    let v705 = v10 * v704;
+    let v706 = v10 * v703;
+    let v707 = v5 * v706;
+    let v708 = v705 - v707;
+    let v709 = p.crank_mass * v708;
+    let v710 = v16 + v16;
+    let v711 = v28 * v710;
+    let v712 = v32 * v703;
+    let v713 = v711 + v712;
+    let v714 = v43 * v713;
+    let v715 = v39 * v710;
+    let v716 = v42 * v703;
+    let v717 = v715 + v716;
+    let v718 = v35 * v717;
+    let v719 = v714 - v718;
+    let v720 = p.coupler_mass * v719;
+    let v721 = v709 + v720;
+    let v722 = v52 + v52;
+    let v723 = v64 * v722;
+    let v724 = v68 * v710;
+    let v725 = v723 + v724;
+    let v726 = v712 + v725;
+    let v727 = v82 * v726;
+    let v728 = v77 * v722;
+    let v729 = v80 * v710;
+    let v730 = v728 + v729;
+    let v731 = v716 + v730;
+    let v732 = v73 * v731;
+    let v733 = v727 - v732;
+    let v734 = p.leg_mass * v733;
+    let v735 = v721 + v734;
+    let v736 = v92 + v92;
+    let v737 = v104 * v736;
+    let v738 = v108 * v722;
+    let v739 = v737 + v738;
+    let v740 = v724 + v739;
+    let v741 = v712 + v740;
+    let v742 = v125 * v741;
+    let v743 = v119 * v736;
+    let v744 = v122 * v722;
+    let v745 = v743 + v744;
+    let v746 = v729 + v745;
+    let v747 = v716 + v746;
+    let v748 = v115 * v747;
+    let v749 = v742 - v748;
+    let v750 = p.strut_mass * v749;
+    let v751 = v735 + v750;
+    let v752 = v751 + p.crank_damping;
+    let v753 = v39 * v713;
+    let v754 = v28 * v717;
+    let v755 = v753 - v754;
+    let v756 = p.coupler_mass * v755;
+    let v757 = v81 * v726;
+    let v758 = v72 * v731;
+    let v759 = v757 - v758;
+    let v760 = p.leg_mass * v759;
+    let v761 = v756 + v760;
+    let v762 = v124 * v741;
+    let v763 = v114 * v747;
+    let v764 = v762 - v763;
+    let v765 = p.strut_mass * v764;
+    let v766 = v761 + v765;
+    let v767 = v77 * v726;
+    let v768 = v64 * v731;
+    let v769 = v767 - v768;
+    let v770 = p.leg_mass * v769;
+    let v771 = v123 * v741;
+    let v772 = v113 * v747;
+    let v773 = v771 - v772;
+    let v774 = p.strut_mass * v773;
+    let v775 = v770 + v774;
+    let v776 = v119 * v741;
+    let v777 = v104 * v747;
+    let v778 = v776 - v777;
+    let v779 = p.strut_mass * v778;
+    let v780 = v43 * v711;
+    let v781 = v35 * v715;
+    let v782 = v780 - v781;
+    let v783 = p.coupler_mass * v782;
+    let v784 = v82 * v725;
+    let v785 = v73 * v730;
+    let v786 = v784 - v785;
+    let v787 = p.leg_mass * v786;
+    let v788 = v783 + v787;
+    let v789 = v125 * v740;
+    let v790 = v115 * v746;
+    let v791 = v789 - v790;
+    let v792 = p.strut_mass * v791;
+    let v793 = v788 + v792;
+    let v794 = v39 * v711;
+    let v795 = v28 * v715;
+    let v796 = v794 - v795;
+    let v797 = p.coupler_mass * v796;
+    let v798 = v81 * v725;
+    let v799 = v72 * v730;
+    let v800 = v798 - v799;
+    let v801 = p.leg_mass * v800;
+    let v802 = v797 + v801;
+    let v803 = v124 * v740;
+    let v804 = v114 * v746;
+    let v805 = v803 - v804;
+    let v806 = p.strut_mass * v805;
+    let v807 = v802 + v806;
+    let v808 = v807 + p.coupler_damping;
+    let v809 = v77 * v725;
+    let v810 = v64 * v730;
+    let v811 = v809 - v810;
+    let v812 = p.leg_mass * v811;
+    let v813 = v123 * v740;
+    let v814 = v113 * v746;
+    let v815 = v813 - v814;
+    let v816 = p.strut_mass * v815;
+    let v817 = v812 + v816;
+    let v818 = v119 * v740;
+    let v819 = v104 * v746;
+    let v820 = v818 - v819;
+    let v821 = p.strut_mass * v820;
+    let v822 = qd_2 + qd_2;
+    let v823 = v390 * v822;
+    let v824 = v395 * v823;
+    let v825 = v395 * v822;
+    let v826 = v390 * v825;
+    let v827 = v824 - v826;
+    let v828 = p.rocker_mass * v827;
+    let v829 = v401 + v401;
+    let v830 = v413 * v829;
+    let v831 = v417 * v822;
+    let v832 = v830 + v831;
+    let v833 = v428 * v832;
+    let v834 = v424 * v829;
+    let v835 = v427 * v822;
+    let v836 = v834 + v835;
+    let v837 = v420 * v836;
+    let v838 = v833 - v837;
+    let v839 = p.brace_mass * v838;
+    let v840 = v828 + v839;
+    let v841 = v840 + p.rocker_damping;
+    let v842 = v424 * v832;
+    let v843 = v413 * v836;
+    let v844 = v842 - v843;
+    let v845 = p.brace_mass * v844;
+    let v846 = v82 * v723;
+    let v847 = v73 * v728;
+    let v848 = v846 - v847;
+    let v849 = p.leg_mass * v848;
+    let v850 = v125 * v739;
+    let v851 = v115 * v745;
+    let v852 = v850 - v851;
+    let v853 = p.strut_mass * v852;
+    let v854 = v849 + v853;
+    let v855 = v81 * v723;
+    let v856 = v72 * v728;
+    let v857 = v855 - v856;
+    let v858 = p.leg_mass * v857;
+    let v859 = v124 * v739;
+    let v860 = v114 * v745;
+    let v861 = v859 - v860;
+    let v862 = p.strut_mass * v861;
+    let v863 = v858 + v862;
+    let v864 = v77 * v723;
+    let v865 = v64 * v728;
+    let v866 = v864 - v865;
+    let v867 = p.leg_mass * v866;
+    let v868 = v123 * v739;
+    let v869 = v113 * v745;
+    let v870 = v868 - v869;
+    let v871 = p.strut_mass * v870;
+    let v872 = v867 + v871;
+    let v873 = v872 + p.leg_damping;
+    let v874 = v119 * v739;
+    let v875 = v104 * v745;
+    let v876 = v874 - v875;
+    let v877 = p.strut_mass * v876;
+    let v878 = qd_4 + qd_4;
+    let v879 = v571 * v878;
+    let v880 = v576 * v879;
+    let v881 = v576 * v878;
+    let v882 = v571 * v881;
+    let v883 = v880 - v882;
+    let v884 = p.guide_mass * v883;
+    let v885 = v884 + p.guide_damping;
+    let v886 = v125 * v737;
+    let v887 = v115 * v743;
+    let v888 = v886 - v887;
+    let v889 = p.strut_mass * v888;
+    let v890 = v124 * v737;
+    let v891 = v114 * v743;
+    let v892 = v890 - v891;
+    let v893 = p.strut_mass * v892;
+    let v894 = v123 * v737;
+    let v895 = v113 * v743;
+    let v896 = v894 - v895;
+    let v897 = p.strut_mass * v896;
+    let v898 = v119 * v737;
+    let v899 = v104 * v743;
+    let v900 = v898 - v899;
+    let v901 = p.strut_mass * v900;
+    let v902 = v901 + p.strut_damping;
+    let v903 = v428 * v830;
+    let v904 = v420 * v834;
+    let v905 = v903 - v904;
+    let v906 = p.brace_mass * v905;
+    let v907 = v424 * v830;
+    let v908 = v413 * v834;
+    let v909 = v907 - v908;
+    let v910 = p.brace_mass * v909;
+    let v911 = v910 + p.brace_damping;
+    let v912 = v17 * v160;
+    let v913 = v45 + v912;
+    let v914 = v166 * a_0;
+    let v915 = v165 * a_1;
+    let v916 = v914 + v915;
+    let v917 = v913 - v916;
+    let v918 = v161 * a_0;
+    let v919 = v160 * a_1;
+    let v920 = v918 + v919;
+    let v921 = v17 * v165;
+    let v922 = v33 + v921;
+    let v923 = v920 + v922;
+    let v924 = -v923;
+    let v925 = v156 * a_0;
+    let v926 = v155 * a_1;
+    let v927 = v925 + v926;
+    let v928 = v154 * a_3;
+    let v929 = v927 + v928;
+    let v930 = v53 * v172;
+    let v931 = v84 + v930;
+    let v932 = v45 + v931;
+    let v933 = v929 - v932;
+    let v934 = v174 * a_0;
+    let v935 = v173 * a_1;
+    let v936 = v934 + v935;
+    let v937 = v172 * a_3;
+    let v938 = v936 + v937;
+    let v939 = v53 * v154;
+    let v940 = v69 + v939;
+    let v941 = v33 + v940;
+    let v942 = v938 + v941;
+    let v943 = v182 * a_0;
+    let v944 = v181 * a_1;
+    let v945 = v943 + v944;
+    let v946 = v180 * a_3;
+    let v947 = v945 + v946;
+    let v948 = v179 * a_5;
+    let v949 = v947 + v948;
+    let v950 = v93 * v187;
+    let v951 = v127 + v950;
+    let v952 = v84 + v951;
+    let v953 = v45 + v952;
+    let v954 = v949 - v953;
+    let v955 = v190 * a_0;
+    let v956 = v189 * a_1;
+    let v957 = v955 + v956;
+    let v958 = v188 * a_3;
+    let v959 = v957 + v958;
+    let v960 = v187 * a_5;
+    let v961 = v959 + v960;
+    let v962 = v93 * v179;
+    let v963 = v109 + v962;
+    let v964 = v69 + v963;
+    let v965 = v33 + v964;
+    let v966 = v961 + v965;
+    let v967 = v165 * a_0;
+    let v968 = v915 + v967;
+    let v969 = v912 - v968;
+    let v970 = v160 * a_0;
+    let v971 = v919 + v970;
+    let v972 = v921 + v971;
+    let v973 = -v972;
+    let v974 = v155 * a_0;
+    let v975 = v926 + v974;
+    let v976 = v928 + v975;
+    let v977 = v976 - v931;
+    let v978 = v173 * a_0;
+    let v979 = v935 + v978;
+    let v980 = v937 + v979;
+    let v981 = v940 + v980;
+    let v982 = v181 * a_0;
+    let v983 = v944 + v982;
+    let v984 = v946 + v983;
+    let v985 = v948 + v984;
+    let v986 = v985 - v952;
+    let v987 = v189 * a_0;
+    let v988 = v956 + v987;
+    let v989 = v958 + v988;
+    let v990 = v960 + v989;
+    let v991 = v964 + v990;
+    let v992 = v447 * a_2;
+    let v993 = v385 * v451;
+    let v994 = v992 - v993;
+    let v995 = v451 * a_2;
+    let v996 = v385 * v447;
+    let v997 = v995 + v996;
+    let v998 = v402 * v462;
+    let v999 = v430 + v998;
+    let v1000 = v457 * a_2;
+    let v1001 = v456 * a_6;
+    let v1002 = v1000 + v1001;
+    let v1003 = v999 - v1002;
+    let v1004 = v463 * a_2;
+    let v1005 = v462 * a_6;
+    let v1006 = v1004 + v1005;
+    let v1007 = v402 * v456;
+    let v1008 = v418 + v1007;
+    let v1009 = v1006 + v1008;
+    let v1010 = -v1009;
+    let v1011 = v154 * a_0;
+    let v1012 = v154 * a_1;
+    let v1013 = v1011 + v1012;
+    let v1014 = v928 + v1013;
+    let v1015 = v1014 - v930;
+    let v1016 = v172 * a_0;
+    let v1017 = v172 * a_1;
+    let v1018 = v1016 + v1017;
+    let v1019 = v937 + v1018;
+    let v1020 = v939 + v1019;
+    let v1021 = v180 * a_0;
+    let v1022 = v180 * a_1;
+    let v1023 = v1021 + v1022;
+    let v1024 = v946 + v1023;
+    let v1025 = v948 + v1024;
+    let v1026 = v1025 - v951;
+    let v1027 = v188 * a_0;
+    let v1028 = v188 * a_1;
+    let v1029 = v1027 + v1028;
+    let v1030 = v958 + v1029;
+    let v1031 = v960 + v1030;
+    let v1032 = v963 + v1031;
+    let v1033 = v566 * v588;
+    let v1034 = v592 * a_4;
+    let v1035 = v1033 - v1034;
+    let v1036 = v588 * a_4;
+    let v1037 = v566 * v592;
+    let v1038 = v1036 + v1037;
+    let v1039 = -v1038;
+    let v1040 = v179 * a_0;
+    let v1041 = v179 * a_1;
+    let v1042 = v1040 + v1041;
+    let v1043 = v179 * a_3;
+    let v1044 = v1042 + v1043;
+    let v1045 = v948 + v1044;
+    let v1046 = v1045 - v950;
+    let v1047 = v187 * a_0;
+    let v1048 = v187 * a_1;
+    let v1049 = v1047 + v1048;
+    let v1050 = v187 * a_3;
+    let v1051 = v1049 + v1050;
+    let v1052 = v960 + v1051;
+    let v1053 = v962 + v1052;
+    let v1054 = v456 * a_2;
+    let v1055 = v1001 + v1054;
+    let v1056 = v998 - v1055;
+    let v1057 = v462 * a_2;
+    let v1058 = v1005 + v1057;
+    let v1059 = v1007 + v1058;
+    let v1060 = -v1059;
+    let v1061 = qd_0 * v166;
+    let v1062 = qd_1 * v165;
+    let v1063 = v1061 + v1062;
+    let v1064 = -v1063;
+    let v1065 = qd_0 * v161;
+    let v1066 = qd_1 * v160;
+    let v1067 = v1065 + v1066;
+    let v1068 = -v1067;
+    let v1069 = qd_0 * v156;
+    let v1070 = qd_1 * v155;
+    let v1071 = v1069 + v1070;
+    let v1072 = qd_3 * v154;
+    let v1073 = v1071 + v1072;
+    let v1074 = qd_0 * v174;
+    let v1075 = qd_1 * v173;
+    let v1076 = v1074 + v1075;
+    let v1077 = qd_3 * v172;
+    let v1078 = v1076 + v1077;
+    let v1079 = qd_0 * v182;
+    let v1080 = qd_1 * v181;
+    let v1081 = v1079 + v1080;
+    let v1082 = qd_3 * v180;
+    let v1083 = v1081 + v1082;
+    let v1084 = qd_5 * v179;
+    let v1085 = v1083 + v1084;
+    let v1086 = qd_0 * v190;
+    let v1087 = qd_1 * v189;
+    let v1088 = v1086 + v1087;
+    let v1089 = qd_3 * v188;
+    let v1090 = v1088 + v1089;
+    let v1091 = qd_5 * v187;
+    let v1092 = v1090 + v1091;
+    let v1093 = qd_0 * v165;
+    let v1094 = v1062 + v1093;
+    let v1095 = -v1094;
+    let v1096 = qd_0 * v160;
+    let v1097 = v1066 + v1096;
+    let v1098 = -v1097;
+    let v1099 = qd_0 * v155;
+    let v1100 = v1070 + v1099;
+    let v1101 = v1072 + v1100;
+    let v1102 = qd_0 * v173;
+    let v1103 = v1075 + v1102;
+    let v1104 = v1077 + v1103;
+    let v1105 = qd_0 * v181;
+    let v1106 = v1080 + v1105;
+    let v1107 = v1082 + v1106;
+    let v1108 = v1084 + v1107;
+    let v1109 = qd_0 * v189;
+    let v1110 = v1087 + v1109;
+    let v1111 = v1089 + v1110;
+    let v1112 = v1091 + v1111;
+    let v1113 = qd_2 * v447;
+    let v1114 = qd_2 * v451;
+    let v1115 = qd_2 * v457;
+    let v1116 = qd_6 * v456;
+    let v1117 = v1115 + v1116;
+    let v1118 = -v1117;
+    let v1119 = qd_2 * v463;
+    let v1120 = qd_6 * v462;
+    let v1121 = v1119 + v1120;
+    let v1122 = -v1121;
+    let v1123 = qd_0 * v154;
+    let v1124 = qd_1 * v154;
+    let v1125 = v1123 + v1124;
+    let v1126 = v1072 + v1125;
+    let v1127 = qd_0 * v172;
+    let v1128 = qd_1 * v172;
+    let v1129 = v1127 + v1128;
+    let v1130 = v1077 + v1129;
+    let v1131 = qd_0 * v180;
+    let v1132 = qd_1 * v180;
+    let v1133 = v1131 + v1132;
+    let v1134 = v1082 + v1133;
+    let v1135 = v1084 + v1134;
+    let v1136 = qd_0 * v188;
+    let v1137 = qd_1 * v188;
+    let v1138 = v1136 + v1137;
+    let v1139 = v1089 + v1138;
+    let v1140 = v1091 + v1139;
+    let v1141 = qd_4 * v592;
+    let v1142 = -v1141;
+    let v1143 = qd_4 * v588;
+    let v1144 = -v1143;
+    let v1145 = qd_0 * v179;
+    let v1146 = qd_1 * v179;
+    let v1147 = v1145 + v1146;
+    let v1148 = qd_3 * v179;
+    let v1149 = v1147 + v1148;
+    let v1150 = v1084 + v1149;
+    let v1151 = qd_0 * v187;
+    let v1152 = qd_1 * v187;
+    let v1153 = v1151 + v1152;
+    let v1154 = qd_3 * v187;
+    let v1155 = v1153 + v1154;
+    let v1156 = v1091 + v1155;
+    let v1157 = qd_2 * v456;
+    let v1158 = v1116 + v1157;
+    let v1159 = -v1158;
+    let v1160 = qd_2 * v462;
+    let v1161 = v1120 + v1160;
+    let v1162 = -v1161;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [v193, v223, T::lit(0.0), v243, T::lit(0.0), v253, T::lit(0.0)],
+                [v333, v357, T::lit(0.0), v374, T::lit(0.0), v384, T::lit(0.0)],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v466,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v476,
+                ],
+                [v511, v534, T::lit(0.0), v553, T::lit(0.0), v565, T::lit(0.0)],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v595,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [v627, v643, T::lit(0.0), v659, T::lit(0.0), v673, T::lit(0.0)],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v692,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v702,
+                ],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [v752, v766, T::lit(0.0), v775, T::lit(0.0), v779, T::lit(0.0)],
+                [v793, v808, T::lit(0.0), v817, T::lit(0.0), v821, T::lit(0.0)],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v841,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v845,
+                ],
+                [v854, v863, T::lit(0.0), v873, T::lit(0.0), v877, T::lit(0.0)],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v885,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                ],
+                [v889, v893, T::lit(0.0), v897, T::lit(0.0), v902, T::lit(0.0)],
+                [
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v906,
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    T::lit(0.0),
+                    v911,
+                ],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [v917, v924, v933, v942, v954, v966],
+                [v969, v973, v977, v981, v986, v991],
+                [v994, v997, T::lit(0.0), T::lit(0.0), v1003, v1010],
+                [T::lit(0.0), T::lit(0.0), v1015, v1020, v1026, v1032],
+                [T::lit(0.0), T::lit(0.0), v1035, v1039, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v1046, v1053],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v1056, v1060],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [v1064, v1068, v1073, v1078, v1085, v1092],
+                [v1095, v1098, v1101, v1104, v1108, v1112],
+                [v1113, v1114, T::lit(0.0), T::lit(0.0), v1118, v1122],
+                [T::lit(0.0), T::lit(0.0), v1126, v1130, v1135, v1140],
+                [T::lit(0.0), T::lit(0.0), v1142, v1144, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v1150, v1156],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v1159, v1162],
+            ]),
+        ),
     )
 }

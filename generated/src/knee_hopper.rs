@@ -9,7 +9,8 @@
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
-    Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters,
+    Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
+    JointKind, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 3;
@@ -409,6 +410,62 @@ impl LegModel<NQ, NC, NU> for KneeHopper {
             constraint_bias,
         }
     }
+    fn mass_matrix_derivative<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        a: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 3, 3> {
+        mass_matrix_derivative(q, a, p)
+    }
+    fn bias_forces_derivatives<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        qd: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> (SMatrix<T, 3, 3>, SMatrix<T, 3, 3>) {
+        bias_forces_derivatives(q, qd, p)
+    }
+    fn constraint_derivatives<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        qd: &SVector<T, 3>,
+        a: &SVector<T, 3>,
+        f: &SVector<T, 0>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 3, 0> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
+    }
+    fn dynamics_derivatives<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        qd: &SVector<T, 3>,
+        a: &SVector<T, 3>,
+        f: &SVector<T, 0>,
+        p: &Params<T>,
+    ) -> DynamicsDerivatives<T, 3, 0> {
+        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        DynamicsDerivatives {
+            dynamics_q,
+            dynamics_qd,
+            constraint_q,
+            jacobian_rate,
+        }
+    }
 }
 impl ContactModel<NQ, NC, NU, NK> for KneeHopper {
     const CONTACT_NAMES: &'static [&'static str] = &["toe"];
@@ -433,6 +490,27 @@ impl ContactModel<NQ, NC, NU, NK> for KneeHopper {
         p: &Params<T>,
     ) -> SVector<T, 2> {
         contact_bias(q, qd, p)
+    }
+    fn contact_derivatives<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        qd: &SVector<T, 3>,
+        a: &SVector<T, 3>,
+        lambda: &SVector<T, 2>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 3, 2> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
+            q,
+            qd,
+            a,
+            lambda,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -1141,5 +1219,436 @@ pub fn dynamics_terms<T: Arithmetic>(
         SMatrix::from_data(ArrayStorage([[v42, v66, v71]])),
         SMatrix::from_data(ArrayStorage([[], [], []])),
         SMatrix::from_data(ArrayStorage([[]])),
+    )
+}
+/// `∂(M a)/∂q` at the accelerations `a`.
+pub fn mass_matrix_derivative<T: Arithmetic>(
+    q: &SVector<T, 3>,
+    a: &SVector<T, 3>,
+    p: &Params<T>,
+) -> SMatrix<T, 3, 3> {
+    let [_, q_1, q_2] = q.data.0[0];
+    let [a_0, a_1, a_2] = a.data.0[0];
+    let (v2, v0) = q_2.sincos();
+    let v1 = v0 * p.prepared[2];
+    let v3 = v2 * p.prepared[3];
+    let v4 = v1 - v3;
+    let v5 = p.prepared[1] + v4;
+    let (v6, v12) = q_1.sincos();
+    let v7 = v5 * v6;
+    let v8 = p.prepared[2] * v2;
+    let v9 = v0 * p.prepared[3];
+    let v10 = v8 + v9;
+    let v11 = p.prepared[4] + v10;
+    let v13 = v11 * v12;
+    let v14 = v7 + v13;
+    let v15 = a_1 * v14;
+    let v16 = v4 * v6;
+    let v17 = v10 * v12;
+    let v18 = v16 + v17;
+    let v19 = a_2 * v18;
+    let v20 = v15 + v19;
+    let v21 = -v20;
+    let v22 = v14 * a_0;
+    let v23 = -v22;
+    let v24 = v18 * a_0;
+    let v25 = -v24;
+    let v26 = a_1 * v18;
+    let v27 = v19 + v26;
+    let v28 = -v27;
+    let v29 = v2 * p.prepared[7];
+    let v30 = v0 * p.prepared[8];
+    let v31 = v29 + v30;
+    let v32 = -v31;
+    let v33 = v32 + v32;
+    let v34 = a_1 * v33;
+    let v35 = v34 - v24;
+    let v36 = v0 * p.prepared[9];
+    let v37 = v36 - v29;
+    let v38 = a_2 * v37;
+    let v39 = v35 + v38;
+    let v40 = a_1 * v37;
+    let v41 = v40 - v24;
+    SMatrix::from_data(
+        ArrayStorage([
+            [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            [v21, v23, v25],
+            [v28, v39, v41],
+        ]),
+    )
+}
+/// `∂N/∂q` and `∂N/∂q̇`.
+pub fn bias_forces_derivatives<T: Arithmetic>(
+    q: &SVector<T, 3>,
+    qd: &SVector<T, 3>,
+    p: &Params<T>,
+) -> (SMatrix<T, 3, 3>, SMatrix<T, 3, 3>) {
+    let [_, q_1, q_2] = q.data.0[0];
+    let [_, qd_1, qd_2] = qd.data.0[0];
+    let v0 = qd_1 * qd_1;
+    let (v3, v1) = q_2.sincos();
+    let v2 = v1 * p.prepared[2];
+    let v4 = v3 * p.prepared[3];
+    let v5 = v2 - v4;
+    let v6 = p.prepared[1] + v5;
+    let (v13, v7) = q_1.sincos();
+    let v8 = v6 * v7;
+    let v9 = p.prepared[2] * v3;
+    let v10 = v1 * p.prepared[3];
+    let v11 = v9 + v10;
+    let v12 = p.prepared[4] + v11;
+    let v14 = v12 * v13;
+    let v15 = v8 - v14;
+    let v16 = v0 * v15;
+    let v17 = qd_1 * qd_2;
+    let v18 = v5 * v7;
+    let v19 = v11 * v13;
+    let v20 = v18 - v19;
+    let v21 = v20 + v20;
+    let v22 = v17 * v21;
+    let v23 = v16 + v22;
+    let v24 = qd_2 * qd_2;
+    let v25 = v20 * v24;
+    let v26 = v23 + v25;
+    let v27 = -v26;
+    let v28 = v7 * p.prepared[13];
+    let v29 = v13 * p.prepared[12];
+    let v30 = v28 - v29;
+    let v31 = v1 * v7;
+    let v32 = v3 * v13;
+    let v33 = v31 - v32;
+    let v34 = p.prepared[15] * v33;
+    let v35 = v1 * v13;
+    let v36 = v3 * v7;
+    let v37 = v35 + v36;
+    let v38 = p.prepared[14] * v37;
+    let v39 = v34 - v38;
+    let v40 = v30 + v39;
+    let v41 = v0 * v20;
+    let v42 = v20 + v20;
+    let v43 = v17 * v42;
+    let v44 = v41 + v43;
+    let v45 = v25 + v44;
+    let v46 = -v45;
+    let v47 = v1 * p.prepared[7];
+    let v48 = v3 * p.prepared[8];
+    let v49 = v47 - v48;
+    let v50 = -v49;
+    let v51 = v50 + v50;
+    let v52 = v17 * v51;
+    let v53 = v3 * p.prepared[9];
+    let v54 = v47 + v53;
+    let v55 = v24 * v54;
+    let v56 = v52 - v55;
+    let v57 = v39 + v56;
+    let v58 = v0 * v49;
+    let v59 = v39 + p.knee_spring_stiffness;
+    let v60 = v58 + v59;
+    let v61 = v6 * v13;
+    let v62 = v7 * v12;
+    let v63 = v61 + v62;
+    let v64 = qd_1 + qd_1;
+    let v65 = v63 * v64;
+    let v66 = v7 * v11;
+    let v67 = v5 * v13;
+    let v68 = v66 + v67;
+    let v69 = v68 + v68;
+    let v70 = qd_2 * v69;
+    let v71 = v65 + v70;
+    let v72 = -v71;
+    let v73 = v3 * p.prepared[7];
+    let v74 = v1 * p.prepared[8];
+    let v75 = v73 + v74;
+    let v76 = -v75;
+    let v77 = v76 + v76;
+    let v78 = qd_2 * v77;
+    let v79 = v64 * v75;
+    let v80 = qd_1 * v69;
+    let v81 = qd_2 + qd_2;
+    let v82 = v68 * v81;
+    let v83 = v80 + v82;
+    let v84 = -v83;
+    let v85 = qd_1 * v77;
+    let v86 = v1 * p.prepared[9];
+    let v87 = v86 - v73;
+    let v88 = v81 * v87;
+    let v89 = v85 + v88;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v27, v40, v39],
+                [v46, v57, v60],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v72, v78, v79],
+                [v84, v89, T::lit(0.0)],
+            ]),
+        ),
+    )
+}
+/// `∂(Jᵀ f)/∂q`, `∂(J a)/∂q`, `∂(J̇ q̇)/∂q` and `J̇` at the closure forces `f` and the
+/// accelerations `a`.
+pub fn constraint_derivatives<T: Arithmetic>(
+    _q: &SVector<T, 3>,
+    _qd: &SVector<T, 3>,
+    _a: &SVector<T, 3>,
+    _f: &SVector<T, 0>,
+    _p: &Params<T>,
+) -> (SMatrix<T, 3, 3>, SMatrix<T, 0, 3>, SMatrix<T, 0, 3>, SMatrix<T, 0, 3>) {
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+        SMatrix::from_data(ArrayStorage([[], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], []])),
+    )
+}
+/// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
+/// (base frame) and the accelerations `a`.
+pub fn contact_derivatives<T: Arithmetic>(
+    q: &SVector<T, 3>,
+    qd: &SVector<T, 3>,
+    a: &SVector<T, 3>,
+    lambda: &SVector<T, 2>,
+    p: &Params<T>,
+) -> (SMatrix<T, 3, 3>, SMatrix<T, 2, 3>, SMatrix<T, 2, 3>, SMatrix<T, 2, 3>) {
+    let [_, q_1, q_2] = q.data.0[0];
+    let [_, qd_1, qd_2] = qd.data.0[0];
+    let [_, a_1, a_2] = a.data.0[0];
+    let [lambda_0, lambda_1] = lambda.data.0[0];
+    let (v3, v0) = q_2.sincos();
+    let (v1, v4) = q_1.sincos();
+    let v2 = v0 * v1;
+    let v5 = v3 * v4;
+    let v6 = v2 + v5;
+    let v7 = p.shin_length_x * v6;
+    let v8 = v0 * v4;
+    let v9 = v1 * v3;
+    let v10 = v8 - v9;
+    let v11 = p.shin_length_y * v10;
+    let v12 = v7 + v11;
+    let v13 = v1 * p.thigh_length_x;
+    let v14 = v4 * p.thigh_length_y;
+    let v15 = v13 + v14;
+    let v16 = v12 + v15;
+    let v17 = lambda_1 * v16;
+    let v18 = p.shin_length_x * v10;
+    let v19 = v6 * p.shin_length_y;
+    let v20 = v18 - v19;
+    let v21 = v4 * p.thigh_length_x;
+    let v22 = v1 * p.thigh_length_y;
+    let v23 = v21 - v22;
+    let v24 = v20 + v23;
+    let v25 = lambda_0 * v24;
+    let v26 = v17 + v25;
+    let v27 = -v26;
+    let v28 = lambda_1 * v12;
+    let v29 = lambda_0 * v20;
+    let v30 = v28 + v29;
+    let v31 = -v30;
+    let v32 = v24 * a_1;
+    let v33 = v20 * a_2;
+    let v34 = v32 + v33;
+    let v35 = -v34;
+    let v36 = v16 * a_1;
+    let v37 = v12 * a_2;
+    let v38 = v36 + v37;
+    let v39 = -v38;
+    let v40 = v20 * a_1;
+    let v41 = v33 + v40;
+    let v42 = -v41;
+    let v43 = v12 * a_1;
+    let v44 = v37 + v43;
+    let v45 = -v44;
+    let v46 = qd_1 + qd_2;
+    let v47 = v46 * v46;
+    let v48 = v12 * v47;
+    let v49 = qd_1 * qd_1;
+    let v50 = v15 * v49;
+    let v51 = v48 + v50;
+    let v52 = v20 * v47;
+    let v53 = v23 * v49;
+    let v54 = v52 + v53;
+    let v55 = -v54;
+    let v56 = -v52;
+    let v57 = v24 * qd_1;
+    let v58 = v20 * qd_2;
+    let v59 = v57 + v58;
+    let v60 = -v59;
+    let v61 = v16 * qd_1;
+    let v62 = v12 * qd_2;
+    let v63 = v61 + v62;
+    let v64 = -v63;
+    let v65 = v20 * qd_1;
+    let v66 = v58 + v65;
+    let v67 = -v66;
+    let v68 = v12 * qd_1;
+    let v69 = v62 + v68;
+    let v70 = -v69;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), v27, v31],
+                [T::lit(0.0), v31, v31],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([[T::lit(0.0), T::lit(0.0)], [v35, v39], [v42, v45]]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([[T::lit(0.0), T::lit(0.0)], [v51, v55], [v48, v56]]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([[T::lit(0.0), T::lit(0.0)], [v60, v64], [v67, v70]]),
+        ),
+    )
+}
+/// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
+/// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
+pub fn dynamics_derivatives<T: Arithmetic>(
+    q: &SVector<T, 3>,
+    qd: &SVector<T, 3>,
+    a: &SVector<T, 3>,
+    _f: &SVector<T, 0>,
+    p: &Params<T>,
+) -> (SMatrix<T, 3, 3>, SMatrix<T, 3, 3>, SMatrix<T, 0, 3>, SMatrix<T, 0, 3>) {
+    let [_, q_1, q_2] = q.data.0[0];
+    let [_, qd_1, qd_2] = qd.data.0[0];
+    let [a_0, a_1, a_2] = a.data.0[0];
+    let (v2, v0) = q_2.sincos();
+    let v1 = v0 * p.prepared[2];
+    let v3 = v2 * p.prepared[3];
+    let v4 = v1 - v3;
+    let v5 = p.prepared[1] + v4;
+    let (v6, v12) = q_1.sincos();
+    let v7 = v5 * v6;
+    let v8 = p.prepared[2] * v2;
+    let v9 = v0 * p.prepared[3];
+    let v10 = v8 + v9;
+    let v11 = p.prepared[4] + v10;
+    let v13 = v11 * v12;
+    let v14 = v7 + v13;
+    let v15 = a_1 * v14;
+    let v16 = v4 * v6;
+    let v17 = v10 * v12;
+    let v18 = v16 + v17;
+    let v19 = a_2 * v18;
+    let v20 = v15 + v19;
+    let v21 = qd_1 * qd_1;
+    let v22 = v5 * v12;
+    let v23 = v6 * v11;
+    let v24 = v22 - v23;
+    let v25 = v21 * v24;
+    let v26 = qd_1 * qd_2;
+    let v27 = v4 * v12;
+    let v28 = v6 * v10;
+    let v29 = v27 - v28;
+    let v30 = v29 + v29;
+    let v31 = v26 * v30;
+    let v32 = v25 + v31;
+    let v33 = qd_2 * qd_2;
+    let v34 = v29 * v33;
+    let v35 = v32 + v34;
+    let v36 = v20 + v35;
+    let v37 = -v36;
+    let v38 = v12 * p.prepared[13];
+    let v39 = v6 * p.prepared[12];
+    let v40 = v38 - v39;
+    let v41 = v0 * v12;
+    let v42 = v2 * v6;
+    let v43 = v41 - v42;
+    let v44 = p.prepared[15] * v43;
+    let v45 = v0 * v6;
+    let v46 = v2 * v12;
+    let v47 = v45 + v46;
+    let v48 = p.prepared[14] * v47;
+    let v49 = v44 - v48;
+    let v50 = v40 + v49;
+    let v51 = v14 * a_0;
+    let v52 = v50 - v51;
+    let v53 = v18 * a_0;
+    let v54 = v49 - v53;
+    let v55 = a_1 * v18;
+    let v56 = v19 + v55;
+    let v57 = v21 * v29;
+    let v58 = v29 + v29;
+    let v59 = v26 * v58;
+    let v60 = v57 + v59;
+    let v61 = v34 + v60;
+    let v62 = v56 + v61;
+    let v63 = -v62;
+    let v64 = v2 * p.prepared[7];
+    let v65 = v0 * p.prepared[8];
+    let v66 = v64 + v65;
+    let v67 = -v66;
+    let v68 = v67 + v67;
+    let v69 = a_1 * v68;
+    let v70 = v69 - v53;
+    let v71 = v0 * p.prepared[9];
+    let v72 = v71 - v64;
+    let v73 = a_2 * v72;
+    let v74 = v70 + v73;
+    let v75 = v0 * p.prepared[7];
+    let v76 = v2 * p.prepared[8];
+    let v77 = v75 - v76;
+    let v78 = -v77;
+    let v79 = v78 + v78;
+    let v80 = v26 * v79;
+    let v81 = v2 * p.prepared[9];
+    let v82 = v75 + v81;
+    let v83 = v33 * v82;
+    let v84 = v80 - v83;
+    let v85 = v49 + v84;
+    let v86 = v74 + v85;
+    let v87 = a_1 * v72;
+    let v88 = v87 - v53;
+    let v89 = v21 * v77;
+    let v90 = v49 + p.knee_spring_stiffness;
+    let v91 = v89 + v90;
+    let v92 = v88 + v91;
+    let v93 = qd_1 + qd_1;
+    let v94 = v14 * v93;
+    let v95 = v18 + v18;
+    let v96 = qd_2 * v95;
+    let v97 = v94 + v96;
+    let v98 = -v97;
+    let v99 = qd_2 * v68;
+    let v100 = v99 + p.thigh_damping;
+    let v101 = v66 * v93;
+    let v102 = qd_1 * v95;
+    let v103 = qd_2 + qd_2;
+    let v104 = v18 * v103;
+    let v105 = v102 + v104;
+    let v106 = -v105;
+    let v107 = qd_1 * v68;
+    let v108 = v72 * v103;
+    let v109 = v107 + v108;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v37, v52, v54],
+                [v63, v86, v92],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [p.body_damping, T::lit(0.0), T::lit(0.0)],
+                [v98, v100, v101],
+                [v106, v109, p.shin_damping],
+            ]),
+        ),
+        SMatrix::from_data(ArrayStorage([[], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], []])),
     )
 }

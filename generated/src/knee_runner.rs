@@ -9,7 +9,8 @@
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
-    Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters,
+    Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
+    JointKind, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 5;
@@ -501,6 +502,62 @@ impl LegModel<NQ, NC, NU> for KneeRunner {
             constraint_bias,
         }
     }
+    fn mass_matrix_derivative<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 5, 5> {
+        mass_matrix_derivative(q, a, p)
+    }
+    fn bias_forces_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>) {
+        bias_forces_derivatives(q, qd, p)
+    }
+    fn constraint_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        f: &SVector<T, 0>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 5, 0> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
+    }
+    fn dynamics_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        f: &SVector<T, 0>,
+        p: &Params<T>,
+    ) -> DynamicsDerivatives<T, 5, 0> {
+        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        DynamicsDerivatives {
+            dynamics_q,
+            dynamics_qd,
+            constraint_q,
+            jacobian_rate,
+        }
+    }
 }
 impl ContactModel<NQ, NC, NU, NK> for KneeRunner {
     const CONTACT_NAMES: &'static [&'static str] = &["toe"];
@@ -525,6 +582,27 @@ impl ContactModel<NQ, NC, NU, NK> for KneeRunner {
         p: &Params<T>,
     ) -> SVector<T, 2> {
         contact_bias(q, qd, p)
+    }
+    fn contact_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        lambda: &SVector<T, 2>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 5, 2> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
+            q,
+            qd,
+            a,
+            lambda,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -1794,5 +1872,1156 @@ pub fn dynamics_terms<T: Arithmetic>(
         SMatrix::from_data(ArrayStorage([[v115, v145, v177, v187, v195]])),
         SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
         SMatrix::from_data(ArrayStorage([[]])),
+    )
+}
+/// `∂(M a)/∂q` at the accelerations `a`.
+pub fn mass_matrix_derivative<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    a: &SVector<T, 5>,
+    p: &Params<T>,
+) -> SMatrix<T, 5, 5> {
+    let [_, _, q_2, q_3, q_4] = q.data.0[0];
+    let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
+    let (v8, v0) = q_3.sincos();
+    let (v3, v1) = q_4.sincos();
+    let v2 = v1 * p.prepared[4];
+    let v4 = v3 * p.prepared[5];
+    let v5 = v2 - v4;
+    let v6 = p.prepared[3] + v5;
+    let v7 = v0 * v6;
+    let v9 = p.prepared[4] * v3;
+    let v10 = v1 * p.prepared[5];
+    let v11 = v9 + v10;
+    let v12 = p.prepared[6] + v11;
+    let v13 = v8 * v12;
+    let v14 = v7 - v13;
+    let v15 = p.prepared[7] + v14;
+    let (v22, v16) = q_2.sincos();
+    let v17 = v15 * v16;
+    let v18 = v6 * v8;
+    let v19 = v0 * v12;
+    let v20 = v18 + v19;
+    let v21 = p.prepared[2] + v20;
+    let v23 = v21 * v22;
+    let v24 = v17 - v23;
+    let v25 = a_2 * v24;
+    let v26 = v14 * v16;
+    let v27 = v20 * v22;
+    let v28 = v26 - v27;
+    let v29 = a_3 * v28;
+    let v30 = v25 + v29;
+    let v31 = v0 * v5;
+    let v32 = v8 * v11;
+    let v33 = v31 - v32;
+    let v34 = v16 * v33;
+    let v35 = v0 * v11;
+    let v36 = v5 * v8;
+    let v37 = v35 + v36;
+    let v38 = v22 * v37;
+    let v39 = v34 - v38;
+    let v40 = a_4 * v39;
+    let v41 = v30 + v40;
+    let v42 = -v41;
+    let v43 = v15 * v22;
+    let v44 = v16 * v21;
+    let v45 = v43 + v44;
+    let v46 = a_2 * v45;
+    let v47 = v14 * v22;
+    let v48 = v16 * v20;
+    let v49 = v47 + v48;
+    let v50 = a_3 * v49;
+    let v51 = v46 + v50;
+    let v52 = v22 * v33;
+    let v53 = v16 * v37;
+    let v54 = v52 + v53;
+    let v55 = a_4 * v54;
+    let v56 = v51 + v55;
+    let v57 = -v56;
+    let v58 = v45 * a_1;
+    let v59 = v24 * a_0;
+    let v60 = v58 + v59;
+    let v61 = -v60;
+    let v62 = v49 * a_1;
+    let v63 = v28 * a_0;
+    let v64 = v62 + v63;
+    let v65 = -v64;
+    let v66 = v54 * a_1;
+    let v67 = v39 * a_0;
+    let v68 = v66 + v67;
+    let v69 = -v68;
+    let v70 = a_2 * v28;
+    let v71 = v29 + v70;
+    let v72 = v40 + v71;
+    let v73 = -v72;
+    let v74 = a_2 * v49;
+    let v75 = v50 + v74;
+    let v76 = v55 + v75;
+    let v77 = -v76;
+    let v78 = v14 * p.thigh_origin_y;
+    let v79 = p.thigh_origin_x * v20;
+    let v80 = v78 - v79;
+    let v81 = v80 + v80;
+    let v82 = a_2 * v81;
+    let v83 = v82 - v64;
+    let v84 = a_3 * v80;
+    let v85 = v83 + v84;
+    let v86 = p.thigh_origin_y * v33;
+    let v87 = p.thigh_origin_x * v37;
+    let v88 = v86 - v87;
+    let v89 = a_4 * v88;
+    let v90 = v85 + v89;
+    let v91 = a_2 * v80;
+    let v92 = v91 - v64;
+    let v93 = a_2 * v88;
+    let v94 = v93 - v68;
+    let v95 = a_2 * v39;
+    let v96 = a_3 * v39;
+    let v97 = v95 + v96;
+    let v98 = v40 + v97;
+    let v99 = -v98;
+    let v100 = a_2 * v54;
+    let v101 = a_3 * v54;
+    let v102 = v100 + v101;
+    let v103 = v55 + v102;
+    let v104 = -v103;
+    let v105 = v3 * p.prepared[11];
+    let v106 = v1 * p.prepared[12];
+    let v107 = v105 + v106;
+    let v108 = -v107;
+    let v109 = v108 + v108;
+    let v110 = v88 + v88;
+    let v111 = v109 + v110;
+    let v112 = a_2 * v111;
+    let v113 = v112 - v68;
+    let v114 = v88 + v109;
+    let v115 = a_3 * v114;
+    let v116 = v113 + v115;
+    let v117 = v1 * p.prepared[13];
+    let v118 = v117 - v105;
+    let v119 = v88 + v118;
+    let v120 = a_4 * v119;
+    let v121 = v116 + v120;
+    let v122 = a_2 * v114;
+    let v123 = v122 - v68;
+    let v124 = a_3 * v109;
+    let v125 = v123 + v124;
+    let v126 = a_4 * v118;
+    let v127 = v125 + v126;
+    let v128 = a_2 * v119;
+    let v129 = v128 - v68;
+    let v130 = a_3 * v118;
+    let v131 = v129 + v130;
+    SMatrix::from_data(
+        ArrayStorage([
+            [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            [v42, v57, v61, v65, v69],
+            [v73, v77, v90, v92, v94],
+            [v99, v104, v121, v127, v131],
+        ]),
+    )
+}
+/// `∂N/∂q` and `∂N/∂q̇`.
+pub fn bias_forces_derivatives<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    qd: &SVector<T, 5>,
+    p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>) {
+    let [_, _, q_2, q_3, q_4] = q.data.0[0];
+    let [_, _, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let v0 = qd_2 * qd_2;
+    let (v1, v3) = q_2.sincos();
+    let v2 = p.torso_com_x * v1;
+    let v4 = p.torso_com_y * v3;
+    let v5 = v2 + v4;
+    let v6 = v0 * v5;
+    let v7 = p.torso_mass * v6;
+    let v8 = qd_2 + qd_3;
+    let v9 = v8 * v8;
+    let (v12, v10) = q_3.sincos();
+    let v11 = v1 * v10;
+    let v13 = v3 * v12;
+    let v14 = v11 + v13;
+    let v15 = p.thigh_com_x * v14;
+    let v16 = v3 * v10;
+    let v17 = v1 * v12;
+    let v18 = v16 - v17;
+    let v19 = p.thigh_com_y * v18;
+    let v20 = v15 + v19;
+    let v21 = v9 * v20;
+    let v22 = v1 * p.thigh_origin_x;
+    let v23 = v3 * p.thigh_origin_y;
+    let v24 = v22 + v23;
+    let v25 = v0 * v24;
+    let v26 = v21 + v25;
+    let v27 = p.thigh_mass * v26;
+    let v28 = v7 + v27;
+    let v29 = v8 + qd_4;
+    let v30 = v29 * v29;
+    let (v33, v31) = q_4.sincos();
+    let v32 = v14 * v31;
+    let v34 = v18 * v33;
+    let v35 = v32 + v34;
+    let v36 = p.shin_com_x * v35;
+    let v37 = v18 * v31;
+    let v38 = v14 * v33;
+    let v39 = v37 - v38;
+    let v40 = p.shin_com_y * v39;
+    let v41 = v36 + v40;
+    let v42 = v30 * v41;
+    let v43 = v14 * p.thigh_length_x;
+    let v44 = v18 * p.thigh_length_y;
+    let v45 = v43 + v44;
+    let v46 = v9 * v45;
+    let v47 = v42 + v46;
+    let v48 = v25 + v47;
+    let v49 = p.shin_mass * v48;
+    let v50 = v28 + v49;
+    let v51 = p.torso_com_x * v3;
+    let v52 = v1 * p.torso_com_y;
+    let v53 = v51 - v52;
+    let v54 = v0 * v53;
+    let v55 = p.torso_mass * v54;
+    let v56 = p.thigh_com_x * v18;
+    let v57 = v14 * p.thigh_com_y;
+    let v58 = v56 - v57;
+    let v59 = v9 * v58;
+    let v60 = v3 * p.thigh_origin_x;
+    let v61 = v1 * p.thigh_origin_y;
+    let v62 = v60 - v61;
+    let v63 = v0 * v62;
+    let v64 = v59 + v63;
+    let v65 = p.thigh_mass * v64;
+    let v66 = v55 + v65;
+    let v67 = p.shin_com_x * v39;
+    let v68 = v35 * p.shin_com_y;
+    let v69 = v67 - v68;
+    let v70 = v30 * v69;
+    let v71 = v18 * p.thigh_length_x;
+    let v72 = v14 * p.thigh_length_y;
+    let v73 = v71 - v72;
+    let v74 = v9 * v73;
+    let v75 = v70 + v74;
+    let v76 = v63 + v75;
+    let v77 = p.shin_mass * v76;
+    let v78 = v66 + v77;
+    let v79 = -v78;
+    let v80 = v53 * v54;
+    let v81 = v5 * v6;
+    let v82 = v80 - v81;
+    let v83 = v82 - v82;
+    let v84 = p.torso_mass * v83;
+    let v85 = v58 + v62;
+    let v86 = v64 * v85;
+    let v87 = v20 + v24;
+    let v88 = v26 * v87;
+    let v89 = v86 - v88;
+    let v90 = v89 - v89;
+    let v91 = p.thigh_mass * v90;
+    let v92 = v84 + v91;
+    let v93 = v69 + v73;
+    let v94 = v62 + v93;
+    let v95 = v76 * v94;
+    let v96 = v41 + v45;
+    let v97 = v24 + v96;
+    let v98 = v48 * v97;
+    let v99 = v95 - v98;
+    let v100 = v99 - v99;
+    let v101 = p.shin_mass * v100;
+    let v102 = v92 + v101;
+    let v103 = v3 * p.prepared[19];
+    let v104 = v1 * p.prepared[18];
+    let v105 = v103 - v104;
+    let v106 = v18 * p.prepared[21];
+    let v107 = v14 * p.prepared[20];
+    let v108 = v106 - v107;
+    let v109 = v39 * p.prepared[23];
+    let v110 = v35 * p.prepared[22];
+    let v111 = v109 - v110;
+    let v112 = v108 + v111;
+    let v113 = v105 + v112;
+    let v114 = v102 + v113;
+    let v115 = v58 * v64;
+    let v116 = v20 * v26;
+    let v117 = v115 - v116;
+    let v118 = v117 - v117;
+    let v119 = p.thigh_mass * v118;
+    let v120 = v76 * v93;
+    let v121 = v48 * v96;
+    let v122 = v120 - v121;
+    let v123 = v122 - v122;
+    let v124 = p.shin_mass * v123;
+    let v125 = v119 + v124;
+    let v126 = v112 + v125;
+    let v127 = v69 * v76;
+    let v128 = v41 * v48;
+    let v129 = v127 - v128;
+    let v130 = v129 - v129;
+    let v131 = p.shin_mass * v130;
+    let v132 = v111 + v131;
+    let v133 = p.thigh_mass * v21;
+    let v134 = p.shin_mass * v47;
+    let v135 = v133 + v134;
+    let v136 = p.thigh_mass * v59;
+    let v137 = p.shin_mass * v75;
+    let v138 = v136 + v137;
+    let v139 = -v138;
+    let v140 = v21 * v87;
+    let v141 = v115 - v140;
+    let v142 = v59 * v85;
+    let v143 = v142 - v116;
+    let v144 = v141 - v143;
+    let v145 = p.thigh_mass * v144;
+    let v146 = v47 * v97;
+    let v147 = v120 - v146;
+    let v148 = v75 * v94;
+    let v149 = v148 - v121;
+    let v150 = v147 - v149;
+    let v151 = p.shin_mass * v150;
+    let v152 = v145 + v151;
+    let v153 = v112 + v152;
+    let v154 = v20 * v21;
+    let v155 = v115 - v154;
+    let v156 = v58 * v59;
+    let v157 = v156 - v116;
+    let v158 = v155 - v157;
+    let v159 = p.thigh_mass * v158;
+    let v160 = v47 * v96;
+    let v161 = v120 - v160;
+    let v162 = v75 * v93;
+    let v163 = v162 - v121;
+    let v164 = v161 - v163;
+    let v165 = p.shin_mass * v164;
+    let v166 = v159 + v165;
+    let v167 = v112 + v166;
+    let v168 = v41 * v47;
+    let v169 = v127 - v168;
+    let v170 = v69 * v75;
+    let v171 = v170 - v128;
+    let v172 = v169 - v171;
+    let v173 = p.shin_mass * v172;
+    let v174 = v111 + v173;
+    let v175 = p.shin_mass * v42;
+    let v176 = p.shin_mass * v70;
+    let v177 = -v176;
+    let v178 = v42 * v97;
+    let v179 = v127 - v178;
+    let v180 = v70 * v94;
+    let v181 = v180 - v128;
+    let v182 = v179 - v181;
+    let v183 = p.shin_mass * v182;
+    let v184 = v111 + v183;
+    let v185 = v42 * v96;
+    let v186 = v127 - v185;
+    let v187 = v70 * v93;
+    let v188 = v187 - v128;
+    let v189 = v186 - v188;
+    let v190 = p.shin_mass * v189;
+    let v191 = v111 + v190;
+    let v192 = v41 * v42;
+    let v193 = v127 - v192;
+    let v194 = v69 * v70;
+    let v195 = v194 - v128;
+    let v196 = v193 - v195;
+    let v197 = p.shin_mass * v196;
+    let v198 = v111 + p.knee_spring_stiffness;
+    let v199 = v197 + v198;
+    let v200 = qd_2 + qd_2;
+    let v201 = v53 * v200;
+    let v202 = p.torso_mass * v201;
+    let v203 = v8 + v8;
+    let v204 = v58 * v203;
+    let v205 = v62 * v200;
+    let v206 = v204 + v205;
+    let v207 = p.thigh_mass * v206;
+    let v208 = v202 + v207;
+    let v209 = v29 + v29;
+    let v210 = v69 * v209;
+    let v211 = v73 * v203;
+    let v212 = v210 + v211;
+    let v213 = v205 + v212;
+    let v214 = p.shin_mass * v213;
+    let v215 = v208 + v214;
+    let v216 = -v215;
+    let v217 = v5 * v200;
+    let v218 = p.torso_mass * v217;
+    let v219 = v20 * v203;
+    let v220 = v24 * v200;
+    let v221 = v219 + v220;
+    let v222 = p.thigh_mass * v221;
+    let v223 = v218 + v222;
+    let v224 = v41 * v209;
+    let v225 = v45 * v203;
+    let v226 = v224 + v225;
+    let v227 = v220 + v226;
+    let v228 = p.shin_mass * v227;
+    let v229 = v223 + v228;
+    let v230 = -v229;
+    let v231 = v5 * v201;
+    let v232 = v53 * v217;
+    let v233 = v231 - v232;
+    let v234 = p.torso_mass * v233;
+    let v235 = v87 * v206;
+    let v236 = v85 * v221;
+    let v237 = v235 - v236;
+    let v238 = p.thigh_mass * v237;
+    let v239 = v234 + v238;
+    let v240 = v97 * v213;
+    let v241 = v94 * v227;
+    let v242 = v240 - v241;
+    let v243 = p.shin_mass * v242;
+    let v244 = v239 + v243;
+    let v245 = v20 * v206;
+    let v246 = v58 * v221;
+    let v247 = v245 - v246;
+    let v248 = p.thigh_mass * v247;
+    let v249 = v96 * v213;
+    let v250 = v93 * v227;
+    let v251 = v249 - v250;
+    let v252 = p.shin_mass * v251;
+    let v253 = v248 + v252;
+    let v254 = v41 * v213;
+    let v255 = v69 * v227;
+    let v256 = v254 - v255;
+    let v257 = p.shin_mass * v256;
+    let v258 = p.thigh_mass * v204;
+    let v259 = p.shin_mass * v212;
+    let v260 = v258 + v259;
+    let v261 = -v260;
+    let v262 = p.thigh_mass * v219;
+    let v263 = p.shin_mass * v226;
+    let v264 = v262 + v263;
+    let v265 = -v264;
+    let v266 = v87 * v204;
+    let v267 = v85 * v219;
+    let v268 = v266 - v267;
+    let v269 = p.thigh_mass * v268;
+    let v270 = v97 * v212;
+    let v271 = v94 * v226;
+    let v272 = v270 - v271;
+    let v273 = p.shin_mass * v272;
+    let v274 = v269 + v273;
+    let v275 = v20 * v204;
+    let v276 = v58 * v219;
+    let v277 = v275 - v276;
+    let v278 = p.thigh_mass * v277;
+    let v279 = v96 * v212;
+    let v280 = v93 * v226;
+    let v281 = v279 - v280;
+    let v282 = p.shin_mass * v281;
+    let v283 = v278 + v282;
+    let v284 = v41 * v212;
+    let v285 = v69 * v226;
+    let v286 = v284 - v285;
+    let v287 = p.shin_mass * v286;
+    let v288 = p.shin_mass * v210;
+    let v289 = -v288;
+    let v290 = p.shin_mass * v224;
+    let v291 = -v290;
+    let v292 = v97 * v210;
+    let v293 = v94 * v224;
+    let v294 = v292 - v293;
+    let v295 = p.shin_mass * v294;
+    let v296 = v96 * v210;
+    let v297 = v93 * v224;
+    let v298 = v296 - v297;
+    let v299 = p.shin_mass * v298;
+    let v300 = v41 * v210;
+    let v301 = v69 * v224;
+    let v302 = v300 - v301;
+    let v303 = p.shin_mass * v302;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v50, v79, v114, v126, v132],
+                [v135, v139, v153, v167, v174],
+                [v175, v177, v184, v191, v199],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v216, v230, v244, v253, v257],
+                [v261, v265, v274, v283, v287],
+                [v289, v291, v295, v299, v303],
+            ]),
+        ),
+    )
+}
+/// `∂(Jᵀ f)/∂q`, `∂(J a)/∂q`, `∂(J̇ q̇)/∂q` and `J̇` at the closure forces `f` and the
+/// accelerations `a`.
+pub fn constraint_derivatives<T: Arithmetic>(
+    _q: &SVector<T, 5>,
+    _qd: &SVector<T, 5>,
+    _a: &SVector<T, 5>,
+    _f: &SVector<T, 0>,
+    _p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>) {
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+    )
+}
+/// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
+/// (base frame) and the accelerations `a`.
+pub fn contact_derivatives<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    qd: &SVector<T, 5>,
+    a: &SVector<T, 5>,
+    lambda: &SVector<T, 2>,
+    p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 2, 5>, SMatrix<T, 2, 5>, SMatrix<T, 2, 5>) {
+    let [_, _, q_2, q_3, q_4] = q.data.0[0];
+    let [_, _, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let [_, _, a_2, a_3, a_4] = a.data.0[0];
+    let [lambda_0, lambda_1] = lambda.data.0[0];
+    let (v9, v0) = q_4.sincos();
+    let (v4, v1) = q_3.sincos();
+    let (v2, v5) = q_2.sincos();
+    let v3 = v1 * v2;
+    let v6 = v4 * v5;
+    let v7 = v3 + v6;
+    let v8 = v0 * v7;
+    let v10 = v1 * v5;
+    let v11 = v2 * v4;
+    let v12 = v10 - v11;
+    let v13 = v9 * v12;
+    let v14 = v8 + v13;
+    let v15 = p.shin_length_x * v14;
+    let v16 = v0 * v12;
+    let v17 = v7 * v9;
+    let v18 = v16 - v17;
+    let v19 = p.shin_length_y * v18;
+    let v20 = v15 + v19;
+    let v21 = v7 * p.thigh_length_x;
+    let v22 = v12 * p.thigh_length_y;
+    let v23 = v21 + v22;
+    let v24 = v20 + v23;
+    let v25 = v2 * p.thigh_origin_x;
+    let v26 = v5 * p.thigh_origin_y;
+    let v27 = v25 + v26;
+    let v28 = v24 + v27;
+    let v29 = lambda_1 * v28;
+    let v30 = p.shin_length_x * v18;
+    let v31 = v14 * p.shin_length_y;
+    let v32 = v30 - v31;
+    let v33 = v12 * p.thigh_length_x;
+    let v34 = v7 * p.thigh_length_y;
+    let v35 = v33 - v34;
+    let v36 = v32 + v35;
+    let v37 = v5 * p.thigh_origin_x;
+    let v38 = v2 * p.thigh_origin_y;
+    let v39 = v37 - v38;
+    let v40 = v36 + v39;
+    let v41 = lambda_0 * v40;
+    let v42 = v29 + v41;
+    let v43 = -v42;
+    let v44 = lambda_1 * v24;
+    let v45 = lambda_0 * v36;
+    let v46 = v44 + v45;
+    let v47 = -v46;
+    let v48 = lambda_1 * v20;
+    let v49 = lambda_0 * v32;
+    let v50 = v48 + v49;
+    let v51 = -v50;
+    let v52 = v40 * a_2;
+    let v53 = v36 * a_3;
+    let v54 = v52 + v53;
+    let v55 = v32 * a_4;
+    let v56 = v54 + v55;
+    let v57 = -v56;
+    let v58 = v28 * a_2;
+    let v59 = v24 * a_3;
+    let v60 = v58 + v59;
+    let v61 = v20 * a_4;
+    let v62 = v60 + v61;
+    let v63 = -v62;
+    let v64 = v36 * a_2;
+    let v65 = v53 + v64;
+    let v66 = v55 + v65;
+    let v67 = -v66;
+    let v68 = v24 * a_2;
+    let v69 = v59 + v68;
+    let v70 = v61 + v69;
+    let v71 = -v70;
+    let v72 = v32 * a_2;
+    let v73 = v32 * a_3;
+    let v74 = v72 + v73;
+    let v75 = v55 + v74;
+    let v76 = -v75;
+    let v77 = v20 * a_2;
+    let v78 = v20 * a_3;
+    let v79 = v77 + v78;
+    let v80 = v61 + v79;
+    let v81 = -v80;
+    let v82 = qd_2 + qd_3;
+    let v83 = v82 + qd_4;
+    let v84 = v83 * v83;
+    let v85 = v20 * v84;
+    let v86 = v82 * v82;
+    let v87 = v23 * v86;
+    let v88 = v85 + v87;
+    let v89 = qd_2 * qd_2;
+    let v90 = v27 * v89;
+    let v91 = v88 + v90;
+    let v92 = v32 * v84;
+    let v93 = v35 * v86;
+    let v94 = v92 + v93;
+    let v95 = v39 * v89;
+    let v96 = v94 + v95;
+    let v97 = -v96;
+    let v98 = -v94;
+    let v99 = -v92;
+    let v100 = v40 * qd_2;
+    let v101 = v36 * qd_3;
+    let v102 = v100 + v101;
+    let v103 = v32 * qd_4;
+    let v104 = v102 + v103;
+    let v105 = -v104;
+    let v106 = v28 * qd_2;
+    let v107 = v24 * qd_3;
+    let v108 = v106 + v107;
+    let v109 = v20 * qd_4;
+    let v110 = v108 + v109;
+    let v111 = -v110;
+    let v112 = v36 * qd_2;
+    let v113 = v101 + v112;
+    let v114 = v103 + v113;
+    let v115 = -v114;
+    let v116 = v24 * qd_2;
+    let v117 = v107 + v116;
+    let v118 = v109 + v117;
+    let v119 = -v118;
+    let v120 = v32 * qd_2;
+    let v121 = v32 * qd_3;
+    let v122 = v120 + v121;
+    let v123 = v103 + v122;
+    let v124 = -v123;
+    let v125 = v20 * qd_2;
+    let v126 = v20 * qd_3;
+    let v127 = v125 + v126;
+    let v128 = v109 + v127;
+    let v129 = -v128;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v43, v47, v51],
+                [T::lit(0.0), T::lit(0.0), v47, v47, v51],
+                [T::lit(0.0), T::lit(0.0), v51, v51, v51],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+                [v57, v63],
+                [v67, v71],
+                [v76, v81],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+                [v91, v97],
+                [v88, v98],
+                [v85, v99],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+                [v105, v111],
+                [v115, v119],
+                [v124, v129],
+            ]),
+        ),
+    )
+}
+/// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
+/// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
+pub fn dynamics_derivatives<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    qd: &SVector<T, 5>,
+    a: &SVector<T, 5>,
+    _f: &SVector<T, 0>,
+    p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>) {
+    let [_, _, q_2, q_3, q_4] = q.data.0[0];
+    let [_, _, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
+    let v0 = qd_2 * qd_2;
+    let (v1, v3) = q_2.sincos();
+    let v2 = p.torso_com_x * v1;
+    let v4 = p.torso_com_y * v3;
+    let v5 = v2 + v4;
+    let v6 = v0 * v5;
+    let v7 = p.torso_mass * v6;
+    let v8 = qd_2 + qd_3;
+    let v9 = v8 * v8;
+    let (v12, v10) = q_3.sincos();
+    let v11 = v1 * v10;
+    let v13 = v3 * v12;
+    let v14 = v11 + v13;
+    let v15 = p.thigh_com_x * v14;
+    let v16 = v3 * v10;
+    let v17 = v1 * v12;
+    let v18 = v16 - v17;
+    let v19 = p.thigh_com_y * v18;
+    let v20 = v15 + v19;
+    let v21 = v9 * v20;
+    let v22 = v1 * p.thigh_origin_x;
+    let v23 = v3 * p.thigh_origin_y;
+    let v24 = v22 + v23;
+    let v25 = v0 * v24;
+    let v26 = v21 + v25;
+    let v27 = p.thigh_mass * v26;
+    let v28 = v7 + v27;
+    let v29 = v8 + qd_4;
+    let v30 = v29 * v29;
+    let (v33, v31) = q_4.sincos();
+    let v32 = v14 * v31;
+    let v34 = v18 * v33;
+    let v35 = v32 + v34;
+    let v36 = p.shin_com_x * v35;
+    let v37 = v18 * v31;
+    let v38 = v14 * v33;
+    let v39 = v37 - v38;
+    let v40 = p.shin_com_y * v39;
+    let v41 = v36 + v40;
+    let v42 = v30 * v41;
+    let v43 = v14 * p.thigh_length_x;
+    let v44 = v18 * p.thigh_length_y;
+    let v45 = v43 + v44;
+    let v46 = v9 * v45;
+    let v47 = v42 + v46;
+    let v48 = v25 + v47;
+    let v49 = p.shin_mass * v48;
+    let v50 = v28 + v49;
+    let v51 = v31 * p.prepared[4];
+    let v52 = v33 * p.prepared[5];
+    let v53 = v51 - v52;
+    let v54 = p.prepared[3] + v53;
+    let v55 = v10 * v54;
+    let v56 = v33 * p.prepared[4];
+    let v57 = v31 * p.prepared[5];
+    let v58 = v56 + v57;
+    let v59 = p.prepared[6] + v58;
+    let v60 = v12 * v59;
+    let v61 = v55 - v60;
+    let v62 = p.prepared[7] + v61;
+    let v63 = v3 * v62;
+    let v64 = v12 * v54;
+    let v65 = v10 * v59;
+    let v66 = v64 + v65;
+    let v67 = p.prepared[2] + v66;
+    let v68 = v1 * v67;
+    let v69 = v63 - v68;
+    let v70 = a_2 * v69;
+    let v71 = v3 * v61;
+    let v72 = v1 * v66;
+    let v73 = v71 - v72;
+    let v74 = a_3 * v73;
+    let v75 = v70 + v74;
+    let v76 = v10 * v53;
+    let v77 = v12 * v58;
+    let v78 = v76 - v77;
+    let v79 = v3 * v78;
+    let v80 = v10 * v58;
+    let v81 = v12 * v53;
+    let v82 = v80 + v81;
+    let v83 = v1 * v82;
+    let v84 = v79 - v83;
+    let v85 = a_4 * v84;
+    let v86 = v75 + v85;
+    let v87 = v50 - v86;
+    let v88 = v1 * v62;
+    let v89 = v3 * v67;
+    let v90 = v88 + v89;
+    let v91 = a_2 * v90;
+    let v92 = v1 * v61;
+    let v93 = v3 * v66;
+    let v94 = v92 + v93;
+    let v95 = a_3 * v94;
+    let v96 = v91 + v95;
+    let v97 = v1 * v78;
+    let v98 = v3 * v82;
+    let v99 = v97 + v98;
+    let v100 = a_4 * v99;
+    let v101 = v96 + v100;
+    let v102 = p.torso_com_x * v3;
+    let v103 = v1 * p.torso_com_y;
+    let v104 = v102 - v103;
+    let v105 = v0 * v104;
+    let v106 = p.torso_mass * v105;
+    let v107 = p.thigh_com_x * v18;
+    let v108 = v14 * p.thigh_com_y;
+    let v109 = v107 - v108;
+    let v110 = v9 * v109;
+    let v111 = v3 * p.thigh_origin_x;
+    let v112 = v1 * p.thigh_origin_y;
+    let v113 = v111 - v112;
+    let v114 = v0 * v113;
+    let v115 = v110 + v114;
+    let v116 = p.thigh_mass * v115;
+    let v117 = v106 + v116;
+    let v118 = p.shin_com_x * v39;
+    let v119 = v35 * p.shin_com_y;
+    let v120 = v118 - v119;
+    let v121 = v30 * v120;
+    let v122 = v18 * p.thigh_length_x;
+    let v123 = v14 * p.thigh_length_y;
+    let v124 = v122 - v123;
+    let v125 = v9 * v124;
+    let v126 = v121 + v125;
+    let v127 = v114 + v126;
+    let v128 = p.shin_mass * v127;
+    let v129 = v117 + v128;
+    let v130 = v101 + v129;
+    let v131 = -v130;
+    let v132 = v104 * v105;
+    let v133 = v5 * v6;
+    let v134 = v132 - v133;
+    let v135 = v134 - v134;
+    let v136 = p.torso_mass * v135;
+    let v137 = v109 + v113;
+    let v138 = v115 * v137;
+    let v139 = v20 + v24;
+    let v140 = v26 * v139;
+    let v141 = v138 - v140;
+    let v142 = v141 - v141;
+    let v143 = p.thigh_mass * v142;
+    let v144 = v136 + v143;
+    let v145 = v120 + v124;
+    let v146 = v113 + v145;
+    let v147 = v127 * v146;
+    let v148 = v41 + v45;
+    let v149 = v24 + v148;
+    let v150 = v48 * v149;
+    let v151 = v147 - v150;
+    let v152 = v151 - v151;
+    let v153 = p.shin_mass * v152;
+    let v154 = v144 + v153;
+    let v155 = v3 * p.prepared[19];
+    let v156 = v1 * p.prepared[18];
+    let v157 = v155 - v156;
+    let v158 = v18 * p.prepared[21];
+    let v159 = v14 * p.prepared[20];
+    let v160 = v158 - v159;
+    let v161 = v39 * p.prepared[23];
+    let v162 = v35 * p.prepared[22];
+    let v163 = v161 - v162;
+    let v164 = v160 + v163;
+    let v165 = v157 + v164;
+    let v166 = v154 + v165;
+    let v167 = v90 * a_1;
+    let v168 = v69 * a_0;
+    let v169 = v167 + v168;
+    let v170 = v166 - v169;
+    let v171 = v109 * v115;
+    let v172 = v20 * v26;
+    let v173 = v171 - v172;
+    let v174 = v173 - v173;
+    let v175 = p.thigh_mass * v174;
+    let v176 = v127 * v145;
+    let v177 = v48 * v148;
+    let v178 = v176 - v177;
+    let v179 = v178 - v178;
+    let v180 = p.shin_mass * v179;
+    let v181 = v175 + v180;
+    let v182 = v164 + v181;
+    let v183 = v94 * a_1;
+    let v184 = v73 * a_0;
+    let v185 = v183 + v184;
+    let v186 = v182 - v185;
+    let v187 = v120 * v127;
+    let v188 = v41 * v48;
+    let v189 = v187 - v188;
+    let v190 = v189 - v189;
+    let v191 = p.shin_mass * v190;
+    let v192 = v163 + v191;
+    let v193 = v99 * a_1;
+    let v194 = v84 * a_0;
+    let v195 = v193 + v194;
+    let v196 = v192 - v195;
+    let v197 = p.thigh_mass * v21;
+    let v198 = p.shin_mass * v47;
+    let v199 = v197 + v198;
+    let v200 = a_2 * v73;
+    let v201 = v74 + v200;
+    let v202 = v85 + v201;
+    let v203 = v199 - v202;
+    let v204 = a_2 * v94;
+    let v205 = v95 + v204;
+    let v206 = v100 + v205;
+    let v207 = p.thigh_mass * v110;
+    let v208 = p.shin_mass * v126;
+    let v209 = v207 + v208;
+    let v210 = v206 + v209;
+    let v211 = -v210;
+    let v212 = p.thigh_origin_y * v61;
+    let v213 = p.thigh_origin_x * v66;
+    let v214 = v212 - v213;
+    let v215 = v214 + v214;
+    let v216 = a_2 * v215;
+    let v217 = v216 - v185;
+    let v218 = a_3 * v214;
+    let v219 = v217 + v218;
+    let v220 = p.thigh_origin_y * v78;
+    let v221 = p.thigh_origin_x * v82;
+    let v222 = v220 - v221;
+    let v223 = a_4 * v222;
+    let v224 = v219 + v223;
+    let v225 = v21 * v139;
+    let v226 = v171 - v225;
+    let v227 = v110 * v137;
+    let v228 = v227 - v172;
+    let v229 = v226 - v228;
+    let v230 = p.thigh_mass * v229;
+    let v231 = v47 * v149;
+    let v232 = v176 - v231;
+    let v233 = v126 * v146;
+    let v234 = v233 - v177;
+    let v235 = v232 - v234;
+    let v236 = p.shin_mass * v235;
+    let v237 = v230 + v236;
+    let v238 = v164 + v237;
+    let v239 = v224 + v238;
+    let v240 = a_2 * v214;
+    let v241 = v240 - v185;
+    let v242 = v20 * v21;
+    let v243 = v171 - v242;
+    let v244 = v109 * v110;
+    let v245 = v244 - v172;
+    let v246 = v243 - v245;
+    let v247 = p.thigh_mass * v246;
+    let v248 = v47 * v148;
+    let v249 = v176 - v248;
+    let v250 = v126 * v145;
+    let v251 = v250 - v177;
+    let v252 = v249 - v251;
+    let v253 = p.shin_mass * v252;
+    let v254 = v247 + v253;
+    let v255 = v164 + v254;
+    let v256 = v241 + v255;
+    let v257 = a_2 * v222;
+    let v258 = v257 - v195;
+    let v259 = v41 * v47;
+    let v260 = v187 - v259;
+    let v261 = v120 * v126;
+    let v262 = v261 - v188;
+    let v263 = v260 - v262;
+    let v264 = p.shin_mass * v263;
+    let v265 = v163 + v264;
+    let v266 = v258 + v265;
+    let v267 = p.shin_mass * v42;
+    let v268 = a_2 * v84;
+    let v269 = a_3 * v84;
+    let v270 = v268 + v269;
+    let v271 = v85 + v270;
+    let v272 = v267 - v271;
+    let v273 = a_2 * v99;
+    let v274 = a_3 * v99;
+    let v275 = v273 + v274;
+    let v276 = v100 + v275;
+    let v277 = p.shin_mass * v121;
+    let v278 = v276 + v277;
+    let v279 = -v278;
+    let v280 = v33 * p.prepared[11];
+    let v281 = v31 * p.prepared[12];
+    let v282 = v280 + v281;
+    let v283 = -v282;
+    let v284 = v283 + v283;
+    let v285 = v222 + v222;
+    let v286 = v284 + v285;
+    let v287 = a_2 * v286;
+    let v288 = v287 - v195;
+    let v289 = v222 + v284;
+    let v290 = a_3 * v289;
+    let v291 = v288 + v290;
+    let v292 = v31 * p.prepared[13];
+    let v293 = v292 - v280;
+    let v294 = v222 + v293;
+    let v295 = a_4 * v294;
+    let v296 = v291 + v295;
+    let v297 = v42 * v149;
+    let v298 = v187 - v297;
+    let v299 = v121 * v146;
+    let v300 = v299 - v188;
+    let v301 = v298 - v300;
+    let v302 = p.shin_mass * v301;
+    let v303 = v163 + v302;
+    let v304 = v296 + v303;
+    let v305 = a_2 * v289;
+    let v306 = v305 - v195;
+    let v307 = a_3 * v284;
+    let v308 = v306 + v307;
+    let v309 = a_4 * v293;
+    let v310 = v308 + v309;
+    let v311 = v42 * v148;
+    let v312 = v187 - v311;
+    let v313 = v121 * v145;
+    let v314 = v313 - v188;
+    let v315 = v312 - v314;
+    let v316 = p.shin_mass * v315;
+    let v317 = v163 + v316;
+    let v318 = v310 + v317;
+    let v319 = a_2 * v294;
+    let v320 = v319 - v195;
+    let v321 = a_3 * v293;
+    let v322 = v320 + v321;
+    let v323 = v41 * v42;
+    let v324 = v187 - v323;
+    let v325 = v120 * v121;
+    let v326 = v325 - v188;
+    let v327 = v324 - v326;
+    let v328 = p.shin_mass * v327;
+    let v329 = v163 + p.knee_spring_stiffness;
+    let v330 = v328 + v329;
+    let v331 = v322 + v330;
+    let v332 = qd_2 + qd_2;
+    let v333 = v104 * v332;
+    let v334 = p.torso_mass * v333;
+    let v335 = v8 + v8;
+    let v336 = v109 * v335;
+    let v337 = v113 * v332;
+    let v338 = v336 + v337;
+    let v339 = p.thigh_mass * v338;
+    let v340 = v334 + v339;
+    let v341 = v29 + v29;
+    let v342 = v120 * v341;
+    let v343 = v124 * v335;
+    let v344 = v342 + v343;
+    let v345 = v337 + v344;
+    let v346 = p.shin_mass * v345;
+    let v347 = v340 + v346;
+    let v348 = -v347;
+    let v349 = v5 * v332;
+    let v350 = p.torso_mass * v349;
+    let v351 = v20 * v335;
+    let v352 = v24 * v332;
+    let v353 = v351 + v352;
+    let v354 = p.thigh_mass * v353;
+    let v355 = v350 + v354;
+    let v356 = v41 * v341;
+    let v357 = v45 * v335;
+    let v358 = v356 + v357;
+    let v359 = v352 + v358;
+    let v360 = p.shin_mass * v359;
+    let v361 = v355 + v360;
+    let v362 = -v361;
+    let v363 = v5 * v333;
+    let v364 = v104 * v349;
+    let v365 = v363 - v364;
+    let v366 = p.torso_mass * v365;
+    let v367 = v139 * v338;
+    let v368 = v137 * v353;
+    let v369 = v367 - v368;
+    let v370 = p.thigh_mass * v369;
+    let v371 = v366 + v370;
+    let v372 = v149 * v345;
+    let v373 = v146 * v359;
+    let v374 = v372 - v373;
+    let v375 = p.shin_mass * v374;
+    let v376 = v371 + v375;
+    let v377 = v376 + p.torso_damping;
+    let v378 = v20 * v338;
+    let v379 = v109 * v353;
+    let v380 = v378 - v379;
+    let v381 = p.thigh_mass * v380;
+    let v382 = v148 * v345;
+    let v383 = v145 * v359;
+    let v384 = v382 - v383;
+    let v385 = p.shin_mass * v384;
+    let v386 = v381 + v385;
+    let v387 = v41 * v345;
+    let v388 = v120 * v359;
+    let v389 = v387 - v388;
+    let v390 = p.shin_mass * v389;
+    let v391 = p.thigh_mass * v336;
+    let v392 = p.shin_mass * v344;
+    let v393 = v391 + v392;
+    let v394 = -v393;
+    let v395 = p.thigh_mass * v351;
+    let v396 = p.shin_mass * v358;
+    let v397 = v395 + v396;
+    let v398 = -v397;
+    let v399 = v139 * v336;
+    let v400 = v137 * v351;
+    let v401 = v399 - v400;
+    let v402 = p.thigh_mass * v401;
+    let v403 = v149 * v344;
+    let v404 = v146 * v358;
+    let v405 = v403 - v404;
+    let v406 = p.shin_mass * v405;
+    let v407 = v402 + v406;
+    let v408 = v20 * v336;
+    let v409 = v109 * v351;
+    let v410 = v408 - v409;
+    let v411 = p.thigh_mass * v410;
+    let v412 = v148 * v344;
+    let v413 = v145 * v358;
+    let v414 = v412 - v413;
+    let v415 = p.shin_mass * v414;
+    let v416 = v411 + v415;
+    let v417 = v416 + p.thigh_damping;
+    let v418 = v41 * v344;
+    let v419 = v120 * v358;
+    let v420 = v418 - v419;
+    let v421 = p.shin_mass * v420;
+    let v422 = p.shin_mass * v342;
+    let v423 = -v422;
+    let v424 = p.shin_mass * v356;
+    let v425 = -v424;
+    let v426 = v149 * v342;
+    let v427 = v146 * v356;
+    let v428 = v426 - v427;
+    let v429 = p.shin_mass * v428;
+    let v430 = v148 * v342;
+    let v431 = v145 * v356;
+    let v432 = v430 - v431;
+    let v433 = p.shin_mass * v432;
+    let v434 = v41 * v342;
+    let v435 = v120 * v356;
+    let v436 = v434 - v435;
+    let v437 = p.shin_mass * v436;
+    let v438 = v437 + p.shin_damping;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v87, v131, v170, v186, v196],
+                [v203, v211, v239, v256, v266],
+                [v272, v279, v304, v318, v331],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [p.slide_x_damping, T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), p.slide_y_damping, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v348, v362, v377, v386, v390],
+                [v394, v398, v407, v417, v421],
+                [v423, v425, v429, v433, v438],
+            ]),
+        ),
+        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
     )
 }

@@ -9,7 +9,8 @@
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
-    Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters,
+    Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
+    JointKind, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 5;
@@ -493,6 +494,62 @@ impl LegModel<NQ, NC, NU> for MinitaurHopper {
             constraint_bias,
         }
     }
+    fn mass_matrix_derivative<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 5, 5> {
+        mass_matrix_derivative(q, a, p)
+    }
+    fn bias_forces_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>) {
+        bias_forces_derivatives(q, qd, p)
+    }
+    fn constraint_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        f: &SVector<T, 2>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 5, 2> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
+    }
+    fn dynamics_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        f: &SVector<T, 2>,
+        p: &Params<T>,
+    ) -> DynamicsDerivatives<T, 5, 2> {
+        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        DynamicsDerivatives {
+            dynamics_q,
+            dynamics_qd,
+            constraint_q,
+            jacobian_rate,
+        }
+    }
 }
 impl ContactModel<NQ, NC, NU, NK> for MinitaurHopper {
     const CONTACT_NAMES: &'static [&'static str] = &["toe_contact"];
@@ -517,6 +574,27 @@ impl ContactModel<NQ, NC, NU, NK> for MinitaurHopper {
         p: &Params<T>,
     ) -> SVector<T, 2> {
         contact_bias(q, qd, p)
+    }
+    fn contact_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        lambda: &SVector<T, 2>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 5, 2> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
+            q,
+            qd,
+            a,
+            lambda,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -1839,5 +1917,991 @@ pub fn dynamics_terms<T: Arithmetic>(
             ]),
         ),
         SMatrix::from_data(ArrayStorage([[v179, v186]])),
+    )
+}
+/// `∂(M a)/∂q` at the accelerations `a`.
+pub fn mass_matrix_derivative<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    a: &SVector<T, 5>,
+    p: &Params<T>,
+) -> SMatrix<T, 5, 5> {
+    let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
+    let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
+    let (v2, v0) = q_2.sincos();
+    let v1 = v0 * p.prepared[2];
+    let v3 = v2 * p.prepared[3];
+    let v4 = v1 - v3;
+    let v5 = p.prepared[1] + v4;
+    let (v6, v12) = q_1.sincos();
+    let v7 = v5 * v6;
+    let v8 = p.prepared[2] * v2;
+    let v9 = v0 * p.prepared[3];
+    let v10 = v8 + v9;
+    let v11 = p.prepared[4] + v10;
+    let v13 = v11 * v12;
+    let v14 = v7 + v13;
+    let v15 = a_1 * v14;
+    let v16 = v4 * v6;
+    let v17 = v10 * v12;
+    let v18 = v16 + v17;
+    let v19 = a_2 * v18;
+    let v20 = v15 + v19;
+    let v21 = -v20;
+    let v22 = v14 * a_0;
+    let v23 = -v22;
+    let v24 = v18 * a_0;
+    let v25 = -v24;
+    let v26 = a_1 * v18;
+    let v27 = v19 + v26;
+    let v28 = -v27;
+    let v29 = v2 * p.prepared[11];
+    let v30 = v0 * p.prepared[12];
+    let v31 = v29 + v30;
+    let v32 = -v31;
+    let v33 = v32 + v32;
+    let v34 = a_1 * v33;
+    let v35 = v34 - v24;
+    let v36 = v0 * p.prepared[13];
+    let v37 = v36 - v29;
+    let v38 = a_2 * v37;
+    let v39 = v35 + v38;
+    let v40 = a_1 * v37;
+    let v41 = v40 - v24;
+    let (v44, v42) = q_4.sincos();
+    let v43 = v42 * p.prepared[6];
+    let v45 = v44 * p.prepared[7];
+    let v46 = v43 - v45;
+    let v47 = p.prepared[5] + v46;
+    let (v48, v54) = q_3.sincos();
+    let v49 = v47 * v48;
+    let v50 = p.prepared[6] * v44;
+    let v51 = v42 * p.prepared[7];
+    let v52 = v50 + v51;
+    let v53 = p.prepared[8] + v52;
+    let v55 = v53 * v54;
+    let v56 = v49 + v55;
+    let v57 = a_3 * v56;
+    let v58 = v46 * v48;
+    let v59 = v52 * v54;
+    let v60 = v58 + v59;
+    let v61 = a_4 * v60;
+    let v62 = v57 + v61;
+    let v63 = -v62;
+    let v64 = a_0 * v56;
+    let v65 = -v64;
+    let v66 = a_0 * v60;
+    let v67 = -v66;
+    let v68 = a_3 * v60;
+    let v69 = v61 + v68;
+    let v70 = -v69;
+    let v71 = v44 * p.prepared[16];
+    let v72 = v42 * p.prepared[17];
+    let v73 = v71 + v72;
+    let v74 = -v73;
+    let v75 = v74 + v74;
+    let v76 = a_3 * v75;
+    let v77 = v76 - v66;
+    let v78 = v42 * p.prepared[18];
+    let v79 = v78 - v71;
+    let v80 = a_4 * v79;
+    let v81 = v77 + v80;
+    let v82 = a_3 * v79;
+    let v83 = v82 - v66;
+    SMatrix::from_data(
+        ArrayStorage([
+            [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            [v21, v23, v25, T::lit(0.0), T::lit(0.0)],
+            [v28, v39, v41, T::lit(0.0), T::lit(0.0)],
+            [v63, T::lit(0.0), T::lit(0.0), v65, v67],
+            [v70, T::lit(0.0), T::lit(0.0), v81, v83],
+        ]),
+    )
+}
+/// `∂N/∂q` and `∂N/∂q̇`.
+pub fn bias_forces_derivatives<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    qd: &SVector<T, 5>,
+    p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>) {
+    let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
+    let [_, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let v0 = qd_1 * qd_1;
+    let (v3, v1) = q_2.sincos();
+    let v2 = v1 * p.prepared[2];
+    let v4 = v3 * p.prepared[3];
+    let v5 = v2 - v4;
+    let v6 = p.prepared[1] + v5;
+    let (v13, v7) = q_1.sincos();
+    let v8 = v6 * v7;
+    let v9 = p.prepared[2] * v3;
+    let v10 = v1 * p.prepared[3];
+    let v11 = v9 + v10;
+    let v12 = p.prepared[4] + v11;
+    let v14 = v12 * v13;
+    let v15 = v8 - v14;
+    let v16 = v0 * v15;
+    let v17 = qd_1 * qd_2;
+    let v18 = v5 * v7;
+    let v19 = v11 * v13;
+    let v20 = v18 - v19;
+    let v21 = v20 + v20;
+    let v22 = v17 * v21;
+    let v23 = v16 + v22;
+    let v24 = qd_2 * qd_2;
+    let v25 = v20 * v24;
+    let v26 = v23 + v25;
+    let v27 = -v26;
+    let v28 = v7 * p.prepared[21];
+    let v29 = v13 * p.prepared[20];
+    let v30 = v28 - v29;
+    let v31 = v1 * v7;
+    let v32 = v3 * v13;
+    let v33 = v31 - v32;
+    let v34 = p.prepared[23] * v33;
+    let v35 = v1 * v13;
+    let v36 = v3 * v7;
+    let v37 = v35 + v36;
+    let v38 = p.prepared[22] * v37;
+    let v39 = v34 - v38;
+    let v40 = v30 + v39;
+    let v41 = v0 * v20;
+    let v42 = v20 + v20;
+    let v43 = v17 * v42;
+    let v44 = v41 + v43;
+    let v45 = v25 + v44;
+    let v46 = -v45;
+    let v47 = v1 * p.prepared[11];
+    let v48 = v3 * p.prepared[12];
+    let v49 = v47 - v48;
+    let v50 = -v49;
+    let v51 = v50 + v50;
+    let v52 = v17 * v51;
+    let v53 = v3 * p.prepared[13];
+    let v54 = v47 + v53;
+    let v55 = v24 * v54;
+    let v56 = v52 - v55;
+    let v57 = v39 + v56;
+    let v58 = v0 * v49;
+    let v59 = v39 + v58;
+    let v60 = qd_3 * qd_3;
+    let (v63, v61) = q_4.sincos();
+    let v62 = v61 * p.prepared[6];
+    let v64 = v63 * p.prepared[7];
+    let v65 = v62 - v64;
+    let v66 = p.prepared[5] + v65;
+    let (v73, v67) = q_3.sincos();
+    let v68 = v66 * v67;
+    let v69 = p.prepared[6] * v63;
+    let v70 = v61 * p.prepared[7];
+    let v71 = v69 + v70;
+    let v72 = p.prepared[8] + v71;
+    let v74 = v72 * v73;
+    let v75 = v68 - v74;
+    let v76 = v60 * v75;
+    let v77 = qd_3 * qd_4;
+    let v78 = v65 * v67;
+    let v79 = v71 * v73;
+    let v80 = v78 - v79;
+    let v81 = v80 + v80;
+    let v82 = v77 * v81;
+    let v83 = v76 + v82;
+    let v84 = qd_4 * qd_4;
+    let v85 = v80 * v84;
+    let v86 = v83 + v85;
+    let v87 = -v86;
+    let v88 = v67 * p.prepared[25];
+    let v89 = v73 * p.prepared[24];
+    let v90 = v88 - v89;
+    let v91 = v61 * v67;
+    let v92 = v63 * v73;
+    let v93 = v91 - v92;
+    let v94 = p.prepared[27] * v93;
+    let v95 = v61 * v73;
+    let v96 = v63 * v67;
+    let v97 = v95 + v96;
+    let v98 = p.prepared[26] * v97;
+    let v99 = v94 - v98;
+    let v100 = v90 + v99;
+    let v101 = v60 * v80;
+    let v102 = v80 + v80;
+    let v103 = v77 * v102;
+    let v104 = v101 + v103;
+    let v105 = v85 + v104;
+    let v106 = -v105;
+    let v107 = v61 * p.prepared[16];
+    let v108 = v63 * p.prepared[17];
+    let v109 = v107 - v108;
+    let v110 = -v109;
+    let v111 = v110 + v110;
+    let v112 = v77 * v111;
+    let v113 = v63 * p.prepared[18];
+    let v114 = v107 + v113;
+    let v115 = v84 * v114;
+    let v116 = v112 - v115;
+    let v117 = v99 + v116;
+    let v118 = v60 * v109;
+    let v119 = v99 + v118;
+    let v120 = v6 * v13;
+    let v121 = v7 * v12;
+    let v122 = v120 + v121;
+    let v123 = qd_1 + qd_1;
+    let v124 = v122 * v123;
+    let v125 = v7 * v11;
+    let v126 = v5 * v13;
+    let v127 = v125 + v126;
+    let v128 = v127 + v127;
+    let v129 = qd_2 * v128;
+    let v130 = v124 + v129;
+    let v131 = -v130;
+    let v132 = v3 * p.prepared[11];
+    let v133 = v1 * p.prepared[12];
+    let v134 = v132 + v133;
+    let v135 = -v134;
+    let v136 = v135 + v135;
+    let v137 = qd_2 * v136;
+    let v138 = v123 * v134;
+    let v139 = qd_1 * v128;
+    let v140 = qd_2 + qd_2;
+    let v141 = v127 * v140;
+    let v142 = v139 + v141;
+    let v143 = -v142;
+    let v144 = qd_1 * v136;
+    let v145 = v1 * p.prepared[13];
+    let v146 = v145 - v132;
+    let v147 = v140 * v146;
+    let v148 = v144 + v147;
+    let v149 = v66 * v73;
+    let v150 = v67 * v72;
+    let v151 = v149 + v150;
+    let v152 = qd_3 + qd_3;
+    let v153 = v151 * v152;
+    let v154 = v67 * v71;
+    let v155 = v65 * v73;
+    let v156 = v154 + v155;
+    let v157 = v156 + v156;
+    let v158 = qd_4 * v157;
+    let v159 = v153 + v158;
+    let v160 = -v159;
+    let v161 = v63 * p.prepared[16];
+    let v162 = v61 * p.prepared[17];
+    let v163 = v161 + v162;
+    let v164 = -v163;
+    let v165 = v164 + v164;
+    let v166 = qd_4 * v165;
+    let v167 = v152 * v163;
+    let v168 = qd_3 * v157;
+    let v169 = qd_4 + qd_4;
+    let v170 = v156 * v169;
+    let v171 = v168 + v170;
+    let v172 = -v171;
+    let v173 = qd_3 * v165;
+    let v174 = v61 * p.prepared[18];
+    let v175 = v174 - v161;
+    let v176 = v169 * v175;
+    let v177 = v173 + v176;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v27, v40, v39, T::lit(0.0), T::lit(0.0)],
+                [v46, v57, v59, T::lit(0.0), T::lit(0.0)],
+                [v87, T::lit(0.0), T::lit(0.0), v100, v99],
+                [v106, T::lit(0.0), T::lit(0.0), v117, v119],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v131, v137, v138, T::lit(0.0), T::lit(0.0)],
+                [v143, v148, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v160, T::lit(0.0), T::lit(0.0), v166, v167],
+                [v172, T::lit(0.0), T::lit(0.0), v177, T::lit(0.0)],
+            ]),
+        ),
+    )
+}
+/// `∂(Jᵀ f)/∂q`, `∂(J a)/∂q`, `∂(J̇ q̇)/∂q` and `J̇` at the closure forces `f` and the
+/// accelerations `a`.
+pub fn constraint_derivatives<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    qd: &SVector<T, 5>,
+    a: &SVector<T, 5>,
+    f: &SVector<T, 2>,
+    p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 2, 5>, SMatrix<T, 2, 5>, SMatrix<T, 2, 5>) {
+    let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
+    let [_, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let [_, a_1, a_2, a_3, a_4] = a.data.0[0];
+    let [f_0, f_1] = f.data.0[0];
+    let (v3, v0) = q_2.sincos();
+    let (v1, v4) = q_1.sincos();
+    let v2 = v0 * v1;
+    let v5 = v3 * v4;
+    let v6 = v2 + v5;
+    let v7 = p.lower_a_length_x * v6;
+    let v8 = v0 * v4;
+    let v9 = v1 * v3;
+    let v10 = v8 - v9;
+    let v11 = p.lower_a_length_y * v10;
+    let v12 = v7 + v11;
+    let v13 = v1 * p.upper_a_length_x;
+    let v14 = v4 * p.upper_a_length_y;
+    let v15 = v13 + v14;
+    let v16 = v12 + v15;
+    let v17 = f_1 * v16;
+    let v18 = p.lower_a_length_x * v10;
+    let v19 = v6 * p.lower_a_length_y;
+    let v20 = v18 - v19;
+    let v21 = v4 * p.upper_a_length_x;
+    let v22 = v1 * p.upper_a_length_y;
+    let v23 = v21 - v22;
+    let v24 = v20 + v23;
+    let v25 = f_0 * v24;
+    let v26 = v17 + v25;
+    let v27 = -v26;
+    let v28 = f_1 * v12;
+    let v29 = f_0 * v20;
+    let v30 = v28 + v29;
+    let v31 = -v30;
+    let (v35, v32) = q_4.sincos();
+    let (v36, v33) = q_3.sincos();
+    let v34 = v32 * v33;
+    let v37 = v35 * v36;
+    let v38 = v34 - v37;
+    let v39 = p.lower_b_length_x * v38;
+    let v40 = v32 * v36;
+    let v41 = v33 * v35;
+    let v42 = v40 + v41;
+    let v43 = p.lower_b_length_y * v42;
+    let v44 = v39 - v43;
+    let v45 = v33 * p.upper_b_length_x;
+    let v46 = v36 * p.upper_b_length_y;
+    let v47 = v45 - v46;
+    let v48 = v44 + v47;
+    let v49 = f_0 * v48;
+    let v50 = p.lower_b_length_x * v42;
+    let v51 = v38 * p.lower_b_length_y;
+    let v52 = v50 + v51;
+    let v53 = v36 * p.upper_b_length_x;
+    let v54 = v33 * p.upper_b_length_y;
+    let v55 = v53 + v54;
+    let v56 = v52 + v55;
+    let v57 = f_1 * v56;
+    let v58 = v49 + v57;
+    let v59 = f_0 * v44;
+    let v60 = f_1 * v52;
+    let v61 = v59 + v60;
+    let v62 = v24 * a_1;
+    let v63 = v20 * a_2;
+    let v64 = v62 + v63;
+    let v65 = -v64;
+    let v66 = v16 * a_1;
+    let v67 = v12 * a_2;
+    let v68 = v66 + v67;
+    let v69 = -v68;
+    let v70 = v20 * a_1;
+    let v71 = v63 + v70;
+    let v72 = -v71;
+    let v73 = v12 * a_1;
+    let v74 = v67 + v73;
+    let v75 = -v74;
+    let v76 = v48 * a_3;
+    let v77 = v44 * a_4;
+    let v78 = v76 + v77;
+    let v79 = v56 * a_3;
+    let v80 = v52 * a_4;
+    let v81 = v79 + v80;
+    let v82 = v44 * a_3;
+    let v83 = v77 + v82;
+    let v84 = v52 * a_3;
+    let v85 = v80 + v84;
+    let v86 = qd_1 + qd_2;
+    let v87 = v86 * v86;
+    let v88 = v12 * v87;
+    let v89 = qd_1 * qd_1;
+    let v90 = v15 * v89;
+    let v91 = v88 + v90;
+    let v92 = v20 * v87;
+    let v93 = v23 * v89;
+    let v94 = v92 + v93;
+    let v95 = -v94;
+    let v96 = -v92;
+    let v97 = qd_3 + qd_4;
+    let v98 = v97 * v97;
+    let v99 = v52 * v98;
+    let v100 = qd_3 * qd_3;
+    let v101 = v55 * v100;
+    let v102 = v99 + v101;
+    let v103 = -v102;
+    let v104 = v44 * v98;
+    let v105 = v47 * v100;
+    let v106 = v104 + v105;
+    let v107 = -v99;
+    let v108 = v24 * qd_1;
+    let v109 = v20 * qd_2;
+    let v110 = v108 + v109;
+    let v111 = -v110;
+    let v112 = v16 * qd_1;
+    let v113 = v12 * qd_2;
+    let v114 = v112 + v113;
+    let v115 = -v114;
+    let v116 = v20 * qd_1;
+    let v117 = v109 + v116;
+    let v118 = -v117;
+    let v119 = v12 * qd_1;
+    let v120 = v113 + v119;
+    let v121 = -v120;
+    let v122 = v48 * qd_3;
+    let v123 = v44 * qd_4;
+    let v124 = v122 + v123;
+    let v125 = v56 * qd_3;
+    let v126 = v52 * qd_4;
+    let v127 = v125 + v126;
+    let v128 = v44 * qd_3;
+    let v129 = v123 + v128;
+    let v130 = v52 * qd_3;
+    let v131 = v126 + v130;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), v27, v31, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), v31, v31, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), v58, v61],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), v61, v61],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0)],
+                [v65, v69],
+                [v72, v75],
+                [v78, v81],
+                [v83, v85],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0)],
+                [v91, v95],
+                [v88, v96],
+                [v103, v106],
+                [v107, v104],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0)],
+                [v111, v115],
+                [v118, v121],
+                [v124, v127],
+                [v129, v131],
+            ]),
+        ),
+    )
+}
+/// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
+/// (base frame) and the accelerations `a`.
+pub fn contact_derivatives<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    qd: &SVector<T, 5>,
+    a: &SVector<T, 5>,
+    lambda: &SVector<T, 2>,
+    p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 2, 5>, SMatrix<T, 2, 5>, SMatrix<T, 2, 5>) {
+    let [_, q_1, q_2, _, _] = q.data.0[0];
+    let [_, qd_1, qd_2, _, _] = qd.data.0[0];
+    let [_, a_1, a_2, _, _] = a.data.0[0];
+    let [lambda_0, lambda_1] = lambda.data.0[0];
+    let (v3, v0) = q_2.sincos();
+    let (v1, v4) = q_1.sincos();
+    let v2 = v0 * v1;
+    let v5 = v3 * v4;
+    let v6 = v2 + v5;
+    let v7 = p.lower_a_length_x * v6;
+    let v8 = v0 * v4;
+    let v9 = v1 * v3;
+    let v10 = v8 - v9;
+    let v11 = p.lower_a_length_y * v10;
+    let v12 = v7 + v11;
+    let v13 = v1 * p.upper_a_length_x;
+    let v14 = v4 * p.upper_a_length_y;
+    let v15 = v13 + v14;
+    let v16 = v12 + v15;
+    let v17 = lambda_1 * v16;
+    let v18 = p.lower_a_length_x * v10;
+    let v19 = v6 * p.lower_a_length_y;
+    let v20 = v18 - v19;
+    let v21 = v4 * p.upper_a_length_x;
+    let v22 = v1 * p.upper_a_length_y;
+    let v23 = v21 - v22;
+    let v24 = v20 + v23;
+    let v25 = lambda_0 * v24;
+    let v26 = v17 + v25;
+    let v27 = -v26;
+    let v28 = lambda_1 * v12;
+    let v29 = lambda_0 * v20;
+    let v30 = v28 + v29;
+    let v31 = -v30;
+    let v32 = v24 * a_1;
+    let v33 = v20 * a_2;
+    let v34 = v32 + v33;
+    let v35 = -v34;
+    let v36 = v16 * a_1;
+    let v37 = v12 * a_2;
+    let v38 = v36 + v37;
+    let v39 = -v38;
+    let v40 = v20 * a_1;
+    let v41 = v33 + v40;
+    let v42 = -v41;
+    let v43 = v12 * a_1;
+    let v44 = v37 + v43;
+    let v45 = -v44;
+    let v46 = qd_1 + qd_2;
+    let v47 = v46 * v46;
+    let v48 = v12 * v47;
+    let v49 = qd_1 * qd_1;
+    let v50 = v15 * v49;
+    let v51 = v48 + v50;
+    let v52 = v20 * v47;
+    let v53 = v23 * v49;
+    let v54 = v52 + v53;
+    let v55 = -v54;
+    let v56 = -v52;
+    let v57 = v24 * qd_1;
+    let v58 = v20 * qd_2;
+    let v59 = v57 + v58;
+    let v60 = -v59;
+    let v61 = v16 * qd_1;
+    let v62 = v12 * qd_2;
+    let v63 = v61 + v62;
+    let v64 = -v63;
+    let v65 = v20 * qd_1;
+    let v66 = v58 + v65;
+    let v67 = -v66;
+    let v68 = v12 * qd_1;
+    let v69 = v62 + v68;
+    let v70 = -v69;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), v27, v31, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), v31, v31, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0)],
+                [v35, v39],
+                [v42, v45],
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0)],
+                [v51, v55],
+                [v48, v56],
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0)],
+                [v60, v64],
+                [v67, v70],
+                [T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+    )
+}
+/// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
+/// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
+pub fn dynamics_derivatives<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    qd: &SVector<T, 5>,
+    a: &SVector<T, 5>,
+    f: &SVector<T, 2>,
+    p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>, SMatrix<T, 2, 5>, SMatrix<T, 2, 5>) {
+    let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
+    let [_, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
+    let [f_0, f_1] = f.data.0[0];
+    let (v2, v0) = q_2.sincos();
+    let v1 = v0 * p.prepared[2];
+    let v3 = v2 * p.prepared[3];
+    let v4 = v1 - v3;
+    let v5 = p.prepared[1] + v4;
+    let (v6, v12) = q_1.sincos();
+    let v7 = v5 * v6;
+    let v8 = p.prepared[2] * v2;
+    let v9 = v0 * p.prepared[3];
+    let v10 = v8 + v9;
+    let v11 = p.prepared[4] + v10;
+    let v13 = v11 * v12;
+    let v14 = v7 + v13;
+    let v15 = a_1 * v14;
+    let v16 = v4 * v6;
+    let v17 = v10 * v12;
+    let v18 = v16 + v17;
+    let v19 = a_2 * v18;
+    let v20 = v15 + v19;
+    let v21 = qd_1 * qd_1;
+    let v22 = v5 * v12;
+    let v23 = v6 * v11;
+    let v24 = v22 - v23;
+    let v25 = v21 * v24;
+    let v26 = qd_1 * qd_2;
+    let v27 = v4 * v12;
+    let v28 = v6 * v10;
+    let v29 = v27 - v28;
+    let v30 = v29 + v29;
+    let v31 = v26 * v30;
+    let v32 = v25 + v31;
+    let v33 = qd_2 * qd_2;
+    let v34 = v29 * v33;
+    let v35 = v32 + v34;
+    let v36 = v20 + v35;
+    let v37 = -v36;
+    let v38 = v12 * p.prepared[21];
+    let v39 = v6 * p.prepared[20];
+    let v40 = v38 - v39;
+    let v41 = v0 * v12;
+    let v42 = v2 * v6;
+    let v43 = v41 - v42;
+    let v44 = p.prepared[23] * v43;
+    let v45 = v0 * v6;
+    let v46 = v2 * v12;
+    let v47 = v45 + v46;
+    let v48 = p.prepared[22] * v47;
+    let v49 = v44 - v48;
+    let v50 = v40 + v49;
+    let v51 = v14 * a_0;
+    let v52 = v50 - v51;
+    let v53 = v47 * p.lower_a_length_x;
+    let v54 = v43 * p.lower_a_length_y;
+    let v55 = v53 + v54;
+    let v56 = p.upper_a_length_x * v6;
+    let v57 = p.upper_a_length_y * v12;
+    let v58 = v56 + v57;
+    let v59 = v55 + v58;
+    let v60 = f_1 * v59;
+    let v61 = v43 * p.lower_a_length_x;
+    let v62 = v47 * p.lower_a_length_y;
+    let v63 = v61 - v62;
+    let v64 = p.upper_a_length_x * v12;
+    let v65 = v6 * p.upper_a_length_y;
+    let v66 = v64 - v65;
+    let v67 = v63 + v66;
+    let v68 = f_0 * v67;
+    let v69 = v60 + v68;
+    let v70 = v52 + v69;
+    let v71 = v18 * a_0;
+    let v72 = v49 - v71;
+    let v73 = f_1 * v55;
+    let v74 = f_0 * v63;
+    let v75 = v73 + v74;
+    let v76 = v72 + v75;
+    let v77 = a_1 * v18;
+    let v78 = v19 + v77;
+    let v79 = v21 * v29;
+    let v80 = v29 + v29;
+    let v81 = v26 * v80;
+    let v82 = v79 + v81;
+    let v83 = v34 + v82;
+    let v84 = v78 + v83;
+    let v85 = -v84;
+    let v86 = v2 * p.prepared[11];
+    let v87 = v0 * p.prepared[12];
+    let v88 = v86 + v87;
+    let v89 = -v88;
+    let v90 = v89 + v89;
+    let v91 = a_1 * v90;
+    let v92 = v91 - v71;
+    let v93 = v0 * p.prepared[13];
+    let v94 = v93 - v86;
+    let v95 = a_2 * v94;
+    let v96 = v92 + v95;
+    let v97 = v0 * p.prepared[11];
+    let v98 = v2 * p.prepared[12];
+    let v99 = v97 - v98;
+    let v100 = -v99;
+    let v101 = v100 + v100;
+    let v102 = v26 * v101;
+    let v103 = v2 * p.prepared[13];
+    let v104 = v97 + v103;
+    let v105 = v33 * v104;
+    let v106 = v102 - v105;
+    let v107 = v49 + v106;
+    let v108 = v96 + v107;
+    let v109 = v75 + v108;
+    let v110 = a_1 * v94;
+    let v111 = v110 - v71;
+    let v112 = v21 * v99;
+    let v113 = v49 + v112;
+    let v114 = v111 + v113;
+    let v115 = v75 + v114;
+    let (v118, v116) = q_4.sincos();
+    let v117 = v116 * p.prepared[6];
+    let v119 = v118 * p.prepared[7];
+    let v120 = v117 - v119;
+    let v121 = p.prepared[5] + v120;
+    let (v122, v128) = q_3.sincos();
+    let v123 = v121 * v122;
+    let v124 = p.prepared[6] * v118;
+    let v125 = v116 * p.prepared[7];
+    let v126 = v124 + v125;
+    let v127 = p.prepared[8] + v126;
+    let v129 = v127 * v128;
+    let v130 = v123 + v129;
+    let v131 = a_3 * v130;
+    let v132 = v120 * v122;
+    let v133 = v126 * v128;
+    let v134 = v132 + v133;
+    let v135 = a_4 * v134;
+    let v136 = v131 + v135;
+    let v137 = qd_3 * qd_3;
+    let v138 = v121 * v128;
+    let v139 = v122 * v127;
+    let v140 = v138 - v139;
+    let v141 = v137 * v140;
+    let v142 = qd_3 * qd_4;
+    let v143 = v120 * v128;
+    let v144 = v122 * v126;
+    let v145 = v143 - v144;
+    let v146 = v145 + v145;
+    let v147 = v142 * v146;
+    let v148 = v141 + v147;
+    let v149 = qd_4 * qd_4;
+    let v150 = v145 * v149;
+    let v151 = v148 + v150;
+    let v152 = v136 + v151;
+    let v153 = -v152;
+    let v154 = v128 * p.prepared[25];
+    let v155 = v122 * p.prepared[24];
+    let v156 = v154 - v155;
+    let v157 = v116 * v128;
+    let v158 = v118 * v122;
+    let v159 = v157 - v158;
+    let v160 = p.prepared[27] * v159;
+    let v161 = v116 * v122;
+    let v162 = v118 * v128;
+    let v163 = v161 + v162;
+    let v164 = p.prepared[26] * v163;
+    let v165 = v160 - v164;
+    let v166 = v156 + v165;
+    let v167 = a_0 * v130;
+    let v168 = v166 - v167;
+    let v169 = v159 * p.lower_b_length_x;
+    let v170 = v163 * p.lower_b_length_y;
+    let v171 = v169 - v170;
+    let v172 = p.upper_b_length_x * v128;
+    let v173 = v122 * p.upper_b_length_y;
+    let v174 = v172 - v173;
+    let v175 = v171 + v174;
+    let v176 = f_0 * v175;
+    let v177 = v163 * p.lower_b_length_x;
+    let v178 = v159 * p.lower_b_length_y;
+    let v179 = v177 + v178;
+    let v180 = p.upper_b_length_x * v122;
+    let v181 = p.upper_b_length_y * v128;
+    let v182 = v180 + v181;
+    let v183 = v179 + v182;
+    let v184 = f_1 * v183;
+    let v185 = v176 + v184;
+    let v186 = v168 - v185;
+    let v187 = a_0 * v134;
+    let v188 = v165 - v187;
+    let v189 = f_0 * v171;
+    let v190 = f_1 * v179;
+    let v191 = v189 + v190;
+    let v192 = v188 - v191;
+    let v193 = a_3 * v134;
+    let v194 = v135 + v193;
+    let v195 = v137 * v145;
+    let v196 = v145 + v145;
+    let v197 = v142 * v196;
+    let v198 = v195 + v197;
+    let v199 = v150 + v198;
+    let v200 = v194 + v199;
+    let v201 = -v200;
+    let v202 = v118 * p.prepared[16];
+    let v203 = v116 * p.prepared[17];
+    let v204 = v202 + v203;
+    let v205 = -v204;
+    let v206 = v205 + v205;
+    let v207 = a_3 * v206;
+    let v208 = v207 - v187;
+    let v209 = v116 * p.prepared[18];
+    let v210 = v209 - v202;
+    let v211 = a_4 * v210;
+    let v212 = v208 + v211;
+    let v213 = v116 * p.prepared[16];
+    let v214 = v118 * p.prepared[17];
+    let v215 = v213 - v214;
+    let v216 = -v215;
+    let v217 = v216 + v216;
+    let v218 = v142 * v217;
+    let v219 = v118 * p.prepared[18];
+    let v220 = v213 + v219;
+    let v221 = v149 * v220;
+    let v222 = v218 - v221;
+    let v223 = v165 + v222;
+    let v224 = v212 + v223;
+    let v225 = v224 - v191;
+    let v226 = a_3 * v210;
+    let v227 = v226 - v187;
+    let v228 = v137 * v215;
+    let v229 = v165 + v228;
+    let v230 = v227 + v229;
+    let v231 = v230 - v191;
+    let v232 = qd_1 + qd_1;
+    let v233 = v14 * v232;
+    let v234 = v18 + v18;
+    let v235 = qd_2 * v234;
+    let v236 = v233 + v235;
+    let v237 = -v236;
+    let v238 = qd_2 * v90;
+    let v239 = v238 + p.upper_a_damping;
+    let v240 = v88 * v232;
+    let v241 = qd_1 * v234;
+    let v242 = qd_2 + qd_2;
+    let v243 = v18 * v242;
+    let v244 = v241 + v243;
+    let v245 = -v244;
+    let v246 = qd_1 * v90;
+    let v247 = v94 * v242;
+    let v248 = v246 + v247;
+    let v249 = qd_3 + qd_3;
+    let v250 = v130 * v249;
+    let v251 = v134 + v134;
+    let v252 = qd_4 * v251;
+    let v253 = v250 + v252;
+    let v254 = -v253;
+    let v255 = qd_4 * v206;
+    let v256 = v255 + p.upper_b_damping;
+    let v257 = v204 * v249;
+    let v258 = qd_3 * v251;
+    let v259 = qd_4 + qd_4;
+    let v260 = v134 * v259;
+    let v261 = v258 + v260;
+    let v262 = -v261;
+    let v263 = qd_3 * v206;
+    let v264 = v210 * v259;
+    let v265 = v263 + v264;
+    let v266 = qd_1 + qd_2;
+    let v267 = v266 * v266;
+    let v268 = v55 * v267;
+    let v269 = v21 * v58;
+    let v270 = v268 + v269;
+    let v271 = a_1 * v67;
+    let v272 = a_2 * v63;
+    let v273 = v271 + v272;
+    let v274 = v270 - v273;
+    let v275 = a_1 * v59;
+    let v276 = a_2 * v55;
+    let v277 = v275 + v276;
+    let v278 = v63 * v267;
+    let v279 = v21 * v66;
+    let v280 = v278 + v279;
+    let v281 = v277 + v280;
+    let v282 = -v281;
+    let v283 = a_1 * v63;
+    let v284 = v272 + v283;
+    let v285 = v268 - v284;
+    let v286 = a_1 * v55;
+    let v287 = v276 + v286;
+    let v288 = v278 + v287;
+    let v289 = -v288;
+    let v290 = a_3 * v175;
+    let v291 = a_4 * v171;
+    let v292 = v290 + v291;
+    let v293 = qd_3 + qd_4;
+    let v294 = v293 * v293;
+    let v295 = v179 * v294;
+    let v296 = v137 * v182;
+    let v297 = v295 + v296;
+    let v298 = v292 - v297;
+    let v299 = a_3 * v183;
+    let v300 = a_4 * v179;
+    let v301 = v299 + v300;
+    let v302 = v171 * v294;
+    let v303 = v137 * v174;
+    let v304 = v302 + v303;
+    let v305 = v301 + v304;
+    let v306 = a_3 * v171;
+    let v307 = v291 + v306;
+    let v308 = v307 - v295;
+    let v309 = a_3 * v179;
+    let v310 = v300 + v309;
+    let v311 = v302 + v310;
+    let v312 = qd_1 * v67;
+    let v313 = qd_2 * v63;
+    let v314 = v312 + v313;
+    let v315 = -v314;
+    let v316 = qd_1 * v59;
+    let v317 = qd_2 * v55;
+    let v318 = v316 + v317;
+    let v319 = -v318;
+    let v320 = qd_1 * v63;
+    let v321 = v313 + v320;
+    let v322 = -v321;
+    let v323 = qd_1 * v55;
+    let v324 = v317 + v323;
+    let v325 = -v324;
+    let v326 = qd_3 * v175;
+    let v327 = qd_4 * v171;
+    let v328 = v326 + v327;
+    let v329 = qd_3 * v183;
+    let v330 = qd_4 * v179;
+    let v331 = v329 + v330;
+    let v332 = qd_3 * v171;
+    let v333 = v327 + v332;
+    let v334 = qd_3 * v179;
+    let v335 = v330 + v334;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v37, v70, v76, T::lit(0.0), T::lit(0.0)],
+                [v85, v109, v115, T::lit(0.0), T::lit(0.0)],
+                [v153, T::lit(0.0), T::lit(0.0), v186, v192],
+                [v201, T::lit(0.0), T::lit(0.0), v225, v231],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [p.body_damping, T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v237, v239, v240, T::lit(0.0), T::lit(0.0)],
+                [v245, v248, p.lower_a_damping, T::lit(0.0), T::lit(0.0)],
+                [v254, T::lit(0.0), T::lit(0.0), v256, v257],
+                [v262, T::lit(0.0), T::lit(0.0), v265, p.lower_b_damping],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0)],
+                [v274, v282],
+                [v285, v289],
+                [v298, v305],
+                [v308, v311],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0)],
+                [v315, v319],
+                [v322, v325],
+                [v328, v331],
+                [v333, v335],
+            ]),
+        ),
     )
 }

@@ -9,7 +9,8 @@
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
-    Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters,
+    Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
+    JointKind, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 5;
@@ -505,6 +506,62 @@ impl LegModel<NQ, NC, NU> for MinitaurPinnedToe {
             constraint_bias,
         }
     }
+    fn mass_matrix_derivative<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 5, 5> {
+        mass_matrix_derivative(q, a, p)
+    }
+    fn bias_forces_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>) {
+        bias_forces_derivatives(q, qd, p)
+    }
+    fn constraint_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        f: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 5, 4> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
+    }
+    fn dynamics_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        f: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> DynamicsDerivatives<T, 5, 4> {
+        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        DynamicsDerivatives {
+            dynamics_q,
+            dynamics_qd,
+            constraint_q,
+            jacobian_rate,
+        }
+    }
 }
 impl ContactModel<NQ, NC, NU, NK> for MinitaurPinnedToe {
     const CONTACT_NAMES: &'static [&'static str] = &[];
@@ -529,6 +586,27 @@ impl ContactModel<NQ, NC, NU, NK> for MinitaurPinnedToe {
         p: &Params<T>,
     ) -> SVector<T, 0> {
         contact_bias(q, qd, p)
+    }
+    fn contact_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        lambda: &SVector<T, 0>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 5, 0> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
+            q,
+            qd,
+            a,
+            lambda,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -1771,5 +1849,914 @@ pub fn dynamics_terms<T: Arithmetic>(
             ]),
         ),
         SMatrix::from_data(ArrayStorage([[v179, v186, v187, v188]])),
+    )
+}
+/// `∂(M a)/∂q` at the accelerations `a`.
+pub fn mass_matrix_derivative<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    a: &SVector<T, 5>,
+    p: &Params<T>,
+) -> SMatrix<T, 5, 5> {
+    let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
+    let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
+    let (v2, v0) = q_2.sincos();
+    let v1 = v0 * p.prepared[2];
+    let v3 = v2 * p.prepared[3];
+    let v4 = v1 - v3;
+    let v5 = p.prepared[1] + v4;
+    let (v6, v12) = q_1.sincos();
+    let v7 = v5 * v6;
+    let v8 = p.prepared[2] * v2;
+    let v9 = v0 * p.prepared[3];
+    let v10 = v8 + v9;
+    let v11 = p.prepared[4] + v10;
+    let v13 = v11 * v12;
+    let v14 = v7 + v13;
+    let v15 = a_1 * v14;
+    let v16 = v4 * v6;
+    let v17 = v10 * v12;
+    let v18 = v16 + v17;
+    let v19 = a_2 * v18;
+    let v20 = v15 + v19;
+    let v21 = -v20;
+    let v22 = v14 * a_0;
+    let v23 = -v22;
+    let v24 = v18 * a_0;
+    let v25 = -v24;
+    let v26 = a_1 * v18;
+    let v27 = v19 + v26;
+    let v28 = -v27;
+    let v29 = v2 * p.prepared[11];
+    let v30 = v0 * p.prepared[12];
+    let v31 = v29 + v30;
+    let v32 = -v31;
+    let v33 = v32 + v32;
+    let v34 = a_1 * v33;
+    let v35 = v34 - v24;
+    let v36 = v0 * p.prepared[13];
+    let v37 = v36 - v29;
+    let v38 = a_2 * v37;
+    let v39 = v35 + v38;
+    let v40 = a_1 * v37;
+    let v41 = v40 - v24;
+    let (v44, v42) = q_4.sincos();
+    let v43 = v42 * p.prepared[6];
+    let v45 = v44 * p.prepared[7];
+    let v46 = v43 - v45;
+    let v47 = p.prepared[5] + v46;
+    let (v48, v54) = q_3.sincos();
+    let v49 = v47 * v48;
+    let v50 = p.prepared[6] * v44;
+    let v51 = v42 * p.prepared[7];
+    let v52 = v50 + v51;
+    let v53 = p.prepared[8] + v52;
+    let v55 = v53 * v54;
+    let v56 = v49 + v55;
+    let v57 = a_3 * v56;
+    let v58 = v46 * v48;
+    let v59 = v52 * v54;
+    let v60 = v58 + v59;
+    let v61 = a_4 * v60;
+    let v62 = v57 + v61;
+    let v63 = -v62;
+    let v64 = a_0 * v56;
+    let v65 = -v64;
+    let v66 = a_0 * v60;
+    let v67 = -v66;
+    let v68 = a_3 * v60;
+    let v69 = v61 + v68;
+    let v70 = -v69;
+    let v71 = v44 * p.prepared[16];
+    let v72 = v42 * p.prepared[17];
+    let v73 = v71 + v72;
+    let v74 = -v73;
+    let v75 = v74 + v74;
+    let v76 = a_3 * v75;
+    let v77 = v76 - v66;
+    let v78 = v42 * p.prepared[18];
+    let v79 = v78 - v71;
+    let v80 = a_4 * v79;
+    let v81 = v77 + v80;
+    let v82 = a_3 * v79;
+    let v83 = v82 - v66;
+    SMatrix::from_data(
+        ArrayStorage([
+            [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            [v21, v23, v25, T::lit(0.0), T::lit(0.0)],
+            [v28, v39, v41, T::lit(0.0), T::lit(0.0)],
+            [v63, T::lit(0.0), T::lit(0.0), v65, v67],
+            [v70, T::lit(0.0), T::lit(0.0), v81, v83],
+        ]),
+    )
+}
+/// `∂N/∂q` and `∂N/∂q̇`.
+pub fn bias_forces_derivatives<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    qd: &SVector<T, 5>,
+    p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>) {
+    let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
+    let [_, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let v0 = qd_1 * qd_1;
+    let (v3, v1) = q_2.sincos();
+    let v2 = v1 * p.prepared[2];
+    let v4 = v3 * p.prepared[3];
+    let v5 = v2 - v4;
+    let v6 = p.prepared[1] + v5;
+    let (v13, v7) = q_1.sincos();
+    let v8 = v6 * v7;
+    let v9 = p.prepared[2] * v3;
+    let v10 = v1 * p.prepared[3];
+    let v11 = v9 + v10;
+    let v12 = p.prepared[4] + v11;
+    let v14 = v12 * v13;
+    let v15 = v8 - v14;
+    let v16 = v0 * v15;
+    let v17 = qd_1 * qd_2;
+    let v18 = v5 * v7;
+    let v19 = v11 * v13;
+    let v20 = v18 - v19;
+    let v21 = v20 + v20;
+    let v22 = v17 * v21;
+    let v23 = v16 + v22;
+    let v24 = qd_2 * qd_2;
+    let v25 = v20 * v24;
+    let v26 = v23 + v25;
+    let v27 = -v26;
+    let v28 = v7 * p.prepared[21];
+    let v29 = v13 * p.prepared[20];
+    let v30 = v28 - v29;
+    let v31 = v1 * v7;
+    let v32 = v3 * v13;
+    let v33 = v31 - v32;
+    let v34 = p.prepared[23] * v33;
+    let v35 = v1 * v13;
+    let v36 = v3 * v7;
+    let v37 = v35 + v36;
+    let v38 = p.prepared[22] * v37;
+    let v39 = v34 - v38;
+    let v40 = v30 + v39;
+    let v41 = v0 * v20;
+    let v42 = v20 + v20;
+    let v43 = v17 * v42;
+    let v44 = v41 + v43;
+    let v45 = v25 + v44;
+    let v46 = -v45;
+    let v47 = v1 * p.prepared[11];
+    let v48 = v3 * p.prepared[12];
+    let v49 = v47 - v48;
+    let v50 = -v49;
+    let v51 = v50 + v50;
+    let v52 = v17 * v51;
+    let v53 = v3 * p.prepared[13];
+    let v54 = v47 + v53;
+    let v55 = v24 * v54;
+    let v56 = v52 - v55;
+    let v57 = v39 + v56;
+    let v58 = v0 * v49;
+    let v59 = v39 + v58;
+    let v60 = qd_3 * qd_3;
+    let (v63, v61) = q_4.sincos();
+    let v62 = v61 * p.prepared[6];
+    let v64 = v63 * p.prepared[7];
+    let v65 = v62 - v64;
+    let v66 = p.prepared[5] + v65;
+    let (v73, v67) = q_3.sincos();
+    let v68 = v66 * v67;
+    let v69 = p.prepared[6] * v63;
+    let v70 = v61 * p.prepared[7];
+    let v71 = v69 + v70;
+    let v72 = p.prepared[8] + v71;
+    let v74 = v72 * v73;
+    let v75 = v68 - v74;
+    let v76 = v60 * v75;
+    let v77 = qd_3 * qd_4;
+    let v78 = v65 * v67;
+    let v79 = v71 * v73;
+    let v80 = v78 - v79;
+    let v81 = v80 + v80;
+    let v82 = v77 * v81;
+    let v83 = v76 + v82;
+    let v84 = qd_4 * qd_4;
+    let v85 = v80 * v84;
+    let v86 = v83 + v85;
+    let v87 = -v86;
+    let v88 = v67 * p.prepared[25];
+    let v89 = v73 * p.prepared[24];
+    let v90 = v88 - v89;
+    let v91 = v61 * v67;
+    let v92 = v63 * v73;
+    let v93 = v91 - v92;
+    let v94 = p.prepared[27] * v93;
+    let v95 = v61 * v73;
+    let v96 = v63 * v67;
+    let v97 = v95 + v96;
+    let v98 = p.prepared[26] * v97;
+    let v99 = v94 - v98;
+    let v100 = v90 + v99;
+    let v101 = v60 * v80;
+    let v102 = v80 + v80;
+    let v103 = v77 * v102;
+    let v104 = v101 + v103;
+    let v105 = v85 + v104;
+    let v106 = -v105;
+    let v107 = v61 * p.prepared[16];
+    let v108 = v63 * p.prepared[17];
+    let v109 = v107 - v108;
+    let v110 = -v109;
+    let v111 = v110 + v110;
+    let v112 = v77 * v111;
+    let v113 = v63 * p.prepared[18];
+    let v114 = v107 + v113;
+    let v115 = v84 * v114;
+    let v116 = v112 - v115;
+    let v117 = v99 + v116;
+    let v118 = v60 * v109;
+    let v119 = v99 + v118;
+    let v120 = v6 * v13;
+    let v121 = v7 * v12;
+    let v122 = v120 + v121;
+    let v123 = qd_1 + qd_1;
+    let v124 = v122 * v123;
+    let v125 = v7 * v11;
+    let v126 = v5 * v13;
+    let v127 = v125 + v126;
+    let v128 = v127 + v127;
+    let v129 = qd_2 * v128;
+    let v130 = v124 + v129;
+    let v131 = -v130;
+    let v132 = v3 * p.prepared[11];
+    let v133 = v1 * p.prepared[12];
+    let v134 = v132 + v133;
+    let v135 = -v134;
+    let v136 = v135 + v135;
+    let v137 = qd_2 * v136;
+    let v138 = v123 * v134;
+    let v139 = qd_1 * v128;
+    let v140 = qd_2 + qd_2;
+    let v141 = v127 * v140;
+    let v142 = v139 + v141;
+    let v143 = -v142;
+    let v144 = qd_1 * v136;
+    let v145 = v1 * p.prepared[13];
+    let v146 = v145 - v132;
+    let v147 = v140 * v146;
+    let v148 = v144 + v147;
+    let v149 = v66 * v73;
+    let v150 = v67 * v72;
+    let v151 = v149 + v150;
+    let v152 = qd_3 + qd_3;
+    let v153 = v151 * v152;
+    let v154 = v67 * v71;
+    let v155 = v65 * v73;
+    let v156 = v154 + v155;
+    let v157 = v156 + v156;
+    let v158 = qd_4 * v157;
+    let v159 = v153 + v158;
+    let v160 = -v159;
+    let v161 = v63 * p.prepared[16];
+    let v162 = v61 * p.prepared[17];
+    let v163 = v161 + v162;
+    let v164 = -v163;
+    let v165 = v164 + v164;
+    let v166 = qd_4 * v165;
+    let v167 = v152 * v163;
+    let v168 = qd_3 * v157;
+    let v169 = qd_4 + qd_4;
+    let v170 = v156 * v169;
+    let v171 = v168 + v170;
+    let v172 = -v171;
+    let v173 = qd_3 * v165;
+    let v174 = v61 * p.prepared[18];
+    let v175 = v174 - v161;
+    let v176 = v169 * v175;
+    let v177 = v173 + v176;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v27, v40, v39, T::lit(0.0), T::lit(0.0)],
+                [v46, v57, v59, T::lit(0.0), T::lit(0.0)],
+                [v87, T::lit(0.0), T::lit(0.0), v100, v99],
+                [v106, T::lit(0.0), T::lit(0.0), v117, v119],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v131, v137, v138, T::lit(0.0), T::lit(0.0)],
+                [v143, v148, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v160, T::lit(0.0), T::lit(0.0), v166, v167],
+                [v172, T::lit(0.0), T::lit(0.0), v177, T::lit(0.0)],
+            ]),
+        ),
+    )
+}
+/// `∂(Jᵀ f)/∂q`, `∂(J a)/∂q`, `∂(J̇ q̇)/∂q` and `J̇` at the closure forces `f` and the
+/// accelerations `a`.
+pub fn constraint_derivatives<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    qd: &SVector<T, 5>,
+    a: &SVector<T, 5>,
+    f: &SVector<T, 4>,
+    p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 4, 5>, SMatrix<T, 4, 5>, SMatrix<T, 4, 5>) {
+    let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
+    let [_, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let [_, a_1, a_2, a_3, a_4] = a.data.0[0];
+    let [f_0, f_1, f_2, f_3] = f.data.0[0];
+    let (v3, v0) = q_2.sincos();
+    let (v1, v4) = q_1.sincos();
+    let v2 = v0 * v1;
+    let v5 = v3 * v4;
+    let v6 = v2 + v5;
+    let v7 = p.lower_a_length_x * v6;
+    let v8 = v0 * v4;
+    let v9 = v1 * v3;
+    let v10 = v8 - v9;
+    let v11 = p.lower_a_length_y * v10;
+    let v12 = v7 + v11;
+    let v13 = v1 * p.upper_a_length_x;
+    let v14 = v4 * p.upper_a_length_y;
+    let v15 = v13 + v14;
+    let v16 = v12 + v15;
+    let v17 = f_1 * v16;
+    let v18 = p.lower_a_length_x * v10;
+    let v19 = v6 * p.lower_a_length_y;
+    let v20 = v18 - v19;
+    let v21 = v4 * p.upper_a_length_x;
+    let v22 = v1 * p.upper_a_length_y;
+    let v23 = v21 - v22;
+    let v24 = v20 + v23;
+    let v25 = f_0 * v24;
+    let v26 = v17 + v25;
+    let v27 = v24 * f_2;
+    let v28 = v26 + v27;
+    let v29 = v16 * f_3;
+    let v30 = v28 + v29;
+    let v31 = -v30;
+    let v32 = f_1 * v12;
+    let v33 = f_0 * v20;
+    let v34 = v32 + v33;
+    let v35 = v20 * f_2;
+    let v36 = v34 + v35;
+    let v37 = v12 * f_3;
+    let v38 = v36 + v37;
+    let v39 = -v38;
+    let (v43, v40) = q_4.sincos();
+    let (v44, v41) = q_3.sincos();
+    let v42 = v40 * v41;
+    let v45 = v43 * v44;
+    let v46 = v42 - v45;
+    let v47 = p.lower_b_length_x * v46;
+    let v48 = v40 * v44;
+    let v49 = v41 * v43;
+    let v50 = v48 + v49;
+    let v51 = p.lower_b_length_y * v50;
+    let v52 = v47 - v51;
+    let v53 = v41 * p.upper_b_length_x;
+    let v54 = v44 * p.upper_b_length_y;
+    let v55 = v53 - v54;
+    let v56 = v52 + v55;
+    let v57 = f_0 * v56;
+    let v58 = p.lower_b_length_x * v50;
+    let v59 = v46 * p.lower_b_length_y;
+    let v60 = v58 + v59;
+    let v61 = v44 * p.upper_b_length_x;
+    let v62 = v41 * p.upper_b_length_y;
+    let v63 = v61 + v62;
+    let v64 = v60 + v63;
+    let v65 = f_1 * v64;
+    let v66 = v57 + v65;
+    let v67 = f_0 * v52;
+    let v68 = f_1 * v60;
+    let v69 = v67 + v68;
+    let v70 = v24 * a_1;
+    let v71 = v20 * a_2;
+    let v72 = v70 + v71;
+    let v73 = -v72;
+    let v74 = v16 * a_1;
+    let v75 = v12 * a_2;
+    let v76 = v74 + v75;
+    let v77 = -v76;
+    let v78 = v20 * a_1;
+    let v79 = v71 + v78;
+    let v80 = -v79;
+    let v81 = v12 * a_1;
+    let v82 = v75 + v81;
+    let v83 = -v82;
+    let v84 = v56 * a_3;
+    let v85 = v52 * a_4;
+    let v86 = v84 + v85;
+    let v87 = v64 * a_3;
+    let v88 = v60 * a_4;
+    let v89 = v87 + v88;
+    let v90 = v52 * a_3;
+    let v91 = v85 + v90;
+    let v92 = v60 * a_3;
+    let v93 = v88 + v92;
+    let v94 = qd_1 + qd_2;
+    let v95 = v94 * v94;
+    let v96 = v12 * v95;
+    let v97 = qd_1 * qd_1;
+    let v98 = v15 * v97;
+    let v99 = v96 + v98;
+    let v100 = v20 * v95;
+    let v101 = v23 * v97;
+    let v102 = v100 + v101;
+    let v103 = -v102;
+    let v104 = -v100;
+    let v105 = qd_3 + qd_4;
+    let v106 = v105 * v105;
+    let v107 = v60 * v106;
+    let v108 = qd_3 * qd_3;
+    let v109 = v63 * v108;
+    let v110 = v107 + v109;
+    let v111 = -v110;
+    let v112 = v52 * v106;
+    let v113 = v55 * v108;
+    let v114 = v112 + v113;
+    let v115 = -v107;
+    let v116 = v24 * qd_1;
+    let v117 = v20 * qd_2;
+    let v118 = v116 + v117;
+    let v119 = -v118;
+    let v120 = v16 * qd_1;
+    let v121 = v12 * qd_2;
+    let v122 = v120 + v121;
+    let v123 = -v122;
+    let v124 = v20 * qd_1;
+    let v125 = v117 + v124;
+    let v126 = -v125;
+    let v127 = v12 * qd_1;
+    let v128 = v121 + v127;
+    let v129 = -v128;
+    let v130 = v56 * qd_3;
+    let v131 = v52 * qd_4;
+    let v132 = v130 + v131;
+    let v133 = v64 * qd_3;
+    let v134 = v60 * qd_4;
+    let v135 = v133 + v134;
+    let v136 = v52 * qd_3;
+    let v137 = v131 + v136;
+    let v138 = v60 * qd_3;
+    let v139 = v134 + v138;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), v31, v39, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), v39, v39, T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), v66, v69],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), v69, v69],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v73, v77, v73, v77],
+                [v80, v83, v80, v83],
+                [v86, v89, T::lit(0.0), T::lit(0.0)],
+                [v91, v93, T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v99, v103, v99, v103],
+                [v96, v104, v96, v104],
+                [v111, v114, T::lit(0.0), T::lit(0.0)],
+                [v115, v112, T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v119, v123, v119, v123],
+                [v126, v129, v126, v129],
+                [v132, v135, T::lit(0.0), T::lit(0.0)],
+                [v137, v139, T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+    )
+}
+/// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
+/// (base frame) and the accelerations `a`.
+pub fn contact_derivatives<T: Arithmetic>(
+    _q: &SVector<T, 5>,
+    _qd: &SVector<T, 5>,
+    _a: &SVector<T, 5>,
+    _lambda: &SVector<T, 0>,
+    _p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>) {
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+    )
+}
+/// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
+/// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
+pub fn dynamics_derivatives<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    qd: &SVector<T, 5>,
+    a: &SVector<T, 5>,
+    f: &SVector<T, 4>,
+    p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>, SMatrix<T, 4, 5>, SMatrix<T, 4, 5>) {
+    let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
+    let [_, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
+    let [f_0, f_1, f_2, f_3] = f.data.0[0];
+    let (v2, v0) = q_2.sincos();
+    let v1 = v0 * p.prepared[2];
+    let v3 = v2 * p.prepared[3];
+    let v4 = v1 - v3;
+    let v5 = p.prepared[1] + v4;
+    let (v6, v12) = q_1.sincos();
+    let v7 = v5 * v6;
+    let v8 = p.prepared[2] * v2;
+    let v9 = v0 * p.prepared[3];
+    let v10 = v8 + v9;
+    let v11 = p.prepared[4] + v10;
+    let v13 = v11 * v12;
+    let v14 = v7 + v13;
+    let v15 = a_1 * v14;
+    let v16 = v4 * v6;
+    let v17 = v10 * v12;
+    let v18 = v16 + v17;
+    let v19 = a_2 * v18;
+    let v20 = v15 + v19;
+    let v21 = qd_1 * qd_1;
+    let v22 = v5 * v12;
+    let v23 = v6 * v11;
+    let v24 = v22 - v23;
+    let v25 = v21 * v24;
+    let v26 = qd_1 * qd_2;
+    let v27 = v4 * v12;
+    let v28 = v6 * v10;
+    let v29 = v27 - v28;
+    let v30 = v29 + v29;
+    let v31 = v26 * v30;
+    let v32 = v25 + v31;
+    let v33 = qd_2 * qd_2;
+    let v34 = v29 * v33;
+    let v35 = v32 + v34;
+    let v36 = v20 + v35;
+    let v37 = -v36;
+    let v38 = v12 * p.prepared[21];
+    let v39 = v6 * p.prepared[20];
+    let v40 = v38 - v39;
+    let v41 = v0 * v12;
+    let v42 = v2 * v6;
+    let v43 = v41 - v42;
+    let v44 = p.prepared[23] * v43;
+    let v45 = v0 * v6;
+    let v46 = v2 * v12;
+    let v47 = v45 + v46;
+    let v48 = p.prepared[22] * v47;
+    let v49 = v44 - v48;
+    let v50 = v40 + v49;
+    let v51 = v14 * a_0;
+    let v52 = v50 - v51;
+    let v53 = v47 * p.lower_a_length_x;
+    let v54 = v43 * p.lower_a_length_y;
+    let v55 = v53 + v54;
+    let v56 = p.upper_a_length_x * v6;
+    let v57 = p.upper_a_length_y * v12;
+    let v58 = v56 + v57;
+    let v59 = v55 + v58;
+    let v60 = f_1 * v59;
+    let v61 = v43 * p.lower_a_length_x;
+    let v62 = v47 * p.lower_a_length_y;
+    let v63 = v61 - v62;
+    let v64 = p.upper_a_length_x * v12;
+    let v65 = v6 * p.upper_a_length_y;
+    let v66 = v64 - v65;
+    let v67 = v63 + v66;
+    let v68 = f_0 * v67;
+    let v69 = v60 + v68;
+    let v70 = v67 * f_2;
+    let v71 = v69 + v70;
+    let v72 = v59 * f_3;
+    let v73 = v71 + v72;
+    let v74 = v52 + v73;
+    let v75 = v18 * a_0;
+    let v76 = v49 - v75;
+    let v77 = f_1 * v55;
+    let v78 = f_0 * v63;
+    let v79 = v77 + v78;
+    let v80 = v63 * f_2;
+    let v81 = v79 + v80;
+    let v82 = v55 * f_3;
+    let v83 = v81 + v82;
+    let v84 = v76 + v83;
+    let v85 = a_1 * v18;
+    let v86 = v19 + v85;
+    let v87 = v21 * v29;
+    let v88 = v29 + v29;
+    let v89 = v26 * v88;
+    let v90 = v87 + v89;
+    let v91 = v34 + v90;
+    let v92 = v86 + v91;
+    let v93 = -v92;
+    let v94 = v2 * p.prepared[11];
+    let v95 = v0 * p.prepared[12];
+    let v96 = v94 + v95;
+    let v97 = -v96;
+    let v98 = v97 + v97;
+    let v99 = a_1 * v98;
+    let v100 = v99 - v75;
+    let v101 = v0 * p.prepared[13];
+    let v102 = v101 - v94;
+    let v103 = a_2 * v102;
+    let v104 = v100 + v103;
+    let v105 = v0 * p.prepared[11];
+    let v106 = v2 * p.prepared[12];
+    let v107 = v105 - v106;
+    let v108 = -v107;
+    let v109 = v108 + v108;
+    let v110 = v26 * v109;
+    let v111 = v2 * p.prepared[13];
+    let v112 = v105 + v111;
+    let v113 = v33 * v112;
+    let v114 = v110 - v113;
+    let v115 = v49 + v114;
+    let v116 = v104 + v115;
+    let v117 = v83 + v116;
+    let v118 = a_1 * v102;
+    let v119 = v118 - v75;
+    let v120 = v21 * v107;
+    let v121 = v49 + v120;
+    let v122 = v119 + v121;
+    let v123 = v83 + v122;
+    let (v126, v124) = q_4.sincos();
+    let v125 = v124 * p.prepared[6];
+    let v127 = v126 * p.prepared[7];
+    let v128 = v125 - v127;
+    let v129 = p.prepared[5] + v128;
+    let (v130, v136) = q_3.sincos();
+    let v131 = v129 * v130;
+    let v132 = p.prepared[6] * v126;
+    let v133 = v124 * p.prepared[7];
+    let v134 = v132 + v133;
+    let v135 = p.prepared[8] + v134;
+    let v137 = v135 * v136;
+    let v138 = v131 + v137;
+    let v139 = a_3 * v138;
+    let v140 = v128 * v130;
+    let v141 = v134 * v136;
+    let v142 = v140 + v141;
+    let v143 = a_4 * v142;
+    let v144 = v139 + v143;
+    let v145 = qd_3 * qd_3;
+    let v146 = v129 * v136;
+    let v147 = v130 * v135;
+    let v148 = v146 - v147;
+    let v149 = v145 * v148;
+    let v150 = qd_3 * qd_4;
+    let v151 = v128 * v136;
+    let v152 = v130 * v134;
+    let v153 = v151 - v152;
+    let v154 = v153 + v153;
+    let v155 = v150 * v154;
+    let v156 = v149 + v155;
+    let v157 = qd_4 * qd_4;
+    let v158 = v153 * v157;
+    let v159 = v156 + v158;
+    let v160 = v144 + v159;
+    let v161 = -v160;
+    let v162 = v136 * p.prepared[25];
+    let v163 = v130 * p.prepared[24];
+    let v164 = v162 - v163;
+    let v165 = v124 * v136;
+    let v166 = v126 * v130;
+    let v167 = v165 - v166;
+    let v168 = p.prepared[27] * v167;
+    let v169 = v124 * v130;
+    let v170 = v126 * v136;
+    let v171 = v169 + v170;
+    let v172 = p.prepared[26] * v171;
+    let v173 = v168 - v172;
+    let v174 = v164 + v173;
+    let v175 = a_0 * v138;
+    let v176 = v174 - v175;
+    let v177 = v167 * p.lower_b_length_x;
+    let v178 = v171 * p.lower_b_length_y;
+    let v179 = v177 - v178;
+    let v180 = p.upper_b_length_x * v136;
+    let v181 = v130 * p.upper_b_length_y;
+    let v182 = v180 - v181;
+    let v183 = v179 + v182;
+    let v184 = f_0 * v183;
+    let v185 = v171 * p.lower_b_length_x;
+    let v186 = v167 * p.lower_b_length_y;
+    let v187 = v185 + v186;
+    let v188 = p.upper_b_length_x * v130;
+    let v189 = p.upper_b_length_y * v136;
+    let v190 = v188 + v189;
+    let v191 = v187 + v190;
+    let v192 = f_1 * v191;
+    let v193 = v184 + v192;
+    let v194 = v176 - v193;
+    let v195 = a_0 * v142;
+    let v196 = v173 - v195;
+    let v197 = f_0 * v179;
+    let v198 = f_1 * v187;
+    let v199 = v197 + v198;
+    let v200 = v196 - v199;
+    let v201 = a_3 * v142;
+    let v202 = v143 + v201;
+    let v203 = v145 * v153;
+    let v204 = v153 + v153;
+    let v205 = v150 * v204;
+    let v206 = v203 + v205;
+    let v207 = v158 + v206;
+    let v208 = v202 + v207;
+    let v209 = -v208;
+    let v210 = v126 * p.prepared[16];
+    let v211 = v124 * p.prepared[17];
+    let v212 = v210 + v211;
+    let v213 = -v212;
+    let v214 = v213 + v213;
+    let v215 = a_3 * v214;
+    let v216 = v215 - v195;
+    let v217 = v124 * p.prepared[18];
+    let v218 = v217 - v210;
+    let v219 = a_4 * v218;
+    let v220 = v216 + v219;
+    let v221 = v124 * p.prepared[16];
+    let v222 = v126 * p.prepared[17];
+    let v223 = v221 - v222;
+    let v224 = -v223;
+    let v225 = v224 + v224;
+    let v226 = v150 * v225;
+    let v227 = v126 * p.prepared[18];
+    let v228 = v221 + v227;
+    let v229 = v157 * v228;
+    let v230 = v226 - v229;
+    let v231 = v173 + v230;
+    let v232 = v220 + v231;
+    let v233 = v232 - v199;
+    let v234 = a_3 * v218;
+    let v235 = v234 - v195;
+    let v236 = v145 * v223;
+    let v237 = v173 + v236;
+    let v238 = v235 + v237;
+    let v239 = v238 - v199;
+    let v240 = qd_1 + qd_1;
+    let v241 = v14 * v240;
+    let v242 = v18 + v18;
+    let v243 = qd_2 * v242;
+    let v244 = v241 + v243;
+    let v245 = -v244;
+    let v246 = qd_2 * v98;
+    let v247 = v246 + p.upper_a_damping;
+    let v248 = v96 * v240;
+    let v249 = qd_1 * v242;
+    let v250 = qd_2 + qd_2;
+    let v251 = v18 * v250;
+    let v252 = v249 + v251;
+    let v253 = -v252;
+    let v254 = qd_1 * v98;
+    let v255 = v102 * v250;
+    let v256 = v254 + v255;
+    let v257 = qd_3 + qd_3;
+    let v258 = v138 * v257;
+    let v259 = v142 + v142;
+    let v260 = qd_4 * v259;
+    let v261 = v258 + v260;
+    let v262 = -v261;
+    let v263 = qd_4 * v214;
+    let v264 = v263 + p.upper_b_damping;
+    let v265 = v212 * v257;
+    let v266 = qd_3 * v259;
+    let v267 = qd_4 + qd_4;
+    let v268 = v142 * v267;
+    let v269 = v266 + v268;
+    let v270 = -v269;
+    let v271 = qd_3 * v214;
+    let v272 = v218 * v267;
+    let v273 = v271 + v272;
+    let v274 = qd_1 + qd_2;
+    let v275 = v274 * v274;
+    let v276 = v55 * v275;
+    let v277 = v21 * v58;
+    let v278 = v276 + v277;
+    let v279 = a_1 * v67;
+    let v280 = a_2 * v63;
+    let v281 = v279 + v280;
+    let v282 = v278 - v281;
+    let v283 = a_1 * v59;
+    let v284 = a_2 * v55;
+    let v285 = v283 + v284;
+    let v286 = v63 * v275;
+    let v287 = v21 * v66;
+    let v288 = v286 + v287;
+    let v289 = v285 + v288;
+    let v290 = -v289;
+    let v291 = v281 - v278;
+    let v292 = -v291;
+    let v293 = a_1 * v63;
+    let v294 = v280 + v293;
+    let v295 = v276 - v294;
+    let v296 = a_1 * v55;
+    let v297 = v284 + v296;
+    let v298 = v286 + v297;
+    let v299 = -v298;
+    let v300 = v294 - v276;
+    let v301 = -v300;
+    let v302 = a_3 * v183;
+    let v303 = a_4 * v179;
+    let v304 = v302 + v303;
+    let v305 = qd_3 + qd_4;
+    let v306 = v305 * v305;
+    let v307 = v187 * v306;
+    let v308 = v145 * v190;
+    let v309 = v307 + v308;
+    let v310 = v304 - v309;
+    let v311 = a_3 * v191;
+    let v312 = a_4 * v187;
+    let v313 = v311 + v312;
+    let v314 = v179 * v306;
+    let v315 = v145 * v182;
+    let v316 = v314 + v315;
+    let v317 = v313 + v316;
+    let v318 = a_3 * v179;
+    let v319 = v303 + v318;
+    let v320 = v319 - v307;
+    let v321 = a_3 * v187;
+    let v322 = v312 + v321;
+    let v323 = v314 + v322;
+    let v324 = qd_1 * v67;
+    let v325 = qd_2 * v63;
+    let v326 = v324 + v325;
+    let v327 = -v326;
+    let v328 = qd_1 * v59;
+    let v329 = qd_2 * v55;
+    let v330 = v328 + v329;
+    let v331 = -v330;
+    let v332 = qd_1 * v63;
+    let v333 = v325 + v332;
+    let v334 = -v333;
+    let v335 = qd_1 * v55;
+    let v336 = v329 + v335;
+    let v337 = -v336;
+    let v338 = qd_3 * v183;
+    let v339 = qd_4 * v179;
+    let v340 = v338 + v339;
+    let v341 = qd_3 * v191;
+    let v342 = qd_4 * v187;
+    let v343 = v341 + v342;
+    let v344 = qd_3 * v179;
+    let v345 = v339 + v344;
+    let v346 = qd_3 * v187;
+    let v347 = v342 + v346;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v37, v74, v84, T::lit(0.0), T::lit(0.0)],
+                [v93, v117, v123, T::lit(0.0), T::lit(0.0)],
+                [v161, T::lit(0.0), T::lit(0.0), v194, v200],
+                [v209, T::lit(0.0), T::lit(0.0), v233, v239],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [p.body_damping, T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v245, v247, v248, T::lit(0.0), T::lit(0.0)],
+                [v253, v256, p.lower_a_damping, T::lit(0.0), T::lit(0.0)],
+                [v262, T::lit(0.0), T::lit(0.0), v264, v265],
+                [v270, T::lit(0.0), T::lit(0.0), v273, p.lower_b_damping],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v282, v290, v292, v290],
+                [v295, v299, v301, v299],
+                [v310, v317, T::lit(0.0), T::lit(0.0)],
+                [v320, v323, T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v327, v331, v327, v331],
+                [v334, v337, v334, v337],
+                [v340, v343, T::lit(0.0), T::lit(0.0)],
+                [v345, v347, T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
     )
 }

@@ -9,7 +9,8 @@
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
-    Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters,
+    Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
+    JointKind, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 3;
@@ -377,6 +378,62 @@ impl LegModel<NQ, NC, NU> for OpenThreeLink {
             constraint_bias,
         }
     }
+    fn mass_matrix_derivative<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        a: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 3, 3> {
+        mass_matrix_derivative(q, a, p)
+    }
+    fn bias_forces_derivatives<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        qd: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> (SMatrix<T, 3, 3>, SMatrix<T, 3, 3>) {
+        bias_forces_derivatives(q, qd, p)
+    }
+    fn constraint_derivatives<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        qd: &SVector<T, 3>,
+        a: &SVector<T, 3>,
+        f: &SVector<T, 0>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 3, 0> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
+    }
+    fn dynamics_derivatives<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        qd: &SVector<T, 3>,
+        a: &SVector<T, 3>,
+        f: &SVector<T, 0>,
+        p: &Params<T>,
+    ) -> DynamicsDerivatives<T, 3, 0> {
+        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        DynamicsDerivatives {
+            dynamics_q,
+            dynamics_qd,
+            constraint_q,
+            jacobian_rate,
+        }
+    }
 }
 impl ContactModel<NQ, NC, NU, NK> for OpenThreeLink {
     const CONTACT_NAMES: &'static [&'static str] = &[];
@@ -401,6 +458,27 @@ impl ContactModel<NQ, NC, NU, NK> for OpenThreeLink {
         p: &Params<T>,
     ) -> SVector<T, 0> {
         contact_bias(q, qd, p)
+    }
+    fn contact_derivatives<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        qd: &SVector<T, 3>,
+        a: &SVector<T, 3>,
+        lambda: &SVector<T, 0>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 3, 0> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
+            q,
+            qd,
+            a,
+            lambda,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -1229,5 +1307,541 @@ pub fn dynamics_terms<T: Arithmetic>(
         SMatrix::from_data(ArrayStorage([[v102, v112, v120]])),
         SMatrix::from_data(ArrayStorage([[], [], []])),
         SMatrix::from_data(ArrayStorage([[]])),
+    )
+}
+/// `∂(M a)/∂q` at the accelerations `a`.
+pub fn mass_matrix_derivative<T: Arithmetic>(
+    q: &SVector<T, 3>,
+    a: &SVector<T, 3>,
+    p: &Params<T>,
+) -> SMatrix<T, 3, 3> {
+    let [_, q_1, q_2] = q.data.0[0];
+    let [a_0, a_1, a_2] = a.data.0[0];
+    let (v2, v0) = q_2.sincos();
+    let v1 = v0 * p.prepared[3];
+    let v3 = v2 * p.prepared[4];
+    let v4 = v1 - v3;
+    let v5 = p.prepared[7] + v4;
+    let (v12, v6) = q_1.sincos();
+    let v7 = v5 * v6;
+    let v8 = p.prepared[3] * v2;
+    let v9 = v0 * p.prepared[4];
+    let v10 = v8 + v9;
+    let v11 = p.prepared[8] + v10;
+    let v13 = v11 * v12;
+    let v14 = v7 - v13;
+    let v15 = p.thigh_length_y * v14;
+    let v16 = v5 * v12;
+    let v17 = v6 * v11;
+    let v18 = v16 + v17;
+    let v19 = p.thigh_length_x * v18;
+    let v20 = v15 - v19;
+    let v21 = v20 + v20;
+    let v22 = a_0 * v21;
+    let v23 = v20 * a_1;
+    let v24 = v22 + v23;
+    let v25 = v4 * v6;
+    let v26 = v10 * v12;
+    let v27 = v25 - v26;
+    let v28 = p.thigh_length_y * v27;
+    let v29 = v4 * v12;
+    let v30 = v6 * v10;
+    let v31 = v29 + v30;
+    let v32 = p.thigh_length_x * v31;
+    let v33 = v28 - v32;
+    let v34 = a_2 * v33;
+    let v35 = v24 + v34;
+    let v36 = a_0 * v20;
+    let v37 = a_0 * v33;
+    let v38 = v2 * p.prepared[5];
+    let v39 = v0 * p.prepared[6];
+    let v40 = v38 + v39;
+    let v41 = -v40;
+    let v42 = v41 + v41;
+    let v43 = v33 + v33;
+    let v44 = v42 + v43;
+    let v45 = a_0 * v44;
+    let v46 = v33 + v42;
+    let v47 = a_1 * v46;
+    let v48 = v45 + v47;
+    let v49 = v0 * p.prepared[9];
+    let v50 = v49 - v38;
+    let v51 = v33 + v50;
+    let v52 = a_2 * v51;
+    let v53 = v48 + v52;
+    let v54 = a_0 * v46;
+    let v55 = a_1 * v42;
+    let v56 = v54 + v55;
+    let v57 = a_2 * v50;
+    let v58 = v56 + v57;
+    let v59 = a_0 * v51;
+    let v60 = a_1 * v50;
+    let v61 = v59 + v60;
+    SMatrix::from_data(
+        ArrayStorage([
+            [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            [v35, v36, v37],
+            [v53, v58, v61],
+        ]),
+    )
+}
+/// `∂N/∂q` and `∂N/∂q̇`.
+pub fn bias_forces_derivatives<T: Arithmetic>(
+    q: &SVector<T, 3>,
+    qd: &SVector<T, 3>,
+    p: &Params<T>,
+) -> (SMatrix<T, 3, 3>, SMatrix<T, 3, 3>) {
+    let [q_0, q_1, q_2] = q.data.0[0];
+    let [qd_0, qd_1, qd_2] = qd.data.0[0];
+    let (v2, v0) = q_0.sincos();
+    let v1 = p.prepared[12] * v0;
+    let v3 = p.prepared[11] * v2;
+    let v4 = v1 - v3;
+    let (v7, v5) = q_1.sincos();
+    let v6 = v0 * v5;
+    let v8 = v2 * v7;
+    let v9 = v6 - v8;
+    let v10 = p.prepared[14] * v9;
+    let v11 = v2 * v5;
+    let v12 = v0 * v7;
+    let v13 = v11 + v12;
+    let v14 = p.prepared[13] * v13;
+    let v15 = v10 - v14;
+    let (v18, v16) = q_2.sincos();
+    let v17 = v9 * v16;
+    let v19 = v13 * v18;
+    let v20 = v17 - v19;
+    let v21 = p.prepared[16] * v20;
+    let v22 = v13 * v16;
+    let v23 = v9 * v18;
+    let v24 = v22 + v23;
+    let v25 = p.prepared[15] * v24;
+    let v26 = v21 - v25;
+    let v27 = v15 + v26;
+    let v28 = v4 + v27;
+    let v29 = qd_0 * qd_1;
+    let v30 = p.prepared[3] * v16;
+    let v31 = p.prepared[4] * v18;
+    let v32 = v30 - v31;
+    let v33 = p.prepared[7] + v32;
+    let v34 = v7 * v33;
+    let v35 = p.prepared[3] * v18;
+    let v36 = p.prepared[4] * v16;
+    let v37 = v35 + v36;
+    let v38 = p.prepared[8] + v37;
+    let v39 = v5 * v38;
+    let v40 = v34 + v39;
+    let v41 = p.thigh_length_y * v40;
+    let v42 = v5 * v33;
+    let v43 = v7 * v38;
+    let v44 = v42 - v43;
+    let v45 = p.thigh_length_x * v44;
+    let v46 = v41 + v45;
+    let v47 = -v46;
+    let v48 = v47 + v47;
+    let v49 = v29 * v48;
+    let v50 = qd_0 * qd_2;
+    let v51 = v7 * v32;
+    let v52 = v5 * v37;
+    let v53 = v51 + v52;
+    let v54 = p.thigh_length_y * v53;
+    let v55 = v5 * v32;
+    let v56 = v7 * v37;
+    let v57 = v55 - v56;
+    let v58 = p.thigh_length_x * v57;
+    let v59 = v54 + v58;
+    let v60 = -v59;
+    let v61 = v60 + v60;
+    let v62 = v50 * v61;
+    let v63 = v49 + v62;
+    let v64 = qd_1 * qd_1;
+    let v65 = v46 * v64;
+    let v66 = v63 - v65;
+    let v67 = qd_1 * qd_2;
+    let v68 = v59 + v59;
+    let v69 = v67 * v68;
+    let v70 = v66 - v69;
+    let v71 = qd_2 * qd_2;
+    let v72 = v59 * v71;
+    let v73 = v70 - v72;
+    let v74 = v27 + v73;
+    let v75 = v59 - v59;
+    let v76 = v50 * v75;
+    let v77 = qd_0 * qd_0;
+    let v78 = v46 * v77;
+    let v79 = v76 + v78;
+    let v80 = v27 + v79;
+    let v81 = v59 * v77;
+    let v82 = v29 * v75;
+    let v83 = v81 + v82;
+    let v84 = v26 + v83;
+    let v85 = v29 * v61;
+    let v86 = v16 * p.prepared[5];
+    let v87 = v18 * p.prepared[6];
+    let v88 = v86 - v87;
+    let v89 = -v88;
+    let v90 = v89 + v89;
+    let v91 = v61 + v90;
+    let v92 = v50 * v91;
+    let v93 = v85 + v92;
+    let v94 = v59 * v64;
+    let v95 = v93 - v94;
+    let v96 = v90 - v59;
+    let v97 = v96 - v59;
+    let v98 = v67 * v97;
+    let v99 = v95 + v98;
+    let v100 = v18 * p.prepared[9];
+    let v101 = v86 + v100;
+    let v102 = v59 + v101;
+    let v103 = v71 * v102;
+    let v104 = v99 - v103;
+    let v105 = v26 + v104;
+    let v106 = v50 * v90;
+    let v107 = v81 + v106;
+    let v108 = v67 * v90;
+    let v109 = v107 + v108;
+    let v110 = v71 * v101;
+    let v111 = v109 - v110;
+    let v112 = v26 + v111;
+    let v113 = v91 * T::lit(-0.5);
+    let v114 = v77 * v113;
+    let v115 = v29 * v90;
+    let v116 = v114 - v115;
+    let v117 = v64 * v88;
+    let v118 = v116 + v117;
+    let v119 = v26 + v118;
+    let v120 = p.thigh_length_y * v44;
+    let v121 = p.thigh_length_x * v40;
+    let v122 = v120 - v121;
+    let v123 = v122 + v122;
+    let v124 = qd_1 * v123;
+    let v125 = v18 * p.prepared[5];
+    let v126 = v16 * p.prepared[6];
+    let v127 = v125 + v126;
+    let v128 = -v127;
+    let v129 = v128 + v128;
+    let v130 = p.thigh_length_y * v57;
+    let v131 = p.thigh_length_x * v53;
+    let v132 = v130 - v131;
+    let v133 = v132 + v132;
+    let v134 = v129 + v133;
+    let v135 = qd_2 * v134;
+    let v136 = v124 + v135;
+    let v137 = v129 + v132;
+    let v138 = v137 - v132;
+    let v139 = qd_2 * v138;
+    let v140 = qd_0 + qd_0;
+    let v141 = v122 * v140;
+    let v142 = v139 - v141;
+    let v143 = T::lit(-0.5) * v134;
+    let v144 = v140 * v143;
+    let v145 = v132 - v137;
+    let v146 = qd_1 * v145;
+    let v147 = v144 + v146;
+    let v148 = qd_0 * v123;
+    let v149 = qd_1 + qd_1;
+    let v150 = v122 * v149;
+    let v151 = v148 + v150;
+    let v152 = v132 + v137;
+    let v153 = qd_2 * v152;
+    let v154 = v151 + v153;
+    let v155 = qd_2 * v129;
+    let v156 = qd_0 * v145;
+    let v157 = v127 * v149;
+    let v158 = v156 + v157;
+    let v159 = qd_0 * v134;
+    let v160 = qd_1 * v152;
+    let v161 = v159 + v160;
+    let v162 = v16 * p.prepared[9];
+    let v163 = v162 - v125;
+    let v164 = v132 + v163;
+    let v165 = qd_2 + qd_2;
+    let v166 = v164 * v165;
+    let v167 = v161 + v166;
+    let v168 = qd_0 * v138;
+    let v169 = qd_1 * v129;
+    let v170 = v168 + v169;
+    let v171 = v163 * v165;
+    let v172 = v170 + v171;
+    (
+        SMatrix::from_data(
+            ArrayStorage([[v28, v27, v26], [v74, v80, v84], [v105, v112, v119]]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [v136, v142, v147],
+                [v154, v155, v158],
+                [v167, v172, T::lit(0.0)],
+            ]),
+        ),
+    )
+}
+/// `∂(Jᵀ f)/∂q`, `∂(J a)/∂q`, `∂(J̇ q̇)/∂q` and `J̇` at the closure forces `f` and the
+/// accelerations `a`.
+pub fn constraint_derivatives<T: Arithmetic>(
+    _q: &SVector<T, 3>,
+    _qd: &SVector<T, 3>,
+    _a: &SVector<T, 3>,
+    _f: &SVector<T, 0>,
+    _p: &Params<T>,
+) -> (SMatrix<T, 3, 3>, SMatrix<T, 0, 3>, SMatrix<T, 0, 3>, SMatrix<T, 0, 3>) {
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+        SMatrix::from_data(ArrayStorage([[], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], []])),
+    )
+}
+/// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
+/// (base frame) and the accelerations `a`.
+pub fn contact_derivatives<T: Arithmetic>(
+    _q: &SVector<T, 3>,
+    _qd: &SVector<T, 3>,
+    _a: &SVector<T, 3>,
+    _lambda: &SVector<T, 0>,
+    _p: &Params<T>,
+) -> (SMatrix<T, 3, 3>, SMatrix<T, 0, 3>, SMatrix<T, 0, 3>, SMatrix<T, 0, 3>) {
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+        SMatrix::from_data(ArrayStorage([[], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], []])),
+    )
+}
+/// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
+/// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
+pub fn dynamics_derivatives<T: Arithmetic>(
+    q: &SVector<T, 3>,
+    qd: &SVector<T, 3>,
+    a: &SVector<T, 3>,
+    _f: &SVector<T, 0>,
+    p: &Params<T>,
+) -> (SMatrix<T, 3, 3>, SMatrix<T, 3, 3>, SMatrix<T, 0, 3>, SMatrix<T, 0, 3>) {
+    let [q_0, q_1, q_2] = q.data.0[0];
+    let [qd_0, qd_1, qd_2] = qd.data.0[0];
+    let [a_0, a_1, a_2] = a.data.0[0];
+    let (v2, v0) = q_0.sincos();
+    let v1 = p.prepared[12] * v0;
+    let v3 = p.prepared[11] * v2;
+    let v4 = v1 - v3;
+    let (v7, v5) = q_1.sincos();
+    let v6 = v0 * v5;
+    let v8 = v2 * v7;
+    let v9 = v6 - v8;
+    let v10 = p.prepared[14] * v9;
+    let v11 = v2 * v5;
+    let v12 = v0 * v7;
+    let v13 = v11 + v12;
+    let v14 = p.prepared[13] * v13;
+    let v15 = v10 - v14;
+    let (v18, v16) = q_2.sincos();
+    let v17 = v9 * v16;
+    let v19 = v13 * v18;
+    let v20 = v17 - v19;
+    let v21 = p.prepared[16] * v20;
+    let v22 = v13 * v16;
+    let v23 = v9 * v18;
+    let v24 = v22 + v23;
+    let v25 = p.prepared[15] * v24;
+    let v26 = v21 - v25;
+    let v27 = v15 + v26;
+    let v28 = v4 + v27;
+    let v29 = p.prepared[3] * v16;
+    let v30 = p.prepared[4] * v18;
+    let v31 = v29 - v30;
+    let v32 = p.prepared[7] + v31;
+    let v33 = v5 * v32;
+    let v34 = p.prepared[3] * v18;
+    let v35 = p.prepared[4] * v16;
+    let v36 = v34 + v35;
+    let v37 = p.prepared[8] + v36;
+    let v38 = v7 * v37;
+    let v39 = v33 - v38;
+    let v40 = p.thigh_length_y * v39;
+    let v41 = v7 * v32;
+    let v42 = v5 * v37;
+    let v43 = v41 + v42;
+    let v44 = p.thigh_length_x * v43;
+    let v45 = v40 - v44;
+    let v46 = v45 + v45;
+    let v47 = a_0 * v46;
+    let v48 = v45 * a_1;
+    let v49 = v47 + v48;
+    let v50 = v5 * v31;
+    let v51 = v7 * v36;
+    let v52 = v50 - v51;
+    let v53 = p.thigh_length_y * v52;
+    let v54 = v7 * v31;
+    let v55 = v5 * v36;
+    let v56 = v54 + v55;
+    let v57 = p.thigh_length_x * v56;
+    let v58 = v53 - v57;
+    let v59 = a_2 * v58;
+    let v60 = v49 + v59;
+    let v61 = qd_0 * qd_1;
+    let v62 = p.thigh_length_y * v43;
+    let v63 = p.thigh_length_x * v39;
+    let v64 = v62 + v63;
+    let v65 = -v64;
+    let v66 = v65 + v65;
+    let v67 = v61 * v66;
+    let v68 = qd_0 * qd_2;
+    let v69 = p.thigh_length_y * v56;
+    let v70 = p.thigh_length_x * v52;
+    let v71 = v69 + v70;
+    let v72 = -v71;
+    let v73 = v72 + v72;
+    let v74 = v68 * v73;
+    let v75 = v67 + v74;
+    let v76 = qd_1 * qd_1;
+    let v77 = v64 * v76;
+    let v78 = v75 - v77;
+    let v79 = qd_1 * qd_2;
+    let v80 = v71 + v71;
+    let v81 = v79 * v80;
+    let v82 = v78 - v81;
+    let v83 = qd_2 * qd_2;
+    let v84 = v71 * v83;
+    let v85 = v82 - v84;
+    let v86 = v27 + v85;
+    let v87 = v60 + v86;
+    let v88 = a_0 * v45;
+    let v89 = v71 - v71;
+    let v90 = v68 * v89;
+    let v91 = qd_0 * qd_0;
+    let v92 = v64 * v91;
+    let v93 = v90 + v92;
+    let v94 = v27 + v93;
+    let v95 = v88 + v94;
+    let v96 = a_0 * v58;
+    let v97 = v71 * v91;
+    let v98 = v61 * v89;
+    let v99 = v97 + v98;
+    let v100 = v26 + v99;
+    let v101 = v96 + v100;
+    let v102 = v18 * p.prepared[5];
+    let v103 = v16 * p.prepared[6];
+    let v104 = v102 + v103;
+    let v105 = -v104;
+    let v106 = v105 + v105;
+    let v107 = v58 + v58;
+    let v108 = v106 + v107;
+    let v109 = a_0 * v108;
+    let v110 = v58 + v106;
+    let v111 = a_1 * v110;
+    let v112 = v109 + v111;
+    let v113 = v16 * p.prepared[9];
+    let v114 = v113 - v102;
+    let v115 = v58 + v114;
+    let v116 = a_2 * v115;
+    let v117 = v112 + v116;
+    let v118 = v61 * v73;
+    let v119 = v16 * p.prepared[5];
+    let v120 = v18 * p.prepared[6];
+    let v121 = v119 - v120;
+    let v122 = -v121;
+    let v123 = v122 + v122;
+    let v124 = v73 + v123;
+    let v125 = v68 * v124;
+    let v126 = v118 + v125;
+    let v127 = v71 * v76;
+    let v128 = v126 - v127;
+    let v129 = v123 - v71;
+    let v130 = v129 - v71;
+    let v131 = v79 * v130;
+    let v132 = v128 + v131;
+    let v133 = v18 * p.prepared[9];
+    let v134 = v119 + v133;
+    let v135 = v71 + v134;
+    let v136 = v83 * v135;
+    let v137 = v132 - v136;
+    let v138 = v26 + v137;
+    let v139 = v117 + v138;
+    let v140 = a_0 * v110;
+    let v141 = a_1 * v106;
+    let v142 = v140 + v141;
+    let v143 = a_2 * v114;
+    let v144 = v142 + v143;
+    let v145 = v68 * v123;
+    let v146 = v97 + v145;
+    let v147 = v79 * v123;
+    let v148 = v146 + v147;
+    let v149 = v83 * v134;
+    let v150 = v148 - v149;
+    let v151 = v26 + v150;
+    let v152 = v144 + v151;
+    let v153 = a_0 * v115;
+    let v154 = a_1 * v114;
+    let v155 = v153 + v154;
+    let v156 = v124 * T::lit(-0.5);
+    let v157 = v91 * v156;
+    let v158 = v61 * v123;
+    let v159 = v157 - v158;
+    let v160 = v76 * v121;
+    let v161 = v159 + v160;
+    let v162 = v26 + v161;
+    let v163 = v155 + v162;
+    let v164 = v46 * qd_1;
+    let v165 = qd_2 * v108;
+    let v166 = v164 + v165;
+    let v167 = v166 + p.thigh_damping;
+    let v168 = v110 - v58;
+    let v169 = qd_2 * v168;
+    let v170 = qd_0 + qd_0;
+    let v171 = v45 * v170;
+    let v172 = v169 - v171;
+    let v173 = v108 * T::lit(-0.5);
+    let v174 = v170 * v173;
+    let v175 = v58 - v110;
+    let v176 = qd_1 * v175;
+    let v177 = v174 + v176;
+    let v178 = v46 * qd_0;
+    let v179 = qd_1 + qd_1;
+    let v180 = v45 * v179;
+    let v181 = v178 + v180;
+    let v182 = v58 + v110;
+    let v183 = qd_2 * v182;
+    let v184 = v181 + v183;
+    let v185 = qd_2 * v106;
+    let v186 = v185 + p.shin_damping;
+    let v187 = qd_0 * v175;
+    let v188 = v104 * v179;
+    let v189 = v187 + v188;
+    let v190 = qd_0 * v108;
+    let v191 = qd_1 * v182;
+    let v192 = v190 + v191;
+    let v193 = qd_2 + qd_2;
+    let v194 = v115 * v193;
+    let v195 = v192 + v194;
+    let v196 = qd_0 * v168;
+    let v197 = qd_1 * v106;
+    let v198 = v196 + v197;
+    let v199 = v114 * v193;
+    let v200 = v198 + v199;
+    (
+        SMatrix::from_data(
+            ArrayStorage([[v28, v27, v26], [v87, v95, v101], [v139, v152, v163]]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [v167, v172, v177],
+                [v184, v186, v189],
+                [v195, v200, p.ankle_damping],
+            ]),
+        ),
+        SMatrix::from_data(ArrayStorage([[], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], []])),
     )
 }

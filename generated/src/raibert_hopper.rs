@@ -9,7 +9,8 @@
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
-    Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters,
+    Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
+    JointKind, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 5;
@@ -193,7 +194,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
-    prepared: [T; 34],
+    prepared: [T; 35],
 }
 impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
@@ -532,6 +533,62 @@ impl LegModel<NQ, NC, NU> for RaibertHopper {
             constraint_bias,
         }
     }
+    fn mass_matrix_derivative<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 5, 5> {
+        mass_matrix_derivative(q, a, p)
+    }
+    fn bias_forces_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>) {
+        bias_forces_derivatives(q, qd, p)
+    }
+    fn constraint_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        f: &SVector<T, 0>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 5, 0> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
+    }
+    fn dynamics_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        f: &SVector<T, 0>,
+        p: &Params<T>,
+    ) -> DynamicsDerivatives<T, 5, 0> {
+        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        DynamicsDerivatives {
+            dynamics_q,
+            dynamics_qd,
+            constraint_q,
+            jacobian_rate,
+        }
+    }
 }
 impl ContactModel<NQ, NC, NU, NK> for RaibertHopper {
     const CONTACT_NAMES: &'static [&'static str] = &["sole", "heel"];
@@ -557,11 +614,32 @@ impl ContactModel<NQ, NC, NU, NK> for RaibertHopper {
     ) -> SVector<T, 4> {
         contact_bias(q, qd, p)
     }
+    fn contact_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        lambda: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 5, 4> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
+            q,
+            qd,
+            a,
+            lambda,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
+    }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 34> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 35> {
     let v0 = values.thigh_mass + values.shin_mass;
     let v1 = values.torso_mass + v0;
     let v2 = values.slide_y_mass + v1;
@@ -649,6 +727,8 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 34> {
     let v84 = values.gravity_y * v83;
     let v85 = v80 + v84;
     let v86 = values.slide_x_origin_y + values.slide_x_length_y;
+    let v87 = -v13;
+    let v88 = v87 + v87;
     SMatrix::from_data(
         ArrayStorage([
             [
@@ -686,6 +766,7 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 34> {
                 v76,
                 v85,
                 v86,
+                v88,
             ],
         ]),
     )
@@ -1830,5 +1911,1193 @@ pub fn dynamics_terms<T: Arithmetic>(
         SMatrix::from_data(ArrayStorage([[v100, v131, v174, v185, v197]])),
         SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
         SMatrix::from_data(ArrayStorage([[]])),
+    )
+}
+/// `∂(M a)/∂q` at the accelerations `a`.
+pub fn mass_matrix_derivative<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    a: &SVector<T, 5>,
+    p: &Params<T>,
+) -> SMatrix<T, 5, 5> {
+    let [_, _, q_2, q_3, q_4] = q.data.0[0];
+    let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
+    let (v4, v0) = q_3.sincos();
+    let v1 = v0 * p.shin_mass;
+    let (v6, v2) = q_2.sincos();
+    let v3 = v1 * v2;
+    let v5 = p.shin_mass * v4;
+    let v7 = v5 * v6;
+    let v8 = v3 - v7;
+    let v9 = a_4 * v8;
+    let v10 = v0 * p.prepared[3];
+    let v11 = p.shin_origin_y - q_4;
+    let v12 = p.shin_mass * v11;
+    let v13 = p.prepared[5] + v12;
+    let v14 = v4 * v13;
+    let v15 = v10 - v14;
+    let v16 = p.prepared[6] + v15;
+    let v17 = v2 * v16;
+    let v18 = v4 * p.prepared[3];
+    let v19 = v0 * v13;
+    let v20 = v18 + v19;
+    let v21 = p.prepared[2] + v20;
+    let v22 = v6 * v21;
+    let v23 = v17 - v22;
+    let v24 = a_2 * v23;
+    let v25 = v2 * v15;
+    let v26 = v6 * v20;
+    let v27 = v25 - v26;
+    let v28 = a_3 * v27;
+    let v29 = v24 + v28;
+    let v30 = v9 - v29;
+    let v31 = v2 * v5;
+    let v32 = v1 * v6;
+    let v33 = v31 + v32;
+    let v34 = a_4 * v33;
+    let v35 = v6 * v16;
+    let v36 = v2 * v21;
+    let v37 = v35 + v36;
+    let v38 = a_2 * v37;
+    let v39 = v6 * v15;
+    let v40 = v2 * v20;
+    let v41 = v39 + v40;
+    let v42 = a_3 * v41;
+    let v43 = v38 + v42;
+    let v44 = v34 - v43;
+    let v45 = v37 * a_1;
+    let v46 = v23 * a_0;
+    let v47 = v45 + v46;
+    let v48 = -v47;
+    let v49 = v41 * a_1;
+    let v50 = v27 * a_0;
+    let v51 = v49 + v50;
+    let v52 = -v51;
+    let v53 = v8 * a_0;
+    let v54 = v33 * a_1;
+    let v55 = v53 + v54;
+    let v56 = a_2 * v27;
+    let v57 = v28 + v56;
+    let v58 = v9 - v57;
+    let v59 = a_2 * v41;
+    let v60 = v42 + v59;
+    let v61 = v34 - v60;
+    let v62 = v15 * p.torso_length_y;
+    let v63 = p.torso_length_x * v20;
+    let v64 = v62 - v63;
+    let v65 = v64 + v64;
+    let v66 = a_2 * v65;
+    let v67 = v66 - v51;
+    let v68 = a_3 * v64;
+    let v69 = v67 + v68;
+    let v70 = v0 * p.prepared[13];
+    let v71 = v4 * p.prepared[12];
+    let v72 = v70 - v71;
+    let v73 = a_4 * v72;
+    let v74 = v69 - v73;
+    let v75 = a_2 * v64;
+    let v76 = v75 - v51;
+    let v77 = a_2 * v72;
+    let v78 = v55 - v77;
+    let v79 = v7 - v3;
+    let v80 = a_2 * v79;
+    let v81 = a_3 * v79;
+    let v82 = v80 + v81;
+    let v83 = -v82;
+    let v84 = a_2 * v33;
+    let v85 = a_3 * v33;
+    let v86 = v84 + v85;
+    let v87 = a_0 * v79;
+    let v88 = v54 - v87;
+    let v89 = v11 + v11;
+    let v90 = p.shin_mass * v89;
+    let v91 = p.prepared[34] - v90;
+    let v92 = v5 * p.torso_length_x;
+    let v93 = v1 * p.torso_length_y;
+    let v94 = v92 - v93;
+    let v95 = v94 + v94;
+    let v96 = v91 + v95;
+    let v97 = a_2 * v96;
+    let v98 = v88 + v97;
+    let v99 = v91 + v94;
+    let v100 = a_3 * v99;
+    let v101 = v98 + v100;
+    let v102 = a_2 * v99;
+    let v103 = v88 + v102;
+    let v104 = a_3 * v91;
+    let v105 = v103 + v104;
+    SMatrix::from_data(
+        ArrayStorage([
+            [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            [v30, v44, v48, v52, v55],
+            [v58, v61, v74, v76, v78],
+            [v83, v86, v101, v105, T::lit(0.0)],
+        ]),
+    )
+}
+/// `∂N/∂q` and `∂N/∂q̇`.
+pub fn bias_forces_derivatives<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    qd: &SVector<T, 5>,
+    p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>) {
+    let [_, _, q_2, q_3, q_4] = q.data.0[0];
+    let [_, _, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let v0 = qd_2 + qd_3;
+    let v1 = v0 * v0;
+    let (v5, v2) = q_3.sincos();
+    let (v3, v6) = q_2.sincos();
+    let v4 = v2 * v3;
+    let v7 = v5 * v6;
+    let v8 = v4 + v7;
+    let v9 = p.shin_com_x * v8;
+    let v10 = v2 * v6;
+    let v11 = v3 * v5;
+    let v12 = v10 - v11;
+    let v13 = p.shin_com_y * v12;
+    let v14 = v9 + v13;
+    let v15 = v1 * v14;
+    let v16 = v8 * p.shin_origin_x;
+    let v17 = p.shin_origin_y - q_4;
+    let v18 = v12 * v17;
+    let v19 = v16 + v18;
+    let v20 = v1 * v19;
+    let v21 = v15 + v20;
+    let v22 = v0 + v0;
+    let v23 = v22 * qd_4;
+    let v24 = v8 * v23;
+    let v25 = v21 - v24;
+    let v26 = qd_2 * qd_2;
+    let v27 = v3 * p.torso_length_x;
+    let v28 = v6 * p.torso_length_y;
+    let v29 = v27 + v28;
+    let v30 = v26 * v29;
+    let v31 = v25 + v30;
+    let v32 = p.shin_mass * v31;
+    let v33 = v3 * p.torso_com_x;
+    let v34 = v6 * p.torso_com_y;
+    let v35 = v33 + v34;
+    let v36 = v26 * v35;
+    let v37 = p.torso_mass * v36;
+    let v38 = v8 * p.thigh_com_x;
+    let v39 = v12 * p.thigh_com_y;
+    let v40 = v38 + v39;
+    let v41 = v1 * v40;
+    let v42 = v30 + v41;
+    let v43 = p.thigh_mass * v42;
+    let v44 = v37 + v43;
+    let v45 = v32 + v44;
+    let v46 = v12 * v23;
+    let v47 = p.shin_com_x * v12;
+    let v48 = v8 * p.shin_com_y;
+    let v49 = v47 - v48;
+    let v50 = v1 * v49;
+    let v51 = v12 * p.shin_origin_x;
+    let v52 = v8 * v17;
+    let v53 = v51 - v52;
+    let v54 = v1 * v53;
+    let v55 = v50 + v54;
+    let v56 = v46 - v55;
+    let v57 = v6 * p.torso_length_x;
+    let v58 = v3 * p.torso_length_y;
+    let v59 = v57 - v58;
+    let v60 = v26 * v59;
+    let v61 = v56 - v60;
+    let v62 = p.shin_mass * v61;
+    let v63 = v6 * p.torso_com_x;
+    let v64 = v3 * p.torso_com_y;
+    let v65 = v63 - v64;
+    let v66 = v26 * v65;
+    let v67 = p.torso_mass * v66;
+    let v68 = v12 * p.thigh_com_x;
+    let v69 = v8 * p.thigh_com_y;
+    let v70 = v68 - v69;
+    let v71 = v1 * v70;
+    let v72 = v60 + v71;
+    let v73 = p.thigh_mass * v72;
+    let v74 = v67 + v73;
+    let v75 = v62 - v74;
+    let v76 = v65 * v66;
+    let v77 = v35 * v36;
+    let v78 = v76 - v77;
+    let v79 = v78 - v78;
+    let v80 = p.torso_mass * v79;
+    let v81 = v59 + v70;
+    let v82 = v72 * v81;
+    let v83 = v29 + v40;
+    let v84 = v42 * v83;
+    let v85 = v82 - v84;
+    let v86 = v85 - v85;
+    let v87 = p.thigh_mass * v86;
+    let v88 = v80 + v87;
+    let v89 = v49 + v53;
+    let v90 = v59 + v89;
+    let v91 = v61 * v90;
+    let v92 = v24 - v21;
+    let v93 = v92 - v30;
+    let v94 = v14 + v19;
+    let v95 = v29 + v94;
+    let v96 = v93 * v95;
+    let v97 = v91 - v96;
+    let v98 = v31 * v95;
+    let v99 = v91 + v98;
+    let v100 = v97 - v99;
+    let v101 = p.shin_mass * v100;
+    let v102 = v88 + v101;
+    let v103 = v6 * p.prepared[20];
+    let v104 = v3 * p.prepared[19];
+    let v105 = v103 - v104;
+    let v106 = v12 * p.prepared[21];
+    let v107 = p.shin_mass * v17;
+    let v108 = p.prepared[22] + v107;
+    let v109 = v8 * v108;
+    let v110 = v106 - v109;
+    let v111 = p.gravity_x * v110;
+    let v112 = v8 * p.prepared[21];
+    let v113 = v12 * v108;
+    let v114 = v112 + v113;
+    let v115 = p.gravity_y * v114;
+    let v116 = v111 + v115;
+    let v117 = v12 * p.prepared[24];
+    let v118 = v8 * p.prepared[23];
+    let v119 = v117 - v118;
+    let v120 = v116 + v119;
+    let v121 = v105 + v120;
+    let v122 = v121 + p.hip_spring_stiffness;
+    let v123 = v102 + v122;
+    let v124 = v70 * v72;
+    let v125 = v40 * v42;
+    let v126 = v124 - v125;
+    let v127 = v126 - v126;
+    let v128 = p.thigh_mass * v127;
+    let v129 = v61 * v89;
+    let v130 = v93 * v94;
+    let v131 = v129 - v130;
+    let v132 = v31 * v94;
+    let v133 = v129 + v132;
+    let v134 = v131 - v133;
+    let v135 = p.shin_mass * v134;
+    let v136 = v128 + v135;
+    let v137 = v120 - p.hip_spring_stiffness;
+    let v138 = v136 + v137;
+    let v139 = v12 * v61;
+    let v140 = v8 * v31;
+    let v141 = v139 + v140;
+    let v142 = v8 * v93;
+    let v143 = v139 - v142;
+    let v144 = v141 - v143;
+    let v145 = p.shin_mass * v144;
+    let v146 = v12 * p.gravity_x;
+    let v147 = v8 * p.gravity_y;
+    let v148 = v146 + v147;
+    let v149 = p.shin_mass * v148;
+    let v150 = v145 - v149;
+    let v151 = p.shin_mass * v25;
+    let v152 = p.thigh_mass * v41;
+    let v153 = v151 + v152;
+    let v154 = p.shin_mass * v56;
+    let v155 = p.thigh_mass * v71;
+    let v156 = v154 - v155;
+    let v157 = v41 * v83;
+    let v158 = v124 - v157;
+    let v159 = v71 * v81;
+    let v160 = v159 - v125;
+    let v161 = v158 - v160;
+    let v162 = p.thigh_mass * v161;
+    let v163 = v56 * v90;
+    let v164 = v163 - v130;
+    let v165 = v25 * v95;
+    let v166 = v129 + v165;
+    let v167 = v164 - v166;
+    let v168 = p.shin_mass * v167;
+    let v169 = v162 + v168;
+    let v170 = v137 + v169;
+    let v171 = v40 * v41;
+    let v172 = v124 - v171;
+    let v173 = v70 * v71;
+    let v174 = v173 - v125;
+    let v175 = v172 - v174;
+    let v176 = p.thigh_mass * v175;
+    let v177 = v56 * v89;
+    let v178 = v177 - v130;
+    let v179 = v25 * v94;
+    let v180 = v129 + v179;
+    let v181 = v178 - v180;
+    let v182 = p.shin_mass * v181;
+    let v183 = v176 + v182;
+    let v184 = v120 + p.hip_spring_stiffness;
+    let v185 = v183 + v184;
+    let v186 = v8 * v25;
+    let v187 = v139 + v186;
+    let v188 = v12 * v56;
+    let v189 = v188 - v142;
+    let v190 = v187 - v189;
+    let v191 = p.shin_mass * v190;
+    let v192 = v191 - v149;
+    let v193 = v1 * v8;
+    let v194 = p.shin_mass * v193;
+    let v195 = -v194;
+    let v196 = v1 * v12;
+    let v197 = p.shin_mass * v196;
+    let v198 = v90 * v196;
+    let v199 = v142 + v198;
+    let v200 = v95 * v193;
+    let v201 = v139 + v200;
+    let v202 = v199 + v201;
+    let v203 = p.shin_mass * v202;
+    let v204 = p.shin_mass * v12;
+    let v205 = p.gravity_x * v204;
+    let v206 = p.shin_mass * v8;
+    let v207 = p.gravity_y * v206;
+    let v208 = v205 + v207;
+    let v209 = v203 - v208;
+    let v210 = v89 * v196;
+    let v211 = v142 + v210;
+    let v212 = v94 * v193;
+    let v213 = v139 + v212;
+    let v214 = v211 + v213;
+    let v215 = p.shin_mass * v214;
+    let v216 = v215 - v208;
+    let v217 = v8 * v193;
+    let v218 = v12 * v196;
+    let v219 = v217 + v218;
+    let v220 = p.shin_mass * v219;
+    let v221 = p.leg_spring_stiffness - v220;
+    let v222 = qd_4 + qd_4;
+    let v223 = v12 * v222;
+    let v224 = v22 * v49;
+    let v225 = v22 * v53;
+    let v226 = v224 + v225;
+    let v227 = v223 - v226;
+    let v228 = qd_2 + qd_2;
+    let v229 = v59 * v228;
+    let v230 = v227 - v229;
+    let v231 = p.shin_mass * v230;
+    let v232 = v65 * v228;
+    let v233 = p.torso_mass * v232;
+    let v234 = v22 * v70;
+    let v235 = v229 + v234;
+    let v236 = p.thigh_mass * v235;
+    let v237 = v233 + v236;
+    let v238 = v231 - v237;
+    let v239 = v8 * v222;
+    let v240 = v14 * v22;
+    let v241 = v19 * v22;
+    let v242 = v240 + v241;
+    let v243 = v239 - v242;
+    let v244 = v29 * v228;
+    let v245 = v243 - v244;
+    let v246 = p.shin_mass * v245;
+    let v247 = v35 * v228;
+    let v248 = p.torso_mass * v247;
+    let v249 = v22 * v40;
+    let v250 = v244 + v249;
+    let v251 = p.thigh_mass * v250;
+    let v252 = v248 + v251;
+    let v253 = v246 - v252;
+    let v254 = v35 * v232;
+    let v255 = v65 * v247;
+    let v256 = v254 - v255;
+    let v257 = p.torso_mass * v256;
+    let v258 = v83 * v235;
+    let v259 = v81 * v250;
+    let v260 = v258 - v259;
+    let v261 = p.thigh_mass * v260;
+    let v262 = v257 + v261;
+    let v263 = v90 * v245;
+    let v264 = v95 * v230;
+    let v265 = v263 - v264;
+    let v266 = p.shin_mass * v265;
+    let v267 = v262 + v266;
+    let v268 = v40 * v235;
+    let v269 = v70 * v250;
+    let v270 = v268 - v269;
+    let v271 = p.thigh_mass * v270;
+    let v272 = v89 * v245;
+    let v273 = v94 * v230;
+    let v274 = v272 - v273;
+    let v275 = p.shin_mass * v274;
+    let v276 = v271 + v275;
+    let v277 = v8 * v230;
+    let v278 = v12 * v245;
+    let v279 = v277 - v278;
+    let v280 = p.shin_mass * v279;
+    let v281 = p.shin_mass * v227;
+    let v282 = p.thigh_mass * v234;
+    let v283 = v281 - v282;
+    let v284 = p.shin_mass * v243;
+    let v285 = p.thigh_mass * v249;
+    let v286 = v284 - v285;
+    let v287 = v83 * v234;
+    let v288 = v81 * v249;
+    let v289 = v287 - v288;
+    let v290 = p.thigh_mass * v289;
+    let v291 = v90 * v243;
+    let v292 = v95 * v227;
+    let v293 = v291 - v292;
+    let v294 = p.shin_mass * v293;
+    let v295 = v290 + v294;
+    let v296 = v40 * v234;
+    let v297 = v70 * v249;
+    let v298 = v296 - v297;
+    let v299 = p.thigh_mass * v298;
+    let v300 = v89 * v243;
+    let v301 = v94 * v227;
+    let v302 = v300 - v301;
+    let v303 = p.shin_mass * v302;
+    let v304 = v299 + v303;
+    let v305 = v8 * v227;
+    let v306 = v12 * v243;
+    let v307 = v305 - v306;
+    let v308 = p.shin_mass * v307;
+    let v309 = v12 * v22;
+    let v310 = p.shin_mass * v309;
+    let v311 = v8 * v22;
+    let v312 = p.shin_mass * v311;
+    let v313 = v90 * v311;
+    let v314 = v95 * v309;
+    let v315 = v313 - v314;
+    let v316 = p.shin_mass * v315;
+    let v317 = v89 * v311;
+    let v318 = v94 * v309;
+    let v319 = v317 - v318;
+    let v320 = p.shin_mass * v319;
+    let v321 = v8 * v309;
+    let v322 = v12 * v311;
+    let v323 = v321 - v322;
+    let v324 = p.shin_mass * v323;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v45, v75, v123, v138, v150],
+                [v153, v156, v170, v185, v192],
+                [v195, v197, v209, v216, v221],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v238, v253, v267, v276, v280],
+                [v283, v286, v295, v304, v308],
+                [v310, v312, v316, v320, v324],
+            ]),
+        ),
+    )
+}
+/// `∂(Jᵀ f)/∂q`, `∂(J a)/∂q`, `∂(J̇ q̇)/∂q` and `J̇` at the closure forces `f` and the
+/// accelerations `a`.
+pub fn constraint_derivatives<T: Arithmetic>(
+    _q: &SVector<T, 5>,
+    _qd: &SVector<T, 5>,
+    _a: &SVector<T, 5>,
+    _f: &SVector<T, 0>,
+    _p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>) {
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+            ]),
+        ),
+        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+    )
+}
+/// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
+/// (base frame) and the accelerations `a`.
+pub fn contact_derivatives<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    qd: &SVector<T, 5>,
+    a: &SVector<T, 5>,
+    lambda: &SVector<T, 4>,
+    p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 4, 5>, SMatrix<T, 4, 5>, SMatrix<T, 4, 5>) {
+    let [_, _, q_2, q_3, q_4] = q.data.0[0];
+    let [_, _, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let [_, _, a_2, a_3, a_4] = a.data.0[0];
+    let [lambda_0, lambda_1, lambda_2, lambda_3] = lambda.data.0[0];
+    let (v3, v0) = q_3.sincos();
+    let (v1, v4) = q_2.sincos();
+    let v2 = v0 * v1;
+    let v5 = v3 * v4;
+    let v6 = v2 + v5;
+    let v7 = p.shin_length_x * v6;
+    let v8 = v0 * v4;
+    let v9 = v1 * v3;
+    let v10 = v8 - v9;
+    let v11 = p.shin_length_y * v10;
+    let v12 = v7 + v11;
+    let v13 = v6 * p.shin_origin_x;
+    let v14 = p.shin_origin_y - q_4;
+    let v15 = v10 * v14;
+    let v16 = v13 + v15;
+    let v17 = v12 + v16;
+    let v18 = v1 * p.torso_length_x;
+    let v19 = v4 * p.torso_length_y;
+    let v20 = v18 + v19;
+    let v21 = v17 + v20;
+    let v22 = lambda_1 * v21;
+    let v23 = p.shin_length_x * v10;
+    let v24 = v6 * p.shin_length_y;
+    let v25 = v23 - v24;
+    let v26 = v10 * p.shin_origin_x;
+    let v27 = v6 * v14;
+    let v28 = v26 - v27;
+    let v29 = v25 + v28;
+    let v30 = v4 * p.torso_length_x;
+    let v31 = v1 * p.torso_length_y;
+    let v32 = v30 - v31;
+    let v33 = v29 + v32;
+    let v34 = lambda_0 * v33;
+    let v35 = v22 + v34;
+    let v36 = v10 * p.heel_x;
+    let v37 = v6 * p.heel_y;
+    let v38 = v36 - v37;
+    let v39 = v28 + v38;
+    let v40 = v32 + v39;
+    let v41 = lambda_2 * v40;
+    let v42 = v35 + v41;
+    let v43 = v6 * p.heel_x;
+    let v44 = v10 * p.heel_y;
+    let v45 = v43 + v44;
+    let v46 = v16 + v45;
+    let v47 = v20 + v46;
+    let v48 = lambda_3 * v47;
+    let v49 = v42 + v48;
+    let v50 = -v49;
+    let v51 = lambda_1 * v17;
+    let v52 = lambda_0 * v29;
+    let v53 = v51 + v52;
+    let v54 = lambda_2 * v39;
+    let v55 = v53 + v54;
+    let v56 = lambda_3 * v46;
+    let v57 = v55 + v56;
+    let v58 = -v57;
+    let v59 = v10 * lambda_0;
+    let v60 = lambda_1 * v6;
+    let v61 = v59 + v60;
+    let v62 = v10 * lambda_2;
+    let v63 = v61 + v62;
+    let v64 = v6 * lambda_3;
+    let v65 = v63 + v64;
+    let v66 = v10 * a_4;
+    let v67 = v33 * a_2;
+    let v68 = v29 * a_3;
+    let v69 = v67 + v68;
+    let v70 = v66 - v69;
+    let v71 = v6 * a_4;
+    let v72 = v21 * a_2;
+    let v73 = v17 * a_3;
+    let v74 = v72 + v73;
+    let v75 = v71 - v74;
+    let v76 = v40 * a_2;
+    let v77 = v39 * a_3;
+    let v78 = v76 + v77;
+    let v79 = v66 - v78;
+    let v80 = v47 * a_2;
+    let v81 = v46 * a_3;
+    let v82 = v80 + v81;
+    let v83 = v71 - v82;
+    let v84 = v29 * a_2;
+    let v85 = v68 + v84;
+    let v86 = v66 - v85;
+    let v87 = v17 * a_2;
+    let v88 = v73 + v87;
+    let v89 = v71 - v88;
+    let v90 = v39 * a_2;
+    let v91 = v77 + v90;
+    let v92 = v66 - v91;
+    let v93 = v46 * a_2;
+    let v94 = v81 + v93;
+    let v95 = v71 - v94;
+    let v96 = v10 * a_2;
+    let v97 = v10 * a_3;
+    let v98 = v96 + v97;
+    let v99 = v6 * a_2;
+    let v100 = v6 * a_3;
+    let v101 = v99 + v100;
+    let v102 = qd_2 + qd_3;
+    let v103 = v102 * v102;
+    let v104 = v12 * v103;
+    let v105 = v16 * v103;
+    let v106 = v104 + v105;
+    let v107 = v102 + v102;
+    let v108 = v107 * qd_4;
+    let v109 = v6 * v108;
+    let v110 = v106 - v109;
+    let v111 = qd_2 * qd_2;
+    let v112 = v20 * v111;
+    let v113 = v110 + v112;
+    let v114 = v10 * v108;
+    let v115 = v25 * v103;
+    let v116 = v28 * v103;
+    let v117 = v115 + v116;
+    let v118 = v114 - v117;
+    let v119 = v32 * v111;
+    let v120 = v118 - v119;
+    let v121 = v45 * v103;
+    let v122 = v105 + v121;
+    let v123 = v122 - v109;
+    let v124 = v112 + v123;
+    let v125 = v38 * v103;
+    let v126 = v116 + v125;
+    let v127 = v114 - v126;
+    let v128 = v127 - v119;
+    let v129 = v6 * v103;
+    let v130 = -v129;
+    let v131 = v10 * v103;
+    let v132 = v10 * qd_4;
+    let v133 = v33 * qd_2;
+    let v134 = v29 * qd_3;
+    let v135 = v133 + v134;
+    let v136 = v132 - v135;
+    let v137 = v6 * qd_4;
+    let v138 = v21 * qd_2;
+    let v139 = v17 * qd_3;
+    let v140 = v138 + v139;
+    let v141 = v137 - v140;
+    let v142 = v40 * qd_2;
+    let v143 = v39 * qd_3;
+    let v144 = v142 + v143;
+    let v145 = v132 - v144;
+    let v146 = v47 * qd_2;
+    let v147 = v46 * qd_3;
+    let v148 = v146 + v147;
+    let v149 = v137 - v148;
+    let v150 = v29 * qd_2;
+    let v151 = v134 + v150;
+    let v152 = v132 - v151;
+    let v153 = v17 * qd_2;
+    let v154 = v139 + v153;
+    let v155 = v137 - v154;
+    let v156 = v39 * qd_2;
+    let v157 = v143 + v156;
+    let v158 = v132 - v157;
+    let v159 = v46 * qd_2;
+    let v160 = v147 + v159;
+    let v161 = v137 - v160;
+    let v162 = v10 * qd_2;
+    let v163 = v10 * qd_3;
+    let v164 = v162 + v163;
+    let v165 = v6 * qd_2;
+    let v166 = v6 * qd_3;
+    let v167 = v165 + v166;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), v50, v58, v65],
+                [T::lit(0.0), T::lit(0.0), v58, v58, v65],
+                [T::lit(0.0), T::lit(0.0), v65, v65, T::lit(0.0)],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v70, v75, v79, v83],
+                [v86, v89, v92, v95],
+                [v98, v101, v98, v101],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v113, v120, v124, v128],
+                [v110, v118, v123, v127],
+                [v130, v131, v130, v131],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v136, v141, v145, v149],
+                [v152, v155, v158, v161],
+                [v164, v167, v164, v167],
+            ]),
+        ),
+    )
+}
+/// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
+/// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
+pub fn dynamics_derivatives<T: Arithmetic>(
+    q: &SVector<T, 5>,
+    qd: &SVector<T, 5>,
+    a: &SVector<T, 5>,
+    _f: &SVector<T, 0>,
+    p: &Params<T>,
+) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>) {
+    let [_, _, q_2, q_3, q_4] = q.data.0[0];
+    let [_, _, qd_2, qd_3, qd_4] = qd.data.0[0];
+    let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
+    let (v4, v0) = q_3.sincos();
+    let v1 = v0 * p.shin_mass;
+    let (v6, v2) = q_2.sincos();
+    let v3 = v1 * v2;
+    let v5 = p.shin_mass * v4;
+    let v7 = v5 * v6;
+    let v8 = v3 - v7;
+    let v9 = a_4 * v8;
+    let v10 = v0 * p.prepared[3];
+    let v11 = p.shin_origin_y - q_4;
+    let v12 = p.shin_mass * v11;
+    let v13 = p.prepared[5] + v12;
+    let v14 = v4 * v13;
+    let v15 = v10 - v14;
+    let v16 = p.prepared[6] + v15;
+    let v17 = v2 * v16;
+    let v18 = v4 * p.prepared[3];
+    let v19 = v0 * v13;
+    let v20 = v18 + v19;
+    let v21 = p.prepared[2] + v20;
+    let v22 = v6 * v21;
+    let v23 = v17 - v22;
+    let v24 = a_2 * v23;
+    let v25 = v2 * v15;
+    let v26 = v6 * v20;
+    let v27 = v25 - v26;
+    let v28 = a_3 * v27;
+    let v29 = v24 + v28;
+    let v30 = v9 - v29;
+    let v31 = qd_2 + qd_3;
+    let v32 = v31 * v31;
+    let v33 = v0 * v6;
+    let v34 = v2 * v4;
+    let v35 = v33 + v34;
+    let v36 = p.shin_com_x * v35;
+    let v37 = v0 * v2;
+    let v38 = v4 * v6;
+    let v39 = v37 - v38;
+    let v40 = p.shin_com_y * v39;
+    let v41 = v36 + v40;
+    let v42 = v32 * v41;
+    let v43 = p.shin_origin_x * v35;
+    let v44 = v11 * v39;
+    let v45 = v43 + v44;
+    let v46 = v32 * v45;
+    let v47 = v42 + v46;
+    let v48 = v31 + v31;
+    let v49 = v48 * qd_4;
+    let v50 = v35 * v49;
+    let v51 = v47 - v50;
+    let v52 = qd_2 * qd_2;
+    let v53 = v6 * p.torso_length_x;
+    let v54 = v2 * p.torso_length_y;
+    let v55 = v53 + v54;
+    let v56 = v52 * v55;
+    let v57 = v51 + v56;
+    let v58 = p.shin_mass * v57;
+    let v59 = v6 * p.torso_com_x;
+    let v60 = v2 * p.torso_com_y;
+    let v61 = v59 + v60;
+    let v62 = v52 * v61;
+    let v63 = p.torso_mass * v62;
+    let v64 = p.thigh_com_x * v35;
+    let v65 = p.thigh_com_y * v39;
+    let v66 = v64 + v65;
+    let v67 = v32 * v66;
+    let v68 = v56 + v67;
+    let v69 = p.thigh_mass * v68;
+    let v70 = v63 + v69;
+    let v71 = v58 + v70;
+    let v72 = v30 + v71;
+    let v73 = v2 * v5;
+    let v74 = v1 * v6;
+    let v75 = v73 + v74;
+    let v76 = a_4 * v75;
+    let v77 = v6 * v16;
+    let v78 = v2 * v21;
+    let v79 = v77 + v78;
+    let v80 = a_2 * v79;
+    let v81 = v6 * v15;
+    let v82 = v2 * v20;
+    let v83 = v81 + v82;
+    let v84 = a_3 * v83;
+    let v85 = v80 + v84;
+    let v86 = v76 - v85;
+    let v87 = v39 * v49;
+    let v88 = p.shin_com_x * v39;
+    let v89 = p.shin_com_y * v35;
+    let v90 = v88 - v89;
+    let v91 = v32 * v90;
+    let v92 = p.shin_origin_x * v39;
+    let v93 = v11 * v35;
+    let v94 = v92 - v93;
+    let v95 = v32 * v94;
+    let v96 = v91 + v95;
+    let v97 = v87 - v96;
+    let v98 = v2 * p.torso_length_x;
+    let v99 = v6 * p.torso_length_y;
+    let v100 = v98 - v99;
+    let v101 = v52 * v100;
+    let v102 = v97 - v101;
+    let v103 = p.shin_mass * v102;
+    let v104 = v2 * p.torso_com_x;
+    let v105 = v6 * p.torso_com_y;
+    let v106 = v104 - v105;
+    let v107 = v52 * v106;
+    let v108 = p.torso_mass * v107;
+    let v109 = p.thigh_com_x * v39;
+    let v110 = p.thigh_com_y * v35;
+    let v111 = v109 - v110;
+    let v112 = v32 * v111;
+    let v113 = v101 + v112;
+    let v114 = p.thigh_mass * v113;
+    let v115 = v108 + v114;
+    let v116 = v103 - v115;
+    let v117 = v86 + v116;
+    let v118 = v106 * v107;
+    let v119 = v61 * v62;
+    let v120 = v118 - v119;
+    let v121 = v120 - v120;
+    let v122 = p.torso_mass * v121;
+    let v123 = v100 + v111;
+    let v124 = v113 * v123;
+    let v125 = v55 + v66;
+    let v126 = v68 * v125;
+    let v127 = v124 - v126;
+    let v128 = v127 - v127;
+    let v129 = p.thigh_mass * v128;
+    let v130 = v122 + v129;
+    let v131 = v90 + v94;
+    let v132 = v100 + v131;
+    let v133 = v102 * v132;
+    let v134 = v50 - v47;
+    let v135 = v134 - v56;
+    let v136 = v41 + v45;
+    let v137 = v55 + v136;
+    let v138 = v135 * v137;
+    let v139 = v133 - v138;
+    let v140 = v57 * v137;
+    let v141 = v133 + v140;
+    let v142 = v139 - v141;
+    let v143 = p.shin_mass * v142;
+    let v144 = v130 + v143;
+    let v145 = v2 * p.prepared[20];
+    let v146 = v6 * p.prepared[19];
+    let v147 = v145 - v146;
+    let v148 = v39 * p.prepared[21];
+    let v149 = p.prepared[22] + v12;
+    let v150 = v35 * v149;
+    let v151 = v148 - v150;
+    let v152 = p.gravity_x * v151;
+    let v153 = v35 * p.prepared[21];
+    let v154 = v39 * v149;
+    let v155 = v153 + v154;
+    let v156 = p.gravity_y * v155;
+    let v157 = v152 + v156;
+    let v158 = v39 * p.prepared[24];
+    let v159 = v35 * p.prepared[23];
+    let v160 = v158 - v159;
+    let v161 = v157 + v160;
+    let v162 = v147 + v161;
+    let v163 = v162 + p.hip_spring_stiffness;
+    let v164 = v144 + v163;
+    let v165 = v79 * a_1;
+    let v166 = v23 * a_0;
+    let v167 = v165 + v166;
+    let v168 = v164 - v167;
+    let v169 = v111 * v113;
+    let v170 = v66 * v68;
+    let v171 = v169 - v170;
+    let v172 = v171 - v171;
+    let v173 = p.thigh_mass * v172;
+    let v174 = v102 * v131;
+    let v175 = v135 * v136;
+    let v176 = v174 - v175;
+    let v177 = v57 * v136;
+    let v178 = v174 + v177;
+    let v179 = v176 - v178;
+    let v180 = p.shin_mass * v179;
+    let v181 = v173 + v180;
+    let v182 = v161 - p.hip_spring_stiffness;
+    let v183 = v181 + v182;
+    let v184 = v83 * a_1;
+    let v185 = v27 * a_0;
+    let v186 = v184 + v185;
+    let v187 = v183 - v186;
+    let v188 = v8 * a_0;
+    let v189 = v75 * a_1;
+    let v190 = v188 + v189;
+    let v191 = v39 * v102;
+    let v192 = v35 * v57;
+    let v193 = v191 + v192;
+    let v194 = v35 * v135;
+    let v195 = v191 - v194;
+    let v196 = v193 - v195;
+    let v197 = p.shin_mass * v196;
+    let v198 = v39 * p.gravity_x;
+    let v199 = v35 * p.gravity_y;
+    let v200 = v198 + v199;
+    let v201 = p.shin_mass * v200;
+    let v202 = v197 - v201;
+    let v203 = v190 + v202;
+    let v204 = a_2 * v27;
+    let v205 = v28 + v204;
+    let v206 = v9 - v205;
+    let v207 = p.shin_mass * v51;
+    let v208 = p.thigh_mass * v67;
+    let v209 = v207 + v208;
+    let v210 = v206 + v209;
+    let v211 = a_2 * v83;
+    let v212 = v84 + v211;
+    let v213 = v76 - v212;
+    let v214 = p.shin_mass * v97;
+    let v215 = p.thigh_mass * v112;
+    let v216 = v214 - v215;
+    let v217 = v213 + v216;
+    let v218 = v15 * p.torso_length_y;
+    let v219 = p.torso_length_x * v20;
+    let v220 = v218 - v219;
+    let v221 = v220 + v220;
+    let v222 = a_2 * v221;
+    let v223 = v222 - v186;
+    let v224 = a_3 * v220;
+    let v225 = v223 + v224;
+    let v226 = v0 * p.prepared[13];
+    let v227 = v4 * p.prepared[12];
+    let v228 = v226 - v227;
+    let v229 = a_4 * v228;
+    let v230 = v225 - v229;
+    let v231 = v67 * v125;
+    let v232 = v169 - v231;
+    let v233 = v112 * v123;
+    let v234 = v233 - v170;
+    let v235 = v232 - v234;
+    let v236 = p.thigh_mass * v235;
+    let v237 = v97 * v132;
+    let v238 = v237 - v175;
+    let v239 = v51 * v137;
+    let v240 = v174 + v239;
+    let v241 = v238 - v240;
+    let v242 = p.shin_mass * v241;
+    let v243 = v236 + v242;
+    let v244 = v182 + v243;
+    let v245 = v230 + v244;
+    let v246 = a_2 * v220;
+    let v247 = v246 - v186;
+    let v248 = v66 * v67;
+    let v249 = v169 - v248;
+    let v250 = v111 * v112;
+    let v251 = v250 - v170;
+    let v252 = v249 - v251;
+    let v253 = p.thigh_mass * v252;
+    let v254 = v97 * v131;
+    let v255 = v254 - v175;
+    let v256 = v51 * v136;
+    let v257 = v174 + v256;
+    let v258 = v255 - v257;
+    let v259 = p.shin_mass * v258;
+    let v260 = v253 + v259;
+    let v261 = v161 + p.hip_spring_stiffness;
+    let v262 = v260 + v261;
+    let v263 = v247 + v262;
+    let v264 = a_2 * v228;
+    let v265 = v190 - v264;
+    let v266 = v35 * v51;
+    let v267 = v191 + v266;
+    let v268 = v39 * v97;
+    let v269 = v268 - v194;
+    let v270 = v267 - v269;
+    let v271 = p.shin_mass * v270;
+    let v272 = v271 - v201;
+    let v273 = v265 + v272;
+    let v274 = v7 - v3;
+    let v275 = a_2 * v274;
+    let v276 = a_3 * v274;
+    let v277 = v275 + v276;
+    let v278 = v32 * v35;
+    let v279 = p.shin_mass * v278;
+    let v280 = v277 + v279;
+    let v281 = -v280;
+    let v282 = a_2 * v75;
+    let v283 = a_3 * v75;
+    let v284 = v282 + v283;
+    let v285 = v32 * v39;
+    let v286 = p.shin_mass * v285;
+    let v287 = v284 + v286;
+    let v288 = a_0 * v274;
+    let v289 = v189 - v288;
+    let v290 = v11 + v11;
+    let v291 = p.shin_mass * v290;
+    let v292 = p.prepared[34] - v291;
+    let v293 = v5 * p.torso_length_x;
+    let v294 = v1 * p.torso_length_y;
+    let v295 = v293 - v294;
+    let v296 = v295 + v295;
+    let v297 = v292 + v296;
+    let v298 = a_2 * v297;
+    let v299 = v289 + v298;
+    let v300 = v292 + v295;
+    let v301 = a_3 * v300;
+    let v302 = v299 + v301;
+    let v303 = v132 * v285;
+    let v304 = v194 + v303;
+    let v305 = v137 * v278;
+    let v306 = v191 + v305;
+    let v307 = v304 + v306;
+    let v308 = p.shin_mass * v307;
+    let v309 = p.shin_mass * v39;
+    let v310 = p.gravity_x * v309;
+    let v311 = p.shin_mass * v35;
+    let v312 = p.gravity_y * v311;
+    let v313 = v310 + v312;
+    let v314 = v308 - v313;
+    let v315 = v302 + v314;
+    let v316 = a_2 * v300;
+    let v317 = v289 + v316;
+    let v318 = a_3 * v292;
+    let v319 = v317 + v318;
+    let v320 = v131 * v285;
+    let v321 = v194 + v320;
+    let v322 = v136 * v278;
+    let v323 = v191 + v322;
+    let v324 = v321 + v323;
+    let v325 = p.shin_mass * v324;
+    let v326 = v325 - v313;
+    let v327 = v319 + v326;
+    let v328 = v35 * v278;
+    let v329 = v39 * v285;
+    let v330 = v328 + v329;
+    let v331 = p.shin_mass * v330;
+    let v332 = p.leg_spring_stiffness - v331;
+    let v333 = qd_4 + qd_4;
+    let v334 = v39 * v333;
+    let v335 = v48 * v90;
+    let v336 = v48 * v94;
+    let v337 = v335 + v336;
+    let v338 = v334 - v337;
+    let v339 = qd_2 + qd_2;
+    let v340 = v100 * v339;
+    let v341 = v338 - v340;
+    let v342 = p.shin_mass * v341;
+    let v343 = v106 * v339;
+    let v344 = p.torso_mass * v343;
+    let v345 = v48 * v111;
+    let v346 = v340 + v345;
+    let v347 = p.thigh_mass * v346;
+    let v348 = v344 + v347;
+    let v349 = v342 - v348;
+    let v350 = v35 * v333;
+    let v351 = v41 * v48;
+    let v352 = v45 * v48;
+    let v353 = v351 + v352;
+    let v354 = v350 - v353;
+    let v355 = v55 * v339;
+    let v356 = v354 - v355;
+    let v357 = p.shin_mass * v356;
+    let v358 = v61 * v339;
+    let v359 = p.torso_mass * v358;
+    let v360 = v48 * v66;
+    let v361 = v355 + v360;
+    let v362 = p.thigh_mass * v361;
+    let v363 = v359 + v362;
+    let v364 = v357 - v363;
+    let v365 = v61 * v343;
+    let v366 = v106 * v358;
+    let v367 = v365 - v366;
+    let v368 = p.torso_mass * v367;
+    let v369 = v125 * v346;
+    let v370 = v123 * v361;
+    let v371 = v369 - v370;
+    let v372 = p.thigh_mass * v371;
+    let v373 = v368 + v372;
+    let v374 = v132 * v356;
+    let v375 = v137 * v341;
+    let v376 = v374 - v375;
+    let v377 = p.shin_mass * v376;
+    let v378 = v373 + v377;
+    let v379 = v378 + p.torso_damping;
+    let v380 = v66 * v346;
+    let v381 = v111 * v361;
+    let v382 = v380 - v381;
+    let v383 = p.thigh_mass * v382;
+    let v384 = v131 * v356;
+    let v385 = v136 * v341;
+    let v386 = v384 - v385;
+    let v387 = p.shin_mass * v386;
+    let v388 = v383 + v387;
+    let v389 = v35 * v341;
+    let v390 = v39 * v356;
+    let v391 = v389 - v390;
+    let v392 = p.shin_mass * v391;
+    let v393 = p.shin_mass * v338;
+    let v394 = p.thigh_mass * v345;
+    let v395 = v393 - v394;
+    let v396 = p.shin_mass * v354;
+    let v397 = p.thigh_mass * v360;
+    let v398 = v396 - v397;
+    let v399 = v125 * v345;
+    let v400 = v123 * v360;
+    let v401 = v399 - v400;
+    let v402 = p.thigh_mass * v401;
+    let v403 = v132 * v354;
+    let v404 = v137 * v338;
+    let v405 = v403 - v404;
+    let v406 = p.shin_mass * v405;
+    let v407 = v402 + v406;
+    let v408 = v66 * v345;
+    let v409 = v111 * v360;
+    let v410 = v408 - v409;
+    let v411 = p.thigh_mass * v410;
+    let v412 = v131 * v354;
+    let v413 = v136 * v338;
+    let v414 = v412 - v413;
+    let v415 = p.shin_mass * v414;
+    let v416 = v411 + v415;
+    let v417 = v416 + p.thigh_damping;
+    let v418 = v35 * v338;
+    let v419 = v39 * v354;
+    let v420 = v418 - v419;
+    let v421 = p.shin_mass * v420;
+    let v422 = v39 * v48;
+    let v423 = p.shin_mass * v422;
+    let v424 = v35 * v48;
+    let v425 = p.shin_mass * v424;
+    let v426 = v132 * v424;
+    let v427 = v137 * v422;
+    let v428 = v426 - v427;
+    let v429 = p.shin_mass * v428;
+    let v430 = v131 * v424;
+    let v431 = v136 * v422;
+    let v432 = v430 - v431;
+    let v433 = p.shin_mass * v432;
+    let v434 = v35 * v422;
+    let v435 = v39 * v424;
+    let v436 = v434 - v435;
+    let v437 = p.shin_mass * v436;
+    let v438 = v437 + p.shin_damping;
+    (
+        SMatrix::from_data(
+            ArrayStorage([
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v72, v117, v168, v187, v203],
+                [v210, v217, v245, v263, v273],
+                [v281, v287, v315, v327, v332],
+            ]),
+        ),
+        SMatrix::from_data(
+            ArrayStorage([
+                [p.slide_x_damping, T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [T::lit(0.0), p.slide_y_damping, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
+                [v349, v364, v379, v388, v392],
+                [v395, v398, v407, v417, v421],
+                [v423, v425, v429, v433, v438],
+            ]),
+        ),
+        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
     )
 }

@@ -9,7 +9,8 @@
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
-    Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters,
+    Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
+    JointKind, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 2;
@@ -331,6 +332,62 @@ impl LegModel<NQ, NC, NU> for TwoLink {
             constraint_bias,
         }
     }
+    fn mass_matrix_derivative<T: Arithmetic>(
+        q: &SVector<T, 2>,
+        a: &SVector<T, 2>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 2> {
+        mass_matrix_derivative(q, a, p)
+    }
+    fn bias_forces_derivatives<T: Arithmetic>(
+        q: &SVector<T, 2>,
+        qd: &SVector<T, 2>,
+        p: &Params<T>,
+    ) -> (SMatrix<T, 2, 2>, SMatrix<T, 2, 2>) {
+        bias_forces_derivatives(q, qd, p)
+    }
+    fn constraint_derivatives<T: Arithmetic>(
+        q: &SVector<T, 2>,
+        qd: &SVector<T, 2>,
+        a: &SVector<T, 2>,
+        f: &SVector<T, 0>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 2, 0> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
+    }
+    fn dynamics_derivatives<T: Arithmetic>(
+        q: &SVector<T, 2>,
+        qd: &SVector<T, 2>,
+        a: &SVector<T, 2>,
+        f: &SVector<T, 0>,
+        p: &Params<T>,
+    ) -> DynamicsDerivatives<T, 2, 0> {
+        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
+            q,
+            qd,
+            a,
+            f,
+            p,
+        );
+        DynamicsDerivatives {
+            dynamics_q,
+            dynamics_qd,
+            constraint_q,
+            jacobian_rate,
+        }
+    }
 }
 impl ContactModel<NQ, NC, NU, NK> for TwoLink {
     const CONTACT_NAMES: &'static [&'static str] = &[];
@@ -355,6 +412,27 @@ impl ContactModel<NQ, NC, NU, NK> for TwoLink {
         p: &Params<T>,
     ) -> SVector<T, 0> {
         contact_bias(q, qd, p)
+    }
+    fn contact_derivatives<T: Arithmetic>(
+        q: &SVector<T, 2>,
+        qd: &SVector<T, 2>,
+        a: &SVector<T, 2>,
+        lambda: &SVector<T, 0>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 2, 0> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
+            q,
+            qd,
+            a,
+            lambda,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -809,5 +887,192 @@ pub fn dynamics_terms<T: Arithmetic>(
         SMatrix::from_data(ArrayStorage([[v37, v40]])),
         SMatrix::from_data(ArrayStorage([[], []])),
         SMatrix::from_data(ArrayStorage([[]])),
+    )
+}
+/// `∂(M a)/∂q` at the accelerations `a`.
+pub fn mass_matrix_derivative<T: Arithmetic>(
+    q: &SVector<T, 2>,
+    a: &SVector<T, 2>,
+    p: &Params<T>,
+) -> SMatrix<T, 2, 2> {
+    let [_, q_1] = q.data.0[0];
+    let [a_0, a_1] = a.data.0[0];
+    let (v0, v2) = q_1.sincos();
+    let v1 = p.prepared[2] * v0;
+    let v3 = p.prepared[3] * v2;
+    let v4 = v1 + v3;
+    let v5 = -v4;
+    let v6 = v5 + v5;
+    let v7 = a_0 * v6;
+    let v8 = v2 * p.prepared[4];
+    let v9 = v8 - v1;
+    let v10 = a_1 * v9;
+    let v11 = v7 + v10;
+    let v12 = a_0 * v9;
+    SMatrix::from_data(ArrayStorage([[T::lit(0.0), T::lit(0.0)], [v11, v12]]))
+}
+/// `∂N/∂q` and `∂N/∂q̇`.
+pub fn bias_forces_derivatives<T: Arithmetic>(
+    q: &SVector<T, 2>,
+    qd: &SVector<T, 2>,
+    p: &Params<T>,
+) -> (SMatrix<T, 2, 2>, SMatrix<T, 2, 2>) {
+    let [q_0, q_1] = q.data.0[0];
+    let [qd_0, qd_1] = qd.data.0[0];
+    let (v2, v0) = q_0.sincos();
+    let v1 = p.prepared[7] * v0;
+    let v3 = p.prepared[6] * v2;
+    let v4 = v1 - v3;
+    let (v7, v5) = q_1.sincos();
+    let v6 = v0 * v5;
+    let v8 = v2 * v7;
+    let v9 = v6 - v8;
+    let v10 = p.prepared[9] * v9;
+    let v11 = v2 * v5;
+    let v12 = v0 * v7;
+    let v13 = v11 + v12;
+    let v14 = p.prepared[8] * v13;
+    let v15 = v10 - v14;
+    let v16 = v4 + v15;
+    let v17 = qd_0 * qd_1;
+    let v18 = v5 * p.prepared[2];
+    let v19 = v7 * p.prepared[3];
+    let v20 = v18 - v19;
+    let v21 = -v20;
+    let v22 = v21 + v21;
+    let v23 = v17 * v22;
+    let v24 = qd_1 * qd_1;
+    let v25 = v7 * p.prepared[4];
+    let v26 = v18 + v25;
+    let v27 = v24 * v26;
+    let v28 = v23 - v27;
+    let v29 = v15 + v28;
+    let v30 = qd_0 * qd_0;
+    let v31 = v20 * v30;
+    let v32 = v15 + v31;
+    let v33 = v7 * p.prepared[2];
+    let v34 = v5 * p.prepared[3];
+    let v35 = v33 + v34;
+    let v36 = -v35;
+    let v37 = v36 + v36;
+    let v38 = qd_1 * v37;
+    let v39 = qd_0 + qd_0;
+    let v40 = v35 * v39;
+    let v41 = qd_0 * v37;
+    let v42 = v5 * p.prepared[4];
+    let v43 = v42 - v33;
+    let v44 = qd_1 + qd_1;
+    let v45 = v43 * v44;
+    let v46 = v41 + v45;
+    (
+        SMatrix::from_data(ArrayStorage([[v16, v15], [v29, v32]])),
+        SMatrix::from_data(ArrayStorage([[v38, v40], [v46, T::lit(0.0)]])),
+    )
+}
+/// `∂(Jᵀ f)/∂q`, `∂(J a)/∂q`, `∂(J̇ q̇)/∂q` and `J̇` at the closure forces `f` and the
+/// accelerations `a`.
+pub fn constraint_derivatives<T: Arithmetic>(
+    _q: &SVector<T, 2>,
+    _qd: &SVector<T, 2>,
+    _a: &SVector<T, 2>,
+    _f: &SVector<T, 0>,
+    _p: &Params<T>,
+) -> (SMatrix<T, 2, 2>, SMatrix<T, 0, 2>, SMatrix<T, 0, 2>, SMatrix<T, 0, 2>) {
+    (
+        SMatrix::from_data(
+            ArrayStorage([[T::lit(0.0), T::lit(0.0)], [T::lit(0.0), T::lit(0.0)]]),
+        ),
+        SMatrix::from_data(ArrayStorage([[], []])),
+        SMatrix::from_data(ArrayStorage([[], []])),
+        SMatrix::from_data(ArrayStorage([[], []])),
+    )
+}
+/// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
+/// (base frame) and the accelerations `a`.
+pub fn contact_derivatives<T: Arithmetic>(
+    _q: &SVector<T, 2>,
+    _qd: &SVector<T, 2>,
+    _a: &SVector<T, 2>,
+    _lambda: &SVector<T, 0>,
+    _p: &Params<T>,
+) -> (SMatrix<T, 2, 2>, SMatrix<T, 0, 2>, SMatrix<T, 0, 2>, SMatrix<T, 0, 2>) {
+    (
+        SMatrix::from_data(
+            ArrayStorage([[T::lit(0.0), T::lit(0.0)], [T::lit(0.0), T::lit(0.0)]]),
+        ),
+        SMatrix::from_data(ArrayStorage([[], []])),
+        SMatrix::from_data(ArrayStorage([[], []])),
+        SMatrix::from_data(ArrayStorage([[], []])),
+    )
+}
+/// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
+/// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
+pub fn dynamics_derivatives<T: Arithmetic>(
+    q: &SVector<T, 2>,
+    qd: &SVector<T, 2>,
+    a: &SVector<T, 2>,
+    _f: &SVector<T, 0>,
+    p: &Params<T>,
+) -> (SMatrix<T, 2, 2>, SMatrix<T, 2, 2>, SMatrix<T, 0, 2>, SMatrix<T, 0, 2>) {
+    let [q_0, q_1] = q.data.0[0];
+    let [qd_0, qd_1] = qd.data.0[0];
+    let [a_0, a_1] = a.data.0[0];
+    let (v2, v0) = q_0.sincos();
+    let v1 = p.prepared[7] * v0;
+    let v3 = p.prepared[6] * v2;
+    let v4 = v1 - v3;
+    let (v7, v5) = q_1.sincos();
+    let v6 = v0 * v5;
+    let v8 = v2 * v7;
+    let v9 = v6 - v8;
+    let v10 = p.prepared[9] * v9;
+    let v11 = v2 * v5;
+    let v12 = v0 * v7;
+    let v13 = v11 + v12;
+    let v14 = p.prepared[8] * v13;
+    let v15 = v10 - v14;
+    let v16 = v4 + v15;
+    let v17 = v7 * p.prepared[2];
+    let v18 = v5 * p.prepared[3];
+    let v19 = v17 + v18;
+    let v20 = -v19;
+    let v21 = v20 + v20;
+    let v22 = a_0 * v21;
+    let v23 = v5 * p.prepared[4];
+    let v24 = v23 - v17;
+    let v25 = a_1 * v24;
+    let v26 = v22 + v25;
+    let v27 = qd_0 * qd_1;
+    let v28 = v5 * p.prepared[2];
+    let v29 = v7 * p.prepared[3];
+    let v30 = v28 - v29;
+    let v31 = -v30;
+    let v32 = v31 + v31;
+    let v33 = v27 * v32;
+    let v34 = qd_1 * qd_1;
+    let v35 = v7 * p.prepared[4];
+    let v36 = v28 + v35;
+    let v37 = v34 * v36;
+    let v38 = v33 - v37;
+    let v39 = v15 + v38;
+    let v40 = v26 + v39;
+    let v41 = a_0 * v24;
+    let v42 = qd_0 * qd_0;
+    let v43 = v30 * v42;
+    let v44 = v15 + v43;
+    let v45 = v41 + v44;
+    let v46 = v21 * qd_1;
+    let v47 = v46 + p.upper_arm_damping;
+    let v48 = qd_0 + qd_0;
+    let v49 = v19 * v48;
+    let v50 = v21 * qd_0;
+    let v51 = qd_1 + qd_1;
+    let v52 = v24 * v51;
+    let v53 = v50 + v52;
+    (
+        SMatrix::from_data(ArrayStorage([[v16, v15], [v40, v45]])),
+        SMatrix::from_data(ArrayStorage([[v47, v49], [v53, p.forearm_damping]])),
+        SMatrix::from_data(ArrayStorage([[], []])),
+        SMatrix::from_data(ArrayStorage([[], []])),
     )
 }

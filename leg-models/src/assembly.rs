@@ -242,6 +242,22 @@ where
     Ok(q)
 }
 
+/// Moves `q` onto `φ(q) = 0` changing only the joints not marked in `held`: the lift of
+/// a chart's coordinates onto the closed chain ([`crate::linearize::ManifoldChart`]).
+pub fn assemble_holding<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &mut SVector<T, NQ>,
+    held: &[bool; NQ],
+    tol: &Tolerance<T>,
+) -> Result<(), AssemblyError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let free: [bool; NQ] = core::array::from_fn(|j| !held[j]);
+    solve_closure::<L, T, NQ, NC, NU>(params, q, &free, tol)
+}
+
 /// Moves `q` onto `φ(q) = 0` with every joint free (the smallest correction): the
 /// post-step projection of the integrators.
 pub fn project_position<L, T, const NQ: usize, const NC: usize, const NU: usize>(

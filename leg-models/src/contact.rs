@@ -164,9 +164,44 @@ pub fn solve_structured<T: Real, const NQ: usize, const NC: usize, const NK: usi
     slide: &SVector<T, NK>,
     tau: &SVector<T, NQ>,
 ) -> Result<ContactSolution<T, NQ, NC, NK>, DynamicsError> {
+    let rows = ContactRows {
+        c: *c,
+        w: *w,
+        slide: *slide,
+        held: *held,
+    };
+    let (x, closure, contact) =
+        solve_structured_columns(chol_m, j, r_j, closure_deficiency, &rows, r_c, tau)?;
+    Ok(ContactSolution {
+        x,
+        closure,
+        contact,
+    })
+}
+
+/// [`solve_structured`] for `C` right-hand sides at once (columns of `τ`, `r_j`, `r_c`),
+/// with one elimination of the closure and contact rows: what the derivatives of the
+/// dynamics ([`crate::derivatives`]) solve. Returns `(x, F, λ)`, a column each.
+#[allow(clippy::type_complexity)]
+pub fn solve_structured_columns<
+    T: Real,
+    const NQ: usize,
+    const NC: usize,
+    const NK: usize,
+    const C: usize,
+>(
+    chol_m: &Cholesky<T, NQ>,
+    j: &SMatrix<T, NC, NQ>,
+    r_j: &SMatrix<T, NC, C>,
+    closure_deficiency: usize,
+    rows: &ContactRows<T, NQ, NK>,
+    r_c: &SMatrix<T, NK, C>,
+    tau: &SMatrix<T, NQ, C>,
+) -> Result<(SMatrix<T, NQ, C>, SMatrix<T, NC, C>, SMatrix<T, NK, C>), DynamicsError> {
+    let (c, held) = (&rows.c, &rows.held);
     let mut a = *tau;
     chol_m.solve_mut(&mut a); // M⁻¹ τ
-    let mut z = w.transpose();
+    let mut z = rows.w.transpose();
     for (r, &h) in held.iter().enumerate() {
         if !h {
             z.column_mut(r).fill(T::zero());
@@ -175,7 +210,7 @@ pub fn solve_structured<T: Real, const NQ: usize, const NC: usize, const NK: usi
     chol_m.solve_mut(&mut z); // Z = M⁻¹ Wᵀ
                               // Closure elimination: a0 = a + Y S⁻¹ (r_j − J a), Zp = Z − Y S⁻¹ J Z.
     let (mut a0, mut zp) = (a, z);
-    let mut f0 = SVector::<T, NC>::zeros();
+    let mut f0 = SMatrix::<T, NC, C>::zeros();
     let mut g = SMatrix::<T, NC, NK>::zeros();
     if NC > 0 {
         let mut y = j.transpose();
@@ -211,30 +246,29 @@ pub fn solve_structured<T: Real, const NQ: usize, const NC: usize, const NK: usi
     let mut contact = lambda;
     for r in (0..NK).step_by(2) {
         if !held[r] && held[r + 1] {
-            contact[r] = slide[r] * lambda[r + 1];
+            for col in 0..C {
+                contact[(r, col)] = rows.slide[r] * lambda[(r + 1, col)];
+            }
         }
     }
     if !(all_finite(&x) && all_finite(&closure) && all_finite(&contact) && all_finite(tau)) {
         return Err(DynamicsError::NonFinite);
     }
-    Ok(ContactSolution {
-        x,
-        closure,
-        contact,
-    })
+    Ok((x, closure, contact))
 }
 
 /// Gaussian elimination with complete pivoting over the held rows and columns of `k`
-/// (the others' unknowns are zero). Held rows may repeat each other (two contacts of one
-/// flat foot: the distance between them is fixed, so their tangential rows are one): once
-/// every remaining pivot is below `rcond_floor` of the first, the remaining unknowns are
-/// zero, provided their equations then hold (to the same relative precision); otherwise
-/// the held rows contradict each other or the closures and the solve refuses.
-fn solve_held<T: Real, const N: usize>(
+/// (the others' unknowns are zero), for `C` right-hand sides. Held rows may repeat each
+/// other (two contacts of one flat foot: the distance between them is fixed, so their
+/// tangential rows are one): once every remaining pivot is below `rcond_floor` of the
+/// first, the remaining unknowns are zero, provided their equations then hold (to the
+/// same relative precision); otherwise the held rows contradict each other or the
+/// closures and the solve refuses.
+fn solve_held<T: Real, const N: usize, const C: usize>(
     k: &SMatrix<T, N, N>,
-    rhs: &SVector<T, N>,
+    rhs: &SMatrix<T, N, C>,
     held: &[bool; N],
-) -> Result<SVector<T, N>, DynamicsError> {
+) -> Result<SMatrix<T, N, C>, DynamicsError> {
     let mut idx = [0usize; N];
     let mut m = 0;
     for (r, &h) in held.iter().enumerate() {
@@ -244,9 +278,11 @@ fn solve_held<T: Real, const N: usize>(
         }
     }
     let mut a = SMatrix::<T, N, N>::zeros();
-    let mut b = SVector::<T, N>::zeros();
+    let mut b = SMatrix::<T, N, C>::zeros();
     for i in 0..m {
-        b[i] = rhs[idx[i]];
+        for col in 0..C {
+            b[(i, col)] = rhs[(idx[i], col)];
+        }
         for jj in 0..m {
             a[(i, jj)] = k[(idx[i], idx[jj])];
         }
@@ -257,7 +293,7 @@ fn solve_held<T: Real, const N: usize>(
     // Columns follow their unknowns through the pivoting.
     let mut cols: [usize; N] = core::array::from_fn(|i| i);
     let (mut first, mut rank) = (T::zero(), m);
-    let b_scale = b.amax();
+    let b_scale: [T; C] = core::array::from_fn(|col| b.column(col).amax());
     for col in 0..m {
         let (mut pr, mut pc, mut best) = (col, col, T::zero());
         for i in col..m {
@@ -285,27 +321,33 @@ fn solve_held<T: Real, const N: usize>(
                 let v = a[(col, jj)];
                 a[(i, jj)] -= factor * v;
             }
-            let v = b[col];
-            b[i] -= factor * v;
+            for rc in 0..C {
+                let v = b[(col, rc)];
+                b[(i, rc)] -= factor * v;
+            }
         }
     }
     // The rows left out must hold with their unknowns at zero.
     for i in rank..m {
-        if b[i].abs() > T::default_epsilon().sqrt() * b_scale {
-            return Err(DynamicsError::SingularContacts { rcond: 0.0 });
+        for (rc, scale) in b_scale.iter().enumerate() {
+            if b[(i, rc)].abs() > T::default_epsilon().sqrt() * *scale {
+                return Err(DynamicsError::SingularContacts { rcond: 0.0 });
+            }
         }
     }
-    let mut x = SVector::<T, N>::zeros();
-    for i in (0..rank).rev() {
-        let mut s = b[i];
-        for jj in i + 1..rank {
-            s -= a[(i, jj)] * x[jj];
+    let mut out = SMatrix::<T, N, C>::zeros();
+    for rc in 0..C {
+        let mut x = SVector::<T, N>::zeros();
+        for i in (0..rank).rev() {
+            let mut s = b[(i, rc)];
+            for jj in i + 1..rank {
+                s -= a[(i, jj)] * x[jj];
+            }
+            x[i] = s / a[(i, i)];
         }
-        x[i] = s / a[(i, i)];
-    }
-    let mut out = SVector::<T, N>::zeros();
-    for i in 0..rank {
-        out[idx[cols[i]]] = x[i];
+        for i in 0..rank {
+            out[(idx[cols[i]], rc)] = x[i];
+        }
     }
     Ok(out)
 }

@@ -39,6 +39,10 @@ pub enum ControlError {
     /// The method does not apply to this leg (too few motors for the foot, an
     /// under- or over-actuated leg): reported when the controller is built.
     NotApplicable(NotApplicable),
+    /// A linearization-based controller (LQR) could not linearize the leg.
+    Linearization(crate::linearize::LinearizationError),
+    /// The Riccati equation of an LQR has no solution.
+    Lqr(crate::lqr::LqrError),
 }
 
 /// A torque that is not finite (a parameter or a reference that is NaN or infinite, or
@@ -68,6 +72,8 @@ impl fmt::Display for ControlError {
             ControlError::Dynamics(e) => write!(f, "{e}"),
             ControlError::NonFinite => write!(f, "non-finite state, reference or parameter"),
             ControlError::NotApplicable(why) => write!(f, "not applicable: {why}"),
+            ControlError::Linearization(e) => write!(f, "linearization: {e}"),
+            ControlError::Lqr(e) => write!(f, "LQR: {e}"),
         }
     }
 }

@@ -95,6 +95,91 @@ where
     tau
 }
 
+/// The factorization of `S = J M⁻¹ Jᵀ`: plain on a leg whose closure rows are
+/// independent, pivoted on one closed redundantly.
+#[derive(Clone, Copy, Debug)]
+enum ConstraintFactor<T: Real, const NC: usize> {
+    Regular(Cholesky<T, NC>),
+    Redundant(PivotedLdlt<T, NC>),
+}
+
+/// The KKT matrix `[M −Jᵀ; J 0]` of one state, factored once (`M = L D Lᵀ`, `Y = M⁻¹ Jᵀ`,
+/// `S = J Y` factored) for the solves of any number of right-hand sides: forward dynamics
+/// solves one, its derivatives ([`crate::derivatives`]) `2 NQ + NU` more.
+#[derive(Clone, Copy, Debug)]
+pub struct KktFactorization<T: Real, const NQ: usize, const NC: usize> {
+    chol_m: Cholesky<T, NQ>,
+    jacobian: SMatrix<T, NC, NQ>,
+    y: SMatrix<T, NQ, NC>,
+    s: Option<ConstraintFactor<T, NC>>,
+}
+
+impl<T: Real, const NQ: usize, const NC: usize> KktFactorization<T, NQ, NC> {
+    /// Factors the KKT matrix of `M` and `J`; up to `deficiency` closure rows may repeat
+    /// the others ([`solve_kkt`]).
+    pub fn new(
+        mass_matrix: &SMatrix<T, NQ, NQ>,
+        jacobian: &SMatrix<T, NC, NQ>,
+        deficiency: usize,
+    ) -> Result<Self, DynamicsError> {
+        // A NaN or infinity anywhere shows in M's pivots or in the solutions.
+        let chol_m =
+            Cholesky::new(mass_matrix).ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
+        if chol_m.rcond < rcond_floor::<T>() {
+            return Err(DynamicsError::MassMatrixNotPositiveDefinite);
+        }
+        let mut y = jacobian.transpose();
+        let mut s = None;
+        if NC > 0 {
+            chol_m.solve_mut(&mut y); // Y = M⁻¹ Jᵀ
+            let schur = mul(jacobian, &y);
+            s = Some(if deficiency == 0 {
+                // The common case, unrolled without pivoting.
+                let chol_s = Cholesky::new(&schur)
+                    .ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?;
+                if chol_s.rcond < rcond_floor::<T>() {
+                    return Err(DynamicsError::SingularConstraints {
+                        rcond: to_f64(chol_s.rcond),
+                    });
+                }
+                ConstraintFactor::Regular(chol_s)
+            } else {
+                ConstraintFactor::Redundant(
+                    PivotedLdlt::new(&schur, deficiency, rcond_floor::<T>())
+                        .ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?,
+                )
+            });
+        }
+        Ok(KktFactorization {
+            chol_m,
+            jacobian: *jacobian,
+            y,
+            s,
+        })
+    }
+
+    /// Overwrites the right-hand sides `(top, bottom)` (columns of `[τ; r]`) with the
+    /// solutions `(x, f)` of `M x − Jᵀ f = τ`, `J x = r`: `a = M⁻¹ τ`,
+    /// `f = S⁻¹ (r − J a)`, `x = a + Y f`. Forces of rows left out as redundant are zero.
+    #[inline]
+    pub fn solve_mut<const C: usize>(
+        &self,
+        top: &mut SMatrix<T, NQ, C>,
+        bottom: &mut SMatrix<T, NC, C>,
+    ) {
+        self.chol_m.solve_mut(top);
+        let Some(s) = &self.s else {
+            return;
+        };
+        *bottom -= mul(&self.jacobian, top);
+        match s {
+            ConstraintFactor::Regular(c) => c.solve_mut(bottom),
+            ConstraintFactor::Redundant(c) => c.solve_mut(bottom),
+        }
+        *top += mul(&self.y, bottom);
+    }
+}
+
 /// Solves the KKT system from evaluated terms: `tau` is the generalized force on the
 /// right-hand side (`B u − N − D q̇`), `closure_rhs` the constraint row (`−J̇ q̇ − …`).
 /// Up to `deficiency` closure rows may repeat the others (a leg closed redundantly,
@@ -107,36 +192,9 @@ pub fn solve_kkt<T: Real, const NQ: usize, const NC: usize>(
     closure_rhs: &SVector<T, NC>,
     deficiency: usize,
 ) -> Result<Acceleration<T, NQ, NC>, DynamicsError> {
-    // A NaN or infinity anywhere shows in M's pivots or in the result, checked below.
-    let chol_m = Cholesky::new(mass_matrix).ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
-    if chol_m.rcond < rcond_floor::<T>() {
-        return Err(DynamicsError::MassMatrixNotPositiveDefinite);
-    }
-    let mut qdd = *tau;
-    chol_m.solve_mut(&mut qdd); // a = M⁻¹ τ
-    let mut forces = SVector::<T, NC>::zeros();
-    if NC > 0 {
-        let mut y = jacobian.transpose();
-        chol_m.solve_mut(&mut y); // Y = M⁻¹ Jᵀ
-        let s = mul(jacobian, &y);
-        forces = closure_rhs - mul(jacobian, &qdd);
-        if deficiency == 0 {
-            // The common case, unrolled without pivoting.
-            let chol_s =
-                Cholesky::new(&s).ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?;
-            if chol_s.rcond < rcond_floor::<T>() {
-                return Err(DynamicsError::SingularConstraints {
-                    rcond: to_f64(chol_s.rcond),
-                });
-            }
-            chol_s.solve_mut(&mut forces);
-        } else {
-            PivotedLdlt::new(&s, deficiency, rcond_floor::<T>())
-                .ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?
-                .solve_mut(&mut forces);
-        }
-        qdd += mul(&y, &forces);
-    }
+    let kkt = KktFactorization::new(mass_matrix, jacobian, deficiency)?;
+    let (mut qdd, mut forces) = (*tau, *closure_rhs);
+    kkt.solve_mut(&mut qdd, &mut forces);
     if !(all_finite(&qdd) && all_finite(&forces) && all_finite(tau) && all_finite(closure_rhs)) {
         return Err(DynamicsError::NonFinite);
     }

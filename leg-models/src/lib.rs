@@ -22,11 +22,14 @@ pub mod assembly;
 pub mod batch;
 pub mod contact;
 pub mod control;
+pub mod derivatives;
 pub mod dynamics;
 pub mod hop;
 pub mod hybrid;
 pub mod integrate;
 pub mod linalg;
+pub mod linearize;
+pub mod lqr;
 mod model;
 pub mod reference;
 pub mod simd;
@@ -36,6 +39,7 @@ pub mod structure;
 mod trig;
 
 pub use model::{
-    Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters, Real, Spring,
+    Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms, JointKind,
+    LegModel, Parameters, Real, Spring,
 };
 pub use nalgebra;

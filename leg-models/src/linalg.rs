@@ -213,6 +213,72 @@ impl<T: Real, const N: usize> PivotedLdlt<T, N> {
     }
 }
 
+/// `P A = L U` with partial pivoting, for a general square `A` (nalgebra's `LU` needs
+/// its dimension as a type number, which generic const code cannot name).
+#[derive(Clone, Copy, Debug)]
+pub struct Lu<T: Real, const N: usize> {
+    /// `L` below the diagonal (unit diagonal implied), `U` on and above it.
+    lu: SMatrix<T, N, N>,
+    perm: [usize; N],
+}
+
+impl<T: Real, const N: usize> Lu<T, N> {
+    /// `None` if a pivot is zero, negligible (below `ε` of the largest entry) or not finite.
+    pub fn new(a: &SMatrix<T, N, N>) -> Option<Self> {
+        let mut lu = *a;
+        let mut perm: [usize; N] = core::array::from_fn(|i| i);
+        let scale = a.amax();
+        if !scale.is_finite() {
+            return None;
+        }
+        for k in 0..N {
+            let mut p = k;
+            for i in k + 1..N {
+                if lu[(i, k)].abs() > lu[(p, k)].abs() {
+                    p = i;
+                }
+            }
+            let pivot = lu[(p, k)];
+            if !(pivot.abs() > T::default_epsilon() * scale) {
+                return None;
+            }
+            lu.swap_rows(k, p);
+            perm.swap(k, p);
+            for i in k + 1..N {
+                let f = lu[(i, k)] / pivot;
+                lu[(i, k)] = f;
+                for j in k + 1..N {
+                    let v = lu[(k, j)];
+                    lu[(i, j)] -= f * v;
+                }
+            }
+        }
+        Some(Lu { lu, perm })
+    }
+
+    /// `A⁻¹ B`.
+    pub fn solve<const C: usize>(&self, b: &SMatrix<T, N, C>) -> SMatrix<T, N, C> {
+        let mut x = SMatrix::<T, N, C>::zeros();
+        for c in 0..C {
+            for i in 0..N {
+                let mut s = b[(self.perm[i], c)];
+                for k in 0..i {
+                    s -= self.lu[(i, k)] * x[(k, c)];
+                }
+                x[(i, c)] = s;
+            }
+            for i in (0..N).rev() {
+                let mut s = x[(i, c)];
+                for k in i + 1..N {
+                    s -= self.lu[(i, k)] * x[(k, c)];
+                }
+                x[(i, c)] = s / self.lu[(i, i)];
+            }
+        }
+        x
+    }
+}
+
 /// `A B`, as plain loops over the fixed sizes (unrolled by the compiler).
 #[inline]
 pub fn mul<T: Real, const R: usize, const K: usize, const C: usize>(

@@ -190,6 +190,35 @@ pub struct DynamicsTerms<T: Arithmetic, const NQ: usize, const NC: usize> {
     pub constraint_bias: SVector<T, NC>,
 }
 
+/// The derivatives of the constrained equations of motion at one state, accelerations
+/// `a` and closure forces `f` (DESIGN.md §3.2), evaluated together: what linearizing the
+/// forward dynamics needs besides the [`DynamicsTerms`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DynamicsDerivatives<T: Arithmetic, const NQ: usize, const NC: usize> {
+    /// `∂(M a + N − Jᵀ f)/∂q`.
+    pub dynamics_q: SMatrix<T, NQ, NQ>,
+    /// `∂(N + D q̇)/∂q̇`.
+    pub dynamics_qd: SMatrix<T, NQ, NQ>,
+    /// `∂(J a + J̇ q̇)/∂q`.
+    pub constraint_q: SMatrix<T, NC, NQ>,
+    /// `J̇(q, q̇)`; `∂(J̇ q̇)/∂q̇ = 2 J̇`.
+    pub jacobian_rate: SMatrix<T, NC, NQ>,
+}
+
+/// The derivatives of a set of constraint rows `J` (closures, or contact points `J_c`) at
+/// forces `f` on them and accelerations `a`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ConstraintDerivatives<T: Arithmetic, const NQ: usize, const NR: usize> {
+    /// `∂(Jᵀ f)/∂q`.
+    pub force_q: SMatrix<T, NQ, NQ>,
+    /// `∂(J a)/∂q`.
+    pub jacobian_q: SMatrix<T, NR, NQ>,
+    /// `∂(J̇ q̇)/∂q`.
+    pub bias_q: SMatrix<T, NR, NQ>,
+    /// `J̇(q, q̇)`.
+    pub jacobian_rate: SMatrix<T, NR, NQ>,
+}
+
 /// How a joint moves its link (DESIGN.md §3, "Joints and springs").
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum JointKind {
@@ -308,6 +337,34 @@ pub trait LegModel<const NQ: usize, const NC: usize, const NU: usize> {
         qd: &SVector<T, NQ>,
         p: &Self::Params<T>,
     ) -> DynamicsTerms<T, NQ, NC>;
+    /// `∂(M a)/∂q` at the accelerations `a`.
+    fn mass_matrix_derivative<T: Arithmetic>(
+        q: &SVector<T, NQ>,
+        a: &SVector<T, NQ>,
+        p: &Self::Params<T>,
+    ) -> SMatrix<T, NQ, NQ>;
+    /// `(∂N/∂q, ∂N/∂q̇)`.
+    fn bias_forces_derivatives<T: Arithmetic>(
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        p: &Self::Params<T>,
+    ) -> (SMatrix<T, NQ, NQ>, SMatrix<T, NQ, NQ>);
+    /// The closures' `∂(Jᵀ f)/∂q`, `∂(J a)/∂q`, `∂(J̇ q̇)/∂q` and `J̇`.
+    fn constraint_derivatives<T: Arithmetic>(
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        a: &SVector<T, NQ>,
+        f: &SVector<T, NC>,
+        p: &Self::Params<T>,
+    ) -> ConstraintDerivatives<T, NQ, NC>;
+    /// What linearizing the forward dynamics needs, together ([`DynamicsDerivatives`]).
+    fn dynamics_derivatives<T: Arithmetic>(
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        a: &SVector<T, NQ>,
+        f: &SVector<T, NC>,
+        p: &Self::Params<T>,
+    ) -> DynamicsDerivatives<T, NQ, NC>;
 }
 
 /// A leg's contact points and the ground they may touch (DESIGN.md §3.1). Every generated
@@ -342,4 +399,13 @@ pub trait ContactModel<const NQ: usize, const NC: usize, const NU: usize, const 
         qd: &SVector<T, NQ>,
         p: &Self::Params<T>,
     ) -> SVector<T, NK>;
+    /// The contact rows' `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c`, with `λ`
+    /// the forces on the contact points in the base frame.
+    fn contact_derivatives<T: Arithmetic>(
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        a: &SVector<T, NQ>,
+        lambda: &SVector<T, NK>,
+        p: &Self::Params<T>,
+    ) -> ConstraintDerivatives<T, NQ, NK>;
 }

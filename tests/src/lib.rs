@@ -186,6 +186,9 @@ pub mod casadi {
     pub struct Peers {
         pub lagrange: Pair,
         pub closed: Pair,
+        /// CasADi's `jacobian` of the closed form's forward dynamics: outputs q̈, F,
+        /// ∂q̈/∂q, ∂q̈/∂q̇, ∂q̈/∂u, ∂F/∂q, ∂F/∂q̇, ∂F/∂u (dense, column-major).
+        pub derivatives: CasadiFn,
     }
 
     include!(concat!(env!("OUT_DIR"), "/casadi_peers.rs"));
@@ -204,7 +207,7 @@ pub mod casadi {
     pub struct Prepared {
         f: CasadiFn,
         args: [*const f64; 4],
-        res: [*mut f64; 4],
+        res: [*mut f64; 8],
     }
 
     impl Prepared {
@@ -213,10 +216,10 @@ pub mod casadi {
         /// come from `Vec::as_mut_ptr`, which makes no reference to the elements, so the
         /// caller may read the outputs between calls.
         pub fn new(f: CasadiFn, inputs: &[&[f64]], outputs: &mut [&mut Vec<f64>]) -> Prepared {
-            assert!(inputs.len() <= 4 && outputs.len() <= 4);
+            assert!(inputs.len() <= 4 && outputs.len() <= 8);
             let args =
                 core::array::from_fn(|i| inputs.get(i).map_or(core::ptr::null(), |s| s.as_ptr()));
-            let mut res = [core::ptr::null_mut(); 4];
+            let mut res = [core::ptr::null_mut(); 8];
             for (r, o) in res.iter_mut().zip(outputs.iter_mut()) {
                 *r = o.as_mut_ptr();
             }

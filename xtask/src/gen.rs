@@ -288,7 +288,14 @@ fn assemble(spec: &Spec, model: &Model, derived: Derived) -> IrFile {
                             prepared: 0,
                         }
                     } else {
-                        InputShape::Vector { len: n }
+                        // Closure forces `f` and contact forces `lambda` have a row each;
+                        // every other vector (q, q̇, accelerations `a`) a joint each.
+                        let len = match name.as_str() {
+                            "f" => 2 * model.closures.len(),
+                            "lambda" => 2 * model.contacts.len(),
+                            _ => n,
+                        };
+                        InputShape::Vector { len }
                     };
                     Input { name, shape }
                 })

@@ -24,6 +24,15 @@ pub fn terms(nq: usize, nc: usize, nk: usize) -> Vec<Term> {
     use OutputKind::{Matrix, Scalar, Vector};
     const Q: &[&str] = &["q", "p"];
     const QQ: &[&str] = &["q", "qd", "p"];
+    const QF: &[&str] = &["q", "qd", "a", "f", "p"];
+    let constraint_derivatives = |rows| {
+        vec![
+            ("force_q", Matrix, nq, nq),
+            ("jacobian_q", Matrix, rows, nq),
+            ("bias_q", Matrix, rows, nq),
+            ("jacobian_rate", Matrix, rows, nq),
+        ]
+    };
     let t = |name, inputs, outputs, doc| Term {
         name,
         inputs,
@@ -138,6 +147,47 @@ pub fn terms(nq: usize, nc: usize, nk: usize) -> Vec<Term> {
             QQ,
             vec![m, n, j, b],
             "`M`, `N`, `J` and `J̇ q̇` together, sharing subexpressions.",
+        ),
+        t(
+            "mass_matrix_derivative",
+            &["q", "a", "p"],
+            vec![("mass_matrix_derivative", Matrix, nq, nq)],
+            "`∂(M a)/∂q` at the accelerations `a`.",
+        ),
+        t(
+            "bias_forces_derivatives",
+            QQ,
+            vec![
+                ("bias_forces_q", Matrix, nq, nq),
+                ("bias_forces_qd", Matrix, nq, nq),
+            ],
+            "`∂N/∂q` and `∂N/∂q̇`.",
+        ),
+        t(
+            "constraint_derivatives",
+            QF,
+            constraint_derivatives(nc),
+            "`∂(Jᵀ f)/∂q`, `∂(J a)/∂q`, `∂(J̇ q̇)/∂q` and `J̇` at the closure forces `f` and the\n\
+             accelerations `a`.",
+        ),
+        t(
+            "contact_derivatives",
+            &["q", "qd", "a", "lambda", "p"],
+            constraint_derivatives(nk),
+            "`∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`\n\
+             (base frame) and the accelerations `a`.",
+        ),
+        t(
+            "dynamics_derivatives",
+            QF,
+            vec![
+                ("dynamics_q", Matrix, nq, nq),
+                ("dynamics_qd", Matrix, nq, nq),
+                ("constraint_q", Matrix, nc, nq),
+                ("jacobian_rate", Matrix, nc, nq),
+            ],
+            "`∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing\n\
+             subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).",
         ),
     ]
 }
@@ -386,7 +436,10 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         )]
 
         use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
-        use leg_models::{Arithmetic, ContactModel, DynamicsTerms, JointKind, LegModel, Parameters};
+        use leg_models::{
+            Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
+            JointKind, LegModel, Parameters,
+        };
 
         /// Number of joints.
         pub const NQ: usize = #lq;
@@ -514,10 +567,11 @@ fn trait_method(f: &Program, nq: usize, nc: usize) -> TokenStream {
         .iter()
         .map(|i| {
             let id = format_ident!("{}", i.name);
+            let len = lit(i.shape.len());
             if i.name == "p" {
                 quote!(#id: &Params<T>)
             } else {
-                quote!(#id: &SVector<T, #lq>)
+                quote!(#id: &SVector<T, #len>)
             }
         })
         .collect();
@@ -531,6 +585,30 @@ fn trait_method(f: &Program, nq: usize, nc: usize) -> TokenStream {
             fn #name<T: Arithmetic>(#(#args),*) -> DynamicsTerms<T, #lq, #lc> {
                 let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = #name(#(#pass),*);
                 DynamicsTerms { mass_matrix, bias_forces, constraint_jacobian, constraint_bias }
+            }
+        };
+    }
+    if f.name == "dynamics_derivatives" {
+        return quote! {
+            fn #name<T: Arithmetic>(#(#args),*) -> DynamicsDerivatives<T, #lq, #lc> {
+                let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = #name(#(#pass),*);
+                DynamicsDerivatives { dynamics_q, dynamics_qd, constraint_q, jacobian_rate }
+            }
+        };
+    }
+    if f.name == "constraint_derivatives" || f.name == "contact_derivatives" {
+        let rows = lit(f.outputs[1].rows);
+        return quote! {
+            fn #name<T: Arithmetic>(#(#args),*) -> ConstraintDerivatives<T, #lq, #rows> {
+                let (force_q, jacobian_q, bias_q, jacobian_rate) = #name(#(#pass),*);
+                ConstraintDerivatives { force_q, jacobian_q, bias_q, jacobian_rate }
+            }
+        };
+    }
+    if f.name == "bias_forces_derivatives" {
+        return quote! {
+            fn #name<T: Arithmetic>(#(#args),*) -> (SMatrix<T, #lq, #lq>, SMatrix<T, #lq, #lq>) {
+                #name(#(#pass),*)
             }
         };
     }

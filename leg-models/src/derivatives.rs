@@ -1,0 +1,304 @@
+//! Derivatives of the constrained forward dynamics, for MPC and trajectory optimization
+//! (DESIGN.md §3.2).
+//!
+//! `z = (q̈, F)` solves `K(q) z = r(q, q̇, u)` (the KKT system of [`crate::dynamics`]).
+//! Differentiating at the solution (the implicit function theorem):
+//!
+//! ```text
+//! ∂z/∂x = K⁻¹ (∂r/∂x − ∂(K z)/∂x |z held),   x ∈ {q, q̇, u}
+//! ∂/∂q : top −∂(M q̈ + N − Jᵀ F)/∂q     bottom −∂(J q̈ + J̇ q̇)/∂q  [− 2α J̇ − β² J]
+//! ∂/∂q̇ : top −∂(N + D q̇)/∂q̇           bottom −2 J̇               [− 2α J]
+//! ∂/∂u : top B                         bottom 0
+//! ```
+//!
+//! (bracketed: Baumgarte terms, when the dynamics use them). The products are the
+//! generated [`LegModel::dynamics_derivatives`] at `a = q̈`, `f = F`, so no tensor is
+//! formed, and the forward dynamics' own factorization of `K` ([`KktFactorization`])
+//! solves every right-hand side. With held contacts the contact rows add the same terms
+//! with `J_c` ([`ContactModel::contact_derivatives`]).
+
+use nalgebra::{SMatrix, SVector};
+
+use crate::contact::{solve_structured_columns, ContactRows, ContactSolution, Ground, Modes};
+use crate::control::{actuated_reduction, ControlError};
+use crate::dynamics::{
+    actuation, rcond_floor, Acceleration, Baumgarte, DynamicsError, KktFactorization,
+};
+use crate::linalg::{all_finite, Cholesky};
+use crate::model::{ContactModel, LegModel, Real};
+
+/// Forward dynamics and its derivatives at one state and input.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ForwardDynamicsDerivatives<T: Real, const NQ: usize, const NC: usize, const NU: usize> {
+    /// `q̈` and the closure forces `F`, as [`crate::dynamics::forward_dynamics`] returns them.
+    pub acceleration: Acceleration<T, NQ, NC>,
+    /// `∂q̈/∂q`.
+    pub qdd_q: SMatrix<T, NQ, NQ>,
+    /// `∂q̈/∂q̇`.
+    pub qdd_qd: SMatrix<T, NQ, NQ>,
+    /// `∂q̈/∂u`.
+    pub qdd_u: SMatrix<T, NQ, NU>,
+    /// `∂F/∂q`.
+    pub forces_q: SMatrix<T, NC, NQ>,
+    /// `∂F/∂q̇`.
+    pub forces_qd: SMatrix<T, NC, NQ>,
+    /// `∂F/∂u`.
+    pub forces_u: SMatrix<T, NC, NU>,
+}
+
+/// `B`: column `k` is the generalized force of a unit torque on motor `k`.
+pub fn actuation_matrix<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+) -> SMatrix<T, NQ, NU>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let mut b = SMatrix::<T, NQ, NU>::zeros();
+    for (k, &j) in L::ACTUATED.iter().enumerate() {
+        b[(j, k)] += T::one();
+    }
+    b
+}
+
+/// [`crate::dynamics::forward_dynamics`] and its exact derivatives with respect to `q`,
+/// `q̇` and `u`, from one factorization of the KKT matrix. The same typed errors as
+/// forward dynamics; allocation-free.
+pub fn forward_dynamics_derivatives<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+    qd: &SVector<T, NQ>,
+    u: &SVector<T, NU>,
+    baumgarte: Option<Baumgarte<T>>,
+) -> Result<ForwardDynamicsDerivatives<T, NQ, NC, NU>, DynamicsError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let terms = L::dynamics_terms(q, qd, params);
+    let kkt = KktFactorization::new(
+        &terms.mass_matrix,
+        &terms.constraint_jacobian,
+        L::REDUNDANT_ROWS,
+    )?;
+    let j = &terms.constraint_jacobian;
+    let mut qdd =
+        actuation::<L, T, NQ, NC, NU>(u) - terms.bias_forces - L::damping_forces(qd, params);
+    let mut forces = -terms.constraint_bias;
+    if let Some(b) = baumgarte {
+        if NC > 0 {
+            let phi = L::closure_residual(q, params);
+            forces -= (j * qd) * (b.alpha + b.alpha) + phi * (b.beta * b.beta);
+        }
+    }
+    if !(all_finite(&qdd) && all_finite(&forces)) {
+        return Err(DynamicsError::NonFinite);
+    }
+    kkt.solve_mut(&mut qdd, &mut forces);
+    let d = L::dynamics_derivatives(q, qd, &qdd, &forces, params);
+    let two = T::lit(2.0);
+    let (mut qdd_q, mut forces_q) = (-d.dynamics_q, -d.constraint_q);
+    let (mut qdd_qd, mut forces_qd) = (-d.dynamics_qd, d.jacobian_rate * -two);
+    if let Some(b) = baumgarte {
+        let two_alpha = b.alpha * two;
+        forces_q -= d.jacobian_rate * two_alpha + j * (b.beta * b.beta);
+        forces_qd -= j * two_alpha;
+    }
+    let mut qdd_u = actuation_matrix::<L, T, NQ, NC, NU>();
+    let mut forces_u = SMatrix::<T, NC, NU>::zeros();
+    kkt.solve_mut(&mut qdd_q, &mut forces_q);
+    kkt.solve_mut(&mut qdd_qd, &mut forces_qd);
+    kkt.solve_mut(&mut qdd_u, &mut forces_u);
+    let out = ForwardDynamicsDerivatives {
+        acceleration: Acceleration { qdd, forces },
+        qdd_q,
+        qdd_qd,
+        qdd_u,
+        forces_q,
+        forces_qd,
+        forces_u,
+    };
+    if !(all_finite(&out.acceleration.qdd)
+        && all_finite(&out.acceleration.forces)
+        && all_finite(&qdd_q)
+        && all_finite(&qdd_qd)
+        && all_finite(&forces_q)
+        && all_finite(&forces_qd))
+    {
+        return Err(DynamicsError::NonFinite);
+    }
+    Ok(out)
+}
+
+/// Forward dynamics with contacts and its derivatives.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ContactDynamicsDerivatives<
+    T: Real,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+> {
+    /// As [`crate::contact::forward_dynamics_with_contacts`] returns it.
+    pub solution: ContactSolution<T, NQ, NC, NK>,
+    pub qdd_q: SMatrix<T, NQ, NQ>,
+    pub qdd_qd: SMatrix<T, NQ, NQ>,
+    pub qdd_u: SMatrix<T, NQ, NU>,
+    pub forces_q: SMatrix<T, NC, NQ>,
+    pub forces_qd: SMatrix<T, NC, NQ>,
+    pub forces_u: SMatrix<T, NC, NU>,
+    /// Derivatives of the ground forces `(λ_t, λ_n)` per contact (zero rows in flight).
+    pub contact_q: SMatrix<T, NK, NQ>,
+    pub contact_qd: SMatrix<T, NK, NQ>,
+    pub contact_u: SMatrix<T, NK, NU>,
+}
+
+/// [`crate::contact::forward_dynamics_with_contacts`] (contacts in `modes`, Baumgarte on
+/// closures and held contacts as there) and its derivatives with respect to `q`, `q̇` and
+/// `u`, holding the modes: the linearization of stance (or of flight, or sliding).
+#[allow(clippy::too_many_arguments)]
+pub fn contact_dynamics_derivatives<
+    L,
+    T,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+    qd: &SVector<T, NQ>,
+    u: &SVector<T, NU>,
+    modes: &Modes<NK>,
+    anchors: &SVector<T, NK>,
+    ground: &Ground<T>,
+    mu: &SVector<T, NK>,
+    baumgarte: Option<Baumgarte<T>>,
+) -> Result<ContactDynamicsDerivatives<T, NQ, NC, NU, NK>, DynamicsError>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+    T: Real,
+{
+    let terms = L::dynamics_terms(q, qd, params);
+    let chol_m =
+        Cholesky::new(&terms.mass_matrix).ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
+    if chol_m.rcond < rcond_floor::<T>() {
+        return Err(DynamicsError::MassMatrixNotPositiveDefinite);
+    }
+    let j = &terms.constraint_jacobian;
+    let jc = L::contact_jacobian(q, params);
+    let rows = ContactRows::new(ground, &jc, modes, mu);
+    let mut r_j = -terms.constraint_bias;
+    let mut r_c = -ground.rows(&L::contact_bias(q, qd, params));
+    let (two, zero) = (T::lit(2.0), T::zero());
+    let (two_alpha, beta2) = baumgarte.map_or((zero, zero), |b| (b.alpha * two, b.beta * b.beta));
+    if baumgarte.is_some() {
+        if NC > 0 {
+            let phi = L::closure_residual(q, params);
+            r_j -= (j * qd) * two_alpha + phi * beta2;
+        }
+        let drift = ground.coordinates(&L::contact_positions(q, params)) - anchors;
+        r_c -= (rows.c * qd) * two_alpha + drift * beta2;
+    }
+    // Summed as `ContactSystem` sums it, so that the solution is the same to the bit.
+    let passive = -terms.bias_forces - L::damping_forces(qd, params);
+    let tau = actuation::<L, T, NQ, NC, NU>(u) + passive;
+    let (x, closure, contact) =
+        solve_structured_columns(&chol_m, j, &r_j, L::REDUNDANT_ROWS, &rows, &r_c, &tau)?;
+    // The ground forces in the base frame (λ_t t + λ_n n per contact) for J_cᵀ λ.
+    let (t, n) = (ground.tangent(), ground.normal);
+    let lambda = SVector::<T, NK>::from_fn(|r, _| {
+        let k = r - r % 2;
+        t[r % 2] * contact[k] + n[r % 2] * contact[k + 1]
+    });
+    let d = L::dynamics_derivatives(q, qd, &x, &closure, params);
+    let dc = L::contact_derivatives(q, qd, &x, &lambda, params);
+    // Contact rows: C = R J_c, so ∂(C a + R J̇_c q̇)/∂q = R (∂(J_c a)/∂q + ∂(J̇_c q̇)/∂q).
+    let tau_q = dc.force_q - d.dynamics_q;
+    let rj_q = -d.constraint_q - d.jacobian_rate * two_alpha - j * beta2;
+    let rc_q = -ground.rows(&(dc.jacobian_q + dc.bias_q))
+        - ground.rows(&dc.jacobian_rate) * two_alpha
+        - rows.c * beta2;
+    let tau_qd = -d.dynamics_qd;
+    let rj_qd = -(d.jacobian_rate * two) - j * two_alpha;
+    let rc_qd = -(ground.rows(&dc.jacobian_rate) * two) - rows.c * two_alpha;
+    let tau_u = actuation_matrix::<L, T, NQ, NC, NU>();
+    let (rj_u, rc_u) = (SMatrix::<T, NC, NU>::zeros(), SMatrix::<T, NK, NU>::zeros());
+    let (qdd_q, forces_q, contact_q) =
+        solve_structured_columns(&chol_m, j, &rj_q, L::REDUNDANT_ROWS, &rows, &rc_q, &tau_q)?;
+    let (qdd_qd, forces_qd, contact_qd) = solve_structured_columns(
+        &chol_m,
+        j,
+        &rj_qd,
+        L::REDUNDANT_ROWS,
+        &rows,
+        &rc_qd,
+        &tau_qd,
+    )?;
+    let (qdd_u, forces_u, contact_u) =
+        solve_structured_columns(&chol_m, j, &rj_u, L::REDUNDANT_ROWS, &rows, &rc_u, &tau_u)?;
+    Ok(ContactDynamicsDerivatives {
+        solution: ContactSolution {
+            x,
+            closure,
+            contact,
+        },
+        qdd_q,
+        qdd_qd,
+        qdd_u,
+        forces_q,
+        forces_qd,
+        forces_u,
+        contact_q,
+        contact_qd,
+        contact_u,
+    })
+}
+
+/// The derivatives of the reduction to the motor angles (`Ã θ̈ = b̃ + u`,
+/// [`crate::control::actuated_reduction`]) through its inverse dynamics: the torques
+/// `u(q, q̇, v) = Ã(q) v − b̃(q, q̇)` that give the motors the accelerations `v`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ReductionDerivatives<T: Real, const NQ: usize, const NU: usize> {
+    /// `Ã` (`= ∂u/∂v`).
+    pub a_tilde: SMatrix<T, NU, NU>,
+    /// `b̃`.
+    pub b_tilde: SVector<T, NU>,
+    /// `∂u/∂q = ∂(Ã v)/∂q − ∂b̃/∂q` (at `v = 0`: `−∂b̃/∂q`).
+    pub torque_q: SMatrix<T, NU, NQ>,
+    /// `∂u/∂q̇ = −∂b̃/∂q̇`.
+    pub torque_qd: SMatrix<T, NU, NQ>,
+}
+
+/// [`ReductionDerivatives`] at `(q, q̇)` and motor accelerations `v`. Forward dynamics
+/// under `u(v)` gives the motors `θ̈ = v`, so differentiating that identity,
+/// `∂u/∂x = −Ã ∂θ̈/∂x` with `∂θ̈/∂x` the motor rows of [`forward_dynamics_derivatives`].
+/// Where the reduction applies (not on an over-actuated leg).
+pub fn reduction_derivatives<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+    qd: &SVector<T, NQ>,
+    v: &SVector<T, NU>,
+) -> Result<ReductionDerivatives<T, NQ, NU>, ControlError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let terms = L::dynamics_terms(q, qd, params);
+    let reduced = actuated_reduction::<L, T, NQ, NC, NU>(params, &terms, qd)?;
+    let u = reduced.a_tilde * v - reduced.b_tilde;
+    let d = forward_dynamics_derivatives::<L, T, NQ, NC, NU>(params, q, qd, &u, None)
+        .map_err(ControlError::Dynamics)?;
+    let motor_rows =
+        |m: &SMatrix<T, NQ, NQ>| SMatrix::<T, NU, NQ>::from_fn(|i, c| m[(L::ACTUATED[i], c)]);
+    let torque_q = -(reduced.a_tilde * motor_rows(&d.qdd_q));
+    let torque_qd = -(reduced.a_tilde * motor_rows(&d.qdd_qd));
+    if !(all_finite(&torque_q) && all_finite(&torque_qd)) {
+        return Err(ControlError::NonFinite);
+    }
+    Ok(ReductionDerivatives {
+        a_tilde: reduced.a_tilde,
+        b_tilde: reduced.b_tilde,
+        torque_q,
+        torque_qd,
+    })
+}
