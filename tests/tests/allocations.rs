@@ -14,7 +14,7 @@ use leg_models::control::{
 };
 use leg_models::dynamics::{forward_dynamics, Baumgarte};
 use leg_models::integrate::{step, Method, State, StepOptions, TorqueSource};
-use leg_models::nalgebra::SVector;
+use leg_models::nalgebra::{SMatrix, SVector};
 use leg_models::reference::{Sinusoid, StepCycle};
 use leg_models::simulate::Simulator;
 use leg_models::LegModel;
@@ -244,6 +244,92 @@ where
     assert!(events > 0, "{}: the drop made no contact event", L::NAME);
 }
 
+/// The derivatives, the linearizations and the LQR allocate nothing (the LQR's Riccati
+/// solve included: it is fixed-size too).
+fn check_derivatives<
+    L,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+    const M: usize,
+    const NX: usize,
+>()
+where
+    L: leg_models::ContactModel<NQ, NC, NU, NK>,
+{
+    use leg_models::contact::{spec_friction, ContactMode, Ground, Modes};
+    use leg_models::derivatives::{
+        contact_dynamics_derivatives, forward_dynamics_derivatives, reduction_derivatives,
+    };
+    use leg_models::linearize::{linearize_step, ManifoldChart};
+    use leg_models::lqr::ManifoldLqr;
+    let p = L::Params::<f64>::default();
+    let start = passive_release_state::<L, NQ, NC, NU>(&p);
+    let (q, qd) = (start.q, SVector::<f64, NQ>::zeros());
+    let u = SVector::<f64, NU>::from_element(0.1);
+    let name = L::NAME;
+    let zero = |what: &str, n: usize| assert_eq!(n, 0, "{name}: {what} allocated {n} times");
+    zero(
+        "forward dynamics derivatives",
+        allocations(|| forward_dynamics_derivatives::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None)).0,
+    );
+    zero(
+        "reduction derivatives",
+        allocations(|| reduction_derivatives::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u)).0,
+    );
+    if NK > 0 {
+        let (ground, mu) = (
+            Ground::of::<L, NQ, NC, NU, NK>(),
+            spec_friction::<L, f64, NQ, NC, NU, NK>(),
+        );
+        let mut modes = Modes::<NK>::flight();
+        modes.set(0, ContactMode::Stick);
+        let anchors = ground.coordinates(&L::contact_positions(&q, &p));
+        zero(
+            "contact dynamics derivatives",
+            allocations(|| {
+                contact_dynamics_derivatives::<L, f64, NQ, NC, NU, NK>(
+                    &p, &q, &qd, &u, &modes, &anchors, &ground, &mu, None,
+                )
+            })
+            .0,
+        );
+    }
+    let opts = StepOptions::rk4(1e-3);
+    zero(
+        "step linearization",
+        allocations(|| linearize_step::<L, f64, NQ, NC, NU>(&p, &start, &u, &opts)).0,
+    );
+    let (n, chart) = allocations(|| ManifoldChart::<f64, NQ, M>::new::<L, NC, NU>(&p, &q));
+    zero("a manifold chart", n);
+    let chart = chart.expect("regular home");
+    zero(
+        "a manifold linearization",
+        allocations(|| chart.linearize_step::<L, NC, NU, NX>(&p, &start, &u, &opts)).0,
+    );
+    let weights = SMatrix::<f64, NX, NX>::identity();
+    let r = SMatrix::<f64, NU, NU>::identity();
+    let theta = chart.coordinates_of(&start).0;
+    let hold = Sinusoid {
+        offset: theta,
+        amplitude: SVector::zeros(),
+        frequency: SVector::zeros(),
+        phase: SVector::zeros(),
+    };
+    let limit = SVector::from_element(10.0);
+    let (n, lqr) = allocations(|| {
+        ManifoldLqr::<L, f64, _, NQ, NC, NU, M, NX>::at_pose(
+            p, &q, &opts, &weights, &r, hold, limit,
+        )
+    });
+    zero("an LQR's construction", n);
+    match lqr {
+        Ok(mut lqr) => zero("an LQR step", allocations(|| lqr.torque(0.1, &start)).0),
+        Err(e) => not_applicable(name, "allocations of the LQR", &e),
+    }
+}
+
 #[test]
 fn hot_paths_do_not_allocate() {
     // The counter works: a Vec allocates.
@@ -252,6 +338,10 @@ fn hot_paths_do_not_allocate() {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
             check::<$ty, $nq, $nc, $nu>();
             check_hybrid::<$ty, $nq, $nc, $nu, $nk>();
+            {
+                const M: usize = <$ty as LegModel<$nq, $nc, $nu>>::MOBILITY;
+                check_derivatives::<$ty, $nq, $nc, $nu, $nk, M, { 2 * M }>();
+            }
         };
     }
     generated::for_each_model!(each);

@@ -707,3 +707,109 @@ macro_rules! derivative_checks {
 }
 
 generated::for_each_model!(derivative_checks);
+
+/// Against CasADi's own `jacobian` of its forward dynamics (the closed-form terms solved
+/// by CasADi's `solve` and differentiated by its AD, compiled from the generated C): a
+/// second formulation of every derivative, at 100 random regular states per leg.
+#[cfg(feature = "peers")]
+mod casadi_jacobian {
+    use super::*;
+    use leg_tests::casadi::{functions, parameter_vector, Prepared};
+
+    fn compare<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+        let p = L::Params::<f64>::default();
+        let pv = parameter_vector(&p);
+        let mut rng = Rng::new(31);
+        let mut worst = 0.0f64;
+        for _ in 0..STATES {
+            let s = random_assembled_state::<L, NQ, NC, NU>(&p, &mut rng, 2.0);
+            let u = SVector::<f64, NU>::from_fn(|_, _| rng.range(-2.0, 2.0));
+            let d = forward_dynamics_derivatives::<L, f64, NQ, NC, NU>(&p, &s.q, &s.qd, &u, None)
+                .expect("regular");
+            let sizes = [NQ, NC, NQ * NQ, NQ * NQ, NQ * NU, NC * NQ, NC * NQ, NC * NU];
+            let mut out: Vec<Vec<f64>> = sizes.iter().map(|&n| vec![f64::NAN; n]).collect();
+            let (q, qd, uu) = (
+                s.q.as_slice().to_vec(),
+                s.qd.as_slice().to_vec(),
+                u.as_slice().to_vec(),
+            );
+            {
+                let mut refs: Vec<&mut Vec<f64>> = out.iter_mut().collect();
+                let call = Prepared::new(
+                    functions(L::NAME).derivatives,
+                    &[&q, &qd, &uu, &pv],
+                    &mut refs,
+                );
+                // SAFETY: the buffers outlive the call and have the function's dense sizes.
+                assert_eq!(unsafe { call.call() }, 0);
+            }
+            let name = L::NAME;
+            let mat = |v: &Vec<f64>| SMatrix::<f64, NQ, NQ>::from_column_slice(v);
+            for (what, ours, theirs) in [
+                ("∂q̈/∂q", d.qdd_q, mat(&out[2])),
+                ("∂q̈/∂q̇", d.qdd_qd, mat(&out[3])),
+            ] {
+                if L::REDUNDANT_ROWS > 0 {
+                    // The two solves drop different rows, so they extend the dynamics
+                    // differently off the manifold; along it they agree (to what q̇, held
+                    // while q moves, leaves of the redundant rows' consistency).
+                    for t in manifold_directions::<L, NQ, NC, NU>(&p, &s.q) {
+                        worst = worst.max(check(
+                            &format!("{name} CasADi {what} along the manifold"),
+                            &(ours * t),
+                            &exact(theirs * t),
+                            1e-6,
+                        ));
+                    }
+                    continue;
+                }
+                worst = worst.max(check(
+                    &format!("{name} CasADi {what}"),
+                    &ours,
+                    &exact(theirs),
+                    1e-8,
+                ));
+            }
+            worst = worst.max(check(
+                &format!("{name} CasADi ∂q̈/∂u"),
+                &d.qdd_u,
+                &exact(SMatrix::<f64, NQ, NU>::from_column_slice(&out[4])),
+                1e-8,
+            ));
+            // CasADi solves the independent rows of a leg closed redundantly, ours pivots:
+            // their forces are different solutions.
+            if L::REDUNDANT_ROWS == 0 && NC > 0 {
+                for (what, ours, k) in [("∂F/∂q", d.forces_q, 5), ("∂F/∂q̇", d.forces_qd, 6)]
+                {
+                    worst = worst.max(check(
+                        &format!("{name} CasADi {what}"),
+                        &ours,
+                        &exact(SMatrix::<f64, NC, NQ>::from_column_slice(&out[k])),
+                        1e-8,
+                    ));
+                }
+                worst = worst.max(check(
+                    &format!("{name} CasADi ∂F/∂u"),
+                    &d.forces_u,
+                    &exact(SMatrix::<f64, NC, NU>::from_column_slice(&out[7])),
+                    1e-8,
+                ));
+            }
+        }
+        eprintln!(
+            "{}: against CasADi's jacobian, worst relative difference {worst:.1e}",
+            L::NAME
+        );
+    }
+
+    macro_rules! each {
+        ($module:ident, $ty:ty, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
+            #[test]
+            fn $module() {
+                compare::<$ty, $nq, $nc, $nu>();
+            }
+        };
+    }
+
+    generated::for_each_model!(each);
+}
