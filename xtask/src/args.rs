@@ -225,10 +225,14 @@ pub struct EvalArgs {
     /// slide)
     #[arg(long, value_name = "CONTACT")]
     pub impact: Option<String>,
+    /// Also the derivatives of forward dynamics: dqdd_dq, dqdd_dqd, dqdd_du, dF_dq,
+    /// dF_dqd, dF_du (arrays of rows), exact, from the generated directional terms
+    #[arg(long)]
+    pub derivatives: bool,
     /// One JSON object: q, qd, u, M, N, G, J, Jdot_qdot, qdd, F, A_tilde, b_tilde, foot,
     /// foot_jacobian, kinetic, potential, phi, contacts (positions, gaps), impact
-    /// (matrices as arrays of rows); a term that cannot be computed at this state is
-    /// null, and `errors` says why
+    /// (matrices as arrays of rows), and with --derivatives the six derivatives; a term
+    /// that cannot be computed at this state is null, and `errors` says why
     #[arg(long)]
     pub json: bool,
 }

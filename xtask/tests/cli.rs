@@ -101,6 +101,63 @@ fn eval_json_has_every_term_and_matches_the_model() {
     assert_eq!(v["foot_jacobian"][0].as_array().unwrap().len(), 4);
 }
 
+/// `--derivatives` adds the six derivative matrices as rows; `dqdd_du` against the
+/// difference of two evaluations one newton-metre apart (q̈ is linear in u).
+#[test]
+fn eval_derivatives_adds_the_jacobians() {
+    let eval = |u: &str, extra: &[&str]| {
+        let mut args = vec![
+            "eval",
+            "minitaur",
+            "--q",
+            "-0.7,-1.25,-2.43,1.25",
+            "--project",
+            "--qd",
+            "0.1,0.2,-0.3,0.4",
+            "--u",
+            u,
+            "--json",
+        ];
+        args.extend_from_slice(extra);
+        let out = legs(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice::<Value>(&out.stdout).unwrap()
+    };
+    let v = eval("0.05,-0.02", &["--derivatives"]);
+    for (key, rows, cols) in [
+        ("dqdd_dq", 4, 4),
+        ("dqdd_dqd", 4, 4),
+        ("dqdd_du", 4, 2),
+        ("dF_dq", 2, 4),
+        ("dF_dqd", 2, 4),
+        ("dF_du", 2, 2),
+    ] {
+        let m = v[key].as_array().unwrap_or_else(|| panic!("{key} missing"));
+        assert_eq!(m.len(), rows, "{key} rows");
+        assert!(
+            m.iter().all(|r| r.as_array().unwrap().len() == cols),
+            "{key} columns"
+        );
+    }
+    let shifted = eval("1.05,-0.02", &[]);
+    assert!(
+        shifted.get("dqdd_dq").is_none(),
+        "derivatives only when asked"
+    );
+    for r in 0..4 {
+        let fd = shifted["qdd"][r].as_f64().unwrap() - v["qdd"][r].as_f64().unwrap();
+        let d = v["dqdd_du"][r][0].as_f64().unwrap();
+        assert!(
+            (fd - d).abs() <= 1e-9 * (1.0 + d.abs()),
+            "row {r}: {d} vs {fd}"
+        );
+    }
+}
+
 #[test]
 fn eval_assemble_solves_the_loop() {
     let out = legs(&[

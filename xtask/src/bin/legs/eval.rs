@@ -1,11 +1,12 @@
-//! `cargo xtask eval MODEL --q … [--qd …] [--u …] [--json] [--assemble]`: every term at
-//! one state.
+//! `cargo xtask eval MODEL --q … [--qd …] [--u …] [--json] [--assemble] [--derivatives]`:
+//! every term at one state.
 
 use leg_models::assembly::{
     assemble, assemble_along, consistent_velocity, project_position, project_velocity, Tolerance,
 };
 use leg_models::contact::{impact_map, spec_friction, ContactMode, Ground, Modes};
 use leg_models::control::actuated_reduction;
+use leg_models::derivatives::forward_dynamics_derivatives;
 use leg_models::dynamics::forward_dynamics;
 use leg_models::nalgebra::{SMatrix, SVector};
 use leg_models::ContactModel;
@@ -150,6 +151,30 @@ pub fn run<
             out.insert("qdd".into(), Value::Null);
             out.insert("F".into(), Value::Null);
             errors.insert("qdd".into(), json!(e.to_string()));
+        }
+    }
+    if args.derivatives {
+        let names = ["dqdd_dq", "dqdd_dqd", "dqdd_du", "dF_dq", "dF_dqd", "dF_du"];
+        match forward_dynamics_derivatives::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None) {
+            Ok(d) => {
+                let values = [
+                    matrix(&d.qdd_q),
+                    matrix(&d.qdd_qd),
+                    matrix(&d.qdd_u),
+                    matrix(&d.forces_q),
+                    matrix(&d.forces_qd),
+                    matrix(&d.forces_u),
+                ];
+                for (name, value) in names.into_iter().zip(values) {
+                    out.insert(name.into(), value);
+                }
+            }
+            Err(e) => {
+                for name in names {
+                    out.insert(name.into(), Value::Null);
+                }
+                errors.insert("derivatives".into(), json!(e.to_string()));
+            }
         }
     }
     match actuated_reduction::<L, f64, NQ, NC, NU>(&p, &terms, &qd) {
