@@ -3,6 +3,7 @@
 #![cfg_attr(rustfmt, rustfmt::skip)]
 #![allow(
     clippy::approx_constant,
+    clippy::eq_op,
     clippy::excessive_precision,
     clippy::let_and_return,
     clippy::too_many_lines

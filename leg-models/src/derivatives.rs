@@ -24,7 +24,7 @@ use crate::control::{actuated_reduction, ControlError};
 use crate::dynamics::{
     actuation, rcond_floor, Acceleration, Baumgarte, DynamicsError, KktFactorization,
 };
-use crate::linalg::{all_finite, Cholesky};
+use crate::linalg::{all_finite, negate, Cholesky};
 use crate::model::{ContactModel, LegModel, Real};
 
 /// Forward dynamics and its derivatives at one state and input.
@@ -96,8 +96,8 @@ where
     kkt.solve_mut(&mut qdd, &mut forces);
     let d = L::dynamics_derivatives(q, qd, &qdd, &forces, params);
     let two = T::lit(2.0);
-    let (mut qdd_q, mut forces_q) = (-d.dynamics_q, -d.constraint_q);
-    let (mut qdd_qd, mut forces_qd) = (-d.dynamics_qd, d.jacobian_rate * -two);
+    let (mut qdd_q, mut forces_q) = (negate(d.dynamics_q), negate(d.constraint_q));
+    let (mut qdd_qd, mut forces_qd) = (negate(d.dynamics_qd), d.jacobian_rate * -two);
     if let Some(b) = baumgarte {
         let two_alpha = b.alpha * two;
         forces_q -= d.jacobian_rate * two_alpha + j * (b.beta * b.beta);

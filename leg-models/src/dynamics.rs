@@ -117,6 +117,7 @@ pub struct KktFactorization<T: Real, const NQ: usize, const NC: usize> {
 impl<T: Real, const NQ: usize, const NC: usize> KktFactorization<T, NQ, NC> {
     /// Factors the KKT matrix of `M` and `J`; up to `deficiency` closure rows may repeat
     /// the others ([`solve_kkt`]).
+    #[inline(always)]
     pub fn new(
         mass_matrix: &SMatrix<T, NQ, NQ>,
         jacobian: &SMatrix<T, NC, NQ>,
@@ -161,7 +162,7 @@ impl<T: Real, const NQ: usize, const NC: usize> KktFactorization<T, NQ, NC> {
     /// Overwrites the right-hand sides `(top, bottom)` (columns of `[τ; r]`) with the
     /// solutions `(x, f)` of `M x − Jᵀ f = τ`, `J x = r`: `a = M⁻¹ τ`,
     /// `f = S⁻¹ (r − J a)`, `x = a + Y f`. Forces of rows left out as redundant are zero.
-    #[inline]
+    #[inline(always)]
     pub fn solve_mut<const C: usize>(
         &self,
         top: &mut SMatrix<T, NQ, C>,

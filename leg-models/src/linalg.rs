@@ -239,7 +239,8 @@ impl<T: Real, const N: usize> Lu<T, N> {
                 }
             }
             let pivot = lu[(p, k)];
-            if !(pivot.abs() > T::default_epsilon() * scale) {
+            let floor = T::default_epsilon() * scale;
+            if pivot.abs().partial_cmp(&floor) != Some(core::cmp::Ordering::Greater) {
                 return None;
             }
             lu.swap_rows(k, p);
@@ -316,14 +317,26 @@ pub fn mul_tn<T: Real, const K: usize, const R: usize, const C: usize>(
     out
 }
 
-/// Whether every entry is finite.
+/// Whether every entry is finite: `0 · x` is zero for a finite `x` and NaN otherwise, so
+/// one sum over the entries (a loop the compiler vectorizes) says it.
 #[inline]
 pub fn all_finite<T: Real, const R: usize, const C: usize>(a: &SMatrix<T, R, C>) -> bool {
-    let mut ok = true;
-    for x in a.iter() {
-        ok &= x.is_finite();
+    let mut acc = T::zero();
+    for &x in a.as_slice() {
+        acc += x * T::zero();
     }
-    ok
+    acc == T::zero()
+}
+
+/// `a ← −a`, entry by entry.
+#[inline]
+pub fn negate<T: Real, const R: usize, const C: usize>(
+    mut a: SMatrix<T, R, C>,
+) -> SMatrix<T, R, C> {
+    for x in a.as_mut_slice() {
+        *x = -*x;
+    }
+    a
 }
 
 #[cfg(test)]

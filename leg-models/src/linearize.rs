@@ -436,10 +436,8 @@ impl<T: Real, const NQ: usize, const M: usize> ManifoldChart<T, NQ, M> {
             });
         }
         let mut coordinates = [0usize; M];
-        let mut k = 0;
-        for c in (0..NQ).filter(|&c| !pivots.dependent[c]) {
+        for (k, c) in (0..NQ).filter(|&c| !pivots.dependent[c]).enumerate() {
             coordinates[k] = c;
-            k += 1;
         }
         Ok(ManifoldChart {
             coordinates,

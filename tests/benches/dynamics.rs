@@ -106,6 +106,58 @@ fn bench_model<
             bch.iter(|| unsafe { black_box(&fd).call() })
         });
     }
+    // Forward dynamics and its derivatives: ours (generated directional terms, one
+    // factorization), forward differences of ours, and CasADi's `jacobian` of its
+    // closed-form forward dynamics, checked equal first.
+    let derivatives = leg_models::derivatives::forward_dynamics_derivatives::<L, f64, NQ, NC, NU>(
+        &p, &q, &qd, &u, None,
+    )
+    .unwrap();
+    {
+        let sizes = [NQ, NC, NQ * NQ, NQ * NQ, NQ * NU, NC * NQ, NC * NQ, NC * NU];
+        let mut outs: Vec<Vec<f64>> = sizes.iter().map(|&k| vec![0.0; k]).collect();
+        let mut refs: Vec<&mut Vec<f64>> = outs.iter_mut().collect();
+        let jac = casadi::Prepared::new(
+            peers.derivatives,
+            &[q.as_slice(), qd.as_slice(), u.as_slice(), &pv],
+            &mut refs,
+        );
+        // SAFETY: as above.
+        assert_eq!(unsafe { jac.call() }, 0);
+        let d = &derivatives;
+        let qdd_ok = close(&outs[2], d.qdd_q.as_slice(), 1e-7)
+            && close(&outs[3], d.qdd_qd.as_slice(), 1e-7)
+            && close(&outs[4], d.qdd_u.as_slice(), 1e-7);
+        assert!(qdd_ok, "{}: CasADi's jacobian differs from ours", L::NAME);
+        g.bench_function("deriv-casadi-closed", |bch| {
+            // SAFETY: as above.
+            bch.iter(|| unsafe { black_box(&jac).call() })
+        });
+    }
+    g.bench_function("deriv-ours", |bch| {
+        bch.iter(|| {
+            leg_models::derivatives::forward_dynamics_derivatives::<L, f64, NQ, NC, NU>(
+                black_box(&p),
+                black_box(&q),
+                black_box(&qd),
+                black_box(&u),
+                None,
+            )
+        })
+    });
+    let mut jac = vec![0.0; (NQ + NC) * (2 * NQ + NU)];
+    g.bench_function("deriv-finite-differences", |bch| {
+        bch.iter(|| {
+            leg_tests::forward_difference_derivatives::<L, NQ, NC, NU>(
+                black_box(&p),
+                black_box(&q),
+                black_box(&qd),
+                black_box(&u),
+                1e-7,
+                &mut jac,
+            )
+        })
+    });
     g.bench_function("fd-ours", |bch| {
         bch.iter(|| {
             forward_dynamics::<L, f64, NQ, NC, NU>(

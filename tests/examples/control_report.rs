@@ -2,6 +2,9 @@
 //! 3 s at dt = 1 ms (RK4 with projection), torques updated once per step (1 kHz) and
 //! clipped at assumed motor limits. Errors are measured after the first second.
 //!
+//! The LQR row: discrete LQR on the constraint manifold (`leg_models::lqr`), linearized
+//! once at home, tracking the same reference with a quasi-static feedforward.
+//!
 //! `cargo run --release -p leg-tests --example control_report`
 
 use leg_models::assembly::{assemble_along, consistent_velocity, foot_inverse, Tolerance};
@@ -10,11 +13,13 @@ use leg_models::control::{
     JointFeedbackLinearization, PdGravity, Saturated,
 };
 use leg_models::integrate::{State, StepOptions, TorqueSource};
-use leg_models::nalgebra::SVector;
+use leg_models::linearize::ManifoldChart;
+use leg_models::lqr::ManifoldLqr;
+use leg_models::nalgebra::{SMatrix, SVector};
 use leg_models::reference::{Reference, Sinusoid, StepCycle};
 use leg_models::simulate::{Sample, Simulator};
 use leg_models::structure::Structure;
-use leg_models::{LegModel, Parameters};
+use leg_models::{ContactModel, LegModel, Parameters};
 use leg_tests::passive_release_state;
 
 /// Assumed joint-side torque limits (N m): not in the specs; plausible for each leg.
@@ -65,7 +70,14 @@ where
     }
 }
 
-fn report<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+fn report<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const M: usize,
+    const NX: usize,
+>() {
     let p = L::Params::<f64>::default();
     let home = passive_release_state::<L, NQ, NC, NU>(&p).q;
     let theta_home = SVector::<f64, NU>::from_fn(|k, _| home[L::ACTUATED[k]]);
@@ -196,6 +208,63 @@ fn report<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: u
         }
         Err(why) => rows.push(("foot control", Err(why.to_string()))),
     }
+    // Discrete LQR on the constraint manifold, linearized once at home under the holding
+    // torques (step 1 ms, as simulated), tracking the joint reference in the chart's
+    // coordinates (the motor angles wherever the motors determine the leg).
+    let chart = ManifoldChart::<f64, NQ, M>::new::<L, NC, NU>(&p, &home);
+    let lqr_row = chart.map_err(|e| e.to_string()).and_then(|chart| {
+        if chart
+            .coordinates
+            .iter()
+            .zip(&L::ACTUATED)
+            .any(|(a, b)| a != b)
+            || M != NU
+        {
+            return Err(format!(
+                "the chart's coordinates {:?} are not the motors' {:?}",
+                chart.coordinates,
+                L::ACTUATED
+            ));
+        }
+        let reference = Sinusoid {
+            offset: SVector::<f64, M>::from_fn(|k, _| joint_ref.offset[k]),
+            amplitude: SVector::from_element(0.1),
+            frequency: SVector::from_element(1.0),
+            phase: SVector::from_fn(|k, _| k as f64),
+        };
+        let weights = SMatrix::<f64, NX, NX>::from_fn(|i, j| match (i == j, i < M) {
+            (true, true) => 1e4,
+            (true, false) => 1.0,
+            _ => 0.0,
+        });
+        let r = SMatrix::<f64, NU, NU>::identity() * 1e-2;
+        let lqr = ManifoldLqr::<L, f64, _, NQ, NC, NU, M, NX>::at_pose(
+            p,
+            &home,
+            &StepOptions::rk4(1e-3),
+            &weights,
+            &r,
+            reference,
+            SVector::from_element(f64::INFINITY),
+        )
+        .map_err(|e| e.to_string())?;
+        let r0 = joint_ref.sample(0.0);
+        let q0 = assemble_along::<L, f64, NQ, NC, NU>(
+            &p,
+            &home,
+            &r0.position,
+            0.05,
+            &Tolerance::default(),
+        )
+        .map_err(|e| e.to_string())?;
+        let start = State {
+            q: q0,
+            qd: consistent_velocity::<L, f64, NQ, NC, NU>(&p, &q0, &r0.velocity)
+                .map_err(|e| e.to_string())?,
+        };
+        Ok(run::<L, _, NQ, NC, NU>(&p, start, lqr, joint_err))
+    });
+    rows.push(("LQR at home, sinusoid (rad)", lqr_row));
     for (name, r) in rows {
         let r = match r {
             Ok(r) => r,
@@ -220,15 +289,94 @@ fn report<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: u
     }
 }
 
+/// The linearization of stance: the legs with contacts at home, every contact held where
+/// it is, no torque; the eigenvalues of `ẋ = A x` with `A = [0 I; ∂q̈/∂q ∂q̈/∂q̇]` from the
+/// derivatives of the contact dynamics. A positive real part is a falling mode (the body
+/// over its foot: an inverted pendulum), its inverse the time it takes to grow e-fold.
+fn stance<
+    L: ContactModel<NQ, NC, NU, NK>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+>() {
+    use leg_models::contact::{spec_friction, ContactMode, Ground, Modes};
+    use leg_models::derivatives::contact_dynamics_derivatives;
+    if NK == 0 {
+        return;
+    }
+    let p = L::Params::<f64>::default();
+    let home = passive_release_state::<L, NQ, NC, NU>(&p);
+    let (ground, mu) = (
+        Ground::of::<L, NQ, NC, NU, NK>(),
+        spec_friction::<L, f64, NQ, NC, NU, NK>(),
+    );
+    let mut modes = Modes::<NK>::flight();
+    for k in 0..NK / 2 {
+        modes.set(k, ContactMode::Stick);
+    }
+    let anchors = ground.coordinates(&L::contact_positions(&home.q, &p));
+    match contact_dynamics_derivatives::<L, f64, NQ, NC, NU, NK>(
+        &p,
+        &home.q,
+        &home.qd,
+        &SVector::zeros(),
+        &modes,
+        &anchors,
+        &ground,
+        &mu,
+        None,
+    ) {
+        Ok(d) => {
+            let a = leg_models::nalgebra::DMatrix::from_fn(2 * NQ, 2 * NQ, |i, j| {
+                match (i < NQ, j < NQ) {
+                    (true, true) => 0.0,
+                    (true, false) => f64::from(u8::from(j - NQ == i)),
+                    (false, true) => d.qdd_q[(i - NQ, j)],
+                    (false, false) => d.qdd_qd[(i - NQ, j - NQ)],
+                }
+            });
+            let eig = a.complex_eigenvalues();
+            let fastest = eig.iter().map(|z| z.re).fold(f64::NEG_INFINITY, f64::max);
+            println!(
+                "| {} | {} | {:.3} | {} |",
+                L::NAME,
+                L::CONTACT_NAMES.join(", "),
+                fastest,
+                if fastest > 1e-3 {
+                    format!("falls: e-fold in {:.3} s", 1.0 / fastest)
+                } else {
+                    "no growing mode".into()
+                }
+            );
+        }
+        Err(e) => println!(
+            "| {} | {} | – | {e} |",
+            L::NAME,
+            L::CONTACT_NAMES.join(", ")
+        ),
+    }
+}
+
 fn main() {
     println!(
         "| leg | controller | max error | RMS error | peak torque (N m) | saturations | note |"
     );
     println!("|---|---|---|---|---|---|---|");
     macro_rules! each {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
-            report::<$ty, $nq, $nc, $nu>();
-        };
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {{
+            const M: usize = <$ty as LegModel<$nq, $nc, $nu>>::MOBILITY;
+            report::<$ty, $nq, $nc, $nu, M, { 2 * M }>();
+        }};
     }
     generated::for_each_model!(each);
+    println!();
+    println!("| leg | contacts held at home | largest real eigenvalue of the stance linearization (1/s) | |");
+    println!("|---|---|---|---|");
+    macro_rules! each_stance {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
+            stance::<$ty, $nq, $nc, $nu, $nk>();
+        };
+    }
+    generated::for_each_model!(each_stance);
 }

@@ -5,9 +5,10 @@
 //!
 //! `count_calls MODEL PATH CALLS`, PATH one of `empty`, `fused`, `forward_dynamics`,
 //! `batch_fused`, `batch_forward_dynamics` (four states per call, `F64x4` lanes),
-//! `set_parameter` (one parameter set, everything prepared again) and,
-//! with the `peers` feature, `casadi_fused`, `casadi_forward_dynamics`,
-//! `casadi_closed_fused`, `casadi_closed_forward_dynamics`.
+//! `set_parameter` (one parameter set, everything prepared again), `derivatives` (forward
+//! dynamics and its derivatives), `finite_differences` (the same by forward differences of
+//! forward dynamics) and, with the `peers` feature, `casadi_fused`, `casadi_forward_dynamics`,
+//! `casadi_closed_fused`, `casadi_closed_forward_dynamics`, `casadi_closed_derivatives`.
 //!
 //! Every contender runs in the same loop (`measure`) and does only its own work per call:
 //! its inputs are prepared once before the loop (the state, the parameters — as the
@@ -19,6 +20,7 @@
 
 use std::hint::black_box;
 
+use leg_models::derivatives::forward_dynamics_derivatives;
 use leg_models::dynamics::forward_dynamics;
 use leg_models::nalgebra::SVector;
 use leg_models::{LegModel, Parameters};
@@ -66,6 +68,47 @@ fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usiz
             ))
             .map_or(0.0, |a| a.qdd[0])
         }),
+        "directional" => {
+            let a = SVector::<f64, NQ>::from_element(0.3);
+            let f = SVector::<f64, NC>::from_element(0.2);
+            measure(n, || {
+                black_box(L::dynamics_derivatives(
+                    black_box(&q),
+                    black_box(&qd),
+                    black_box(&a),
+                    black_box(&f),
+                    black_box(&p),
+                ))
+                .dynamics_q[(0, 0)]
+            })
+        }
+        "derivatives" => measure(n, || {
+            black_box(forward_dynamics_derivatives::<L, f64, NQ, NC, NU>(
+                black_box(&p),
+                black_box(&q),
+                black_box(&qd),
+                black_box(&u),
+                None,
+            ))
+            .map_or(0.0, |d| d.qdd_q[(0, 0)])
+        }),
+        // The same derivatives as a user without them gets them: forward differences of
+        // forward dynamics, one call at the state and one per coordinate of q, q̇ and u
+        // (2 NQ + NU + 1 calls), into matrices allocated before the loop.
+        "finite_differences" => {
+            let mut jac = vec![0.0; (NQ + NC) * (2 * NQ + NU)];
+            measure(n, || {
+                leg_tests::forward_difference_derivatives::<L, NQ, NC, NU>(
+                    black_box(&p),
+                    black_box(&q),
+                    black_box(&qd),
+                    black_box(&u),
+                    1e-7,
+                    &mut jac,
+                );
+                black_box(&jac)[0]
+            })
+        }
         // What a change of parameters costs: one value set, every prepared value computed
         // again (the work the per-state functions no longer do).
         "set_parameter" => {
@@ -134,6 +177,29 @@ fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usiz
                     &[q.as_slice(), qd.as_slice(), u.as_slice(), &pv],
                     &mut [&mut first, &mut fourth],
                 ),
+                // CasADi's `jacobian` of its forward dynamics: q̈, F and their six
+                // derivatives (the closed form's only).
+                "derivatives" if peer == "casadi_closed_derivatives" => {
+                    let sizes = [NQ, NC, NQ * NQ, NQ * NQ, NQ * NU, NC * NQ, NC * NQ, NC * NU];
+                    let mut outs: Vec<Vec<f64>> = sizes.iter().map(|&k| vec![0.0; k]).collect();
+                    first = std::mem::take(&mut outs[2]);
+                    let [a, b, _, d, e, f, g, h] = &mut outs[..] else {
+                        unreachable!()
+                    };
+                    let prepared = Prepared::new(
+                        peers.derivatives,
+                        &[q.as_slice(), qd.as_slice(), u.as_slice(), &pv],
+                        &mut [a, b, &mut first, d, e, f, g, h],
+                    );
+                    let out = first.as_ptr();
+                    return Some(measure(n, || {
+                        // SAFETY: as below; `outs` and `first` live until after the loop.
+                        unsafe {
+                            black_box(&prepared).call();
+                            out.read()
+                        }
+                    }));
+                }
                 _ => return None,
             };
             let out = first.as_ptr();

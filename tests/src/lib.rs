@@ -96,6 +96,58 @@ pub fn random_assembled_state<
     }
 }
 
+/// The derivatives of forward dynamics as a user without them computes them: forward
+/// differences, one call at the state and one per coordinate of `q`, `q̇` and `u`
+/// (`2 NQ + NU + 1` calls), written into `jac` (column-major `(NQ + NC) × (2 NQ + NU)`:
+/// `q̈` then `F`, by `q`, then `q̇`, then `u`). The benchmarks' baseline; `false` where a
+/// call fails.
+pub fn forward_difference_derivatives<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>(
+    p: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+    qd: &SVector<f64, NQ>,
+    u: &SVector<f64, NU>,
+    h: f64,
+    jac: &mut [f64],
+) -> bool {
+    let fd = |q: &SVector<f64, NQ>, qd: &SVector<f64, NQ>, u: &SVector<f64, NU>| {
+        forward_dynamics::<L, f64, NQ, NC, NU>(p, q, qd, u, None)
+    };
+    let Ok(base) = fd(q, qd, u) else {
+        return false;
+    };
+    let rows = NQ + NC;
+    let mut put = |col: usize, a: leg_models::dynamics::Acceleration<f64, NQ, NC>| {
+        for r in 0..NQ {
+            jac[col * rows + r] = (a.qdd[r] - base.qdd[r]) / h;
+        }
+        for r in 0..NC {
+            jac[col * rows + NQ + r] = (a.forces[r] - base.forces[r]) / h;
+        }
+    };
+    for i in 0..NQ {
+        let mut x = *q;
+        x[i] += h;
+        let Ok(a) = fd(&x, qd, u) else { return false };
+        put(i, a);
+        let mut x = *qd;
+        x[i] += h;
+        let Ok(a) = fd(q, &x, u) else { return false };
+        put(NQ + i, a);
+    }
+    for i in 0..NU {
+        let mut x = *u;
+        x[i] += h;
+        let Ok(a) = fd(q, qd, &x) else { return false };
+        put(2 * NQ + i, a);
+    }
+    true
+}
+
 /// The leg's home pose from its spec, assembled (every joint free), at rest: where the
 /// drift figures release each leg.
 pub fn passive_release_state<

@@ -16,7 +16,9 @@ pub const BUDGETS: &str = "tests/instruction-budgets.json";
 /// Counted instructions may exceed the budget by this fraction before the check fails
 /// (they are repeatable, but differ slightly between compiler versions).
 pub const TOLERANCE: f64 = 0.02;
-const PATHS: [&str; 2] = ["fused", "forward_dynamics"];
+const PATHS: [&str; 3] = ["fused", "forward_dynamics", "derivatives"];
+/// The paths CasADi's C has in both forms (its derivatives are compared apart).
+const COMPARED: [&str; 2] = ["fused", "forward_dynamics"];
 const CALLS: u64 = 10_000;
 
 fn cargo(root: &Path, args: &[&str]) -> Result<(), String> {
@@ -119,7 +121,7 @@ pub fn compare_instructions(root: &Path) -> Result<String, String> {
         let harness = Harness::of(&bin, m)?;
         let mut cells = vec![m.clone(), harness.per_call().to_string()];
         let mut scalar = Vec::new();
-        for path in PATHS {
+        for path in COMPARED {
             let ours = harness.net(&bin, m, path)?;
             let closed = harness.net(&bin, m, &format!("casadi_closed_{path}"))?;
             let lagrange = harness.net(&bin, m, &format!("casadi_{path}"))?;
@@ -133,7 +135,7 @@ pub fn compare_instructions(root: &Path) -> Result<String, String> {
             scalar.push(ours);
         }
         // Four states per call; a leg without a batched path shows a dash.
-        for (path, ours) in PATHS.iter().zip(scalar) {
+        for (path, ours) in COMPARED.iter().zip(scalar) {
             match harness.net(&bin, m, &format!("batch_{path}")) {
                 Ok(four) => {
                     let per = four as f64 / 4.0;
@@ -148,6 +150,23 @@ pub fn compare_instructions(root: &Path) -> Result<String, String> {
     lines.push(format!(
         "instructions per call (callgrind, {CALLS} calls less none, less the harness's empty loop, shown as `harness`); every contender's inputs are prepared once and its outputs preallocated; ratios are ours / peer; batch: four states per call on F64x4 lanes, per state, and the scalar path's count over it"
     ));
+    // The derivatives of forward dynamics: q̈, F and ∂/∂(q, q̇, u) of both.
+    lines.push(String::new());
+    lines.push("| model | derivatives ours | finite differences of ours | ratio | CasADi C `jacobian`, closed form | ratio |".into());
+    lines.push(format!("|{}", "---|".repeat(6)));
+    for m in &models {
+        let harness = Harness::of(&bin, m)?;
+        let ours = harness.net(&bin, m, "derivatives")?;
+        let fd = harness.net(&bin, m, "finite_differences")?;
+        let casadi = harness.net(&bin, m, "casadi_closed_derivatives")?;
+        lines.push(format!(
+            "| {m} | {ours} | {fd} | {} | {casadi} | {} |",
+            ratio(ours, fd),
+            ratio(ours, casadi)
+        ));
+    }
+    lines.push(String::new());
+    lines.push("derivatives of forward dynamics per call: q̈ and F with ∂/∂q, ∂/∂q̇, ∂/∂u of both; finite differences: forward differences of our forward dynamics (2 NQ + NU + 1 calls) into preallocated matrices; CasADi: `jacobian` of its forward-dynamics function of the same closed-form terms, compiled at -O3".into());
     Ok(lines.join("\n"))
 }
 
@@ -297,6 +316,28 @@ pub fn run(root: &Path, pinocchio: bool) -> Result<(), String> {
             ratio(dd, per_state(g("fd-batch"))),
         ];
         println!("| {m} | {} |", cells.join(" | "));
+    }
+    println!();
+    println!("| model | derivatives ours | finite differences of ours | ratio | CasADi C `jacobian` closed | ratio | Pinocchio C++ constraint dynamics derivatives | ratio |");
+    println!("|{}", "---|".repeat(8));
+    for m in &models {
+        let g = |id: &str| median(root, m, id);
+        let (ours, fd, cas) = (
+            g("deriv-ours"),
+            g("deriv-finite-differences"),
+            g("deriv-casadi-closed"),
+        );
+        let p = pin.get(m).copied().unwrap_or_default();
+        println!(
+            "| {m} | {} | {} | {} | {} | {} | {} | {} |",
+            ns(ours),
+            ns(fd),
+            ratio(ours, fd),
+            ns(cas),
+            ratio(ours, cas),
+            ns(p.derivatives),
+            ratio(ours, p.derivatives)
+        );
     }
     println!("\nmedians of criterion (target/criterion/); `harness` is the measured loop with no contender (included in every other figure); ratios are ours / peer, measured in this one run; batch: four states per call on F64x4 lanes, per state, and the scalar time over it (states per second over the scalar path's)");
     Ok(())

@@ -91,6 +91,8 @@ pub struct Figures {
     /// Pinocchio on casadi::SX emitted as C: the fused terms and forward dynamics.
     pub sx_terms: Option<f64>,
     pub sx_forward_dynamics: Option<f64>,
+    /// Pinocchio's C++ `constraintDynamics` + `computeConstraintDynamicsDerivatives`.
+    pub derivatives: Option<f64>,
 }
 
 /// Whether `out` is older than any of `sources` (or missing).

@@ -428,8 +428,11 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         #![doc = #doc]
         // prettyplease formats generated code, so that formatting cannot drift.
         #![cfg_attr(rustfmt, rustfmt::skip)]
+        // `eq_op`: value numbering can make `x − x` of two equal values, which stays (it is
+        // NaN, not 0, for a non-finite x: the simplifications keep every bit).
         #![allow(
             clippy::approx_constant,
+            clippy::eq_op,
             clippy::excessive_precision,
             clippy::let_and_return,
             clippy::too_many_lines
