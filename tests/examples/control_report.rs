@@ -221,7 +221,7 @@ fn report<
             || M != NU
         {
             return Err(format!(
-                "the chart's coordinates {:?} are not the motors' {:?}",
+                "this row tracks the motors' reference, and the leg's coordinates on its constraint manifold (joints {:?}) are not its motors' (joints {:?})",
                 chart.coordinates,
                 L::ACTUATED
             ));
