@@ -4,7 +4,10 @@
 //! generation step's virtual environment, compiles `xtask/pinocchio_bench.cpp` with g++
 //! at -O3, and runs it on each leg (built with Pinocchio's API from the spec). Before
 //! timing, Pinocchio's `M`, `N` and `q̈` must agree with the generated model's (from
-//! `legs eval --json`), so that both compute the same thing.
+//! `legs eval --json`), so that both compute the same thing. `xtask/pinocchio_derivatives.cpp`
+//! times `constraintDynamics` + `computeConstraintDynamicsDerivatives` the same way, its
+//! derivatives checked against `legs eval --derivatives` first (it works around a bug of
+//! Pinocchio 4.1's loop-closure derivatives: see its header).
 
 use std::collections::BTreeMap;
 use std::fmt::Write;
@@ -19,6 +22,7 @@ use crate::model::{Model, Param};
 const REQUIREMENTS: &str = "xtask/requirements-pinocchio.txt";
 const SOURCE: &str = "xtask/pinocchio_bench.cpp";
 const SX_SOURCE: &str = "xtask/pinocchio_casadi.cpp";
+const DERIVATIVES_SOURCE: &str = "xtask/pinocchio_derivatives.cpp";
 const LEG_HEADER: &str = "xtask/pinocchio_leg.hpp";
 
 fn value(params: &[Param], name: &str) -> f64 {
@@ -188,6 +192,8 @@ pub fn run(root: &Path) -> Result<BTreeMap<String, Figures>, String> {
     compile(root, SOURCE, &bin, &prefix, None)?;
     let sx_bin = dir.join("pinocchio_casadi");
     compile(root, SX_SOURCE, &sx_bin, &prefix, Some(&casadi_dir))?;
+    let derivatives_bin = dir.join("pinocchio_derivatives");
+    compile(root, DERIVATIVES_SOURCE, &derivatives_bin, &prefix, None)?;
     let target_legs = target.join("debug").join("legs");
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     run_command(
@@ -236,6 +242,7 @@ pub fn run(root: &Path) -> Result<BTreeMap<String, Figures>, String> {
                 &join(&m.home),
                 "--qd",
                 &join(&qd),
+                "--derivatives",
                 "--json",
             ]),
             "legs eval",
@@ -251,6 +258,37 @@ pub fn run(root: &Path) -> Result<BTreeMap<String, Figures>, String> {
             }
             Err(e) if e.contains("no fixed-size instance") => {}
             Err(e) => return Err(e),
+        }
+        // Pinocchio's constrained-dynamics derivatives (proximal, so a planar closure's
+        // zero z rows are no obstacle), at the same state with no torque, checked against
+        // ours before they are timed.
+        let actuated = m
+            .actuated
+            .iter()
+            .map(|a| a.to_string())
+            .collect::<Vec<_>>()
+            .join(",");
+        let zero_u = vec!["0"; m.actuated.len()].join(",");
+        match run_command(
+            Command::new(&derivatives_bin)
+                .arg(&file)
+                .arg(&actuated)
+                .arg(&zero_u),
+            "pinocchio_derivatives",
+        ) {
+            Ok(text) => {
+                let pin: Value = serde_json::from_str(&text)
+                    .map_err(|e| format!("pinocchio_derivatives printed {text}: {e}"))?;
+                agree_on(
+                    &name,
+                    "Pinocchio's constrained-dynamics derivatives",
+                    &pin,
+                    &ours,
+                    &["qdd", "dqdd_dq", "dqdd_dqd", "dqdd_du"],
+                )?;
+                figures.derivatives = pin["median_ns"].as_f64();
+            }
+            Err(e) => eprintln!("{name}: no Pinocchio derivatives: {e}"),
         }
         if m.closures.is_empty() || !has_redundant_rows(root, &name)? {
             let c = dir.join(format!("{name}_pinocchio_sx.c"));
@@ -273,10 +311,11 @@ pub fn run(root: &Path) -> Result<BTreeMap<String, Figures>, String> {
             figures.sx_forward_dynamics = sx["fd_median_ns"].as_f64();
         }
         eprintln!(
-            "{name:<16} Pinocchio pipeline {}, Pinocchio-on-CasADi C terms {} / forward dynamics {} (M, N, q̈ agree with ours)",
+            "{name:<16} Pinocchio pipeline {}, Pinocchio-on-CasADi C terms {} / forward dynamics {}, derivatives {} (M, N, q̈ and the derivatives agree with ours)",
             show(figures.pipeline),
             show(figures.sx_terms),
-            show(figures.sx_forward_dynamics)
+            show(figures.sx_forward_dynamics),
+            show(figures.derivatives)
         );
         out.insert(name, figures);
     }
@@ -296,6 +335,17 @@ fn has_redundant_rows(root: &Path, name: &str) -> Result<bool, String> {
 /// `peer`'s M, N and q̈ (rows in the spec's order; M as rows or flat, column-major or
 /// symmetric) agree with ours, so that both compute the same thing.
 fn agree(name: &str, what: &str, peer: &Value, ours: &Value) -> Result<(), String> {
+    agree_on(name, what, peer, ours, &["M", "N", "qdd"])
+}
+
+/// `peer`'s `keys` agree with ours to 1e-9 of their largest entry.
+fn agree_on(
+    name: &str,
+    what: &str,
+    peer: &Value,
+    ours: &Value,
+    keys: &[&str],
+) -> Result<(), String> {
     let flat = |v: &Value| -> Vec<f64> {
         match v {
             Value::Array(a) => a
@@ -308,7 +358,7 @@ fn agree(name: &str, what: &str, peer: &Value, ours: &Value) -> Result<(), Strin
             _ => Vec::new(),
         }
     };
-    for key in ["M", "N", "qdd"] {
+    for &key in keys {
         let (a, b) = (flat(&peer[key]), flat(&ours[key]));
         let scale = b.iter().fold(0.0f64, |s, x| s.max(x.abs())).max(1e-300);
         let diff = a
