@@ -6,8 +6,10 @@
 //! algorithms that use the generated terms: constrained forward dynamics
 //! ([`dynamics`]), loop assembly ([`assembly`]), time stepping with drift control
 //! ([`integrate`]), control in the actuated coordinates ([`control`]) with reference
-//! trajectories ([`mod@reference`]) and, with the `std` feature, a recording
-//! [`simulate::Simulator`].
+//! trajectories ([`mod@reference`]), the exact derivatives of the dynamics
+//! ([`derivatives`]) and the linearization of a step in joint coordinates and on the
+//! constraint manifold ([`linearize`]) for MPC, a discrete LQR on that manifold
+//! ([`lqr`]) and, with the `std` feature, a recording [`simulate::Simulator`].
 //! Everything but the simulator's record is fixed-size and allocation-free, and the
 //! crate is `no_std` without the default `std` feature. The geometry specs the generator
 //! reads live in `leg-models/specs/`.

@@ -5,7 +5,12 @@
 //! or semi-implicit Euler, torques held over the step, Baumgarte terms as configured) by
 //! the chain rule through its stages, each stage's Jacobian from
 //! [`crate::derivatives::forward_dynamics_derivatives`]; the post-step projection onto
-//! the constraints, when on, is differentiated too. A closed chain's `2 NQ` joint states
+//! the constraints, when on, is differentiated to first order at the projected state
+//! (the terms proportional to the drift it removes, `φ` and `J q̇` after the step, are
+//! left out). Without the projection the linearization is exact (tested to 1e-6 against
+//! differences of the step); with it, differences of the step agree to about 1e-5 on most
+//! legs and to 1.4e-4 in chart coordinates on `minitaur_pinned_toe`, a gap not yet
+//! explained. A closed chain's `2 NQ` joint states
 //! are not independent: `φ(q) = 0` and `J q̇ = 0` leave `2 m` of them free (`m` the
 //! mobility). [`ManifoldChart`] picks `m` joints as coordinates of the manifold, lifts
 //! them to joint states, and gives the linearization in them

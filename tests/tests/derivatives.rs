@@ -442,7 +442,7 @@ fn contact_fd<
     let mut rng = Rng::new(9);
     let (mut worst, mut tried) = (0.0f64, 0);
     let mut checked = 0;
-    while checked < STATES / 4 && tried < 40 * STATES {
+    while checked < STATES && tried < 40 * STATES {
         tried += 1;
         let s = random_assembled_state::<L, NQ, NC, NU>(&p, &mut rng, 2.0);
         let u = SVector::<f64, NU>::from_fn(|_, _| rng.range(-2.0, 2.0));
@@ -519,7 +519,7 @@ fn reduction_fd<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const
     }
     let p = L::Params::<f64>::default();
     let mut rng = Rng::new(5);
-    for _ in 0..STATES / 4 {
+    for _ in 0..STATES {
         let s = random_assembled_state::<L, NQ, NC, NU>(&p, &mut rng, 2.0);
         let v = SVector::<f64, NU>::from_fn(|_, _| rng.range(-5.0, 5.0));
         let d = reduction_derivatives::<L, f64, NQ, NC, NU>(&p, &s.q, &s.qd, &v).expect("regular");
