@@ -451,14 +451,14 @@ where
 /// [`forward_dynamics_with_contacts`] once per right-hand side.
 #[derive(Clone, Copy, Debug)]
 pub struct ContactSystem<T: Real, const NQ: usize, const NC: usize, const NK: usize> {
-    chol_m: Cholesky<T, NQ>,
-    jacobian: SMatrix<T, NC, NQ>,
-    r_j: SVector<T, NC>,
+    pub(crate) chol_m: Cholesky<T, NQ>,
+    pub(crate) jacobian: SMatrix<T, NC, NQ>,
+    pub(crate) r_j: SVector<T, NC>,
     redundant_rows: usize,
-    rows: ContactRows<T, NQ, NK>,
-    r_c: SVector<T, NK>,
+    pub(crate) rows: ContactRows<T, NQ, NK>,
+    pub(crate) r_c: SVector<T, NK>,
     /// `−N − D q̇`: the forces that act whatever is applied.
-    passive: SVector<T, NQ>,
+    pub(crate) passive: SVector<T, NQ>,
     /// `M(q)`.
     pub mass_matrix: SMatrix<T, NQ, NQ>,
 }

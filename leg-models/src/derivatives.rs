@@ -19,12 +19,10 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::contact::{solve_structured_columns, ContactRows, ContactSolution, Ground, Modes};
+use crate::contact::{solve_structured_columns, ContactSolution, ContactSystem, Ground, Modes};
 use crate::control::{actuated_reduction, ControlError};
-use crate::dynamics::{
-    actuation, rcond_floor, Acceleration, Baumgarte, DynamicsError, KktFactorization,
-};
-use crate::linalg::{all_finite, negate, Cholesky};
+use crate::dynamics::{actuation, Acceleration, Baumgarte, DynamicsError, KktFactorization};
+use crate::linalg::{all_finite, negate};
 use crate::model::{ContactModel, LegModel, Real};
 
 /// Forward dynamics and its derivatives at one state and input.
@@ -178,32 +176,15 @@ where
     L: ContactModel<NQ, NC, NU, NK>,
     T: Real,
 {
-    let terms = L::dynamics_terms(q, qd, params);
-    let chol_m =
-        Cholesky::new(&terms.mass_matrix).ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
-    if chol_m.rcond < rcond_floor::<T>() {
-        return Err(DynamicsError::MassMatrixNotPositiveDefinite);
-    }
-    let j = &terms.constraint_jacobian;
-    let jc = L::contact_jacobian(q, params);
-    let rows = ContactRows::new(ground, &jc, modes, mu);
-    let mut r_j = -terms.constraint_bias;
-    let mut r_c = -ground.rows(&L::contact_bias(q, qd, params));
+    // The system forward dynamics with contacts solves, so that the solution is the same
+    // to the bit.
+    let sys = ContactSystem::new::<L, NU>(params, q, qd, modes, anchors, ground, mu, baumgarte)?;
+    let (chol_m, j, rows) = (&sys.chol_m, &sys.jacobian, &sys.rows);
     let (two, zero) = (T::lit(2.0), T::zero());
     let (two_alpha, beta2) = baumgarte.map_or((zero, zero), |b| (b.alpha * two, b.beta * b.beta));
-    if baumgarte.is_some() {
-        if NC > 0 {
-            let phi = L::closure_residual(q, params);
-            r_j -= (j * qd) * two_alpha + phi * beta2;
-        }
-        let drift = ground.coordinates(&L::contact_positions(q, params)) - anchors;
-        r_c -= (rows.c * qd) * two_alpha + drift * beta2;
-    }
-    // Summed as `ContactSystem` sums it, so that the solution is the same to the bit.
-    let passive = -terms.bias_forces - L::damping_forces(qd, params);
-    let tau = actuation::<L, T, NQ, NC, NU>(u) + passive;
+    let tau = actuation::<L, T, NQ, NC, NU>(u) + sys.passive;
     let (x, closure, contact) =
-        solve_structured_columns(&chol_m, j, &r_j, L::REDUNDANT_ROWS, &rows, &r_c, &tau)?;
+        solve_structured_columns(chol_m, j, &sys.r_j, L::REDUNDANT_ROWS, rows, &sys.r_c, &tau)?;
     // The ground forces in the base frame (λ_t t + λ_n n per contact) for J_cᵀ λ.
     let (t, n) = (ground.tangent(), ground.normal);
     let lambda = SVector::<T, NK>::from_fn(|r, _| {
@@ -224,18 +205,11 @@ where
     let tau_u = actuation_matrix::<L, T, NQ, NC, NU>();
     let (rj_u, rc_u) = (SMatrix::<T, NC, NU>::zeros(), SMatrix::<T, NK, NU>::zeros());
     let (qdd_q, forces_q, contact_q) =
-        solve_structured_columns(&chol_m, j, &rj_q, L::REDUNDANT_ROWS, &rows, &rc_q, &tau_q)?;
-    let (qdd_qd, forces_qd, contact_qd) = solve_structured_columns(
-        &chol_m,
-        j,
-        &rj_qd,
-        L::REDUNDANT_ROWS,
-        &rows,
-        &rc_qd,
-        &tau_qd,
-    )?;
+        solve_structured_columns(chol_m, j, &rj_q, L::REDUNDANT_ROWS, rows, &rc_q, &tau_q)?;
+    let (qdd_qd, forces_qd, contact_qd) =
+        solve_structured_columns(chol_m, j, &rj_qd, L::REDUNDANT_ROWS, rows, &rc_qd, &tau_qd)?;
     let (qdd_u, forces_u, contact_u) =
-        solve_structured_columns(&chol_m, j, &rj_u, L::REDUNDANT_ROWS, &rows, &rc_u, &tau_u)?;
+        solve_structured_columns(chol_m, j, &rj_u, L::REDUNDANT_ROWS, rows, &rc_u, &tau_u)?;
     Ok(ContactDynamicsDerivatives {
         solution: ContactSolution {
             x,
