@@ -101,6 +101,20 @@ impl<T: Real, const N: usize> Reference<T, N> for MinimumJerk<T, N> {
     }
 }
 
+/// One pose, held: zero velocity and acceleration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hold<T: Real, const N: usize>(pub SVector<T, N>);
+
+impl<T: Real, const N: usize> Reference<T, N> for Hold<T, N> {
+    fn sample(&self, _t: T) -> Setpoint<T, N> {
+        Setpoint {
+            position: self.0,
+            velocity: SVector::zeros(),
+            acceleration: SVector::zeros(),
+        }
+    }
+}
+
 /// A foot step cycle: an ellipse under the hip, `center + (a cos ωt, b sin ωt)` with
 /// `a` half the stride and `b` half the step height, traversed once per `period`.
 #[derive(Clone, Copy, Debug, PartialEq)]

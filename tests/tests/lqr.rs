@@ -9,23 +9,9 @@ use leg_models::integrate::{step, State, StepOptions};
 use leg_models::linearize::{LinearizationError, ManifoldChart};
 use leg_models::lqr::ManifoldLqr;
 use leg_models::nalgebra::{DMatrix, SMatrix, SVector};
-use leg_models::reference::{Reference, Setpoint, Sinusoid};
+use leg_models::reference::{Hold, Reference, Sinusoid};
 use leg_models::LegModel;
 use leg_tests::{not_applicable, passive_release_state, Rng};
-
-/// Holds one pose.
-#[derive(Clone, Copy)]
-struct Hold<const M: usize>(SVector<f64, M>);
-
-impl<const M: usize> Reference<f64, M> for Hold<M> {
-    fn sample(&self, _: f64) -> Setpoint<f64, M> {
-        Setpoint {
-            position: self.0,
-            velocity: SVector::zeros(),
-            acceleration: SVector::zeros(),
-        }
-    }
-}
 
 fn weights<const NX: usize, const NU: usize>() -> (SMatrix<f64, NX, NX>, SMatrix<f64, NU, NU>) {
     let q = SMatrix::<f64, NX, NX>::from_fn(|i, j| match (i == j, i < NX / 2) {

@@ -192,7 +192,19 @@ pub fn run<
     out.insert("foot_jacobian".into(), matrix(&L::foot_jacobian(&q, &p)));
     out.insert("kinetic".into(), json!(L::kinetic_energy(&q, &qd, &p)));
     out.insert("potential".into(), json!(L::potential_energy(&q, &p)));
-    out.insert("phi".into(), vector(&L::closure_residual(&q, &p)));
+    let phi = L::closure_residual(&q, &p);
+    out.insert("phi".into(), vector(&phi));
+    // Terms and derivatives off the closures are of a state the leg cannot be in: said.
+    let size = leg_models::assembly::leg_size::<L, f64, NQ, NC, NU>(&p, &q);
+    if NC > 0 && phi.amax() > 1e-9 * size.max(1e-300) {
+        warnings.insert(
+            "phi".into(),
+            json!(format!(
+                "the state is off the closures by {:.3e} m (phi): the terms are of a pose the leg cannot take; --assemble or --project puts it on them",
+                phi.amax()
+            )),
+        );
+    }
     let ground = Ground::<f64>::of::<L, NQ, NC, NU, NK>();
     let x = L::contact_positions(&q, &p);
     let coords = ground.coordinates(&x);
