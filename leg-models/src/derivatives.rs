@@ -120,7 +120,9 @@ where
         && all_finite(&qdd_q)
         && all_finite(&qdd_qd)
         && all_finite(&forces_q)
-        && all_finite(&forces_qd))
+        && all_finite(&forces_qd)
+        && all_finite(&qdd_u)
+        && all_finite(&forces_u))
     {
         return Err(DynamicsError::NonFinite);
     }

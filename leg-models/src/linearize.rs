@@ -42,6 +42,9 @@ pub enum LinearizationError {
     /// No torque holds the leg at rest at this pose (an under-actuated leg away from its
     /// passive equilibrium): `residual` is the smallest acceleration left (rad/s², m/s²).
     NotAnEquilibrium { residual: f64 },
+    /// The motors do not move the chart's coordinates at this pose (`∂θ̈/∂u` loses rank),
+    /// so no torque is determined.
+    MotorsDoNotMoveCoordinates,
 }
 
 impl fmt::Display for LinearizationError {
@@ -53,6 +56,10 @@ impl fmt::Display for LinearizationError {
                 f,
                 "the leg has {mobility} degree(s) of freedom here, so its states on the constraint manifold are {} numbers, not {states}",
                 2 * mobility
+            ),
+            LinearizationError::MotorsDoNotMoveCoordinates => write!(
+                f,
+                "the motors do not move the leg's coordinates at this pose: no torque holds it"
             ),
             LinearizationError::NotAnEquilibrium { residual } => write!(
                 f,
@@ -605,19 +612,22 @@ impl<T: Real, const NQ: usize, const M: usize> ManifoldChart<T, NQ, M> {
         let a = SMatrix::<T, M, NU>::from_fn(|k, l| d.qdd_u[(self.coordinates[k], l)]);
         let b = SVector::<T, M>::from_fn(|k, _| -d.acceleration.qdd[self.coordinates[k]]);
         let u = if M >= NU {
-            let chol = Cholesky::new(&(a.transpose() * a)).ok_or(AssemblyError::Singular)?;
+            let chol = Cholesky::new(&(a.transpose() * a))
+                .ok_or(LinearizationError::MotorsDoNotMoveCoordinates)?;
             let mut u = a.transpose() * b;
             chol.solve_mut(&mut u);
             u
         } else {
-            let chol = Cholesky::new(&(a * a.transpose())).ok_or(AssemblyError::Singular)?;
+            let chol = Cholesky::new(&(a * a.transpose()))
+                .ok_or(LinearizationError::MotorsDoNotMoveCoordinates)?;
             let mut y = b;
             chol.solve_mut(&mut y);
             a.transpose() * y
         };
         let residual = (a * u - b).amax();
         let scale = b.amax().max(T::one());
-        if residual > T::default_epsilon().sqrt() * scale {
+        // (A NaN residual is refused too: it is not finite.)
+        if !residual.is_finite() || residual > T::default_epsilon().sqrt() * scale {
             return Err(LinearizationError::NotAnEquilibrium {
                 residual: residual.to_subset().unwrap_or(f64::NAN),
             });

@@ -245,11 +245,12 @@ where
             error[M + k] = theta_dot[k] - target.velocity[k];
         }
         let mut u = u_hold - self.lqr.gain * error;
+        // Checked before the clip: `max`/`min` would turn a NaN into a limit.
+        if !(u.iter().all(|x| x.is_finite()) && self.torque_limit.iter().all(|l| *l >= T::zero())) {
+            return Err(ControlError::NonFinite);
+        }
         for (k, limit) in self.torque_limit.iter().enumerate() {
             u[k] = u[k].max(-*limit).min(*limit);
-        }
-        if !u.iter().all(|x| x.is_finite()) {
-            return Err(ControlError::NonFinite);
         }
         Ok(u)
     }

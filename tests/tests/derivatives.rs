@@ -74,6 +74,12 @@ fn central<const N: usize, const R: usize>(
     }
 }
 
+/// Whether a difference is precise enough to check against: its noise at most a tenth of
+/// what it measures (or of 1e-3 for a derivative that vanishes).
+fn checkable<const R: usize, const C: usize>(want: &Want<R, C>) -> bool {
+    want.noise <= 0.1 * want.d.amax().max(1e-3)
+}
+
 /// The error of `got` against `want`, relative to `want`'s largest entry (with an
 /// absolute floor for derivatives that vanish, and less the difference's own rounding
 /// noise); asserts it is at most `tol`.
@@ -84,6 +90,13 @@ fn check<const R: usize, const C: usize>(
     tol: f64,
 ) -> f64 {
     let scale = want.d.amax().max(1e-6);
+    // A difference whose own noise is a tenth of what it measures checks nothing: refused,
+    // so that the allowance below cannot make the check vacuous.
+    assert!(
+        checkable(want),
+        "{what}: the finite difference is too noisy to check against ({:.1e} of {scale:.1e})",
+        want.noise
+    );
     let err = ((got - want.d).amax() - want.noise).max(0.0) / scale;
     assert!(
         err <= tol,
@@ -441,7 +454,7 @@ fn contact_fd<
     }
     let mut rng = Rng::new(9);
     let (mut worst, mut tried) = (0.0f64, 0);
-    let mut checked = 0;
+    let (mut checked, mut noisy) = (0, 0);
     while checked < STATES && tried < 40 * STATES {
         tried += 1;
         let s = random_assembled_state::<L, NQ, NC, NU>(&p, &mut rng, 2.0);
@@ -476,10 +489,18 @@ fn contact_fd<
         };
         assert_eq!(d.solution, sol(&s.q, &s.qd, &u));
         let name = L::NAME;
-        for (what, got, want) in [
-            ("∂q̈/∂q", d.qdd_q, central(&s.q, H, |x| sol(x, &s.qd, &u).x)),
-            ("∂q̈/∂q̇", d.qdd_qd, central(&s.qd, H, |x| sol(&s.q, x, &u).x)),
-        ] {
+        let (dq, dqd) = (
+            central(&s.q, H, |x| sol(x, &s.qd, &u).x),
+            central(&s.qd, H, |x| sol(&s.q, x, &u).x),
+        );
+        // A held contact can make the stance system nearly singular (a foot under a body
+        // that can barely move): there the differences are noise, and the state is left
+        // out (counted) instead of passing a check that cannot fail.
+        if !(checkable(&dq) && checkable(&dqd)) {
+            noisy += 1;
+            continue;
+        }
+        for (what, got, want) in [("∂q̈/∂q", d.qdd_q, dq), ("∂q̈/∂q̇", d.qdd_qd, dqd)] {
             worst = worst.max(check(&format!("{name} stance {what}"), &got, &want, REL));
         }
         worst = worst.max(check(
@@ -508,7 +529,11 @@ fn contact_fd<
         ));
         checked += 1;
     }
-    assert!(checked > 0, "{}: no regular stance state found", L::NAME);
+    assert!(
+        checked >= STATES / 2 && noisy <= checked / 4,
+        "{}: {checked} regular stance states checked, {noisy} too ill-conditioned to difference",
+        L::NAME
+    );
     worst
 }
 
@@ -613,7 +638,7 @@ fn step_fd<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
 }
 
 /// The linearization in a chart of the manifold against differences through the chart:
-/// lift perturbed coordinates onto the constraints, step (with the projection), read
+/// lift perturbed coordinates onto the constraints, step (without the projection), read
 /// the coordinates back.
 fn manifold_fd<
     L: LegModel<NQ, NC, NU>,
@@ -654,13 +679,13 @@ fn manifold_fd<
             &format!("{} manifold A", L::NAME),
             &lin.a,
             &central(&x0, h, |x| through(x, &u)),
-            1e-5,
+            REL,
         ));
         worst = worst.max(check(
             &format!("{} manifold B", L::NAME),
             &lin.b,
             &central(&u, h, |v| through(&x0, v)),
-            1e-5,
+            REL,
         ));
     }
     worst
