@@ -148,30 +148,20 @@ pub struct ContactSolution<T: Real, const NQ: usize, const NC: usize, const NK: 
 /// [ C    0    0  ] [ λ ]   [ r_c ]      (held rows of C only; λ_r = 0 on the others)
 /// ```
 ///
-/// `w` holds the force direction of every held row (zero rows elsewhere). After the solve
-/// the free tangential rows of sliding contacts get `λ_t = slide[r] λ_n` (`slide[2k] =
-/// −μ s`, zero for other rows).
-#[allow(clippy::too_many_arguments)]
+/// `rows.w` holds the force direction of every held row (zero rows elsewhere). After the
+/// solve the free tangential rows of sliding contacts get `λ_t = slide[r] λ_n`
+/// (`rows.slide[2k] = −μ s`, zero for other rows).
 pub fn solve_structured<T: Real, const NQ: usize, const NC: usize, const NK: usize>(
     chol_m: &Cholesky<T, NQ>,
     j: &SMatrix<T, NC, NQ>,
     r_j: &SVector<T, NC>,
     closure_deficiency: usize,
-    c: &SMatrix<T, NK, NQ>,
-    w: &SMatrix<T, NK, NQ>,
+    rows: &ContactRows<T, NQ, NK>,
     r_c: &SVector<T, NK>,
-    held: &[bool; NK],
-    slide: &SVector<T, NK>,
     tau: &SVector<T, NQ>,
 ) -> Result<ContactSolution<T, NQ, NC, NK>, DynamicsError> {
-    let rows = ContactRows {
-        c: *c,
-        w: *w,
-        slide: *slide,
-        held: *held,
-    };
     let (x, closure, contact) =
-        solve_structured_columns(chol_m, j, r_j, closure_deficiency, &rows, r_c, tau)?;
+        solve_structured_columns(chol_m, j, r_j, closure_deficiency, rows, r_c, tau)?;
     Ok(ContactSolution {
         x,
         closure,
@@ -523,11 +513,8 @@ impl<T: Real, const NQ: usize, const NC: usize, const NK: usize> ContactSystem<T
             &self.jacobian,
             &self.r_j,
             self.redundant_rows,
-            &self.rows.c,
-            &self.rows.w,
+            &self.rows,
             &self.r_c,
-            &self.rows.held,
-            &self.rows.slide,
             &(applied + self.passive),
         )
     }
@@ -624,11 +611,8 @@ where
             &j,
             &SVector::zeros(),
             L::REDUNDANT_ROWS,
-            &rows.c,
-            &rows.w,
+            &rows,
             &SVector::zeros(),
-            &rows.held,
-            &rows.slide,
             &momentum,
         )
     };

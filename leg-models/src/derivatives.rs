@@ -21,9 +21,11 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::contact::{solve_structured_columns, ContactSolution, ContactSystem, Ground, Modes};
 use crate::control::{actuated_reduction, ControlError};
-use crate::dynamics::{actuation, Acceleration, Baumgarte, DynamicsError, KktFactorization};
+use crate::dynamics::{
+    actuation, kkt_rhs, Acceleration, Baumgarte, DynamicsError, KktFactorization,
+};
 use crate::linalg::{all_finite, negate};
-use crate::model::{ContactModel, LegModel, Real};
+use crate::model::{ContactModel, DynamicsTerms, LegModel, Real};
 
 /// Forward dynamics and its derivatives at one state and input.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -73,21 +75,37 @@ where
     T: Real,
 {
     let terms = L::dynamics_terms(q, qd, params);
+    forward_dynamics_derivatives_from_terms::<L, T, NQ, NC, NU>(params, &terms, q, qd, u, baumgarte)
+}
+
+/// [`forward_dynamics_derivatives`] from terms already evaluated at `(q, q̇)` (as
+/// [`crate::dynamics::forward_dynamics_from_terms`]).
+#[inline(always)]
+pub fn forward_dynamics_derivatives_from_terms<
+    L,
+    T,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>(
+    params: &L::Params<T>,
+    terms: &DynamicsTerms<T, NQ, NC>,
+    q: &SVector<T, NQ>,
+    qd: &SVector<T, NQ>,
+    u: &SVector<T, NU>,
+    baumgarte: Option<Baumgarte<T>>,
+) -> Result<ForwardDynamicsDerivatives<T, NQ, NC, NU>, DynamicsError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
     let kkt = KktFactorization::new(
         &terms.mass_matrix,
         &terms.constraint_jacobian,
         L::REDUNDANT_ROWS,
     )?;
     let j = &terms.constraint_jacobian;
-    let mut qdd =
-        actuation::<L, T, NQ, NC, NU>(u) - terms.bias_forces - L::damping_forces(qd, params);
-    let mut forces = -terms.constraint_bias;
-    if let Some(b) = baumgarte {
-        if NC > 0 {
-            let phi = L::closure_residual(q, params);
-            forces -= (j * qd) * (b.alpha + b.alpha) + phi * (b.beta * b.beta);
-        }
-    }
+    let (mut qdd, mut forces) = kkt_rhs::<L, T, NQ, NC, NU>(params, terms, q, qd, u, baumgarte);
     if !(all_finite(&qdd) && all_finite(&forces)) {
         return Err(DynamicsError::NonFinite);
     }
@@ -262,8 +280,10 @@ where
     let terms = L::dynamics_terms(q, qd, params);
     let reduced = actuated_reduction::<L, T, NQ, NC, NU>(params, &terms, qd)?;
     let u = reduced.a_tilde * v - reduced.b_tilde;
-    let d = forward_dynamics_derivatives::<L, T, NQ, NC, NU>(params, q, qd, &u, None)
-        .map_err(ControlError::Dynamics)?;
+    let d = forward_dynamics_derivatives_from_terms::<L, T, NQ, NC, NU>(
+        params, &terms, q, qd, &u, None,
+    )
+    .map_err(ControlError::Dynamics)?;
     let motor_rows =
         |m: &SMatrix<T, NQ, NQ>| SMatrix::<T, NU, NQ>::from_fn(|i, c| m[(L::ACTUATED[i], c)]);
     let torque_q = -(reduced.a_tilde * motor_rows(&d.qdd_q));

@@ -262,6 +262,30 @@ where
     L: LegModel<NQ, NC, NU>,
     T: Real,
 {
+    let (tau, rhs) = kkt_rhs::<L, T, NQ, NC, NU>(params, terms, q, qd, u, baumgarte);
+    solve_kkt(
+        &terms.mass_matrix,
+        &terms.constraint_jacobian,
+        &tau,
+        &rhs,
+        L::REDUNDANT_ROWS,
+    )
+}
+
+/// The right-hand side of the KKT system at a state: `(B u − N − D q̇, −J̇ q̇ − 2α J q̇ − β² φ)`.
+#[inline(always)]
+pub(crate) fn kkt_rhs<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    terms: &DynamicsTerms<T, NQ, NC>,
+    q: &SVector<T, NQ>,
+    qd: &SVector<T, NQ>,
+    u: &SVector<T, NU>,
+    baumgarte: Option<Baumgarte<T>>,
+) -> (SVector<T, NQ>, SVector<T, NC>)
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
     let tau = actuation::<L, T, NQ, NC, NU>(u) - terms.bias_forces - L::damping_forces(qd, params);
     let mut rhs = -terms.constraint_bias;
     if let Some(b) = baumgarte {
@@ -270,11 +294,5 @@ where
             rhs -= (terms.constraint_jacobian * qd) * (b.alpha + b.alpha) + phi * (b.beta * b.beta);
         }
     }
-    solve_kkt(
-        &terms.mass_matrix,
-        &terms.constraint_jacobian,
-        &tau,
-        &rhs,
-        L::REDUNDANT_ROWS,
-    )
+    (tau, rhs)
 }

@@ -431,16 +431,19 @@ where
                 &hs.modes,
                 &self.options.friction,
             );
+            // Corrections along the rows themselves (W = C), none sliding.
+            let rows = ContactRows {
+                w: rows.c,
+                slide: SVector::zeros(),
+                ..rows
+            };
             let sol = solve_structured(
                 &identity,
                 &L::constraint_jacobian(&q, p),
                 &-phi,
                 L::REDUNDANT_ROWS,
-                &rows.c,
-                &rows.c,
+                &rows,
                 &-rc,
-                &rows.held,
-                &SVector::zeros(),
                 &SVector::zeros(),
             )
             .map_err(|_| AssemblyError::Singular)?;
@@ -461,15 +464,17 @@ where
             &hs.modes,
             &self.options.friction,
         );
+        let rows = ContactRows {
+            w: rows.c,
+            slide: SVector::zeros(),
+            ..rows
+        };
         let sol = solve_structured(
             &chol_m,
             &L::constraint_jacobian(&q, p),
             &SVector::zeros(),
             L::REDUNDANT_ROWS,
-            &rows.c,
-            &rows.c,
-            &SVector::zeros(),
-            &rows.held,
+            &rows,
             &SVector::zeros(),
             &mul(&m, &hs.state.qd),
         )?;

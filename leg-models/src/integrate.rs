@@ -150,30 +150,69 @@ where
             Ok(forward_dynamics::<L, T, NQ, NC, NU>(params, &q, &qd, &u, opts.baumgarte)?.qdd)
         };
     let first = forward_dynamics::<L, T, NQ, NC, NU>(params, &q, &qd, &u0, opts.baumgarte)?;
-    match opts.method {
-        Method::SemiImplicitEuler => {
-            state.qd = qd + first.qdd * dt;
-            state.q = q + state.qd * dt;
-        }
-        Method::Rk4 => {
-            let half = dt * T::lit(0.5);
-            let (k1q, k1v) = (qd, first.qdd);
-            let (k2q, k2v) = (qd + k1v * half, f(half, q + k1q * half, qd + k1v * half)?);
-            let (k3q, k3v) = (qd + k2v * half, f(half, q + k2q * half, qd + k2v * half)?);
-            let (k4q, k4v) = (qd + k3v * dt, f(dt, q + k3q * dt, qd + k3v * dt)?);
-            let sixth = dt / T::lit(6.0);
-            state.q = q + (k1q + (k2q + k3q) * T::lit(2.0) + k4q) * sixth;
-            state.qd = qd + (k1v + (k2v + k3v) * T::lit(2.0) + k4v) * sixth;
-        }
-    }
-    if opts.project && NC > 0 {
-        project_position::<L, T, NQ, NC, NU>(params, &mut state.q, &opts.tolerance)?;
-        project_velocity::<L, T, NQ, NC, NU>(params, &state.q, &mut state.qd)?;
-    }
+    *state = advance(opts.method, dt, &q, &qd, first.qdd, &mut f)?;
+    project_onto_closures::<L, T, NQ, NC, NU>(params, state, opts)?;
     Ok(StepReport {
         u: u0,
         acceleration: first,
     })
+}
+
+/// The integrators' arithmetic, shared by [`step`] and its linearization
+/// ([`crate::linearize::linearize_step`]): one step of `method` from `(q, q̇)`, `first`
+/// the acceleration there and `accel(τ, q, q̇)` that of the later stages (`τ` their time
+/// offset in the step).
+pub(crate) fn advance<T: Real, const NQ: usize, E>(
+    method: Method,
+    dt: T,
+    q: &SVector<T, NQ>,
+    qd: &SVector<T, NQ>,
+    first: SVector<T, NQ>,
+    mut accel: impl FnMut(T, SVector<T, NQ>, SVector<T, NQ>) -> Result<SVector<T, NQ>, E>,
+) -> Result<State<T, NQ>, E> {
+    let (q, qd) = (*q, *qd);
+    Ok(match method {
+        Method::SemiImplicitEuler => {
+            let qd = qd + first * dt;
+            State { q: q + qd * dt, qd }
+        }
+        Method::Rk4 => {
+            let half = dt * T::lit(0.5);
+            let (k1q, k1v) = (qd, first);
+            let (k2q, k2v) = (
+                qd + k1v * half,
+                accel(half, q + k1q * half, qd + k1v * half)?,
+            );
+            let (k3q, k3v) = (
+                qd + k2v * half,
+                accel(half, q + k2q * half, qd + k2v * half)?,
+            );
+            let (k4q, k4v) = (qd + k3v * dt, accel(dt, q + k3q * dt, qd + k3v * dt)?);
+            let sixth = dt / T::lit(6.0);
+            State {
+                q: q + (k1q + (k2q + k3q) * T::lit(2.0) + k4q) * sixth,
+                qd: qd + (k1v + (k2v + k3v) * T::lit(2.0) + k4v) * sixth,
+            }
+        }
+    })
+}
+
+/// The post-step projection of `opts` (positions onto `φ = 0`, then rates onto
+/// `J q̇ = 0`), when it is on.
+pub(crate) fn project_onto_closures<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    state: &mut State<T, NQ>,
+    opts: &StepOptions<T>,
+) -> Result<(), AssemblyError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    if opts.project && NC > 0 {
+        project_position::<L, T, NQ, NC, NU>(params, &mut state.q, &opts.tolerance)?;
+        project_velocity::<L, T, NQ, NC, NU>(params, &state.q, &mut state.qd)?;
+    }
+    Ok(())
 }
 
 /// Total mechanical energy `T + V`.

@@ -374,6 +374,19 @@ mod tests {
         );
     }
 
+    /// The general LU against its definition (`A x = b` for a non-symmetric `A` that needs
+    /// a row exchange) and refusing a singular matrix.
+    #[test]
+    fn lu_solves_and_refuses() {
+        let a = Matrix3::new(0.0, 2.0, 1.0, 3.0, -1.0, 0.5, 1.0, 4.0, -2.0);
+        let lu = Lu::new(&a).unwrap();
+        let b = SMatrix::<f64, 3, 2>::new(1.0, 0.0, -2.0, 1.0, 0.5, 3.0);
+        assert!((a * lu.solve(&b) - b).amax() < 1e-14);
+        let singular = Matrix3::new(1.0, 2.0, 3.0, 2.0, 4.0, 6.0, 0.0, 1.0, 1.0);
+        assert!(Lu::new(&singular).is_none());
+        assert!(Lu::new(&Matrix3::from_element(f64::NAN)).is_none());
+    }
+
     /// A rank-2 3×3 system (its third row is the sum of the first two): solved where it is
     /// consistent, refused without the allowance, and equal to Cholesky when regular.
     #[test]

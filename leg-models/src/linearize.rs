@@ -24,7 +24,7 @@ use nalgebra::{SMatrix, SVector};
 use crate::assembly::{assemble_holding, AssemblyError, Tolerance};
 use crate::derivatives::{forward_dynamics_derivatives, ForwardDynamicsDerivatives};
 use crate::dynamics::DynamicsError;
-use crate::integrate::{step, Method, State, StepError, StepOptions};
+use crate::integrate::{advance, project_onto_closures, Method, State, StepOptions};
 use crate::linalg::{all_finite, mul, Cholesky, Lu};
 use crate::model::{LegModel, Real};
 use crate::structure::factor_closure_rows;
@@ -84,17 +84,6 @@ impl From<AssemblyError> for LinearizationError {
     }
 }
 
-impl From<StepError> for LinearizationError {
-    fn from(e: StepError) -> Self {
-        match e {
-            StepError::Dynamics(e) => LinearizationError::Dynamics(e),
-            StepError::Projection(e) => LinearizationError::Assembly(e),
-            // The linearized step holds its torques: no controller is asked.
-            StepError::Control(_) => unreachable!("a held torque has no controller"),
-        }
-    }
-}
-
 /// `δx⁺ = A δx + B δu` of one step in joint coordinates, by blocks:
 /// `δq⁺ = q_q δq + q_qd δq̇ + q_u δu`, `δq̇⁺ = qd_q δq + qd_qd δq̇ + qd_u δu`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -135,18 +124,21 @@ impl<T: Real, const NQ: usize, const NU: usize, const C: usize> Tangent<T, NQ, N
     }
 }
 
-/// The stages' derivatives of one step, and the step's result.
+/// The stages' derivatives of one step.
 struct Stages<T: Real, const NQ: usize, const NC: usize, const NU: usize> {
     /// One for semi-implicit Euler, four for RK4.
     derivatives: [Option<ForwardDynamicsDerivatives<T, NQ, NC, NU>>; 4],
 }
 
+/// The stages' derivatives of one step.before its projection:
+/// the integrator's own arithmetic ([`crate::integrate::advance`]), each stage's
+/// acceleration taken from its derivatives, so no stage is solved twice.
 fn stages<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     params: &L::Params<T>,
     state: &State<T, NQ>,
     u: &SVector<T, NU>,
     opts: &StepOptions<T>,
-) -> Result<Stages<T, NQ, NC, NU>, LinearizationError>
+) -> Result<(Stages<T, NQ, NC, NU>, State<T, NQ>), LinearizationError>
 where
     L: LegModel<NQ, NC, NU>,
     T: Real,
@@ -154,20 +146,23 @@ where
     let at = |q: &SVector<T, NQ>, qd: &SVector<T, NQ>| {
         forward_dynamics_derivatives::<L, T, NQ, NC, NU>(params, q, qd, u, opts.baumgarte)
     };
-    let (q, qd, dt) = (state.q, state.qd, opts.dt);
-    let d1 = at(&q, &qd)?;
+    let d1 = at(&state.q, &state.qd)?;
     let mut derivatives = [Some(d1), None, None, None];
-    if opts.method == Method::Rk4 {
-        let half = dt * T::lit(0.5);
-        let (k1q, k1v) = (qd, d1.acceleration.qdd);
-        let d2 = at(&(q + k1q * half), &(qd + k1v * half))?;
-        let (k2q, k2v) = (qd + k1v * half, d2.acceleration.qdd);
-        let d3 = at(&(q + k2q * half), &(qd + k2v * half))?;
-        let (k3q, k3v) = (qd + k2v * half, d3.acceleration.qdd);
-        let d4 = at(&(q + k3q * dt), &(qd + k3v * dt))?;
-        derivatives = [Some(d1), Some(d2), Some(d3), Some(d4)];
-    }
-    Ok(Stages { derivatives })
+    let mut k = 1;
+    let next = advance(
+        opts.method,
+        opts.dt,
+        &state.q,
+        &state.qd,
+        d1.acceleration.qdd,
+        |_, q, qd| {
+            let d = at(&q, &qd)?;
+            derivatives[k] = Some(d);
+            k += 1;
+            Ok::<_, DynamicsError>(d.acceleration.qdd)
+        },
+    )?;
+    Ok((Stages { derivatives }, next))
 }
 
 /// Pushes tangents through the step's stages (before projection).
@@ -258,10 +253,8 @@ where
     L: LegModel<NQ, NC, NU>,
     T: Real,
 {
-    let stages = stages::<L, T, NQ, NC, NU>(params, state, u, opts)?;
-    let mut next = *state;
-    let mut held = |_: T, _: &State<T, NQ>| *u;
-    step::<L, T, NQ, NC, NU>(params, &mut next, T::zero(), &mut held, opts)?;
+    let (stages, mut next) = stages::<L, T, NQ, NC, NU>(params, state, u, opts)?;
+    project_onto_closures::<L, T, NQ, NC, NU>(params, &mut next, opts)?;
     let zero_q = SMatrix::<T, NQ, NQ>::zeros();
     let eye = SMatrix::<T, NQ, NQ>::identity();
     let (mut q_q, mut qd_q) = propagate(

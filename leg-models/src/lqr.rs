@@ -158,6 +158,8 @@ pub struct ManifoldLqr<
     pub torque_limit: SVector<T, NU>,
     /// The last reference pose lifted to joints: the next lift's guess.
     guess: SVector<T, NQ>,
+    /// The last reference pose and its holding torques.
+    hold: Option<(SVector<T, M>, SVector<T, NU>)>,
     model: PhantomData<L>,
 }
 
@@ -203,6 +205,7 @@ where
             reference,
             torque_limit,
             guess: *pose,
+            hold: None,
             model: PhantomData,
         })
     }
@@ -228,16 +231,22 @@ where
             return Err(ControlError::NonFinite);
         }
         let target = self.reference.sample(t);
-        let mut chart = self.chart;
-        chart.origin = self.guess;
-        let lifted = chart.lift::<L, NC, NU>(
-            &self.params,
-            &target.position,
-            &SVector::zeros(),
-            &Tolerance::default(),
-        )?;
-        self.guess = lifted.q;
-        let u_hold = chart.holding_torque::<L, NC, NU>(&self.params, &lifted.q)?;
+        // The feedforward depends on the reference pose only: computed again (a lift and a
+        // solve) only when that pose moves, not at every call of a held pose.
+        if self.hold.map(|(pose, _)| pose) != Some(target.position) {
+            let mut chart = self.chart;
+            chart.origin = self.guess;
+            let lifted = chart.lift::<L, NC, NU>(
+                &self.params,
+                &target.position,
+                &SVector::zeros(),
+                &Tolerance::default(),
+            )?;
+            self.guess = lifted.q;
+            let u = chart.holding_torque::<L, NC, NU>(&self.params, &lifted.q)?;
+            self.hold = Some((target.position, u));
+        }
+        let u_hold = self.hold.map_or(SVector::zeros(), |(_, u)| u);
         let (theta, theta_dot) = self.chart.coordinates_of(state);
         let mut error = SVector::<T, NX>::zeros();
         for k in 0..M {

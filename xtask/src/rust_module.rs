@@ -16,6 +16,8 @@ pub struct Term {
     /// `(name, kind, rows, cols)`.
     pub outputs: Vec<(&'static str, OutputKind, usize, usize)>,
     pub doc: &'static str,
+    /// The runtime struct several outputs are returned in (`None`: a tuple).
+    pub wrap: Option<&'static str>,
 }
 
 /// The terms every model has, in file order, for `nq` joints, `nc` closure rows and `nk`
@@ -38,6 +40,11 @@ pub fn terms(nq: usize, nc: usize, nk: usize) -> Vec<Term> {
         inputs,
         outputs,
         doc,
+        wrap: None,
+    };
+    let wrapped = |wrap, term: Term| Term {
+        wrap: Some(wrap),
+        ..term
     };
     let m = ("mass_matrix", Matrix, nq, nq);
     let n = ("bias_forces", Vector, nq, 1);
@@ -142,11 +149,14 @@ pub fn terms(nq: usize, nc: usize, nk: usize) -> Vec<Term> {
             vec![("contact_bias", Vector, nk, 1)],
             "`J̇_c(q, q̇) q̇`.",
         ),
-        t(
-            "dynamics_terms",
-            QQ,
-            vec![m, n, j, b],
-            "`M`, `N`, `J` and `J̇ q̇` together, sharing subexpressions.",
+        wrapped(
+            "DynamicsTerms",
+            t(
+                "dynamics_terms",
+                QQ,
+                vec![m, n, j, b],
+                "`M`, `N`, `J` and `J̇ q̇` together, sharing subexpressions.",
+            ),
         ),
         t(
             "mass_matrix_derivative",
@@ -163,31 +173,40 @@ pub fn terms(nq: usize, nc: usize, nk: usize) -> Vec<Term> {
             ],
             "`∂N/∂q` and `∂N/∂q̇`.",
         ),
-        t(
-            "constraint_derivatives",
-            QF,
-            constraint_derivatives(nc),
-            "`∂(Jᵀ f)/∂q`, `∂(J a)/∂q`, `∂(J̇ q̇)/∂q` and `J̇` at the closure forces `f` and the\n\
-             accelerations `a`.",
+        wrapped(
+            "ConstraintDerivatives",
+            t(
+                "constraint_derivatives",
+                QF,
+                constraint_derivatives(nc),
+                "`∂(Jᵀ f)/∂q`, `∂(J a)/∂q`, `∂(J̇ q̇)/∂q` and `J̇` at the closure forces `f` and the\n\
+                 accelerations `a`.",
+            ),
         ),
-        t(
-            "contact_derivatives",
-            &["q", "qd", "a", "lambda", "p"],
-            constraint_derivatives(nk),
-            "`∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`\n\
-             (base frame) and the accelerations `a`.",
+        wrapped(
+            "ConstraintDerivatives",
+            t(
+                "contact_derivatives",
+                &["q", "qd", "a", "lambda", "p"],
+                constraint_derivatives(nk),
+                "`∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`\n\
+                 (base frame) and the accelerations `a`.",
+            ),
         ),
-        t(
-            "dynamics_derivatives",
-            QF,
-            vec![
-                ("dynamics_q", Matrix, nq, nq),
-                ("dynamics_qd", Matrix, nq, nq),
-                ("constraint_q", Matrix, nc, nq),
-                ("jacobian_rate", Matrix, nc, nq),
-            ],
-            "`∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing\n\
-             subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).",
+        wrapped(
+            "DynamicsDerivatives",
+            t(
+                "dynamics_derivatives",
+                QF,
+                vec![
+                    ("dynamics_q", Matrix, nq, nq),
+                    ("dynamics_qd", Matrix, nq, nq),
+                    ("constraint_q", Matrix, nc, nq),
+                    ("jacobian_rate", Matrix, nc, nq),
+                ],
+                "`∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing\n\
+                 subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).",
+            ),
         ),
     ]
 }
@@ -410,9 +429,9 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     for (f, t) in hoisted.programs.iter().zip(terms(nq, nc, nk)) {
         functions.push(codegen::emit_function(f, t.doc)?);
         if f.name.starts_with("contact_") {
-            contact_methods.push(trait_method(f, nq, nc));
+            contact_methods.push(trait_method(f, nq, t.wrap));
         } else {
-            methods.push(trait_method(f, nq, nc));
+            methods.push(trait_method(f, nq, t.wrap));
         }
     }
 
@@ -562,9 +581,11 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     codegen::format_file(&[header(ir)], tokens)
 }
 
-fn trait_method(f: &Program, nq: usize, nc: usize) -> TokenStream {
+/// The trait method that forwards to the generated function `f`. One output is returned
+/// as it is; several are returned in the runtime's struct `wrap` (fields named as the
+/// outputs, sizes `NQ` and the rows of the last output), or as a tuple without one.
+fn trait_method(f: &Program, nq: usize, wrap: Option<&str>) -> TokenStream {
     let name = format_ident!("{}", f.name);
-    let (lq, lc) = (lit(nq), lit(nc));
     let args: Vec<_> = f
         .inputs
         .iter()
@@ -583,48 +604,44 @@ fn trait_method(f: &Program, nq: usize, nc: usize) -> TokenStream {
         .iter()
         .map(|i| format_ident!("{}", i.name))
         .collect();
-    if f.name == "dynamics_terms" {
-        return quote! {
-            fn #name<T: Arithmetic>(#(#args),*) -> DynamicsTerms<T, #lq, #lc> {
-                let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = #name(#(#pass),*);
-                DynamicsTerms { mass_matrix, bias_forces, constraint_jacobian, constraint_bias }
-            }
-        };
-    }
-    if f.name == "dynamics_derivatives" {
-        return quote! {
-            fn #name<T: Arithmetic>(#(#args),*) -> DynamicsDerivatives<T, #lq, #lc> {
-                let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = #name(#(#pass),*);
-                DynamicsDerivatives { dynamics_q, dynamics_qd, constraint_q, jacobian_rate }
-            }
-        };
-    }
-    if f.name == "constraint_derivatives" || f.name == "contact_derivatives" {
-        let rows = lit(f.outputs[1].rows);
-        return quote! {
-            fn #name<T: Arithmetic>(#(#args),*) -> ConstraintDerivatives<T, #lq, #rows> {
-                let (force_q, jacobian_q, bias_q, jacobian_rate) = #name(#(#pass),*);
-                ConstraintDerivatives { force_q, jacobian_q, bias_q, jacobian_rate }
-            }
-        };
-    }
-    if f.name == "bias_forces_derivatives" {
-        return quote! {
-            fn #name<T: Arithmetic>(#(#args),*) -> (SMatrix<T, #lq, #lq>, SMatrix<T, #lq, #lq>) {
-                #name(#(#pass),*)
-            }
-        };
-    }
-    let o = &f.outputs[0];
-    let (r, c) = (lit(o.rows), lit(o.cols));
-    let ret = match o.kind {
-        OutputKind::Scalar => quote!(T),
-        OutputKind::Vector => quote!(SVector<T, #r>),
-        OutputKind::Matrix => quote!(SMatrix<T, #r, #c>),
+    let ty = |o: &codegen::ir::Output| {
+        let (r, c) = (lit(o.rows), lit(o.cols));
+        match o.kind {
+            OutputKind::Scalar => quote!(T),
+            OutputKind::Vector => quote!(SVector<T, #r>),
+            OutputKind::Matrix => quote!(SMatrix<T, #r, #c>),
+        }
     };
-    quote! {
-        fn #name<T: Arithmetic>(#(#args),*) -> #ret {
-            #name(#(#pass),*)
+    match (f.outputs.as_slice(), wrap) {
+        ([one], _) => {
+            let ret = ty(one);
+            quote! {
+                fn #name<T: Arithmetic>(#(#args),*) -> #ret {
+                    #name(#(#pass),*)
+                }
+            }
+        }
+        (outputs, Some(wrap)) => {
+            let st = format_ident!("{}", wrap);
+            let (lq, rows) = (lit(nq), lit(outputs.last().map_or(0, |o| o.rows)));
+            let fields: Vec<_> = outputs
+                .iter()
+                .map(|o| format_ident!("{}", o.name))
+                .collect();
+            quote! {
+                fn #name<T: Arithmetic>(#(#args),*) -> #st<T, #lq, #rows> {
+                    let (#(#fields),*) = #name(#(#pass),*);
+                    #st { #(#fields),* }
+                }
+            }
+        }
+        (outputs, None) => {
+            let types = outputs.iter().map(ty);
+            quote! {
+                fn #name<T: Arithmetic>(#(#args),*) -> (#(#types),*) {
+                    #name(#(#pass),*)
+                }
+            }
         }
     }
 }
