@@ -24,6 +24,14 @@ pub const NK: usize = 2;
 /// The `atrias_hopper` leg: 9 joints, 1 closure(s), actuated joints ["thigh_motor", "four_bar_motor"]. Generated from `leg-models/specs/atrias_hopper.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct AtriasHopper;
+/// This leg with its parameters in `f64`, the runtime's entry point:
+/// `Leg::default()` holds the spec's values. Code generic over the scalar writes
+/// `leg_models::Leg<Model, T, NQ, NC, NU, NK>` with this module's sizes.
+pub type Leg = leg_models::Leg<AtriasHopper, f64, NQ, NC, NU, NK>;
+/// This leg computing in `f32` (e.g. on a microcontroller).
+pub type LegF32 = leg_models::Leg<AtriasHopper, f32, NQ, NC, NU, NK>;
+/// The chart of the constraint manifold: 7 coordinates (the mobility), 14 states.
+impl leg_models::ChartSize<7, 14> for AtriasHopper {}
 /// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParamValues<T> {

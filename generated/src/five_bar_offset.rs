@@ -24,6 +24,14 @@ pub const NK: usize = 0;
 /// The `five_bar_offset` leg: 4 joints, 1 closure(s), actuated joints ["upper_a", "upper_b"]. Generated from `leg-models/specs/five_bar_offset.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct FiveBarOffset;
+/// This leg with its parameters in `f64`, the runtime's entry point:
+/// `Leg::default()` holds the spec's values. Code generic over the scalar writes
+/// `leg_models::Leg<Model, T, NQ, NC, NU, NK>` with this module's sizes.
+pub type Leg = leg_models::Leg<FiveBarOffset, f64, NQ, NC, NU, NK>;
+/// This leg computing in `f32` (e.g. on a microcontroller).
+pub type LegF32 = leg_models::Leg<FiveBarOffset, f32, NQ, NC, NU, NK>;
+/// The chart of the constraint manifold: 2 coordinates (the mobility), 4 states.
+impl leg_models::ChartSize<2, 4> for FiveBarOffset {}
 /// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParamValues<T> {

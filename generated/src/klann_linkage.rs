@@ -24,6 +24,14 @@ pub const NK: usize = 0;
 /// The `klann_linkage` leg: 7 joints, 3 closure(s), actuated joints ["crank"]. Generated from `leg-models/specs/klann_linkage.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct KlannLinkage;
+/// This leg with its parameters in `f64`, the runtime's entry point:
+/// `Leg::default()` holds the spec's values. Code generic over the scalar writes
+/// `leg_models::Leg<Model, T, NQ, NC, NU, NK>` with this module's sizes.
+pub type Leg = leg_models::Leg<KlannLinkage, f64, NQ, NC, NU, NK>;
+/// This leg computing in `f32` (e.g. on a microcontroller).
+pub type LegF32 = leg_models::Leg<KlannLinkage, f32, NQ, NC, NU, NK>;
+/// The chart of the constraint manifold: 1 coordinates (the mobility), 2 states.
+impl leg_models::ChartSize<1, 2> for KlannLinkage {}
 /// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParamValues<T> {

@@ -24,6 +24,14 @@ pub const NK: usize = 2;
 /// The `knee_runner` leg: 5 joints, 0 closure(s), actuated joints ["thigh", "shin"]. Generated from `leg-models/specs/knee_runner.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct KneeRunner;
+/// This leg with its parameters in `f64`, the runtime's entry point:
+/// `Leg::default()` holds the spec's values. Code generic over the scalar writes
+/// `leg_models::Leg<Model, T, NQ, NC, NU, NK>` with this module's sizes.
+pub type Leg = leg_models::Leg<KneeRunner, f64, NQ, NC, NU, NK>;
+/// This leg computing in `f32` (e.g. on a microcontroller).
+pub type LegF32 = leg_models::Leg<KneeRunner, f32, NQ, NC, NU, NK>;
+/// The chart of the constraint manifold: 5 coordinates (the mobility), 10 states.
+impl leg_models::ChartSize<5, 10> for KneeRunner {}
 /// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParamValues<T> {

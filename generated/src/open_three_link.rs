@@ -24,6 +24,14 @@ pub const NK: usize = 0;
 /// The `open_three_link` leg: 3 joints, 0 closure(s), actuated joints ["thigh", "shin"]. Generated from `leg-models/specs/open_three_link.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct OpenThreeLink;
+/// This leg with its parameters in `f64`, the runtime's entry point:
+/// `Leg::default()` holds the spec's values. Code generic over the scalar writes
+/// `leg_models::Leg<Model, T, NQ, NC, NU, NK>` with this module's sizes.
+pub type Leg = leg_models::Leg<OpenThreeLink, f64, NQ, NC, NU, NK>;
+/// This leg computing in `f32` (e.g. on a microcontroller).
+pub type LegF32 = leg_models::Leg<OpenThreeLink, f32, NQ, NC, NU, NK>;
+/// The chart of the constraint manifold: 3 coordinates (the mobility), 6 states.
+impl leg_models::ChartSize<3, 6> for OpenThreeLink {}
 /// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParamValues<T> {

@@ -29,6 +29,7 @@ pub mod dynamics;
 pub mod hop;
 pub mod hybrid;
 pub mod integrate;
+pub mod leg;
 pub mod linalg;
 pub mod linearize;
 pub mod lqr;
@@ -40,6 +41,7 @@ pub mod simulate;
 pub mod structure;
 mod trig;
 
+pub use leg::{ChartSize, Leg, UnknownParameter};
 pub use model::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms, JointKind,
     LegModel, Parameters, Real, Spring,

@@ -391,6 +391,12 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     let offset = codegen::f64_literal(info.ground_offset);
     let redundant = lit(info.redundant_rows.len());
     let mobility = lit(info.mobility);
+    let chart_states = lit(2 * info.mobility);
+    let chart_doc = format!(
+        " The chart of the constraint manifold: {} coordinates (the mobility), {} states.",
+        info.mobility,
+        2 * info.mobility
+    );
 
     let mut fields = Vec::new();
     let mut defaults = Vec::new();
@@ -475,6 +481,17 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         #[doc = #doc]
         #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
         pub struct #ty;
+
+        /// This leg with its parameters in `f64`, the runtime's entry point:
+        /// `Leg::default()` holds the spec's values. Code generic over the scalar writes
+        /// `leg_models::Leg<Model, T, NQ, NC, NU, NK>` with this module's sizes.
+        pub type Leg = leg_models::Leg<#ty, f64, NQ, NC, NU, NK>;
+
+        /// This leg computing in `f32` (e.g. on a microcontroller).
+        pub type LegF32 = leg_models::Leg<#ty, f32, NQ, NC, NU, NK>;
+
+        #[doc = #chart_doc]
+        impl leg_models::ChartSize<#mobility, #chart_states> for #ty {}
 
         /// The physical quantities of the spec; `Default` holds its values.
         #[derive(Clone, Copy, Debug, PartialEq)]

@@ -1,0 +1,743 @@
+//! [`Leg`]: one leg with its parameters and settings, the runtime's entry point.
+//!
+//! Every operation of the runtime is a method here, so the leg's sizes (`NQ` joints,
+//! `NC` closure rows, `NU` motors, `NK` contact rows, and the chart's `M`, `NX`) come
+//! from its type and are never written at a call. Each generated module names its leg
+//! (`generated::minitaur::Leg`, an alias of `Leg<Minitaur, f64, 4, 2, 2, 0>`), so a
+//! change of leg is a change of one `use`:
+//!
+//! ```
+//! use generated::minitaur::Leg;
+//! use leg_models::nalgebra::Vector2;
+//!
+//! let leg = Leg::default(); // the spec's parameters
+//! let q = leg.assemble(&Vector2::new(-0.8, -2.3), &leg.home()).unwrap();
+//! let qd = leg.consistent_velocity(&q, &Vector2::new(1.0, -1.0)).unwrap();
+//! let acc = leg.forward_dynamics(&q, &qd, &Vector2::new(0.1, -0.1)).unwrap();
+//! assert!(acc.qdd.iter().all(|x| x.is_finite()));
+//! ```
+//!
+//! The free functions of the other modules ([`crate::dynamics::forward_dynamics`], …)
+//! remain: the methods call them, and generic code over many legs can use either.
+
+use core::fmt;
+
+use nalgebra::{SMatrix, SVector};
+
+use crate::assembly::{self, AssemblyError, Tolerance};
+use crate::batch::{self, BatchAcceleration, BatchError};
+use crate::contact::{self, ContactSolution, Ground, Impact, ImpactError, Modes};
+use crate::control::{
+    self, ActuatedDynamics, ControlError, FootFeedbackLinearization, FootPdGravity, Gains,
+    JointFeedbackLinearization, PdGravity,
+};
+use crate::derivatives::{
+    self, ContactDynamicsDerivatives, ForwardDynamicsDerivatives, ReductionDerivatives,
+};
+use crate::dynamics::{self, Acceleration, Baumgarte, DynamicsError};
+use crate::hybrid::{HybridSimulator, HybridState};
+use crate::integrate::{self, State, StepError, StepOptions, StepReport, TorqueSource};
+use crate::linearize::{
+    self, ChartTangent, LinearizationError, ManifoldChart, ManifoldLinearization, StepJacobian,
+};
+use crate::lqr::ManifoldLqr;
+use crate::reference::Reference;
+use crate::simd::F64x4;
+use crate::structure::Structure;
+#[cfg(doc)]
+use crate::LegModel;
+use crate::{ContactModel, DynamicsTerms, Parameters, Real};
+
+/// The size of a leg's constraint manifold chart: `M` coordinates (its mobility,
+/// [`LegModel::MOBILITY`]) and `NX = 2 M` states (coordinates and rates). Generated models
+/// implement it, which lets [`Leg::chart`] and [`Leg::manifold_lqr`] infer both sizes;
+/// stable Rust cannot compute `2 · MOBILITY` in a signature.
+pub trait ChartSize<const M: usize, const NX: usize> {}
+
+/// A parameter name the leg does not have.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct UnknownParameter<'a> {
+    /// The name asked for.
+    pub name: &'a str,
+    /// The leg's name ([`LegModel::NAME`]).
+    pub leg: &'static str,
+}
+
+impl fmt::Display for UnknownParameter<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "leg `{}` has no parameter `{}` (its names: the model's `Params::NAMES`)",
+            self.leg, self.name
+        )
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for UnknownParameter<'_> {}
+
+/// One leg of model `L` in scalar `T`: its parameters, the tolerance of its assembly
+/// solvers and the Baumgarte terms of its forward dynamics (none by default). Cheap to
+/// copy; every method is allocation-free except those returning a recording simulator's
+/// run.
+///
+/// Write it through the generated alias (`generated::minitaur::Leg`, `Leg<f32>` for
+/// `f32`); the sizes here are the model's and must match its [`ContactModel`] impl.
+pub struct Leg<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize = 0>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+    T: Real,
+{
+    params: L::Params<T>,
+    tolerance: Tolerance<T>,
+    baumgarte: Option<Baumgarte<T>>,
+}
+
+impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize> Clone
+    for Leg<L, T, NQ, NC, NU, NK>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+    T: Real,
+{
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize> Copy
+    for Leg<L, T, NQ, NC, NU, NK>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+    T: Real,
+{
+}
+
+impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize> fmt::Debug
+    for Leg<L, T, NQ, NC, NU, NK>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+    T: Real,
+{
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Leg")
+            .field("model", &L::NAME)
+            .field("params", &self.params)
+            .field("tolerance", &self.tolerance)
+            .field("baumgarte", &self.baumgarte)
+            .finish()
+    }
+}
+
+impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize> Default
+    for Leg<L, T, NQ, NC, NU, NK>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+    T: Real,
+{
+    /// The spec's parameters.
+    fn default() -> Self {
+        Self::new(L::Params::<T>::default())
+    }
+}
+
+impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
+    Leg<L, T, NQ, NC, NU, NK>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+    T: Real,
+{
+    // ---- construction and settings ----
+
+    /// The leg with these parameters, the default [`Tolerance`] and no Baumgarte terms.
+    pub fn new(params: L::Params<T>) -> Self {
+        Leg {
+            params,
+            tolerance: Tolerance::default(),
+            baumgarte: None,
+        }
+    }
+
+    /// The same leg with the assembly solvers stopping at `tolerance`.
+    pub fn with_tolerance(mut self, tolerance: Tolerance<T>) -> Self {
+        self.tolerance = tolerance;
+        self
+    }
+
+    /// The same leg with Baumgarte terms in its forward dynamics and their derivatives
+    /// (`J q̈ = −J̇ q̇ − 2α J q̇ − β² φ`).
+    pub fn with_baumgarte(mut self, alpha: T, beta: T) -> Self {
+        self.baumgarte = Some(Baumgarte { alpha, beta });
+        self
+    }
+
+    /// The same leg with one parameter changed by name (see [`Leg::set_parameter`]).
+    pub fn with_parameter(mut self, name: &str, value: T) -> Result<Self, UnknownParameter<'_>> {
+        self.set_parameter(name, value)?;
+        Ok(self)
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &L::Params<T> {
+        &self.params
+    }
+
+    /// The parameters, to change (`leg.params_mut().update(|v| v.gravity_y = -1.62)`).
+    pub fn params_mut(&mut self) -> &mut L::Params<T> {
+        &mut self.params
+    }
+
+    /// The index of the parameter named `name` (a field of the spec's `ParamValues`) in
+    /// [`Parameters::NAMES`], for [`Parameters::get`] and [`Parameters::set`].
+    pub fn parameter_index<'a>(&self, name: &'a str) -> Result<usize, UnknownParameter<'a>> {
+        L::Params::<T>::NAMES
+            .iter()
+            .position(|n| *n == name)
+            .ok_or(UnknownParameter { name, leg: L::NAME })
+    }
+
+    /// The parameter named `name`.
+    pub fn parameter<'a>(&self, name: &'a str) -> Result<T, UnknownParameter<'a>> {
+        let i = self.parameter_index(name)?;
+        self.params
+            .get(i)
+            .ok_or(UnknownParameter { name, leg: L::NAME })
+    }
+
+    /// Sets the parameter named `name` (and prepares the parameter-only quantities once);
+    /// an unknown name changes nothing.
+    pub fn set_parameter<'a>(
+        &mut self,
+        name: &'a str,
+        value: T,
+    ) -> Result<(), UnknownParameter<'a>> {
+        let i = self.parameter_index(name)?;
+        self.params.set(i, value);
+        Ok(())
+    }
+
+    /// The assembly solvers' tolerance.
+    pub fn tolerance(&self) -> &Tolerance<T> {
+        &self.tolerance
+    }
+
+    /// The Baumgarte terms of the forward dynamics, if any.
+    pub fn baumgarte(&self) -> Option<Baumgarte<T>> {
+        self.baumgarte
+    }
+
+    /// What the leg is (motors, mobility, closures): which methods apply to it.
+    pub fn structure(&self) -> Structure {
+        Structure::of::<L, NQ, NC, NU>()
+    }
+
+    /// The spec's home pose (rad, m for prismatic joints), as written: the default guess
+    /// of assembly. [`Leg::assembled_home`] puts it on the closures.
+    pub fn home(&self) -> SVector<T, NQ> {
+        SVector::from_fn(|i, _| T::lit(L::HOME[i]))
+    }
+
+    /// The home pose projected onto the closures (nearest assembled pose).
+    pub fn assembled_home(&self) -> Result<SVector<T, NQ>, AssemblyError> {
+        let mut q = self.home();
+        self.project_position(&mut q)?;
+        Ok(q)
+    }
+
+    /// The motor angles of joint angles `q` (`q` at [`LegModel::ACTUATED`]).
+    pub fn motor_angles(&self, q: &SVector<T, NQ>) -> SVector<T, NU> {
+        SVector::from_fn(|k, _| q[L::ACTUATED[k]])
+    }
+
+    // ---- generated terms ----
+
+    /// `M`, `N`, `J` and `J̇ q̇` together ([`LegModel::dynamics_terms`]).
+    pub fn dynamics_terms(
+        &self,
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+    ) -> DynamicsTerms<T, NQ, NC> {
+        L::dynamics_terms(q, qd, &self.params)
+    }
+
+    /// `M(q)` with reflected rotor inertia.
+    pub fn mass_matrix(&self, q: &SVector<T, NQ>) -> SMatrix<T, NQ, NQ> {
+        L::mass_matrix(q, &self.params)
+    }
+
+    /// `N(q, q̇) = C q̇ + G`.
+    pub fn bias_forces(&self, q: &SVector<T, NQ>, qd: &SVector<T, NQ>) -> SVector<T, NQ> {
+        L::bias_forces(q, qd, &self.params)
+    }
+
+    /// The closure residual `φ(q)` (zero on an assembled leg).
+    pub fn closure_residual(&self, q: &SVector<T, NQ>) -> SVector<T, NC> {
+        L::closure_residual(q, &self.params)
+    }
+
+    /// `J(q) = ∂φ/∂q`.
+    pub fn constraint_jacobian(&self, q: &SVector<T, NQ>) -> SMatrix<T, NC, NQ> {
+        L::constraint_jacobian(q, &self.params)
+    }
+
+    /// The foot point in the base frame.
+    pub fn foot_position(&self, q: &SVector<T, NQ>) -> SVector<T, 2> {
+        L::foot_position(q, &self.params)
+    }
+
+    /// `J_f(q) = ∂(foot)/∂q`.
+    pub fn foot_jacobian(&self, q: &SVector<T, NQ>) -> SMatrix<T, 2, NQ> {
+        L::foot_jacobian(q, &self.params)
+    }
+
+    /// The contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
+    pub fn contact_positions(&self, q: &SVector<T, NQ>) -> SVector<T, NK> {
+        L::contact_positions(q, &self.params)
+    }
+
+    /// Kinetic plus potential energy, spring energy included ([`integrate::energy`]).
+    pub fn energy(&self, state: &State<T, NQ>) -> T {
+        integrate::energy::<L, T, NQ, NC, NU>(&self.params, state)
+    }
+
+    /// The leg's size at `q` (m), the scale of its residual tolerance.
+    pub fn leg_size(&self, q: &SVector<T, NQ>) -> T {
+        assembly::leg_size::<L, T, NQ, NC, NU>(&self.params, q)
+    }
+
+    // ---- assembly ----
+
+    /// The closed pose with motor angles `theta`, Newton from `guess` (which picks the
+    /// assembly mode; [`Leg::home`] picks the spec's).
+    pub fn assemble(
+        &self,
+        theta: &SVector<T, NU>,
+        guess: &SVector<T, NQ>,
+    ) -> Result<SVector<T, NQ>, AssemblyError> {
+        assembly::assemble::<L, T, NQ, NC, NU>(&self.params, theta, guess, &self.tolerance)
+    }
+
+    /// The closed pose at motor angles `theta` reached by continuation from the assembled
+    /// pose `from` in steps of at most `max_step` rad: it keeps `from`'s branch.
+    pub fn assemble_along(
+        &self,
+        from: &SVector<T, NQ>,
+        theta: &SVector<T, NU>,
+        max_step: T,
+    ) -> Result<SVector<T, NQ>, AssemblyError> {
+        assembly::assemble_along::<L, T, NQ, NC, NU>(
+            &self.params,
+            from,
+            theta,
+            max_step,
+            &self.tolerance,
+        )
+    }
+
+    /// The closed pose putting the foot at `foot` (base frame), from `guess`.
+    pub fn foot_inverse(
+        &self,
+        foot: &SVector<T, 2>,
+        guess: &SVector<T, NQ>,
+    ) -> Result<SVector<T, NQ>, AssemblyError> {
+        assembly::foot_inverse::<L, T, NQ, NC, NU>(&self.params, foot, guess, &self.tolerance)
+    }
+
+    /// The joint rates of motor rates `theta_dot` at the assembled pose `q`.
+    pub fn consistent_velocity(
+        &self,
+        q: &SVector<T, NQ>,
+        theta_dot: &SVector<T, NU>,
+    ) -> Result<SVector<T, NQ>, AssemblyError> {
+        assembly::consistent_velocity::<L, T, NQ, NC, NU>(&self.params, q, theta_dot)
+    }
+
+    /// Moves `q` to the nearest pose on the closures.
+    pub fn project_position(&self, q: &mut SVector<T, NQ>) -> Result<(), AssemblyError> {
+        assembly::project_position::<L, T, NQ, NC, NU>(&self.params, q, &self.tolerance)
+    }
+
+    /// Removes from `qd` its component off the closures' tangent at `q`.
+    pub fn project_velocity(
+        &self,
+        q: &SVector<T, NQ>,
+        qd: &mut SVector<T, NQ>,
+    ) -> Result<(), AssemblyError> {
+        assembly::project_velocity::<L, T, NQ, NC, NU>(&self.params, q, qd)
+    }
+
+    // ---- dynamics ----
+
+    /// `q̈` and the closure forces `F` under motor torques `u` (the KKT solve,
+    /// [`dynamics::forward_dynamics`]), with the leg's Baumgarte terms.
+    pub fn forward_dynamics(
+        &self,
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        u: &SVector<T, NU>,
+    ) -> Result<Acceleration<T, NQ, NC>, DynamicsError> {
+        dynamics::forward_dynamics::<L, T, NQ, NC, NU>(&self.params, q, qd, u, self.baumgarte)
+    }
+
+    /// [`Leg::forward_dynamics`] from terms already evaluated at `(q, q̇)`.
+    pub fn forward_dynamics_from_terms(
+        &self,
+        terms: &DynamicsTerms<T, NQ, NC>,
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        u: &SVector<T, NU>,
+    ) -> Result<Acceleration<T, NQ, NC>, DynamicsError> {
+        dynamics::forward_dynamics_from_terms::<L, T, NQ, NC, NU>(
+            &self.params,
+            terms,
+            q,
+            qd,
+            u,
+            self.baumgarte,
+        )
+    }
+
+    /// The forward dynamics and its exact derivatives by `q`, `q̇` and `u`
+    /// ([`derivatives::forward_dynamics_derivatives`]).
+    pub fn forward_dynamics_derivatives(
+        &self,
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        u: &SVector<T, NU>,
+    ) -> Result<ForwardDynamicsDerivatives<T, NQ, NC, NU>, DynamicsError> {
+        derivatives::forward_dynamics_derivatives::<L, T, NQ, NC, NU>(
+            &self.params,
+            q,
+            qd,
+            u,
+            self.baumgarte,
+        )
+    }
+
+    /// The generalized force of motor torques `u` (`B u`).
+    pub fn actuation(&self, u: &SVector<T, NU>) -> SVector<T, NQ> {
+        dynamics::actuation::<L, T, NQ, NC, NU>(u)
+    }
+
+    /// The dynamics reduced to the motor angles, `Ã θ̈ = b̃ + u` (Schur complement of the
+    /// KKT system, [`control::actuated_reduction`]).
+    pub fn actuated_reduction(
+        &self,
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+    ) -> Result<ActuatedDynamics<T, NU>, ControlError> {
+        let terms = self.dynamics_terms(q, qd);
+        control::actuated_reduction::<L, T, NQ, NC, NU>(&self.params, &terms, qd)
+    }
+
+    /// The same reduction in its null-space form `Ã = Gᵀ M G`.
+    pub fn actuated_reduction_null_space(
+        &self,
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+    ) -> Result<ActuatedDynamics<T, NU>, ControlError> {
+        let terms = self.dynamics_terms(q, qd);
+        control::actuated_reduction_null_space::<L, T, NQ, NC, NU>(&self.params, &terms, qd)
+    }
+
+    /// The torque `u = Ã v − b̃` giving motor accelerations `v`, and its derivatives by
+    /// `q` and `q̇` ([`derivatives::reduction_derivatives`]).
+    pub fn reduction_derivatives(
+        &self,
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        v: &SVector<T, NU>,
+    ) -> Result<ReductionDerivatives<T, NQ, NU>, ControlError> {
+        derivatives::reduction_derivatives::<L, T, NQ, NC, NU>(&self.params, q, qd, v)
+    }
+
+    /// The inertia each motor feels at `q` (the diagonal of `Ã`).
+    pub fn joint_inertias(&self, q: &SVector<T, NQ>) -> Result<SVector<T, NU>, ControlError> {
+        control::joint_inertias::<L, T, NQ, NC, NU>(&self.params, q)
+    }
+
+    /// The foot's apparent mass along x and y at `q`.
+    pub fn foot_inertias(&self, q: &SVector<T, NQ>) -> Result<SVector<T, 2>, ControlError> {
+        control::foot_inertias::<L, T, NQ, NC, NU>(&self.params, q)
+    }
+
+    // ---- contact ----
+
+    /// The spec's ground.
+    pub fn ground(&self) -> Ground<T> {
+        Ground::of::<L, NQ, NC, NU, NK>()
+    }
+
+    /// The spec's friction coefficient per contact row.
+    pub fn friction(&self) -> SVector<T, NK> {
+        contact::spec_friction::<L, T, NQ, NC, NU, NK>()
+    }
+
+    /// The forward dynamics with the contacts in `modes` held (sticking at `anchors`) or
+    /// sliding, on the spec's ground with its friction
+    /// ([`contact::forward_dynamics_with_contacts`]).
+    pub fn forward_dynamics_with_contacts(
+        &self,
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        u: &SVector<T, NU>,
+        modes: &Modes<NK>,
+        anchors: &SVector<T, NK>,
+    ) -> Result<ContactSolution<T, NQ, NC, NK>, DynamicsError> {
+        contact::forward_dynamics_with_contacts::<L, T, NQ, NC, NU, NK>(
+            &self.params,
+            q,
+            qd,
+            u,
+            modes,
+            anchors,
+            &self.ground(),
+            &self.friction(),
+            self.baumgarte,
+        )
+    }
+
+    /// [`Leg::forward_dynamics_with_contacts`] and its derivatives
+    /// ([`derivatives::contact_dynamics_derivatives`]).
+    pub fn contact_dynamics_derivatives(
+        &self,
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        u: &SVector<T, NU>,
+        modes: &Modes<NK>,
+        anchors: &SVector<T, NK>,
+    ) -> Result<ContactDynamicsDerivatives<T, NQ, NC, NU, NK>, DynamicsError> {
+        derivatives::contact_dynamics_derivatives::<L, T, NQ, NC, NU, NK>(
+            &self.params,
+            q,
+            qd,
+            u,
+            modes,
+            anchors,
+            &self.ground(),
+            &self.friction(),
+            self.baumgarte,
+        )
+    }
+
+    /// The plastic impact of the contacts `modes` marks as landing
+    /// ([`contact::impact_map`]); `modes` gets the contacts' modes after it.
+    pub fn impact_map(
+        &self,
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        modes: &mut Modes<NK>,
+    ) -> Result<Impact<T, NQ, NC, NK>, ImpactError> {
+        contact::impact_map::<L, T, NQ, NC, NU, NK>(
+            &self.params,
+            q,
+            qd,
+            modes,
+            &self.ground(),
+            &self.friction(),
+        )
+    }
+
+    // ---- time stepping and simulation ----
+
+    /// One step of `opts` from `state` at time `t` under `source`'s torques.
+    pub fn step(
+        &self,
+        state: &mut State<T, NQ>,
+        t: T,
+        source: &mut impl TorqueSource<T, NQ, NU>,
+        opts: &StepOptions<T>,
+    ) -> Result<StepReport<T, NQ, NC, NU>, StepError> {
+        integrate::step::<L, T, NQ, NC, NU>(&self.params, state, t, source, opts)
+    }
+
+    /// A recording simulator of this leg in the air (closures only), stepping by `opts`.
+    #[cfg(feature = "std")]
+    pub fn simulator(&self, opts: StepOptions<T>) -> crate::simulate::Simulator<L, T, NQ, NC, NU> {
+        crate::simulate::Simulator::new(self.params, opts)
+    }
+
+    /// A simulator of this leg on the ground (contacts, impacts, events), RK4 steps of
+    /// `dt` on the spec's ground; its `options` hold the rest.
+    pub fn hybrid_simulator(&self, dt: T) -> HybridSimulator<L, T, NQ, NC, NU, NK> {
+        let mut sim = HybridSimulator::new(self.params, dt);
+        sim.options.baumgarte = self.baumgarte;
+        sim.options.tolerance = self.tolerance;
+        sim
+    }
+
+    /// `torques` as a torque source of this leg: the closure's argument types come from
+    /// the leg, so it needs no annotation (`leg.torque_source(|_t, s| -0.5 * leg.motor_angles(&s.qd))`).
+    pub fn torque_source<F>(&self, torques: F) -> F
+    where
+        F: FnMut(T, &State<T, NQ>) -> SVector<T, NU>,
+    {
+        torques
+    }
+
+    /// `torques` as a torque source of this leg on the ground ([`Leg::torque_source`]
+    /// for a [`HybridSimulator`]).
+    pub fn hybrid_torque_source<F>(&self, torques: F) -> F
+    where
+        F: FnMut(T, &HybridState<T, NQ, NK>) -> SVector<T, NU>,
+    {
+        torques
+    }
+
+    // ---- controllers ----
+
+    /// Feedback linearization tracking `reference` in the motor angles.
+    pub fn joint_feedback_linearization<R: Reference<T, NU>>(
+        &self,
+        gains: Gains<T, NU>,
+        reference: R,
+    ) -> Result<JointFeedbackLinearization<L, T, R, NQ, NC, NU>, ControlError> {
+        JointFeedbackLinearization::new(self.params, gains, reference)
+    }
+
+    /// Feedback linearization tracking `reference` with the foot (two motors that
+    /// determine the leg).
+    pub fn foot_feedback_linearization<R: Reference<T, 2>>(
+        &self,
+        gains: Gains<T, 2>,
+        reference: R,
+    ) -> Result<FootFeedbackLinearization<L, T, R, NQ, NC, NU>, ControlError> {
+        FootFeedbackLinearization::new(self.params, gains, reference)
+    }
+
+    /// PD on the motor angles with gravity compensation (the baseline).
+    pub fn pd_gravity<R: Reference<T, NU>>(
+        &self,
+        gains: Gains<T, NU>,
+        reference: R,
+    ) -> Result<PdGravity<L, T, R, NQ, NC, NU>, ControlError> {
+        PdGravity::new(self.params, gains, reference)
+    }
+
+    /// PD on the foot with gravity compensation (the baseline).
+    pub fn foot_pd_gravity<R: Reference<T, 2>>(
+        &self,
+        gains: Gains<T, 2>,
+        reference: R,
+    ) -> Result<FootPdGravity<L, T, R, NQ, NC, NU>, ControlError> {
+        FootPdGravity::new(self.params, gains, reference)
+    }
+
+    // ---- linearization and LQR ----
+
+    /// One step of `opts` and its Jacobian `(∂x⁺/∂x, ∂x⁺/∂u)` in joint coordinates,
+    /// torques held ([`linearize::linearize_step`]).
+    pub fn linearize_step(
+        &self,
+        state: &State<T, NQ>,
+        u: &SVector<T, NU>,
+        opts: &StepOptions<T>,
+    ) -> Result<(State<T, NQ>, StepJacobian<T, NQ, NU>), LinearizationError> {
+        linearize::linearize_step::<L, T, NQ, NC, NU>(&self.params, state, u, opts)
+    }
+
+    /// Coordinates of the constraint manifold at the assembled pose `q` (the motors
+    /// where they determine the leg, [`ManifoldChart`]).
+    pub fn chart<const M: usize, const NX: usize>(
+        &self,
+        q: &SVector<T, NQ>,
+    ) -> Result<ManifoldChart<T, NQ, M>, LinearizationError>
+    where
+        L: ChartSize<M, NX>,
+    {
+        ManifoldChart::new::<L, NC, NU>(&self.params, q)
+    }
+
+    /// The state on the closures with chart coordinates `theta` and rates `theta_dot`.
+    pub fn lift<const M: usize>(
+        &self,
+        chart: &ManifoldChart<T, NQ, M>,
+        theta: &SVector<T, M>,
+        theta_dot: &SVector<T, M>,
+    ) -> Result<State<T, NQ>, LinearizationError> {
+        chart.lift::<L, NC, NU>(&self.params, theta, theta_dot, &self.tolerance)
+    }
+
+    /// The chart's tangent at `(q, q̇)` ([`ChartTangent`]).
+    pub fn chart_tangent<const M: usize>(
+        &self,
+        chart: &ManifoldChart<T, NQ, M>,
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+    ) -> Result<ChartTangent<T, NQ, M>, LinearizationError> {
+        chart.tangent::<L, NC, NU>(&self.params, q, qd)
+    }
+
+    /// One step of `opts` linearized in the chart's coordinates: the `(A, B)` an MPC or
+    /// an LQR needs.
+    pub fn linearize_on_chart<const M: usize, const NX: usize>(
+        &self,
+        chart: &ManifoldChart<T, NQ, M>,
+        state: &State<T, NQ>,
+        u: &SVector<T, NU>,
+        opts: &StepOptions<T>,
+    ) -> Result<ManifoldLinearization<T, NQ, NX, NU>, LinearizationError>
+    where
+        L: ChartSize<M, NX>,
+    {
+        chart.linearize_step::<L, NC, NU, NX>(&self.params, state, u, opts)
+    }
+
+    /// The torques holding the leg at rest at `q`.
+    pub fn holding_torque<const M: usize>(
+        &self,
+        chart: &ManifoldChart<T, NQ, M>,
+        q: &SVector<T, NQ>,
+    ) -> Result<SVector<T, NU>, LinearizationError> {
+        chart.holding_torque::<L, NC, NU>(&self.params, q)
+    }
+
+    /// A discrete LQR on the manifold about the rest pose `pose`, tracking `reference` in
+    /// the chart's coordinates, torques clipped to `±torque_limit` ([`ManifoldLqr`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn manifold_lqr<R: Reference<T, M>, const M: usize, const NX: usize>(
+        &self,
+        pose: &SVector<T, NQ>,
+        opts: &StepOptions<T>,
+        state_weights: &SMatrix<T, NX, NX>,
+        torque_weights: &SMatrix<T, NU, NU>,
+        reference: R,
+        torque_limit: SVector<T, NU>,
+    ) -> Result<ManifoldLqr<L, T, R, NQ, NC, NU, M, NX>, ControlError>
+    where
+        L: ChartSize<M, NX>,
+    {
+        ManifoldLqr::at_pose(
+            self.params,
+            pose,
+            opts,
+            state_weights,
+            torque_weights,
+            reference,
+            torque_limit,
+        )
+    }
+}
+
+impl<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
+    Leg<L, f64, NQ, NC, NU, NK>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+{
+    /// The parameters on four SIMD lanes, each lane this leg's (set a lane's value with
+    /// [`Parameters::set`] for a sweep).
+    pub fn lanes(&self) -> L::Params<F64x4> {
+        batch::broadcast::<L, NQ, NC, NU>(&self.params)
+    }
+
+    /// The forward dynamics of four states (or four parameter sets, `params`) in one call
+    /// on SIMD lanes ([`batch::forward_dynamics`]; no Baumgarte terms).
+    pub fn forward_dynamics_lanes(
+        &self,
+        params: &L::Params<F64x4>,
+        q: &SVector<F64x4, NQ>,
+        qd: &SVector<F64x4, NQ>,
+        u: &SVector<F64x4, NU>,
+    ) -> Result<BatchAcceleration<NQ, NC>, BatchError> {
+        batch::forward_dynamics::<L, NQ, NC, NU>(params, q, qd, u)
+    }
+}

@@ -1,0 +1,135 @@
+//! The size-free handle `leg_models::Leg` on every generated leg: its settings reach the
+//! algorithms (Baumgarte terms, tolerance, parameters by name), and each method gives what
+//! the free function it stands for gives with the same arguments written out.
+
+use leg_models::assembly::{assemble, Tolerance};
+use leg_models::contact::Modes;
+use leg_models::dynamics::{forward_dynamics, Baumgarte};
+use leg_models::integrate::{State, StepOptions};
+use leg_models::nalgebra::SVector;
+use leg_models::{ContactModel, Leg, Parameters};
+use leg_tests::{random_assembled_state, Rng};
+
+fn check<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>()
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+{
+    let leg = Leg::<L, f64, NQ, NC, NU, NK>::default();
+    assert_eq!(*leg.params(), L::Params::<f64>::default(), "{}", L::NAME);
+    let mut rng = Rng::new(13);
+    let s = random_assembled_state::<L, NQ, NC, NU>(leg.params(), &mut rng, 1.0);
+    let u = SVector::<f64, NU>::from_fn(|i, _| 0.3 - 0.2 * i as f64);
+
+    // Baumgarte terms set on the leg are the ones the KKT solve gets. Off the closures
+    // (a perturbed q) they change the answer, so a dropped setting would show.
+    let off = s.q.add_scalar(1e-3);
+    let b = Baumgarte {
+        alpha: 7.0,
+        beta: 11.0,
+    };
+    let stabilized = leg.with_baumgarte(b.alpha, b.beta);
+    let by_leg = stabilized.forward_dynamics(&off, &s.qd, &u);
+    let by_fn = forward_dynamics::<L, f64, NQ, NC, NU>(leg.params(), &off, &s.qd, &u, Some(b));
+    assert_eq!(by_leg, by_fn, "{}", L::NAME);
+    if NC > 0 {
+        let plain = leg.forward_dynamics(&off, &s.qd, &u).unwrap();
+        assert!(
+            (plain.qdd - by_leg.unwrap().qdd).amax() > 1e-9,
+            "{}: Baumgarte terms had no effect off the closures",
+            L::NAME
+        );
+    }
+    let d = stabilized
+        .forward_dynamics_derivatives(&s.q, &s.qd, &u)
+        .unwrap();
+    assert_eq!(
+        d.acceleration,
+        forward_dynamics::<L, f64, NQ, NC, NU>(leg.params(), &s.q, &s.qd, &u, Some(b)).unwrap(),
+        "{}",
+        L::NAME
+    );
+
+    // A parameter by name is the parameter by index; an unknown one is an error naming it
+    // and changes nothing.
+    let name = L::Params::<f64>::NAMES[0];
+    let mut renamed = leg;
+    renamed.set_parameter(name, 0.5).unwrap();
+    let mut by_index = L::Params::<f64>::default();
+    by_index.set(0, 0.5);
+    assert_eq!(*renamed.params(), by_index, "{}", L::NAME);
+    assert_eq!(renamed.parameter(name), Ok(0.5));
+    let err = renamed.set_parameter("no_such_parameter", 1.0).unwrap_err();
+    assert_eq!(*renamed.params(), by_index, "{}", L::NAME);
+    let message = err.to_string();
+    assert!(
+        message.contains("no_such_parameter") && message.contains(L::NAME),
+        "{message}"
+    );
+
+    // The tolerance set on the leg is the one assembly uses: one Newton iteration is not
+    // enough from a distant guess, and the default tolerance is.
+    let theta = leg.motor_angles(&s.q);
+    let guess = leg.home();
+    let tight = Tolerance {
+        relative_residual: 1e-14,
+        max_iterations: 1,
+    };
+    assert_eq!(
+        leg.with_tolerance(tight).assemble(&theta, &guess),
+        assemble::<L, f64, NQ, NC, NU>(leg.params(), &theta, &guess, &tight),
+        "{}",
+        L::NAME
+    );
+    assert_eq!(
+        leg.assemble(&theta, &guess),
+        assemble::<L, f64, NQ, NC, NU>(leg.params(), &theta, &guess, &Tolerance::default()),
+        "{}",
+        L::NAME
+    );
+
+    // The assembled home is on the closures; the simulators carry the leg's settings.
+    if let Ok(home) = leg.assembled_home() {
+        if NC > 0 {
+            assert!(leg.closure_residual(&home).amax() < 1e-12, "{}", L::NAME);
+        }
+    }
+    let hybrid = stabilized.with_tolerance(tight).hybrid_simulator(1e-3);
+    assert_eq!(hybrid.options.baumgarte, Some(b));
+    assert_eq!(hybrid.options.tolerance, tight);
+    assert_eq!(hybrid.options.friction, leg.friction());
+    let flight =
+        leg.forward_dynamics_with_contacts(&s.q, &s.qd, &u, &Modes::flight(), &SVector::zeros());
+    assert_eq!(
+        flight.map(|c| c.x),
+        leg.forward_dynamics(&s.q, &s.qd, &u).map(|a| a.qdd),
+        "{}: in flight the contacts add nothing",
+        L::NAME
+    );
+
+    // A step through the leg is the free function's step.
+    let opts = StepOptions::rk4(1e-3);
+    let mut a = State { q: s.q, qd: s.qd };
+    let mut b_state = a;
+    let mut source = leg.torque_source(|_t, _s| u);
+    leg.step(&mut a, 0.0, &mut source, &opts).unwrap();
+    leg_models::integrate::step::<L, f64, NQ, NC, NU>(
+        leg.params(),
+        &mut b_state,
+        0.0,
+        &mut |_t: f64, _s: &State<f64, NQ>| u,
+        &opts,
+    )
+    .unwrap();
+    assert_eq!(a, b_state, "{}", L::NAME);
+}
+
+macro_rules! each {
+    ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $nk:expr) => {
+        check::<$ty, $nq, $nc, $nu, $nk>();
+    };
+}
+
+#[test]
+fn the_handle_carries_its_settings_on_every_leg() {
+    generated::for_each_model!(each);
+}
