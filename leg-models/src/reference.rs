@@ -231,3 +231,11 @@ mod tests {
         );
     }
 }
+
+/// A setpoint is the reference that is that setpoint at every instant (its velocity and
+/// acceleration as given, not integrated): what a controller evaluated at one state needs.
+impl<T: Real, const N: usize> Reference<T, N> for Setpoint<T, N> {
+    fn sample(&self, _t: T) -> Setpoint<T, N> {
+        *self
+    }
+}

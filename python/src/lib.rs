@@ -1,0 +1,819 @@
+//! `legmodels`: every generated leg in Python (PyO3, numpy arrays in and out).
+//!
+//! One class per generated model (`legmodels.Minitaur`, `legmodels.Atrias`, …), each a
+//! thin layer over [`leg_models::Leg`]: arguments are checked for their length and turned
+//! into fixed-size vectors, the Rust method runs, and its result comes back as numpy
+//! arrays (dicts for several). Runtime errors are Python exceptions carrying the
+//! runtime's message, subclasses of `legmodels.LegError`. The list follows the
+//! generated crate (`generated::for_each_model!`): a new spec is a new class after
+//! `cargo xtask gen` and a rebuild, with nothing to write here.
+
+use leg_models::assembly::AssemblyError;
+use leg_models::control::{ControlError, Gains, Saturated};
+use leg_models::dynamics::DynamicsError;
+use leg_models::integrate::{Method, State, StepOptions, TorqueSource};
+use leg_models::linearize::LinearizationError;
+use leg_models::nalgebra::{SMatrix, SVector};
+use leg_models::reference::Sinusoid;
+use leg_models::{ContactModel, Leg};
+use numpy::ndarray::Array2;
+use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::exceptions::{PyException, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+pyo3::create_exception!(
+    legmodels,
+    LegError,
+    PyException,
+    "Base of the errors the leg models raise."
+);
+pyo3::create_exception!(
+    legmodels,
+    AssemblyError_,
+    LegError,
+    "Loop assembly failed: unreachable motor angles or foot position, a singular pose, no convergence."
+);
+pyo3::create_exception!(
+    legmodels,
+    DynamicsError_,
+    LegError,
+    "The forward dynamics has no unique solution (singular constraints or mass matrix) or was given non-finite values."
+);
+pyo3::create_exception!(
+    legmodels,
+    ControlError_,
+    LegError,
+    "A controller does not apply to this leg, or failed at a state."
+);
+pyo3::create_exception!(
+    legmodels,
+    LinearizationError_,
+    LegError,
+    "A linearization or chart of the constraint manifold failed."
+);
+pyo3::create_exception!(
+    legmodels,
+    SimulationError,
+    LegError,
+    "A simulation stopped early; `record` holds what it computed until then."
+);
+pyo3::create_exception!(
+    legmodels,
+    ParameterError,
+    LegError,
+    "The leg has no parameter of that name."
+);
+
+fn assembly_err(e: AssemblyError) -> PyErr {
+    AssemblyError_::new_err(e.to_string())
+}
+fn dynamics_err(e: DynamicsError) -> PyErr {
+    DynamicsError_::new_err(e.to_string())
+}
+fn control_err(e: ControlError) -> PyErr {
+    ControlError_::new_err(e.to_string())
+}
+fn parameter_err(e: leg_models::UnknownParameter<'_>) -> PyErr {
+    ParameterError::new_err(format!(
+        "leg `{}` has no parameter `{}` (its `parameter_names` lists them)",
+        e.leg, e.name
+    ))
+}
+fn linearization_err(e: LinearizationError) -> PyErr {
+    LinearizationError_::new_err(e.to_string())
+}
+
+/// A vector argument of length `N`: a numpy array of floats (no copy until here) or any
+/// sequence of numbers.
+fn vector<const N: usize>(name: &str, value: &Bound<'_, PyAny>) -> PyResult<SVector<f64, N>> {
+    if let Ok(a) = value.extract::<PyReadonlyArray1<'_, f64>>() {
+        if a.len() != N {
+            return Err(PyValueError::new_err(format!(
+                "`{name}` has {} entries, this leg needs {N}",
+                a.len()
+            )));
+        }
+        let a = a.as_array();
+        return Ok(SVector::from_fn(|i, _| a[i]));
+    }
+    let v: Vec<f64> = value.extract().map_err(|_| {
+        PyValueError::new_err(format!(
+            "`{name}` must be a 1-D array or sequence of {N} numbers"
+        ))
+    })?;
+    if v.len() != N {
+        return Err(PyValueError::new_err(format!(
+            "`{name}` has {} entries, this leg needs {N}",
+            v.len()
+        )));
+    }
+    Ok(SVector::from_column_slice(&v))
+}
+
+/// A matrix argument of `R × C`.
+fn matrix<const R: usize, const C: usize>(
+    name: &str,
+    value: &Bound<'_, PyAny>,
+) -> PyResult<SMatrix<f64, R, C>> {
+    let a: PyReadonlyArray2<'_, f64> = value.extract().map_err(|_| {
+        PyValueError::new_err(format!("`{name}` must be a 2-D float array of {R} × {C}"))
+    })?;
+    if a.shape() != [R, C] {
+        return Err(PyValueError::new_err(format!(
+            "`{name}` is {} × {}, this leg needs {R} × {C}",
+            a.shape()[0],
+            a.shape()[1]
+        )));
+    }
+    let a = a.as_array();
+    Ok(SMatrix::from_fn(|i, j| a[[i, j]]))
+}
+
+fn out_vector<'py, const N: usize>(
+    py: Python<'py>,
+    v: &SVector<f64, N>,
+) -> Bound<'py, PyArray1<f64>> {
+    PyArray1::from_slice(py, v.as_slice())
+}
+
+fn out_matrix<'py, const R: usize, const C: usize>(
+    py: Python<'py>,
+    m: &SMatrix<f64, R, C>,
+) -> Bound<'py, PyArray2<f64>> {
+    PyArray2::from_owned_array(py, Array2::from_shape_fn((R, C), |(i, j)| m[(i, j)]))
+}
+
+/// Rows of vectors as an `n × N` array.
+fn out_rows<'py, const N: usize>(
+    py: Python<'py>,
+    rows: impl ExactSizeIterator<Item = SVector<f64, N>>,
+) -> Bound<'py, PyArray2<f64>> {
+    let n = rows.len();
+    let mut a = Array2::zeros((n, N));
+    for (r, v) in rows.enumerate() {
+        for c in 0..N {
+            a[[r, c]] = v[c];
+        }
+    }
+    PyArray2::from_owned_array(py, a)
+}
+
+fn step_options(dt: f64, method: &str, project: bool) -> PyResult<StepOptions<f64>> {
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(PyValueError::new_err(format!(
+            "`dt` must be a positive time step (s), got {dt}"
+        )));
+    }
+    let mut opts = StepOptions::rk4(dt);
+    opts.method = match method {
+        "rk4" => Method::Rk4,
+        "semi_implicit_euler" => Method::SemiImplicitEuler,
+        other => {
+            return Err(PyValueError::new_err(format!(
+                "unknown `method` {other:?}: \"rk4\" or \"semi_implicit_euler\""
+            )))
+        }
+    };
+    opts.project = project;
+    Ok(opts)
+}
+
+/// A reference `setpoint + amplitude · sin(2π frequency t + phase)` per coordinate.
+fn sinusoid<const N: usize>(
+    setpoint: &Bound<'_, PyAny>,
+    amplitude: Option<&Bound<'_, PyAny>>,
+    frequency: Option<&Bound<'_, PyAny>>,
+    phase: Option<&Bound<'_, PyAny>>,
+) -> PyResult<Sinusoid<f64, N>> {
+    Ok(Sinusoid {
+        offset: vector("setpoint", setpoint)?,
+        amplitude: amplitude
+            .map(|a| vector("amplitude", a))
+            .transpose()?
+            .unwrap_or_else(SVector::zeros),
+        frequency: frequency
+            .map(|f| vector("frequency", f))
+            .transpose()?
+            .unwrap_or_else(SVector::zeros),
+        phase: phase
+            .map(|p| vector("phase", p))
+            .transpose()?
+            .unwrap_or_else(SVector::zeros),
+    })
+}
+
+/// Torques from Python: none (zero), a constant array, or a callable `(t, q, qd) -> u`.
+struct PythonTorques<'py, const NQ: usize, const NU: usize> {
+    py: Python<'py>,
+    constant: Option<SVector<f64, NU>>,
+    callable: Option<Bound<'py, PyAny>>,
+    /// The first error the callable raised: the run stops and re-raises it.
+    error: Option<PyErr>,
+}
+
+impl<'py, const NQ: usize, const NU: usize> PythonTorques<'py, NQ, NU> {
+    fn new(py: Python<'py>, torque: Option<&Bound<'py, PyAny>>) -> PyResult<Self> {
+        let mut source = PythonTorques {
+            py,
+            constant: None,
+            callable: None,
+            error: None,
+        };
+        match torque {
+            None => source.constant = Some(SVector::zeros()),
+            Some(t) if t.is_callable() => source.callable = Some(t.clone()),
+            Some(t) => source.constant = Some(vector("torque", t)?),
+        }
+        Ok(source)
+    }
+
+    fn call(&mut self, t: f64, q: &SVector<f64, NQ>, qd: &SVector<f64, NQ>) -> SVector<f64, NU> {
+        if let Some(u) = self.constant {
+            return u;
+        }
+        let f = self.callable.as_ref().expect("callable or constant");
+        let result = f
+            .call1((t, out_vector(self.py, q), out_vector(self.py, qd)))
+            .and_then(|u| vector::<NU>("torque(t, q, qd)", &u));
+        match result {
+            Ok(u) => u,
+            Err(e) => {
+                self.error.get_or_insert(e);
+                SVector::from_element(f64::NAN)
+            }
+        }
+    }
+}
+
+impl<const NQ: usize, const NU: usize> TorqueSource<f64, NQ, NU> for PythonTorques<'_, NQ, NU> {
+    fn torque(&mut self, t: f64, state: &State<f64, NQ>) -> Result<SVector<f64, NU>, ControlError> {
+        Ok(self.call(t, &state.q, &state.qd))
+    }
+}
+
+/// Runs `source` in the leg's simulator and returns the record as arrays; a run that
+/// stops early raises `SimulationError` with the record so far as its `record`.
+fn run_simulation<'py, L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    py: Python<'py>,
+    leg: &Leg<L, f64, NQ, NC, NU, NK>,
+    initial: State<f64, NQ>,
+    steps: usize,
+    opts: StepOptions<f64>,
+    source: &mut impl TorqueSource<f64, NQ, NU>,
+    python_error: impl FnOnce() -> Option<PyErr>,
+) -> PyResult<Bound<'py, PyDict>>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+{
+    let sim = leg.simulator(opts);
+    let result = sim.run(initial, steps, source);
+    if let Some(e) = python_error() {
+        return Err(e);
+    }
+    let record = |samples: &[leg_models::simulate::Sample<f64, NQ, NC, NU>]| -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        d.set_item("t", PyArray1::from_iter(py, samples.iter().map(|s| s.t)))?;
+        d.set_item("q", out_rows(py, samples.iter().map(|s| s.state.q)))?;
+        d.set_item("qd", out_rows(py, samples.iter().map(|s| s.state.qd)))?;
+        d.set_item("u", out_rows(py, samples.iter().map(|s| s.u)))?;
+        d.set_item("forces", out_rows(py, samples.iter().map(|s| s.forces)))?;
+        d.set_item("energy", PyArray1::from_iter(py, samples.iter().map(|s| s.energy)))?;
+        d.set_item(
+            "closure_residual",
+            PyArray1::from_iter(py, samples.iter().map(|s| s.closure_residual)),
+        )?;
+        Ok(d)
+    };
+    match result {
+        Ok(samples) => record(&samples),
+        Err(stopped) => {
+            let err = SimulationError::new_err(stopped.to_string());
+            err.value(py).setattr("record", record(&stopped.samples)?)?;
+            Err(err)
+        }
+    }
+}
+
+macro_rules! leg_class {
+    ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $nk:expr) => {
+        mod $module {
+            use super::*;
+            use leg_models::contact::Modes;
+            use leg_models::hybrid::HybridState;
+            use leg_models::{LegModel, Parameters};
+
+            type Model = $ty;
+            const NQ: usize = $nq;
+            const NC: usize = $nc;
+            const NU: usize = $nu;
+            const NK: usize = $nk;
+            type L = Leg<Model, f64, NQ, NC, NU, NK>;
+
+            /// A generated leg: its parameters (the spec's by default, keyword arguments
+            /// override them by name) and every operation of the runtime.
+            #[pyclass(name = "Leg", module = "legmodels")]
+            pub struct PyLeg {
+                leg: L,
+            }
+
+            #[pymethods]
+            impl PyLeg {
+                /// `Leg(**params)`: the spec's parameters, each keyword one overridden;
+                /// `baumgarte=(alpha, beta)` adds Baumgarte terms to the dynamics.
+                #[new]
+                #[pyo3(signature = (baumgarte = None, **params))]
+                fn new(
+                    baumgarte: Option<(f64, f64)>,
+                    params: Option<&Bound<'_, PyDict>>,
+                ) -> PyResult<Self> {
+                    let mut leg = L::default();
+                    if let Some((alpha, beta)) = baumgarte {
+                        leg = leg.with_baumgarte(alpha, beta);
+                    }
+                    if let Some(params) = params {
+                        for (k, v) in params.iter() {
+                            let name: String = k.extract()?;
+                            let value: f64 = v.extract().map_err(|_| {
+                                PyValueError::new_err(format!("parameter `{name}` must be a number"))
+                            })?;
+                            leg.set_parameter(&name, value)
+                                .map_err(parameter_err)?;
+                        }
+                    }
+                    Ok(PyLeg { leg })
+                }
+
+                fn __repr__(&self) -> String {
+                    format!("legmodels.{}()", class_name())
+                }
+
+                /// The spec's name.
+                #[classattr]
+                fn name() -> &'static str {
+                    Model::NAME
+                }
+                /// Number of joints.
+                #[classattr]
+                fn nq() -> usize {
+                    NQ
+                }
+                /// Number of closure rows (two per closure).
+                #[classattr]
+                fn nc() -> usize {
+                    NC
+                }
+                /// Number of motors.
+                #[classattr]
+                fn nu() -> usize {
+                    NU
+                }
+                /// Number of contact rows (two per contact point).
+                #[classattr]
+                fn nk() -> usize {
+                    NK
+                }
+                /// Degrees of freedom of the closed chain.
+                #[classattr]
+                fn mobility() -> usize {
+                    Model::MOBILITY
+                }
+                /// The joints' names, in coordinate order.
+                #[classattr]
+                fn joint_names() -> Vec<&'static str> {
+                    Model::JOINT_NAMES.to_vec()
+                }
+                /// Indices of the actuated joints, in the order of `u`.
+                #[classattr]
+                fn actuated() -> Vec<usize> {
+                    Model::ACTUATED.to_vec()
+                }
+                /// The contact points' names.
+                #[classattr]
+                fn contact_names() -> Vec<&'static str> {
+                    <Model as ContactModel<NQ, NC, NU, NK>>::CONTACT_NAMES.to_vec()
+                }
+                /// The parameters' names.
+                #[classattr]
+                fn parameter_names() -> Vec<&'static str> {
+                    <Model as LegModel<NQ, NC, NU>>::Params::<f64>::NAMES.to_vec()
+                }
+
+                /// The parameters as a dict name → value.
+                #[getter]
+                fn params<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+                    let d = PyDict::new(py);
+                    let p = self.leg.params();
+                    for (i, n) in <Model as LegModel<NQ, NC, NU>>::Params::<f64>::NAMES.iter().enumerate() {
+                        d.set_item(*n, p.get(i))?;
+                    }
+                    Ok(d)
+                }
+
+                /// The parameter `name`.
+                fn get(&self, name: &str) -> PyResult<f64> {
+                    self.leg.parameter(name).map_err(parameter_err)
+                }
+
+                /// Sets the parameter `name` (no regeneration needed).
+                fn set(&mut self, name: &str, value: f64) -> PyResult<()> {
+                    self.leg
+                        .set_parameter(name, value)
+                        .map_err(parameter_err)
+                }
+
+                /// The spec's home pose (picks the assembly mode).
+                fn home<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+                    out_vector(py, &self.leg.home())
+                }
+
+                /// The home pose projected onto the closures.
+                fn assembled_home<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                    Ok(out_vector(py, &self.leg.assembled_home().map_err(assembly_err)?))
+                }
+
+                // ---- terms ----
+
+                /// `M(q)`, with reflected rotor inertia.
+                fn mass_matrix<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+                    Ok(out_matrix(py, &Model::mass_matrix(&vector("q", q)?, self.leg.params())))
+                }
+                /// `N(q, q̇) = C q̇ + G`.
+                fn bias_forces<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                    Ok(out_vector(py, &Model::bias_forces(&vector("q", q)?, &vector("qd", qd)?, self.leg.params())))
+                }
+                /// `G(q)`.
+                fn gravity_forces<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                    Ok(out_vector(py, &Model::gravity_forces(&vector("q", q)?, self.leg.params())))
+                }
+                /// Damping torques `D q̇`.
+                fn damping_forces<'py>(&self, py: Python<'py>, qd: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                    Ok(out_vector(py, &Model::damping_forces(&vector("qd", qd)?, self.leg.params())))
+                }
+                /// The closure residual `φ(q)`.
+                fn closure_residual<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                    Ok(out_vector(py, &Model::closure_residual(&vector("q", q)?, self.leg.params())))
+                }
+                /// `J(q) = ∂φ/∂q`.
+                fn constraint_jacobian<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+                    Ok(out_matrix(py, &Model::constraint_jacobian(&vector("q", q)?, self.leg.params())))
+                }
+                /// `J̇ q̇`.
+                fn constraint_bias<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                    Ok(out_vector(py, &Model::constraint_bias(&vector("q", q)?, &vector("qd", qd)?, self.leg.params())))
+                }
+                /// The foot point (base frame).
+                fn foot_position<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                    Ok(out_vector(py, &Model::foot_position(&vector("q", q)?, self.leg.params())))
+                }
+                /// `J_f(q)`.
+                fn foot_jacobian<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+                    Ok(out_matrix(py, &Model::foot_jacobian(&vector("q", q)?, self.leg.params())))
+                }
+                /// `J̇_f q̇`.
+                fn foot_bias<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                    Ok(out_vector(py, &Model::foot_bias(&vector("q", q)?, &vector("qd", qd)?, self.leg.params())))
+                }
+                /// Kinetic energy `½ q̇ᵀ M q̇`.
+                fn kinetic_energy(&self, q: &Bound<'_, PyAny>, qd: &Bound<'_, PyAny>) -> PyResult<f64> {
+                    Ok(Model::kinetic_energy(&vector("q", q)?, &vector("qd", qd)?, self.leg.params()))
+                }
+                /// Potential energy (gravity and springs).
+                fn potential_energy(&self, q: &Bound<'_, PyAny>) -> PyResult<f64> {
+                    Ok(Model::potential_energy(&vector("q", q)?, self.leg.params()))
+                }
+                /// Each joint's position (column `i` for joint `i`), 2 × nq.
+                fn joint_positions<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+                    Ok(out_matrix(py, &Model::joint_positions(&vector("q", q)?, self.leg.params())))
+                }
+                /// Each link's tip, 2 × nq.
+                fn link_tips<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+                    Ok(out_matrix(py, &Model::link_tips(&vector("q", q)?, self.leg.params())))
+                }
+                /// The closure points (columns 2k, 2k + 1: points a and b of closure k).
+                fn closure_points<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+                    Ok(out_matrix(py, &Model::closure_points(&vector("q", q)?, self.leg.params())))
+                }
+                /// The contact points stacked (x₀, y₀, x₁, y₁, …).
+                fn contact_positions<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                    Ok(out_vector(py, &Model::contact_positions(&vector("q", q)?, self.leg.params())))
+                }
+                /// `J_c(q)`.
+                fn contact_jacobian<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+                    Ok(out_matrix(py, &Model::contact_jacobian(&vector("q", q)?, self.leg.params())))
+                }
+                /// `J̇_c q̇`.
+                fn contact_bias<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                    Ok(out_vector(py, &Model::contact_bias(&vector("q", q)?, &vector("qd", qd)?, self.leg.params())))
+                }
+                /// `M`, `N`, `J`, `J̇ q̇` together (dict).
+                fn dynamics_terms<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
+                    let t = self.leg.dynamics_terms(&vector("q", q)?, &vector("qd", qd)?);
+                    let d = PyDict::new(py);
+                    d.set_item("mass_matrix", out_matrix(py, &t.mass_matrix))?;
+                    d.set_item("bias_forces", out_vector(py, &t.bias_forces))?;
+                    d.set_item("constraint_jacobian", out_matrix(py, &t.constraint_jacobian))?;
+                    d.set_item("constraint_bias", out_vector(py, &t.constraint_bias))?;
+                    Ok(d)
+                }
+
+                // ---- assembly ----
+
+                /// The closed pose with motor angles `theta`, Newton from `guess` (home).
+                #[pyo3(signature = (theta, guess = None))]
+                fn assemble<'py>(&self, py: Python<'py>, theta: &Bound<'py, PyAny>, guess: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                    let guess = match guess { Some(g) => vector("guess", g)?, None => self.leg.home() };
+                    Ok(out_vector(py, &self.leg.assemble(&vector("theta", theta)?, &guess).map_err(assembly_err)?))
+                }
+                /// The closed pose at `theta` by continuation from the assembled `start`.
+                #[pyo3(signature = (start, theta, max_step = 0.05))]
+                fn assemble_along<'py>(&self, py: Python<'py>, start: &Bound<'py, PyAny>, theta: &Bound<'py, PyAny>, max_step: f64) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                    Ok(out_vector(py, &self.leg.assemble_along(&vector("start", start)?, &vector("theta", theta)?, max_step).map_err(assembly_err)?))
+                }
+                /// The closed pose with the foot at `foot`, from `guess` (home).
+                #[pyo3(signature = (foot, guess = None))]
+                fn foot_inverse<'py>(&self, py: Python<'py>, foot: &Bound<'py, PyAny>, guess: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                    let guess = match guess { Some(g) => vector("guess", g)?, None => self.leg.home() };
+                    Ok(out_vector(py, &self.leg.foot_inverse(&vector("foot", foot)?, &guess).map_err(assembly_err)?))
+                }
+                /// Joint rates of motor rates `theta_dot` at the assembled `q`.
+                fn consistent_velocity<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, theta_dot: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                    Ok(out_vector(py, &self.leg.consistent_velocity(&vector("q", q)?, &vector("theta_dot", theta_dot)?).map_err(assembly_err)?))
+                }
+                /// The nearest pose on the closures.
+                fn project_position<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                    let mut q = vector("q", q)?;
+                    self.leg.project_position(&mut q).map_err(assembly_err)?;
+                    Ok(out_vector(py, &q))
+                }
+
+                // ---- dynamics ----
+
+                /// `(q̈, F)`: accelerations and closure forces under motor torques `u`.
+                fn forward_dynamics<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, u: &Bound<'py, PyAny>) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
+                    let a = self.leg.forward_dynamics(&vector("q", q)?, &vector("qd", qd)?, &vector("u", u)?).map_err(dynamics_err)?;
+                    Ok((out_vector(py, &a.qdd), out_vector(py, &a.forces)))
+                }
+                /// The forward dynamics and its exact derivatives (dict: qdd, forces,
+                /// qdd_q, qdd_qd, qdd_u, forces_q, forces_qd, forces_u).
+                fn forward_dynamics_derivatives<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, u: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
+                    let x = self.leg.forward_dynamics_derivatives(&vector("q", q)?, &vector("qd", qd)?, &vector("u", u)?).map_err(dynamics_err)?;
+                    let d = PyDict::new(py);
+                    d.set_item("qdd", out_vector(py, &x.acceleration.qdd))?;
+                    d.set_item("forces", out_vector(py, &x.acceleration.forces))?;
+                    d.set_item("qdd_q", out_matrix(py, &x.qdd_q))?;
+                    d.set_item("qdd_qd", out_matrix(py, &x.qdd_qd))?;
+                    d.set_item("qdd_u", out_matrix(py, &x.qdd_u))?;
+                    d.set_item("forces_q", out_matrix(py, &x.forces_q))?;
+                    d.set_item("forces_qd", out_matrix(py, &x.forces_qd))?;
+                    d.set_item("forces_u", out_matrix(py, &x.forces_u))?;
+                    Ok(d)
+                }
+                /// Nanoseconds per call of the Rust forward dynamics at this state, over
+                /// `calls` calls in Rust (no Python in the loop): the baseline of the
+                /// Python overhead benchmark (python/benchmarks/overhead.py).
+                fn _rust_forward_dynamics_ns(&self, q: &Bound<'_, PyAny>, qd: &Bound<'_, PyAny>, u: &Bound<'_, PyAny>, calls: usize) -> PyResult<f64> {
+                    let (q, qd, u) = (vector::<NQ>("q", q)?, vector::<NQ>("qd", qd)?, vector::<NU>("u", u)?);
+                    self.leg.forward_dynamics(&q, &qd, &u).map_err(dynamics_err)?;
+                    let start = std::time::Instant::now();
+                    for _ in 0..calls {
+                        let a = self.leg.forward_dynamics(std::hint::black_box(&q), std::hint::black_box(&qd), std::hint::black_box(&u));
+                        std::hint::black_box(&a);
+                    }
+                    Ok(start.elapsed().as_nanos() as f64 / calls.max(1) as f64)
+                }
+
+                /// `(Ã, b̃)` of the reduction `Ã θ̈ = b̃ + u` to the motor angles.
+                #[pyo3(signature = (q, qd, null_space = false))]
+                fn actuated_reduction<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, null_space: bool) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<f64>>)> {
+                    let (q, qd) = (vector("q", q)?, vector("qd", qd)?);
+                    let r = if null_space { self.leg.actuated_reduction_null_space(&q, &qd) } else { self.leg.actuated_reduction(&q, &qd) }.map_err(control_err)?;
+                    Ok((out_matrix(py, &r.a_tilde), out_vector(py, &r.b_tilde)))
+                }
+                /// `u = Ã v − b̃` for motor accelerations `v` and its derivatives (dict).
+                fn reduction_derivatives<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, v: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
+                    let r = self.leg.reduction_derivatives(&vector("q", q)?, &vector("qd", qd)?, &vector("v", v)?).map_err(control_err)?;
+                    let d = PyDict::new(py);
+                    d.set_item("a_tilde", out_matrix(py, &r.a_tilde))?;
+                    d.set_item("b_tilde", out_vector(py, &r.b_tilde))?;
+                    d.set_item("torque_q", out_matrix(py, &r.torque_q))?;
+                    d.set_item("torque_qd", out_matrix(py, &r.torque_qd))?;
+                    Ok(d)
+                }
+                /// `(q̈, closure forces, contact forces)` with contacts held at `anchors`
+                /// (`held[k]`: contact k sticks; others in flight), spec ground and friction.
+                fn forward_dynamics_with_contacts<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, u: &Bound<'py, PyAny>, held: Vec<bool>, anchors: &Bound<'py, PyAny>) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
+                    if held.len() * 2 != NK {
+                        return Err(PyValueError::new_err(format!("`held` has {} entries, this leg has {} contacts", held.len(), NK / 2)));
+                    }
+                    let mut modes = Modes::<NK>::flight();
+                    for (k, h) in held.iter().enumerate() {
+                        if *h { modes.set(k, leg_models::contact::ContactMode::Stick); }
+                    }
+                    let s = self.leg.forward_dynamics_with_contacts(&vector("q", q)?, &vector("qd", qd)?, &vector("u", u)?, &modes, &vector("anchors", anchors)?).map_err(dynamics_err)?;
+                    Ok((out_vector(py, &s.x), out_vector(py, &s.closure), out_vector(py, &s.contact)))
+                }
+
+                // ---- control ----
+
+                /// Feedback-linearizing torque at one state (no controller state kept):
+                /// `kind` "joint" tracks motor angles, "foot" the foot; the reference's
+                /// position, velocity and acceleration are `target`, `rate`, `accel`.
+                #[pyo3(signature = (kind, q, qd, target, rate, accel, kp, kd = None))]
+                #[allow(clippy::too_many_arguments)]
+                fn feedback_linearization_torque<'py>(&self, py: Python<'py>, kind: &str, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, target: &Bound<'py, PyAny>, rate: &Bound<'py, PyAny>, accel: &Bound<'py, PyAny>, kp: f64, kd: Option<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                    let state = State { q: vector("q", q)?, qd: vector("qd", qd)? };
+                    let gains_kd = kd.unwrap_or(2.0 * kp.sqrt());
+                    let u = match kind {
+                        "joint" => {
+                            let r = leg_models::reference::Setpoint::<f64, NU> { position: vector("target", target)?, velocity: vector("rate", rate)?, acceleration: vector("accel", accel)? };
+                            let mut c = self.leg.joint_feedback_linearization(Gains::new(kp, gains_kd), r).map_err(control_err)?;
+                            c.torque(0.0, &state)
+                        }
+                        "foot" => {
+                            let r = leg_models::reference::Setpoint::<f64, 2> { position: vector("target", target)?, velocity: vector("rate", rate)?, acceleration: vector("accel", accel)? };
+                            let mut c = self.leg.foot_feedback_linearization(Gains::new(kp, gains_kd), r).map_err(control_err)?;
+                            c.torque(0.0, &state)
+                        }
+                        other => return Err(PyValueError::new_err(format!("unknown `kind` {other:?}: \"joint\" or \"foot\""))),
+                    }.map_err(control_err)?;
+                    Ok(out_vector(py, &u))
+                }
+
+                // ---- simulation ----
+
+                /// Simulates `steps` steps of `dt` from `(q, qd)`. Torques: `torque` (None:
+                /// zero; an array: constant; a callable `(t, q, qd) -> u`), or a built-in
+                /// `controller`: "joint_feedback_linearization", "foot_feedback_linearization",
+                /// "pd_gravity" or "foot_pd_gravity", tracking `setpoint + amplitude ·
+                /// sin(2π frequency t + phase)` with gains `kp`, `kd` (default 2√kp), torques
+                /// clipped to `±torque_limit`. Returns a dict of arrays: t, q, qd, u,
+                /// forces, energy, closure_residual.
+                #[pyo3(signature = (q, qd, steps, dt, torque = None, controller = None, setpoint = None, amplitude = None, frequency = None, phase = None, kp = 100.0, kd = None, torque_limit = None, method = "rk4", project = true))]
+                #[allow(clippy::too_many_arguments)]
+                fn simulate<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, steps: usize, dt: f64, torque: Option<&Bound<'py, PyAny>>, controller: Option<&str>, setpoint: Option<&Bound<'py, PyAny>>, amplitude: Option<&Bound<'py, PyAny>>, frequency: Option<&Bound<'py, PyAny>>, phase: Option<&Bound<'py, PyAny>>, kp: f64, kd: Option<f64>, torque_limit: Option<&Bound<'py, PyAny>>, method: &str, project: bool) -> PyResult<Bound<'py, PyDict>> {
+                    let initial = State { q: vector("q", q)?, qd: vector("qd", qd)? };
+                    let opts = step_options(dt, method, project)?;
+                    let limit: SVector<f64, NU> = match torque_limit { Some(l) => vector("torque_limit", l)?, None => SVector::from_element(f64::INFINITY) };
+                    let gains_kd = kd.unwrap_or(2.0 * kp.sqrt());
+                    let Some(kind) = controller else {
+                        let mut source = Saturated::new(PythonTorques::<NQ, NU>::new(py, torque)?, limit);
+                        let result = run_simulation(py, &self.leg, initial, steps, opts, &mut source, || None);
+                        return match source.inner.error.take() { Some(e) => Err(e), None => result };
+                    };
+                    if torque.is_some() {
+                        return Err(PyValueError::new_err("give `torque` or `controller`, not both"));
+                    }
+                    let setpoint = setpoint.ok_or_else(|| PyValueError::new_err(format!("controller {kind:?} needs a `setpoint`")))?;
+                    match kind {
+                        "joint_feedback_linearization" | "pd_gravity" => {
+                            let r = sinusoid::<NU>(setpoint, amplitude, frequency, phase)?;
+                            let g = Gains::new(kp, gains_kd);
+                            if kind == "pd_gravity" {
+                                let mut c = Saturated::new(self.leg.pd_gravity(g, r).map_err(control_err)?, limit);
+                                run_simulation(py, &self.leg, initial, steps, opts, &mut c, || None)
+                            } else {
+                                let mut c = Saturated::new(self.leg.joint_feedback_linearization(g, r).map_err(control_err)?, limit);
+                                run_simulation(py, &self.leg, initial, steps, opts, &mut c, || None)
+                            }
+                        }
+                        "foot_feedback_linearization" | "foot_pd_gravity" => {
+                            let r = sinusoid::<2>(setpoint, amplitude, frequency, phase)?;
+                            let g = Gains::new(kp, gains_kd);
+                            if kind == "foot_pd_gravity" {
+                                let mut c = Saturated::new(self.leg.foot_pd_gravity(g, r).map_err(control_err)?, limit);
+                                run_simulation(py, &self.leg, initial, steps, opts, &mut c, || None)
+                            } else {
+                                let mut c = Saturated::new(self.leg.foot_feedback_linearization(g, r).map_err(control_err)?, limit);
+                                run_simulation(py, &self.leg, initial, steps, opts, &mut c, || None)
+                            }
+                        }
+                        other => Err(PyValueError::new_err(format!("unknown `controller` {other:?}: \"joint_feedback_linearization\", \"foot_feedback_linearization\", \"pd_gravity\" or \"foot_pd_gravity\""))),
+                    }
+                }
+
+                /// Simulates the leg on the ground (contacts, impacts, events) for `steps`
+                /// RK4 steps of `dt` from `(q, qd)` with every contact in flight. Torques as
+                /// in `simulate`. Returns a dict of arrays (t, q, qd, u, contact_forces,
+                /// energy) and `events`, a list of dicts (t, kind, contact, impulse,
+                /// energy_lost).
+                #[pyo3(signature = (q, qd, steps, dt, torque = None))]
+                fn simulate_hybrid<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, steps: usize, dt: f64, torque: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyDict>> {
+                    step_options(dt, "rk4", true)?;
+                    let sim = self.leg.hybrid_simulator(dt);
+                    let mut torques = PythonTorques::<NQ, NU>::new(py, torque)?;
+                    let start = sim.start(State { q: vector("q", q)?, qd: vector("qd", qd)? }, &SVector::zeros())
+                        .map_err(|e| SimulationError::new_err(e.to_string()))?;
+                    let mut source = |t: f64, hs: &HybridState<f64, NQ, NK>| torques.call(t, &hs.state.q, &hs.state.qd);
+                    let result = sim.run(start, steps, &mut source);
+                    if let Some(e) = torques.error.take() {
+                        return Err(e);
+                    }
+                    let record = |r: &leg_models::hybrid::HybridRecord<f64, NQ, NC, NU, NK>| -> PyResult<Bound<'py, PyDict>> {
+                        let d = PyDict::new(py);
+                        let s = &r.samples;
+                        d.set_item("t", PyArray1::from_iter(py, s.iter().map(|s| s.t)))?;
+                        d.set_item("q", out_rows(py, s.iter().map(|s| s.state.state.q)))?;
+                        d.set_item("qd", out_rows(py, s.iter().map(|s| s.state.state.qd)))?;
+                        d.set_item("u", out_rows(py, s.iter().map(|s| s.u)))?;
+                        d.set_item("contact_forces", out_rows(py, s.iter().map(|s| s.contact_forces)))?;
+                        d.set_item("energy", PyArray1::from_iter(py, s.iter().map(|s| s.energy)))?;
+                        let events = PyList::empty(py);
+                        for e in &r.events {
+                            let ev = PyDict::new(py);
+                            ev.set_item("t", e.t)?;
+                            ev.set_item("kind", format!("{:?}", e.kind).to_lowercase())?;
+                            ev.set_item("contact", <Model as ContactModel<NQ, NC, NU, NK>>::CONTACT_NAMES[e.contact])?;
+                            ev.set_item("impulse", e.impulse.to_vec())?;
+                            ev.set_item("energy_lost", e.energy_lost)?;
+                            events.append(ev)?;
+                        }
+                        d.set_item("events", events)?;
+                        Ok(d)
+                    };
+                    match result {
+                        Ok(r) => record(&r),
+                        Err(stopped) => {
+                            let err = SimulationError::new_err(stopped.to_string());
+                            err.value(py).setattr("record", record(&stopped.record)?)?;
+                            Err(err)
+                        }
+                    }
+                }
+
+                // ---- linearization and LQR ----
+
+                /// One step of `dt` linearized on the constraint manifold at the rest pose
+                /// `q` under its holding torque: dict with A, B (chart coordinates and
+                /// rates), the chart's joints `coordinates`, and `holding_torque`.
+                #[pyo3(signature = (q, dt, method = "rk4"))]
+                fn linearize<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, dt: f64, method: &str) -> PyResult<Bound<'py, PyDict>> {
+                    let q = vector("q", q)?;
+                    let opts = step_options(dt, method, true)?;
+                    let chart = self.leg.chart(&q).map_err(linearization_err)?;
+                    let u = self.leg.holding_torque(&chart, &q).map_err(linearization_err)?;
+                    let lin = self.leg.linearize_on_chart(&chart, &State { q, qd: SVector::zeros() }, &u, &opts).map_err(linearization_err)?;
+                    let d = PyDict::new(py);
+                    d.set_item("A", out_matrix(py, &lin.a))?;
+                    d.set_item("B", out_matrix(py, &lin.b))?;
+                    d.set_item("coordinates", chart.coordinates.to_vec())?;
+                    d.set_item("holding_torque", out_vector(py, &u))?;
+                    Ok(d)
+                }
+
+                /// A discrete LQR about the rest pose `q` for steps of `dt`: dict with the
+                /// gain K, the closed loop A − B K and the Riccati solution P.
+                fn lqr<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, dt: f64, state_weights: &Bound<'py, PyAny>, torque_weights: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
+                    let q = vector("q", q)?;
+                    let opts = step_options(dt, "rk4", true)?;
+                    let chart = self.leg.chart(&q).map_err(linearization_err)?;
+                    let theta = chart.coordinates_of(&State { q, qd: SVector::zeros() }).0;
+                    let c = self.leg.manifold_lqr(&q, &opts, &matrix("state_weights", state_weights)?, &matrix("torque_weights", torque_weights)?, leg_models::reference::Hold(theta), SVector::from_element(f64::INFINITY)).map_err(control_err)?;
+                    let d = PyDict::new(py);
+                    d.set_item("K", out_matrix(py, &c.lqr.gain))?;
+                    d.set_item("closed_loop", out_matrix(py, &c.lqr.closed_loop))?;
+                    d.set_item("P", out_matrix(py, &c.lqr.cost))?;
+                    Ok(d)
+                }
+            }
+
+            fn class_name() -> &'static str {
+                let path = stringify!($ty);
+                path.rsplit("::").next().unwrap_or(path).trim()
+            }
+
+            pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+                let class = m.py().get_type::<PyLeg>();
+                m.add(class_name(), &class)?;
+                m.getattr("models")?.set_item(Model::NAME, class)?;
+                Ok(())
+            }
+        }
+    };
+}
+
+generated::for_each_model!(leg_class);
+
+/// The generated leg models: one class per spec (`legmodels.Minitaur`, …), and
+/// `legmodels.models`, a dict spec name → class.
+#[pymodule]
+fn legmodels(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add("models", PyDict::new(py))?;
+    m.add("LegError", py.get_type::<LegError>())?;
+    m.add("AssemblyError", py.get_type::<AssemblyError_>())?;
+    m.add("DynamicsError", py.get_type::<DynamicsError_>())?;
+    m.add("ControlError", py.get_type::<ControlError_>())?;
+    m.add("LinearizationError", py.get_type::<LinearizationError_>())?;
+    m.add("SimulationError", py.get_type::<SimulationError>())?;
+    m.add("ParameterError", py.get_type::<ParameterError>())?;
+    let module = m;
+    // Defined here so that `module` in its body is this function's.
+    macro_rules! register {
+        ($name:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $nk:expr) => {
+            $name::register(module)?;
+        };
+    }
+    generated::for_each_model!(register);
+    Ok(())
+}

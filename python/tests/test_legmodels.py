@@ -1,0 +1,216 @@
+"""The Python package against the Rust runtime and against physics.
+
+Every term of every generated leg equals what the Rust command line (`legs eval --json`)
+prints at the same state; derivatives agree with central differences; a simulation
+without torques or damping keeps its energy; bad input raises the runtime's errors."""
+
+import pathlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import legmodels
+from conftest import ROOT, rust_eval
+
+SPECS = sorted(p.stem for p in (ROOT / "leg-models" / "specs").glob("*.toml"))
+
+
+def test_every_spec_is_a_class():
+    assert sorted(legmodels.models) == SPECS
+    for name, cls in legmodels.models.items():
+        assert cls.name == name
+        leg = cls()
+        assert len(leg.home()) == cls.nq and len(cls.actuated) == cls.nu
+
+
+def assembled_state(leg, rng):
+    """A state on the closures near home, with rates along them (motors' rates random)."""
+    for _ in range(50):
+        theta = leg.home()[leg.actuated] + rng.uniform(-0.15, 0.15, leg.nu)
+        try:
+            q = leg.assemble(theta)
+            qd = leg.consistent_velocity(q, rng.uniform(-1.0, 1.0, leg.nu))
+        except legmodels.LegError:
+            continue
+        return q, qd
+    # Motors that over-determine the leg (a pinned toe: mobility 1, two motors) cannot be
+    # set independently: a pose near home projected onto the closures, at rest.
+    assert leg.mobility < leg.nu, f"{leg.name}: no assembled state near home"
+    return leg.project_position(leg.home() + rng.uniform(-0.05, 0.05, leg.nq)), np.zeros(leg.nq)
+
+
+def close(ours, theirs, what, rtol=1e-12):
+    ours, theirs = np.asarray(ours, dtype=float), np.asarray(theirs, dtype=float)
+    assert ours.shape == theirs.shape, (what, ours.shape, theirs.shape)
+    scale = max(np.abs(theirs).max(initial=0.0), 1e-300)
+    assert np.abs(ours - theirs).max(initial=0.0) <= rtol * scale, what
+
+
+@pytest.mark.parametrize("name", SPECS)
+def test_terms_equal_the_rust_runtime(legs, name):
+    cls = legmodels.models[name]
+    leg = cls()
+    rng = np.random.default_rng(7)
+    for k in range(3):
+        if k == 0 and cls.nc > 0:
+            q, qd = assembled_state(leg, rng)
+        else:
+            q, qd = rng.uniform(-np.pi, np.pi, cls.nq), rng.uniform(-2.0, 2.0, cls.nq)
+        u = rng.uniform(-0.5, 0.5, cls.nu)
+        rust = rust_eval(legs, name, q, qd, u, derivatives=True)
+        close(leg.mass_matrix(q), rust["M"], "M")
+        close(leg.bias_forces(q, qd), rust["N"], "N")
+        close(leg.gravity_forces(q), rust["G"], "G")
+        close(leg.constraint_jacobian(q), np.array(rust["J"]).reshape(cls.nc, cls.nq), "J")
+        close(leg.constraint_bias(q, qd), rust["Jdot_qdot"], "J̇q̇")
+        close(leg.closure_residual(q), rust["phi"], "φ")
+        close(leg.foot_position(q), rust["foot"], "foot")
+        close(leg.foot_jacobian(q), rust["foot_jacobian"], "foot Jacobian")
+        close(leg.kinetic_energy(q, qd), rust["kinetic"], "T")
+        close(leg.potential_energy(q), rust["potential"], "V")
+        terms = leg.dynamics_terms(q, qd)
+        close(terms["mass_matrix"], rust["M"], "terms M")
+        close(terms["bias_forces"], rust["N"], "terms N")
+        if "qdd" in rust and rust.get("qdd") is not None:
+            qdd, forces = leg.forward_dynamics(q, qd, u)
+            close(qdd, rust["qdd"], "q̈")
+            close(forces, rust["F"], "F")
+        if rust.get("dqdd_dq") is not None:
+            d = leg.forward_dynamics_derivatives(q, qd, u)
+            for ours, theirs in [("qdd_q", "dqdd_dq"), ("qdd_qd", "dqdd_dqd"), ("qdd_u", "dqdd_du")]:
+                close(d[ours], np.array(rust[theirs]).reshape(d[ours].shape), ours)
+        if rust.get("A_tilde") is not None:
+            a, b = leg.actuated_reduction(q, qd)
+            close(a, rust["A_tilde"], "Ã")
+            close(b, rust["b_tilde"], "b̃")
+
+
+@pytest.mark.parametrize("name", SPECS)
+def test_derivatives_against_central_differences(name):
+    cls = legmodels.models[name]
+    leg = cls()
+    rng = np.random.default_rng(3)
+    q, qd = (assembled_state(leg, rng) if cls.nc else (leg.home(), rng.uniform(-1, 1, cls.nq)))
+    u = rng.uniform(-0.3, 0.3, cls.nu)
+    d = leg.forward_dynamics_derivatives(q, qd, u)
+    h = 1e-6
+    for i in range(cls.nq):
+        e = np.zeros(cls.nq)
+        e[i] = h
+        fd_q = (leg.forward_dynamics(q + e, qd, u)[0] - leg.forward_dynamics(q - e, qd, u)[0]) / (2 * h)
+        fd_qd = (leg.forward_dynamics(q, qd + e, u)[0] - leg.forward_dynamics(q, qd - e, u)[0]) / (2 * h)
+        scale = max(np.abs(d["qdd_q"]).max(), 1.0)
+        assert np.abs(fd_q - d["qdd_q"][:, i]).max() < 1e-5 * scale, (name, i)
+        assert np.abs(fd_qd - d["qdd_qd"][:, i]).max() < 1e-5 * max(np.abs(d["qdd_qd"]).max(), 1.0), (name, i)
+
+
+def test_parameters_by_name():
+    leg = legmodels.Minitaur()
+    heavier = legmodels.Minitaur(lower_a_mass=leg.get("lower_a_mass") * 2)
+    q = leg.home()
+    assert heavier.get("lower_a_mass") == 2 * leg.get("lower_a_mass")
+    assert not np.allclose(heavier.mass_matrix(q), leg.mass_matrix(q))
+    leg.set("lower_a_mass", heavier.get("lower_a_mass"))
+    np.testing.assert_array_equal(leg.mass_matrix(q), heavier.mass_matrix(q))
+    assert leg.params["lower_a_mass"] == heavier.get("lower_a_mass")
+    assert set(leg.params) == set(leg.parameter_names)
+
+
+def test_bad_input_raises_with_the_runtime_message():
+    leg = legmodels.Minitaur()
+    with pytest.raises(legmodels.ParameterError, match="lower_mass"):
+        legmodels.Minitaur(lower_mass=1.0)
+    with pytest.raises(ValueError, match="`q` has 2 entries, this leg needs 4"):
+        leg.mass_matrix([0.0, 0.0])
+    straight = [-np.pi / 2, 0.0, -np.pi / 2, 0.0]
+    with pytest.raises(legmodels.DynamicsError, match="singular"):
+        leg.forward_dynamics(straight, np.zeros(4), np.zeros(2))
+    with pytest.raises(legmodels.AssemblyError):
+        leg.foot_inverse([0.0, -5.0])  # 5 m below a 0.3 m leg
+    with pytest.raises(ValueError, match="controller"):
+        leg.simulate(leg.home(), np.zeros(4), 10, 1e-3, controller="mpc", setpoint=[0, 0])
+    with pytest.raises(ValueError, match="dt"):
+        leg.simulate(leg.home(), np.zeros(4), 10, -1e-3)
+    # A Python torque function that raises stops the run and its error comes through.
+    def broken(t, q, qd):
+        raise RuntimeError("motor driver fault")
+    with pytest.raises(RuntimeError, match="motor driver fault"):
+        leg.simulate(leg.assembled_home(), np.zeros(4), 10, 1e-3, torque=broken)
+
+
+def test_a_failed_simulation_keeps_its_record():
+    leg = legmodels.Minitaur()
+    q = leg.assembled_home()
+    # Torques that drive the leg into its singular straight pose within the run.
+    with pytest.raises(legmodels.SimulationError) as stopped:
+        leg.simulate(q, np.zeros(4), 20000, 1e-3, torque=[50.0, -50.0])
+    record = stopped.value.record
+    assert 1 < len(record["t"]) < 20001
+    assert record["q"].shape == (len(record["t"]), 4)
+
+
+def test_energy_is_kept_without_torques_or_damping():
+    leg = legmodels.Minitaur()
+    for n in leg.parameter_names:
+        if "damping" in n:
+            leg.set(n, 0.0)
+    q = leg.assembled_home()
+    qd = leg.consistent_velocity(q, [2.0, -1.0])
+    run = leg.simulate(q, qd, 1000, 1e-4)
+    drift = np.abs(run["energy"] - run["energy"][0]).max()
+    assert drift < 1e-8 * max(abs(run["energy"][0]), 1e-3), drift
+    assert run["closure_residual"].max() < 1e-12
+
+
+def test_callable_and_constant_torques_agree():
+    leg = legmodels.Atrias()
+    q = leg.assembled_home()
+    constant = leg.simulate(q, np.zeros(4), 200, 1e-3, torque=[0.2, -0.1])
+    called = leg.simulate(q, np.zeros(4), 200, 1e-3, torque=lambda t, q, qd: np.array([0.2, -0.1]))
+    np.testing.assert_array_equal(constant["q"], called["q"])
+
+
+def test_controllers_track():
+    leg = legmodels.Minitaur()
+    q = leg.assembled_home()
+    theta = q[leg.actuated]
+    run = leg.simulate(q, np.zeros(4), 2000, 1e-3, controller="joint_feedback_linearization",
+                       setpoint=theta, amplitude=[0.1, 0.1], frequency=[1.0, 1.0], kp=400.0)
+    t = run["t"]
+    want = theta[None, :] + 0.1 * np.sin(2 * np.pi * t)[:, None]
+    assert np.abs(run["q"][:, leg.actuated] - want)[500:].max() < 1e-3
+    # One feedback-linearizing torque gives the commanded motor acceleration.
+    qd = leg.consistent_velocity(q, [0.5, -0.5])
+    u = leg.feedback_linearization_torque("joint", q, qd, theta, [0, 0], [0, 0], kp=100.0)
+    qdd, _ = leg.forward_dynamics(q, qd, u)
+    want = 100.0 * 0 - 2 * np.sqrt(100.0) * np.array([0.5, -0.5])
+    np.testing.assert_allclose(qdd[leg.actuated], want, atol=1e-9)
+
+
+def test_lqr_is_stabilizing():
+    leg = legmodels.Minitaur()
+    q = leg.assembled_home()
+    lin = leg.linearize(q, 1e-3)
+    lqr = leg.lqr(q, 1e-3, np.diag([100.0, 100.0, 1.0, 1.0]), 0.1 * np.eye(2))
+    closed = lin["A"] - lin["B"] @ lqr["K"]
+    np.testing.assert_allclose(closed, lqr["closed_loop"], atol=1e-12)
+    assert np.abs(np.linalg.eigvals(closed)).max() < 1.0
+
+
+def test_hybrid_drop_lands_when_free_fall_says():
+    leg = legmodels.MinitaurHopper()
+    q = leg.assembled_home()
+    q[0] += 0.1
+    height = leg.contact_positions(q)[1]
+    rec = leg.simulate_hybrid(q, np.zeros(leg.nq), 150, 1e-3)
+    touchdown = next(e for e in rec["events"] if e["kind"] == "touchdown")
+    g = -leg.get("gravity_y")
+    assert abs(touchdown["t"] - np.sqrt(2 * height / g)) < 1e-9
+
+
+def test_example_script_runs(tmp_path):
+    out = tmp_path / "minitaur.png"
+    subprocess.run([sys.executable, str(ROOT / "python" / "examples" / "simulate_leg.py"), "--out", str(out)], check=True)
+    assert out.stat().st_size > 10_000
