@@ -35,85 +35,85 @@ impl leg_models::ChartSize<2, 4> for Atrias {}
 /// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParamValues<T> {
-    /// Gravity in the base frame, x [m/s²].
+    /// Gravity in the base frame, x \[m/s²\].
     pub gravity_x: T,
-    /// Gravity in the base frame, y [m/s²].
+    /// Gravity in the base frame, y \[m/s²\].
     pub gravity_y: T,
-    /// Joint of `thigh` in the base frame, x [m].
+    /// Joint of `thigh` in the base frame, x \[m\].
     pub thigh_origin_x: T,
-    /// Joint of `thigh` in the base frame, y [m].
+    /// Joint of `thigh` in the base frame, y \[m\].
     pub thigh_origin_y: T,
-    /// Tip of `thigh` from its joint, link frame, x [m].
+    /// Tip of `thigh` from its joint, link frame, x \[m\].
     pub thigh_length_x: T,
-    /// Tip of `thigh` from its joint, link frame, y [m].
+    /// Tip of `thigh` from its joint, link frame, y \[m\].
     pub thigh_length_y: T,
-    /// Mass of `thigh` [kg].
+    /// Mass of `thigh` \[kg\].
     pub thigh_mass: T,
-    /// Centre of mass of `thigh` from its joint, link frame, x [m].
+    /// Centre of mass of `thigh` from its joint, link frame, x \[m\].
     pub thigh_com_x: T,
-    /// Centre of mass of `thigh` from its joint, link frame, y [m].
+    /// Centre of mass of `thigh` from its joint, link frame, y \[m\].
     pub thigh_com_y: T,
-    /// Inertia of `thigh` about its centre of mass [kg m²].
+    /// Inertia of `thigh` about its centre of mass \[kg m²\].
     pub thigh_inertia: T,
-    /// Viscous damping of the joint of `thigh` [N m s/rad].
+    /// Viscous damping of the joint of `thigh` \[N m s/rad\].
     pub thigh_damping: T,
-    /// Rotor inertia of the motor of `thigh` [kg m²].
+    /// Rotor inertia of the motor of `thigh` \[kg m²\].
     pub thigh_rotor_inertia: T,
     /// Gear ratio of the motor of `thigh` (reflected inertia I·N²).
     pub thigh_gear_ratio: T,
-    /// Tip of `shin` from its joint, link frame, x [m].
+    /// Tip of `shin` from its joint, link frame, x \[m\].
     pub shin_length_x: T,
-    /// Tip of `shin` from its joint, link frame, y [m].
+    /// Tip of `shin` from its joint, link frame, y \[m\].
     pub shin_length_y: T,
-    /// Mass of `shin` [kg].
+    /// Mass of `shin` \[kg\].
     pub shin_mass: T,
-    /// Centre of mass of `shin` from its joint, link frame, x [m].
+    /// Centre of mass of `shin` from its joint, link frame, x \[m\].
     pub shin_com_x: T,
-    /// Centre of mass of `shin` from its joint, link frame, y [m].
+    /// Centre of mass of `shin` from its joint, link frame, y \[m\].
     pub shin_com_y: T,
-    /// Inertia of `shin` about its centre of mass [kg m²].
+    /// Inertia of `shin` about its centre of mass \[kg m²\].
     pub shin_inertia: T,
-    /// Viscous damping of the joint of `shin` [N m s/rad].
+    /// Viscous damping of the joint of `shin` \[N m s/rad\].
     pub shin_damping: T,
-    /// Joint of `four_bar_link` in the base frame, x [m].
+    /// Joint of `four_bar_link` in the base frame, x \[m\].
     pub four_bar_link_origin_x: T,
-    /// Joint of `four_bar_link` in the base frame, y [m].
+    /// Joint of `four_bar_link` in the base frame, y \[m\].
     pub four_bar_link_origin_y: T,
-    /// Tip of `four_bar_link` from its joint, link frame, x [m].
+    /// Tip of `four_bar_link` from its joint, link frame, x \[m\].
     pub four_bar_link_length_x: T,
-    /// Tip of `four_bar_link` from its joint, link frame, y [m].
+    /// Tip of `four_bar_link` from its joint, link frame, y \[m\].
     pub four_bar_link_length_y: T,
-    /// Mass of `four_bar_link` [kg].
+    /// Mass of `four_bar_link` \[kg\].
     pub four_bar_link_mass: T,
-    /// Centre of mass of `four_bar_link` from its joint, link frame, x [m].
+    /// Centre of mass of `four_bar_link` from its joint, link frame, x \[m\].
     pub four_bar_link_com_x: T,
-    /// Centre of mass of `four_bar_link` from its joint, link frame, y [m].
+    /// Centre of mass of `four_bar_link` from its joint, link frame, y \[m\].
     pub four_bar_link_com_y: T,
-    /// Inertia of `four_bar_link` about its centre of mass [kg m²].
+    /// Inertia of `four_bar_link` about its centre of mass \[kg m²\].
     pub four_bar_link_inertia: T,
-    /// Viscous damping of the joint of `four_bar_link` [N m s/rad].
+    /// Viscous damping of the joint of `four_bar_link` \[N m s/rad\].
     pub four_bar_link_damping: T,
-    /// Rotor inertia of the motor of `four_bar_link` [kg m²].
+    /// Rotor inertia of the motor of `four_bar_link` \[kg m²\].
     pub four_bar_link_rotor_inertia: T,
     /// Gear ratio of the motor of `four_bar_link` (reflected inertia I·N²).
     pub four_bar_link_gear_ratio: T,
-    /// Tip of `lower_leg` from its joint, link frame, x [m].
+    /// Tip of `lower_leg` from its joint, link frame, x \[m\].
     pub lower_leg_length_x: T,
-    /// Tip of `lower_leg` from its joint, link frame, y [m].
+    /// Tip of `lower_leg` from its joint, link frame, y \[m\].
     pub lower_leg_length_y: T,
-    /// Mass of `lower_leg` [kg].
+    /// Mass of `lower_leg` \[kg\].
     pub lower_leg_mass: T,
-    /// Centre of mass of `lower_leg` from its joint, link frame, x [m].
+    /// Centre of mass of `lower_leg` from its joint, link frame, x \[m\].
     pub lower_leg_com_x: T,
-    /// Centre of mass of `lower_leg` from its joint, link frame, y [m].
+    /// Centre of mass of `lower_leg` from its joint, link frame, y \[m\].
     pub lower_leg_com_y: T,
-    /// Inertia of `lower_leg` about its centre of mass [kg m²].
+    /// Inertia of `lower_leg` about its centre of mass \[kg m²\].
     pub lower_leg_inertia: T,
-    /// Viscous damping of the joint of `lower_leg` [N m s/rad].
+    /// Viscous damping of the joint of `lower_leg` \[N m s/rad\].
     pub lower_leg_damping: T,
-    /// Point a of closure `shin_pin`, link frame, x [m].
+    /// Point a of closure `shin_pin`, link frame, x \[m\].
     pub shin_pin_a_x: T,
-    /// Point a of closure `shin_pin`, link frame, y [m].
+    /// Point a of closure `shin_pin`, link frame, y \[m\].
     pub shin_pin_a_y: T,
 }
 impl<T: Arithmetic> Default for ParamValues<T> {

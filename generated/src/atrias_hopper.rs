@@ -35,159 +35,159 @@ impl leg_models::ChartSize<7, 14> for AtriasHopper {}
 /// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParamValues<T> {
-    /// Gravity in the base frame, x [m/s²].
+    /// Gravity in the base frame, x \[m/s²\].
     pub gravity_x: T,
-    /// Gravity in the base frame, y [m/s²].
+    /// Gravity in the base frame, y \[m/s²\].
     pub gravity_y: T,
-    /// Joint of `slide_x` in the base frame, x [m].
+    /// Joint of `slide_x` in the base frame, x \[m\].
     pub slide_x_origin_x: T,
-    /// Joint of `slide_x` in the base frame, y [m].
+    /// Joint of `slide_x` in the base frame, y \[m\].
     pub slide_x_origin_y: T,
-    /// Tip of `slide_x` from its joint, link frame, x [m].
+    /// Tip of `slide_x` from its joint, link frame, x \[m\].
     pub slide_x_length_x: T,
-    /// Tip of `slide_x` from its joint, link frame, y [m].
+    /// Tip of `slide_x` from its joint, link frame, y \[m\].
     pub slide_x_length_y: T,
-    /// Mass of `slide_x` [kg].
+    /// Mass of `slide_x` \[kg\].
     pub slide_x_mass: T,
-    /// Centre of mass of `slide_x` from its joint, link frame, x [m].
+    /// Centre of mass of `slide_x` from its joint, link frame, x \[m\].
     pub slide_x_com_x: T,
-    /// Centre of mass of `slide_x` from its joint, link frame, y [m].
+    /// Centre of mass of `slide_x` from its joint, link frame, y \[m\].
     pub slide_x_com_y: T,
-    /// Inertia of `slide_x` about its centre of mass [kg m²].
+    /// Inertia of `slide_x` about its centre of mass \[kg m²\].
     pub slide_x_inertia: T,
-    /// Viscous damping of the joint of `slide_x` [N m s/rad].
+    /// Viscous damping of the joint of `slide_x` \[N m s/rad\].
     pub slide_x_damping: T,
-    /// Tip of `slide_y` from its joint, link frame, x [m].
+    /// Tip of `slide_y` from its joint, link frame, x \[m\].
     pub slide_y_length_x: T,
-    /// Tip of `slide_y` from its joint, link frame, y [m].
+    /// Tip of `slide_y` from its joint, link frame, y \[m\].
     pub slide_y_length_y: T,
-    /// Mass of `slide_y` [kg].
+    /// Mass of `slide_y` \[kg\].
     pub slide_y_mass: T,
-    /// Centre of mass of `slide_y` from its joint, link frame, x [m].
+    /// Centre of mass of `slide_y` from its joint, link frame, x \[m\].
     pub slide_y_com_x: T,
-    /// Centre of mass of `slide_y` from its joint, link frame, y [m].
+    /// Centre of mass of `slide_y` from its joint, link frame, y \[m\].
     pub slide_y_com_y: T,
-    /// Inertia of `slide_y` about its centre of mass [kg m²].
+    /// Inertia of `slide_y` about its centre of mass \[kg m²\].
     pub slide_y_inertia: T,
-    /// Viscous damping of the joint of `slide_y` [N m s/rad].
+    /// Viscous damping of the joint of `slide_y` \[N m s/rad\].
     pub slide_y_damping: T,
-    /// Tip of `torso` from its joint, link frame, x [m].
+    /// Tip of `torso` from its joint, link frame, x \[m\].
     pub torso_length_x: T,
-    /// Tip of `torso` from its joint, link frame, y [m].
+    /// Tip of `torso` from its joint, link frame, y \[m\].
     pub torso_length_y: T,
-    /// Mass of `torso` [kg].
+    /// Mass of `torso` \[kg\].
     pub torso_mass: T,
-    /// Centre of mass of `torso` from its joint, link frame, x [m].
+    /// Centre of mass of `torso` from its joint, link frame, x \[m\].
     pub torso_com_x: T,
-    /// Centre of mass of `torso` from its joint, link frame, y [m].
+    /// Centre of mass of `torso` from its joint, link frame, y \[m\].
     pub torso_com_y: T,
-    /// Inertia of `torso` about its centre of mass [kg m²].
+    /// Inertia of `torso` about its centre of mass \[kg m²\].
     pub torso_inertia: T,
-    /// Viscous damping of the joint of `torso` [N m s/rad].
+    /// Viscous damping of the joint of `torso` \[N m s/rad\].
     pub torso_damping: T,
-    /// Tip of `thigh_motor` from its joint, link frame, x [m].
+    /// Tip of `thigh_motor` from its joint, link frame, x \[m\].
     pub thigh_motor_length_x: T,
-    /// Tip of `thigh_motor` from its joint, link frame, y [m].
+    /// Tip of `thigh_motor` from its joint, link frame, y \[m\].
     pub thigh_motor_length_y: T,
-    /// Mass of `thigh_motor` [kg].
+    /// Mass of `thigh_motor` \[kg\].
     pub thigh_motor_mass: T,
-    /// Centre of mass of `thigh_motor` from its joint, link frame, x [m].
+    /// Centre of mass of `thigh_motor` from its joint, link frame, x \[m\].
     pub thigh_motor_com_x: T,
-    /// Centre of mass of `thigh_motor` from its joint, link frame, y [m].
+    /// Centre of mass of `thigh_motor` from its joint, link frame, y \[m\].
     pub thigh_motor_com_y: T,
-    /// Inertia of `thigh_motor` about its centre of mass [kg m²].
+    /// Inertia of `thigh_motor` about its centre of mass \[kg m²\].
     pub thigh_motor_inertia: T,
-    /// Viscous damping of the joint of `thigh_motor` [N m s/rad].
+    /// Viscous damping of the joint of `thigh_motor` \[N m s/rad\].
     pub thigh_motor_damping: T,
-    /// Rotor inertia of the motor of `thigh_motor` [kg m²].
+    /// Rotor inertia of the motor of `thigh_motor` \[kg m²\].
     pub thigh_motor_rotor_inertia: T,
     /// Gear ratio of the motor of `thigh_motor` (reflected inertia I·N²).
     pub thigh_motor_gear_ratio: T,
-    /// Tip of `four_bar_motor` from its joint, link frame, x [m].
+    /// Tip of `four_bar_motor` from its joint, link frame, x \[m\].
     pub four_bar_motor_length_x: T,
-    /// Tip of `four_bar_motor` from its joint, link frame, y [m].
+    /// Tip of `four_bar_motor` from its joint, link frame, y \[m\].
     pub four_bar_motor_length_y: T,
-    /// Mass of `four_bar_motor` [kg].
+    /// Mass of `four_bar_motor` \[kg\].
     pub four_bar_motor_mass: T,
-    /// Centre of mass of `four_bar_motor` from its joint, link frame, x [m].
+    /// Centre of mass of `four_bar_motor` from its joint, link frame, x \[m\].
     pub four_bar_motor_com_x: T,
-    /// Centre of mass of `four_bar_motor` from its joint, link frame, y [m].
+    /// Centre of mass of `four_bar_motor` from its joint, link frame, y \[m\].
     pub four_bar_motor_com_y: T,
-    /// Inertia of `four_bar_motor` about its centre of mass [kg m²].
+    /// Inertia of `four_bar_motor` about its centre of mass \[kg m²\].
     pub four_bar_motor_inertia: T,
-    /// Viscous damping of the joint of `four_bar_motor` [N m s/rad].
+    /// Viscous damping of the joint of `four_bar_motor` \[N m s/rad\].
     pub four_bar_motor_damping: T,
-    /// Rotor inertia of the motor of `four_bar_motor` [kg m²].
+    /// Rotor inertia of the motor of `four_bar_motor` \[kg m²\].
     pub four_bar_motor_rotor_inertia: T,
     /// Gear ratio of the motor of `four_bar_motor` (reflected inertia I·N²).
     pub four_bar_motor_gear_ratio: T,
-    /// Tip of `thigh` from its joint, link frame, x [m].
+    /// Tip of `thigh` from its joint, link frame, x \[m\].
     pub thigh_length_x: T,
-    /// Tip of `thigh` from its joint, link frame, y [m].
+    /// Tip of `thigh` from its joint, link frame, y \[m\].
     pub thigh_length_y: T,
-    /// Mass of `thigh` [kg].
+    /// Mass of `thigh` \[kg\].
     pub thigh_mass: T,
-    /// Centre of mass of `thigh` from its joint, link frame, x [m].
+    /// Centre of mass of `thigh` from its joint, link frame, x \[m\].
     pub thigh_com_x: T,
-    /// Centre of mass of `thigh` from its joint, link frame, y [m].
+    /// Centre of mass of `thigh` from its joint, link frame, y \[m\].
     pub thigh_com_y: T,
-    /// Inertia of `thigh` about its centre of mass [kg m²].
+    /// Inertia of `thigh` about its centre of mass \[kg m²\].
     pub thigh_inertia: T,
-    /// Viscous damping of the joint of `thigh` [N m s/rad].
+    /// Viscous damping of the joint of `thigh` \[N m s/rad\].
     pub thigh_damping: T,
-    /// Tip of `shin` from its joint, link frame, x [m].
+    /// Tip of `shin` from its joint, link frame, x \[m\].
     pub shin_length_x: T,
-    /// Tip of `shin` from its joint, link frame, y [m].
+    /// Tip of `shin` from its joint, link frame, y \[m\].
     pub shin_length_y: T,
-    /// Mass of `shin` [kg].
+    /// Mass of `shin` \[kg\].
     pub shin_mass: T,
-    /// Centre of mass of `shin` from its joint, link frame, x [m].
+    /// Centre of mass of `shin` from its joint, link frame, x \[m\].
     pub shin_com_x: T,
-    /// Centre of mass of `shin` from its joint, link frame, y [m].
+    /// Centre of mass of `shin` from its joint, link frame, y \[m\].
     pub shin_com_y: T,
-    /// Inertia of `shin` about its centre of mass [kg m²].
+    /// Inertia of `shin` about its centre of mass \[kg m²\].
     pub shin_inertia: T,
-    /// Viscous damping of the joint of `shin` [N m s/rad].
+    /// Viscous damping of the joint of `shin` \[N m s/rad\].
     pub shin_damping: T,
-    /// Tip of `four_bar_link` from its joint, link frame, x [m].
+    /// Tip of `four_bar_link` from its joint, link frame, x \[m\].
     pub four_bar_link_length_x: T,
-    /// Tip of `four_bar_link` from its joint, link frame, y [m].
+    /// Tip of `four_bar_link` from its joint, link frame, y \[m\].
     pub four_bar_link_length_y: T,
-    /// Mass of `four_bar_link` [kg].
+    /// Mass of `four_bar_link` \[kg\].
     pub four_bar_link_mass: T,
-    /// Centre of mass of `four_bar_link` from its joint, link frame, x [m].
+    /// Centre of mass of `four_bar_link` from its joint, link frame, x \[m\].
     pub four_bar_link_com_x: T,
-    /// Centre of mass of `four_bar_link` from its joint, link frame, y [m].
+    /// Centre of mass of `four_bar_link` from its joint, link frame, y \[m\].
     pub four_bar_link_com_y: T,
-    /// Inertia of `four_bar_link` about its centre of mass [kg m²].
+    /// Inertia of `four_bar_link` about its centre of mass \[kg m²\].
     pub four_bar_link_inertia: T,
-    /// Viscous damping of the joint of `four_bar_link` [N m s/rad].
+    /// Viscous damping of the joint of `four_bar_link` \[N m s/rad\].
     pub four_bar_link_damping: T,
-    /// Tip of `lower_leg` from its joint, link frame, x [m].
+    /// Tip of `lower_leg` from its joint, link frame, x \[m\].
     pub lower_leg_length_x: T,
-    /// Tip of `lower_leg` from its joint, link frame, y [m].
+    /// Tip of `lower_leg` from its joint, link frame, y \[m\].
     pub lower_leg_length_y: T,
-    /// Mass of `lower_leg` [kg].
+    /// Mass of `lower_leg` \[kg\].
     pub lower_leg_mass: T,
-    /// Centre of mass of `lower_leg` from its joint, link frame, x [m].
+    /// Centre of mass of `lower_leg` from its joint, link frame, x \[m\].
     pub lower_leg_com_x: T,
-    /// Centre of mass of `lower_leg` from its joint, link frame, y [m].
+    /// Centre of mass of `lower_leg` from its joint, link frame, y \[m\].
     pub lower_leg_com_y: T,
-    /// Inertia of `lower_leg` about its centre of mass [kg m²].
+    /// Inertia of `lower_leg` about its centre of mass \[kg m²\].
     pub lower_leg_inertia: T,
-    /// Viscous damping of the joint of `lower_leg` [N m s/rad].
+    /// Viscous damping of the joint of `lower_leg` \[N m s/rad\].
     pub lower_leg_damping: T,
-    /// Point a of closure `shin_pin`, link frame, x [m].
+    /// Point a of closure `shin_pin`, link frame, x \[m\].
     pub shin_pin_a_x: T,
-    /// Point a of closure `shin_pin`, link frame, y [m].
+    /// Point a of closure `shin_pin`, link frame, y \[m\].
     pub shin_pin_a_y: T,
-    /// Stiffness of spring `thigh_spring` on `thigh_motor` minus `thigh` [N m/rad].
+    /// Stiffness of spring `thigh_spring` on `thigh_motor` minus `thigh` \[N m/rad\].
     pub thigh_spring_stiffness: T,
-    /// Rest value of spring `thigh_spring` on `thigh_motor` minus `thigh` [rad].
+    /// Rest value of spring `thigh_spring` on `thigh_motor` minus `thigh` \[rad\].
     pub thigh_spring_rest: T,
-    /// Stiffness of spring `four_bar_spring` on `four_bar_motor` minus `four_bar_link` [N m/rad].
+    /// Stiffness of spring `four_bar_spring` on `four_bar_motor` minus `four_bar_link` \[N m/rad\].
     pub four_bar_spring_stiffness: T,
-    /// Rest value of spring `four_bar_spring` on `four_bar_motor` minus `four_bar_link` [rad].
+    /// Rest value of spring `four_bar_spring` on `four_bar_motor` minus `four_bar_link` \[rad\].
     pub four_bar_spring_rest: T,
 }
 impl<T: Arithmetic> Default for ParamValues<T> {

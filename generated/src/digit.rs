@@ -35,85 +35,85 @@ impl leg_models::ChartSize<2, 4> for Digit {}
 /// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParamValues<T> {
-    /// Gravity in the base frame, x [m/s²].
+    /// Gravity in the base frame, x \[m/s²\].
     pub gravity_x: T,
-    /// Gravity in the base frame, y [m/s²].
+    /// Gravity in the base frame, y \[m/s²\].
     pub gravity_y: T,
-    /// Joint of `hip_pitch` in the base frame, x [m].
+    /// Joint of `hip_pitch` in the base frame, x \[m\].
     pub hip_pitch_origin_x: T,
-    /// Joint of `hip_pitch` in the base frame, y [m].
+    /// Joint of `hip_pitch` in the base frame, y \[m\].
     pub hip_pitch_origin_y: T,
-    /// Tip of `hip_pitch` from its joint, link frame, x [m].
+    /// Tip of `hip_pitch` from its joint, link frame, x \[m\].
     pub hip_pitch_length_x: T,
-    /// Tip of `hip_pitch` from its joint, link frame, y [m].
+    /// Tip of `hip_pitch` from its joint, link frame, y \[m\].
     pub hip_pitch_length_y: T,
-    /// Mass of `hip_pitch` [kg].
+    /// Mass of `hip_pitch` \[kg\].
     pub hip_pitch_mass: T,
-    /// Centre of mass of `hip_pitch` from its joint, link frame, x [m].
+    /// Centre of mass of `hip_pitch` from its joint, link frame, x \[m\].
     pub hip_pitch_com_x: T,
-    /// Centre of mass of `hip_pitch` from its joint, link frame, y [m].
+    /// Centre of mass of `hip_pitch` from its joint, link frame, y \[m\].
     pub hip_pitch_com_y: T,
-    /// Inertia of `hip_pitch` about its centre of mass [kg m²].
+    /// Inertia of `hip_pitch` about its centre of mass \[kg m²\].
     pub hip_pitch_inertia: T,
-    /// Viscous damping of the joint of `hip_pitch` [N m s/rad].
+    /// Viscous damping of the joint of `hip_pitch` \[N m s/rad\].
     pub hip_pitch_damping: T,
-    /// Rotor inertia of the motor of `hip_pitch` [kg m²].
+    /// Rotor inertia of the motor of `hip_pitch` \[kg m²\].
     pub hip_pitch_rotor_inertia: T,
     /// Gear ratio of the motor of `hip_pitch` (reflected inertia I·N²).
     pub hip_pitch_gear_ratio: T,
-    /// Tip of `shin` from its joint, link frame, x [m].
+    /// Tip of `shin` from its joint, link frame, x \[m\].
     pub shin_length_x: T,
-    /// Tip of `shin` from its joint, link frame, y [m].
+    /// Tip of `shin` from its joint, link frame, y \[m\].
     pub shin_length_y: T,
-    /// Mass of `shin` [kg].
+    /// Mass of `shin` \[kg\].
     pub shin_mass: T,
-    /// Centre of mass of `shin` from its joint, link frame, x [m].
+    /// Centre of mass of `shin` from its joint, link frame, x \[m\].
     pub shin_com_x: T,
-    /// Centre of mass of `shin` from its joint, link frame, y [m].
+    /// Centre of mass of `shin` from its joint, link frame, y \[m\].
     pub shin_com_y: T,
-    /// Inertia of `shin` about its centre of mass [kg m²].
+    /// Inertia of `shin` about its centre of mass \[kg m²\].
     pub shin_inertia: T,
-    /// Viscous damping of the joint of `shin` [N m s/rad].
+    /// Viscous damping of the joint of `shin` \[N m s/rad\].
     pub shin_damping: T,
-    /// Joint of `achilles_rod` in the base frame, x [m].
+    /// Joint of `achilles_rod` in the base frame, x \[m\].
     pub achilles_rod_origin_x: T,
-    /// Joint of `achilles_rod` in the base frame, y [m].
+    /// Joint of `achilles_rod` in the base frame, y \[m\].
     pub achilles_rod_origin_y: T,
-    /// Tip of `achilles_rod` from its joint, link frame, x [m].
+    /// Tip of `achilles_rod` from its joint, link frame, x \[m\].
     pub achilles_rod_length_x: T,
-    /// Tip of `achilles_rod` from its joint, link frame, y [m].
+    /// Tip of `achilles_rod` from its joint, link frame, y \[m\].
     pub achilles_rod_length_y: T,
-    /// Mass of `achilles_rod` [kg].
+    /// Mass of `achilles_rod` \[kg\].
     pub achilles_rod_mass: T,
-    /// Centre of mass of `achilles_rod` from its joint, link frame, x [m].
+    /// Centre of mass of `achilles_rod` from its joint, link frame, x \[m\].
     pub achilles_rod_com_x: T,
-    /// Centre of mass of `achilles_rod` from its joint, link frame, y [m].
+    /// Centre of mass of `achilles_rod` from its joint, link frame, y \[m\].
     pub achilles_rod_com_y: T,
-    /// Inertia of `achilles_rod` about its centre of mass [kg m²].
+    /// Inertia of `achilles_rod` about its centre of mass \[kg m²\].
     pub achilles_rod_inertia: T,
-    /// Viscous damping of the joint of `achilles_rod` [N m s/rad].
+    /// Viscous damping of the joint of `achilles_rod` \[N m s/rad\].
     pub achilles_rod_damping: T,
-    /// Tip of `tarsus` from its joint, link frame, x [m].
+    /// Tip of `tarsus` from its joint, link frame, x \[m\].
     pub tarsus_length_x: T,
-    /// Tip of `tarsus` from its joint, link frame, y [m].
+    /// Tip of `tarsus` from its joint, link frame, y \[m\].
     pub tarsus_length_y: T,
-    /// Mass of `tarsus` [kg].
+    /// Mass of `tarsus` \[kg\].
     pub tarsus_mass: T,
-    /// Centre of mass of `tarsus` from its joint, link frame, x [m].
+    /// Centre of mass of `tarsus` from its joint, link frame, x \[m\].
     pub tarsus_com_x: T,
-    /// Centre of mass of `tarsus` from its joint, link frame, y [m].
+    /// Centre of mass of `tarsus` from its joint, link frame, y \[m\].
     pub tarsus_com_y: T,
-    /// Inertia of `tarsus` about its centre of mass [kg m²].
+    /// Inertia of `tarsus` about its centre of mass \[kg m²\].
     pub tarsus_inertia: T,
-    /// Viscous damping of the joint of `tarsus` [N m s/rad].
+    /// Viscous damping of the joint of `tarsus` \[N m s/rad\].
     pub tarsus_damping: T,
-    /// Rotor inertia of the motor of `tarsus` [kg m²].
+    /// Rotor inertia of the motor of `tarsus` \[kg m²\].
     pub tarsus_rotor_inertia: T,
     /// Gear ratio of the motor of `tarsus` (reflected inertia I·N²).
     pub tarsus_gear_ratio: T,
-    /// Point b of closure `ankle`, link frame, x [m].
+    /// Point b of closure `ankle`, link frame, x \[m\].
     pub ankle_b_x: T,
-    /// Point b of closure `ankle`, link frame, y [m].
+    /// Point b of closure `ankle`, link frame, y \[m\].
     pub ankle_b_y: T,
 }
 impl<T: Arithmetic> Default for ParamValues<T> {

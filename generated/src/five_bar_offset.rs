@@ -35,81 +35,81 @@ impl leg_models::ChartSize<2, 4> for FiveBarOffset {}
 /// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParamValues<T> {
-    /// Gravity in the base frame, x [m/s²].
+    /// Gravity in the base frame, x \[m/s²\].
     pub gravity_x: T,
-    /// Gravity in the base frame, y [m/s²].
+    /// Gravity in the base frame, y \[m/s²\].
     pub gravity_y: T,
-    /// Joint of `upper_a` in the base frame, x [m].
+    /// Joint of `upper_a` in the base frame, x \[m\].
     pub upper_a_origin_x: T,
-    /// Joint of `upper_a` in the base frame, y [m].
+    /// Joint of `upper_a` in the base frame, y \[m\].
     pub upper_a_origin_y: T,
-    /// Tip of `upper_a` from its joint, link frame, x [m].
+    /// Tip of `upper_a` from its joint, link frame, x \[m\].
     pub upper_a_length_x: T,
-    /// Tip of `upper_a` from its joint, link frame, y [m].
+    /// Tip of `upper_a` from its joint, link frame, y \[m\].
     pub upper_a_length_y: T,
-    /// Mass of `upper_a` [kg].
+    /// Mass of `upper_a` \[kg\].
     pub upper_a_mass: T,
-    /// Centre of mass of `upper_a` from its joint, link frame, x [m].
+    /// Centre of mass of `upper_a` from its joint, link frame, x \[m\].
     pub upper_a_com_x: T,
-    /// Centre of mass of `upper_a` from its joint, link frame, y [m].
+    /// Centre of mass of `upper_a` from its joint, link frame, y \[m\].
     pub upper_a_com_y: T,
-    /// Inertia of `upper_a` about its centre of mass [kg m²].
+    /// Inertia of `upper_a` about its centre of mass \[kg m²\].
     pub upper_a_inertia: T,
-    /// Viscous damping of the joint of `upper_a` [N m s/rad].
+    /// Viscous damping of the joint of `upper_a` \[N m s/rad\].
     pub upper_a_damping: T,
-    /// Rotor inertia of the motor of `upper_a` [kg m²].
+    /// Rotor inertia of the motor of `upper_a` \[kg m²\].
     pub upper_a_rotor_inertia: T,
     /// Gear ratio of the motor of `upper_a` (reflected inertia I·N²).
     pub upper_a_gear_ratio: T,
-    /// Tip of `lower_a` from its joint, link frame, x [m].
+    /// Tip of `lower_a` from its joint, link frame, x \[m\].
     pub lower_a_length_x: T,
-    /// Tip of `lower_a` from its joint, link frame, y [m].
+    /// Tip of `lower_a` from its joint, link frame, y \[m\].
     pub lower_a_length_y: T,
-    /// Mass of `lower_a` [kg].
+    /// Mass of `lower_a` \[kg\].
     pub lower_a_mass: T,
-    /// Centre of mass of `lower_a` from its joint, link frame, x [m].
+    /// Centre of mass of `lower_a` from its joint, link frame, x \[m\].
     pub lower_a_com_x: T,
-    /// Centre of mass of `lower_a` from its joint, link frame, y [m].
+    /// Centre of mass of `lower_a` from its joint, link frame, y \[m\].
     pub lower_a_com_y: T,
-    /// Inertia of `lower_a` about its centre of mass [kg m²].
+    /// Inertia of `lower_a` about its centre of mass \[kg m²\].
     pub lower_a_inertia: T,
-    /// Viscous damping of the joint of `lower_a` [N m s/rad].
+    /// Viscous damping of the joint of `lower_a` \[N m s/rad\].
     pub lower_a_damping: T,
-    /// Joint of `upper_b` in the base frame, x [m].
+    /// Joint of `upper_b` in the base frame, x \[m\].
     pub upper_b_origin_x: T,
-    /// Joint of `upper_b` in the base frame, y [m].
+    /// Joint of `upper_b` in the base frame, y \[m\].
     pub upper_b_origin_y: T,
-    /// Tip of `upper_b` from its joint, link frame, x [m].
+    /// Tip of `upper_b` from its joint, link frame, x \[m\].
     pub upper_b_length_x: T,
-    /// Tip of `upper_b` from its joint, link frame, y [m].
+    /// Tip of `upper_b` from its joint, link frame, y \[m\].
     pub upper_b_length_y: T,
-    /// Mass of `upper_b` [kg].
+    /// Mass of `upper_b` \[kg\].
     pub upper_b_mass: T,
-    /// Centre of mass of `upper_b` from its joint, link frame, x [m].
+    /// Centre of mass of `upper_b` from its joint, link frame, x \[m\].
     pub upper_b_com_x: T,
-    /// Centre of mass of `upper_b` from its joint, link frame, y [m].
+    /// Centre of mass of `upper_b` from its joint, link frame, y \[m\].
     pub upper_b_com_y: T,
-    /// Inertia of `upper_b` about its centre of mass [kg m²].
+    /// Inertia of `upper_b` about its centre of mass \[kg m²\].
     pub upper_b_inertia: T,
-    /// Viscous damping of the joint of `upper_b` [N m s/rad].
+    /// Viscous damping of the joint of `upper_b` \[N m s/rad\].
     pub upper_b_damping: T,
-    /// Rotor inertia of the motor of `upper_b` [kg m²].
+    /// Rotor inertia of the motor of `upper_b` \[kg m²\].
     pub upper_b_rotor_inertia: T,
     /// Gear ratio of the motor of `upper_b` (reflected inertia I·N²).
     pub upper_b_gear_ratio: T,
-    /// Tip of `lower_b` from its joint, link frame, x [m].
+    /// Tip of `lower_b` from its joint, link frame, x \[m\].
     pub lower_b_length_x: T,
-    /// Tip of `lower_b` from its joint, link frame, y [m].
+    /// Tip of `lower_b` from its joint, link frame, y \[m\].
     pub lower_b_length_y: T,
-    /// Mass of `lower_b` [kg].
+    /// Mass of `lower_b` \[kg\].
     pub lower_b_mass: T,
-    /// Centre of mass of `lower_b` from its joint, link frame, x [m].
+    /// Centre of mass of `lower_b` from its joint, link frame, x \[m\].
     pub lower_b_com_x: T,
-    /// Centre of mass of `lower_b` from its joint, link frame, y [m].
+    /// Centre of mass of `lower_b` from its joint, link frame, y \[m\].
     pub lower_b_com_y: T,
-    /// Inertia of `lower_b` about its centre of mass [kg m²].
+    /// Inertia of `lower_b` about its centre of mass \[kg m²\].
     pub lower_b_inertia: T,
-    /// Viscous damping of the joint of `lower_b` [N m s/rad].
+    /// Viscous damping of the joint of `lower_b` \[N m s/rad\].
     pub lower_b_damping: T,
 }
 impl<T: Arithmetic> Default for ParamValues<T> {

@@ -35,139 +35,139 @@ impl leg_models::ChartSize<1, 2> for KlannLinkage {}
 /// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParamValues<T> {
-    /// Gravity in the base frame, x [m/s²].
+    /// Gravity in the base frame, x \[m/s²\].
     pub gravity_x: T,
-    /// Gravity in the base frame, y [m/s²].
+    /// Gravity in the base frame, y \[m/s²\].
     pub gravity_y: T,
-    /// Joint of `crank` in the base frame, x [m].
+    /// Joint of `crank` in the base frame, x \[m\].
     pub crank_origin_x: T,
-    /// Joint of `crank` in the base frame, y [m].
+    /// Joint of `crank` in the base frame, y \[m\].
     pub crank_origin_y: T,
-    /// Tip of `crank` from its joint, link frame, x [m].
+    /// Tip of `crank` from its joint, link frame, x \[m\].
     pub crank_length_x: T,
-    /// Tip of `crank` from its joint, link frame, y [m].
+    /// Tip of `crank` from its joint, link frame, y \[m\].
     pub crank_length_y: T,
-    /// Mass of `crank` [kg].
+    /// Mass of `crank` \[kg\].
     pub crank_mass: T,
-    /// Centre of mass of `crank` from its joint, link frame, x [m].
+    /// Centre of mass of `crank` from its joint, link frame, x \[m\].
     pub crank_com_x: T,
-    /// Centre of mass of `crank` from its joint, link frame, y [m].
+    /// Centre of mass of `crank` from its joint, link frame, y \[m\].
     pub crank_com_y: T,
-    /// Inertia of `crank` about its centre of mass [kg m²].
+    /// Inertia of `crank` about its centre of mass \[kg m²\].
     pub crank_inertia: T,
-    /// Viscous damping of the joint of `crank` [N m s/rad].
+    /// Viscous damping of the joint of `crank` \[N m s/rad\].
     pub crank_damping: T,
-    /// Rotor inertia of the motor of `crank` [kg m²].
+    /// Rotor inertia of the motor of `crank` \[kg m²\].
     pub crank_rotor_inertia: T,
     /// Gear ratio of the motor of `crank` (reflected inertia I·N²).
     pub crank_gear_ratio: T,
-    /// Tip of `coupler` from its joint, link frame, x [m].
+    /// Tip of `coupler` from its joint, link frame, x \[m\].
     pub coupler_length_x: T,
-    /// Tip of `coupler` from its joint, link frame, y [m].
+    /// Tip of `coupler` from its joint, link frame, y \[m\].
     pub coupler_length_y: T,
-    /// Mass of `coupler` [kg].
+    /// Mass of `coupler` \[kg\].
     pub coupler_mass: T,
-    /// Centre of mass of `coupler` from its joint, link frame, x [m].
+    /// Centre of mass of `coupler` from its joint, link frame, x \[m\].
     pub coupler_com_x: T,
-    /// Centre of mass of `coupler` from its joint, link frame, y [m].
+    /// Centre of mass of `coupler` from its joint, link frame, y \[m\].
     pub coupler_com_y: T,
-    /// Inertia of `coupler` about its centre of mass [kg m²].
+    /// Inertia of `coupler` about its centre of mass \[kg m²\].
     pub coupler_inertia: T,
-    /// Viscous damping of the joint of `coupler` [N m s/rad].
+    /// Viscous damping of the joint of `coupler` \[N m s/rad\].
     pub coupler_damping: T,
-    /// Joint of `rocker` in the base frame, x [m].
+    /// Joint of `rocker` in the base frame, x \[m\].
     pub rocker_origin_x: T,
-    /// Joint of `rocker` in the base frame, y [m].
+    /// Joint of `rocker` in the base frame, y \[m\].
     pub rocker_origin_y: T,
-    /// Tip of `rocker` from its joint, link frame, x [m].
+    /// Tip of `rocker` from its joint, link frame, x \[m\].
     pub rocker_length_x: T,
-    /// Tip of `rocker` from its joint, link frame, y [m].
+    /// Tip of `rocker` from its joint, link frame, y \[m\].
     pub rocker_length_y: T,
-    /// Mass of `rocker` [kg].
+    /// Mass of `rocker` \[kg\].
     pub rocker_mass: T,
-    /// Centre of mass of `rocker` from its joint, link frame, x [m].
+    /// Centre of mass of `rocker` from its joint, link frame, x \[m\].
     pub rocker_com_x: T,
-    /// Centre of mass of `rocker` from its joint, link frame, y [m].
+    /// Centre of mass of `rocker` from its joint, link frame, y \[m\].
     pub rocker_com_y: T,
-    /// Inertia of `rocker` about its centre of mass [kg m²].
+    /// Inertia of `rocker` about its centre of mass \[kg m²\].
     pub rocker_inertia: T,
-    /// Viscous damping of the joint of `rocker` [N m s/rad].
+    /// Viscous damping of the joint of `rocker` \[N m s/rad\].
     pub rocker_damping: T,
-    /// Joint of `leg` in its parent's frame, x [m].
+    /// Joint of `leg` in its parent's frame, x \[m\].
     pub leg_origin_x: T,
-    /// Joint of `leg` in its parent's frame, y [m].
+    /// Joint of `leg` in its parent's frame, y \[m\].
     pub leg_origin_y: T,
-    /// Tip of `leg` from its joint, link frame, x [m].
+    /// Tip of `leg` from its joint, link frame, x \[m\].
     pub leg_length_x: T,
-    /// Tip of `leg` from its joint, link frame, y [m].
+    /// Tip of `leg` from its joint, link frame, y \[m\].
     pub leg_length_y: T,
-    /// Mass of `leg` [kg].
+    /// Mass of `leg` \[kg\].
     pub leg_mass: T,
-    /// Centre of mass of `leg` from its joint, link frame, x [m].
+    /// Centre of mass of `leg` from its joint, link frame, x \[m\].
     pub leg_com_x: T,
-    /// Centre of mass of `leg` from its joint, link frame, y [m].
+    /// Centre of mass of `leg` from its joint, link frame, y \[m\].
     pub leg_com_y: T,
-    /// Inertia of `leg` about its centre of mass [kg m²].
+    /// Inertia of `leg` about its centre of mass \[kg m²\].
     pub leg_inertia: T,
-    /// Viscous damping of the joint of `leg` [N m s/rad].
+    /// Viscous damping of the joint of `leg` \[N m s/rad\].
     pub leg_damping: T,
-    /// Joint of `guide` in the base frame, x [m].
+    /// Joint of `guide` in the base frame, x \[m\].
     pub guide_origin_x: T,
-    /// Joint of `guide` in the base frame, y [m].
+    /// Joint of `guide` in the base frame, y \[m\].
     pub guide_origin_y: T,
-    /// Tip of `guide` from its joint, link frame, x [m].
+    /// Tip of `guide` from its joint, link frame, x \[m\].
     pub guide_length_x: T,
-    /// Tip of `guide` from its joint, link frame, y [m].
+    /// Tip of `guide` from its joint, link frame, y \[m\].
     pub guide_length_y: T,
-    /// Mass of `guide` [kg].
+    /// Mass of `guide` \[kg\].
     pub guide_mass: T,
-    /// Centre of mass of `guide` from its joint, link frame, x [m].
+    /// Centre of mass of `guide` from its joint, link frame, x \[m\].
     pub guide_com_x: T,
-    /// Centre of mass of `guide` from its joint, link frame, y [m].
+    /// Centre of mass of `guide` from its joint, link frame, y \[m\].
     pub guide_com_y: T,
-    /// Inertia of `guide` about its centre of mass [kg m²].
+    /// Inertia of `guide` about its centre of mass \[kg m²\].
     pub guide_inertia: T,
-    /// Viscous damping of the joint of `guide` [N m s/rad].
+    /// Viscous damping of the joint of `guide` \[N m s/rad\].
     pub guide_damping: T,
-    /// Tip of `strut` from its joint, link frame, x [m].
+    /// Tip of `strut` from its joint, link frame, x \[m\].
     pub strut_length_x: T,
-    /// Tip of `strut` from its joint, link frame, y [m].
+    /// Tip of `strut` from its joint, link frame, y \[m\].
     pub strut_length_y: T,
-    /// Mass of `strut` [kg].
+    /// Mass of `strut` \[kg\].
     pub strut_mass: T,
-    /// Centre of mass of `strut` from its joint, link frame, x [m].
+    /// Centre of mass of `strut` from its joint, link frame, x \[m\].
     pub strut_com_x: T,
-    /// Centre of mass of `strut` from its joint, link frame, y [m].
+    /// Centre of mass of `strut` from its joint, link frame, y \[m\].
     pub strut_com_y: T,
-    /// Inertia of `strut` about its centre of mass [kg m²].
+    /// Inertia of `strut` about its centre of mass \[kg m²\].
     pub strut_inertia: T,
-    /// Viscous damping of the joint of `strut` [N m s/rad].
+    /// Viscous damping of the joint of `strut` \[N m s/rad\].
     pub strut_damping: T,
-    /// Joint of `brace` in its parent's frame, x [m].
+    /// Joint of `brace` in its parent's frame, x \[m\].
     pub brace_origin_x: T,
-    /// Joint of `brace` in its parent's frame, y [m].
+    /// Joint of `brace` in its parent's frame, y \[m\].
     pub brace_origin_y: T,
-    /// Tip of `brace` from its joint, link frame, x [m].
+    /// Tip of `brace` from its joint, link frame, x \[m\].
     pub brace_length_x: T,
-    /// Tip of `brace` from its joint, link frame, y [m].
+    /// Tip of `brace` from its joint, link frame, y \[m\].
     pub brace_length_y: T,
-    /// Mass of `brace` [kg].
+    /// Mass of `brace` \[kg\].
     pub brace_mass: T,
-    /// Centre of mass of `brace` from its joint, link frame, x [m].
+    /// Centre of mass of `brace` from its joint, link frame, x \[m\].
     pub brace_com_x: T,
-    /// Centre of mass of `brace` from its joint, link frame, y [m].
+    /// Centre of mass of `brace` from its joint, link frame, y \[m\].
     pub brace_com_y: T,
-    /// Inertia of `brace` about its centre of mass [kg m²].
+    /// Inertia of `brace` about its centre of mass \[kg m²\].
     pub brace_inertia: T,
-    /// Viscous damping of the joint of `brace` [N m s/rad].
+    /// Viscous damping of the joint of `brace` \[N m s/rad\].
     pub brace_damping: T,
-    /// Point b of closure `hip_guide`, link frame, x [m].
+    /// Point b of closure `hip_guide`, link frame, x \[m\].
     pub hip_guide_b_x: T,
-    /// Point b of closure `hip_guide`, link frame, y [m].
+    /// Point b of closure `hip_guide`, link frame, y \[m\].
     pub hip_guide_b_y: T,
-    /// Point b of closure `ankle`, link frame, x [m].
+    /// Point b of closure `ankle`, link frame, x \[m\].
     pub ankle_b_x: T,
-    /// Point b of closure `ankle`, link frame, y [m].
+    /// Point b of closure `ankle`, link frame, y \[m\].
     pub ankle_b_y: T,
 }
 impl<T: Arithmetic> Default for ParamValues<T> {

@@ -35,71 +35,71 @@ impl leg_models::ChartSize<3, 6> for KneeHopper {}
 /// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParamValues<T> {
-    /// Gravity in the base frame, x [m/s²].
+    /// Gravity in the base frame, x \[m/s²\].
     pub gravity_x: T,
-    /// Gravity in the base frame, y [m/s²].
+    /// Gravity in the base frame, y \[m/s²\].
     pub gravity_y: T,
-    /// Joint of `body` in the base frame, x [m].
+    /// Joint of `body` in the base frame, x \[m\].
     pub body_origin_x: T,
-    /// Joint of `body` in the base frame, y [m].
+    /// Joint of `body` in the base frame, y \[m\].
     pub body_origin_y: T,
-    /// Tip of `body` from its joint, link frame, x [m].
+    /// Tip of `body` from its joint, link frame, x \[m\].
     pub body_length_x: T,
-    /// Tip of `body` from its joint, link frame, y [m].
+    /// Tip of `body` from its joint, link frame, y \[m\].
     pub body_length_y: T,
-    /// Mass of `body` [kg].
+    /// Mass of `body` \[kg\].
     pub body_mass: T,
-    /// Centre of mass of `body` from its joint, link frame, x [m].
+    /// Centre of mass of `body` from its joint, link frame, x \[m\].
     pub body_com_x: T,
-    /// Centre of mass of `body` from its joint, link frame, y [m].
+    /// Centre of mass of `body` from its joint, link frame, y \[m\].
     pub body_com_y: T,
-    /// Inertia of `body` about its centre of mass [kg m²].
+    /// Inertia of `body` about its centre of mass \[kg m²\].
     pub body_inertia: T,
-    /// Viscous damping of the joint of `body` [N m s/rad].
+    /// Viscous damping of the joint of `body` \[N m s/rad\].
     pub body_damping: T,
-    /// Joint of `thigh` in its parent's frame, x [m].
+    /// Joint of `thigh` in its parent's frame, x \[m\].
     pub thigh_origin_x: T,
-    /// Joint of `thigh` in its parent's frame, y [m].
+    /// Joint of `thigh` in its parent's frame, y \[m\].
     pub thigh_origin_y: T,
-    /// Tip of `thigh` from its joint, link frame, x [m].
+    /// Tip of `thigh` from its joint, link frame, x \[m\].
     pub thigh_length_x: T,
-    /// Tip of `thigh` from its joint, link frame, y [m].
+    /// Tip of `thigh` from its joint, link frame, y \[m\].
     pub thigh_length_y: T,
-    /// Mass of `thigh` [kg].
+    /// Mass of `thigh` \[kg\].
     pub thigh_mass: T,
-    /// Centre of mass of `thigh` from its joint, link frame, x [m].
+    /// Centre of mass of `thigh` from its joint, link frame, x \[m\].
     pub thigh_com_x: T,
-    /// Centre of mass of `thigh` from its joint, link frame, y [m].
+    /// Centre of mass of `thigh` from its joint, link frame, y \[m\].
     pub thigh_com_y: T,
-    /// Inertia of `thigh` about its centre of mass [kg m²].
+    /// Inertia of `thigh` about its centre of mass \[kg m²\].
     pub thigh_inertia: T,
-    /// Viscous damping of the joint of `thigh` [N m s/rad].
+    /// Viscous damping of the joint of `thigh` \[N m s/rad\].
     pub thigh_damping: T,
-    /// Rotor inertia of the motor of `thigh` [kg m²].
+    /// Rotor inertia of the motor of `thigh` \[kg m²\].
     pub thigh_rotor_inertia: T,
     /// Gear ratio of the motor of `thigh` (reflected inertia I·N²).
     pub thigh_gear_ratio: T,
-    /// Tip of `shin` from its joint, link frame, x [m].
+    /// Tip of `shin` from its joint, link frame, x \[m\].
     pub shin_length_x: T,
-    /// Tip of `shin` from its joint, link frame, y [m].
+    /// Tip of `shin` from its joint, link frame, y \[m\].
     pub shin_length_y: T,
-    /// Mass of `shin` [kg].
+    /// Mass of `shin` \[kg\].
     pub shin_mass: T,
-    /// Centre of mass of `shin` from its joint, link frame, x [m].
+    /// Centre of mass of `shin` from its joint, link frame, x \[m\].
     pub shin_com_x: T,
-    /// Centre of mass of `shin` from its joint, link frame, y [m].
+    /// Centre of mass of `shin` from its joint, link frame, y \[m\].
     pub shin_com_y: T,
-    /// Inertia of `shin` about its centre of mass [kg m²].
+    /// Inertia of `shin` about its centre of mass \[kg m²\].
     pub shin_inertia: T,
-    /// Viscous damping of the joint of `shin` [N m s/rad].
+    /// Viscous damping of the joint of `shin` \[N m s/rad\].
     pub shin_damping: T,
-    /// Rotor inertia of the motor of `shin` [kg m²].
+    /// Rotor inertia of the motor of `shin` \[kg m²\].
     pub shin_rotor_inertia: T,
     /// Gear ratio of the motor of `shin` (reflected inertia I·N²).
     pub shin_gear_ratio: T,
-    /// Stiffness of spring `knee_spring` on the joint of `shin` [N m/rad].
+    /// Stiffness of spring `knee_spring` on the joint of `shin` \[N m/rad\].
     pub knee_spring_stiffness: T,
-    /// Rest value of spring `knee_spring` on the joint of `shin` [rad].
+    /// Rest value of spring `knee_spring` on the joint of `shin` \[rad\].
     pub knee_spring_rest: T,
 }
 impl<T: Arithmetic> Default for ParamValues<T> {

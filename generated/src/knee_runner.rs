@@ -35,99 +35,99 @@ impl leg_models::ChartSize<5, 10> for KneeRunner {}
 /// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParamValues<T> {
-    /// Gravity in the base frame, x [m/s²].
+    /// Gravity in the base frame, x \[m/s²\].
     pub gravity_x: T,
-    /// Gravity in the base frame, y [m/s²].
+    /// Gravity in the base frame, y \[m/s²\].
     pub gravity_y: T,
-    /// Joint of `slide_x` in the base frame, x [m].
+    /// Joint of `slide_x` in the base frame, x \[m\].
     pub slide_x_origin_x: T,
-    /// Joint of `slide_x` in the base frame, y [m].
+    /// Joint of `slide_x` in the base frame, y \[m\].
     pub slide_x_origin_y: T,
-    /// Tip of `slide_x` from its joint, link frame, x [m].
+    /// Tip of `slide_x` from its joint, link frame, x \[m\].
     pub slide_x_length_x: T,
-    /// Tip of `slide_x` from its joint, link frame, y [m].
+    /// Tip of `slide_x` from its joint, link frame, y \[m\].
     pub slide_x_length_y: T,
-    /// Mass of `slide_x` [kg].
+    /// Mass of `slide_x` \[kg\].
     pub slide_x_mass: T,
-    /// Centre of mass of `slide_x` from its joint, link frame, x [m].
+    /// Centre of mass of `slide_x` from its joint, link frame, x \[m\].
     pub slide_x_com_x: T,
-    /// Centre of mass of `slide_x` from its joint, link frame, y [m].
+    /// Centre of mass of `slide_x` from its joint, link frame, y \[m\].
     pub slide_x_com_y: T,
-    /// Inertia of `slide_x` about its centre of mass [kg m²].
+    /// Inertia of `slide_x` about its centre of mass \[kg m²\].
     pub slide_x_inertia: T,
-    /// Viscous damping of the joint of `slide_x` [N m s/rad].
+    /// Viscous damping of the joint of `slide_x` \[N m s/rad\].
     pub slide_x_damping: T,
-    /// Tip of `slide_y` from its joint, link frame, x [m].
+    /// Tip of `slide_y` from its joint, link frame, x \[m\].
     pub slide_y_length_x: T,
-    /// Tip of `slide_y` from its joint, link frame, y [m].
+    /// Tip of `slide_y` from its joint, link frame, y \[m\].
     pub slide_y_length_y: T,
-    /// Mass of `slide_y` [kg].
+    /// Mass of `slide_y` \[kg\].
     pub slide_y_mass: T,
-    /// Centre of mass of `slide_y` from its joint, link frame, x [m].
+    /// Centre of mass of `slide_y` from its joint, link frame, x \[m\].
     pub slide_y_com_x: T,
-    /// Centre of mass of `slide_y` from its joint, link frame, y [m].
+    /// Centre of mass of `slide_y` from its joint, link frame, y \[m\].
     pub slide_y_com_y: T,
-    /// Inertia of `slide_y` about its centre of mass [kg m²].
+    /// Inertia of `slide_y` about its centre of mass \[kg m²\].
     pub slide_y_inertia: T,
-    /// Viscous damping of the joint of `slide_y` [N m s/rad].
+    /// Viscous damping of the joint of `slide_y` \[N m s/rad\].
     pub slide_y_damping: T,
-    /// Tip of `torso` from its joint, link frame, x [m].
+    /// Tip of `torso` from its joint, link frame, x \[m\].
     pub torso_length_x: T,
-    /// Tip of `torso` from its joint, link frame, y [m].
+    /// Tip of `torso` from its joint, link frame, y \[m\].
     pub torso_length_y: T,
-    /// Mass of `torso` [kg].
+    /// Mass of `torso` \[kg\].
     pub torso_mass: T,
-    /// Centre of mass of `torso` from its joint, link frame, x [m].
+    /// Centre of mass of `torso` from its joint, link frame, x \[m\].
     pub torso_com_x: T,
-    /// Centre of mass of `torso` from its joint, link frame, y [m].
+    /// Centre of mass of `torso` from its joint, link frame, y \[m\].
     pub torso_com_y: T,
-    /// Inertia of `torso` about its centre of mass [kg m²].
+    /// Inertia of `torso` about its centre of mass \[kg m²\].
     pub torso_inertia: T,
-    /// Viscous damping of the joint of `torso` [N m s/rad].
+    /// Viscous damping of the joint of `torso` \[N m s/rad\].
     pub torso_damping: T,
-    /// Joint of `thigh` in its parent's frame, x [m].
+    /// Joint of `thigh` in its parent's frame, x \[m\].
     pub thigh_origin_x: T,
-    /// Joint of `thigh` in its parent's frame, y [m].
+    /// Joint of `thigh` in its parent's frame, y \[m\].
     pub thigh_origin_y: T,
-    /// Tip of `thigh` from its joint, link frame, x [m].
+    /// Tip of `thigh` from its joint, link frame, x \[m\].
     pub thigh_length_x: T,
-    /// Tip of `thigh` from its joint, link frame, y [m].
+    /// Tip of `thigh` from its joint, link frame, y \[m\].
     pub thigh_length_y: T,
-    /// Mass of `thigh` [kg].
+    /// Mass of `thigh` \[kg\].
     pub thigh_mass: T,
-    /// Centre of mass of `thigh` from its joint, link frame, x [m].
+    /// Centre of mass of `thigh` from its joint, link frame, x \[m\].
     pub thigh_com_x: T,
-    /// Centre of mass of `thigh` from its joint, link frame, y [m].
+    /// Centre of mass of `thigh` from its joint, link frame, y \[m\].
     pub thigh_com_y: T,
-    /// Inertia of `thigh` about its centre of mass [kg m²].
+    /// Inertia of `thigh` about its centre of mass \[kg m²\].
     pub thigh_inertia: T,
-    /// Viscous damping of the joint of `thigh` [N m s/rad].
+    /// Viscous damping of the joint of `thigh` \[N m s/rad\].
     pub thigh_damping: T,
-    /// Rotor inertia of the motor of `thigh` [kg m²].
+    /// Rotor inertia of the motor of `thigh` \[kg m²\].
     pub thigh_rotor_inertia: T,
     /// Gear ratio of the motor of `thigh` (reflected inertia I·N²).
     pub thigh_gear_ratio: T,
-    /// Tip of `shin` from its joint, link frame, x [m].
+    /// Tip of `shin` from its joint, link frame, x \[m\].
     pub shin_length_x: T,
-    /// Tip of `shin` from its joint, link frame, y [m].
+    /// Tip of `shin` from its joint, link frame, y \[m\].
     pub shin_length_y: T,
-    /// Mass of `shin` [kg].
+    /// Mass of `shin` \[kg\].
     pub shin_mass: T,
-    /// Centre of mass of `shin` from its joint, link frame, x [m].
+    /// Centre of mass of `shin` from its joint, link frame, x \[m\].
     pub shin_com_x: T,
-    /// Centre of mass of `shin` from its joint, link frame, y [m].
+    /// Centre of mass of `shin` from its joint, link frame, y \[m\].
     pub shin_com_y: T,
-    /// Inertia of `shin` about its centre of mass [kg m²].
+    /// Inertia of `shin` about its centre of mass \[kg m²\].
     pub shin_inertia: T,
-    /// Viscous damping of the joint of `shin` [N m s/rad].
+    /// Viscous damping of the joint of `shin` \[N m s/rad\].
     pub shin_damping: T,
-    /// Rotor inertia of the motor of `shin` [kg m²].
+    /// Rotor inertia of the motor of `shin` \[kg m²\].
     pub shin_rotor_inertia: T,
     /// Gear ratio of the motor of `shin` (reflected inertia I·N²).
     pub shin_gear_ratio: T,
-    /// Stiffness of spring `knee_spring` on the joint of `shin` [N m/rad].
+    /// Stiffness of spring `knee_spring` on the joint of `shin` \[N m/rad\].
     pub knee_spring_stiffness: T,
-    /// Rest value of spring `knee_spring` on the joint of `shin` [rad].
+    /// Rest value of spring `knee_spring` on the joint of `shin` \[rad\].
     pub knee_spring_rest: T,
 }
 impl<T: Arithmetic> Default for ParamValues<T> {

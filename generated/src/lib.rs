@@ -2,6 +2,7 @@
 //! Generated leg models, one module per spec in `leg-models/specs/`. Each implements
 //! [`leg_models::LegModel`]. Regenerate with `cargo xtask gen`; never edit by hand.
 #![cfg_attr(not(feature = "std"), no_std)]
+#![warn(missing_docs)]
 #![cfg_attr(rustfmt, rustfmt::skip)]
 pub mod atrias;
 pub use atrias::Atrias;

@@ -35,139 +35,139 @@ impl leg_models::ChartSize<3, 6> for ThreeMotorLeg {}
 /// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParamValues<T> {
-    /// Gravity in the base frame, x [m/s²].
+    /// Gravity in the base frame, x \[m/s²\].
     pub gravity_x: T,
-    /// Gravity in the base frame, y [m/s²].
+    /// Gravity in the base frame, y \[m/s²\].
     pub gravity_y: T,
-    /// Joint of `thigh` in the base frame, x [m].
+    /// Joint of `thigh` in the base frame, x \[m\].
     pub thigh_origin_x: T,
-    /// Joint of `thigh` in the base frame, y [m].
+    /// Joint of `thigh` in the base frame, y \[m\].
     pub thigh_origin_y: T,
-    /// Tip of `thigh` from its joint, link frame, x [m].
+    /// Tip of `thigh` from its joint, link frame, x \[m\].
     pub thigh_length_x: T,
-    /// Tip of `thigh` from its joint, link frame, y [m].
+    /// Tip of `thigh` from its joint, link frame, y \[m\].
     pub thigh_length_y: T,
-    /// Mass of `thigh` [kg].
+    /// Mass of `thigh` \[kg\].
     pub thigh_mass: T,
-    /// Centre of mass of `thigh` from its joint, link frame, x [m].
+    /// Centre of mass of `thigh` from its joint, link frame, x \[m\].
     pub thigh_com_x: T,
-    /// Centre of mass of `thigh` from its joint, link frame, y [m].
+    /// Centre of mass of `thigh` from its joint, link frame, y \[m\].
     pub thigh_com_y: T,
-    /// Inertia of `thigh` about its centre of mass [kg m²].
+    /// Inertia of `thigh` about its centre of mass \[kg m²\].
     pub thigh_inertia: T,
-    /// Viscous damping of the joint of `thigh` [N m s/rad].
+    /// Viscous damping of the joint of `thigh` \[N m s/rad\].
     pub thigh_damping: T,
-    /// Rotor inertia of the motor of `thigh` [kg m²].
+    /// Rotor inertia of the motor of `thigh` \[kg m²\].
     pub thigh_rotor_inertia: T,
     /// Gear ratio of the motor of `thigh` (reflected inertia I·N²).
     pub thigh_gear_ratio: T,
-    /// Tip of `shin` from its joint, link frame, x [m].
+    /// Tip of `shin` from its joint, link frame, x \[m\].
     pub shin_length_x: T,
-    /// Tip of `shin` from its joint, link frame, y [m].
+    /// Tip of `shin` from its joint, link frame, y \[m\].
     pub shin_length_y: T,
-    /// Mass of `shin` [kg].
+    /// Mass of `shin` \[kg\].
     pub shin_mass: T,
-    /// Centre of mass of `shin` from its joint, link frame, x [m].
+    /// Centre of mass of `shin` from its joint, link frame, x \[m\].
     pub shin_com_x: T,
-    /// Centre of mass of `shin` from its joint, link frame, y [m].
+    /// Centre of mass of `shin` from its joint, link frame, y \[m\].
     pub shin_com_y: T,
-    /// Inertia of `shin` about its centre of mass [kg m²].
+    /// Inertia of `shin` about its centre of mass \[kg m²\].
     pub shin_inertia: T,
-    /// Viscous damping of the joint of `shin` [N m s/rad].
+    /// Viscous damping of the joint of `shin` \[N m s/rad\].
     pub shin_damping: T,
-    /// Rotor inertia of the motor of `shin` [kg m²].
+    /// Rotor inertia of the motor of `shin` \[kg m²\].
     pub shin_rotor_inertia: T,
     /// Gear ratio of the motor of `shin` (reflected inertia I·N²).
     pub shin_gear_ratio: T,
-    /// Tip of `tarsus` from its joint, link frame, x [m].
+    /// Tip of `tarsus` from its joint, link frame, x \[m\].
     pub tarsus_length_x: T,
-    /// Tip of `tarsus` from its joint, link frame, y [m].
+    /// Tip of `tarsus` from its joint, link frame, y \[m\].
     pub tarsus_length_y: T,
-    /// Mass of `tarsus` [kg].
+    /// Mass of `tarsus` \[kg\].
     pub tarsus_mass: T,
-    /// Centre of mass of `tarsus` from its joint, link frame, x [m].
+    /// Centre of mass of `tarsus` from its joint, link frame, x \[m\].
     pub tarsus_com_x: T,
-    /// Centre of mass of `tarsus` from its joint, link frame, y [m].
+    /// Centre of mass of `tarsus` from its joint, link frame, y \[m\].
     pub tarsus_com_y: T,
-    /// Inertia of `tarsus` about its centre of mass [kg m²].
+    /// Inertia of `tarsus` about its centre of mass \[kg m²\].
     pub tarsus_inertia: T,
-    /// Viscous damping of the joint of `tarsus` [N m s/rad].
+    /// Viscous damping of the joint of `tarsus` \[N m s/rad\].
     pub tarsus_damping: T,
-    /// Tip of `toe` from its joint, link frame, x [m].
+    /// Tip of `toe` from its joint, link frame, x \[m\].
     pub toe_length_x: T,
-    /// Tip of `toe` from its joint, link frame, y [m].
+    /// Tip of `toe` from its joint, link frame, y \[m\].
     pub toe_length_y: T,
-    /// Mass of `toe` [kg].
+    /// Mass of `toe` \[kg\].
     pub toe_mass: T,
-    /// Centre of mass of `toe` from its joint, link frame, x [m].
+    /// Centre of mass of `toe` from its joint, link frame, x \[m\].
     pub toe_com_x: T,
-    /// Centre of mass of `toe` from its joint, link frame, y [m].
+    /// Centre of mass of `toe` from its joint, link frame, y \[m\].
     pub toe_com_y: T,
-    /// Inertia of `toe` about its centre of mass [kg m²].
+    /// Inertia of `toe` about its centre of mass \[kg m²\].
     pub toe_inertia: T,
-    /// Viscous damping of the joint of `toe` [N m s/rad].
+    /// Viscous damping of the joint of `toe` \[N m s/rad\].
     pub toe_damping: T,
-    /// Joint of `heel_rod` in its parent's frame, x [m].
+    /// Joint of `heel_rod` in its parent's frame, x \[m\].
     pub heel_rod_origin_x: T,
-    /// Joint of `heel_rod` in its parent's frame, y [m].
+    /// Joint of `heel_rod` in its parent's frame, y \[m\].
     pub heel_rod_origin_y: T,
-    /// Tip of `heel_rod` from its joint, link frame, x [m].
+    /// Tip of `heel_rod` from its joint, link frame, x \[m\].
     pub heel_rod_length_x: T,
-    /// Tip of `heel_rod` from its joint, link frame, y [m].
+    /// Tip of `heel_rod` from its joint, link frame, y \[m\].
     pub heel_rod_length_y: T,
-    /// Mass of `heel_rod` [kg].
+    /// Mass of `heel_rod` \[kg\].
     pub heel_rod_mass: T,
-    /// Centre of mass of `heel_rod` from its joint, link frame, x [m].
+    /// Centre of mass of `heel_rod` from its joint, link frame, x \[m\].
     pub heel_rod_com_x: T,
-    /// Centre of mass of `heel_rod` from its joint, link frame, y [m].
+    /// Centre of mass of `heel_rod` from its joint, link frame, y \[m\].
     pub heel_rod_com_y: T,
-    /// Inertia of `heel_rod` about its centre of mass [kg m²].
+    /// Inertia of `heel_rod` about its centre of mass \[kg m²\].
     pub heel_rod_inertia: T,
-    /// Viscous damping of the joint of `heel_rod` [N m s/rad].
+    /// Viscous damping of the joint of `heel_rod` \[N m s/rad\].
     pub heel_rod_damping: T,
-    /// Joint of `toe_crank` in its parent's frame, x [m].
+    /// Joint of `toe_crank` in its parent's frame, x \[m\].
     pub toe_crank_origin_x: T,
-    /// Joint of `toe_crank` in its parent's frame, y [m].
+    /// Joint of `toe_crank` in its parent's frame, y \[m\].
     pub toe_crank_origin_y: T,
-    /// Tip of `toe_crank` from its joint, link frame, x [m].
+    /// Tip of `toe_crank` from its joint, link frame, x \[m\].
     pub toe_crank_length_x: T,
-    /// Tip of `toe_crank` from its joint, link frame, y [m].
+    /// Tip of `toe_crank` from its joint, link frame, y \[m\].
     pub toe_crank_length_y: T,
-    /// Mass of `toe_crank` [kg].
+    /// Mass of `toe_crank` \[kg\].
     pub toe_crank_mass: T,
-    /// Centre of mass of `toe_crank` from its joint, link frame, x [m].
+    /// Centre of mass of `toe_crank` from its joint, link frame, x \[m\].
     pub toe_crank_com_x: T,
-    /// Centre of mass of `toe_crank` from its joint, link frame, y [m].
+    /// Centre of mass of `toe_crank` from its joint, link frame, y \[m\].
     pub toe_crank_com_y: T,
-    /// Inertia of `toe_crank` about its centre of mass [kg m²].
+    /// Inertia of `toe_crank` about its centre of mass \[kg m²\].
     pub toe_crank_inertia: T,
-    /// Viscous damping of the joint of `toe_crank` [N m s/rad].
+    /// Viscous damping of the joint of `toe_crank` \[N m s/rad\].
     pub toe_crank_damping: T,
-    /// Rotor inertia of the motor of `toe_crank` [kg m²].
+    /// Rotor inertia of the motor of `toe_crank` \[kg m²\].
     pub toe_crank_rotor_inertia: T,
     /// Gear ratio of the motor of `toe_crank` (reflected inertia I·N²).
     pub toe_crank_gear_ratio: T,
-    /// Tip of `plantar_rod` from its joint, link frame, x [m].
+    /// Tip of `plantar_rod` from its joint, link frame, x \[m\].
     pub plantar_rod_length_x: T,
-    /// Tip of `plantar_rod` from its joint, link frame, y [m].
+    /// Tip of `plantar_rod` from its joint, link frame, y \[m\].
     pub plantar_rod_length_y: T,
-    /// Mass of `plantar_rod` [kg].
+    /// Mass of `plantar_rod` \[kg\].
     pub plantar_rod_mass: T,
-    /// Centre of mass of `plantar_rod` from its joint, link frame, x [m].
+    /// Centre of mass of `plantar_rod` from its joint, link frame, x \[m\].
     pub plantar_rod_com_x: T,
-    /// Centre of mass of `plantar_rod` from its joint, link frame, y [m].
+    /// Centre of mass of `plantar_rod` from its joint, link frame, y \[m\].
     pub plantar_rod_com_y: T,
-    /// Inertia of `plantar_rod` about its centre of mass [kg m²].
+    /// Inertia of `plantar_rod` about its centre of mass \[kg m²\].
     pub plantar_rod_inertia: T,
-    /// Viscous damping of the joint of `plantar_rod` [N m s/rad].
+    /// Viscous damping of the joint of `plantar_rod` \[N m s/rad\].
     pub plantar_rod_damping: T,
-    /// Point b of closure `heel`, link frame, x [m].
+    /// Point b of closure `heel`, link frame, x \[m\].
     pub heel_b_x: T,
-    /// Point b of closure `heel`, link frame, y [m].
+    /// Point b of closure `heel`, link frame, y \[m\].
     pub heel_b_y: T,
-    /// Point b of closure `plantar`, link frame, x [m].
+    /// Point b of closure `plantar`, link frame, x \[m\].
     pub plantar_b_x: T,
-    /// Point b of closure `plantar`, link frame, y [m].
+    /// Point b of closure `plantar`, link frame, y \[m\].
     pub plantar_b_y: T,
 }
 impl<T: Arithmetic> Default for ParamValues<T> {

@@ -35,47 +35,47 @@ impl leg_models::ChartSize<2, 4> for TwoLink {}
 /// The physical quantities of the spec; `Default` holds its values.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParamValues<T> {
-    /// Gravity in the base frame, x [m/s²].
+    /// Gravity in the base frame, x \[m/s²\].
     pub gravity_x: T,
-    /// Gravity in the base frame, y [m/s²].
+    /// Gravity in the base frame, y \[m/s²\].
     pub gravity_y: T,
-    /// Joint of `upper_arm` in the base frame, x [m].
+    /// Joint of `upper_arm` in the base frame, x \[m\].
     pub upper_arm_origin_x: T,
-    /// Joint of `upper_arm` in the base frame, y [m].
+    /// Joint of `upper_arm` in the base frame, y \[m\].
     pub upper_arm_origin_y: T,
-    /// Tip of `upper_arm` from its joint, link frame, x [m].
+    /// Tip of `upper_arm` from its joint, link frame, x \[m\].
     pub upper_arm_length_x: T,
-    /// Tip of `upper_arm` from its joint, link frame, y [m].
+    /// Tip of `upper_arm` from its joint, link frame, y \[m\].
     pub upper_arm_length_y: T,
-    /// Mass of `upper_arm` [kg].
+    /// Mass of `upper_arm` \[kg\].
     pub upper_arm_mass: T,
-    /// Centre of mass of `upper_arm` from its joint, link frame, x [m].
+    /// Centre of mass of `upper_arm` from its joint, link frame, x \[m\].
     pub upper_arm_com_x: T,
-    /// Centre of mass of `upper_arm` from its joint, link frame, y [m].
+    /// Centre of mass of `upper_arm` from its joint, link frame, y \[m\].
     pub upper_arm_com_y: T,
-    /// Inertia of `upper_arm` about its centre of mass [kg m²].
+    /// Inertia of `upper_arm` about its centre of mass \[kg m²\].
     pub upper_arm_inertia: T,
-    /// Viscous damping of the joint of `upper_arm` [N m s/rad].
+    /// Viscous damping of the joint of `upper_arm` \[N m s/rad\].
     pub upper_arm_damping: T,
-    /// Rotor inertia of the motor of `upper_arm` [kg m²].
+    /// Rotor inertia of the motor of `upper_arm` \[kg m²\].
     pub upper_arm_rotor_inertia: T,
     /// Gear ratio of the motor of `upper_arm` (reflected inertia I·N²).
     pub upper_arm_gear_ratio: T,
-    /// Tip of `forearm` from its joint, link frame, x [m].
+    /// Tip of `forearm` from its joint, link frame, x \[m\].
     pub forearm_length_x: T,
-    /// Tip of `forearm` from its joint, link frame, y [m].
+    /// Tip of `forearm` from its joint, link frame, y \[m\].
     pub forearm_length_y: T,
-    /// Mass of `forearm` [kg].
+    /// Mass of `forearm` \[kg\].
     pub forearm_mass: T,
-    /// Centre of mass of `forearm` from its joint, link frame, x [m].
+    /// Centre of mass of `forearm` from its joint, link frame, x \[m\].
     pub forearm_com_x: T,
-    /// Centre of mass of `forearm` from its joint, link frame, y [m].
+    /// Centre of mass of `forearm` from its joint, link frame, y \[m\].
     pub forearm_com_y: T,
-    /// Inertia of `forearm` about its centre of mass [kg m²].
+    /// Inertia of `forearm` about its centre of mass \[kg m²\].
     pub forearm_inertia: T,
-    /// Viscous damping of the joint of `forearm` [N m s/rad].
+    /// Viscous damping of the joint of `forearm` \[N m s/rad\].
     pub forearm_damping: T,
-    /// Rotor inertia of the motor of `forearm` [kg m²].
+    /// Rotor inertia of the motor of `forearm` \[kg m²\].
     pub forearm_rotor_inertia: T,
     /// Gear ratio of the motor of `forearm` (reflected inertia I·N²).
     pub forearm_gear_ratio: T,

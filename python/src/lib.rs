@@ -17,7 +17,9 @@ use leg_models::nalgebra::{SMatrix, SVector};
 use leg_models::reference::Sinusoid;
 use leg_models::{ContactModel, Leg};
 use numpy::ndarray::Array2;
-use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{
+    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
+};
 use pyo3::exceptions::{PyException, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -87,6 +89,20 @@ fn linearization_err(e: LinearizationError) -> PyErr {
 /// A vector argument of length `N`: a numpy array of floats (no copy until here) or any
 /// sequence of numbers.
 fn vector<const N: usize>(name: &str, value: &Bound<'_, PyAny>) -> PyResult<SVector<f64, N>> {
+    if let Ok(a) = value.cast::<PyArray1<f64>>() {
+        if a.len() != N {
+            return Err(PyValueError::new_err(format!(
+                "`{name}` has {} entries, this leg needs {N}",
+                a.len()
+            )));
+        }
+        // Safety: the entries are copied at once, holding the GIL (the abi3 build is not
+        // free-threaded), so nothing writes the array meanwhile; numpy's borrow tracking
+        // (PyReadonlyArray) cost more than the dynamics of a small leg.
+        if let Ok(slice) = unsafe { a.as_slice() } {
+            return Ok(SVector::from_column_slice(slice));
+        }
+    }
     if let Ok(a) = value.extract::<PyReadonlyArray1<'_, f64>>() {
         if a.len() != N {
             return Err(PyValueError::new_err(format!(
@@ -141,7 +157,15 @@ fn out_matrix<'py, const R: usize, const C: usize>(
     py: Python<'py>,
     m: &SMatrix<f64, R, C>,
 ) -> Bound<'py, PyArray2<f64>> {
-    PyArray2::from_owned_array(py, Array2::from_shape_fn((R, C), |(i, j)| m[(i, j)]))
+    let a = PyArray2::zeros(py, [R, C], false);
+    // Safety: a new C-contiguous array no one else holds yet.
+    let out = unsafe { a.as_slice_mut() }.expect("a new array is contiguous");
+    for i in 0..R {
+        for j in 0..C {
+            out[i * C + j] = m[(i, j)];
+        }
+    }
+    a
 }
 
 /// Rows of vectors as an `n × N` array.

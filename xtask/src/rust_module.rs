@@ -405,7 +405,8 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     let mut setters = Vec::new();
     for p in &info.params {
         let id = codegen::ident(&ctx, &p.name)?;
-        let doc = format!(" {}", p.doc);
+        // Units are written `[m]`: escaped, so rustdoc does not read them as links.
+        let doc = format!(" {}", p.doc.replace('[', "\\[").replace(']', "\\]"));
         fields.push(quote!(#[doc = #doc] pub #id: T));
         if !p.default.is_finite() {
             return Err(Error {
@@ -702,6 +703,7 @@ pub fn lib_source(models: &[Summary]) -> Result<String, Error> {
         //! Generated leg models, one module per spec in `leg-models/specs/`. Each implements
         //! [`leg_models::LegModel`]. Regenerate with `cargo xtask gen`; never edit by hand.
         #![cfg_attr(not(feature = "std"), no_std)]
+        #![warn(missing_docs)]
         #![cfg_attr(rustfmt, rustfmt::skip)]
 
         #(#mods)*

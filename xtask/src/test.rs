@@ -86,6 +86,42 @@ fn cross_checks(root: &Path) -> Result<Vec<String>, String> {
     Ok(failed)
 }
 
+/// Builds and installs the Python package into the project's environment (the README's
+/// `pip install ./python`, maturin from source), then runs its pytest suite against the
+/// `legs` binary the cross-checks built.
+fn python_package(root: &Path) -> Result<(), String> {
+    eprintln!("==> Python package: pip install ./python, then pytest python/tests");
+    let py = gen::python(root)?;
+    let run = |args: &[&str], shown: &str| -> Result<(), String> {
+        let status = Command::new(&py)
+            .args(args)
+            .env("LEGS_BINARY", target_dir(root).join("debug").join("legs"))
+            .current_dir(root)
+            .status()
+            .map_err(|e| format!("cannot run `{shown}`: {e}"))?;
+        if status.success() {
+            Ok(())
+        } else {
+            Err(format!("`{shown}` failed ({status})"))
+        }
+    };
+    run(
+        &[
+            "-m",
+            "pip",
+            "install",
+            "--quiet",
+            "--disable-pip-version-check",
+            "./python",
+        ],
+        ".venv/bin/python -m pip install ./python",
+    )?;
+    run(
+        &["-m", "pytest", "-q", "python/tests"],
+        ".venv/bin/python -m pytest python/tests",
+    )
+}
+
 pub fn run(root: &Path) -> Result<(), String> {
     let mut failures: Vec<String> = Vec::new();
     let mut check = |what: &str, r: Result<(), String>| {
@@ -140,6 +176,16 @@ pub fn run(root: &Path) -> Result<(), String> {
             .for_each(|f| check("cross-check", Err(f))),
         Err(e) => check("cross-checks", Err(e)),
     }
+    check("Python package", python_package(root));
+    eprintln!("==> docs (cargo doc, warnings denied)");
+    check(
+        "docs",
+        cargo(
+            root,
+            &["doc", "--no-deps", "-p", "leg-models", "-p", "generated"],
+            &[("RUSTDOCFLAGS", "-D warnings")],
+        ),
+    );
     eprintln!("==> instruction budgets ({})", xtask::bench::BUDGETS);
     check(
         "instruction budgets",
