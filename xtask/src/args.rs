@@ -54,8 +54,15 @@ pub struct GenArgs {
     #[arg(long)]
     pub check: bool,
     /// Models to regenerate (default: every spec in leg-models/specs/)
-    #[arg(value_name = "NAME")]
+    #[arg(value_name = "NAME", conflicts_with = "spec")]
     pub names: Vec<String>,
+    /// A spec outside leg-models/specs/ (a user's own crate): generate its model as one
+    /// Rust module that depends on `leg-models` only; needs --out
+    #[arg(long, value_name = "FILE", requires = "out")]
+    pub spec: Option<PathBuf>,
+    /// Where the module of --spec goes (with --check: the file to compare with)
+    #[arg(long, value_name = "FILE", requires = "spec")]
+    pub out: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]

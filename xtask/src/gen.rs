@@ -421,6 +421,42 @@ pub struct GenOptions {
     pub names: Vec<String>,
 }
 
+/// Generates the model of a spec that lives outside `leg-models/specs/` (a user's own
+/// crate) as one module at `out`: the same derivation and checks as `run`, and the module
+/// needs only the `leg-models` crate (`mod my_leg;` in the user's crate). With `check`,
+/// writes nothing and fails if `out` differs. A failure writes nothing.
+pub fn standalone(root: &Path, spec_path: &Path, out: &Path, check: bool) -> Result<String, Error> {
+    let started = std::time::Instant::now();
+    let spec = load_spec(root, spec_path).map_err(Error::Usage)?;
+    let model = model::build(&spec).map_err(|e| Error::Usage(e.to_string()))?;
+    let py = python(root).map_err(Error::Failed)?;
+    let derived = derive(root, &py, &model).map_err(Error::Failed)?;
+    check_home(&spec, &derived.home_check).map_err(Error::Usage)?;
+    let mobility = derived.home_check.mobility;
+    let ir = assemble(&spec, &model, derived);
+    rust_module::check_terms(&ir).map_err(|e| Error::Failed(e.to_string()))?;
+    let src = rust_module::model_source(&ir).map_err(|e| Error::Failed(e.to_string()))?;
+    let shown = out.display();
+    if check {
+        let committed = std::fs::read_to_string(out).unwrap_or_default();
+        if committed != src {
+            return Err(Error::Failed(format!(
+                "{shown} is stale: run `cargo xtask gen --spec {} --out {shown}`",
+                spec_path.display()
+            )));
+        }
+        return Ok(format!("{shown} is up to date"));
+    }
+    crate::cli::write_atomic(out, &src).map_err(Error::Failed)?;
+    Ok(format!(
+        "generated {} (mobility {mobility}, {} motors) into {shown} in {:.1} s; in your crate: `mod {};` beside a dependency on leg-models",
+        spec.name,
+        model.actuated.len(),
+        started.elapsed().as_secs_f64(),
+        spec.name
+    ))
+}
+
 /// Runs the generation; returns a report for the user. A bad spec or an unknown name is
 /// a usage error (the input's fault, exit code 2); anything else is a failure.
 pub fn run(root: &Path, opts: &GenOptions) -> Result<String, Error> {

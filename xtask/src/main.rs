@@ -39,6 +39,10 @@ fn main() -> ExitCode {
 }
 
 fn run_gen(root: &Path, a: args::GenArgs) -> Result<(), cli::Error> {
+    if let (Some(spec), Some(out)) = (&a.spec, &a.out) {
+        println!("{}", gen::standalone(root, spec, out, a.check)?);
+        return Ok(());
+    }
     let known = cli::model_names(root).map_err(cli::Error::Failed)?;
     for n in &a.names {
         cli::check_model(n, &known)?;

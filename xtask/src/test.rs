@@ -122,6 +122,33 @@ fn python_package(root: &Path) -> Result<(), String> {
     )
 }
 
+/// The user's crate of the README (tests/user-crate): its generated module is fresh and
+/// its program, which checks its own leg, runs.
+fn user_crate(root: &Path) -> Result<(), String> {
+    eprintln!("==> a user's crate (tests/user-crate): gen --spec --check, then cargo run");
+    gen::standalone(
+        root,
+        &root.join("tests/user-crate/specs/parallelogram_knee.toml"),
+        &root.join("tests/user-crate/src/parallelogram_knee.rs"),
+        true,
+    )
+    .map_err(|e| e.to_string())?;
+    let target = target_dir(root).join("user-crate");
+    cargo(
+        root,
+        &[
+            "run",
+            "--quiet",
+            "--manifest-path",
+            "tests/user-crate/Cargo.toml",
+        ],
+        &[(
+            "CARGO_TARGET_DIR",
+            target.to_str().unwrap_or("target/user-crate"),
+        )],
+    )
+}
+
 pub fn run(root: &Path) -> Result<(), String> {
     let mut failures: Vec<String> = Vec::new();
     let mut check = |what: &str, r: Result<(), String>| {
@@ -177,6 +204,7 @@ pub fn run(root: &Path) -> Result<(), String> {
         Err(e) => check("cross-checks", Err(e)),
     }
     check("Python package", python_package(root));
+    check("user crate", user_crate(root));
     eprintln!("==> docs (cargo doc, warnings denied)");
     check(
         "docs",
