@@ -214,3 +214,14 @@ def test_example_script_runs(tmp_path):
     out = tmp_path / "minitaur.png"
     subprocess.run([sys.executable, str(ROOT / "python" / "examples" / "simulate_leg.py"), "--out", str(out)], check=True)
     assert out.stat().st_size > 10_000
+
+
+def test_the_readme_example_runs():
+    """The README's Python example, as written there."""
+    text = (ROOT / "README.md").read_text()
+    start = text.index("```python\n", text.index("## Python")) + len("```python\n")
+    code = text[start:text.index("```", start)]
+    namespace = {}
+    exec(compile(code, "README.md", "exec"), namespace)
+    assert namespace["run"]["q"].shape == (1001, 4)
+    assert np.isfinite(namespace["d"]["qdd_q"]).all()
