@@ -28,14 +28,20 @@ pub enum AssemblyError {
     /// No configuration satisfies the request from this guess: the motor angles (or foot
     /// position) are out of the workspace, or the guess is on no branch that reaches
     /// them. `residual` is the largest residual left (m).
-    Unreachable { residual: f64 },
+    Unreachable {
+        /// The largest residual entry left (m).
+        residual: f64,
+    },
     /// The passive joints lose rank here (e.g. a five-bar's lower links are collinear),
     /// so the velocities of the passive joints are not determined by the motors'.
     Singular,
     /// Following the branch of the starting pose ([`assemble_along`]), the branch ends
     /// (a singular configuration, or the edge of the workspace) after this fraction of
     /// the way, or the solution would jump to another branch there.
-    BranchEnds { fraction: f64 },
+    BranchEnds {
+        /// The share of the way (0 to 1) followed before the branch ends.
+        fraction: f64,
+    },
     /// An input is NaN or infinite.
     NonFinite,
 }
@@ -71,6 +77,7 @@ pub struct Tolerance<T> {
     /// Largest residual accepted, relative to the leg's size ([`leg_size`]): by default
     /// `1000 ε` (2.2e-13 for `f64`, 1.2e-4 for `f32`), so about 1e-13 m on a 0.5 m leg.
     pub relative_residual: T,
+    /// The most Gauss–Newton iterations of one solve (default 50).
     pub max_iterations: usize,
 }
 

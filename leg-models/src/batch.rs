@@ -39,7 +39,9 @@ impl std::error::Error for BatchError {}
 /// `q̈` and the closure forces of four states, and which lanes are valid.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BatchAcceleration<const NQ: usize, const NC: usize> {
+    /// `q̈` per lane.
     pub qdd: SVector<F64x4, NQ>,
+    /// The closure forces `F` per lane, as [`crate::dynamics::Acceleration::forces`].
     pub forces: SVector<F64x4, NC>,
     /// `ok[k]`: lane `k` solved (where the scalar path returns `Ok`).
     pub ok: [bool; 4],

@@ -25,7 +25,9 @@ use crate::model::{ContactModel, Real};
 /// The ground line `n · x = d` (base frame), `n` a unit normal out of the ground.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ground<T: Real> {
+    /// The unit normal `n`, pointing out of the ground (base frame).
     pub normal: SVector<T, 2>,
+    /// The offset `d` (m).
     pub offset: T,
 }
 
@@ -84,10 +86,14 @@ pub enum ContactMode {
     Stick,
     /// On the ground, sliding along `+t` (`forward`) or `−t`; the friction force is
     /// `μ λ_n` against the slip.
-    Slide { forward: bool },
+    Slide {
+        /// Sliding along `+t` (`false`: along `−t`).
+        forward: bool,
+    },
 }
 
 impl ContactMode {
+    /// Whether the contact touches the ground (sticking or sliding).
     pub fn on_ground(self) -> bool {
         self != ContactMode::Flight
     }
@@ -104,14 +110,17 @@ impl<const NK: usize> Modes<NK> {
         Modes([ContactMode::Flight; NK])
     }
 
+    /// The number of contacts, `NK / 2`.
     pub fn contacts(&self) -> usize {
         NK / 2
     }
 
+    /// The mode of contact `k`.
     pub fn get(&self, k: usize) -> ContactMode {
         self.0[2 * k]
     }
 
+    /// Sets the mode of contact `k` (both its rows).
     pub fn set(&mut self, k: usize, mode: ContactMode) {
         self.0[2 * k] = mode;
         self.0[2 * k + 1] = mode;
@@ -356,10 +365,13 @@ pub struct ContactRows<T: Real, const NQ: usize, const NK: usize> {
     pub w: SMatrix<T, NK, NQ>,
     /// `−μ s` on the tangential row of a sliding contact, zero elsewhere.
     pub slide: SVector<T, NK>,
+    /// Which rows are held ([`Modes::held_rows`]).
     pub held: [bool; NK],
 }
 
 impl<T: Real, const NQ: usize, const NK: usize> ContactRows<T, NQ, NK> {
+    /// The rows of the base-frame contact Jacobian `jacobian` (`J_c`) on `ground`, under
+    /// `modes`, with friction `mu` (per contact, entry `2k`).
     pub fn new(
         ground: &Ground<T>,
         jacobian: &SMatrix<T, NK, NQ>,
@@ -540,7 +552,12 @@ pub enum ImpactError {
     Dynamics(DynamicsError),
     /// The normal impulse of contact `contact` would pull the leg into the ground
     /// (`Λ_n < 0`): the contact is separating, not impacting.
-    Pulling { contact: usize, normal_impulse: f64 },
+    Pulling {
+        /// The contact's index.
+        contact: usize,
+        /// Its normal impulse `Λ_n` (N s), negative.
+        normal_impulse: f64,
+    },
 }
 
 impl fmt::Display for ImpactError {

@@ -33,6 +33,8 @@ pub enum ControlError {
     /// The foot Jacobian in actuated coordinates `J_f G` loses rank: the foot cannot be
     /// moved in some direction.
     SingularTask,
+    /// The leg's dynamics cannot be solved at the state (the mass matrix is not positive
+    /// definite, or a closure or contact system is singular).
     Dynamics(DynamicsError),
     /// A state, reference or parameter is NaN or infinite.
     NonFinite,
@@ -99,7 +101,10 @@ impl From<AssemblyError> for ControlError {
 /// `Ã θ̈ = b̃ + u`: the dynamics in the motor angles.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ActuatedDynamics<T: Real, const NU: usize> {
+    /// `Ã`: the inertia the motors see, with the loop closed.
     pub a_tilde: SMatrix<T, NU, NU>,
+    /// `b̃`: the rest of the reduced dynamics, from `−N − D q̇` and `−J̇ q̇`, with the loop
+    /// closed.
     pub b_tilde: SVector<T, NU>,
 }
 
@@ -236,7 +241,9 @@ where
 /// The constrained motion in motor coordinates: `q̇ = G θ̇` and `q̈ = G θ̈ + c`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NullSpace<T: Real, const NQ: usize, const NU: usize> {
+    /// `G` (`NQ × NU`): column `k`, the joint rates when motor `k` turns at unit rate.
     pub g: SMatrix<T, NQ, NU>,
+    /// `c`: the joint accelerations that keep `J q̈ + J̇ q̇ = 0` when `θ̈ = 0`.
     pub c: SVector<T, NQ>,
 }
 
@@ -297,11 +304,14 @@ fn reduce_with<T: Real, const NQ: usize, const NC: usize, const NU: usize>(
 /// Proportional and derivative gains per coordinate.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Gains<T: Real, const N: usize> {
+    /// `k_p` per coordinate.
     pub kp: SVector<T, N>,
+    /// `k_d` per coordinate.
     pub kd: SVector<T, N>,
 }
 
 impl<T: Real, const N: usize> Gains<T, N> {
+    /// The same `k_p` and `k_d` on every coordinate.
     pub fn new(kp: T, kd: T) -> Self {
         Gains {
             kp: SVector::from_element(kp),
@@ -366,7 +376,9 @@ pub struct JointFeedbackLinearization<
 {
     /// The controller's model of the leg (it may differ from the plant's).
     pub params: L::Params<T>,
+    /// Gains on the motor-angle error `e = θ_ref − θ` (`k_p` in 1/s², `k_d` in 1/s).
     pub gains: Gains<T, NU>,
+    /// The motor angles' reference `θ_ref(t)`.
     pub reference: R,
     model: PhantomData<L>,
 }
@@ -457,8 +469,12 @@ pub struct FootFeedbackLinearization<
 > where
     L: LegModel<NQ, NC, NU>,
 {
+    /// The controller's model of the leg (it may differ from the plant's).
     pub params: L::Params<T>,
+    /// Gains on the foot error `e = y_ref − y` (`k_p` in 1/s², `k_d` in 1/s); the posture
+    /// law uses the first coordinate's.
     pub gains: Gains<T, 2>,
+    /// The foot's reference `y_ref(t)` in the base frame (m).
     pub reference: R,
     /// The motor angles the free motions are held at (set from the first state).
     pub posture: Option<SVector<T, NU>>,
@@ -570,8 +586,12 @@ pub struct PdGravity<L, T: Real, R, const NQ: usize, const NC: usize, const NU: 
 where
     L: LegModel<NQ, NC, NU>,
 {
+    /// The controller's model of the leg (it may differ from the plant's).
     pub params: L::Params<T>,
+    /// Gains on the motor-angle error (`k_p` in N m/rad, `k_d` in N m s/rad on revolute
+    /// motors).
     pub gains: Gains<T, NU>,
+    /// The motor angles' reference `θ_ref(t)`.
     pub reference: R,
     model: PhantomData<L>,
 }
@@ -624,9 +644,11 @@ pub struct FootPdGravity<L, T: Real, R, const NQ: usize, const NC: usize, const 
 where
     L: LegModel<NQ, NC, NU>,
 {
+    /// The controller's model of the leg (it may differ from the plant's).
     pub params: L::Params<T>,
     /// Stiffness (N/m) and damping (N s/m) at the foot.
     pub gains: Gains<T, 2>,
+    /// The foot's reference in the base frame (m).
     pub reference: R,
     model: PhantomData<L>,
 }
@@ -726,6 +748,7 @@ where
 /// Torque limits per motor around any torque source, counting how often each motor
 /// saturated (per evaluation of the source).
 pub struct Saturated<C, T: Real, const NU: usize> {
+    /// The torque source whose torques are clipped.
     pub inner: C,
     /// The largest `|u_k|` each motor can give.
     pub limits: SVector<T, NU>,
@@ -736,6 +759,7 @@ pub struct Saturated<C, T: Real, const NU: usize> {
 }
 
 impl<C, T: Real, const NU: usize> Saturated<C, T, NU> {
+    /// `inner` clipped to `±limits`, with the counts at zero.
     pub fn new(inner: C, limits: SVector<T, NU>) -> Self {
         Saturated {
             inner,

@@ -158,15 +158,23 @@ pub struct ContactDynamicsDerivatives<
 > {
     /// As [`crate::contact::forward_dynamics_with_contacts`] returns it.
     pub solution: ContactSolution<T, NQ, NC, NK>,
+    /// `∂q̈/∂q`.
     pub qdd_q: SMatrix<T, NQ, NQ>,
+    /// `∂q̈/∂q̇`.
     pub qdd_qd: SMatrix<T, NQ, NQ>,
+    /// `∂q̈/∂u`.
     pub qdd_u: SMatrix<T, NQ, NU>,
+    /// `∂F/∂q` of the closure forces.
     pub forces_q: SMatrix<T, NC, NQ>,
+    /// `∂F/∂q̇`.
     pub forces_qd: SMatrix<T, NC, NQ>,
+    /// `∂F/∂u`.
     pub forces_u: SMatrix<T, NC, NU>,
     /// Derivatives of the ground forces `(λ_t, λ_n)` per contact (zero rows in flight).
     pub contact_q: SMatrix<T, NK, NQ>,
+    /// `∂λ/∂q̇`.
     pub contact_qd: SMatrix<T, NK, NQ>,
+    /// `∂λ/∂u`.
     pub contact_u: SMatrix<T, NK, NU>,
 }
 

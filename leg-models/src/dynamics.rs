@@ -24,10 +24,16 @@ pub enum DynamicsError {
     /// `J M⁻¹ Jᵀ` is singular or too ill-conditioned to trust: the closure constraints
     /// lose rank here, a singular configuration of the mechanism. `rcond` is the
     /// reciprocal condition estimate (squared pivot ratio of its Cholesky factor).
-    SingularConstraints { rcond: f64 },
+    SingularConstraints {
+        /// The reciprocal condition estimate of `J M⁻¹ Jᵀ`.
+        rcond: f64,
+    },
     /// The held contact rows repeat each other or the closures (more contacts held than
     /// the leg can satisfy independently); `rcond` is the pivot ratio of their system.
-    SingularContacts { rcond: f64 },
+    SingularContacts {
+        /// The pivot ratio of the held contact rows' system.
+        rcond: f64,
+    },
     /// A state, input or parameter is NaN or infinite.
     NonFinite,
 }
@@ -57,7 +63,9 @@ impl std::error::Error for DynamicsError {}
 /// Baumgarte stabilization of the closure: `J q̈ = −J̇ q̇ − 2α J q̇ − β² φ`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Baumgarte<T> {
+    /// `α` (1/s): damping of the constraint velocity `J q̇`.
     pub alpha: T,
+    /// `β` (1/s): stiffness of the constraint residual `φ`.
     pub beta: T,
 }
 

@@ -298,6 +298,7 @@ pub struct HopSettings<T: Real, const NU: usize> {
     pub posture: SVector<T, NU>,
     /// Flight PD gains on the driven joints.
     pub kp: SVector<T, NU>,
+    /// Flight derivative gains on the driven joints.
     pub kd: SVector<T, NU>,
     /// The virtual leg spring's natural frequency in stance (rad/s).
     pub stance_frequency: T,
@@ -482,8 +483,11 @@ pub struct HopController<
 > where
     L: ContactModel<NQ, NC, NU, NK>,
 {
+    /// The controller's model of the leg.
     pub params: L::Params<T>,
+    /// The ground, friction, Baumgarte terms and step the controller plans with.
     pub options: HybridOptions<T, NK>,
+    /// What it aims at, and how hard.
     pub settings: HopSettings<T, NU>,
     /// Each motor's drive.
     pub drives: [Drive; NU],
@@ -526,6 +530,8 @@ where
     L: ContactModel<NQ, NC, NU, NK>,
     T: Real,
 {
+    /// A controller that has seen no hop yet (nothing learnt; the last stance taken to last
+    /// `π / stance_frequency`), with the drives of the spec ([`drives`]).
     pub fn new(
         params: L::Params<T>,
         options: HybridOptions<T, NK>,

@@ -37,7 +37,9 @@ use crate::model::{ContactModel, Real};
 /// A leg's state with its contacts.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HybridState<T: Real, const NQ: usize, const NK: usize> {
+    /// The joint state `(q, q̇)`.
     pub state: State<T, NQ>,
+    /// Each contact's mode.
     pub modes: Modes<NK>,
     /// Ground coordinates the held rows keep: a sticking contact's tangential position at
     /// touchdown (entry `2k`) and the ground (entry `2k + 1`, always 0).
@@ -71,7 +73,9 @@ pub enum EventKind {
 /// One located event.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Event<T: Real> {
+    /// When it happened (s).
     pub t: T,
+    /// What happened.
     pub kind: EventKind,
     /// The contact's index (in [`ContactModel::CONTACT_NAMES`]).
     pub contact: usize,
@@ -122,14 +126,17 @@ impl<T: Real> StepEvents<T> {
         Ok(())
     }
 
+    /// The events, in time order.
     pub fn iter(&self) -> impl Iterator<Item = &Event<T>> {
         self.events[..self.count].iter().flatten()
     }
 
+    /// How many events the step held.
     pub fn len(&self) -> usize {
         self.count
     }
 
+    /// Whether the step held no event.
     pub fn is_empty(&self) -> bool {
         self.count == 0
     }
@@ -138,12 +145,19 @@ impl<T: Real> StepEvents<T> {
 /// Why a hybrid step failed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum HybridError {
+    /// The constrained dynamics in the current modes cannot be solved (the mass matrix
+    /// is not positive definite, the closures or held contacts are singular, or a value
+    /// is not finite).
     Dynamics(DynamicsError),
+    /// The impact map at a touchdown failed.
     Impact(ImpactError),
+    /// Projecting the state onto the closures and held contacts failed.
     Projection(AssemblyError),
+    /// The torque source could not act.
     Control(ControlError),
     /// More than [`MAX_EVENTS_PER_STEP`] events in one step at time `t`.
     TooManyEvents {
+        /// The time of the event that would have been one too many (s).
         t: f64,
     },
 }
@@ -194,6 +208,7 @@ fn to_f64<T: Real>(x: T) -> f64 {
 /// Motor torques from the time and the hybrid state (the contact modes included): a
 /// hopping controller, or any closure `FnMut(t, &HybridState) -> u`.
 pub trait HybridTorqueSource<T: Real, const NQ: usize, const NK: usize, const NU: usize> {
+    /// The motor torques `u` at time `t` (s) and hybrid state `state`, or why there are none.
     fn torque(
         &mut self,
         t: T,
@@ -218,7 +233,9 @@ where
 /// How to step.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HybridOptions<T: Real, const NK: usize> {
+    /// The step (s).
     pub dt: T,
+    /// The ground the contacts meet.
     pub ground: Ground<T>,
     /// Coulomb μ per row (both rows of contact `k` hold its value).
     pub friction: SVector<T, NK>,
@@ -245,7 +262,9 @@ pub struct HybridSimulator<
 > where
     L: ContactModel<NQ, NC, NU, NK>,
 {
+    /// The leg's parameters.
     pub params: L::Params<T>,
+    /// How to step.
     pub options: HybridOptions<T, NK>,
     model: PhantomData<L>,
 }
@@ -879,11 +898,15 @@ mod record {
         const NU: usize,
         const NK: usize,
     > {
+        /// Time (s).
         pub t: T,
+        /// The state and contact modes.
         pub state: HybridState<T, NQ, NK>,
+        /// The torques the source gives at this instant.
         pub u: SVector<T, NU>,
         /// Ground forces `(λ_t, λ_n)` per contact at this instant.
         pub contact_forces: SVector<T, NK>,
+        /// The closure forces `F` at this instant (base frame).
         pub closure_forces: SVector<T, NC>,
         /// `T + V`.
         pub energy: T,
@@ -902,7 +925,9 @@ mod record {
         const NU: usize,
         const NK: usize,
     > {
+        /// The recorded instants, in time order.
         pub samples: Vec<HybridSample<T, NQ, NC, NU, NK>>,
+        /// Every event, in time order.
         pub events: Vec<Event<T>>,
     }
 
@@ -915,8 +940,12 @@ mod record {
         const NU: usize,
         const NK: usize,
     > {
+        /// When it stopped (s): the start of the step, or the instant of the sample, that
+        /// failed.
         pub t: T,
+        /// Why it failed.
         pub cause: HybridError,
+        /// Everything recorded before.
         pub record: HybridRecord<T, NQ, NC, NU, NK>,
     }
 

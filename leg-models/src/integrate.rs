@@ -14,7 +14,9 @@ use crate::model::{LegModel, Real};
 /// Joint positions and velocities.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct State<T: Real, const NQ: usize> {
+    /// The joint coordinates `q` (rad, or m on a prismatic joint).
     pub q: SVector<T, NQ>,
+    /// The joint rates `q̇` (rad/s, or m/s).
     pub qd: SVector<T, NQ>,
 }
 
@@ -22,6 +24,7 @@ pub struct State<T: Real, const NQ: usize> {
 /// `FnMut(t, &State) -> u`. A controller that cannot act (a singular configuration, an
 /// unreachable reference) says why.
 pub trait TorqueSource<T: Real, const NQ: usize, const NU: usize> {
+    /// The motor torques `u` at time `t` (s) and `state`, or why there are none.
     fn torque(&mut self, t: T, state: &State<T, NQ>) -> Result<SVector<T, NU>, ControlError>;
 }
 
@@ -43,6 +46,7 @@ pub enum ControlUpdate {
     PerStage,
 }
 
+/// The integrator of a step.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Method {
     /// Semi-implicit (symplectic) Euler: `q̇ += dt q̈(q, q̇)`, then `q += dt q̇`.
@@ -54,7 +58,9 @@ pub enum Method {
 /// How to take a step.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepOptions<T> {
+    /// The integrator.
     pub method: Method,
+    /// The step (s).
     pub dt: T,
     /// Baumgarte terms in the constraint row of the dynamics (`None`: plain `J q̈ = −J̇ q̇`).
     pub baumgarte: Option<Baumgarte<T>>,
@@ -62,6 +68,7 @@ pub struct StepOptions<T> {
     pub project: bool,
     /// For the position projection.
     pub tolerance: Tolerance<T>,
+    /// When the torque source is asked.
     pub control: ControlUpdate,
 }
 
@@ -82,8 +89,12 @@ impl<T: Real> StepOptions<T> {
 /// Why a step failed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum StepError {
+    /// The constrained dynamics cannot be solved at a stage (the mass matrix is not
+    /// positive definite, the closures are singular, or a value is not finite).
     Dynamics(DynamicsError),
+    /// Projecting the state onto the closures after the step failed.
     Projection(AssemblyError),
+    /// The torque source could not act.
     Control(ControlError),
 }
 
@@ -122,7 +133,9 @@ impl From<AssemblyError> for StepError {
 /// forces there.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepReport<T: Real, const NQ: usize, const NC: usize, const NU: usize> {
+    /// The torques at the step's start.
     pub u: SVector<T, NU>,
+    /// `q̈` and the closure forces `F` at the step's start.
     pub acceleration: Acceleration<T, NQ, NC>,
 }
 

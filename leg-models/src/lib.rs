@@ -19,6 +19,7 @@
 //! closure residual `φ(q)` (point a minus point b, in the base frame);
 //! `M q̈ + N + D q̇ = Jᵀ F + B u`.
 #![cfg_attr(not(feature = "std"), no_std)]
+#![warn(missing_docs)]
 
 pub mod assembly;
 pub mod batch;

@@ -38,10 +38,18 @@ pub enum LinearizationError {
     Assembly(AssemblyError),
     /// The chart's size does not match the leg: it has `mobility` degrees of freedom
     /// here, so its manifold states are `2 · mobility`, not `states`.
-    Dimension { mobility: usize, states: usize },
+    Dimension {
+        /// The leg's degrees of freedom at the pose.
+        mobility: usize,
+        /// The number of manifold states asked for.
+        states: usize,
+    },
     /// No torque holds the leg at rest at this pose (an under-actuated leg away from its
     /// passive equilibrium): `residual` is the smallest acceleration left (rad/s², m/s²).
-    NotAnEquilibrium { residual: f64 },
+    NotAnEquilibrium {
+        /// The acceleration left under the best torque, its largest entry (rad/s², m/s²).
+        residual: f64,
+    },
     /// The motors do not move the chart's coordinates at this pose (`∂θ̈/∂u` loses rank),
     /// so no torque is determined.
     MotorsDoNotMoveCoordinates,
@@ -88,11 +96,17 @@ impl From<AssemblyError> for LinearizationError {
 /// `δq⁺ = q_q δq + q_qd δq̇ + q_u δu`, `δq̇⁺ = qd_q δq + qd_qd δq̇ + qd_u δu`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepJacobian<T: Real, const NQ: usize, const NU: usize> {
+    /// `∂q⁺/∂q`.
     pub q_q: SMatrix<T, NQ, NQ>,
+    /// `∂q⁺/∂q̇`.
     pub q_qd: SMatrix<T, NQ, NQ>,
+    /// `∂q⁺/∂u`.
     pub q_u: SMatrix<T, NQ, NU>,
+    /// `∂q̇⁺/∂q`.
     pub qd_q: SMatrix<T, NQ, NQ>,
+    /// `∂q̇⁺/∂q̇`.
     pub qd_qd: SMatrix<T, NQ, NQ>,
+    /// `∂q̇⁺/∂u`.
     pub qd_u: SMatrix<T, NQ, NU>,
 }
 
@@ -396,7 +410,9 @@ fn pivot_closure<T: Real, const NQ: usize, const NC: usize>(
 /// `δq = G δθ`, `δq̇ = G δθ̇ + W δθ`: how chart coordinates move the joint state at a state.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ChartTangent<T: Real, const NQ: usize, const M: usize> {
+    /// `G = ∂q/∂θ`: `J G = 0`, the identity on the coordinates.
     pub g: SMatrix<T, NQ, M>,
+    /// `W`: keeps `J q̇ = 0` to first order (`J W δθ + J̇ G δθ = 0`).
     pub w: SMatrix<T, NQ, M>,
 }
 
@@ -404,7 +420,9 @@ pub struct ChartTangent<T: Real, const NQ: usize, const M: usize> {
 /// `x = (θ, θ̇)` the chart's coordinates and their rates (`NX = 2 M`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ManifoldLinearization<T: Real, const NQ: usize, const NX: usize, const NU: usize> {
+    /// `A = ∂x⁺/∂x`.
     pub a: SMatrix<T, NX, NX>,
+    /// `B = ∂x⁺/∂u`.
     pub b: SMatrix<T, NX, NU>,
     /// The joint state after the step.
     pub next: State<T, NQ>,

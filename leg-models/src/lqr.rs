@@ -29,7 +29,10 @@ pub enum LqrError {
     NotPositiveDefinite,
     /// The iteration did not settle in `iterations` rounds: `(A, B)` is not stabilizable
     /// or `(A, Q)` not detectable.
-    NotConverged { iterations: usize },
+    NotConverged {
+        /// The doubling rounds taken.
+        iterations: usize,
+    },
     /// NaN or infinity in the data or the iterates.
     NonFinite,
 }
@@ -151,10 +154,15 @@ pub struct ManifoldLqr<
 > where
     L: LegModel<NQ, NC, NU>,
 {
+    /// The controller's model of the leg.
     pub params: L::Params<T>,
+    /// The chart whose coordinates `θ` the state `x = (θ, θ̇)` is in.
     pub chart: ManifoldChart<T, NQ, M>,
+    /// The gain `K` (and the Riccati solution) of the linearization at the pose.
     pub lqr: Lqr<T, NX, NU>,
+    /// The reference of the chart's coordinates.
     pub reference: R,
+    /// `|u_k|` limits per motor.
     pub torque_limit: SVector<T, NU>,
     /// The last reference pose lifted to joints: the next lift's guess.
     guess: SVector<T, NQ>,

@@ -67,22 +67,39 @@ pub trait Arithmetic:
     fn lit(value: f64) -> Self;
     /// `(sin self, cos self)` with one argument reduction ([`Real::sincos`]).
     fn sincos(self) -> (Self, Self);
+    /// `√self`.
     fn sqrt(self) -> Self;
+    /// `sin self` (`self` in rad).
     fn sin(self) -> Self;
+    /// `cos self` (`self` in rad).
     fn cos(self) -> Self;
+    /// `tan self` (`self` in rad).
     fn tan(self) -> Self;
+    /// `asin self` (rad).
     fn asin(self) -> Self;
+    /// `acos self` (rad).
     fn acos(self) -> Self;
+    /// `atan self` (rad).
     fn atan(self) -> Self;
+    /// `sinh self`.
     fn sinh(self) -> Self;
+    /// `cosh self`.
     fn cosh(self) -> Self;
+    /// `tanh self`.
     fn tanh(self) -> Self;
+    /// `exp self`.
     fn exp(self) -> Self;
+    /// The natural logarithm `ln self`.
     fn ln(self) -> Self;
+    /// `|self|`.
     fn abs(self) -> Self;
+    /// `self^exponent`.
     fn powf(self, exponent: Self) -> Self;
+    /// `atan2(self, x)` (rad): the angle of the point `(x, self)`.
     fn atan2(self, x: Self) -> Self;
+    /// The smaller of `self` and `other`.
     fn min(self, other: Self) -> Self;
+    /// The larger of `self` and `other`.
     fn max(self, other: Self) -> Self;
 }
 
@@ -234,11 +251,16 @@ pub enum JointKind {
 pub struct Spring {
     /// The spec's name of the spring.
     pub name: &'static str,
+    /// The joint it acts on (an index into `q`); for a coupling spring, the first of
+    /// `q_a − q_b`.
     pub a: usize,
+    /// The second joint of a coupling spring (`½ k (q_a − q_b − rest)²`); `None` for a
+    /// spring on joint `a` alone.
     pub b: Option<usize>,
     /// Indices of its stiffness and rest value in the parameters ([`Parameters::get`]):
     /// they are run-time parameters like every other.
     pub stiffness: usize,
+    /// Index of its rest value in the parameters (rad, or m on a prismatic joint).
     pub rest: usize,
 }
 

@@ -7,20 +7,26 @@ use crate::model::Real;
 /// Position, velocity and acceleration of a reference at one instant.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Setpoint<T: Real, const N: usize> {
+    /// The coordinates (rad, or m).
     pub position: SVector<T, N>,
+    /// Their rates (per s).
     pub velocity: SVector<T, N>,
+    /// Their second derivatives (per s²).
     pub acceleration: SVector<T, N>,
 }
 
 /// A trajectory in `N` coordinates (joint angles, or a foot position with `N = 2`).
 pub trait Reference<T: Real, const N: usize> {
+    /// The setpoint at time `t` (s).
     fn sample(&self, t: T) -> Setpoint<T, N>;
 }
 
 /// `offset + amplitude · sin(2π f t + phase)`, per coordinate.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Sinusoid<T: Real, const N: usize> {
+    /// The centre of the oscillation.
     pub offset: SVector<T, N>,
+    /// The largest excursion from `offset`.
     pub amplitude: SVector<T, N>,
     /// Hz.
     pub frequency: SVector<T, N>,
@@ -50,6 +56,7 @@ impl<T: Real, const N: usize> Reference<T, N> for Sinusoid<T, N> {
 /// `start + rate · t` per coordinate: a crank turning at a steady speed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ramp<T: Real, const N: usize> {
+    /// The position at `t = 0`.
     pub start: SVector<T, N>,
     /// Per second.
     pub rate: SVector<T, N>,
@@ -70,9 +77,13 @@ impl<T: Real, const N: usize> Reference<T, N> for Ramp<T, N> {
 /// and `goal` after.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MinimumJerk<T: Real, const N: usize> {
+    /// Where the move starts.
     pub start: SVector<T, N>,
+    /// Where it ends.
     pub goal: SVector<T, N>,
+    /// When it starts (s).
     pub t0: T,
+    /// How long it takes (s).
     pub duration: T,
 }
 
@@ -119,8 +130,11 @@ impl<T: Real, const N: usize> Reference<T, N> for Hold<T, N> {
 /// `a` half the stride and `b` half the step height, traversed once per `period`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepCycle<T: Real> {
+    /// The ellipse's centre in the base frame (m).
     pub center: SVector<T, 2>,
+    /// `a`, half the stride (m).
     pub half_stride: T,
+    /// `b`, half the step height (m).
     pub half_height: T,
     /// s.
     pub period: T,

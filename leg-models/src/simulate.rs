@@ -13,7 +13,9 @@ use crate::model::{LegModel, Real};
 /// One recorded instant.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Sample<T: Real, const NQ: usize, const NC: usize, const NU: usize> {
+    /// Time (s).
     pub t: T,
+    /// The joint state `(q, q̇)`.
     pub state: State<T, NQ>,
     /// The torques applied from this instant to the next.
     pub u: SVector<T, NU>,
@@ -28,8 +30,12 @@ pub struct Sample<T: Real, const NQ: usize, const NC: usize, const NU: usize> {
 /// A simulation that stopped early: why, when, and everything recorded until then.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Stopped<T: Real, const NQ: usize, const NC: usize, const NU: usize> {
+    /// When it stopped (s): the start of the step that failed, or the end of the run if
+    /// the last sample failed.
     pub t: T,
+    /// Why it failed.
     pub cause: StepError,
+    /// Everything recorded before.
     pub samples: Vec<Sample<T, NQ, NC, NU>>,
 }
 
@@ -58,7 +64,9 @@ pub struct Simulator<L, T: Real, const NQ: usize, const NC: usize, const NU: usi
 where
     L: LegModel<NQ, NC, NU>,
 {
+    /// The leg's parameters.
     pub params: L::Params<T>,
+    /// How each step is taken.
     pub options: StepOptions<T>,
     model: PhantomData<L>,
 }
@@ -68,6 +76,7 @@ where
     L: LegModel<NQ, NC, NU>,
     T: Real,
 {
+    /// A simulator of leg `L` with `params`, stepping with `options`.
     pub fn new(params: L::Params<T>, options: StepOptions<T>) -> Self {
         Simulator {
             params,

@@ -25,12 +25,15 @@ pub enum Actuation {
 /// The counts that decide which methods apply to a leg.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Structure {
+    /// `NQ`.
     pub joints: usize,
+    /// `NC`.
     pub closure_rows: usize,
     /// Closure rows implied by the others ([`LegModel::REDUNDANT_ROWS`]).
     pub redundant_rows: usize,
     /// `NQ − rank J` ([`LegModel::MOBILITY`]).
     pub mobility: usize,
+    /// `NU`.
     pub motors: usize,
 }
 
@@ -39,11 +42,24 @@ pub struct Structure {
 pub enum NotApplicable {
     /// The motors do not determine the passive joints, so the null-space form `q̇ = G θ̇`
     /// and everything built on it (foot control, the foot inverse) do not exist.
-    UnderActuated { mobility: usize, motors: usize },
+    UnderActuated {
+        /// The leg's degrees of freedom.
+        mobility: usize,
+        /// Its motors, fewer.
+        motors: usize,
+    },
     /// The motors over-determine the leg: there is no reduction to the motor angles.
-    OverActuated { mobility: usize, motors: usize },
+    OverActuated {
+        /// The leg's degrees of freedom.
+        mobility: usize,
+        /// Its motors, more.
+        motors: usize,
+    },
     /// A foot in the plane has two coordinates; fewer motors cannot place it.
-    FootNeedsTwoMotors { motors: usize },
+    FootNeedsTwoMotors {
+        /// The leg's motors, fewer than two.
+        motors: usize,
+    },
 }
 
 impl fmt::Display for NotApplicable {
@@ -74,6 +90,7 @@ impl fmt::Display for NotApplicable {
 impl std::error::Error for NotApplicable {}
 
 impl Structure {
+    /// The structure of leg `L`.
     pub fn of<L, const NQ: usize, const NC: usize, const NU: usize>() -> Structure
     where
         L: LegModel<NQ, NC, NU>,
@@ -87,6 +104,7 @@ impl Structure {
         }
     }
 
+    /// How the motors compare with the mobility.
     pub fn actuation(&self) -> Actuation {
         match self.mobility.cmp(&self.motors) {
             core::cmp::Ordering::Equal => Actuation::Full,
