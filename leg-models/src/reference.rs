@@ -153,6 +153,14 @@ impl<T: Real> Reference<T, 2> for StepCycle<T> {
     }
 }
 
+/// A setpoint is the reference that is that setpoint at every instant (its velocity and
+/// acceleration as given, not integrated): what a controller evaluated at one state needs.
+impl<T: Real, const N: usize> Reference<T, N> for Setpoint<T, N> {
+    fn sample(&self, _t: T) -> Setpoint<T, N> {
+        *self
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -243,13 +251,5 @@ mod tests {
             (r.sample(0.4).position - r.sample(0.0).position).amax() < 1e-15,
             "closed, period 0.4 s"
         );
-    }
-}
-
-/// A setpoint is the reference that is that setpoint at every instant (its velocity and
-/// acceleration as given, not integrated): what a controller evaluated at one state needs.
-impl<T: Real, const N: usize> Reference<T, N> for Setpoint<T, N> {
-    fn sample(&self, _t: T) -> Setpoint<T, N> {
-        *self
     }
 }
