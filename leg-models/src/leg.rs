@@ -54,27 +54,89 @@ use crate::{ContactModel, DynamicsTerms, Parameters, Real};
 /// stable Rust cannot compute `2 · MOBILITY` in a signature.
 pub trait ChartSize<const M: usize, const NX: usize> {}
 
-/// A parameter name the leg does not have.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct UnknownParameter<'a> {
-    /// The name asked for.
-    pub name: &'a str,
-    /// The leg's name ([`LegModel::NAME`]).
-    pub leg: &'static str,
+/// A parameter the leg refused, by name.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ParameterError<'a> {
+    /// The leg has no parameter of this name.
+    Unknown {
+        /// The name asked for.
+        name: &'a str,
+        /// The leg's name ([`LegModel::NAME`]).
+        leg: &'static str,
+        /// The leg's parameter names, for the message's suggestion.
+        known: &'static [&'static str],
+    },
+    /// The value is NaN or infinite (every later evaluation would be).
+    NotFinite {
+        /// The parameter.
+        name: &'a str,
+        /// The value refused.
+        value: f64,
+    },
 }
 
-impl fmt::Display for UnknownParameter<'_> {
+impl ParameterError<'_> {
+    /// The known name closest to an unknown one (edit distance at most a third of its
+    /// length), if any.
+    pub fn suggestion(&self) -> Option<&'static str> {
+        let ParameterError::Unknown { name, known, .. } = *self else {
+            return None;
+        };
+        known
+            .iter()
+            .filter_map(|k| edit_distance(name, k).map(|d| (d, *k)))
+            .filter(|(d, _)| 3 * d <= name.len().max(3))
+            .min_by_key(|(d, _)| *d)
+            .map(|(_, k)| k)
+    }
+}
+
+/// Levenshtein distance of two names of at most 64 bytes (`None` beyond: no allocation).
+fn edit_distance(a: &str, b: &str) -> Option<usize> {
+    const MAX: usize = 64;
+    let (a, b) = (a.as_bytes(), b.as_bytes());
+    if a.len() > MAX || b.len() > MAX {
+        return None;
+    }
+    let mut prev = [0usize; MAX + 1];
+    let mut row = [0usize; MAX + 1];
+    for (j, p) in prev.iter_mut().enumerate().take(b.len() + 1) {
+        *p = j;
+    }
+    for i in 1..=a.len() {
+        row[0] = i;
+        for j in 1..=b.len() {
+            let substitution = prev[j - 1] + usize::from(a[i - 1] != b[j - 1]);
+            row[j] = substitution.min(prev[j] + 1).min(row[j - 1] + 1);
+        }
+        prev = row;
+    }
+    Some(prev[b.len()])
+}
+
+impl fmt::Display for ParameterError<'_> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "leg `{}` has no parameter `{}` (its names: the model's `Params::NAMES`)",
-            self.leg, self.name
-        )
+        match *self {
+            ParameterError::Unknown { name, leg, known } => {
+                write!(f, "leg `{leg}` has no parameter `{name}`")?;
+                match self.suggestion() {
+                    Some(s) => write!(f, "; did you mean `{s}`?"),
+                    None => write!(
+                        f,
+                        " ({} parameters, the model's `Params::NAMES`)",
+                        known.len()
+                    ),
+                }
+            }
+            ParameterError::NotFinite { name, value } => {
+                write!(f, "parameter `{name}` must be finite, got {value}")
+            }
+        }
     }
 }
 
 #[cfg(feature = "std")]
-impl std::error::Error for UnknownParameter<'_> {}
+impl std::error::Error for ParameterError<'_> {}
 
 /// One leg of model `L` in scalar `T`: its parameters, the tolerance of its assembly
 /// solvers and the Baumgarte terms of its forward dynamics (none by default). Cheap to
@@ -171,7 +233,7 @@ where
     }
 
     /// The same leg with one parameter changed by name (see [`Leg::set_parameter`]).
-    pub fn with_parameter(mut self, name: &str, value: T) -> Result<Self, UnknownParameter<'_>> {
+    pub fn with_parameter(mut self, name: &str, value: T) -> Result<Self, ParameterError<'_>> {
         self.set_parameter(name, value)?;
         Ok(self)
     }
@@ -188,29 +250,37 @@ where
 
     /// The index of the parameter named `name` (a field of the spec's `ParamValues`) in
     /// [`Parameters::NAMES`], for [`Parameters::get`] and [`Parameters::set`].
-    pub fn parameter_index<'a>(&self, name: &'a str) -> Result<usize, UnknownParameter<'a>> {
+    pub fn parameter_index<'a>(&self, name: &'a str) -> Result<usize, ParameterError<'a>> {
         L::Params::<T>::NAMES
             .iter()
             .position(|n| *n == name)
-            .ok_or(UnknownParameter { name, leg: L::NAME })
+            .ok_or(ParameterError::Unknown {
+                name,
+                leg: L::NAME,
+                known: L::Params::<T>::NAMES,
+            })
     }
 
     /// The parameter named `name`.
-    pub fn parameter<'a>(&self, name: &'a str) -> Result<T, UnknownParameter<'a>> {
+    pub fn parameter<'a>(&self, name: &'a str) -> Result<T, ParameterError<'a>> {
         let i = self.parameter_index(name)?;
-        self.params
-            .get(i)
-            .ok_or(UnknownParameter { name, leg: L::NAME })
+        self.params.get(i).ok_or(ParameterError::Unknown {
+            name,
+            leg: L::NAME,
+            known: L::Params::<T>::NAMES,
+        })
     }
 
     /// Sets the parameter named `name` (and prepares the parameter-only quantities once);
-    /// an unknown name changes nothing.
-    pub fn set_parameter<'a>(
-        &mut self,
-        name: &'a str,
-        value: T,
-    ) -> Result<(), UnknownParameter<'a>> {
+    /// an unknown name or a non-finite value changes nothing.
+    pub fn set_parameter<'a>(&mut self, name: &'a str, value: T) -> Result<(), ParameterError<'a>> {
         let i = self.parameter_index(name)?;
+        if !value.is_finite() {
+            return Err(ParameterError::NotFinite {
+                name,
+                value: nalgebra::try_convert::<T, f64>(value).unwrap_or(f64::NAN),
+            });
+        }
         self.params.set(i, value);
         Ok(())
     }

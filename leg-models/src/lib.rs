@@ -42,7 +42,7 @@ pub mod simulate;
 pub mod structure;
 mod trig;
 
-pub use leg::{ChartSize, Leg, UnknownParameter};
+pub use leg::{ChartSize, Leg, ParameterError};
 pub use model::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms, JointKind,
     LegModel, Parameters, Real, Spring,

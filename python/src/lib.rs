@@ -8,11 +8,11 @@
 //! generated crate (`generated::for_each_model!`): a new spec is a new class after
 //! `cargo xtask gen` and a rebuild, with nothing to write here.
 
-use leg_models::assembly::AssemblyError;
-use leg_models::control::{ControlError, Gains, Saturated};
-use leg_models::dynamics::DynamicsError;
+use leg_models::assembly::AssemblyError as RustAssemblyError;
+use leg_models::control::{ControlError as RustControlError, Gains, Saturated};
+use leg_models::dynamics::DynamicsError as RustDynamicsError;
 use leg_models::integrate::{Method, State, StepOptions, TorqueSource};
-use leg_models::linearize::LinearizationError;
+use leg_models::linearize::LinearizationError as RustLinearizationError;
 use leg_models::nalgebra::{SMatrix, SVector};
 use leg_models::reference::Sinusoid;
 use leg_models::{ContactModel, Leg};
@@ -32,25 +32,25 @@ pyo3::create_exception!(
 );
 pyo3::create_exception!(
     legmodels,
-    AssemblyError_,
+    AssemblyError,
     LegError,
     "Loop assembly failed: unreachable motor angles or foot position, a singular pose, no convergence."
 );
 pyo3::create_exception!(
     legmodels,
-    DynamicsError_,
+    DynamicsError,
     LegError,
     "The forward dynamics has no unique solution (singular constraints or mass matrix) or was given non-finite values."
 );
 pyo3::create_exception!(
     legmodels,
-    ControlError_,
+    ControlError,
     LegError,
     "A controller does not apply to this leg, or failed at a state."
 );
 pyo3::create_exception!(
     legmodels,
-    LinearizationError_,
+    LinearizationError,
     LegError,
     "A linearization or chart of the constraint manifold failed."
 );
@@ -67,23 +67,28 @@ pyo3::create_exception!(
     "The leg has no parameter of that name."
 );
 
-fn assembly_err(e: AssemblyError) -> PyErr {
-    AssemblyError_::new_err(e.to_string())
+fn assembly_err(e: RustAssemblyError) -> PyErr {
+    AssemblyError::new_err(e.to_string())
 }
-fn dynamics_err(e: DynamicsError) -> PyErr {
-    DynamicsError_::new_err(e.to_string())
+fn dynamics_err(e: RustDynamicsError) -> PyErr {
+    DynamicsError::new_err(e.to_string())
 }
-fn control_err(e: ControlError) -> PyErr {
-    ControlError_::new_err(e.to_string())
+fn control_err(e: RustControlError) -> PyErr {
+    ControlError::new_err(e.to_string())
 }
-fn parameter_err(e: leg_models::UnknownParameter<'_>) -> PyErr {
-    ParameterError::new_err(format!(
-        "leg `{}` has no parameter `{}` (its `parameter_names` lists them)",
-        e.leg, e.name
-    ))
+fn parameter_err(e: leg_models::ParameterError<'_>) -> PyErr {
+    ParameterError::new_err(match e {
+        leg_models::ParameterError::Unknown { name, leg, .. } => format!(
+            "leg `{leg}` has no parameter `{name}`{} (its `parameter_names` lists them)",
+            e.suggestion()
+                .map(|s| format!("; did you mean `{s}`?"))
+                .unwrap_or_default()
+        ),
+        other => other.to_string(),
+    })
 }
-fn linearization_err(e: LinearizationError) -> PyErr {
-    LinearizationError_::new_err(e.to_string())
+fn linearization_err(e: RustLinearizationError) -> PyErr {
+    LinearizationError::new_err(e.to_string())
 }
 
 /// A vector argument of length `N`: a numpy array of floats (no copy until here) or any
@@ -271,7 +276,11 @@ impl<'py, const NQ: usize, const NU: usize> PythonTorques<'py, NQ, NU> {
 }
 
 impl<const NQ: usize, const NU: usize> TorqueSource<f64, NQ, NU> for PythonTorques<'_, NQ, NU> {
-    fn torque(&mut self, t: f64, state: &State<f64, NQ>) -> Result<SVector<f64, NU>, ControlError> {
+    fn torque(
+        &mut self,
+        t: f64,
+        state: &State<f64, NQ>,
+    ) -> Result<SVector<f64, NU>, RustControlError> {
         Ok(self.call(t, &state.q, &state.qd))
     }
 }
@@ -688,6 +697,10 @@ macro_rules! leg_class {
                     if torque.is_some() {
                         return Err(PyValueError::new_err("give `torque` or `controller`, not both"));
                     }
+                    const CONTROLLERS: [&str; 4] = ["joint_feedback_linearization", "foot_feedback_linearization", "pd_gravity", "foot_pd_gravity"];
+                    if !CONTROLLERS.contains(&kind) {
+                        return Err(PyValueError::new_err(format!("unknown `controller` {kind:?}: one of {CONTROLLERS:?}")));
+                    }
                     let setpoint = setpoint.ok_or_else(|| PyValueError::new_err(format!("controller {kind:?} needs a `setpoint`")))?;
                     match kind {
                         "joint_feedback_linearization" | "pd_gravity" => {
@@ -825,10 +838,10 @@ fn legmodels(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add("models", PyDict::new(py))?;
     m.add("LegError", py.get_type::<LegError>())?;
-    m.add("AssemblyError", py.get_type::<AssemblyError_>())?;
-    m.add("DynamicsError", py.get_type::<DynamicsError_>())?;
-    m.add("ControlError", py.get_type::<ControlError_>())?;
-    m.add("LinearizationError", py.get_type::<LinearizationError_>())?;
+    m.add("AssemblyError", py.get_type::<AssemblyError>())?;
+    m.add("DynamicsError", py.get_type::<DynamicsError>())?;
+    m.add("ControlError", py.get_type::<ControlError>())?;
+    m.add("LinearizationError", py.get_type::<LinearizationError>())?;
     m.add("SimulationError", py.get_type::<SimulationError>())?;
     m.add("ParameterError", py.get_type::<ParameterError>())?;
     let module = m;

@@ -120,8 +120,13 @@ def test_parameters_by_name():
 
 def test_bad_input_raises_with_the_runtime_message():
     leg = legmodels.Minitaur()
-    with pytest.raises(legmodels.ParameterError, match="lower_mass"):
-        legmodels.Minitaur(lower_mass=1.0)
+    with pytest.raises(legmodels.ParameterError, match="did you mean `lower_a_mass`"):
+        legmodels.Minitaur(lower_a_mas=1.0)
+    with pytest.raises(legmodels.ParameterError, match="finite"):
+        legmodels.Minitaur(lower_a_mass=float("nan"))
+    assert legmodels.AssemblyError.__name__ == "AssemblyError"
+    with pytest.raises(ValueError, match="unknown `controller`"):
+        leg.simulate(leg.home(), np.zeros(4), 10, 1e-3, controller="foot_fl")
     with pytest.raises(ValueError, match="`q` has 2 entries, this leg needs 4"):
         leg.mass_matrix([0.0, 0.0])
     straight = [-np.pi / 2, 0.0, -np.pi / 2, 0.0]

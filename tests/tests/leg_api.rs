@@ -65,6 +65,19 @@ where
         message.contains("no_such_parameter") && message.contains(L::NAME),
         "{message}"
     );
+    // A misspelt name gets the name meant; a non-finite value is refused, changing nothing.
+    let misspelt = format!("{name}x");
+    let err = renamed.set_parameter(&misspelt, 1.0).unwrap_err();
+    assert_eq!(err.suggestion(), Some(name), "{}", L::NAME);
+    assert!(
+        err.to_string().contains(&format!("did you mean `{name}`")),
+        "{err}"
+    );
+    assert!(matches!(
+        renamed.set_parameter(name, f64::NAN),
+        Err(leg_models::ParameterError::NotFinite { .. })
+    ));
+    assert_eq!(*renamed.params(), by_index, "{}", L::NAME);
 
     // The tolerance set on the leg is the one assembly uses: one Newton iteration is not
     // enough from a distant guess, and the default tolerance is.

@@ -427,6 +427,12 @@ pub struct GenOptions {
 /// writes nothing and fails if `out` differs. A failure writes nothing.
 pub fn standalone(root: &Path, spec_path: &Path, out: &Path, check: bool) -> Result<String, Error> {
     let started = std::time::Instant::now();
+    // The module's header names the spec: one spelling of its path (relative to the
+    // repository when inside it, else absolute), so `--check` does not depend on how the
+    // path was typed.
+    let spec_path = &spec_path
+        .canonicalize()
+        .map_err(|e| Error::Usage(format!("{}: cannot read: {e}", spec_path.display())))?;
     let spec = load_spec(root, spec_path).map_err(Error::Usage)?;
     let model = model::build(&spec).map_err(|e| Error::Usage(e.to_string()))?;
     let py = python(root).map_err(Error::Failed)?;
