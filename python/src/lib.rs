@@ -94,13 +94,17 @@ fn linearization_err(e: RustLinearizationError) -> PyErr {
 /// A vector argument of length `N`: a numpy array of floats (no copy until here) or any
 /// sequence of numbers.
 fn vector<const N: usize>(name: &str, value: &Bound<'_, PyAny>) -> PyResult<SVector<f64, N>> {
-    if let Ok(a) = value.cast::<PyArray1<f64>>() {
-        if a.len() != N {
-            return Err(PyValueError::new_err(format!(
-                "`{name}` has {} entries, this leg needs {N}",
-                a.len()
-            )));
+    let length = |len: usize| {
+        if len == N {
+            Ok(())
+        } else {
+            Err(PyValueError::new_err(format!(
+                "`{name}` has {len} entries, this leg needs {N}"
+            )))
         }
+    };
+    if let Ok(a) = value.cast::<PyArray1<f64>>() {
+        length(a.len())?;
         // Safety: the entries are copied at once, holding the GIL (the abi3 build is not
         // free-threaded), so nothing writes the array meanwhile; numpy's borrow tracking
         // (PyReadonlyArray) cost more than the dynamics of a small leg.
@@ -109,12 +113,7 @@ fn vector<const N: usize>(name: &str, value: &Bound<'_, PyAny>) -> PyResult<SVec
         }
     }
     if let Ok(a) = value.extract::<PyReadonlyArray1<'_, f64>>() {
-        if a.len() != N {
-            return Err(PyValueError::new_err(format!(
-                "`{name}` has {} entries, this leg needs {N}",
-                a.len()
-            )));
-        }
+        length(a.len())?;
         let a = a.as_array();
         return Ok(SVector::from_fn(|i, _| a[i]));
     }
@@ -123,12 +122,7 @@ fn vector<const N: usize>(name: &str, value: &Bound<'_, PyAny>) -> PyResult<SVec
             "`{name}` must be a 1-D array or sequence of {N} numbers"
         ))
     })?;
-    if v.len() != N {
-        return Err(PyValueError::new_err(format!(
-            "`{name}` has {} entries, this leg needs {N}",
-            v.len()
-        )));
-    }
+    length(v.len())?;
     Ok(SVector::from_column_slice(&v))
 }
 
@@ -232,36 +226,39 @@ fn sinusoid<const N: usize>(
     })
 }
 
-/// Torques from Python: none (zero), a constant array, or a callable `(t, q, qd) -> u`.
+/// Torques from Python: a constant array (zero when none is given) or a callable
+/// `(t, q, qd) -> u`.
+enum Torques<'py, const NU: usize> {
+    Constant(SVector<f64, NU>),
+    Callable(Bound<'py, PyAny>),
+}
+
 struct PythonTorques<'py, const NQ: usize, const NU: usize> {
     py: Python<'py>,
-    constant: Option<SVector<f64, NU>>,
-    callable: Option<Bound<'py, PyAny>>,
+    torques: Torques<'py, NU>,
     /// The first error the callable raised: the run stops and re-raises it.
     error: Option<PyErr>,
 }
 
 impl<'py, const NQ: usize, const NU: usize> PythonTorques<'py, NQ, NU> {
     fn new(py: Python<'py>, torque: Option<&Bound<'py, PyAny>>) -> PyResult<Self> {
-        let mut source = PythonTorques {
-            py,
-            constant: None,
-            callable: None,
-            error: None,
+        let torques = match torque {
+            None => Torques::Constant(SVector::zeros()),
+            Some(t) if t.is_callable() => Torques::Callable(t.clone()),
+            Some(t) => Torques::Constant(vector("torque", t)?),
         };
-        match torque {
-            None => source.constant = Some(SVector::zeros()),
-            Some(t) if t.is_callable() => source.callable = Some(t.clone()),
-            Some(t) => source.constant = Some(vector("torque", t)?),
-        }
-        Ok(source)
+        Ok(PythonTorques {
+            py,
+            torques,
+            error: None,
+        })
     }
 
     fn call(&mut self, t: f64, q: &SVector<f64, NQ>, qd: &SVector<f64, NQ>) -> SVector<f64, NU> {
-        if let Some(u) = self.constant {
-            return u;
-        }
-        let f = self.callable.as_ref().expect("callable or constant");
+        let f = match &self.torques {
+            Torques::Constant(u) => return *u,
+            Torques::Callable(f) => f,
+        };
         let result = f
             .call1((t, out_vector(self.py, q), out_vector(self.py, qd)))
             .and_then(|u| vector::<NU>("torque(t, q, qd)", &u));
@@ -294,16 +291,12 @@ fn run_simulation<'py, L, const NQ: usize, const NC: usize, const NU: usize, con
     steps: usize,
     opts: StepOptions<f64>,
     source: &mut impl TorqueSource<f64, NQ, NU>,
-    python_error: impl FnOnce() -> Option<PyErr>,
 ) -> PyResult<Bound<'py, PyDict>>
 where
     L: ContactModel<NQ, NC, NU, NK>,
 {
     let sim = leg.simulator(opts);
     let result = sim.run(initial, steps, source);
-    if let Some(e) = python_error() {
-        return Err(e);
-    }
     let record = |samples: &[leg_models::simulate::Sample<f64, NQ, NC, NU>]| -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
         d.set_item("t", PyArray1::from_iter(py, samples.iter().map(|s| s.t)))?;
@@ -691,38 +684,34 @@ macro_rules! leg_class {
                     let gains_kd = kd.unwrap_or(2.0 * kp.sqrt());
                     let Some(kind) = controller else {
                         let mut source = Saturated::new(PythonTorques::<NQ, NU>::new(py, torque)?, limit);
-                        let result = run_simulation(py, &self.leg, initial, steps, opts, &mut source, || None);
+                        let result = run_simulation(py, &self.leg, initial, steps, opts, &mut source);
                         return match source.inner.error.take() { Some(e) => Err(e), None => result };
                     };
                     if torque.is_some() {
                         return Err(PyValueError::new_err("give `torque` or `controller`, not both"));
                     }
-                    const CONTROLLERS: [&str; 4] = ["joint_feedback_linearization", "foot_feedback_linearization", "pd_gravity", "foot_pd_gravity"];
-                    if !CONTROLLERS.contains(&kind) {
-                        return Err(PyValueError::new_err(format!("unknown `controller` {kind:?}: one of {CONTROLLERS:?}")));
-                    }
-                    let setpoint = setpoint.ok_or_else(|| PyValueError::new_err(format!("controller {kind:?} needs a `setpoint`")))?;
+                    let setpoint = || setpoint.ok_or_else(|| PyValueError::new_err(format!("controller {kind:?} needs a `setpoint`")));
                     match kind {
                         "joint_feedback_linearization" | "pd_gravity" => {
-                            let r = sinusoid::<NU>(setpoint, amplitude, frequency, phase)?;
+                            let r = sinusoid::<NU>(setpoint()?, amplitude, frequency, phase)?;
                             let g = Gains::new(kp, gains_kd);
                             if kind == "pd_gravity" {
                                 let mut c = Saturated::new(self.leg.pd_gravity(g, r).map_err(control_err)?, limit);
-                                run_simulation(py, &self.leg, initial, steps, opts, &mut c, || None)
+                                run_simulation(py, &self.leg, initial, steps, opts, &mut c)
                             } else {
                                 let mut c = Saturated::new(self.leg.joint_feedback_linearization(g, r).map_err(control_err)?, limit);
-                                run_simulation(py, &self.leg, initial, steps, opts, &mut c, || None)
+                                run_simulation(py, &self.leg, initial, steps, opts, &mut c)
                             }
                         }
                         "foot_feedback_linearization" | "foot_pd_gravity" => {
-                            let r = sinusoid::<2>(setpoint, amplitude, frequency, phase)?;
+                            let r = sinusoid::<2>(setpoint()?, amplitude, frequency, phase)?;
                             let g = Gains::new(kp, gains_kd);
                             if kind == "foot_pd_gravity" {
                                 let mut c = Saturated::new(self.leg.foot_pd_gravity(g, r).map_err(control_err)?, limit);
-                                run_simulation(py, &self.leg, initial, steps, opts, &mut c, || None)
+                                run_simulation(py, &self.leg, initial, steps, opts, &mut c)
                             } else {
                                 let mut c = Saturated::new(self.leg.foot_feedback_linearization(g, r).map_err(control_err)?, limit);
-                                run_simulation(py, &self.leg, initial, steps, opts, &mut c, || None)
+                                run_simulation(py, &self.leg, initial, steps, opts, &mut c)
                             }
                         }
                         other => Err(PyValueError::new_err(format!("unknown `controller` {other:?}: \"joint_feedback_linearization\", \"foot_feedback_linearization\", \"pd_gravity\" or \"foot_pd_gravity\""))),

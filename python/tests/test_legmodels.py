@@ -230,3 +230,24 @@ def test_the_readme_example_runs():
     exec(compile(code, "README.md", "exec"), namespace)
     assert namespace["run"]["q"].shape == (1001, 4)
     assert np.isfinite(namespace["d"]["qdd_q"]).all()
+
+
+@pytest.mark.parametrize("name", SPECS)
+def test_controllers_apply_by_structure(name):
+    """On every leg (one motor, three motors, over-actuated, floating bodies) each built-in
+    controller runs or raises ControlError, as the leg's structure says: joint-space control
+    needs motors that do not over-determine the leg (mobility ≥ motors), foot-space control
+    two or more motors that determine it (mobility = motors ≥ 2)."""
+    leg = legmodels.models[name]()
+    q = leg.assembled_home()
+    for controller in ["joint_feedback_linearization", "pd_gravity", "foot_feedback_linearization", "foot_pd_gravity"]:
+        foot = controller.startswith("foot")
+        applies = leg.mobility == leg.nu >= 2 if foot else leg.mobility >= leg.nu
+        setpoint = leg.foot_position(q) if foot else q[leg.actuated]
+        try:
+            run = leg.simulate(q, np.zeros(leg.nq), 5, 1e-3, controller=controller, setpoint=setpoint)
+        except legmodels.ControlError as e:
+            assert not applies and str(e), (name, controller, str(e))
+            continue
+        assert applies, (name, controller, "ran where it should not apply")
+        assert np.isfinite(run["q"]).all(), (name, controller)

@@ -421,6 +421,42 @@ pub struct GenOptions {
     pub names: Vec<String>,
 }
 
+/// Derives one spec: its IR (checked), CasADi's C of the same derivation, and the line
+/// `gen` prints about it (mobility, motors, redundant rows).
+fn derive_spec(root: &Path, py: &Path, spec: &Spec) -> Result<(IrFile, String, String), Error> {
+    let model = model::build(spec).map_err(|e| Error::Usage(e.to_string()))?;
+    let mut derived = derive(root, py, &model).map_err(Error::Failed)?;
+    check_home(spec, &derived.home_check).map_err(Error::Usage)?;
+    let h = &derived.home_check;
+    let motors = model.actuated.len();
+    let note = format!(
+        "{}: mobility {} (rank J {} of {} closure rows{}), {} motor{}: {}",
+        spec.name,
+        h.mobility,
+        h.rank,
+        2 * model.closures.len(),
+        if h.redundant_rows.is_empty() {
+            String::new()
+        } else {
+            format!(", redundant rows {:?}", h.redundant_rows)
+        },
+        motors,
+        if motors == 1 { "" } else { "s" },
+        match actuation_note(h.mobility, motors) {
+            // Legal, and worth a word: the motors can fight each other.
+            "over-actuated" => format!(
+                "over-actuated ({motors} motors for {} degrees of freedom: they can load each other through the closures, and joint-space control does not apply)",
+                h.mobility
+            ),
+            note => note.to_string(),
+        }
+    );
+    let casadi_c = std::mem::take(&mut derived.casadi_c);
+    let ir = assemble(spec, &model, derived);
+    rust_module::check_terms(&ir).map_err(|e| Error::Failed(e.to_string()))?;
+    Ok((ir, casadi_c, note))
+}
+
 /// Generates the model of a spec that lives outside `leg-models/specs/` (a user's own
 /// crate) as one module at `out`: the same derivation and checks as `run`, and the module
 /// needs only the `leg-models` crate (`mod my_leg;` in the user's crate). With `check`,
@@ -434,13 +470,8 @@ pub fn standalone(root: &Path, spec_path: &Path, out: &Path, check: bool) -> Res
         .canonicalize()
         .map_err(|e| Error::Usage(format!("{}: cannot read: {e}", spec_path.display())))?;
     let spec = load_spec(root, spec_path).map_err(Error::Usage)?;
-    let model = model::build(&spec).map_err(|e| Error::Usage(e.to_string()))?;
     let py = python(root).map_err(Error::Failed)?;
-    let derived = derive(root, &py, &model).map_err(Error::Failed)?;
-    check_home(&spec, &derived.home_check).map_err(Error::Usage)?;
-    let mobility = derived.home_check.mobility;
-    let ir = assemble(&spec, &model, derived);
-    rust_module::check_terms(&ir).map_err(|e| Error::Failed(e.to_string()))?;
+    let (ir, _casadi_c, note) = derive_spec(root, &py, &spec)?;
     let src = rust_module::model_source(&ir).map_err(|e| Error::Failed(e.to_string()))?;
     let shown = out.display();
     if check {
@@ -455,9 +486,8 @@ pub fn standalone(root: &Path, spec_path: &Path, out: &Path, check: bool) -> Res
     }
     crate::cli::write_atomic(out, &src).map_err(Error::Failed)?;
     Ok(format!(
-        "generated {} (mobility {mobility}, {} motors) into {shown} in {:.1} s; in your crate: `mod {};` beside a dependency on leg-models",
+        "{note}\ngenerated {} into {shown} in {:.1} s; in your crate: `mod {};` beside a dependency on leg-models",
         spec.name,
-        model.actuated.len(),
         started.elapsed().as_secs_f64(),
         spec.name
     ))
@@ -517,39 +547,14 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, Error> {
     );
     for spec in &specs {
         let ir = if selected(&spec.name) {
-            let model = model::build(spec).map_err(|e| Error::Usage(e.to_string()))?;
             progress.message(format!("deriving {} with CasADi", spec.name));
-            let mut derived = derive(root, &py, &model).map_err(Error::Failed)?;
+            let (ir, casadi_c, note) = derive_spec(root, &py, spec)?;
             progress.set(notes.len() as u64 + 1);
-            check_home(spec, &derived.home_check).map_err(Error::Usage)?;
-            let h = &derived.home_check;
-            let motors = model.actuated.len();
-            notes.push(format!(
-                "{}: mobility {} (rank J {} of {} closure rows{}), {} motor{}: {}",
-                spec.name,
-                h.mobility,
-                h.rank,
-                2 * model.closures.len(),
-                if h.redundant_rows.is_empty() {
-                    String::new()
-                } else {
-                    format!(", redundant rows {:?}", h.redundant_rows)
-                },
-                motors,
-                if motors == 1 { "" } else { "s" },
-                match actuation_note(h.mobility, motors) {
-                    // Legal, and worth a word: the motors can fight each other.
-                    "over-actuated" => format!(
-                        "over-actuated ({motors} motors for {} degrees of freedom: they can load each other through the closures, and joint-space control does not apply)",
-                        h.mobility
-                    ),
-                    note => note.to_string(),
-                }
-            ));
-            let c = std::mem::take(&mut derived.casadi_c);
-            files.insert(Path::new(CASADI_C_DIR).join(format!("{}.c", spec.name)), c);
-            let ir = assemble(spec, &model, derived);
-            rust_module::check_terms(&ir).map_err(|e| Error::Failed(e.to_string()))?;
+            notes.push(note);
+            files.insert(
+                Path::new(CASADI_C_DIR).join(format!("{}.c", spec.name)),
+                casadi_c,
+            );
             files.insert(
                 Path::new(IR_DIR).join(format!("{}.json", spec.name)),
                 ir.to_text(),
