@@ -21,6 +21,7 @@
 #![cfg_attr(not(feature = "std"), no_std)]
 #![warn(missing_docs)]
 
+pub mod analysis;
 pub mod assembly;
 pub mod batch;
 pub mod contact;

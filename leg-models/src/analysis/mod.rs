@@ -1,0 +1,963 @@
+//! Design measures of a leg (DESIGN.md §3, in the motor coordinates of the reduction):
+//! what a designer compares before building one. At one assembled pose, allocation-free:
+//!
+//! - **Singularities** (Gosselin and Angeles 1990, "Singularity analysis of closed-loop
+//!   kinematic chains", IEEE T-RA 6(3)). The passive joints lose rank where `J_p` (the
+//!   closure Jacobian without the motors' columns) does: with the motors held the
+//!   mechanism gains a freedom ("type II", [`PointMeasures::passive_rank`]), the null-space
+//!   map `q̇ = G θ̇` does not exist and `assemble` reports `Singular`. The foot loses a
+//!   direction where the foot Jacobian in motor coordinates `J_θ = J_f G` loses rank
+//!   ("type I", [`PointMeasures::foot_rank`]): the edge of the workspace.
+//! - **Transparency**: the condition number of `J_θ` (Kenneally, De and Koditschek 2016,
+//!   "Design principles for a family of direct-drive legged robots", IEEE RA-L 1(2)).
+//! - **Force capacity**: with the leg at rest, the motors hold `u = Gᵀ G(q) + J_θᵀ f` for
+//!   a force `f` the foot puts on the ground (`Gᵀ B = I`, `Gᵀ Jᵀ = 0`; `G(q)` the gravity
+//!   and spring torques). Limits `|u_k| ≤ τ_k` bound `f` to a polygon, the intersection of
+//!   one slab per motor ([`force_polygon`]); the largest downward push is
+//!   [`PointMeasures::vertical_force`].
+//! - **Speed capacity**: `ẏ = J_θ θ̇` with `|θ̇_k| ≤ ω_k`: a zonotope ([`speed_polygon`]);
+//!   the fastest vertical foot speed is [`PointMeasures::vertical_speed`].
+//! - **Operational-space inertia at the foot** (Khatib 1987): `Λ⁻¹ = J_f C J_fᵀ` with
+//!   `C` the inverse inertia of the closed chain (`M⁻¹` projected onto `J q̇ = 0`),
+//!   reflected rotor inertia included in `M`. With the motors free (unpowered, rotors
+//!   turning) and with them locked (their joints fixed). [`foot_inverse_inertia`] gives
+//!   `Λ⁻¹`, which exists at every pose (a one-motor linkage's foot moves on a line: `Λ⁻¹`
+//!   has rank one and the effective mass along that line is finite).
+//! - **Impact mitigation factor** (Wensing, Wang, Seok, Otten, Lang and Kim 2017,
+//!   "Proprioceptive actuator design in the MIT Cheetah: impact mitigation and
+//!   high-bandwidth physical interaction for dynamic legged robots", IEEE T-RO 33(3),
+//!   §IV): `ξ = det(I − Λ Λ_L⁻¹)`, `Λ` the foot's operational-space inertia of the
+//!   robot on a floating body with its joints free (the rotors backdriven), `Λ_L` with
+//!   its joints locked. `ξ = 0` when backdriving changes nothing, `ξ → 1` when the leg
+//!   keeps the body's inertia away from the ground. It needs a body: a leg with body
+//!   joints of its own (a hopper) uses them; a leg on a fixed hip is put on a body that
+//!   translates in the plane ([`Body::Translating`]).
+//!
+//! A leg with body joints of its own (passive joints above every motor: a hopper's
+//! sliders) is analysed in its body's frame ([`LegFrame`]): those joints are held where
+//! the pose has them, the rest is the leg. Which measures apply is decided by the leg's
+//! properties, never its name: motor coordinates need motors that determine the leg
+//! (mobility with the body held = motors), polygons need two motors or more.
+//!
+//! [`workspace`] (with `std`) runs these over a grid of foot positions.
+
+use core::fmt;
+
+use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
+
+use crate::assembly::AssemblyError;
+use crate::dynamics::rcond_floor;
+use crate::linalg::{mul, mul_tn, Cholesky, PivotedLdlt};
+use crate::model::{LegModel, Parameters, Real};
+use crate::structure::{Actuation, NotApplicable};
+
+#[cfg(feature = "std")]
+pub mod workspace;
+
+/// The most motors the polygons handle (their vertices are stored on the stack).
+pub const MAX_MOTORS: usize = 8;
+
+/// Why a measure does not apply to a leg: a property of the leg, said in words.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Inapplicable {
+    /// Motor coordinates or the foot's two directions need other motors
+    /// ([`NotApplicable`]: under-, over-actuated, or one motor for a 2-D polygon).
+    Structure(NotApplicable),
+    /// One motor moves the foot along a curve: no area, no 2-D polygon.
+    FootOnACurve,
+    /// More than [`MAX_MOTORS`] motors.
+    TooManyMotors {
+        /// The leg's motors.
+        motors: usize,
+    },
+    /// With its motors locked the foot cannot move (a leg on a fixed hip): the impact
+    /// mitigation factor needs a body that moves ([`Body::Translating`]).
+    RigidWhenLocked,
+    /// The leg's parameters have no `gravity_x`/`gravity_y` or no `<link>_mass` (a
+    /// hand-written model): the body's coupling cannot be computed.
+    MissingParameters,
+}
+
+impl fmt::Display for Inapplicable {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Inapplicable::Structure(n) => write!(f, "{n}"),
+            Inapplicable::FootOnACurve => write!(
+                f,
+                "the foot has two coordinates but the leg has 1 motor: it moves the foot along a curve, so there is no workspace area and no 2-D force or speed polygon"
+            ),
+            Inapplicable::TooManyMotors { motors } => write!(
+                f,
+                "the leg has {motors} motors; the polygons handle at most {MAX_MOTORS}"
+            ),
+            Inapplicable::RigidWhenLocked => write!(
+                f,
+                "with the motors locked the foot cannot move (the hip is fixed): the impact mitigation factor needs a body (give its mass)"
+            ),
+            Inapplicable::MissingParameters => write!(
+                f,
+                "the model's parameters lack gravity_x, gravity_y or a <link>_mass: the body's coupling cannot be computed"
+            ),
+        }
+    }
+}
+
+/// Why a measure cannot be computed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum AnalysisError {
+    /// It does not apply to this leg (a property of the leg).
+    NotApplicable(Inapplicable),
+    /// The pose cannot be assembled as asked.
+    Assembly(AssemblyError),
+    /// The passive joints lose rank here ("type II"): `q̇ = G θ̇` does not exist.
+    PassiveSingular,
+    /// The foot Jacobian in motor coordinates loses rank here ("type I").
+    FootSingular,
+    /// `M` is not positive definite (a parameter set out of range).
+    MassMatrix,
+    /// An input or a result is NaN or infinite.
+    NonFinite,
+}
+
+impl fmt::Display for AnalysisError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            AnalysisError::NotApplicable(why) => write!(f, "not applicable: {why}"),
+            AnalysisError::Assembly(e) => write!(f, "{e}"),
+            AnalysisError::PassiveSingular => {
+                write!(f, "singular configuration: the passive joints lose rank")
+            }
+            AnalysisError::FootSingular => write!(
+                f,
+                "singular configuration: the foot Jacobian in motor coordinates loses rank"
+            ),
+            AnalysisError::MassMatrix => write!(f, "the mass matrix is not positive definite"),
+            AnalysisError::NonFinite => write!(f, "non-finite input or result"),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for AnalysisError {}
+
+impl From<AssemblyError> for AnalysisError {
+    fn from(e: AssemblyError) -> Self {
+        AnalysisError::Assembly(e)
+    }
+}
+
+impl From<Inapplicable> for AnalysisError {
+    fn from(e: Inapplicable) -> Self {
+        AnalysisError::NotApplicable(e)
+    }
+}
+
+/// The frame a leg is analysed in: its body joints held, the rest free.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LegFrame<const NQ: usize> {
+    /// The body's joints: passive joints above every motor in the tree (a hopper's
+    /// sliders and pitch), held where the pose has them. None on a leg with a fixed hip.
+    pub held: [bool; NQ],
+    /// Degrees of freedom with those joints held: `MOBILITY` minus their count.
+    pub mobility: usize,
+    /// The motors.
+    pub motors: usize,
+}
+
+impl<const NQ: usize> LegFrame<NQ> {
+    /// The frame of leg `L`.
+    pub fn of<L, const NC: usize, const NU: usize>() -> Self
+    where
+        L: LegModel<NQ, NC, NU>,
+    {
+        let above = |j: usize, a: usize| {
+            let mut k = L::PARENTS[a];
+            while let Some(p) = k {
+                if p == j {
+                    return true;
+                }
+                k = L::PARENTS[p];
+            }
+            false
+        };
+        let held: [bool; NQ] = core::array::from_fn(|j| {
+            NU > 0 && !L::ACTUATED.contains(&j) && L::ACTUATED.iter().all(|&a| above(j, a))
+        });
+        let count = held.iter().filter(|&&h| h).count();
+        LegFrame {
+            held,
+            mobility: L::MOBILITY.saturating_sub(count),
+            motors: NU,
+        }
+    }
+
+    /// Whether the leg has body joints of its own.
+    pub fn has_body(&self) -> bool {
+        self.held.iter().any(|&h| h)
+    }
+
+    /// How the motors compare with the mobility of the leg in this frame.
+    pub fn actuation(&self) -> Actuation {
+        match self.mobility.cmp(&self.motors) {
+            core::cmp::Ordering::Equal => Actuation::Full,
+            core::cmp::Ordering::Greater => Actuation::Under,
+            core::cmp::Ordering::Less => Actuation::Over,
+        }
+    }
+
+    /// The motor angles determine the leg in this frame (motor coordinates exist).
+    pub fn motor_coordinates(&self) -> Result<(), Inapplicable> {
+        let (mobility, motors) = (self.mobility, self.motors);
+        match self.actuation() {
+            Actuation::Full => Ok(()),
+            Actuation::Under => Err(Inapplicable::Structure(NotApplicable::UnderActuated {
+                mobility,
+                motors,
+            })),
+            Actuation::Over => Err(Inapplicable::Structure(NotApplicable::OverActuated {
+                mobility,
+                motors,
+            })),
+        }
+    }
+
+    /// The motors span the foot's two directions: motor coordinates, and two motors or
+    /// more (at most [`MAX_MOTORS`]).
+    pub fn foot_polygons(&self) -> Result<(), Inapplicable> {
+        self.motor_coordinates()?;
+        if self.motors < 2 {
+            return Err(Inapplicable::FootOnACurve);
+        }
+        if self.motors > MAX_MOTORS {
+            return Err(Inapplicable::TooManyMotors {
+                motors: self.motors,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Motor limits: the torque each motor can hold (N m, or N on a prismatic joint) and the
+/// speed it can turn (rad/s, or m/s).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MotorLimits<T: Real, const NU: usize> {
+    /// `τ_k`.
+    pub torque: SVector<T, NU>,
+    /// `ω_k`.
+    pub speed: SVector<T, NU>,
+}
+
+/// The body a leg's hip is on, for the impact mitigation factor.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Body<T: Real> {
+    /// The hip on a fixed base (or, on a leg with body joints, the spec's own body).
+    Fixed,
+    /// The hip on a body of this mass (kg) that translates in the plane (held upright):
+    /// the base frame moves with it.
+    Translating {
+        /// The body's mass without the leg (kg).
+        mass: T,
+    },
+}
+
+/// The motion of a leg in its motor coordinates at one pose: `q̇ = G θ̇`, `ẏ = J_θ θ̇`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MotorKinematics<T: Real, const NQ: usize, const NU: usize> {
+    /// `G` (`NQ × NU`): the joint rates when motor `k` turns at unit rate (held joints
+    /// at rest).
+    pub g: SMatrix<T, NQ, NU>,
+    /// `J_θ = J_f G`: the foot's velocity per unit motor rate.
+    pub foot_jacobian: SMatrix<T, 2, NU>,
+    /// The passive joints' rank measure ([`PointMeasures::passive_rank`]).
+    pub passive_rank: T,
+}
+
+fn all_finite_slice<T: Real>(x: &[T]) -> bool {
+    x.iter().all(|v| v.is_finite())
+}
+
+/// `det(A)` by Gaussian elimination with partial pivoting (any fixed size).
+fn determinant<T: Real, const N: usize>(mut a: SMatrix<T, N, N>) -> T {
+    let mut det = T::one();
+    for k in 0..N {
+        let mut p = k;
+        for i in k + 1..N {
+            if a[(i, k)].abs() > a[(p, k)].abs() {
+                p = i;
+            }
+        }
+        if a[(p, k)] == T::zero() {
+            return T::zero();
+        }
+        if p != k {
+            a.swap_rows(p, k);
+            det = -det;
+        }
+        let pivot = a[(k, k)];
+        det *= pivot;
+        for i in k + 1..N {
+            let factor = a[(i, k)] / pivot;
+            for c in k + 1..N {
+                let v = a[(k, c)];
+                a[(i, c)] -= factor * v;
+            }
+        }
+    }
+    det
+}
+
+/// The passive joints' rank measure of the closure Jacobian `j` with the columns in
+/// `fixed` (motors and held joints) left out: where the passive columns and the
+/// independent rows make a square matrix, its determinant over the product of its
+/// column lengths (Hadamard's ratio, in `[−1, 1]`, signed, zero exactly at the
+/// singularity); otherwise `√rcond` of `J_p J_pᵀ` (unsigned). `1` without closures.
+fn passive_rank<T: Real, const NQ: usize, const NC: usize>(
+    j: &SMatrix<T, NC, NQ>,
+    fixed: &[bool; NQ],
+    redundant_rows: usize,
+) -> T {
+    if NC == 0 {
+        return T::one();
+    }
+    let passive = fixed.iter().filter(|&&f| !f).count();
+    if passive == NC && redundant_rows == 0 {
+        let mut s = SMatrix::<T, NC, NC>::zeros();
+        let mut norms = T::one();
+        let mut c = 0;
+        for (col, &f) in fixed.iter().enumerate() {
+            if !f {
+                s.set_column(c, &j.column(col));
+                norms *= j.column(col).norm();
+                c += 1;
+            }
+        }
+        if norms == T::zero() {
+            return T::zero();
+        }
+        return determinant(s) / norms;
+    }
+    let mut jp = *j;
+    for (col, &f) in fixed.iter().enumerate() {
+        if f {
+            jp.column_mut(col).fill(T::zero());
+        }
+    }
+    // Every pivot counts here (no floor): a singular `J_p` gives rcond 0.
+    match PivotedLdlt::new(&mul(&jp, &jp.transpose()), redundant_rows, T::zero()) {
+        Some(f) => f.rcond.max(T::zero()).sqrt(),
+        None => T::zero(),
+    }
+}
+
+/// `G` and `J_θ` at an assembled pose `q`, the joints of `frame.held` at rest. Fails
+/// where the passive joints lose rank ([`AnalysisError::PassiveSingular`]) and where
+/// motor coordinates do not exist for this leg.
+pub fn motor_kinematics<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+    frame: &LegFrame<NQ>,
+) -> Result<MotorKinematics<T, NQ, NU>, AnalysisError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    frame.motor_coordinates()?;
+    if !all_finite_slice(q.as_slice()) {
+        return Err(AnalysisError::NonFinite);
+    }
+    let fixed: [bool; NQ] = core::array::from_fn(|c| frame.held[c] || L::ACTUATED.contains(&c));
+    let j = L::constraint_jacobian(q, params);
+    let rank = passive_rank(&j, &fixed, L::REDUNDANT_ROWS);
+    let mut g = SMatrix::<T, NQ, NU>::zeros();
+    for (k, &a) in L::ACTUATED.iter().enumerate() {
+        g[(a, k)] = T::one();
+    }
+    if NC > 0 {
+        let mut jp = j;
+        for (c, &f) in fixed.iter().enumerate() {
+            if f {
+                jp.column_mut(c).fill(T::zero());
+            }
+        }
+        let s = mul(&jp, &jp.transpose());
+        let chol = PivotedLdlt::new(&s, L::REDUNDANT_ROWS, rcond_floor::<T>())
+            .ok_or(AnalysisError::PassiveSingular)?;
+        // The passive rates that cancel each motor's closure velocity, smallest norm:
+        // `x = J_pᵀ (J_p J_pᵀ)⁻¹ (−J e_k)`.
+        let mut w = -mul(&j, &g);
+        chol.solve_mut(&mut w);
+        g += mul(&jp.transpose(), &w);
+        // The rows left out by the pivots must hold too (a singular J_p can pass the
+        // factorization of a redundant system).
+        let residual = mul(&j, &g);
+        let scale = g.amax().max(T::one()) * j.amax().max(T::one());
+        if residual.amax() > scale * rcond_floor::<T>().sqrt() {
+            return Err(AnalysisError::PassiveSingular);
+        }
+    }
+    let foot_jacobian = mul(&L::foot_jacobian(q, params), &g);
+    if !all_finite_slice(g.as_slice()) || !all_finite_slice(foot_jacobian.as_slice()) {
+        return Err(AnalysisError::NonFinite);
+    }
+    Ok(MotorKinematics {
+        g,
+        foot_jacobian,
+        passive_rank: rank,
+    })
+}
+
+/// The singular values `(σ_max, σ_min)` of a `2 × N` matrix (closed form of `A Aᵀ`).
+pub fn singular_values<T: Real, const N: usize>(a: &SMatrix<T, 2, N>) -> (T, T) {
+    let s = mul(a, &a.transpose());
+    let half = T::lit(0.5);
+    let tr = s[(0, 0)] + s[(1, 1)];
+    let diff = (s[(0, 0)] - s[(1, 1)]) * half;
+    let root = (diff * diff + s[(0, 1)] * s[(1, 0)]).sqrt();
+    let hi = tr * half + root;
+    let lo = (tr * half - root).max(T::zero());
+    (hi.sqrt(), lo.sqrt())
+}
+
+/// The foot's rank measure in motor coordinates: with two motors `det J_θ / (|c₁| |c₂|)`
+/// (signed, zero exactly where the foot loses a direction); otherwise `σ_min / σ_max`.
+pub fn foot_rank<T: Real, const NU: usize>(jt: &SMatrix<T, 2, NU>) -> T {
+    if NU == 2 {
+        let (c0, c1) = (jt.column(0).norm(), jt.column(1).norm());
+        if c0 == T::zero() || c1 == T::zero() {
+            return T::zero();
+        }
+        (jt[(0, 0)] * jt[(1, 1)] - jt[(0, 1)] * jt[(1, 0)]) / (c0 * c1)
+    } else {
+        let (hi, lo) = singular_values(jt);
+        if hi == T::zero() {
+            T::zero()
+        } else {
+            lo / hi
+        }
+    }
+}
+
+/// A convex polygon in the plane, vertices counter-clockwise, on the stack.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Polygon<T: Real> {
+    vertices: [Vector2<T>; 2 * MAX_MOTORS],
+    len: usize,
+}
+
+impl<T: Real> Polygon<T> {
+    fn empty() -> Self {
+        Polygon {
+            vertices: [Vector2::zeros(); 2 * MAX_MOTORS],
+            len: 0,
+        }
+    }
+
+    fn push(&mut self, v: Vector2<T>) {
+        if self.len < 2 * MAX_MOTORS {
+            self.vertices[self.len] = v;
+            self.len += 1;
+        }
+    }
+
+    /// The vertices, counter-clockwise.
+    pub fn vertices(&self) -> &[Vector2<T>] {
+        &self.vertices[..self.len]
+    }
+
+    /// The enclosed area (shoelace formula).
+    pub fn area(&self) -> T {
+        let v = self.vertices();
+        let mut twice = T::zero();
+        for i in 0..v.len() {
+            let (a, b) = (v[i], v[(i + 1) % v.len()]);
+            twice += a[0] * b[1] - a[1] * b[0];
+        }
+        twice * T::lit(0.5)
+    }
+
+    /// Sorts the vertices counter-clockwise about their centroid.
+    fn sort(&mut self) {
+        let n = self.len;
+        if n == 0 {
+            return;
+        }
+        let mut c = Vector2::zeros();
+        for v in &self.vertices[..n] {
+            c += v;
+        }
+        c /= T::from_usize(n).unwrap_or_else(T::one);
+        let angle = |v: &Vector2<T>| (v[1] - c[1]).atan2(v[0] - c[0]);
+        // Insertion sort: at most 2·MAX_MOTORS vertices.
+        for i in 1..n {
+            let mut k = i;
+            while k > 0 && angle(&self.vertices[k - 1]) > angle(&self.vertices[k]) {
+                self.vertices.swap(k - 1, k);
+                k -= 1;
+            }
+        }
+    }
+}
+
+/// The polygon `{f : lo_k ≤ (Aᵀ f)_k ≤ hi_k}` (one slab per column `a_k` of `A`), by
+/// the pairwise intersections of the slabs' edges that satisfy every slab. Empty when
+/// the slabs do not meet.
+fn slab_polygon<T: Real, const NU: usize>(
+    a: &SMatrix<T, 2, NU>,
+    lo: &SVector<T, NU>,
+    hi: &SVector<T, NU>,
+) -> Polygon<T> {
+    let mut poly = Polygon::empty();
+    let scale = a.amax() * (lo.amax().max(hi.amax()));
+    let slack = scale * T::default_epsilon() * T::lit(1e4);
+    for i in 0..NU {
+        for k in i + 1..NU {
+            let (ai, ak) = (a.column(i), a.column(k));
+            let det = ai[0] * ak[1] - ai[1] * ak[0];
+            if det.abs() <= ai.norm() * ak.norm() * T::default_epsilon() * T::lit(1e3) {
+                continue;
+            }
+            for bi in [lo[i], hi[i]] {
+                for bk in [lo[k], hi[k]] {
+                    // [aᵢᵀ; a_kᵀ] f = (bᵢ, b_k) by Cramer's rule.
+                    let f = Vector2::new(
+                        (bi * ak[1] - bk * ai[1]) / det,
+                        (ai[0] * bk - ak[0] * bi) / det,
+                    );
+                    let inside = (0..NU).all(|m| {
+                        let v = a.column(m).dot(&f);
+                        v >= lo[m] - slack && v <= hi[m] + slack
+                    });
+                    let seen = poly.vertices().iter().any(|p| (p - f).amax() <= slack);
+                    if inside && !seen {
+                        poly.push(f);
+                    }
+                }
+            }
+        }
+    }
+    poly.sort();
+    poly
+}
+
+/// The foot forces (N, on the ground, base frame) the motors hold at rest at pose `q`
+/// within `torque` limits: `|Gᵀ G(q) + J_θᵀ f|_k ≤ τ_k`, gravity and springs included.
+/// Empty where the motors cannot hold the leg itself.
+pub fn force_polygon<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+    kin: &MotorKinematics<T, NQ, NU>,
+    torque: &SVector<T, NU>,
+) -> Polygon<T>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let hold = holding_torque::<L, T, NQ, NC, NU>(params, q, kin);
+    slab_polygon(&kin.foot_jacobian, &(-torque - hold), &(torque - hold))
+}
+
+/// `Gᵀ G(q)`: the motor torques that hold the leg still with no force at the foot.
+pub fn holding_torque<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+    kin: &MotorKinematics<T, NQ, NU>,
+) -> SVector<T, NU>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    mul_tn(&kin.g, &L::gravity_forces(q, params))
+}
+
+/// The largest downward push `F ≥ 0` (the foot putting `(0, −F)` on the ground) the
+/// motors hold at rest within `torque`; `None` where no downward force can be held.
+pub fn vertical_force<T: Real, const NU: usize>(
+    foot_jacobian: &SMatrix<T, 2, NU>,
+    hold: &SVector<T, NU>,
+    torque: &SVector<T, NU>,
+) -> Option<T> {
+    // u_k = hold_k − F a_k with a_k = J_θ[1, k]: F within [lo, hi] for every motor.
+    let (mut lo, mut hi) = (T::zero(), T::max_value().unwrap_or_else(|| T::lit(1e300)));
+    for k in 0..NU {
+        let a = foot_jacobian[(1, k)];
+        let (below, above) = (-torque[k] - hold[k], torque[k] - hold[k]);
+        // −F a ∈ [below, above]
+        if a == T::zero() {
+            if below > T::zero() || above < T::zero() {
+                return None;
+            }
+        } else {
+            let (x, y) = (-above / a, -below / a);
+            let (from, to) = if x < y { (x, y) } else { (y, x) };
+            lo = lo.max(from);
+            hi = hi.min(to);
+        }
+    }
+    (lo <= hi && hi.is_finite()).then_some(hi)
+}
+
+/// The foot velocities reachable with motor speeds `|θ̇_k| ≤ ω_k`: the zonotope
+/// `Σ [−1, 1] ω_k c_k` of `J_θ`'s columns `c_k`, `2 NU` vertices counter-clockwise.
+pub fn speed_polygon<T: Real, const NU: usize>(
+    foot_jacobian: &SMatrix<T, 2, NU>,
+    speed: &SVector<T, NU>,
+) -> Polygon<T> {
+    let mut gens = [Vector2::<T>::zeros(); MAX_MOTORS];
+    let n = NU.min(MAX_MOTORS);
+    for (k, g) in gens.iter_mut().enumerate().take(n) {
+        let c = foot_jacobian.column(k) * speed[k];
+        // Each generator pointing into the upper half-plane (angle in [0, π)).
+        *g = if c[1] < T::zero() || (c[1] == T::zero() && c[0] < T::zero()) {
+            -c
+        } else {
+            c
+        };
+    }
+    let gens = &mut gens[..n];
+    for i in 1..n {
+        let mut k = i;
+        while k > 0 && gens[k - 1][1].atan2(gens[k - 1][0]) > gens[k][1].atan2(gens[k][0]) {
+            gens.swap(k - 1, k);
+            k -= 1;
+        }
+    }
+    let mut poly = Polygon::empty();
+    let mut v = Vector2::zeros();
+    for g in gens.iter() {
+        v -= g;
+    }
+    // From the lowest vertex, each generator in turn by angle, then back.
+    for g in gens.iter() {
+        poly.push(v);
+        v += g * T::lit(2.0);
+    }
+    for g in gens.iter() {
+        poly.push(v);
+        v -= g * T::lit(2.0);
+    }
+    poly
+}
+
+/// The fastest vertical foot speed with motor speeds `|θ̇_k| ≤ ω_k` and no sideways
+/// motion: the largest `v` with `(0, v)` in [`speed_polygon`].
+pub fn vertical_speed<T: Real, const NU: usize>(
+    foot_jacobian: &SMatrix<T, 2, NU>,
+    speed: &SVector<T, NU>,
+) -> T {
+    let poly = speed_polygon(foot_jacobian, speed);
+    ray_reach(&poly, &Vector2::new(T::zero(), T::one()))
+}
+
+/// How far the ray from the origin along `d` stays inside a convex polygon that holds
+/// the origin (zero when it does not).
+pub fn ray_reach<T: Real>(poly: &Polygon<T>, d: &Vector2<T>) -> T {
+    let v = poly.vertices();
+    let mut best = T::max_value().unwrap_or_else(|| T::lit(1e300));
+    if v.len() < 3 {
+        return T::zero();
+    }
+    for i in 0..v.len() {
+        let (a, b) = (v[i], v[(i + 1) % v.len()]);
+        // Outward normal of a counter-clockwise edge.
+        let n = Vector2::new(b[1] - a[1], a[0] - b[0]);
+        let along = n.dot(d);
+        let offset = n.dot(&a);
+        if offset < T::zero() {
+            return T::zero();
+        }
+        if along > T::zero() {
+            best = best.min(offset / along);
+        }
+    }
+    best
+}
+
+/// `A C Aᵀ` with `C` the inverse inertia of the closed chain (Khatib's `Λ⁻¹` for the
+/// rows `A`): `C = M⁻¹ − M⁻¹Jᵀ (J M⁻¹ Jᵀ)⁻¹ J M⁻¹`, the joints in `locked` fixed (their
+/// rows and columns of `M` replaced by the identity and their columns of `J` and `A`
+/// zeroed, so they neither move nor couple).
+fn delassus<T: Real, const NQ: usize, const NC: usize, const NR: usize>(
+    m: &SMatrix<T, NQ, NQ>,
+    j: &SMatrix<T, NC, NQ>,
+    a: &SMatrix<T, NR, NQ>,
+    locked: &[bool; NQ],
+    redundant_rows: usize,
+) -> Result<SMatrix<T, NR, NR>, AnalysisError> {
+    let (mut m, mut j, mut a) = (*m, *j, *a);
+    for (c, &l) in locked.iter().enumerate() {
+        if l {
+            m.row_mut(c).fill(T::zero());
+            m.column_mut(c).fill(T::zero());
+            m[(c, c)] = T::one();
+            j.column_mut(c).fill(T::zero());
+            a.column_mut(c).fill(T::zero());
+        }
+    }
+    let chol = Cholesky::new(&m).ok_or(AnalysisError::MassMatrix)?;
+    if chol.rcond < rcond_floor::<T>() {
+        return Err(AnalysisError::MassMatrix);
+    }
+    let mut y = a.transpose();
+    chol.solve_mut(&mut y); // M⁻¹ Aᵀ
+    let mut d = mul(&a, &y);
+    if NC > 0 {
+        // Rows of J with every column locked are no constraint: the pivots leave them out.
+        let free_rows = (0..NC).filter(|&r| j.row(r).amax() == T::zero()).count();
+        let mut x = j.transpose();
+        chol.solve_mut(&mut x); // M⁻¹ Jᵀ
+        let s = mul(&j, &x);
+        let factor = PivotedLdlt::new(&s, redundant_rows.max(free_rows), rcond_floor::<T>());
+        let factor = match factor {
+            Some(f) => f,
+            // Locking joints can make more rows repeat the others than the leg's
+            // redundant rows: allow every row that is not independent.
+            None => PivotedLdlt::new(&s, NC, rcond_floor::<T>())
+                .ok_or(AnalysisError::PassiveSingular)?,
+        };
+        let jy = mul(&j, &y); // J M⁻¹ Aᵀ
+        let mut w = jy;
+        factor.solve_mut(&mut w);
+        d -= mul_tn(&jy, &w);
+    }
+    if !all_finite_slice(d.as_slice()) {
+        return Err(AnalysisError::NonFinite);
+    }
+    Ok((d + d.transpose()) * T::lit(0.5))
+}
+
+/// The foot's inverse operational-space inertia `Λ⁻¹ = J_f C J_fᵀ` (1/kg) at `q`: the
+/// foot's velocity change per unit impulse there. The joints of `frame.held` fixed (the
+/// leg in its body's frame); with `motors_locked`, the motors' joints too.
+pub fn foot_inverse_inertia<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+    frame: &LegFrame<NQ>,
+    motors_locked: bool,
+) -> Result<Matrix2<T>, AnalysisError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let locked: [bool; NQ] =
+        core::array::from_fn(|c| frame.held[c] || (motors_locked && L::ACTUATED.contains(&c)));
+    delassus(
+        &L::mass_matrix(q, params),
+        &L::constraint_jacobian(q, params),
+        &L::foot_jacobian(q, params),
+        &locked,
+        L::REDUNDANT_ROWS,
+    )
+}
+
+/// The effective mass along the unit direction `d` of a foot with inverse inertia
+/// `inv`: `1 / (dᵀ Λ⁻¹ d)` (infinite where the foot cannot move along `d`).
+pub fn effective_mass<T: Real>(inv: &Matrix2<T>, d: &Vector2<T>) -> T {
+    let x = d.dot(&(inv * d));
+    if x > T::zero() {
+        T::one() / x
+    } else {
+        T::max_value().unwrap_or_else(|| T::lit(1e300))
+    }
+}
+
+/// What the body of [`Body::Translating`] needs from the leg's parameters: copies with
+/// gravity along `x`, along `y` and off (so that `∂V/∂q` gives the momentum Jacobian of
+/// the links, `P = Σ mᵢ J_cᵢ`), and the leg's mass. Prepared once per parameter set.
+#[derive(Clone, Copy, Debug)]
+pub struct BodyCoupling<P> {
+    unit_x: P,
+    unit_y: P,
+    zero: P,
+    /// The leg's mass (kg): the sum of its links' `<link>_mass`.
+    pub leg_mass: f64,
+}
+
+impl<P> BodyCoupling<P> {
+    /// From the parameters of leg `L`; `None` without `gravity_x`, `gravity_y` or a
+    /// link's `<link>_mass`.
+    pub fn new<L, T, const NQ: usize, const NC: usize, const NU: usize>(params: &P) -> Option<Self>
+    where
+        L: LegModel<NQ, NC, NU, Params<T> = P>,
+        T: Real,
+        P: Parameters<T> + Clone,
+    {
+        let index = |name: &str| P::NAMES.iter().position(|n| *n == name);
+        let (gx, gy) = (index("gravity_x")?, index("gravity_y")?);
+        let mut leg_mass = 0.0;
+        for link in L::JOINT_NAMES {
+            let i = P::NAMES.iter().position(|n| {
+                n.strip_prefix(link)
+                    .and_then(|rest| rest.strip_prefix('_'))
+                    .is_some_and(|rest| rest == "mass")
+            })?;
+            let m: f64 = params.get(i)?.to_subset()?;
+            leg_mass += m;
+        }
+        let with = |x: f64, y: f64| {
+            let mut p = params.clone();
+            p.set(gx, T::lit(x));
+            p.set(gy, T::lit(y));
+            p
+        };
+        Some(BodyCoupling {
+            unit_x: with(1.0, 0.0),
+            unit_y: with(0.0, 1.0),
+            zero: with(0.0, 0.0),
+            leg_mass,
+        })
+    }
+}
+
+/// The impact mitigation factor `ξ = det(I − Λ Λ_L⁻¹) = det(Λ⁻¹ − Λ_L⁻¹) / det Λ⁻¹`
+/// (Wensing et al. 2017, §IV) at the foot at pose `q`. On a leg with body joints of its
+/// own (`frame.has_body()`), `body` must be [`Body::Fixed`] and the spec's body moves;
+/// otherwise the hip is put on `body` (a translating body of mass `m_b`: with the links'
+/// momentum Jacobian `P` and `m_t = m_b + m_leg`, `Λ⁻¹ = I/m_t + Ā C(M̄) Āᵀ` with
+/// `M̄ = M − PᵀP/m_t`, `Ā = J_f − P/m_t`; locked, `Λ_L = m_t I`).
+pub fn impact_mitigation<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+    frame: &LegFrame<NQ>,
+    body: &Body<T>,
+    coupling: Option<&BodyCoupling<L::Params<T>>>,
+) -> Result<T, AnalysisError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let actuated: [bool; NQ] = core::array::from_fn(|c| L::ACTUATED.contains(&c));
+    let m = L::mass_matrix(q, params);
+    let j = L::constraint_jacobian(q, params);
+    let jf = L::foot_jacobian(q, params);
+    let none = [false; NQ];
+    let (free, locked) = match (body, frame.has_body()) {
+        (Body::Translating { mass }, false) => {
+            let c = coupling.ok_or(Inapplicable::MissingParameters)?;
+            let g0 = L::gravity_forces(q, &c.zero);
+            // ∂V/∂q with unit gravity along x is −Σ mᵢ J_cᵢ,xᵀ (springs cancel with g0).
+            let px = g0 - L::gravity_forces(q, &c.unit_x);
+            let py = g0 - L::gravity_forces(q, &c.unit_y);
+            let p = SMatrix::<T, 2, NQ>::from_fn(|r, col| if r == 0 { px[col] } else { py[col] });
+            let total = *mass + T::lit(c.leg_mass);
+            if total <= T::zero() || !total.is_finite() {
+                return Err(AnalysisError::NonFinite);
+            }
+            let inv_t = T::one() / total;
+            let m_bar = m - mul_tn(&p, &p) * inv_t;
+            let a_bar = jf - p * inv_t;
+            let own = Matrix2::identity() * inv_t;
+            let free = own + delassus(&m_bar, &j, &a_bar, &none, L::REDUNDANT_ROWS)?;
+            let locked = own + delassus(&m_bar, &j, &a_bar, &actuated, L::REDUNDANT_ROWS)?;
+            (free, locked)
+        }
+        _ => (
+            delassus(&m, &j, &jf, &none, L::REDUNDANT_ROWS)?,
+            delassus(&m, &j, &jf, &actuated, L::REDUNDANT_ROWS)?,
+        ),
+    };
+    let det_free = free.determinant();
+    if det_free <= T::zero() || !det_free.is_finite() {
+        // The foot moves on a line at most: Λ does not exist.
+        return Err(Inapplicable::FootOnACurve.into());
+    }
+    if locked.amax() <= free.amax() * T::default_epsilon() * T::lit(1e3) {
+        return Err(Inapplicable::RigidWhenLocked.into());
+    }
+    Ok((free - locked).determinant() / det_free)
+}
+
+/// Every measure at one assembled pose, in the leg's frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PointMeasures<T: Real, const NQ: usize, const NU: usize> {
+    /// The foot (base frame, m).
+    pub foot: Vector2<T>,
+    /// The motor angles.
+    pub motor_angles: SVector<T, NU>,
+    /// `q̇ = G θ̇` and `J_θ`.
+    pub kinematics: MotorKinematics<T, NQ, NU>,
+    /// Passive joints' rank ("type II"): signed Hadamard ratio of `J_p` where it is square,
+    /// `√rcond(J_p J_pᵀ)` otherwise; zero at the singularity.
+    pub passive_rank: T,
+    /// Foot's rank in motor coordinates ("type I"): `det J_θ / (|c₁||c₂|)` with two motors,
+    /// `σ_min / σ_max` otherwise; zero at the singularity.
+    pub foot_rank: T,
+    /// `κ(J_θ) = σ_max / σ_min` (infinite with one motor).
+    pub condition: T,
+    /// Largest downward push at rest within the torque limits (N); `None` where the
+    /// motors cannot push down here (or a one-motor leg).
+    pub vertical_force: Option<T>,
+    /// Fastest vertical foot speed within the speed limits (m/s), no sideways motion.
+    pub vertical_speed: T,
+    /// `Λ⁻¹` with the motors free (rotors backdriven), the body held (1/kg).
+    pub inverse_inertia: Matrix2<T>,
+    /// `Λ⁻¹` with the motors locked, the body held (zero on a fully actuated leg).
+    pub inverse_inertia_locked: Matrix2<T>,
+    /// Effective mass felt by a vertical impact at the foot, motors free (kg).
+    pub effective_mass: T,
+}
+
+/// Every measure at the assembled pose `q` (allocation-free). Fails where motor
+/// coordinates do not apply or the passive joints lose rank.
+pub fn point_measures<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+    frame: &LegFrame<NQ>,
+    limits: &MotorLimits<T, NU>,
+) -> Result<PointMeasures<T, NQ, NU>, AnalysisError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let kin = motor_kinematics::<L, T, NQ, NC, NU>(params, q, frame)?;
+    let jt = kin.foot_jacobian;
+    let (hi, lo) = singular_values(&jt);
+    let condition = if NU >= 2 && lo > T::zero() {
+        hi / lo
+    } else {
+        T::max_value().unwrap_or_else(|| T::lit(1e300))
+    };
+    let hold = holding_torque::<L, T, NQ, NC, NU>(params, q, &kin);
+    let two = NU >= 2;
+    let inverse_inertia = foot_inverse_inertia::<L, T, NQ, NC, NU>(params, q, frame, false)?;
+    let inverse_inertia_locked = foot_inverse_inertia::<L, T, NQ, NC, NU>(params, q, frame, true)?;
+    Ok(PointMeasures {
+        foot: L::foot_position(q, params),
+        motor_angles: SVector::<T, NU>::from_fn(|k, _| q[L::ACTUATED[k]]),
+        kinematics: kin,
+        passive_rank: kin.passive_rank,
+        foot_rank: foot_rank(&jt),
+        condition,
+        vertical_force: if two {
+            vertical_force(&jt, &hold, &limits.torque)
+        } else {
+            None
+        },
+        vertical_speed: if two {
+            vertical_speed(&jt, &limits.speed)
+        } else {
+            T::zero()
+        },
+        inverse_inertia,
+        inverse_inertia_locked,
+        effective_mass: effective_mass(&inverse_inertia, &Vector2::new(T::zero(), T::one())),
+    })
+}
+
+/// The passive joints' rank measure at `q` ([`PointMeasures::passive_rank`]), computed
+/// even where the passive joints lose rank (where [`motor_kinematics`] fails).
+pub fn passive_rank_at<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+    frame: &LegFrame<NQ>,
+) -> T
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    let fixed: [bool; NQ] = core::array::from_fn(|c| frame.held[c] || L::ACTUATED.contains(&c));
+    passive_rank(
+        &L::constraint_jacobian(q, params),
+        &fixed,
+        L::REDUNDANT_ROWS,
+    )
+}

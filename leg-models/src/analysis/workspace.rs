@@ -1,0 +1,412 @@
+//! The measures of [`super`] over a square grid of foot positions: the workspace of one
+//! assembly branch, found by continuation from an assembled pose (each node's pose is
+//! solved from a neighbour's, so the branch never changes), and the singularity curves
+//! drawn through it.
+//!
+//! In foot space the foot's rank loss ("type I") is where the branch ends: the edge of the
+//! workspace. The passive joints' rank loss ("type II") is inside it, where the signed
+//! [`PointMeasures::passive_rank`] changes sign between neighbouring nodes.
+
+use std::collections::VecDeque;
+
+use nalgebra::SVector;
+
+use super::{
+    impact_mitigation, passive_rank, point_measures, AnalysisError, Body, BodyCoupling, LegFrame,
+    MotorLimits, PointMeasures,
+};
+use crate::assembly::{foot_inverse_holding, Tolerance};
+use crate::model::LegModel;
+
+/// How the grid is laid out and what limits apply.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GridOptions<const NU: usize> {
+    /// Nodes per side (the grid has `nodes²`).
+    pub nodes: usize,
+    /// The grid's centre and half-width (m); `None`: centred on the hip of the foot's
+    /// chain, as wide as that chain is long.
+    pub window: Option<([f64; 2], f64)>,
+    /// Motor angle range `(low, high)` per motor (rad); `None`: no limit.
+    pub motor_range: Option<[(f64, f64); NU]>,
+    /// Torque and speed limits of the force and speed measures.
+    pub limits: MotorLimits<f64, NU>,
+}
+
+/// What happened at a node.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NodeState {
+    /// Not reached from the start (outside the branch's connected workspace).
+    Unvisited,
+    /// On the branch: the foot can be put here.
+    Reached,
+    /// Next to a reached node but not reachable on the branch (the branch ends).
+    BranchEnds,
+    /// Reachable, but a motor is outside its range.
+    OutOfRange,
+}
+
+/// A line segment in the base frame (m).
+pub type Segment = [[f64; 2]; 2];
+
+/// The measures over the grid.
+#[derive(Clone, Debug)]
+pub struct Workspace<const NQ: usize, const NU: usize> {
+    /// Nodes per side.
+    pub nodes: usize,
+    /// The node `(0, 0)` (lowest `x`, lowest `y`), base frame (m).
+    pub origin: [f64; 2],
+    /// Node spacing (m).
+    pub step: f64,
+    /// Each node's state, row by row (`index = iy · nodes + ix`).
+    pub states: Vec<NodeState>,
+    /// Each reached node's pose (zero elsewhere).
+    pub poses: Vec<SVector<f64, NQ>>,
+    /// Each reached node's measures; `Err` where they cannot be computed there (a
+    /// singular pose), `None` at nodes not reached.
+    pub measures: Vec<Option<Result<PointMeasures<f64, NQ, NU>, AnalysisError>>>,
+    /// The passive rank measure at each reached node (NaN elsewhere).
+    pub passive_rank: Vec<f64>,
+    /// Whether [`Workspace::passive_rank`] is signed (its zero crossings are curves).
+    pub passive_signed: bool,
+    /// Workspace area: reached nodes × step² (m²).
+    pub area: f64,
+    /// Where the passive joints lose rank ("type II"), as segments.
+    pub passive_curves: Vec<Segment>,
+    /// Where the foot loses a direction ("type I"): the edge where the branch ends, and
+    /// sign changes of the foot's rank measure inside.
+    pub foot_curves: Vec<Segment>,
+}
+
+impl<const NQ: usize, const NU: usize> Workspace<NQ, NU> {
+    /// The foot position of node `(ix, iy)`.
+    pub fn node(&self, ix: usize, iy: usize) -> [f64; 2] {
+        [
+            self.origin[0] + ix as f64 * self.step,
+            self.origin[1] + iy as f64 * self.step,
+        ]
+    }
+
+    /// The distance (m) from `point` to the nearest singularity curve (either kind);
+    /// `None` when there is none in the grid.
+    pub fn distance_to_singularity(&self, point: [f64; 2]) -> Option<f64> {
+        self.passive_curves
+            .iter()
+            .chain(&self.foot_curves)
+            .map(|s| segment_distance(point, s))
+            .fold(None, |best, d| Some(best.map_or(d, |b: f64| b.min(d))))
+    }
+
+    /// The measures at the reached node nearest `point`, if any.
+    pub fn nearest(&self, point: [f64; 2]) -> Option<(usize, &PointMeasures<f64, NQ, NU>)> {
+        let mut best: Option<(f64, usize)> = None;
+        for (i, m) in self.measures.iter().enumerate() {
+            if let Some(Ok(_)) = m {
+                let p = self.node(i % self.nodes, i / self.nodes);
+                let d = (p[0] - point[0]).hypot(p[1] - point[1]);
+                if best.is_none_or(|(b, _)| d < b) {
+                    best = Some((d, i));
+                }
+            }
+        }
+        let (_, i) = best?;
+        match &self.measures[i] {
+            Some(Ok(m)) => Some((i, m)),
+            _ => None,
+        }
+    }
+}
+
+/// Distance from `p` to the segment `s`.
+pub fn segment_distance(p: [f64; 2], s: &Segment) -> f64 {
+    let (a, b) = (s[0], s[1]);
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let len2 = dx * dx + dy * dy;
+    let t = if len2 > 0.0 {
+        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
+}
+
+/// The hip of the foot's chain and the chain's length at pose `q` (the joints that move
+/// the foot in the tree, without held ones): the default window.
+pub fn reach<L, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+    frame: &LegFrame<NQ>,
+) -> ([f64; 2], f64)
+where
+    L: LegModel<NQ, NC, NU>,
+{
+    let jf = L::foot_jacobian(q, params);
+    let joints = L::joint_positions(q, params);
+    let foot = L::foot_position(q, params);
+    let size = crate::assembly::leg_size::<L, f64, NQ, NC, NU>(params, q);
+    let in_chain = |j: usize| !frame.held[j] && jf.column(j).amax() > 0.0;
+    // The chain from the hip down: each chain joint's depth in the tree.
+    let depth = |j: usize| {
+        let (mut d, mut k) = (0, L::PARENTS[j]);
+        while let Some(p) = k {
+            d += 1;
+            k = L::PARENTS[p];
+        }
+        d
+    };
+    let mut chain: Vec<usize> = (0..NQ).filter(|&j| in_chain(j)).collect();
+    chain.sort_by_key(|&j| depth(j));
+    let Some(&hip) = chain.first() else {
+        return ([foot[0], foot[1]], size.max(f64::EPSILON));
+    };
+    let point = |j: usize| [joints[(0, j)], joints[(1, j)]];
+    let mut length = 0.0;
+    let mut last = point(hip);
+    for &j in chain.iter().skip(1) {
+        let p = point(j);
+        length += (p[0] - last[0]).hypot(p[1] - last[1]);
+        last = p;
+    }
+    length += (foot[0] - last[0]).hypot(foot[1] - last[1]);
+    // A slider's reach is not fixed by its pose: allow the leg's size for each.
+    let sliders = chain
+        .iter()
+        .filter(|&&j| L::JOINT_KINDS[j] == crate::model::JointKind::Prismatic)
+        .count();
+    (point(hip), length + sliders as f64 * size)
+}
+
+/// The workspace of the branch of `start` (an assembled pose) over the grid, with every
+/// measure at every node. Allocates the grid; each node's work allocates nothing.
+pub fn workspace<L, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<f64>,
+    start: &SVector<f64, NQ>,
+    frame: &LegFrame<NQ>,
+    options: &GridOptions<NU>,
+) -> Result<Workspace<NQ, NU>, AnalysisError>
+where
+    L: LegModel<NQ, NC, NU>,
+{
+    frame.foot_polygons()?;
+    let n = options.nodes.max(2);
+    let (center, half) = options
+        .window
+        .unwrap_or_else(|| reach::<L, NQ, NC, NU>(params, start, frame));
+    let step = 2.0 * half / (n - 1) as f64;
+    let origin = [center[0] - half, center[1] - half];
+    let at = |i: usize| {
+        SVector::<f64, 2>::new(
+            origin[0] + (i % n) as f64 * step,
+            origin[1] + (i / n) as f64 * step,
+        )
+    };
+    let tol = Tolerance {
+        max_iterations: 30,
+        ..Tolerance::default()
+    };
+    let in_range = |q: &SVector<f64, NQ>| {
+        options.motor_range.is_none_or(|r| {
+            L::ACTUATED
+                .iter()
+                .zip(r.iter())
+                .all(|(&a, &(lo, hi))| q[a] >= lo && q[a] <= hi)
+        })
+    };
+    let mut states = vec![NodeState::Unvisited; n * n];
+    let mut poses = vec![SVector::<f64, NQ>::zeros(); n * n];
+    let mut queue = VecDeque::new();
+    // The node nearest the start's foot, solved from the start.
+    let foot = L::foot_position(start, params);
+    let ix = (((foot[0] - origin[0]) / step).round().max(0.0) as usize).min(n - 1);
+    let iy = (((foot[1] - origin[1]) / step).round().max(0.0) as usize).min(n - 1);
+    let first = iy * n + ix;
+    let q0 =
+        foot_inverse_holding::<L, f64, NQ, NC, NU>(params, &at(first), start, &tol, &frame.held)?;
+    if (q0 - start).amax() > 4.0 * JUMP || !in_range(&q0) {
+        return Err(AnalysisError::Assembly(
+            crate::assembly::AssemblyError::BranchEnds { fraction: 0.0 },
+        ));
+    }
+    states[first] = NodeState::Reached;
+    poses[first] = q0;
+    queue.push_back(first);
+    while let Some(i) = queue.pop_front() {
+        let (x, y) = (i % n, i / n);
+        let neighbours = [
+            (x > 0).then(|| i - 1),
+            (x + 1 < n).then(|| i + 1),
+            (y > 0).then(|| i - n),
+            (y + 1 < n).then(|| i + n),
+        ];
+        for k in neighbours.into_iter().flatten() {
+            if matches!(states[k], NodeState::Reached | NodeState::OutOfRange) {
+                continue;
+            }
+            match follow::<L, NQ, NC, NU>(params, &poses[i], &at(i), &at(k), frame, &tol) {
+                Ok(q) => {
+                    if in_range(&q) {
+                        states[k] = NodeState::Reached;
+                        poses[k] = q;
+                        queue.push_back(k);
+                    } else {
+                        states[k] = NodeState::OutOfRange;
+                    }
+                }
+                _ => states[k] = NodeState::BranchEnds,
+            }
+        }
+    }
+    let fixed: [bool; NQ] = core::array::from_fn(|c| frame.held[c] || L::ACTUATED.contains(&c));
+    // Curves in foot space need the pose to be a function of the foot on the branch (two
+    // motors that determine the leg): with more, the pose at a foot depends on the path.
+    let passive_signed =
+        NU == 2 && NC > 0 && L::REDUNDANT_ROWS == 0 && fixed.iter().filter(|&&f| !f).count() == NC;
+    let mut measures = vec![None; n * n];
+    let mut ranks = vec![f64::NAN; n * n];
+    let mut foot_ranks = vec![f64::NAN; n * n];
+    for i in 0..n * n {
+        if states[i] == NodeState::Reached {
+            let q = &poses[i];
+            ranks[i] = passive_rank(
+                &L::constraint_jacobian(q, params),
+                &fixed,
+                L::REDUNDANT_ROWS,
+            );
+            let m = point_measures::<L, f64, NQ, NC, NU>(params, q, frame, &options.limits);
+            if let Ok(m) = &m {
+                foot_ranks[i] = m.foot_rank;
+            }
+            measures[i] = Some(m);
+        }
+    }
+    let reached = states.iter().filter(|&&s| s == NodeState::Reached).count();
+    let node = |i: usize| {
+        [
+            origin[0] + (i % n) as f64 * step,
+            origin[1] + (i / n) as f64 * step,
+        ]
+    };
+    let passive_curves = if passive_signed {
+        contour(n, &ranks, node)
+    } else {
+        Vec::new()
+    };
+    // The branch's edge: +1 reached, −1 where the branch ends, no value elsewhere.
+    let edge: Vec<f64> = states
+        .iter()
+        .map(|s| match s {
+            NodeState::Reached => 1.0,
+            NodeState::BranchEnds => -1.0,
+            _ => f64::NAN,
+        })
+        .collect();
+    let mut foot_curves = contour(n, &edge, node);
+    if NU == 2 {
+        foot_curves.extend(contour(n, &foot_ranks, node));
+    }
+    Ok(Workspace {
+        nodes: n,
+        origin,
+        step,
+        states,
+        poses,
+        measures,
+        passive_rank: ranks,
+        passive_signed,
+        area: reached as f64 * step * step,
+        passive_curves,
+        foot_curves,
+    })
+}
+
+/// Steps of a branch change each joint by at most this much (rad, or m): a larger change
+/// means the solver landed on another branch.
+pub const JUMP: f64 = 0.35;
+
+/// Moves the foot of the assembled pose `from` (its foot at `from_foot`) on a straight
+/// line to `to`, staying on `from`'s branch: each step is solved from the previous pose
+/// and may change no joint by more than [`JUMP`]; a step that would is halved, down to a
+/// sixteenth of the way. Fails where the branch ends (or folds back) on the way.
+pub fn follow<L, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<f64>,
+    from: &SVector<f64, NQ>,
+    from_foot: &SVector<f64, 2>,
+    to: &SVector<f64, 2>,
+    frame: &LegFrame<NQ>,
+    tol: &Tolerance<f64>,
+) -> Result<SVector<f64, NQ>, AnalysisError>
+where
+    L: LegModel<NQ, NC, NU>,
+{
+    let (mut q, mut done, mut h): (_, f64, f64) = (*from, 0.0, 1.0);
+    while done < 1.0 {
+        let t = (done + h).min(1.0);
+        let target = from_foot + (to - from_foot) * t;
+        match foot_inverse_holding::<L, f64, NQ, NC, NU>(params, &target, &q, tol, &frame.held) {
+            Ok(next) if (next - q).amax() <= JUMP => {
+                q = next;
+                done = t;
+            }
+            Ok(_) | Err(_) if h > 1.0 / 16.0 => h *= 0.5,
+            Ok(_) => {
+                return Err(AnalysisError::Assembly(
+                    crate::assembly::AssemblyError::BranchEnds { fraction: done },
+                ))
+            }
+            Err(e) => return Err(e.into()),
+        }
+    }
+    Ok(q)
+}
+
+/// Marching squares: the segments where `values` (row by row, `n` per row; NaN: no
+/// value) changes sign, each crossing placed by linear interpolation along its edge.
+pub fn contour(n: usize, values: &[f64], node: impl Fn(usize) -> [f64; 2]) -> Vec<Segment> {
+    let mut out = Vec::new();
+    for y in 0..n.saturating_sub(1) {
+        for x in 0..n - 1 {
+            let corners = [
+                y * n + x,
+                y * n + x + 1,
+                (y + 1) * n + x + 1,
+                (y + 1) * n + x,
+            ];
+            if corners.iter().any(|&c| !values[c].is_finite()) {
+                continue;
+            }
+            let mut crossings = [[0.0; 2]; 4];
+            let mut count = 0;
+            for e in 0..4 {
+                let (a, b) = (corners[e], corners[(e + 1) % 4]);
+                let (va, vb) = (values[a], values[b]);
+                if (va > 0.0) != (vb > 0.0) {
+                    let t = va / (va - vb);
+                    let (pa, pb) = (node(a), node(b));
+                    crossings[count] = [pa[0] + t * (pb[0] - pa[0]), pa[1] + t * (pb[1] - pa[1])];
+                    count += 1;
+                }
+            }
+            if count >= 2 {
+                out.push([crossings[0], crossings[1]]);
+            }
+            if count == 4 {
+                out.push([crossings[2], crossings[3]]);
+            }
+        }
+    }
+    out
+}
+
+/// The impact mitigation factor at `q` for a leg on `body` (see [`impact_mitigation`]),
+/// preparing the body's coupling from `params`.
+pub fn impact_mitigation_at<L, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+    frame: &LegFrame<NQ>,
+    body: &Body<f64>,
+) -> Result<f64, AnalysisError>
+where
+    L: LegModel<NQ, NC, NU>,
+{
+    let coupling = BodyCoupling::new::<L, f64, NQ, NC, NU>(params);
+    impact_mitigation::<L, f64, NQ, NC, NU>(params, q, frame, body, coupling.as_ref())
+}

@@ -1,0 +1,722 @@
+//! Design measures (`leg_models::analysis`) against something independent: the five-bar's
+//! analytic workspace, statics through the KKT solve with the foot pinned, impulses
+//! through the impact solve, the assembly's own singularity test, and a floating body
+//! written as a spec. Every leg runs every measure, or is refused for a reason its
+//! structure gives.
+
+use leg_models::analysis::workspace::{follow, workspace, GridOptions, NodeState, Workspace};
+use leg_models::analysis::{
+    foot_inverse_inertia, force_polygon, impact_mitigation, motor_kinematics, point_measures,
+    AnalysisError, Body, BodyCoupling, LegFrame, MotorLimits,
+};
+use leg_models::assembly::{
+    consistent_velocity, foot_inverse_holding, project_position, AssemblyError, Tolerance,
+};
+use leg_models::contact::{solve_structured, ContactRows};
+use leg_models::dynamics::actuation;
+use leg_models::linalg::Cholesky;
+use leg_models::nalgebra::{Matrix2, SMatrix, SVector, Vector2};
+use leg_models::{LegModel, Parameters};
+use leg_tests::{not_applicable, Rng};
+
+/// The spec's home pose on its closures.
+fn home<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
+    p: &L::Params<f64>,
+) -> SVector<f64, NQ> {
+    let mut q = SVector::from(L::HOME);
+    project_position::<L, f64, NQ, NC, NU>(p, &mut q, &Tolerance::default()).unwrap();
+    q
+}
+
+fn limits<const NU: usize>(torque: f64, speed: f64) -> MotorLimits<f64, NU> {
+    MotorLimits {
+        torque: SVector::from_fn(|k, _| torque * (1.0 + 0.25 * k as f64)),
+        speed: SVector::from_fn(|k, _| speed * (1.0 + 0.1 * k as f64)),
+    }
+}
+
+/// The size of `J_f M⁻¹ J_fᵀ` (1/kg): what rounding in an inverse inertia is relative to
+/// (a pinned foot's is zero).
+fn inverse_inertia_scale<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>(
+    p: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+) -> f64 {
+    let m = L::mass_matrix(q, p);
+    let jf = L::foot_jacobian(q, p);
+    let mut y = jf.transpose();
+    Cholesky::new(&m).unwrap().solve_mut(&mut y);
+    (jf * y).amax()
+}
+
+/// Up to four pairs of rows held at zero velocity: the foot (pair 0) and unit rows of
+/// the held joints (two per pair), as a contact solve takes them.
+const NK: usize = 8;
+
+fn pinned_rows<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
+    p: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+    frame: &LegFrame<NQ>,
+    extra_locked: &[bool; NQ],
+) -> ContactRows<f64, NQ, NK> {
+    let jf = L::foot_jacobian(q, p);
+    let mut c = SMatrix::<f64, NK, NQ>::zeros();
+    let mut held = [false; NK];
+    c.set_row(0, &jf.row(0));
+    c.set_row(1, &jf.row(1));
+    (held[0], held[1]) = (true, true);
+    let mut r = 2;
+    for j in 0..NQ {
+        if frame.held[j] || extra_locked[j] {
+            assert!(
+                r < NK,
+                "{}: too many held joints for the test's rows",
+                L::NAME
+            );
+            c[(r, j)] = 1.0;
+            held[r] = true;
+            r += 1;
+        }
+    }
+    ContactRows {
+        c,
+        w: c,
+        slide: SVector::zeros(),
+        held,
+    }
+}
+
+/// Poses to check at: home and up to `n` reached nodes of a coarse grid.
+fn sample_poses<const NQ: usize, const NU: usize>(
+    ws: &Workspace<NQ, NU>,
+    start: &SVector<f64, NQ>,
+    n: usize,
+    rng: &mut Rng,
+) -> Vec<SVector<f64, NQ>> {
+    let reached: Vec<usize> = (0..ws.states.len())
+        .filter(|&i| matches!(ws.measures[i], Some(Ok(_))))
+        .collect();
+    let mut out = vec![*start];
+    for _ in 0..n.min(reached.len()) {
+        out.push(ws.poses[reached[(rng.unit() * reached.len() as f64) as usize]]);
+    }
+    out
+}
+
+fn grid<const NU: usize>(nodes: usize) -> GridOptions<NU> {
+    GridOptions {
+        nodes,
+        window: None,
+        motor_range: None,
+        limits: limits(2.0, 20.0),
+    }
+}
+
+/// Every measure on every leg: computed where the leg's structure allows it (finite,
+/// with a workspace of positive area), refused with the structure's reason elsewhere.
+pub fn check_every_measure<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>() {
+    let p = L::Params::<f64>::default();
+    let frame = LegFrame::of::<L, NC, NU>();
+    let q = home::<L, NQ, NC, NU>(&p);
+    let lim = limits::<NU>(2.0, 20.0);
+    // The inverse inertia applies to every leg whose mass matrix is regular.
+    let inv = foot_inverse_inertia::<L, f64, NQ, NC, NU>(&p, &q, &frame, false).unwrap();
+    assert!(inv.iter().all(|x| x.is_finite()), "{}", L::NAME);
+    // Positive semi-definite, to rounding on the scale of J_f M⁻¹ J_fᵀ.
+    let scale = inverse_inertia_scale::<L, NQ, NC, NU>(&p, &q);
+    let eig = inv.symmetric_eigenvalues();
+    assert!(eig.min() >= -1e-12 * scale, "{}: {eig:?}", L::NAME);
+    let point = point_measures::<L, f64, NQ, NC, NU>(&p, &q, &frame, &lim);
+    let ws = workspace::<L, NQ, NC, NU>(&p, &q, &frame, &grid::<NU>(40));
+    match frame.foot_polygons() {
+        Ok(()) => {
+            let m = point.unwrap_or_else(|e| panic!("{}: {e}", L::NAME));
+            assert!(m.condition >= 1.0 && m.condition.is_finite(), "{}", L::NAME);
+            assert!(m.effective_mass > 0.0 && m.vertical_speed > 0.0);
+            let ws = ws.unwrap_or_else(|e| panic!("{}: {e}", L::NAME));
+            assert!(ws.area > 0.0 && ws.area.is_finite(), "{}", L::NAME);
+            assert!(
+                ws.states
+                    .iter()
+                    .filter(|&&s| s == NodeState::Reached)
+                    .count()
+                    > 20
+            );
+        }
+        Err(why) => {
+            not_applicable(L::NAME, "foot polygons and workspace", &why);
+            assert_eq!(
+                ws.err(),
+                Some(AnalysisError::NotApplicable(why)),
+                "{}",
+                L::NAME
+            );
+            // Motor coordinates still exist on a one-motor linkage: its point measures do.
+            match frame.motor_coordinates() {
+                Ok(()) => {
+                    let m = point.unwrap_or_else(|e| panic!("{}: {e}", L::NAME));
+                    assert_eq!(m.vertical_force, None, "{}", L::NAME);
+                }
+                Err(why) => assert_eq!(point.err(), Some(AnalysisError::NotApplicable(why))),
+            }
+        }
+    }
+}
+
+/// Force capacity against statics: the foot pinned to the ground (and the body held),
+/// the motors at the torques of a polygon vertex, the KKT solve keeps the leg at rest and
+/// the ground's force on the foot is minus the vertex. With two motors the vertex torques
+/// are the limits themselves.
+pub fn check_force_polygon<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>() {
+    let frame = LegFrame::of::<L, NC, NU>();
+    if let Err(why) = frame.foot_polygons() {
+        return not_applicable(L::NAME, "force polygon against statics", &why);
+    }
+    let p = L::Params::<f64>::default();
+    let start = home::<L, NQ, NC, NU>(&p);
+    let ws = workspace::<L, NQ, NC, NU>(&p, &start, &frame, &grid::<NU>(30)).unwrap();
+    let mut rng = Rng::new(7);
+    let torque = limits::<NU>(2.0, 1.0).torque;
+    let mut checked = 0;
+    for q in sample_poses(&ws, &start, 6, &mut rng) {
+        let Ok(kin) = motor_kinematics::<L, f64, NQ, NC, NU>(&p, &q, &frame) else {
+            continue;
+        };
+        let poly = force_polygon::<L, f64, NQ, NC, NU>(&p, &q, &kin, &torque);
+        assert!(poly.vertices().len() >= 4, "{}: {:?}", L::NAME, poly);
+        let m = L::mass_matrix(&q, &p);
+        let chol = Cholesky::new(&m).unwrap();
+        let j = L::constraint_jacobian(&q, &p);
+        let rows = pinned_rows::<L, NQ, NC, NU>(&p, &q, &frame, &[false; NQ]);
+        let gravity = L::gravity_forces(&q, &p);
+        let scale = poly.vertices().iter().map(|v| v.amax()).fold(0.0, f64::max);
+        for f in poly.vertices() {
+            let u = leg_models::analysis::holding_torque::<L, f64, NQ, NC, NU>(&p, &q, &kin)
+                + kin.foot_jacobian.transpose() * f;
+            let at_limit = (0..NU)
+                .filter(|&k| (u[k].abs() - torque[k]).abs() <= 1e-9 * torque[k])
+                .count();
+            assert!(
+                at_limit >= 2,
+                "{}: vertex {f:?} with torques {u:?}",
+                L::NAME
+            );
+            assert!((0..NU).all(|k| u[k].abs() <= torque[k] * (1.0 + 1e-9)));
+            if NU == 2 {
+                // The limits themselves, not torques derived from the polygon.
+                let limit = SVector::<f64, NU>::from_fn(|k, _| torque[k].copysign(u[k]));
+                assert!((u - limit).amax() <= 1e-9 * torque.amax());
+            }
+            let tau = actuation::<L, f64, NQ, NC, NU>(&u) - gravity;
+            let sol = solve_structured(
+                &chol,
+                &j,
+                &SVector::zeros(),
+                L::REDUNDANT_ROWS,
+                &rows,
+                &SVector::zeros(),
+                &tau,
+            )
+            .unwrap();
+            assert!(
+                sol.x.amax() < 1e-7 * (1.0 + tau.amax() / m.amax()),
+                "{}: the pinned leg moves: {:?}",
+                L::NAME,
+                sol.x
+            );
+            // The ground's force on the leg is −f.
+            let ground = Vector2::new(sol.contact[0], sol.contact[1]);
+            assert!(
+                (ground + f).amax() <= 1e-8 * scale,
+                "{}: KKT force {ground:?}, polygon vertex {f:?}",
+                L::NAME
+            );
+        }
+        // The largest downward push is on the polygon's boundary, straight down.
+        if let Some(fv) = leg_models::analysis::vertical_force(
+            &kin.foot_jacobian,
+            &leg_models::analysis::holding_torque::<L, f64, NQ, NC, NU>(&p, &q, &kin),
+            &torque,
+        ) {
+            let u = leg_models::analysis::holding_torque::<L, f64, NQ, NC, NU>(&p, &q, &kin)
+                + kin.foot_jacobian.transpose() * Vector2::new(0.0, -fv);
+            let worst = (0..NU).map(|k| u[k].abs() / torque[k]).fold(0.0, f64::max);
+            assert!((worst - 1.0).abs() < 1e-9, "{}: {worst}", L::NAME);
+        }
+        checked += 1;
+    }
+    assert!(checked >= 2, "{}", L::NAME);
+}
+
+/// The foot's inverse inertia against an impulse: the leg strikes with its foot pinned
+/// on impact (the plastic impact solve, foot rows held); the foot's velocity change is
+/// `Λ⁻¹ P` for the impulse `P` the ground gives. With the motors locked, the same with
+/// their joints held; and a leg whose rotors are a billion times heavier has the locked
+/// leg's inertia.
+pub fn check_foot_inertia<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>() {
+    let frame = LegFrame::of::<L, NC, NU>();
+    let p = L::Params::<f64>::default();
+    let q = home::<L, NQ, NC, NU>(&p);
+    let mut rng = Rng::new(11);
+    let actuated: [bool; NQ] = core::array::from_fn(|c| L::ACTUATED.contains(&c));
+    for locked in [false, true] {
+        let inv = foot_inverse_inertia::<L, f64, NQ, NC, NU>(&p, &q, &frame, locked).unwrap();
+        let extra = if locked { actuated } else { [false; NQ] };
+        // A pre-impact velocity on the closures, the held joints at rest.
+        let mut qd = SVector::<f64, NQ>::from_fn(|_, _| rng.range(-1.0, 1.0));
+        for j in 0..NQ {
+            if frame.held[j] || extra[j] {
+                qd[j] = 0.0;
+            }
+        }
+        let mut rows_free = pinned_rows::<L, NQ, NC, NU>(&p, &q, &frame, &extra);
+        (rows_free.held[0], rows_free.held[1]) = (false, false);
+        rows_free.w.row_mut(0).fill(0.0);
+        rows_free.w.row_mut(1).fill(0.0);
+        let m = L::mass_matrix(&q, &p);
+        let chol = Cholesky::new(&m).unwrap();
+        let j = L::constraint_jacobian(&q, &p);
+        // Project the random rates onto the closures and held rows (a velocity impact
+        // with the foot free).
+        let pre = solve_structured(
+            &chol,
+            &j,
+            &SVector::zeros(),
+            L::REDUNDANT_ROWS,
+            &rows_free,
+            &SVector::zeros(),
+            &(m * qd),
+        )
+        .unwrap()
+        .x;
+        let rows = pinned_rows::<L, NQ, NC, NU>(&p, &q, &frame, &extra);
+        let sol = match solve_structured(
+            &chol,
+            &j,
+            &SVector::zeros(),
+            L::REDUNDANT_ROWS,
+            &rows,
+            &SVector::zeros(),
+            &(m * pre),
+        ) {
+            Ok(s) => s,
+            // A foot that cannot move (locked, or a one-motor linkage's line) makes the
+            // pinned rows repeat: nothing to strike with.
+            Err(_) => {
+                let scale = inverse_inertia_scale::<L, NQ, NC, NU>(&p, &q);
+                assert!(
+                    inv.symmetric_eigenvalues().min() < 1e-9 * scale,
+                    "{}",
+                    L::NAME
+                );
+                continue;
+            }
+        };
+        let v_before = L::foot_jacobian(&q, &p) * pre;
+        let impulse = Vector2::new(sol.contact[0], sol.contact[1]);
+        let dv = inv * impulse;
+        assert!(
+            (dv + v_before).amax() <= 1e-9 * (1.0 + v_before.amax()),
+            "{} (locked {locked}): Λ⁻¹P = {dv:?}, foot velocity before {v_before:?}",
+            L::NAME
+        );
+    }
+    // Locking a motor is the limit of an infinitely heavy rotor: reflected inertias 1e7
+    // times the mass matrix's largest entry.
+    let mut heavy = p;
+    let mut any = false;
+    let index = |name: String| L::Params::<f64>::NAMES.iter().position(|n| *n == name);
+    let biggest = L::mass_matrix(&q, &p).amax();
+    for &a in &L::ACTUATED {
+        let link = L::JOINT_NAMES[a];
+        let (Some(i), Some(g)) = (
+            index(format!("{link}_rotor_inertia")),
+            index(format!("{link}_gear_ratio")),
+        ) else {
+            continue;
+        };
+        let gear = p.get(g).unwrap();
+        heavy.set(i, 1e7 * biggest / (gear * gear));
+        any = true;
+    }
+    assert!(any, "{}: no rotor inertia parameter", L::NAME);
+    let locked = foot_inverse_inertia::<L, f64, NQ, NC, NU>(&p, &q, &frame, true).unwrap();
+    let nearly = foot_inverse_inertia::<L, f64, NQ, NC, NU>(&heavy, &q, &frame, false).unwrap();
+    let free = foot_inverse_inertia::<L, f64, NQ, NC, NU>(&p, &q, &frame, false).unwrap();
+    assert!(
+        (locked - nearly).amax()
+            <= 1e-5
+                * free
+                    .amax()
+                    .max(1e-6 * inverse_inertia_scale::<L, NQ, NC, NU>(&p, &q)),
+        "{}: locked {locked:?}, rotors ×1e9 {nearly:?}",
+        L::NAME
+    );
+}
+
+/// Where the grid puts a passive singularity ("type II"), bisection between the two
+/// nodes finds a pose where `assemble`'s velocity solve reports `Singular`; where it
+/// puts the branch's end ("type I"), the foot Jacobian's smallest singular value goes
+/// to zero.
+pub fn check_singularities<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>() {
+    let frame = LegFrame::of::<L, NC, NU>();
+    if let Err(why) = frame.foot_polygons() {
+        return not_applicable(L::NAME, "singularity curves", &why);
+    }
+    let p = L::Params::<f64>::default();
+    let start = home::<L, NQ, NC, NU>(&p);
+    let ws = workspace::<L, NQ, NC, NU>(&p, &start, &frame, &grid::<NU>(60)).unwrap();
+    let n = ws.nodes;
+    let tol = Tolerance::default();
+    let foot_at = |a: [f64; 2], b: [f64; 2], t: f64| {
+        Vector2::new(a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]))
+    };
+    let mut passive_checked = 0;
+    let mut edges_checked = 0;
+    for i in 0..n * n {
+        for k in [i + 1, i + n] {
+            if k >= n * n || (k == i + 1 && (i + 1) % n == 0) {
+                continue;
+            }
+            let (a, b) = (ws.node(i % n, i / n), ws.node(k % n, k / n));
+            match (ws.states[i], ws.states[k]) {
+                (NodeState::Reached, NodeState::Reached)
+                    if ws.passive_signed
+                        && passive_checked < 8
+                        && (ws.passive_rank[i] > 0.0) != (ws.passive_rank[k] > 0.0) =>
+                {
+                    // Bisection on the sign of the passive rank measure, continuing the
+                    // branch from node i.
+                    let (mut lo, mut hi, mut q) = (0.0, 1.0, ws.poses[i]);
+                    let sign = ws.passive_rank[i] > 0.0;
+                    for _ in 0..60 {
+                        let mid = 0.5 * (lo + hi);
+                        let qm = foot_inverse_holding::<L, f64, NQ, NC, NU>(
+                            &p,
+                            &foot_at(a, b, mid),
+                            &q,
+                            &tol,
+                            &frame.held,
+                        )
+                        .unwrap();
+                        let r = leg_models::analysis::passive_rank_at::<L, f64, NQ, NC, NU>(
+                            &p, &qm, &frame,
+                        );
+                        if (r > 0.0) == sign {
+                            (lo, q) = (mid, qm);
+                        } else {
+                            hi = mid;
+                        }
+                    }
+                    let theta_dot = SVector::<f64, NU>::from_element(1.0);
+                    let r =
+                        leg_models::analysis::passive_rank_at::<L, f64, NQ, NC, NU>(&p, &q, &frame);
+                    assert!(r.abs() < 1e-6, "{}: rank {r} after bisection", L::NAME);
+                    if !frame.has_body() {
+                        assert_eq!(
+                            consistent_velocity::<L, f64, NQ, NC, NU>(&p, &q, &theta_dot),
+                            Err(AssemblyError::Singular),
+                            "{}: at the curve",
+                            L::NAME
+                        );
+                        assert!(consistent_velocity::<L, f64, NQ, NC, NU>(
+                            &p,
+                            &ws.poses[i],
+                            &theta_dot
+                        )
+                        .is_ok());
+                    }
+                    assert_eq!(
+                        motor_kinematics::<L, f64, NQ, NC, NU>(&p, &q, &frame).err(),
+                        Some(AnalysisError::PassiveSingular)
+                    );
+                    // And the grid drew a curve through this edge.
+                    let mid = foot_at(a, b, lo);
+                    assert!(
+                        ws.distance_to_singularity([mid[0], mid[1]]).unwrap() <= 0.5 * ws.step,
+                        "{}",
+                        L::NAME
+                    );
+                    passive_checked += 1;
+                }
+                (NodeState::Reached, NodeState::BranchEnds) if edges_checked < 8 => {
+                    // The last point along the edge the branch reaches from node i.
+                    let (mut lo, mut hi, mut q) = (0.0, 1.0, ws.poses[i]);
+                    let from = Vector2::new(a[0], a[1]);
+                    for _ in 0..50 {
+                        let mid = 0.5 * (lo + hi);
+                        match follow::<L, NQ, NC, NU>(
+                            &p,
+                            &ws.poses[i],
+                            &from,
+                            &foot_at(a, b, mid),
+                            &frame,
+                            &tol,
+                        ) {
+                            Ok(qm) => (lo, q) = (mid, qm),
+                            _ => hi = mid,
+                        }
+                    }
+                    if hi - lo > 1e-9 {
+                        continue;
+                    }
+
+                    let interior = motor_kinematics::<L, f64, NQ, NC, NU>(&p, &start, &frame)
+                        .unwrap()
+                        .foot_jacobian;
+                    let (s_in_hi, s_in_lo) = leg_models::analysis::singular_values(&interior);
+                    match motor_kinematics::<L, f64, NQ, NC, NU>(&p, &q, &frame) {
+                        Ok(kin) => {
+                            let (_, s) = leg_models::analysis::singular_values(&kin.foot_jacobian);
+                            // σ_min ∝ √(distance to the edge): 1e-4 of the home pose's at
+                            // a distance below 1e-9 of the cell.
+                            assert!(
+                                s < 1e-3 * s_in_lo,
+                                "{}: σ_min {s} at the branch's end, {s_in_lo} at home (σ_max {s_in_hi})",
+                                L::NAME
+                            );
+                        }
+                        // The branch can also end where the passive joints lose rank.
+                        Err(AnalysisError::PassiveSingular) => {}
+                        Err(e) => panic!("{}: {e}", L::NAME),
+                    }
+                    edges_checked += 1;
+                }
+                _ => {}
+            }
+        }
+    }
+    println!(
+        "{}: {passive_checked} passive crossings, {edges_checked} branch ends checked",
+        L::NAME
+    );
+    if edges_checked == 0 && passive_checked == 0 {
+        // No singularity in the grid (a sliding shin reaches everywhere but its hip):
+        // then no node may be singular either.
+        for m in ws.measures.iter().flatten() {
+            assert!(m.is_ok(), "{}: {:?}", L::NAME, m);
+        }
+    }
+}
+
+macro_rules! analysis {
+    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
+        mod $module {
+            type Model = $ty;
+            #[test]
+            fn every_measure_runs_or_says_why_not() {
+                super::check_every_measure::<Model, $nq, $nc, $nu>();
+            }
+            #[test]
+            fn force_polygon_matches_statics_with_the_foot_pinned() {
+                super::check_force_polygon::<Model, $nq, $nc, $nu>();
+            }
+            #[test]
+            fn foot_inertia_matches_an_impulse() {
+                super::check_foot_inertia::<Model, $nq, $nc, $nu>();
+            }
+            #[test]
+            fn singularity_curves_are_where_the_rank_is_lost() {
+                super::check_singularities::<Model, $nq, $nc, $nu>();
+            }
+        }
+    };
+}
+
+generated::for_each_model!(analysis);
+
+/// The five-bar's workspace (both motors turning freely) is the intersection of the two
+/// branches' annuli: `|l₁ − l₂| ≤ |p − hip| ≤ l₁ + l₂` for each. Every node farther than
+/// two cells from that boundary is reached exactly when it is inside, and the area agrees.
+fn five_bar_annuli<L: LegModel<4, 2, 2>>() {
+    let p = L::Params::<f64>::default();
+    let frame = LegFrame::of::<L, 2, 2>();
+    let q = home::<L, 4, 2, 2>(&p);
+    let joints = L::joint_positions(&q, &p);
+    let tips = L::link_tips(&q, &p);
+    let len = |j: usize| (tips.column(j) - joints.column(j)).norm();
+    let (hip_a, hip_b) = (joints.column(0).into_owned(), joints.column(2).into_owned());
+    let (a1, a2, b1, b2) = (len(0), len(1), len(2), len(3));
+    assert!(
+        (L::foot_position(&q, &p) - tips.column(1)).norm() < 1e-12,
+        "the foot is the toe"
+    );
+    let ws = workspace::<L, 4, 2, 2>(&p, &q, &frame, &grid::<2>(100)).unwrap();
+    // Signed distance inside the intersection of the annuli (positive inside).
+    let inside = |x: Vector2<f64>| {
+        let (ra, rb) = ((x - hip_a).norm(), (x - hip_b).norm());
+        [
+            ra - (a1 - a2).abs(),
+            a1 + a2 - ra,
+            rb - (b1 - b2).abs(),
+            b1 + b2 - rb,
+        ]
+        .into_iter()
+        .fold(f64::INFINITY, f64::min)
+    };
+    let mut checked = 0;
+    let mut inside_count = 0usize;
+    for iy in 0..ws.nodes {
+        for ix in 0..ws.nodes {
+            let x = ws.node(ix, iy);
+            let d = inside(Vector2::new(x[0], x[1]));
+            inside_count += (d > 0.0) as usize;
+            if d.abs() <= 2.0 * ws.step {
+                continue;
+            }
+            let reached = ws.states[iy * ws.nodes + ix] == NodeState::Reached;
+            assert_eq!(reached, d > 0.0, "{}: node {x:?}, {d} m inside", L::NAME);
+            checked += 1;
+        }
+    }
+    assert!(checked > ws.nodes * ws.nodes / 2);
+    let exact = inside_count as f64 * ws.step * ws.step;
+    assert!(
+        (ws.area - exact).abs() <= 0.03 * exact,
+        "{}: area {} against {exact}",
+        L::NAME,
+        ws.area
+    );
+}
+
+#[test]
+fn five_bar_workspace_is_the_intersection_of_the_annuli() {
+    five_bar_annuli::<generated::Minitaur>();
+    five_bar_annuli::<generated::FiveBarOffset>();
+    // Minitaur's coaxial hips: an annulus between 0.1 m and 0.3 m.
+    let p = generated::minitaur::Params::<f64>::default();
+    let frame = LegFrame::of::<generated::Minitaur, 2, 2>();
+    let q = home::<generated::Minitaur, 4, 2, 2>(&p);
+    let ws = workspace::<generated::Minitaur, 4, 2, 2>(&p, &q, &frame, &grid::<2>(100)).unwrap();
+    let annulus = std::f64::consts::PI * (0.3f64.powi(2) - 0.1f64.powi(2));
+    assert!((ws.area - annulus).abs() < 0.03 * annulus, "{}", ws.area);
+}
+
+/// The impact mitigation factor of a leg on a translating body against the same leg
+/// written with its body: `two_link` given `knee_runner`'s thigh and shin, on a body of
+/// the runner's torso mass, and `knee_runner` with its torso's pitch inertia made huge.
+#[test]
+fn impact_mitigation_on_a_body_matches_a_leg_with_that_body() {
+    use generated::{KneeRunner, TwoLink};
+    let mut arm = generated::two_link::Params::<f64>::default();
+    let mut runner = generated::knee_runner::Params::<f64>::default();
+    let get = |name: &str| {
+        let i = generated::knee_runner::Params::<f64>::NAMES
+            .iter()
+            .position(|n| *n == name)
+            .unwrap_or_else(|| panic!("{name}"));
+        runner.get(i).unwrap()
+    };
+    let names = generated::two_link::Params::<f64>::NAMES;
+    for (mine, theirs) in [("upper_arm", "thigh"), ("forearm", "shin")] {
+        for field in [
+            "length_x",
+            "length_y",
+            "mass",
+            "com_x",
+            "com_y",
+            "inertia",
+            "rotor_inertia",
+            "gear_ratio",
+        ] {
+            let i = names
+                .iter()
+                .position(|n| *n == format!("{mine}_{field}"))
+                .unwrap();
+            assert!(arm.set(i, get(&format!("{theirs}_{field}"))));
+        }
+    }
+    let torso_mass = get("torso_mass");
+    let pitch = generated::knee_runner::Params::<f64>::NAMES
+        .iter()
+        .position(|n| *n == "torso_inertia")
+        .unwrap();
+    runner.set(pitch, 1e8);
+    let mut q_runner = SVector::from(KneeRunner::HOME);
+    project_position::<KneeRunner, f64, 5, 0, 2>(&runner, &mut q_runner, &Tolerance::default())
+        .unwrap();
+    let q_arm = SVector::<f64, 2>::new(q_runner[3], q_runner[4]);
+    let frame_runner = LegFrame::of::<KneeRunner, 0, 2>();
+    assert!(frame_runner.has_body());
+    let frame_arm = LegFrame::of::<TwoLink, 0, 2>();
+    assert!(!frame_arm.has_body());
+    let coupling = BodyCoupling::new::<TwoLink, f64, 2, 0, 2>(&arm).unwrap();
+    let mut rng = Rng::new(3);
+    for _ in 0..5 {
+        let mut qr = q_runner;
+        qr[3] += rng.range(-0.3, 0.3);
+        qr[4] += rng.range(-0.3, 0.3);
+        let qa = SVector::<f64, 2>::new(qr[3], qr[4]);
+        let of_runner = impact_mitigation::<KneeRunner, f64, 5, 0, 2>(
+            &runner,
+            &qr,
+            &frame_runner,
+            &Body::Fixed,
+            None,
+        )
+        .unwrap();
+        let of_arm = impact_mitigation::<TwoLink, f64, 2, 0, 2>(
+            &arm,
+            &qa,
+            &frame_arm,
+            &Body::Translating { mass: torso_mass },
+            Some(&coupling),
+        )
+        .unwrap();
+        assert!(of_arm > 0.0 && of_arm < 1.0, "{of_arm}");
+        assert!(
+            (of_arm - of_runner).abs() < 1e-7,
+            "arm on a body {of_arm}, runner {of_runner}"
+        );
+    }
+    // On a fixed hip the locked leg is rigid: the factor needs a body.
+    assert_eq!(
+        impact_mitigation::<TwoLink, f64, 2, 0, 2>(&arm, &q_arm, &frame_arm, &Body::Fixed, None),
+        Err(AnalysisError::NotApplicable(
+            leg_models::analysis::Inapplicable::RigidWhenLocked
+        ))
+    );
+    // A heavier body mitigates more (the leg is a smaller share of what hits).
+    let light = impact_mitigation::<TwoLink, f64, 2, 0, 2>(
+        &arm,
+        &q_arm,
+        &frame_arm,
+        &Body::Translating { mass: 1.0 },
+        Some(&coupling),
+    )
+    .unwrap();
+    let heavy = impact_mitigation::<TwoLink, f64, 2, 0, 2>(
+        &arm,
+        &q_arm,
+        &frame_arm,
+        &Body::Translating { mass: 100.0 },
+        Some(&coupling),
+    )
+    .unwrap();
+    assert!(light < heavy, "{light} {heavy}");
+    let _ = Matrix2::<f64>::identity();
+}
