@@ -24,6 +24,7 @@ use core::fmt;
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::analysis;
 use crate::assembly::{self, AssemblyError, Tolerance};
 use crate::batch::{self, BatchAcceleration, BatchError};
 use crate::contact::{self, ContactSolution, Ground, Impact, ImpactError, Modes};
@@ -786,6 +787,60 @@ where
             torque_limit,
         )
     }
+
+    // ---- design measures ----
+
+    /// The frame the design measures use: the leg's body joints held
+    /// ([`analysis::LegFrame`]).
+    pub fn analysis_frame(&self) -> analysis::LegFrame<NQ> {
+        analysis::LegFrame::of::<L, NC, NU>()
+    }
+
+    /// Every design measure at the assembled pose `q` ([`analysis::point_measures`]).
+    pub fn design_measures(
+        &self,
+        q: &SVector<T, NQ>,
+        limits: &analysis::MotorLimits<T, NU>,
+    ) -> Result<analysis::PointMeasures<T, NQ, NU>, analysis::AnalysisError> {
+        analysis::point_measures::<L, T, NQ, NC, NU>(
+            &self.params,
+            q,
+            &self.analysis_frame(),
+            limits,
+        )
+    }
+
+    /// The foot's inverse operational-space inertia `Λ⁻¹` at `q`, the motors free or
+    /// locked ([`analysis::foot_inverse_inertia`]).
+    pub fn foot_inverse_inertia(
+        &self,
+        q: &SVector<T, NQ>,
+        motors_locked: bool,
+    ) -> Result<nalgebra::Matrix2<T>, analysis::AnalysisError> {
+        analysis::foot_inverse_inertia::<L, T, NQ, NC, NU>(
+            &self.params,
+            q,
+            &self.analysis_frame(),
+            motors_locked,
+        )
+    }
+
+    /// The impact mitigation factor at `q` with the hip on `body` (a leg with body joints
+    /// of its own uses them) ([`analysis::impact_mitigation`]).
+    pub fn impact_mitigation(
+        &self,
+        q: &SVector<T, NQ>,
+        body: &analysis::Body<T>,
+    ) -> Result<T, analysis::AnalysisError> {
+        let coupling = analysis::BodyCoupling::new::<L, T, NQ, NC, NU>(&self.params);
+        analysis::impact_mitigation::<L, T, NQ, NC, NU>(
+            &self.params,
+            q,
+            &self.analysis_frame(),
+            body,
+            coupling.as_ref(),
+        )
+    }
 }
 
 impl<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
@@ -809,5 +864,22 @@ where
         u: &SVector<F64x4, NU>,
     ) -> Result<BatchAcceleration<NQ, NC>, BatchError> {
         batch::forward_dynamics::<L, NQ, NC, NU>(params, q, qd, u)
+    }
+
+    /// The workspace of the branch of `start` (an assembled pose) over a grid of foot
+    /// positions, with every design measure at every node
+    /// ([`analysis::workspace::workspace`]).
+    #[cfg(feature = "std")]
+    pub fn workspace(
+        &self,
+        start: &SVector<f64, NQ>,
+        options: &analysis::workspace::GridOptions<NU>,
+    ) -> Result<analysis::workspace::Workspace<NQ, NU>, analysis::AnalysisError> {
+        analysis::workspace::workspace::<L, NQ, NC, NU>(
+            &self.params,
+            start,
+            &self.analysis_frame(),
+            options,
+        )
     }
 }

@@ -201,6 +201,38 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
         .0,
     );
 
+    // The design measures at one pose, and the impact mitigation factor on a body.
+    let frame = leg_models::analysis::LegFrame::of::<L, NC, NU>();
+    let limits = leg_models::analysis::MotorLimits {
+        torque: SVector::<f64, NU>::from_element(1.0),
+        speed: SVector::<f64, NU>::from_element(10.0),
+    };
+    match frame.motor_coordinates() {
+        Ok(()) => zero(
+            "design measures at a pose",
+            allocations(|| {
+                leg_models::analysis::point_measures::<L, f64, NQ, NC, NU>(&p, &q, &frame, &limits)
+            })
+            .0,
+        ),
+        Err(e) => not_applicable(name, "allocations of the design measures", &e),
+    }
+    let coupling = leg_models::analysis::BodyCoupling::new::<L, f64, NQ, NC, NU>(&p);
+    let body = leg_models::analysis::Body::Translating { mass: 10.0 };
+    zero(
+        "impact mitigation factor",
+        allocations(|| {
+            leg_models::analysis::impact_mitigation::<L, f64, NQ, NC, NU>(
+                &p,
+                &q,
+                &frame,
+                &body,
+                coupling.as_ref(),
+            )
+        })
+        .0,
+    );
+
     // A whole run allocates its record once, up front.
     let sim = Simulator::<L, f64, NQ, NC, NU>::new(p, StepOptions::rk4(1e-3));
     let mut source = |_: f64, _: &State<f64, NQ>| SVector::<f64, NU>::zeros();

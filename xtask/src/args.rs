@@ -32,6 +32,10 @@ pub enum Command {
     Sim(SimArgs),
     /// Print every term of a model at one state
     Eval(EvalArgs),
+    /// Compare leg designs over their workspaces: singularities, force and speed
+    /// capacity, foot inertia, impact mitigation; writes analysis.json, a CSV per grid
+    /// and report.html
+    Analyze(AnalyzeArgs),
     /// Write the leg for MuJoCo (MJCF, closures as <connect>) or URDF (spanning tree,
     /// closure frames NAME_a / NAME_b)
     Export(ExportArgs),
@@ -242,6 +246,50 @@ pub struct EvalArgs {
     /// that cannot be computed at this state is null, and `errors` says why
     #[arg(long)]
     pub json: bool,
+}
+
+/// `cargo xtask analyze`.
+#[derive(Args, Debug, Clone)]
+#[command(
+    allow_negative_numbers = true,
+    after_help = "writes analysis.json, one CSV per design's grid and report.html (open it in a browser)"
+)]
+pub struct AnalyzeArgs {
+    /// The models to compare (specs in leg-models/specs/)
+    #[arg(required = true, value_name = "MODEL")]
+    pub models: Vec<String>,
+    /// Change a parameter before analysing (`lower_a_length_x=0.22`); repeat for more;
+    /// applies to every model given
+    #[arg(long = "set", value_name = "NAME=VALUE", allow_hyphen_values = true)]
+    pub sets: Vec<String>,
+    /// Sweep a parameter over N designs from FROM to TO (inclusive), analysed in
+    /// parallel; one model only. NAME may list parameters that move together
+    /// (`lower_a_length_x,lower_b_length_x=0.16:0.26:6`)
+    #[arg(long, value_name = "NAME=FROM:TO:N", allow_hyphen_values = true)]
+    pub sweep: Option<String>,
+    /// Joint torque limits in N m (after the gearbox): one value for every motor or one
+    /// per motor, comma-separated (default: 1 N m at the motor times its gear ratio)
+    #[arg(long, value_name = "N[,N…]", value_parser = numbers_text)]
+    pub torque_limit: Option<String>,
+    /// Joint speed limits in rad/s (after the gearbox): one value or one per motor
+    /// (default: 100 rad/s at the motor over its gear ratio)
+    #[arg(long, value_name = "W[,W…]", value_parser = numbers_text)]
+    pub speed_limit: Option<String>,
+    /// Mass of the body the hip is on for the impact mitigation factor, kg (default ten
+    /// times the leg's mass); a leg with body joints of its own uses its own body
+    #[arg(long, value_name = "KG",
+          value_parser = number("a mass in (0, 1e6] kg", |x| x > 0.0 && x <= 1e6))]
+    pub body_mass: Option<f64>,
+    /// Motor angle range of the workspace, rad, for every motor (default: no limit)
+    #[arg(long, value_name = "LO:HI", allow_hyphen_values = true)]
+    pub motor_range: Option<String>,
+    /// Grid nodes per side
+    #[arg(long, value_name = "N", default_value_t = 200,
+          value_parser = clap::value_parser!(u32).range(10..=2000))]
+    pub nodes: u32,
+    /// Where to write (default target/analyze)
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
 }
 
 /// A list of numbers may start with a minus sign, but a flag where the list should be

@@ -30,7 +30,7 @@ fn main() -> ExitCode {
         Command::Export(a) => run_export(&root, a),
         Command::Bench(a) => run_bench(&root, a),
         // Parsed here so that bad input is refused at once; `legs` parses them again.
-        Command::Sim(_) | Command::Eval(_) => return delegate(&root, &args),
+        Command::Sim(_) | Command::Eval(_) | Command::Analyze(_) => return delegate(&root, &args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

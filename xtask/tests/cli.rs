@@ -707,3 +707,183 @@ fn eval_prints_the_impact_map() {
         "{w}"
     );
 }
+
+#[test]
+fn analyze_writes_the_table_the_grids_and_the_report() {
+    let dir = temp_dir("analyze");
+    let d = dir.to_str().unwrap();
+    let out = legs(&[
+        "analyze",
+        "minitaur",
+        "klann_linkage",
+        "--nodes",
+        "40",
+        "--torque-limit",
+        "2",
+        "--out",
+        d,
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("minitaur") && stdout.contains("workspace (cm²)"),
+        "{stdout}"
+    );
+    // The one-motor linkage says why it has no polygon, and still gets what applies.
+    assert!(
+        stdout.contains("klann_linkage: ") && stdout.contains("1 motor"),
+        "{stdout}"
+    );
+    let json: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("analysis.json")).unwrap()).unwrap();
+    let designs = json["designs"].as_array().unwrap();
+    assert_eq!(designs.len(), 2);
+    let m = &designs[0]["table"];
+    // Minitaur's coaxial five-bar: an annulus from 0.1 to 0.3 m, to the 40-node grid.
+    let area = m["workspace_area_m2"].as_f64().unwrap();
+    let annulus = std::f64::consts::PI * (0.09 - 0.01);
+    assert!((area - annulus).abs() < 0.1 * annulus, "{area}");
+    assert!(m["vertical_force_n"].as_f64().unwrap() > 0.0);
+    assert_eq!(designs[0]["torque_limit"], serde_json::json!([2.0, 2.0]));
+    assert!(designs[1]["table"]["workspace_area_m2"].is_null());
+    assert!(designs[1]["not_computed"]["workspace_area_m2"]
+        .as_str()
+        .unwrap()
+        .contains("1 motor"));
+    let csv = std::fs::read_to_string(dir.join("minitaur.csv")).unwrap();
+    assert!(csv.starts_with("x,y,state,q_upper_a"));
+    assert_eq!(csv.lines().count(), 1 + 40 * 40);
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert!(html.contains("<canvas") || html.contains("createElement('canvas')"));
+    assert!(!html.contains("http://") && !html.contains("https://"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn analyze_sweeps_a_parameter() {
+    let dir = temp_dir("analyze-sweep");
+    let d = dir.to_str().unwrap();
+    let out = legs(&[
+        "analyze",
+        "minitaur",
+        "--sweep",
+        "lower_a_length_x=0.16:0.24:3",
+        "--set",
+        "lower_b_length_x=0.2",
+        "--nodes",
+        "30",
+        "--out",
+        d,
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("analysis.json")).unwrap()).unwrap();
+    let designs = json["designs"].as_array().unwrap();
+    assert_eq!(designs.len(), 3);
+    let lengths: Vec<f64> = designs
+        .iter()
+        .map(|d| d["parameters"]["lower_a_length_x"].as_f64().unwrap())
+        .collect();
+    assert_eq!(lengths, [0.16, 0.2, 0.24]);
+    for d in designs {
+        assert_eq!(d["parameters"]["lower_b_length_x"].as_f64(), Some(0.2));
+    }
+    // The home pose assembles only at the spec's length (the toe's closure holds only
+    // there): the others say so, and the middle design has its grid.
+    assert!(designs[1]["table"]["workspace_area_m2"].as_f64().unwrap() > 0.0);
+    for k in [0, 2] {
+        let d = &designs[k];
+        assert!(
+            d["error"].as_str().is_some() || d["table"]["workspace_area_m2"].as_f64().is_some(),
+            "{d}"
+        );
+    }
+    assert!(dir.join("report.html").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn analyze_refuses_bad_input_and_writes_nothing() {
+    let dir = temp_dir("analyze-bad");
+    let d = dir.to_str().unwrap();
+    for (args, says) in [
+        (
+            vec!["analyze", "minitaurr", "--out", d],
+            "unknown model `minitaurr`",
+        ),
+        (
+            vec![
+                "analyze",
+                "minitaur",
+                "--set",
+                "lower_a_lenght_x=0.2",
+                "--out",
+                d,
+            ],
+            "did you mean `lower_a_length_x`",
+        ),
+        (
+            vec![
+                "analyze",
+                "minitaur",
+                "--set",
+                "lower_a_length_x",
+                "--out",
+                d,
+            ],
+            "NAME=VALUE",
+        ),
+        (
+            vec![
+                "analyze",
+                "minitaur",
+                "--sweep",
+                "lower_a_length_x=0.1:0.2",
+                "--out",
+                d,
+            ],
+            "NAME=FROM:TO:N",
+        ),
+        (
+            vec![
+                "analyze",
+                "minitaur",
+                "atrias",
+                "--sweep",
+                "gravity_y=-9:-10:3",
+                "--out",
+                d,
+            ],
+            "give one model",
+        ),
+        (
+            vec!["analyze", "minitaur", "--torque-limit", "1,2,3", "--out", d],
+            "give one limit or 2",
+        ),
+        (
+            vec!["analyze", "minitaur", "--torque-limit", "-1", "--out", d],
+            "positive",
+        ),
+        (
+            vec!["analyze", "minitaur", "--motor-range", "1:-1", "--out", d],
+            "LO < HI",
+        ),
+        (
+            vec!["analyze", "minitaur", "--nodes", "5", "--out", d],
+            "10..=2000",
+        ),
+        (vec!["analyze", "--out", d], "MODEL"),
+    ] {
+        let out = legs(&args);
+        refused(&out, says);
+    }
+    assert!(!dir.exists(), "a refused analysis wrote {}", dir.display());
+}

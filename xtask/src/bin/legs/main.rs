@@ -3,9 +3,11 @@
 
 use std::process::ExitCode;
 
-use xtask::args::{self, Command, EvalArgs, Parsed, SimArgs, Xtask};
+use xtask::args::{self, AnalyzeArgs, Command, EvalArgs, Parsed, SimArgs, Xtask};
 use xtask::cli::Error;
 
+mod analysis_report;
+mod analyze;
 mod eval;
 mod hop_sim;
 mod report;
@@ -69,6 +71,71 @@ fn simulate(args: SimArgs) -> Result<(), Error> {
     Err(unknown(&name))
 }
 
+fn analyze(args: AnalyzeArgs, raw: &[String]) -> Result<(), Error> {
+    let root = xtask::gen::workspace_root();
+    let settings = analyze::Settings::from_args(&args, &root)?;
+    // Every model is checked before anything is computed.
+    let known = models();
+    for m in &args.models {
+        if !known.contains(&m.as_str()) {
+            return Err(unknown(m));
+        }
+    }
+    let total = args.models.len() as u64 * settings_designs(&args);
+    let progress = std::sync::Mutex::new((
+        xtask::progress::Progress::ticking(total, "analysing designs"),
+        0u64,
+    ));
+    let started = std::time::Instant::now();
+    let mut designs = Vec::new();
+    for name in &args.models {
+        macro_rules! dispatch {
+            ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
+                if name == stringify!($module) {
+                    designs.extend(analyze::run::<$ty, $nq, $nc, $nu>(&settings, &progress)?);
+                }
+            };
+        }
+        generated::for_each_model!(dispatch);
+    }
+    drop(progress);
+    let command = format!("cargo xtask {}", raw.join(" "));
+    analyze::write(&settings, &designs, &command)?;
+    print!("{}", analyze::table(&designs));
+    for d in &designs {
+        if let Some(e) = d.json["error"].as_str() {
+            println!("{}: {e}", d.label);
+        }
+        if let Some(why) = d.json["not_computed"].as_object() {
+            let mut seen = Vec::new();
+            for (key, reason) in why {
+                let reason = reason.as_str().unwrap_or_default();
+                if !seen.contains(&reason) {
+                    seen.push(reason);
+                    println!("{}: {key}: {reason}", d.label);
+                }
+            }
+        }
+    }
+    println!(
+        "{} design{} in {:.2} s; wrote analysis.json, the grids' CSVs and report.html to {}",
+        designs.len(),
+        if designs.len() == 1 { "" } else { "s" },
+        started.elapsed().as_secs_f64(),
+        settings.out.display()
+    );
+    Ok(())
+}
+
+/// Designs per model: the sweep's count, or one.
+fn settings_designs(args: &AnalyzeArgs) -> u64 {
+    args.sweep
+        .as_deref()
+        .and_then(|s| s.rsplit(':').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or(1)
+}
+
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args::parse::<Xtask>(&args) {
@@ -78,8 +145,11 @@ fn main() -> ExitCode {
         Ok(Parsed::Run(Xtask {
             command: Command::Sim(a),
         })) => simulate(a),
+        Ok(Parsed::Run(Xtask {
+            command: Command::Analyze(a),
+        })) => analyze(a, &args),
         Ok(Parsed::Run(_)) => Err(Error::usage(
-            "`legs` runs `sim` and `eval` only; the other commands are `cargo xtask`'s",
+            "`legs` runs `sim`, `eval` and `analyze` only; the other commands are `cargo xtask`'s",
         )),
         Ok(Parsed::Printed) => Ok(()),
         Err(e) => Err(e),

@@ -1,0 +1,768 @@
+//! `cargo xtask analyze`: design measures of legs over their workspaces
+//! (`leg_models::analysis`), side by side or along a parameter sweep; writes
+//! `analysis.json`, one CSV per design's grid and a self-contained `report.html`.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::sync::Mutex;
+use std::time::Instant;
+
+use leg_models::analysis::workspace::{workspace, GridOptions, NodeState, Segment};
+use leg_models::analysis::{
+    impact_mitigation, point_measures, Body, BodyCoupling, LegFrame, MotorLimits,
+};
+use leg_models::assembly::{project_position, Tolerance};
+use leg_models::nalgebra::SVector;
+use leg_models::{LegModel, ParameterError, Parameters};
+use rayon::prelude::*;
+use serde_json::{json, Value};
+use xtask::args::AnalyzeArgs;
+use xtask::cli::{write_atomic, Error};
+use xtask::progress::Progress;
+
+/// The command's settings, checked.
+pub struct Settings {
+    sets: Vec<(String, f64)>,
+    sweep: Option<Sweep>,
+    torque: Option<Vec<f64>>,
+    speed: Option<Vec<f64>>,
+    body_mass: Option<f64>,
+    motor_range: Option<(f64, f64)>,
+    nodes: usize,
+    pub out: PathBuf,
+}
+
+#[derive(Clone, Debug)]
+struct Sweep {
+    /// The parameters swept together (`lower_a_length_x,lower_b_length_x=…`), and how
+    /// they are shown.
+    names: Vec<String>,
+    name: String,
+    from: f64,
+    to: f64,
+    count: usize,
+}
+
+impl Sweep {
+    fn values(&self) -> Vec<f64> {
+        (0..self.count)
+            .map(|i| self.from + (self.to - self.from) * i as f64 / (self.count - 1) as f64)
+            .collect()
+    }
+}
+
+fn finite(flag: &str, text: &str, what: &str) -> Result<f64, Error> {
+    match text.trim().parse::<f64>() {
+        Ok(x) if x.is_finite() => Ok(x),
+        _ => Err(Error::usage(format!(
+            "`{flag}`: `{}` is not a finite number ({what})",
+            xtask::spec::shown(text)
+        ))),
+    }
+}
+
+impl Settings {
+    pub fn from_args(a: &AnalyzeArgs, root: &std::path::Path) -> Result<Settings, Error> {
+        let mut sets = Vec::new();
+        for s in &a.sets {
+            let Some((name, value)) = s.split_once('=') else {
+                return Err(Error::usage(format!(
+                    "`--set {}`: expected NAME=VALUE (e.g. lower_a_length_x=0.22)",
+                    xtask::spec::shown(s)
+                )));
+            };
+            sets.push((
+                name.trim().to_string(),
+                finite("--set", value, "the parameter's value")?,
+            ));
+        }
+        let sweep = match &a.sweep {
+            None => None,
+            Some(s) => {
+                let bad = || {
+                    Error::usage(format!(
+                        "`--sweep {}`: expected NAME=FROM:TO:N (e.g. lower_a_length_x=0.16:0.26:6), N from 2 to 200",
+                        xtask::spec::shown(s)
+                    ))
+                };
+                let (name, range) = s.split_once('=').ok_or_else(bad)?;
+                let parts: Vec<&str> = range.split(':').collect();
+                let [from, to, n] = parts[..] else {
+                    return Err(bad());
+                };
+                let from = finite("--sweep", from, "FROM")?;
+                let to = finite("--sweep", to, "TO")?;
+                let count: usize = n.trim().parse().map_err(|_| bad())?;
+                if !(2..=200).contains(&count) || from == to {
+                    return Err(bad());
+                }
+                if a.models.len() > 1 {
+                    return Err(Error::usage(
+                        "`--sweep` sweeps one model's parameter: give one model",
+                    ));
+                }
+                let names: Vec<String> = name
+                    .split(',')
+                    .map(|n| n.trim().to_string())
+                    .filter(|n| !n.is_empty())
+                    .collect();
+                if names.is_empty() {
+                    return Err(bad());
+                }
+                Some(Sweep {
+                    names,
+                    name: name.trim().to_string(),
+                    from,
+                    to,
+                    count,
+                })
+            }
+        };
+        let list =
+            |flag: &str, text: &Option<String>, what: &str| -> Result<Option<Vec<f64>>, Error> {
+                let Some(text) = text else { return Ok(None) };
+                let values = text
+                    .split(',')
+                    .map(|v| finite(flag, v, what))
+                    .collect::<Result<Vec<_>, _>>()?;
+                if values.iter().any(|&v| v <= 0.0) {
+                    return Err(Error::usage(format!(
+                        "`{flag}`: every {what} must be positive"
+                    )));
+                }
+                Ok(Some(values))
+            };
+        let motor_range = match &a.motor_range {
+            None => None,
+            Some(r) => {
+                let bad = || {
+                    Error::usage(format!(
+                        "`--motor-range {}`: expected LO:HI in rad with LO < HI (e.g. -3.2:0.5)",
+                        xtask::spec::shown(r)
+                    ))
+                };
+                let (lo, hi) = r.split_once(':').ok_or_else(bad)?;
+                let (lo, hi) = (
+                    finite("--motor-range", lo, "LO")?,
+                    finite("--motor-range", hi, "HI")?,
+                );
+                if lo >= hi {
+                    return Err(bad());
+                }
+                Some((lo, hi))
+            }
+        };
+        Ok(Settings {
+            sets,
+            sweep,
+            torque: list("--torque-limit", &a.torque_limit, "torque limit")?,
+            speed: list("--speed-limit", &a.speed_limit, "speed limit")?,
+            body_mass: a.body_mass,
+            motor_range,
+            nodes: a.nodes as usize,
+            out: a
+                .out
+                .clone()
+                .unwrap_or_else(|| xtask::cli::target_dir(root).join("analyze")),
+        })
+    }
+
+    pub fn sweeping(&self) -> Option<&str> {
+        self.sweep.as_ref().map(|s| s.name.as_str())
+    }
+}
+
+/// What the report draws of one design.
+pub struct View {
+    pub nodes: usize,
+    pub origin: [f64; 2],
+    pub step: f64,
+    /// `(title, unit, value per node (NaN where none))`.
+    pub maps: Vec<(String, String, Vec<f64>)>,
+    pub passive: Vec<Segment>,
+    pub foot: Vec<Segment>,
+    /// The leg at its stance pose: each link joint → tip, and the closures' points.
+    pub links: Vec<[f64; 4]>,
+    pub stance: [f64; 2],
+}
+
+/// One analysed design.
+pub struct Design {
+    pub label: String,
+    pub file_stem: String,
+    pub swept: Option<f64>,
+    pub json: Value,
+    pub csv: Option<String>,
+    pub view: Option<View>,
+}
+
+fn index_of<L, const NQ: usize, const NC: usize, const NU: usize>(
+    name: &str,
+) -> Result<usize, Error>
+where
+    L: LegModel<NQ, NC, NU>,
+{
+    L::Params::<f64>::NAMES
+        .iter()
+        .position(|n| *n == name)
+        .ok_or_else(|| {
+            Error::usage(
+                ParameterError::Unknown {
+                    name,
+                    leg: L::NAME,
+                    known: L::Params::<f64>::NAMES,
+                }
+                .to_string(),
+            )
+        })
+}
+
+fn number(x: f64) -> Value {
+    if x.is_finite() {
+        json!(x)
+    } else {
+        Value::Null
+    }
+}
+
+/// Analyses model `L` under `settings`: one design, or one per swept value (in parallel).
+pub fn run<L, const NQ: usize, const NC: usize, const NU: usize>(
+    settings: &Settings,
+    progress: &Mutex<(Progress, u64)>,
+) -> Result<Vec<Design>, Error>
+where
+    L: LegModel<NQ, NC, NU>,
+    L::Params<f64>: Send + Sync,
+{
+    let mut base = L::Params::<f64>::default();
+    for (name, value) in &settings.sets {
+        let i = index_of::<L, NQ, NC, NU>(name)?;
+        base.set(i, *value);
+    }
+    let sweep = match &settings.sweep {
+        Some(s) => Some((
+            s.names
+                .iter()
+                .map(|n| index_of::<L, NQ, NC, NU>(n))
+                .collect::<Result<Vec<_>, _>>()?,
+            s,
+        )),
+        None => None,
+    };
+    for list in [&settings.torque, &settings.speed].into_iter().flatten() {
+        if list.len() != 1 && list.len() != NU {
+            return Err(Error::usage(format!(
+                "`{}` has {} motors: give one limit or {NU} (got {})",
+                L::NAME,
+                NU,
+                list.len()
+            )));
+        }
+    }
+    let values: Vec<Option<f64>> = match &sweep {
+        Some((_, s)) => s.values().into_iter().map(Some).collect(),
+        None => vec![None],
+    };
+    let designs = values
+        .par_iter()
+        .map(|&v| {
+            let mut p = base;
+            if let (Some((indices, _)), Some(v)) = (&sweep, v) {
+                for &i in indices {
+                    p.set(i, v);
+                }
+            }
+            let d = design::<L, NQ, NC, NU>(
+                &p,
+                settings,
+                sweep.as_ref().map(|(_, s)| (*s, v.unwrap_or(f64::NAN))),
+            );
+            let mut guard = progress.lock().unwrap_or_else(|e| e.into_inner());
+            guard.1 += 1;
+            let done = guard.1;
+            guard.0.set(done);
+            d
+        })
+        .collect();
+    Ok(designs)
+}
+
+fn gear<L, const NQ: usize, const NC: usize, const NU: usize>(p: &L::Params<f64>, k: usize) -> f64
+where
+    L: LegModel<NQ, NC, NU>,
+{
+    let name = format!("{}_gear_ratio", L::JOINT_NAMES[L::ACTUATED[k]]);
+    L::Params::<f64>::NAMES
+        .iter()
+        .position(|n| *n == name)
+        .and_then(|i| p.get(i))
+        .filter(|g| g.is_finite() && *g != 0.0)
+        .map_or(1.0, f64::abs)
+}
+
+/// Motor torque at the shaft (N m) and speed (rad/s) of the defaults.
+const MOTOR_TORQUE: f64 = 1.0;
+const MOTOR_SPEED: f64 = 100.0;
+
+fn design<L, const NQ: usize, const NC: usize, const NU: usize>(
+    p: &L::Params<f64>,
+    settings: &Settings,
+    swept: Option<(&Sweep, f64)>,
+) -> Design
+where
+    L: LegModel<NQ, NC, NU>,
+{
+    let label = match swept {
+        Some((s, v)) => format!("{} {}={v}", L::NAME, s.name),
+        None => L::NAME.to_string(),
+    };
+    let file_stem = match swept {
+        Some((s, v)) => format!(
+            "{}_{}_{}",
+            L::NAME,
+            s.names[0],
+            format!("{v}").replace(['-', '.'], "_")
+        ),
+        None => L::NAME.to_string(),
+    };
+    let frame = LegFrame::of::<L, NC, NU>();
+    let pick = |given: &Option<Vec<f64>>, k: usize, default: f64| match given {
+        Some(v) if v.len() == 1 => v[0],
+        Some(v) => v[k],
+        None => default,
+    };
+    let limits = MotorLimits {
+        torque: SVector::<f64, NU>::from_fn(|k, _| {
+            pick(
+                &settings.torque,
+                k,
+                MOTOR_TORQUE * gear::<L, NQ, NC, NU>(p, k),
+            )
+        }),
+        speed: SVector::<f64, NU>::from_fn(|k, _| {
+            pick(
+                &settings.speed,
+                k,
+                MOTOR_SPEED / gear::<L, NQ, NC, NU>(p, k),
+            )
+        }),
+    };
+    let mut changed = serde_json::Map::new();
+    for (name, value) in &settings.sets {
+        changed.insert(name.clone(), json!(value));
+    }
+    if let Some((s, v)) = swept {
+        for name in &s.names {
+            changed.insert(name.clone(), json!(v));
+        }
+    }
+    let coupling = BodyCoupling::new::<L, f64, NQ, NC, NU>(p);
+    let body_mass = settings
+        .body_mass
+        .or_else(|| coupling.as_ref().map(|c| 10.0 * c.leg_mass));
+    let body = if frame.has_body() {
+        Body::Fixed
+    } else {
+        match body_mass {
+            Some(mass) => Body::Translating { mass },
+            None => Body::Fixed,
+        }
+    };
+    let held: Vec<&str> = (0..NQ)
+        .filter(|&j| frame.held[j])
+        .map(|j| L::JOINT_NAMES[j])
+        .collect();
+    let mut json = json!({
+        "model": L::NAME,
+        "label": label,
+        "parameters": changed,
+        "frame": {
+            "body_joints_held": held,
+            "mobility": frame.mobility,
+            "motors": NU,
+            "actuated": L::ACTUATED.iter().map(|&a| L::JOINT_NAMES[a]).collect::<Vec<_>>(),
+        },
+        "torque_limit": limits.torque.as_slice(),
+        "speed_limit": limits.speed.as_slice(),
+        "body": if frame.has_body() {
+            json!({"kind": "the spec's own body joints", "joints": held})
+        } else {
+            json!({"kind": "translating", "mass_kg": body_mass.map_or(Value::Null, number),
+                   "leg_mass_kg": coupling.as_ref().map_or(Value::Null, |c| number(c.leg_mass))})
+        },
+    });
+    let mut why = serde_json::Map::new();
+    let mut q = SVector::from(L::HOME);
+    if let Err(e) = project_position::<L, f64, NQ, NC, NU>(p, &mut q, &Tolerance::default()) {
+        json["error"] = json!(format!(
+            "the home pose does not assemble with these parameters: {e}"
+        ));
+        return Design {
+            label,
+            file_stem,
+            swept: swept.map(|s| s.1),
+            json,
+            csv: None,
+            view: None,
+        };
+    }
+    let foot = L::foot_position(&q, p);
+    json["stance"] = json!({
+        "q": q.as_slice(),
+        "foot": [foot[0], foot[1]],
+        "what": "the spec's home pose, assembled",
+    });
+    let mut table = serde_json::Map::new();
+    match point_measures::<L, f64, NQ, NC, NU>(p, &q, &frame, &limits) {
+        Ok(m) => {
+            table.insert(
+                "vertical_force_n".into(),
+                m.vertical_force.map_or(Value::Null, number),
+            );
+            if m.vertical_force.is_none() {
+                why.insert(
+                    "vertical_force_n".into(),
+                    json!(if NU < 2 {
+                        "one motor: no 2-D force polygon".to_string()
+                    } else {
+                        "the motors cannot hold the leg with the foot pushing down here".to_string()
+                    }),
+                );
+            }
+            table.insert("vertical_speed_m_s".into(), number(m.vertical_speed));
+            table.insert("effective_mass_kg".into(), number(m.effective_mass));
+            table.insert("condition".into(), number(m.condition));
+            table.insert("passive_rank".into(), number(m.passive_rank));
+            table.insert("foot_rank".into(), number(m.foot_rank));
+            let matrix = |m: &leg_models::nalgebra::Matrix2<f64>| {
+                json!([[m[(0, 0)], m[(0, 1)]], [m[(1, 0)], m[(1, 1)]]])
+            };
+            json["stance"]["inverse_inertia_free"] = matrix(&m.inverse_inertia);
+            json["stance"]["inverse_inertia_locked"] = matrix(&m.inverse_inertia_locked);
+            json["stance"]["foot_jacobian_motor"] = json!((0..2)
+                .map(|r| (0..NU)
+                    .map(|c| m.kinematics.foot_jacobian[(r, c)])
+                    .collect::<Vec<_>>())
+                .collect::<Vec<_>>());
+            if NU >= 2 && NU <= leg_models::analysis::MAX_MOTORS {
+                let poly = leg_models::analysis::force_polygon::<L, f64, NQ, NC, NU>(
+                    p,
+                    &q,
+                    &m.kinematics,
+                    &limits.torque,
+                );
+                json["stance"]["force_polygon_n"] = json!(poly
+                    .vertices()
+                    .iter()
+                    .map(|v| [v[0], v[1]])
+                    .collect::<Vec<_>>());
+                let speed =
+                    leg_models::analysis::speed_polygon(&m.kinematics.foot_jacobian, &limits.speed);
+                json["stance"]["speed_polygon_m_s"] = json!(speed
+                    .vertices()
+                    .iter()
+                    .map(|v| [v[0], v[1]])
+                    .collect::<Vec<_>>());
+            }
+        }
+        Err(e) => {
+            for key in [
+                "vertical_force_n",
+                "vertical_speed_m_s",
+                "effective_mass_kg",
+                "condition",
+            ] {
+                table.insert(key.into(), Value::Null);
+                why.insert(key.into(), json!(e.to_string()));
+            }
+        }
+    }
+    match impact_mitigation::<L, f64, NQ, NC, NU>(p, &q, &frame, &body, coupling.as_ref()) {
+        Ok(x) => {
+            table.insert("impact_mitigation".into(), number(x));
+        }
+        Err(e) => {
+            table.insert("impact_mitigation".into(), Value::Null);
+            why.insert("impact_mitigation".into(), json!(e.to_string()));
+        }
+    }
+    let options = GridOptions {
+        nodes: settings.nodes,
+        window: None,
+        motor_range: settings.motor_range.map(|r| [r; NU]),
+        limits,
+    };
+    let started = Instant::now();
+    let ws = workspace::<L, NQ, NC, NU>(p, &q, &frame, &options);
+    let seconds = started.elapsed().as_secs_f64();
+    let (csv, view) = match ws {
+        Ok(ws) => {
+            table.insert("workspace_area_m2".into(), number(ws.area));
+            let d = ws.distance_to_singularity([foot[0], foot[1]]);
+            table.insert(
+                "singularity_distance_m".into(),
+                d.map_or(Value::Null, number),
+            );
+            if d.is_none() {
+                why.insert(
+                    "singularity_distance_m".into(),
+                    json!("no singularity in the grid"),
+                );
+            }
+            let reached = ws
+                .states
+                .iter()
+                .filter(|&&s| s == NodeState::Reached)
+                .count();
+            let singular = ws
+                .measures
+                .iter()
+                .filter(|m| matches!(m, Some(Err(_))))
+                .count();
+            json["grid"] = json!({
+                "nodes_per_side": ws.nodes,
+                "origin": ws.origin,
+                "step_m": ws.step,
+                "reached": reached,
+                "singular_nodes": singular,
+                "seconds": seconds,
+                "csv": format!("{file_stem}.csv"),
+            });
+            let seg = |s: &[Segment]| {
+                s.iter()
+                    .map(|s| [s[0][0], s[0][1], s[1][0], s[1][1]])
+                    .collect::<Vec<_>>()
+            };
+            json["curves"] = json!({
+                "passive": seg(&ws.passive_curves),
+                "passive_located": ws.passive_signed,
+                "foot": seg(&ws.foot_curves),
+            });
+            if !ws.passive_signed {
+                json["curves"]["passive_note"] = json!(
+                    "the passive rank measure is unsigned here (redundant rows, a body's held joints or more than two motors): its curves are not located"
+                );
+            }
+            (
+                Some(csv::<L, NQ, NC, NU>(&ws)),
+                Some(view::<L, NQ, NC, NU>(p, &q, &ws)),
+            )
+        }
+        Err(e) => {
+            for key in ["workspace_area_m2", "singularity_distance_m"] {
+                table.insert(key.into(), Value::Null);
+                why.insert(key.into(), json!(e.to_string()));
+            }
+            (None, None)
+        }
+    };
+    json["table"] = Value::Object(table);
+    json["not_computed"] = Value::Object(why);
+    Design {
+        label,
+        file_stem,
+        swept: swept.map(|s| s.1),
+        json,
+        csv,
+        view,
+    }
+}
+
+fn csv<L, const NQ: usize, const NC: usize, const NU: usize>(
+    ws: &leg_models::analysis::workspace::Workspace<NQ, NU>,
+) -> String
+where
+    L: LegModel<NQ, NC, NU>,
+{
+    let mut out = String::from("x,y,state");
+    for name in L::JOINT_NAMES {
+        write!(out, ",q_{name}").unwrap();
+    }
+    out.push_str(
+        ",passive_rank,foot_rank,condition,vertical_force,vertical_speed,effective_mass\n",
+    );
+    let cell = |x: Option<f64>| {
+        x.filter(|v| v.is_finite())
+            .map_or(String::new(), |v| v.to_string())
+    };
+    for i in 0..ws.states.len() {
+        let [x, y] = ws.node(i % ws.nodes, i / ws.nodes);
+        let state = match ws.states[i] {
+            NodeState::Reached => "reached",
+            NodeState::BranchEnds => "branch_ends",
+            NodeState::OutOfRange => "out_of_range",
+            NodeState::Unvisited => "unvisited",
+        };
+        write!(out, "{x},{y},{state}").unwrap();
+        let reached = ws.states[i] == NodeState::Reached;
+        for j in 0..NQ {
+            write!(out, ",{}", cell(reached.then(|| ws.poses[i][j]))).unwrap();
+        }
+        let m = match &ws.measures[i] {
+            Some(Ok(m)) => Some(m),
+            _ => None,
+        };
+        writeln!(
+            out,
+            ",{},{},{},{},{},{}",
+            cell(reached.then(|| ws.passive_rank[i])),
+            cell(m.map(|m| m.foot_rank)),
+            cell(m.map(|m| m.condition)),
+            cell(m.and_then(|m| m.vertical_force)),
+            cell(m.map(|m| m.vertical_speed)),
+            cell(m.map(|m| m.effective_mass)),
+        )
+        .unwrap();
+    }
+    out
+}
+
+fn view<L, const NQ: usize, const NC: usize, const NU: usize>(
+    p: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+    ws: &leg_models::analysis::workspace::Workspace<NQ, NU>,
+) -> View
+where
+    L: LegModel<NQ, NC, NU>,
+{
+    let values = |f: &dyn Fn(&leg_models::analysis::PointMeasures<f64, NQ, NU>) -> Option<f64>| {
+        ws.measures
+            .iter()
+            .map(|m| match m {
+                Some(Ok(m)) => f(m).filter(|v| v.is_finite()).unwrap_or(f64::NAN),
+                _ => f64::NAN,
+            })
+            .collect::<Vec<f64>>()
+    };
+    let maps = vec![
+        (
+            "vertical force capacity (downward push)".to_string(),
+            "N".to_string(),
+            values(&|m| m.vertical_force),
+        ),
+        (
+            "conditioning: log₁₀ κ(J_θ)".to_string(),
+            "".to_string(),
+            values(&|m| Some(m.condition.log10())),
+        ),
+        (
+            "effective mass at the foot, vertical".to_string(),
+            "kg".to_string(),
+            values(&|m| Some(m.effective_mass)),
+        ),
+    ];
+    let joints = L::joint_positions(q, p);
+    let tips = L::link_tips(q, p);
+    let mut links: Vec<[f64; 4]> = (0..NQ)
+        .map(|j| [joints[(0, j)], joints[(1, j)], tips[(0, j)], tips[(1, j)]])
+        .collect();
+    // A child joint off its parent's tip, and closure points inside links: joined too.
+    for j in 0..NQ {
+        if let Some(parent) = L::PARENTS[j] {
+            links.push([
+                tips[(0, parent)],
+                tips[(1, parent)],
+                joints[(0, j)],
+                joints[(1, j)],
+            ]);
+        }
+    }
+    let foot = L::foot_position(q, p);
+    View {
+        nodes: ws.nodes,
+        origin: ws.origin,
+        step: ws.step,
+        maps,
+        passive: ws.passive_curves.clone(),
+        foot: ws.foot_curves.clone(),
+        links,
+        stance: [foot[0], foot[1]],
+    }
+}
+
+/// The table's columns: key in `table`, heading, scale to the unit shown, decimals.
+pub const COLUMNS: [(&str, &str, f64, usize); 7] = [
+    ("workspace_area_m2", "workspace (cm²)", 1e4, 1),
+    ("vertical_force_n", "push at stance (N)", 1.0, 2),
+    (
+        "vertical_speed_m_s",
+        "vertical speed at stance (m/s)",
+        1.0,
+        3,
+    ),
+    ("effective_mass_kg", "effective mass at stance (kg)", 1.0, 4),
+    ("impact_mitigation", "impact mitigation factor", 1.0, 3),
+    (
+        "singularity_distance_m",
+        "stance to singularity (mm)",
+        1e3,
+        1,
+    ),
+    ("condition", "κ(J_θ) at stance", 1.0, 2),
+];
+
+/// The table as text, one design a row.
+pub fn table(designs: &[Design]) -> String {
+    let mut rows = vec![std::iter::once("design".to_string())
+        .chain(COLUMNS.iter().map(|c| c.1.to_string()))
+        .collect::<Vec<_>>()];
+    for d in designs {
+        let mut row = vec![d.label.clone()];
+        for (key, _, scale, digits) in COLUMNS {
+            row.push(match d.json["table"].get(key).and_then(Value::as_f64) {
+                Some(v) => format!("{:.*}", digits, v * scale),
+                None => "–".to_string(),
+            });
+        }
+        rows.push(row);
+    }
+    let widths: Vec<usize> = (0..rows[0].len())
+        .map(|c| rows.iter().map(|r| r[c].chars().count()).max().unwrap_or(0))
+        .collect();
+    let mut out = String::new();
+    for r in &rows {
+        let cells: Vec<String> = r
+            .iter()
+            .zip(&widths)
+            .enumerate()
+            .map(|(c, (cell, &w))| {
+                if c == 0 {
+                    format!("{cell:<w$}")
+                } else {
+                    format!("{cell:>w$}")
+                }
+            })
+            .collect();
+        out.push_str(cells.join("  ").trim_end());
+        out.push('\n');
+    }
+    out
+}
+
+/// Writes `analysis.json`, the CSVs and `report.html` into `settings.out`, only once
+/// every design is computed (a failure before leaves nothing).
+pub fn write(settings: &Settings, designs: &[Design], command: &str) -> Result<(), Error> {
+    let out = &settings.out;
+    let json = json!({
+        "command": command,
+        "sweep": settings.sweep.as_ref().map(|s| json!({"parameters": s.names, "from": s.from, "to": s.to, "designs": s.count})),
+        "motor_range": settings.motor_range.map(|r| [r.0, r.1]),
+        "defaults": {
+            "torque_limit": format!("{MOTOR_TORQUE} N m at the motor times its gear ratio"),
+            "speed_limit": format!("{MOTOR_SPEED} rad/s at the motor over its gear ratio"),
+            "body_mass": "ten times the leg's mass (a leg with body joints uses its own body)",
+        },
+        "designs": designs.iter().map(|d| d.json.clone()).collect::<Vec<_>>(),
+    });
+    let text = serde_json::to_string_pretty(&json).map_err(|e| Error::Failed(e.to_string()))?;
+    for d in designs {
+        if let Some(csv) = &d.csv {
+            write_atomic(&out.join(format!("{}.csv", d.file_stem)), csv).map_err(Error::Failed)?;
+        }
+    }
+    write_atomic(&out.join("analysis.json"), &text).map_err(Error::Failed)?;
+    let html = crate::analysis_report::html(designs, settings.sweeping(), command)
+        .map_err(Error::Failed)?;
+    write_atomic(&out.join("report.html"), &html).map_err(Error::Failed)?;
+    Ok(())
+}
