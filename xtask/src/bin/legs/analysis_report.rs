@@ -153,7 +153,7 @@ function colour(t) {{
   return s[i].map((c, k) => Math.round(c + f * (s[i + 1][k] - c)));
 }}
 function drawMap(d, m) {{
-  const px = 300, c = document.createElement('canvas'); c.width = px; c.height = px;
+  const px = 270, c = document.createElement('canvas'); c.width = px; c.height = px;
   const g = c.getContext('2d'), n = d.side;
   const vals = m.values.filter(v => v !== null).sort((a, b) => a - b);
   const lo = vals.length ? vals[Math.floor(0.02 * (vals.length - 1))] : 0;

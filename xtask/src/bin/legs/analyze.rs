@@ -44,9 +44,14 @@ struct Sweep {
 }
 
 impl Sweep {
+    /// The swept values, rounded to 12 significant digits (`0.22`, not
+    /// `0.22000000000000003`).
     fn values(&self) -> Vec<f64> {
         (0..self.count)
-            .map(|i| self.from + (self.to - self.from) * i as f64 / (self.count - 1) as f64)
+            .map(|i| {
+                let x = self.from + (self.to - self.from) * i as f64 / (self.count - 1) as f64;
+                format!("{x:.11e}").parse().unwrap_or(x)
+            })
             .collect()
     }
 }
