@@ -396,6 +396,7 @@ pub fn check_singularities<
         Vector2::new(a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]))
     };
     let mut passive_checked = 0;
+    let mut drawn_checked = 0;
     let mut edges_checked = 0;
     for i in 0..n * n {
         for k in [i + 1, i + n] {
@@ -406,9 +407,32 @@ pub fn check_singularities<
             match (ws.states[i], ws.states[k]) {
                 (NodeState::Reached, NodeState::Reached)
                     if ws.passive_signed
-                        && passive_checked < 8
+                        && ws.joined(i, k)
                         && (ws.passive_rank[i] > 0.0) != (ws.passive_rank[k] > 0.0) =>
                 {
+                    // Marching squares draws a crossing in a square of four joined nodes.
+                    let complete = |c: usize| {
+                        c % n + 1 < n
+                            && c + n + 1 < n * n
+                            && [
+                                (c, c + 1),
+                                (c + 1, c + n + 1),
+                                (c + n + 1, c + n),
+                                (c + n, c),
+                            ]
+                            .iter()
+                            .all(|&(x, y)| ws.joined(x, y))
+                    };
+                    let squares = if k == i + 1 {
+                        [Some(i), i.checked_sub(n)]
+                    } else {
+                        [Some(i), (i % n > 0).then(|| i - 1)]
+                    };
+                    let on_square = squares.into_iter().flatten().any(complete);
+                    // A few crossings of each kind: anywhere, and on drawn squares.
+                    if passive_checked >= 4 && (drawn_checked >= 4 || !on_square) {
+                        continue;
+                    }
                     // Bisection on the sign of the passive rank measure, continuing the
                     // branch from node i.
                     let (mut lo, mut hi, mut q) = (0.0, 1.0, ws.poses[i]);
@@ -454,13 +478,16 @@ pub fn check_singularities<
                         motor_kinematics::<L, f64, NQ, NC, NU>(&p, &q, &frame).err(),
                         Some(AnalysisError::PassiveSingular)
                     );
-                    // And the grid drew a curve through this edge.
-                    let mid = foot_at(a, b, lo);
-                    assert!(
-                        ws.distance_to_singularity([mid[0], mid[1]]).unwrap() <= 0.5 * ws.step,
-                        "{}",
-                        L::NAME
-                    );
+                    if on_square {
+                        // And the grid drew a curve through this edge.
+                        let mid = foot_at(a, b, lo);
+                        assert!(
+                            ws.distance_to_singularity([mid[0], mid[1]]).unwrap() <= 0.5 * ws.step,
+                            "{}",
+                            L::NAME
+                        );
+                        drawn_checked += 1;
+                    }
                     passive_checked += 1;
                 }
                 (NodeState::Reached, NodeState::BranchEnds) if edges_checked < 8 => {
@@ -511,9 +538,13 @@ pub fn check_singularities<
         }
     }
     println!(
-        "{}: {passive_checked} passive crossings, {edges_checked} branch ends checked",
+        "{}: {passive_checked} passive crossings ({drawn_checked} on a drawn curve), {edges_checked} branch ends checked",
         L::NAME
     );
+    // Where the passive rank crosses zero inside squares of joined nodes, curves exist.
+    if passive_checked > 0 && !ws.passive_curves.is_empty() {
+        assert!(drawn_checked > 0, "{}", L::NAME);
+    }
     if edges_checked == 0 && passive_checked == 0 {
         // No singularity in the grid (a sliding shin reaches everywhere but its hip):
         // then no node may be singular either.
@@ -719,4 +750,48 @@ fn impact_mitigation_on_a_body_matches_a_leg_with_that_body() {
     .unwrap();
     assert!(light < heavy, "{light} {heavy}");
     let _ = Matrix2::<f64>::identity();
+}
+
+/// A one-motor linkage's workspace is its foot's path: Klann's crank turns fully and the
+/// path closes on itself (the branch comes back to the start after a turn), every point
+/// on the closures at its motor angle; a leg with two motors is told to use the grid.
+#[test]
+fn a_crank_linkage_traces_a_closed_foot_path() {
+    use generated::KlannLinkage;
+    use leg_models::analysis::workspace::foot_path;
+    let p = generated::klann_linkage::Params::<f64>::default();
+    let frame = LegFrame::of::<KlannLinkage, 6, 1>();
+    let q = home::<KlannLinkage, 7, 6, 1>(&p);
+    let path = foot_path::<KlannLinkage, 7, 6, 1>(&p, &q, &frame, 120, None).unwrap();
+    assert!(path.full_turn);
+    assert_eq!(path.feet.len(), 121);
+    let (first, last) = (path.feet[0], path.feet[120]);
+    assert!(
+        (first[0] - last[0]).hypot(first[1] - last[1]) < 1e-9,
+        "{first:?} {last:?}"
+    );
+    assert!((path.poses[0] - path.poses[120]).amax() - std::f64::consts::TAU < 1e-9);
+    for (theta, q) in path.angles.iter().zip(&path.poses) {
+        assert!(KlannLinkage::closure_residual(q, &p).amax() < 1e-12);
+        assert_eq!(q[KlannLinkage::ACTUATED[0]], *theta);
+    }
+    // The path's length against the polygon through every other point (shorter, close).
+    let coarse: f64 = path
+        .feet
+        .iter()
+        .step_by(2)
+        .collect::<Vec<_>>()
+        .windows(2)
+        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+        .sum();
+    assert!(coarse <= path.length && coarse > 0.97 * path.length);
+    let minitaur = LegFrame::of::<generated::Minitaur, 2, 2>();
+    let pm = generated::minitaur::Params::<f64>::default();
+    let qm = home::<generated::Minitaur, 4, 2, 2>(&pm);
+    assert!(matches!(
+        foot_path::<generated::Minitaur, 4, 2, 2>(&pm, &qm, &minitaur, 60, None),
+        Err(AnalysisError::NotApplicable(
+            leg_models::analysis::Inapplicable::NotOneMotor { motors: 2 }
+        ))
+    ));
 }

@@ -754,6 +754,9 @@ fn analyze_writes_the_table_the_grids_and_the_report() {
         .as_str()
         .unwrap()
         .contains("1 motor"));
+    // Its workspace is the foot's path over a turn of the crank.
+    assert_eq!(designs[1]["foot_path"]["full_turn"], Value::Bool(true));
+    assert!(designs[1]["foot_path"]["length_m"].as_f64().unwrap() > 0.0);
     let csv = std::fs::read_to_string(dir.join("minitaur.csv")).unwrap();
     assert!(csv.starts_with("x,y,state,q_upper_a"));
     assert_eq!(csv.lines().count(), 1 + 40 * 40);

@@ -65,6 +65,12 @@ pub enum Inapplicable {
     Structure(NotApplicable),
     /// One motor moves the foot along a curve: no area, no 2-D polygon.
     FootOnACurve,
+    /// The foot's path over one motor's turn is for a one-motor leg; this one has more
+    /// (its workspace is an area).
+    NotOneMotor {
+        /// The leg's motors.
+        motors: usize,
+    },
     /// More than [`MAX_MOTORS`] motors.
     TooManyMotors {
         /// The leg's motors.
@@ -85,6 +91,10 @@ impl fmt::Display for Inapplicable {
             Inapplicable::FootOnACurve => write!(
                 f,
                 "the foot has two coordinates but the leg has 1 motor: it moves the foot along a curve, so there is no workspace area and no 2-D force or speed polygon"
+            ),
+            Inapplicable::NotOneMotor { motors } => write!(
+                f,
+                "the foot's path over a motor's turn is for a one-motor leg; this one has {motors} motors (its workspace is an area)"
             ),
             Inapplicable::TooManyMotors { motors } => write!(
                 f,
@@ -756,7 +766,7 @@ pub fn effective_mass<T: Real>(inv: &Matrix2<T>, d: &Vector2<T>) -> T {
     if x > T::zero() {
         T::one() / x
     } else {
-        T::max_value().unwrap_or_else(|| T::lit(1e300))
+        T::one() / T::zero()
     }
 }
 
@@ -881,7 +891,7 @@ pub struct PointMeasures<T: Real, const NQ: usize, const NU: usize> {
     /// Foot's rank in motor coordinates ("type I"): `det J_θ / (|c₁||c₂|)` with two motors,
     /// `σ_min / σ_max` otherwise; zero at the singularity.
     pub foot_rank: T,
-    /// `κ(J_θ) = σ_max / σ_min` (infinite with one motor).
+    /// `κ(J_θ) = σ_max / σ_min` (infinite with one motor: `J_θ` has rank one).
     pub condition: T,
     /// Largest downward push at rest within the torque limits (N); `None` where the
     /// motors cannot push down here (or a one-motor leg).
@@ -914,7 +924,8 @@ where
     let condition = if NU >= 2 && lo > T::zero() {
         hi / lo
     } else {
-        T::max_value().unwrap_or_else(|| T::lit(1e300))
+        // One motor (or a lost direction): σ_min = 0.
+        T::one() / T::zero()
     };
     let hold = holding_torque::<L, T, NQ, NC, NU>(params, q, &kin);
     let two = NU >= 2;

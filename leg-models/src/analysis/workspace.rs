@@ -11,10 +11,7 @@ use std::collections::VecDeque;
 
 use nalgebra::SVector;
 
-use super::{
-    impact_mitigation, passive_rank, point_measures, AnalysisError, Body, BodyCoupling, LegFrame,
-    MotorLimits, PointMeasures,
-};
+use super::{passive_rank, point_measures, AnalysisError, LegFrame, MotorLimits, PointMeasures};
 use crate::assembly::{foot_inverse_holding, Tolerance};
 use crate::model::LegModel;
 
@@ -66,6 +63,8 @@ pub struct Workspace<const NQ: usize, const NU: usize> {
     pub measures: Vec<Option<Result<PointMeasures<f64, NQ, NU>, AnalysisError>>>,
     /// The passive rank measure at each reached node (NaN elsewhere).
     pub passive_rank: Vec<f64>,
+    /// Which joints are revolute (compared modulo a turn by [`Workspace::joined`]).
+    pub revolute: [bool; NQ],
     /// Whether [`Workspace::passive_rank`] is signed (its zero crossings are curves).
     pub passive_signed: bool,
     /// Workspace area: reached nodes × step² (m²).
@@ -86,6 +85,24 @@ impl<const NQ: usize, const NU: usize> Workspace<NQ, NU> {
         ]
     }
 
+    /// Whether nodes `a` and `b` are joined on the branch: both reached, no joint
+    /// differing by more than a branch step ([`JUMP`]; angles modulo a turn, since going
+    /// round a hole of the workspace adds 2π). Two fronts of the continuation that met on
+    /// different solutions are not joined: a seam, not a singularity.
+    pub fn joined(&self, a: usize, b: usize) -> bool {
+        if self.states[a] != NodeState::Reached || self.states[b] != NodeState::Reached {
+            return false;
+        }
+        (0..NQ).all(|j| {
+            let mut d = self.poses[a][j] - self.poses[b][j];
+            if self.revolute[j] {
+                d = (d + core::f64::consts::PI).rem_euclid(core::f64::consts::TAU)
+                    - core::f64::consts::PI;
+            }
+            d.abs() <= JUMP
+        })
+    }
+
     /// The distance (m) from `point` to the nearest singularity curve (either kind);
     /// `None` when there is none in the grid.
     pub fn distance_to_singularity(&self, point: [f64; 2]) -> Option<f64> {
@@ -94,25 +111,6 @@ impl<const NQ: usize, const NU: usize> Workspace<NQ, NU> {
             .chain(&self.foot_curves)
             .map(|s| segment_distance(point, s))
             .fold(None, |best, d| Some(best.map_or(d, |b: f64| b.min(d))))
-    }
-
-    /// The measures at the reached node nearest `point`, if any.
-    pub fn nearest(&self, point: [f64; 2]) -> Option<(usize, &PointMeasures<f64, NQ, NU>)> {
-        let mut best: Option<(f64, usize)> = None;
-        for (i, m) in self.measures.iter().enumerate() {
-            if let Some(Ok(_)) = m {
-                let p = self.node(i % self.nodes, i / self.nodes);
-                let d = (p[0] - point[0]).hypot(p[1] - point[1]);
-                if best.is_none_or(|(b, _)| d < b) {
-                    best = Some((d, i));
-                }
-            }
-        }
-        let (_, i) = best?;
-        match &self.measures[i] {
-            Some(Ok(m)) => Some((i, m)),
-            _ => None,
-        }
     }
 }
 
@@ -285,25 +283,7 @@ where
             origin[1] + (i / n) as f64 * step,
         ]
     };
-    let passive_curves = if passive_signed {
-        contour(n, &ranks, node)
-    } else {
-        Vec::new()
-    };
-    // The branch's edge: +1 reached, −1 where the branch ends, no value elsewhere.
-    let edge: Vec<f64> = states
-        .iter()
-        .map(|s| match s {
-            NodeState::Reached => 1.0,
-            NodeState::BranchEnds => -1.0,
-            _ => f64::NAN,
-        })
-        .collect();
-    let mut foot_curves = contour(n, &edge, node);
-    if NU == 2 {
-        foot_curves.extend(contour(n, &foot_ranks, node));
-    }
-    Ok(Workspace {
+    let mut ws = Workspace {
         nodes: n,
         origin,
         step,
@@ -311,11 +291,35 @@ where
         poses,
         measures,
         passive_rank: ranks,
+        revolute: core::array::from_fn(|j| L::JOINT_KINDS[j] == crate::model::JointKind::Revolute),
         passive_signed,
         area: reached as f64 * step * step,
-        passive_curves,
-        foot_curves,
-    })
+        passive_curves: Vec::new(),
+        foot_curves: Vec::new(),
+    };
+    let joined = |a: usize, b: usize| ws.joined(a, b);
+    let passive_curves = if passive_signed {
+        contour(n, &ws.passive_rank, node, joined)
+    } else {
+        Vec::new()
+    };
+    // The branch's edge: +1 reached, −1 where the branch ends, no value elsewhere.
+    let edge: Vec<f64> = ws
+        .states
+        .iter()
+        .map(|s| match s {
+            NodeState::Reached => 1.0,
+            NodeState::BranchEnds => -1.0,
+            _ => f64::NAN,
+        })
+        .collect();
+    let mut foot_curves = contour(n, &edge, node, |_, _| true);
+    if NU == 2 {
+        foot_curves.extend(contour(n, &foot_ranks, node, joined));
+    }
+    ws.passive_curves = passive_curves;
+    ws.foot_curves = foot_curves;
+    Ok(ws)
 }
 
 /// Steps of a branch change each joint by at most this much (rad, or m): a larger change
@@ -360,7 +364,16 @@ where
 
 /// Marching squares: the segments where `values` (row by row, `n` per row; NaN: no
 /// value) changes sign, each crossing placed by linear interpolation along its edge.
-pub fn contour(n: usize, values: &[f64], node: impl Fn(usize) -> [f64; 2]) -> Vec<Segment> {
+///
+/// A square whose corners are not `joined` (their poses not continuous with each other,
+/// where two continuation fronts met on different solutions around a hole of the
+/// workspace) gives no segment: a sign change there is a seam, not a singularity.
+pub fn contour(
+    n: usize,
+    values: &[f64],
+    node: impl Fn(usize) -> [f64; 2],
+    joined: impl Fn(usize, usize) -> bool,
+) -> Vec<Segment> {
     let mut out = Vec::new();
     for y in 0..n.saturating_sub(1) {
         for x in 0..n - 1 {
@@ -370,7 +383,9 @@ pub fn contour(n: usize, values: &[f64], node: impl Fn(usize) -> [f64; 2]) -> Ve
                 (y + 1) * n + x + 1,
                 (y + 1) * n + x,
             ];
-            if corners.iter().any(|&c| !values[c].is_finite()) {
+            if corners.iter().any(|&c| !values[c].is_finite())
+                || (0..4).any(|e| !joined(corners[e], corners[(e + 1) % 4]))
+            {
                 continue;
             }
             let mut crossings = [[0.0; 2]; 4];
@@ -396,17 +411,92 @@ pub fn contour(n: usize, values: &[f64], node: impl Fn(usize) -> [f64; 2]) -> Ve
     out
 }
 
-/// The impact mitigation factor at `q` for a leg on `body` (see [`impact_mitigation`]),
-/// preparing the body's coupling from `params`.
-pub fn impact_mitigation_at<L, const NQ: usize, const NC: usize, const NU: usize>(
+/// The foot's path over one motor's turn: what a one-motor linkage's workspace is.
+#[derive(Clone, Debug)]
+pub struct FootPath<const NQ: usize> {
+    /// Motor angles (rad), increasing.
+    pub angles: Vec<f64>,
+    /// The poses there, on the branch of the start.
+    pub poses: Vec<SVector<f64, NQ>>,
+    /// The foot there (base frame, m).
+    pub feet: Vec<[f64; 2]>,
+    /// Whether the motor turned a full revolution (a crank).
+    pub full_turn: bool,
+    /// The path's length (m).
+    pub length: f64,
+}
+
+/// The foot's path while the one motor of a one-motor leg turns from the start's angle,
+/// a full revolution each way at most (or within `range`), following the start's branch
+/// in `samples` steps a revolution ([`crate::assembly::assemble_along`]); where the
+/// branch ends the path stops there. Legs with more motors have a workspace instead.
+pub fn foot_path<L, const NQ: usize, const NC: usize, const NU: usize>(
     params: &L::Params<f64>,
-    q: &SVector<f64, NQ>,
+    start: &SVector<f64, NQ>,
     frame: &LegFrame<NQ>,
-    body: &Body<f64>,
-) -> Result<f64, AnalysisError>
+    samples: usize,
+    range: Option<(f64, f64)>,
+) -> Result<FootPath<NQ>, AnalysisError>
 where
     L: LegModel<NQ, NC, NU>,
 {
-    let coupling = BodyCoupling::new::<L, f64, NQ, NC, NU>(params);
-    impact_mitigation::<L, f64, NQ, NC, NU>(params, q, frame, body, coupling.as_ref())
+    frame.motor_coordinates()?;
+    if NU != 1 {
+        return Err(super::Inapplicable::NotOneMotor { motors: NU }.into());
+    }
+    let tau = core::f64::consts::TAU;
+    let a = L::ACTUATED[0];
+    let theta0 = start[a];
+    let (lo, hi) = range.unwrap_or((theta0 - tau, theta0 + tau));
+    let step = tau / samples.max(8) as f64;
+    let tol = Tolerance::default();
+    let walk = |direction: f64| {
+        let mut out = Vec::new();
+        let mut q = *start;
+        let mut theta = theta0;
+        loop {
+            let next = theta + direction * step;
+            if next < lo - 1e-12 || next > hi + 1e-12 || (next - theta0).abs() > tau + 1e-9 {
+                break;
+            }
+            let target = SVector::<f64, NU>::from_element(next);
+            match crate::assembly::assemble_along::<L, f64, NQ, NC, NU>(
+                params, &q, &target, 0.05, &tol,
+            ) {
+                Ok(p) => {
+                    q = p;
+                    theta = next;
+                    out.push((theta, q));
+                }
+                Err(_) => break,
+            }
+        }
+        out
+    };
+    let forward = walk(1.0);
+    let full_turn = forward
+        .last()
+        .is_some_and(|(t, _)| (t - theta0 - tau).abs() < 1e-9);
+    let backward = if full_turn { Vec::new() } else { walk(-1.0) };
+    let mut points: Vec<(f64, SVector<f64, NQ>)> = backward.into_iter().rev().collect();
+    points.push((theta0, *start));
+    points.extend(forward);
+    let feet: Vec<[f64; 2]> = points
+        .iter()
+        .map(|(_, q)| {
+            let f = L::foot_position(q, params);
+            [f[0], f[1]]
+        })
+        .collect();
+    let length = feet
+        .windows(2)
+        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+        .sum();
+    Ok(FootPath {
+        angles: points.iter().map(|p| p.0).collect(),
+        poses: points.iter().map(|p| p.1).collect(),
+        feet,
+        full_turn,
+        length,
+    })
 }

@@ -44,7 +44,7 @@ pub fn html(designs: &[Design], sweep: Option<&str>, command: &str) -> Result<St
         .map(|&i| {
             let d = &designs[i];
             let v = d.view.as_ref().expect("shown designs have a view");
-            let stride = v.nodes.div_ceil(MAX_SHOWN);
+            let stride = v.nodes.div_ceil(MAX_SHOWN).max(1);
             let side = v.nodes.div_ceil(stride);
             let pick = |values: &[f64]| {
                 let mut out = Vec::with_capacity(side * side);
@@ -70,6 +70,7 @@ pub fn html(designs: &[Design], sweep: Option<&str>, command: &str) -> Result<St
                 "foot": seg(&v.foot),
                 "links": v.links,
                 "stance": v.stance,
+                "path": v.path,
             })
         })
         .collect();
@@ -184,11 +185,28 @@ function drawMap(d, m) {{
   box.appendChild(document.createTextNode('x from ' + d.origin[0].toFixed(3) + ' to ' + (d.origin[0] + span).toFixed(3) + ' m, y from ' + d.origin[1].toFixed(3) + ' to ' + (d.origin[1] + span).toFixed(3) + ' m'));
   return box;
 }}
+function drawPath(d) {{
+  // A one-motor leg: its foot's path over the motor's turn, and the leg at stance.
+  const px = 270, c = document.createElement('canvas'); c.width = px; c.height = px;
+  const g = c.getContext('2d'); const pts = d.path.concat(d.links.flatMap(l => [[l[0], l[1]], [l[2], l[3]]]));
+  const xs = pts.map(p => p[0]), ys = pts.map(p => p[1]);
+  const x0 = Math.min(...xs), y0 = Math.min(...ys);
+  const span = Math.max(Math.max(...xs) - x0, Math.max(...ys) - y0) * 1.1 || 1;
+  const X = x => 10 + (x - x0) / span * (px - 20), Y = y => px - 10 - (y - y0) / span * (px - 20);
+  g.strokeStyle = '#1f3b73'; g.lineWidth = 3; g.beginPath();
+  for (const s of d.links) {{ g.moveTo(X(s[0]), Y(s[1])); g.lineTo(X(s[2]), Y(s[3])); }} g.stroke();
+  g.strokeStyle = '#d62728'; g.lineWidth = 2; g.beginPath();
+  d.path.forEach((p, i) => i ? g.lineTo(X(p[0]), Y(p[1])) : g.moveTo(X(p[0]), Y(p[1]))); g.stroke();
+  const box = document.createElement('div'); box.className = 'map';
+  box.innerHTML = '<b>the foot\'s path over a turn of the motor</b> (red)<br>'; box.appendChild(c);
+  return box;
+}}
 for (const d of DATA.maps) {{
   const sec = document.createElement('div'); sec.className = 'design';
   const h = document.createElement('h2'); h.textContent = d.label; sec.appendChild(h);
   const row = document.createElement('div'); row.className = 'maps';
   for (const m of d.maps) row.appendChild(drawMap(d, m));
+  if (d.path.length) row.appendChild(drawPath(d));
   sec.appendChild(row); document.getElementById('designs').appendChild(sec);
 }}
 if (DATA.sweep) {{

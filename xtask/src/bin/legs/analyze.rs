@@ -189,6 +189,8 @@ pub struct View {
     /// The leg at its stance pose: each link joint → tip, and the closures' points.
     pub links: Vec<[f64; 4]>,
     pub stance: [f64; 2],
+    /// A one-motor leg's foot path (no maps then).
+    pub path: Vec<[f64; 2]>,
 }
 
 /// One analysed design.
@@ -434,9 +436,19 @@ where
                     }),
                 );
             }
-            table.insert("vertical_speed_m_s".into(), number(m.vertical_speed));
+            if NU >= 2 {
+                table.insert("vertical_speed_m_s".into(), number(m.vertical_speed));
+                table.insert("condition".into(), number(m.condition));
+            } else {
+                for key in ["vertical_speed_m_s", "condition"] {
+                    table.insert(key.into(), Value::Null);
+                    why.insert(
+                        key.into(),
+                        json!("one motor: the foot moves along a curve (J_θ has rank one)"),
+                    );
+                }
+            }
             table.insert("effective_mass_kg".into(), number(m.effective_mass));
-            table.insert("condition".into(), number(m.condition));
             table.insert("passive_rank".into(), number(m.passive_rank));
             table.insert("foot_rank".into(), number(m.foot_rank));
             let matrix = |m: &leg_models::nalgebra::Matrix2<f64>| {
@@ -550,7 +562,7 @@ where
             }
             (
                 Some(csv::<L, NQ, NC, NU>(&ws)),
-                Some(view::<L, NQ, NC, NU>(p, &q, &ws)),
+                Some(view::<L, NQ, NC, NU>(p, &q, Some(&ws))),
             )
         }
         Err(e) => {
@@ -558,7 +570,28 @@ where
                 table.insert(key.into(), Value::Null);
                 why.insert(key.into(), json!(e.to_string()));
             }
-            (None, None)
+            // A one-motor linkage's workspace is the path of its foot.
+            let path = leg_models::analysis::workspace::foot_path::<L, NQ, NC, NU>(
+                p,
+                &q,
+                &frame,
+                360,
+                settings.motor_range,
+            );
+            match path {
+                Ok(path) => {
+                    json["foot_path"] = json!({
+                        "full_turn": path.full_turn,
+                        "length_m": path.length,
+                        "motor_angles": path.angles,
+                        "feet": path.feet,
+                    });
+                    let mut v = view::<L, NQ, NC, NU>(p, &q, None);
+                    v.path = path.feet;
+                    (None, Some(v))
+                }
+                Err(_) => (None, None),
+            }
         }
     };
     json["table"] = Value::Object(table);
@@ -625,12 +658,13 @@ where
 fn view<L, const NQ: usize, const NC: usize, const NU: usize>(
     p: &L::Params<f64>,
     q: &SVector<f64, NQ>,
-    ws: &leg_models::analysis::workspace::Workspace<NQ, NU>,
+    ws: Option<&leg_models::analysis::workspace::Workspace<NQ, NU>>,
 ) -> View
 where
     L: LegModel<NQ, NC, NU>,
 {
     let values = |f: &dyn Fn(&leg_models::analysis::PointMeasures<f64, NQ, NU>) -> Option<f64>| {
+        let Some(ws) = ws else { return Vec::new() };
         ws.measures
             .iter()
             .map(|m| match m {
@@ -639,7 +673,7 @@ where
             })
             .collect::<Vec<f64>>()
     };
-    let maps = vec![
+    let mut maps = vec![
         (
             "vertical force capacity (downward push)".to_string(),
             "N".to_string(),
@@ -656,6 +690,9 @@ where
             values(&|m| Some(m.effective_mass)),
         ),
     ];
+    if ws.is_none() {
+        maps.clear();
+    }
     let joints = L::joint_positions(q, p);
     let tips = L::link_tips(q, p);
     let mut links: Vec<[f64; 4]> = (0..NQ)
@@ -674,14 +711,15 @@ where
     }
     let foot = L::foot_position(q, p);
     View {
-        nodes: ws.nodes,
-        origin: ws.origin,
-        step: ws.step,
+        nodes: ws.map_or(0, |w| w.nodes),
+        origin: ws.map_or([0.0; 2], |w| w.origin),
+        step: ws.map_or(0.0, |w| w.step),
         maps,
-        passive: ws.passive_curves.clone(),
-        foot: ws.foot_curves.clone(),
+        passive: ws.map_or_else(Vec::new, |w| w.passive_curves.clone()),
+        foot: ws.map_or_else(Vec::new, |w| w.foot_curves.clone()),
         links,
         stance: [foot[0], foot[1]],
+        path: Vec::new(),
     }
 }
 
