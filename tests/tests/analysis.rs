@@ -116,6 +116,30 @@ fn grid<const NU: usize>(nodes: usize) -> GridOptions<NU> {
     }
 }
 
+/// The leg's spec parameters, its frame, its home pose and a grid of `nodes` a side over
+/// its workspace; `None` (recorded as not applicable to `check`) where the grid does not
+/// apply to the leg.
+#[allow(clippy::type_complexity)]
+fn leg_grid<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
+    check: &str,
+    nodes: usize,
+) -> Option<(
+    L::Params<f64>,
+    LegFrame<NQ>,
+    SVector<f64, NQ>,
+    Workspace<NQ, NU>,
+)> {
+    let frame = LegFrame::of::<L, NC, NU>();
+    if let Err(why) = frame.foot_polygons() {
+        not_applicable(L::NAME, check, &why);
+        return None;
+    }
+    let p = L::Params::<f64>::default();
+    let start = home::<L, NQ, NC, NU>(&p);
+    let ws = workspace::<L, NQ, NC, NU>(&p, &start, &frame, &grid::<NU>(nodes)).unwrap();
+    Some((p, frame, start, ws))
+}
+
 /// Every measure on every leg: computed where the leg's structure allows it (finite,
 /// with a workspace of positive area), refused with the structure's reason elsewhere.
 pub fn check_every_measure<
@@ -182,13 +206,11 @@ pub fn check_force_polygon<
     const NC: usize,
     const NU: usize,
 >() {
-    let frame = LegFrame::of::<L, NC, NU>();
-    if let Err(why) = frame.foot_polygons() {
-        return not_applicable(L::NAME, "force polygon against statics", &why);
-    }
-    let p = L::Params::<f64>::default();
-    let start = home::<L, NQ, NC, NU>(&p);
-    let ws = workspace::<L, NQ, NC, NU>(&p, &start, &frame, &grid::<NU>(30)).unwrap();
+    let Some((p, frame, start, ws)) =
+        leg_grid::<L, NQ, NC, NU>("force polygon against statics", 30)
+    else {
+        return;
+    };
     let mut rng = Rng::new(7);
     let torque = limits::<NU>(2.0, 1.0).torque;
     let mut checked = 0;
@@ -383,13 +405,9 @@ pub fn check_singularities<
     const NC: usize,
     const NU: usize,
 >() {
-    let frame = LegFrame::of::<L, NC, NU>();
-    if let Err(why) = frame.foot_polygons() {
-        return not_applicable(L::NAME, "singularity curves", &why);
-    }
-    let p = L::Params::<f64>::default();
-    let start = home::<L, NQ, NC, NU>(&p);
-    let ws = workspace::<L, NQ, NC, NU>(&p, &start, &frame, &grid::<NU>(60)).unwrap();
+    let Some((p, frame, start, ws)) = leg_grid::<L, NQ, NC, NU>("singularity curves", 60) else {
+        return;
+    };
     let n = ws.nodes;
     let tol = Tolerance::default();
     let foot_at = |a: [f64; 2], b: [f64; 2], t: f64| {

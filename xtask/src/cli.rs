@@ -88,6 +88,39 @@ pub fn numbers(flag: &str, text: &str, n: usize, what: &str) -> Result<Vec<f64>,
     }
 }
 
+/// Rows of cells as aligned text columns, two spaces apart, one line a row; the columns
+/// for which `right` holds are right-aligned (numbers).
+pub fn text_table<R: AsRef<[String]>>(rows: &[R], right: impl Fn(usize) -> bool) -> String {
+    let columns = rows.iter().map(|r| r.as_ref().len()).max().unwrap_or(0);
+    let widths: Vec<usize> = (0..columns)
+        .map(|c| {
+            rows.iter()
+                .map(|r| r.as_ref().get(c).map_or(0, |s| s.chars().count()))
+                .max()
+                .unwrap_or(0)
+        })
+        .collect();
+    let mut out = String::new();
+    for r in rows {
+        let cells: Vec<String> = r
+            .as_ref()
+            .iter()
+            .zip(&widths)
+            .enumerate()
+            .map(|(c, (cell, &w))| {
+                if right(c) {
+                    format!("{cell:>w$}")
+                } else {
+                    format!("{cell:<w$}")
+                }
+            })
+            .collect();
+        out.push_str(cells.join("  ").trim_end());
+        out.push('\n');
+    }
+    out
+}
+
 /// Writes through a temporary file and a rename: a reader never sees half a file, and a
 /// failure leaves nothing behind.
 pub fn write_atomic(path: &Path, text: &str) -> Result<(), String> {

@@ -165,24 +165,7 @@ fn list(root: &Path) -> Result<(), cli::Error> {
             spec.path.display().to_string(),
         ]);
     }
-    let widths: Vec<usize> = (0..8)
-        .map(|c| rows.iter().map(|r| r[c].chars().count()).max().unwrap_or(0))
-        .collect();
-    for r in &rows {
-        let cells: Vec<String> = r
-            .iter()
-            .zip(&widths)
-            .enumerate()
-            .map(|(c, (cell, &w))| {
-                if (1..=4).contains(&c) {
-                    format!("{cell:>w$}")
-                } else {
-                    format!("{cell:<w$}")
-                }
-            })
-            .collect();
-        println!("{}", cells.join("  ").trim_end());
-    }
+    print!("{}", cli::text_table(&rows, |c| (1..=4).contains(&c)));
     Ok(())
 }
 
