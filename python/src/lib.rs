@@ -8,6 +8,8 @@
 //! generated crate (`generated::for_each_model!`): a new spec is a new class after
 //! `cargo xtask gen` and a rebuild, with nothing to write here.
 
+use leg_models::analysis::workspace::{GridOptions, NodeState, Segment};
+use leg_models::analysis::{AnalysisError as RustAnalysisError, Body, MotorLimits, Polygon};
 use leg_models::assembly::AssemblyError as RustAssemblyError;
 use leg_models::control::{ControlError as RustControlError, Gains, Saturated};
 use leg_models::dynamics::DynamicsError as RustDynamicsError;
@@ -16,9 +18,9 @@ use leg_models::linearize::LinearizationError as RustLinearizationError;
 use leg_models::nalgebra::{SMatrix, SVector};
 use leg_models::reference::Sinusoid;
 use leg_models::{ContactModel, Leg};
-use numpy::ndarray::Array2;
+use numpy::ndarray::{Array2, Array3};
 use numpy::{
-    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
+    PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
 };
 use pyo3::exceptions::{PyException, PyValueError};
 use pyo3::prelude::*;
@@ -62,6 +64,12 @@ pyo3::create_exception!(
 );
 pyo3::create_exception!(
     legmodels,
+    AnalysisError,
+    LegError,
+    "A design measure does not apply to this leg (the message says why), or the pose is singular."
+);
+pyo3::create_exception!(
+    legmodels,
     ParameterError,
     LegError,
     "The leg has no parameter of that name."
@@ -89,6 +97,41 @@ fn parameter_err(e: leg_models::ParameterError<'_>) -> PyErr {
 }
 fn linearization_err(e: RustLinearizationError) -> PyErr {
     LinearizationError::new_err(e.to_string())
+}
+fn analysis_err(e: RustAnalysisError) -> PyErr {
+    AnalysisError::new_err(e.to_string())
+}
+
+/// A motor limit: one positive number for every motor, or one per motor.
+fn per_motor<const N: usize>(name: &str, value: &Bound<'_, PyAny>) -> PyResult<SVector<f64, N>> {
+    let v: SVector<f64, N> = match value.extract::<f64>() {
+        Ok(x) => SVector::from_element(x),
+        Err(_) => vector(name, value)?,
+    };
+    if let Some(bad) = v.iter().find(|x| !(x.is_finite() && **x > 0.0)) {
+        return Err(PyValueError::new_err(format!(
+            "`{name}` must be positive and finite, got {bad}"
+        )));
+    }
+    Ok(v)
+}
+
+/// A polygon's vertices as an `n × 2` array (counter-clockwise).
+fn out_polygon<'py>(py: Python<'py>, poly: &Polygon<f64>) -> Bound<'py, PyArray2<f64>> {
+    out_rows(py, poly.vertices().iter().copied())
+}
+
+/// Segments as an `n × 2 × 2` array (segment, end, x/y).
+fn out_segments<'py>(py: Python<'py>, segments: &[Segment]) -> Bound<'py, PyArray3<f64>> {
+    let mut a = Array3::zeros((segments.len(), 2, 2));
+    for (i, s) in segments.iter().enumerate() {
+        for e in 0..2 {
+            for c in 0..2 {
+                a[[i, e, c]] = s[e][c];
+            }
+        }
+    }
+    PyArray3::from_owned_array(py, a)
 }
 
 /// A vector argument of length `N`: a numpy array of floats (no copy until here) or any
@@ -767,6 +810,156 @@ macro_rules! leg_class {
                     }
                 }
 
+                // ---- design measures (leg_models::analysis) ----
+
+                /// Every design measure at the assembled pose `q`, with the joints' torque
+                /// limits `torque_limit` (N m after the gearbox) and speed limits
+                /// `speed_limit` (rad/s), each one number for every motor or one per motor.
+                /// Dict: held_joints (the body's joints, held: indices), foot, motor_angles,
+                /// G (q̇ = G θ̇, the held joints at rest), foot_jacobian (J_θ = J_f G),
+                /// passive_rank and foot_rank (zero at the two kinds of singularity),
+                /// condition (κ(J_θ); inf with one motor), holding_torque, force_polygon and
+                /// speed_polygon (vertices counter-clockwise; None with one motor),
+                /// vertical_force (the largest downward push; None where there is none),
+                /// vertical_speed, inverse_inertia and inverse_inertia_locked (the foot's
+                /// Λ⁻¹ with the motors free and locked, 1/kg) and effective_mass (kg).
+                fn design_measures<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, torque_limit: &Bound<'py, PyAny>, speed_limit: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
+                    let q = vector("q", q)?;
+                    let limits = MotorLimits { torque: per_motor("torque_limit", torque_limit)?, speed: per_motor("speed_limit", speed_limit)? };
+                    let m = self.leg.design_measures(&q, &limits).map_err(analysis_err)?;
+                    let kin = &m.kinematics;
+                    let params = self.leg.params();
+                    let hold = leg_models::analysis::holding_torque::<Model, f64, NQ, NC, NU>(params, &q, kin);
+                    let frame = self.leg.analysis_frame();
+                    let polygons = frame.foot_polygons().is_ok();
+                    let held: Vec<usize> = (0..NQ).filter(|&j| frame.held[j]).collect();
+                    let d = PyDict::new(py);
+                    d.set_item("held_joints", held)?;
+                    d.set_item("foot", out_vector(py, &m.foot))?;
+                    d.set_item("motor_angles", out_vector(py, &m.motor_angles))?;
+                    d.set_item("G", out_matrix(py, &kin.g))?;
+                    d.set_item("foot_jacobian", out_matrix(py, &kin.foot_jacobian))?;
+                    d.set_item("passive_rank", m.passive_rank)?;
+                    d.set_item("foot_rank", m.foot_rank)?;
+                    d.set_item("condition", m.condition)?;
+                    d.set_item("holding_torque", out_vector(py, &hold))?;
+                    if polygons {
+                        let force = leg_models::analysis::force_polygon::<Model, f64, NQ, NC, NU>(params, &q, kin, &limits.torque);
+                        let speed = leg_models::analysis::speed_polygon(&kin.foot_jacobian, &limits.speed);
+                        d.set_item("force_polygon", out_polygon(py, &force))?;
+                        d.set_item("speed_polygon", out_polygon(py, &speed))?;
+                    } else {
+                        d.set_item("force_polygon", py.None())?;
+                        d.set_item("speed_polygon", py.None())?;
+                    }
+                    d.set_item("vertical_force", m.vertical_force)?;
+                    d.set_item("vertical_speed", m.vertical_speed)?;
+                    d.set_item("inverse_inertia", out_matrix(py, &m.inverse_inertia))?;
+                    d.set_item("inverse_inertia_locked", out_matrix(py, &m.inverse_inertia_locked))?;
+                    d.set_item("effective_mass", m.effective_mass)?;
+                    Ok(d)
+                }
+
+                /// The foot's inverse operational-space inertia Λ⁻¹ (2 × 2, 1/kg) at the
+                /// assembled pose `q`, the motors free (rotors backdriven) or locked.
+                #[pyo3(signature = (q, motors_locked = false))]
+                fn foot_inverse_inertia<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, motors_locked: bool) -> PyResult<Bound<'py, PyArray2<f64>>> {
+                    let inv = self.leg.foot_inverse_inertia(&vector("q", q)?, motors_locked).map_err(analysis_err)?;
+                    Ok(out_matrix(py, &inv))
+                }
+
+                /// The impact mitigation factor ξ = det(I − Λ Λ_L⁻¹) (Wensing et al. 2017) at
+                /// the assembled pose `q`: with `body_mass` (kg) the hip on a body of that
+                /// mass translating in the plane; without, on a fixed base (a leg with body
+                /// joints of its own uses them).
+                #[pyo3(signature = (q, body_mass = None))]
+                fn impact_mitigation(&self, q: &Bound<'_, PyAny>, body_mass: Option<f64>) -> PyResult<f64> {
+                    let body = match body_mass {
+                        None => Body::Fixed,
+                        Some(mass) if mass.is_finite() && mass > 0.0 => Body::Translating { mass },
+                        Some(mass) => return Err(PyValueError::new_err(format!("`body_mass` must be positive and finite, got {mass}"))),
+                    };
+                    self.leg.impact_mitigation(&vector("q", q)?, &body).map_err(analysis_err)
+                }
+
+                /// The workspace of the assembly branch of `start` (default: the assembled
+                /// home pose) over a grid of `nodes × nodes` foot positions centred on
+                /// `centre` with half-width `half_width` (default: on the hip of the foot's
+                /// chain, as wide as the chain is long), motors within `motor_range` (one
+                /// `(low, high)` per motor; default none). Dict: x, y (the grid's nodes),
+                /// state (`nodes × nodes` strings indexed [iy, ix]: "reached", "branch_ends",
+                /// "out_of_range", "unvisited"), area (m²), the measures as `nodes × nodes`
+                /// arrays (NaN where not reached or singular): condition, vertical_force,
+                /// vertical_speed, effective_mass, foot_rank, passive_rank; poses
+                /// (`nodes × nodes × nq`, NaN where not reached); passive_curves and
+                /// foot_curves (`n × 2 × 2` segments).
+                #[pyo3(signature = (torque_limit, speed_limit, nodes = 200, start = None, centre = None, half_width = None, motor_range = None))]
+                #[allow(clippy::too_many_arguments)]
+                fn workspace<'py>(&self, py: Python<'py>, torque_limit: &Bound<'py, PyAny>, speed_limit: &Bound<'py, PyAny>, nodes: usize, start: Option<&Bound<'py, PyAny>>, centre: Option<(f64, f64)>, half_width: Option<f64>, motor_range: Option<Vec<(f64, f64)>>) -> PyResult<Bound<'py, PyDict>> {
+                    if nodes < 2 {
+                        return Err(PyValueError::new_err(format!("`nodes` must be at least 2, got {nodes}")));
+                    }
+                    let limits = MotorLimits { torque: per_motor("torque_limit", torque_limit)?, speed: per_motor("speed_limit", speed_limit)? };
+                    let start = match start {
+                        Some(q) => vector("start", q)?,
+                        None => self.leg.assembled_home().map_err(assembly_err)?,
+                    };
+                    let window = match (centre, half_width) {
+                        (None, None) => None,
+                        (Some(c), Some(w)) if w.is_finite() && w > 0.0 && c.0.is_finite() && c.1.is_finite() => Some(([c.0, c.1], w)),
+                        (Some(_), Some(w)) => return Err(PyValueError::new_err(format!("`centre` must be finite and `half_width` positive and finite, got {w}"))),
+                        _ => return Err(PyValueError::new_err("give `centre` and `half_width` together")),
+                    };
+                    let motor_range = match motor_range {
+                        None => None,
+                        Some(r) if r.len() == NU && r.iter().all(|&(lo, hi)| lo < hi) => Some(core::array::from_fn(|k| r[k])),
+                        Some(r) => return Err(PyValueError::new_err(format!("`motor_range` needs {NU} pairs (low, high) with low < high, got {r:?}"))),
+                    };
+                    let options = GridOptions { nodes, window, motor_range, limits };
+                    let w = self.leg.workspace(&start, &options).map_err(analysis_err)?;
+                    let n = w.nodes;
+                    let x: Vec<f64> = (0..n).map(|i| w.node(i, 0)[0]).collect();
+                    let y: Vec<f64> = (0..n).map(|i| w.node(0, i)[1]).collect();
+                    let state: Vec<Vec<&str>> = (0..n).map(|iy| (0..n).map(|ix| match w.states[iy * n + ix] {
+                        NodeState::Reached => "reached",
+                        NodeState::BranchEnds => "branch_ends",
+                        NodeState::OutOfRange => "out_of_range",
+                        NodeState::Unvisited => "unvisited",
+                    }).collect()).collect();
+                    let grid = |f: &dyn Fn(&leg_models::analysis::PointMeasures<f64, NQ, NU>) -> Option<f64>| {
+                        let a = Array2::from_shape_fn((n, n), |(iy, ix)| match &w.measures[iy * n + ix] {
+                            Some(Ok(m)) => f(m).unwrap_or(f64::NAN),
+                            _ => f64::NAN,
+                        });
+                        PyArray2::from_owned_array(py, a)
+                    };
+                    let mut poses = Array3::from_elem((n, n, NQ), f64::NAN);
+                    for iy in 0..n {
+                        for ix in 0..n {
+                            if w.states[iy * n + ix] == NodeState::Reached {
+                                for j in 0..NQ {
+                                    poses[[iy, ix, j]] = w.poses[iy * n + ix][j];
+                                }
+                            }
+                        }
+                    }
+                    let d = PyDict::new(py);
+                    d.set_item("x", x)?;
+                    d.set_item("y", y)?;
+                    d.set_item("state", state)?;
+                    d.set_item("area", w.area)?;
+                    d.set_item("condition", grid(&|m| Some(m.condition)))?;
+                    d.set_item("vertical_force", grid(&|m| m.vertical_force))?;
+                    d.set_item("vertical_speed", grid(&|m| Some(m.vertical_speed)))?;
+                    d.set_item("effective_mass", grid(&|m| Some(m.effective_mass)))?;
+                    d.set_item("foot_rank", grid(&|m| Some(m.foot_rank)))?;
+                    d.set_item("passive_rank", PyArray2::from_owned_array(py, Array2::from_shape_fn((n, n), |(iy, ix)| w.passive_rank[iy * n + ix])))?;
+                    d.set_item("poses", PyArray3::from_owned_array(py, poses))?;
+                    d.set_item("passive_curves", out_segments(py, &w.passive_curves))?;
+                    d.set_item("foot_curves", out_segments(py, &w.foot_curves))?;
+                    Ok(d)
+                }
+
                 // ---- linearization and LQR ----
 
                 /// One step of `dt` linearized on the constraint manifold at the rest pose
@@ -833,6 +1026,7 @@ fn legmodels(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("LinearizationError", py.get_type::<LinearizationError>())?;
     m.add("SimulationError", py.get_type::<SimulationError>())?;
     m.add("ParameterError", py.get_type::<ParameterError>())?;
+    m.add("AnalysisError", py.get_type::<AnalysisError>())?;
     let module = m;
     // Defined here so that `module` in its body is this function's.
     macro_rules! register {

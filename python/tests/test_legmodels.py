@@ -230,6 +230,8 @@ def test_the_readme_example_runs():
     exec(compile(code, "README.md", "exec"), namespace)
     assert namespace["run"]["q"].shape == (1001, 4)
     assert np.isfinite(namespace["d"]["qdd_q"]).all()
+    areas = namespace["areas"]
+    assert 0 < areas[0.16] < areas[0.20] < areas[0.24], areas
 
 
 @pytest.mark.parametrize("name", SPECS)
