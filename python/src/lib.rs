@@ -20,7 +20,8 @@ use leg_models::reference::Sinusoid;
 use leg_models::{ContactModel, Leg};
 use numpy::ndarray::{Array2, Array3};
 use numpy::{
-    PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
+    PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
+    PyUntypedArrayMethods,
 };
 use pyo3::exceptions::{PyException, PyValueError};
 use pyo3::prelude::*;
