@@ -47,7 +47,7 @@ use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
 
 use crate::assembly::AssemblyError;
 use crate::dynamics::rcond_floor;
-use crate::linalg::{mul, mul_tn, Cholesky, PivotedLdlt};
+use crate::linalg::{mul, mul_tn, Cholesky, Lu, PivotedLdlt};
 use crate::model::{LegModel, Parameters, Real};
 use crate::structure::{Actuation, NotApplicable};
 
@@ -416,7 +416,8 @@ where
     })
 }
 
-/// The singular values `(σ_max, σ_min)` of a `2 × N` matrix (closed form of `A Aᵀ`).
+/// The singular values `(σ_max, σ_min)` of a `2 × N` matrix (closed form of `A Aᵀ`;
+/// `σ_min² = det(A Aᵀ) / σ_max²`, which keeps its digits where `σ_min ≪ σ_max`).
 pub fn singular_values<T: Real, const N: usize>(a: &SMatrix<T, 2, N>) -> (T, T) {
     let s = mul(a, &a.transpose());
     let half = T::lit(0.5);
@@ -424,27 +425,83 @@ pub fn singular_values<T: Real, const N: usize>(a: &SMatrix<T, 2, N>) -> (T, T) 
     let diff = (s[(0, 0)] - s[(1, 1)]) * half;
     let root = (diff * diff + s[(0, 1)] * s[(1, 0)]).sqrt();
     let hi = tr * half + root;
-    let lo = (tr * half - root).max(T::zero());
-    (hi.sqrt(), lo.sqrt())
+    if hi <= T::zero() {
+        return (T::zero(), T::zero());
+    }
+    let det = (s[(0, 0)] * s[(1, 1)] - s[(0, 1)] * s[(1, 0)]).max(T::zero());
+    (hi.sqrt(), (det / hi).sqrt())
 }
 
-/// The foot's rank measure in motor coordinates: with two motors `det J_θ / (|c₁| |c₂|)`
-/// (signed, zero exactly where the foot loses a direction); otherwise `σ_min / σ_max`.
-pub fn foot_rank<T: Real, const NU: usize>(jt: &SMatrix<T, 2, NU>) -> T {
-    if NU == 2 {
-        let (c0, c1) = (jt.column(0).norm(), jt.column(1).norm());
-        if c0 == T::zero() || c1 == T::zero() {
+/// The foot's rank measure ("type I") at pose `q` with motor kinematics `kin`:
+/// `σ_min / σ_max` of `J_f Q`, `Q` an orthonormal basis of the motions the mechanism
+/// has with the held joints at rest (the span of `G`). It depends on where the foot can
+/// move and not on how the motors parametrize that motion: zero exactly where the foot
+/// loses a direction, and finite where the passive joints lose rank (there `J_θ = J_f G`
+/// blows up and its columns align, so a measure of `J_θ`'s own shape would vanish).
+/// Where the closures and the foot make a square system `K = [J; J_f]` over the free
+/// joints (two motors, no redundant rows) it carries the sign of `det K = ± det J_p ·
+/// det J_θ`, which changes across a foot singularity and not across a passive one.
+/// Zero with one motor (the foot has one direction).
+pub fn foot_rank<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+    frame: &LegFrame<NQ>,
+    kin: &MotorKinematics<T, NQ, NU>,
+) -> T
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    // Gram–Schmidt, twice per column: G's columns can be nearly parallel near a passive
+    // singularity (their passive parts grow alike).
+    let mut basis = kin.g;
+    for k in 0..NU {
+        for _ in 0..2 {
+            for i in 0..k {
+                let along = basis.column(i).dot(&basis.column(k));
+                let prev = basis.column(i).into_owned();
+                basis.column_mut(k).axpy(-along, &prev, T::one());
+            }
+        }
+        let norm = basis.column(k).norm();
+        if norm == T::zero() || !norm.is_finite() {
             return T::zero();
         }
-        (jt[(0, 0)] * jt[(1, 1)] - jt[(0, 1)] * jt[(1, 0)]) / (c0 * c1)
-    } else {
-        let (hi, lo) = singular_values(jt);
-        if hi == T::zero() {
-            T::zero()
-        } else {
-            lo / hi
+        basis.column_mut(k).unscale_mut(norm);
+    }
+    let jf = L::foot_jacobian(q, params);
+    let (hi, lo) = singular_values(&mul(&jf, &basis));
+    if hi == T::zero() || NU < 2 {
+        return T::zero();
+    }
+    let held = frame.held.iter().filter(|&&h| h).count();
+    if NU == 2 && L::REDUNDANT_ROWS == 0 && NC + 2 + held == NQ {
+        // K over the free joints, written NQ × NQ with a unit row per held joint (their
+        // columns cleared elsewhere, which leaves the determinant as it is).
+        let j = L::constraint_jacobian(q, params);
+        let mut k = SMatrix::<T, NQ, NQ>::zeros();
+        let mut row = 0;
+        for r in 0..NC {
+            k.row_mut(row).copy_from(&j.row(r));
+            row += 1;
+        }
+        for r in 0..2 {
+            k.row_mut(row).copy_from(&jf.row(r));
+            row += 1;
+        }
+        for c in 0..NQ {
+            if frame.held[c] {
+                k.column_mut(c).fill(T::zero());
+                k[(row, c)] = T::one();
+                row += 1;
+            }
+        }
+        // Where K is singular to rounding the measure is zero to rounding: no sign.
+        if Lu::new(&k).is_some_and(|lu| lu.determinant() < T::zero()) {
+            return -lo / hi;
         }
     }
+    lo / hi
 }
 
 /// A convex polygon in the plane, vertices counter-clockwise, on the stack.
@@ -888,8 +945,9 @@ pub struct PointMeasures<T: Real, const NQ: usize, const NU: usize> {
     /// Passive joints' rank ("type II"): signed Hadamard ratio of `J_p` where it is square,
     /// `√rcond(J_p J_pᵀ)` otherwise; zero at the singularity.
     pub passive_rank: T,
-    /// Foot's rank in motor coordinates ("type I"): `det J_θ / (|c₁||c₂|)` with two motors,
-    /// `σ_min / σ_max` otherwise; zero at the singularity.
+    /// Foot's rank ("type I", [`foot_rank`]): `σ_min / σ_max` of the foot's Jacobian on an
+    /// orthonormal basis of the mechanism's motions, signed where that is square; zero
+    /// at the singularity, finite at a passive one.
     pub foot_rank: T,
     /// `κ(J_θ) = σ_max / σ_min` (infinite with one motor: `J_θ` has rank one).
     pub condition: T,
@@ -936,7 +994,7 @@ where
         motor_angles: SVector::<T, NU>::from_fn(|k, _| q[L::ACTUATED[k]]),
         kinematics: kin,
         passive_rank: kin.passive_rank,
-        foot_rank: foot_rank(&jt),
+        foot_rank: foot_rank::<L, T, NQ, NC, NU>(params, q, frame, &kin),
         condition,
         vertical_force: if two {
             vertical_force(&jt, &hold, &limits.torque)
