@@ -809,6 +809,41 @@ fn five_bar_workspace_is_the_intersection_of_the_annuli() {
     assert!((ws.area - annulus).abs() < 0.03 * annulus, "{}", ws.area);
 }
 
+/// A motor range that leaves out the starting pose is named as such, not as a branch
+/// that ends at once; a range around it limits the workspace to the motors' range.
+#[test]
+fn a_motor_range_without_the_start_is_refused_with_its_reason() {
+    type L = generated::Minitaur;
+    let p = generated::minitaur::Params::<f64>::default();
+    let frame = LegFrame::of::<L, 2, 2>();
+    let q = home::<L, 4, 2, 2>(&p);
+    let theta = [q[L::ACTUATED[0]], q[L::ACTUATED[1]]];
+    let mut options = grid::<2>(30);
+    options.motor_range = Some([(theta[0] + 0.1, theta[0] + 1.0), (-10.0, 10.0)]);
+    let e = workspace::<L, 4, 2, 2>(&p, &q, &frame, &options).unwrap_err();
+    assert_eq!(
+        e,
+        AnalysisError::StartOutOfRange {
+            motor: 0,
+            angle: theta[0],
+            range: (theta[0] + 0.1, theta[0] + 1.0)
+        }
+    );
+    assert!(e.to_string().contains("outside the motor range"), "{e}");
+    options.motor_range = Some([
+        (theta[0] - 0.3, theta[0] + 0.3),
+        (theta[1] - 0.3, theta[1] + 0.3),
+    ]);
+    let ws = workspace::<L, 4, 2, 2>(&p, &q, &frame, &options).unwrap();
+    for (state, pose) in ws.states.iter().zip(&ws.poses) {
+        if *state == NodeState::Reached {
+            for (k, &a) in L::ACTUATED.iter().enumerate() {
+                assert!((pose[a] - theta[k]).abs() <= 0.3 + 1e-12);
+            }
+        }
+    }
+}
+
 /// The impact mitigation factor of a leg on a translating body against the same leg
 /// written with its body: `two_link` given `knee_runner`'s thigh and shin, on a body of
 /// the runner's torso mass, and `knee_runner` with its torso's pitch inertia made huge.

@@ -883,6 +883,45 @@ fn analyze_refuses_bad_input_and_writes_nothing() {
             vec!["analyze", "minitaur", "--nodes", "5", "--out", d],
             "10..=2000",
         ),
+        (
+            vec!["analyze", "minitaur", "--set", "foo=1", "--out", d],
+            "its parameters: ",
+        ),
+        (
+            vec![
+                "analyze",
+                "minitaur",
+                "--set",
+                "upper_a_mass=-1",
+                "--out",
+                d,
+            ],
+            "`upper_a_mass` is a mass or an inertia and cannot be negative",
+        ),
+        (
+            vec![
+                "analyze",
+                "minitaur",
+                "--sweep",
+                "upper_a_mass=-0.1:0.1:3",
+                "--out",
+                d,
+            ],
+            "cannot be negative",
+        ),
+        (
+            vec![
+                "analyze",
+                "minitaur",
+                "--set",
+                "lower_a_length_x=0.22",
+                "--sweep",
+                "lower_a_length_x=0.16:0.26:3",
+                "--out",
+                d,
+            ],
+            "is both set (`--set`) and swept (`--sweep`)",
+        ),
         (vec!["analyze", "--out", d], "MODEL"),
     ] {
         let out = legs(&args);

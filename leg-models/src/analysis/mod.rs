@@ -127,6 +127,16 @@ pub enum AnalysisError {
     MassMatrix,
     /// An input or a result is NaN or infinite.
     NonFinite,
+    /// The starting pose has motor `motor` (0-based, in `ACTUATED` order) at `angle`,
+    /// outside the range `(low, high)` the workspace is limited to.
+    StartOutOfRange {
+        /// The motor.
+        motor: usize,
+        /// Its angle at the start (rad, or m).
+        angle: f64,
+        /// The range.
+        range: (f64, f64),
+    },
 }
 
 impl fmt::Display for AnalysisError {
@@ -143,6 +153,15 @@ impl fmt::Display for AnalysisError {
             ),
             AnalysisError::MassMatrix => write!(f, "the mass matrix is not positive definite"),
             AnalysisError::NonFinite => write!(f, "non-finite input or result"),
+            AnalysisError::StartOutOfRange {
+                motor,
+                angle,
+                range: (low, high),
+            } => write!(
+                f,
+                "the starting pose has motor {} at {angle:.4}, outside the motor range {low}:{high}: start from a pose in range (or widen the range)",
+                motor + 1
+            ),
         }
     }
 }

@@ -209,6 +209,17 @@ where
                 .all(|(&a, &(lo, hi))| q[a] >= lo && q[a] <= hi)
         })
     };
+    if let Some(r) = &options.motor_range {
+        for (k, (&a, &range)) in L::ACTUATED.iter().zip(r.iter()).enumerate() {
+            if !(start[a] >= range.0 && start[a] <= range.1) {
+                return Err(AnalysisError::StartOutOfRange {
+                    motor: k,
+                    angle: start[a],
+                    range,
+                });
+            }
+        }
+    }
     let mut states = vec![NodeState::Unvisited; n * n];
     let mut poses = vec![SVector::<f64, NQ>::zeros(); n * n];
     let mut queue = VecDeque::new();

@@ -76,10 +76,9 @@ impl Settings {
                     xtask::spec::shown(s)
                 )));
             };
-            sets.push((
-                name.trim().to_string(),
-                finite("--set", value, "the parameter's value")?,
-            ));
+            let value = finite("--set", value, "the parameter's value")?;
+            nonnegative("--set", name.trim(), value)?;
+            sets.push((name.trim().to_string(), value));
         }
         let sweep = match &a.sweep {
             None => None,
@@ -113,6 +112,14 @@ impl Settings {
                     .collect();
                 if names.is_empty() {
                     return Err(bad());
+                }
+                for n in &names {
+                    nonnegative("--sweep", n, from.min(to))?;
+                    if sets.iter().any(|(set, _)| set == n) {
+                        return Err(Error::usage(format!(
+                            "`{n}` is both set (`--set`) and swept (`--sweep`): the sweep gives its values; drop the `--set`"
+                        )));
+                    }
                 }
                 Some(Sweep {
                     names,
@@ -213,15 +220,31 @@ where
         .iter()
         .position(|n| *n == name)
         .ok_or_else(|| {
-            Error::usage(
-                ParameterError::Unknown {
-                    name,
-                    leg: L::NAME,
-                    known: L::Params::<f64>::NAMES,
-                }
-                .to_string(),
-            )
+            let e = ParameterError::Unknown {
+                name,
+                leg: L::NAME,
+                known: L::Params::<f64>::NAMES,
+            };
+            match e.suggestion() {
+                Some(_) => Error::usage(e.to_string()),
+                // Nothing close: the names themselves, so that the next try can be right.
+                None => Error::usage(format!(
+                    "leg `{}` has no parameter `{name}`; its parameters: {}",
+                    L::NAME,
+                    L::Params::<f64>::NAMES.join(", ")
+                )),
+            }
         })
+}
+
+/// Masses and inertias cannot be negative (a negative one makes `M` indefinite).
+fn nonnegative(flag: &str, name: &str, value: f64) -> Result<(), Error> {
+    if value < 0.0 && (name.ends_with("_mass") || name.ends_with("_inertia")) {
+        return Err(Error::usage(format!(
+            "`{flag}`: `{name}` is a mass or an inertia and cannot be negative (got {value})"
+        )));
+    }
+    Ok(())
 }
 
 fn number(x: f64) -> Value {
