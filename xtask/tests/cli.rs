@@ -922,6 +922,23 @@ fn analyze_refuses_bad_input_and_writes_nothing() {
             ],
             "is both set (`--set`) and swept (`--sweep`)",
         ),
+        (
+            vec![
+                "analyze",
+                "minitaur",
+                "--nodes",
+                "2000",
+                "--sweep",
+                "lower_a_length_x=0.16:0.26:3",
+                "--out",
+                d,
+            ],
+            "12.0 million grid nodes",
+        ),
+        (
+            vec!["analyze", "minitaur", "atrias", "minitaur", "--out", d],
+            "`minitaur` is given twice",
+        ),
         (vec!["analyze", "--out", d], "MODEL"),
     ] {
         let out = legs(&args);

@@ -627,7 +627,8 @@ fn slab_polygon<T: Real, const NU: usize>(
 
 /// The foot forces (N, on the ground, base frame) the motors hold at rest at pose `q`
 /// within `torque` limits: `|Gᵀ G(q) + J_θᵀ f|_k ≤ τ_k`, gravity and springs included.
-/// Empty where the motors cannot hold the leg itself.
+/// Where the motors cannot hold the leg itself within their limits the polygon leaves
+/// out `f = 0` (with two motors it is never empty; with more it can be).
 pub fn force_polygon<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     params: &L::Params<T>,
     q: &SVector<T, NQ>,
@@ -656,14 +657,17 @@ where
 }
 
 /// The largest downward push `F ≥ 0` (the foot putting `(0, −F)` on the ground) the
-/// motors hold at rest within `torque`; `None` where no downward force can be held.
+/// motors hold at rest within `torque`; `None` where no downward force can be held,
+/// infinite where no motor takes any of it (the structure holds it all).
 pub fn vertical_force<T: Real, const NU: usize>(
     foot_jacobian: &SMatrix<T, 2, NU>,
     hold: &SVector<T, NU>,
     torque: &SVector<T, NU>,
 ) -> Option<T> {
     // u_k = hold_k − F a_k with a_k = J_θ[1, k]: F within [lo, hi] for every motor.
-    let (mut lo, mut hi) = (T::zero(), T::max_value().unwrap_or_else(|| T::lit(1e300)));
+    // Unbounded until a motor bounds it: infinite where no motor is loaded by a vertical
+    // force (the structure holds it).
+    let (mut lo, mut hi) = (T::zero(), T::one() / T::zero());
     for k in 0..NU {
         let a = foot_jacobian[(1, k)];
         let (below, above) = (-torque[k] - hold[k], torque[k] - hold[k]);
@@ -679,7 +683,7 @@ pub fn vertical_force<T: Real, const NU: usize>(
             hi = hi.min(to);
         }
     }
-    (lo <= hi && hi.is_finite()).then_some(hi)
+    (lo <= hi).then_some(hi)
 }
 
 /// The foot velocities reachable with motor speeds `|θ̇_k| ≤ ω_k`: the zonotope
@@ -738,7 +742,8 @@ pub fn vertical_speed<T: Real, const NU: usize>(
 /// the origin (zero when it does not).
 pub fn ray_reach<T: Real>(poly: &Polygon<T>, d: &Vector2<T>) -> T {
     let v = poly.vertices();
-    let mut best = T::max_value().unwrap_or_else(|| T::lit(1e300));
+    // Infinite if no edge faces the ray (a degenerate polygon, unbounded that way).
+    let mut best = T::one() / T::zero();
     if v.len() < 3 {
         return T::zero();
     }

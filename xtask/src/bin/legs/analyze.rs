@@ -56,6 +56,9 @@ impl Sweep {
     }
 }
 
+/// The most grid nodes over all the designs of one run.
+const MAX_NODES: usize = 10_000_000;
+
 fn finite(flag: &str, text: &str, what: &str) -> Result<f64, Error> {
     match text.trim().parse::<f64>() {
         Ok(x) if x.is_finite() => Ok(x),
@@ -164,6 +167,28 @@ impl Settings {
                 Some((lo, hi))
             }
         };
+        if let Some(m) = a
+            .models
+            .iter()
+            .enumerate()
+            .find_map(|(i, m)| a.models[..i].contains(m).then_some(m))
+        {
+            return Err(Error::usage(format!(
+                "`{m}` is given twice: each design once"
+            )));
+        }
+        // Every design's grid and CSV are held until all are done (nothing is written
+        // before): bound their total, about 250 bytes a node.
+        let designs = sweep.as_ref().map_or(a.models.len(), |s| s.count);
+        let total = (a.nodes as usize).pow(2) * designs;
+        if total > MAX_NODES {
+            return Err(Error::usage(format!(
+                "`--nodes {}` for {designs} designs is {:.1} million grid nodes; one run takes at most {} million (held in memory until every design is done): fewer nodes or designs",
+                a.nodes,
+                total as f64 / 1e6,
+                MAX_NODES / 1_000_000
+            )));
+        }
         Ok(Settings {
             sets,
             sweep,
