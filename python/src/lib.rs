@@ -887,7 +887,7 @@ macro_rules! leg_class {
                 /// home pose) over a grid of `nodes × nodes` foot positions centred on
                 /// `centre` with half-width `half_width` (default: on the hip of the foot's
                 /// chain, as wide as the chain is long), motors within `motor_range` (one
-                /// `(low, high)` per motor; default none). Dict: x, y (the grid's nodes),
+                /// `(low, high)` per motor, a revolute one modulo a turn; default none). Dict: x, y (the grid's nodes),
                 /// state (`nodes × nodes` strings indexed [iy, ix]: "reached", "branch_ends",
                 /// "out_of_range", "unvisited"), area (m²), the measures as `nodes × nodes`
                 /// arrays (NaN where not reached or singular): condition, vertical_force,

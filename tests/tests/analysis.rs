@@ -812,7 +812,7 @@ fn five_bar_workspace_is_the_intersection_of_the_annuli() {
 /// A motor range that leaves out the starting pose is named as such, not as a branch
 /// that ends at once; a range around it limits the workspace to the motors' range.
 #[test]
-fn a_motor_range_without_the_start_is_refused_with_its_reason() {
+fn motor_ranges_refuse_a_start_outside_and_count_angles_modulo_a_turn() {
     type L = generated::Minitaur;
     let p = generated::minitaur::Params::<f64>::default();
     let frame = LegFrame::of::<L, 2, 2>();
@@ -835,13 +835,25 @@ fn a_motor_range_without_the_start_is_refused_with_its_reason() {
         (theta[1] - 0.3, theta[1] + 0.3),
     ]);
     let ws = workspace::<L, 4, 2, 2>(&p, &q, &frame, &options).unwrap();
+    let turn = std::f64::consts::TAU;
     for (state, pose) in ws.states.iter().zip(&ws.poses) {
         if *state == NodeState::Reached {
             for (k, &a) in L::ACTUATED.iter().enumerate() {
-                assert!((pose[a] - theta[k]).abs() <= 0.3 + 1e-12);
+                let d = pose[a] - theta[k];
+                assert!((d - turn * (d / turn).round()).abs() <= 0.3 + 1e-12);
             }
         }
     }
+    // A range of a whole turn limits nothing: the fronts that meet around the
+    // annulus's hole carry angles a turn apart, the same poses.
+    options.motor_range = Some([
+        (theta[0] - 3.2, theta[0] + 3.2),
+        (theta[1] - 3.2, theta[1] + 3.2),
+    ]);
+    let whole = workspace::<L, 4, 2, 2>(&p, &q, &frame, &options).unwrap();
+    options.motor_range = None;
+    let free = workspace::<L, 4, 2, 2>(&p, &q, &frame, &options).unwrap();
+    assert_eq!(whole.area, free.area);
 }
 
 /// The impact mitigation factor of a leg on a translating body against the same leg

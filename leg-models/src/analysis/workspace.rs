@@ -23,7 +23,8 @@ pub struct GridOptions<const NU: usize> {
     /// The grid's centre and half-width (m); `None`: centred on the hip of the foot's
     /// chain, as wide as that chain is long.
     pub window: Option<([f64; 2], f64)>,
-    /// Motor angle range `(low, high)` per motor (rad); `None`: no limit.
+    /// Motor angle range `(low, high)` per motor (rad, a revolute motor's modulo a turn;
+    /// m on a slider); `None`: no limit.
     pub motor_range: Option<[(f64, f64); NU]>,
     /// Torque and speed limits of the force and speed measures.
     pub limits: MotorLimits<f64, NU>,
@@ -201,17 +202,27 @@ where
         max_iterations: 30,
         ..Tolerance::default()
     };
+    // A revolute motor's angle is in range if it is there modulo a turn: the fronts of
+    // the continuation can reach one node with angles a turn apart (around a hole in
+    // the workspace), and both are the same pose.
+    let motor_in = |a: usize, x: f64, (lo, hi): (f64, f64)| {
+        if L::JOINT_KINDS[a] == crate::model::JointKind::Revolute {
+            lo + (x - lo).rem_euclid(core::f64::consts::TAU) <= hi
+        } else {
+            x >= lo && x <= hi
+        }
+    };
     let in_range = |q: &SVector<f64, NQ>| {
         options.motor_range.is_none_or(|r| {
             L::ACTUATED
                 .iter()
                 .zip(r.iter())
-                .all(|(&a, &(lo, hi))| q[a] >= lo && q[a] <= hi)
+                .all(|(&a, &range)| motor_in(a, q[a], range))
         })
     };
     if let Some(r) = &options.motor_range {
         for (k, (&a, &range)) in L::ACTUATED.iter().zip(r.iter()).enumerate() {
-            if !(start[a] >= range.0 && start[a] <= range.1) {
+            if !motor_in(a, start[a], range) {
                 return Err(AnalysisError::StartOutOfRange {
                     motor: k,
                     angle: start[a],
