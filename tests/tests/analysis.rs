@@ -856,6 +856,43 @@ fn motor_ranges_refuse_a_start_outside_and_count_angles_modulo_a_turn() {
     assert_eq!(whole.area, free.area);
 }
 
+/// The assembly modes of a five-bar at its home motor angles: the two lower links' tips
+/// meet where the circles about the two knees cross, twice; the other mode's foot is the
+/// home foot reflected in the line through the knees. Each mode's workspace is found.
+#[test]
+fn a_five_bar_has_two_assembly_modes_mirrored_in_its_knees() {
+    use leg_models::analysis::workspace::assembly_modes;
+    fn check<L: LegModel<4, 2, 2>>() {
+        let p = L::Params::<f64>::default();
+        let frame = LegFrame::of::<L, 2, 2>();
+        let q = home::<L, 4, 2, 2>(&p);
+        let modes = assembly_modes::<L, 4, 2, 2>(&p, &q, &frame, 64);
+        assert_eq!(modes.len(), 2, "{}: {modes:?}", L::NAME);
+        assert_eq!(modes[0], q);
+        let other = modes[1];
+        for &a in L::ACTUATED.iter() {
+            assert_eq!(other[a], q[a]);
+        }
+        assert!(L::closure_residual(&other, &p).amax() < 1e-10);
+        // The knees: the lower links' joints.
+        let joints = L::joint_positions(&q, &p);
+        let (k1, k2) = (joints.column(1).into_owned(), joints.column(3).into_owned());
+        let axis = (k2 - k1).normalize();
+        let f = L::foot_position(&q, &p) - k1;
+        let mirrored = k1 + 2.0 * f.dot(&axis) * axis - f;
+        let foot = L::foot_position(&other, &p);
+        assert!(
+            (foot - mirrored).norm() < 1e-9,
+            "{}: {foot} against {mirrored}",
+            L::NAME
+        );
+        let ws = workspace::<L, 4, 2, 2>(&p, &other, &frame, &grid::<2>(40)).unwrap();
+        assert!(ws.area > 0.0);
+    }
+    check::<generated::Minitaur>();
+    check::<generated::FiveBarOffset>();
+}
+
 /// The impact mitigation factor of a leg on a translating body against the same leg
 /// written with its body: `two_link` given `knee_runner`'s thigh and shin, on a body of
 /// the runner's torso mass, and `knee_runner` with its torso's pitch inertia made huge.

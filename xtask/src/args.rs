@@ -280,6 +280,10 @@ pub struct AnalyzeArgs {
     #[arg(long, value_name = "KG",
           value_parser = number("a mass in (0, 1e6] kg", |x| x > 0.0 && x <= 1e6))]
     pub body_mass: Option<f64>,
+    /// Analyse every assembly branch at the home pose's motor angles, each a design
+    /// (default: the home pose's branch only); not with --sweep
+    #[arg(long)]
+    pub branches: bool,
     /// Motor angle range of the workspace, rad, for every motor (default: no limit)
     #[arg(long, value_name = "LO:HI", allow_hyphen_values = true)]
     pub motor_range: Option<String>,

@@ -813,6 +813,53 @@ fn analyze_sweeps_a_parameter() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `--branches`: one design per assembly branch at the home motor angles, each with its
+/// own stance (same motors, another foot) and grid file.
+#[test]
+fn analyze_compares_the_assembly_branches() {
+    let dir = temp_dir("analyze-branches");
+    let d = dir.to_str().unwrap();
+    let out = legs(&[
+        "analyze",
+        "minitaur",
+        "--branches",
+        "--nodes",
+        "30",
+        "--out",
+        d,
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("analysis.json")).unwrap()).unwrap();
+    let designs = json["designs"].as_array().unwrap();
+    let labels: Vec<&str> = designs
+        .iter()
+        .map(|d| d["label"].as_str().unwrap())
+        .collect();
+    assert_eq!(labels, ["minitaur branch 1 (home)", "minitaur branch 2"]);
+    let q = |k: usize| -> Vec<f64> {
+        designs[k]["stance"]["q"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    let (home, other) = (q(0), q(1));
+    // Minitaur's motors are joints 0 and 2.
+    assert_eq!((home[0], home[2]), (other[0], other[2]));
+    assert!((home[1] - other[1]).abs() > 0.1, "{home:?} {other:?}");
+    for k in 0..2 {
+        assert!(designs[k]["table"]["workspace_area_m2"].as_f64().unwrap() > 0.0);
+    }
+    assert!(dir.join("minitaur_branch_2.csv").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn analyze_refuses_bad_input_and_writes_nothing() {
     let dir = temp_dir("analyze-bad");
@@ -938,6 +985,18 @@ fn analyze_refuses_bad_input_and_writes_nothing() {
         (
             vec!["analyze", "minitaur", "atrias", "minitaur", "--out", d],
             "`minitaur` is given twice",
+        ),
+        (
+            vec![
+                "analyze",
+                "minitaur",
+                "--branches",
+                "--sweep",
+                "lower_a_length_x=0.16:0.26:3",
+                "--out",
+                d,
+            ],
+            "do not go together",
         ),
         (vec!["analyze", "--out", d], "MODEL"),
     ] {

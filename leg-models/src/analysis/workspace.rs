@@ -522,3 +522,65 @@ where
         length,
     })
 }
+
+/// The assembly modes of a leg at the motor angles (and held body joints) of the
+/// assembled pose `start`: `start` first, then every other closed pose found from
+/// `tries` guesses of the passive joints (deterministic: revolute ones spread over a
+/// turn, sliders over the leg's size), each once (poses equal modulo a turn on revolute
+/// joints are one). Each is the start of a branch for [`workspace`].
+pub fn assembly_modes<L, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<f64>,
+    start: &SVector<f64, NQ>,
+    frame: &LegFrame<NQ>,
+    tries: usize,
+) -> Vec<SVector<f64, NQ>>
+where
+    L: LegModel<NQ, NC, NU>,
+{
+    use crate::model::JointKind;
+    let fixed: [bool; NQ] = core::array::from_fn(|c| frame.held[c] || L::ACTUATED.contains(&c));
+    let size = crate::assembly::leg_size::<L, f64, NQ, NC, NU>(params, start).max(1e-3);
+    let same = |a: &SVector<f64, NQ>, b: &SVector<f64, NQ>| {
+        (0..NQ).all(|j| {
+            let d = a[j] - b[j];
+            if L::JOINT_KINDS[j] == JointKind::Revolute {
+                (d - core::f64::consts::TAU * (d / core::f64::consts::TAU).round()).abs() < 1e-6
+            } else {
+                d.abs() < 1e-6 * size
+            }
+        })
+    };
+    let tol = Tolerance {
+        max_iterations: 60,
+        ..Tolerance::default()
+    };
+    let mut modes = vec![*start];
+    // A low-discrepancy sequence per joint (golden-ratio steps), deterministic.
+    let mut phase = [0.0f64; NQ];
+    for (j, p) in phase.iter_mut().enumerate() {
+        *p = (j as f64 * 0.618_033_988_749_895).fract();
+    }
+    for t in 0..tries {
+        let mut guess = *start;
+        for j in 0..NQ {
+            if fixed[j] {
+                continue;
+            }
+            let u =
+                (phase[j] + (t as f64 + 1.0) * (0.754_877_666_246_692_7 + 0.1 * j as f64)).fract();
+            guess[j] = match L::JOINT_KINDS[j] {
+                JointKind::Revolute => start[j] + (u - 0.5) * core::f64::consts::TAU,
+                _ => start[j] + (u - 0.5) * 2.0 * size,
+            };
+        }
+        let mut q = guess;
+        if crate::assembly::assemble_holding::<L, f64, NQ, NC, NU>(params, &mut q, &fixed, &tol)
+            .is_ok()
+            && q.iter().all(|x| x.is_finite())
+            && !modes.iter().any(|m| same(m, &q))
+        {
+            modes.push(q);
+        }
+    }
+    modes
+}

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::sync::Mutex;
 use std::time::Instant;
 
-use leg_models::analysis::workspace::{workspace, GridOptions, NodeState, Segment};
+use leg_models::analysis::workspace::{assembly_modes, workspace, GridOptions, NodeState, Segment};
 use leg_models::analysis::{
     impact_mitigation, point_measures, Body, BodyCoupling, LegFrame, MotorLimits,
 };
@@ -29,6 +29,7 @@ pub struct Settings {
     body_mass: Option<f64>,
     motor_range: Option<(f64, f64)>,
     nodes: usize,
+    branches: bool,
     pub out: PathBuf,
 }
 
@@ -55,6 +56,9 @@ impl Sweep {
             .collect()
     }
 }
+
+/// Guesses of the passive joints that look for a leg's other assembly branches.
+const BRANCH_TRIES: usize = 64;
 
 /// The most grid nodes over all the designs of one run.
 const MAX_NODES: usize = 10_000_000;
@@ -106,6 +110,11 @@ impl Settings {
                 if a.models.len() > 1 {
                     return Err(Error::usage(
                         "`--sweep` sweeps one model's parameter: give one model",
+                    ));
+                }
+                if a.branches {
+                    return Err(Error::usage(
+                        "`--branches` and `--sweep` do not go together: sweep one branch (the home pose's), or compare the branches of one design",
                     ));
                 }
                 let names: Vec<String> = name
@@ -197,6 +206,7 @@ impl Settings {
             body_mass: a.body_mass,
             motor_range,
             nodes: a.nodes as usize,
+            branches: a.branches,
             out: a
                 .out
                 .clone()
@@ -314,6 +324,30 @@ where
             )));
         }
     }
+    if settings.branches {
+        let frame = LegFrame::of::<L, NC, NU>();
+        let mut q = SVector::from(L::HOME);
+        let modes =
+            match project_position::<L, f64, NQ, NC, NU>(&base, &mut q, &Tolerance::default()) {
+                Ok(()) => assembly_modes::<L, NQ, NC, NU>(&base, &q, &frame, BRANCH_TRIES),
+                // The one design says why the home pose does not assemble.
+                Err(_) => Vec::new(),
+            };
+        let designs: Vec<Design> = if modes.is_empty() {
+            vec![design::<L, NQ, NC, NU>(&base, settings, None, None)]
+        } else {
+            modes
+                .par_iter()
+                .enumerate()
+                .map(|(b, q)| design::<L, NQ, NC, NU>(&base, settings, None, Some((b, q))))
+                .collect()
+        };
+        let mut guard = progress.lock().unwrap_or_else(|e| e.into_inner());
+        guard.1 += 1;
+        let done = guard.1;
+        guard.0.set(done);
+        return Ok(designs);
+    }
     let values: Vec<Option<f64>> = match &sweep {
         Some((_, s)) => s.values().into_iter().map(Some).collect(),
         None => vec![None],
@@ -331,6 +365,7 @@ where
                 &p,
                 settings,
                 sweep.as_ref().map(|(_, s)| (*s, v.unwrap_or(f64::NAN))),
+                None,
             );
             let mut guard = progress.lock().unwrap_or_else(|e| e.into_inner());
             guard.1 += 1;
@@ -363,13 +398,16 @@ fn design<L, const NQ: usize, const NC: usize, const NU: usize>(
     p: &L::Params<f64>,
     settings: &Settings,
     swept: Option<(&Sweep, f64)>,
+    branch: Option<(usize, &SVector<f64, NQ>)>,
 ) -> Design
 where
     L: LegModel<NQ, NC, NU>,
 {
-    let label = match swept {
-        Some((s, v)) => format!("{} {}={v}", L::NAME, s.name),
-        None => L::NAME.to_string(),
+    let label = match (swept, branch) {
+        (Some((s, v)), _) => format!("{} {}={v}", L::NAME, s.name),
+        (None, Some((0, _))) => format!("{} branch 1 (home)", L::NAME),
+        (None, Some((b, _))) => format!("{} branch {}", L::NAME, b + 1),
+        (None, None) => L::NAME.to_string(),
     };
     let file_stem = match swept {
         Some((s, v)) => format!(
@@ -378,7 +416,10 @@ where
             s.names[0],
             format!("{v}").replace(['-', '.'], "_")
         ),
-        None => L::NAME.to_string(),
+        None => match branch {
+            Some((b, _)) => format!("{}_branch_{}", L::NAME, b + 1),
+            None => L::NAME.to_string(),
+        },
     };
     let frame = LegFrame::of::<L, NC, NU>();
     let pick = |given: &Option<Vec<f64>>, k: usize, default: f64| match given {
@@ -447,7 +488,7 @@ where
         },
     });
     let mut why = serde_json::Map::new();
-    let mut q = SVector::from(L::HOME);
+    let mut q = branch.map_or(SVector::from(L::HOME), |(_, q)| *q);
     if let Err(e) = project_position::<L, f64, NQ, NC, NU>(p, &mut q, &Tolerance::default()) {
         json["error"] = json!(format!(
             "the home pose does not assemble with these parameters: {e}"
@@ -465,7 +506,10 @@ where
     json["stance"] = json!({
         "q": q.as_slice(),
         "foot": [foot[0], foot[1]],
-        "what": "the spec's home pose, assembled",
+        "what": match branch {
+            Some((b, _)) if b > 0 => format!("assembly branch {} at the home pose's motor angles", b + 1),
+            _ => "the spec's home pose, assembled".to_string(),
+        },
     });
     let mut table = serde_json::Map::new();
     match point_measures::<L, f64, NQ, NC, NU>(p, &q, &frame, &limits) {
