@@ -883,6 +883,19 @@ macro_rules! leg_class {
                     self.leg.impact_mitigation(&vector("q", q)?, &body).map_err(analysis_err)
                 }
 
+                /// The leg's assembly branches at the motor angles (and held body joints) of
+                /// the assembled pose `q` (default: the assembled home pose): an `n × nq`
+                /// array of closed poses, `q` first, each a `start` for `workspace`.
+                #[pyo3(signature = (q = None, tries = 64))]
+                fn assembly_branches<'py>(&self, py: Python<'py>, q: Option<&Bound<'py, PyAny>>, tries: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
+                    let q = match q {
+                        Some(q) => vector("q", q)?,
+                        None => self.leg.assembled_home().map_err(assembly_err)?,
+                    };
+                    let modes = leg_models::analysis::workspace::assembly_modes::<Model, NQ, NC, NU>(self.leg.params(), &q, &self.leg.analysis_frame(), tries);
+                    Ok(out_rows(py, modes.into_iter()))
+                }
+
                 /// The workspace of the assembly branch of `start` (default: the assembled
                 /// home pose) over a grid of `nodes × nodes` foot positions centred on
                 /// `centre` with half-width `half_width` (default: on the hip of the foot's

@@ -225,3 +225,20 @@ def test_workspace_options_and_bad_input():
     assert d["force_polygon"] is None and d["condition"] == np.inf
     with pytest.raises(legmodels.AnalysisError, match="not applicable"):
         klann.workspace(1.0, 1.0, nodes=5)
+
+
+def test_assembly_branches_each_start_a_workspace():
+    """Minitaur at its home motor angles closes two ways (the lower links' tips meet where
+    two circles cross); each branch keeps the motors, closes the loop, and has its own
+    workspace and stance measures."""
+    leg = legmodels.Minitaur()
+    q = leg.assembled_home()
+    branches = leg.assembly_branches()
+    assert branches.shape == (2, leg.nq)
+    np.testing.assert_array_equal(branches[0], q)
+    np.testing.assert_array_equal(branches[1][leg.actuated], q[leg.actuated])
+    assert np.abs(leg.closure_residual(branches[1])).max() < 1e-10
+    other = leg.workspace(2.0, 30.0, nodes=30, start=branches[1])
+    assert other["area"] > 0
+    a, b = (leg.design_measures(x, 2.0, 30.0)["effective_mass"] for x in branches)
+    assert a != b
