@@ -74,6 +74,14 @@ pub enum ParameterError<'a> {
         /// The value refused.
         value: f64,
     },
+    /// A mass or an inertia (a name ending in `_mass` or `_inertia`) below zero: the mass
+    /// matrix would not be positive definite.
+    Negative {
+        /// The parameter.
+        name: &'a str,
+        /// The value refused.
+        value: f64,
+    },
 }
 
 impl ParameterError<'_> {
@@ -132,6 +140,10 @@ impl fmt::Display for ParameterError<'_> {
             ParameterError::NotFinite { name, value } => {
                 write!(f, "parameter `{name}` must be finite, got {value}")
             }
+            ParameterError::Negative { name, value } => write!(
+                f,
+                "parameter `{name}` is a mass or an inertia and cannot be negative, got {value}"
+            ),
         }
     }
 }
@@ -278,6 +290,12 @@ where
         let i = self.parameter_index(name)?;
         if !value.is_finite() {
             return Err(ParameterError::NotFinite {
+                name,
+                value: nalgebra::try_convert::<T, f64>(value).unwrap_or(f64::NAN),
+            });
+        }
+        if value < T::zero() && (name.ends_with("_mass") || name.ends_with("_inertia")) {
+            return Err(ParameterError::Negative {
                 name,
                 value: nalgebra::try_convert::<T, f64>(value).unwrap_or(f64::NAN),
             });

@@ -67,13 +67,13 @@ pyo3::create_exception!(
     legmodels,
     AnalysisError,
     LegError,
-    "A design measure does not apply to this leg (the message says why), or the pose is singular."
+    "A design measure does not apply to this leg (the message says why), the pose is singular or not finite, or the workspace's start is outside its motor range."
 );
 pyo3::create_exception!(
     legmodels,
     ParameterError,
     LegError,
-    "The leg has no parameter of that name."
+    "The leg has no parameter of that name, or the value is refused (not finite, a negative mass or inertia)."
 );
 
 fn assembly_err(e: RustAssemblyError) -> PyErr {
@@ -821,7 +821,8 @@ macro_rules! leg_class {
                 /// passive_rank and foot_rank (zero at the two kinds of singularity),
                 /// condition (κ(J_θ); inf with one motor), holding_torque, force_polygon and
                 /// speed_polygon (vertices counter-clockwise; None with one motor),
-                /// vertical_force (the largest downward push; None where there is none),
+                /// vertical_force (the largest downward push; None where there is none,
+                /// inf where no motor takes any of it),
                 /// vertical_speed, inverse_inertia and inverse_inertia_locked (the foot's
                 /// Λ⁻¹ with the motors free and locked, 1/kg) and effective_mass (kg).
                 fn design_measures<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, torque_limit: &Bound<'py, PyAny>, speed_limit: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
@@ -889,7 +890,12 @@ macro_rules! leg_class {
                 #[pyo3(signature = (q = None, tries = 64))]
                 fn assembly_branches<'py>(&self, py: Python<'py>, q: Option<&Bound<'py, PyAny>>, tries: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
                     let q = match q {
-                        Some(q) => vector("q", q)?,
+                        Some(q) => {
+                            // On the closures first: it is returned as a closed pose.
+                            let mut q = vector("q", q)?;
+                            self.leg.project_position(&mut q).map_err(assembly_err)?;
+                            q
+                        }
                         None => self.leg.assembled_home().map_err(assembly_err)?,
                     };
                     let modes = leg_models::analysis::workspace::assembly_modes::<Model, NQ, NC, NU>(self.leg.params(), &q, &self.leg.analysis_frame(), tries);
@@ -909,9 +915,9 @@ macro_rules! leg_class {
                 /// foot_curves (`n × 2 × 2` segments).
                 #[pyo3(signature = (torque_limit, speed_limit, nodes = 200, start = None, centre = None, half_width = None, motor_range = None))]
                 #[allow(clippy::too_many_arguments)]
-                fn workspace<'py>(&self, py: Python<'py>, torque_limit: &Bound<'py, PyAny>, speed_limit: &Bound<'py, PyAny>, nodes: usize, start: Option<&Bound<'py, PyAny>>, centre: Option<(f64, f64)>, half_width: Option<f64>, motor_range: Option<Vec<(f64, f64)>>) -> PyResult<Bound<'py, PyDict>> {
-                    if nodes < 2 {
-                        return Err(PyValueError::new_err(format!("`nodes` must be at least 2, got {nodes}")));
+                fn workspace<'py>(&self, py: Python<'py>, torque_limit: &Bound<'py, PyAny>, speed_limit: &Bound<'py, PyAny>, nodes: usize, start: Option<&Bound<'py, PyAny>>, centre: Option<[f64; 2]>, half_width: Option<f64>, motor_range: Option<Vec<[f64; 2]>>) -> PyResult<Bound<'py, PyDict>> {
+                    if !(2..=2000).contains(&nodes) {
+                        return Err(PyValueError::new_err(format!("`nodes` must be from 2 to 2000, got {nodes}")));
                     }
                     let limits = MotorLimits { torque: per_motor("torque_limit", torque_limit)?, speed: per_motor("speed_limit", speed_limit)? };
                     let start = match start {
@@ -920,14 +926,14 @@ macro_rules! leg_class {
                     };
                     let window = match (centre, half_width) {
                         (None, None) => None,
-                        (Some(c), Some(w)) if w.is_finite() && w > 0.0 && c.0.is_finite() && c.1.is_finite() => Some(([c.0, c.1], w)),
-                        (Some(_), Some(w)) => return Err(PyValueError::new_err(format!("`centre` must be finite and `half_width` positive and finite, got {w}"))),
+                        (Some(c), Some(w)) if w.is_finite() && w > 0.0 && c.iter().all(|x| x.is_finite()) => Some((c, w)),
+                        (Some(c), Some(w)) => return Err(PyValueError::new_err(format!("`centre` must be finite and `half_width` positive and finite, got centre {c:?}, half_width {w}"))),
                         _ => return Err(PyValueError::new_err("give `centre` and `half_width` together")),
                     };
                     let motor_range = match motor_range {
                         None => None,
-                        Some(r) if r.len() == NU && r.iter().all(|&(lo, hi)| lo < hi) => Some(core::array::from_fn(|k| r[k])),
-                        Some(r) => return Err(PyValueError::new_err(format!("`motor_range` needs {NU} pairs (low, high) with low < high, got {r:?}"))),
+                        Some(r) if r.len() == NU && r.iter().all(|&[lo, hi]| lo.is_finite() && hi.is_finite() && lo < hi) => Some(core::array::from_fn(|k| (r[k][0], r[k][1]))),
+                        Some(r) => return Err(PyValueError::new_err(format!("`motor_range` needs {NU} finite pairs (low, high) with low < high, got {r:?}"))),
                     };
                     let options = GridOptions { nodes, window, motor_range, limits };
                     let w = self.leg.workspace(&start, &options).map_err(analysis_err)?;

@@ -193,7 +193,7 @@ def test_workspace_options_and_bad_input():
     theta = q[leg.actuated]
     # Motor range: every reached pose keeps its motors inside; less area than without.
     low, high = theta - 0.3, theta + 0.3
-    w = leg.workspace(2.0, 30.0, nodes=40, motor_range=list(zip(low, high)))
+    w = leg.workspace(2.0, 30.0, nodes=40, motor_range=np.column_stack([low, high]))
     full = leg.workspace(2.0, 30.0, nodes=40)
     reached = np.asarray(w["state"]) == "reached"
     motors = w["poses"][reached][:, leg.actuated]
@@ -203,7 +203,7 @@ def test_workspace_options_and_bad_input():
     assert 0 < w["area"] < full["area"]
     assert (np.asarray(w["state"]) == "out_of_range").any()
     # A window: the grid's nodes are where it says.
-    w = leg.workspace(2.0, 30.0, nodes=11, centre=(0.0, -0.2), half_width=0.05)
+    w = leg.workspace(2.0, 30.0, nodes=11, centre=[0.0, -0.2], half_width=0.05)
     np.testing.assert_allclose([w["x"][0], w["x"][-1], w["y"][0], w["y"][-1]], [-0.05, 0.05, -0.25, -0.15], atol=1e-12)
     with pytest.raises(ValueError, match="torque_limit"):
         leg.design_measures(q, -1.0, 30.0)
@@ -215,6 +215,12 @@ def test_workspace_options_and_bad_input():
         leg.workspace(1.0, 1.0, nodes=5, centre=(0.0, 0.0))
     with pytest.raises(ValueError, match="motor_range"):
         leg.workspace(1.0, 1.0, nodes=5, motor_range=[(0.0, 1.0)])
+    with pytest.raises(ValueError, match="motor_range"):
+        leg.workspace(1.0, 1.0, nodes=5, motor_range=[(-np.inf, np.inf), (0.0, 1.0)])
+    with pytest.raises(legmodels.AnalysisError, match="outside the motor range"):
+        leg.workspace(1.0, 1.0, nodes=5, motor_range=[(theta[0] + 0.1, theta[0] + 1.0), (-4.0, 4.0)])
+    # A pose off the closures is closed before its branches are looked for.
+    np.testing.assert_allclose(leg.assembly_branches(q + 1e-4)[0], q, atol=1e-3)
     straight = [-np.pi / 2, 0.0, -np.pi / 2, 0.0]
     with pytest.raises(legmodels.AnalysisError, match="singular"):
         leg.design_measures(straight, 1.0, 1.0)

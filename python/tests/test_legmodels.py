@@ -124,6 +124,8 @@ def test_bad_input_raises_with_the_runtime_message():
         legmodels.Minitaur(lower_a_mas=1.0)
     with pytest.raises(legmodels.ParameterError, match="finite"):
         legmodels.Minitaur(lower_a_mass=float("nan"))
+    with pytest.raises(legmodels.ParameterError, match="`lower_a_mass` is a mass or an inertia and cannot be negative"):
+        legmodels.Minitaur(lower_a_mass=-0.1)
     assert legmodels.AssemblyError.__name__ == "AssemblyError"
     with pytest.raises(ValueError, match="unknown `controller`"):
         leg.simulate(leg.home(), np.zeros(4), 10, 1e-3, controller="foot_fl")

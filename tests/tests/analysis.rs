@@ -521,6 +521,10 @@ pub fn check_foot_rank<
         "{}: foot rank checked at {checked} nodes, {crossings} passive crossings",
         L::NAME
     );
+    // Digit's workspace holds passive singularities away from its edge: the check ran.
+    if L::NAME == "digit" {
+        assert!(crossings > 0);
+    }
 }
 
 /// Where the grid puts a passive singularity ("type II"), bisection between the two
@@ -844,16 +848,35 @@ fn motor_ranges_refuse_a_start_outside_and_count_angles_modulo_a_turn() {
             }
         }
     }
-    // A range of a whole turn limits nothing: the fronts that meet around the
-    // annulus's hole carry angles a turn apart, the same poses.
-    options.motor_range = Some([
-        (theta[0] - 3.2, theta[0] + 3.2),
-        (theta[1] - 3.2, theta[1] + 3.2),
-    ]);
-    let whole = workspace::<L, 4, 2, 2>(&p, &q, &frame, &options).unwrap();
+    // Just under a turn: the fronts that meet around the annulus's hole carry angles a
+    // turn apart, the same poses; nodes reached with a motor's angle outside the range as
+    // written but inside it modulo a turn are kept, and the nodes lost are those of the
+    // 0.28 rad left out, not the half of the annulus past the seam.
+    let range = [
+        (theta[0] - 3.0, theta[0] + 3.0),
+        (theta[1] - 3.0, theta[1] + 3.0),
+    ];
+    options.motor_range = Some(range);
+    let almost = workspace::<L, 4, 2, 2>(&p, &q, &frame, &options).unwrap();
+    let mut wrapped = 0;
+    for (state, pose) in almost.states.iter().zip(&almost.poses) {
+        if *state == NodeState::Reached {
+            for (k, &a) in L::ACTUATED.iter().enumerate() {
+                let (lo, hi) = range[k];
+                assert!(lo + (pose[a] - lo).rem_euclid(turn) <= hi);
+                wrapped += usize::from(pose[a] < lo || pose[a] > hi);
+            }
+        }
+    }
+    assert!(wrapped > 0, "no node needed the turn");
     options.motor_range = None;
     let free = workspace::<L, 4, 2, 2>(&p, &q, &frame, &options).unwrap();
-    assert_eq!(whole.area, free.area);
+    assert!(
+        almost.area > 0.8 * free.area,
+        "{} of {}",
+        almost.area,
+        free.area
+    );
 }
 
 /// The assembly modes of a five-bar at its home motor angles: the two lower links' tips

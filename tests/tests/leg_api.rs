@@ -56,6 +56,19 @@ where
     renamed.set_parameter(name, 0.5).unwrap();
     let mut by_index = L::Params::<f64>::default();
     by_index.set(0, 0.5);
+    // A negative mass or inertia is refused by name, and nothing changes.
+    if let Some(mass) = L::Params::<f64>::NAMES
+        .iter()
+        .find(|n| n.ends_with("_mass") || n.ends_with("_inertia"))
+    {
+        let err = renamed.set_parameter(mass, -1.0).unwrap_err();
+        assert!(
+            matches!(err, leg_models::ParameterError::Negative { .. })
+                && err.to_string().contains(mass),
+            "{}: {err}",
+            L::NAME
+        );
+    }
     assert_eq!(*renamed.params(), by_index, "{}", L::NAME);
     assert_eq!(renamed.parameter(name), Ok(0.5));
     let err = renamed.set_parameter("no_such_parameter", 1.0).unwrap_err();

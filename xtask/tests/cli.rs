@@ -998,6 +998,20 @@ fn analyze_refuses_bad_input_and_writes_nothing() {
             ],
             "do not go together",
         ),
+        (
+            vec![
+                "analyze",
+                "minitaur",
+                "atrias",
+                "digit",
+                "--branches",
+                "--nodes",
+                "1800",
+                "--out",
+                d,
+            ],
+            "`minitaur` has 2 branches",
+        ),
         (vec!["analyze", "--out", d], "MODEL"),
     ] {
         let out = legs(&args);

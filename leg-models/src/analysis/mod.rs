@@ -436,7 +436,8 @@ where
 }
 
 /// The singular values `(σ_max, σ_min)` of a `2 × N` matrix (closed form of `A Aᵀ`;
-/// `σ_min² = det(A Aᵀ) / σ_max²`, which keeps its digits where `σ_min ≪ σ_max`).
+/// `σ_min² = det(A Aᵀ) / σ_max²` with `det(A Aᵀ)` the sum of the squared 2 × 2 minors of
+/// `A` (Cauchy–Binet), which keeps its digits where `σ_min ≪ σ_max`).
 pub fn singular_values<T: Real, const N: usize>(a: &SMatrix<T, 2, N>) -> (T, T) {
     let s = mul(a, &a.transpose());
     let half = T::lit(0.5);
@@ -447,7 +448,13 @@ pub fn singular_values<T: Real, const N: usize>(a: &SMatrix<T, 2, N>) -> (T, T) 
     if hi <= T::zero() {
         return (T::zero(), T::zero());
     }
-    let det = (s[(0, 0)] * s[(1, 1)] - s[(0, 1)] * s[(1, 0)]).max(T::zero());
+    let mut det = T::zero();
+    for i in 0..N {
+        for j in i + 1..N {
+            let minor = a[(0, i)] * a[(1, j)] - a[(0, j)] * a[(1, i)];
+            det += minor * minor;
+        }
+    }
     (hi.sqrt(), (det / hi).sqrt())
 }
 

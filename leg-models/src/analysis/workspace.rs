@@ -207,7 +207,9 @@ where
     // the workspace), and both are the same pose.
     let motor_in = |a: usize, x: f64, (lo, hi): (f64, f64)| {
         if L::JOINT_KINDS[a] == crate::model::JointKind::Revolute {
-            lo + (x - lo).rem_euclid(core::f64::consts::TAU) <= hi
+            // A turn or more limits nothing (and keeps an infinite bound out of the sum).
+            hi - lo >= core::f64::consts::TAU
+                || lo + (x - lo).rem_euclid(core::f64::consts::TAU) <= hi
         } else {
             x >= lo && x <= hi
         }
@@ -538,6 +540,12 @@ where
     L: LegModel<NQ, NC, NU>,
 {
     use crate::model::JointKind;
+    // Without motor coordinates (an under-actuated leg's passive joints are free, an
+    // over-actuated one's motors cannot all be held) the motors do not pick out a
+    // finite set of poses.
+    if frame.motor_coordinates().is_err() {
+        return vec![*start];
+    }
     let fixed: [bool; NQ] = core::array::from_fn(|c| frame.held[c] || L::ACTUATED.contains(&c));
     let size = crate::assembly::leg_size::<L, f64, NQ, NC, NU>(params, start).max(1e-3);
     let same = |a: &SVector<f64, NQ>, b: &SVector<f64, NQ>| {

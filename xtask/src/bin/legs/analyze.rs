@@ -4,6 +4,7 @@
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 
@@ -30,6 +31,8 @@ pub struct Settings {
     motor_range: Option<(f64, f64)>,
     nodes: usize,
     branches: bool,
+    /// Grid nodes the run's designs hold (checked against [`MAX_NODES`]).
+    planned_nodes: AtomicUsize,
     pub out: PathBuf,
 }
 
@@ -207,6 +210,7 @@ impl Settings {
             motor_range,
             nodes: a.nodes as usize,
             branches: a.branches,
+            planned_nodes: AtomicUsize::new(total),
             out: a
                 .out
                 .clone()
@@ -333,6 +337,19 @@ where
                 // The one design says why the home pose does not assemble.
                 Err(_) => Vec::new(),
             };
+        // The budget counted one design a model: the branches add theirs.
+        let extra = modes.len().saturating_sub(1) * settings.nodes * settings.nodes;
+        let planned = settings.planned_nodes.fetch_add(extra, Ordering::Relaxed) + extra;
+        if planned > MAX_NODES {
+            return Err(Error::usage(format!(
+                "`--branches`: `{}` has {} branches; with `--nodes {}` the run would hold {:.1} million grid nodes, at most {} million: fewer nodes or models",
+                L::NAME,
+                modes.len(),
+                settings.nodes,
+                planned as f64 / 1e6,
+                MAX_NODES / 1_000_000
+            )));
+        }
         let designs: Vec<Design> = if modes.is_empty() {
             vec![design::<L, NQ, NC, NU>(&base, settings, None, None)]
         } else {
@@ -526,6 +543,11 @@ where
                     } else {
                         "the motors cannot hold the leg with the foot pushing down here".to_string()
                     }),
+                );
+            } else if m.vertical_force.is_some_and(f64::is_infinite) {
+                why.insert(
+                    "vertical_force_n".into(),
+                    json!("unbounded: no motor takes a vertical force at the foot here (the structure holds it)"),
                 );
             }
             if NU >= 2 {
