@@ -84,6 +84,12 @@ pub enum ParameterError<'a> {
     },
 }
 
+/// Whether parameter `name` is a mass or an inertia (its name ends in `_mass` or
+/// `_inertia`, as every spec's are): a negative value would make `M` indefinite.
+pub fn must_be_nonnegative(name: &str) -> bool {
+    name.ends_with("_mass") || name.ends_with("_inertia")
+}
+
 impl ParameterError<'_> {
     /// The known name closest to an unknown one (edit distance at most a third of its
     /// length), if any.
@@ -294,7 +300,7 @@ where
                 value: nalgebra::try_convert::<T, f64>(value).unwrap_or(f64::NAN),
             });
         }
-        if value < T::zero() && (name.ends_with("_mass") || name.ends_with("_inertia")) {
+        if value < T::zero() && must_be_nonnegative(name) {
             return Err(ParameterError::Negative {
                 name,
                 value: nalgebra::try_convert::<T, f64>(value).unwrap_or(f64::NAN),

@@ -43,7 +43,7 @@ pub mod simulate;
 pub mod structure;
 mod trig;
 
-pub use leg::{ChartSize, Leg, ParameterError};
+pub use leg::{must_be_nonnegative, ChartSize, Leg, ParameterError};
 pub use model::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms, JointKind,
     LegModel, Parameters, Real, Spring,

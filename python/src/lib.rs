@@ -940,12 +940,7 @@ macro_rules! leg_class {
                     let n = w.nodes;
                     let x: Vec<f64> = (0..n).map(|i| w.node(i, 0)[0]).collect();
                     let y: Vec<f64> = (0..n).map(|i| w.node(0, i)[1]).collect();
-                    let state: Vec<Vec<&str>> = (0..n).map(|iy| (0..n).map(|ix| match w.states[iy * n + ix] {
-                        NodeState::Reached => "reached",
-                        NodeState::BranchEnds => "branch_ends",
-                        NodeState::OutOfRange => "out_of_range",
-                        NodeState::Unvisited => "unvisited",
-                    }).collect()).collect();
+                    let state: Vec<Vec<&str>> = (0..n).map(|iy| (0..n).map(|ix| w.states[iy * n + ix].name()).collect()).collect();
                     let grid = |f: &dyn Fn(&leg_models::analysis::PointMeasures<f64, NQ, NU>) -> Option<f64>| {
                         let a = Array2::from_shape_fn((n, n), |(iy, ix)| match &w.measures[iy * n + ix] {
                             Some(Ok(m)) => f(m).unwrap_or(f64::NAN),

@@ -414,6 +414,7 @@ pub fn check_foot_rank<
     let held: Vec<usize> = (0..NQ).filter(|&c| frame.held[c]).collect();
     let square = NU == 2 && L::REDUNDANT_ROWS == 0 && NC + 2 + held.len() == NQ;
     let mut checked = 0;
+    let mut convention = None;
     for (i, m) in ws.measures.iter().enumerate() {
         let Some(Ok(m)) = m else { continue };
         if i % 7 != 0 {
@@ -469,25 +470,44 @@ pub fn check_foot_rank<
             for (r, &c) in held.iter().enumerate() {
                 k[(NC + 2 + r, c)] = 1.0;
             }
+            // The sign is det K's up to one sign for the leg (the joints' order).
             let det = k.determinant();
             if det.abs() > 1e-9 {
-                assert_eq!(m.foot_rank > 0.0, det > 0.0, "{}: node {i}", L::NAME);
+                let agree = (m.foot_rank > 0.0) == (det > 0.0);
+                assert_eq!(
+                    *convention.get_or_insert(agree),
+                    agree,
+                    "{}: node {i}",
+                    L::NAME
+                );
             }
         }
         checked += 1;
     }
     assert!(checked > 0, "{}", L::NAME);
-    // Across a passive singularity the foot keeps both directions: no sign change (but
-    // where the two kinds meet, as a parallelogram's straight leg does, both vanish: the
-    // nodes there are left out by their small foot rank).
+    // Across a passive singularity the foot keeps both directions: no sign change. Where
+    // the two kinds meet (a parallelogram's straight leg) both vanish: a crossing whose
+    // foot rank is small must then be at the workspace's edge, within two cells of a node
+    // the branch does not reach.
     let at_home = leg_models::analysis::foot_rank::<L, f64, NQ, NC, NU>(
-        &p,
-        &start,
         &frame,
         &motor_kinematics::<L, f64, NQ, NC, NU>(&p, &start, &frame).unwrap(),
     )
     .abs();
     let n = ws.nodes;
+    let near_edge = |i: usize| {
+        let (x, y) = ((i % n) as isize, (i / n) as isize);
+        (-2..=2).any(|dy| {
+            (-2..=2).any(|dx| {
+                let (u, v) = (x + dx, y + dy);
+                u < 0
+                    || v < 0
+                    || u >= n as isize
+                    || v >= n as isize
+                    || ws.states[v as usize * n + u as usize] != NodeState::Reached
+            })
+        })
+    };
     let mut crossings = 0;
     for i in 0..n * n {
         for k in [i + 1, i + n] {
@@ -497,10 +517,17 @@ pub fn check_foot_rank<
             let (Some(Ok(a)), Some(Ok(b))) = (&ws.measures[i], &ws.measures[k]) else {
                 continue;
             };
-            if ws.passive_signed
-                && (ws.passive_rank[i] > 0.0) != (ws.passive_rank[k] > 0.0)
-                && a.foot_rank.abs().min(b.foot_rank.abs()) > 0.1 * at_home
-            {
+            if !ws.passive_signed || (ws.passive_rank[i] > 0.0) == (ws.passive_rank[k] > 0.0) {
+                continue;
+            }
+            if a.foot_rank.abs().min(b.foot_rank.abs()) <= 0.1 * at_home {
+                assert!(
+                    near_edge(i) || near_edge(k),
+                    "{}: the foot rank is small at a passive crossing inside the workspace, {:?}",
+                    L::NAME,
+                    ws.node(i % n, i / n)
+                );
+            } else {
                 assert_eq!(
                     a.foot_rank > 0.0,
                     b.foot_rank > 0.0,
@@ -521,10 +548,48 @@ pub fn check_foot_rank<
         "{}: foot rank checked at {checked} nodes, {crossings} passive crossings",
         L::NAME
     );
-    // Digit's workspace holds passive singularities away from its edge: the check ran.
-    if L::NAME == "digit" {
-        assert!(crossings > 0);
+}
+
+/// Every leg's assembly branches at its home motor angles: the home pose first, each
+/// other one closed with the motors and the body's joints where home has them and no two
+/// the same pose (modulo a turn); a leg whose motors do not determine it has only home.
+pub fn check_assembly_branches<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>() {
+    use leg_models::analysis::workspace::assembly_modes;
+    let p = L::Params::<f64>::default();
+    let frame = LegFrame::of::<L, NC, NU>();
+    let start = home::<L, NQ, NC, NU>(&p);
+    let modes = assembly_modes::<L, NQ, NC, NU>(&p, &start, &frame, 64);
+    assert_eq!(modes[0], start, "{}", L::NAME);
+    if frame.motor_coordinates().is_err() {
+        assert_eq!(modes.len(), 1, "{}", L::NAME);
+        return;
     }
+    let turn = std::f64::consts::TAU;
+    for (b, q) in modes.iter().enumerate() {
+        assert!(
+            L::closure_residual(q, &p).amax() < 1e-9,
+            "{}: branch {b}",
+            L::NAME
+        );
+        for c in 0..NQ {
+            if frame.held[c] || L::ACTUATED.contains(&c) {
+                assert_eq!(q[c], start[c], "{}: branch {b}, joint {c}", L::NAME);
+            }
+        }
+        for other in &modes[..b] {
+            let apart = (0..NQ).any(|c| {
+                let d = q[c] - other[c];
+                (d - turn * (d / turn).round()).abs() > 1e-6
+            });
+            assert!(apart, "{}: branch {b} twice", L::NAME);
+        }
+    }
+    println!("{}: {} assembly branches", L::NAME, modes.len());
 }
 
 /// Where the grid puts a passive singularity ("type II"), bisection between the two
@@ -545,6 +610,7 @@ pub fn check_singularities<
     let foot_at = |a: [f64; 2], b: [f64; 2], t: f64| {
         Vector2::new(a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]))
     };
+    let home_kin = motor_kinematics::<L, f64, NQ, NC, NU>(&p, &start, &frame).unwrap();
     let mut passive_checked = 0;
     let mut drawn_checked = 0;
     let mut edges_checked = 0;
@@ -660,21 +726,15 @@ pub fn check_singularities<
                     }
                     // q is within 2⁻⁵⁰ of a cell from where the branch ends.
 
-                    let interior = motor_kinematics::<L, f64, NQ, NC, NU>(&p, &start, &frame)
-                        .unwrap()
-                        .foot_jacobian;
+                    let interior = home_kin.foot_jacobian;
                     let (s_in_hi, s_in_lo) = leg_models::analysis::singular_values(&interior);
                     match motor_kinematics::<L, f64, NQ, NC, NU>(&p, &q, &frame) {
                         Ok(kin) => {
-                            let rank = |q: &SVector<f64, NQ>, kin| {
-                                leg_models::analysis::foot_rank::<L, f64, NQ, NC, NU>(
-                                    &p, q, &frame, kin,
-                                )
-                                .abs()
+                            let rank = |kin| {
+                                leg_models::analysis::foot_rank::<L, f64, NQ, NC, NU>(&frame, kin)
+                                    .abs()
                             };
-                            let home_kin =
-                                motor_kinematics::<L, f64, NQ, NC, NU>(&p, &start, &frame).unwrap();
-                            let (at_end, at_home) = (rank(&q, &kin), rank(&start, &home_kin));
+                            let (at_end, at_home) = (rank(&kin), rank(&home_kin));
                             assert!(
                                 at_end < 1e-3 * at_home,
                                 "{}: foot rank {at_end} at the branch's end, {at_home} at home",
@@ -735,6 +795,10 @@ macro_rules! analysis {
             #[test]
             fn foot_rank_is_the_mechanisms_not_the_motors() {
                 super::check_foot_rank::<Model, $nq, $nc, $nu>();
+            }
+            #[test]
+            fn assembly_branches_close_and_differ() {
+                super::check_assembly_branches::<Model, $nq, $nc, $nu>();
             }
             #[test]
             fn singularity_curves_are_where_the_rank_is_lost() {

@@ -47,7 +47,7 @@ use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
 
 use crate::assembly::AssemblyError;
 use crate::dynamics::rcond_floor;
-use crate::linalg::{mul, mul_tn, Cholesky, Lu, PivotedLdlt};
+use crate::linalg::{mul, mul_tn, Cholesky, PivotedLdlt};
 use crate::model::{LegModel, Parameters, Real};
 use crate::structure::{Actuation, NotApplicable};
 
@@ -297,6 +297,8 @@ pub struct MotorKinematics<T: Real, const NQ: usize, const NU: usize> {
     pub g: SMatrix<T, NQ, NU>,
     /// `J_θ = J_f G`: the foot's velocity per unit motor rate.
     pub foot_jacobian: SMatrix<T, 2, NU>,
+    /// `J_f`: the foot's velocity per unit joint rate.
+    pub joint_foot_jacobian: SMatrix<T, 2, NQ>,
     /// The passive joints' rank measure ([`PointMeasures::passive_rank`]).
     pub passive_rank: T,
 }
@@ -424,13 +426,15 @@ where
             return Err(AnalysisError::PassiveSingular);
         }
     }
-    let foot_jacobian = mul(&L::foot_jacobian(q, params), &g);
+    let joint_foot_jacobian = L::foot_jacobian(q, params);
+    let foot_jacobian = mul(&joint_foot_jacobian, &g);
     if !all_finite_slice(g.as_slice()) || !all_finite_slice(foot_jacobian.as_slice()) {
         return Err(AnalysisError::NonFinite);
     }
     Ok(MotorKinematics {
         g,
         foot_jacobian,
+        joint_foot_jacobian,
         passive_rank: rank,
     })
 }
@@ -458,19 +462,32 @@ pub fn singular_values<T: Real, const N: usize>(a: &SMatrix<T, 2, N>) -> (T, T) 
     (hi.sqrt(), (det / hi).sqrt())
 }
 
-/// The foot's rank measure ("type I") at pose `q` with motor kinematics `kin`:
-/// `σ_min / σ_max` of `J_f Q`, `Q` an orthonormal basis of the motions the mechanism
-/// has with the held joints at rest (the span of `G`). It depends on where the foot can
-/// move and not on how the motors parametrize that motion: zero exactly where the foot
-/// loses a direction, and finite where the passive joints lose rank (there `J_θ = J_f G`
-/// blows up and its columns align, so a measure of `J_θ`'s own shape would vanish).
-/// Where the closures and the foot make a square system `K = [J; J_f]` over the free
-/// joints (two motors, no redundant rows) it carries the sign of `det K = ± det J_p ·
-/// det J_θ`, which changes across a foot singularity and not across a passive one.
+/// Whether the passive joints' Jacobian `J_p` (the closures' columns of the joints that
+/// are neither motors nor held) is square with no redundant rows: then
+/// [`PointMeasures::passive_rank`] is the signed `det J_p` over its columns' norms.
+pub fn passive_square<L, const NQ: usize, const NC: usize, const NU: usize>(
+    frame: &LegFrame<NQ>,
+) -> bool
+where
+    L: LegModel<NQ, NC, NU>,
+{
+    let passive = (0..NQ)
+        .filter(|&c| !frame.held[c] && !L::ACTUATED.contains(&c))
+        .count();
+    L::REDUNDANT_ROWS == 0 && passive == NC
+}
+
+/// The foot's rank measure ("type I") with motor kinematics `kin`: `σ_min / σ_max` of
+/// `J_f Q`, `Q` an orthonormal basis of the motions the mechanism has with the held
+/// joints at rest (the span of `G`). It depends on where the foot can move and not on
+/// how the motors parametrize that motion: zero exactly where the foot loses a
+/// direction, and finite where the passive joints lose rank (there `J_θ = J_f G` blows
+/// up and its columns align, so a measure of `J_θ`'s own shape would vanish). With two
+/// motors and a square `J_p` ([`passive_square`]) it carries the sign of `det J_p ·
+/// det J_θ`, which is `± det [J; J_f]` over the free joints (the sign fixed by the
+/// joints' order): it changes across a foot singularity and not across a passive one.
 /// Zero with one motor (the foot has one direction).
 pub fn foot_rank<L, T, const NQ: usize, const NC: usize, const NU: usize>(
-    params: &L::Params<T>,
-    q: &SVector<T, NQ>,
     frame: &LegFrame<NQ>,
     kin: &MotorKinematics<T, NQ, NU>,
 ) -> T
@@ -495,39 +512,19 @@ where
         }
         basis.column_mut(k).unscale_mut(norm);
     }
-    let jf = L::foot_jacobian(q, params);
-    let (hi, lo) = singular_values(&mul(&jf, &basis));
+    let (hi, lo) = singular_values(&mul(&kin.joint_foot_jacobian, &basis));
     if hi == T::zero() || NU < 2 {
         return T::zero();
     }
-    let held = frame.held.iter().filter(|&&h| h).count();
-    if NU == 2 && L::REDUNDANT_ROWS == 0 && NC + 2 + held == NQ {
-        // K over the free joints, written NQ × NQ with a unit row per held joint (their
-        // columns cleared elsewhere, which leaves the determinant as it is).
-        let j = L::constraint_jacobian(q, params);
-        let mut k = SMatrix::<T, NQ, NQ>::zeros();
-        let mut row = 0;
-        for r in 0..NC {
-            k.row_mut(row).copy_from(&j.row(r));
-            row += 1;
-        }
-        for r in 0..2 {
-            k.row_mut(row).copy_from(&jf.row(r));
-            row += 1;
-        }
-        for c in 0..NQ {
-            if frame.held[c] {
-                k.column_mut(c).fill(T::zero());
-                k[(row, c)] = T::one();
-                row += 1;
-            }
-        }
-        // Where K is singular to rounding the measure is zero to rounding: no sign.
-        if Lu::new(&k).is_some_and(|lu| lu.determinant() < T::zero()) {
-            return -lo / hi;
+    let ratio = lo / hi;
+    if NU == 2 && passive_square::<L, NQ, NC, NU>(frame) {
+        let jt = &kin.foot_jacobian;
+        let det = jt[(0, 0)] * jt[(1, 1)] - jt[(0, 1)] * jt[(1, 0)];
+        if (det < T::zero()) != (kin.passive_rank < T::zero()) {
+            return -ratio;
         }
     }
-    lo / hi
+    ratio
 }
 
 /// A convex polygon in the plane, vertices counter-clockwise, on the stack.
@@ -1025,7 +1022,7 @@ where
         motor_angles: SVector::<T, NU>::from_fn(|k, _| q[L::ACTUATED[k]]),
         kinematics: kin,
         passive_rank: kin.passive_rank,
-        foot_rank: foot_rank::<L, T, NQ, NC, NU>(params, q, frame, &kin),
+        foot_rank: foot_rank::<L, T, NQ, NC, NU>(frame, &kin),
         condition,
         vertical_force: if two {
             vertical_force(&jt, &hold, &limits.torque)

@@ -43,6 +43,19 @@ pub enum NodeState {
     OutOfRange,
 }
 
+impl NodeState {
+    /// The state's name in the written grids (`reached`, `branch_ends`, `out_of_range`,
+    /// `unvisited`).
+    pub fn name(self) -> &'static str {
+        match self {
+            NodeState::Reached => "reached",
+            NodeState::BranchEnds => "branch_ends",
+            NodeState::OutOfRange => "out_of_range",
+            NodeState::Unvisited => "unvisited",
+        }
+    }
+}
+
 /// A line segment in the base frame (m).
 pub type Segment = [[f64; 2]; 2];
 
@@ -280,8 +293,7 @@ where
     let fixed: [bool; NQ] = core::array::from_fn(|c| frame.held[c] || L::ACTUATED.contains(&c));
     // Curves in foot space need the pose to be a function of the foot on the branch (two
     // motors that determine the leg): with more, the pose at a foot depends on the path.
-    let passive_signed =
-        NU == 2 && NC > 0 && L::REDUNDANT_ROWS == 0 && fixed.iter().filter(|&&f| !f).count() == NC;
+    let passive_signed = NU == 2 && NC > 0 && super::passive_square::<L, NQ, NC, NU>(frame);
     let mut measures = vec![None; n * n];
     let mut ranks = vec![f64::NAN; n * n];
     let mut foot_ranks = vec![f64::NAN; n * n];

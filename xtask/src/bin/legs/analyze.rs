@@ -276,11 +276,12 @@ where
         })
 }
 
-/// Masses and inertias cannot be negative (a negative one makes `M` indefinite).
+/// Masses and inertias cannot be negative (the runtime's rule, `Leg::set_parameter`'s).
 fn nonnegative(flag: &str, name: &str, value: f64) -> Result<(), Error> {
-    if value < 0.0 && (name.ends_with("_mass") || name.ends_with("_inertia")) {
+    if value < 0.0 && leg_models::must_be_nonnegative(name) {
         return Err(Error::usage(format!(
-            "`{flag}`: `{name}` is a mass or an inertia and cannot be negative (got {value})"
+            "`{flag}`: {}",
+            ParameterError::Negative { name, value }
         )));
     }
     Ok(())
@@ -359,10 +360,7 @@ where
                 .map(|(b, q)| design::<L, NQ, NC, NU>(&base, settings, None, Some((b, q))))
                 .collect()
         };
-        let mut guard = progress.lock().unwrap_or_else(|e| e.into_inner());
-        guard.1 += 1;
-        let done = guard.1;
-        guard.0.set(done);
+        tick(progress);
         return Ok(designs);
     }
     let values: Vec<Option<f64>> = match &sweep {
@@ -384,14 +382,19 @@ where
                 sweep.as_ref().map(|(_, s)| (*s, v.unwrap_or(f64::NAN))),
                 None,
             );
-            let mut guard = progress.lock().unwrap_or_else(|e| e.into_inner());
-            guard.1 += 1;
-            let done = guard.1;
-            guard.0.set(done);
+            tick(progress);
             d
         })
         .collect();
     Ok(designs)
+}
+
+/// One more unit of the progress bar done.
+fn tick(progress: &Mutex<(Progress, u64)>) {
+    let mut guard = progress.lock().unwrap_or_else(|e| e.into_inner());
+    guard.1 += 1;
+    let done = guard.1;
+    guard.0.set(done);
 }
 
 fn gear<L, const NQ: usize, const NC: usize, const NU: usize>(p: &L::Params<f64>, k: usize) -> f64
@@ -739,13 +742,7 @@ where
     };
     for i in 0..ws.states.len() {
         let [x, y] = ws.node(i % ws.nodes, i / ws.nodes);
-        let state = match ws.states[i] {
-            NodeState::Reached => "reached",
-            NodeState::BranchEnds => "branch_ends",
-            NodeState::OutOfRange => "out_of_range",
-            NodeState::Unvisited => "unvisited",
-        };
-        write!(out, "{x},{y},{state}").unwrap();
+        write!(out, "{x},{y},{}", ws.states[i].name()).unwrap();
         let reached = ws.states[i] == NodeState::Reached;
         for j in 0..NQ {
             write!(out, ",{}", cell(reached.then(|| ws.poses[i][j]))).unwrap();
