@@ -18,9 +18,9 @@ use core::fmt;
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::linalg::{mul, Cholesky};
-use crate::model::{LegModel, Real};
-use crate::structure::factor_closure_rows;
+use crate::dynamics::structure::factor_closure_rows;
+use crate::model::contract::{LegModel, Real};
+use crate::model::linalg::{mul, Cholesky};
 
 /// Why a leg cannot be assembled as asked.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -162,7 +162,7 @@ where
     // The tolerance is relative to the leg's size at the pose being judged.
     let limit =
         |q: &SVector<T, NQ>| tol.relative_residual * leg_size::<L, T, NQ, NC, NU>(params, q);
-    if !limit(q).is_finite() || !crate::linalg::all_finite(&phi) {
+    if !limit(q).is_finite() || !crate::model::linalg::all_finite(&phi) {
         return Err(AssemblyError::NonFinite);
     }
     let free_count = free.iter().filter(|&&f| f).count();
@@ -202,7 +202,7 @@ where
                 }
             }
             let chol = Cholesky::new(&a).ok_or(unreachable)?;
-            if chol.rcond < crate::dynamics::rcond_floor::<T>() {
+            if chol.rcond < crate::dynamics::forward::rcond_floor::<T>() {
                 return Err(unreachable);
             }
             let mut step = j.transpose() * phi;
@@ -250,7 +250,7 @@ where
 }
 
 /// Moves `q` onto `φ(q) = 0` changing only the joints not marked in `held`: the lift of
-/// a chart's coordinates onto the closed chain ([`crate::linearize::ManifoldChart`]).
+/// a chart's coordinates onto the closed chain ([`crate::control::linearize::ManifoldChart`]).
 pub fn assemble_holding<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     params: &L::Params<T>,
     q: &mut SVector<T, NQ>,
@@ -424,8 +424,8 @@ where
         within(phi, limit) && within(e, limit.max(tol.relative_residual * foot.amax()))
     };
     if !(limit(&q).is_finite()
-        && crate::linalg::all_finite(&r.0)
-        && crate::linalg::all_finite(&r.1))
+        && crate::model::linalg::all_finite(&r.0)
+        && crate::model::linalg::all_finite(&r.1))
     {
         return Err(AssemblyError::NonFinite);
     }

@@ -26,25 +26,24 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::analysis;
 use crate::assembly::{self, AssemblyError, Tolerance};
-use crate::batch::{self, BatchAcceleration, BatchError};
-use crate::contact::{self, ContactSolution, Ground, Impact, ImpactError, Modes};
+use crate::control::linearize::{
+    self, ChartTangent, ManifoldChart, ManifoldLinearization, StepJacobian,
+};
+use crate::control::lqr::ManifoldLqr;
+use crate::control::reference::Reference;
 use crate::control::{
     self, ActuatedDynamics, ControlError, FootFeedbackLinearization, FootPdGravity, Gains,
-    JointFeedbackLinearization, PdGravity,
+    JointFeedbackLinearization, PdGravity, ReductionDerivatives,
 };
-use crate::derivatives::{
-    self, ContactDynamicsDerivatives, ForwardDynamicsDerivatives, ReductionDerivatives,
-};
+use crate::dynamics::batch::{self, BatchAcceleration, BatchError};
+use crate::dynamics::contact::{self, ContactSolution, Ground, Impact, ImpactError, Modes};
+use crate::dynamics::derivatives::{self, ContactDynamicsDerivatives, ForwardDynamicsDerivatives};
+use crate::dynamics::structure::Structure;
 use crate::dynamics::{self, Acceleration, Baumgarte, DynamicsError};
-use crate::hybrid::{HybridSimulator, HybridState};
-use crate::integrate::{self, State, StepError, StepOptions, StepReport, TorqueSource};
-use crate::linearize::{
-    self, ChartTangent, LinearizationError, ManifoldChart, ManifoldLinearization, StepJacobian,
-};
-use crate::lqr::ManifoldLqr;
-use crate::reference::Reference;
-use crate::simd::F64x4;
-use crate::structure::Structure;
+use crate::model::simd::F64x4;
+use crate::simulate::hybrid::{HybridSimulator, HybridState};
+use crate::simulate::source::LinearizationError;
+use crate::simulate::{self, State, StepError, StepOptions, StepReport, TorqueSource};
 #[cfg(doc)]
 use crate::LegModel;
 use crate::{ContactModel, DynamicsTerms, Parameters, Real};
@@ -389,9 +388,9 @@ where
         L::contact_positions(q, &self.params)
     }
 
-    /// Kinetic plus potential energy, spring energy included ([`integrate::energy`]).
+    /// Kinetic plus potential energy, spring energy included ([`simulate::energy`]).
     pub fn energy(&self, state: &State<T, NQ>) -> T {
-        integrate::energy::<L, T, NQ, NC, NU>(&self.params, state)
+        simulate::energy::<L, T, NQ, NC, NU>(&self.params, state)
     }
 
     /// The leg's size at `q` (m), the scale of its residual tolerance.
@@ -542,7 +541,7 @@ where
         qd: &SVector<T, NQ>,
         v: &SVector<T, NU>,
     ) -> Result<ReductionDerivatives<T, NQ, NU>, ControlError> {
-        derivatives::reduction_derivatives::<L, T, NQ, NC, NU>(&self.params, q, qd, v)
+        control::reduction_derivatives::<L, T, NQ, NC, NU>(&self.params, q, qd, v)
     }
 
     /// The inertia each motor feels at `q` (the diagonal of `Ã`).
@@ -642,7 +641,7 @@ where
         source: &mut impl TorqueSource<T, NQ, NU>,
         opts: &StepOptions<T>,
     ) -> Result<StepReport<T, NQ, NC, NU>, StepError> {
-        integrate::step::<L, T, NQ, NC, NU>(&self.params, state, t, source, opts)
+        simulate::step::<L, T, NQ, NC, NU>(&self.params, state, t, source, opts)
     }
 
     /// A recording simulator of this leg in the air (closures only), stepping by `opts`.

@@ -3,13 +3,18 @@
 //! This crate holds the contract between the generator and the runtime — the
 //! [`LegModel`] trait that every generated geometry implements (see the `generated`
 //! crate) and the scalar trait [`Real`] the generated code is generic over — and the
-//! algorithms that use the generated terms: constrained forward dynamics
-//! ([`dynamics`]), loop assembly ([`assembly`]), time stepping with drift control
-//! ([`integrate`]), control in the actuated coordinates ([`control`]) with reference
-//! trajectories ([`mod@reference`]), the exact derivatives of the dynamics
-//! ([`derivatives`]) and the linearization of a step in joint coordinates and on the
-//! constraint manifold ([`linearize`]) for MPC, a discrete LQR on that manifold
-//! ([`lqr`]) and, with the `std` feature, a recording [`simulate::Simulator`].
+//! algorithms that use the generated terms, in floors that import only downward:
+//!
+//! | floor | what lives there |
+//! |---|---|
+//! | [`Leg`] | the facade: every operation as a method of one leg with its parameters |
+//! | [`analysis`] | design measures: singularities, force and speed polygons, foot inertia, workspace |
+//! | [`control`] | controllers in the motor coordinates, references, linearization, LQR, hopping |
+//! | [`simulate`] | integrators with drift control, the hybrid simulator, the recorder; the controllers' port |
+//! | [`assembly`] | closing the loops: assembly, projection, continuation along a branch |
+//! | [`dynamics`] | the KKT forward dynamics, structure, contact and impacts, derivatives, batches |
+//! | contract | [`LegModel`], [`Real`], trigonometry, [`simd`] lanes, fixed-size [`linalg`] |
+//!
 //! Everything but the simulator's record is fixed-size and allocation-free, and the
 //! crate is `no_std` without the default `std` feature. The geometry specs the generator
 //! reads live in `leg-models/specs/`.
@@ -23,29 +28,16 @@
 
 pub mod analysis;
 pub mod assembly;
-pub mod batch;
-pub mod contact;
 pub mod control;
-pub mod derivatives;
 pub mod dynamics;
-pub mod hop;
-pub mod hybrid;
-pub mod integrate;
 pub mod leg;
-pub mod linalg;
-pub mod linearize;
-pub mod lqr;
 mod model;
-pub mod reference;
-pub mod simd;
-#[cfg(feature = "std")]
 pub mod simulate;
-pub mod structure;
-mod trig;
 
 pub use leg::{must_be_nonnegative, ChartSize, Leg, ParameterError};
-pub use model::{
+pub use model::contract::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms, JointKind,
     LegModel, Parameters, Real, Spring,
 };
+pub use model::{linalg, simd};
 pub use nalgebra;

@@ -11,12 +11,12 @@
 use leg_models::analysis::workspace::{GridOptions, NodeState, Segment};
 use leg_models::analysis::{AnalysisError as RustAnalysisError, Body, MotorLimits, Polygon};
 use leg_models::assembly::AssemblyError as RustAssemblyError;
+use leg_models::control::linearize::LinearizationError as RustLinearizationError;
+use leg_models::control::reference::Sinusoid;
 use leg_models::control::{ControlError as RustControlError, Gains, Saturated};
 use leg_models::dynamics::DynamicsError as RustDynamicsError;
-use leg_models::integrate::{Method, State, StepOptions, TorqueSource};
-use leg_models::linearize::LinearizationError as RustLinearizationError;
 use leg_models::nalgebra::{SMatrix, SVector};
-use leg_models::reference::Sinusoid;
+use leg_models::simulate::{Method, State, StepOptions, TorqueSource};
 use leg_models::{ContactModel, Leg};
 use numpy::ndarray::{Array2, Array3};
 use numpy::{
@@ -369,8 +369,8 @@ macro_rules! leg_class {
     ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $nk:expr) => {
         mod $module {
             use super::*;
-            use leg_models::contact::Modes;
-            use leg_models::hybrid::HybridState;
+            use leg_models::dynamics::contact::Modes;
+            use leg_models::simulate::hybrid::HybridState;
             use leg_models::{LegModel, Parameters};
 
             type Model = $ty;
@@ -678,7 +678,7 @@ macro_rules! leg_class {
                     }
                     let mut modes = Modes::<NK>::flight();
                     for (k, h) in held.iter().enumerate() {
-                        if *h { modes.set(k, leg_models::contact::ContactMode::Stick); }
+                        if *h { modes.set(k, leg_models::dynamics::contact::ContactMode::Stick); }
                     }
                     let s = self.leg.forward_dynamics_with_contacts(&vector("q", q)?, &vector("qd", qd)?, &vector("u", u)?, &modes, &vector("anchors", anchors)?).map_err(dynamics_err)?;
                     Ok((out_vector(py, &s.x), out_vector(py, &s.closure), out_vector(py, &s.contact)))
@@ -696,12 +696,12 @@ macro_rules! leg_class {
                     let gains_kd = kd.unwrap_or(2.0 * kp.sqrt());
                     let u = match kind {
                         "joint" => {
-                            let r = leg_models::reference::Setpoint::<f64, NU> { position: vector("target", target)?, velocity: vector("rate", rate)?, acceleration: vector("accel", accel)? };
+                            let r = leg_models::control::reference::Setpoint::<f64, NU> { position: vector("target", target)?, velocity: vector("rate", rate)?, acceleration: vector("accel", accel)? };
                             let mut c = self.leg.joint_feedback_linearization(Gains::new(kp, gains_kd), r).map_err(control_err)?;
                             c.torque(0.0, &state)
                         }
                         "foot" => {
-                            let r = leg_models::reference::Setpoint::<f64, 2> { position: vector("target", target)?, velocity: vector("rate", rate)?, acceleration: vector("accel", accel)? };
+                            let r = leg_models::control::reference::Setpoint::<f64, 2> { position: vector("target", target)?, velocity: vector("rate", rate)?, acceleration: vector("accel", accel)? };
                             let mut c = self.leg.foot_feedback_linearization(Gains::new(kp, gains_kd), r).map_err(control_err)?;
                             c.torque(0.0, &state)
                         }
@@ -779,7 +779,7 @@ macro_rules! leg_class {
                     if let Some(e) = torques.error.take() {
                         return Err(e);
                     }
-                    let record = |r: &leg_models::hybrid::HybridRecord<f64, NQ, NC, NU, NK>| -> PyResult<Bound<'py, PyDict>> {
+                    let record = |r: &leg_models::simulate::hybrid::HybridRecord<f64, NQ, NC, NU, NK>| -> PyResult<Bound<'py, PyDict>> {
                         let d = PyDict::new(py);
                         let s = &r.samples;
                         d.set_item("t", PyArray1::from_iter(py, s.iter().map(|s| s.t)))?;
@@ -1002,7 +1002,7 @@ macro_rules! leg_class {
                     let opts = step_options(dt, "rk4", true)?;
                     let chart = self.leg.chart(&q).map_err(linearization_err)?;
                     let theta = chart.coordinates_of(&State { q, qd: SVector::zeros() }).0;
-                    let c = self.leg.manifold_lqr(&q, &opts, &matrix("state_weights", state_weights)?, &matrix("torque_weights", torque_weights)?, leg_models::reference::Hold(theta), SVector::from_element(f64::INFINITY)).map_err(control_err)?;
+                    let c = self.leg.manifold_lqr(&q, &opts, &matrix("state_weights", state_weights)?, &matrix("torque_weights", torque_weights)?, leg_models::control::reference::Hold(theta), SVector::from_element(f64::INFINITY)).map_err(control_err)?;
                     let d = PyDict::new(py);
                     d.set_item("K", out_matrix(py, &c.lqr.gain))?;
                     d.set_item("closed_loop", out_matrix(py, &c.lqr.closed_loop))?;

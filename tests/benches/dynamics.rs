@@ -8,12 +8,12 @@ use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use leg_models::assembly::project_velocity;
+use leg_models::control::reference::Sinusoid;
 use leg_models::control::{actuated_reduction, Gains, JointFeedbackLinearization};
 use leg_models::dynamics::forward_dynamics;
-use leg_models::hybrid::{HybridSimulator, HybridState};
-use leg_models::integrate::{step, State, StepOptions, TorqueSource};
 use leg_models::nalgebra::SVector;
-use leg_models::reference::Sinusoid;
+use leg_models::simulate::hybrid::{HybridSimulator, HybridState};
+use leg_models::simulate::{step, State, StepOptions, TorqueSource};
 use leg_models::ContactModel;
 use leg_tests::casadi;
 use leg_tests::passive_release_state;
@@ -109,10 +109,11 @@ fn bench_model<
     // Forward dynamics and its derivatives: ours (generated directional terms, one
     // factorization), forward differences of ours, and CasADi's `jacobian` of its
     // closed-form forward dynamics, checked equal first.
-    let derivatives = leg_models::derivatives::forward_dynamics_derivatives::<L, f64, NQ, NC, NU>(
-        &p, &q, &qd, &u, None,
-    )
-    .unwrap();
+    let derivatives =
+        leg_models::dynamics::derivatives::forward_dynamics_derivatives::<L, f64, NQ, NC, NU>(
+            &p, &q, &qd, &u, None,
+        )
+        .unwrap();
     {
         let sizes = [NQ, NC, NQ * NQ, NQ * NQ, NQ * NU, NC * NQ, NC * NQ, NC * NU];
         let mut outs: Vec<Vec<f64>> = sizes.iter().map(|&k| vec![0.0; k]).collect();
@@ -136,7 +137,7 @@ fn bench_model<
     }
     g.bench_function("deriv-ours", |bch| {
         bch.iter(|| {
-            leg_models::derivatives::forward_dynamics_derivatives::<L, f64, NQ, NC, NU>(
+            leg_models::dynamics::derivatives::forward_dynamics_derivatives::<L, f64, NQ, NC, NU>(
                 black_box(&p),
                 black_box(&q),
                 black_box(&qd),
@@ -184,7 +185,7 @@ fn bench_model<
     // repeats rows have no batched forward dynamics.
     {
         use leg_models::simd::pack;
-        let p4 = leg_models::batch::broadcast::<L, NQ, NC, NU>(&p);
+        let p4 = leg_models::dynamics::batch::broadcast::<L, NQ, NC, NU>(&p);
         let q4 = pack([&q; 4]);
         let qd4 = pack([&qd; 4]);
         let u4 = pack([&u; 4]);
@@ -194,7 +195,7 @@ fn bench_model<
         if L::REDUNDANT_ROWS == 0 {
             g.bench_function("fd-batch", |bch| {
                 bch.iter(|| {
-                    leg_models::batch::forward_dynamics::<L, NQ, NC, NU>(
+                    leg_models::dynamics::batch::forward_dynamics::<L, NQ, NC, NU>(
                         black_box(&p4),
                         black_box(&q4),
                         black_box(&qd4),
@@ -267,17 +268,19 @@ fn bench_model<
         };
         // Flight: the home pose lifted 5 cm along the body's height (the prismatic joint
         // that raises the contacts most).
-        let lift = leg_models::hop::height_joint::<L, f64, NQ, NC, NU, NK>(&p, &q);
+        let lift = leg_models::control::hop::height_joint::<L, f64, NQ, NC, NU, NK>(&p, &q);
         let mut up = rest;
         if let Some(i) = lift {
             up.q[i] += 0.05;
         }
         // Stance: every contact held where it is, projected onto the ground.
         let mut stance = HybridState::flight(rest);
-        let coords = leg_models::contact::Ground::<f64>::of::<L, NQ, NC, NU, NK>()
+        let coords = leg_models::dynamics::contact::Ground::<f64>::of::<L, NQ, NC, NU, NK>()
             .coordinates(&L::contact_positions(&q, &p));
         for k in 0..NK / 2 {
-            stance.modes.set(k, leg_models::contact::ContactMode::Stick);
+            stance
+                .modes
+                .set(k, leg_models::dynamics::contact::ContactMode::Stick);
             stance.anchors[2 * k] = coords[2 * k];
         }
         let stance = sim.project(&mut stance).map(|_| stance);

@@ -2,23 +2,23 @@
 //! 3 s at dt = 1 ms (RK4 with projection), torques updated once per step (1 kHz) and
 //! clipped at assumed motor limits. Errors are measured after the first second.
 //!
-//! The LQR row: discrete LQR on the constraint manifold (`leg_models::lqr`), linearized
+//! The LQR row: discrete LQR on the constraint manifold (`leg_models::control::lqr`), linearized
 //! once at home, tracking the same reference with a quasi-static feedforward.
 //!
 //! `cargo run --release -p leg-tests --example control_report`
 
 use leg_models::assembly::{assemble_along, consistent_velocity, foot_inverse, Tolerance};
+use leg_models::control::linearize::ManifoldChart;
+use leg_models::control::lqr::ManifoldLqr;
+use leg_models::control::reference::{Reference, Sinusoid, StepCycle};
 use leg_models::control::{
     foot_inertias, joint_inertias, FootFeedbackLinearization, FootPdGravity, Gains,
     JointFeedbackLinearization, PdGravity, Saturated,
 };
-use leg_models::integrate::{State, StepOptions, TorqueSource};
-use leg_models::linearize::ManifoldChart;
-use leg_models::lqr::ManifoldLqr;
+use leg_models::dynamics::structure::Structure;
 use leg_models::nalgebra::{SMatrix, SVector};
-use leg_models::reference::{Reference, Sinusoid, StepCycle};
 use leg_models::simulate::{Sample, Simulator};
-use leg_models::structure::Structure;
+use leg_models::simulate::{State, StepOptions, TorqueSource};
 use leg_models::{ContactModel, LegModel, Parameters};
 use leg_tests::passive_release_state;
 
@@ -300,8 +300,8 @@ fn stance<
     const NU: usize,
     const NK: usize,
 >() {
-    use leg_models::contact::{spec_friction, ContactMode, Ground, Modes};
-    use leg_models::derivatives::contact_dynamics_derivatives;
+    use leg_models::dynamics::contact::{spec_friction, ContactMode, Ground, Modes};
+    use leg_models::dynamics::derivatives::contact_dynamics_derivatives;
     if NK == 0 {
         return;
     }

@@ -20,7 +20,7 @@
 
 use std::hint::black_box;
 
-use leg_models::derivatives::forward_dynamics_derivatives;
+use leg_models::dynamics::derivatives::forward_dynamics_derivatives;
 use leg_models::dynamics::forward_dynamics;
 use leg_models::nalgebra::SVector;
 use leg_models::{LegModel, Parameters};
@@ -124,7 +124,7 @@ fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usiz
         "batch_forward_dynamics" if L::REDUNDANT_ROWS > 0 => return None,
         "batch_fused" | "batch_forward_dynamics" => {
             use leg_models::simd::{pack, F64x4};
-            let p4 = leg_models::batch::broadcast::<L, NQ, NC, NU>(&p);
+            let p4 = leg_models::dynamics::batch::broadcast::<L, NQ, NC, NU>(&p);
             let qs: Vec<SVector<f64, NQ>> = (0..4).map(|k| q.add_scalar(1e-3 * k as f64)).collect();
             let q4 = pack([&qs[0], &qs[1], &qs[2], &qs[3]]);
             let qd4 = pack([&qd; 4]);
@@ -141,12 +141,14 @@ fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usiz
                 })
             } else {
                 measure(n, || {
-                    black_box(leg_models::batch::forward_dynamics::<L, NQ, NC, NU>(
-                        black_box(&p4),
-                        black_box(&q4),
-                        black_box(&qd4),
-                        black_box(&u4),
-                    ))
+                    black_box(
+                        leg_models::dynamics::batch::forward_dynamics::<L, NQ, NC, NU>(
+                            black_box(&p4),
+                            black_box(&q4),
+                            black_box(&qd4),
+                            black_box(&u4),
+                        ),
+                    )
                     .map_or(0.0, |a| a.qdd[0].lane(0))
                 })
             }

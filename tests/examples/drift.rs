@@ -4,9 +4,9 @@
 //! `cargo run --release -p leg-tests --example drift`
 
 use leg_models::dynamics::Baumgarte;
-use leg_models::integrate::{Method, State, StepOptions};
 use leg_models::nalgebra::SVector;
 use leg_models::simulate::Simulator;
+use leg_models::simulate::{Method, State, StepOptions};
 use leg_models::LegModel;
 use leg_tests::passive_release_state;
 

@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 
 use leg_models::assembly::{project_position, project_velocity, Tolerance};
 use leg_models::dynamics::forward_dynamics;
-use leg_models::integrate::State;
 use leg_models::nalgebra::SVector;
+use leg_models::simulate::State;
 use leg_models::LegModel;
 
 /// Records that a check does not apply to a leg, and why (a property of the leg: its

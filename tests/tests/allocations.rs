@@ -8,15 +8,15 @@ use leg_models::assembly::{
     assemble, assemble_along, consistent_velocity, foot_inverse, project_position,
     project_velocity, Tolerance,
 };
+use leg_models::control::reference::{Sinusoid, StepCycle};
 use leg_models::control::{
     actuated_reduction, FootFeedbackLinearization, FootPdGravity, Gains,
     JointFeedbackLinearization, PdGravity, Saturated,
 };
 use leg_models::dynamics::{forward_dynamics, Baumgarte};
-use leg_models::integrate::{step, Method, State, StepOptions, TorqueSource};
 use leg_models::nalgebra::{SMatrix, SVector};
-use leg_models::reference::{Sinusoid, StepCycle};
 use leg_models::simulate::Simulator;
+use leg_models::simulate::{step, Method, State, StepOptions, TorqueSource};
 use leg_models::LegModel;
 use leg_tests::{not_applicable, passive_release_state};
 
@@ -66,7 +66,7 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
         allocations(|| forward_dynamics::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None)).0,
     );
     // Four states on SIMD lanes, and a change of parameters (which prepares them again).
-    let p4 = leg_models::batch::broadcast::<L, NQ, NC, NU>(&p);
+    let p4 = leg_models::dynamics::batch::broadcast::<L, NQ, NC, NU>(&p);
     let (q4, qd4, u4) = (
         leg_models::simd::pack([&q; 4]),
         leg_models::simd::pack([&qd; 4]),
@@ -78,7 +78,10 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
     );
     zero(
         "batched forward dynamics",
-        allocations(|| leg_models::batch::forward_dynamics::<L, NQ, NC, NU>(&p4, &q4, &qd4, &u4)).0,
+        allocations(|| {
+            leg_models::dynamics::batch::forward_dynamics::<L, NQ, NC, NU>(&p4, &q4, &qd4, &u4)
+        })
+        .0,
     );
     let mut changed = p;
     zero(
@@ -250,7 +253,7 @@ fn check_hybrid<L, const NQ: usize, const NC: usize, const NU: usize, const NK: 
 where
     L: leg_models::ContactModel<NQ, NC, NU, NK>,
 {
-    use leg_models::hybrid::{HybridSimulator, HybridState};
+    use leg_models::simulate::hybrid::{HybridSimulator, HybridState};
     if NK == 0 {
         return;
     }
@@ -290,12 +293,13 @@ fn check_derivatives<
 where
     L: leg_models::ContactModel<NQ, NC, NU, NK>,
 {
-    use leg_models::contact::{spec_friction, ContactMode, Ground, Modes};
-    use leg_models::derivatives::{
-        contact_dynamics_derivatives, forward_dynamics_derivatives, reduction_derivatives,
+    use leg_models::control::linearize::{linearize_step, ManifoldChart};
+    use leg_models::control::lqr::ManifoldLqr;
+    use leg_models::control::reduction_derivatives;
+    use leg_models::dynamics::contact::{spec_friction, ContactMode, Ground, Modes};
+    use leg_models::dynamics::derivatives::{
+        contact_dynamics_derivatives, forward_dynamics_derivatives,
     };
-    use leg_models::linearize::{linearize_step, ManifoldChart};
-    use leg_models::lqr::ManifoldLqr;
     let p = L::Params::<f64>::default();
     let start = passive_release_state::<L, NQ, NC, NU>(&p);
     let (q, qd) = (start.q, SVector::<f64, NQ>::zeros());

@@ -12,8 +12,8 @@ use leg_models::analysis::{
 use leg_models::assembly::{
     consistent_velocity, foot_inverse_holding, project_position, AssemblyError, Tolerance,
 };
-use leg_models::contact::{solve_structured, ContactRows};
 use leg_models::dynamics::actuation;
+use leg_models::dynamics::contact::{solve_structured, ContactRows};
 use leg_models::linalg::Cholesky;
 use leg_models::nalgebra::{Matrix2, SMatrix, SVector, Vector2};
 use leg_models::{LegModel, Parameters};

@@ -3,7 +3,7 @@
 //! relative; lanes with different parameters (a sweep); a broken lane flagged while the
 //! others stay right; legs whose closure repeats rows refused with a typed error.
 
-use leg_models::batch::{broadcast, forward_dynamics as batch_fd, BatchError};
+use leg_models::dynamics::batch::{broadcast, forward_dynamics as batch_fd, BatchError};
 use leg_models::dynamics::forward_dynamics;
 use leg_models::nalgebra::SVector;
 use leg_models::simd::{pack, unpack, F64x4};

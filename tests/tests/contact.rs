@@ -3,13 +3,13 @@
 //! identities, and drops whose events and energies are checked against free fall and
 //! energy conservation.
 
-use leg_models::contact::{
+use leg_models::dynamics::contact::{
     forward_dynamics_with_contacts, impact_map, spec_friction, ContactMode, Ground, ImpactError,
     Modes,
 };
-use leg_models::hybrid::{EventKind, HybridSimulator, HybridState};
-use leg_models::integrate::State;
 use leg_models::nalgebra::{DMatrix, DVector, SMatrix, SVector};
+use leg_models::simulate::hybrid::{EventKind, HybridSimulator, HybridState};
+use leg_models::simulate::State;
 use leg_models::{ContactModel, LegModel, Parameters};
 use leg_tests::{not_applicable, Rng};
 
@@ -459,7 +459,7 @@ fn drop_test<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usi
     height: f64,
     seconds: f64,
     kp: f64,
-) -> leg_models::hybrid::HybridRecord<f64, NQ, NC, NU, NK>
+) -> leg_models::simulate::hybrid::HybridRecord<f64, NQ, NC, NU, NK>
 where
     L: ContactModel<NQ, NC, NU, NK>,
 {
@@ -475,7 +475,7 @@ where
     }
     let mut sim = HybridSimulator::<L, f64, NQ, NC, NU, NK>::new(p, 1e-3);
     // The motor springs act continuously, so that they keep energy.
-    sim.options.control = leg_models::integrate::ControlUpdate::PerStage;
+    sim.options.control = leg_models::simulate::ControlUpdate::PerStage;
     let mut q = SVector::<f64, NQ>::from(L::HOME);
     leg_models::assembly::project_position::<L, f64, NQ, NC, NU>(&p, &mut q, &Default::default())
         .unwrap();
@@ -496,7 +496,7 @@ where
         Ok(r) => r,
         Err(stopped) => panic!("{}: {stopped}; events {:?}", L::NAME, stopped.record.events),
     };
-    let total = |s: &leg_models::hybrid::HybridSample<f64, NQ, NC, NU, NK>| {
+    let total = |s: &leg_models::simulate::hybrid::HybridSample<f64, NQ, NC, NU, NK>| {
         s.energy + potential(&s.state.state)
     };
     let scale = record

@@ -4,16 +4,16 @@
 //! the loop stable; singular configurations are typed errors.
 
 use leg_models::assembly::{assemble, consistent_velocity, foot_inverse, Tolerance};
+use leg_models::control::reference::{Reference, Sinusoid, StepCycle};
 use leg_models::control::{
     actuated_reduction, actuated_reduction_null_space, ControlError, FootFeedbackLinearization,
     FootPdGravity, Gains, JointFeedbackLinearization, PdGravity,
 };
 use leg_models::dynamics::forward_dynamics;
-use leg_models::integrate::{ControlUpdate, State, StepOptions, TorqueSource};
+use leg_models::dynamics::structure::{NotApplicable, Structure};
 use leg_models::nalgebra::{DMatrix, SVector};
-use leg_models::reference::{Reference, Sinusoid, StepCycle};
 use leg_models::simulate::Simulator;
-use leg_models::structure::{NotApplicable, Structure};
+use leg_models::simulate::{ControlUpdate, State, StepOptions, TorqueSource};
 use leg_models::{LegModel, Parameters};
 use leg_tests::{not_applicable, passive_release_state, random_assembled_state, Rng};
 

@@ -6,18 +6,20 @@
 //! constraint manifold; and against a second formulation (the null-space form's `∂q̈/∂u
 //! = G Ã⁻¹`; CasADi's own `jacobian` of its forward dynamics in `peers`).
 
-use leg_models::contact::{
+use leg_models::control::linearize::{linearize_step, ManifoldChart};
+use leg_models::control::{
+    actuated_reduction, actuated_reduction_null_space, null_space, reduction_derivatives,
+};
+use leg_models::dynamics::contact::{
     forward_dynamics_with_contacts, spec_friction, ContactMode, Ground, Modes,
 };
-use leg_models::control::{actuated_reduction, actuated_reduction_null_space, null_space};
-use leg_models::derivatives::{
-    contact_dynamics_derivatives, forward_dynamics_derivatives, reduction_derivatives,
+use leg_models::dynamics::derivatives::{
+    contact_dynamics_derivatives, forward_dynamics_derivatives,
 };
+use leg_models::dynamics::structure::{Actuation, Structure};
 use leg_models::dynamics::{forward_dynamics, Baumgarte};
-use leg_models::integrate::{step, Method, State, StepOptions};
-use leg_models::linearize::{linearize_step, ManifoldChart};
 use leg_models::nalgebra::{SMatrix, SVector};
-use leg_models::structure::{Actuation, Structure};
+use leg_models::simulate::{step, Method, State, StepOptions};
 use leg_models::{ContactModel, LegModel};
 use leg_tests::{random_assembled_state, Rng};
 

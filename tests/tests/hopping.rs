@@ -6,20 +6,20 @@
 use generated::minitaur_hopper::{Params, NC, NK, NQ, NU};
 use generated::MinitaurHopper as L;
 use leg_models::assembly::project_position;
-use leg_models::hop::{HopController, HopSettings};
-use leg_models::hybrid::{EventKind, HybridSimulator};
-use leg_models::integrate::State;
+use leg_models::control::hop::{HopController, HopSettings};
 use leg_models::nalgebra::SVector;
+use leg_models::simulate::hybrid::{EventKind, HybridSimulator};
+use leg_models::simulate::State;
 use leg_models::LegModel;
 
 /// Apexes from a record, `(t, q[forward], q[height])`: the height's rate crossing zero
 /// with every contact in flight.
 fn apexes<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
-    record: &leg_models::hybrid::HybridRecord<f64, NQ, NC, NU, NK>,
+    record: &leg_models::simulate::hybrid::HybridRecord<f64, NQ, NC, NU, NK>,
     height: usize,
     forward: usize,
 ) -> Vec<(f64, f64, f64)> {
-    let flight = |s: &leg_models::hybrid::HybridSample<f64, NQ, NC, NU, NK>| {
+    let flight = |s: &leg_models::simulate::hybrid::HybridSample<f64, NQ, NC, NU, NK>| {
         (0..NK / 2).all(|k| !s.state.modes.get(k).on_ground())
     };
     record
@@ -43,7 +43,7 @@ pub fn minitaur_hopper_run(
     apex: f64,
     seconds: f64,
 ) -> (
-    leg_models::hybrid::HybridRecord<f64, NQ, NC, NU, NK>,
+    leg_models::simulate::hybrid::HybridRecord<f64, NQ, NC, NU, NK>,
     HopController<L, f64, NQ, NC, NU, NK>,
 ) {
     let p = Params::<f64>::default();
@@ -124,7 +124,7 @@ fn atrias_hopper_hops_forward_at(speed: f64) {
     use generated::AtriasHopper as A;
     let p = Params::<f64>::default();
     let mut sim = HybridSimulator::<A, f64, NQ, NC, NU, NK>::new(p, 1e-3);
-    sim.options.control = leg_models::integrate::ControlUpdate::PerStep;
+    sim.options.control = leg_models::simulate::ControlUpdate::PerStep;
     let mut home = SVector::<f64, NQ>::from(A::HOME);
     project_position::<A, f64, NQ, NC, NU>(&p, &mut home, &Default::default()).unwrap();
     let apex = home[1] + 0.05;
@@ -226,7 +226,7 @@ fn knee_runner_hops_in_place_and_forward() {
     use generated::KneeRunner as K;
     let p = Params::<f64>::default();
     let mut sim = HybridSimulator::<K, f64, NQ, NC, NU, NK>::new(p, 1e-3);
-    sim.options.control = leg_models::integrate::ControlUpdate::PerStep;
+    sim.options.control = leg_models::simulate::ControlUpdate::PerStep;
     let mut home = SVector::<f64, NQ>::from(K::HOME);
     project_position::<K, f64, NQ, NC, NU>(&p, &mut home, &Default::default()).unwrap();
     let apex = home[1] + 0.05;

@@ -3,10 +3,10 @@
 //! the free function it stands for gives with the same arguments written out.
 
 use leg_models::assembly::{assemble, Tolerance};
-use leg_models::contact::Modes;
+use leg_models::dynamics::contact::Modes;
 use leg_models::dynamics::{forward_dynamics, Baumgarte};
-use leg_models::integrate::{State, StepOptions};
 use leg_models::nalgebra::SVector;
+use leg_models::simulate::{State, StepOptions};
 use leg_models::{ContactModel, Leg, Parameters};
 use leg_tests::{random_assembled_state, Rng};
 
@@ -138,7 +138,7 @@ where
     let mut b_state = a;
     let mut source = leg.torque_source(|_t, _s| u);
     leg.step(&mut a, 0.0, &mut source, &opts).unwrap();
-    leg_models::integrate::step::<L, f64, NQ, NC, NU>(
+    leg_models::simulate::step::<L, f64, NQ, NC, NU>(
         leg.params(),
         &mut b_state,
         0.0,

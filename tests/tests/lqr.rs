@@ -5,11 +5,11 @@
 //! Legs with no holding torque at home (passive joints away from equilibrium) say so.
 
 use leg_models::assembly::Tolerance;
-use leg_models::integrate::{step, State, StepOptions};
-use leg_models::linearize::{LinearizationError, ManifoldChart};
-use leg_models::lqr::ManifoldLqr;
+use leg_models::control::linearize::{LinearizationError, ManifoldChart};
+use leg_models::control::lqr::ManifoldLqr;
+use leg_models::control::reference::{Hold, Reference, Sinusoid};
 use leg_models::nalgebra::{DMatrix, SMatrix, SVector};
-use leg_models::reference::{Hold, Reference, Sinusoid};
+use leg_models::simulate::{step, State, StepOptions};
 use leg_models::LegModel;
 use leg_tests::{not_applicable, passive_release_state, Rng};
 
@@ -42,7 +42,7 @@ fn hold_and_decay<
     let pose = passive_release_state::<L, NQ, NC, NU>(&p).q;
     let mut opts = StepOptions::rk4(2e-3);
     // Linearized and simulated without the projection, whose linearization is only first
-    // order (see leg_models::linearize); the drift of 300 RK4 steps is far below the errors
+    // order (see leg_models::control::linearize); the drift of 300 RK4 steps is far below the errors
     // compared here.
     opts.project = false;
     let chart = ManifoldChart::<f64, NQ, M>::new::<L, NC, NU>(&p, &pose).expect("regular home");

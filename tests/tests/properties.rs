@@ -10,13 +10,13 @@
 //! leg-tests --test properties`.
 
 use leg_models::assembly::{assemble, foot_inverse, leg_size, Tolerance};
+use leg_models::control::reference::{Sinusoid, StepCycle};
 use leg_models::control::{
     FootFeedbackLinearization, FootPdGravity, Gains, JointFeedbackLinearization, PdGravity,
 };
 use leg_models::dynamics::forward_dynamics;
-use leg_models::integrate::{step, State, StepOptions, TorqueSource};
 use leg_models::nalgebra::SVector;
-use leg_models::reference::{Sinusoid, StepCycle};
+use leg_models::simulate::{step, State, StepOptions, TorqueSource};
 use leg_models::{LegModel, Parameters};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed, TestCaseError, TestRunner};
@@ -288,7 +288,7 @@ fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usiz
     );
     // Controllers and assembly from motor angles need motors that do not over-determine
     // the leg; on one that they do, both are refused by structure.
-    let structure = leg_models::structure::Structure::of::<L, NQ, NC, NU>();
+    let structure = leg_models::dynamics::structure::Structure::of::<L, NQ, NC, NU>();
     match structure.joint_space() {
         Ok(()) => {
             assert!(

@@ -46,10 +46,10 @@ use core::fmt;
 use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
 
 use crate::assembly::AssemblyError;
-use crate::dynamics::rcond_floor;
-use crate::linalg::{mul, mul_tn, Cholesky, PivotedLdlt};
-use crate::model::{LegModel, Parameters, Real};
-use crate::structure::{Actuation, NotApplicable};
+use crate::dynamics::forward::rcond_floor;
+use crate::dynamics::structure::{Actuation, NotApplicable};
+use crate::model::contract::{LegModel, Parameters, Real};
+use crate::model::linalg::{mul, mul_tn, Cholesky, PivotedLdlt};
 
 #[cfg(feature = "std")]
 pub mod workspace;

@@ -13,7 +13,7 @@ use nalgebra::SVector;
 
 use super::{passive_rank, point_measures, AnalysisError, LegFrame, MotorLimits, PointMeasures};
 use crate::assembly::{foot_inverse_holding, Tolerance};
-use crate::model::LegModel;
+use crate::model::contract::LegModel;
 
 /// How the grid is laid out and what limits apply.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -182,7 +182,7 @@ where
     // A slider's reach is not fixed by its pose: allow the leg's size for each.
     let sliders = chain
         .iter()
-        .filter(|&&j| L::JOINT_KINDS[j] == crate::model::JointKind::Prismatic)
+        .filter(|&&j| L::JOINT_KINDS[j] == crate::model::contract::JointKind::Prismatic)
         .count();
     (point(hip), length + sliders as f64 * size)
 }
@@ -219,7 +219,7 @@ where
     // the continuation can reach one node with angles a turn apart (around a hole in
     // the workspace), and both are the same pose.
     let motor_in = |a: usize, x: f64, (lo, hi): (f64, f64)| {
-        if L::JOINT_KINDS[a] == crate::model::JointKind::Revolute {
+        if L::JOINT_KINDS[a] == crate::model::contract::JointKind::Revolute {
             // A turn or more limits nothing (and keeps an infinite bound out of the sum).
             hi - lo >= core::f64::consts::TAU
                 || lo + (x - lo).rem_euclid(core::f64::consts::TAU) <= hi
@@ -327,7 +327,9 @@ where
         poses,
         measures,
         passive_rank: ranks,
-        revolute: core::array::from_fn(|j| L::JOINT_KINDS[j] == crate::model::JointKind::Revolute),
+        revolute: core::array::from_fn(|j| {
+            L::JOINT_KINDS[j] == crate::model::contract::JointKind::Revolute
+        }),
         passive_signed,
         area: reached as f64 * step * step,
         passive_curves: Vec::new(),
@@ -551,7 +553,7 @@ pub fn assembly_modes<L, const NQ: usize, const NC: usize, const NU: usize>(
 where
     L: LegModel<NQ, NC, NU>,
 {
-    use crate::model::JointKind;
+    use crate::model::contract::JointKind;
     // Without motor coordinates (an under-actuated leg's passive joints are free, an
     // over-actuated one's motors cannot all be held) the motors do not pick out a
     // finite set of poses.

@@ -6,9 +6,9 @@
 mod parallelogram_knee;
 
 use leg_models::control::{Gains, Saturated};
-use leg_models::integrate::{State, StepOptions};
+use leg_models::simulate::{State, StepOptions};
 use leg_models::nalgebra::{Vector2, Vector4};
-use leg_models::reference::Sinusoid;
+use leg_models::control::reference::Sinusoid;
 use parallelogram_knee::Leg;
 
 fn main() {

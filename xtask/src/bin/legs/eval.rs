@@ -4,9 +4,9 @@
 use leg_models::assembly::{
     assemble, assemble_along, consistent_velocity, project_position, project_velocity, Tolerance,
 };
-use leg_models::contact::{impact_map, spec_friction, ContactMode, Ground, Modes};
 use leg_models::control::actuated_reduction;
-use leg_models::derivatives::forward_dynamics_derivatives;
+use leg_models::dynamics::contact::{impact_map, spec_friction, ContactMode, Ground, Modes};
+use leg_models::dynamics::derivatives::forward_dynamics_derivatives;
 use leg_models::dynamics::forward_dynamics;
 use leg_models::nalgebra::{SMatrix, SVector};
 use leg_models::ContactModel;
@@ -260,7 +260,7 @@ pub fn run<
             Err(e) => {
                 out.insert("impact".into(), Value::Null);
                 let why = match e {
-                    leg_models::contact::ImpactError::Pulling { normal_impulse, .. } => format!(
+                    leg_models::dynamics::contact::ImpactError::Pulling { normal_impulse, .. } => format!(
                         "impact: contact `{}` would need a pulling normal impulse ({normal_impulse:.3e} N s): it separates instead",
                         L::CONTACT_NAMES[k]
                     ),

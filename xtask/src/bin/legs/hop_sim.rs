@@ -6,11 +6,13 @@
 use std::fmt::Write as _;
 
 use leg_models::assembly::{project_position, Tolerance};
-use leg_models::contact::{ContactMode, Ground};
-use leg_models::hop::{forward_joint, height_joint, HopController, HopSettings, HopSetupError};
-use leg_models::hybrid::{EventKind, HybridSample, HybridSimulator, HybridState};
-use leg_models::integrate::State;
+use leg_models::control::hop::{
+    forward_joint, height_joint, HopController, HopSettings, HopSetupError,
+};
+use leg_models::dynamics::contact::{ContactMode, Ground};
 use leg_models::nalgebra::SVector;
+use leg_models::simulate::hybrid::{EventKind, HybridSample, HybridSimulator, HybridState};
+use leg_models::simulate::State;
 use leg_models::{ContactModel, LegModel};
 use serde_json::json;
 use xtask::cli::{write_atomic, Error};
@@ -37,7 +39,8 @@ where
 }
 
 impl<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
-    leg_models::hybrid::HybridTorqueSource<f64, NQ, NK, NU> for WithProgress<L, NQ, NC, NU, NK>
+    leg_models::simulate::hybrid::HybridTorqueSource<f64, NQ, NK, NU>
+    for WithProgress<L, NQ, NC, NU, NK>
 where
     L: ContactModel<NQ, NC, NU, NK>,
 {
@@ -84,7 +87,7 @@ pub fn run<
     let h = height_joint::<L, f64, NQ, NC, NU, NK>(&p, &home)
         .ok_or_else(|| Error::usage(format!("{}: {}", L::NAME, HopSetupError::NoHeightJoint)))?;
     let mut sim = HybridSimulator::<L, f64, NQ, NC, NU, NK>::new(p, s.dt);
-    sim.options.control = leg_models::integrate::ControlUpdate::PerStep;
+    sim.options.control = leg_models::simulate::ControlUpdate::PerStep;
     let apex = s.apex.unwrap_or(home[h] + 0.05);
     if apex <= home[h] {
         return Err(Error::usage(format!(
@@ -219,7 +222,7 @@ pub fn run<
     };
     let count = |k: EventKind| events.iter().filter(|e| e.kind == k).count();
     // Whether the contact of `e` lifts off within `within` seconds after it.
-    let lifts_off_within = |e: &leg_models::hybrid::Event<f64>, within: f64| {
+    let lifts_off_within = |e: &leg_models::simulate::hybrid::Event<f64>, within: f64| {
         events.iter().any(|l| {
             l.kind == EventKind::Liftoff
                 && l.contact == e.contact
@@ -588,7 +591,7 @@ fn serve<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
 where
     L: ContactModel<NQ, NC, NU, NK>,
 {
-    use leg_models::hybrid::HybridTorqueSource;
+    use leg_models::simulate::hybrid::HybridTorqueSource;
     use std::io::{BufRead, Write};
     let stdin = std::io::stdin();
     let mut stdout = std::io::stdout().lock();

@@ -7,15 +7,15 @@ use std::path::PathBuf;
 use leg_models::assembly::{
     assemble_along, consistent_velocity, foot_inverse, project_position, Tolerance,
 };
+use leg_models::control::reference::{MinimumJerk, Ramp, Reference, Setpoint, Sinusoid, StepCycle};
 use leg_models::control::{
     foot_inertias, joint_inertias, ControlError, FootFeedbackLinearization, FootPdGravity, Gains,
     JointFeedbackLinearization, PdGravity, Saturated,
 };
-use leg_models::integrate::{State, StepOptions, TorqueSource};
+use leg_models::dynamics::structure::{NotApplicable, Structure};
 use leg_models::nalgebra::SVector;
-use leg_models::reference::{MinimumJerk, Ramp, Reference, Setpoint, Sinusoid, StepCycle};
 use leg_models::simulate::{Sample, Simulator};
-use leg_models::structure::{NotApplicable, Structure};
+use leg_models::simulate::{State, StepOptions, TorqueSource};
 use leg_models::LegModel;
 use serde_json::json;
 use xtask::args::{ControllerArg, SimArgs, TrajectoryArg};

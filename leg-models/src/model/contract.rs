@@ -30,7 +30,7 @@ impl Real for f64 {
 
     #[inline(always)]
     fn sincos(self) -> (Self, Self) {
-        crate::trig::sincos(self)
+        crate::model::trig::sincos(self)
     }
 }
 
@@ -43,7 +43,7 @@ impl Real for f32 {
     /// In `f64`, rounded once to `f32`.
     #[inline(always)]
     fn sincos(self) -> (Self, Self) {
-        let (s, c) = crate::trig::sincos(self as f64);
+        let (s, c) = crate::model::trig::sincos(self as f64);
         (s as f32, c as f32)
     }
 }

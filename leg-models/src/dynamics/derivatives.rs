@@ -19,13 +19,14 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::contact::{solve_structured_columns, ContactSolution, ContactSystem, Ground, Modes};
-use crate::control::{actuated_reduction, ControlError};
-use crate::dynamics::{
+use crate::dynamics::contact::{
+    solve_structured_columns, ContactSolution, ContactSystem, Ground, Modes,
+};
+use crate::dynamics::forward::{
     actuation, kkt_rhs, Acceleration, Baumgarte, DynamicsError, KktFactorization,
 };
-use crate::linalg::{all_finite, negate};
-use crate::model::{ContactModel, DynamicsTerms, LegModel, Real};
+use crate::model::contract::{ContactModel, DynamicsTerms, LegModel, Real};
+use crate::model::linalg::{all_finite, negate};
 
 /// Forward dynamics and its derivatives at one state and input.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -156,7 +157,7 @@ pub struct ContactDynamicsDerivatives<
     const NU: usize,
     const NK: usize,
 > {
-    /// As [`crate::contact::forward_dynamics_with_contacts`] returns it.
+    /// As [`crate::dynamics::contact::forward_dynamics_with_contacts`] returns it.
     pub solution: ContactSolution<T, NQ, NC, NK>,
     /// `∂q̈/∂q`.
     pub qdd_q: SMatrix<T, NQ, NQ>,
@@ -178,7 +179,7 @@ pub struct ContactDynamicsDerivatives<
     pub contact_u: SMatrix<T, NK, NU>,
 }
 
-/// [`crate::contact::forward_dynamics_with_contacts`] (contacts in `modes`, Baumgarte on
+/// [`crate::dynamics::contact::forward_dynamics_with_contacts`] (contacts in `modes`, Baumgarte on
 /// closures and held contacts as there) and its derivatives with respect to `q`, `q̇` and
 /// `u`, holding the modes: the linearization of stance (or of flight, or sliding).
 #[allow(clippy::too_many_arguments)]
@@ -253,56 +254,5 @@ where
         contact_q,
         contact_qd,
         contact_u,
-    })
-}
-
-/// The derivatives of the reduction to the motor angles (`Ã θ̈ = b̃ + u`,
-/// [`crate::control::actuated_reduction`]) through its inverse dynamics: the torques
-/// `u(q, q̇, v) = Ã(q) v − b̃(q, q̇)` that give the motors the accelerations `v`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ReductionDerivatives<T: Real, const NQ: usize, const NU: usize> {
-    /// `Ã` (`= ∂u/∂v`).
-    pub a_tilde: SMatrix<T, NU, NU>,
-    /// `b̃`.
-    pub b_tilde: SVector<T, NU>,
-    /// `∂u/∂q = ∂(Ã v)/∂q − ∂b̃/∂q` (at `v = 0`: `−∂b̃/∂q`).
-    pub torque_q: SMatrix<T, NU, NQ>,
-    /// `∂u/∂q̇ = −∂b̃/∂q̇`.
-    pub torque_qd: SMatrix<T, NU, NQ>,
-}
-
-/// [`ReductionDerivatives`] at `(q, q̇)` and motor accelerations `v`. Forward dynamics
-/// under `u(v)` gives the motors `θ̈ = v`, so differentiating that identity,
-/// `∂u/∂x = −Ã ∂θ̈/∂x` with `∂θ̈/∂x` the motor rows of [`forward_dynamics_derivatives`].
-/// Where the reduction applies (not on an over-actuated leg).
-pub fn reduction_derivatives<L, T, const NQ: usize, const NC: usize, const NU: usize>(
-    params: &L::Params<T>,
-    q: &SVector<T, NQ>,
-    qd: &SVector<T, NQ>,
-    v: &SVector<T, NU>,
-) -> Result<ReductionDerivatives<T, NQ, NU>, ControlError>
-where
-    L: LegModel<NQ, NC, NU>,
-    T: Real,
-{
-    let terms = L::dynamics_terms(q, qd, params);
-    let reduced = actuated_reduction::<L, T, NQ, NC, NU>(params, &terms, qd)?;
-    let u = reduced.a_tilde * v - reduced.b_tilde;
-    let d = forward_dynamics_derivatives_from_terms::<L, T, NQ, NC, NU>(
-        params, &terms, q, qd, &u, None,
-    )
-    .map_err(ControlError::Dynamics)?;
-    let motor_rows =
-        |m: &SMatrix<T, NQ, NQ>| SMatrix::<T, NU, NQ>::from_fn(|i, c| m[(L::ACTUATED[i], c)]);
-    let torque_q = -(reduced.a_tilde * motor_rows(&d.qdd_q));
-    let torque_qd = -(reduced.a_tilde * motor_rows(&d.qdd_qd));
-    if !(all_finite(&torque_q) && all_finite(&torque_qd)) {
-        return Err(ControlError::NonFinite);
-    }
-    Ok(ReductionDerivatives {
-        a_tilde: reduced.a_tilde,
-        b_tilde: reduced.b_tilde,
-        torque_q,
-        torque_qd,
     })
 }

@@ -18,9 +18,9 @@ use core::fmt;
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::dynamics::{actuation, rcond_floor, Baumgarte, DynamicsError};
-use crate::linalg::{all_finite, mul, Cholesky, PivotedLdlt};
-use crate::model::{ContactModel, Real};
+use crate::dynamics::forward::{actuation, rcond_floor, Baumgarte, DynamicsError};
+use crate::model::contract::{ContactModel, Real};
+use crate::model::linalg::{all_finite, mul, Cholesky, PivotedLdlt};
 
 /// The ground line `n · x = d` (base frame), `n` a unit normal out of the ground.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -13,8 +13,8 @@ use core::fmt;
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::linalg::{all_finite, mul, Cholesky, PivotedLdlt};
-use crate::model::{DynamicsTerms, LegModel, Real};
+use crate::model::contract::{DynamicsTerms, LegModel, Real};
+use crate::model::linalg::{all_finite, mul, Cholesky, PivotedLdlt};
 
 /// Why the constrained dynamics cannot be solved at a state.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -11,9 +11,9 @@
 
 use nalgebra::SVector;
 
-use crate::dynamics::rcond_floor;
-use crate::model::{LegModel, Parameters};
-use crate::simd::F64x4;
+use crate::dynamics::forward::rcond_floor;
+use crate::model::contract::{LegModel, Parameters};
+use crate::model::simd::F64x4;
 
 /// Why a leg has no batched forward dynamics.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

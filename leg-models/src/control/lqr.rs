@@ -1,5 +1,5 @@
 //! Discrete LQR on the constraint manifold: the Riccati equation of a linearized step
-//! ([`crate::linearize::ManifoldChart::linearize_step`]) solved once, and a controller that
+//! ([`crate::control::linearize::ManifoldChart::linearize_step`]) solved once, and a controller that
 //! holds a leg at a pose or tracks a slow reference of the chart's coordinates with it,
 //! under torque limits.
 //!
@@ -9,51 +9,20 @@
 //! quadratically where the plain iteration needs thousands of rounds for a step much
 //! shorter than the leg's time constants. Fixed-size and allocation-free.
 
-use core::fmt;
 use core::marker::PhantomData;
 
 use nalgebra::{SMatrix, SVector};
 
 use crate::assembly::Tolerance;
-use crate::control::ControlError;
-use crate::integrate::{State, StepOptions, TorqueSource};
-use crate::linalg::{all_finite, Cholesky, Lu};
-use crate::linearize::{LinearizationError, ManifoldChart};
-use crate::model::{LegModel, Real};
-use crate::reference::Reference;
-
-/// Why the Riccati equation has no solution here.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum LqrError {
-    /// `R` (or `R + Bᵀ P B`) is not positive definite, or a doubling round is singular.
-    NotPositiveDefinite,
-    /// The iteration did not settle in `iterations` rounds: `(A, B)` is not stabilizable
-    /// or `(A, Q)` not detectable.
-    NotConverged {
-        /// The doubling rounds taken.
-        iterations: usize,
-    },
-    /// NaN or infinity in the data or the iterates.
-    NonFinite,
-}
-
-impl fmt::Display for LqrError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            LqrError::NotPositiveDefinite => {
-                write!(f, "R + Bᵀ P B is not positive definite")
-            }
-            LqrError::NotConverged { iterations } => write!(
-                f,
-                "the Riccati iteration did not converge in {iterations} rounds: the linearization is not stabilizable"
-            ),
-            LqrError::NonFinite => write!(f, "non-finite Riccati data or iterate"),
-        }
-    }
-}
-
-#[cfg(feature = "std")]
-impl std::error::Error for LqrError {}
+use crate::control::linearize::ManifoldChart;
+use crate::control::reference::Reference;
+use crate::model::contract::{LegModel, Real};
+use crate::model::linalg::{all_finite, Cholesky, Lu};
+use crate::simulate::source::ControlError;
+use crate::simulate::source::LinearizationError;
+pub use crate::simulate::source::LqrError;
+use crate::simulate::source::{State, TorqueSource};
+use crate::simulate::step::StepOptions;
 
 /// The optimal state feedback `δu = −K δx` of `δx⁺ = A δx + B δu` with the cost
 /// `Σ δxᵀ Q δx + δuᵀ R δu`.

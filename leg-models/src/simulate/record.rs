@@ -6,9 +6,10 @@ use core::marker::PhantomData;
 
 use nalgebra::SVector;
 
-pub use crate::integrate::TorqueSource;
-use crate::integrate::{energy, step, State, StepError, StepOptions};
-use crate::model::{LegModel, Real};
+use crate::model::contract::{LegModel, Real};
+use crate::simulate::source::State;
+use crate::simulate::source::TorqueSource;
+use crate::simulate::step::{energy, step, StepError, StepOptions};
 
 /// One recorded instant.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -129,7 +130,7 @@ where
             .torque(t, &state)
             .map_err(StepError::Control)
             .and_then(|u| {
-                crate::dynamics::forward_dynamics::<L, T, NQ, NC, NU>(
+                crate::dynamics::forward::forward_dynamics::<L, T, NQ, NC, NU>(
                     &self.params,
                     &state.q,
                     &state.qd,

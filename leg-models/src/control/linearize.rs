@@ -1,10 +1,10 @@
 //! The exact linearization of one integrator step, `δx⁺ = A δx + B δu` (DESIGN.md §3.2),
 //! in joint coordinates and on the constraint manifold.
 //!
-//! [`linearize_step`] differentiates the very step [`crate::integrate::step`] takes (RK4
+//! [`linearize_step`] differentiates the very step [`crate::simulate::step`] takes (RK4
 //! or semi-implicit Euler, torques held over the step, Baumgarte terms as configured) by
 //! the chain rule through its stages, each stage's Jacobian from
-//! [`crate::derivatives::forward_dynamics_derivatives`]; the post-step projection onto
+//! [`crate::dynamics::derivatives::forward_dynamics_derivatives`]; the post-step projection onto
 //! the constraints, when on, is differentiated to first order at the projected state
 //! (the terms proportional to the drift it removes, `φ` and `J q̇` after the step, are
 //! left out). Without the projection the linearization is exact (tested to 1e-6 against
@@ -17,80 +17,17 @@
 //! ([`ManifoldChart::linearize_step`]): the `(A, B)` an MPC or an LQR on a closed chain
 //! needs, of full rank where the chain is regular.
 
-use core::fmt;
-
 use nalgebra::{SMatrix, SVector};
 
 use crate::assembly::{assemble_holding, AssemblyError, Tolerance};
-use crate::derivatives::{forward_dynamics_derivatives, ForwardDynamicsDerivatives};
-use crate::dynamics::DynamicsError;
-use crate::integrate::{advance, project_onto_closures, Method, State, StepOptions};
-use crate::linalg::{all_finite, mul, Cholesky, Lu};
-use crate::model::{LegModel, Real};
-use crate::structure::factor_closure_rows;
-
-/// Why a linearization cannot be made.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum LinearizationError {
-    /// The dynamics cannot be solved at a stage.
-    Dynamics(DynamicsError),
-    /// Projecting onto the constraints, or lifting chart coordinates onto them, failed.
-    Assembly(AssemblyError),
-    /// The chart's size does not match the leg: it has `mobility` degrees of freedom
-    /// here, so its manifold states are `2 · mobility`, not `states`.
-    Dimension {
-        /// The leg's degrees of freedom at the pose.
-        mobility: usize,
-        /// The number of manifold states asked for.
-        states: usize,
-    },
-    /// No torque holds the leg at rest at this pose (an under-actuated leg away from its
-    /// passive equilibrium): `residual` is the smallest acceleration left (rad/s², m/s²).
-    NotAnEquilibrium {
-        /// The acceleration left under the best torque, its largest entry (rad/s², m/s²).
-        residual: f64,
-    },
-    /// The motors do not move the chart's coordinates at this pose (`∂θ̈/∂u` loses rank),
-    /// so no torque is determined.
-    MotorsDoNotMoveCoordinates,
-}
-
-impl fmt::Display for LinearizationError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            LinearizationError::Dynamics(e) => write!(f, "dynamics: {e}"),
-            LinearizationError::Assembly(e) => write!(f, "constraints: {e}"),
-            LinearizationError::Dimension { mobility, states } => write!(
-                f,
-                "the leg has {mobility} degree(s) of freedom here, so its states on the constraint manifold are {} numbers, not {states}",
-                2 * mobility
-            ),
-            LinearizationError::MotorsDoNotMoveCoordinates => write!(
-                f,
-                "the motors do not move the leg's coordinates at this pose: no torque holds it"
-            ),
-            LinearizationError::NotAnEquilibrium { residual } => write!(
-                f,
-                "no motor torque holds the leg at rest at this pose (acceleration {residual:.3e} remains): the passive joints are not at an equilibrium"
-            ),
-        }
-    }
-}
-
-#[cfg(feature = "std")]
-impl std::error::Error for LinearizationError {}
-
-impl From<DynamicsError> for LinearizationError {
-    fn from(e: DynamicsError) -> Self {
-        LinearizationError::Dynamics(e)
-    }
-}
-
-impl From<AssemblyError> for LinearizationError {
-    fn from(e: AssemblyError) -> Self {
-        LinearizationError::Assembly(e)
-    }
-}
+use crate::dynamics::derivatives::{forward_dynamics_derivatives, ForwardDynamicsDerivatives};
+use crate::dynamics::forward::DynamicsError;
+use crate::dynamics::structure::factor_closure_rows;
+use crate::model::contract::{LegModel, Real};
+use crate::model::linalg::{all_finite, mul, Cholesky, Lu};
+pub use crate::simulate::source::LinearizationError;
+use crate::simulate::source::State;
+use crate::simulate::step::{advance, project_onto_closures, Method, StepOptions};
 
 /// `δx⁺ = A δx + B δu` of one step in joint coordinates, by blocks:
 /// `δq⁺ = q_q δq + q_qd δq̇ + q_u δu`, `δq̇⁺ = qd_q δq + qd_qd δq̇ + qd_u δu`.
@@ -145,7 +82,7 @@ struct Stages<T: Real, const NQ: usize, const NC: usize, const NU: usize> {
 }
 
 /// The stages' derivatives of one step.before its projection:
-/// the integrator's own arithmetic ([`crate::integrate::advance`]), each stage's
+/// the integrator's own arithmetic ([`crate::simulate::advance`]), each stage's
 /// acceleration taken from its derivatives, so no stage is solved twice.
 fn stages<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     params: &L::Params<T>,
@@ -255,7 +192,7 @@ where
     })
 }
 
-/// One step of [`crate::integrate::step`] from `state` with the torques `u` held, and its
+/// One step of [`crate::simulate::step`] from `state` with the torques `u` held, and its
 /// exact linearization. Returns the next state and `(A, B)` by blocks.
 pub fn linearize_step<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     params: &L::Params<T>,

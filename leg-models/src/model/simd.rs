@@ -13,7 +13,7 @@ use core::ops::{Add, Div, Mul, Neg, Sub};
 
 use nalgebra::{ComplexField, RealField, SVector};
 
-use crate::model::Arithmetic;
+use crate::model::contract::Arithmetic;
 
 /// Four `f64` lanes.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -83,7 +83,7 @@ impl Arithmetic for F64x4 {
     }
     #[inline(always)]
     fn sincos(self) -> (Self, Self) {
-        let (s, c) = crate::trig::sincos_lanes(self.0);
+        let (s, c) = crate::model::trig::sincos_lanes(self.0);
         (F64x4(s), F64x4(c))
     }
     fn sqrt(self) -> Self {
@@ -171,7 +171,7 @@ mod tests {
         for k in 0..4 {
             assert_eq!(
                 (s.0[k], c.0[k]),
-                crate::trig::sincos(x.0[k]),
+                crate::model::trig::sincos(x.0[k]),
                 "lane {k}: the scalar path's bits"
             );
         }

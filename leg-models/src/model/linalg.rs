@@ -3,7 +3,7 @@
 
 use nalgebra::SMatrix;
 
-use crate::model::Real;
+use crate::model::contract::Real;
 
 /// The factorization `A = L D Lᵀ` (`L` unit lower triangular, `D` diagonal and positive)
 /// of a symmetric positive definite `A`: the Cholesky factorization without its square

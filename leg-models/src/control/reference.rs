@@ -2,7 +2,7 @@
 
 use nalgebra::SVector;
 
-use crate::model::Real;
+use crate::model::contract::Real;
 
 /// Position, velocity and acceleration of a reference at one instant.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -6,9 +6,9 @@ use core::fmt;
 
 use nalgebra::SMatrix;
 
-use crate::dynamics::rcond_floor;
-use crate::linalg::PivotedLdlt;
-use crate::model::{LegModel, Real};
+use crate::dynamics::forward::rcond_floor;
+use crate::model::contract::{LegModel, Real};
+use crate::model::linalg::PivotedLdlt;
 
 /// How a leg's motors compare with its degrees of freedom.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -7,44 +7,11 @@ use core::fmt;
 use nalgebra::SVector;
 
 use crate::assembly::{project_position, project_velocity, AssemblyError, Tolerance};
-use crate::control::ControlError;
-use crate::dynamics::{forward_dynamics, Acceleration, Baumgarte, DynamicsError};
-use crate::model::{LegModel, Real};
-
-/// Joint positions and velocities.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct State<T: Real, const NQ: usize> {
-    /// The joint coordinates `q` (rad, or m on a prismatic joint).
-    pub q: SVector<T, NQ>,
-    /// The joint rates `q̇` (rad/s, or m/s).
-    pub qd: SVector<T, NQ>,
-}
-
-/// Motor torques as a function of time and state: a controller, or any closure
-/// `FnMut(t, &State) -> u`. A controller that cannot act (a singular configuration, an
-/// unreachable reference) says why.
-pub trait TorqueSource<T: Real, const NQ: usize, const NU: usize> {
-    /// The motor torques `u` at time `t` (s) and `state`, or why there are none.
-    fn torque(&mut self, t: T, state: &State<T, NQ>) -> Result<SVector<T, NU>, ControlError>;
-}
-
-impl<T: Real, const NQ: usize, const NU: usize, F> TorqueSource<T, NQ, NU> for F
-where
-    F: FnMut(T, &State<T, NQ>) -> SVector<T, NU>,
-{
-    fn torque(&mut self, t: T, state: &State<T, NQ>) -> Result<SVector<T, NU>, ControlError> {
-        Ok(self(t, state))
-    }
-}
-
-/// When the torque source is asked.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ControlUpdate {
-    /// Once per step, held over the step (a digital controller at the step rate).
-    PerStep,
-    /// At every stage of the integrator (the continuous-time control law).
-    PerStage,
-}
+use crate::dynamics::forward::{forward_dynamics, Acceleration, Baumgarte, DynamicsError};
+use crate::model::contract::{LegModel, Real};
+use crate::simulate::source::ControlError;
+use crate::simulate::source::ControlUpdate;
+use crate::simulate::source::{State, TorqueSource};
 
 /// The integrator of a step.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -172,7 +139,7 @@ where
 }
 
 /// The integrators' arithmetic, shared by [`step`] and its linearization
-/// ([`crate::linearize::linearize_step`]): one step of `method` from `(q, q̇)`, `first`
+/// ([`crate::control::linearize::linearize_step`]): one step of `method` from `(q, q̇)`, `first`
 /// the acceleration there and `accel(τ, q, q̇)` that of the later stages (`τ` their time
 /// offset in the step).
 pub(crate) fn advance<T: Real, const NQ: usize, E>(

@@ -24,15 +24,15 @@ use core::marker::PhantomData;
 use nalgebra::{SMatrix, SVector};
 
 use crate::assembly::{leg_size, AssemblyError, Tolerance};
-use crate::contact::{
+use crate::dynamics::contact::{
     forward_dynamics_with_contacts, impact_map, solve_structured, spec_friction, ContactMode,
     ContactRows, ContactSolution, Ground, ImpactError, Modes,
 };
-use crate::control::ControlError;
-use crate::dynamics::{Baumgarte, DynamicsError};
-use crate::integrate::{ControlUpdate, State};
-use crate::linalg::{mul, Cholesky};
-use crate::model::{ContactModel, Real};
+use crate::dynamics::forward::{Baumgarte, DynamicsError};
+use crate::model::contract::{ContactModel, Real};
+use crate::model::linalg::{mul, Cholesky};
+use crate::simulate::source::ControlError;
+use crate::simulate::source::{ControlUpdate, State};
 
 /// A leg's state with its contacts.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -887,7 +887,7 @@ pub use record::*;
 #[cfg(feature = "std")]
 mod record {
     use super::*;
-    use crate::integrate::energy;
+    use crate::simulate::step::energy;
 
     /// One recorded instant of a hybrid run.
     #[derive(Clone, Copy, Debug, PartialEq)]

@@ -47,11 +47,11 @@
 use nalgebra::{SMatrix, SVector};
 
 use crate::assembly::{foot_inverse_holding, Tolerance};
-use crate::contact::{ContactMode, ContactSystem, Ground};
-use crate::control::ControlError;
-use crate::hybrid::{HybridOptions, HybridState, HybridTorqueSource};
-use crate::linalg::Cholesky;
-use crate::model::{ContactModel, JointKind, LegModel, Parameters, Real};
+use crate::dynamics::contact::{ContactMode, ContactSystem, Ground};
+use crate::model::contract::{ContactModel, JointKind, LegModel, Parameters, Real};
+use crate::model::linalg::Cholesky;
+use crate::simulate::hybrid::{HybridOptions, HybridState, HybridTorqueSource};
+use crate::simulate::source::ControlError;
 
 /// The body's height coordinate of leg `L` at `q`: the prismatic joint that raises the
 /// contacts most along the ground's normal (a vertical slider), if any joint raises them.
@@ -379,7 +379,7 @@ impl<T: Real, const NU: usize> HopSettings<T, NU> {
                 m[(d.joint, d.joint)]
             } else {
                 // A motor's own joint: its inertia through the closures (the reduction).
-                crate::control::joint_inertias::<L, T, NQ, NC, NU>(params, home)
+                crate::control::feedback::joint_inertias::<L, T, NQ, NC, NU>(params, home)
                     .map(|i| i[k])
                     .unwrap_or(m[(d.joint, d.joint)])
             }
