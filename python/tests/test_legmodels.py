@@ -5,6 +5,7 @@ prints at the same state; derivatives agree with central differences; a simulati
 without torques or damping keeps its energy; bad input raises the runtime's errors."""
 
 import pathlib
+import re
 import subprocess
 import sys
 
@@ -223,17 +224,58 @@ def test_example_script_runs(tmp_path):
     assert out.stat().st_size > 10_000
 
 
-def test_the_readme_example_runs():
-    """The README's Python example, as written there."""
-    text = (ROOT / "README.md").read_text()
-    start = text.index("```python\n", text.index("## Python")) + len("```python\n")
-    code = text[start:text.index("```", start)]
-    namespace = {}
-    exec(compile(code, "README.md", "exec"), namespace)
+def _python_blocks():
+    """Every ```python block of README.md and docs/*.md, as (file, index in that file, code).
+
+    Every such block runs. A block that is not meant to run (a shell session, a fragment)
+    is fenced as something else (```text, ```sh), or listed in SKIPPED_BLOCKS with why."""
+    blocks = []
+    for path in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
+        text = path.read_text()
+        found = re.finditer(r"^```python[ \t]*\n(.*?)^```", text, re.DOTALL | re.MULTILINE)
+        for index, m in enumerate(found):
+            blocks.append((path.relative_to(ROOT).as_posix(), index, m.group(1)))
+    return blocks
+
+
+PYTHON_BLOCKS = _python_blocks()
+
+# (file, index) → why the block does not run. Empty: every block runs.
+SKIPPED_BLOCKS = {}
+
+
+def _check_the_package_example(namespace):
+    """The README's example of the package: a simulation, derivatives and a sweep."""
     assert namespace["run"]["q"].shape == (1001, 4)
     assert np.isfinite(namespace["d"]["qdd_q"]).all()
     areas = namespace["areas"]
     assert 0 < areas[0.16] < areas[0.20] < areas[0.24], areas
+
+
+# Checks beyond running, each for the block that contains its marker.
+BLOCK_CHECKS = {"areas = {l: legmodels.Minitaur(": _check_the_package_example}
+
+
+def test_the_docs_have_their_python_examples():
+    """The blocks the checks are for are found (a renamed fence would skip them silently)."""
+    assert PYTHON_BLOCKS, "no ```python block in README.md or docs/"
+    for marker in BLOCK_CHECKS:
+        assert sum(marker in code for _, _, code in PYTHON_BLOCKS) == 1, marker
+
+
+@pytest.mark.parametrize(
+    "file,index", [(f, i) for f, i, _ in PYTHON_BLOCKS], ids=[f"{f}:{i}" for f, i, _ in PYTHON_BLOCKS]
+)
+def test_the_docs_python_examples_run(file, index):
+    """Each ```python block of the README and docs/, as written there."""
+    if (file, index) in SKIPPED_BLOCKS:
+        pytest.skip(SKIPPED_BLOCKS[(file, index)])
+    code = next(c for f, i, c in PYTHON_BLOCKS if (f, i) == (file, index))
+    namespace = {}
+    exec(compile(code, f"{file} (python block {index})", "exec"), namespace)
+    for marker, check in BLOCK_CHECKS.items():
+        if marker in code:
+            check(namespace)
 
 
 @pytest.mark.parametrize("name", SPECS)

@@ -1,5 +1,23 @@
 #![doc = include_str!("../../README.md")]
-// The README is this crate's documentation, so its Rust examples run as doctests.
+// The README is this crate's documentation, so its Rust examples run as doctests; so do
+// those of the docs/ files, each the documentation of an empty module that only doctests
+// see (`cfg(doctest)`: not part of the crate otherwise). A docs file with a ```rust
+// block needs its module here.
+
+// docs/rust-api.md
+#[doc = include_str!("../../docs/rust-api.md")]
+#[cfg(doctest)]
+pub mod rust_api {}
+
+// docs/comparing-designs.md
+#[doc = include_str!("../../docs/comparing-designs.md")]
+#[cfg(doctest)]
+pub mod comparing_designs {}
+
+// docs/spec-format.md (its one block is `rust,ignore`: a fragment of a user's crate)
+#[doc = include_str!("../../docs/spec-format.md")]
+#[cfg(doctest)]
+pub mod spec_format {}
 
 // Helpers shared by the workspace tests.
 

@@ -1,6 +1,6 @@
 //! How `cargo xtask gen`'s time grows with the size of a leg: a serial chain of N links,
 //! derived and emitted in a scratch workspace (CasADi from the project's `.venv`).
-//! Not part of the suite (it takes minutes); the README's table comes from
+//! Not part of the suite (it takes minutes); docs/figures.md's table comes from
 //! `cargo test -p xtask --test gen_growth -- --ignored --nocapture`.
 
 use std::fmt::Write as _;
