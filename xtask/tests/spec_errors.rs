@@ -3,9 +3,9 @@
 
 use std::path::{Path, PathBuf};
 
+use xtask::gen::model;
+use xtask::gen::spec::{Spec, SpecError};
 use xtask::gen::{self, GenOptions};
-use xtask::model;
-use xtask::spec::{Spec, SpecError};
 
 const VALID: &str = r#"# a small five-bar
 gravity = [0.0, -9.81]
@@ -70,7 +70,7 @@ fn edit(from: &str, to: &str, nth: usize) -> String {
 /// 1-based line and column of the `nth` occurrence of `needle` in `text`.
 fn pos(text: &str, needle: &str, nth: usize) -> (usize, usize) {
     let (i, _) = text.match_indices(needle).nth(nth).unwrap();
-    xtask::spec::line_column(text, i)
+    xtask::gen::spec::line_column(text, i)
 }
 
 fn expect_error(text: &str, at: (usize, usize), field: &str, says: &str) {
@@ -564,7 +564,7 @@ link = "left"
 
 #[test]
 fn a_spec_larger_than_the_limit_is_refused_up_front() {
-    let n = xtask::spec::MAX_LINKS + 1;
+    let n = xtask::gen::spec::MAX_LINKS + 1;
     let mut text = String::from("gravity = [0.0, -9.81]\n");
     for i in 0..n {
         let parent = if i == 0 {

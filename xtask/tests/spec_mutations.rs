@@ -12,8 +12,8 @@ use std::path::Path;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed, TestCaseError, TestRunner};
 use xtask::gen;
-use xtask::model;
-use xtask::spec::{Spec, SpecError};
+use xtask::gen::model;
+use xtask::gen::spec::{Spec, SpecError};
 
 /// A fixed seed (1 unless `LEGS_PROPTEST_SEED` says otherwise), so that a run can be
 /// repeated and the counts the test asserts do not depend on luck.

@@ -11,7 +11,7 @@ use leg_models::dynamics::forward_dynamics;
 use leg_models::nalgebra::{SMatrix, SVector};
 use leg_models::ContactModel;
 use serde_json::{json, Map, Value};
-use xtask::args::EvalArgs;
+use xtask::cli::args::EvalArgs;
 use xtask::cli::{numbers, Error};
 
 fn matrix<const R: usize, const C: usize>(m: &SMatrix<f64, R, C>) -> Value {
@@ -44,14 +44,14 @@ pub fn run<
             None if L::CONTACT_NAMES.is_empty() => {
                 return Err(Error::usage(format!(
                     "--impact {}: {} has no contact points (add [[contacts]] to its spec)",
-                    xtask::spec::shown(name),
+                    xtask::gen::spec::shown(name),
                     L::NAME
                 )))
             }
             None => {
                 return Err(Error::usage(format!(
                     "--impact: unknown contact `{}` (contacts of {}: {})",
-                    xtask::spec::shown(name),
+                    xtask::gen::spec::shown(name),
                     L::NAME,
                     L::CONTACT_NAMES.join(", ")
                 )))

@@ -3,13 +3,11 @@
 
 use std::process::ExitCode;
 
-use xtask::args::{self, AnalyzeArgs, Command, EvalArgs, Parsed, SimArgs, Xtask};
+use xtask::cli::args::{self, AnalyzeArgs, Command, EvalArgs, Parsed, SimArgs, Xtask};
 use xtask::cli::Error;
 
-mod analysis_report;
 mod analyze;
 mod eval;
-mod hop_sim;
 mod report;
 mod sim;
 
@@ -29,14 +27,14 @@ fn unknown(name: &str) -> Error {
     let spec = xtask::gen::workspace_root()
         .join(xtask::gen::SPECS_DIR)
         .join(format!("{name}.toml"));
-    if xtask::spec::check_name(name).is_ok() && spec.exists() {
+    if xtask::gen::spec::check_name(name).is_ok() && spec.exists() {
         return Error::usage(format!(
             "`{name}` has a spec but no generated code yet: run `cargo xtask gen {name}`"
         ));
     }
     Error::usage(format!(
         "unknown model `{}` (expected one of: {})",
-        xtask::spec::shown(name),
+        xtask::gen::spec::shown(name),
         models().join(", ")
     ))
 }
@@ -61,7 +59,7 @@ fn simulate(args: SimArgs) -> Result<(), Error> {
             if name == stringify!($module) {
                 // A leg with contacts runs on the ground.
                 if $nk > 0 {
-                    return hop_sim::run::<$ty, $nq, $nc, $nu, $nk>(&settings);
+                    return sim::hop::run::<$ty, $nq, $nc, $nu, $nk>(&settings);
                 }
                 return sim::run::<$ty, $nq, $nc, $nu>(&settings);
             }
@@ -83,7 +81,7 @@ fn analyze(args: AnalyzeArgs, raw: &[String]) -> Result<(), Error> {
     }
     let total = args.models.len() as u64 * settings_designs(&args);
     let progress = std::sync::Mutex::new((
-        xtask::progress::Progress::ticking(total, "analysing designs"),
+        xtask::cli::progress::Progress::ticking(total, "analysing designs"),
         0u64,
     ));
     let started = std::time::Instant::now();

@@ -17,9 +17,14 @@ use leg_models::nalgebra::SVector;
 use leg_models::{LegModel, ParameterError, Parameters};
 use rayon::prelude::*;
 use serde_json::{json, Value};
-use xtask::args::AnalyzeArgs;
+use xtask::cli::args::AnalyzeArgs;
+use xtask::cli::progress::Progress;
 use xtask::cli::{write_atomic, Error};
-use xtask::progress::Progress;
+
+pub use design::{table, Design, View};
+
+mod design;
+mod report;
 
 /// The command's settings, checked.
 pub struct Settings {
@@ -71,7 +76,7 @@ fn finite(flag: &str, text: &str, what: &str) -> Result<f64, Error> {
         Ok(x) if x.is_finite() => Ok(x),
         _ => Err(Error::usage(format!(
             "`{flag}`: `{}` is not a finite number ({what})",
-            xtask::spec::shown(text)
+            xtask::gen::spec::shown(text)
         ))),
     }
 }
@@ -83,7 +88,7 @@ impl Settings {
             let Some((name, value)) = s.split_once('=') else {
                 return Err(Error::usage(format!(
                     "`--set {}`: expected NAME=VALUE (e.g. lower_a_length_x=0.22)",
-                    xtask::spec::shown(s)
+                    xtask::gen::spec::shown(s)
                 )));
             };
             let value = finite("--set", value, "the parameter's value")?;
@@ -96,7 +101,7 @@ impl Settings {
                 let bad = || {
                     Error::usage(format!(
                         "`--sweep {}`: expected NAME=FROM:TO:N (e.g. lower_a_length_x=0.16:0.26:6), N from 2 to 200",
-                        xtask::spec::shown(s)
+                        xtask::gen::spec::shown(s)
                     ))
                 };
                 let (name, range) = s.split_once('=').ok_or_else(bad)?;
@@ -165,7 +170,7 @@ impl Settings {
                 let bad = || {
                     Error::usage(format!(
                         "`--motor-range {}`: expected LO:HI in rad with LO < HI (e.g. -3.2:0.5)",
-                        xtask::spec::shown(r)
+                        xtask::gen::spec::shown(r)
                     ))
                 };
                 let (lo, hi) = r.split_once(':').ok_or_else(bad)?;
@@ -221,32 +226,6 @@ impl Settings {
     pub fn sweeping(&self) -> Option<&str> {
         self.sweep.as_ref().map(|s| s.name.as_str())
     }
-}
-
-/// What the report draws of one design.
-pub struct View {
-    pub nodes: usize,
-    pub origin: [f64; 2],
-    pub step: f64,
-    /// `(title, unit, value per node (NaN where none))`.
-    pub maps: Vec<(String, String, Vec<f64>)>,
-    pub passive: Vec<Segment>,
-    pub foot: Vec<Segment>,
-    /// The leg at its stance pose: each link joint → tip, and the closures' points.
-    pub links: Vec<[f64; 4]>,
-    pub stance: [f64; 2],
-    /// A one-motor leg's foot path (no maps then).
-    pub path: Vec<[f64; 2]>,
-}
-
-/// One analysed design.
-pub struct Design {
-    pub label: String,
-    pub file_stem: String,
-    pub swept: Option<f64>,
-    pub json: Value,
-    pub csv: Option<String>,
-    pub view: Option<View>,
 }
 
 fn index_of<L, const NQ: usize, const NC: usize, const NU: usize>(
@@ -834,45 +813,6 @@ where
     }
 }
 
-/// The table's columns: key in `table`, heading, scale to the unit shown, decimals.
-pub const COLUMNS: [(&str, &str, f64, usize); 7] = [
-    ("workspace_area_m2", "workspace (cm²)", 1e4, 1),
-    ("vertical_force_n", "push at stance (N)", 1.0, 2),
-    (
-        "vertical_speed_m_s",
-        "vertical speed at stance (m/s)",
-        1.0,
-        3,
-    ),
-    ("effective_mass_kg", "effective mass at stance (kg)", 1.0, 4),
-    ("impact_mitigation", "impact mitigation factor", 1.0, 3),
-    (
-        "singularity_distance_m",
-        "stance to singularity (mm)",
-        1e3,
-        1,
-    ),
-    ("condition", "κ(J_θ) at stance", 1.0, 2),
-];
-
-/// The table as text, one design a row.
-pub fn table(designs: &[Design]) -> String {
-    let mut rows = vec![std::iter::once("design".to_string())
-        .chain(COLUMNS.iter().map(|c| c.1.to_string()))
-        .collect::<Vec<_>>()];
-    for d in designs {
-        let mut row = vec![d.label.clone()];
-        for (key, _, scale, digits) in COLUMNS {
-            row.push(match d.json["table"].get(key).and_then(Value::as_f64) {
-                Some(v) => format!("{:.*}", digits, v * scale),
-                None => "–".to_string(),
-            });
-        }
-        rows.push(row);
-    }
-    xtask::cli::text_table(&rows, |c| c > 0)
-}
-
 /// Writes `analysis.json`, the CSVs and `report.html` into `settings.out`, only once
 /// every design is computed (a failure before leaves nothing).
 pub fn write(settings: &Settings, designs: &[Design], command: &str) -> Result<(), Error> {
@@ -895,8 +835,7 @@ pub fn write(settings: &Settings, designs: &[Design], command: &str) -> Result<(
         }
     }
     write_atomic(&out.join("analysis.json"), &text).map_err(Error::Failed)?;
-    let html = crate::analysis_report::html(designs, settings.sweeping(), command)
-        .map_err(Error::Failed)?;
+    let html = report::html(designs, settings.sweeping(), command).map_err(Error::Failed)?;
     write_atomic(&out.join("report.html"), &html).map_err(Error::Failed)?;
     Ok(())
 }

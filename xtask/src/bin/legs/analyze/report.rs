@@ -5,7 +5,7 @@
 
 use serde_json::{json, Value};
 
-use crate::analyze::{Design, COLUMNS};
+use crate::analyze::design::{Design, COLUMNS};
 
 /// Heat maps are drawn from at most this many nodes per side (every k-th node).
 const MAX_SHOWN: usize = 120;

@@ -6,7 +6,7 @@ use codegen::ir::Program;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use crate::model::Param;
+use crate::gen::model::Param;
 
 pub const FORMAT: u32 = 3;
 

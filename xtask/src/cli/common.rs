@@ -1,5 +1,5 @@
-//! What the command-line tools share: errors with their exit codes, lists of numbers,
-//! model names, and writing files so that a failure leaves no partial output.
+//! Errors with their exit codes, lists of numbers, text tables, writing files so that a
+//! failure leaves no partial output, and running cargo.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
@@ -44,25 +44,6 @@ impl Error {
     }
 }
 
-/// The models there are specs for.
-pub fn model_names(root: &Path) -> Result<Vec<String>, String> {
-    Ok(crate::gen::spec_paths(root)?
-        .iter()
-        .filter_map(|p| p.file_stem().and_then(|s| s.to_str()).map(String::from))
-        .collect())
-}
-
-pub fn check_model(name: &str, known: &[String]) -> Result<(), Error> {
-    if known.iter().any(|k| k == name) {
-        Ok(())
-    } else {
-        Err(Error::usage(format!(
-            "unknown model `{name}` (expected one of: {})",
-            known.join(", ")
-        )))
-    }
-}
-
 /// A comma-separated list of exactly `n` numbers (`--q 0.1,-1.2,…`).
 pub fn numbers(flag: &str, text: &str, n: usize, what: &str) -> Result<Vec<f64>, Error> {
     let parts: Vec<&str> = text
@@ -72,7 +53,7 @@ pub fn numbers(flag: &str, text: &str, n: usize, what: &str) -> Result<Vec<f64>,
         .collect();
     let values: Result<Vec<f64>, _> = parts.iter().map(|p| p.parse::<f64>()).collect();
     let numbers = if n == 1 { "number" } else { "numbers" };
-    let shown = crate::spec::shown(text);
+    let shown = crate::gen::spec::shown(text);
     match values {
         Ok(v) if v.len() == n && v.iter().all(|x| x.is_finite()) => Ok(v),
         Ok(v) if v.iter().all(|x| x.is_finite()) => Err(Error::usage(format!(

@@ -4,8 +4,8 @@
 use std::path::Path;
 use std::process::Command;
 
-use xtask::cli::{cargo, target_dir};
-use xtask::gen::{self, GenOptions};
+use crate::cli::{cargo, target_dir};
+use crate::gen::{self, GenOptions};
 
 /// Snapshots insta wrote but nobody reviewed.
 fn pending_snapshots(root: &Path) -> Vec<String> {
@@ -56,16 +56,16 @@ fn cross_checks(root: &Path) -> Result<Vec<String>, String> {
     let py = gen::python(root)?;
     let dir = target.join("exports");
     let mut failed = Vec::new();
-    for name in xtask::cli::model_names(root)? {
+    for name in crate::gen::model_names(root)? {
         let spec = gen::load_spec(
             root,
             &root.join(gen::SPECS_DIR).join(format!("{name}.toml")),
         )?;
-        let model = xtask::model::build(&spec).map_err(|e| e.to_string())?;
+        let model = crate::gen::model::build(&spec).map_err(|e| e.to_string())?;
         let mjcf = dir.join(format!("{name}.xml"));
-        xtask::cli::write_atomic(&mjcf, &xtask::export::mjcf(&model))?;
+        crate::cli::write_atomic(&mjcf, &crate::commands::export::mjcf(&model))?;
         let urdf = dir.join(format!("{name}.urdf"));
-        xtask::cli::write_atomic(&urdf, &xtask::export::urdf(&model))?;
+        crate::cli::write_atomic(&urdf, &crate::commands::export::urdf(&model))?;
         for (script, file, tool) in [
             ("mujoco_check.py", &mjcf, "MuJoCo"),
             ("urdf_check.py", &urdf, "Pinocchio"),
@@ -205,19 +205,24 @@ pub fn run(root: &Path) -> Result<(), String> {
     }
     check("Python package", python_package(root));
     check("user crate", user_crate(root));
-    eprintln!("==> docs (cargo doc, warnings denied)");
+    eprintln!("==> docs (cargo doc of the whole workspace, warnings denied; relative links)");
     check(
         "docs",
         cargo(
             root,
-            &["doc", "--no-deps", "-p", "leg-models", "-p", "generated"],
+            &["doc", "--workspace", "--no-deps", "--all-features"],
             &[("RUSTDOCFLAGS", "-D warnings")],
         ),
     );
-    eprintln!("==> instruction budgets ({})", xtask::bench::BUDGETS);
+    check(
+        "links",
+        crate::dev::links::check_links(root)
+            .map(|n| eprintln!("{n} relative links in README.md and docs/ resolve")),
+    );
+    eprintln!("==> instruction budgets ({})", crate::dev::bench::BUDGETS);
     check(
         "instruction budgets",
-        xtask::bench::check_budgets(root, false).map(|r| eprintln!("{r}")),
+        crate::dev::bench::check_budgets(root, false).map(|r| eprintln!("{r}")),
     );
     check(
         "no_std build",

@@ -23,7 +23,11 @@
 
 use std::fmt::Write;
 
-use crate::model::{Model, Param, Point};
+use std::path::Path;
+
+use crate::cli::{self, args::ExportArgs, args::ExportFormat};
+use crate::gen;
+use crate::gen::model::{self, Model, Param, Point};
 
 fn num(v: f64) -> String {
     format!("{v:?}")
@@ -437,4 +441,31 @@ pub fn urdf(m: &Model) -> String {
     }
     let _ = writeln!(out, "</robot>");
     out
+}
+
+/// The validated model of a built-in spec, by name.
+fn load_model(root: &Path, name: &str) -> Result<model::Model, cli::Error> {
+    let known = gen::model_names(root).map_err(cli::Error::Failed)?;
+    gen::check_model(name, &known)?;
+    let path = root.join(gen::SPECS_DIR).join(format!("{name}.toml"));
+    // A spec that does not load is bad input, as in `gen`.
+    let spec = gen::load_spec(root, &path).map_err(cli::Error::Usage)?;
+    model::build(&spec).map_err(|e| cli::Error::Usage(e.to_string()))
+}
+
+/// `cargo xtask export`: writes `--out FILE` whole (or prints to standard output).
+pub fn run(root: &Path, a: ExportArgs) -> Result<(), cli::Error> {
+    let m = load_model(root, &a.model)?;
+    let text = match a.format {
+        ExportFormat::Mjcf => mjcf(&m),
+        ExportFormat::Urdf => urdf(&m),
+    };
+    match a.out {
+        Some(out) => {
+            cli::write_atomic(&out, &text).map_err(cli::Error::Failed)?;
+            eprintln!("wrote {}", out.display());
+        }
+        None => print!("{text}"),
+    }
+    Ok(())
 }

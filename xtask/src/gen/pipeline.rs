@@ -9,12 +9,12 @@ use std::process::{Command, Stdio};
 use codegen::ir::{Input, InputShape, Output, Program};
 use serde::Deserialize;
 
+use crate::cli::progress::Progress;
 use crate::cli::Error;
-use crate::ir_file::{IrFile, ModelInfo, FORMAT};
-use crate::model::{self, Model};
-use crate::progress::Progress;
-use crate::rust_module::{self, Summary};
-use crate::spec::Spec;
+use crate::gen::ir_file::{IrFile, ModelInfo, FORMAT};
+use crate::gen::model::{self, Model};
+use crate::gen::rust_module::{self, Summary};
+use crate::gen::spec::Spec;
 
 pub const SPECS_DIR: &str = "leg-models/specs";
 pub const IR_DIR: &str = "generated/ir";
@@ -96,13 +96,13 @@ const ASSEMBLY_TOLERANCE: f64 = 1000.0 * f64::EPSILON;
 fn check_home(spec: &Spec, check: &HomeCheck) -> Result<(), String> {
     let (line, column, field) = match &spec.file.home {
         Some(h) => {
-            let (l, c) = crate::spec::line_column(&spec.text, h.span().start);
+            let (l, c) = crate::gen::spec::line_column(&spec.text, h.span().start);
             (l, c, "home")
         }
         None => (1, 1, "home (not given: all zeros)"),
     };
     let error = |message: String| {
-        crate::spec::SpecError {
+        crate::gen::spec::SpecError {
             file: spec.path.clone(),
             line,
             column,
@@ -136,8 +136,8 @@ fn check_home(spec: &Spec, check: &HomeCheck) -> Result<(), String> {
     if check.mobility == 0 {
         if let Some(c) = spec.file.closures.first() {
             let name = &c.get_ref().name;
-            let (line, column) = crate::spec::line_column(&spec.text, name.span().start);
-            return Err(crate::spec::SpecError {
+            let (line, column) = crate::gen::spec::line_column(&spec.text, name.span().start);
+            return Err(crate::gen::spec::SpecError {
                 file: spec.path.clone(),
                 line,
                 column,
@@ -152,8 +152,8 @@ fn check_home(spec: &Spec, check: &HomeCheck) -> Result<(), String> {
     }
     if let Some(j) = check.massless_joint {
         let link = spec.file.links[j].get_ref();
-        let (line, column) = crate::spec::line_column(&spec.text, link.mass.span().start);
-        return Err(crate::spec::SpecError {
+        let (line, column) = crate::gen::spec::line_column(&spec.text, link.mass.span().start);
+        return Err(crate::gen::spec::SpecError {
             file: spec.path.clone(),
             line,
             column,
@@ -323,7 +323,7 @@ fn assemble(spec: &Spec, model: &Model, derived: Derived) -> IrFile {
             springs: model
                 .springs
                 .iter()
-                .map(|s| crate::ir_file::SpringInfo {
+                .map(|s| crate::gen::ir_file::SpringInfo {
                     name: s.name.clone(),
                     a: s.a,
                     b: s.b,
@@ -619,7 +619,7 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, Error> {
         if std::fs::read_to_string(&full).ok().as_deref() == Some(text.as_str()) {
             continue;
         }
-        write_atomic(&full, text).map_err(Error::Failed)?;
+        crate::cli::write_atomic(&full, text).map_err(Error::Failed)?;
         written.push(path.display().to_string());
     }
     if opts.names.is_empty() {
@@ -642,11 +642,21 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, Error> {
     ))
 }
 
-/// Writes through a temporary file and a rename, so a reader never sees half a file.
-fn write_atomic(path: &Path, text: &str) -> Result<(), String> {
-    let dir = path.parent().expect("generated files live in a folder");
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, text).map_err(|e| format!("{}: {e}", tmp.display()))?;
-    std::fs::rename(&tmp, path).map_err(|e| format!("{}: {e}", path.display()))
+/// The models there are specs for.
+pub fn model_names(root: &Path) -> Result<Vec<String>, String> {
+    Ok(spec_paths(root)?
+        .iter()
+        .filter_map(|p| p.file_stem().and_then(|s| s.to_str()).map(String::from))
+        .collect())
+}
+
+pub fn check_model(name: &str, known: &[String]) -> Result<(), Error> {
+    if known.iter().any(|k| k == name) {
+        Ok(())
+    } else {
+        Err(Error::usage(format!(
+            "unknown model `{name}` (expected one of: {})",
+            known.join(", ")
+        )))
+    }
 }

@@ -15,8 +15,8 @@ use leg_models::simulate::hybrid::{EventKind, HybridSample, HybridSimulator, Hyb
 use leg_models::simulate::State;
 use leg_models::{ContactModel, LegModel};
 use serde_json::json;
+use xtask::cli::progress::Progress;
 use xtask::cli::{write_atomic, Error};
-use xtask::progress::Progress;
 
 use crate::report::{self, Report, Series};
 use crate::sim::{body_points, frame_at, max, Settings};

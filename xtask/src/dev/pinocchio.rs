@@ -17,7 +17,7 @@ use std::process::Command;
 use serde_json::Value;
 
 use crate::gen;
-use crate::model::{Model, Param};
+use crate::gen::model::{Model, Param};
 
 const REQUIREMENTS: &str = "xtask/requirements-pinocchio.txt";
 const SOURCE: &str = "xtask/pinocchio_bench.cpp";
@@ -212,12 +212,12 @@ pub fn run(root: &Path) -> Result<BTreeMap<String, Figures>, String> {
         "cargo build --bin legs",
     )?;
     let mut out = BTreeMap::new();
-    for name in crate::cli::model_names(root)? {
+    for name in crate::gen::model_names(root)? {
         let spec = gen::load_spec(
             root,
             &root.join(gen::SPECS_DIR).join(format!("{name}.toml")),
         )?;
-        let m = crate::model::build(&spec).map_err(|e| e.to_string())?;
+        let m = crate::gen::model::build(&spec).map_err(|e| e.to_string())?;
         // The leg file holds revolute joints without springs: a leg with a prismatic
         // joint or a spring is not timed against Pinocchio (yet), rather than against a
         // different model.

@@ -7,7 +7,7 @@ use codegen::Error;
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 
-use crate::ir_file::IrFile;
+use crate::gen::ir_file::IrFile;
 
 /// One derived term: its function name, arguments, outputs and documentation.
 pub struct Term {

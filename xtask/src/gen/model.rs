@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::spec::{JointKind, PointSpec, Spec, SpecError, Vec2};
+use crate::gen::spec::{JointKind, PointSpec, Spec, SpecError, Vec2};
 use toml::Spanned;
 
 /// One run-time parameter: a field of the generated `Params` struct.
@@ -114,8 +114,8 @@ impl Builder<'_> {
         if let Some(i) = self.params.iter().position(|p| p.name == name) {
             // Reported at the second name, naming the first.
             let (first, first_at) = &self.owners[i];
-            let (first_line, _) = crate::spec::line_column(&self.spec.text, *first_at);
-            let (line, column) = crate::spec::line_column(&self.spec.text, self.owner.1);
+            let (first_line, _) = crate::gen::spec::line_column(&self.spec.text, *first_at);
+            let (line, column) = crate::gen::spec::line_column(&self.spec.text, self.owner.1);
             return Err(SpecError {
                 file: self.spec.path.clone(),
                 line,

@@ -8,8 +8,8 @@ use std::process::Command;
 
 use serde_json::Value;
 
+use crate::cli::progress::Progress;
 use crate::cli::target_dir;
-use crate::progress::Progress;
 
 /// The committed instruction budgets: per model, per hot path, instructions per call.
 pub const BUDGETS: &str = "tests/instruction-budgets.json";
@@ -86,7 +86,7 @@ fn count_calls(root: &Path, peers: bool) -> Result<std::path::PathBuf, String> {
 pub fn instruction_counts(root: &Path) -> Result<BTreeMap<String, BTreeMap<String, u64>>, String> {
     let bin = count_calls(root, false)?;
     let mut out = BTreeMap::new();
-    let models = crate::cli::model_names(root)?;
+    let models = crate::gen::model_names(root)?;
     let mut progress = Progress::new(
         (models.len() * PATHS.len()) as u64,
         "counting instructions (callgrind)",
@@ -108,7 +108,7 @@ pub fn instruction_counts(root: &Path) -> Result<BTreeMap<String, BTreeMap<Strin
 /// budgeted: the peers' counts only put ours in perspective).
 pub fn compare_instructions(root: &Path) -> Result<String, String> {
     let bin = count_calls(root, true)?;
-    let models = crate::cli::model_names(root)?;
+    let models = crate::gen::model_names(root)?;
     let mut progress = Progress::new(models.len() as u64, "counting CasADi's C (callgrind)");
     let mut lines = vec![
         "| model | harness | fused ours | CasADi C, closed form | ratio | CasADi C, Lagrange | ratio | FD ours | CasADi C, closed form | ratio | CasADi C, Lagrange | ratio | fused batch per state | × scalar | FD batch per state | × scalar |"
@@ -267,11 +267,11 @@ pub fn run(root: &Path, pinocchio: bool) -> Result<(), String> {
         ],
     )?;
     let pin = if pinocchio {
-        crate::pinocchio::run(root)?
+        crate::dev::pinocchio::run(root)?
     } else {
         BTreeMap::new()
     };
-    let models = crate::cli::model_names(root)?;
+    let models = crate::gen::model_names(root)?;
     println!();
     println!("| model | harness | fused ours | CasADi C closed | ratio | CasADi C Lagrange | ratio | Pinocchio-on-CasADi C | ratio | FD ours | CasADi C closed | ratio | CasADi C Lagrange | ratio | Pinocchio-on-CasADi C | ratio | Pinocchio C++ | ratio | control step | control / FD | fused f32/f64 | FD f32/f64 | sim step | fused batch per state | × scalar | FD batch per state | × scalar |");
     println!("|{}", "---|".repeat(27));

@@ -1,0 +1,211 @@
+//! `sim`'s command line turned into checked settings: which controller, which reference,
+//! how long, with which step and limits (the simulation itself is in `sim/mod.rs`).
+
+use std::path::PathBuf;
+
+use leg_models::dynamics::structure::{NotApplicable, Structure};
+use xtask::cli::args::{ControllerArg, SimArgs, TrajectoryArg};
+use xtask::cli::Error;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Controller {
+    FootFl,
+    FootPd,
+    JointFl,
+    JointPd,
+    Passive,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Trajectory {
+    Step,
+    Sine,
+    Spin,
+    MinJerk,
+    Hold,
+}
+
+pub struct Settings {
+    pub(crate) controller: Option<Controller>,
+    pub(crate) trajectory: Option<Trajectory>,
+    /// The spin trajectory's motor speed, or a leg on the ground's forward speed.
+    pub(crate) speed: Option<f64>,
+    pub(crate) duration: f64,
+    pub(crate) dt: f64,
+    pub(crate) kp: Option<f64>,
+    pub(crate) torque_limit: Option<f64>,
+    pub(crate) out: Option<PathBuf>,
+    /// Commanded apex height (legs with contacts).
+    pub(crate) apex: Option<f64>,
+    /// Serve the hopping controller's torques on stdin/stdout (the MuJoCo closed loop).
+    pub(crate) serve: bool,
+}
+
+impl Settings {
+    /// The spin trajectory's motor speed (1 turn/s unless `--speed` says).
+    pub(crate) fn spin_speed(&self) -> f64 {
+        self.speed.unwrap_or(std::f64::consts::TAU)
+    }
+
+    /// Whether the run is passive (no torque): `--controller passive`.
+    pub(crate) fn passive(&self) -> bool {
+        self.controller == Some(Controller::Passive)
+    }
+
+    /// Whether `--kp` was given (the swing controllers' gain).
+    pub(crate) fn kp_given(&self) -> bool {
+        self.kp.is_some()
+    }
+
+    /// A controller or trajectory named for the swing leg, which a leg on the ground does
+    /// not run.
+    pub(crate) fn swing_only(&self) -> Option<&'static str> {
+        match (self.controller, self.trajectory) {
+            (Some(c), _) if c != Controller::Passive => Some(c.name()),
+            (_, Some(t)) => Some(t.name()),
+            _ => None,
+        }
+    }
+}
+
+impl Controller {
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            Controller::FootFl => "foot-fl",
+            Controller::FootPd => "foot-pd",
+            Controller::JointFl => "joint-fl",
+            Controller::JointPd => "joint-pd",
+            Controller::Passive => "passive",
+        }
+    }
+
+    pub(crate) fn in_foot_space(self) -> bool {
+        matches!(self, Controller::FootFl | Controller::FootPd)
+    }
+
+    /// Whether the controller applies to a leg of this structure, and why not.
+    pub(crate) fn applies(self, s: &Structure) -> Result<(), NotApplicable> {
+        match self {
+            Controller::FootFl | Controller::FootPd => s.foot_space(),
+            Controller::JointFl | Controller::JointPd => s.joint_space(),
+            Controller::Passive => Ok(()),
+        }
+    }
+}
+
+impl Trajectory {
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            Trajectory::Step => "step",
+            Trajectory::Sine => "sine",
+            Trajectory::Spin => "spin",
+            Trajectory::MinJerk => "min-jerk",
+            Trajectory::Hold => "hold",
+        }
+    }
+}
+
+impl Settings {
+    pub fn from_args(a: &SimArgs) -> Result<Settings, Error> {
+        let controller = a.controller.map(|c| match c {
+            ControllerArg::FootFl => Controller::FootFl,
+            ControllerArg::FootPd => Controller::FootPd,
+            ControllerArg::JointFl => Controller::JointFl,
+            ControllerArg::JointPd => Controller::JointPd,
+            ControllerArg::Passive => Controller::Passive,
+        });
+        let trajectory = a.trajectory.map(|t| match t {
+            TrajectoryArg::Step => Trajectory::Step,
+            TrajectoryArg::Sine => Trajectory::Sine,
+            TrajectoryArg::Spin => Trajectory::Spin,
+            TrajectoryArg::MinJerk => Trajectory::MinJerk,
+            TrajectoryArg::Hold => Trajectory::Hold,
+        });
+        if a.duration / a.dt > 5e6 {
+            return Err(Error::usage(format!(
+                "{} s at dt = {} s is more than 5 million steps",
+                a.duration, a.dt
+            )));
+        }
+        let settings = Settings {
+            controller,
+            trajectory,
+            speed: a.speed,
+            duration: a.duration,
+            dt: a.dt,
+            kp: a.kp,
+            torque_limit: a.torque_limit,
+            out: a.out.clone(),
+            apex: a.apex,
+            serve: a.serve,
+        };
+        if let (Some(c), Some(t)) = (controller, trajectory) {
+            settings.check_pair(c, t)?;
+        }
+
+        Ok(settings)
+    }
+
+    pub(crate) fn check_pair(&self, c: Controller, t: Trajectory) -> Result<(), Error> {
+        let fits = match t {
+            Trajectory::Hold => true,
+            Trajectory::Step => c.in_foot_space(),
+            _ => !c.in_foot_space() && c != Controller::Passive,
+        };
+        if fits || c == Controller::Passive && t == Trajectory::Hold {
+            Ok(())
+        } else {
+            Err(Error::usage(format!(
+                "trajectory `{}` does not suit controller `{}` (foot controllers: step, hold; joint controllers: sine, spin, min-jerk, hold)",
+                t.name(),
+                c.name()
+            )))
+        }
+    }
+
+    /// The controller and trajectory for a leg of this structure, and why they were
+    /// chosen. A controller asked for that does not apply is bad input.
+    pub(crate) fn resolve(
+        &self,
+        model: &str,
+        s: &Structure,
+    ) -> Result<(Controller, Trajectory, String), Error> {
+        let (controller, why) = match self.controller {
+            Some(c) => {
+                c.applies(s).map_err(|e| {
+                    Error::usage(format!(
+                        "controller `{}` does not apply to {model}: {e}",
+                        c.name()
+                    ))
+                })?;
+                (c, "asked for".to_string())
+            }
+            None => match (s.foot_space(), s.joint_space()) {
+                (Ok(()), _) => (
+                    Controller::FootFl,
+                    "default: the motors can place the foot".to_string(),
+                ),
+                (Err(foot), Ok(())) => (
+                    Controller::JointFl,
+                    format!("default: joint-space tracking of the motors, because {foot}"),
+                ),
+                (Err(_), Err(joint)) => (
+                    Controller::Passive,
+                    format!("default: no controller applies ({joint})"),
+                ),
+            },
+        };
+        let trajectory = match self.trajectory {
+            Some(t) => {
+                self.check_pair(controller, t)?;
+                t
+            }
+            None if controller.in_foot_space() => Trajectory::Step,
+            None if controller == Controller::Passive => Trajectory::Hold,
+            // One motor turning a crank: spin it.
+            None if s.motors == 1 => Trajectory::Spin,
+            None => Trajectory::Sine,
+        };
+        Ok((controller, trajectory, why))
+    }
+}

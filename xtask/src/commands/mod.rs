@@ -1,0 +1,10 @@
+//! The user's commands that need no generated model: `list` (the specs, their sizes and
+//! what applies), `new` (a spec to start from) and `export` (MJCF and URDF). The
+//! commands that run a generated model (`sim`, `eval`, `analyze`) are the `legs` binary,
+//! in `src/bin/legs/`.
+//!
+//! May import: [`crate::gen`], [`crate::cli`].
+
+pub mod export;
+pub mod list;
+pub mod new;
