@@ -534,7 +534,7 @@ where
     }
 
     /// The torque `u = Ã v − b̃` giving motor accelerations `v`, and its derivatives by
-    /// `q` and `q̇` ([`derivatives::reduction_derivatives`]).
+    /// `q` and `q̇` ([`control::reduction_derivatives`]).
     pub fn reduction_derivatives(
         &self,
         q: &SVector<T, NQ>,

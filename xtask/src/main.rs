@@ -69,11 +69,10 @@ fn run_bench(root: &Path, a: args::BenchArgs) -> Result<(), cli::Error> {
 }
 
 /// Builds `legs` (this package's binary with the generated models) and runs it with the
-/// same arguments. The build is quiet (cargo's progress would bury the command's output)
-/// and the first one takes minutes, so a build that is still going after a second says so.
+/// same arguments. The build shows cargo's progress (the first one compiles every generated
+/// model, minutes on a fresh clone), and says why it is building before it starts.
 fn delegate(root: &Path, args: &[String]) -> ExitCode {
-    const LEGS: [&str; 7] = [
-        "--quiet",
+    const LEGS: [&str; 6] = [
         "--package",
         "xtask",
         "--features",
@@ -82,43 +81,32 @@ fn delegate(root: &Path, args: &[String]) -> ExitCode {
         "legs",
     ];
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let build = std::process::Command::new(&cargo)
+    if !cli::target_dir(root).join("debug").join("legs").exists() {
+        eprintln!(
+            "building `legs`, the commands that run the generated models (`{}`): a first build compiles every model, about 13 minutes on 2 cores…",
+            args[0]
+        );
+    }
+    let started = Instant::now();
+    let built = match std::process::Command::new(&cargo)
         .arg("build")
         .args(LEGS)
         .current_dir(root)
-        .spawn();
-    let mut child = match build {
-        Ok(c) => c,
+        .status()
+    {
+        Ok(s) => s,
         Err(e) => return cli::Error::Failed(format!("cannot run cargo: {e}")).report(),
-    };
-    let started = Instant::now();
-    let mut said = false;
-    let built = loop {
-        match child.try_wait() {
-            Ok(Some(status)) => break status,
-            Ok(None) => {
-                if !said && started.elapsed() >= Duration::from_secs(1) {
-                    eprintln!(
-                        "building the generated models for `{}` (a first build takes a few minutes)…",
-                        args[0]
-                    );
-                    said = true;
-                }
-                std::thread::sleep(Duration::from_millis(50));
-            }
-            Err(e) => return cli::Error::Failed(format!("cargo build: {e}")).report(),
-        }
     };
     if !built.success() {
         return cli::Error::Failed(format!("building `legs` failed ({built})")).report();
     }
-    if said {
+    if started.elapsed() >= Duration::from_secs(5) {
         eprintln!("built in {:.0} s", started.elapsed().as_secs_f64());
     }
     // Cargo finds the binary it just built (wherever the target directory is) and does
     // not build again.
     match std::process::Command::new(cargo)
-        .arg("run")
+        .args(["run", "--quiet"])
         .args(LEGS)
         .arg("--")
         .args(args)

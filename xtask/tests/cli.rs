@@ -206,7 +206,7 @@ fn eval_refuses_bad_input() {
     );
     refused(
         &legs(&["eval", "minitaur", "--q", "1,2", "--assemble", "--qd", "1"]),
-        "has 1 values, expected 2",
+        "has 1 value, expected 2",
     );
     refused(
         &legs(&["eval", "minitaur", "--q", "1,x,3,4"]),

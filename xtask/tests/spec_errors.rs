@@ -451,6 +451,48 @@ fn a_home_pose_that_does_not_assemble_is_located() {
     assert_eq!(root.listing(), before, "a failed generation changed files");
 }
 
+/// Runs the derivation: `list` gives a spec that `gen` would refuse its own error (not
+/// advice to run `gen`), and a spec that does not validate its message under the table,
+/// which stays narrow.
+#[test]
+fn list_says_what_gen_would_say() {
+    let bad_home = edit(
+        "gravity = [0.0, -9.81]\n",
+        "gravity = [0.0, -9.81]\nhome = [0.0, 0.0, 0.0, 0.0]\n",
+        0,
+    );
+    let root = scratch("list", &bad_home);
+    let broken = edit(
+        "mass = 0.05",
+        &format!("mass = -0.05 # {}", "x".repeat(300)),
+        0,
+    );
+    root.write("leg-models/specs/broken.toml", &broken);
+    let two_link =
+        std::fs::read_to_string(gen::workspace_root().join("leg-models/specs/two_link.toml"))
+            .unwrap();
+    root.write("leg-models/specs/fine.toml", &two_link);
+    let before = root.listing();
+    let text = xtask::commands::list::table(&root.0).unwrap();
+    let (table, notes) = text.split_once("\n\n").expect("messages under the table");
+    assert!(table.lines().all(|l| l.chars().count() < 120), "{table}");
+    assert!(
+        notes.contains("leg: `cargo xtask gen leg` fails: leg-models/specs/leg.toml:")
+            && notes.contains("the home pose does not assemble"),
+        "{notes}"
+    );
+    assert!(
+        notes.contains("broken: leg-models/specs/broken.toml:"),
+        "{notes}"
+    );
+    assert!(
+        notes
+            .contains("fine: not generated yet; `cargo xtask gen fine` will say: fine: mobility 2 (rank J 0 of 0 closure rows), 2 motors: fully actuated"),
+        "{notes}"
+    );
+    assert_eq!(root.listing(), before, "list wrote files");
+}
+
 #[test]
 fn a_leg_without_a_motor() {
     let text = VALID.replace("actuator = { rotor_inertia = 0.0, gear_ratio = 1.0 }\n", "");

@@ -6,7 +6,7 @@
 //!   null-space forms) and its derivatives, re-exported here;
 //! - `feedback`: joint- and foot-space feedback linearization, PD with gravity
 //!   compensation, torque saturation, re-exported here;
-//! - [`reference`]: reference trajectories (set points, ramps, minimum jerk, sinusoids,
+//! - [`reference`](mod@reference): reference trajectories (set points, ramps, minimum jerk, sinusoids,
 //!   step cycles);
 //! - [`linearize`]: the exact linearization of one integrator step, in joint coordinates
 //!   and on the constraint manifold (for MPC);
@@ -15,7 +15,7 @@
 //!
 //! The trait and its error live in [`crate::simulate`] (the simulators' port) and are
 //! re-exported here. May import: [`crate::simulate`], [`crate::assembly`],
-//! [`crate::dynamics`], [`crate::model`].
+//! [`crate::dynamics`], the contract ([`LegModel`](crate::LegModel), [`Real`](crate::Real), [`linalg`](crate::linalg), [`simd`](crate::simd)).
 
 pub(crate) mod feedback;
 pub mod hop;

@@ -245,7 +245,7 @@ pub struct ReductionDerivatives<T: Real, const NQ: usize, const NU: usize> {
 
 /// [`ReductionDerivatives`] at `(q, q̇)` and motor accelerations `v`. Forward dynamics
 /// under `u(v)` gives the motors `θ̈ = v`, so differentiating that identity,
-/// `∂u/∂x = −Ã ∂θ̈/∂x` with `∂θ̈/∂x` the motor rows of [`forward_dynamics_derivatives`].
+/// `∂u/∂x = −Ã ∂θ̈/∂x` with `∂θ̈/∂x` the motor rows of [`crate::dynamics::derivatives::forward_dynamics_derivatives`].
 /// Where the reduction applies (not on an over-actuated leg).
 pub fn reduction_derivatives<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     params: &L::Params<T>,

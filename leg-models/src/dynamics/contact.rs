@@ -180,7 +180,7 @@ pub fn solve_structured<T: Real, const NQ: usize, const NC: usize, const NK: usi
 
 /// [`solve_structured`] for `C` right-hand sides at once (columns of `τ`, `r_j`, `r_c`),
 /// with one elimination of the closure and contact rows: what the derivatives of the
-/// dynamics ([`crate::derivatives`]) solve. Returns `(x, F, λ)`, a column each.
+/// dynamics ([`crate::dynamics::derivatives`]) solve. Returns `(x, F, λ)`, a column each.
 #[allow(clippy::type_complexity)]
 pub fn solve_structured_columns<
     T: Real,

@@ -113,7 +113,7 @@ enum ConstraintFactor<T: Real, const NC: usize> {
 
 /// The KKT matrix `[M −Jᵀ; J 0]` of one state, factored once (`M = L D Lᵀ`, `Y = M⁻¹ Jᵀ`,
 /// `S = J Y` factored) for the solves of any number of right-hand sides: forward dynamics
-/// solves one, its derivatives ([`crate::derivatives`]) `2 NQ + NU` more.
+/// solves one, its derivatives ([`crate::dynamics::derivatives`]) `2 NQ + NU` more.
 #[derive(Clone, Copy, Debug)]
 pub struct KktFactorization<T: Real, const NQ: usize, const NC: usize> {
     chol_m: Cholesky<T, NQ>,

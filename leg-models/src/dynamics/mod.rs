@@ -8,7 +8,7 @@
 //! - [`derivatives`]: exact derivatives of the forward and contact dynamics;
 //! - [`batch`]: forward dynamics of four states at once in SIMD lanes.
 //!
-//! May import: [`crate::model`] only.
+//! May import: the contract ([`LegModel`](crate::LegModel), [`Real`](crate::Real), [`linalg`](crate::linalg), [`simd`](crate::simd)) only.
 
 pub mod batch;
 pub mod contact;

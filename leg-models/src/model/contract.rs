@@ -295,7 +295,7 @@ pub trait LegModel<const NQ: usize, const NC: usize, const NU: usize> {
     /// on the pose) and hold their forces at zero.
     const REDUNDANT_ROWS: usize;
     /// Degrees of freedom of the closed chain, `NQ − rank J`, at the assembled home pose.
-    /// Compared with `NU`, it says which methods apply (see [`crate::structure`]).
+    /// Compared with `NU`, it says which methods apply (see [`crate::dynamics::structure`]).
     const MOBILITY: usize;
 
     /// The physical parameters (lengths, masses, centres of mass, inertias, rotor

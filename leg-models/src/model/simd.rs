@@ -7,7 +7,7 @@
 //! registers per value on a baseline x86-64, one with AVX). The trigonometry is
 //! [`crate::Real::sincos`]'s, made branch-free (every reduction round, quadrants selected by
 //! bit masks); a lane whose angle is beyond the reduction's range goes to libm.
-//! [`crate::batch`] solves the constrained dynamics of all lanes at once.
+//! [`crate::dynamics::batch`] solves the constrained dynamics of all lanes at once.
 
 use core::ops::{Add, Div, Mul, Neg, Sub};
 

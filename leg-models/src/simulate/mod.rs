@@ -10,7 +10,7 @@
 //!   impacts;
 //! - `record` (with `std`): the recording [`Simulator`].
 //!
-//! May import: [`crate::assembly`], [`crate::dynamics`], [`crate::model`].
+//! May import: [`crate::assembly`], [`crate::dynamics`], the contract ([`LegModel`](crate::LegModel), [`Real`](crate::Real), [`linalg`](crate::linalg), [`simd`](crate::simd)).
 
 pub mod hybrid;
 #[cfg(feature = "std")]

@@ -57,8 +57,9 @@ pub fn numbers(flag: &str, text: &str, n: usize, what: &str) -> Result<Vec<f64>,
     match values {
         Ok(v) if v.len() == n && v.iter().all(|x| x.is_finite()) => Ok(v),
         Ok(v) if v.iter().all(|x| x.is_finite()) => Err(Error::usage(format!(
-            "`{flag}` has {} values, expected {n} ({what})",
-            v.len()
+            "`{flag}` has {} {}, expected {n} ({what})",
+            v.len(),
+            if v.len() == 1 { "value" } else { "values" }
         ))),
         Ok(_) => Err(Error::usage(format!(
             "`{flag} {shown}`: every value must be finite (not NaN or infinite); expected {n} comma-separated {numbers} ({what})"

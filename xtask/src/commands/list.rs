@@ -1,15 +1,21 @@
 //! `cargo xtask list`: every spec with its sizes, mobility and actuation, from the spec
-//! and the committed IR; a spec that does not validate is listed with its error.
+//! and the committed IR. A spec that does not validate, or has no generated code yet, is
+//! listed with what `gen` says of it; long messages stand under the table, which stays
+//! narrow.
 
 use std::path::Path;
 
 use crate::cli::{self, text_table};
 use crate::gen::{self, model};
 
-/// Prints the table of specs.
+/// Prints [`table`].
 pub fn run(root: &Path) -> Result<(), cli::Error> {
-    // Mobility and redundant rows come from the derivation (the committed IR); a spec not
-    // generated yet (just written by `new`) is listed with what to run.
+    print!("{}", table(root)?);
+    Ok(())
+}
+
+/// The table of specs, then the messages of the specs that need them.
+pub fn table(root: &Path) -> Result<String, cli::Error> {
     let mut rows = vec![[
         "model".to_string(),
         "NQ".into(),
@@ -20,7 +26,13 @@ pub fn run(root: &Path) -> Result<(), cli::Error> {
         "actuated joints".into(),
         "spec".into(),
     ]];
+    let mut notes = Vec::new();
     for path in gen::spec_paths(root).map_err(cli::Error::Failed)? {
+        let shown = path
+            .strip_prefix(root)
+            .unwrap_or(&path)
+            .display()
+            .to_string();
         // A spec that does not validate is listed with its error, not in the way of the rest.
         let built = gen::load_spec(root, &path).and_then(|spec| {
             model::build(&spec)
@@ -36,13 +48,10 @@ pub fn run(root: &Path) -> Result<(), cli::Error> {
                     .unwrap_or_default();
                 let mut row: [String; 8] = Default::default();
                 row[0] = name.to_string();
-                row[5] = format!("does not validate: {e}");
-                row[7] = path
-                    .strip_prefix(root)
-                    .unwrap_or(&path)
-                    .display()
-                    .to_string();
+                row[5] = "does not validate (below)".into();
+                row[7] = shown;
                 rows.push(row);
+                notes.push(format!("{name}: {e}"));
                 continue;
             }
         };
@@ -51,22 +60,33 @@ pub fn run(root: &Path) -> Result<(), cli::Error> {
             .iter()
             .map(|&a| m.links[a].name.as_str())
             .collect();
-        let ir = gen::committed_ir(root, &m.name).map_err(cli::Error::Failed)?;
-        let (redundant, mobility, actuation) = match &ir {
-            Some(ir) => (
-                match ir.model.redundant_rows.len() {
-                    0 => String::new(),
-                    n => format!(" ({n} redundant)"),
-                },
-                ir.model.mobility.to_string(),
-                gen::actuation_note(ir.model.mobility, m.actuated.len()).to_string(),
-            ),
-            None => (
-                String::new(),
-                "–".into(),
-                format!("not generated yet: run `cargo xtask gen {}`", m.name),
-            ),
-        };
+        // Mobility and redundant rows come from the derivation: the committed IR, or for a
+        // spec not generated yet (just written by `new`) the derivation run in memory, so
+        // that a spec `gen` would refuse shows its own error rather than advice to run it.
+        let (redundant, mobility, actuation) =
+            match gen::committed_ir(root, &m.name).map_err(cli::Error::Failed)? {
+                Some(ir) => (
+                    match ir.model.redundant_rows.len() {
+                        0 => String::new(),
+                        n => format!(" ({n} redundant)"),
+                    },
+                    ir.model.mobility.to_string(),
+                    gen::actuation_note(ir.model.mobility, m.actuated.len()).to_string(),
+                ),
+                None => {
+                    match gen::dry_run(root, &spec) {
+                        Ok(line) => notes.push(format!(
+                            "{}: not generated yet; `cargo xtask gen {}` will say: {line}",
+                            m.name, m.name
+                        )),
+                        Err(e) => notes.push(format!(
+                            "{}: `cargo xtask gen {}` fails: {e}",
+                            m.name, m.name
+                        )),
+                    }
+                    (String::new(), "–".into(), "not generated (below)".into())
+                }
+            };
         rows.push([
             m.name.clone(),
             m.links.len().to_string(),
@@ -78,6 +98,13 @@ pub fn run(root: &Path) -> Result<(), cli::Error> {
             spec.path.display().to_string(),
         ]);
     }
-    print!("{}", text_table(&rows, |c| (1..=4).contains(&c)));
-    Ok(())
+    let mut out = text_table(&rows, |c| (1..=4).contains(&c));
+    if !notes.is_empty() {
+        out.push('\n');
+        for n in notes {
+            out.push_str(&n);
+            out.push('\n');
+        }
+    }
+    Ok(out)
 }

@@ -457,6 +457,14 @@ fn derive_spec(root: &Path, py: &Path, spec: &Spec) -> Result<(IrFile, String, S
     Ok((ir, casadi_c, note))
 }
 
+/// What `gen` would say of a spec that has no generated code yet: the line it prints
+/// (mobility and motors) or the spec's own error (a home pose that does not assemble, a
+/// massless joint), from the same derivation, in memory; nothing is written.
+pub fn dry_run(root: &Path, spec: &Spec) -> Result<String, Error> {
+    let py = python(root).map_err(Error::Failed)?;
+    derive_spec(root, &py, spec).map(|(_, _, note)| note)
+}
+
 /// Generates the model of a spec that lives outside `leg-models/specs/` (a user's own
 /// crate) as one module at `out`: the same derivation and checks as `run`, and the module
 /// needs only the `leg-models` crate (`mod my_leg;` in the user's crate). With `check`,

@@ -218,7 +218,7 @@ pub struct GroundSpec {
     /// Points out of the ground, base frame; normalized. Default `[0, 1]`.
     #[serde(default)]
     pub normal: Option<Spanned<Vec2>>,
-    /// The ground is `normal · x = offset` [m]; default 0.
+    /// The ground is `normal · x = offset` \[m\]; default 0.
     #[serde(default)]
     pub offset: Option<Spanned<Num>>,
 }
@@ -240,12 +240,12 @@ pub struct LinkSpec {
     /// parent link, in the parent's frame (default the parent's tip).
     #[serde(default)]
     pub origin: Option<Spanned<Vec2>>,
-    /// From the joint to the link's tip, in the link frame [m].
+    /// From the joint to the link's tip, in the link frame \[m\].
     pub length: Spanned<Vec2>,
-    /// [kg]; zero for the massless intermediate links of a floating base (the mass
+    /// \[kg\]; zero for the massless intermediate links of a floating base (the mass
     /// matrix must stay positive definite).
     pub mass: Spanned<Num>,
-    /// Centre of mass, from the joint, in the link frame [m].
+    /// Centre of mass, from the joint, in the link frame \[m\].
     pub com: Spanned<Vec2>,
     /// About the centre of mass [kg m²].
     pub inertia: Spanned<Num>,
