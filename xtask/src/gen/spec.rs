@@ -488,7 +488,7 @@ impl Spec {
 }
 
 /// The most links a spec may have. Generation grows about as n³ with the links of a chain
-/// (README, "Measured figures": one chain of 16 links 5 s, of 32 links 28–42 s and 100,000
+/// (docs/figures.md: one chain of 16 links 5 s, of 32 links 28–42 s and 100,000
 /// lines of Rust);
 /// legs have a handful, and a larger spec is refused before anything runs.
 pub const MAX_LINKS: usize = 32;
