@@ -148,3 +148,23 @@ pub fn cargo(root: &Path, args: &[&str], env: &[(&str, &str)]) -> Result<(), Str
         Err(format!("`{shown}` failed ({status})"))
     }
 }
+
+/// Builds the `legs` binary (the commands that run the generated models) and gives its
+/// path: the cross-checks, the Python tests and the Pinocchio peer run it.
+pub fn build_legs(root: &Path) -> Result<PathBuf, String> {
+    cargo(
+        root,
+        &[
+            "build",
+            "--quiet",
+            "-p",
+            "xtask",
+            "--features",
+            "models",
+            "--bin",
+            "legs",
+        ],
+        &[],
+    )?;
+    Ok(target_dir(root).join("debug").join("legs"))
+}

@@ -194,23 +194,7 @@ pub fn run(root: &Path) -> Result<BTreeMap<String, Figures>, String> {
     compile(root, SX_SOURCE, &sx_bin, &prefix, Some(&casadi_dir))?;
     let derivatives_bin = dir.join("pinocchio_derivatives");
     compile(root, DERIVATIVES_SOURCE, &derivatives_bin, &prefix, None)?;
-    let target_legs = target.join("debug").join("legs");
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    run_command(
-        Command::new(cargo)
-            .args([
-                "build",
-                "--quiet",
-                "-p",
-                "xtask",
-                "--features",
-                "models",
-                "--bin",
-                "legs",
-            ])
-            .current_dir(root),
-        "cargo build --bin legs",
-    )?;
+    let target_legs = crate::cli::build_legs(root)?;
     let mut out = BTreeMap::new();
     for name in crate::gen::model_names(root)? {
         let spec = gen::load_spec(

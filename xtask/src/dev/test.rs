@@ -37,22 +37,8 @@ fn cross_checks(root: &Path) -> Result<Vec<String>, String> {
     eprintln!(
         "==> MuJoCo (xtask/mujoco_check.py) and Pinocchio (xtask/urdf_check.py) cross-checks"
     );
-    cargo(
-        root,
-        &[
-            "build",
-            "--quiet",
-            "-p",
-            "xtask",
-            "--features",
-            "models",
-            "--bin",
-            "legs",
-        ],
-        &[],
-    )?;
+    let legs = crate::cli::build_legs(root)?;
     let target = target_dir(root);
-    let legs = target.join("debug").join("legs");
     let py = gen::python(root)?;
     let dir = target.join("exports");
     let mut failed = Vec::new();
