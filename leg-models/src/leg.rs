@@ -40,13 +40,13 @@ use crate::dynamics::contact::{self, ContactSolution, Ground, Impact, ImpactErro
 use crate::dynamics::derivatives::{self, ContactDynamicsDerivatives, ForwardDynamicsDerivatives};
 use crate::dynamics::structure::Structure;
 use crate::dynamics::{self, Acceleration, Baumgarte, DynamicsError};
+#[cfg(doc)]
+use crate::model::contract::LegModel;
+use crate::model::contract::{ContactModel, DynamicsTerms, Parameters, Real};
 use crate::model::simd::F64x4;
 use crate::simulate::hybrid::{HybridSimulator, HybridState};
 use crate::simulate::source::LinearizationError;
 use crate::simulate::{self, State, StepError, StepOptions, StepReport, TorqueSource};
-#[cfg(doc)]
-use crate::LegModel;
-use crate::{ContactModel, DynamicsTerms, Parameters, Real};
 
 /// The size of a leg's constraint manifold chart: `M` coordinates (its mobility,
 /// [`LegModel::MOBILITY`]) and `NX = 2 M` states (coordinates and rates). Generated models

@@ -53,7 +53,7 @@ pub fn numbers(flag: &str, text: &str, n: usize, what: &str) -> Result<Vec<f64>,
         .collect();
     let values: Result<Vec<f64>, _> = parts.iter().map(|p| p.parse::<f64>()).collect();
     let numbers = if n == 1 { "number" } else { "numbers" };
-    let shown = crate::gen::spec::shown(text);
+    let shown = shown(text);
     match values {
         Ok(v) if v.len() == n && v.iter().all(|x| x.is_finite()) => Ok(v),
         Ok(v) if v.iter().all(|x| x.is_finite()) => Err(Error::usage(format!(
@@ -167,4 +167,15 @@ pub fn build_legs(root: &Path) -> Result<PathBuf, String> {
         &[],
     )?;
     Ok(target_dir(root).join("debug").join("legs"))
+}
+
+/// Text from a spec or the command line as an error shows it: escaped, so that a newline or another control
+/// character cannot break the one-line error, and at most 40 characters.
+pub fn shown(text: &str) -> String {
+    let escaped: String = text.escape_debug().collect();
+    if escaped.chars().count() > 40 {
+        format!("{}…", escaped.chars().take(40).collect::<String>())
+    } else {
+        escaped
+    }
 }

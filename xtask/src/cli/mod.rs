@@ -8,4 +8,4 @@ pub mod args;
 mod common;
 pub mod progress;
 
-pub use common::{build_legs, cargo, numbers, target_dir, text_table, write_atomic, Error};
+pub use common::{build_legs, cargo, numbers, shown, target_dir, text_table, write_atomic, Error};

@@ -300,16 +300,7 @@ const RUST_KEYWORDS: &[&str] = &[
     "override", "priv", "typeof", "unsized", "virtual", "yield",
 ];
 
-/// Text from a spec as an error shows it: escaped, so that a newline or another control
-/// character cannot break the one-line error, and at most 40 characters.
-pub fn shown(text: &str) -> String {
-    let escaped: String = text.escape_debug().collect();
-    if escaped.chars().count() > 40 {
-        format!("{}…", escaped.chars().take(40).collect::<String>())
-    } else {
-        escaped
-    }
-}
+pub use crate::cli::shown;
 
 /// Names in specs become module, field and constant names: lowercase snake case ASCII
 /// identifiers that are not keywords.
