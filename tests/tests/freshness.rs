@@ -53,3 +53,28 @@ fn every_spec_has_committed_ir_that_names_it() {
         assert_eq!(ir.model.spec_sha256.len(), 64);
     }
 }
+
+/// Every Rust example of the documentation is a doctest: a docs file with a ```rust block
+/// is included in `tests/src/lib.rs` (as the README is), so that none goes unchecked.
+#[test]
+fn every_docs_file_with_rust_examples_is_doctested() {
+    let root = workspace_root();
+    let lib = std::fs::read_to_string(root.join("tests/src/lib.rs")).unwrap();
+    assert!(lib.contains("include_str!(\"../../README.md\")"));
+    let mut checked = 0;
+    for entry in std::fs::read_dir(root.join("docs")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|x| x == "md") {
+            let text = std::fs::read_to_string(&path).unwrap();
+            if text.contains("```rust") {
+                let name = path.file_name().unwrap().to_str().unwrap();
+                assert!(
+                    lib.contains(&format!("include_str!(\"../../docs/{name}\")")),
+                    "docs/{name} has Rust examples that no doctest runs: add it to tests/src/lib.rs"
+                );
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 0, "no docs file with Rust examples found");
+}

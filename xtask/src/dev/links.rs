@@ -4,8 +4,8 @@
 //! definitions, `[label]: target`), outside fenced code blocks and inline code, must
 //! resolve: its file (or folder) exists, relative to the linking file's folder (a target
 //! starting with `/` from the repository's root), and for `file.md#anchor` the file has a
-//! heading with that GitHub-style slug. Links to `http:`, `https:` and `mailto:` and pure
-//! `#anchor` links are not checked. Standard library only.
+//! heading with that GitHub-style slug; a pure `#anchor`, the linking file's own headings.
+//! Links to `http:`, `https:` and `mailto:` are not checked. Standard library only.
 
 use std::collections::HashSet;
 use std::path::{Component, Path, PathBuf};
@@ -31,7 +31,7 @@ pub fn check_links(root: &Path) -> Result<usize, String> {
         let shown = display(root, file);
         let text = std::fs::read_to_string(file).map_err(|e| format!("{shown}: {e}"))?;
         for link in links(&text) {
-            if is_external(&link.target) || link.target.starts_with('#') {
+            if is_external(&link.target) {
                 continue;
             }
             checked += 1;
@@ -83,7 +83,12 @@ fn check_one(root: &Path, from: &Path, target: &str) -> Result<(), String> {
     } else {
         from.parent().unwrap_or(root).to_path_buf()
     };
-    let resolved = normalize(&base.join(path.trim_start_matches('/')));
+    // `#anchor` alone: a heading of the linking file itself.
+    let resolved = if path.is_empty() {
+        from.to_path_buf()
+    } else {
+        normalize(&base.join(path.trim_start_matches('/')))
+    };
     if !resolved.starts_with(normalize(root)) {
         return Err("outside the repository".into());
     }
@@ -416,8 +421,9 @@ mod tests {
              [ref].\n\n[ref]: ./api.md#api\n",
         );
         dir.write("img/shot.png", "png");
-        // README: the file, its anchor, the image, the folder; docs/api.md: two.
-        assert_eq!(check_links(&dir.0), Ok(6));
+        // README: the file, its anchor, the image, the folder, its own heading;
+        // docs/api.md: two.
+        assert_eq!(check_links(&dir.0), Ok(7));
     }
 
     #[test]
@@ -446,7 +452,7 @@ mod tests {
         dir.write(
             "README.md",
             "[good](docs/a.md#eval---json) [dup](docs/a.md#same-1)\n\
-             [bad](docs/a.md#no-such-heading)\n[not markdown](x.txt#anything)\n",
+             [bad](docs/a.md#no-such-heading)\n[not markdown](x.txt#anything) [own](#nowhere)\n",
         );
         dir.write(
             "docs/a.md",
@@ -457,7 +463,8 @@ mod tests {
         assert_eq!(
             err,
             "README.md:2: docs/a.md#no-such-heading (no heading with the anchor \
-             #no-such-heading in docs/a.md)"
+             #no-such-heading in docs/a.md)\n\
+             README.md:3: #nowhere (no heading with the anchor #nowhere in README.md)"
         );
     }
 
