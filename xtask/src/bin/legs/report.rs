@@ -799,8 +799,9 @@ table.summary th {{ text-align: left; font-weight: bold; padding: 10px 0 3px; bo
   }}
   const links = d.bodies[0].map(() => el('path', {{ fill: '#aec7e8', 'fill-opacity': 0.6, stroke: '#1f77b4', 'stroke-width': 5, 'stroke-linejoin': 'round', 'stroke-linecap': 'round' }}));
   const joints = d.links[0].map(() => el('circle', {{ r: 4, fill: '#222' }}));
-  const closures = d.closures[0].map(() => el('circle', {{ r: 6, fill: 'none', stroke: '#d62728', 'stroke-width': 2 }}));
+  // The foot under the closure rings: a closure at the foot stays visible.
   const foot = el('circle', {{ r: 5, fill: '#2ca02c' }});
+  const closures = d.closures[0].map(() => el('circle', {{ r: 7, fill: 'none', stroke: '#d62728', 'stroke-width': 2 }}));
   const ref = el('circle', {{ r: 5, fill: 'none', stroke: '#666', 'stroke-width': 1.5 }});
   if (!d.ground) el('circle', {{ cx: X(0), cy: Y(0), r: 7, fill: '#888' }});
   const scrub = document.getElementById('scrub'), time = document.getElementById('time'), play = document.getElementById('play');
@@ -856,17 +857,18 @@ mod tests {
         )
         .axis("max |φ|", "m");
         assert_eq!(positive_range(&s), (2e-16, 1e-12));
-        // Five decades below the top at most; the floor marked as such.
-        assert_eq!(log_decades(&s), (-17, -12));
+        // The top a decade above the largest value (with room), the floor at the
+        // smallest value's decade (at most five below the top), marked as such.
+        assert_eq!(log_decades(&s), (-16, -11));
         let svg = plot(&s).unwrap();
-        for tick in ["≤ 10⁻¹⁷", "10⁻¹⁶", "10⁻¹⁴", "10⁻¹²"] {
+        for tick in ["≤ 10⁻¹⁶", "10⁻¹⁵", "10⁻¹²", "10⁻¹¹"] {
             assert!(
                 svg.contains(&format!("\n{tick}\n")),
                 "no tick {tick}: {svg}"
             );
         }
         assert!(svg.contains("log scale") && !svg.contains("NaN"));
-        assert!(plot_caption(&s, 2).contains("below 10⁻¹⁷"));
+        assert!(plot_caption(&s, 2).contains("below 10⁻¹⁶"));
     }
 
     #[test]

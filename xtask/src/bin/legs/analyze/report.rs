@@ -211,7 +211,7 @@ function drawMap(d, m) {{
   if (vals.length) {{
     for (let k = 0; k < S; k++) {{ const [r, gg, b] = colour(1 - k / (S - 1)); g.fillStyle = `rgb(${{r}},${{gg}},${{b}})`; g.fillRect(BX, T + k, BW, 1); }}
     g.strokeStyle = '#444'; g.strokeRect(BX + 0.5, T + 0.5, BW, S);
-    const tc = ticks(lo, hi, 4), B = v => T + S - (v - lo) / ((hi - lo) || 1) * S;
+    const tc = ticks(lo, hi, 6), B = v => T + S - (v - lo) / ((hi - lo) || 1) * S;
     g.fillStyle = '#222'; g.textAlign = 'left'; g.textBaseline = 'middle';
     for (const v of tc.values) {{ const y = B(v); g.beginPath(); g.moveTo(BX + BW, y); g.lineTo(BX + BW + 4, y); g.stroke(); g.fillText(tickText(v, tc.step), BX + BW + 6, y); }}
     g.save(); g.translate(W - 6, T + S / 2); g.rotate(-Math.PI / 2); g.textAlign = 'center'; g.fillText(m.unit, 0, 0); g.restore();
