@@ -2,6 +2,8 @@
 //! and an animation of the linkage (the frames as JSON, drawn by a few lines of script).
 //! Nothing is fetched: no network, no external file.
 
+use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint, Ranged};
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use serde_json::{json, Value};
 
@@ -14,6 +16,11 @@ pub struct Series {
     log: bool,
     /// Time intervals shaded behind the curves (a leg's stance phases).
     shade: Vec<(f64, f64)>,
+    /// The y axis: the quantity and its SI unit (`""` for a pure number); the unit gets
+    /// the prefix that suits the data's range (mm, mN m).
+    axis: Option<(String, String)>,
+    /// What the figure's caption says after its title.
+    caption: String,
 }
 
 impl Series {
@@ -24,6 +31,8 @@ impl Series {
             lines,
             log: false,
             shade: Vec::new(),
+            axis: None,
+            caption: String::new(),
         }
     }
 
@@ -33,8 +42,20 @@ impl Series {
         self
     }
 
-    /// Magnitudes on a log scale; exact zeros are drawn on the axis's floor, a decade
-    /// below the smallest positive value.
+    /// The y axis's quantity and SI unit (`"m"`, `"N m"`, `""`).
+    pub fn axis(mut self, quantity: &str, unit: &str) -> Series {
+        self.axis = Some((quantity.to_string(), unit.to_string()));
+        self
+    }
+
+    /// The caption's text after the title (plain text, escaped).
+    pub fn caption(mut self, text: &str) -> Series {
+        self.caption = text.to_string();
+        self
+    }
+
+    /// Magnitudes on a log scale over at most [`LOG_DECADES`] decades below the largest;
+    /// smaller values and exact zeros are drawn on the axis's floor, marked `≤`.
     pub fn log(title: &str, t: &[f64], lines: Vec<(String, Vec<f64>)>) -> Series {
         Series {
             log: true,
@@ -62,6 +83,7 @@ pub struct Report<'a> {
     pub plots: &'a [Series],
     pub frames: &'a [Frame],
     /// The ground line `n · x = d` as `[n_x, n_y, d]`, drawn under a leg with contacts.
+    /// Without it the leg hangs from a fixed base at the origin, drawn as a grey disc.
     pub ground: Option<[f64; 3]>,
 }
 
@@ -72,14 +94,199 @@ const COLORS: [RGBColor; 4] = [
     RGBColor(148, 103, 189),
 ];
 
+/// A plot's size in pixels (two side by side in a 1280 px wide page).
+const SIZE: (u32, u32) = (600, 300);
+/// Tick labels and axis titles, px.
+const TICK_FONT: u32 = 14;
+const AXIS_FONT: u32 = 15;
+/// A log axis spans at most this many decades below its top.
+const LOG_DECADES: i32 = 5;
+/// The running maximum of a log plot takes the largest value in windows of this share of
+/// the run.
+const ENVELOPE_SHARE: f64 = 1.0 / 150.0;
+
+/// Whether a unit takes an SI prefix (not a pure number, not kg, not a compound `1/s`).
+fn prefixable(unit: &str) -> bool {
+    !unit.is_empty() && unit != "kg" && !unit.starts_with('1') && unit != "%"
+}
+
+/// The SI prefix for values up to `max_abs`: `(factor, prefix)`, the values divided by
+/// the factor lying in [1, 1000) where a prefix from n to G allows it.
+fn si_prefix(max_abs: f64) -> (f64, &'static str) {
+    if !max_abs.is_finite() || max_abs == 0.0 {
+        return (1.0, "");
+    }
+    // A hair above the boundary so that 0.001 is 1 m, not 1000 µ.
+    let e = (((max_abs * (1.0 + 1e-12)).log10() / 3.0).floor() as i32).clamp(-3, 3);
+    let p = ["n", "µ", "m", "", "k", "M", "G"][(e + 3) as usize];
+    (10f64.powi(3 * e), p)
+}
+
+/// An exponent in superscript digits: `-14` → `⁻¹⁴`.
+fn superscript(e: i32) -> String {
+    e.to_string()
+        .chars()
+        .map(|c| match c {
+            '-' => '⁻',
+            d => ['⁰', '¹', '²', '³', '⁴', '⁵', '⁶', '⁷', '⁸', '⁹'][d as usize - '0' as usize],
+        })
+        .collect()
+}
+
+/// `x` to `digits` significant digits, trailing zeros dropped.
+fn significant(x: f64, digits: i32) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return if x == 0.0 { "0".into() } else { x.to_string() };
+    }
+    let mag = x.abs().log10().floor() as i32;
+    let decimals = (digits - 1 - mag).max(0) as usize;
+    let s = format!("{x:.decimals$}");
+    let s = if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    };
+    if s == "-0" {
+        "0".into()
+    } else {
+        s
+    }
+}
+
+/// `x` as `m × 10ⁿ` with a four-digit mantissa.
+fn scientific(x: f64) -> String {
+    let e = x.abs().log10().floor() as i32;
+    format!(
+        "{} × 10{}",
+        significant(x / 10f64.powi(e), 4),
+        superscript(e)
+    )
+}
+
+/// A quantity for a reader: four significant digits, the unit with the prefix that suits
+/// the value (`0.0034 m` → `3.412 mm`), powers of ten beyond the prefixes.
+pub fn quantity(x: f64, unit: &str) -> String {
+    let with = |s: String, u: &str| {
+        if u.is_empty() {
+            s
+        } else {
+            format!("{s} {u}")
+        }
+    };
+    if x == 0.0 || !x.is_finite() {
+        return with(significant(x, 4), unit);
+    }
+    if prefixable(unit) && (1e-9..1e12).contains(&x.abs()) {
+        let (f, p) = si_prefix(x.abs());
+        return with(significant(x / f, 4), &format!("{p}{unit}"));
+    }
+    if (1e-3..1e6).contains(&x.abs()) {
+        with(significant(x, 4), unit)
+    } else {
+        with(scientific(x), unit)
+    }
+}
+
+fn svg_err<E: std::fmt::Display>(e: E) -> String {
+    e.to_string()
+}
+
+/// The y axis's title and the factor the values are divided by for it.
+fn y_axis(series: &Series, max_abs: f64, log: bool) -> (f64, String) {
+    let scale = if log { ", log scale" } else { "" };
+    match &series.axis {
+        Some((q, u)) if prefixable(u) && !log => {
+            let (f, p) = si_prefix(max_abs);
+            (f, format!("{q} ({p}{u})"))
+        }
+        Some((q, u)) if u.is_empty() => {
+            (1.0, format!("{q}{}", if log { " (log scale)" } else { "" }))
+        }
+        Some((q, u)) => (1.0, format!("{q} ({u}{scale})")),
+        None => (1.0, series.title.clone()),
+    }
+}
+
+/// Round ticks (1, 2 or 5 times a power of ten apart, about `target` of them) over
+/// `[lo, hi]`, their step, and the minor ticks a fifth of a step apart.
+fn nice_ticks(lo: f64, hi: f64, target: f64) -> (Vec<f64>, f64, Vec<f64>) {
+    let range = (hi - lo).max(1e-300);
+    let raw = range / target;
+    let decade = 10f64.powf(raw.log10().floor());
+    let step = [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .map(|m| m * decade)
+        .find(|s| *s >= raw)
+        .unwrap_or(10.0 * decade);
+    let at = |s: f64| -> Vec<f64> {
+        let first = (lo / s).ceil() as i64;
+        let last = (hi / s).floor() as i64;
+        (first..=last).map(|i| i as f64 * s).collect()
+    };
+    (at(step), step, at(step / 5.0))
+}
+
+/// An axis with ticks of our choosing (major for labels and bold lines, minor for faint
+/// ones); plotters' own `WithKeyPoints` does not take a label formatter.
+struct Ticked {
+    range: RangedCoordf64,
+    major: Vec<f64>,
+    minor: Vec<f64>,
+}
+
+impl Ticked {
+    fn new(lo: f64, hi: f64, major: Vec<f64>, minor: Vec<f64>) -> Ticked {
+        Ticked {
+            range: (lo..hi).into(),
+            major,
+            minor,
+        }
+    }
+}
+
+impl Ranged for Ticked {
+    type FormatOption = DefaultFormatting;
+    type ValueType = f64;
+    fn map(&self, value: &f64, limit: (i32, i32)) -> i32 {
+        self.range.map(value, limit)
+    }
+    fn key_points<H: KeyPointHint>(&self, hint: H) -> Vec<f64> {
+        if hint.weight().allow_light_points() {
+            self.minor.clone()
+        } else {
+            self.major.clone()
+        }
+    }
+    fn range(&self) -> std::ops::Range<f64> {
+        self.range.range()
+    }
+}
+
+/// Decimals a tick label needs at this step.
+fn decimals(step: f64) -> usize {
+    if step <= 0.0 || !step.is_finite() {
+        return 0;
+    }
+    (-step.log10() - 1e-9).ceil().clamp(0.0, 9.0) as usize
+}
+
+/// A tick label as a plain decimal, with a true minus sign.
+fn plain(v: f64, decimals: usize, step: f64) -> String {
+    if v.abs() <= step * 1e-6 {
+        "0".to_string()
+    } else {
+        format!("{v:.decimals$}").replace('-', "−")
+    }
+}
+
 fn plot(series: &Series) -> Result<String, String> {
     if series.log {
         return plot_log(series);
     }
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (640, 260)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(svg_err)?;
         let t_end = series.t.last().copied().unwrap_or(1.0).max(1e-9);
         let finite = series
             .lines
@@ -90,45 +297,45 @@ fn plot(series: &Series) -> Result<String, String> {
             (a.min(v), b.max(v))
         });
         let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
+        let (factor, y_desc) = y_axis(series, hi.abs().max(lo.abs()), false);
+        let (lo, hi) = (lo / factor, hi / factor);
         let pad = ((hi - lo) * 0.05)
             .max(hi.abs().max(lo.abs()) * 1e-9)
             .max(1e-300);
-        let legend_room = if series.lines.len() > 1 {
-            (hi - lo).max(pad) * 0.35
-        } else {
-            0.0
-        };
-        let tiny = (hi.abs().max(lo.abs())) * 1e-9;
+        let (bottom, top) = (lo - pad, hi + pad);
+        let (y_ticks, y_step, y_minor) = nice_ticks(bottom, top, 6.0);
+        let (x_ticks, x_step, x_minor) = nice_ticks(0.0, t_end, 6.0);
+        let (x_dec, y_dec) = (decimals(x_step), decimals(y_step));
         let mut chart = ChartBuilder::on(&root)
-            .caption(&series.title, ("sans-serif", 16))
-            .margin(8)
-            .x_label_area_size(30)
-            .y_label_area_size(70)
-            // Headroom above the curves for the legend of several lines.
-            .build_cartesian_2d(0.0..t_end, (lo - pad)..(hi + pad + legend_room))
-            .map_err(|e| e.to_string())?;
+            .margin(10)
+            .margin_right(20)
+            .x_label_area_size(44)
+            .y_label_area_size(74)
+            .build_cartesian_2d(
+                Ticked::new(0.0, t_end, x_ticks, x_minor),
+                Ticked::new(bottom, top, y_ticks, y_minor),
+            )
+            .map_err(svg_err)?;
         chart
             .configure_mesh()
-            .x_desc("t (s)")
-            .y_desc(series.title.as_str())
-            .y_label_formatter(&|v| {
-                if v.abs() <= tiny {
-                    "0".to_string()
-                } else {
-                    format!("{v:.2e}")
-                }
-            })
+            .light_line_style(BLACK.mix(0.04))
+            .bold_line_style(BLACK.mix(0.12))
+            .label_style(("sans-serif", TICK_FONT))
+            .axis_desc_style(("sans-serif", AXIS_FONT))
+            .x_desc("time (s)")
+            .y_desc(y_desc)
+            .x_label_formatter(&|v| plain(*v, x_dec, x_step))
+            .y_label_formatter(&|v| plain(*v, y_dec, y_step))
             .draw()
-            .map_err(|e| e.to_string())?;
-        let (bottom, top) = (lo - pad, hi + pad + legend_room);
+            .map_err(svg_err)?;
         chart
             .draw_series(
                 series.shade.iter().map(|&(a, b)| {
                     Rectangle::new([(a, bottom), (b, top)], BLACK.mix(0.08).filled())
                 }),
             )
-            .map_err(|e| e.to_string())?;
-        for (i, (name, values)) in series.lines.iter().enumerate() {
+            .map_err(svg_err)?;
+        for (i, (_, values)) in series.lines.iter().enumerate() {
             let color = COLORS[i % COLORS.len()];
             chart
                 .draw_series(LineSeries::new(
@@ -136,26 +343,13 @@ fn plot(series: &Series) -> Result<String, String> {
                         .t
                         .iter()
                         .copied()
-                        .zip(values.iter().copied())
+                        .zip(values.iter().map(|v| v / factor))
                         .filter(|(_, v)| v.is_finite()),
                     color.stroke_width(2),
                 ))
-                .map_err(|e| e.to_string())?
-                .label(name.clone())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
-                });
+                .map_err(svg_err)?;
         }
-        if series.lines.len() > 1 {
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .draw()
-                .map_err(|e| e.to_string())?;
-        }
-        root.present().map_err(|e| e.to_string())?;
+        root.present().map_err(svg_err)?;
     }
     Ok(svg)
 }
@@ -176,62 +370,112 @@ fn positive_range(series: &Series) -> (f64, f64) {
     }
 }
 
+/// A log axis's decades `(floor, top)`: the top a decade at or above the largest value,
+/// the floor at most [`LOG_DECADES`] below it (and no lower than the smallest value's).
+fn log_decades(series: &Series) -> (i32, i32) {
+    let (lo, hi) = positive_range(series);
+    let top = (hi * 1.2).log10().ceil() as i32;
+    let floor = (lo.log10().floor() as i32)
+        .max(top - LOG_DECADES)
+        .min(top - 1);
+    (floor, top)
+}
+
 fn plot_log(series: &Series) -> Result<String, String> {
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (640, 260)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(svg_err)?;
         let t_end = series.t.last().copied().unwrap_or(1.0).max(1e-9);
-        let (lo, hi) = positive_range(series);
-        let floor = lo / 10.0;
-        let top = if series.lines.len() > 1 {
-            hi * 1e3
-        } else {
-            hi * 3.0
-        };
+        let (floor_e, top_e) = log_decades(series);
+        // Drawn in decades (log10 of the value) on a linear axis: a tick at every decade.
+        let floor = 10f64.powi(floor_e);
+        let (bottom, top) = (floor_e as f64, top_e as f64);
+        let (_, y_desc) = y_axis(series, 10f64.powi(top_e), true);
+        let (x_ticks, x_step, x_minor) = nice_ticks(0.0, t_end, 6.0);
+        let x_dec = decimals(x_step);
+        let decades: Vec<f64> = (floor_e..=top_e).map(f64::from).collect();
+        let minor: Vec<f64> = (floor_e..top_e)
+            .flat_map(|e| (2..10).map(move |m| e as f64 + (m as f64).log10()))
+            .collect();
         let mut chart = ChartBuilder::on(&root)
-            .caption(&series.title, ("sans-serif", 16))
-            .margin(8)
-            .x_label_area_size(30)
-            .y_label_area_size(70)
-            .build_cartesian_2d(0.0..t_end, (floor..top).log_scale())
-            .map_err(|e| e.to_string())?;
+            .margin(10)
+            .margin_right(20)
+            .x_label_area_size(44)
+            .y_label_area_size(84)
+            .build_cartesian_2d(
+                Ticked::new(0.0, t_end, x_ticks, x_minor),
+                Ticked::new(bottom, top, decades, minor),
+            )
+            .map_err(svg_err)?;
         chart
             .configure_mesh()
-            .x_desc("t (s)")
-            .y_desc(format!("{} (log)", series.title))
-            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .light_line_style(BLACK.mix(0.04))
+            .bold_line_style(BLACK.mix(0.12))
+            .label_style(("sans-serif", TICK_FONT))
+            .axis_desc_style(("sans-serif", AXIS_FONT))
+            .x_desc("time (s)")
+            .y_desc(y_desc)
+            .x_label_formatter(&|v| plain(*v, x_dec, x_step))
+            .y_label_formatter(&|e| {
+                if (e - e.round()).abs() > 1e-6 {
+                    String::new()
+                } else if e.round() as i32 == floor_e {
+                    format!("≤ 10{}", superscript(floor_e))
+                } else {
+                    format!("10{}", superscript(e.round() as i32))
+                }
+            })
             .draw()
-            .map_err(|e| e.to_string())?;
-        for (i, (name, values)) in series.lines.iter().enumerate() {
+            .map_err(svg_err)?;
+        chart
+            .draw_series(
+                series.shade.iter().map(|&(a, b)| {
+                    Rectangle::new([(a, bottom), (b, top)], BLACK.mix(0.08).filled())
+                }),
+            )
+            .map_err(svg_err)?;
+        // The samples as faint dots (one per pixel they fall on), their running maximum as
+        // a line: a cloud of rounding noise reads as a level, not as a band of spikes.
+        let window = (t_end * ENVELOPE_SHARE).max(1e-12);
+        for (i, (_, values)) in series.lines.iter().enumerate() {
             let color = COLORS[i % COLORS.len()];
+            let points: Vec<(f64, f64)> = series
+                .t
+                .iter()
+                .copied()
+                .zip(values.iter().copied())
+                .filter(|(_, v)| v.is_finite())
+                .map(|(t, v)| (t, v.abs().max(floor).log10()))
+                .collect();
+            let mut seen = std::collections::HashSet::new();
+            let dots = points.iter().filter(|(t, v)| {
+                let px = (t / t_end * SIZE.0 as f64).round() as i64;
+                let py = ((v - bottom) * 40.0).round() as i64;
+                seen.insert((px, py))
+            });
             chart
-                .draw_series(LineSeries::new(
-                    series
-                        .t
-                        .iter()
-                        .copied()
-                        .zip(values.iter().copied())
-                        .filter(|(_, v)| v.is_finite())
-                        .map(|(t, v)| (t, v.abs().max(floor))),
-                    color.stroke_width(2),
-                ))
-                .map_err(|e| e.to_string())?
-                .label(name.clone())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
-                });
-        }
-        if series.lines.len() > 1 {
+                .draw_series(dots.map(|&(t, v)| Circle::new((t, v), 1.5, color.mix(0.3).filled())))
+                .map_err(svg_err)?;
+            let mut envelope: Vec<(f64, f64)> = Vec::new();
+            let mut k = 0;
+            while k < points.len() {
+                let start = points[k].0;
+                let mut m = bottom;
+                let mut j = k;
+                while j < points.len() && points[j].0 < start + window {
+                    m = m.max(points[j].1);
+                    j += 1;
+                }
+                envelope.push((start, m));
+                envelope.push((points[j - 1].0, m));
+                k = j;
+            }
             chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .draw()
-                .map_err(|e| e.to_string())?;
+                .draw_series(LineSeries::new(envelope, color.stroke_width(2)))
+                .map_err(svg_err)?;
         }
-        root.present().map_err(|e| e.to_string())?;
+        root.present().map_err(svg_err)?;
     }
     Ok(svg)
 }
@@ -243,40 +487,222 @@ fn escape(s: &str) -> String {
         .replace('>', "&gt;")
 }
 
-/// The summary as table rows, nested objects flattened to `a.b` keys; `null`s left out.
-fn summary_rows(v: &Value) -> String {
-    fn walk(prefix: &str, v: &Value, out: &mut String) {
-        match v {
-            Value::Object(m) => {
-                for (k, x) in m {
-                    let key = if prefix.is_empty() {
-                        k.clone()
-                    } else {
-                        format!("{prefix}.{k}")
-                    };
-                    walk(&key, x, out);
-                }
+/// The unit a summary key ends in (`duration_s`), and the key without it.
+fn unit_of(key: &str) -> (&str, &'static str) {
+    const SUFFIXES: [(&str, &str); 10] = [
+        ("_rad_s", "rad/s"),
+        ("_m_s", "m/s"),
+        ("_m2", "m²"),
+        ("_nm", "N m"),
+        ("_kg", "kg"),
+        ("_j", "J"),
+        ("_n", "N"),
+        ("_s", "s"),
+        ("_m", "m"),
+        ("_rad", "rad"),
+    ];
+    for (suffix, unit) in SUFFIXES {
+        if let Some(stem) = key.strip_suffix(suffix) {
+            return (stem, unit);
+        }
+    }
+    (key, "")
+}
+
+/// A reader's label for a summary key (without its unit suffix).
+fn label_of(stem: &str) -> String {
+    let known = match stem {
+        "controller_choice" => "why this controller",
+        "closure_rows" => "closure constraint rows",
+        "redundant_rows" => "redundant constraint rows",
+        "mobility" => "mobility (degrees of freedom)",
+        "dt" => "time step",
+        "gains" => "feedback gains",
+        "torque_update" => "torque update",
+        "samples" => "samples recorded",
+        "steady_state_from" => "steady state from",
+        "steady_state_max" => "max in steady state",
+        "steady_state_rms" => "rms in steady state",
+        "peak_torque" => "peak motor torque",
+        "saturations" => "torque saturations",
+        "saturations_per_motor" => "saturations per motor",
+        "max_closure_residual" => "max closure residual |φ|",
+        "max_contact_residual" => "max contact residual",
+        "energy_drift_relative" => "energy drift max |E(t) − E(0)| / |E(0)|",
+        "height_joint" => "body height joint",
+        "apex_command" => "commanded apex height",
+        "friction" => "friction coefficient μ",
+        "impact_energy_lost" => "energy lost in impacts",
+        "rebounds_within_10_ms" => "rebounds within 10 ms",
+        "slips_within_1_ms_of_liftoff" => "slips within 1 ms of a liftoff",
+        "cause" => "cause",
+        "t" => "at t",
+        _ => "",
+    };
+    if known.is_empty() {
+        stem.replace('_', " ")
+    } else {
+        known.to_string()
+    }
+}
+
+/// A summary value as text in `unit` (numbers to four significant digits; a list of
+/// numbers in one common prefix).
+fn value_text(v: &Value, unit: &str) -> String {
+    match v {
+        Value::String(s) => escape(s),
+        Value::Number(n) if n.is_f64() => quantity(n.as_f64().unwrap_or(f64::NAN), unit),
+        Value::Number(n) => {
+            let s = n.to_string();
+            if unit.is_empty() {
+                s
+            } else {
+                format!("{s} {unit}")
             }
-            Value::Null => {}
-            Value::String(s) => out.push_str(&format!(
-                "<tr><td>{}</td><td>{}</td></tr>",
-                escape(prefix),
-                escape(s)
-            )),
-            other => out.push_str(&format!(
-                "<tr><td>{}</td><td>{}</td></tr>",
-                escape(prefix),
-                escape(&other.to_string())
-            )),
+        }
+        Value::Array(a) if a.iter().all(Value::is_number) => {
+            let xs: Vec<f64> = a.iter().filter_map(Value::as_f64).collect();
+            let floats = a.iter().any(|x| x.is_f64());
+            let max = xs.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            let (f, p) = if floats && prefixable(unit) && (1e-9..1e12).contains(&max) {
+                si_prefix(max)
+            } else {
+                (1.0, "")
+            };
+            let list: Vec<String> = a
+                .iter()
+                .map(|x| match x.as_f64() {
+                    Some(y) if floats => significant(y / f, 4),
+                    _ => x.to_string(),
+                })
+                .collect();
+            let u = format!("{p}{unit}");
+            if u.is_empty() {
+                list.join(", ")
+            } else {
+                format!("{} {u}", list.join(", "))
+            }
+        }
+        other => escape(&other.to_string()),
+    }
+}
+
+/// The summary as a table: plain labels, units, four significant digits; each nested
+/// object under a heading row (its `unit`, or its key's unit suffix, applies to its
+/// numbers); `null`s left out.
+fn summary_rows(v: &Value) -> String {
+    fn rows(m: &serde_json::Map<String, Value>, inherited: &str, out: &mut String) {
+        let own = m.get("unit").and_then(Value::as_str);
+        // The plain values first, then each nested object under its heading.
+        let (plain, nested): (Vec<_>, Vec<_>) = m.iter().partition(|(_, x)| !x.is_object());
+        for (k, x) in plain.into_iter().chain(nested) {
+            if k == "unit" && own.is_some() {
+                continue;
+            }
+            let (stem, suffix) = unit_of(k);
+            let unit = if !suffix.is_empty() {
+                suffix
+            } else {
+                own.unwrap_or(inherited)
+            };
+            match x {
+                Value::Null => {}
+                Value::Object(inner) => {
+                    out.push_str(&format!(
+                        "<tr><th colspan=\"2\">{}</th></tr>",
+                        escape(&label_of(stem))
+                    ));
+                    rows(inner, unit, out);
+                }
+                _ => out.push_str(&format!(
+                    "<tr><td>{}</td><td>{}</td></tr>",
+                    escape(&label_of(stem)),
+                    value_text(x, unit)
+                )),
+            }
         }
     }
     let mut out = String::new();
-    walk("", v, &mut out);
+    if let Value::Object(m) = v {
+        rows(m, "", &mut out);
+    }
     out
 }
 
+/// The animation's caption: only what this leg's drawing holds.
+fn animation_caption(r: &Report) -> String {
+    let mut parts = vec![
+        "The leg as simulated, played back in real time (scrub with the slider): each link a rigid body (blue outline through all its points)".to_string(),
+        "joints (black dots)".to_string(),
+    ];
+    if r.frames.iter().any(|f| !f.closures.is_empty()) {
+        parts.push("the closure points where the chains meet (red rings)".into());
+    }
+    parts.push("the foot (green dot) and its path over the last second (green)".into());
+    if r.frames.iter().any(|f| f.reference.is_some()) {
+        parts.push("the reference the foot tracks (grey ring, its path dashed)".into());
+    }
+    match r.ground {
+        Some(_) => parts.push("the ground (brown line, earth below)".into()),
+        None => parts.push("the fixed base at the origin (grey disc)".into()),
+    }
+    format!(
+        "{}. The scale bar at the bottom left gives the length.",
+        parts.join(", ")
+    )
+}
+
+/// A plot's caption: its title, what it says, the key to its lines, and what its axis and
+/// shading mean.
+fn plot_caption(s: &Series, number: usize) -> String {
+    let mut text = format!("<b>Figure {number}.</b> {}.", escape(&s.title));
+    if !s.caption.is_empty() {
+        text.push_str(&format!(" {}", escape(&s.caption)));
+    }
+    if !s.shade.is_empty() {
+        text.push_str(" Grey bands: stance (a contact on the ground).");
+    }
+    if s.log {
+        let (floor_e, _) = log_decades(s);
+        let t_end = s.t.last().copied().unwrap_or(1.0);
+        text.push_str(&format!(
+            " Log scale; values below 10{0} (exact zeros included) are drawn on the bottom line, marked ≤ 10{0}. Faint dots: the samples; line: the largest value in each {1} window.",
+            superscript(floor_e),
+            quantity(t_end * ENVELOPE_SHARE, "s")
+        ));
+    }
+    text
+}
+
+fn plot_key(s: &Series) -> String {
+    if s.lines.len() < 2 {
+        return "<div class=\"key\"></div>".to_string();
+    }
+    let keys: Vec<String> = s
+        .lines
+        .iter()
+        .enumerate()
+        .map(|(i, (name, _))| {
+            let RGBColor(r, g, b) = COLORS[i % COLORS.len()];
+            format!(
+                "<span><i style=\"background:rgb({r},{g},{b})\"></i>{}</span>",
+                escape(name)
+            )
+        })
+        .collect();
+    format!("<div class=\"key\">{}</div>", keys.join(""))
+}
+
 pub fn html(r: &Report) -> Result<String, String> {
-    let plots: Vec<String> = r.plots.iter().map(plot).collect::<Result<_, _>>()?;
+    let mut plots = Vec::new();
+    for (i, s) in r.plots.iter().enumerate() {
+        plots.push(format!(
+            "<figure>{}{}<figcaption>{}</figcaption></figure>",
+            plot_key(s),
+            plot(s)?,
+            plot_caption(s, i + 2)
+        ));
+    }
     let frames = json!({
         "t": r.frames.iter().map(|f| f.t).collect::<Vec<_>>(),
         "links": r.frames.iter().map(|f| f.links.clone()).collect::<Vec<_>>(),
@@ -295,26 +721,36 @@ pub fn html(r: &Report) -> Result<String, String> {
 <meta charset="utf-8">
 <title>{title}</title>
 <style>
-body {{ font-family: sans-serif; margin: 24px; color: #222; }}
-.row {{ display: flex; flex-wrap: wrap; gap: 24px; align-items: flex-start; }}
+body {{ font-family: sans-serif; font-size: 15px; line-height: 1.4; margin: 24px; color: #222; max-width: 1240px; }}
+h1 {{ font-size: 26px; margin: 0 0 16px; }}
+.row {{ display: flex; flex-wrap: wrap; gap: 32px; align-items: flex-start; }}
 #leg {{ border: 1px solid #ccc; background: #fafafa; }}
-pre {{ background: #f4f4f4; padding: 12px; font-size: 12px; max-width: 640px; overflow-x: auto; }}
-.plots {{ display: grid; grid-template-columns: repeat(auto-fill, minmax(640px, 1fr)); gap: 8px; }}
+figure {{ margin: 0; }}
+figcaption {{ font-size: 14px; color: #333; margin-top: 6px; }}
+.anim figcaption, .anim .controls {{ max-width: 520px; }}
+.controls {{ font-size: 15px; }}
+.plots {{ display: grid; grid-template-columns: repeat(auto-fill, minmax(600px, 1fr)); gap: 28px 24px; margin-top: 28px; }}
+.plots figure {{ max-width: 600px; }}
 .plots svg {{ display: block; }}
-table.summary {{ border-collapse: collapse; font-size: 13px; max-width: 640px; }}
-table.summary td {{ border-bottom: 1px solid #e4e4e4; padding: 3px 10px 3px 0; vertical-align: top; }}
+.key {{ font-size: 14px; margin-bottom: 2px; min-height: 20px; }}
+.key span {{ margin-right: 16px; white-space: nowrap; }}
+.key i {{ display: inline-block; width: 22px; height: 3px; vertical-align: middle; margin-right: 6px; }}
+table.summary {{ border-collapse: collapse; font-size: 15px; max-width: 640px; }}
+table.summary caption {{ text-align: left; font-weight: bold; font-size: 16px; padding-bottom: 6px; }}
+table.summary td {{ border-bottom: 1px solid #e4e4e4; padding: 3px 14px 3px 0; vertical-align: top; }}
 table.summary td:first-child {{ color: #555; white-space: nowrap; }}
+table.summary th {{ text-align: left; font-weight: bold; padding: 10px 0 3px; border-bottom: 1px solid #bbb; }}
 </style>
 </head>
 <body>
 <h1>{title}</h1>
 <div class="row">
-<div>
+<figure class="anim">
 <svg id="leg" width="520" height="520" viewBox="0 0 520 520"></svg>
-<div><button id="play">pause</button> <input id="scrub" type="range" min="0" value="0" style="width:380px"> <span id="time"></span></div>
-<p>Links as rigid bodies (blue outlines through every point of a link), joints (dots), closure points (red), foot path (green), reference (dashed grey), base (grey disc), the ground (brown) under a leg with contacts; scale bar below.</p>
-</div>
-<table class="summary">{summary}</table>
+<div class="controls"><button id="play">pause</button> <input id="scrub" type="range" min="0" value="0" style="width:360px"> <span id="time"></span></div>
+<figcaption><b>Figure 1.</b> {anim_caption}</figcaption>
+</figure>
+<table class="summary"><caption>Summary</caption>{summary}</table>
 </div>
 <div class="plots">
 {plots}
@@ -337,7 +773,7 @@ table.summary td:first-child {{ color: #555; white-space: nowrap; }}
   const path = pts => pts.filter(p => p).map((p, i) => (i ? 'L' : 'M') + X(p[0]).toFixed(1) + ' ' + Y(p[1]).toFixed(1)).join(' ');
   el('path', {{ d: path(d.reference), fill: 'none', stroke: '#999', 'stroke-dasharray': '4 3' }});
   if (d.ground) {{
-    // The ground n·x = d: a brown line through the view, hatched below.
+    // The ground n·x = d: a brown line through the view, earth below.
     const [gx, gy, off] = d.ground, tx = gy, ty = -gx, px = gx * off, py = gy * off;
     const a = [px - tx * 10 * span, py - ty * 10 * span], b = [px + tx * 10 * span, py + ty * 10 * span];
     const below = [[b[0] - gx * span, b[1] - gy * span], [a[0] - gx * span, a[1] - gy * span]];
@@ -348,8 +784,8 @@ table.summary td:first-child {{ color: #555; white-space: nowrap; }}
   // A scale bar of a round length near a fifth of the view, at the bottom left.
   const decade = Math.pow(10, Math.floor(Math.log10(span / 5)));
   const bar = [5, 2, 1].map(m => m * decade).find(b => b <= span / 5) || decade;
-  el('line', {{ x1: 20, y1: 500, x2: 20 + bar / span * 500, y2: 500, stroke: '#222', 'stroke-width': 2 }});
-  const label = el('text', {{ x: 20, y: 492, 'font-size': 12 }});
+  el('line', {{ x1: 20, y1: 500, x2: 20 + bar / span * 500, y2: 500, stroke: '#222', 'stroke-width': 3 }});
+  const label = el('text', {{ x: 20, y: 490, 'font-size': 15 }});
   const round = x => +x.toPrecision(3);
   label.textContent = (bar >= 1 ? round(bar) + ' m' : (bar * 100 >= 1 ? round(bar * 100) + ' cm' : round(bar * 1000) + ' mm'));
   function hull(pts) {{
@@ -363,12 +799,16 @@ table.summary td:first-child {{ color: #555; white-space: nowrap; }}
   }}
   const links = d.bodies[0].map(() => el('path', {{ fill: '#aec7e8', 'fill-opacity': 0.6, stroke: '#1f77b4', 'stroke-width': 5, 'stroke-linejoin': 'round', 'stroke-linecap': 'round' }}));
   const joints = d.links[0].map(() => el('circle', {{ r: 4, fill: '#222' }}));
-  const closures = d.closures[0].map(() => el('circle', {{ r: 5, fill: 'none', stroke: '#d62728', 'stroke-width': 2 }}));
-  const foot = el('circle', {{ r: 4, fill: '#2ca02c' }});
-  const ref = el('circle', {{ r: 4, fill: 'none', stroke: '#666' }});
-  el('circle', {{ cx: X(0), cy: Y(0), r: 6, fill: '#444' }});
+  // The foot under the closure rings: a closure at the foot stays visible.
+  const foot = el('circle', {{ r: 5, fill: '#2ca02c' }});
+  const closures = d.closures[0].map(() => el('circle', {{ r: 7, fill: 'none', stroke: '#d62728', 'stroke-width': 2 }}));
+  const ref = el('circle', {{ r: 5, fill: 'none', stroke: '#666', 'stroke-width': 1.5 }});
+  if (!d.ground) el('circle', {{ cx: X(0), cy: Y(0), r: 7, fill: '#888' }});
   const scrub = document.getElementById('scrub'), time = document.getElementById('time'), play = document.getElementById('play');
   scrub.max = n - 1;
+  // The foot's path over the last second.
+  const dtFrame = n > 1 ? (d.t[n - 1] - d.t[0]) / (n - 1) : 1;
+  const trailFrames = Math.max(1, Math.round(1 / dtFrame));
   let k = 0, playing = true;
   function draw(i) {{
     d.bodies[i].forEach((b, j) => {{ links[j].setAttribute('d', path(hull(b)) + ' Z'); }});
@@ -378,12 +818,12 @@ table.summary td:first-child {{ color: #555; white-space: nowrap; }}
     const r = d.reference[i];
     ref.setAttribute('visibility', r ? 'visible' : 'hidden');
     if (r) {{ ref.setAttribute('cx', X(r[0])); ref.setAttribute('cy', Y(r[1])); }}
-    trail.setAttribute('d', path(d.foot.slice(Math.max(0, i - 50), i + 1)));
+    trail.setAttribute('d', path(d.foot.slice(Math.max(0, i - trailFrames), i + 1)));
     scrub.value = i; time.textContent = 't = ' + d.t[i].toFixed(3) + ' s';
   }}
   let last = null;
   function tick(now) {{
-    if (playing && last !== null && now - last > 20) {{ k = (k + 1) % n; draw(k); last = now; }}
+    if (playing && last !== null && now - last > dtFrame * 1000) {{ k = (k + 1) % n; draw(k); last = now; }}
     if (last === null) last = now;
     requestAnimationFrame(tick);
   }}
@@ -397,6 +837,7 @@ table.summary td:first-child {{ color: #555; white-space: nowrap; }}
 </html>
 "#,
         title = escape(&r.title),
+        anim_caption = escape(&animation_caption(r)),
         summary = summary_rows(r.summary),
         plots = plots.join("\n"),
     ))
@@ -407,24 +848,72 @@ mod tests {
     use super::*;
 
     #[test]
-    fn residuals_are_drawn_on_decades_with_zeros_on_the_floor() {
+    fn residuals_are_drawn_on_decades_with_small_values_on_the_floor() {
         let t = [0.0, 0.5, 1.0, 1.5];
         let s = Series::log(
-            "closure residual max |φ| (m)",
+            "closure residual",
             &t,
             vec![("residual".into(), vec![0.0, 2e-16, 3e-14, 1e-12])],
-        );
-        // The floor is a decade below the smallest positive value.
+        )
+        .axis("max |φ|", "m");
         assert_eq!(positive_range(&s), (2e-16, 1e-12));
+        // The top a decade above the largest value (with room), the floor at the
+        // smallest value's decade (at most five below the top), marked as such.
+        assert_eq!(log_decades(&s), (-16, -11));
         let svg = plot(&s).unwrap();
-        // A tick at every decade the values span.
-        for tick in ["1e-15", "1e-14", "1e-13", "1e-12"] {
+        for tick in ["≤ 10⁻¹⁶", "10⁻¹⁵", "10⁻¹²", "10⁻¹¹"] {
             assert!(
                 svg.contains(&format!("\n{tick}\n")),
                 "no tick {tick}: {svg}"
             );
         }
-        assert!(svg.contains("(log)") && !svg.contains("NaN"));
+        assert!(svg.contains("log scale") && !svg.contains("NaN"));
+        assert!(plot_caption(&s, 2).contains("below 10⁻¹⁶"));
+    }
+
+    #[test]
+    fn quantities_read_plainly() {
+        assert_eq!(quantity(0.0034122660742651185, "m"), "3.412 mm");
+        assert_eq!(quantity(0.00003832595829718664, "m"), "38.33 µm");
+        assert_eq!(quantity(0.1290293780730676, "N m"), "129 mN m");
+        assert_eq!(quantity(1.0, "s"), "1 s");
+        assert_eq!(quantity(0.001, "s"), "1 ms");
+        assert_eq!(quantity(5.842548667089886e-14, "m"), "5.843 × 10⁻¹⁴ m");
+        assert_eq!(quantity(0.8, ""), "0.8");
+        let (f, p) = si_prefix(0.2);
+        assert_eq!((f, p), (1e-3, "m"));
+        assert_eq!(plain(0.5, decimals(0.5), 0.5), "0.5");
+        assert_eq!(plain(-50.0, decimals(50.0), 50.0), "−50");
+        let (ticks, step, _) = nice_ticks(-0.2, 3.7, 6.0);
+        assert_eq!((ticks, step), (vec![0.0, 1.0, 2.0, 3.0], 1.0));
+    }
+
+    #[test]
+    fn the_summary_has_labels_and_units() {
+        let v = json!({"tracking_error": {"unit": "m", "max": 0.0034122660742651185, "steady_state_from_s": 1.0},
+            "peak_torque_nm": 0.129, "saturations_per_motor": [0, 0], "apex_heights_m": [0.2772, 0.2995], "stopped": null});
+        let rows = summary_rows(&v);
+        assert!(
+            rows.contains("<th colspan=\"2\">tracking error</th>"),
+            "{rows}"
+        );
+        assert!(rows.contains("<td>max</td><td>3.412 mm</td>"), "{rows}");
+        assert!(
+            rows.contains("<td>steady state from</td><td>1 s</td>"),
+            "{rows}"
+        );
+        assert!(
+            rows.contains("<td>peak motor torque</td><td>129 mN m</td>"),
+            "{rows}"
+        );
+        assert!(
+            rows.contains("<td>0, 0</td>") && rows.contains("277.2, 299.5 mm"),
+            "{rows}"
+        );
+        assert!(
+            !rows.contains("stopped") && !rows.contains(">unit<"),
+            "{rows}"
+        );
     }
 
     #[test]

@@ -123,14 +123,15 @@ pub fn html(designs: &[Design], sweep: Option<&str>, command: &str) -> Result<St
         r#"<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>Leg designs compared</title>
 <style>
-body {{ font-family: sans-serif; margin: 1.5em; color: #222; }}
+body {{ font-family: sans-serif; font-size: 15px; margin: 1.5em; color: #222; }}
+.note {{ color: #555; }}
 table {{ border-collapse: collapse; margin: 1em 0; }}
 td, th {{ border: 1px solid #ccc; padding: 0.3em 0.6em; text-align: right; }}
 td:first-child, th:first-child {{ text-align: left; }}
 .design {{ margin: 1.5em 0; }}
 .maps {{ display: flex; flex-wrap: wrap; gap: 12px; }}
-.map {{ font-size: 13px; }}
-canvas {{ border: 1px solid #ddd; }}
+.map {{ font-size: 14px; max-width: 384px; }}
+
 .legend span {{ display: inline-block; margin-right: 1.2em; }}
 code {{ background: #f4f4f4; padding: 0 0.2em; }}
 </style></head><body>
@@ -153,8 +154,23 @@ function colour(t) {{
   t = Math.max(0, Math.min(1, t)) * 4; const i = Math.min(3, Math.floor(t)), f = t - i;
   return s[i].map((c, k) => Math.round(c + f * (s[i + 1][k] - c)));
 }}
+// Round ticks (1, 2 or 5 times a power of ten apart, about n of them) over [lo, hi].
+function ticks(lo, hi, n) {{
+  const raw = (hi - lo) / n || 1, dec = Math.pow(10, Math.floor(Math.log10(raw)));
+  const step = [1, 2, 5, 10].map(m => m * dec).find(s => s >= raw * 0.999);
+  const out = [];
+  for (let i = Math.ceil(lo / step - 1e-9); i * step <= hi + step * 1e-9; i++) out.push(i * step);
+  return {{ values: out, step }};
+}}
+function tickText(v, step) {{
+  const dec = Math.max(0, Math.ceil(-Math.log10(step) - 1e-9));
+  return Math.abs(v) < step * 1e-6 ? '0' : v.toFixed(dec).replace('-', '\u2212');
+}}
+const FONT = '13px sans-serif';
 function drawMap(d, m) {{
-  const px = 270, c = document.createElement('canvas'); c.width = px; c.height = px;
+  // The map (240 px square) with axes in metres, the colour bar to its right.
+  const L = 58, T = 10, S = 240, W = L + S + 20 + 14 + 52, H = T + S + 46;
+  const c = document.createElement('canvas'); c.width = W; c.height = H;
   const g = c.getContext('2d'), n = d.side;
   const vals = m.values.filter(v => v !== null).sort((a, b) => a - b);
   const lo = vals.length ? vals[Math.floor(0.02 * (vals.length - 1))] : 0;
@@ -168,21 +184,41 @@ function drawMap(d, m) {{
   }}
   const tmp = document.createElement('canvas'); tmp.width = n; tmp.height = n;
   tmp.getContext('2d').putImageData(img, 0, 0);
-  g.imageSmoothingEnabled = false; g.drawImage(tmp, 0, 0, px, px);
+  g.imageSmoothingEnabled = false; g.drawImage(tmp, L, T, S, S);
   const span = d.step * (n - 1), half = d.step / 2;
-  const X = x => (x - d.origin[0] + half) / (span + d.step) * px;
-  const Y = y => px - (y - d.origin[1] + half) / (span + d.step) * px;
+  const x0 = d.origin[0] - half, y0 = d.origin[1] - half, ext = span + d.step;
+  const X = x => L + (x - x0) / ext * S;
+  const Y = y => T + S - (y - y0) / ext * S;
+  g.save(); g.beginPath(); g.rect(L, T, S, S); g.clip();
   const lines = (segs, style, w) => {{ g.strokeStyle = style; g.lineWidth = w; g.beginPath();
     for (const s of segs) {{ g.moveTo(X(s[0]), Y(s[1])); g.lineTo(X(s[2]), Y(s[3])); }} g.stroke(); }};
   lines(d.foot, '#000', 1.5); lines(d.passive, '#d62728', 2); lines(d.links, '#1f3b73', 3);
   g.strokeStyle = '#fff'; g.lineWidth = 2; g.beginPath();
   g.arc(X(d.stance[0]), Y(d.stance[1]), 5, 0, 2 * Math.PI); g.stroke();
+  g.restore();
+  // Axes: ticks in metres on both.
+  g.strokeStyle = '#444'; g.lineWidth = 1; g.strokeRect(L + 0.5, T + 0.5, S, S);
+  g.fillStyle = '#222'; g.font = FONT;
+  const tx = ticks(x0, x0 + ext, 4), ty = ticks(y0, y0 + ext, 4);
+  g.textAlign = 'center'; g.textBaseline = 'top';
+  for (const v of tx.values) {{ const x = X(v); g.beginPath(); g.moveTo(x, T + S); g.lineTo(x, T + S + 5); g.stroke(); g.fillText(tickText(v, tx.step), x, T + S + 7); }}
+  g.fillText('x (m)', L + S / 2, T + S + 26);
+  g.textAlign = 'right'; g.textBaseline = 'middle';
+  for (const v of ty.values) {{ const y = Y(v); g.beginPath(); g.moveTo(L, y); g.lineTo(L - 5, y); g.stroke(); g.fillText(tickText(v, ty.step), L - 7, y); }}
+  g.save(); g.translate(12, T + S / 2); g.rotate(-Math.PI / 2); g.textAlign = 'center'; g.fillText('y (m)', 0, 0); g.restore();
+  // The colour bar: the map's colours from lo to hi, ticked in the measure's unit.
+  const BX = L + S + 20, BW = 14;
+  if (vals.length) {{
+    for (let k = 0; k < S; k++) {{ const [r, gg, b] = colour(1 - k / (S - 1)); g.fillStyle = `rgb(${{r}},${{gg}},${{b}})`; g.fillRect(BX, T + k, BW, 1); }}
+    g.strokeStyle = '#444'; g.strokeRect(BX + 0.5, T + 0.5, BW, S);
+    const tc = ticks(lo, hi, 6), B = v => T + S - (v - lo) / ((hi - lo) || 1) * S;
+    g.fillStyle = '#222'; g.textAlign = 'left'; g.textBaseline = 'middle';
+    for (const v of tc.values) {{ const y = B(v); g.beginPath(); g.moveTo(BX + BW, y); g.lineTo(BX + BW + 4, y); g.stroke(); g.fillText(tickText(v, tc.step), BX + BW + 6, y); }}
+    g.save(); g.translate(W - 6, T + S / 2); g.rotate(-Math.PI / 2); g.textAlign = 'center'; g.fillText(m.unit, 0, 0); g.restore();
+  }}
   const box = document.createElement('div'); box.className = 'map';
-  const fmt = v => Math.abs(v) >= 1e4 || (Math.abs(v) < 1e-2 && v !== 0) ? v.toExponential(2) : v.toPrecision(3);
-  box.innerHTML = '<b>' + m.title + '</b><br>' + (vals.length ? 'colour from ' + fmt(lo) + ' to ' + fmt(hi) + ' ' + m.unit + ' (2nd to 98th percentile)' : 'no value') + '<br>';
+  box.innerHTML = '<b>' + m.title + '</b>' + (m.unit ? ' (' + m.unit + ')' : '') + '<br><span class="note">' + (vals.length ? 'colours clipped to the 2nd–98th percentile; grey: outside' : 'no value') + '</span><br>';
   box.appendChild(c);
-  box.appendChild(document.createElement('br'));
-  box.appendChild(document.createTextNode('x from ' + d.origin[0].toFixed(3) + ' to ' + (d.origin[0] + span).toFixed(3) + ' m, y from ' + d.origin[1].toFixed(3) + ' to ' + (d.origin[1] + span).toFixed(3) + ' m'));
   return box;
 }}
 function drawPath(d) {{
@@ -215,18 +251,27 @@ if (DATA.sweep) {{
   const row = document.createElement('div'); row.className = 'maps'; host.appendChild(row);
   DATA.columns.forEach((title, k) => {{
     const pts = DATA.rows.filter(r => r.values[k] !== null && r.swept !== null).map(r => [r.swept, r.values[k]]);
-    const w = 300, hgt = 200, c = document.createElement('canvas'); c.width = w; c.height = hgt;
+    const w = 340, hgt = 240, c = document.createElement('canvas'); c.width = w; c.height = hgt;
     const g = c.getContext('2d'); const box = document.createElement('div'); box.className = 'map';
     box.innerHTML = '<b>' + title + '</b><br>'; box.appendChild(c); row.appendChild(box);
+    g.font = FONT;
     if (pts.length < 2) {{ g.fillText('not computed', 10, 20); return; }}
     const xs = pts.map(p => p[0]), ys = pts.map(p => p[1]);
     const x0 = Math.min(...xs), x1 = Math.max(...xs); let y0 = Math.min(...ys), y1 = Math.max(...ys);
     if (y1 === y0) {{ y0 -= 1; y1 += 1; }}
-    const X = x => 50 + (x - x0) / (x1 - x0) * (w - 60), Y = y => hgt - 25 - (y - y0) / (y1 - y0) * (hgt - 40);
-    g.strokeStyle = '#999'; g.strokeRect(50, 15, w - 60, hgt - 40);
-    g.fillStyle = '#222'; g.font = '11px sans-serif';
-    g.fillText(y1.toPrecision(3), 2, 20); g.fillText(y0.toPrecision(3), 2, hgt - 25);
-    g.fillText(x0.toPrecision(3), 50, hgt - 8); g.fillText(x1.toPrecision(3), w - 40, hgt - 8);
+    const pad = (y1 - y0) * 0.08; y0 -= pad; y1 += pad;
+    const L = 62, R = 14, T = 10, B = 46;
+    const X = x => L + (x - x0) / (x1 - x0) * (w - L - R), Y = y => hgt - B - (y - y0) / (y1 - y0) * (hgt - B - T);
+    const tx = ticks(x0, x1, 5), ty = ticks(y0, y1, 5);
+    g.strokeStyle = '#e4e4e4'; g.lineWidth = 1;
+    for (const v of ty.values) {{ g.beginPath(); g.moveTo(L, Y(v)); g.lineTo(w - R, Y(v)); g.stroke(); }}
+    g.strokeStyle = '#444'; g.strokeRect(L + 0.5, T + 0.5, w - L - R, hgt - B - T);
+    g.fillStyle = '#222';
+    g.textAlign = 'center'; g.textBaseline = 'top';
+    for (const v of tx.values) {{ const x = X(v); g.beginPath(); g.moveTo(x, hgt - B); g.lineTo(x, hgt - B + 5); g.stroke(); g.fillText(tickText(v, tx.step), x, hgt - B + 7); }}
+    g.fillText(DATA.sweep, L + (w - L - R) / 2, hgt - B + 26);
+    g.textAlign = 'right'; g.textBaseline = 'middle';
+    for (const v of ty.values) {{ const y = Y(v); g.beginPath(); g.moveTo(L, y); g.lineTo(L - 5, y); g.stroke(); g.fillText(tickText(v, ty.step), L - 7, y); }}
     g.strokeStyle = '#1f77b4'; g.lineWidth = 2; g.beginPath();
     pts.forEach((p, i) => i ? g.lineTo(X(p[0]), Y(p[1])) : g.moveTo(X(p[0]), Y(p[1]))); g.stroke();
     g.fillStyle = '#1f77b4'; for (const p of pts) {{ g.beginPath(); g.arc(X(p[0]), Y(p[1]), 3, 0, 7); g.fill(); }}

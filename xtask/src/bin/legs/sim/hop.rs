@@ -395,20 +395,28 @@ pub fn run<
         stance.push((t0, last.t));
     }
     let mut plots = vec![Series::new(
-        &format!("body height {} (m); apexes and command", L::JOINT_NAMES[h]),
+        "Body height",
         &t,
         vec![
             (
                 "height".into(),
                 samples.iter().map(|x| x.state.state.q[h]).collect(),
             ),
-            ("command".into(), samples.iter().map(|_| apex).collect()),
+            (
+                "apex command".into(),
+                samples.iter().map(|_| apex).collect(),
+            ),
         ],
-    )];
+    )
+    .axis("body height", "m")
+    .caption(&format!(
+        "The body's height (joint `{}`) and the commanded apex height.",
+        L::JOINT_NAMES[h]
+    ))];
     for (k, c) in L::CONTACT_NAMES.iter().enumerate() {
         let mu = sim.options.friction[2 * k];
         plots.push(Series::new(
-            &format!("ground force on `{c}` (N): normal, tangential, ±μ λ_n (the cone)"),
+            &format!("Ground force on `{c}`"),
             &t,
             vec![
                 (
@@ -437,24 +445,29 @@ pub fn run<
                         .collect(),
                 ),
             ],
-        ));
-        plots.push(Series::new(
-            &format!("contact `{c}` on the ground (1) or in flight (0)"),
-            &t,
-            vec![(
-                "stance".into(),
-                samples
-                    .iter()
-                    .map(|x| {
-                        if x.state.modes.get(k).on_ground() {
-                            1.0
-                        } else {
-                            0.0
-                        }
-                    })
-                    .collect(),
-            )],
-        ));
+        )
+        .axis("force", "N")
+        .caption(&format!("The normal force λ_n and the tangential force λ_t, inside the friction cone ±μ λ_n (μ = {mu}) while the foot sticks.")));
+        plots.push(
+            Series::new(
+                &format!("Contact `{c}`: on the ground (1) or in flight (0)"),
+                &t,
+                vec![(
+                    "stance".into(),
+                    samples
+                        .iter()
+                        .map(|x| {
+                            if x.state.modes.get(k).on_ground() {
+                                1.0
+                            } else {
+                                0.0
+                            }
+                        })
+                        .collect(),
+                )],
+            )
+            .axis("contact", ""),
+        );
     }
     // Energy, and energy plus every impact's loss so far (flat where only the motors act).
     let mut lost = 0.0;
@@ -469,42 +482,73 @@ pub fn run<
             x.energy + lost
         })
         .collect();
-    plots.push(Series::new(
-        "energy T + V (J), and with the impacts' losses added back",
-        &t,
-        vec![
-            ("T + V".into(), samples.iter().map(|x| x.energy).collect()),
-            ("T + V + losses".into(), with_losses),
-        ],
-    ));
-    plots.push(Series::new(
-        "motor torques (N m)",
-        &t,
-        L::ACTUATED
-            .iter()
-            .enumerate()
-            .map(|(k, &a)| {
+    // The motors' work: the torques are held over each step (and after each event), so
+    // W = Σ u · Δθ over the samples is exact up to the events inside a step.
+    let mut w = 0.0;
+    let balance: Vec<f64> = samples
+        .iter()
+        .enumerate()
+        .map(|(i, x)| {
+            if i > 0 {
+                let prev = &samples[i - 1];
+                for (k, &a) in L::ACTUATED.iter().enumerate() {
+                    w += prev.u[k] * (x.state.state.q[a] - prev.state.state.q[a]);
+                }
+            }
+            with_losses[i] - w
+        })
+        .collect();
+    let spread = balance.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+        - balance.iter().copied().fold(f64::INFINITY, f64::min);
+    plots.push(
+        Series::new(
+            "Energy",
+            &t,
+            vec![
+                ("T + V".into(), samples.iter().map(|x| x.energy).collect()),
+                ("T + V + impact losses".into(), with_losses),
+                ("T + V + losses − motor work".into(), balance),
+            ],
+        )
+        .axis("energy", "J")
+        .caption(&format!("The energy T + V (blue) falls at each touchdown by what the plastic impact dissipates and changes in stance because the motors do work W = Σ ∫ u θ̇ dt. The impacts' losses added back (red), only the motors' work remains; with that subtracted too (green) what is left moves by {} over the run: what neither the impacts nor the motors account for (joint damping, if the leg has any, and integration error).", crate::report::quantity(spread, "J"))),
+    );
+    plots.push(
+        Series::new(
+            "Motor torques",
+            &t,
+            L::ACTUATED
+                .iter()
+                .enumerate()
+                .map(|(k, &a)| {
+                    (
+                        L::JOINT_NAMES[a].to_string(),
+                        samples.iter().map(|x| x.u[k]).collect(),
+                    )
+                })
+                .collect(),
+        )
+        .axis("torque", "N m")
+        .caption("Each motor's torque at its joint, held over each step."),
+    );
+    plots.push(
+        Series::log(
+            "Residuals",
+            &t,
+            vec![
                 (
-                    L::JOINT_NAMES[a].to_string(),
-                    samples.iter().map(|x| x.u[k]).collect(),
-                )
-            })
-            .collect(),
-    ));
-    plots.push(Series::log(
-        "residuals: closures max |φ|, held contacts (m)",
-        &t,
-        vec![
-            (
-                "|φ|".into(),
-                samples.iter().map(|x| x.closure_residual).collect(),
-            ),
-            (
-                "contacts".into(),
-                samples.iter().map(|x| x.contact_residual).collect(),
-            ),
-        ],
-    ));
+                    "closures max |φ|".into(),
+                    samples.iter().map(|x| x.closure_residual).collect(),
+                ),
+                (
+                    "held contacts".into(),
+                    samples.iter().map(|x| x.contact_residual).collect(),
+                ),
+            ],
+        )
+        .axis("residual", "m")
+        .caption("The largest gap of the closure constraints and of the contacts held on the ground, after each step's projection: rounding error."),
+    );
     let plots: Vec<Series> = plots.into_iter().map(|p| p.shaded(&stance)).collect();
     let ground = Ground::<f64>::of::<L, NQ, NC, NU, NK>();
     let html = report::html(&Report {

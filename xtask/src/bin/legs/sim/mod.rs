@@ -20,7 +20,7 @@ use serde_json::json;
 use xtask::cli::progress::Progress;
 use xtask::cli::{write_atomic, Error};
 
-use crate::report::{self, Report, Series};
+use crate::report::{self, quantity as report_quantity, Report, Series};
 
 pub mod hop;
 mod settings;
@@ -500,39 +500,96 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
     let t: Vec<f64> = samples.iter().map(|x| x.t).collect();
     let mut plots = Vec::new();
     if tracked {
-        plots.push(Series::new(
-            &format!("tracking error ({unit})"),
-            &t,
-            vec![("error".into(), errors.clone())],
-        ));
+        let what = if foot_task {
+            "the distance from the foot to its reference"
+        } else {
+            "the largest motor angle's distance from its reference"
+        };
+        plots.push(
+            Series::new("Tracking error", &t, vec![("error".into(), errors.clone())])
+                .axis("tracking error", unit)
+                .caption(&format!(
+                    "{}, {what}; steady state counted from t = {settle} s.",
+                    if foot_task {
+                        "|p_foot − p_ref|"
+                    } else {
+                        "max |θ − θ_ref|"
+                    }
+                )),
+        );
     }
-    plots.push(Series::new(
-        "motor torques (N m)",
-        &t,
-        L::ACTUATED
-            .iter()
-            .enumerate()
-            .map(|(k, &a)| {
-                (
-                    L::JOINT_NAMES[a].to_string(),
-                    samples.iter().map(|x| x.u[k]).collect(),
-                )
-            })
-            .collect(),
-    ));
-    plots.push(Series::log(
-        "closure residual max |φ| (m)",
-        &t,
-        vec![(
-            "|φ|".into(),
-            samples.iter().map(|x| x.closure_residual).collect(),
-        )],
-    ));
-    plots.push(Series::new(
-        "energy T + V (J)",
-        &t,
-        vec![("energy".into(), samples.iter().map(|x| x.energy).collect())],
-    ));
+    plots.push(
+        Series::new(
+            "Motor torques",
+            &t,
+            L::ACTUATED
+                .iter()
+                .enumerate()
+                .map(|(k, &a)| {
+                    (
+                        L::JOINT_NAMES[a].to_string(),
+                        samples.iter().map(|x| x.u[k]).collect(),
+                    )
+                })
+                .collect(),
+        )
+        .axis("torque", "N m")
+        .caption("Each motor's torque at its joint (after the gearbox), held over each step."),
+    );
+    plots.push(
+        Series::log(
+            "Closure residual",
+            &t,
+            vec![(
+                "|φ|".into(),
+                samples.iter().map(|x| x.closure_residual).collect(),
+            )],
+        )
+        .axis("max |φ|", "m")
+        .caption("The largest gap of the closure constraints φ(q) = 0 after each step's projection: rounding error, not physics."),
+    );
+    // The motors' work: the torques are held over each step, so W = Σ u · Δθ is exact.
+    let mut work = Vec::with_capacity(samples.len());
+    let mut w = 0.0;
+    for (i, x) in samples.iter().enumerate() {
+        if i > 0 {
+            let prev = &samples[i - 1];
+            for (k, &a) in L::ACTUATED.iter().enumerate() {
+                w += prev.u[k] * (x.state.q[a] - prev.state.q[a]);
+            }
+        }
+        work.push(w);
+    }
+    let balance: Vec<f64> = samples
+        .iter()
+        .zip(&work)
+        .map(|(x, w)| x.energy - w)
+        .collect();
+    let spread = |v: &[f64]| {
+        v.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+            - v.iter().copied().fold(f64::INFINITY, f64::min)
+    };
+    let damped = L::damping_forces(&SVector::from_element(1.0), &p)
+        .iter()
+        .any(|d| *d != 0.0);
+    plots.push(
+        Series::new(
+            "Energy",
+            &t,
+            vec![
+                ("T + V".into(), samples.iter().map(|x| x.energy).collect()),
+                ("T + V − W (the motors' work subtracted)".into(), balance.clone()),
+            ],
+        )
+        .axis("energy", "J")
+        .caption(&format!(
+            "The leg's kinetic plus potential energy T + V (blue) {} because the motors do work on it: W = Σ ∫ u θ̇ dt. With that work subtracted (red) the energy {}: it moves by {} over the run, against {} for T + V.",
+            if NU > 0 { "rises and falls" } else { "changes" },
+            if damped { "only falls, by what the joints' damping dissipates" } else { "is conserved up to the integrator's error" },
+            report_quantity(spread(&balance), "J"),
+            report_quantity(spread(&samples.iter().map(|x| x.energy).collect::<Vec<_>>()), "J"),
+        )),
+    );
     let html = report::html(&Report {
         title: format!(
             "{} — {}{}",
