@@ -134,7 +134,7 @@ fn superscript(e: i32) -> String {
 }
 
 /// `x` to `digits` significant digits, trailing zeros dropped.
-fn significant(x: f64, digits: i32) -> String {
+pub(crate) fn significant(x: f64, digits: i32) -> String {
     if x == 0.0 || !x.is_finite() {
         return if x == 0.0 { "0".into() } else { x.to_string() };
     }

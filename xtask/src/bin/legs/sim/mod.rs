@@ -284,7 +284,11 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
                 FootFeedbackLinearization::new(p, Gains::new(kp, kd), foot_ref)
                     .map_err(not_applicable)?,
             ),
-            format!("k_p = {kp} 1/s², k_d = {kd:.3} 1/s"),
+            format!(
+                "k_p = {} 1/s², k_d = {} 1/s",
+                report::significant(kp, 4),
+                report::significant(kd, 4)
+            ),
         ),
         Controller::FootPd => {
             let foot_inertia = foot_inertias::<L, f64, NQ, NC, NU>(&p, &home)
@@ -307,7 +311,11 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
                 JointFeedbackLinearization::new(p, Gains::new(kp, kd), joint_ref)
                     .map_err(not_applicable)?,
             ),
-            format!("k_p = {kp} 1/s², k_d = {kd:.3} 1/s"),
+            format!(
+                "k_p = {} 1/s², k_d = {} 1/s",
+                report::significant(kp, 4),
+                report::significant(kd, 4)
+            ),
         ),
         Controller::JointPd => {
             let joint_inertia = joint_inertias::<L, f64, NQ, NC, NU>(&p, &home)
