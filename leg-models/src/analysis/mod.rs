@@ -40,6 +40,8 @@
 //! (mobility with the body held = motors), polygons need two motors or more.
 //!
 //! [`workspace`] (with `std`) runs these over a grid of foot positions.
+//!
+//! May import: [`crate::assembly`], [`crate::dynamics`], the contract ([`LegModel`], [`Real`], [`linalg`](crate::linalg)); not the controllers or the simulators.
 
 use core::fmt;
 

@@ -1,5 +1,14 @@
-//! `legs`: the commands of `cargo xtask` that run the generated models (`sim`, `eval`).
-//! `cargo xtask sim …` and `cargo xtask eval …` build and run it.
+//! `legs`: the user's commands of `cargo xtask` that run the generated models; `cargo
+//! xtask sim|eval|analyze …` build and run it. One room per command:
+//!
+//! - `sim/`: `settings.rs` (the command line, checked), `mod.rs` (the simulation and its
+//!   outputs), `hop.rs` (legs on the ground, under the hopping controller);
+//! - `eval.rs`: every term at one state, as text or JSON;
+//! - `analyze/`: `mod.rs` (the measures over the workspace), `design.rs` (what both
+//!   outputs read), `report.rs` (its `report.html`);
+//! - `report.rs`: `sim`'s `report.html` (the animation, the summary, the plots).
+//!
+//! May import: the `xtask` library's `cli` and `gen`, `leg-models`, `generated`.
 
 use std::process::ExitCode;
 
