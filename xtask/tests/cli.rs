@@ -336,6 +336,13 @@ fn sim_refuses_bad_input_and_writes_nothing() {
         &legs(&["sim", "minitaur", "--duration", "abc", "--out", d]),
         "invalid value 'abc' for '--duration <S>'",
     );
+    // Not one step (issue 29): it ran none and printed "-0.0000 J lost", exit 0.
+    for model in ["minitaur", "minitaur_hopper"] {
+        refused(
+            &legs(&["sim", model, "--duration", "0.0004", "--out", d]),
+            "`--duration 0.0004 s` is shorter than one step (`--dt 0.001 s`)",
+        );
+    }
     refused(
         &legs(&["sim", "minitaur", "--sped", "2", "--out", d]),
         "unexpected argument '--sped' found; tip: a similar argument exists: '--speed'",

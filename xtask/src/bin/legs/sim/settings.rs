@@ -121,6 +121,13 @@ impl Settings {
             TrajectoryArg::MinJerk => Trajectory::MinJerk,
             TrajectoryArg::Hold => Trajectory::Hold,
         });
+        // Not one step: nothing would be simulated, and the report would show nothing.
+        if a.duration < a.dt {
+            return Err(Error::usage(format!(
+                "`--duration {} s` is shorter than one step (`--dt {} s`): nothing would be simulated",
+                a.duration, a.dt
+            )));
+        }
         if a.duration / a.dt > 5e6 {
             return Err(Error::usage(format!(
                 "{} s at dt = {} s is more than 5 million steps",
