@@ -1064,6 +1064,23 @@ fn impact_mitigation_on_a_body_matches_a_leg_with_that_body() {
             leg_models::analysis::Inapplicable::RigidWhenLocked
         ))
     );
+    // A toe pinned by a closure cannot move with the motors free: the reason names the
+    // closures, not a motor count (it has two motors; issue 29 found "the leg has 1 motor").
+    {
+        use generated::MinitaurPinnedToe as P;
+        let p = <P as LegModel<5, 4, 2>>::Params::<f64>::default();
+        let mut q = SVector::<f64, 5>::from(<P as LegModel<5, 4, 2>>::HOME);
+        project_position::<P, f64, 5, 4, 2>(&p, &mut q, &Tolerance::default()).unwrap();
+        let frame = LegFrame::<5>::of::<P, 4, 2>();
+        let e =
+            impact_mitigation::<P, f64, 5, 4, 2>(&p, &q, &frame, &Body::Fixed, None).unwrap_err();
+        assert_eq!(
+            e,
+            AnalysisError::NotApplicable(leg_models::analysis::Inapplicable::FootHeld),
+            "{e}"
+        );
+        assert!(!e.to_string().contains("1 motor"), "{e}");
+    }
     // A heavier body mitigates more (the leg is a smaller share of what hits).
     let light = impact_mitigation::<TwoLink, f64, 2, 0, 2>(
         &arm,

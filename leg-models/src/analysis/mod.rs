@@ -78,6 +78,10 @@ pub enum Inapplicable {
         /// The leg's motors.
         motors: usize,
     },
+    /// With its motors free the foot still cannot move in every direction (its closures
+    /// hold it, as a toe pinned to the ground): the foot's inertia `Λ` does not exist, so
+    /// neither does the impact mitigation factor, whatever the number of motors.
+    FootHeld,
     /// With its motors locked the foot cannot move (a leg on a fixed hip): the impact
     /// mitigation factor needs a body that moves ([`Body::Translating`]).
     RigidWhenLocked,
@@ -93,6 +97,10 @@ impl fmt::Display for Inapplicable {
             Inapplicable::FootOnACurve => write!(
                 f,
                 "the foot has two coordinates but the leg has 1 motor: it moves the foot along a curve, so there is no workspace area and no 2-D force or speed polygon"
+            ),
+            Inapplicable::FootHeld => write!(
+                f,
+                "with its motors free the foot cannot move in every direction (the closures hold it): its inertia Λ does not exist"
             ),
             Inapplicable::NotOneMotor { motors } => write!(
                 f,
@@ -953,9 +961,13 @@ where
         ),
     };
     let det_free = free.determinant();
-    if det_free <= T::zero() || !det_free.is_finite() {
-        // The foot moves on a line at most: Λ does not exist.
-        return Err(Inapplicable::FootOnACurve.into());
+    if !det_free.is_finite() {
+        return Err(AnalysisError::NonFinite);
+    }
+    if det_free <= T::zero() {
+        // Λ⁻¹ with the motors free is singular: a direction the foot cannot move in,
+        // whatever the motors (their number is not the reason).
+        return Err(Inapplicable::FootHeld.into());
     }
     if locked.amax() <= free.amax() * T::default_epsilon() * T::lit(1e3) {
         return Err(Inapplicable::RigidWhenLocked.into());
