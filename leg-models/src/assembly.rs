@@ -42,9 +42,21 @@ pub enum AssemblyError {
         /// The share of the way (0 to 1) followed before the branch ends.
         fraction: f64,
     },
+    /// The continuation's largest step ([`assemble_along`]) is not positive, or so small
+    /// that the way would take more than [`MAX_CONTINUATION_STEPS`] steps.
+    StepTooSmall {
+        /// The step asked for (rad, or m on a prismatic motor).
+        max_step: f64,
+        /// The way to go: the largest motor change (rad, or m).
+        way: f64,
+    },
     /// An input is NaN or infinite.
     NonFinite,
 }
+
+/// The most steps [`assemble_along`] takes at its largest step: the work it may do is
+/// bounded before it starts.
+pub const MAX_CONTINUATION_STEPS: f64 = 1e6;
 
 impl fmt::Display for AssemblyError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -62,6 +74,10 @@ impl fmt::Display for AssemblyError {
                 f,
                 "the assembly branch of the starting pose ends {:.1} % of the way (a singular configuration or the edge of the workspace)",
                 fraction * 100.0
+            ),
+            AssemblyError::StepTooSmall { max_step, way } => write!(
+                f,
+                "the continuation step {max_step:e} must be positive and at least 1/{MAX_CONTINUATION_STEPS:e} of the way ({way:e})"
             ),
             AssemblyError::NonFinite => write!(f, "non-finite input"),
         }
@@ -496,7 +512,9 @@ where
 /// size (the solution would jump), or that meets a singular configuration, is halved;
 /// when a step would fall below 1e-7 of the way, the branch ends there:
 /// [`AssemblyError::BranchEnds`] says how far it got. A sweep or a start pose computed
-/// this way stays in the assembly mode of `from`.
+/// this way stays in the assembly mode of `from`. A `max_step` that is not positive, or
+/// would take more than [`MAX_CONTINUATION_STEPS`] steps, is refused
+/// ([`AssemblyError::StepTooSmall`]).
 pub fn assemble_along<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     params: &L::Params<T>,
     from: &SVector<T, NQ>,
@@ -516,6 +534,13 @@ where
     let total = delta.amax();
     if total == T::zero() || NC == 0 {
         return assemble::<L, T, NQ, NC, NU>(params, theta, from, tol);
+    }
+    // A step of zero never arrives, a negative one walks backwards: bounded work only.
+    if !(max_step > T::zero() && total / max_step <= T::lit(MAX_CONTINUATION_STEPS)) {
+        return Err(AssemblyError::StepTooSmall {
+            max_step: to_f64(max_step),
+            way: to_f64(total),
+        });
     }
     let longest = (max_step / total).min(T::one());
     let (mut q, mut done, mut h) = (*from, T::zero(), longest);

@@ -137,6 +137,10 @@ def test_bad_input_raises_with_the_runtime_message():
         leg.forward_dynamics(straight, np.zeros(4), np.zeros(2))
     with pytest.raises(legmodels.AssemblyError):
         leg.foot_inverse([0.0, -5.0])  # 5 m below a 0.3 m leg
+    # A continuation step that never arrives (0 hung), walks backwards or is unbounded.
+    for bad in (0.0, -0.05, 1e-12):
+        with pytest.raises(legmodels.AssemblyError, match="continuation step"):
+            leg.assemble_along(leg.assembled_home(), [-0.6, -2.5], max_step=bad)
     with pytest.raises(ValueError, match="controller"):
         leg.simulate(leg.home(), np.zeros(4), 10, 1e-3, controller="mpc", setpoint=[0, 0])
     with pytest.raises(ValueError, match="dt"):

@@ -159,3 +159,25 @@ macro_rules! each {
 fn the_handle_carries_its_settings_on_every_leg() {
     generated::for_each_model!(each);
 }
+
+/// A continuation step of zero never arrived (it hung), a negative one walked backwards
+/// ("-2928.1 % of the way"), a tiny one ran unbounded (issue 29): each is refused before
+/// any work, and an ordinary step still follows the branch.
+#[test]
+fn continuation_steps_are_bounded() {
+    use leg_models::assembly::{AssemblyError, MAX_CONTINUATION_STEPS};
+    let leg = generated::minitaur::Leg::default();
+    let start = leg.assembled_home().unwrap();
+    let theta = SVector::<f64, 2>::new(-0.6, -2.5);
+    for bad in [0.0, -0.05, 1e-12] {
+        match leg.assemble_along(&start, &theta, bad) {
+            Err(AssemblyError::StepTooSmall { max_step, way }) => {
+                assert_eq!(max_step, bad);
+                assert!(way > 0.0 && way / bad.abs() > MAX_CONTINUATION_STEPS || bad <= 0.0);
+            }
+            other => panic!("max_step {bad}: {other:?}"),
+        }
+    }
+    let q = leg.assemble_along(&start, &theta, 0.05).unwrap();
+    assert!(leg.closure_residual(&q).amax() < 1e-9);
+}
