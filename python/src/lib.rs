@@ -13,7 +13,9 @@ use leg_models::analysis::{AnalysisError as RustAnalysisError, Body, MotorLimits
 use leg_models::assembly::AssemblyError as RustAssemblyError;
 use leg_models::control::linearize::LinearizationError as RustLinearizationError;
 use leg_models::control::reference::Sinusoid;
-use leg_models::control::{ControlError as RustControlError, Gains, Saturated};
+use leg_models::control::{
+    check_torque_limits, ControlError as RustControlError, Gains, Saturated,
+};
 use leg_models::dynamics::DynamicsError as RustDynamicsError;
 use leg_models::nalgebra::{SMatrix, SVector};
 use leg_models::simulate::{Method, State, StepOptions, TorqueSource};
@@ -725,9 +727,10 @@ macro_rules! leg_class {
                     let initial = State { q: vector("q", q)?, qd: vector("qd", qd)? };
                     let opts = step_options(dt, method, project)?;
                     let limit: SVector<f64, NU> = match torque_limit { Some(l) => vector("torque_limit", l)?, None => SVector::from_element(f64::INFINITY) };
+                    check_torque_limits(&limit).map_err(|e| PyValueError::new_err(format!("`torque_limit`: {e}")))?;
                     let gains_kd = kd.unwrap_or(2.0 * kp.sqrt());
                     let Some(kind) = controller else {
-                        let mut source = Saturated::new(PythonTorques::<NQ, NU>::new(py, torque)?, limit);
+                        let mut source = Saturated::new(PythonTorques::<NQ, NU>::new(py, torque)?, limit).map_err(control_err)?;
                         let result = run_simulation(py, &self.leg, initial, steps, opts, &mut source);
                         return match source.inner.error.take() { Some(e) => Err(e), None => result };
                     };
@@ -740,10 +743,10 @@ macro_rules! leg_class {
                             let r = sinusoid::<NU>(setpoint()?, amplitude, frequency, phase)?;
                             let g = Gains::new(kp, gains_kd);
                             if kind == "pd_gravity" {
-                                let mut c = Saturated::new(self.leg.pd_gravity(g, r).map_err(control_err)?, limit);
+                                let mut c = Saturated::new(self.leg.pd_gravity(g, r).map_err(control_err)?, limit).map_err(control_err)?;
                                 run_simulation(py, &self.leg, initial, steps, opts, &mut c)
                             } else {
-                                let mut c = Saturated::new(self.leg.joint_feedback_linearization(g, r).map_err(control_err)?, limit);
+                                let mut c = Saturated::new(self.leg.joint_feedback_linearization(g, r).map_err(control_err)?, limit).map_err(control_err)?;
                                 run_simulation(py, &self.leg, initial, steps, opts, &mut c)
                             }
                         }
@@ -751,10 +754,10 @@ macro_rules! leg_class {
                             let r = sinusoid::<2>(setpoint()?, amplitude, frequency, phase)?;
                             let g = Gains::new(kp, gains_kd);
                             if kind == "foot_pd_gravity" {
-                                let mut c = Saturated::new(self.leg.foot_pd_gravity(g, r).map_err(control_err)?, limit);
+                                let mut c = Saturated::new(self.leg.foot_pd_gravity(g, r).map_err(control_err)?, limit).map_err(control_err)?;
                                 run_simulation(py, &self.leg, initial, steps, opts, &mut c)
                             } else {
-                                let mut c = Saturated::new(self.leg.foot_feedback_linearization(g, r).map_err(control_err)?, limit);
+                                let mut c = Saturated::new(self.leg.foot_feedback_linearization(g, r).map_err(control_err)?, limit).map_err(control_err)?;
                                 run_simulation(py, &self.leg, initial, steps, opts, &mut c)
                             }
                         }

@@ -137,6 +137,10 @@ def test_bad_input_raises_with_the_runtime_message():
         leg.forward_dynamics(straight, np.zeros(4), np.zeros(2))
     with pytest.raises(legmodels.AssemblyError):
         leg.foot_inverse([0.0, -5.0])  # 5 m below a 0.3 m leg
+    # A negative or NaN torque limit drove every motor at it, or clipped nothing.
+    for bad in ([-0.01, -0.01], [np.nan, np.nan], [1.0, -1.0]):
+        with pytest.raises(ValueError, match="`torque_limit`: the torque limit of motor"):
+            leg.simulate(leg.assembled_home(), np.zeros(4), 10, 1e-3, torque=lambda t, q, qd: np.zeros(2), torque_limit=bad)
     # A continuation step that never arrives (0 hung), walks backwards or is unbounded.
     for bad in (0.0, -0.05, 1e-12):
         with pytest.raises(legmodels.AssemblyError, match="continuation step"):

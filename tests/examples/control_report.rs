@@ -50,7 +50,7 @@ where
     L: LegModel<NQ, NC, NU>,
     C: TorqueSource<f64, NQ, NU>,
 {
-    let mut limited = Saturated::new(controller, SVector::from_element(limit(L::NAME)));
+    let mut limited = Saturated::new(controller, SVector::from_element(limit(L::NAME))).unwrap();
     let sim = Simulator::<L, f64, NQ, NC, NU>::new(*p, StepOptions::rk4(1e-3));
     let (samples, note) = match sim.run(initial, 3000, &mut limited) {
         Ok(s) => (s, String::new()),

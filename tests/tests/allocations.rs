@@ -158,7 +158,7 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
                 "joint feedback linearization",
                 allocations(|| fl.torque(0.1, &state)).0,
             );
-            let mut limited = Saturated::new(fl, SVector::from_element(1.0));
+            let mut limited = Saturated::new(fl, SVector::from_element(1.0)).unwrap();
             zero(
                 "torque limits",
                 allocations(|| limited.torque(0.1, &state)).0,

@@ -440,7 +440,7 @@ fn torque_limits_clip_and_count() {
     use leg_models::control::Saturated;
     let p = generated::minitaur::Params::<f64>::default();
     let wants = |_: f64, _: &State<f64, 4>| SVector::<f64, 2>::new(0.5, -0.01);
-    let mut limited = Saturated::new(wants, SVector::<f64, 2>::new(0.1, 0.1));
+    let mut limited = Saturated::new(wants, SVector::<f64, 2>::new(0.1, 0.1)).unwrap();
     let s = passive_release_state::<Minitaur, 4, 2, 2>(&p);
     let u = limited.torque(0.0, &s).unwrap();
     assert_eq!(u, SVector::<f64, 2>::new(0.1, -0.01));
@@ -460,7 +460,7 @@ fn torque_limits_clip_and_count() {
         cycle,
     )
     .unwrap();
-    let mut tight = Saturated::new(fl, SVector::<f64, 2>::from_element(0.05));
+    let mut tight = Saturated::new(fl, SVector::<f64, 2>::from_element(0.05)).unwrap();
     let sim = Simulator::<Minitaur, f64, 4, 2, 2>::new(p, StepOptions::rk4(1e-3));
     let samples = sim.run(s, 500, &mut tight).unwrap();
     assert!(samples.iter().all(|x| x.u.amax() <= 0.05));

@@ -492,14 +492,31 @@ pub struct Saturated<C, T: Real, const NU: usize> {
 }
 
 impl<C, T: Real, const NU: usize> Saturated<C, T, NU> {
-    /// `inner` clipped to `±limits`, with the counts at zero.
-    pub fn new(inner: C, limits: SVector<T, NU>) -> Self {
-        Saturated {
+    /// `inner` clipped to `±limits`, with the counts at zero. A limit that is negative or
+    /// NaN is refused ([`ControlError::TorqueLimit`]): `max`/`min` would clip every torque
+    /// to it, or nothing.
+    pub fn new(inner: C, limits: SVector<T, NU>) -> Result<Self, ControlError> {
+        check_torque_limits(&limits)?;
+        Ok(Saturated {
             inner,
             limits,
             saturations: [0; NU],
             peak_request: SVector::zeros(),
-        }
+        })
+    }
+}
+
+/// Torque limits are zero or more (infinite for none): the one check every entry point
+/// that takes limits shares.
+pub fn check_torque_limits<T: Real, const NU: usize>(
+    limits: &SVector<T, NU>,
+) -> Result<(), ControlError> {
+    match limits.iter().position(|l| !(*l >= T::zero())) {
+        Some(motor) => Err(ControlError::TorqueLimit {
+            motor,
+            value: limits[motor].to_subset().unwrap_or(f64::NAN),
+        }),
+        None => Ok(()),
     }
 }
 

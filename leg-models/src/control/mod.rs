@@ -26,8 +26,8 @@ pub mod reference;
 
 pub use crate::simulate::{ControlError, State, TorqueSource};
 pub use feedback::{
-    foot_inertias, joint_inertias, FootFeedbackLinearization, FootPdGravity, Gains,
-    JointFeedbackLinearization, PdGravity, Saturated,
+    check_torque_limits, foot_inertias, joint_inertias, FootFeedbackLinearization, FootPdGravity,
+    Gains, JointFeedbackLinearization, PdGravity, Saturated,
 };
 pub use reduction::{
     actuated_reduction, actuated_reduction_null_space, null_space, reduction_derivatives,

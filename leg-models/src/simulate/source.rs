@@ -65,6 +65,14 @@ pub enum ControlError {
     /// The method does not apply to this leg (too few motors for the foot, an
     /// under- or over-actuated leg): reported when the controller is built.
     NotApplicable(NotApplicable),
+    /// A torque limit is negative or NaN (a limit is zero or more; infinite for none):
+    /// refused when the limited source is built, never clipping to garbage.
+    TorqueLimit {
+        /// The motor (from 0, in the order of the leg's motors).
+        motor: usize,
+        /// The limit given (N m, or N on a prismatic motor).
+        value: f64,
+    },
     /// A linearization-based controller (LQR) could not linearize the leg.
     Linearization(crate::simulate::source::LinearizationError),
     /// The Riccati equation of an LQR has no solution.
@@ -86,6 +94,10 @@ impl fmt::Display for ControlError {
             ControlError::Dynamics(e) => write!(f, "{e}"),
             ControlError::NonFinite => write!(f, "non-finite state, reference or parameter"),
             ControlError::NotApplicable(why) => write!(f, "not applicable: {why}"),
+            ControlError::TorqueLimit { motor, value } => write!(
+                f,
+                "the torque limit of motor {motor} is {value}: a limit must be zero or more (infinite for none)"
+            ),
             ControlError::Linearization(e) => write!(f, "linearization: {e}"),
             ControlError::Lqr(e) => write!(f, "LQR: {e}"),
         }

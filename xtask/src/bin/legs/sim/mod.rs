@@ -336,7 +336,8 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
         Controller::Passive => (AnyController::Passive, "none".to_string()),
     };
     let limit = s.torque_limit.unwrap_or(f64::INFINITY);
-    let source = Saturated::new(controller, SVector::from_element(limit));
+    let source = Saturated::new(controller, SVector::from_element(limit))
+        .map_err(|e| Error::usage(format!("`--torque-limit`: {e}")))?;
     let steps = (s.duration / s.dt).round() as usize;
     let sim = Simulator::<L, f64, NQ, NC, NU>::new(p, StepOptions::rk4(s.dt));
     let mut source = WithProgress {
