@@ -34,7 +34,7 @@ pub mod leg;
 mod model;
 pub mod simulate;
 
-pub use leg::{must_be_nonnegative, ChartSize, Leg, ParameterError};
+pub use leg::{must_be_nonnegative, ChartSize, Leg, ParameterError, Shown};
 pub use model::contract::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms, JointKind,
     LegModel, Parameters, Real, Spring,

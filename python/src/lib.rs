@@ -19,6 +19,7 @@ use leg_models::control::{
 use leg_models::dynamics::DynamicsError as RustDynamicsError;
 use leg_models::nalgebra::{SMatrix, SVector};
 use leg_models::simulate::{Method, State, StepOptions, TorqueSource};
+use leg_models::Shown;
 use leg_models::{ContactModel, Leg};
 use numpy::ndarray::{Array2, Array3};
 use numpy::{
@@ -90,7 +91,8 @@ fn control_err(e: RustControlError) -> PyErr {
 fn parameter_err(e: leg_models::ParameterError<'_>) -> PyErr {
     ParameterError::new_err(match e {
         leg_models::ParameterError::Unknown { name, leg, .. } => format!(
-            "leg `{leg}` has no parameter `{name}`{} (its `parameter_names` lists them)",
+            "leg `{leg}` has no parameter `{}`{} (its `parameter_names` lists them)",
+            Shown(name),
             e.suggestion()
                 .map(|s| format!("; did you mean `{s}`?"))
                 .unwrap_or_default()
@@ -240,7 +242,8 @@ fn step_options(dt: f64, method: &str, project: bool) -> PyResult<StepOptions<f6
         "semi_implicit_euler" => Method::SemiImplicitEuler,
         other => {
             return Err(PyValueError::new_err(format!(
-                "unknown `method` {other:?}: \"rk4\" or \"semi_implicit_euler\""
+                "unknown `method` \"{}\": \"rk4\" or \"semi_implicit_euler\"",
+                Shown(other)
             )))
         }
     };
@@ -407,7 +410,7 @@ macro_rules! leg_class {
                         for (k, v) in params.iter() {
                             let name: String = k.extract()?;
                             let value: f64 = v.extract().map_err(|_| {
-                                PyValueError::new_err(format!("parameter `{name}` must be a number"))
+                                PyValueError::new_err(format!("parameter `{}` must be a number", Shown(&name)))
                             })?;
                             leg.set_parameter(&name, value)
                                 .map_err(parameter_err)?;
@@ -737,7 +740,7 @@ macro_rules! leg_class {
                     if torque.is_some() {
                         return Err(PyValueError::new_err("give `torque` or `controller`, not both"));
                     }
-                    let setpoint = || setpoint.ok_or_else(|| PyValueError::new_err(format!("controller {kind:?} needs a `setpoint`")));
+                    let setpoint = || setpoint.ok_or_else(|| PyValueError::new_err(format!("controller \"{}\" needs a `setpoint`", Shown(kind))));
                     match kind {
                         "joint_feedback_linearization" | "pd_gravity" => {
                             let r = sinusoid::<NU>(setpoint()?, amplitude, frequency, phase)?;
@@ -761,7 +764,7 @@ macro_rules! leg_class {
                                 run_simulation(py, &self.leg, initial, steps, opts, &mut c)
                             }
                         }
-                        other => Err(PyValueError::new_err(format!("unknown `controller` {other:?}: \"joint_feedback_linearization\", \"foot_feedback_linearization\", \"pd_gravity\" or \"foot_pd_gravity\""))),
+                        other => Err(PyValueError::new_err(format!("unknown `controller` \"{}\": \"joint_feedback_linearization\", \"foot_feedback_linearization\", \"pd_gravity\" or \"foot_pd_gravity\"", Shown(other)))),
                     }
                 }
 

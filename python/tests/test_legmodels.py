@@ -128,6 +128,16 @@ def test_bad_input_raises_with_the_runtime_message():
     with pytest.raises(legmodels.ParameterError, match="`lower_a_mass` is a mass or an inertia and cannot be negative"):
         legmodels.Minitaur(lower_a_mass=-0.1)
     assert legmodels.AssemblyError.__name__ == "AssemblyError"
+    # A hostile name is echoed escaped and short: one line, no escape codes.
+    hostile = "bad\nname\u2028\x1b[31m" + "x" * 100_000
+    with pytest.raises(legmodels.ParameterError) as e:
+        legmodels.Minitaur(**{hostile: 1.0})
+    message = str(e.value)
+    assert "\n" not in message and "\u2028" not in message and "\x1b" not in message, message
+    assert len(message) < 200, len(message)
+    with pytest.raises(ValueError) as e:
+        leg.simulate(leg.home(), np.zeros(4), 10, 1e-3, controller=hostile)
+    assert "\n" not in str(e.value) and len(str(e.value)) < 300, str(e.value)
     with pytest.raises(ValueError, match="unknown `controller`"):
         leg.simulate(leg.home(), np.zeros(4), 10, 1e-3, controller="foot_fl")
     with pytest.raises(ValueError, match="`q` has 2 entries, this leg needs 4"):

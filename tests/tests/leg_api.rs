@@ -181,3 +181,26 @@ fn continuation_steps_are_bounded() {
     let q = leg.assemble_along(&start, &theta, 0.05).unwrap();
     assert!(leg.closure_residual(&q).amax() < 1e-9);
 }
+
+/// A parameter name from a user is echoed escaped and short (issue 29: a newline or
+/// U+2028 split the message, ANSI escapes passed through, a 100,000-character name made
+/// a 100,069-character message).
+#[test]
+fn parameter_names_are_echoed_escaped_and_short() {
+    let mut leg = generated::minitaur::Leg::default();
+    let hostile = format!("bad\nname\u{2028}\x1b[31mred{}", "x".repeat(100_000));
+    let e = leg.set_parameter(&hostile, 1.0).unwrap_err().to_string();
+    assert_eq!(e.lines().count(), 1, "{e}");
+    assert!(!e.contains('\u{2028}') && !e.contains('\x1b'), "{e}");
+    assert!(e.contains(r"bad\nname\u{2028}\u{1b}[31mred"), "{e}");
+    assert!(e.chars().count() < 200, "{} characters", e.chars().count());
+    // A plain misspelling still gets its suggestion, unescaped.
+    let e = leg
+        .set_parameter("lower_a_mas", 1.0)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("no parameter `lower_a_mas`; did you mean `lower_a_mass`?"),
+        "{e}"
+    );
+}

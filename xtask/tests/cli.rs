@@ -871,6 +871,8 @@ fn analyze_compares_the_assembly_branches() {
 fn analyze_refuses_bad_input_and_writes_nothing() {
     let dir = temp_dir("analyze-bad");
     let d = dir.to_str().unwrap();
+    let long_set = format!("{}=0.2", "x".repeat(4998));
+    let long_name = format!("{}=0.2", "y".repeat(2000));
     for (args, says) in [
         (
             vec!["analyze", "minitaurr", "--out", d],
@@ -886,6 +888,30 @@ fn analyze_refuses_bad_input_and_writes_nothing() {
                 d,
             ],
             "did you mean `lower_a_length_x`",
+        ),
+        // A hostile name is echoed escaped and short (issue 29): `refused` checks one line.
+        (
+            vec![
+                "analyze",
+                "minitaur",
+                "--set",
+                "bad\nname\u{2028}\u{1b}[31mredxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx=0.2",
+                "--out",
+                d,
+            ],
+            "argument `bad\\nname\\u{2028}\\u{1b}[31mredxxxxxxxxxx…` holds a control character",
+        ),
+        (
+            vec!["analyze", "minitaur", "--set", "bad\u{2028}name=0.2", "--out", d],
+            "argument `bad\\u{2028}name=0.2` holds a control character",
+        ),
+        (
+            vec!["analyze", "minitaur", "--set", &long_set, "--out", d],
+            "argument `xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx…` has 5002 characters, more than 4096",
+        ),
+        (
+            vec!["analyze", "minitaur", "--set", &long_name, "--out", d],
+            "has no parameter `yyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyyy…`",
         ),
         (
             vec![

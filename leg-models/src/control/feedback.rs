@@ -511,7 +511,11 @@ impl<C, T: Real, const NU: usize> Saturated<C, T, NU> {
 pub fn check_torque_limits<T: Real, const NU: usize>(
     limits: &SVector<T, NU>,
 ) -> Result<(), ControlError> {
-    match limits.iter().position(|l| !(*l >= T::zero())) {
+    // NaN compares false both ways: a limit is good only if it is at least zero.
+    match limits
+        .iter()
+        .position(|l| l.partial_cmp(&T::zero()).is_none_or(|o| o.is_lt()))
+    {
         Some(motor) => Err(ControlError::TorqueLimit {
             motor,
             value: limits[motor].to_subset().unwrap_or(f64::NAN),

@@ -331,16 +331,28 @@ pub enum Parsed<T> {
     Printed,
 }
 
+/// The longest argument taken (a path, a list of numbers, a sweep).
+pub const MAX_ARGUMENT: usize = 4096;
+
 /// Parses `args` (without the program name). `--help` prints and gives `Printed`; a bad
 /// argument is a one-line usage error (exit code 2) that keeps clap's tip (the flag or
 /// command it probably meant) and points at `--help`.
 pub fn parse<T: Parser>(args: &[String]) -> Result<Parsed<T>, Error> {
-    // No argument of ours holds a newline or another control character; one that does is
-    // refused before clap echoes it.
-    if let Some(bad) = args.iter().find(|a| a.chars().any(char::is_control)) {
+    // No argument of ours holds a newline, a line separator or another control character;
+    // one that does is refused before clap echoes it, and shown escaped and short.
+    let breaks_a_line = |c: char| c.is_control() || matches!(c, '\u{2028}' | '\u{2029}');
+    if let Some(bad) = args.iter().find(|a| a.chars().any(breaks_a_line)) {
         return Err(Error::usage(format!(
             "argument `{}` holds a control character (see `cargo xtask --help`)",
-            bad.escape_debug()
+            crate::cli::shown(bad)
+        )));
+    }
+    // Nor is one of them long: clap would echo it whole.
+    if let Some(bad) = args.iter().find(|a| a.chars().count() > MAX_ARGUMENT) {
+        return Err(Error::usage(format!(
+            "argument `{}` has {} characters, more than {MAX_ARGUMENT}",
+            crate::cli::shown(bad),
+            bad.chars().count()
         )));
     }
     let argv = std::iter::once("cargo xtask".to_string()).chain(args.iter().cloned());

@@ -247,8 +247,9 @@ where
                 Some(_) => Error::usage(e.to_string()),
                 // Nothing close: the names themselves, so that the next try can be right.
                 None => Error::usage(format!(
-                    "leg `{}` has no parameter `{name}`; its parameters: {}",
+                    "leg `{}` has no parameter `{}`; its parameters: {}",
                     L::NAME,
+                    xtask::cli::shown(name),
                     L::Params::<f64>::NAMES.join(", ")
                 )),
             }
