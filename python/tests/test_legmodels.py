@@ -177,6 +177,20 @@ def test_a_failed_simulation_keeps_its_record():
     assert record["q"].shape == (len(record["t"]), 4)
 
 
+def test_a_run_larger_than_the_record_budget_is_refused_at_once():
+    # It killed the interpreter (10**10 steps: "memory allocation of 1200000000120 bytes
+    # failed"), panicked (2**62) or ran for minutes (2**64 - 1).
+    for leg in (legmodels.Minitaur(), legmodels.TwoLink()):
+        q = leg.assembled_home()
+        for steps in (10**10, 2**62, 2**64 - 1):
+            with pytest.raises(legmodels.SimulationError, match="more than the budget of 512 MiB") as stopped:
+                leg.simulate(q, np.zeros(len(q)), steps, 1e-3)
+            assert len(stopped.value.record["t"]) == 0
+    hopper = legmodels.MinitaurHopper()
+    with pytest.raises(legmodels.SimulationError, match="more than the budget of 512 MiB"):
+        hopper.simulate_hybrid(hopper.assembled_home(), np.zeros(hopper.nq), 10**10, 1e-3)
+
+
 def test_energy_is_kept_without_torques_or_damping():
     leg = legmodels.Minitaur()
     for n in leg.parameter_names:

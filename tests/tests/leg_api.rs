@@ -204,3 +204,45 @@ fn parameter_names_are_echoed_escaped_and_short() {
         "{e}"
     );
 }
+
+/// A recording run is bounded before it allocates: a record over the budget is refused
+/// with its size, with nothing recorded (issue 29: 10^10 steps aborted the process).
+#[test]
+fn a_record_over_its_budget_is_refused_before_it_is_allocated() {
+    use leg_models::simulate::{RecordTooLarge, StepError, MAX_RECORD_BYTES};
+    let leg = generated::minitaur::Leg::default();
+    let q = leg.assembled_home().unwrap();
+    let sim = leg.simulator(StepOptions::rk4(1e-3));
+    let mut none = |_: f64, _: &State<f64, 4>| SVector::<f64, 2>::zeros();
+    for steps in [10_000_000_000usize, usize::MAX] {
+        let stopped = sim
+            .run(
+                State {
+                    q,
+                    qd: SVector::zeros(),
+                },
+                steps,
+                &mut none,
+            )
+            .unwrap_err();
+        assert!(stopped.samples.is_empty());
+        match stopped.cause {
+            StepError::RecordTooLarge(RecordTooLarge { bytes, budget, .. }) => {
+                assert!(bytes > budget && budget == MAX_RECORD_BYTES)
+            }
+            other => panic!("{steps} steps: {other}"),
+        }
+    }
+    // A run within the budget records every step.
+    let run = sim
+        .run(
+            State {
+                q,
+                qd: SVector::zeros(),
+            },
+            10,
+            &mut none,
+        )
+        .unwrap();
+    assert_eq!(run.len(), 11);
+}

@@ -160,6 +160,9 @@ pub enum HybridError {
         /// The time of the event that would have been one too many (s).
         t: f64,
     },
+    /// The record a run would keep is larger than its budget: refused before the first
+    /// step.
+    RecordTooLarge(crate::simulate::step::RecordTooLarge),
 }
 
 impl fmt::Display for HybridError {
@@ -173,6 +176,7 @@ impl fmt::Display for HybridError {
                 f,
                 "more than {MAX_EVENTS_PER_STEP} contact events in the step at t = {t} s (the contacts chatter)"
             ),
+            HybridError::RecordTooLarge(e) => write!(f, "{e}"),
         }
     }
 }
@@ -1012,6 +1016,18 @@ mod record {
             steps: usize,
             source: &mut impl HybridTorqueSource<T, NQ, NK, NU>,
         ) -> Result<HybridRecord<T, NQ, NC, NU, NK>, HybridStopped<T, NQ, NC, NU, NK>> {
+            crate::simulate::step::check_record(
+                steps,
+                core::mem::size_of::<HybridSample<T, NQ, NC, NU, NK>>(),
+            )
+            .map_err(|e| HybridStopped {
+                t: T::zero(),
+                cause: HybridError::RecordTooLarge(e),
+                record: HybridRecord {
+                    samples: Vec::new(),
+                    events: Vec::new(),
+                },
+            })?;
             let mut record = HybridRecord {
                 samples: Vec::with_capacity(steps + 1),
                 events: Vec::with_capacity(64),

@@ -21,4 +21,7 @@ pub(crate) mod step;
 #[cfg(feature = "std")]
 pub use record::{Sample, Simulator, Stopped};
 pub use source::{ControlError, ControlUpdate, State, TorqueSource};
-pub use step::{energy, step, Method, StepError, StepOptions, StepReport};
+pub use step::{
+    check_record, energy, step, Method, RecordTooLarge, StepError, StepOptions, StepReport,
+    MAX_RECORD_BYTES,
+};

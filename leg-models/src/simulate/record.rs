@@ -9,7 +9,7 @@ use nalgebra::SVector;
 use crate::model::contract::{LegModel, Real};
 use crate::simulate::source::State;
 use crate::simulate::source::TorqueSource;
-use crate::simulate::step::{energy, step, StepError, StepOptions};
+use crate::simulate::step::{check_record, energy, step, StepError, StepOptions};
 
 /// One recorded instant.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -107,13 +107,22 @@ where
         }
     }
 
-    /// Runs `steps` steps from `initial`; records the initial state and every step.
+    /// Runs `steps` steps from `initial`; records the initial state and every step. A
+    /// record larger than [`MAX_RECORD_BYTES`](crate::simulate::MAX_RECORD_BYTES) is
+    /// refused before anything is allocated.
     pub fn run(
         &self,
         initial: State<T, NQ>,
         steps: usize,
         source: &mut impl TorqueSource<T, NQ, NU>,
     ) -> Result<Vec<Sample<T, NQ, NC, NU>>, Stopped<T, NQ, NC, NU>> {
+        check_record(steps, core::mem::size_of::<Sample<T, NQ, NC, NU>>()).map_err(|e| {
+            Stopped {
+                t: T::zero(),
+                cause: StepError::RecordTooLarge(e),
+                samples: Vec::new(),
+            }
+        })?;
         let mut samples = Vec::with_capacity(steps + 1);
         let mut state = initial;
         let mut t = T::zero();

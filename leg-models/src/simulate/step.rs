@@ -63,6 +63,53 @@ pub enum StepError {
     Projection(AssemblyError),
     /// The torque source could not act.
     Control(ControlError),
+    /// The record a run would keep is larger than its budget: refused before the first
+    /// step and before anything is allocated.
+    RecordTooLarge(RecordTooLarge),
+}
+
+/// A record of `samples` samples would take `bytes` bytes, more than `budget`
+/// ([`MAX_RECORD_BYTES`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RecordTooLarge {
+    /// The samples asked for (steps + 1), saturated at `usize::MAX`.
+    pub samples: usize,
+    /// Their size (bytes), saturated at `usize::MAX`.
+    pub bytes: usize,
+    /// The budget (bytes).
+    pub budget: usize,
+}
+
+/// The most memory a recording run keeps (bytes): 512 MiB, millions of samples of any
+/// leg, well below the machine a simulation runs on.
+pub const MAX_RECORD_BYTES: usize = 512 << 20;
+
+/// Checks a record of `steps + 1` samples of `sample_bytes` each against
+/// [`MAX_RECORD_BYTES`]: the one bound every recording run shares.
+pub fn check_record(steps: usize, sample_bytes: usize) -> Result<(), RecordTooLarge> {
+    let samples = steps.saturating_add(1);
+    let bytes = samples.saturating_mul(sample_bytes);
+    if bytes > MAX_RECORD_BYTES {
+        Err(RecordTooLarge {
+            samples,
+            bytes,
+            budget: MAX_RECORD_BYTES,
+        })
+    } else {
+        Ok(())
+    }
+}
+
+impl fmt::Display for RecordTooLarge {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "a record of {} samples would take {} MiB, more than the budget of {} MiB: run fewer steps, or several runs",
+            self.samples,
+            self.bytes >> 20,
+            self.budget >> 20
+        )
+    }
 }
 
 impl fmt::Display for StepError {
@@ -71,6 +118,7 @@ impl fmt::Display for StepError {
             StepError::Dynamics(e) => write!(f, "dynamics: {e}"),
             StepError::Projection(e) => write!(f, "projection onto the constraints: {e}"),
             StepError::Control(e) => write!(f, "control: {e}"),
+            StepError::RecordTooLarge(e) => write!(f, "{e}"),
         }
     }
 }

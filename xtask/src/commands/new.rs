@@ -13,7 +13,7 @@ pub fn run(root: &Path, name: &str) -> Result<(), cli::Error> {
     let path: PathBuf = root.join(gen::SPECS_DIR).join(format!("{name}.toml"));
     if path.exists() {
         return Err(cli::Error::usage(format!(
-            "{} exists already",
+            "{} exists already: choose another name, or edit that spec",
             path.display()
         )));
     }

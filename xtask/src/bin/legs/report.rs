@@ -729,8 +729,9 @@ figure {{ margin: 0; }}
 figcaption {{ font-size: 14px; color: #333; margin-top: 6px; }}
 .anim figcaption, .anim .controls {{ max-width: 520px; }}
 .controls {{ font-size: 15px; }}
-.plots {{ display: grid; grid-template-columns: repeat(auto-fill, minmax(600px, 1fr)); gap: 28px 24px; margin-top: 28px; }}
-.plots figure {{ max-width: 600px; }}
+.plots {{ display: grid; grid-template-columns: repeat(auto-fill, minmax(540px, 1fr)); gap: 28px 24px; margin-top: 28px; }}
+.plots figure {{ max-width: 600px; margin: 0; }}
+.plots svg {{ max-width: 100%; height: auto; }}
 .plots svg {{ display: block; }}
 .key {{ font-size: 14px; margin-bottom: 2px; min-height: 20px; }}
 .key span {{ margin-right: 16px; white-space: nowrap; }}
