@@ -889,6 +889,15 @@ fn analyze_refuses_bad_input_and_writes_nothing() {
             ],
             "did you mean `lower_a_length_x`",
         ),
+        // Sweeps that make no designs (issue 29): values that overflow, values one label.
+        (
+            vec!["analyze", "minitaur", "--sweep", "lower_a_length_x=-1e308:1e308:3", "--out", d],
+            "the range's values overflow",
+        ),
+        (
+            vec!["analyze", "minitaur", "--sweep", "lower_a_length_x=0.2:0.2000000000001:3", "--out", d],
+            "3 values from 0.2 to 0.2000000000001 are not distinct at 12 significant digits",
+        ),
         // A hostile name is echoed escaped and short (issue 29): `refused` checks one line.
         (
             vec![

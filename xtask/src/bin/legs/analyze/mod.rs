@@ -141,13 +141,30 @@ impl Settings {
                         )));
                     }
                 }
-                Some(Sweep {
+                let sweep = Sweep {
                     names,
                     name: name.trim().to_string(),
                     from,
                     to,
                     count,
-                })
+                };
+                // Every design is a real one, and its own: a range whose steps overflow
+                // made designs labelled NaN and inf, one narrower than the labels' 12
+                // digits made designs of one label whose CSVs overwrote each other.
+                let values = sweep.values();
+                if let Some(v) = values.iter().find(|v| !v.is_finite()) {
+                    return Err(Error::usage(format!(
+                        "`--sweep {}`: the range's values overflow ({v}); sweep a range whose values are finite",
+                        xtask::cli::shown(s)
+                    )));
+                }
+                if values.windows(2).any(|w| w[0] == w[1]) {
+                    return Err(Error::usage(format!(
+                        "`--sweep {}`: {count} values from {from} to {to} are not distinct at 12 significant digits; widen the range or sweep fewer values",
+                        xtask::cli::shown(s)
+                    )));
+                }
+                Some(sweep)
             }
         };
         let list =
