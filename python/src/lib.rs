@@ -139,6 +139,20 @@ fn out_segments<'py>(py: Python<'py>, segments: &[Segment]) -> Bound<'py, PyArra
     PyArray3::from_owned_array(py, a)
 }
 
+/// A complex array is refused: numpy would drop its imaginary part with only a warning.
+fn not_complex(name: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
+    let kind = value
+        .getattr("dtype")
+        .and_then(|d| d.getattr("kind"))
+        .and_then(|k| k.extract::<String>());
+    match kind {
+        Ok(k) if k == "c" => Err(PyValueError::new_err(format!(
+            "`{name}` is a complex array; the leg's quantities are real"
+        ))),
+        _ => Ok(()),
+    }
+}
+
 /// A vector argument of length `N`: a numpy array of floats (no copy until here) or any
 /// sequence of numbers.
 fn vector<const N: usize>(name: &str, value: &Bound<'_, PyAny>) -> PyResult<SVector<f64, N>> {
@@ -165,6 +179,7 @@ fn vector<const N: usize>(name: &str, value: &Bound<'_, PyAny>) -> PyResult<SVec
         let a = a.as_array();
         return Ok(SVector::from_fn(|i, _| a[i]));
     }
+    not_complex(name, value)?;
     let v: Vec<f64> = value.extract().map_err(|_| {
         PyValueError::new_err(format!(
             "`{name}` must be a 1-D array or sequence of {N} numbers"

@@ -128,6 +128,12 @@ def test_bad_input_raises_with_the_runtime_message():
     with pytest.raises(legmodels.ParameterError, match="`lower_a_mass` is a mass or an inertia and cannot be negative"):
         legmodels.Minitaur(lower_a_mass=-0.1)
     assert legmodels.AssemblyError.__name__ == "AssemblyError"
+    # A complex array lost its imaginary part with only numpy's warning.
+    q = leg.assembled_home()
+    with pytest.raises(ValueError, match="`q` is a complex array"):
+        leg.forward_dynamics(q.astype(complex) + 1j, np.zeros(4), np.zeros(2))
+    with pytest.raises(ValueError, match="`u` is a complex array"):
+        leg.forward_dynamics(q, np.zeros(4), np.zeros(2, dtype=complex))
     # A hostile name is echoed escaped and short: one line, no escape codes.
     hostile = "bad\nname\u2028\x1b[31m" + "x" * 100_000
     with pytest.raises(legmodels.ParameterError) as e:
