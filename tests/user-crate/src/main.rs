@@ -67,7 +67,7 @@ fn main() {
     let tracker = leg
         .foot_feedback_linearization(Gains::critically_damped(400.0), circle)
         .expect("two motors that determine the leg place the foot");
-    let mut controller = Saturated::new(tracker, Vector2::from_element(20.0));
+    let mut controller = Saturated::new(tracker, Vector2::from_element(20.0)).unwrap();
     let run = leg
         .simulator(StepOptions::rk4(1e-3))
         .run(
