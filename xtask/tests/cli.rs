@@ -1061,3 +1061,69 @@ fn analyze_refuses_bad_input_and_writes_nothing() {
     }
     assert!(!dir.exists(), "a refused analysis wrote {}", dir.display());
 }
+
+/// Issue 29, class 6: one target in the way (a folder where a file goes) left the other files
+/// written. Now every target is checked before the work starts and the files are moved into
+/// place together: the folder is left exactly as it was.
+#[test]
+fn output_is_written_whole_or_not_at_all() {
+    let cases: [(&[&str], &str); 4] = [
+        (&["analyze", "minitaur", "--nodes", "12"], "analysis.json"),
+        (&["analyze", "minitaur", "--nodes", "12"], "report.html"),
+        (&["sim", "minitaur", "--duration", "0.01"], "summary.json"),
+        (
+            &["sim", "minitaur_hopper", "--duration", "0.01"],
+            "events.csv",
+        ),
+    ];
+    for (i, (args, blocked)) in cases.iter().enumerate() {
+        let dir = temp_dir(&format!("whole-{i}"));
+        std::fs::create_dir_all(dir.join(blocked)).unwrap();
+        // A file from an earlier run, which must survive untouched.
+        std::fs::write(dir.join("earlier.txt"), "kept").unwrap();
+        let mut full = args.to_vec();
+        full.extend(["--out", dir.to_str().unwrap()]);
+        let out = legs(&full);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        assert!(
+            err.contains(&format!("{blocked}: exists and is not a file"))
+                && err.trim_end().lines().count() == 1,
+            "{args:?}: {err}"
+        );
+        let mut left: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        let mut expected = vec![blocked.to_string(), "earlier.txt".to_string()];
+        expected.sort();
+        assert_eq!(left, expected, "{args:?} wrote into {}", dir.display());
+        assert!(std::fs::read_dir(dir.join(blocked))
+            .unwrap()
+            .next()
+            .is_none());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    // The output folder itself in the way: a file where the folder goes.
+    let dir = temp_dir("whole-file");
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("not-a-folder");
+    std::fs::write(&file, "x").unwrap();
+    let out = legs(&[
+        "sim",
+        "minitaur",
+        "--duration",
+        "0.01",
+        "--out",
+        file.join("sub").to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("not-a-folder: exists and is not a folder"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), "x");
+    let _ = std::fs::remove_dir_all(&dir);
+}

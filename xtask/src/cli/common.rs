@@ -125,6 +125,100 @@ pub fn write_atomic(path: &Path, text: &str) -> Result<(), String> {
     })
 }
 
+/// Checks, before anything is computed or written, that each of `names` can be written in
+/// the folder `out`: the folder is a folder (or can be made) and no target is a folder or
+/// anything else that is not a plain file. Names the first path in the way.
+pub fn check_targets(out: &Path, names: &[&str]) -> Result<(), String> {
+    // The nearest existing ancestor must be a folder, or the folder cannot be made.
+    let mut up = Some(out);
+    while let Some(dir) = up.filter(|d| !d.as_os_str().is_empty()) {
+        match std::fs::metadata(dir) {
+            Ok(m) if m.is_dir() => break,
+            Ok(_) => {
+                return Err(format!(
+                    "{}: exists and is not a folder (the output folder {} cannot be made there)",
+                    dir.display(),
+                    out.display()
+                ))
+            }
+            Err(_) => up = dir.parent(),
+        }
+    }
+    for name in names {
+        let path = out.join(name);
+        if let Ok(m) = std::fs::symlink_metadata(&path) {
+            if !m.is_file() {
+                return Err(format!(
+                    "{}: exists and is not a file (nothing was written; move it or choose another --out)",
+                    path.display()
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Writes a set of files into the folder `out` whole or not at all: every target is checked
+/// first, the files are written into a temporary folder inside `out`, and then moved into
+/// place; if a move fails, the files already moved are put back, so a failure leaves the
+/// folder as it was (a folder this call made is removed again).
+pub fn write_all(out: &Path, files: &[(String, String)]) -> Result<(), String> {
+    let names: Vec<&str> = files.iter().map(|(n, _)| n.as_str()).collect();
+    check_targets(out, &names)?;
+    let made = !out.exists();
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let undo_made = || {
+        if made {
+            let _ = std::fs::remove_dir_all(out);
+        }
+    };
+    let tmp = out.join(format!(".writing-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&tmp);
+    if let Err(e) = std::fs::create_dir(&tmp) {
+        undo_made();
+        return Err(format!("{}: {e}", tmp.display()));
+    }
+    let result = (|| {
+        for (name, text) in files {
+            std::fs::write(tmp.join(name), text)
+                .map_err(|e| format!("{}: {e}", out.join(name).display()))?;
+        }
+        // Move each new file in, keeping the old one aside until all have moved.
+        let mut moved: Vec<(&str, bool)> = Vec::new();
+        for name in &names {
+            let target = out.join(name);
+            let old = tmp.join(format!("{name}.old"));
+            let had_old = target.exists();
+            let step = (|| {
+                if had_old {
+                    std::fs::rename(&target, &old)?;
+                }
+                std::fs::rename(tmp.join(name), &target)
+            })();
+            if let Err(e) = step {
+                moved.push((name, had_old));
+                for (back, had) in moved.iter().rev() {
+                    let target = out.join(back);
+                    let old = tmp.join(format!("{back}.old"));
+                    if *had {
+                        let _ = std::fs::rename(&old, &target);
+                    } else {
+                        let _ = std::fs::remove_file(&target);
+                    }
+                }
+                return Err(format!("{}: {e}", target.display()));
+            }
+            moved.push((name, had_old));
+        }
+        Ok(())
+    })();
+    let _ = std::fs::remove_dir_all(&tmp);
+    if result.is_err() {
+        undo_made();
+    }
+    result
+}
+
 /// Cargo's target directory.
 pub fn target_dir(root: &Path) -> PathBuf {
     std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root.join("target"), PathBuf::from)

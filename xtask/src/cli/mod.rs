@@ -8,4 +8,7 @@ pub mod args;
 mod common;
 pub mod progress;
 
-pub use common::{build_legs, cargo, numbers, shown, target_dir, text_table, write_atomic, Error};
+pub use common::{
+    build_legs, cargo, check_targets, numbers, shown, target_dir, text_table, write_all,
+    write_atomic, Error,
+};

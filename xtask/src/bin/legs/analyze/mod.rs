@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use serde_json::{json, Value};
 use xtask::cli::args::AnalyzeArgs;
 use xtask::cli::progress::Progress;
-use xtask::cli::{write_atomic, Error};
+use xtask::cli::{check_targets, write_all, Error};
 
 pub use design::{table, Design, View};
 
@@ -301,6 +301,8 @@ where
     L: LegModel<NQ, NC, NU>,
     L::Params<f64>: Send + Sync,
 {
+    // A target in the way is found before the designs are computed, not after.
+    check_targets(&settings.out, &["analysis.json", "report.html"]).map_err(Error::Failed)?;
     let mut base = L::Params::<f64>::default();
     for (name, value) in &settings.sets {
         let i = index_of::<L, NQ, NC, NU>(name)?;
@@ -847,13 +849,13 @@ pub fn write(settings: &Settings, designs: &[Design], command: &str) -> Result<(
         "designs": designs.iter().map(|d| d.json.clone()).collect::<Vec<_>>(),
     });
     let text = serde_json::to_string_pretty(&json).map_err(|e| Error::Failed(e.to_string()))?;
-    for d in designs {
-        if let Some(csv) = &d.csv {
-            write_atomic(&out.join(format!("{}.csv", d.file_stem)), csv).map_err(Error::Failed)?;
-        }
-    }
-    write_atomic(&out.join("analysis.json"), &text).map_err(Error::Failed)?;
     let html = report::html(designs, settings.sweeping(), command).map_err(Error::Failed)?;
-    write_atomic(&out.join("report.html"), &html).map_err(Error::Failed)?;
+    let mut files: Vec<(String, String)> = designs
+        .iter()
+        .filter_map(|d| Some((format!("{}.csv", d.file_stem), d.csv.clone()?)))
+        .collect();
+    files.push(("analysis.json".into(), text));
+    files.push(("report.html".into(), html));
+    write_all(out, &files).map_err(Error::Failed)?;
     Ok(())
 }

@@ -16,7 +16,7 @@ use leg_models::simulate::State;
 use leg_models::{ContactModel, LegModel};
 use serde_json::json;
 use xtask::cli::progress::Progress;
-use xtask::cli::{write_atomic, Error};
+use xtask::cli::{check_targets, write_all, Error};
 
 use crate::report::{self, Report, Series};
 use crate::sim::{body_points, frame_at, max, Settings};
@@ -66,6 +66,17 @@ pub fn run<
 >(
     s: &Settings,
 ) -> Result<(), Error> {
+    // A target in the way is found before the simulation runs, not after.
+    check_targets(
+        &s.out_dir(L::NAME),
+        &[
+            "trajectory.csv",
+            "events.csv",
+            "summary.json",
+            "report.html",
+        ],
+    )
+    .map_err(Error::Failed)?;
     let p = <L as LegModel<NQ, NC, NU>>::Params::<f64>::default();
     let fail =
         |what: &str, e: &dyn std::fmt::Display| Error::Failed(format!("{}: {what}: {e}", L::NAME));
@@ -256,13 +267,7 @@ pub fn run<
         Source::Hop(c) => (c.saturations.to_vec(), false),
         Source::Passive => (vec![0; NU], true),
     };
-    let out = s.out.clone().unwrap_or_else(|| {
-        xtask::gen::workspace_root()
-            .join("target")
-            .join("sim")
-            .join(L::NAME)
-    });
-    std::fs::create_dir_all(&out).map_err(|e| Error::Failed(format!("{}: {e}", out.display())))?;
+    let out = s.out_dir(L::NAME);
     let summary = json!({
         "model": L::NAME,
         "controller": if passive { "passive" } else { "hop" },
@@ -563,14 +568,13 @@ pub fn run<
         ground: Some([ground.normal[0], ground.normal[1], ground.offset]),
     })
     .map_err(Error::Failed)?;
-    for (name, text) in [
-        ("trajectory.csv", csv),
-        ("events.csv", events_csv),
-        ("summary.json", format!("{summary:#}\n")),
-        ("report.html", html),
-    ] {
-        write_atomic(&out.join(name), &text).map_err(Error::Failed)?;
-    }
+    let files = [
+        ("trajectory.csv".into(), csv),
+        ("events.csv".into(), events_csv),
+        ("summary.json".into(), format!("{summary:#}\n")),
+        ("report.html".into(), html),
+    ];
+    write_all(&out, &files).map_err(Error::Failed)?;
     println!(
         "{} on the ground, {} ({} s at dt = {} s): wrote {}/{{trajectory.csv, events.csv, summary.json, report.html}}",
         L::NAME,

@@ -18,7 +18,7 @@ use leg_models::simulate::{State, StepOptions, TorqueSource};
 use leg_models::LegModel;
 use serde_json::json;
 use xtask::cli::progress::Progress;
-use xtask::cli::{write_atomic, Error};
+use xtask::cli::{check_targets, write_all, Error};
 
 use crate::report::{self, quantity as report_quantity, Report, Series};
 
@@ -200,6 +200,12 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
     let tol = Tolerance::default();
     let fail =
         |what: &str, e: &dyn std::fmt::Display| Error::Failed(format!("{}: {what}: {e}", L::NAME));
+    // A target in the way is found before the simulation runs, not after.
+    check_targets(
+        &s.out_dir(L::NAME),
+        &["trajectory.csv", "summary.json", "report.html"],
+    )
+    .map_err(Error::Failed)?;
     let mut home = SVector::<f64, NQ>::from_column_slice(&L::HOME);
     project_position::<L, f64, NQ, NC, NU>(&p, &mut home, &tol)
         .map_err(|e| fail("the home pose does not assemble", &e))?;
@@ -384,13 +390,7 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
     let e0 = samples.first().map_or(0.0, |x| x.energy);
     let energy_drift = max(samples.iter().map(|x| (x.energy - e0).abs())) / e0.abs().max(1e-300);
 
-    let out = s.out.clone().unwrap_or_else(|| {
-        xtask::gen::workspace_root()
-            .join("target")
-            .join("sim")
-            .join(L::NAME)
-    });
-    std::fs::create_dir_all(&out).map_err(|e| Error::Failed(format!("{}: {e}", out.display())))?;
+    let out = s.out_dir(L::NAME);
 
     // trajectory.csv
     let mut csv = String::from("t");
@@ -618,13 +618,11 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
     .map_err(Error::Failed)?;
 
     let written = [
-        ("trajectory.csv", csv),
-        ("summary.json", format!("{:#}\n", summary)),
-        ("report.html", html),
+        ("trajectory.csv".into(), csv),
+        ("summary.json".into(), format!("{:#}\n", summary)),
+        ("report.html".into(), html),
     ];
-    for (name, text) in &written {
-        write_atomic(&out.join(name), text).map_err(Error::Failed)?;
-    }
+    write_all(&out, &written).map_err(Error::Failed)?;
     println!(
         "{} with {} ({choice}; {} s at dt = {} s): wrote {}/{{trajectory.csv, summary.json, report.html}}",
         L::NAME,

@@ -42,6 +42,16 @@ pub struct Settings {
 }
 
 impl Settings {
+    /// The folder the files go to: `--out`, or `target/sim/NAME`.
+    pub(crate) fn out_dir(&self, name: &str) -> PathBuf {
+        self.out.clone().unwrap_or_else(|| {
+            xtask::gen::workspace_root()
+                .join("target")
+                .join("sim")
+                .join(name)
+        })
+    }
+
     /// The spin trajectory's motor speed (1 turn/s unless `--speed` says).
     pub(crate) fn spin_speed(&self) -> f64 {
         self.speed.unwrap_or(std::f64::consts::TAU)
