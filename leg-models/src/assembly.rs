@@ -50,9 +50,24 @@ pub enum AssemblyError {
         /// The way to go: the largest motor change (rad, or m).
         way: f64,
     },
+    /// The pose given to a method that needs a pose on the closures (the design measures,
+    /// a manifold chart) is off them by `residual` (m), more than `limit` (m,
+    /// [`ON_CLOSURES`] of the leg's size): its numbers would be of a pose the leg cannot
+    /// take. Project it first ([`project_position`]) or assemble it.
+    OffClosures {
+        /// The largest closure residual entry (m).
+        residual: f64,
+        /// The largest accepted (m).
+        limit: f64,
+    },
     /// An input is NaN or infinite.
     NonFinite,
 }
+
+/// How far off its closures a pose may be, relative to the leg's size, for the methods
+/// that need one on them ([`check_on_closures`]): loose enough for any pose assembled or
+/// projected at a [`Tolerance`] up to 1e-9 and for a pose written with nine digits.
+pub const ON_CLOSURES: f64 = 1e-9;
 
 /// The most steps [`assemble_along`] takes at its largest step: the work it may do is
 /// bounded before it starts.
@@ -78,6 +93,10 @@ impl fmt::Display for AssemblyError {
             AssemblyError::StepTooSmall { max_step, way } => write!(
                 f,
                 "the continuation step {max_step:e} must be positive and at least 1/{MAX_CONTINUATION_STEPS:e} of the way ({way:e})"
+            ),
+            AssemblyError::OffClosures { residual, limit } => write!(
+                f,
+                "the pose is off its closures by {residual:.3e} m (more than {limit:.1e} m): project it onto them first (project_position, or assemble it)"
             ),
             AssemblyError::NonFinite => write!(f, "non-finite input"),
         }
@@ -120,6 +139,36 @@ where
     L::joint_positions(q, params)
         .amax()
         .max(L::link_tips(q, params).amax())
+}
+
+/// Refuses a pose that is not finite or is off its closures by more than [`ON_CLOSURES`]
+/// of the leg's size: the check every method shares that needs a pose the leg can take.
+pub fn check_on_closures<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+) -> Result<(), AssemblyError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
+    if !q.iter().all(|x| x.is_finite()) {
+        return Err(AssemblyError::NonFinite);
+    }
+    if NC == 0 {
+        return Ok(());
+    }
+    let residual = L::closure_residual(q, params).amax();
+    let limit = leg_size::<L, T, NQ, NC, NU>(params, q) * T::lit(ON_CLOSURES);
+    if !residual.is_finite() {
+        return Err(AssemblyError::NonFinite);
+    }
+    if residual > limit {
+        return Err(AssemblyError::OffClosures {
+            residual: to_f64(residual),
+            limit: to_f64(limit),
+        });
+    }
+    Ok(())
 }
 
 /// Whether every entry of `r` is finite and within `limit` (itself finite): a NaN residual

@@ -1099,6 +1099,26 @@ fn impact_mitigation_on_a_body_matches_a_leg_with_that_body() {
     )
     .unwrap();
     assert!(light < heavy, "{light} {heavy}");
+    // Issue 29: a body of 1e308 kg was refused with "the factor needs a body (give its
+    // mass)". A body that heavy is the fixed base's limit, where a leg rigid when locked
+    // mitigates fully: ξ → 1, approached monotonically by ever heavier bodies.
+    let mut last = heavy;
+    for mass in [1e4, 1e8, 1e16, 1e308] {
+        let xi = impact_mitigation::<TwoLink, f64, 2, 0, 2>(
+            &arm,
+            &q_arm,
+            &frame_arm,
+            &Body::Translating { mass },
+            Some(&coupling),
+        )
+        .unwrap();
+        assert!(
+            xi >= last && xi <= 1.0 + 1e-12,
+            "{mass} kg: {xi} after {last}"
+        );
+        last = xi;
+    }
+    assert!((last - 1.0).abs() < 1e-9, "{last}");
     let _ = Matrix2::<f64>::identity();
 }
 

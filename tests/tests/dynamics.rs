@@ -288,6 +288,23 @@ pub fn check_assembly<
         forward_dynamics::<L, f64, NQ, NC, NU>(&p, &home, &home, &nan, None),
         Err(DynamicsError::NonFinite)
     );
+    // Issue 29: a NaN pose was reported as "the mass matrix is not positive definite", and
+    // finite rates whose terms overflow as a non-finite input. Each is said as what it is.
+    let zero = SVector::<f64, NQ>::zeros();
+    let nan_q = SVector::<f64, NQ>::from_element(f64::NAN);
+    assert_eq!(
+        forward_dynamics::<L, f64, NQ, NC, NU>(&p, &nan_q, &zero, &SVector::zeros(), None),
+        Err(DynamicsError::NonFinite),
+        "{}: a NaN pose",
+        L::NAME
+    );
+    let fast = SVector::<f64, NQ>::from_element(1e200);
+    assert_eq!(
+        forward_dynamics::<L, f64, NQ, NC, NU>(&p, &home, &fast, &SVector::zeros(), None),
+        Err(DynamicsError::Overflow),
+        "{}: rates of 1e200",
+        L::NAME
+    );
 }
 
 macro_rules! runtime {

@@ -1127,3 +1127,68 @@ fn output_is_written_whole_or_not_at_all() {
     assert_eq!(std::fs::read_to_string(&file).unwrap(), "x");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue 29, class 11: rates of 1e200 left `N`, `Jdot_qdot` and `kinetic` as `null` with
+/// no word, and an impact at 1e160 reported success with `energy_lost: null`. Every term
+/// that is not a number now has an entry in `errors` that says overflow and names it.
+#[test]
+fn eval_names_every_term_that_overflows() {
+    let cases: [&[&str]; 2] = [
+        &[
+            "eval",
+            "minitaur",
+            "--assemble",
+            "--q",
+            "-0.6,-2.5",
+            "--qd",
+            "1e200,1e200",
+            "--derivatives",
+            "--json",
+        ],
+        &[
+            "eval",
+            "minitaur_hopper",
+            "--q",
+            "0.3,-0.7,-1.25,-2.43,1.25",
+            "--qd",
+            "0,-1e160,0,0,0",
+            "--impact",
+            "toe_contact",
+            "--json",
+        ],
+    ];
+    for args in cases {
+        let out = legs(args);
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+        let errors = v["errors"].as_object().expect("an errors entry");
+        for (key, value) in v.as_object().unwrap() {
+            if !value.is_null() {
+                continue;
+            }
+            let by = match key.as_str() {
+                "F" => "qdd",
+                "b_tilde" => "A_tilde",
+                k if k.starts_with("dqdd_") || k.starts_with("dF_") => "derivatives",
+                k => k,
+            };
+            let why = errors.get(by).and_then(Value::as_str).unwrap_or_default();
+            assert!(
+                why.contains("overflow"),
+                "{args:?}: `{key}` is null and `errors.{by}` says `{why}`"
+            );
+        }
+    }
+    // The impact's energy is named.
+    let v: Value = serde_json::from_slice(&legs(cases[1]).stdout).unwrap();
+    assert!(v["impact"].is_null());
+    assert!(
+        v["errors"]["impact"].as_str().unwrap().contains("overflow"),
+        "{}",
+        v["errors"]
+    );
+}

@@ -47,7 +47,7 @@ use core::fmt;
 
 use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
 
-use crate::assembly::AssemblyError;
+use crate::assembly::{check_on_closures, AssemblyError};
 use crate::dynamics::forward::rcond_floor;
 use crate::dynamics::structure::{Actuation, NotApplicable};
 use crate::model::contract::{LegModel, Parameters, Real};
@@ -843,6 +843,7 @@ where
     L: LegModel<NQ, NC, NU>,
     T: Real,
 {
+    check_on_closures::<L, T, NQ, NC, NU>(params, q)?;
     let locked: [bool; NQ] =
         core::array::from_fn(|c| frame.held[c] || (motors_locked && L::ACTUATED.contains(&c)));
     delassus(
@@ -930,6 +931,7 @@ where
     L: LegModel<NQ, NC, NU>,
     T: Real,
 {
+    check_on_closures::<L, T, NQ, NC, NU>(params, q)?;
     let actuated: [bool; NQ] = core::array::from_fn(|c| L::ACTUATED.contains(&c));
     let m = L::mass_matrix(q, params);
     let j = L::constraint_jacobian(q, params);
@@ -969,7 +971,10 @@ where
         // whatever the motors (their number is not the reason).
         return Err(Inapplicable::FootHeld.into());
     }
-    if locked.amax() <= free.amax() * T::default_epsilon() * T::lit(1e3) {
+    // On a translating body Λ_L⁻¹ holds the body's own 1/m: never singular, only small for
+    // a heavy body, where ξ → 1 (a body of 1e308 kg was refused as "give its mass").
+    let on_body = matches!(body, Body::Translating { .. }) && !frame.has_body();
+    if !on_body && locked.amax() <= free.amax() * T::default_epsilon() * T::lit(1e3) {
         return Err(Inapplicable::RigidWhenLocked.into());
     }
     Ok((free - locked).determinant() / det_free)
@@ -1018,6 +1023,8 @@ where
     L: LegModel<NQ, NC, NU>,
     T: Real,
 {
+    // Measures of a pose the leg cannot take are refused, not returned (issue 29).
+    check_on_closures::<L, T, NQ, NC, NU>(params, q)?;
     let kin = motor_kinematics::<L, T, NQ, NC, NU>(params, q, frame)?;
     let jt = kin.foot_jacobian;
     let (hi, lo) = singular_values(&jt);

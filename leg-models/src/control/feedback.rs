@@ -15,7 +15,7 @@ use crate::control::reduction::reduce_with;
 use crate::control::reduction::ActuatedDynamics;
 use crate::control::reduction::NullSpace;
 use crate::control::reference::Reference;
-use crate::dynamics::forward::rcond_floor;
+use crate::dynamics::forward::{rcond_floor, to_f64};
 use crate::dynamics::structure::{Actuation, Structure};
 use crate::model::contract::{DynamicsTerms, LegModel, Real};
 use crate::model::linalg::{mul, Cholesky};
@@ -55,6 +55,23 @@ impl<T: Real, const N: usize> Gains<T, N> {
     /// `k_d = 2√k_p`: the error dynamics `ë + k_d ė + k_p e = 0` are critically damped.
     pub fn critically_damped(kp: T) -> Self {
         Gains::new(kp, T::lit(2.0) * kp.sqrt())
+    }
+
+    /// Every gain finite and zero or more: a negative or NaN gain is refused by name
+    /// (a negative `k_p` gave `k_d = 2√k_p = NaN`, reported as a non-finite state).
+    pub fn check(&self) -> Result<(), ControlError> {
+        for (name, v) in [("kp", &self.kp), ("kd", &self.kd)] {
+            for (k, &x) in v.iter().enumerate() {
+                if !(x.is_finite() && x >= T::zero()) {
+                    return Err(ControlError::Gain {
+                        name,
+                        coordinate: k,
+                        value: to_f64(x),
+                    });
+                }
+            }
+        }
+        Ok(())
     }
 
     fn feedback(&self, e: &SVector<T, N>, ed: &SVector<T, N>) -> SVector<T, N> {
@@ -130,6 +147,7 @@ where
         reference: R,
     ) -> Result<Self, ControlError> {
         Structure::of::<L, NQ, NC, NU>().joint_space()?;
+        gains.check()?;
         Ok(JointFeedbackLinearization {
             params,
             gains,
@@ -229,6 +247,7 @@ where
         reference: R,
     ) -> Result<Self, ControlError> {
         Structure::of::<L, NQ, NC, NU>().foot_space()?;
+        gains.check()?;
         Ok(FootFeedbackLinearization {
             params,
             gains,
@@ -342,6 +361,7 @@ where
         reference: R,
     ) -> Result<Self, ControlError> {
         Structure::of::<L, NQ, NC, NU>().joint_space()?;
+        gains.check()?;
         Ok(PdGravity {
             params,
             gains,
@@ -399,6 +419,7 @@ where
         reference: R,
     ) -> Result<Self, ControlError> {
         Structure::of::<L, NQ, NC, NU>().foot_space()?;
+        gains.check()?;
         Ok(FootPdGravity {
             params,
             gains,

@@ -19,7 +19,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::assembly::{assemble_holding, AssemblyError, Tolerance};
+use crate::assembly::{assemble_holding, check_on_closures, AssemblyError, Tolerance};
 use crate::dynamics::derivatives::{forward_dynamics_derivatives, ForwardDynamicsDerivatives};
 use crate::dynamics::forward::DynamicsError;
 use crate::dynamics::structure::factor_closure_rows;
@@ -378,6 +378,8 @@ impl<T: Real, const NQ: usize, const M: usize> ManifoldChart<T, NQ, M> {
         if !q.iter().all(|x| x.is_finite()) {
             return Err(DynamicsError::NonFinite.into());
         }
+        // A chart is of the constraint manifold: a pose off it is refused, not linearized.
+        check_on_closures::<L, T, NQ, NC, NU>(params, q)?;
         let j = L::constraint_jacobian(q, params);
         // A motor's column is a pivot only when no passive column is nearly as good.
         let weight: [T; NQ] = core::array::from_fn(|c| {

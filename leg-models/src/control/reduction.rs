@@ -145,7 +145,15 @@ where
 {
     Structure::of::<L, NQ, NC, NU>().joint_space()?;
     let (m, j) = (&terms.mass_matrix, &terms.constraint_jacobian);
-    let a22 = PassiveSystem::new(m, j, actuated_mask::<L, NQ, NC, NU>(), L::REDUNDANT_ROWS)?;
+    let a22 = PassiveSystem::new(m, j, actuated_mask::<L, NQ, NC, NU>(), L::REDUNDANT_ROWS)
+        .map_err(|e| {
+            // A NaN pose shows as a singular system: said as what it is.
+            if all_finite(m) && all_finite(j) {
+                e
+            } else {
+                ControlError::NonFinite
+            }
+        })?;
     // A12 z for z = (x, f): the actuated rows of M x − Jᵀ f.
     let a12 = |(x, f): (SVector<T, NQ>, SVector<T, NC>)| mul(m, &x) - mul_tn(j, &f);
     let mut a_tilde = SMatrix::<T, NU, NU>::zeros();
@@ -160,7 +168,13 @@ where
     let col = a12(a22.solve(&b, &-terms.constraint_bias));
     let b_tilde = SVector::<T, NU>::from_fn(|i, _| b[L::ACTUATED[i]] - col[L::ACTUATED[i]]);
     if !a_tilde.iter().chain(b_tilde.iter()).all(|x| x.is_finite()) {
-        return Err(ControlError::NonFinite);
+        // Finite rates on a finite pose: the terms overflowed, the input was not bad.
+        let finite_input = all_finite(qd) && all_finite(m) && all_finite(j);
+        return Err(if finite_input {
+            ControlError::Dynamics(DynamicsError::Overflow)
+        } else {
+            ControlError::NonFinite
+        });
     }
     Ok(ActuatedDynamics { a_tilde, b_tilde })
 }

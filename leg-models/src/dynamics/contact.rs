@@ -613,8 +613,15 @@ where
     L: ContactModel<NQ, NC, NU, NK>,
     T: Real,
 {
+    if !(all_finite(q) && all_finite(qd)) {
+        return Err(DynamicsError::NonFinite.into());
+    }
     let m = L::mass_matrix(q, params);
-    let chol_m = Cholesky::new(&m).ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
+    let chol_m = Cholesky::new(&m).ok_or(if all_finite(&m) {
+        DynamicsError::MassMatrixNotPositiveDefinite
+    } else {
+        DynamicsError::NonFinite
+    })?;
     if chol_m.rcond < rcond_floor::<T>() {
         return Err(DynamicsError::MassMatrixNotPositiveDefinite.into());
     }
@@ -680,6 +687,15 @@ where
     }
     let half = T::lit(0.5);
     let energy_lost = half * qd.dot(&momentum) - half * sol.x.dot(&mul(&m, &sol.x));
+    // Rates so large that the momentum or the energy exceed f64's range: said, not
+    // returned as an infinite or NaN energy.
+    let finite = all_finite(&sol.x)
+        && all_finite(&sol.contact)
+        && all_finite(&sol.closure)
+        && (energy_lost * T::zero()) == T::zero();
+    if !finite {
+        return Err(DynamicsError::Overflow.into());
+    }
     Ok(Impact {
         qd_plus: sol.x,
         closure_impulses: sol.closure,

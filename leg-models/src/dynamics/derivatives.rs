@@ -23,7 +23,8 @@ use crate::dynamics::contact::{
     solve_structured_columns, ContactSolution, ContactSystem, Ground, Modes,
 };
 use crate::dynamics::forward::{
-    actuation, kkt_rhs, Acceleration, Baumgarte, DynamicsError, KktFactorization,
+    actuation, classify_non_finite, kkt_rhs, Acceleration, Baumgarte, DynamicsError,
+    KktFactorization,
 };
 use crate::model::contract::{ContactModel, DynamicsTerms, LegModel, Real};
 use crate::model::linalg::{all_finite, negate};
@@ -104,11 +105,12 @@ where
         &terms.mass_matrix,
         &terms.constraint_jacobian,
         L::REDUNDANT_ROWS,
-    )?;
+    )
+    .map_err(|e| classify_non_finite(e, q, qd, u))?;
     let j = &terms.constraint_jacobian;
     let (mut qdd, mut forces) = kkt_rhs::<L, T, NQ, NC, NU>(params, terms, q, qd, u, baumgarte);
     if !(all_finite(&qdd) && all_finite(&forces)) {
-        return Err(DynamicsError::NonFinite);
+        return Err(classify_non_finite(DynamicsError::NonFinite, q, qd, u));
     }
     kkt.solve_mut(&mut qdd, &mut forces);
     let d = L::dynamics_derivatives(q, qd, &qdd, &forces, params);
@@ -143,7 +145,7 @@ where
         && all_finite(&forces_q)
         && all_finite(&forces_qd))
     {
-        return Err(DynamicsError::NonFinite);
+        return Err(classify_non_finite(DynamicsError::NonFinite, q, qd, u));
     }
     Ok(out)
 }

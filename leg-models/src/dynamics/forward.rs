@@ -36,6 +36,9 @@ pub enum DynamicsError {
     },
     /// A state, input or parameter is NaN or infinite.
     NonFinite,
+    /// The state and inputs are finite but a term computed from them is not: rates or
+    /// torques so large that `N`, `J̇ q̇` or the solution exceed f64's range.
+    Overflow,
 }
 
 impl fmt::Display for DynamicsError {
@@ -53,6 +56,10 @@ impl fmt::Display for DynamicsError {
                 "singular contacts: the held contact rows lose rank with the closures (rcond {rcond:.1e})"
             ),
             DynamicsError::NonFinite => write!(f, "non-finite state, input or parameter"),
+            DynamicsError::Overflow => write!(
+                f,
+                "overflow: the state and torques are finite but the terms at them exceed f64's range"
+            ),
         }
     }
 }
@@ -84,7 +91,7 @@ pub fn rcond_floor<T: Real>() -> T {
     T::default_epsilon() * T::lit(1000.0)
 }
 
-fn to_f64<T: Real>(x: T) -> f64 {
+pub(crate) fn to_f64<T: Real>(x: T) -> f64 {
     x.to_subset().unwrap_or(f64::NAN)
 }
 
@@ -133,7 +140,7 @@ impl<T: Real, const NQ: usize, const NC: usize> KktFactorization<T, NQ, NC> {
     ) -> Result<Self, DynamicsError> {
         // A NaN or infinity anywhere shows in M's pivots or in the solutions.
         let chol_m =
-            Cholesky::new(mass_matrix).ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
+            Cholesky::new(mass_matrix).ok_or_else(|| not_positive_definite(mass_matrix))?;
         if chol_m.rcond < rcond_floor::<T>() {
             return Err(DynamicsError::MassMatrixNotPositiveDefinite);
         }
@@ -205,7 +212,7 @@ pub fn solve_kkt<T: Real, const NQ: usize, const NC: usize>(
     // (the same steps): carrying the factorization costs the simulation's hot path up to
     // 8 % (minitaur_pinned_toe 2392 → 2588 instructions, braced_parallelogram 3478 → 3650).
     // A NaN or infinity anywhere shows in M's pivots or in the result, checked below.
-    let chol_m = Cholesky::new(mass_matrix).ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
+    let chol_m = Cholesky::new(mass_matrix).ok_or_else(|| not_positive_definite(mass_matrix))?;
     if chol_m.rcond < rcond_floor::<T>() {
         return Err(DynamicsError::MassMatrixNotPositiveDefinite);
     }
@@ -237,6 +244,32 @@ pub fn solve_kkt<T: Real, const NQ: usize, const NC: usize>(
         return Err(DynamicsError::NonFinite);
     }
     Ok(Acceleration { qdd, forces })
+}
+
+/// Why `M` has no Cholesky factor: a NaN or infinity in it (a non-finite pose or
+/// parameter) is said as such, not as a mass matrix that is not positive definite.
+#[cold]
+fn not_positive_definite<T: Real, const NQ: usize>(m: &SMatrix<T, NQ, NQ>) -> DynamicsError {
+    if all_finite(m) {
+        DynamicsError::MassMatrixNotPositiveDefinite
+    } else {
+        DynamicsError::NonFinite
+    }
+}
+
+/// A non-finite result at a finite state and input is an overflow, not bad input.
+#[cold]
+pub(crate) fn classify_non_finite<T: Real, const NQ: usize, const NU: usize>(
+    e: DynamicsError,
+    q: &SVector<T, NQ>,
+    qd: &SVector<T, NQ>,
+    u: &SVector<T, NU>,
+) -> DynamicsError {
+    if e == DynamicsError::NonFinite && all_finite(q) && all_finite(qd) && all_finite(u) {
+        DynamicsError::Overflow
+    } else {
+        e
+    }
 }
 
 /// Forward dynamics of the closed chain at `(q, q̇)` under motor torques `u`, with joint
@@ -278,6 +311,7 @@ where
         &rhs,
         L::REDUNDANT_ROWS,
     )
+    .map_err(|e| classify_non_finite(e, q, qd, u))
 }
 
 /// The right-hand side of the KKT system at a state: `(B u − N − D q̇, −J̇ q̇ − 2α J q̇ − β² φ)`.

@@ -73,6 +73,18 @@ pub enum ControlError {
         /// The limit given (N m, or N on a prismatic motor).
         value: f64,
     },
+    /// A feedback gain is negative or not finite: refused when the controller is built.
+    Gain {
+        /// `kp` or `kd`.
+        name: &'static str,
+        /// The coordinate (from 0: a motor, or a foot coordinate).
+        coordinate: usize,
+        /// The gain given.
+        value: f64,
+    },
+    /// The caller stopped the run (a Ctrl-C seen by the Python bindings): the record so
+    /// far is kept, as for any other stop.
+    Interrupted,
     /// A linearization-based controller (LQR) could not linearize the leg.
     Linearization(crate::simulate::source::LinearizationError),
     /// The Riccati equation of an LQR has no solution.
@@ -98,6 +110,15 @@ impl fmt::Display for ControlError {
                 f,
                 "the torque limit of motor {motor} is {value}: a limit must be zero or more (infinite for none)"
             ),
+            ControlError::Gain {
+                name,
+                coordinate,
+                value,
+            } => write!(
+                f,
+                "the gain {name} of coordinate {coordinate} is {value}: a gain must be finite and zero or more"
+            ),
+            ControlError::Interrupted => write!(f, "interrupted by the caller"),
             ControlError::Linearization(e) => write!(f, "linearization: {e}"),
             ControlError::Lqr(e) => write!(f, "LQR: {e}"),
         }

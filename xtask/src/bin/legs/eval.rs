@@ -26,6 +26,25 @@ fn vector<const R: usize>(v: &SVector<f64, R>) -> Value {
     Value::Array(v.iter().map(|x| json!(x)).collect())
 }
 
+/// Whether a term holds a number beyond f64's range (serde_json writes `inf` and `NaN` as
+/// `null`, so a `null` inside a computed term is one).
+fn overflowed(v: &Value) -> bool {
+    match v {
+        Value::Null => true,
+        Value::Array(xs) => xs.iter().any(overflowed),
+        Value::Object(m) => m.values().any(overflowed),
+        _ => false,
+    }
+}
+
+/// The largest magnitude among the state and torques given, for the overflow message.
+fn largest_input(q: &[f64], qd: &[f64], u: &[f64]) -> f64 {
+    q.iter()
+        .chain(qd)
+        .chain(u)
+        .fold(0.0_f64, |m, x| m.max(x.abs()))
+}
+
 pub fn run<
     L: ContactModel<NQ, NC, NU, NK>,
     const NQ: usize,
@@ -269,6 +288,40 @@ pub fn run<
                 errors.insert("impact".into(), json!(why));
             }
         }
+    }
+    // A term that overflowed is said so by name, never left as a bare `null` (issue 29).
+    let big = largest_input(q.as_slice(), qd.as_slice(), u.as_slice());
+    let keys: Vec<String> = out.keys().cloned().collect();
+    for key in keys {
+        // The error that already explains a term left out (several terms share one).
+        let explained_by = match key.as_str() {
+            "F" => "qdd",
+            "b_tilde" => "A_tilde",
+            k if k.starts_with("dqdd_") || k.starts_with("dF_") => "derivatives",
+            k => k,
+        };
+        let already = errors.contains_key(explained_by) && out[&key].is_null();
+        if already || !overflowed(&out[&key]) {
+            continue;
+        }
+        let parts = match &out[&key] {
+            Value::Object(m) => {
+                let bad: Vec<&str> = m
+                    .iter()
+                    .filter(|(_, v)| overflowed(v))
+                    .map(|(k, _)| k.as_str())
+                    .collect();
+                format!("{key}.{}", bad.join(&format!(", {key}.")))
+            }
+            _ => key.clone(),
+        };
+        errors.insert(
+            key.clone(),
+            json!(format!(
+                "overflow: {parts} is beyond f64's range at this state (inputs up to {big:.3e}): not computed"
+            )),
+        );
+        out.insert(key, Value::Null);
     }
     if !errors.is_empty() {
         out.insert("errors".into(), Value::Object(errors));
