@@ -8,9 +8,19 @@
 //!
 //! | mode  | tangential row `2k`      | normal row `2k + 1` |
 //! |-------|--------------------------|---------------------|
-//! | flight| —                        | gap `n·x_c − d`     |
+//! | flight| —                        | gap `n·x_c − d + δ` |
 //! | stick | `μ λ_n − abs(λ_t)`       | `λ_n`               |
 //! | slide | slip speed `s (t·ẋ_c)`   | `λ_n`               |
+//!
+//! `δ` is the projection's tolerance ([`Tolerance::relative_residual`] of the leg's size):
+//! a held contact sits on the ground only to within it, so a contact that has just lifted
+//! off may start its flight up to `δ` under the ground, and it is under the ground only
+//! below that. (With the gap itself as the guard, such a contact leaving at rest — the
+//! normal force vanishing, the gap growing as the cube of the time — did not clear the
+//! ground before the end of a step that had little left after the liftoff: every step's
+//! end then found a "crossing" at its start, and touchdowns and liftoffs a picosecond apart
+//! filled the step. The shorter the step, the more often a liftoff fell that close to
+//! its end.)
 //!
 //! A step integrates (RK4, torques held) in the current modes; if a guard ends negative,
 //! the earliest crossing is found by the Illinois method on the step length (to
@@ -394,10 +404,13 @@ where
         };
         let (x, v) = self.contact_coordinates(&hs.state);
         let floor = self.force_floor(&hs.state.q, u);
+        // Within the projection's tolerance of the ground is on it (see the module docs).
+        let band = self.options.tolerance.relative_residual
+            * leg_size::<L, T, NQ, NC, NU>(&self.params, &hs.state.q);
         for k in 0..NK / 2 {
             let (t, n) = (2 * k, 2 * k + 1);
             match hs.modes.get(k) {
-                ContactMode::Flight => g[n] = x[n],
+                ContactMode::Flight => g[n] = x[n] + band,
                 ContactMode::Stick => {
                     g[n] = forces[n];
                     g[t] = self.options.friction[t] * forces[n] + floor - forces[t].abs();
