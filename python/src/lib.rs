@@ -18,6 +18,7 @@ use leg_models::control::{
 };
 use leg_models::dynamics::DynamicsError as RustDynamicsError;
 use leg_models::nalgebra::{SMatrix, SVector};
+use leg_models::simulate::hybrid::{HybridState, HybridTorqueSource};
 use leg_models::simulate::{Method, State, StepOptions, TorqueSource};
 use leg_models::Shown;
 use leg_models::{ContactModel, Leg};
@@ -28,7 +29,7 @@ use numpy::{
 };
 use pyo3::exceptions::{PyException, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
+use pyo3::types::{PyDict, PyList, PyTuple};
 
 pyo3::create_exception!(
     legmodels,
@@ -291,28 +292,26 @@ fn sinusoid<const N: usize>(
 }
 
 /// Torques from Python: a constant array (zero when none is given) or a callable
-/// `(t, q, qd) -> u`.
-enum Torques<'py, const NU: usize> {
+/// `(t, q, qd) -> u`, held without the GIL (`Py`), so that a run can release it.
+enum Torques<const NU: usize> {
     Constant(SVector<f64, NU>),
-    Callable(Bound<'py, PyAny>),
+    Callable(Py<PyAny>),
 }
 
-struct PythonTorques<'py, const NQ: usize, const NU: usize> {
-    py: Python<'py>,
-    torques: Torques<'py, NU>,
+struct PythonTorques<const NQ: usize, const NU: usize> {
+    torques: Torques<NU>,
     /// The first error the callable raised: the run stops and re-raises it.
     error: Option<PyErr>,
 }
 
-impl<'py, const NQ: usize, const NU: usize> PythonTorques<'py, NQ, NU> {
-    fn new(py: Python<'py>, torque: Option<&Bound<'py, PyAny>>) -> PyResult<Self> {
+impl<const NQ: usize, const NU: usize> PythonTorques<NQ, NU> {
+    fn new(torque: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
         let torques = match torque {
             None => Torques::Constant(SVector::zeros()),
-            Some(t) if t.is_callable() => Torques::Callable(t.clone()),
+            Some(t) if t.is_callable() => Torques::Callable(t.clone().unbind()),
             Some(t) => Torques::Constant(vector("torque", t)?),
         };
         Ok(PythonTorques {
-            py,
             torques,
             error: None,
         })
@@ -323,9 +322,12 @@ impl<'py, const NQ: usize, const NU: usize> PythonTorques<'py, NQ, NU> {
             Torques::Constant(u) => return *u,
             Torques::Callable(f) => f,
         };
-        let result = f
-            .call1((t, out_vector(self.py, q), out_vector(self.py, qd)))
-            .and_then(|u| vector::<NU>("torque(t, q, qd)", &u));
+        // The GIL is taken for the call only: the integration between calls runs without it.
+        let result = Python::attach(|py| {
+            f.bind(py)
+                .call1((t, out_vector(py, q), out_vector(py, qd)))
+                .and_then(|u| vector::<NU>("torque(t, q, qd)", &u))
+        });
         match result {
             Ok(u) => u,
             Err(e) => {
@@ -336,7 +338,7 @@ impl<'py, const NQ: usize, const NU: usize> PythonTorques<'py, NQ, NU> {
     }
 }
 
-impl<const NQ: usize, const NU: usize> TorqueSource<f64, NQ, NU> for PythonTorques<'_, NQ, NU> {
+impl<const NQ: usize, const NU: usize> TorqueSource<f64, NQ, NU> for PythonTorques<NQ, NU> {
     fn torque(
         &mut self,
         t: f64,
@@ -346,21 +348,104 @@ impl<const NQ: usize, const NU: usize> TorqueSource<f64, NQ, NU> for PythonTorqu
     }
 }
 
-/// Runs `source` in the leg's simulator and returns the record as arrays; a run that
-/// stops early raises `SimulationError` with the record so far as its `record`.
-fn run_simulation<'py, L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+/// A torque source that looks for Ctrl-C every [`Interruptible::EVERY`] calls (the run holds
+/// no GIL, so Python's own check does not run): on a signal the run stops as a controller
+/// error would, with its record, and the signal's exception (`KeyboardInterrupt`) is raised.
+struct Interruptible<S> {
+    inner: S,
+    calls: u32,
+    interrupt: Option<PyErr>,
+}
+
+impl<S> Interruptible<S> {
+    /// About a millisecond of RK4 steps on the largest legs: Ctrl-C answers at once.
+    const EVERY: u32 = 256;
+
+    fn new(inner: S) -> Self {
+        Interruptible {
+            inner,
+            calls: 0,
+            interrupt: None,
+        }
+    }
+
+    fn poll(&mut self) -> Result<(), RustControlError> {
+        self.calls = self.calls.wrapping_add(1);
+        if self.calls % Self::EVERY == 0 {
+            if let Err(e) = Python::attach(|py| py.check_signals()) {
+                self.interrupt = Some(e);
+                return Err(RustControlError::Interrupted);
+            }
+        }
+        Ok(())
+    }
+}
+
+impl<S: TorqueSource<f64, NQ, NU>, const NQ: usize, const NU: usize> TorqueSource<f64, NQ, NU>
+    for Interruptible<S>
+{
+    fn torque(
+        &mut self,
+        t: f64,
+        state: &State<f64, NQ>,
+    ) -> Result<SVector<f64, NU>, RustControlError> {
+        self.poll()?;
+        self.inner.torque(t, state)
+    }
+}
+
+impl<S, const NQ: usize, const NK: usize, const NU: usize> HybridTorqueSource<f64, NQ, NK, NU>
+    for Interruptible<S>
+where
+    S: HybridTorqueSource<f64, NQ, NK, NU>,
+{
+    fn torque(
+        &mut self,
+        t: f64,
+        state: &HybridState<f64, NQ, NK>,
+    ) -> Result<SVector<f64, NU>, RustControlError> {
+        self.poll()?;
+        self.inner.torque(t, state)
+    }
+}
+
+/// The exception a run ends with: the callable's own error or Ctrl-C's `KeyboardInterrupt`
+/// first (with the record so far as its `record`), else the simulator's stop as
+/// `SimulationError` (also with its `record`), else the record.
+fn finish<'py>(
+    py: Python<'py>,
+    pending: Option<PyErr>,
+    stopped: Option<String>,
+    record: PyResult<Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let record = record?;
+    let err = match (pending, stopped) {
+        (Some(e), _) => e,
+        (None, Some(why)) => SimulationError::new_err(why),
+        (None, None) => return Ok(record),
+    };
+    err.value(py).setattr("record", record)?;
+    Err(err)
+}
+
+/// Runs `source` in the leg's simulator without the GIL and returns the record as arrays;
+/// a run that stops early raises `SimulationError` with the record so far as its `record`.
+fn run_simulation<'py, L, S, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
     py: Python<'py>,
     leg: &Leg<L, f64, NQ, NC, NU, NK>,
     initial: State<f64, NQ>,
     steps: usize,
     opts: StepOptions<f64>,
-    source: &mut impl TorqueSource<f64, NQ, NU>,
+    source: S,
+    callable_error: fn(&mut S) -> Option<PyErr>,
 ) -> PyResult<Bound<'py, PyDict>>
 where
     L: ContactModel<NQ, NC, NU, NK>,
+    S: TorqueSource<f64, NQ, NU> + Send,
+    Leg<L, f64, NQ, NC, NU, NK>: Sync,
 {
-    let sim = leg.simulator(opts);
-    let result = sim.run(initial, steps, source);
+    let mut source = Interruptible::new(source);
+    let result = py.detach(|| leg.simulator(opts).run(initial, steps, &mut source));
     let record = |samples: &[leg_models::simulate::Sample<f64, NQ, NC, NU>]| -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
         d.set_item("t", PyArray1::from_iter(py, samples.iter().map(|s| s.t)))?;
@@ -375,14 +460,20 @@ where
         )?;
         Ok(d)
     };
-    match result {
-        Ok(samples) => record(&samples),
-        Err(stopped) => {
-            let err = SimulationError::new_err(stopped.to_string());
-            err.value(py).setattr("record", record(&stopped.samples)?)?;
-            Err(err)
-        }
-    }
+    let (samples, stopped) = match &result {
+        Ok(samples) => (samples.as_slice(), None),
+        Err(e) => (e.samples.as_slice(), Some(e.to_string())),
+    };
+    let pending = source
+        .interrupt
+        .take()
+        .or_else(|| callable_error(&mut source.inner));
+    finish(py, pending, stopped, record(samples))
+}
+
+/// No Python callable: no error of its own.
+fn no_callable<S>(_: &mut S) -> Option<PyErr> {
+    None
 }
 
 macro_rules! leg_class {
@@ -436,6 +527,17 @@ macro_rules! leg_class {
 
                 fn __repr__(&self) -> String {
                     format!("legmodels.{}()", class_name())
+                }
+
+                /// Pickling (a work unit shipped to another process): the class by its
+                /// name and the leg's parameters and Baumgarte terms as the constructor's
+                /// keywords, so an unpickled leg equals the original bit for bit.
+                fn __getnewargs_ex__<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyTuple>, Bound<'py, PyDict>)> {
+                    let kwargs = self.params(py)?;
+                    if let Some(b) = self.leg.baumgarte() {
+                        kwargs.set_item("baumgarte", (b.alpha, b.beta))?;
+                    }
+                    Ok((PyTuple::empty(py), kwargs))
                 }
 
                 /// The spec's name.
@@ -748,9 +850,9 @@ macro_rules! leg_class {
                     check_torque_limits(&limit).map_err(|e| PyValueError::new_err(format!("`torque_limit`: {e}")))?;
                     let gains_kd = kd.unwrap_or(2.0 * kp.sqrt());
                     let Some(kind) = controller else {
-                        let mut source = Saturated::new(PythonTorques::<NQ, NU>::new(py, torque)?, limit).map_err(control_err)?;
-                        let result = run_simulation(py, &self.leg, initial, steps, opts, &mut source);
-                        return match source.inner.error.take() { Some(e) => Err(e), None => result };
+                        let source = Saturated::new(PythonTorques::<NQ, NU>::new(torque)?, limit).map_err(control_err)?;
+                        // The callable's error comes first, with the record so far.
+                        return run_simulation(py, &self.leg, initial, steps, opts, source, |s| s.inner.error.take());
                     };
                     if torque.is_some() {
                         return Err(PyValueError::new_err("give `torque` or `controller`, not both"));
@@ -761,22 +863,22 @@ macro_rules! leg_class {
                             let r = sinusoid::<NU>(setpoint()?, amplitude, frequency, phase)?;
                             let g = Gains::new(kp, gains_kd);
                             if kind == "pd_gravity" {
-                                let mut c = Saturated::new(self.leg.pd_gravity(g, r).map_err(control_err)?, limit).map_err(control_err)?;
-                                run_simulation(py, &self.leg, initial, steps, opts, &mut c)
+                                let c = Saturated::new(self.leg.pd_gravity(g, r).map_err(control_err)?, limit).map_err(control_err)?;
+                                run_simulation(py, &self.leg, initial, steps, opts, c, no_callable)
                             } else {
-                                let mut c = Saturated::new(self.leg.joint_feedback_linearization(g, r).map_err(control_err)?, limit).map_err(control_err)?;
-                                run_simulation(py, &self.leg, initial, steps, opts, &mut c)
+                                let c = Saturated::new(self.leg.joint_feedback_linearization(g, r).map_err(control_err)?, limit).map_err(control_err)?;
+                                run_simulation(py, &self.leg, initial, steps, opts, c, no_callable)
                             }
                         }
                         "foot_feedback_linearization" | "foot_pd_gravity" => {
                             let r = sinusoid::<2>(setpoint()?, amplitude, frequency, phase)?;
                             let g = Gains::new(kp, gains_kd);
                             if kind == "foot_pd_gravity" {
-                                let mut c = Saturated::new(self.leg.foot_pd_gravity(g, r).map_err(control_err)?, limit).map_err(control_err)?;
-                                run_simulation(py, &self.leg, initial, steps, opts, &mut c)
+                                let c = Saturated::new(self.leg.foot_pd_gravity(g, r).map_err(control_err)?, limit).map_err(control_err)?;
+                                run_simulation(py, &self.leg, initial, steps, opts, c, no_callable)
                             } else {
-                                let mut c = Saturated::new(self.leg.foot_feedback_linearization(g, r).map_err(control_err)?, limit).map_err(control_err)?;
-                                run_simulation(py, &self.leg, initial, steps, opts, &mut c)
+                                let c = Saturated::new(self.leg.foot_feedback_linearization(g, r).map_err(control_err)?, limit).map_err(control_err)?;
+                                run_simulation(py, &self.leg, initial, steps, opts, c, no_callable)
                             }
                         }
                         other => Err(PyValueError::new_err(format!("unknown `controller` \"{}\": \"joint_feedback_linearization\", \"foot_feedback_linearization\", \"pd_gravity\" or \"foot_pd_gravity\"", Shown(other)))),
@@ -792,14 +894,13 @@ macro_rules! leg_class {
                 fn simulate_hybrid<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, steps: usize, dt: f64, torque: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyDict>> {
                     step_options(dt, "rk4", true)?;
                     let sim = self.leg.hybrid_simulator(dt);
-                    let mut torques = PythonTorques::<NQ, NU>::new(py, torque)?;
+                    let mut torques = PythonTorques::<NQ, NU>::new(torque)?;
                     let start = sim.start(State { q: vector("q", q)?, qd: vector("qd", qd)? }, &SVector::zeros())
                         .map_err(|e| SimulationError::new_err(e.to_string()))?;
-                    let mut source = |t: f64, hs: &HybridState<f64, NQ, NK>| torques.call(t, &hs.state.q, &hs.state.qd);
-                    let result = sim.run(start, steps, &mut source);
-                    if let Some(e) = torques.error.take() {
-                        return Err(e);
-                    }
+                    let mut source = Interruptible::new(|t: f64, hs: &HybridState<f64, NQ, NK>| torques.call(t, &hs.state.q, &hs.state.qd));
+                    // Without the GIL (the callable takes it for its calls), Ctrl-C seen.
+                    let result = py.detach(|| sim.run(start, steps, &mut source));
+                    let pending = source.interrupt.take().or_else(|| torques.error.take());
                     let record = |r: &leg_models::simulate::hybrid::HybridRecord<f64, NQ, NC, NU, NK>| -> PyResult<Bound<'py, PyDict>> {
                         let d = PyDict::new(py);
                         let s = &r.samples;
@@ -822,14 +923,11 @@ macro_rules! leg_class {
                         d.set_item("events", events)?;
                         Ok(d)
                     };
-                    match result {
-                        Ok(r) => record(&r),
-                        Err(stopped) => {
-                            let err = SimulationError::new_err(stopped.to_string());
-                            err.value(py).setattr("record", record(&stopped.record)?)?;
-                            Err(err)
-                        }
-                    }
+                    let (r, stopped) = match &result {
+                        Ok(r) => (r, None),
+                        Err(stopped) => (&stopped.record, Some(stopped.to_string())),
+                    };
+                    finish(py, pending, stopped, record(r))
                 }
 
                 // ---- design measures (leg_models::analysis) ----
@@ -957,7 +1055,9 @@ macro_rules! leg_class {
                         Some(r) => return Err(PyValueError::new_err(format!("`motor_range` needs {NU} finite pairs (low, high) with low < high, got {r:?}"))),
                     };
                     let options = GridOptions { nodes, window, motor_range, limits };
-                    let w = self.leg.workspace(&start, &options).map_err(analysis_err)?;
+                    // Up to 2000 × 2000 nodes of continuation: without the GIL.
+                    let leg = &self.leg;
+                    let w = py.detach(|| leg.workspace(&start, &options)).map_err(analysis_err)?;
                     let n = w.nodes;
                     let x: Vec<f64> = (0..n).map(|i| w.node(i, 0)[0]).collect();
                     let y: Vec<f64> = (0..n).map(|i| w.node(0, i)[1]).collect();
@@ -1039,6 +1139,10 @@ macro_rules! leg_class {
 
             pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
                 let class = m.py().get_type::<PyLeg>();
+                // One Rust type per leg, each named for its leg (pickle finds a class by
+                // `module.__qualname__`: under one shared name `Leg` none pickled).
+                class.setattr("__name__", class_name())?;
+                class.setattr("__qualname__", class_name())?;
                 m.add(class_name(), &class)?;
                 m.getattr("models")?.set_item(Model::NAME, class)?;
                 Ok(())

@@ -8,7 +8,7 @@ use leg_models::dynamics::contact::{
     Modes,
 };
 use leg_models::nalgebra::{DMatrix, DVector, SMatrix, SVector};
-use leg_models::simulate::hybrid::{EventKind, HybridSimulator, HybridState};
+use leg_models::simulate::hybrid::{EventKind, HybridError, HybridSimulator, HybridState};
 use leg_models::simulate::State;
 use leg_models::{ContactModel, LegModel, Parameters};
 use leg_tests::{not_applicable, Rng};
@@ -427,6 +427,51 @@ fn minitaur_hopper_drop_touches_down_at_the_free_fall_time() {
         );
     }
     assert!(touchdown.energy_lost > 0.0 && touchdown.impulse[1] > 0.0);
+}
+
+/// Issue 29, class 10: a start 0.1 m into the ground began the record 0.1 m higher, with
+/// no event and no error. It is refused, naming the contact and the depth; a toe on the
+/// ground (to rounding) starts in stance where it is.
+#[test]
+fn a_start_under_the_ground_is_refused() {
+    use generated::minitaur_hopper::{Params, NC, NK, NQ, NU};
+    use generated::MinitaurHopper as L;
+    let p = Params::<f64>::default();
+    let sim = HybridSimulator::<L, f64, NQ, NC, NU, NK>::new(p, 1e-3);
+    let mut home = SVector::<f64, NQ>::from(L::HOME);
+    leg_models::assembly::project_position::<L, f64, NQ, NC, NU>(
+        &p,
+        &mut home,
+        &Default::default(),
+    )
+    .unwrap();
+    let toe = L::contact_positions(&home, &p)[1];
+    let at = |shift: f64| {
+        let mut q = home;
+        q[0] += shift - toe; // the rail's height: the toe at `shift` above the ground
+        State {
+            q,
+            qd: SVector::zeros(),
+        }
+    };
+    for depth in [0.1, 1e-3, 1e-6] {
+        match sim.start(at(-depth), &SVector::zeros()) {
+            Err(e @ HybridError::StartsUnderGround { contact, depth: d }) => {
+                assert_eq!(contact, "toe_contact");
+                assert!((d - depth).abs() < 1e-12, "{d} for {depth}");
+                assert!(e.to_string().contains("under the ground"), "{e}");
+            }
+            other => panic!("{depth} m under: {other:?}"),
+        }
+    }
+    let on = at(0.0);
+    let start = sim.start(on, &SVector::zeros()).unwrap();
+    assert_eq!(start.modes.get(0), ContactMode::Stick);
+    assert!(
+        (start.state.q - on.q).amax() < 1e-9,
+        "moved: {}",
+        start.state.q - on.q
+    );
 }
 
 /// A conservative motor law `u = −k_p (θ − θ₀)` (a spring on each motor, no damping):

@@ -603,6 +603,22 @@ fn sim_hops_a_leg_with_contacts() {
         &legs(&["sim", "minitaur_hopper", "--speed", "0.5", "--out", b]),
         "--speed: minitaur_hopper: a forward speed needs a body that moves along the ground",
     );
+    // Ignored without a word under a passive drop (issue 29).
+    for flag in ["--apex", "--speed"] {
+        refused(
+            &legs(&[
+                "sim",
+                "atrias_hopper",
+                "--controller",
+                "passive",
+                flag,
+                "0.5",
+                "--out",
+                b,
+            ]),
+            &format!("{flag} sets the hopping controller's"),
+        );
+    }
     refused(
         &legs(&[
             "eval",
@@ -888,6 +904,15 @@ fn analyze_refuses_bad_input_and_writes_nothing() {
                 d,
             ],
             "did you mean `lower_a_length_x`",
+        ),
+        // Limits that overflow the polygons (issue 29, class 5): read as "unbounded".
+        (
+            vec!["analyze", "minitaur", "--torque-limit", "1e308", "--out", d],
+            "`--torque-limit`: 1e308 is beyond 1e9: a torque limit must be in (0, 1e9]",
+        ),
+        (
+            vec!["analyze", "minitaur", "--speed-limit", "2,1e308", "--out", d],
+            "`--speed-limit`: 1e308 is beyond 1e9",
         ),
         // Sweeps that make no designs (issue 29): values that overflow, values one label.
         (
@@ -1191,4 +1216,68 @@ fn eval_names_every_term_that_overflows() {
         "{}",
         v["errors"]
     );
+}
+
+/// Issue 29, class 5: a gear ratio of 1e-200 made a default speed limit of 1e202 rad/s and
+/// left dashes with no reason. The design says which limit and why; every dash of every
+/// design has its reason.
+#[test]
+fn analyze_says_why_for_every_dash() {
+    let dir = temp_dir("analyze-dash");
+    let out = legs(&[
+        "analyze",
+        "minitaur",
+        "--set",
+        "upper_a_gear_ratio=1e-200",
+        "--nodes",
+        "12",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("analysis.json")).unwrap()).unwrap();
+    let error = v["designs"][0]["error"].as_str().unwrap_or_default();
+    assert!(
+        error.contains(
+            "the speed limit of motor 1 (upper_a) is 1.000e202 rad/s, from its gear ratio 1e-200"
+        ),
+        "{error}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+    // Every null in a table has its reason, on designs of every kind of leg.
+    let out = legs(&[
+        "analyze",
+        "minitaur",
+        "klann_linkage",
+        "minitaur_pinned_toe",
+        "two_link",
+        "--nodes",
+        "12",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("analysis.json")).unwrap()).unwrap();
+    for d in v["designs"].as_array().unwrap() {
+        for (key, value) in d["table"].as_object().unwrap() {
+            if value.is_null() {
+                assert!(
+                    d["not_computed"][key].is_string(),
+                    "{}: `{key}` has no reason",
+                    d["label"]
+                );
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }

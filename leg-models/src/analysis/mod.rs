@@ -788,6 +788,14 @@ fn delassus<T: Real, const NQ: usize, const NC: usize, const NR: usize>(
     locked: &[bool; NQ],
     redundant_rows: usize,
 ) -> Result<SMatrix<T, NR, NR>, AnalysisError> {
+    // A closure row that is zero before any joint is locked is not a row that locking
+    // freed: the closures lose rank at this pose (a five-bar stretched flat), a
+    // singularity, not a row to leave out (Minitaur at q = 0 gave ξ = 0 and a Λ⁻¹ with a
+    // zero row).
+    let zero_rows = (0..NC).filter(|&r| j.row(r).amax() == T::zero()).count();
+    if zero_rows > redundant_rows {
+        return Err(AnalysisError::PassiveSingular);
+    }
     let (mut m, mut j, mut a) = (*m, *j, *a);
     for (c, &l) in locked.iter().enumerate() {
         if l {

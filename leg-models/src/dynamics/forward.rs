@@ -257,7 +257,9 @@ fn not_positive_definite<T: Real, const NQ: usize>(m: &SMatrix<T, NQ, NQ>) -> Dy
     }
 }
 
-/// A non-finite result at a finite state and input is an overflow, not bad input.
+/// The failure said as what caused it: a NaN or infinite state or input, whatever it
+/// broke first (a NaN angle shows as singular constraints), is `NonFinite`; a non-finite
+/// result at a finite state and input is an overflow, not bad input.
 #[cold]
 pub(crate) fn classify_non_finite<T: Real, const NQ: usize, const NU: usize>(
     e: DynamicsError,
@@ -265,10 +267,11 @@ pub(crate) fn classify_non_finite<T: Real, const NQ: usize, const NU: usize>(
     qd: &SVector<T, NQ>,
     u: &SVector<T, NU>,
 ) -> DynamicsError {
-    if e == DynamicsError::NonFinite && all_finite(q) && all_finite(qd) && all_finite(u) {
-        DynamicsError::Overflow
-    } else {
-        e
+    let finite_input = all_finite(q) && all_finite(qd) && all_finite(u);
+    match e {
+        _ if !finite_input => DynamicsError::NonFinite,
+        DynamicsError::NonFinite => DynamicsError::Overflow,
+        other => other,
     }
 }
 

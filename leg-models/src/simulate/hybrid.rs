@@ -173,6 +173,15 @@ pub enum HybridError {
     /// The record a run would keep is larger than its budget: refused before the first
     /// step.
     RecordTooLarge(crate::simulate::step::RecordTooLarge),
+    /// The start has contact `contact` under the ground by `depth` (m), more than
+    /// [`ON_CLOSURES`](crate::assembly::ON_CLOSURES) of the leg's size: it was moved up
+    /// onto the ground without a word; a start must be on or above the ground.
+    StartsUnderGround {
+        /// The contact's name.
+        contact: &'static str,
+        /// How far under (m, positive).
+        depth: f64,
+    },
 }
 
 impl fmt::Display for HybridError {
@@ -187,6 +196,10 @@ impl fmt::Display for HybridError {
                 "more than {MAX_EVENTS_PER_STEP} contact events in the step at t = {t} s (the contacts chatter)"
             ),
             HybridError::RecordTooLarge(e) => write!(f, "{e}"),
+            HybridError::StartsUnderGround { contact, depth } => write!(
+                f,
+                "the start has contact `{contact}` {depth:.3e} m under the ground: start on or above it (raise the body or fold the leg)"
+            ),
         }
     }
 }
@@ -722,6 +735,15 @@ where
         let mut hs = HybridState::flight(state);
         let (x, v) = self.contact_coordinates(&state);
         let size = leg_size::<L, T, NQ, NC, NU>(&self.params, &state.q);
+        // A contact under the ground is refused, not moved up onto it (issue 29).
+        for k in 0..NK / 2 {
+            if x[2 * k + 1] < -(size * T::lit(crate::assembly::ON_CLOSURES)) {
+                return Err(HybridError::StartsUnderGround {
+                    contact: L::CONTACT_NAMES[k],
+                    depth: -to_f64(x[2 * k + 1]),
+                });
+            }
+        }
         for k in 0..NK / 2 {
             if x[2 * k + 1] <= self.options.tolerance.relative_residual * size
                 && v[2 * k + 1] <= T::zero()

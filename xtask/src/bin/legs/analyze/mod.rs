@@ -167,20 +167,28 @@ impl Settings {
                 Some(sweep)
             }
         };
-        let list =
-            |flag: &str, text: &Option<String>, what: &str| -> Result<Option<Vec<f64>>, Error> {
-                let Some(text) = text else { return Ok(None) };
-                let values = text
-                    .split(',')
-                    .map(|v| finite(flag, v, what))
-                    .collect::<Result<Vec<_>, _>>()?;
-                if values.iter().any(|&v| v <= 0.0) {
-                    return Err(Error::usage(format!(
-                        "`{flag}`: every {what} must be positive"
+        let list = |flag: &str,
+                    text: &Option<String>,
+                    what: &str|
+         -> Result<Option<Vec<f64>>, Error> {
+            let Some(text) = text else { return Ok(None) };
+            let values = text
+                .split(',')
+                .map(|v| finite(flag, v, what))
+                .collect::<Result<Vec<_>, _>>()?;
+            if values.iter().any(|&v| v <= 0.0) {
+                return Err(Error::usage(format!(
+                    "`{flag}`: every {what} must be positive"
+                )));
+            }
+            // A limit of 1e308 overflowed the polygons and was reported as physics.
+            if let Some(v) = values.iter().find(|&&v| v > MAX_LIMIT) {
+                return Err(Error::usage(format!(
+                        "`{flag}`: {v:e} is beyond {MAX_LIMIT:e}: a {what} must be in (0, {MAX_LIMIT:e}] (larger ones overflow the force and speed polygons)"
                     )));
-                }
-                Ok(Some(values))
-            };
+            }
+            Ok(Some(values))
+        };
         let motor_range = match &a.motor_range {
             None => None,
             Some(r) => {
@@ -409,6 +417,10 @@ where
         .map_or(1.0, f64::abs)
 }
 
+/// The largest torque (N m) or speed (rad/s) limit taken, given or from a gear ratio:
+/// beyond it the polygons' products overflow f64 (a limit of 1e308 read as "unbounded").
+const MAX_LIMIT: f64 = 1e9;
+
 /// Motor torque at the shaft (N m) and speed (rad/s) of the defaults.
 const MOTOR_TORQUE: f64 = 1.0;
 const MOTOR_SPEED: f64 = 100.0;
@@ -507,6 +519,33 @@ where
         },
     });
     let mut why = serde_json::Map::new();
+    // A default limit from a gear ratio out of range (1e-200 made a speed limit of 1e202
+    // rad/s and a dash with no reason): the design says so and computes nothing.
+    for (kind, unit, values) in [
+        ("torque", "N m", &limits.torque),
+        ("speed", "rad/s", &limits.speed),
+    ] {
+        if let Some((k, v)) = values
+            .iter()
+            .enumerate()
+            .find(|(_, v)| !(v.is_finite() && **v > 0.0 && **v <= MAX_LIMIT))
+        {
+            json["error"] = json!(format!(
+                "the {kind} limit of motor {} ({}) is {v:.3e} {unit}, from its gear ratio {:e}: beyond (0, {MAX_LIMIT:e}]; give --{kind}-limit or a gear ratio in range",
+                k + 1,
+                L::JOINT_NAMES[L::ACTUATED[k]],
+                gear::<L, NQ, NC, NU>(p, k)
+            ));
+            return Design {
+                label,
+                file_stem,
+                swept: swept.map(|s| s.1),
+                json,
+                csv: None,
+                view: None,
+            };
+        }
+    }
     let mut q = branch.map_or(SVector::from(L::HOME), |(_, q)| *q);
     if let Err(e) = project_position::<L, f64, NQ, NC, NU>(p, &mut q, &Tolerance::default()) {
         json["error"] = json!(format!(
@@ -710,6 +749,15 @@ where
             }
         }
     };
+    // A dash always has its reason: a measure that is not a number and has none overflowed.
+    for (key, value) in &table {
+        if value.is_null() && !why.contains_key(key) {
+            why.insert(
+                key.clone(),
+                json!("overflow: beyond f64's range with these parameters and limits"),
+            );
+        }
+    }
     json["table"] = Value::Object(table);
     json["not_computed"] = Value::Object(why);
     Design {

@@ -92,6 +92,17 @@ pub fn run<
             L::NAME
         )));
     }
+    // The hopping controller's settings mean nothing to a passive drop: refused, not ignored.
+    if s.passive() {
+        for (flag, given) in [("--apex", s.apex.is_some()), ("--speed", s.speed.is_some())] {
+            if given {
+                return Err(Error::usage(format!(
+                    "{flag} sets the hopping controller's {}; with --controller passive there is none (leave out one or the other)",
+                    if flag == "--apex" { "apex height" } else { "forward speed" }
+                )));
+            }
+        }
+    }
     let mut home = SVector::<f64, NQ>::from_column_slice(&L::HOME);
     project_position::<L, f64, NQ, NC, NU>(&p, &mut home, &Tolerance::default())
         .map_err(|e| fail("the home pose does not assemble", &e))?;
