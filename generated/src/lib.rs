@@ -10,6 +10,8 @@ pub mod atrias_hopper;
 pub use atrias_hopper::AtriasHopper;
 pub mod braced_parallelogram;
 pub use braced_parallelogram::BracedParallelogram;
+pub mod cassie_planar;
+pub use cassie_planar::CassiePlanar;
 pub mod digit;
 pub use digit::Digit;
 pub mod five_bar_offset;
@@ -44,7 +46,8 @@ macro_rules! for_each_model {
         $callback ! (atrias, $crate::atrias::Atrias, 4, 2, 2, 0); $callback !
         (atrias_hopper, $crate::atrias_hopper::AtriasHopper, 9, 2, 2, 2); $callback !
         (braced_parallelogram, $crate::braced_parallelogram::BracedParallelogram, 5, 4,
-        2, 0); $callback ! (digit, $crate::digit::Digit, 4, 2, 2, 0); $callback !
+        2, 0); $callback ! (cassie_planar, $crate::cassie_planar::CassiePlanar, 7, 4, 3,
+        0); $callback ! (digit, $crate::digit::Digit, 4, 2, 2, 0); $callback !
         (five_bar_offset, $crate::five_bar_offset::FiveBarOffset, 4, 2, 2, 0); $callback
         ! (klann_linkage, $crate::klann_linkage::KlannLinkage, 7, 6, 1, 0); $callback !
         (knee_hopper, $crate::knee_hopper::KneeHopper, 3, 0, 2, 2); $callback !

@@ -108,7 +108,7 @@ def test_design_measures_against_numpy(name):
     assert d["effective_mass"] == pytest.approx(1.0 / free[1, 1], rel=1e-8)
 
 
-@pytest.mark.parametrize("name", ["minitaur", "atrias", "digit", "five_bar_offset", "three_motor_leg"])
+@pytest.mark.parametrize("name", ["minitaur", "atrias", "digit", "five_bar_offset", "three_motor_leg", "cassie_planar"])
 def test_impact_mitigation_on_a_body_against_the_augmented_system(name):
     """ξ = det(I − Λ Λ_L⁻¹) with the hip on a translating body of mass m_b, against numpy's
     Delassus matrices of the leg and body written as one system: coordinates (b_x, b_y, q),

@@ -4,7 +4,9 @@
 //! written as a spec. Every leg runs every measure, or is refused for a reason its
 //! structure gives.
 
-use leg_models::analysis::workspace::{follow, workspace, GridOptions, NodeState, Workspace};
+use leg_models::analysis::workspace::{
+    follow, workspace, GridOptions, NodeState, Workspace, FOLD_FLOOR, GRID_FLOOR,
+};
 use leg_models::analysis::{
     foot_inverse_inertia, force_polygon, impact_mitigation, motor_kinematics, point_measures,
     AnalysisError, Body, BodyCoupling, LegFrame, MotorLimits,
@@ -707,7 +709,10 @@ pub fn check_singularities<
                     passive_checked += 1;
                 }
                 (NodeState::Reached, NodeState::BranchEnds) if edges_checked < 8 => {
-                    // The last point along the edge the branch reaches from node i.
+                    // The last point along the edge the branch reaches from node i, with
+                    // steps down to 1e-7 of the way: the grid's sixteenth stops short of a
+                    // fold where a joint turns fast near it (cassie_planar's toe crank turns
+                    // 0.2 rad over the last 0.3 mm, where σ_min is still 3e-3 of home's).
                     let (mut lo, mut hi, mut q) = (0.0, 1.0, ws.poses[i]);
                     let from = Vector2::new(a[0], a[1]);
                     for _ in 0..50 {
@@ -719,12 +724,14 @@ pub fn check_singularities<
                             &foot_at(a, b, mid),
                             &frame,
                             &tol,
+                            FOLD_FLOOR,
                         ) {
                             Ok(qm) => (lo, q) = (mid, qm),
                             _ => hi = mid,
                         }
                     }
-                    // q is within 2⁻⁵⁰ of a cell from where the branch ends.
+                    // q is within 2⁻⁵⁰ of a cell from where `follow` ends, which is within
+                    // about 1e-7 of the way from the fold.
 
                     let interior = home_kin.foot_jacobian;
                     let (s_in_hi, s_in_lo) = leg_models::analysis::singular_values(&interior);
@@ -875,6 +882,96 @@ fn five_bar_workspace_is_the_intersection_of_the_annuli() {
     let ws = workspace::<generated::Minitaur, 4, 2, 2>(&p, &q, &frame, &grid::<2>(100)).unwrap();
     let annulus = std::f64::consts::PI * (0.3f64.powi(2) - 0.1f64.powi(2));
     assert!((ws.area - annulus).abs() < 0.03 * annulus, "{}", ws.area);
+}
+
+/// `follow` ends at the fold, not short of it, where a joint turns fast near the fold:
+/// `cassie_planar` (three motors moving a two-coordinate foot) at the edge of its reach
+/// has its toe crank near its dead centre, turning about 0.2 rad over the last 0.3 mm.
+/// Against a march of its own along the same edge (each step solved from the last, grown
+/// by half after each that holds and halved otherwise, none turning a joint by more than
+/// 0.02 rad, until a step of 1e-15 of the cell fails): with [`FOLD_FLOOR`], `follow`
+/// reaches the edge's point 1e-6 of a cell before the march's last and not the one 1e-6
+/// after it, and the foot's rank there is below 1e-4 of home's (σ_min ∝ √distance). With
+/// the grid's floor, a sixteenth of the way, it stops short: up to 0.0074 of a cell
+/// (0.27 mm; the foot's rank 9.3e-4 there, 0.34 at home).
+#[test]
+fn follow_ends_at_the_fold_where_a_joint_turns_fast() {
+    type L = generated::CassiePlanar;
+    let (p, frame, start, ws) = leg_grid::<L, 7, 4, 3>("follow to the fold", 60).unwrap();
+    let tol = Tolerance::default();
+    let n = ws.nodes;
+    let rank = |q: &SVector<f64, 7>| {
+        let kin = motor_kinematics::<L, f64, 7, 4, 3>(&p, q, &frame).unwrap();
+        leg_models::analysis::foot_rank::<L, f64, 7, 4, 3>(&frame, &kin).abs()
+    };
+    let at_home = rank(&start);
+    let (mut checked, mut short) = (0, 0.0f64);
+    for i in 0..n * n - 1 {
+        let k = i + 1;
+        if k % n == 0 || ws.states[i] != NodeState::Reached || ws.states[k] != NodeState::BranchEnds
+        {
+            continue;
+        }
+        let (a, b) = (ws.node(i % n, i / n), ws.node(k % n, k / n));
+        let foot_at = |t: f64| Vector2::new(a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]));
+        // The march.
+        let (mut q, mut t, mut h) = (ws.poses[i], 0.0, 1e-3);
+        for _ in 0..10_000 {
+            if h < 1e-15 {
+                break;
+            }
+            match foot_inverse_holding::<L, f64, 7, 4, 3>(
+                &p,
+                &foot_at(t + h),
+                &q,
+                &tol,
+                &frame.held,
+            ) {
+                Ok(next) if (next - q).amax() < 0.02 => (q, t, h) = (next, t + h, 1.5 * h),
+                _ => h *= 0.5,
+            }
+        }
+        assert!(h < 1e-15 && t < 1.0, "the march crosses the edge: t = {t}");
+        let to = |s: f64, floor: f64| {
+            follow::<L, 7, 4, 3>(
+                &p,
+                &ws.poses[i],
+                &Vector2::new(a[0], a[1]),
+                &foot_at(s),
+                &frame,
+                &tol,
+                floor,
+            )
+        };
+        let before = to(t - 1e-6, FOLD_FLOOR).unwrap_or_else(|e| {
+            panic!(
+                "edge {i}: follow stops before {} of the cell: {e}",
+                t - 1e-6
+            )
+        });
+        assert!(to(t + 1e-6, FOLD_FLOOR).is_err(), "edge {i}: past the fold");
+        let r = rank(&before);
+        assert!(
+            r < 1e-4 * at_home,
+            "edge {i}: foot rank {r}, {at_home} at home"
+        );
+        // The grid's floor: where it stops, by bisection.
+        let (mut lo, mut hi) = (0.0, 1.0);
+        for _ in 0..40 {
+            let mid = 0.5 * (lo + hi);
+            match to(mid, GRID_FLOOR) {
+                Ok(_) => lo = mid,
+                _ => hi = mid,
+            }
+        }
+        short = short.max(t - lo);
+        checked += 1;
+        if checked == 8 {
+            break;
+        }
+    }
+    assert_eq!(checked, 8);
+    println!("with the grid's floor follow stops up to {short} of a cell short of the fold");
 }
 
 /// A motor range that leaves out the starting pose is named as such, not as a branch

@@ -276,7 +276,15 @@ where
             if matches!(states[k], NodeState::Reached | NodeState::OutOfRange) {
                 continue;
             }
-            match follow::<L, NQ, NC, NU>(params, &poses[i], &at(i), &at(k), frame, &tol) {
+            match follow::<L, NQ, NC, NU>(
+                params,
+                &poses[i],
+                &at(i),
+                &at(k),
+                frame,
+                &tol,
+                GRID_FLOOR,
+            ) {
                 Ok(q) => {
                     if in_range(&q) {
                         states[k] = NodeState::Reached;
@@ -364,10 +372,35 @@ where
 /// means the solver landed on another branch.
 pub const JUMP: f64 = 0.35;
 
+/// The shortest step [`workspace`] lets [`follow`] take between neighbouring nodes, as a
+/// fraction of the way: a sixteenth, enough to tell whether a node is reached (a node a
+/// small fraction of a cell inside a fold may be counted as past it). [`FOLD_FLOOR`]
+/// finds the fold itself, at a cost: each halving aimed past a fold is a solve that runs
+/// all its iterations.
+pub const GRID_FLOOR: f64 = 1.0 / 16.0;
+
+/// A floor for [`follow`] that finds where a branch ends to within about 1e-7 of the way
+/// (as [`crate::assembly::assemble_along`] does).
+pub const FOLD_FLOOR: f64 = 1e-7;
+
+/// The most foot solves one [`follow`] makes, whatever the floor (bounded work): a
+/// straight way with no fold takes one; a way that ends at a fold takes one or two per
+/// halving down to the floor (23 halvings to [`FOLD_FLOOR`]).
+pub const FOLLOW_SOLVES: usize = 2000;
+
 /// Moves the foot of the assembled pose `from` (its foot at `from_foot`) on a straight
 /// line to `to`, staying on `from`'s branch: each step is solved from the previous pose
-/// and may change no joint by more than [`JUMP`]; a step that would is halved, down to a
-/// sixteenth of the way. Fails where the branch ends (or folds back) on the way.
+/// and may change no joint by more than [`JUMP`]; a step that would, or whose solve
+/// fails, is halved, down to `floor` of the way, and after two steps in a row that hold
+/// the next is doubled (up to the whole way).
+///
+/// Fails where the branch ends (or folds back) on the way, and may fail up to a few
+/// `floor`s of the way before that: near a fold the pose moves as the square root of the
+/// foot's distance to it, so a joint can turn by more than [`JUMP`] over the last
+/// fraction of a millimetre (a short toe crank near its dead centre does) and a step no
+/// shorter than `floor` cannot follow it. [`workspace`] uses [`GRID_FLOOR`];
+/// [`FOLD_FLOOR`] puts the failure at the fold. A `floor` that is not positive (or NaN)
+/// is taken as `f64::EPSILON`; at most [`FOLLOW_SOLVES`] solves.
 pub fn follow<L, const NQ: usize, const NC: usize, const NU: usize>(
     params: &L::Params<f64>,
     from: &SVector<f64, NQ>,
@@ -375,29 +408,45 @@ pub fn follow<L, const NQ: usize, const NC: usize, const NU: usize>(
     to: &SVector<f64, 2>,
     frame: &LegFrame<NQ>,
     tol: &Tolerance<f64>,
+    floor: f64,
 ) -> Result<SVector<f64, NQ>, AnalysisError>
 where
     L: LegModel<NQ, NC, NU>,
 {
-    let (mut q, mut done, mut h): (_, f64, f64) = (*from, 0.0, 1.0);
-    while done < 1.0 {
-        let t = (done + h).min(1.0);
+    use crate::assembly::AssemblyError;
+    let floor = if floor > 0.0 {
+        floor.min(1.0)
+    } else {
+        f64::EPSILON
+    };
+    let ends = |done: f64| AnalysisError::Assembly(AssemblyError::BranchEnds { fraction: done });
+    // `held`: steps in a row that held at the current length.
+    let (mut q, mut done, mut h, mut held): (_, f64, f64, u32) = (*from, 0.0, 1.0, 1);
+    for _ in 0..FOLLOW_SOLVES {
+        if done >= 1.0 {
+            return Ok(q);
+        }
+        let h_now = h.min(1.0 - done);
+        let t = done + h_now;
         let target = from_foot + (to - from_foot) * t;
         match foot_inverse_holding::<L, f64, NQ, NC, NU>(params, &target, &q, tol, &frame.held) {
             Ok(next) if (next - q).amax() <= JUMP => {
-                q = next;
-                done = t;
+                (q, done, held) = (next, t, held + 1);
+                if held >= 2 {
+                    h = (h_now + h_now).min(1.0);
+                }
             }
-            Ok(_) | Err(_) if h > 1.0 / 16.0 => h *= 0.5,
-            Ok(_) => {
-                return Err(AnalysisError::Assembly(
-                    crate::assembly::AssemblyError::BranchEnds { fraction: done },
-                ))
-            }
+            Err(AssemblyError::NonFinite) => return Err(AssemblyError::NonFinite.into()),
+            Ok(_) | Err(_) if h_now > floor => (h, held) = (0.5 * h_now, 0),
+            Ok(_) => return Err(ends(done)),
             Err(e) => return Err(e.into()),
         }
     }
-    Ok(q)
+    if done >= 1.0 {
+        Ok(q)
+    } else {
+        Err(ends(done))
+    }
 }
 
 /// Marching squares: the segments where `values` (row by row, `n` per row; NaN: no
