@@ -309,11 +309,201 @@ fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usiz
     }
 }
 
+/// Issue 29: the analysis and the hybrid simulator under the same kind of input. Poses near
+/// home (projected, or left off the closures), hostile poses, parameters edited; limits
+/// ordinary, zero or huge; a start on, above or under the ground. Each call is `Ok` with
+/// finite values in their ranges (ranks in [0, 1], `Λ⁻¹` symmetric, `ξ` in [0, 1]) and
+/// only at a pose on the closures, or a typed error; a hybrid run keeps every contact on
+/// or above the ground and a start under it is refused.
+fn run_analysis_and_hybrid<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>()
+where
+    L: leg_models::ContactModel<NQ, NC, NU, NK>,
+{
+    use leg_models::analysis::{
+        foot_inverse_inertia, impact_mitigation, point_measures, Body, BodyCoupling, LegFrame,
+        MotorLimits,
+    };
+    use leg_models::simulate::hybrid::{HybridError, HybridSimulator, HybridState};
+    let n_params = <L::Params<f64> as Parameters<f64>>::NAMES.len();
+    let strategy = (
+        prop::collection::vec(-0.3..0.3f64, NQ),
+        prop::collection::vec(value(4.0), NQ),
+        prop_oneof![3 => Just(true), 1 => Just(false)],
+        prop::collection::vec(-2.0..2.0f64, NQ),
+        prop_oneof![Just(1e-3), Just(0.5), Just(1e9), Just(0.0), Just(f64::NAN)],
+        prop_oneof![Just(-0.05), Just(0.0), Just(0.02), Just(0.2)],
+        prop::collection::vec(
+            prop_oneof![8 => Just(Edit::Keep), 1 => (0.5..2.0f64).prop_map(Edit::Scale), 1 => edit()],
+            n_params,
+        ),
+        prop_oneof![3 => Just(true), 1 => Just(false)],
+    );
+    let mut runner = TestRunner::new(Config {
+        cases: (cases() / 2).max(8),
+        failure_persistence: None,
+        rng_seed: seed(),
+        ..Config::default()
+    });
+    let oks = std::cell::RefCell::new([0u32; 3]);
+    let frame = LegFrame::<NQ>::of::<L, NC, NU>();
+    let result = runner.run(
+        &strategy,
+        |(noise, hostile, near, qd, limit, lift, edits, ordinary)| {
+            let mut p = L::Params::<f64>::default();
+            if !ordinary {
+                for (i, e) in edits.iter().enumerate() {
+                    let v = p.get(i).unwrap();
+                    match *e {
+                        Edit::Keep => {}
+                        Edit::Scale(s) => {
+                            p.set(i, v * s);
+                        }
+                        Edit::Set(x) => {
+                            p.set(i, x);
+                        }
+                    }
+                }
+            }
+            let home = SVector::<f64, NQ>::from_column_slice(&L::HOME);
+            let mut q = if near {
+                home + SVector::<f64, NQ>::from_column_slice(&noise)
+            } else {
+                SVector::<f64, NQ>::from_column_slice(&hostile)
+            };
+            let projected = leg_models::assembly::project_position::<L, f64, NQ, NC, NU>(
+                &p,
+                &mut q.clone(),
+                &Tolerance::default(),
+            )
+            .is_ok();
+            if near && projected {
+                let _ = leg_models::assembly::project_position::<L, f64, NQ, NC, NU>(
+                    &p,
+                    &mut q,
+                    &Tolerance::default(),
+                );
+            }
+            let on_closures = q.iter().all(|x| x.is_finite())
+                && (NC == 0
+                    || L::closure_residual(&q, &p).amax()
+                        <= leg_models::assembly::ON_CLOSURES
+                            * leg_size::<L, f64, NQ, NC, NU>(&p, &q));
+            let limits = MotorLimits {
+                torque: SVector::<f64, NU>::from_element(limit),
+                speed: SVector::<f64, NU>::from_element(limit),
+            };
+            if let Ok(m) = point_measures::<L, f64, NQ, NC, NU>(&p, &q, &frame, &limits) {
+                prop_assert!(on_closures, "measures off the closures at {q:?}");
+                prop_assert!(
+                    m.passive_rank.abs() <= 1.0 + 1e-12 && m.foot_rank.abs() <= 1.0 + 1e-12,
+                    "ranks {} {}",
+                    m.passive_rank,
+                    m.foot_rank
+                );
+                prop_assert!(
+                    m.foot.iter().all(|x| x.is_finite())
+                        && m.inverse_inertia.iter().all(|x| x.is_finite())
+                        && (m.inverse_inertia - m.inverse_inertia.transpose()).amax()
+                            <= 1e-9 * m.inverse_inertia.amax(),
+                    "{m:?}"
+                );
+                oks.borrow_mut()[0] += 1;
+            }
+            if let Ok(inv) = foot_inverse_inertia::<L, f64, NQ, NC, NU>(&p, &q, &frame, true) {
+                prop_assert!(on_closures && inv.iter().all(|x| x.is_finite()), "{inv:?}");
+            }
+            let coupling = BodyCoupling::new::<L, f64, NQ, NC, NU>(&p);
+            let body = Body::Translating { mass: 10.0 };
+            if let Ok(xi) =
+                impact_mitigation::<L, f64, NQ, NC, NU>(&p, &q, &frame, &body, coupling.as_ref())
+            {
+                prop_assert!(on_closures, "ξ off the closures at {q:?}");
+                prop_assert!((-1e-9..=1.0 + 1e-9).contains(&xi), "ξ = {xi}");
+            }
+            if NK == 0 || !(near && projected && ordinary) {
+                return Ok(());
+            }
+            // The hybrid simulator from the pose lifted by `lift` above its lowest contact.
+            let sim = HybridSimulator::<L, f64, NQ, NC, NU, NK>::new(p, 1e-3);
+            let x = L::contact_positions(&q, &p);
+            let lowest = (0..NK / 2)
+                .map(|k| x[2 * k + 1])
+                .fold(f64::INFINITY, f64::min);
+            let Some(h) = leg_models::control::hop::height_joint::<L, f64, NQ, NC, NU, NK>(&p, &q)
+            else {
+                return Ok(());
+            };
+            let mut start = q;
+            start[h] += lift - lowest;
+            let qd = SVector::<f64, NQ>::from_column_slice(&qd);
+            let state = State { q: start, qd };
+            match sim.start(state, &SVector::zeros()) {
+                // (On a slope the lift is not the gap: only its sign is checked on a level
+                // ground.)
+                Err(HybridError::StartsUnderGround { depth, .. }) => {
+                    prop_assert!(depth > 0.0, "{depth} for {lift}");
+                }
+                Err(_) => {}
+                Ok(s) => {
+                    let mut zero =
+                        |_: f64, _: &HybridState<f64, NQ, NK>| SVector::<f64, NU>::zeros();
+                    let record = match sim.run(s, 30, &mut zero) {
+                        Ok(r) => r,
+                        Err(stopped) => stopped.record,
+                    };
+                    let ground =
+                        leg_models::dynamics::contact::Ground::<f64>::of::<L, NQ, NC, NU, NK>();
+                    for sample in &record.samples {
+                        let hq = &sample.state.state;
+                        prop_assert!(finite(&hq.q) && finite(&hq.qd), "{hq:?}");
+                        let gap = ground.coordinates(&L::contact_positions(&hq.q, &p));
+                        let size = leg_size::<L, f64, NQ, NC, NU>(&p, &hq.q);
+                        for k in 0..NK / 2 {
+                            prop_assert!(
+                                gap[2 * k + 1] >= -1e-9 * size,
+                                "contact {k} {} m under the ground at t = {}",
+                                -gap[2 * k + 1],
+                                sample.t
+                            );
+                        }
+                    }
+                    oks.borrow_mut()[2] += 1;
+                }
+            }
+            oks.borrow_mut()[1] += 1;
+            Ok(())
+        },
+    );
+    if let Err(e) = result {
+        panic!("{}: {e}", L::NAME);
+    }
+    let oks = oks.into_inner();
+    eprintln!(
+        "{}: measures Ok {}, hybrid starts {} (runs {})",
+        L::NAME,
+        oks[0],
+        oks[1],
+        oks[2]
+    );
+    if frame.foot_polygons().is_ok() {
+        assert!(oks[0] >= 1, "{}: no measures succeeded", L::NAME);
+    }
+    if NK > 0 && oks[1] > 0 {
+        assert!(oks[2] >= 1, "{}: no hybrid run started", L::NAME);
+    }
+}
+
 macro_rules! property_tests {
     ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
-        #[test]
-        fn $module() {
-            run::<$ty, $nq, $nc, $nu>();
+        mod $module {
+            #[test]
+            fn runtime() {
+                super::run::<$ty, $nq, $nc, $nu>();
+            }
+            #[test]
+            fn analysis_and_hybrid() {
+                super::run_analysis_and_hybrid::<$ty, $nq, $nc, $nu, $nk>();
+            }
         }
     };
 }

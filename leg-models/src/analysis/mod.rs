@@ -961,7 +961,14 @@ where
             let m_bar = m - mul_tn(&p, &p) * inv_t;
             let a_bar = jf - p * inv_t;
             let own = Matrix2::identity() * inv_t;
-            let free = own + delassus(&m_bar, &j, &a_bar, &none, L::REDUNDANT_ROWS)?;
+            let leg_free = delassus(&m_bar, &j, &a_bar, &none, L::REDUNDANT_ROWS)?;
+            // A foot the closures hold to the body moves only with it: free and locked are
+            // both the body's own 1/m, and their difference is rounding (ξ = 3 was found).
+            let scale = leg_free.amax();
+            if !(leg_free.determinant() > scale * scale * T::default_epsilon() * T::lit(1e3)) {
+                return Err(Inapplicable::FootHeld.into());
+            }
+            let free = own + leg_free;
             let locked = own + delassus(&m_bar, &j, &a_bar, &actuated, L::REDUNDANT_ROWS)?;
             (free, locked)
         }
@@ -974,7 +981,14 @@ where
     if !det_free.is_finite() {
         return Err(AnalysisError::NonFinite);
     }
-    if det_free <= T::zero() {
+    // Singular to rounding, relative to its size: a foot a closure holds gave a det of
+    // rounding's size, and ξ = 3.
+    // The scale is the foot's inverse inertia with the closures cut (J_f M⁻¹ J_fᵀ): a
+    // pinned foot's Λ⁻¹ is all rounding, small against it.
+    let scale = delassus::<T, NQ, 0, 2>(&m, &SMatrix::zeros(), &jf, &none, 0)?
+        .amax()
+        .max(free.amax());
+    if det_free <= scale * scale * T::default_epsilon() * T::lit(1e3) {
         // Λ⁻¹ with the motors free is singular: a direction the foot cannot move in,
         // whatever the motors (their number is not the reason).
         return Err(Inapplicable::FootHeld.into());
@@ -1046,8 +1060,13 @@ where
     let two = NU >= 2;
     let inverse_inertia = foot_inverse_inertia::<L, T, NQ, NC, NU>(params, q, frame, false)?;
     let inverse_inertia_locked = foot_inverse_inertia::<L, T, NQ, NC, NU>(params, q, frame, true)?;
+    let foot = L::foot_position(q, params);
+    // A NaN parameter the terms do not use passes every solve: the foot shows it.
+    if !(foot[0].is_finite() && foot[1].is_finite()) {
+        return Err(AnalysisError::NonFinite);
+    }
     Ok(PointMeasures {
-        foot: L::foot_position(q, params),
+        foot,
         motor_angles: SVector::<T, NU>::from_fn(|k, _| q[L::ACTUATED[k]]),
         kinematics: kin,
         passive_rank: kin.passive_rank,
