@@ -22,6 +22,8 @@
 
 use core::fmt;
 
+use crate::model::shown::{Shown, ShownNumber};
+
 use nalgebra::{SMatrix, SVector};
 
 use crate::analysis;
@@ -128,23 +130,6 @@ fn edit_distance(a: &str, b: &str) -> Option<usize> {
     Some(prev[b.len()])
 }
 
-/// Text a user gave, as an error echoes it: escaped (a newline, U+2028 or an ANSI escape
-/// cannot split or restyle the one-line message) and cut to 40 characters.
-pub struct Shown<'a>(pub &'a str);
-
-impl fmt::Display for Shown<'_> {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        const MAX: usize = 40;
-        for (written, c) in self.0.chars().flat_map(char::escape_debug).enumerate() {
-            if written == MAX {
-                return f.write_str("…");
-            }
-            fmt::Write::write_char(f, c)?;
-        }
-        Ok(())
-    }
-}
-
 impl fmt::Display for ParameterError<'_> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
@@ -160,12 +145,18 @@ impl fmt::Display for ParameterError<'_> {
                 }
             }
             ParameterError::NotFinite { name, value } => {
-                write!(f, "parameter `{}` must be finite, got {value}", Shown(name))
+                write!(
+                    f,
+                    "parameter `{}` must be finite, got {}",
+                    Shown(name),
+                    ShownNumber(value)
+                )
             }
             ParameterError::Negative { name, value } => write!(
                 f,
-                "parameter `{}` is a mass or an inertia and cannot be negative, got {value}",
-                Shown(name)
+                "parameter `{}` is a mass or an inertia and cannot be negative, got {}",
+                Shown(name),
+                ShownNumber(value)
             ),
         }
     }

@@ -34,10 +34,11 @@ pub mod leg;
 mod model;
 pub mod simulate;
 
-pub use leg::{must_be_nonnegative, ChartSize, Leg, ParameterError, Shown};
+pub use leg::{must_be_nonnegative, ChartSize, Leg, ParameterError};
 pub use model::contract::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms, JointKind,
     LegModel, Parameters, Real, Spring,
 };
+pub use model::shown::{Shown, ShownNumber};
 pub use model::{linalg, simd};
 pub use nalgebra;

@@ -12,6 +12,7 @@ use crate::assembly::AssemblyError;
 use crate::dynamics::forward::DynamicsError;
 use crate::dynamics::structure::NotApplicable;
 use crate::model::contract::Real;
+use crate::model::shown::ShownNumber;
 
 /// Joint positions and velocities.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -108,7 +109,8 @@ impl fmt::Display for ControlError {
             ControlError::NotApplicable(why) => write!(f, "not applicable: {why}"),
             ControlError::TorqueLimit { motor, value } => write!(
                 f,
-                "the torque limit of motor {motor} is {value}: a limit must be zero or more (infinite for none)"
+                "the torque limit of motor {motor} is {}: a limit must be zero or more (infinite for none)",
+                ShownNumber(*value)
             ),
             ControlError::Gain {
                 name,
@@ -116,7 +118,8 @@ impl fmt::Display for ControlError {
                 value,
             } => write!(
                 f,
-                "the gain {name} of coordinate {coordinate} is {value}: a gain must be finite and zero or more"
+                "the gain {name} of coordinate {coordinate} is {}: a gain must be finite and zero or more",
+                ShownNumber(*value)
             ),
             ControlError::Interrupted => write!(f, "interrupted by the caller"),
             ControlError::Linearization(e) => write!(f, "linearization: {e}"),
