@@ -371,7 +371,7 @@ impl<S> Interruptible<S> {
 
     fn poll(&mut self) -> Result<(), RustControlError> {
         self.calls = self.calls.wrapping_add(1);
-        if self.calls % Self::EVERY == 0 {
+        if self.calls.is_multiple_of(Self::EVERY) {
             if let Err(e) = Python::attach(|py| py.check_signals()) {
                 self.interrupt = Some(e);
                 return Err(RustControlError::Interrupted);

@@ -965,7 +965,8 @@ where
             // A foot the closures hold to the body moves only with it: free and locked are
             // both the body's own 1/m, and their difference is rounding (ξ = 3 was found).
             let scale = leg_free.amax();
-            if !(leg_free.determinant() > scale * scale * T::default_epsilon() * T::lit(1e3)) {
+            let det = leg_free.determinant();
+            if !det.is_finite() || det <= scale * scale * T::default_epsilon() * T::lit(1e3) {
                 return Err(Inapplicable::FootHeld.into());
             }
             let free = own + leg_free;
