@@ -1281,3 +1281,193 @@ fn analyze_says_why_for_every_dash() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue 29, part 4: hostile command lines for the hopper's `sim` and for `eval --impact`
+/// and `--derivatives`, as a table: each is refused with exit code 2 and one line that
+/// says what and where, and writes nothing.
+#[test]
+fn hostile_command_lines_for_the_hopper_and_eval() {
+    let dir = temp_dir("hostile");
+    let d = dir.to_str().unwrap();
+    let q = "0.3,-0.7,-1.25,-2.43,1.25";
+    let esc = "a\u{1b}[31mb";
+    let rows: &[(&[&str], &str)] = &[
+        (
+            &["sim", "minitaur_hopper", "--apex", "1e308", "--out", d],
+            "invalid value '1e308' for '--apex <H>'",
+        ),
+        (
+            &["sim", "minitaur_hopper", "--apex", "nan", "--out", d],
+            "invalid value 'nan' for '--apex <H>'",
+        ),
+        (
+            &["sim", "minitaur_hopper", "--dt", "0", "--out", d],
+            "expected a step in (0, 0.05] s",
+        ),
+        // A tiny step was echoed with 300 digits.
+        (
+            &["sim", "minitaur_hopper", "--dt", "1e-300", "--out", d],
+            "3 s at dt = 1e-300 s is more than 5 million steps",
+        ),
+        (
+            &["sim", "minitaur_hopper", "--duration", "inf", "--out", d],
+            "expected a duration in (0, 600] s",
+        ),
+        (
+            &["sim", "minitaur_hopper", "--torque-limit", "-1", "--out", d],
+            "invalid value '-1' for '--torque-limit <N>'",
+        ),
+        (
+            &[
+                "sim",
+                "minitaur_hopper",
+                "--torque-limit",
+                "nan",
+                "--out",
+                d,
+            ],
+            "expected a positive number of N m",
+        ),
+        (
+            &["sim", "atrias_hopper", "--speed", "1e308", "--out", d],
+            "expected a speed of at most 1000",
+        ),
+        (
+            &["sim", "minitaur_hopper", "--trajectory", "spin", "--out", d],
+            "`spin` is for legs in the air",
+        ),
+        (
+            &[
+                "sim",
+                "minitaur_hopper",
+                "--controller",
+                "passive",
+                "--apex",
+                "0.4",
+                "--out",
+                d,
+            ],
+            "--apex sets the hopping controller's apex height",
+        ),
+        (
+            &["sim", "minitaur_hopper", "--out", esc],
+            "holds a control character",
+        ),
+        (
+            &["eval", "minitaur_hopper", "--q", q, "--impact"],
+            "a value is required for '--impact <CONTACT>'",
+        ),
+        (
+            &[
+                "eval",
+                "minitaur_hopper",
+                "--q",
+                q,
+                "--impact",
+                "toe_contact",
+                "--impact",
+                "toe_contact",
+            ],
+            "cannot be used multiple times",
+        ),
+        (
+            &["eval", "minitaur", "--q", "0,0,0,0", "--impact", "toe"],
+            "minitaur has no contact points",
+        ),
+        (
+            &["eval", "minitaur_hopper", "--q", q, "--impact", esc],
+            "holds a control character",
+        ),
+        (
+            &[
+                "eval",
+                "minitaur_hopper",
+                "--q",
+                q,
+                "--impact",
+                "heel\u{2028}x",
+            ],
+            "holds a control character",
+        ),
+        (
+            &[
+                "eval",
+                "minitaur_hopper",
+                "--q",
+                q,
+                "--derivatives",
+                "--qd",
+                "1e400,0,0,0,0",
+            ],
+            "`--qd 1e400,0,0,0,0`: every value must be finite",
+        ),
+        (
+            &[
+                "eval",
+                "minitaur_hopper",
+                "--q",
+                "0.3,-0.7,-1.25,-2.43,1.25,1",
+                "--derivatives",
+            ],
+            "`--q` has 6 values, expected 5",
+        ),
+        (
+            &[
+                "eval",
+                "minitaur_hopper",
+                "--q",
+                q,
+                "--u",
+                "1,2,3",
+                "--derivatives",
+            ],
+            "`--u` has 3 values, expected 2",
+        ),
+        (
+            &["eval", "minitaur_hopper", "--q", q, "--derivatives=yes"],
+            "unexpected value 'yes' for '--derivatives'",
+        ),
+        (
+            &[
+                "eval",
+                "minitaur_hopper",
+                "--q",
+                q,
+                "--impact",
+                "toe_contact",
+                "--assemble",
+            ],
+            "`--q` has 5 values, expected 2 (actuated angles with --assemble)",
+        ),
+        (
+            &[
+                "eval",
+                "minitaur_hopper",
+                "--q",
+                q,
+                "--impact",
+                "toe_contact",
+                "--u",
+                "nan,0",
+            ],
+            "`--u nan,0`: every value must be finite",
+        ),
+    ];
+    for (args, says) in rows {
+        let out = legs(args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(
+            err.starts_with("error: ") && err.trim_end().lines().count() == 1 && err.len() < 400,
+            "{args:?}: not one short line: {err}"
+        );
+        assert!(
+            err.contains(says),
+            "{args:?}: `{}` should say `{says}`",
+            err.trim_end()
+        );
+        assert!(out.stdout.is_empty(), "{args:?}");
+    }
+    assert!(!dir.exists(), "hostile input left {}", dir.display());
+    eprintln!("{} hostile command lines refused", rows.len());
+}

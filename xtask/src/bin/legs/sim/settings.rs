@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use leg_models::dynamics::structure::{NotApplicable, Structure};
+use leg_models::ShownNumber;
 use xtask::cli::args::{ControllerArg, SimArgs, TrajectoryArg};
 use xtask::cli::Error;
 
@@ -135,13 +136,15 @@ impl Settings {
         if a.duration < a.dt {
             return Err(Error::usage(format!(
                 "`--duration {} s` is shorter than one step (`--dt {} s`): nothing would be simulated",
-                a.duration, a.dt
+                ShownNumber(a.duration),
+                ShownNumber(a.dt)
             )));
         }
         if a.duration / a.dt > 5e6 {
             return Err(Error::usage(format!(
                 "{} s at dt = {} s is more than 5 million steps",
-                a.duration, a.dt
+                ShownNumber(a.duration),
+                ShownNumber(a.dt)
             )));
         }
         let settings = Settings {
