@@ -79,7 +79,7 @@ impl fmt::Display for AssemblyError {
             AssemblyError::Unreachable { residual } => {
                 write!(
                     f,
-                    "unreachable: the closure cannot be met (residual {residual:.3e} m)"
+                    "unreachable from this start: the solve stops {residual:.3e} m short of the constraints (a target out of reach, or a start from which it is not reached: a singular or distant guess)"
                 )
             }
             AssemblyError::Singular => {

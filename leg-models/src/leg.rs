@@ -479,6 +479,7 @@ where
         u: &SVector<T, NU>,
     ) -> Result<Acceleration<T, NQ, NC>, DynamicsError> {
         dynamics::forward_dynamics::<L, T, NQ, NC, NU>(&self.params, q, qd, u, self.baumgarte)
+            .map_err(|e| e.explained(q, qd, u))
     }
 
     /// [`Leg::forward_dynamics`] from terms already evaluated at `(q, q̇)`.

@@ -20,8 +20,8 @@ use leg_models::dynamics::DynamicsError as RustDynamicsError;
 use leg_models::nalgebra::{SMatrix, SVector};
 use leg_models::simulate::hybrid::{HybridState, HybridTorqueSource};
 use leg_models::simulate::{Method, State, StepOptions, TorqueSource};
-use leg_models::Shown;
 use leg_models::{ContactModel, Leg};
+use leg_models::{Shown, ShownNumber};
 use numpy::ndarray::{Array2, Array3};
 use numpy::{
     PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
@@ -246,10 +246,14 @@ fn out_rows<'py, const N: usize>(
     PyArray2::from_owned_array(py, a)
 }
 
+/// The most a step may be (s): a step of 1e308 s ran and failed as a "non-finite state".
+const MAX_DT: f64 = 1.0;
+
 fn step_options(dt: f64, method: &str, project: bool) -> PyResult<StepOptions<f64>> {
-    if !(dt.is_finite() && dt > 0.0) {
+    if !(dt.is_finite() && dt > 0.0 && dt <= MAX_DT) {
         return Err(PyValueError::new_err(format!(
-            "`dt` must be a positive time step (s), got {dt}"
+            "`dt` must be a positive time step of at most {MAX_DT} s, got {}",
+            ShownNumber(dt)
         )));
     }
     let mut opts = StepOptions::rk4(dt);
@@ -288,6 +292,18 @@ fn sinusoid<const N: usize>(
             .map(|p| vector("phase", p))
             .transpose()?
             .unwrap_or_else(SVector::zeros),
+    })
+}
+
+/// A step count: a whole number, zero or more (a negative one was numpy's
+/// "can't convert negative int to unsigned", naming nothing).
+fn step_count(steps: &Bound<'_, PyAny>) -> PyResult<usize> {
+    steps.extract::<usize>().map_err(|_| {
+        let shown = steps.repr().map(|r| r.to_string()).unwrap_or_default();
+        PyValueError::new_err(format!(
+            "`steps` must be a whole number of steps, zero or more, got {}",
+            Shown(&shown)
+        ))
     })
 }
 
@@ -843,8 +859,9 @@ macro_rules! leg_class {
                 /// forces, energy, closure_residual.
                 #[pyo3(signature = (q, qd, steps, dt, torque = None, controller = None, setpoint = None, amplitude = None, frequency = None, phase = None, kp = 100.0, kd = None, torque_limit = None, method = "rk4", project = true))]
                 #[allow(clippy::too_many_arguments)]
-                fn simulate<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, steps: usize, dt: f64, torque: Option<&Bound<'py, PyAny>>, controller: Option<&str>, setpoint: Option<&Bound<'py, PyAny>>, amplitude: Option<&Bound<'py, PyAny>>, frequency: Option<&Bound<'py, PyAny>>, phase: Option<&Bound<'py, PyAny>>, kp: f64, kd: Option<f64>, torque_limit: Option<&Bound<'py, PyAny>>, method: &str, project: bool) -> PyResult<Bound<'py, PyDict>> {
+                fn simulate<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, steps: &Bound<'py, PyAny>, dt: f64, torque: Option<&Bound<'py, PyAny>>, controller: Option<&str>, setpoint: Option<&Bound<'py, PyAny>>, amplitude: Option<&Bound<'py, PyAny>>, frequency: Option<&Bound<'py, PyAny>>, phase: Option<&Bound<'py, PyAny>>, kp: f64, kd: Option<f64>, torque_limit: Option<&Bound<'py, PyAny>>, method: &str, project: bool) -> PyResult<Bound<'py, PyDict>> {
                     let initial = State { q: vector("q", q)?, qd: vector("qd", qd)? };
+                    let steps = step_count(steps)?;
                     let opts = step_options(dt, method, project)?;
                     let limit: SVector<f64, NU> = match torque_limit { Some(l) => vector("torque_limit", l)?, None => SVector::from_element(f64::INFINITY) };
                     check_torque_limits(&limit).map_err(|e| PyValueError::new_err(format!("`torque_limit`: {e}")))?;
@@ -891,8 +908,9 @@ macro_rules! leg_class {
                 /// energy) and `events`, a list of dicts (t, kind, contact, impulse,
                 /// energy_lost).
                 #[pyo3(signature = (q, qd, steps, dt, torque = None))]
-                fn simulate_hybrid<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, steps: usize, dt: f64, torque: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyDict>> {
+                fn simulate_hybrid<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, steps: &Bound<'py, PyAny>, dt: f64, torque: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyDict>> {
                     step_options(dt, "rk4", true)?;
+                    let steps = step_count(steps)?;
                     let sim = self.leg.hybrid_simulator(dt);
                     let mut torques = PythonTorques::<NQ, NU>::new(torque)?;
                     let start = sim.start(State { q: vector("q", q)?, qd: vector("qd", qd)? }, &SVector::zeros())

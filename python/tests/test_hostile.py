@@ -304,3 +304,21 @@ def test_a_simulation_releases_the_gil():
         time.sleep(0)
     worker.join()
     assert ticks > 100, ticks
+
+
+def test_steps_and_dt_are_named_when_wrong():
+    """From the new user's trial: a negative step count was "can't convert negative int to
+    unsigned" (naming nothing) and dt = 1e308 ran and failed as a "non-finite state"."""
+    leg = legmodels.Minitaur()
+    q = leg.assembled_home()
+    for steps in (-1, 1.5, "10", None):
+        with pytest.raises(ValueError, match="`steps` must be a whole number of steps") as e:
+            leg.simulate(q, np.zeros(4), steps, 1e-3)
+        said_well(e.value)
+    for dt in (1e308, 2.0, float("inf")):
+        with pytest.raises(ValueError, match="`dt` must be a positive time step of at most 1 s") as e:
+            leg.simulate(q, np.zeros(4), 10, dt)
+        said_well(e.value)
+    hopper = legmodels.MinitaurHopper()
+    with pytest.raises(ValueError, match="`steps`"):
+        hopper.simulate_hybrid(hopper.assembled_home(), np.zeros(hopper.nq), -5, 1e-3)

@@ -289,18 +289,22 @@ pub fn check_assembly<
         Err(DynamicsError::NonFinite)
     );
     // Issue 29: a NaN pose was reported as "the mass matrix is not positive definite", and
-    // finite rates whose terms overflow as a non-finite input. Each is said as what it is.
+    // finite rates whose terms overflow as a non-finite input. Each is said as what it is
+    // (explained off the hot path; the `Leg` methods do it).
     let zero = SVector::<f64, NQ>::zeros();
+    let none = SVector::<f64, NU>::zeros();
     let nan_q = SVector::<f64, NQ>::from_element(f64::NAN);
     assert_eq!(
-        forward_dynamics::<L, f64, NQ, NC, NU>(&p, &nan_q, &zero, &SVector::zeros(), None),
+        forward_dynamics::<L, f64, NQ, NC, NU>(&p, &nan_q, &zero, &none, None)
+            .map_err(|e| e.explained(&nan_q, &zero, &none)),
         Err(DynamicsError::NonFinite),
         "{}: a NaN pose",
         L::NAME
     );
     let fast = SVector::<f64, NQ>::from_element(1e200);
     assert_eq!(
-        forward_dynamics::<L, f64, NQ, NC, NU>(&p, &home, &fast, &SVector::zeros(), None),
+        forward_dynamics::<L, f64, NQ, NC, NU>(&p, &home, &fast, &none, None)
+            .map_err(|e| e.explained(&home, &fast, &none)),
         Err(DynamicsError::Overflow),
         "{}: rates of 1e200",
         L::NAME

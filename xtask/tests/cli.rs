@@ -1353,6 +1353,33 @@ fn hostile_command_lines_for_the_hopper_and_eval() {
             &["sim", "minitaur_hopper", "--out", esc],
             "holds a control character",
         ),
+        // A record over the budget was refused only when the run began, leaving empty files.
+        (
+            &[
+                "sim",
+                "minitaur",
+                "--duration",
+                "600",
+                "--dt",
+                "0.00013",
+                "--out",
+                d,
+            ],
+            "more than the budget of 512 MiB",
+        ),
+        (
+            &[
+                "sim",
+                "minitaur_hopper",
+                "--duration",
+                "600",
+                "--dt",
+                "0.00013",
+                "--out",
+                d,
+            ],
+            "more than the budget of 512 MiB",
+        ),
         (
             &["eval", "minitaur_hopper", "--q", q, "--impact"],
             "a value is required for '--impact <CONTACT>'",

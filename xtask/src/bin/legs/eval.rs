@@ -169,7 +169,7 @@ pub fn run<
         Err(e) => {
             out.insert("qdd".into(), Value::Null);
             out.insert("F".into(), Value::Null);
-            errors.insert("qdd".into(), json!(e.to_string()));
+            errors.insert("qdd".into(), json!(e.explained(&q, &qd, &u).to_string()));
         }
     }
     if args.derivatives {

@@ -181,6 +181,12 @@ pub fn run<
         };
     }
     let steps = (s.duration / s.dt).round() as usize;
+    // Refused before the run, as bad input, not after it with empty files.
+    leg_models::simulate::check_record(
+        steps,
+        std::mem::size_of::<leg_models::simulate::hybrid::HybridSample<f64, NQ, NC, NU, NK>>(),
+    )
+    .map_err(|e| Error::usage(format!("`--duration` over `--dt`: {e}")))?;
     let mut source = WithProgress {
         source,
         progress: Progress::new(

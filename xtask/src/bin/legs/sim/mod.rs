@@ -345,6 +345,9 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
     let source = Saturated::new(controller, SVector::from_element(limit))
         .map_err(|e| Error::usage(format!("`--torque-limit`: {e}")))?;
     let steps = (s.duration / s.dt).round() as usize;
+    // Refused before the run, as bad input, not after it with empty files.
+    leg_models::simulate::check_record(steps, std::mem::size_of::<Sample<f64, NQ, NC, NU>>())
+        .map_err(|e| Error::usage(format!("`--duration` over `--dt`: {e}")))?;
     let sim = Simulator::<L, f64, NQ, NC, NU>::new(p, StepOptions::rk4(s.dt));
     let mut source = WithProgress {
         inner: source,
