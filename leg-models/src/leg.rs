@@ -75,9 +75,25 @@ pub enum ParameterError<'a> {
         /// The value refused.
         value: f64,
     },
-    /// A mass or an inertia (a name ending in `_mass` or `_inertia`) below zero: the mass
-    /// matrix would not be positive definite.
+    /// A mass, an inertia or a damping (a name ending in `_mass`, `_inertia` or
+    /// `_damping`) below zero: the mass matrix would not be positive definite, or the
+    /// damping would feed energy in.
     Negative {
+        /// The parameter.
+        name: &'a str,
+        /// The value refused.
+        value: f64,
+    },
+    /// A gear ratio (a name ending in `_gear_ratio`) zero or negative, as a spec refuses.
+    NotPositive {
+        /// The parameter.
+        name: &'a str,
+        /// The value refused.
+        value: f64,
+    },
+    /// Beyond [`MAX_PARAMETER`] in magnitude, as a spec refuses (the terms' products
+    /// overflow: a mass of 1e308 was reported as "the mass matrix is not positive definite").
+    TooLarge {
         /// The parameter.
         name: &'a str,
         /// The value refused.
@@ -85,10 +101,32 @@ pub enum ParameterError<'a> {
     },
 }
 
-/// Whether parameter `name` is a mass or an inertia (its name ends in `_mass` or
-/// `_inertia`, as every spec's are): a negative value would make `M` indefinite.
+/// The largest magnitude a parameter may have, in its unit: a spec's bound
+/// (`xtask::gen::spec::MAX_MAGNITUDE`), the same at run time.
+pub const MAX_PARAMETER: f64 = 1e6;
+
+/// Whether parameter `name` is a mass, an inertia or a damping (its name ends in `_mass`,
+/// `_inertia` or `_damping`, as every spec's are): a negative value would make `M`
+/// indefinite, or the damping feed energy in.
 pub fn must_be_nonnegative(name: &str) -> bool {
-    name.ends_with("_mass") || name.ends_with("_inertia")
+    name.ends_with("_mass") || name.ends_with("_inertia") || name.ends_with("_damping")
+}
+
+/// The rules a parameter's value obeys, the spec's: finite, at most [`MAX_PARAMETER`] in
+/// magnitude, masses, inertias and dampings not negative, gear ratios positive. The one
+/// check [`Leg::set_parameter`], the command line and the Python bindings share.
+pub fn check_parameter(name: &str, value: f64) -> Result<(), ParameterError<'_>> {
+    if !value.is_finite() {
+        Err(ParameterError::NotFinite { name, value })
+    } else if value.abs() > MAX_PARAMETER {
+        Err(ParameterError::TooLarge { name, value })
+    } else if name.ends_with("_gear_ratio") && value <= 0.0 {
+        Err(ParameterError::NotPositive { name, value })
+    } else if value < 0.0 && must_be_nonnegative(name) {
+        Err(ParameterError::Negative { name, value })
+    } else {
+        Ok(())
+    }
 }
 
 impl ParameterError<'_> {
@@ -154,7 +192,19 @@ impl fmt::Display for ParameterError<'_> {
             }
             ParameterError::Negative { name, value } => write!(
                 f,
-                "parameter `{}` is a mass or an inertia and cannot be negative, got {}",
+                "parameter `{}` is a mass, an inertia or a damping and cannot be negative, got {}",
+                Shown(name),
+                ShownNumber(value)
+            ),
+            ParameterError::NotPositive { name, value } => write!(
+                f,
+                "parameter `{}` is a gear ratio and must be positive, got {}",
+                Shown(name),
+                ShownNumber(value)
+            ),
+            ParameterError::TooLarge { name, value } => write!(
+                f,
+                "parameter `{}` must be at most {MAX_PARAMETER:e} in magnitude (a spec's bound), got {}",
                 Shown(name),
                 ShownNumber(value)
             ),
@@ -302,18 +352,11 @@ where
     /// an unknown name or a non-finite value changes nothing.
     pub fn set_parameter<'a>(&mut self, name: &'a str, value: T) -> Result<(), ParameterError<'a>> {
         let i = self.parameter_index(name)?;
+        let shown = nalgebra::try_convert::<T, f64>(value).unwrap_or(f64::NAN);
         if !value.is_finite() {
-            return Err(ParameterError::NotFinite {
-                name,
-                value: nalgebra::try_convert::<T, f64>(value).unwrap_or(f64::NAN),
-            });
+            return Err(ParameterError::NotFinite { name, value: shown });
         }
-        if value < T::zero() && must_be_nonnegative(name) {
-            return Err(ParameterError::Negative {
-                name,
-                value: nalgebra::try_convert::<T, f64>(value).unwrap_or(f64::NAN),
-            });
-        }
+        check_parameter(name, shown)?;
         self.params.set(i, value);
         Ok(())
     }

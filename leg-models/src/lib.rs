@@ -34,7 +34,9 @@ pub mod leg;
 mod model;
 pub mod simulate;
 
-pub use leg::{must_be_nonnegative, ChartSize, Leg, ParameterError};
+pub use leg::{
+    check_parameter, must_be_nonnegative, ChartSize, Leg, ParameterError, MAX_PARAMETER,
+};
 pub use model::contract::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms, JointKind,
     LegModel, Parameters, Real, Spring,

@@ -125,8 +125,15 @@ def test_bad_input_raises_with_the_runtime_message():
         legmodels.Minitaur(lower_a_mas=1.0)
     with pytest.raises(legmodels.ParameterError, match="finite"):
         legmodels.Minitaur(lower_a_mass=float("nan"))
-    with pytest.raises(legmodels.ParameterError, match="`lower_a_mass` is a mass or an inertia and cannot be negative"):
+    with pytest.raises(legmodels.ParameterError, match="`lower_a_mass` is a mass, an inertia or a damping and cannot be negative"):
         legmodels.Minitaur(lower_a_mass=-0.1)
+    # The spec's rules at run time (the new user's trial: these were accepted).
+    with pytest.raises(legmodels.ParameterError, match="gear ratio and must be positive"):
+        legmodels.Minitaur(upper_a_gear_ratio=0.0)
+    with pytest.raises(legmodels.ParameterError, match="cannot be negative"):
+        legmodels.Minitaur(upper_a_damping=-1.0)
+    with pytest.raises(legmodels.ParameterError, match="at most 1e6 in magnitude"):
+        legmodels.Minitaur(lower_a_mass=1e308)
     assert legmodels.AssemblyError.__name__ == "AssemblyError"
     # A complex array lost its imaginary part with only numpy's warning.
     q = leg.assembled_home()

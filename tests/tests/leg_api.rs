@@ -69,6 +69,30 @@ where
             L::NAME
         );
     }
+    // The spec's other rules hold at run time too (issue 29): a gear ratio is positive, a
+    // damping not negative, every value at most 1e6 in magnitude.
+    for (suffix, bad) in [
+        ("_gear_ratio", 0.0),
+        ("_gear_ratio", -6.0),
+        ("_damping", -1.0),
+    ] {
+        if let Some(p) = L::Params::<f64>::NAMES.iter().find(|n| n.ends_with(suffix)) {
+            let err = renamed.set_parameter(p, bad).unwrap_err();
+            assert!(
+                matches!(
+                    err,
+                    leg_models::ParameterError::NotPositive { .. }
+                        | leg_models::ParameterError::Negative { .. }
+                ),
+                "{}: {p} = {bad}: {err}",
+                L::NAME
+            );
+        }
+    }
+    assert!(matches!(
+        renamed.set_parameter(name, 1e308),
+        Err(leg_models::ParameterError::TooLarge { .. })
+    ));
     assert_eq!(*renamed.params(), by_index, "{}", L::NAME);
     assert_eq!(renamed.parameter(name), Ok(0.5));
     let err = renamed.set_parameter("no_such_parameter", 1.0).unwrap_err();

@@ -917,7 +917,7 @@ fn analyze_refuses_bad_input_and_writes_nothing() {
         // Sweeps that make no designs (issue 29): values that overflow, values one label.
         (
             vec!["analyze", "minitaur", "--sweep", "lower_a_length_x=-1e308:1e308:3", "--out", d],
-            "the range's values overflow",
+            "`--sweep`: parameter `lower_a_length_x` must be at most 1e6 in magnitude",
         ),
         (
             vec!["analyze", "minitaur", "--sweep", "lower_a_length_x=0.2:0.2000000000001:3", "--out", d],
@@ -1010,7 +1010,20 @@ fn analyze_refuses_bad_input_and_writes_nothing() {
                 "--out",
                 d,
             ],
-            "`upper_a_mass` is a mass or an inertia and cannot be negative",
+            "`upper_a_mass` is a mass, an inertia or a damping and cannot be negative",
+        ),
+        // The spec's rules at run time too (from the new user's trial): they were accepted.
+        (
+            vec!["analyze", "minitaur", "--set", "upper_a_gear_ratio=0", "--out", d],
+            "`upper_a_gear_ratio` is a gear ratio and must be positive, got 0",
+        ),
+        (
+            vec!["analyze", "minitaur", "--set", "upper_a_damping=-1", "--out", d],
+            "`upper_a_damping` is a mass, an inertia or a damping and cannot be negative",
+        ),
+        (
+            vec!["analyze", "minitaur", "--set", "lower_a_mass=1e308", "--out", d],
+            "`lower_a_mass` must be at most 1e6 in magnitude",
         ),
         (
             vec![

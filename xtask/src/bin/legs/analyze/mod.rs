@@ -92,7 +92,7 @@ impl Settings {
                 )));
             };
             let value = finite("--set", value, "the parameter's value")?;
-            nonnegative("--set", name.trim(), value)?;
+            parameter_value("--set", name.trim(), value)?;
             sets.push((name.trim().to_string(), value));
         }
         let sweep = match &a.sweep {
@@ -134,7 +134,8 @@ impl Settings {
                     return Err(bad());
                 }
                 for n in &names {
-                    nonnegative("--sweep", n, from.min(to))?;
+                    parameter_value("--sweep", n, from.min(to))?;
+                    parameter_value("--sweep", n, from.max(to))?;
                     if sets.iter().any(|(set, _)| set == n) {
                         return Err(Error::usage(format!(
                             "`{n}` is both set (`--set`) and swept (`--sweep`): the sweep gives its values; drop the `--set`"
@@ -281,15 +282,10 @@ where
         })
 }
 
-/// Masses and inertias cannot be negative (the runtime's rule, `Leg::set_parameter`'s).
-fn nonnegative(flag: &str, name: &str, value: f64) -> Result<(), Error> {
-    if value < 0.0 && leg_models::must_be_nonnegative(name) {
-        return Err(Error::usage(format!(
-            "`{flag}`: {}",
-            ParameterError::Negative { name, value }
-        )));
-    }
-    Ok(())
+/// A parameter's value obeys the spec's rules (the runtime's check, `Leg::set_parameter`'s):
+/// finite, at most 1e6, masses, inertias and dampings not negative, gear ratios positive.
+fn parameter_value(flag: &str, name: &str, value: f64) -> Result<(), Error> {
+    leg_models::check_parameter(name, value).map_err(|e| Error::usage(format!("`{flag}`: {e}")))
 }
 
 fn number(x: f64) -> Value {
