@@ -1366,6 +1366,37 @@ fn hostile_command_lines_for_the_hopper_and_eval() {
             &["sim", "minitaur_hopper", "--out", esc],
             "holds a control character",
         ),
+        // Settings that mean nothing for the leg were ignored without a word (the new user's trial).
+        (
+            &["sim", "minitaur", "--apex", "0.3", "--out", d],
+            "--apex is the hopping controller's apex height; minitaur has no contacts",
+        ),
+        (
+            &[
+                "sim",
+                "minitaur",
+                "--controller",
+                "foot-fl",
+                "--speed",
+                "5",
+                "--out",
+                d,
+            ],
+            "--speed sets the spin trajectory's motor speed; the `step` trajectory has none",
+        ),
+        (
+            &[
+                "sim",
+                "minitaur",
+                "--controller",
+                "passive",
+                "--kp",
+                "100",
+                "--out",
+                d,
+            ],
+            "--kp sets a controller's stiffness; with --controller passive there is none",
+        ),
         // A record over the budget was refused only when the run began, leaving empty files.
         (
             &[

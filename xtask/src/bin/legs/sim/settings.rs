@@ -226,6 +226,24 @@ impl Settings {
             None if s.motors == 1 => Trajectory::Spin,
             None => Trajectory::Sine,
         };
+        // Settings that mean nothing here are refused, not ignored (the new user's trial).
+        if self.apex.is_some() {
+            return Err(Error::usage(format!(
+                "--apex is the hopping controller's apex height; {model} has no contacts (it is simulated in the air)"
+            )));
+        }
+        // (A zero speed is refused as such where the spin is built.)
+        if self.speed.is_some_and(|v| v != 0.0) && trajectory != Trajectory::Spin {
+            return Err(Error::usage(format!(
+                "--speed sets the spin trajectory's motor speed; the `{}` trajectory has none (add --trajectory spin, or leave out --speed)",
+                trajectory.name()
+            )));
+        }
+        if self.kp.is_some() && controller == Controller::Passive {
+            return Err(Error::usage(
+                "--kp sets a controller's stiffness; with --controller passive there is none (leave out one or the other)",
+            ));
+        }
         Ok((controller, trajectory, why))
     }
 }
