@@ -105,10 +105,28 @@ pub enum ParameterError<'a> {
 /// (`xtask::gen::spec::MAX_MAGNITUDE`), the same at run time.
 pub const MAX_PARAMETER: f64 = 1e6;
 
+/// The largest magnitude a joint coordinate (rad, or m on a slider) may have where a pose
+/// is read: beyond it an angle has lost its precision (an f64 step of 1e9 rad is 1e-7
+/// rad), and a continuation towards it has no step a solve can take.
+pub const MAX_COORDINATE: f64 = 1e9;
+
+/// The rule a pose's coordinates obey where they are read (the command line's `--q` and
+/// `--guess`, the Python bindings' poses): finite and at most [`MAX_COORDINATE`] in
+/// magnitude. Gives the first coordinate that is not.
+pub fn check_pose(q: &[f64]) -> Result<(), (usize, f64)> {
+    match q
+        .iter()
+        .position(|x| !(x.is_finite() && x.abs() <= MAX_COORDINATE))
+    {
+        Some(k) => Err((k, q[k])),
+        None => Ok(()),
+    }
+}
+
 /// Whether parameter `name` is a mass, an inertia or a damping (its name ends in `_mass`,
 /// `_inertia` or `_damping`, as every spec's are): a negative value would make `M`
 /// indefinite, or the damping feed energy in.
-pub fn must_be_nonnegative(name: &str) -> bool {
+fn must_be_nonnegative(name: &str) -> bool {
     name.ends_with("_mass") || name.ends_with("_inertia") || name.ends_with("_damping")
 }
 

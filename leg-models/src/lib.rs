@@ -35,7 +35,7 @@ mod model;
 pub mod simulate;
 
 pub use leg::{
-    check_parameter, must_be_nonnegative, ChartSize, Leg, ParameterError, MAX_PARAMETER,
+    check_parameter, check_pose, ChartSize, Leg, ParameterError, MAX_COORDINATE, MAX_PARAMETER,
 };
 pub use model::contract::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms, JointKind,

@@ -108,6 +108,39 @@ fn analysis_err(e: RustAnalysisError) -> PyErr {
     AnalysisError::new_err(e.to_string())
 }
 
+/// A workspace grid's option out of range, as the `ValueError` of the argument that holds it.
+fn grid_err(e: RustAnalysisError) -> PyErr {
+    match e {
+        RustAnalysisError::Grid { what, .. } => {
+            let argument = if what.contains("nodes") {
+                "nodes"
+            } else if what.contains("centre") {
+                "centre"
+            } else if what.contains("half-width") {
+                "half_width"
+            } else {
+                "motor_range"
+            };
+            PyValueError::new_err(format!("`{argument}`: {e}"))
+        }
+        e => analysis_err(e),
+    }
+}
+
+/// `motor_range`: one `(low, high)` pair per motor.
+fn motor_ranges<const N: usize>(value: &Bound<'_, PyAny>) -> PyResult<[(f64, f64); N]> {
+    match value.extract::<Vec<[f64; 2]>>() {
+        Ok(p) if p.len() == N => Ok(core::array::from_fn(|k| (p[k][0], p[k][1]))),
+        _ => Err(PyValueError::new_err(format!(
+            "`motor_range` needs {N} pairs (low, high), one per motor; got {}",
+            value
+                .repr()
+                .map(|r| leg_models::Shown(&r.to_string()).to_string())
+                .unwrap_or_else(|_| "a value that cannot be shown".into())
+        ))),
+    }
+}
+
 /// A motor limit: one positive number for every motor, or one per motor.
 fn per_motor<const N: usize>(name: &str, value: &Bound<'_, PyAny>) -> PyResult<SVector<f64, N>> {
     let v: SVector<f64, N> = match value.extract::<f64>() {
@@ -154,9 +187,34 @@ fn not_complex(name: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
     }
 }
 
-/// A vector argument of length `N`: a numpy array of floats (no copy until here) or any
-/// sequence of numbers.
+/// A vector argument of length `N` with every entry finite: a NaN or infinite pose, rate
+/// or torque is refused by name (the terms gave NaN back, and the solves a wrong reason).
 fn vector<const N: usize>(name: &str, value: &Bound<'_, PyAny>) -> PyResult<SVector<f64, N>> {
+    let v = any_vector::<N>(name, value)?;
+    if let Some((k, x)) = v.iter().enumerate().find(|(_, x)| !x.is_finite()) {
+        return Err(PyValueError::new_err(format!(
+            "`{name}[{k}]` is {x}: every entry must be finite"
+        )));
+    }
+    Ok(v)
+}
+
+/// A pose (or motor angles) of length `N`: finite and at most `MAX_COORDINATE` (1e9) in
+/// magnitude, the rule the command line's `--q` obeys too.
+fn pose<const N: usize>(name: &str, value: &Bound<'_, PyAny>) -> PyResult<SVector<f64, N>> {
+    let v = vector::<N>(name, value)?;
+    leg_models::check_pose(v.as_slice()).map_err(|(k, x)| {
+        PyValueError::new_err(format!(
+            "`{name}[{k}]` is {x:e}: a coordinate must be at most {:e} in magnitude (rad, or m)",
+            leg_models::MAX_COORDINATE
+        ))
+    })?;
+    Ok(v)
+}
+
+/// A vector argument of length `N`, any values: a numpy array of floats (no copy until
+/// here) or any sequence of numbers.
+fn any_vector<const N: usize>(name: &str, value: &Bound<'_, PyAny>) -> PyResult<SVector<f64, N>> {
     let length = |len: usize| {
         if len == N {
             Ok(())
@@ -644,15 +702,15 @@ macro_rules! leg_class {
 
                 /// `M(q)`, with reflected rotor inertia.
                 fn mass_matrix<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-                    Ok(out_matrix(py, &Model::mass_matrix(&vector("q", q)?, self.leg.params())))
+                    Ok(out_matrix(py, &Model::mass_matrix(&pose("q", q)?, self.leg.params())))
                 }
                 /// `N(q, q̇) = C q̇ + G`.
                 fn bias_forces<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-                    Ok(out_vector(py, &Model::bias_forces(&vector("q", q)?, &vector("qd", qd)?, self.leg.params())))
+                    Ok(out_vector(py, &Model::bias_forces(&pose("q", q)?, &vector("qd", qd)?, self.leg.params())))
                 }
                 /// `G(q)`.
                 fn gravity_forces<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-                    Ok(out_vector(py, &Model::gravity_forces(&vector("q", q)?, self.leg.params())))
+                    Ok(out_vector(py, &Model::gravity_forces(&pose("q", q)?, self.leg.params())))
                 }
                 /// Damping torques `D q̇`.
                 fn damping_forces<'py>(&self, py: Python<'py>, qd: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
@@ -660,63 +718,63 @@ macro_rules! leg_class {
                 }
                 /// The closure residual `φ(q)`.
                 fn closure_residual<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-                    Ok(out_vector(py, &Model::closure_residual(&vector("q", q)?, self.leg.params())))
+                    Ok(out_vector(py, &Model::closure_residual(&pose("q", q)?, self.leg.params())))
                 }
                 /// `J(q) = ∂φ/∂q`.
                 fn constraint_jacobian<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-                    Ok(out_matrix(py, &Model::constraint_jacobian(&vector("q", q)?, self.leg.params())))
+                    Ok(out_matrix(py, &Model::constraint_jacobian(&pose("q", q)?, self.leg.params())))
                 }
                 /// `J̇ q̇`.
                 fn constraint_bias<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-                    Ok(out_vector(py, &Model::constraint_bias(&vector("q", q)?, &vector("qd", qd)?, self.leg.params())))
+                    Ok(out_vector(py, &Model::constraint_bias(&pose("q", q)?, &vector("qd", qd)?, self.leg.params())))
                 }
                 /// The foot point (base frame).
                 fn foot_position<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-                    Ok(out_vector(py, &Model::foot_position(&vector("q", q)?, self.leg.params())))
+                    Ok(out_vector(py, &Model::foot_position(&pose("q", q)?, self.leg.params())))
                 }
                 /// `J_f(q)`.
                 fn foot_jacobian<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-                    Ok(out_matrix(py, &Model::foot_jacobian(&vector("q", q)?, self.leg.params())))
+                    Ok(out_matrix(py, &Model::foot_jacobian(&pose("q", q)?, self.leg.params())))
                 }
                 /// `J̇_f q̇`.
                 fn foot_bias<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-                    Ok(out_vector(py, &Model::foot_bias(&vector("q", q)?, &vector("qd", qd)?, self.leg.params())))
+                    Ok(out_vector(py, &Model::foot_bias(&pose("q", q)?, &vector("qd", qd)?, self.leg.params())))
                 }
                 /// Kinetic energy `½ q̇ᵀ M q̇`.
                 fn kinetic_energy(&self, q: &Bound<'_, PyAny>, qd: &Bound<'_, PyAny>) -> PyResult<f64> {
-                    Ok(Model::kinetic_energy(&vector("q", q)?, &vector("qd", qd)?, self.leg.params()))
+                    Ok(Model::kinetic_energy(&pose("q", q)?, &vector("qd", qd)?, self.leg.params()))
                 }
                 /// Potential energy (gravity and springs).
                 fn potential_energy(&self, q: &Bound<'_, PyAny>) -> PyResult<f64> {
-                    Ok(Model::potential_energy(&vector("q", q)?, self.leg.params()))
+                    Ok(Model::potential_energy(&pose("q", q)?, self.leg.params()))
                 }
                 /// Each joint's position (column `i` for joint `i`), 2 × nq.
                 fn joint_positions<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-                    Ok(out_matrix(py, &Model::joint_positions(&vector("q", q)?, self.leg.params())))
+                    Ok(out_matrix(py, &Model::joint_positions(&pose("q", q)?, self.leg.params())))
                 }
                 /// Each link's tip, 2 × nq.
                 fn link_tips<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-                    Ok(out_matrix(py, &Model::link_tips(&vector("q", q)?, self.leg.params())))
+                    Ok(out_matrix(py, &Model::link_tips(&pose("q", q)?, self.leg.params())))
                 }
                 /// The closure points (columns 2k, 2k + 1: points a and b of closure k).
                 fn closure_points<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-                    Ok(out_matrix(py, &Model::closure_points(&vector("q", q)?, self.leg.params())))
+                    Ok(out_matrix(py, &Model::closure_points(&pose("q", q)?, self.leg.params())))
                 }
                 /// The contact points stacked (x₀, y₀, x₁, y₁, …).
                 fn contact_positions<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-                    Ok(out_vector(py, &Model::contact_positions(&vector("q", q)?, self.leg.params())))
+                    Ok(out_vector(py, &Model::contact_positions(&pose("q", q)?, self.leg.params())))
                 }
                 /// `J_c(q)`.
                 fn contact_jacobian<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-                    Ok(out_matrix(py, &Model::contact_jacobian(&vector("q", q)?, self.leg.params())))
+                    Ok(out_matrix(py, &Model::contact_jacobian(&pose("q", q)?, self.leg.params())))
                 }
                 /// `J̇_c q̇`.
                 fn contact_bias<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-                    Ok(out_vector(py, &Model::contact_bias(&vector("q", q)?, &vector("qd", qd)?, self.leg.params())))
+                    Ok(out_vector(py, &Model::contact_bias(&pose("q", q)?, &vector("qd", qd)?, self.leg.params())))
                 }
                 /// `M`, `N`, `J`, `J̇ q̇` together (dict).
                 fn dynamics_terms<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
-                    let t = self.leg.dynamics_terms(&vector("q", q)?, &vector("qd", qd)?);
+                    let t = self.leg.dynamics_terms(&pose("q", q)?, &vector("qd", qd)?);
                     let d = PyDict::new(py);
                     d.set_item("mass_matrix", out_matrix(py, &t.mass_matrix))?;
                     d.set_item("bias_forces", out_vector(py, &t.bias_forces))?;
@@ -730,27 +788,27 @@ macro_rules! leg_class {
                 /// The closed pose with motor angles `theta`, Newton from `guess` (home).
                 #[pyo3(signature = (theta, guess = None))]
                 fn assemble<'py>(&self, py: Python<'py>, theta: &Bound<'py, PyAny>, guess: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-                    let guess = match guess { Some(g) => vector("guess", g)?, None => self.leg.home() };
-                    Ok(out_vector(py, &self.leg.assemble(&vector("theta", theta)?, &guess).map_err(assembly_err)?))
+                    let guess = match guess { Some(g) => pose("guess", g)?, None => self.leg.home() };
+                    Ok(out_vector(py, &self.leg.assemble(&pose("theta", theta)?, &guess).map_err(assembly_err)?))
                 }
                 /// The closed pose at `theta` by continuation from the assembled `start`.
                 #[pyo3(signature = (start, theta, max_step = 0.05))]
                 fn assemble_along<'py>(&self, py: Python<'py>, start: &Bound<'py, PyAny>, theta: &Bound<'py, PyAny>, max_step: f64) -> PyResult<Bound<'py, PyArray1<f64>>> {
-                    Ok(out_vector(py, &self.leg.assemble_along(&vector("start", start)?, &vector("theta", theta)?, max_step).map_err(assembly_err)?))
+                    Ok(out_vector(py, &self.leg.assemble_along(&pose("start", start)?, &pose("theta", theta)?, max_step).map_err(assembly_err)?))
                 }
                 /// The closed pose with the foot at `foot`, from `guess` (home).
                 #[pyo3(signature = (foot, guess = None))]
                 fn foot_inverse<'py>(&self, py: Python<'py>, foot: &Bound<'py, PyAny>, guess: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-                    let guess = match guess { Some(g) => vector("guess", g)?, None => self.leg.home() };
+                    let guess = match guess { Some(g) => pose("guess", g)?, None => self.leg.home() };
                     Ok(out_vector(py, &self.leg.foot_inverse(&vector("foot", foot)?, &guess).map_err(assembly_err)?))
                 }
                 /// Joint rates of motor rates `theta_dot` at the assembled `q`.
                 fn consistent_velocity<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, theta_dot: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-                    Ok(out_vector(py, &self.leg.consistent_velocity(&vector("q", q)?, &vector("theta_dot", theta_dot)?).map_err(assembly_err)?))
+                    Ok(out_vector(py, &self.leg.consistent_velocity(&pose("q", q)?, &vector("theta_dot", theta_dot)?).map_err(assembly_err)?))
                 }
                 /// The nearest pose on the closures.
                 fn project_position<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-                    let mut q = vector("q", q)?;
+                    let mut q = pose("q", q)?;
                     self.leg.project_position(&mut q).map_err(assembly_err)?;
                     Ok(out_vector(py, &q))
                 }
@@ -759,13 +817,13 @@ macro_rules! leg_class {
 
                 /// `(q̈, F)`: accelerations and closure forces under motor torques `u`.
                 fn forward_dynamics<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, u: &Bound<'py, PyAny>) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
-                    let a = self.leg.forward_dynamics(&vector("q", q)?, &vector("qd", qd)?, &vector("u", u)?).map_err(dynamics_err)?;
+                    let a = self.leg.forward_dynamics(&pose("q", q)?, &vector("qd", qd)?, &vector("u", u)?).map_err(dynamics_err)?;
                     Ok((out_vector(py, &a.qdd), out_vector(py, &a.forces)))
                 }
                 /// The forward dynamics and its exact derivatives (dict: qdd, forces,
                 /// qdd_q, qdd_qd, qdd_u, forces_q, forces_qd, forces_u).
                 fn forward_dynamics_derivatives<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, u: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
-                    let x = self.leg.forward_dynamics_derivatives(&vector("q", q)?, &vector("qd", qd)?, &vector("u", u)?).map_err(dynamics_err)?;
+                    let x = self.leg.forward_dynamics_derivatives(&pose("q", q)?, &vector("qd", qd)?, &vector("u", u)?).map_err(dynamics_err)?;
                     let d = PyDict::new(py);
                     d.set_item("qdd", out_vector(py, &x.acceleration.qdd))?;
                     d.set_item("forces", out_vector(py, &x.acceleration.forces))?;
@@ -781,7 +839,7 @@ macro_rules! leg_class {
                 /// `calls` calls in Rust (no Python in the loop): the baseline of the
                 /// Python overhead benchmark (python/benchmarks/overhead.py).
                 fn _rust_forward_dynamics_ns(&self, q: &Bound<'_, PyAny>, qd: &Bound<'_, PyAny>, u: &Bound<'_, PyAny>, calls: usize) -> PyResult<f64> {
-                    let (q, qd, u) = (vector::<NQ>("q", q)?, vector::<NQ>("qd", qd)?, vector::<NU>("u", u)?);
+                    let (q, qd, u) = (pose::<NQ>("q", q)?, vector::<NQ>("qd", qd)?, vector::<NU>("u", u)?);
                     self.leg.forward_dynamics(&q, &qd, &u).map_err(dynamics_err)?;
                     let start = std::time::Instant::now();
                     for _ in 0..calls {
@@ -794,13 +852,13 @@ macro_rules! leg_class {
                 /// `(Ã, b̃)` of the reduction `Ã θ̈ = b̃ + u` to the motor angles.
                 #[pyo3(signature = (q, qd, null_space = false))]
                 fn actuated_reduction<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, null_space: bool) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<f64>>)> {
-                    let (q, qd) = (vector("q", q)?, vector("qd", qd)?);
+                    let (q, qd) = (pose("q", q)?, vector("qd", qd)?);
                     let r = if null_space { self.leg.actuated_reduction_null_space(&q, &qd) } else { self.leg.actuated_reduction(&q, &qd) }.map_err(control_err)?;
                     Ok((out_matrix(py, &r.a_tilde), out_vector(py, &r.b_tilde)))
                 }
                 /// `u = Ã v − b̃` for motor accelerations `v` and its derivatives (dict).
                 fn reduction_derivatives<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, v: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
-                    let r = self.leg.reduction_derivatives(&vector("q", q)?, &vector("qd", qd)?, &vector("v", v)?).map_err(control_err)?;
+                    let r = self.leg.reduction_derivatives(&pose("q", q)?, &vector("qd", qd)?, &vector("v", v)?).map_err(control_err)?;
                     let d = PyDict::new(py);
                     d.set_item("a_tilde", out_matrix(py, &r.a_tilde))?;
                     d.set_item("b_tilde", out_vector(py, &r.b_tilde))?;
@@ -818,7 +876,7 @@ macro_rules! leg_class {
                     for (k, h) in held.iter().enumerate() {
                         if *h { modes.set(k, leg_models::dynamics::contact::ContactMode::Stick); }
                     }
-                    let s = self.leg.forward_dynamics_with_contacts(&vector("q", q)?, &vector("qd", qd)?, &vector("u", u)?, &modes, &vector("anchors", anchors)?).map_err(dynamics_err)?;
+                    let s = self.leg.forward_dynamics_with_contacts(&pose("q", q)?, &vector("qd", qd)?, &vector("u", u)?, &modes, &vector("anchors", anchors)?).map_err(dynamics_err)?;
                     Ok((out_vector(py, &s.x), out_vector(py, &s.closure), out_vector(py, &s.contact)))
                 }
 
@@ -830,16 +888,16 @@ macro_rules! leg_class {
                 #[pyo3(signature = (kind, q, qd, target, rate, accel, kp, kd = None))]
                 #[allow(clippy::too_many_arguments)]
                 fn feedback_linearization_torque<'py>(&self, py: Python<'py>, kind: &str, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, target: &Bound<'py, PyAny>, rate: &Bound<'py, PyAny>, accel: &Bound<'py, PyAny>, kp: f64, kd: Option<f64>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-                    let state = State { q: vector("q", q)?, qd: vector("qd", qd)? };
+                    let state = State { q: pose("q", q)?, qd: vector("qd", qd)? };
                     let gains_kd = kd.unwrap_or(2.0 * kp.sqrt());
                     let u = match kind {
                         "joint" => {
-                            let r = leg_models::control::reference::Setpoint::<f64, NU> { position: vector("target", target)?, velocity: vector("rate", rate)?, acceleration: vector("accel", accel)? };
+                            let r = leg_models::control::reference::Setpoint::<f64, NU> { position: pose("target", target)?, velocity: vector("rate", rate)?, acceleration: vector("accel", accel)? };
                             let mut c = self.leg.joint_feedback_linearization(Gains::new(kp, gains_kd), r).map_err(control_err)?;
                             c.torque(0.0, &state)
                         }
                         "foot" => {
-                            let r = leg_models::control::reference::Setpoint::<f64, 2> { position: vector("target", target)?, velocity: vector("rate", rate)?, acceleration: vector("accel", accel)? };
+                            let r = leg_models::control::reference::Setpoint::<f64, 2> { position: pose("target", target)?, velocity: vector("rate", rate)?, acceleration: vector("accel", accel)? };
                             let mut c = self.leg.foot_feedback_linearization(Gains::new(kp, gains_kd), r).map_err(control_err)?;
                             c.torque(0.0, &state)
                         }
@@ -860,10 +918,11 @@ macro_rules! leg_class {
                 #[pyo3(signature = (q, qd, steps, dt, torque = None, controller = None, setpoint = None, amplitude = None, frequency = None, phase = None, kp = 100.0, kd = None, torque_limit = None, method = "rk4", project = true))]
                 #[allow(clippy::too_many_arguments)]
                 fn simulate<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, steps: &Bound<'py, PyAny>, dt: f64, torque: Option<&Bound<'py, PyAny>>, controller: Option<&str>, setpoint: Option<&Bound<'py, PyAny>>, amplitude: Option<&Bound<'py, PyAny>>, frequency: Option<&Bound<'py, PyAny>>, phase: Option<&Bound<'py, PyAny>>, kp: f64, kd: Option<f64>, torque_limit: Option<&Bound<'py, PyAny>>, method: &str, project: bool) -> PyResult<Bound<'py, PyDict>> {
-                    let initial = State { q: vector("q", q)?, qd: vector("qd", qd)? };
+                    let initial = State { q: pose("q", q)?, qd: vector("qd", qd)? };
                     let steps = step_count(steps)?;
                     let opts = step_options(dt, method, project)?;
-                    let limit: SVector<f64, NU> = match torque_limit { Some(l) => vector("torque_limit", l)?, None => SVector::from_element(f64::INFINITY) };
+                    // One number for every motor or one per motor, as `design_measures` takes; inf is none.
+                    let limit: SVector<f64, NU> = match torque_limit { Some(l) => match l.extract::<f64>() { Ok(x) => SVector::from_element(x), Err(_) => any_vector("torque_limit", l)? }, None => SVector::from_element(f64::INFINITY) };
                     check_torque_limits(&limit).map_err(|e| PyValueError::new_err(format!("`torque_limit`: {e}")))?;
                     let gains_kd = kd.unwrap_or(2.0 * kp.sqrt());
                     let Some(kind) = controller else {
@@ -913,7 +972,7 @@ macro_rules! leg_class {
                     let steps = step_count(steps)?;
                     let sim = self.leg.hybrid_simulator(dt);
                     let mut torques = PythonTorques::<NQ, NU>::new(torque)?;
-                    let start = sim.start(State { q: vector("q", q)?, qd: vector("qd", qd)? }, &SVector::zeros())
+                    let start = sim.start(State { q: pose("q", q)?, qd: vector("qd", qd)? }, &SVector::zeros())
                         .map_err(|e| SimulationError::new_err(e.to_string()))?;
                     let mut source = Interruptible::new(|t: f64, hs: &HybridState<f64, NQ, NK>| torques.call(t, &hs.state.q, &hs.state.qd));
                     // Without the GIL (the callable takes it for its calls), Ctrl-C seen.
@@ -963,7 +1022,7 @@ macro_rules! leg_class {
                 /// vertical_speed, inverse_inertia and inverse_inertia_locked (the foot's
                 /// Λ⁻¹ with the motors free and locked, 1/kg) and effective_mass (kg).
                 fn design_measures<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, torque_limit: &Bound<'py, PyAny>, speed_limit: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
-                    let q = vector("q", q)?;
+                    let q = pose("q", q)?;
                     let limits = MotorLimits { torque: per_motor("torque_limit", torque_limit)?, speed: per_motor("speed_limit", speed_limit)? };
                     let m = self.leg.design_measures(&q, &limits).map_err(analysis_err)?;
                     let kin = &m.kinematics;
@@ -1003,7 +1062,7 @@ macro_rules! leg_class {
                 /// assembled pose `q`, the motors free (rotors backdriven) or locked.
                 #[pyo3(signature = (q, motors_locked = false))]
                 fn foot_inverse_inertia<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, motors_locked: bool) -> PyResult<Bound<'py, PyArray2<f64>>> {
-                    let inv = self.leg.foot_inverse_inertia(&vector("q", q)?, motors_locked).map_err(analysis_err)?;
+                    let inv = self.leg.foot_inverse_inertia(&pose("q", q)?, motors_locked).map_err(analysis_err)?;
                     Ok(out_matrix(py, &inv))
                 }
 
@@ -1018,7 +1077,7 @@ macro_rules! leg_class {
                         Some(mass) if mass.is_finite() && mass > 0.0 => Body::Translating { mass },
                         Some(mass) => return Err(PyValueError::new_err(format!("`body_mass` must be positive and finite, got {mass}"))),
                     };
-                    self.leg.impact_mitigation(&vector("q", q)?, &body).map_err(analysis_err)
+                    self.leg.impact_mitigation(&pose("q", q)?, &body).map_err(analysis_err)
                 }
 
                 /// The leg's assembly branches at the motor angles (and held body joints) of
@@ -1029,7 +1088,7 @@ macro_rules! leg_class {
                     let q = match q {
                         Some(q) => {
                             // On the closures first: it is returned as a closed pose.
-                            let mut q = vector("q", q)?;
+                            let mut q = pose("q", q)?;
                             self.leg.project_position(&mut q).map_err(assembly_err)?;
                             q
                         }
@@ -1052,27 +1111,24 @@ macro_rules! leg_class {
                 /// foot_curves (`n × 2 × 2` segments).
                 #[pyo3(signature = (torque_limit, speed_limit, nodes = 200, start = None, centre = None, half_width = None, motor_range = None))]
                 #[allow(clippy::too_many_arguments)]
-                fn workspace<'py>(&self, py: Python<'py>, torque_limit: &Bound<'py, PyAny>, speed_limit: &Bound<'py, PyAny>, nodes: usize, start: Option<&Bound<'py, PyAny>>, centre: Option<[f64; 2]>, half_width: Option<f64>, motor_range: Option<Vec<[f64; 2]>>) -> PyResult<Bound<'py, PyDict>> {
-                    if !(2..=2000).contains(&nodes) {
-                        return Err(PyValueError::new_err(format!("`nodes` must be from 2 to 2000, got {nodes}")));
-                    }
+                fn workspace<'py>(&self, py: Python<'py>, torque_limit: &Bound<'py, PyAny>, speed_limit: &Bound<'py, PyAny>, nodes: usize, start: Option<&Bound<'py, PyAny>>, centre: Option<[f64; 2]>, half_width: Option<f64>, motor_range: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyDict>> {
                     let limits = MotorLimits { torque: per_motor("torque_limit", torque_limit)?, speed: per_motor("speed_limit", speed_limit)? };
                     let start = match start {
-                        Some(q) => vector("start", q)?,
+                        Some(q) => pose("start", q)?,
                         None => self.leg.assembled_home().map_err(assembly_err)?,
                     };
                     let window = match (centre, half_width) {
                         (None, None) => None,
-                        (Some(c), Some(w)) if w.is_finite() && w > 0.0 && c.iter().all(|x| x.is_finite()) => Some((c, w)),
-                        (Some(c), Some(w)) => return Err(PyValueError::new_err(format!("`centre` must be finite and `half_width` positive and finite, got centre {c:?}, half_width {w}"))),
+                        (Some(c), Some(w)) => Some((c, w)),
                         _ => return Err(PyValueError::new_err("give `centre` and `half_width` together")),
                     };
                     let motor_range = match motor_range {
                         None => None,
-                        Some(r) if r.len() == NU && r.iter().all(|&[lo, hi]| lo.is_finite() && hi.is_finite() && lo < hi) => Some(core::array::from_fn(|k| (r[k][0], r[k][1]))),
-                        Some(r) => return Err(PyValueError::new_err(format!("`motor_range` needs {NU} finite pairs (low, high) with low < high, got {r:?}"))),
+                        Some(r) => Some(motor_ranges::<NU>(r)?),
                     };
                     let options = GridOptions { nodes, window, motor_range, limits };
+                    // The grid's rules are the Rust API's, said with the argument's name.
+                    options.check().map_err(grid_err)?;
                     // Up to 2000 × 2000 nodes of continuation: without the GIL.
                     let leg = &self.leg;
                     let w = py.detach(|| leg.workspace(&start, &options)).map_err(analysis_err)?;
@@ -1121,7 +1177,7 @@ macro_rules! leg_class {
                 /// rates), the chart's joints `coordinates`, and `holding_torque`.
                 #[pyo3(signature = (q, dt, method = "rk4"))]
                 fn linearize<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, dt: f64, method: &str) -> PyResult<Bound<'py, PyDict>> {
-                    let q = vector("q", q)?;
+                    let q = pose("q", q)?;
                     let opts = step_options(dt, method, true)?;
                     let chart = self.leg.chart(&q).map_err(linearization_err)?;
                     let u = self.leg.holding_torque(&chart, &q).map_err(linearization_err)?;
@@ -1137,7 +1193,7 @@ macro_rules! leg_class {
                 /// A discrete LQR about the rest pose `q` for steps of `dt`: dict with the
                 /// gain K, the closed loop A − B K and the Riccati solution P.
                 fn lqr<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, dt: f64, state_weights: &Bound<'py, PyAny>, torque_weights: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
-                    let q = vector("q", q)?;
+                    let q = pose("q", q)?;
                     let opts = step_options(dt, "rk4", true)?;
                     let chart = self.leg.chart(&q).map_err(linearization_err)?;
                     let theta = chart.coordinates_of(&State { q, qd: SVector::zeros() }).0;

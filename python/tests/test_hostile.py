@@ -215,9 +215,21 @@ def test_every_class_and_leg_pickles():
 def test_wrong_words_are_right_now():
     leg = legmodels.Minitaur()
     q = leg.assembled_home()
-    # A NaN pose was "the mass matrix is not positive definite".
-    with pytest.raises(legmodels.DynamicsError, match="non-finite"):
-        leg.forward_dynamics([np.nan, 0, 0, 0], np.zeros(4), np.zeros(2))
+    # A NaN pose was "the mass matrix is not positive definite"; now every method refuses
+    # it by name, before any term is computed (mass_matrix and foot_position gave NaN).
+    for f, args in [
+        (leg.forward_dynamics, ([np.nan, 0, 0, 0], np.zeros(4), np.zeros(2))),
+        (leg.mass_matrix, ([0, np.nan, 0, 0],)),
+        (leg.foot_position, ([0, 0, np.inf, 0],)),
+        (leg.bias_forces, (q, [0, 0, 0, np.nan])),
+    ]:
+        with pytest.raises(ValueError, match=r"\[\d\]` is (NaN|inf): every entry must be finite"):
+            f(*args)
+    # An angle of 1e308 rad has no precision left: refused, as the command line's --q.
+    with pytest.raises(ValueError, match=r"`q\[0\]` is 1e308: a coordinate must be at most 1e9"):
+        leg.mass_matrix([1e308, 0, 0, 0])
+    with pytest.raises(ValueError, match="at most 1e9"):
+        leg.assemble([1e308, 0.0], q)
     # Finite rates whose terms overflow were a "non-finite state".
     with pytest.raises(legmodels.DynamicsError, match="overflow"):
         leg.forward_dynamics(q, np.full(4, 1e200), np.zeros(2))
@@ -231,6 +243,33 @@ def test_wrong_words_are_right_now():
     heavy = arm.impact_mitigation(arm.assembled_home(), body_mass=1e308)
     assert abs(heavy - 1.0) < 1e-9, heavy
     assert arm.impact_mitigation(arm.assembled_home(), body_mass=1.0) < heavy
+
+
+def test_the_new_users_trial_settings():
+    """Settings a new user's trial found taken without a word, or refused naming nothing."""
+    leg = legmodels.Minitaur()
+    q = leg.assembled_home()
+    z = np.zeros(4)
+    theta = q[leg.actuated]
+    # A gain of 1e308 was taken and overflowed the first torque.
+    with pytest.raises(legmodels.ControlError, match="the gain kp of coordinate 0 is 1e308: a gain must be zero or more and at most 1e9"):
+        leg.simulate(q, z, 10, 1e-3, controller="pd_gravity", setpoint=theta, kp=1e308)
+    # One torque limit for every motor, as design_measures and the command line take.
+    one = leg.simulate(q, z, 50, 1e-3, controller="pd_gravity", setpoint=theta + 0.5, torque_limit=0.01)
+    each = leg.simulate(q, z, 50, 1e-3, controller="pd_gravity", setpoint=theta + 0.5, torque_limit=[0.01, 0.01])
+    np.testing.assert_array_equal(one["u"], each["u"])
+    assert np.abs(one["u"]).max() <= 0.01 + 1e-15
+    with pytest.raises(ValueError, match="torque_limit"):
+        leg.simulate(q, z, 10, 1e-3, torque_limit=-1.0)
+    # A motor range the wrong way round, or not one pair per motor, names the argument.
+    with pytest.raises(ValueError, match="`motor_range`: the workspace grid needs each motor range"):
+        leg.workspace(1.0, 1.0, nodes=5, motor_range=[(1.0, -1.0), (-4.0, 4.0)])
+    with pytest.raises(ValueError, match="`motor_range` needs 2 pairs"):
+        leg.workspace(1.0, 1.0, nodes=5, motor_range=(1.0, -1.0))
+    # The grid's bounds are the Rust API's and the command line's: 2 to 2000 nodes.
+    for bad in (1, 2001):
+        with pytest.raises(ValueError, match="`nodes`: the workspace grid needs from 2 to 2000 nodes per side"):
+            leg.workspace(1.0, 1.0, nodes=bad)
 
 
 def test_a_pose_off_its_closures_is_refused_by_the_analysis():

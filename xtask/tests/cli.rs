@@ -833,6 +833,46 @@ fn analyze_sweeps_a_parameter() {
         );
     }
     assert!(dir.join("report.html").exists());
+    // A rerun into the same folder with other designs leaves only its own CSVs: the
+    // earlier run's stayed beside them (the new user's trial). A file of the user's stays.
+    let csvs = |dir: &std::path::Path| {
+        let mut v: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .filter(|n| n.ends_with(".csv"))
+            .collect();
+        v.sort();
+        v
+    };
+    let before = csvs(&dir);
+    assert!(!before.is_empty());
+    std::fs::write(dir.join("mine.csv"), "kept").unwrap();
+    let out = legs(&[
+        "analyze",
+        "minitaur",
+        "--sweep",
+        "lower_b_length_x=0.19:0.21:2",
+        "--nodes",
+        "10",
+        "--out",
+        d,
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("analysis.json")).unwrap()).unwrap();
+    let mut named: Vec<String> = json["designs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|d| d["grid"]["csv"].as_str().map(str::to_string))
+        .collect();
+    named.push("mine.csv".into());
+    named.sort();
+    assert_eq!(csvs(&dir), named, "earlier: {before:?}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -994,8 +1034,8 @@ fn analyze_refuses_bad_input_and_writes_nothing() {
             "LO < HI",
         ),
         (
-            vec!["analyze", "minitaur", "--nodes", "5", "--out", d],
-            "10..=2000",
+            vec!["analyze", "minitaur", "--nodes", "1", "--out", d],
+            "2..=2000",
         ),
         (
             vec!["analyze", "minitaur", "--set", "foo=1", "--out", d],
@@ -1406,6 +1446,8 @@ fn hostile_command_lines_for_the_hopper_and_eval() {
                 "600",
                 "--dt",
                 "0.00013",
+                "--every",
+                "10",
                 "--out",
                 d,
             ],
@@ -1419,10 +1461,35 @@ fn hostile_command_lines_for_the_hopper_and_eval() {
                 "600",
                 "--dt",
                 "0.00013",
+                "--every",
+                "10",
                 "--out",
                 d,
             ],
             "more than the budget of 512 MiB",
+        ),
+        // A trajectory.csv of a gigabyte was written without a word (the new user's trial).
+        (
+            &[
+                "sim",
+                "minitaur",
+                "--duration",
+                "500",
+                "--dt",
+                "1e-4",
+                "--out",
+                d,
+            ],
+            "writes 5000002 rows to trajectory.csv, more than the file's limit of 1000000: pass --every 6 or more",
+        ),
+        (
+            &["sim", "minitaur", "--every", "0", "--out", d],
+            "invalid value '0' for '--every <N>'",
+        ),
+        // A gain of 1e308 was taken, and the run failed at t = 0 with an empty summary.
+        (
+            &["sim", "minitaur", "--kp", "1e308", "--out", d],
+            "expected a positive stiffness of at most 1e9 1/s²",
         ),
         (
             &["eval", "minitaur_hopper", "--q", q, "--impact"],

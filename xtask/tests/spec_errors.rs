@@ -113,6 +113,20 @@ fn syntax_error() {
     expect_error(&text, (at.0, at.1 + 7), "links[1].mass", "");
 }
 
+/// A missing `]` was blamed on the next key (`links[0].name`, a line below): the error
+/// points at the array left open.
+#[test]
+fn unclosed_array() {
+    let text = edit("length = [0.2, 0.0]", "length = [0.2, 0.0 # no bracket", 0);
+    let at = pos(&text, "[0.2, 0.0 #", 0);
+    expect_error(
+        &text,
+        at,
+        "links[1].length",
+        "this array is not closed: a `]` is missing",
+    );
+}
+
 #[test]
 fn unknown_parent() {
     let text = edit("parent = \"upper_a\"", "parent = \"uper_a\"", 0);

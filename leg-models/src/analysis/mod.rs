@@ -147,6 +147,14 @@ pub enum AnalysisError {
         /// The range.
         range: (f64, f64),
     },
+    /// The workspace grid's options are out of their ranges ([`workspace::GridOptions::check`]):
+    /// `what` says which rule, `value` the value given.
+    Grid {
+        /// The rule broken ("nodes per side from 2 to 2000").
+        what: &'static str,
+        /// The value given.
+        value: f64,
+    },
 }
 
 impl fmt::Display for AnalysisError {
@@ -171,6 +179,11 @@ impl fmt::Display for AnalysisError {
                 f,
                 "the starting pose has motor {} at {angle:.4}, outside the motor range {low}:{high}: start from a pose in range (or widen the range)",
                 motor + 1
+            ),
+            AnalysisError::Grid { what, value } => write!(
+                f,
+                "the workspace grid needs {what}, got {}",
+                crate::ShownNumber(*value)
             ),
         }
     }
@@ -852,6 +865,21 @@ where
     T: Real,
 {
     check_on_closures::<L, T, NQ, NC, NU>(params, q)?;
+    inverse_inertia_on_closures::<L, T, NQ, NC, NU>(params, q, frame, motors_locked)
+}
+
+/// [`foot_inverse_inertia`] at a pose already checked to be on its closures (the check
+/// solves for `φ`; [`point_measures`] does it once for all its measures).
+fn inverse_inertia_on_closures<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+    frame: &LegFrame<NQ>,
+    motors_locked: bool,
+) -> Result<Matrix2<T>, AnalysisError>
+where
+    L: LegModel<NQ, NC, NU>,
+    T: Real,
+{
     let locked: [bool; NQ] =
         core::array::from_fn(|c| frame.held[c] || (motors_locked && L::ACTUATED.contains(&c)));
     delassus(
@@ -1059,8 +1087,9 @@ where
     };
     let hold = holding_torque::<L, T, NQ, NC, NU>(params, q, &kin);
     let two = NU >= 2;
-    let inverse_inertia = foot_inverse_inertia::<L, T, NQ, NC, NU>(params, q, frame, false)?;
-    let inverse_inertia_locked = foot_inverse_inertia::<L, T, NQ, NC, NU>(params, q, frame, true)?;
+    let inverse_inertia = inverse_inertia_on_closures::<L, T, NQ, NC, NU>(params, q, frame, false)?;
+    let inverse_inertia_locked =
+        inverse_inertia_on_closures::<L, T, NQ, NC, NU>(params, q, frame, true)?;
     let foot = L::foot_position(q, params);
     // A NaN parameter the terms do not use passes every solve: the foot shows it.
     if !(foot[0].is_finite() && foot[1].is_finite()) {

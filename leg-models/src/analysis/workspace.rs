@@ -30,6 +30,42 @@ pub struct GridOptions<const NU: usize> {
     pub limits: MotorLimits<f64, NU>,
 }
 
+/// The fewest and the most nodes per side a grid takes: a grid of 2000² nodes is
+/// 4·10⁶ continuation solves and about 200 MB of poses on a five-joint leg.
+pub const GRID_NODES: core::ops::RangeInclusive<usize> = 2..=2000;
+
+impl<const NU: usize> GridOptions<NU> {
+    /// The options' rules, checked before anything is allocated: nodes per side in
+    /// [`GRID_NODES`], a finite window with a positive half-width, each motor range finite
+    /// with `low < high` (no limit is `None`; a revolute range a turn wide limits nothing).
+    pub fn check(&self) -> Result<(), AnalysisError> {
+        let bad = |what, value| Err(AnalysisError::Grid { what, value });
+        if !GRID_NODES.contains(&self.nodes) {
+            return bad("from 2 to 2000 nodes per side", self.nodes as f64);
+        }
+        if let Some((centre, half)) = self.window {
+            if let Some(&c) = centre.iter().find(|c| !c.is_finite()) {
+                return bad("a finite centre", c);
+            }
+            if !(half.is_finite() && half > 0.0) {
+                return bad("a positive, finite half-width", half);
+            }
+        }
+        for &(low, high) in self.motor_range.iter().flatten() {
+            if !low.is_finite() {
+                return bad("each motor range (low, high) finite", low);
+            }
+            if !(high.is_finite() && low < high) {
+                return bad(
+                    "each motor range (low, high) finite with low below high",
+                    high,
+                );
+            }
+        }
+        Ok(())
+    }
+}
+
 /// What happened at a node.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum NodeState {
@@ -198,8 +234,9 @@ pub fn workspace<L, const NQ: usize, const NC: usize, const NU: usize>(
 where
     L: LegModel<NQ, NC, NU>,
 {
+    options.check()?;
     frame.foot_polygons()?;
-    let n = options.nodes.max(2);
+    let n = options.nodes;
     let (center, half) = options
         .window
         .unwrap_or_else(|| reach::<L, NQ, NC, NU>(params, start, frame));

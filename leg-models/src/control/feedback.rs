@@ -19,7 +19,7 @@ use crate::dynamics::forward::{rcond_floor, to_f64};
 use crate::dynamics::structure::{Actuation, Structure};
 use crate::model::contract::{DynamicsTerms, LegModel, Real};
 use crate::model::linalg::{mul, Cholesky};
-use crate::simulate::source::ControlError;
+use crate::simulate::source::{ControlError, MAX_GAIN};
 use crate::simulate::source::{State, TorqueSource};
 
 /// A torque that is not finite (a parameter or a reference that is NaN or infinite, or
@@ -57,12 +57,13 @@ impl<T: Real, const N: usize> Gains<T, N> {
         Gains::new(kp, T::lit(2.0) * kp.sqrt())
     }
 
-    /// Every gain finite and zero or more: a negative or NaN gain is refused by name
-    /// (a negative `k_p` gave `k_d = 2√k_p = NaN`, reported as a non-finite state).
+    /// Every gain zero or more and at most [`MAX_GAIN`]: a negative, NaN or huge gain is
+    /// refused by name (a negative `k_p` gave `k_d = 2√k_p = NaN`, reported as a non-finite
+    /// state; `k_p` = 1e308 overflowed the first torque).
     pub fn check(&self) -> Result<(), ControlError> {
         for (name, v) in [("kp", &self.kp), ("kd", &self.kd)] {
             for (k, &x) in v.iter().enumerate() {
-                if !(x.is_finite() && x >= T::zero()) {
+                if !(x >= T::zero() && to_f64(x) <= MAX_GAIN) {
                     return Err(ControlError::Gain {
                         name,
                         coordinate: k,

@@ -24,7 +24,7 @@ pub mod lqr;
 pub(crate) mod reduction;
 pub mod reference;
 
-pub use crate::simulate::{ControlError, State, TorqueSource};
+pub use crate::simulate::{ControlError, State, TorqueSource, MAX_GAIN};
 pub use feedback::{
     check_torque_limits, foot_inertias, joint_inertias, FootFeedbackLinearization, FootPdGravity,
     Gains, JointFeedbackLinearization, PdGravity, Saturated,

@@ -20,7 +20,7 @@ pub(crate) mod step;
 
 #[cfg(feature = "std")]
 pub use record::{Sample, Simulator, Stopped};
-pub use source::{ControlError, ControlUpdate, State, TorqueSource};
+pub use source::{ControlError, ControlUpdate, State, TorqueSource, MAX_GAIN};
 pub use step::{
     check_record, energy, step, Method, RecordTooLarge, StepError, StepOptions, StepReport,
     MAX_RECORD_BYTES,

@@ -74,7 +74,8 @@ pub enum ControlError {
         /// The limit given (N m, or N on a prismatic motor).
         value: f64,
     },
-    /// A feedback gain is negative or not finite: refused when the controller is built.
+    /// A feedback gain is negative, not finite or beyond [`MAX_GAIN`]: refused when the
+    /// controller is built.
     Gain {
         /// `kp` or `kd`.
         name: &'static str,
@@ -91,6 +92,10 @@ pub enum ControlError {
     /// The Riccati equation of an LQR has no solution.
     Lqr(crate::simulate::source::LqrError),
 }
+
+/// The largest feedback gain a controller takes: `k_p` = 1e9 1/s² is an error dynamics of
+/// 3·10⁴ rad/s, past any integrator's stable step; larger gains only overflow the torques.
+pub const MAX_GAIN: f64 = 1e9;
 
 impl fmt::Display for ControlError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -118,8 +123,9 @@ impl fmt::Display for ControlError {
                 value,
             } => write!(
                 f,
-                "the gain {name} of coordinate {coordinate} is {}: a gain must be finite and zero or more",
-                ShownNumber(*value)
+                "the gain {name} of coordinate {coordinate} is {}: a gain must be zero or more and at most {}",
+                ShownNumber(*value),
+                ShownNumber(MAX_GAIN)
             ),
             ControlError::Interrupted => write!(f, "interrupted by the caller"),
             ControlError::Linearization(e) => write!(f, "linearization: {e}"),

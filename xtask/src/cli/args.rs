@@ -145,7 +145,8 @@ pub struct SimArgs {
     pub dt: f64,
     /// Stiffness of the error dynamics in 1/s² (default 400 foot, 100 joint); k_d = 2√k_p;
     /// PD gains are scaled by the leg's inertia at home
-    #[arg(long, value_name = "K", value_parser = number("a positive number", |x| x > 0.0))]
+    #[arg(long, value_name = "K",
+          value_parser = number("a positive stiffness of at most 1e9 1/s²", |x| x > 0.0 && x <= 1e9))]
     pub kp: Option<f64>,
     /// Motor limit in N m (default none); saturations are counted
     #[arg(long, value_name = "N", value_parser = number("a positive number of N m", |x| x > 0.0))]
@@ -153,6 +154,11 @@ pub struct SimArgs {
     /// Where to write (default target/sim/MODEL)
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Write every N-th sample to trajectory.csv (the first and last always); the file
+    /// holds at most a million rows, so a longer run needs a larger N
+    #[arg(long, value_name = "N", default_value_t = 1,
+          value_parser = clap::value_parser!(u64).range(1..=1_000_000_000))]
+    pub every: u64,
     /// On a leg with contacts: the commanded apex height of the body in m (default the
     /// home pose's height + 5 cm); the leg hops to it
     #[arg(long, value_name = "H", value_parser = number("a height in m", |x| x.abs() <= 1e3))]
@@ -293,7 +299,7 @@ pub struct AnalyzeArgs {
     pub motor_range: Option<String>,
     /// Grid nodes per side
     #[arg(long, value_name = "N", default_value_t = 200,
-          value_parser = clap::value_parser!(u32).range(10..=2000))]
+          value_parser = clap::value_parser!(u32).range(2..=2000))]
     pub nodes: u32,
     /// Where to write (default target/analyze)
     #[arg(long, value_name = "DIR")]

@@ -46,14 +46,18 @@ impl Error {
 
 /// A comma-separated list of exactly `n` numbers (`--q 0.1,-1.2,…`).
 pub fn numbers(flag: &str, text: &str, n: usize, what: &str) -> Result<Vec<f64>, Error> {
-    let parts: Vec<&str> = text
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .collect();
-    let values: Result<Vec<f64>, _> = parts.iter().map(|p| p.parse::<f64>()).collect();
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
     let numbers = if n == 1 { "number" } else { "numbers" };
     let shown = shown(text);
+    // An empty field (`-1.7,,-0.6`, a trailing comma) was dropped, and the values after
+    // it taken for the wrong joints.
+    if let Some(k) = parts.iter().position(|p| p.is_empty()) {
+        return Err(Error::usage(format!(
+            "`{flag} {shown}`: value {} is empty; expected {n} comma-separated {numbers} ({what})",
+            k + 1
+        )));
+    }
+    let values: Result<Vec<f64>, _> = parts.iter().map(|p| p.parse::<f64>()).collect();
     match values {
         Ok(v) if v.len() == n && v.iter().all(|x| x.is_finite()) => Ok(v),
         Ok(v) if v.iter().all(|x| x.is_finite()) => Err(Error::usage(format!(
@@ -106,6 +110,7 @@ pub fn text_table<R: AsRef<[String]>>(rows: &[R], right: impl Fn(usize) -> bool)
 /// Writes through a temporary file and a rename: a reader never sees half a file, and a
 /// failure leaves nothing behind.
 pub fn write_atomic(path: &Path, text: &str) -> Result<(), String> {
+    check_target(path)?;
     let dir = path
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
@@ -123,6 +128,19 @@ pub fn write_atomic(path: &Path, text: &str) -> Result<(), String> {
         let _ = std::fs::remove_file(&tmp);
         format!("{}: {e}", path.display())
     })
+}
+
+/// [`check_targets`] for one file path: its folder can be made and it is not a folder
+/// (a path under a file was "File exists (os error 17)").
+pub fn check_target(path: &Path) -> Result<(), String> {
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    match path.file_name().and_then(|n| n.to_str()) {
+        Some(name) => check_targets(dir, &[name]),
+        None => Err(format!("{}: not a file name", path.display())),
+    }
 }
 
 /// Checks, before anything is computed or written, that each of `names` can be written in
@@ -271,5 +289,43 @@ pub fn shown(text: &str) -> String {
         format!("{}…", escaped.chars().take(40).collect::<String>())
     } else {
         escaped
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_file_under_a_file_is_refused_by_name() {
+        let dir = std::env::temp_dir().join(format!("check-target-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("a_file"), "").unwrap();
+        // It was "File exists (os error 17)", after the derivation had run.
+        let e = check_target(&dir.join("a_file").join("leg.rs")).unwrap_err();
+        assert!(e.contains("a_file: exists and is not a folder"), "{e}");
+        let e = check_target(&dir).unwrap_err();
+        assert!(e.contains("exists and is not a file"), "{e}");
+        assert!(check_target(&dir.join("new").join("leg.rs")).is_ok());
+        assert!(!dir.join("new").exists());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn an_empty_field_in_a_list_is_named() {
+        let e = numbers("--q", "-1.7,,-0.6", 3, "joint values").unwrap_err();
+        assert!(
+            matches!(&e, Error::Usage(m) if m.contains("value 2 is empty")),
+            "{e:?}"
+        );
+        let e = numbers("--q", "1,2,", 2, "joint values").unwrap_err();
+        assert!(
+            matches!(&e, Error::Usage(m) if m.contains("value 3 is empty")),
+            "{e:?}"
+        );
+        assert_eq!(
+            numbers("--q", " 1, 2 ", 2, "joint values").unwrap(),
+            [1.0, 2.0]
+        );
     }
 }

@@ -9,6 +9,6 @@ mod common;
 pub mod progress;
 
 pub use common::{
-    build_legs, cargo, check_targets, numbers, shown, target_dir, text_table, write_all,
-    write_atomic, Error,
+    build_legs, cargo, check_target, check_targets, numbers, shown, target_dir, text_table,
+    write_all, write_atomic, Error,
 };

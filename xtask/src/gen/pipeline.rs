@@ -465,6 +465,21 @@ pub fn dry_run(root: &Path, spec: &Spec) -> Result<String, Error> {
     derive_spec(root, &py, spec).map(|(_, _, note)| note)
 }
 
+/// The module a generated file is in a user's crate: its file's stem (`src/legs/hopper.rs`
+/// is `mod hopper;`), or its folder's name for a `mod.rs`.
+fn module_name(out: &Path) -> String {
+    let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("model");
+    if stem == "mod" {
+        out.parent()
+            .and_then(|p| p.file_name())
+            .and_then(|s| s.to_str())
+            .unwrap_or(stem)
+            .to_string()
+    } else {
+        stem.to_string()
+    }
+}
+
 /// Generates the model of a spec that lives outside `leg-models/specs/` (a user's own
 /// crate) as one module at `out`: the same derivation and checks as `run`, and the module
 /// needs only the `leg-models` crate (`mod my_leg;` in the user's crate). With `check`,
@@ -478,6 +493,10 @@ pub fn standalone(root: &Path, spec_path: &Path, out: &Path, check: bool) -> Res
         .canonicalize()
         .map_err(|e| Error::Usage(format!("{}: cannot read: {e}", spec_path.display())))?;
     let spec = load_spec(root, spec_path).map_err(Error::Usage)?;
+    // A path that cannot be written is found before the derivation, not after it.
+    if !check {
+        crate::cli::check_target(out).map_err(Error::Usage)?;
+    }
     let py = python(root).map_err(Error::Failed)?;
     let (ir, _casadi_c, note) = derive_spec(root, &py, &spec)?;
     let src = rust_module::model_source(&ir).map_err(|e| Error::Failed(e.to_string()))?;
@@ -497,7 +516,7 @@ pub fn standalone(root: &Path, spec_path: &Path, out: &Path, check: bool) -> Res
         "{note}\ngenerated {} into {shown} in {:.1} s; in your crate: `mod {};` beside a dependency on leg-models",
         spec.name,
         started.elapsed().as_secs_f64(),
-        spec.name
+        module_name(out)
     ))
 }
 
@@ -666,5 +685,17 @@ pub fn check_model(name: &str, known: &[String]) -> Result<(), Error> {
             "unknown model `{name}` (expected one of: {})",
             known.join(", ")
         )))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_module_hint_names_the_file_written_not_the_spec() {
+        assert_eq!(module_name(Path::new("src/legs/hopper.rs")), "hopper");
+        assert_eq!(module_name(Path::new("src/my_leg/mod.rs")), "my_leg");
+        assert_eq!(module_name(Path::new("leg.rs")), "leg");
     }
 }

@@ -349,6 +349,29 @@ impl Ctx<'_> {
     }
 }
 
+/// The offset of the innermost `[` still open at `offset` (strings and comments skipped),
+/// if any: where a missing `]` belongs.
+fn unclosed_bracket(text: &str, offset: usize) -> Option<usize> {
+    let mut open = Vec::new();
+    let mut quote: Option<char> = None;
+    let mut comment = false;
+    for (i, c) in text.char_indices().take_while(|&(i, _)| i < offset) {
+        match (quote, c) {
+            _ if comment => comment = c != '\n',
+            (Some(q), c) if c == q => quote = None,
+            (Some(_), _) => {}
+            (None, '"' | '\'') => quote = Some(c),
+            (None, '#') => comment = true,
+            (None, '[') => open.push(i),
+            (None, ']') => {
+                open.pop();
+            }
+            _ => {}
+        }
+    }
+    open.last().copied()
+}
+
 /// 1-based line and column (in characters) of a byte offset.
 pub fn line_column(text: &str, offset: usize) -> (usize, usize) {
     let offset = offset.min(text.len());
@@ -459,6 +482,17 @@ impl Spec {
                 })
                 .collect::<Vec<_>>()
                 .join(": ");
+            // A missing `]` is found where the next line begins, and blamed on that line's
+            // key: point at the array that was left open instead.
+            if message.contains("expected `]`") {
+                if let Some(open) = unclosed_bracket(&text, offset) {
+                    return ctx.at(
+                        open,
+                        field_at(&text, open, ""),
+                        "this array is not closed: a `]` is missing".to_string(),
+                    );
+                }
+            }
             ctx.at(offset, field_at(&text, offset, &message), message)
         })?;
         validate(&ctx, &file)?;

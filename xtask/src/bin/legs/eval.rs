@@ -81,7 +81,10 @@ pub fn run<
     let assembled = args.assemble;
     let q_text = &args.q;
     let (q, qd) = if assembled {
-        let theta = numbers("--q", q_text, NU, "actuated angles with --assemble")?;
+        let theta = pose(
+            "--q",
+            numbers("--q", q_text, NU, "actuated angles with --assemble")?,
+        )?;
         let theta_dot = match &args.qd {
             Some(t) => numbers("--qd", t, NU, "actuated rates with --assemble")?,
             None => vec![0.0; NU],
@@ -97,11 +100,9 @@ pub fn run<
         };
         let q = match &args.guess {
             Some(g) => {
-                let guess = SVector::<f64, NQ>::from_column_slice(&numbers(
+                let guess = SVector::<f64, NQ>::from_column_slice(&pose(
                     "--guess",
-                    g,
-                    NQ,
-                    "a starting pose, one angle per joint",
+                    numbers("--guess", g, NQ, "a starting pose, one angle per joint")?,
                 )?);
                 assemble::<L, f64, NQ, NC, NU>(&p, &theta, &guess, &tol)
                     .map_err(|e| cannot("from --guess", &e))?
@@ -128,7 +129,10 @@ pub fn run<
         .map_err(|e| Error::usage(format!("no consistent rates at this pose: {e}")))?;
         (q, qd)
     } else {
-        let q = SVector::<f64, NQ>::from_column_slice(&numbers("--q", q_text, NQ, "joint values")?);
+        let q = SVector::<f64, NQ>::from_column_slice(&pose(
+            "--q",
+            numbers("--q", q_text, NQ, "joint values")?,
+        )?);
         let mut qd = match &args.qd {
             Some(t) => SVector::from_column_slice(&numbers("--qd", t, NQ, "joint rates")?),
             None => SVector::zeros(),
@@ -345,4 +349,18 @@ pub fn run<
         }
     }
     Ok(())
+}
+
+/// Coordinates read as a pose obey the rule every pose does ([`leg_models::check_pose`]):
+/// an angle of 1e308 rad was taken, and assembling towards it failed on a step size.
+fn pose(flag: &str, values: Vec<f64>) -> Result<Vec<f64>, Error> {
+    leg_models::check_pose(&values).map_err(|(k, x)| {
+        Error::usage(format!(
+            "`{flag}`: value {} is {}, more than {} in magnitude: a coordinate (rad, or m) that large has no precision left",
+            k + 1,
+            leg_models::ShownNumber(x),
+            leg_models::ShownNumber(leg_models::MAX_COORDINATE)
+        ))
+    })?;
+    Ok(values)
 }

@@ -339,12 +339,16 @@ fn plot(series: &Series) -> Result<String, String> {
             let color = COLORS[i % COLORS.len()];
             chart
                 .draw_series(LineSeries::new(
-                    series
-                        .t
-                        .iter()
-                        .copied()
-                        .zip(values.iter().map(|v| v / factor))
-                        .filter(|(_, v)| v.is_finite()),
+                    thinned(
+                        series
+                            .t
+                            .iter()
+                            .copied()
+                            .zip(values.iter().map(|v| v / factor))
+                            .filter(|(_, v)| v.is_finite()),
+                        t_end,
+                        2 * SIZE.0 as usize,
+                    ),
                     color.stroke_width(2),
                 ))
                 .map_err(svg_err)?;
@@ -352,6 +356,48 @@ fn plot(series: &Series) -> Result<String, String> {
         root.present().map_err(svg_err)?;
     }
     Ok(svg)
+}
+
+/// The points a line is drawn through: all of them when there are few, else per column of
+/// `columns` its first, lowest, highest and last point in time order, so the drawn curve
+/// keeps every peak while a run of millions of samples makes a figure of kilobytes.
+fn thinned(
+    points: impl Iterator<Item = (f64, f64)>,
+    t_end: f64,
+    columns: usize,
+) -> Vec<(f64, f64)> {
+    let points: Vec<(f64, f64)> = points.collect();
+    if points.len() <= 4 * columns {
+        return points;
+    }
+    let column = |t: f64| ((t / t_end * columns as f64) as usize).min(columns - 1);
+    let mut kept = Vec::with_capacity(4 * columns);
+    let mut k = 0;
+    while k < points.len() {
+        let c = column(points[k].0);
+        let mut j = k;
+        let (mut lo, mut hi) = (k, k);
+        while j < points.len() && column(points[j].0) == c {
+            if points[j].1 < points[lo].1 {
+                lo = j;
+            }
+            if points[j].1 > points[hi].1 {
+                hi = j;
+            }
+            j += 1;
+        }
+        let mut picks = [k, lo, hi, j - 1];
+        picks.sort_unstable();
+        let mut last = usize::MAX;
+        for i in picks {
+            if i != last {
+                kept.push(points[i]);
+                last = i;
+            }
+        }
+        k = j;
+    }
+    kept
 }
 
 /// The smallest positive and the largest value of the series' lines.
@@ -847,6 +893,38 @@ table.summary th {{ text-align: left; font-weight: bold; padding: 10px 0 3px; bo
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_long_line_is_thinned_to_its_columns_keeping_every_peak() {
+        // A million samples of a fast sine with one spike: at most four points per
+        // column survive, in time order, and the spike and both extremes are among them.
+        let n = 1_000_000;
+        let points: Vec<(f64, f64)> = (0..n)
+            .map(|k| {
+                let t = k as f64 * 1e-5;
+                let v = if k == 123_457 {
+                    7.0
+                } else {
+                    (t * 3000.0).sin()
+                };
+                (t, v)
+            })
+            .collect();
+        let t_end = points[n - 1].0;
+        let kept = thinned(points.iter().copied(), t_end, 1200);
+        assert!(kept.len() <= 4 * 1200, "{} points kept", kept.len());
+        assert!(kept.windows(2).all(|w| w[0].0 < w[1].0));
+        assert!(kept.contains(&points[123_457]));
+        assert_eq!(kept.first(), points.first());
+        assert_eq!(kept.last(), points.last());
+        let lowest = points.iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
+        assert!(kept.iter().any(|p| p.1 == lowest));
+        // A short line is drawn through every point.
+        assert_eq!(
+            thinned(points[..100].iter().copied(), 1.0, 1200),
+            points[..100]
+        );
+    }
 
     #[test]
     fn residuals_are_drawn_on_decades_with_small_values_on_the_floor() {

@@ -149,16 +149,11 @@ impl Settings {
                     to,
                     count,
                 };
-                // Every design is a real one, and its own: a range whose steps overflow
-                // made designs labelled NaN and inf, one narrower than the labels' 12
-                // digits made designs of one label whose CSVs overwrote each other.
+                // Every design is a real one, and its own: a range narrower than the
+                // labels' 12 digits made designs of one label whose CSVs overwrote each
+                // other. (Its ends obey the parameters' bound, checked above, so every
+                // value between them is finite: a range of 1e308 made NaN and inf.)
                 let values = sweep.values();
-                if let Some(v) = values.iter().find(|v| !v.is_finite()) {
-                    return Err(Error::usage(format!(
-                        "`--sweep {}`: the range's values overflow ({v}); sweep a range whose values are finite",
-                        xtask::cli::shown(s)
-                    )));
-                }
                 if values.windows(2).any(|w| w[0] == w[1]) {
                     return Err(Error::usage(format!(
                         "`--sweep {}`: {count} values from {from} to {to} are not distinct at 12 significant digits; widen the range or sweep fewer values",
@@ -900,6 +895,46 @@ pub fn write(settings: &Settings, designs: &[Design], command: &str) -> Result<(
         .collect();
     files.push(("analysis.json".into(), text));
     files.push(("report.html".into(), html));
+    let earlier = earlier_csvs(out);
     write_all(out, &files).map_err(Error::Failed)?;
+    // A rerun into the same folder kept the earlier run's sweep CSVs beside the new ones:
+    // the CSVs the earlier analysis.json named and this run did not write go.
+    for name in earlier
+        .iter()
+        .filter(|n| !files.iter().any(|(f, _)| f == *n))
+    {
+        if let Err(e) = std::fs::remove_file(out.join(name)) {
+            if e.kind() != std::io::ErrorKind::NotFound {
+                eprintln!(
+                    "warning: could not remove {}, a CSV of the earlier run: {e}",
+                    out.join(name).display()
+                );
+            }
+        }
+    }
     Ok(())
+}
+
+/// The CSVs an earlier run's `analysis.json` in `out` names (its designs' `grid.csv`), only
+/// plain file names: nothing outside `out` is ever removed.
+fn earlier_csvs(out: &std::path::Path) -> Vec<String> {
+    let Ok(text) = std::fs::read_to_string(out.join("analysis.json")) else {
+        return Vec::new();
+    };
+    let Ok(json) = serde_json::from_str::<serde_json::Value>(&text) else {
+        return Vec::new();
+    };
+    json["designs"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|d| d["grid"]["csv"].as_str())
+        .filter(|n| {
+            n.ends_with(".csv")
+                && !n.contains(['/', '\\'])
+                && !n.starts_with('.')
+                && std::path::Path::new(n).components().count() == 1
+        })
+        .map(str::to_string)
+        .collect()
 }

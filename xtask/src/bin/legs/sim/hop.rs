@@ -345,7 +345,10 @@ pub fn run<
         let _ = write!(csv, ",mode_{c},lambda_t_{c},lambda_n_{c}");
     }
     csv.push_str(",energy,closure_residual,contact_residual\n");
-    for x in samples {
+    for (k, x) in samples.iter().enumerate() {
+        if !crate::sim::settings::written(k, samples.len(), s.every) {
+            continue;
+        }
         let mut row = format!("{}", x.t);
         for v in x
             .state

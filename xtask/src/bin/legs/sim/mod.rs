@@ -26,7 +26,7 @@ pub mod hop;
 mod settings;
 
 pub use settings::Settings;
-use settings::{Controller, Trajectory};
+use settings::{written, Controller, Trajectory};
 
 /// The foot references `sim` offers.
 #[derive(Clone, Copy)]
@@ -421,7 +421,11 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
         csv.push_str(",error");
     }
     csv.push('\n');
-    for (x, e) in samples.iter().zip(&errors) {
+    let n = samples.len();
+    for (k, (x, e)) in samples.iter().zip(&errors).enumerate() {
+        if !written(k, n, s.every) {
+            continue;
+        }
         let mut row = format!("{}", x.t);
         for v in x
             .state

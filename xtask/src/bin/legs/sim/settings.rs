@@ -26,6 +26,14 @@ pub(crate) enum Trajectory {
     Hold,
 }
 
+/// The most rows `trajectory.csv` holds (a few hundred megabytes of text at most).
+pub(crate) const MAX_CSV_ROWS: u64 = 1_000_000;
+
+/// Whether sample `k` of `n` goes into trajectory.csv: every `every`-th, and the last.
+pub(crate) fn written(k: usize, n: usize, every: usize) -> bool {
+    k % every == 0 || k + 1 == n
+}
+
 pub struct Settings {
     pub(crate) controller: Option<Controller>,
     pub(crate) trajectory: Option<Trajectory>,
@@ -36,6 +44,8 @@ pub struct Settings {
     pub(crate) kp: Option<f64>,
     pub(crate) torque_limit: Option<f64>,
     pub(crate) out: Option<PathBuf>,
+    /// Write every `every`-th sample to trajectory.csv.
+    pub(crate) every: usize,
     /// Commanded apex height (legs with contacts).
     pub(crate) apex: Option<f64>,
     /// Serve the hopping controller's torques on stdin/stdout (the MuJoCo closed loop).
@@ -147,6 +157,19 @@ impl Settings {
                 ShownNumber(a.dt)
             )));
         }
+        // trajectory.csv is bounded as the record is: a run of 5 million steps would write
+        // about a gigabyte of text; such a run names the --every that fits.
+        let steps = (a.duration / a.dt).round() as u64;
+        let every = a.every.max(1);
+        let rows = steps / every + 2;
+        if rows > MAX_CSV_ROWS {
+            return Err(Error::usage(format!(
+                "{} s at dt = {} s with --every {every} writes {rows} rows to trajectory.csv, more than the file's limit of {MAX_CSV_ROWS}: pass --every {} or more",
+                ShownNumber(a.duration),
+                ShownNumber(a.dt),
+                steps.div_ceil(MAX_CSV_ROWS - 2)
+            )));
+        }
         let settings = Settings {
             controller,
             trajectory,
@@ -156,6 +179,7 @@ impl Settings {
             kp: a.kp,
             torque_limit: a.torque_limit,
             out: a.out.clone(),
+            every: every as usize,
             apex: a.apex,
             serve: a.serve,
         };
