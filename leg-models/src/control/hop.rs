@@ -1000,10 +1000,16 @@ where
         let u = if on_ground {
             let (effort, acceleration, m) = self.stance(hs)?;
             // The efforts' rate (the motors lead the springs by it), from the last
-            // evaluation in this stance a step or more ago.
+            // evaluation in this stance a step or more ago, filtered over 1/ω: a jump in
+            // the efforts (a slide turning to stick) was a rate of Δτ*/h for one step, a
+            // torque spike growing as 1/dt (35 kN m at 0.1 ms on atrias_hopper); filtered,
+            // it peaks at Δτ*/(1/ω + h), whatever the step.
             let rate = match self.last_effort {
                 Some((t0, e0)) if t - t0 >= T::lit(0.5) * self.options.dt => {
-                    let r = (effort - e0) / (t - t0);
+                    let h = t - t0;
+                    let raw = (effort - e0) / h;
+                    let lag = T::one() / self.settings.drive_frequency;
+                    let r = self.effort_rate + (raw - self.effort_rate) * (h / (lag + h));
                     self.last_effort = Some((t, effort));
                     r
                 }
