@@ -912,7 +912,9 @@ macro_rules! leg_class {
                 /// zero; an array: constant; a callable `(t, q, qd) -> u`), or a built-in
                 /// `controller`: "joint_feedback_linearization", "foot_feedback_linearization",
                 /// "pd_gravity" or "foot_pd_gravity", tracking `setpoint + amplitude ·
-                /// sin(2π frequency t + phase)` with gains `kp`, `kd` (default 2√kp), torques
+                /// sin(2π frequency t + phase)` with gains `kp`, `kd` (default 2√kp) of the error
+                /// dynamics in 1/s² and 1/s (the PD controllers scale them by the motors' or
+                /// the foot's inertia at `q`, as `sim` does at home), torques
                 /// clipped to `±torque_limit`. Returns a dict of arrays: t, q, qd, u,
                 /// forces, energy, closure_residual.
                 #[pyo3(signature = (q, qd, steps, dt, torque = None, controller = None, setpoint = None, amplitude = None, frequency = None, phase = None, kp = 100.0, kd = None, torque_limit = None, method = "rk4", project = true))]
@@ -939,6 +941,13 @@ macro_rules! leg_class {
                             let r = sinusoid::<NU>(setpoint()?, amplitude, frequency, phase)?;
                             let g = Gains::new(kp, gains_kd);
                             if kind == "pd_gravity" {
+                                // kp, kd are the error dynamics' (1/s², 1/s), as for feedback
+                                // linearization and `sim`: scaled by the motors' inertia at the
+                                // start (unscaled, kp = 100 N m/rad with kd = 2√kp diverged
+                                // on Minitaur at any kp).
+                                g.check().map_err(control_err)?;
+                                let inertia: SVector<f64, NU> = self.leg.joint_inertias(&initial.q).map_err(control_err)?;
+                                let g = Gains { kp: inertia * kp, kd: inertia * gains_kd };
                                 let c = Saturated::new(self.leg.pd_gravity(g, r).map_err(control_err)?, limit).map_err(control_err)?;
                                 run_simulation(py, &self.leg, initial, steps, opts, c, no_callable)
                             } else {
@@ -950,6 +959,9 @@ macro_rules! leg_class {
                             let r = sinusoid::<2>(setpoint()?, amplitude, frequency, phase)?;
                             let g = Gains::new(kp, gains_kd);
                             if kind == "foot_pd_gravity" {
+                                g.check().map_err(control_err)?;
+                                let inertia: SVector<f64, 2> = self.leg.foot_inertias(&initial.q).map_err(control_err)?;
+                                let g = Gains { kp: inertia * kp, kd: inertia * gains_kd };
                                 let c = Saturated::new(self.leg.foot_pd_gravity(g, r).map_err(control_err)?, limit).map_err(control_err)?;
                                 run_simulation(py, &self.leg, initial, steps, opts, c, no_callable)
                             } else {

@@ -241,7 +241,11 @@ fn atrias_hopper_peak_torque_does_not_grow_as_the_step_shrinks() {
             Ok(r) => r,
             Err(stopped) => panic!("dt = {dt}: {stopped}"),
         };
-        record.samples.iter().map(|s| s.u.amax()).fold(0.0, f64::max)
+        record
+            .samples
+            .iter()
+            .map(|s| s.u.amax())
+            .fold(0.0, f64::max)
     };
     let (coarse, fine) = (peak(1e-3), peak(1e-4));
     eprintln!("peak torque: {coarse} N m at 1 ms, {fine} N m at 0.1 ms");
