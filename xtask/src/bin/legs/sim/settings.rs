@@ -31,7 +31,7 @@ pub(crate) const MAX_CSV_ROWS: u64 = 1_000_000;
 
 /// Whether sample `k` of `n` goes into trajectory.csv: every `every`-th, and the last.
 pub(crate) fn written(k: usize, n: usize, every: usize) -> bool {
-    k % every == 0 || k + 1 == n
+    k.is_multiple_of(every) || k + 1 == n
 }
 
 pub struct Settings {
