@@ -70,7 +70,7 @@ def hop_closed_loop(legs, name, m, d, joints, qadr, vadr, ir):
     ]
     n = ir["model"]["ground_normal"]
     tangent = np.array([n[1], -n[0]])
-    contacts = [m.geom(f"{c}_geom").id for c in ir["model"]["contacts"]]
+    contacts = [m.geom(f"{c}.geom").id for c in ir["model"]["contacts"]]
     floor = m.geom("floor").id
     server = subprocess.Popen(
         [legs, "sim", name, "--serve"], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, bufsize=1
@@ -169,8 +169,8 @@ def main():
         for _ in range(int(1.0 / m.opt.timestep)):
             mujoco.mj_step(m, d)
             for e in range(m.neq):
-                a = m.site(f"{m.equality(e).name}_a").id
-                b = m.site(f"{m.equality(e).name}_b").id
+                a = m.site(f"{m.equality(e).name}.a").id
+                b = m.site(f"{m.equality(e).name}.b").id
                 closure = max(closure, float(np.abs(d.site_xpos[a] - d.site_xpos[b]).max()))
         ok = ok and closure < CLOSURE_TOL and bool(np.all(np.isfinite(d.qpos)))
     landing = ""

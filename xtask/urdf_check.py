@@ -6,8 +6,8 @@ Loads the URDF with Pinocchio's parser (urdfdom), sets the joint armature from t
 transmissions' `<drake:rotor_inertia>` and `<drake:gear_ratio>` and gravity from the spec,
 then for random states compares Pinocchio's mass matrix (`crba`) and bias forces (`rnea`
 with zero acceleration) with the generated model's `M` and `N` (from `legs eval --json`),
-and its `foot` frame with our foot; at an assembled pose, the frames `<closure>_a` and
-`<closure>_b` must coincide. Prints one line per model; exits 1 on a mismatch.
+and its `foot.point` frame with our foot; at an assembled pose, the frames `<closure>.a` and
+`<closure>.b` must coincide. Prints one line per model; exits 1 on a mismatch.
 """
 
 import json
@@ -70,7 +70,7 @@ def main():
         return g
     rng = np.random.default_rng(5)
     worst = {"M": 0.0, "N": 0.0, "foot": 0.0}
-    foot_frame = model.getFrameId("foot")
+    foot_frame = model.getFrameId("foot.point")
     for _ in range(STATES):
         q = rng.uniform(-np.pi, np.pi, len(joints))
         qd = rng.uniform(-3.0, 3.0, len(joints))
@@ -97,8 +97,8 @@ def main():
         qp = configuration(start["q"])
         pin.framesForwardKinematics(model, data, qp)
         for c in ir["model"]["closures"]:
-            a = data.oMf[model.getFrameId(f"{c}_a")].translation
-            b = data.oMf[model.getFrameId(f"{c}_b")].translation
+            a = data.oMf[model.getFrameId(f"{c}.a")].translation
+            b = data.oMf[model.getFrameId(f"{c}.b")].translation
             closure = max(closure, float(np.abs(a - b).max()))
         ok = ok and closure < 1e-12
     print(

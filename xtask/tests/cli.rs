@@ -418,16 +418,16 @@ fn export_writes_mjcf_and_urdf_and_refuses_bad_input() {
     );
     let urdf = std::fs::read_to_string(&file).unwrap();
     for frame in [
-        "<link name=\"toe_a\"/>",
-        "<link name=\"toe_b\"/>",
-        "<link name=\"foot\"/>",
+        "<link name=\"toe.a\"/>",
+        "<link name=\"toe.b\"/>",
+        "<link name=\"foot.point\"/>",
         "<mass value=\"0.05\"/>",
     ] {
         assert!(urdf.contains(frame), "{frame} missing");
     }
     let out = xtask(&["export", "atrias", "--format", "mjcf"]);
     let mjcf = String::from_utf8(out.stdout).unwrap();
-    assert!(mjcf.contains("<connect name=\"shin_pin\" site1=\"shin_pin_a\" site2=\"shin_pin_b\""));
+    assert!(mjcf.contains("<connect name=\"shin_pin\" site1=\"shin_pin.a\" site2=\"shin_pin.b\""));
     assert!(
         mjcf.contains("mass=\"0.4438\"")
             && mjcf.contains("<motor name=\"thigh\" joint=\"thigh\" gear=\"1\"/>")

@@ -417,26 +417,64 @@ fn home_pose_with_the_wrong_number_of_angles() {
     );
 }
 
+/// No name a user may choose is reserved by the exports (issue 30): a link named `foot`,
+/// a link named like a closure point's frame (`toe_a`) and a contact named like a frame's
+/// joint build, and the exports' names stay distinct within each kind.
 #[test]
-fn names_the_exporters_add_are_reserved() {
-    let text = VALID.replace("lower_b", "foot");
-    let (l, c) = pos(&text, "\"foot\"", 0);
-    expect_error(
-        &text,
-        (l, c),
-        "links[3].name",
-        "`foot` is reserved for the foot frame of the exports",
-    );
-    // A link named like the frame of a closure point.
+fn names_a_user_chooses_do_not_clash_with_the_exports() {
     let text = edit("name = \"upper_b\"", "name = \"toe_a\"", 0)
-        .replace("parent = \"upper_b\"", "parent = \"toe_a\"");
-    let (l, c) = pos(&text, "\"toe_a\"", 0);
-    expect_error(
-        &text,
-        (l, c),
-        "links[2].name",
-        "`toe_a` is reserved for the frame of point a of closure `toe`",
-    );
+        .replace("parent = \"upper_b\"", "parent = \"toe_a\"")
+        .replace("lower_b", "foot")
+        + "\n[[contacts]]\nname = \"foot_frame\"\nlink = \"lower_a\"\nfriction = 0.8\n";
+    let m = model::build(&parse(&text).unwrap()).unwrap();
+    // The names the elements defined at `indent` spaces hold (a URDF transmission's
+    // `<joint name=…>` refers to a joint: it sits deeper).
+    let names = |xml: &str, element: &str, indent: Option<usize>| -> Vec<String> {
+        let open = format!("<{element} name=\"");
+        xml.lines()
+            .filter(|line| indent.is_none_or(|n| line.len() - line.trim_start().len() == n))
+            .filter_map(|line| line.trim_start().strip_prefix(open.as_str()))
+            .map(|rest| rest[..rest.find('"').unwrap()].to_string())
+            .collect()
+    };
+    let distinct = |v: &[String], what: &str| {
+        let mut s = v.to_vec();
+        s.sort();
+        s.dedup();
+        assert_eq!(s.len(), v.len(), "{what} names clash: {v:?}");
+    };
+    let urdf = xtask::commands::export::urdf(&m);
+    let links = names(&urdf, "link", Some(2));
+    for n in [
+        "foot",
+        "toe_a",
+        "foot.point",
+        "toe.a",
+        "toe.b",
+        "foot_frame.point",
+    ] {
+        assert!(
+            links.contains(&n.to_string()),
+            "URDF link `{n}` in {links:?}"
+        );
+    }
+    distinct(&links, "URDF link");
+    distinct(&names(&urdf, "joint", Some(2)), "URDF joint");
+    let mjcf = xtask::commands::export::mjcf(&m);
+    let sites = names(&mjcf, "site", None);
+    for n in ["foot.point", "toe.a", "toe.b", "foot_frame.point"] {
+        assert!(
+            sites.contains(&n.to_string()),
+            "MJCF site `{n}` in {sites:?}"
+        );
+    }
+    distinct(&sites, "MJCF site");
+    distinct(&names(&mjcf, "body", None), "MJCF body");
+    distinct(&names(&mjcf, "geom", None), "MJCF geom");
+    // `base` stays a keyword: it is what a first link's `parent` names.
+    let text = VALID.replace("lower_b", "base");
+    let (l, c) = pos(&text, "\"base\"", 2);
+    expect_error(&text, (l, c), "links[3].name", "`base` is reserved");
 }
 
 /// Runs the derivation (CasADi, from the project's Python environment): a home pose that
@@ -804,8 +842,8 @@ fn springs_contacts_and_ground_are_checked() {
         e.field.starts_with("contacts[0]") && e.message.contains("friction"),
         "{e}"
     );
-    let text = with("[[contacts]]\nname = \"foot\"\nlink = \"lower_a\"\nfriction = 0.8\n");
-    let at = pos(&text, "\"foot\"", 0);
+    let text = with("[[contacts]]\nname = \"base\"\nlink = \"lower_a\"\nfriction = 0.8\n");
+    let at = pos(&text, "\"base\"", 2);
     expect_error(&text, at, "contacts[0].name", "reserved");
     let text = with("[ground]\nnormal = [0.0, 0.0]\n");
     let at = pos(&text, "[0.0, 0.0]\n", 0);

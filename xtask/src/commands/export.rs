@@ -12,22 +12,50 @@
 //! `armature`; motors are joint-torque actuators (`gear = 1`: `ctrl` is the joint torque
 //! `u` of the runtime). In MJCF a closure is an `<equality><connect>` between two sites;
 //! URDF holds only the spanning tree, with one fixed, massless frame per closure point,
-//! named `<closure>_a` and `<closure>_b`, and a `foot` frame, so that tools reading URDF
-//! can rebuild the loop. URDF has no rotor inertia: each motor's transmission carries
+//! named `<closure>.a` and `<closure>.b`, a `foot.point` frame and a `<contact>.point`
+//! frame per contact, so that tools reading URDF can rebuild the loop. URDF has no rotor inertia: each motor's transmission carries
 //! Drake's extension elements `<drake:rotor_inertia>` and `<drake:gear_ratio>` (read by
 //! Drake; other parsers skip them) and a comment with the reflected inertia `I·N²`.
 //! A leg with contact points gets MuJoCo's contact: a small sphere at each point (the only
 //! geoms that collide) against a floor plane at the spec's ground, with the spec's
 //! friction; without contacts, contact stays disabled.
-//! The spec validation reserves every name the exporters add (`foot`, `<closure>_a`, …).
+//! Every name the exporters add holds a `.` (`foot.point`, `<closure>.a`, `<frame>.joint`,
+//! `<contact>.geom`), which a spec's names cannot: a user may name a link `foot` (Cassie
+//! has a body `left-foot`) and nothing clashes. See [`added`].
 
 use std::fmt::Write;
-
 use std::path::Path;
 
 use crate::cli::{self, args::ExportArgs, args::ExportFormat};
 use crate::gen;
 use crate::gen::model::{self, Model, Param, Point};
+
+/// The names the exporters add beside the spec's: each holds a `.`, which a spec name
+/// (a plain identifier) cannot, so none can clash with a link, joint, closure or contact.
+pub mod added {
+    /// The foot point's frame (URDF link, MJCF site).
+    pub const FOOT: &str = "foot.point";
+
+    /// Point `side` (`a` or `b`) of closure `closure`.
+    pub fn closure_point(closure: &str, side: &str) -> String {
+        format!("{closure}.{side}")
+    }
+
+    /// A contact point's frame (URDF link, MJCF site).
+    pub fn contact_point(contact: &str) -> String {
+        format!("{contact}.point")
+    }
+
+    /// A contact point's collision sphere (MJCF geom).
+    pub fn contact_geom(contact: &str) -> String {
+        format!("{contact}.geom")
+    }
+
+    /// The fixed joint that holds an added URDF frame.
+    pub fn frame_joint(frame: &str) -> String {
+        format!("{frame}.joint")
+    }
+}
 
 fn num(v: f64) -> String {
     format!("{v:?}")
@@ -119,7 +147,13 @@ pub fn mjcf(m: &Model) -> String {
         let _ = writeln!(out, "  <equality>");
         for c in &m.closures {
             // Stiffer than MuJoCo's default soft constraint (time constant 2 dt).
-            let _ = writeln!(out, "    <connect name=\"{0}\" site1=\"{0}_a\" site2=\"{0}_b\" solref=\"0.002 1\" solimp=\"0.95 0.99 0.001\"/>", c.name);
+            let _ = writeln!(
+                out,
+                "    <connect name=\"{}\" site1=\"{}\" site2=\"{}\" solref=\"0.002 1\" solimp=\"0.95 0.99 0.001\"/>",
+                c.name,
+                added::closure_point(&c.name, "a"),
+                added::closure_point(&c.name, "b")
+            );
         }
         let _ = writeln!(out, "  </equality>");
     }
@@ -182,30 +216,35 @@ fn sites(m: &Model, link: Option<usize>, pad: &str, out: &mut String) {
             if p.link == link {
                 let _ = writeln!(
                     out,
-                    "{pad}<site name=\"{}_{side}\" pos=\"{}\"/>",
-                    c.name,
+                    "{pad}<site name=\"{}\" pos=\"{}\"/>",
+                    added::closure_point(&c.name, side),
                     at(m, p)
                 );
             }
         }
     }
     if m.foot.link == link {
-        let _ = writeln!(out, "{pad}<site name=\"foot\" pos=\"{}\"/>", at(m, &m.foot));
+        let _ = writeln!(
+            out,
+            "{pad}<site name=\"{}\" pos=\"{}\"/>",
+            added::FOOT,
+            at(m, &m.foot)
+        );
     }
     for c in &m.contacts {
         if c.point.link == link {
             let _ = writeln!(
                 out,
                 "{pad}<site name=\"{}\" pos=\"{}\"/>",
-                c.name,
+                added::contact_point(&c.name),
                 at(m, &c.point)
             );
             // MuJoCo's contact is soft: a sphere that collides with the floor only, with
             // the spec's sliding friction (MuJoCo's default torsional and rolling).
             let _ = writeln!(
                 out,
-                "{pad}<geom name=\"{}_geom\" type=\"sphere\" size=\"{}\" pos=\"{}\" contype=\"1\" conaffinity=\"0\" condim=\"3\" friction=\"{} 0.005 0.0001\" mass=\"0\"/>",
-                c.name,
+                "{pad}<geom name=\"{}\" type=\"sphere\" size=\"{}\" pos=\"{}\" contype=\"1\" conaffinity=\"0\" condim=\"3\" friction=\"{} 0.005 0.0001\" mass=\"0\"/>",
+                added::contact_geom(&c.name),
                 num(CONTACT_RADIUS),
                 at(m, &c.point),
                 num(c.friction)
@@ -306,7 +345,7 @@ pub fn urdf(m: &Model) -> String {
     );
     let _ = writeln!(
         out,
-        "     each closure k joins the frames k_a and k_b (they must coincide). Gravity of the"
+        "     each closure k joins the frames k.a and k.b (they must coincide). Gravity of the"
     );
     let _ = writeln!(
         out,
@@ -388,7 +427,11 @@ pub fn urdf(m: &Model) -> String {
     }
     let frame = |name: &str, p: &Point, out: &mut String| {
         let _ = writeln!(out, "  <link name=\"{name}\"/>");
-        let _ = writeln!(out, "  <joint name=\"{name}_frame\" type=\"fixed\">");
+        let _ = writeln!(
+            out,
+            "  <joint name=\"{}\" type=\"fixed\">",
+            added::frame_joint(name)
+        );
         let _ = writeln!(
             out,
             "    <parent link=\"{}\"/>\n    <child link=\"{name}\"/>",
@@ -398,12 +441,12 @@ pub fn urdf(m: &Model) -> String {
         let _ = writeln!(out, "  </joint>");
     };
     for c in &m.closures {
-        frame(&format!("{}_a", c.name), &c.a, &mut out);
-        frame(&format!("{}_b", c.name), &c.b, &mut out);
+        frame(&added::closure_point(&c.name, "a"), &c.a, &mut out);
+        frame(&added::closure_point(&c.name, "b"), &c.b, &mut out);
     }
-    frame("foot", &m.foot, &mut out);
+    frame(added::FOOT, &m.foot, &mut out);
     for c in &m.contacts {
-        frame(&c.name, &c.point, &mut out);
+        frame(&added::contact_point(&c.name), &c.point, &mut out);
     }
     for &a in &m.actuated {
         let l = &m.links[a];

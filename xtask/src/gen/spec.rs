@@ -539,7 +539,11 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
         let n = s.get_ref();
         check_name(n).map_err(|m| ctx.span(s, field, m))?;
         if n == "base" {
-            return Err(ctx.span(s, field, format!("`{n}` is reserved")));
+            return Err(ctx.span(
+                s,
+                field,
+                format!("`{n}` is reserved: it is the fixed frame a first link's `parent` names"),
+            ));
         }
         if let Some((_, first, line)) = names.iter().find(|(name, _, _)| name == n) {
             return Err(ctx.span(
@@ -751,7 +755,6 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
             check_num(ctx, o, "ground.offset", Sign::Any)?;
         }
     }
-    check_reserved(ctx, file)?;
     if let Some(home) = &file.home {
         let h = home.get_ref();
         if h.len() != file.links.len() {
@@ -793,70 +796,6 @@ fn check_has_size(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
             "links[0].length",
             "every length, origin, centre of mass and point in the spec is zero: the leg has no size (every point is at the base, so no joint moves anything)",
         ));
-    }
-    Ok(())
-}
-
-/// Names the exporters add (URDF frames for the foot and the closure points, and their
-/// fixed joints) must not be spec names: a link called `foot` would make two URDF links
-/// `foot`. Each clash is reported at the spec name, with what the exporter uses it for.
-fn check_reserved(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
-    let mut reserved: Vec<(String, String)> = vec![
-        ("foot".into(), "the foot frame of the exports".into()),
-        (
-            "foot_frame".into(),
-            "the joint of the foot frame in URDF".into(),
-        ),
-    ];
-    for c in &file.contacts {
-        let n = c.get_ref().name.get_ref();
-        reserved.push((
-            format!("{n}_frame"),
-            format!("the joint of the frame of contact `{n}` in URDF"),
-        ));
-    }
-    for c in &file.closures {
-        let n = c.get_ref().name.get_ref();
-        for side in ["a", "b"] {
-            let why = format!("the frame of point {side} of closure `{n}` in the exports");
-            reserved.push((format!("{n}_{side}"), why.clone()));
-            reserved.push((format!("{n}_{side}_frame"), format!("the joint of {why}")));
-        }
-    }
-    let named = file
-        .links
-        .iter()
-        .enumerate()
-        .map(|(i, l)| (&l.get_ref().name, format!("links[{i}].name")))
-        .chain(
-            file.closures
-                .iter()
-                .enumerate()
-                .map(|(k, c)| (&c.get_ref().name, format!("closures[{k}].name"))),
-        )
-        .chain(
-            file.springs
-                .iter()
-                .enumerate()
-                .map(|(k, c)| (&c.get_ref().name, format!("springs[{k}].name"))),
-        )
-        .chain(
-            file.contacts
-                .iter()
-                .enumerate()
-                .map(|(k, c)| (&c.get_ref().name, format!("contacts[{k}].name"))),
-        );
-    for (name, field) in named {
-        if let Some((_, why)) = reserved.iter().find(|(r, _)| r == name.get_ref()) {
-            return Err(ctx.span(
-                name,
-                field,
-                format!(
-                    "`{}` is reserved for {why}; choose another name",
-                    name.get_ref()
-                ),
-            ));
-        }
     }
     Ok(())
 }
