@@ -23,6 +23,8 @@ import sys
 
 import casadi as cs
 
+import derive_spatial
+
 UNARY = {
     cs.OP_NEG: "neg",
     cs.OP_SQ: "sq",
@@ -374,7 +376,7 @@ def coriolis(M, q, qd):
         for w, t in terms:
             match = next((x for x in kept if x[0] == -w and cs.is_equal(x[1], t, 64)), None)
             if match is not None:
-                kept.remove(match)
+                kept = [x for x in kept if x is not match]
             else:
                 kept.append((w, t))
         total = None
@@ -399,14 +401,12 @@ def coriolis(M, q, qd):
     return cs.vertcat(*out)
 
 
-def derive(model):
-    """Returns {function name: (input names, [(output name, kind, expression)])}."""
-    sym = {p["name"]: cs.SX.sym(p["name"]) for p in model["params"]}
-    params = cs.vertcat(*[sym[p["name"]] for p in model["params"]])
+def planar_lagrangian(model, sym, q, qd):
+    """The notes' Lagrange form of a planar leg: the kinetic and potential energy of each
+    branch from absolute angles and joint positions, and the point function of the same
+    chain. Returns (T, V, point)."""
     links = model["links"]
     n = len(links)
-    q = cs.SX.sym("q", n)
-    qd = cs.SX.sym("qd", n)
 
     def vec(pair):
         return cs.vertcat(sym[pair[0]], sym[pair[1]])
@@ -453,6 +453,24 @@ def derive(model):
             rotor_inertia, gear_ratio = sym[link["rotor"][0]], sym[link["rotor"][1]]
             kinetic[b] += 0.5 * rotor_inertia * gear_ratio**2 * qd[i] ** 2
         potential[b] += -mass * cs.dot(gravity, com)
+    return kinetic, potential, point
+
+
+def derive(model):
+    """Returns {function name: (input names, [(output name, kind, expression)])}."""
+    sym = {p["name"]: cs.SX.sym(p["name"]) for p in model["params"]}
+    params = cs.vertcat(*[sym[p["name"]] for p in model["params"]])
+    links = model["links"]
+    n = len(links)
+    q = cs.SX.sym("q", n)
+    qd = cs.SX.sym("qd", n)
+
+    spatial = model.get("dimension", 2) == 3
+    if spatial:
+        T_lagrange, V_lagrange, point = derive_spatial.lagrangian(model, sym, q, qd)
+        kinetic, potential = {None: T_lagrange}, {None: V_lagrange}
+    else:
+        kinetic, potential, point = planar_lagrangian(model, sym, q, qd)
     # Springs: ½ k (q_a − q_b − rest)², or ½ k (q_a − rest)² on one joint.
     V_springs = 0
     G_springs = cs.SX(n, 1)
@@ -487,7 +505,7 @@ def derive(model):
     # (`c·(r·h) − s·(r×h)`), so that the emitter can compute them once per parameter set;
     # the entries of M then reduce to constants times sines and cosines of relative angles.
     # One sine and cosine per revolute joint; absolute orientations by angle addition.
-    lk = LinkKinematics(model, sym, q, qd)
+    lk = (derive_spatial.SpatialKinematics if spatial else LinkKinematics)(model, sym, q, qd)
     M = lk.mass_matrix()
     G = lk.gravity_forces() + G_springs
     M_qd = cs.mtimes(M, qd)
@@ -495,7 +513,7 @@ def derive(model):
     V = lk.potential_energy() + V_springs
     D = cs.vertcat(*[sym[link["damping"]] * qd[i] for i, link in enumerate(links)])
     point = lk.position
-    joint = [cs.vertcat(*o) for o in lk.joint]
+    joint = [o if spatial else cs.vertcat(*o) for o in lk.joint]
 
     def stacked(refs):
         """Positions, Jacobian and J̇ q̇ of points (two rows each)."""
@@ -514,17 +532,21 @@ def derive(model):
         phi, J, Jdot_qd = pa - pb, Ja - Jb, ba - bb
         closure_points = cs.horzcat(*[cs.horzcat(point(c["a"]), point(c["b"])) for c in closures])
     else:
-        phi, J, Jdot_qd, closure_points = cs.SX(0, 1), cs.SX(0, n), cs.SX(0, 1), cs.SX(2, 0)
+        phi, J, Jdot_qd = cs.SX(0, 1), cs.SX(0, n), cs.SX(0, 1)
+        closure_points = cs.SX(model.get("dimension", 2), 0)
 
     # C q̇ two ways, the same values: by the Christoffel symbols of the link-local M (compact
     # for short chains), or Σ m_k J_kᵀ (J̇_k q̇) over the centres of mass (a planar link's
     # rotation adds nothing, J_ω being constant), which grows more slowly with depth. The
     # one whose fused terms (M, N, J, J̇q̇) take fewer state-dependent operations is emitted.
     C_christoffel = coriolis(M, q, qd)
-    C_points = cs.SX(n, 1)
-    for i, link in enumerate(links):
-        com = {"link": i, "point": link["com"]}
-        C_points += sym[link["mass"]] * cs.mtimes(lk.jacobian(com).T, lk.bias(com))
+    if spatial:
+        C_points = lk.coriolis_points()
+    else:
+        C_points = cs.SX(n, 1)
+        for i, link in enumerate(links):
+            com = {"link": i, "point": link["com"]}
+            C_points += sym[link["mass"]] * cs.mtimes(lk.jacobian(com).T, lk.bias(com))
     N = min(
         (C_christoffel + G, C_points + G),
         key=lambda N: state_operations([M, N, J, Jdot_qd], [q, qd], [q, qd, params]),
@@ -532,6 +554,13 @@ def derive(model):
 
     foot, Jf, Jf_dot_qd = stacked([model["foot"]])
     tips = cs.horzcat(*[point({"link": i, "point": l["length"]}) for i, l in enumerate(links)])
+
+    # The leg's size at q, which the runtime's tolerances scale with: the largest
+    # coordinate of any joint or link tip in the base frame (max |x|, the first NaN-free).
+    sizes = cs.vec(cs.fabs(cs.horzcat(*joint, tips)))
+    leg_size = sizes[0]
+    for k in range(1, sizes.numel()):
+        leg_size = cs.fmax(leg_size, sizes[k])
 
     # Contact points: base-frame positions stacked (rows 2k, 2k + 1 are x, y of contact k),
     # their Jacobian and J̇_c q̇; the runtime projects them on the ground.
@@ -571,6 +600,7 @@ def derive(model):
         "joint_positions": (Q, [("joint_positions", "matrix", cs.horzcat(*joint))]),
         "link_tips": (Q, [("link_tips", "matrix", tips)]),
         "closure_points": (Q, [("closure_points", "matrix", closure_points)]),
+        "leg_size": (Q, [("leg_size", "scalar", leg_size)]),
         "contact_positions": (Q, [("contact_positions", "vector", xc)]),
         "contact_jacobian": (Q, [("contact_jacobian", "matrix", Jc)]),
         "contact_bias": (QQ, [("contact_bias", "vector", Jc_dot_qd)]),

@@ -11,7 +11,7 @@
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
-    JointKind, LegModel, Parameters,
+    JointKind, LegDynamics, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 9;
@@ -281,7 +281,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
-    prepared: [T; 64],
+    prepared: [T; 66],
 }
 impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
@@ -564,7 +564,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
         true
     }
 }
-impl LegModel<NQ, NC, NU> for AtriasHopper {
+impl LegDynamics<NQ, NC, NU> for AtriasHopper {
     const NAME: &'static str = "atrias_hopper";
     const JOINT_NAMES: [&'static str; NQ] = [
         "slide_x",
@@ -668,22 +668,6 @@ impl LegModel<NQ, NC, NU> for AtriasHopper {
     ) -> SVector<T, 2> {
         constraint_bias(q, qd, p)
     }
-    fn foot_position<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 2> {
-        foot_position(q, p)
-    }
-    fn foot_jacobian<T: Arithmetic>(
-        q: &SVector<T, 9>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 9> {
-        foot_jacobian(q, p)
-    }
-    fn foot_bias<T: Arithmetic>(
-        q: &SVector<T, 9>,
-        qd: &SVector<T, 9>,
-        p: &Params<T>,
-    ) -> SVector<T, 2> {
-        foot_bias(q, qd, p)
-    }
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
@@ -694,20 +678,8 @@ impl LegModel<NQ, NC, NU> for AtriasHopper {
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
-    fn joint_positions<T: Arithmetic>(
-        q: &SVector<T, 9>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 9> {
-        joint_positions(q, p)
-    }
-    fn link_tips<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 9> {
-        link_tips(q, p)
-    }
-    fn closure_points<T: Arithmetic>(
-        q: &SVector<T, 9>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 2> {
-        closure_points(q, p)
+    fn leg_size<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> T {
+        leg_size(q, p)
     }
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 9>,
@@ -783,6 +755,39 @@ impl LegModel<NQ, NC, NU> for AtriasHopper {
         }
     }
 }
+impl LegModel<NQ, NC, NU> for AtriasHopper {
+    fn foot_position<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 2> {
+        foot_position(q, p)
+    }
+    fn foot_jacobian<T: Arithmetic>(
+        q: &SVector<T, 9>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 9> {
+        foot_jacobian(q, p)
+    }
+    fn foot_bias<T: Arithmetic>(
+        q: &SVector<T, 9>,
+        qd: &SVector<T, 9>,
+        p: &Params<T>,
+    ) -> SVector<T, 2> {
+        foot_bias(q, qd, p)
+    }
+    fn joint_positions<T: Arithmetic>(
+        q: &SVector<T, 9>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 9> {
+        joint_positions(q, p)
+    }
+    fn link_tips<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 9> {
+        link_tips(q, p)
+    }
+    fn closure_points<T: Arithmetic>(
+        q: &SVector<T, 9>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 2> {
+        closure_points(q, p)
+    }
+}
 impl ContactModel<NQ, NC, NU, NK> for AtriasHopper {
     const CONTACT_NAMES: &'static [&'static str] = &["toe"];
     const CONTACT_FRICTION: &'static [f64] = &[0.8];
@@ -832,7 +837,7 @@ impl ContactModel<NQ, NC, NU, NK> for AtriasHopper {
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 64> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 66> {
     let v0 = values.four_bar_link_mass + values.lower_leg_mass;
     let v1 = values.torso_mass + v0;
     let v2 = values.thigh_mass + values.shin_mass;
@@ -1046,8 +1051,10 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 64> {
     let v210 = values.gravity_y * v209;
     let v211 = v206 + v210;
     let v212 = values.slide_x_origin_y + values.slide_x_length_y;
-    let v213 = -values.thigh_spring_stiffness;
-    let v214 = -values.four_bar_spring_stiffness;
+    let v213 = values.slide_x_origin_y.abs();
+    let v214 = v212.abs();
+    let v215 = -values.thigh_spring_stiffness;
+    let v216 = -values.four_bar_spring_stiffness;
     SMatrix::from_data(
         ArrayStorage([
             [
@@ -1115,6 +1122,8 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 64> {
                 v212,
                 v213,
                 v214,
+                v215,
+                v216,
             ],
         ]),
     )
@@ -2894,6 +2903,171 @@ pub fn closure_points<T: Arithmetic>(
     let v78 = v76 + v77;
     let v79 = v75 + v78;
     SMatrix::from_data(ArrayStorage([[v32, v47], [v71, v79]]))
+}
+/// The leg's size (m): the largest coordinate of any joint or link tip in the base
+/// frame, which tolerances scale with.
+pub fn leg_size<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> T {
+    let [q_0, q_1, q_2, q_3, q_4, q_5, q_6, q_7, q_8] = q.data.0[0];
+    let v0 = p.slide_x_origin_x + q_0;
+    let v1 = v0.abs();
+    let v2 = v1.max(p.prepared[62]);
+    let v3 = v0 + p.slide_x_length_x;
+    let v4 = v3.abs();
+    let v5 = v2.max(v4);
+    let v6 = p.slide_x_length_y + q_1;
+    let v7 = p.slide_x_origin_y + v6;
+    let v8 = v7.abs();
+    let v9 = v5.max(v8);
+    let v10 = v3 + p.slide_y_length_x;
+    let v11 = v10.abs();
+    let v12 = v9.max(v11);
+    let v13 = v7 + p.slide_y_length_y;
+    let v14 = v13.abs();
+    let v15 = v12.max(v14);
+    let (v18, v16) = q_2.sincos();
+    let v17 = v16 * p.torso_length_x;
+    let v19 = v18 * p.torso_length_y;
+    let v20 = v17 - v19;
+    let v21 = v10 + v20;
+    let v22 = v21.abs();
+    let v23 = v15.max(v22);
+    let v24 = p.torso_length_x * v18;
+    let v25 = v16 * p.torso_length_y;
+    let v26 = v24 + v25;
+    let v27 = v13 + v26;
+    let v28 = v27.abs();
+    let v29 = v23.max(v28);
+    let v30 = v29.max(v22);
+    let v31 = v30.max(v28);
+    let v32 = v31.max(v22);
+    let v33 = v32.max(v28);
+    let (v36, v34) = q_5.sincos();
+    let v35 = v16 * v34;
+    let v37 = v18 * v36;
+    let v38 = v35 - v37;
+    let v39 = v38 * p.thigh_length_x;
+    let v40 = v18 * v34;
+    let v41 = v16 * v36;
+    let v42 = v40 + v41;
+    let v43 = v42 * p.thigh_length_y;
+    let v44 = v39 - v43;
+    let v45 = v21 + v44;
+    let v46 = v45.abs();
+    let v47 = v33.max(v46);
+    let v48 = p.thigh_length_x * v42;
+    let v49 = v38 * p.thigh_length_y;
+    let v50 = v48 + v49;
+    let v51 = v27 + v50;
+    let v52 = v51.abs();
+    let v53 = v47.max(v52);
+    let v54 = v53.max(v22);
+    let v55 = v54.max(v28);
+    let (v58, v56) = q_7.sincos();
+    let v57 = v16 * v56;
+    let v59 = v18 * v58;
+    let v60 = v57 - v59;
+    let v61 = v60 * p.four_bar_link_length_x;
+    let v62 = v18 * v56;
+    let v63 = v16 * v58;
+    let v64 = v62 + v63;
+    let v65 = v64 * p.four_bar_link_length_y;
+    let v66 = v61 - v65;
+    let v67 = v21 + v66;
+    let v68 = v67.abs();
+    let v69 = v55.max(v68);
+    let v70 = p.four_bar_link_length_x * v64;
+    let v71 = v60 * p.four_bar_link_length_y;
+    let v72 = v70 + v71;
+    let v73 = v27 + v72;
+    let v74 = v73.abs();
+    let v75 = v69.max(v74);
+    let v76 = v75.max(v4);
+    let v77 = v76.max(p.prepared[63]);
+    let v78 = v77.max(v11);
+    let v79 = v78.max(v14);
+    let v80 = v79.max(v22);
+    let v81 = v80.max(v28);
+    let (v84, v82) = q_3.sincos();
+    let v83 = v16 * v82;
+    let v85 = v18 * v84;
+    let v86 = v83 - v85;
+    let v87 = v86 * p.thigh_motor_length_x;
+    let v88 = v18 * v82;
+    let v89 = v16 * v84;
+    let v90 = v88 + v89;
+    let v91 = v90 * p.thigh_motor_length_y;
+    let v92 = v87 - v91;
+    let v93 = v21 + v92;
+    let v94 = v93.abs();
+    let v95 = v81.max(v94);
+    let v96 = p.thigh_motor_length_x * v90;
+    let v97 = v86 * p.thigh_motor_length_y;
+    let v98 = v96 + v97;
+    let v99 = v27 + v98;
+    let v100 = v99.abs();
+    let v101 = v95.max(v100);
+    let (v104, v102) = q_4.sincos();
+    let v103 = v16 * v102;
+    let v105 = v18 * v104;
+    let v106 = v103 - v105;
+    let v107 = v106 * p.four_bar_motor_length_x;
+    let v108 = v18 * v102;
+    let v109 = v16 * v104;
+    let v110 = v108 + v109;
+    let v111 = v110 * p.four_bar_motor_length_y;
+    let v112 = v107 - v111;
+    let v113 = v21 + v112;
+    let v114 = v113.abs();
+    let v115 = v101.max(v114);
+    let v116 = p.four_bar_motor_length_x * v110;
+    let v117 = v106 * p.four_bar_motor_length_y;
+    let v118 = v116 + v117;
+    let v119 = v27 + v118;
+    let v120 = v119.abs();
+    let v121 = v115.max(v120);
+    let v122 = v121.max(v46);
+    let v123 = v122.max(v52);
+    let (v126, v124) = q_6.sincos();
+    let v125 = v38 * v124;
+    let v127 = v42 * v126;
+    let v128 = v125 - v127;
+    let v129 = v128 * p.shin_length_x;
+    let v130 = v42 * v124;
+    let v131 = v38 * v126;
+    let v132 = v130 + v131;
+    let v133 = v132 * p.shin_length_y;
+    let v134 = v129 - v133;
+    let v135 = v45 + v134;
+    let v136 = v135.abs();
+    let v137 = v123.max(v136);
+    let v138 = p.shin_length_x * v132;
+    let v139 = v128 * p.shin_length_y;
+    let v140 = v138 + v139;
+    let v141 = v51 + v140;
+    let v142 = v141.abs();
+    let v143 = v137.max(v142);
+    let v144 = v143.max(v68);
+    let v145 = v144.max(v74);
+    let (v148, v146) = q_8.sincos();
+    let v147 = v60 * v146;
+    let v149 = v64 * v148;
+    let v150 = v147 - v149;
+    let v151 = v150 * p.lower_leg_length_x;
+    let v152 = v64 * v146;
+    let v153 = v60 * v148;
+    let v154 = v152 + v153;
+    let v155 = v154 * p.lower_leg_length_y;
+    let v156 = v151 - v155;
+    let v157 = v67 + v156;
+    let v158 = v157.abs();
+    let v159 = v145.max(v158);
+    let v160 = p.lower_leg_length_x * v154;
+    let v161 = v150 * p.lower_leg_length_y;
+    let v162 = v160 + v161;
+    let v163 = v73 + v162;
+    let v164 = v163.abs();
+    let v165 = v159.max(v164);
+    v165
 }
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
 pub fn contact_positions<T: Arithmetic>(
@@ -4888,7 +5062,7 @@ pub fn bias_forces_derivatives<T: Arithmetic>(
                     v328,
                     v336,
                     T::lit(0.0),
-                    p.prepared[62],
+                    p.prepared[64],
                     T::lit(0.0),
                     T::lit(0.0),
                     T::lit(0.0),
@@ -4901,14 +5075,14 @@ pub fn bias_forces_derivatives<T: Arithmetic>(
                     v354,
                     T::lit(0.0),
                     T::lit(0.0),
-                    p.prepared[63],
+                    p.prepared[65],
                     T::lit(0.0),
                 ],
                 [
                     v357,
                     v361,
                     v375,
-                    p.prepared[62],
+                    p.prepared[64],
                     T::lit(0.0),
                     v390,
                     v397,
@@ -4931,7 +5105,7 @@ pub fn bias_forces_derivatives<T: Arithmetic>(
                     v428,
                     v442,
                     T::lit(0.0),
-                    p.prepared[63],
+                    p.prepared[65],
                     T::lit(0.0),
                     T::lit(0.0),
                     v457,
@@ -7484,7 +7658,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                     v546,
                     v557,
                     T::lit(0.0),
-                    p.prepared[62],
+                    p.prepared[64],
                     T::lit(0.0),
                     T::lit(0.0),
                     T::lit(0.0),
@@ -7497,14 +7671,14 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                     v596,
                     T::lit(0.0),
                     T::lit(0.0),
-                    p.prepared[63],
+                    p.prepared[65],
                     T::lit(0.0),
                 ],
                 [
                     v603,
                     v611,
                     v640,
-                    p.prepared[62],
+                    p.prepared[64],
                     T::lit(0.0),
                     v659,
                     v670,
@@ -7527,7 +7701,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                     v752,
                     v781,
                     T::lit(0.0),
-                    p.prepared[63],
+                    p.prepared[65],
                     T::lit(0.0),
                     T::lit(0.0),
                     v800,

@@ -11,7 +11,7 @@
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
-    JointKind, LegModel, Parameters,
+    JointKind, LegDynamics, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 5;
@@ -203,7 +203,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
-    prepared: [T; 25],
+    prepared: [T; 28],
 }
 impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
@@ -408,7 +408,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
         true
     }
 }
-impl LegModel<NQ, NC, NU> for BracedParallelogram {
+impl LegDynamics<NQ, NC, NU> for BracedParallelogram {
     const NAME: &'static str = "braced_parallelogram";
     const JOINT_NAMES: [&'static str; NQ] = [
         "thigh",
@@ -469,22 +469,6 @@ impl LegModel<NQ, NC, NU> for BracedParallelogram {
     ) -> SVector<T, 4> {
         constraint_bias(q, qd, p)
     }
-    fn foot_position<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
-        foot_position(q, p)
-    }
-    fn foot_jacobian<T: Arithmetic>(
-        q: &SVector<T, 5>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 5> {
-        foot_jacobian(q, p)
-    }
-    fn foot_bias<T: Arithmetic>(
-        q: &SVector<T, 5>,
-        qd: &SVector<T, 5>,
-        p: &Params<T>,
-    ) -> SVector<T, 2> {
-        foot_bias(q, qd, p)
-    }
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -495,20 +479,8 @@ impl LegModel<NQ, NC, NU> for BracedParallelogram {
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
-    fn joint_positions<T: Arithmetic>(
-        q: &SVector<T, 5>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 5> {
-        joint_positions(q, p)
-    }
-    fn link_tips<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
-        link_tips(q, p)
-    }
-    fn closure_points<T: Arithmetic>(
-        q: &SVector<T, 5>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 4> {
-        closure_points(q, p)
+    fn leg_size<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
+        leg_size(q, p)
     }
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 5>,
@@ -584,6 +556,39 @@ impl LegModel<NQ, NC, NU> for BracedParallelogram {
         }
     }
 }
+impl LegModel<NQ, NC, NU> for BracedParallelogram {
+    fn foot_position<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
+        foot_position(q, p)
+    }
+    fn foot_jacobian<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 5> {
+        foot_jacobian(q, p)
+    }
+    fn foot_bias<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SVector<T, 2> {
+        foot_bias(q, qd, p)
+    }
+    fn joint_positions<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 5> {
+        joint_positions(q, p)
+    }
+    fn link_tips<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
+        link_tips(q, p)
+    }
+    fn closure_points<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 4> {
+        closure_points(q, p)
+    }
+}
 impl ContactModel<NQ, NC, NU, NK> for BracedParallelogram {
     const CONTACT_NAMES: &'static [&'static str] = &[];
     const CONTACT_FRICTION: &'static [f64] = &[];
@@ -633,7 +638,7 @@ impl ContactModel<NQ, NC, NU, NK> for BracedParallelogram {
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 25> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 28> {
     let v0 = values.thigh_com_x * values.thigh_com_x;
     let v1 = values.thigh_com_y * values.thigh_com_y;
     let v2 = v0 + v1;
@@ -768,6 +773,11 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 25> {
     let v131 = v129 + v130;
     let v132 = values.gravity_y * v131;
     let v133 = v128 + v132;
+    let v134 = values.thigh_origin_x.abs();
+    let v135 = values.thigh_origin_y.abs();
+    let v136 = v134.max(v135);
+    let v137 = values.four_bar_link_origin_x.abs();
+    let v138 = values.four_bar_link_origin_y.abs();
     SMatrix::from_data(
         ArrayStorage([
             [
@@ -796,6 +806,9 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 25> {
                 v118,
                 v121,
                 v133,
+                v136,
+                v137,
+                v138,
             ],
         ]),
     )
@@ -1723,6 +1736,113 @@ pub fn closure_points<T: Arithmetic>(
     let v82 = v80 + v81;
     let v83 = v21 + v82;
     SMatrix::from_data(ArrayStorage([[v17, v25], [v43, v51], [v67, v75], [v79, v83]]))
+}
+/// The leg's size (m): the largest coordinate of any joint or link tip in the base
+/// frame, which tolerances scale with.
+pub fn leg_size<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
+    let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
+    let (v2, v0) = q_0.sincos();
+    let v1 = v0 * p.thigh_length_x;
+    let v3 = v2 * p.thigh_length_y;
+    let v4 = v1 - v3;
+    let v5 = p.thigh_origin_x + v4;
+    let v6 = v5.abs();
+    let v7 = p.prepared[25].max(v6);
+    let v8 = p.thigh_length_x * v2;
+    let v9 = v0 * p.thigh_length_y;
+    let v10 = v8 + v9;
+    let v11 = p.thigh_origin_y + v10;
+    let v12 = v11.abs();
+    let v13 = v7.max(v12);
+    let v14 = v13.max(p.prepared[26]);
+    let v15 = v14.max(p.prepared[27]);
+    let (v18, v16) = q_2.sincos();
+    let v17 = v16 * p.four_bar_link_length_x;
+    let v19 = v18 * p.four_bar_link_length_y;
+    let v20 = v17 - v19;
+    let v21 = p.four_bar_link_origin_x + v20;
+    let v22 = v21.abs();
+    let v23 = v15.max(v22);
+    let v24 = p.four_bar_link_length_x * v18;
+    let v25 = v16 * p.four_bar_link_length_y;
+    let v26 = v24 + v25;
+    let v27 = p.four_bar_link_origin_y + v26;
+    let v28 = v27.abs();
+    let v29 = v23.max(v28);
+    let v30 = v16 * p.brace_origin_x;
+    let v31 = v18 * p.brace_origin_y;
+    let v32 = v30 - v31;
+    let v33 = p.four_bar_link_origin_x + v32;
+    let v34 = v33.abs();
+    let v35 = v29.max(v34);
+    let v36 = v18 * p.brace_origin_x;
+    let v37 = v16 * p.brace_origin_y;
+    let v38 = v36 + v37;
+    let v39 = p.four_bar_link_origin_y + v38;
+    let v40 = v39.abs();
+    let v41 = v35.max(v40);
+    let v42 = v41.max(v6);
+    let v43 = v42.max(v12);
+    let (v46, v44) = q_1.sincos();
+    let v45 = v0 * v44;
+    let v47 = v2 * v46;
+    let v48 = v45 - v47;
+    let v49 = v48 * p.shin_length_x;
+    let v50 = v2 * v44;
+    let v51 = v0 * v46;
+    let v52 = v50 + v51;
+    let v53 = v52 * p.shin_length_y;
+    let v54 = v49 - v53;
+    let v55 = v5 + v54;
+    let v56 = v55.abs();
+    let v57 = v43.max(v56);
+    let v58 = p.shin_length_x * v52;
+    let v59 = v48 * p.shin_length_y;
+    let v60 = v58 + v59;
+    let v61 = v11 + v60;
+    let v62 = v61.abs();
+    let v63 = v57.max(v62);
+    let v64 = v63.max(v22);
+    let v65 = v64.max(v28);
+    let (v68, v66) = q_3.sincos();
+    let v67 = v16 * v66;
+    let v69 = v18 * v68;
+    let v70 = v67 - v69;
+    let v71 = v70 * p.lower_leg_length_x;
+    let v72 = v18 * v66;
+    let v73 = v16 * v68;
+    let v74 = v72 + v73;
+    let v75 = v74 * p.lower_leg_length_y;
+    let v76 = v71 - v75;
+    let v77 = v21 + v76;
+    let v78 = v77.abs();
+    let v79 = v65.max(v78);
+    let v80 = p.lower_leg_length_x * v74;
+    let v81 = v70 * p.lower_leg_length_y;
+    let v82 = v80 + v81;
+    let v83 = v27 + v82;
+    let v84 = v83.abs();
+    let v85 = v79.max(v84);
+    let (v88, v86) = q_4.sincos();
+    let v87 = v16 * v86;
+    let v89 = v18 * v88;
+    let v90 = v87 - v89;
+    let v91 = v90 * p.brace_length_x;
+    let v92 = v18 * v86;
+    let v93 = v16 * v88;
+    let v94 = v92 + v93;
+    let v95 = v94 * p.brace_length_y;
+    let v96 = v91 - v95;
+    let v97 = v33 + v96;
+    let v98 = v97.abs();
+    let v99 = v85.max(v98);
+    let v100 = p.brace_length_x * v94;
+    let v101 = v90 * p.brace_length_y;
+    let v102 = v100 + v101;
+    let v103 = v39 + v102;
+    let v104 = v103.abs();
+    let v105 = v99.max(v104);
+    v105
 }
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
 pub fn contact_positions<T: Arithmetic>(

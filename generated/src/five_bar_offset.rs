@@ -11,7 +11,7 @@
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
-    JointKind, LegModel, Parameters,
+    JointKind, LegDynamics, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 4;
@@ -164,7 +164,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
-    prepared: [T; 19],
+    prepared: [T; 22],
 }
 impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
@@ -330,7 +330,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
         true
     }
 }
-impl LegModel<NQ, NC, NU> for FiveBarOffset {
+impl LegDynamics<NQ, NC, NU> for FiveBarOffset {
     const NAME: &'static str = "five_bar_offset";
     const JOINT_NAMES: [&'static str; NQ] = ["upper_a", "lower_a", "upper_b", "lower_b"];
     const JOINT_KINDS: [JointKind; NQ] = [
@@ -384,22 +384,6 @@ impl LegModel<NQ, NC, NU> for FiveBarOffset {
     ) -> SVector<T, 2> {
         constraint_bias(q, qd, p)
     }
-    fn foot_position<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 2> {
-        foot_position(q, p)
-    }
-    fn foot_jacobian<T: Arithmetic>(
-        q: &SVector<T, 4>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 4> {
-        foot_jacobian(q, p)
-    }
-    fn foot_bias<T: Arithmetic>(
-        q: &SVector<T, 4>,
-        qd: &SVector<T, 4>,
-        p: &Params<T>,
-    ) -> SVector<T, 2> {
-        foot_bias(q, qd, p)
-    }
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -410,20 +394,8 @@ impl LegModel<NQ, NC, NU> for FiveBarOffset {
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
-    fn joint_positions<T: Arithmetic>(
-        q: &SVector<T, 4>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 4> {
-        joint_positions(q, p)
-    }
-    fn link_tips<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> {
-        link_tips(q, p)
-    }
-    fn closure_points<T: Arithmetic>(
-        q: &SVector<T, 4>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 2> {
-        closure_points(q, p)
+    fn leg_size<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> T {
+        leg_size(q, p)
     }
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 4>,
@@ -499,6 +471,39 @@ impl LegModel<NQ, NC, NU> for FiveBarOffset {
         }
     }
 }
+impl LegModel<NQ, NC, NU> for FiveBarOffset {
+    fn foot_position<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 2> {
+        foot_position(q, p)
+    }
+    fn foot_jacobian<T: Arithmetic>(
+        q: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 4> {
+        foot_jacobian(q, p)
+    }
+    fn foot_bias<T: Arithmetic>(
+        q: &SVector<T, 4>,
+        qd: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> SVector<T, 2> {
+        foot_bias(q, qd, p)
+    }
+    fn joint_positions<T: Arithmetic>(
+        q: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 4> {
+        joint_positions(q, p)
+    }
+    fn link_tips<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> {
+        link_tips(q, p)
+    }
+    fn closure_points<T: Arithmetic>(
+        q: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 2> {
+        closure_points(q, p)
+    }
+}
 impl ContactModel<NQ, NC, NU, NK> for FiveBarOffset {
     const CONTACT_NAMES: &'static [&'static str] = &[];
     const CONTACT_FRICTION: &'static [f64] = &[];
@@ -548,7 +553,7 @@ impl ContactModel<NQ, NC, NU, NK> for FiveBarOffset {
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 19> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 22> {
     let v0 = values.upper_a_com_x * values.upper_a_com_x;
     let v1 = values.upper_a_com_y * values.upper_a_com_y;
     let v2 = v0 + v1;
@@ -652,6 +657,11 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 19> {
     let v100 = v98 + v99;
     let v101 = values.gravity_y * v100;
     let v102 = v97 + v101;
+    let v103 = values.upper_a_origin_x.abs();
+    let v104 = values.upper_a_origin_y.abs();
+    let v105 = v103.max(v104);
+    let v106 = values.upper_b_origin_x.abs();
+    let v107 = values.upper_b_origin_y.abs();
     SMatrix::from_data(
         ArrayStorage([
             [
@@ -674,6 +684,9 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 19> {
                 v88,
                 v91,
                 v102,
+                v105,
+                v106,
+                v107,
             ],
         ]),
     )
@@ -1347,6 +1360,82 @@ pub fn closure_points<T: Arithmetic>(
     let v50 = v48 + v49;
     let v51 = v47 + v50;
     SMatrix::from_data(ArrayStorage([[v17, v25], [v43, v51]]))
+}
+/// The leg's size (m): the largest coordinate of any joint or link tip in the base
+/// frame, which tolerances scale with.
+pub fn leg_size<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> T {
+    let [q_0, q_1, q_2, q_3] = q.data.0[0];
+    let (v2, v0) = q_0.sincos();
+    let v1 = v0 * p.upper_a_length_x;
+    let v3 = v2 * p.upper_a_length_y;
+    let v4 = v1 - v3;
+    let v5 = p.upper_a_origin_x + v4;
+    let v6 = v5.abs();
+    let v7 = p.prepared[19].max(v6);
+    let v8 = p.upper_a_length_x * v2;
+    let v9 = v0 * p.upper_a_length_y;
+    let v10 = v8 + v9;
+    let v11 = p.upper_a_origin_y + v10;
+    let v12 = v11.abs();
+    let v13 = v7.max(v12);
+    let v14 = v13.max(p.prepared[20]);
+    let v15 = v14.max(p.prepared[21]);
+    let (v18, v16) = q_2.sincos();
+    let v17 = v16 * p.upper_b_length_x;
+    let v19 = v18 * p.upper_b_length_y;
+    let v20 = v17 - v19;
+    let v21 = p.upper_b_origin_x + v20;
+    let v22 = v21.abs();
+    let v23 = v15.max(v22);
+    let v24 = p.upper_b_length_x * v18;
+    let v25 = v16 * p.upper_b_length_y;
+    let v26 = v24 + v25;
+    let v27 = p.upper_b_origin_y + v26;
+    let v28 = v27.abs();
+    let v29 = v23.max(v28);
+    let v30 = v29.max(v6);
+    let v31 = v30.max(v12);
+    let (v34, v32) = q_1.sincos();
+    let v33 = v0 * v32;
+    let v35 = v2 * v34;
+    let v36 = v33 - v35;
+    let v37 = v36 * p.lower_a_length_x;
+    let v38 = v2 * v32;
+    let v39 = v0 * v34;
+    let v40 = v38 + v39;
+    let v41 = v40 * p.lower_a_length_y;
+    let v42 = v37 - v41;
+    let v43 = v5 + v42;
+    let v44 = v43.abs();
+    let v45 = v31.max(v44);
+    let v46 = p.lower_a_length_x * v40;
+    let v47 = v36 * p.lower_a_length_y;
+    let v48 = v46 + v47;
+    let v49 = v11 + v48;
+    let v50 = v49.abs();
+    let v51 = v45.max(v50);
+    let v52 = v51.max(v22);
+    let v53 = v52.max(v28);
+    let (v56, v54) = q_3.sincos();
+    let v55 = v16 * v54;
+    let v57 = v18 * v56;
+    let v58 = v55 - v57;
+    let v59 = v58 * p.lower_b_length_x;
+    let v60 = v18 * v54;
+    let v61 = v16 * v56;
+    let v62 = v60 + v61;
+    let v63 = v62 * p.lower_b_length_y;
+    let v64 = v59 - v63;
+    let v65 = v21 + v64;
+    let v66 = v65.abs();
+    let v67 = v53.max(v66);
+    let v68 = p.lower_b_length_x * v62;
+    let v69 = v58 * p.lower_b_length_y;
+    let v70 = v68 + v69;
+    let v71 = v27 + v70;
+    let v72 = v71.abs();
+    let v73 = v67.max(v72);
+    v73
 }
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
 pub fn contact_positions<T: Arithmetic>(

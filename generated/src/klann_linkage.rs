@@ -11,7 +11,7 @@
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
-    JointKind, LegModel, Parameters,
+    JointKind, LegDynamics, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 7;
@@ -251,7 +251,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
-    prepared: [T; 34],
+    prepared: [T; 39],
 }
 impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
@@ -504,7 +504,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
         true
     }
 }
-impl LegModel<NQ, NC, NU> for KlannLinkage {
+impl LegDynamics<NQ, NC, NU> for KlannLinkage {
     const NAME: &'static str = "klann_linkage";
     const JOINT_NAMES: [&'static str; NQ] = [
         "crank",
@@ -585,22 +585,6 @@ impl LegModel<NQ, NC, NU> for KlannLinkage {
     ) -> SVector<T, 6> {
         constraint_bias(q, qd, p)
     }
-    fn foot_position<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 2> {
-        foot_position(q, p)
-    }
-    fn foot_jacobian<T: Arithmetic>(
-        q: &SVector<T, 7>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 7> {
-        foot_jacobian(q, p)
-    }
-    fn foot_bias<T: Arithmetic>(
-        q: &SVector<T, 7>,
-        qd: &SVector<T, 7>,
-        p: &Params<T>,
-    ) -> SVector<T, 2> {
-        foot_bias(q, qd, p)
-    }
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -611,20 +595,8 @@ impl LegModel<NQ, NC, NU> for KlannLinkage {
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
-    fn joint_positions<T: Arithmetic>(
-        q: &SVector<T, 7>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 7> {
-        joint_positions(q, p)
-    }
-    fn link_tips<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> {
-        link_tips(q, p)
-    }
-    fn closure_points<T: Arithmetic>(
-        q: &SVector<T, 7>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 6> {
-        closure_points(q, p)
+    fn leg_size<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> T {
+        leg_size(q, p)
     }
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 7>,
@@ -700,6 +672,39 @@ impl LegModel<NQ, NC, NU> for KlannLinkage {
         }
     }
 }
+impl LegModel<NQ, NC, NU> for KlannLinkage {
+    fn foot_position<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 2> {
+        foot_position(q, p)
+    }
+    fn foot_jacobian<T: Arithmetic>(
+        q: &SVector<T, 7>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 7> {
+        foot_jacobian(q, p)
+    }
+    fn foot_bias<T: Arithmetic>(
+        q: &SVector<T, 7>,
+        qd: &SVector<T, 7>,
+        p: &Params<T>,
+    ) -> SVector<T, 2> {
+        foot_bias(q, qd, p)
+    }
+    fn joint_positions<T: Arithmetic>(
+        q: &SVector<T, 7>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 7> {
+        joint_positions(q, p)
+    }
+    fn link_tips<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> {
+        link_tips(q, p)
+    }
+    fn closure_points<T: Arithmetic>(
+        q: &SVector<T, 7>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 6> {
+        closure_points(q, p)
+    }
+}
 impl ContactModel<NQ, NC, NU, NK> for KlannLinkage {
     const CONTACT_NAMES: &'static [&'static str] = &[];
     const CONTACT_FRICTION: &'static [f64] = &[];
@@ -749,7 +754,7 @@ impl ContactModel<NQ, NC, NU, NK> for KlannLinkage {
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 34> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 39> {
     let v0 = values.crank_com_x * values.crank_com_x;
     let v1 = values.crank_com_y * values.crank_com_y;
     let v2 = v0 + v1;
@@ -913,6 +918,13 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 34> {
     let v160 = v158 + v159;
     let v161 = values.gravity_y * v160;
     let v162 = v155 + v161;
+    let v163 = values.crank_origin_x.abs();
+    let v164 = values.crank_origin_y.abs();
+    let v165 = v163.max(v164);
+    let v166 = values.rocker_origin_x.abs();
+    let v167 = values.rocker_origin_y.abs();
+    let v168 = values.guide_origin_x.abs();
+    let v169 = values.guide_origin_y.abs();
     SMatrix::from_data(
         ArrayStorage([
             [
@@ -950,6 +962,11 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 34> {
                 v144,
                 v147,
                 v162,
+                v165,
+                v166,
+                v167,
+                v168,
+                v169,
             ],
         ]),
     )
@@ -2556,6 +2573,159 @@ pub fn closure_points<T: Arithmetic>(
             [v109, v117],
         ]),
     )
+}
+/// The leg's size (m): the largest coordinate of any joint or link tip in the base
+/// frame, which tolerances scale with.
+pub fn leg_size<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> T {
+    let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
+    let (v2, v0) = q_0.sincos();
+    let v1 = v0 * p.crank_length_x;
+    let v3 = v2 * p.crank_length_y;
+    let v4 = v1 - v3;
+    let v5 = p.crank_origin_x + v4;
+    let v6 = v5.abs();
+    let v7 = p.prepared[34].max(v6);
+    let v8 = p.crank_length_x * v2;
+    let v9 = v0 * p.crank_length_y;
+    let v10 = v8 + v9;
+    let v11 = p.crank_origin_y + v10;
+    let v12 = v11.abs();
+    let v13 = v7.max(v12);
+    let v14 = v13.max(p.prepared[35]);
+    let v15 = v14.max(p.prepared[36]);
+    let (v18, v16) = q_1.sincos();
+    let v17 = v0 * v16;
+    let v19 = v2 * v18;
+    let v20 = v17 - v19;
+    let v21 = v20 * p.leg_origin_x;
+    let v22 = v2 * v16;
+    let v23 = v0 * v18;
+    let v24 = v22 + v23;
+    let v25 = v24 * p.leg_origin_y;
+    let v26 = v21 - v25;
+    let v27 = v5 + v26;
+    let v28 = v27.abs();
+    let v29 = v15.max(v28);
+    let v30 = p.leg_origin_x * v24;
+    let v31 = v20 * p.leg_origin_y;
+    let v32 = v30 + v31;
+    let v33 = v11 + v32;
+    let v34 = v33.abs();
+    let v35 = v29.max(v34);
+    let v36 = v35.max(p.prepared[37]);
+    let v37 = v36.max(p.prepared[38]);
+    let (v40, v38) = q_3.sincos();
+    let v39 = v20 * v38;
+    let v41 = v24 * v40;
+    let v42 = v39 - v41;
+    let v43 = v42 * p.leg_length_x;
+    let v44 = v24 * v38;
+    let v45 = v20 * v40;
+    let v46 = v44 + v45;
+    let v47 = v46 * p.leg_length_y;
+    let v48 = v43 - v47;
+    let v49 = v27 + v48;
+    let v50 = v49.abs();
+    let v51 = v37.max(v50);
+    let v52 = p.leg_length_x * v46;
+    let v53 = v42 * p.leg_length_y;
+    let v54 = v52 + v53;
+    let v55 = v33 + v54;
+    let v56 = v55.abs();
+    let v57 = v51.max(v56);
+    let (v60, v58) = q_2.sincos();
+    let v59 = v58 * p.brace_origin_x;
+    let v61 = v60 * p.brace_origin_y;
+    let v62 = v59 - v61;
+    let v63 = p.rocker_origin_x + v62;
+    let v64 = v63.abs();
+    let v65 = v57.max(v64);
+    let v66 = p.brace_origin_x * v60;
+    let v67 = v58 * p.brace_origin_y;
+    let v68 = v66 + v67;
+    let v69 = p.rocker_origin_y + v68;
+    let v70 = v69.abs();
+    let v71 = v65.max(v70);
+    let v72 = v71.max(v6);
+    let v73 = v72.max(v12);
+    let v74 = v20 * p.coupler_length_x;
+    let v75 = v24 * p.coupler_length_y;
+    let v76 = v74 - v75;
+    let v77 = v5 + v76;
+    let v78 = v77.abs();
+    let v79 = v73.max(v78);
+    let v80 = v24 * p.coupler_length_x;
+    let v81 = v20 * p.coupler_length_y;
+    let v82 = v80 + v81;
+    let v83 = v11 + v82;
+    let v84 = v83.abs();
+    let v85 = v79.max(v84);
+    let v86 = v58 * p.rocker_length_x;
+    let v87 = v60 * p.rocker_length_y;
+    let v88 = v86 - v87;
+    let v89 = p.rocker_origin_x + v88;
+    let v90 = v89.abs();
+    let v91 = v85.max(v90);
+    let v92 = v60 * p.rocker_length_x;
+    let v93 = v58 * p.rocker_length_y;
+    let v94 = v92 + v93;
+    let v95 = p.rocker_origin_y + v94;
+    let v96 = v95.abs();
+    let v97 = v91.max(v96);
+    let v98 = v97.max(v50);
+    let v99 = v98.max(v56);
+    let (v102, v100) = q_4.sincos();
+    let v101 = v100 * p.guide_length_x;
+    let v103 = v102 * p.guide_length_y;
+    let v104 = v101 - v103;
+    let v105 = p.guide_origin_x + v104;
+    let v106 = v105.abs();
+    let v107 = v99.max(v106);
+    let v108 = p.guide_length_x * v102;
+    let v109 = v100 * p.guide_length_y;
+    let v110 = v108 + v109;
+    let v111 = p.guide_origin_y + v110;
+    let v112 = v111.abs();
+    let v113 = v107.max(v112);
+    let (v116, v114) = q_5.sincos();
+    let v115 = v42 * v114;
+    let v117 = v46 * v116;
+    let v118 = v115 - v117;
+    let v119 = v118 * p.strut_length_x;
+    let v120 = v46 * v114;
+    let v121 = v42 * v116;
+    let v122 = v120 + v121;
+    let v123 = v122 * p.strut_length_y;
+    let v124 = v119 - v123;
+    let v125 = v49 + v124;
+    let v126 = v125.abs();
+    let v127 = v113.max(v126);
+    let v128 = p.strut_length_x * v122;
+    let v129 = v118 * p.strut_length_y;
+    let v130 = v128 + v129;
+    let v131 = v55 + v130;
+    let v132 = v131.abs();
+    let v133 = v127.max(v132);
+    let (v136, v134) = q_6.sincos();
+    let v135 = v58 * v134;
+    let v137 = v60 * v136;
+    let v138 = v135 - v137;
+    let v139 = v138 * p.brace_length_x;
+    let v140 = v60 * v134;
+    let v141 = v58 * v136;
+    let v142 = v140 + v141;
+    let v143 = v142 * p.brace_length_y;
+    let v144 = v139 - v143;
+    let v145 = v63 + v144;
+    let v146 = v145.abs();
+    let v147 = v133.max(v146);
+    let v148 = p.brace_length_x * v142;
+    let v149 = v138 * p.brace_length_y;
+    let v150 = v148 + v149;
+    let v151 = v69 + v150;
+    let v152 = v151.abs();
+    let v153 = v147.max(v152);
+    v153
 }
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
 pub fn contact_positions<T: Arithmetic>(

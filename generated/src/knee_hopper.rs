@@ -11,7 +11,7 @@
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
-    JointKind, LegModel, Parameters,
+    JointKind, LegDynamics, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 3;
@@ -149,7 +149,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
-    prepared: [T; 22],
+    prepared: [T; 25],
 }
 impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
@@ -300,7 +300,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
         true
     }
 }
-impl LegModel<NQ, NC, NU> for KneeHopper {
+impl LegDynamics<NQ, NC, NU> for KneeHopper {
     const NAME: &'static str = "knee_hopper";
     const JOINT_NAMES: [&'static str; NQ] = ["body", "thigh", "shin"];
     const JOINT_KINDS: [JointKind; NQ] = [
@@ -361,22 +361,6 @@ impl LegModel<NQ, NC, NU> for KneeHopper {
     ) -> SVector<T, 0> {
         constraint_bias(q, qd, p)
     }
-    fn foot_position<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 2> {
-        foot_position(q, p)
-    }
-    fn foot_jacobian<T: Arithmetic>(
-        q: &SVector<T, 3>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 3> {
-        foot_jacobian(q, p)
-    }
-    fn foot_bias<T: Arithmetic>(
-        q: &SVector<T, 3>,
-        qd: &SVector<T, 3>,
-        p: &Params<T>,
-    ) -> SVector<T, 2> {
-        foot_bias(q, qd, p)
-    }
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -387,20 +371,8 @@ impl LegModel<NQ, NC, NU> for KneeHopper {
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
-    fn joint_positions<T: Arithmetic>(
-        q: &SVector<T, 3>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 3> {
-        joint_positions(q, p)
-    }
-    fn link_tips<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
-        link_tips(q, p)
-    }
-    fn closure_points<T: Arithmetic>(
-        q: &SVector<T, 3>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 0> {
-        closure_points(q, p)
+    fn leg_size<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> T {
+        leg_size(q, p)
     }
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 3>,
@@ -476,6 +448,39 @@ impl LegModel<NQ, NC, NU> for KneeHopper {
         }
     }
 }
+impl LegModel<NQ, NC, NU> for KneeHopper {
+    fn foot_position<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 2> {
+        foot_position(q, p)
+    }
+    fn foot_jacobian<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 3> {
+        foot_jacobian(q, p)
+    }
+    fn foot_bias<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        qd: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> SVector<T, 2> {
+        foot_bias(q, qd, p)
+    }
+    fn joint_positions<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 3> {
+        joint_positions(q, p)
+    }
+    fn link_tips<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
+        link_tips(q, p)
+    }
+    fn closure_points<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 0> {
+        closure_points(q, p)
+    }
+}
 impl ContactModel<NQ, NC, NU, NK> for KneeHopper {
     const CONTACT_NAMES: &'static [&'static str] = &["toe"];
     const CONTACT_FRICTION: &'static [f64] = &[0.8];
@@ -525,7 +530,7 @@ impl ContactModel<NQ, NC, NU, NK> for KneeHopper {
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 22> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 25> {
     let v0 = values.thigh_mass + values.shin_mass;
     let v1 = values.body_mass + v0;
     let v2 = values.thigh_mass * values.thigh_com_x;
@@ -593,6 +598,9 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 22> {
     let v64 = values.gravity_y * v63;
     let v65 = v60 + v64;
     let v66 = values.body_origin_x + values.body_length_x;
+    let v67 = values.body_origin_x.abs();
+    let v68 = v53.abs();
+    let v69 = v66.abs();
     SMatrix::from_data(
         ArrayStorage([
             [
@@ -618,6 +626,9 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 22> {
                 v56,
                 v65,
                 v66,
+                v67,
+                v68,
+                v69,
             ],
         ]),
     )
@@ -1029,6 +1040,57 @@ pub fn closure_points<T: Arithmetic>(
     _p: &Params<T>,
 ) -> SMatrix<T, 2, 0> {
     SMatrix::from_data(ArrayStorage([]))
+}
+/// The leg's size (m): the largest coordinate of any joint or link tip in the base
+/// frame, which tolerances scale with.
+pub fn leg_size<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> T {
+    let [q_0, q_1, q_2] = q.data.0[0];
+    let v0 = p.body_origin_y + q_0;
+    let v1 = v0.abs();
+    let v2 = p.prepared[22].max(v1);
+    let v3 = v2.max(p.prepared[23]);
+    let v4 = v0 + p.thigh_origin_y;
+    let v5 = v4.abs();
+    let v6 = v3.max(v5);
+    let (v9, v7) = q_1.sincos();
+    let v8 = v7 * p.thigh_length_x;
+    let v10 = v9 * p.thigh_length_y;
+    let v11 = v8 - v10;
+    let v12 = p.prepared[17] + v11;
+    let v13 = v12.abs();
+    let v14 = v6.max(v13);
+    let v15 = p.thigh_length_x * v9;
+    let v16 = v7 * p.thigh_length_y;
+    let v17 = v15 + v16;
+    let v18 = v4 + v17;
+    let v19 = v18.abs();
+    let v20 = v14.max(v19);
+    let v21 = v20.max(p.prepared[24]);
+    let v22 = v0 + p.body_length_y;
+    let v23 = v22.abs();
+    let v24 = v21.max(v23);
+    let v25 = v24.max(v13);
+    let v26 = v25.max(v19);
+    let (v29, v27) = q_2.sincos();
+    let v28 = v7 * v27;
+    let v30 = v9 * v29;
+    let v31 = v28 - v30;
+    let v32 = v31 * p.shin_length_x;
+    let v33 = v9 * v27;
+    let v34 = v7 * v29;
+    let v35 = v33 + v34;
+    let v36 = v35 * p.shin_length_y;
+    let v37 = v32 - v36;
+    let v38 = v12 + v37;
+    let v39 = v38.abs();
+    let v40 = v26.max(v39);
+    let v41 = p.shin_length_x * v35;
+    let v42 = v31 * p.shin_length_y;
+    let v43 = v41 + v42;
+    let v44 = v18 + v43;
+    let v45 = v44.abs();
+    let v46 = v40.max(v45);
+    v46
 }
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
 pub fn contact_positions<T: Arithmetic>(

@@ -11,7 +11,7 @@
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
-    JointKind, LegModel, Parameters,
+    JointKind, LegDynamics, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 5;
@@ -191,7 +191,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
-    prepared: [T; 32],
+    prepared: [T; 34],
 }
 impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
@@ -384,7 +384,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
         true
     }
 }
-impl LegModel<NQ, NC, NU> for KneeRunner {
+impl LegDynamics<NQ, NC, NU> for KneeRunner {
     const NAME: &'static str = "knee_runner";
     const JOINT_NAMES: [&'static str; NQ] = [
         "slide_x",
@@ -453,22 +453,6 @@ impl LegModel<NQ, NC, NU> for KneeRunner {
     ) -> SVector<T, 0> {
         constraint_bias(q, qd, p)
     }
-    fn foot_position<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
-        foot_position(q, p)
-    }
-    fn foot_jacobian<T: Arithmetic>(
-        q: &SVector<T, 5>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 5> {
-        foot_jacobian(q, p)
-    }
-    fn foot_bias<T: Arithmetic>(
-        q: &SVector<T, 5>,
-        qd: &SVector<T, 5>,
-        p: &Params<T>,
-    ) -> SVector<T, 2> {
-        foot_bias(q, qd, p)
-    }
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -479,20 +463,8 @@ impl LegModel<NQ, NC, NU> for KneeRunner {
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
-    fn joint_positions<T: Arithmetic>(
-        q: &SVector<T, 5>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 5> {
-        joint_positions(q, p)
-    }
-    fn link_tips<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
-        link_tips(q, p)
-    }
-    fn closure_points<T: Arithmetic>(
-        q: &SVector<T, 5>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 0> {
-        closure_points(q, p)
+    fn leg_size<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
+        leg_size(q, p)
     }
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 5>,
@@ -568,6 +540,39 @@ impl LegModel<NQ, NC, NU> for KneeRunner {
         }
     }
 }
+impl LegModel<NQ, NC, NU> for KneeRunner {
+    fn foot_position<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
+        foot_position(q, p)
+    }
+    fn foot_jacobian<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 5> {
+        foot_jacobian(q, p)
+    }
+    fn foot_bias<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SVector<T, 2> {
+        foot_bias(q, qd, p)
+    }
+    fn joint_positions<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 5> {
+        joint_positions(q, p)
+    }
+    fn link_tips<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
+        link_tips(q, p)
+    }
+    fn closure_points<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 0> {
+        closure_points(q, p)
+    }
+}
 impl ContactModel<NQ, NC, NU, NK> for KneeRunner {
     const CONTACT_NAMES: &'static [&'static str] = &["toe"];
     const CONTACT_FRICTION: &'static [f64] = &[0.8];
@@ -617,7 +622,7 @@ impl ContactModel<NQ, NC, NU, NK> for KneeRunner {
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 32> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 34> {
     let v0 = values.thigh_mass + values.shin_mass;
     let v1 = values.torso_mass + v0;
     let v2 = values.slide_y_mass + v1;
@@ -715,6 +720,8 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 32> {
     let v94 = values.gravity_y * v93;
     let v95 = v90 + v94;
     let v96 = values.slide_x_origin_y + values.slide_x_length_y;
+    let v97 = values.slide_x_origin_y.abs();
+    let v98 = v96.abs();
     SMatrix::from_data(
         ArrayStorage([
             [
@@ -750,6 +757,8 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 32> {
                 v86,
                 v95,
                 v96,
+                v97,
+                v98,
             ],
         ]),
     )
@@ -1497,6 +1506,97 @@ pub fn closure_points<T: Arithmetic>(
     _p: &Params<T>,
 ) -> SMatrix<T, 2, 0> {
     SMatrix::from_data(ArrayStorage([]))
+}
+/// The leg's size (m): the largest coordinate of any joint or link tip in the base
+/// frame, which tolerances scale with.
+pub fn leg_size<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
+    let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
+    let v0 = p.slide_x_origin_x + q_0;
+    let v1 = v0.abs();
+    let v2 = v1.max(p.prepared[32]);
+    let v3 = v0 + p.slide_x_length_x;
+    let v4 = v3.abs();
+    let v5 = v2.max(v4);
+    let v6 = p.slide_x_length_y + q_1;
+    let v7 = p.slide_x_origin_y + v6;
+    let v8 = v7.abs();
+    let v9 = v5.max(v8);
+    let v10 = v3 + p.slide_y_length_x;
+    let v11 = v10.abs();
+    let v12 = v9.max(v11);
+    let v13 = v7 + p.slide_y_length_y;
+    let v14 = v13.abs();
+    let v15 = v12.max(v14);
+    let (v18, v16) = q_2.sincos();
+    let v17 = v16 * p.thigh_origin_x;
+    let v19 = v18 * p.thigh_origin_y;
+    let v20 = v17 - v19;
+    let v21 = v10 + v20;
+    let v22 = v21.abs();
+    let v23 = v15.max(v22);
+    let v24 = p.thigh_origin_x * v18;
+    let v25 = v16 * p.thigh_origin_y;
+    let v26 = v24 + v25;
+    let v27 = v13 + v26;
+    let v28 = v27.abs();
+    let v29 = v23.max(v28);
+    let (v32, v30) = q_3.sincos();
+    let v31 = v16 * v30;
+    let v33 = v18 * v32;
+    let v34 = v31 - v33;
+    let v35 = v34 * p.thigh_length_x;
+    let v36 = v18 * v30;
+    let v37 = v16 * v32;
+    let v38 = v36 + v37;
+    let v39 = v38 * p.thigh_length_y;
+    let v40 = v35 - v39;
+    let v41 = v21 + v40;
+    let v42 = v41.abs();
+    let v43 = v29.max(v42);
+    let v44 = p.thigh_length_x * v38;
+    let v45 = v34 * p.thigh_length_y;
+    let v46 = v44 + v45;
+    let v47 = v27 + v46;
+    let v48 = v47.abs();
+    let v49 = v43.max(v48);
+    let v50 = v49.max(v4);
+    let v51 = v50.max(p.prepared[33]);
+    let v52 = v51.max(v11);
+    let v53 = v52.max(v14);
+    let v54 = v16 * p.torso_length_x;
+    let v55 = v18 * p.torso_length_y;
+    let v56 = v54 - v55;
+    let v57 = v10 + v56;
+    let v58 = v57.abs();
+    let v59 = v53.max(v58);
+    let v60 = v18 * p.torso_length_x;
+    let v61 = v16 * p.torso_length_y;
+    let v62 = v60 + v61;
+    let v63 = v13 + v62;
+    let v64 = v63.abs();
+    let v65 = v59.max(v64);
+    let v66 = v65.max(v42);
+    let v67 = v66.max(v48);
+    let (v70, v68) = q_4.sincos();
+    let v69 = v34 * v68;
+    let v71 = v38 * v70;
+    let v72 = v69 - v71;
+    let v73 = v72 * p.shin_length_x;
+    let v74 = v38 * v68;
+    let v75 = v34 * v70;
+    let v76 = v74 + v75;
+    let v77 = v76 * p.shin_length_y;
+    let v78 = v73 - v77;
+    let v79 = v41 + v78;
+    let v80 = v79.abs();
+    let v81 = v67.max(v80);
+    let v82 = p.shin_length_x * v76;
+    let v83 = v72 * p.shin_length_y;
+    let v84 = v82 + v83;
+    let v85 = v47 + v84;
+    let v86 = v85.abs();
+    let v87 = v81.max(v86);
+    v87
 }
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
 pub fn contact_positions<T: Arithmetic>(

@@ -4,6 +4,8 @@
 #![cfg_attr(not(feature = "std"), no_std)]
 #![warn(missing_docs)]
 #![cfg_attr(rustfmt, rustfmt::skip)]
+pub mod abducted_five_bar;
+pub use abducted_five_bar::AbductedFiveBar;
 pub mod atrias;
 pub use atrias::Atrias;
 pub mod atrias_hopper;
@@ -38,8 +40,8 @@ pub mod three_motor_leg;
 pub use three_motor_leg::ThreeMotorLeg;
 pub mod two_link;
 pub use two_link::TwoLink;
-/// Calls `$callback!(module, Type, NQ, NC, NU, NK)` once for every generated model, so
-/// tests and tools cover a new geometry without naming it.
+/// Calls `$callback!(module, Type, NQ, NC, NU, NK)` once for every generated planar
+/// model, so tests and tools cover a new geometry without naming it.
 #[macro_export]
 macro_rules! for_each_model {
     ($callback:ident) => {
@@ -60,5 +62,14 @@ macro_rules! for_each_model {
         0, 2, 0); $callback ! (raibert_hopper, $crate::raibert_hopper::RaibertHopper, 5,
         0, 2, 4); $callback ! (three_motor_leg, $crate::three_motor_leg::ThreeMotorLeg,
         7, 4, 3, 0); $callback ! (two_link, $crate::two_link::TwoLink, 2, 0, 2, 0);
+    };
+}
+/// Calls `$callback!(module, Type, NQ, NC, NU)` once for every generated spatial
+/// model (`LegModel<NQ, NC, NU, 3>`: three coordinates per point).
+#[macro_export]
+macro_rules! for_each_spatial_model {
+    ($callback:ident) => {
+        $callback ! (abducted_five_bar, $crate::abducted_five_bar::AbductedFiveBar, 5, 3,
+        3);
     };
 }

@@ -11,7 +11,7 @@
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
-    JointKind, LegModel, Parameters,
+    JointKind, LegDynamics, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 5;
@@ -191,7 +191,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
-    prepared: [T; 34],
+    prepared: [T; 38],
 }
 impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
@@ -384,7 +384,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
         true
     }
 }
-impl LegModel<NQ, NC, NU> for MinitaurHopper {
+impl LegDynamics<NQ, NC, NU> for MinitaurHopper {
     const NAME: &'static str = "minitaur_hopper";
     const JOINT_NAMES: [&'static str; NQ] = [
         "body",
@@ -445,22 +445,6 @@ impl LegModel<NQ, NC, NU> for MinitaurHopper {
     ) -> SVector<T, 2> {
         constraint_bias(q, qd, p)
     }
-    fn foot_position<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
-        foot_position(q, p)
-    }
-    fn foot_jacobian<T: Arithmetic>(
-        q: &SVector<T, 5>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 5> {
-        foot_jacobian(q, p)
-    }
-    fn foot_bias<T: Arithmetic>(
-        q: &SVector<T, 5>,
-        qd: &SVector<T, 5>,
-        p: &Params<T>,
-    ) -> SVector<T, 2> {
-        foot_bias(q, qd, p)
-    }
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -471,20 +455,8 @@ impl LegModel<NQ, NC, NU> for MinitaurHopper {
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
-    fn joint_positions<T: Arithmetic>(
-        q: &SVector<T, 5>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 5> {
-        joint_positions(q, p)
-    }
-    fn link_tips<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
-        link_tips(q, p)
-    }
-    fn closure_points<T: Arithmetic>(
-        q: &SVector<T, 5>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 2> {
-        closure_points(q, p)
+    fn leg_size<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
+        leg_size(q, p)
     }
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 5>,
@@ -560,6 +532,39 @@ impl LegModel<NQ, NC, NU> for MinitaurHopper {
         }
     }
 }
+impl LegModel<NQ, NC, NU> for MinitaurHopper {
+    fn foot_position<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
+        foot_position(q, p)
+    }
+    fn foot_jacobian<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 5> {
+        foot_jacobian(q, p)
+    }
+    fn foot_bias<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SVector<T, 2> {
+        foot_bias(q, qd, p)
+    }
+    fn joint_positions<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 5> {
+        joint_positions(q, p)
+    }
+    fn link_tips<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
+        link_tips(q, p)
+    }
+    fn closure_points<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 2> {
+        closure_points(q, p)
+    }
+}
 impl ContactModel<NQ, NC, NU, NK> for MinitaurHopper {
     const CONTACT_NAMES: &'static [&'static str] = &["toe_contact"];
     const CONTACT_FRICTION: &'static [f64] = &[0.8];
@@ -609,7 +614,7 @@ impl ContactModel<NQ, NC, NU, NK> for MinitaurHopper {
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 34> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 38> {
     let v0 = values.upper_b_mass + values.lower_b_mass;
     let v1 = values.body_mass + v0;
     let v2 = values.upper_a_mass + values.lower_a_mass;
@@ -726,6 +731,10 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 34> {
     let v113 = values.gravity_y * v112;
     let v114 = v107 + v113;
     let v115 = values.body_origin_x + values.body_length_x;
+    let v116 = values.body_origin_x.abs();
+    let v117 = v98.abs();
+    let v118 = v99.abs();
+    let v119 = v115.abs();
     SMatrix::from_data(
         ArrayStorage([
             [
@@ -763,6 +772,10 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 34> {
                 v101,
                 v114,
                 v115,
+                v116,
+                v117,
+                v118,
+                v119,
             ],
         ]),
     )
@@ -1598,6 +1611,95 @@ pub fn closure_points<T: Arithmetic>(
     let v53 = v51 + v52;
     let v54 = v50 + v53;
     SMatrix::from_data(ArrayStorage([[v17, v27], [v45, v54]]))
+}
+/// The leg's size (m): the largest coordinate of any joint or link tip in the base
+/// frame, which tolerances scale with.
+pub fn leg_size<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
+    let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
+    let v0 = p.body_origin_y + q_0;
+    let v1 = v0.abs();
+    let v2 = p.prepared[34].max(v1);
+    let v3 = v2.max(p.prepared[35]);
+    let v4 = v0 + p.upper_a_origin_y;
+    let v5 = v4.abs();
+    let v6 = v3.max(v5);
+    let (v9, v7) = q_1.sincos();
+    let v8 = v7 * p.upper_a_length_x;
+    let v10 = v9 * p.upper_a_length_y;
+    let v11 = v8 - v10;
+    let v12 = p.prepared[29] + v11;
+    let v13 = v12.abs();
+    let v14 = v6.max(v13);
+    let v15 = p.upper_a_length_x * v9;
+    let v16 = v7 * p.upper_a_length_y;
+    let v17 = v15 + v16;
+    let v18 = v4 + v17;
+    let v19 = v18.abs();
+    let v20 = v14.max(v19);
+    let v21 = v20.max(p.prepared[36]);
+    let v22 = v0 + p.upper_b_origin_y;
+    let v23 = v22.abs();
+    let v24 = v21.max(v23);
+    let (v27, v25) = q_3.sincos();
+    let v26 = v25 * p.upper_b_length_x;
+    let v28 = v27 * p.upper_b_length_y;
+    let v29 = v26 - v28;
+    let v30 = p.prepared[30] + v29;
+    let v31 = v30.abs();
+    let v32 = v24.max(v31);
+    let v33 = p.upper_b_length_x * v27;
+    let v34 = v25 * p.upper_b_length_y;
+    let v35 = v33 + v34;
+    let v36 = v22 + v35;
+    let v37 = v36.abs();
+    let v38 = v32.max(v37);
+    let v39 = v38.max(p.prepared[37]);
+    let v40 = v0 + p.body_length_y;
+    let v41 = v40.abs();
+    let v42 = v39.max(v41);
+    let v43 = v42.max(v13);
+    let v44 = v43.max(v19);
+    let (v47, v45) = q_2.sincos();
+    let v46 = v7 * v45;
+    let v48 = v9 * v47;
+    let v49 = v46 - v48;
+    let v50 = v49 * p.lower_a_length_x;
+    let v51 = v9 * v45;
+    let v52 = v7 * v47;
+    let v53 = v51 + v52;
+    let v54 = v53 * p.lower_a_length_y;
+    let v55 = v50 - v54;
+    let v56 = v12 + v55;
+    let v57 = v56.abs();
+    let v58 = v44.max(v57);
+    let v59 = p.lower_a_length_x * v53;
+    let v60 = v49 * p.lower_a_length_y;
+    let v61 = v59 + v60;
+    let v62 = v18 + v61;
+    let v63 = v62.abs();
+    let v64 = v58.max(v63);
+    let v65 = v64.max(v31);
+    let v66 = v65.max(v37);
+    let (v69, v67) = q_4.sincos();
+    let v68 = v25 * v67;
+    let v70 = v27 * v69;
+    let v71 = v68 - v70;
+    let v72 = v71 * p.lower_b_length_x;
+    let v73 = v27 * v67;
+    let v74 = v25 * v69;
+    let v75 = v73 + v74;
+    let v76 = v75 * p.lower_b_length_y;
+    let v77 = v72 - v76;
+    let v78 = v30 + v77;
+    let v79 = v78.abs();
+    let v80 = v66.max(v79);
+    let v81 = p.lower_b_length_x * v75;
+    let v82 = v71 * p.lower_b_length_y;
+    let v83 = v81 + v82;
+    let v84 = v36 + v83;
+    let v85 = v84.abs();
+    let v86 = v80.max(v85);
+    v86
 }
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
 pub fn contact_positions<T: Arithmetic>(

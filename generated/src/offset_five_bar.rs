@@ -11,7 +11,7 @@
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
-    JointKind, LegModel, Parameters,
+    JointKind, LegDynamics, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 4;
@@ -194,7 +194,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
-    prepared: [T; 19],
+    prepared: [T; 22],
 }
 impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
@@ -390,7 +390,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
         true
     }
 }
-impl LegModel<NQ, NC, NU> for OffsetFiveBar {
+impl LegDynamics<NQ, NC, NU> for OffsetFiveBar {
     const NAME: &'static str = "offset_five_bar";
     const JOINT_NAMES: [&'static str; NQ] = ["upper_a", "lower_a", "upper_b", "lower_b"];
     const JOINT_KINDS: [JointKind; NQ] = [
@@ -444,22 +444,6 @@ impl LegModel<NQ, NC, NU> for OffsetFiveBar {
     ) -> SVector<T, 2> {
         constraint_bias(q, qd, p)
     }
-    fn foot_position<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 2> {
-        foot_position(q, p)
-    }
-    fn foot_jacobian<T: Arithmetic>(
-        q: &SVector<T, 4>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 4> {
-        foot_jacobian(q, p)
-    }
-    fn foot_bias<T: Arithmetic>(
-        q: &SVector<T, 4>,
-        qd: &SVector<T, 4>,
-        p: &Params<T>,
-    ) -> SVector<T, 2> {
-        foot_bias(q, qd, p)
-    }
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -470,20 +454,8 @@ impl LegModel<NQ, NC, NU> for OffsetFiveBar {
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
-    fn joint_positions<T: Arithmetic>(
-        q: &SVector<T, 4>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 4> {
-        joint_positions(q, p)
-    }
-    fn link_tips<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> {
-        link_tips(q, p)
-    }
-    fn closure_points<T: Arithmetic>(
-        q: &SVector<T, 4>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 2> {
-        closure_points(q, p)
+    fn leg_size<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> T {
+        leg_size(q, p)
     }
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 4>,
@@ -559,6 +531,39 @@ impl LegModel<NQ, NC, NU> for OffsetFiveBar {
         }
     }
 }
+impl LegModel<NQ, NC, NU> for OffsetFiveBar {
+    fn foot_position<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 2> {
+        foot_position(q, p)
+    }
+    fn foot_jacobian<T: Arithmetic>(
+        q: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 4> {
+        foot_jacobian(q, p)
+    }
+    fn foot_bias<T: Arithmetic>(
+        q: &SVector<T, 4>,
+        qd: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> SVector<T, 2> {
+        foot_bias(q, qd, p)
+    }
+    fn joint_positions<T: Arithmetic>(
+        q: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 4> {
+        joint_positions(q, p)
+    }
+    fn link_tips<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> {
+        link_tips(q, p)
+    }
+    fn closure_points<T: Arithmetic>(
+        q: &SVector<T, 4>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 2> {
+        closure_points(q, p)
+    }
+}
 impl ContactModel<NQ, NC, NU, NK> for OffsetFiveBar {
     const CONTACT_NAMES: &'static [&'static str] = &[];
     const CONTACT_FRICTION: &'static [f64] = &[];
@@ -608,7 +613,7 @@ impl ContactModel<NQ, NC, NU, NK> for OffsetFiveBar {
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 19> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 22> {
     let v0 = values.upper_a_com_x * values.upper_a_com_x;
     let v1 = values.upper_a_com_y * values.upper_a_com_y;
     let v2 = v0 + v1;
@@ -712,6 +717,11 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 19> {
     let v100 = v98 + v99;
     let v101 = values.gravity_y * v100;
     let v102 = v97 + v101;
+    let v103 = values.upper_a_origin_x.abs();
+    let v104 = values.upper_a_origin_y.abs();
+    let v105 = v103.max(v104);
+    let v106 = values.upper_b_origin_x.abs();
+    let v107 = values.upper_b_origin_y.abs();
     SMatrix::from_data(
         ArrayStorage([
             [
@@ -734,6 +744,9 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 19> {
                 v88,
                 v91,
                 v102,
+                v105,
+                v106,
+                v107,
             ],
         ]),
     )
@@ -1423,6 +1436,102 @@ pub fn closure_points<T: Arithmetic>(
     let v50 = v48 + v49;
     let v51 = v47 + v50;
     SMatrix::from_data(ArrayStorage([[v17, v25], [v43, v51]]))
+}
+/// The leg's size (m): the largest coordinate of any joint or link tip in the base
+/// frame, which tolerances scale with.
+pub fn leg_size<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> T {
+    let [q_0, q_1, q_2, q_3] = q.data.0[0];
+    let (v2, v0) = q_0.sincos();
+    let v1 = v0 * p.lower_a_origin_x;
+    let v3 = v2 * p.lower_a_origin_y;
+    let v4 = v1 - v3;
+    let v5 = p.upper_a_origin_x + v4;
+    let v6 = v5.abs();
+    let v7 = p.prepared[19].max(v6);
+    let v8 = p.lower_a_origin_x * v2;
+    let v9 = v0 * p.lower_a_origin_y;
+    let v10 = v8 + v9;
+    let v11 = p.upper_a_origin_y + v10;
+    let v12 = v11.abs();
+    let v13 = v7.max(v12);
+    let v14 = v13.max(p.prepared[20]);
+    let v15 = v14.max(p.prepared[21]);
+    let (v18, v16) = q_2.sincos();
+    let v17 = v16 * p.lower_b_origin_x;
+    let v19 = v18 * p.lower_b_origin_y;
+    let v20 = v17 - v19;
+    let v21 = p.upper_b_origin_x + v20;
+    let v22 = v21.abs();
+    let v23 = v15.max(v22);
+    let v24 = p.lower_b_origin_x * v18;
+    let v25 = v16 * p.lower_b_origin_y;
+    let v26 = v24 + v25;
+    let v27 = p.upper_b_origin_y + v26;
+    let v28 = v27.abs();
+    let v29 = v23.max(v28);
+    let v30 = v0 * p.upper_a_length_x;
+    let v31 = v2 * p.upper_a_length_y;
+    let v32 = v30 - v31;
+    let v33 = p.upper_a_origin_x + v32;
+    let v34 = v33.abs();
+    let v35 = v29.max(v34);
+    let v36 = v2 * p.upper_a_length_x;
+    let v37 = v0 * p.upper_a_length_y;
+    let v38 = v36 + v37;
+    let v39 = p.upper_a_origin_y + v38;
+    let v40 = v39.abs();
+    let v41 = v35.max(v40);
+    let (v44, v42) = q_1.sincos();
+    let v43 = v0 * v42;
+    let v45 = v2 * v44;
+    let v46 = v43 - v45;
+    let v47 = v46 * p.lower_a_length_x;
+    let v48 = v2 * v42;
+    let v49 = v0 * v44;
+    let v50 = v48 + v49;
+    let v51 = v50 * p.lower_a_length_y;
+    let v52 = v47 - v51;
+    let v53 = v5 + v52;
+    let v54 = v53.abs();
+    let v55 = v41.max(v54);
+    let v56 = p.lower_a_length_x * v50;
+    let v57 = v46 * p.lower_a_length_y;
+    let v58 = v56 + v57;
+    let v59 = v11 + v58;
+    let v60 = v59.abs();
+    let v61 = v55.max(v60);
+    let v62 = v16 * p.upper_b_length_x;
+    let v63 = v18 * p.upper_b_length_y;
+    let v64 = v62 - v63;
+    let v65 = p.upper_b_origin_x + v64;
+    let v66 = v65.abs();
+    let v67 = v61.max(v66);
+    let v68 = v18 * p.upper_b_length_x;
+    let v69 = v16 * p.upper_b_length_y;
+    let v70 = v68 + v69;
+    let v71 = p.upper_b_origin_y + v70;
+    let v72 = v71.abs();
+    let v73 = v67.max(v72);
+    let (v76, v74) = q_3.sincos();
+    let v75 = v16 * v74;
+    let v77 = v18 * v76;
+    let v78 = v75 - v77;
+    let v79 = v78 * p.lower_b_length_x;
+    let v80 = v18 * v74;
+    let v81 = v16 * v76;
+    let v82 = v80 + v81;
+    let v83 = v82 * p.lower_b_length_y;
+    let v84 = v79 - v83;
+    let v85 = v21 + v84;
+    let v86 = v85.abs();
+    let v87 = v73.max(v86);
+    let v88 = p.lower_b_length_x * v82;
+    let v89 = v78 * p.lower_b_length_y;
+    let v90 = v88 + v89;
+    let v91 = v27 + v90;
+    let v92 = v91.abs();
+    let v93 = v87.max(v92);
+    v93
 }
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
 pub fn contact_positions<T: Arithmetic>(

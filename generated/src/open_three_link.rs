@@ -11,7 +11,7 @@
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
-    JointKind, LegModel, Parameters,
+    JointKind, LegDynamics, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 3;
@@ -137,7 +137,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
-    prepared: [T; 18],
+    prepared: [T; 19],
 }
 impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
@@ -276,7 +276,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
         true
     }
 }
-impl LegModel<NQ, NC, NU> for OpenThreeLink {
+impl LegDynamics<NQ, NC, NU> for OpenThreeLink {
     const NAME: &'static str = "open_three_link";
     const JOINT_NAMES: [&'static str; NQ] = ["thigh", "shin", "ankle"];
     const JOINT_KINDS: [JointKind; NQ] = [
@@ -329,22 +329,6 @@ impl LegModel<NQ, NC, NU> for OpenThreeLink {
     ) -> SVector<T, 0> {
         constraint_bias(q, qd, p)
     }
-    fn foot_position<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 2> {
-        foot_position(q, p)
-    }
-    fn foot_jacobian<T: Arithmetic>(
-        q: &SVector<T, 3>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 3> {
-        foot_jacobian(q, p)
-    }
-    fn foot_bias<T: Arithmetic>(
-        q: &SVector<T, 3>,
-        qd: &SVector<T, 3>,
-        p: &Params<T>,
-    ) -> SVector<T, 2> {
-        foot_bias(q, qd, p)
-    }
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -355,20 +339,8 @@ impl LegModel<NQ, NC, NU> for OpenThreeLink {
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
-    fn joint_positions<T: Arithmetic>(
-        q: &SVector<T, 3>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 3> {
-        joint_positions(q, p)
-    }
-    fn link_tips<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
-        link_tips(q, p)
-    }
-    fn closure_points<T: Arithmetic>(
-        q: &SVector<T, 3>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 0> {
-        closure_points(q, p)
+    fn leg_size<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> T {
+        leg_size(q, p)
     }
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 3>,
@@ -444,6 +416,39 @@ impl LegModel<NQ, NC, NU> for OpenThreeLink {
         }
     }
 }
+impl LegModel<NQ, NC, NU> for OpenThreeLink {
+    fn foot_position<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 2> {
+        foot_position(q, p)
+    }
+    fn foot_jacobian<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 3> {
+        foot_jacobian(q, p)
+    }
+    fn foot_bias<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        qd: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> SVector<T, 2> {
+        foot_bias(q, qd, p)
+    }
+    fn joint_positions<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 3> {
+        joint_positions(q, p)
+    }
+    fn link_tips<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
+        link_tips(q, p)
+    }
+    fn closure_points<T: Arithmetic>(
+        q: &SVector<T, 3>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 0> {
+        closure_points(q, p)
+    }
+}
 impl ContactModel<NQ, NC, NU, NK> for OpenThreeLink {
     const CONTACT_NAMES: &'static [&'static str] = &[];
     const CONTACT_FRICTION: &'static [f64] = &[];
@@ -493,7 +498,7 @@ impl ContactModel<NQ, NC, NU, NK> for OpenThreeLink {
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 18> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 19> {
     let v0 = values.thigh_com_x * values.thigh_com_x;
     let v1 = values.thigh_com_y * values.thigh_com_y;
     let v2 = v0 + v1;
@@ -572,6 +577,9 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 18> {
     let v75 = values.thigh_origin_y * v72;
     let v76 = values.gravity_y * v75;
     let v77 = v74 + v76;
+    let v78 = values.thigh_origin_x.abs();
+    let v79 = values.thigh_origin_y.abs();
+    let v80 = v78.max(v79);
     SMatrix::from_data(
         ArrayStorage([
             [
@@ -593,6 +601,7 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 18> {
                 v68,
                 v71,
                 v77,
+                v80,
             ],
         ]),
     )
@@ -1160,6 +1169,67 @@ pub fn closure_points<T: Arithmetic>(
     _p: &Params<T>,
 ) -> SMatrix<T, 2, 0> {
     SMatrix::from_data(ArrayStorage([]))
+}
+/// The leg's size (m): the largest coordinate of any joint or link tip in the base
+/// frame, which tolerances scale with.
+pub fn leg_size<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> T {
+    let [q_0, q_1, q_2] = q.data.0[0];
+    let (v2, v0) = q_0.sincos();
+    let v1 = v0 * p.thigh_length_x;
+    let v3 = v2 * p.thigh_length_y;
+    let v4 = v1 - v3;
+    let v5 = p.thigh_origin_x + v4;
+    let v6 = v5.abs();
+    let v7 = p.prepared[18].max(v6);
+    let v8 = p.thigh_length_x * v2;
+    let v9 = v0 * p.thigh_length_y;
+    let v10 = v8 + v9;
+    let v11 = p.thigh_origin_y + v10;
+    let v12 = v11.abs();
+    let v13 = v7.max(v12);
+    let (v16, v14) = q_1.sincos();
+    let v15 = v0 * v14;
+    let v17 = v2 * v16;
+    let v18 = v15 - v17;
+    let v19 = v18 * p.shin_length_x;
+    let v20 = v2 * v14;
+    let v21 = v0 * v16;
+    let v22 = v20 + v21;
+    let v23 = v22 * p.shin_length_y;
+    let v24 = v19 - v23;
+    let v25 = v5 + v24;
+    let v26 = v25.abs();
+    let v27 = v13.max(v26);
+    let v28 = p.shin_length_x * v22;
+    let v29 = v18 * p.shin_length_y;
+    let v30 = v28 + v29;
+    let v31 = v11 + v30;
+    let v32 = v31.abs();
+    let v33 = v27.max(v32);
+    let v34 = v33.max(v6);
+    let v35 = v34.max(v12);
+    let v36 = v35.max(v26);
+    let v37 = v36.max(v32);
+    let (v40, v38) = q_2.sincos();
+    let v39 = v18 * v38;
+    let v41 = v22 * v40;
+    let v42 = v39 - v41;
+    let v43 = v42 * p.ankle_length_x;
+    let v44 = v22 * v38;
+    let v45 = v18 * v40;
+    let v46 = v44 + v45;
+    let v47 = v46 * p.ankle_length_y;
+    let v48 = v43 - v47;
+    let v49 = v25 + v48;
+    let v50 = v49.abs();
+    let v51 = v37.max(v50);
+    let v52 = p.ankle_length_x * v46;
+    let v53 = v42 * p.ankle_length_y;
+    let v54 = v52 + v53;
+    let v55 = v31 + v54;
+    let v56 = v55.abs();
+    let v57 = v51.max(v56);
+    v57
 }
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
 pub fn contact_positions<T: Arithmetic>(

@@ -11,7 +11,7 @@
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
-    JointKind, LegModel, Parameters,
+    JointKind, LegDynamics, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 5;
@@ -203,7 +203,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
-    prepared: [T; 35],
+    prepared: [T; 37],
 }
 impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
@@ -408,7 +408,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
         true
     }
 }
-impl LegModel<NQ, NC, NU> for RaibertHopper {
+impl LegDynamics<NQ, NC, NU> for RaibertHopper {
     const NAME: &'static str = "raibert_hopper";
     const JOINT_NAMES: [&'static str; NQ] = [
         "slide_x",
@@ -484,22 +484,6 @@ impl LegModel<NQ, NC, NU> for RaibertHopper {
     ) -> SVector<T, 0> {
         constraint_bias(q, qd, p)
     }
-    fn foot_position<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
-        foot_position(q, p)
-    }
-    fn foot_jacobian<T: Arithmetic>(
-        q: &SVector<T, 5>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 5> {
-        foot_jacobian(q, p)
-    }
-    fn foot_bias<T: Arithmetic>(
-        q: &SVector<T, 5>,
-        qd: &SVector<T, 5>,
-        p: &Params<T>,
-    ) -> SVector<T, 2> {
-        foot_bias(q, qd, p)
-    }
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -510,20 +494,8 @@ impl LegModel<NQ, NC, NU> for RaibertHopper {
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
-    fn joint_positions<T: Arithmetic>(
-        q: &SVector<T, 5>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 5> {
-        joint_positions(q, p)
-    }
-    fn link_tips<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
-        link_tips(q, p)
-    }
-    fn closure_points<T: Arithmetic>(
-        q: &SVector<T, 5>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 0> {
-        closure_points(q, p)
+    fn leg_size<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
+        leg_size(q, p)
     }
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 5>,
@@ -599,6 +571,39 @@ impl LegModel<NQ, NC, NU> for RaibertHopper {
         }
     }
 }
+impl LegModel<NQ, NC, NU> for RaibertHopper {
+    fn foot_position<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
+        foot_position(q, p)
+    }
+    fn foot_jacobian<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 5> {
+        foot_jacobian(q, p)
+    }
+    fn foot_bias<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SVector<T, 2> {
+        foot_bias(q, qd, p)
+    }
+    fn joint_positions<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 5> {
+        joint_positions(q, p)
+    }
+    fn link_tips<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
+        link_tips(q, p)
+    }
+    fn closure_points<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 0> {
+        closure_points(q, p)
+    }
+}
 impl ContactModel<NQ, NC, NU, NK> for RaibertHopper {
     const CONTACT_NAMES: &'static [&'static str] = &["sole", "heel"];
     const CONTACT_FRICTION: &'static [f64] = &[0.6, 0.6];
@@ -648,7 +653,7 @@ impl ContactModel<NQ, NC, NU, NK> for RaibertHopper {
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 35> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 37> {
     let v0 = values.thigh_mass + values.shin_mass;
     let v1 = values.torso_mass + v0;
     let v2 = values.slide_y_mass + v1;
@@ -736,8 +741,10 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 35> {
     let v84 = values.gravity_y * v83;
     let v85 = v80 + v84;
     let v86 = values.slide_x_origin_y + values.slide_x_length_y;
-    let v87 = -v13;
-    let v88 = v87 + v87;
+    let v87 = values.slide_x_origin_y.abs();
+    let v88 = v86.abs();
+    let v89 = -v13;
+    let v90 = v89 + v89;
     SMatrix::from_data(
         ArrayStorage([
             [
@@ -775,7 +782,9 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 35> {
                 v76,
                 v85,
                 v86,
+                v87,
                 v88,
+                v90,
             ],
         ]),
     )
@@ -1516,6 +1525,91 @@ pub fn closure_points<T: Arithmetic>(
 ) -> SMatrix<T, 2, 0> {
     SMatrix::from_data(ArrayStorage([]))
 }
+/// The leg's size (m): the largest coordinate of any joint or link tip in the base
+/// frame, which tolerances scale with.
+pub fn leg_size<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
+    let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
+    let v0 = p.slide_x_origin_x + q_0;
+    let v1 = v0.abs();
+    let v2 = v1.max(p.prepared[34]);
+    let v3 = v0 + p.slide_x_length_x;
+    let v4 = v3.abs();
+    let v5 = v2.max(v4);
+    let v6 = p.slide_x_length_y + q_1;
+    let v7 = p.slide_x_origin_y + v6;
+    let v8 = v7.abs();
+    let v9 = v5.max(v8);
+    let v10 = v3 + p.slide_y_length_x;
+    let v11 = v10.abs();
+    let v12 = v9.max(v11);
+    let v13 = v7 + p.slide_y_length_y;
+    let v14 = v13.abs();
+    let v15 = v12.max(v14);
+    let (v18, v16) = q_2.sincos();
+    let v17 = v16 * p.torso_length_x;
+    let v19 = v18 * p.torso_length_y;
+    let v20 = v17 - v19;
+    let v21 = v10 + v20;
+    let v22 = v21.abs();
+    let v23 = v15.max(v22);
+    let v24 = p.torso_length_x * v18;
+    let v25 = v16 * p.torso_length_y;
+    let v26 = v24 + v25;
+    let v27 = v13 + v26;
+    let v28 = v27.abs();
+    let v29 = v23.max(v28);
+    let (v32, v30) = q_3.sincos();
+    let v31 = v16 * v30;
+    let v33 = v18 * v32;
+    let v34 = v31 - v33;
+    let v35 = v34 * p.shin_origin_x;
+    let v36 = v18 * v30;
+    let v37 = v16 * v32;
+    let v38 = v36 + v37;
+    let v39 = p.shin_origin_y - q_4;
+    let v40 = v38 * v39;
+    let v41 = v35 - v40;
+    let v42 = v21 + v41;
+    let v43 = v42.abs();
+    let v44 = v29.max(v43);
+    let v45 = p.shin_origin_x * v38;
+    let v46 = v34 * v39;
+    let v47 = v45 + v46;
+    let v48 = v27 + v47;
+    let v49 = v48.abs();
+    let v50 = v44.max(v49);
+    let v51 = v50.max(v4);
+    let v52 = v51.max(p.prepared[35]);
+    let v53 = v52.max(v11);
+    let v54 = v53.max(v14);
+    let v55 = v54.max(v22);
+    let v56 = v55.max(v28);
+    let v57 = v34 * p.thigh_length_x;
+    let v58 = v38 * p.thigh_length_y;
+    let v59 = v57 - v58;
+    let v60 = v21 + v59;
+    let v61 = v60.abs();
+    let v62 = v56.max(v61);
+    let v63 = v38 * p.thigh_length_x;
+    let v64 = v34 * p.thigh_length_y;
+    let v65 = v63 + v64;
+    let v66 = v27 + v65;
+    let v67 = v66.abs();
+    let v68 = v62.max(v67);
+    let v69 = v34 * p.shin_length_x;
+    let v70 = v38 * p.shin_length_y;
+    let v71 = v69 - v70;
+    let v72 = v42 + v71;
+    let v73 = v72.abs();
+    let v74 = v68.max(v73);
+    let v75 = v38 * p.shin_length_x;
+    let v76 = v34 * p.shin_length_y;
+    let v77 = v75 + v76;
+    let v78 = v48 + v77;
+    let v79 = v78.abs();
+    let v80 = v74.max(v79);
+    v80
+}
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
 pub fn contact_positions<T: Arithmetic>(
     q: &SVector<T, 5>,
@@ -2019,7 +2113,7 @@ pub fn mass_matrix_derivative<T: Arithmetic>(
     let v88 = v54 - v87;
     let v89 = v11 + v11;
     let v90 = p.shin_mass * v89;
-    let v91 = p.prepared[34] - v90;
+    let v91 = p.prepared[36] - v90;
     let v92 = v5 * p.torso_length_x;
     let v93 = v1 * p.torso_length_y;
     let v94 = v92 - v93;
@@ -2940,7 +3034,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v289 = v189 - v288;
     let v290 = v11 + v11;
     let v291 = p.shin_mass * v290;
-    let v292 = p.prepared[34] - v291;
+    let v292 = p.prepared[36] - v291;
     let v293 = v5 * p.torso_length_x;
     let v294 = v1 * p.torso_length_y;
     let v295 = v293 - v294;

@@ -11,7 +11,7 @@
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
-    JointKind, LegModel, Parameters,
+    JointKind, LegDynamics, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 7;
@@ -251,7 +251,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
-    prepared: [T; 43],
+    prepared: [T; 44],
 }
 impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
@@ -504,7 +504,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
         true
     }
 }
-impl LegModel<NQ, NC, NU> for ThreeMotorLeg {
+impl LegDynamics<NQ, NC, NU> for ThreeMotorLeg {
     const NAME: &'static str = "three_motor_leg";
     const JOINT_NAMES: [&'static str; NQ] = [
         "thigh",
@@ -585,22 +585,6 @@ impl LegModel<NQ, NC, NU> for ThreeMotorLeg {
     ) -> SVector<T, 4> {
         constraint_bias(q, qd, p)
     }
-    fn foot_position<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 2> {
-        foot_position(q, p)
-    }
-    fn foot_jacobian<T: Arithmetic>(
-        q: &SVector<T, 7>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 7> {
-        foot_jacobian(q, p)
-    }
-    fn foot_bias<T: Arithmetic>(
-        q: &SVector<T, 7>,
-        qd: &SVector<T, 7>,
-        p: &Params<T>,
-    ) -> SVector<T, 2> {
-        foot_bias(q, qd, p)
-    }
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -611,20 +595,8 @@ impl LegModel<NQ, NC, NU> for ThreeMotorLeg {
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
-    fn joint_positions<T: Arithmetic>(
-        q: &SVector<T, 7>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 7> {
-        joint_positions(q, p)
-    }
-    fn link_tips<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> {
-        link_tips(q, p)
-    }
-    fn closure_points<T: Arithmetic>(
-        q: &SVector<T, 7>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 4> {
-        closure_points(q, p)
+    fn leg_size<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> T {
+        leg_size(q, p)
     }
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 7>,
@@ -700,6 +672,39 @@ impl LegModel<NQ, NC, NU> for ThreeMotorLeg {
         }
     }
 }
+impl LegModel<NQ, NC, NU> for ThreeMotorLeg {
+    fn foot_position<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 2> {
+        foot_position(q, p)
+    }
+    fn foot_jacobian<T: Arithmetic>(
+        q: &SVector<T, 7>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 7> {
+        foot_jacobian(q, p)
+    }
+    fn foot_bias<T: Arithmetic>(
+        q: &SVector<T, 7>,
+        qd: &SVector<T, 7>,
+        p: &Params<T>,
+    ) -> SVector<T, 2> {
+        foot_bias(q, qd, p)
+    }
+    fn joint_positions<T: Arithmetic>(
+        q: &SVector<T, 7>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 7> {
+        joint_positions(q, p)
+    }
+    fn link_tips<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> {
+        link_tips(q, p)
+    }
+    fn closure_points<T: Arithmetic>(
+        q: &SVector<T, 7>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 4> {
+        closure_points(q, p)
+    }
+}
 impl ContactModel<NQ, NC, NU, NK> for ThreeMotorLeg {
     const CONTACT_NAMES: &'static [&'static str] = &[];
     const CONTACT_FRICTION: &'static [f64] = &[];
@@ -749,7 +754,7 @@ impl ContactModel<NQ, NC, NU, NK> for ThreeMotorLeg {
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 43> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 44> {
     let v0 = values.thigh_com_x * values.thigh_com_x;
     let v1 = values.thigh_com_y * values.thigh_com_y;
     let v2 = v0 + v1;
@@ -943,6 +948,9 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 43> {
     let v190 = values.thigh_origin_y * v187;
     let v191 = values.gravity_y * v190;
     let v192 = v189 + v191;
+    let v193 = values.thigh_origin_x.abs();
+    let v194 = values.thigh_origin_y.abs();
+    let v195 = v193.max(v194);
     SMatrix::from_data(
         ArrayStorage([
             [
@@ -989,6 +997,7 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 43> {
                 v182,
                 v185,
                 v192,
+                v195,
             ],
         ]),
     )
@@ -2992,6 +3001,171 @@ pub fn closure_points<T: Arithmetic>(
     let v128 = v126 + v127;
     let v129 = v125 + v128;
     SMatrix::from_data(ArrayStorage([[v17, v25], [v53, v65], [v93, v105], [v121, v129]]))
+}
+/// The leg's size (m): the largest coordinate of any joint or link tip in the base
+/// frame, which tolerances scale with.
+pub fn leg_size<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> T {
+    let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
+    let (v2, v0) = q_0.sincos();
+    let v1 = v0 * p.thigh_length_x;
+    let v3 = v2 * p.thigh_length_y;
+    let v4 = v1 - v3;
+    let v5 = p.thigh_origin_x + v4;
+    let v6 = v5.abs();
+    let v7 = p.prepared[43].max(v6);
+    let v8 = p.thigh_length_x * v2;
+    let v9 = v0 * p.thigh_length_y;
+    let v10 = v8 + v9;
+    let v11 = p.thigh_origin_y + v10;
+    let v12 = v11.abs();
+    let v13 = v7.max(v12);
+    let (v16, v14) = q_1.sincos();
+    let v15 = v0 * v14;
+    let v17 = v2 * v16;
+    let v18 = v15 - v17;
+    let v19 = v18 * p.shin_length_x;
+    let v20 = v2 * v14;
+    let v21 = v0 * v16;
+    let v22 = v20 + v21;
+    let v23 = v22 * p.shin_length_y;
+    let v24 = v19 - v23;
+    let v25 = v5 + v24;
+    let v26 = v25.abs();
+    let v27 = v13.max(v26);
+    let v28 = p.shin_length_x * v22;
+    let v29 = v18 * p.shin_length_y;
+    let v30 = v28 + v29;
+    let v31 = v11 + v30;
+    let v32 = v31.abs();
+    let v33 = v27.max(v32);
+    let (v36, v34) = q_2.sincos();
+    let v35 = v18 * v34;
+    let v37 = v22 * v36;
+    let v38 = v35 - v37;
+    let v39 = v38 * p.tarsus_length_x;
+    let v40 = v22 * v34;
+    let v41 = v18 * v36;
+    let v42 = v40 + v41;
+    let v43 = v42 * p.tarsus_length_y;
+    let v44 = v39 - v43;
+    let v45 = v25 + v44;
+    let v46 = v45.abs();
+    let v47 = v33.max(v46);
+    let v48 = p.tarsus_length_x * v42;
+    let v49 = v38 * p.tarsus_length_y;
+    let v50 = v48 + v49;
+    let v51 = v31 + v50;
+    let v52 = v51.abs();
+    let v53 = v47.max(v52);
+    let v54 = v0 * p.heel_rod_origin_x;
+    let v55 = v2 * p.heel_rod_origin_y;
+    let v56 = v54 - v55;
+    let v57 = p.thigh_origin_x + v56;
+    let v58 = v57.abs();
+    let v59 = v53.max(v58);
+    let v60 = v2 * p.heel_rod_origin_x;
+    let v61 = v0 * p.heel_rod_origin_y;
+    let v62 = v60 + v61;
+    let v63 = p.thigh_origin_y + v62;
+    let v64 = v63.abs();
+    let v65 = v59.max(v64);
+    let v66 = v38 * p.toe_crank_origin_x;
+    let v67 = v42 * p.toe_crank_origin_y;
+    let v68 = v66 - v67;
+    let v69 = v25 + v68;
+    let v70 = v69.abs();
+    let v71 = v65.max(v70);
+    let v72 = v42 * p.toe_crank_origin_x;
+    let v73 = v38 * p.toe_crank_origin_y;
+    let v74 = v72 + v73;
+    let v75 = v31 + v74;
+    let v76 = v75.abs();
+    let v77 = v71.max(v76);
+    let (v80, v78) = q_5.sincos();
+    let v79 = v38 * v78;
+    let v81 = v42 * v80;
+    let v82 = v79 - v81;
+    let v83 = v82 * p.toe_crank_length_x;
+    let v84 = v42 * v78;
+    let v85 = v38 * v80;
+    let v86 = v84 + v85;
+    let v87 = v86 * p.toe_crank_length_y;
+    let v88 = v83 - v87;
+    let v89 = v69 + v88;
+    let v90 = v89.abs();
+    let v91 = v77.max(v90);
+    let v92 = p.toe_crank_length_x * v86;
+    let v93 = v82 * p.toe_crank_length_y;
+    let v94 = v92 + v93;
+    let v95 = v75 + v94;
+    let v96 = v95.abs();
+    let v97 = v91.max(v96);
+    let v98 = v97.max(v6);
+    let v99 = v98.max(v12);
+    let v100 = v99.max(v26);
+    let v101 = v100.max(v32);
+    let v102 = v101.max(v46);
+    let v103 = v102.max(v52);
+    let (v106, v104) = q_3.sincos();
+    let v105 = v38 * v104;
+    let v107 = v42 * v106;
+    let v108 = v105 - v107;
+    let v109 = v108 * p.toe_length_x;
+    let v110 = v42 * v104;
+    let v111 = v38 * v106;
+    let v112 = v110 + v111;
+    let v113 = v112 * p.toe_length_y;
+    let v114 = v109 - v113;
+    let v115 = v45 + v114;
+    let v116 = v115.abs();
+    let v117 = v103.max(v116);
+    let v118 = p.toe_length_x * v112;
+    let v119 = v108 * p.toe_length_y;
+    let v120 = v118 + v119;
+    let v121 = v51 + v120;
+    let v122 = v121.abs();
+    let v123 = v117.max(v122);
+    let (v126, v124) = q_4.sincos();
+    let v125 = v0 * v124;
+    let v127 = v2 * v126;
+    let v128 = v125 - v127;
+    let v129 = v128 * p.heel_rod_length_x;
+    let v130 = v2 * v124;
+    let v131 = v0 * v126;
+    let v132 = v130 + v131;
+    let v133 = v132 * p.heel_rod_length_y;
+    let v134 = v129 - v133;
+    let v135 = v57 + v134;
+    let v136 = v135.abs();
+    let v137 = v123.max(v136);
+    let v138 = p.heel_rod_length_x * v132;
+    let v139 = v128 * p.heel_rod_length_y;
+    let v140 = v138 + v139;
+    let v141 = v63 + v140;
+    let v142 = v141.abs();
+    let v143 = v137.max(v142);
+    let v144 = v143.max(v90);
+    let v145 = v144.max(v96);
+    let (v148, v146) = q_6.sincos();
+    let v147 = v82 * v146;
+    let v149 = v86 * v148;
+    let v150 = v147 - v149;
+    let v151 = v150 * p.plantar_rod_length_x;
+    let v152 = v86 * v146;
+    let v153 = v82 * v148;
+    let v154 = v152 + v153;
+    let v155 = v154 * p.plantar_rod_length_y;
+    let v156 = v151 - v155;
+    let v157 = v89 + v156;
+    let v158 = v157.abs();
+    let v159 = v145.max(v158);
+    let v160 = p.plantar_rod_length_x * v154;
+    let v161 = v150 * p.plantar_rod_length_y;
+    let v162 = v160 + v161;
+    let v163 = v95 + v162;
+    let v164 = v163.abs();
+    let v165 = v159.max(v164);
+    v165
 }
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
 pub fn contact_positions<T: Arithmetic>(

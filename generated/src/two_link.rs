@@ -11,7 +11,7 @@
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
-    JointKind, LegModel, Parameters,
+    JointKind, LegDynamics, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 2;
@@ -116,7 +116,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
-    prepared: [T; 11],
+    prepared: [T; 12],
 }
 impl<T: Arithmetic> Params<T> {
     /// Parameters of these values.
@@ -234,7 +234,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
         true
     }
 }
-impl LegModel<NQ, NC, NU> for TwoLink {
+impl LegDynamics<NQ, NC, NU> for TwoLink {
     const NAME: &'static str = "two_link";
     const JOINT_NAMES: [&'static str; NQ] = ["upper_arm", "forearm"];
     const JOINT_KINDS: [JointKind; NQ] = [JointKind::Revolute, JointKind::Revolute];
@@ -283,22 +283,6 @@ impl LegModel<NQ, NC, NU> for TwoLink {
     ) -> SVector<T, 0> {
         constraint_bias(q, qd, p)
     }
-    fn foot_position<T: Arithmetic>(q: &SVector<T, 2>, p: &Params<T>) -> SVector<T, 2> {
-        foot_position(q, p)
-    }
-    fn foot_jacobian<T: Arithmetic>(
-        q: &SVector<T, 2>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 2> {
-        foot_jacobian(q, p)
-    }
-    fn foot_bias<T: Arithmetic>(
-        q: &SVector<T, 2>,
-        qd: &SVector<T, 2>,
-        p: &Params<T>,
-    ) -> SVector<T, 2> {
-        foot_bias(q, qd, p)
-    }
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 2>,
         qd: &SVector<T, 2>,
@@ -309,20 +293,8 @@ impl LegModel<NQ, NC, NU> for TwoLink {
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 2>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
-    fn joint_positions<T: Arithmetic>(
-        q: &SVector<T, 2>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 2> {
-        joint_positions(q, p)
-    }
-    fn link_tips<T: Arithmetic>(q: &SVector<T, 2>, p: &Params<T>) -> SMatrix<T, 2, 2> {
-        link_tips(q, p)
-    }
-    fn closure_points<T: Arithmetic>(
-        q: &SVector<T, 2>,
-        p: &Params<T>,
-    ) -> SMatrix<T, 2, 0> {
-        closure_points(q, p)
+    fn leg_size<T: Arithmetic>(q: &SVector<T, 2>, p: &Params<T>) -> T {
+        leg_size(q, p)
     }
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 2>,
@@ -398,6 +370,39 @@ impl LegModel<NQ, NC, NU> for TwoLink {
         }
     }
 }
+impl LegModel<NQ, NC, NU> for TwoLink {
+    fn foot_position<T: Arithmetic>(q: &SVector<T, 2>, p: &Params<T>) -> SVector<T, 2> {
+        foot_position(q, p)
+    }
+    fn foot_jacobian<T: Arithmetic>(
+        q: &SVector<T, 2>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 2> {
+        foot_jacobian(q, p)
+    }
+    fn foot_bias<T: Arithmetic>(
+        q: &SVector<T, 2>,
+        qd: &SVector<T, 2>,
+        p: &Params<T>,
+    ) -> SVector<T, 2> {
+        foot_bias(q, qd, p)
+    }
+    fn joint_positions<T: Arithmetic>(
+        q: &SVector<T, 2>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 2> {
+        joint_positions(q, p)
+    }
+    fn link_tips<T: Arithmetic>(q: &SVector<T, 2>, p: &Params<T>) -> SMatrix<T, 2, 2> {
+        link_tips(q, p)
+    }
+    fn closure_points<T: Arithmetic>(
+        q: &SVector<T, 2>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 2, 0> {
+        closure_points(q, p)
+    }
+}
 impl ContactModel<NQ, NC, NU, NK> for TwoLink {
     const CONTACT_NAMES: &'static [&'static str] = &[];
     const CONTACT_FRICTION: &'static [f64] = &[];
@@ -447,7 +452,7 @@ impl ContactModel<NQ, NC, NU, NK> for TwoLink {
 /// The parameter-only quantities the terms read (products of masses, lengths and
 /// centres of mass, inertias about the joints, …), computed once per parameter set
 /// by [`Params::new`].
-pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 11> {
+pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 12> {
     let v0 = values.upper_arm_com_x * values.upper_arm_com_x;
     let v1 = values.upper_arm_com_y * values.upper_arm_com_y;
     let v2 = v0 + v1;
@@ -503,8 +508,11 @@ pub fn prepare<T: Arithmetic>(values: &ParamValues<T>) -> SVector<T, 11> {
     let v52 = values.upper_arm_origin_y * v49;
     let v53 = values.gravity_y * v52;
     let v54 = v51 + v53;
+    let v55 = values.upper_arm_origin_x.abs();
+    let v56 = values.upper_arm_origin_y.abs();
+    let v57 = v55.max(v56);
     SMatrix::from_data(
-        ArrayStorage([[v9, v18, v23, v26, v27, v30, v39, v42, v45, v48, v54]]),
+        ArrayStorage([[v9, v18, v23, v26, v27, v30, v39, v42, v45, v48, v54, v57]]),
     )
 }
 /// `M(q) = ∂²L/∂q̇²`, with reflected rotor inertia on actuated joints.
@@ -821,6 +829,46 @@ pub fn closure_points<T: Arithmetic>(
     _p: &Params<T>,
 ) -> SMatrix<T, 2, 0> {
     SMatrix::from_data(ArrayStorage([]))
+}
+/// The leg's size (m): the largest coordinate of any joint or link tip in the base
+/// frame, which tolerances scale with.
+pub fn leg_size<T: Arithmetic>(q: &SVector<T, 2>, p: &Params<T>) -> T {
+    let [q_0, q_1] = q.data.0[0];
+    let (v2, v0) = q_0.sincos();
+    let v1 = v0 * p.upper_arm_length_x;
+    let v3 = v2 * p.upper_arm_length_y;
+    let v4 = v1 - v3;
+    let v5 = p.upper_arm_origin_x + v4;
+    let v6 = v5.abs();
+    let v7 = p.prepared[11].max(v6);
+    let v8 = p.upper_arm_length_x * v2;
+    let v9 = v0 * p.upper_arm_length_y;
+    let v10 = v8 + v9;
+    let v11 = p.upper_arm_origin_y + v10;
+    let v12 = v11.abs();
+    let v13 = v7.max(v12);
+    let v14 = v13.max(v6);
+    let v15 = v14.max(v12);
+    let (v18, v16) = q_1.sincos();
+    let v17 = v0 * v16;
+    let v19 = v2 * v18;
+    let v20 = v17 - v19;
+    let v21 = v20 * p.forearm_length_x;
+    let v22 = v2 * v16;
+    let v23 = v0 * v18;
+    let v24 = v22 + v23;
+    let v25 = v24 * p.forearm_length_y;
+    let v26 = v21 - v25;
+    let v27 = v5 + v26;
+    let v28 = v27.abs();
+    let v29 = v15.max(v28);
+    let v30 = p.forearm_length_x * v24;
+    let v31 = v20 * p.forearm_length_y;
+    let v32 = v30 + v31;
+    let v33 = v11 + v32;
+    let v34 = v33.abs();
+    let v35 = v29.max(v34);
+    v35
 }
 /// Contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
 pub fn contact_positions<T: Arithmetic>(

@@ -11,7 +11,7 @@
 //!
 //! Tolerances are relative to the leg's size ([`leg_size`]), so a 1 m leg and a 10 cm
 //! leg are assembled to the same number of significant digits. Closure rows that repeat
-//! the others ([`LegModel::REDUNDANT_ROWS`] of them) are left out of each step by the
+//! the others ([`LegDynamics::REDUNDANT_ROWS`] of them) are left out of each step by the
 //! pivots of its factorization, and met because the rows they repeat are.
 
 use core::fmt;
@@ -19,7 +19,7 @@ use core::fmt;
 use nalgebra::{SMatrix, SVector};
 
 use crate::dynamics::structure::factor_closure_rows;
-use crate::model::contract::{LegModel, Real};
+use crate::model::contract::{LegDynamics, LegModel, Real};
 use crate::model::linalg::{mul, Cholesky};
 
 /// Why a leg cannot be assembled as asked.
@@ -133,12 +133,10 @@ pub fn leg_size<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     q: &SVector<T, NQ>,
 ) -> T
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
-    L::joint_positions(q, params)
-        .amax()
-        .max(L::link_tips(q, params).amax())
+    L::leg_size(q, params)
 }
 
 /// Refuses a pose that is not finite or is off its closures by more than [`ON_CLOSURES`]
@@ -148,7 +146,7 @@ pub fn check_on_closures<L, T, const NQ: usize, const NC: usize, const NU: usize
     q: &SVector<T, NQ>,
 ) -> Result<(), AssemblyError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     if !q.iter().all(|x| x.is_finite()) {
@@ -183,7 +181,7 @@ fn to_f64<T: Real>(x: T) -> f64 {
 
 fn is_actuated<L, const NQ: usize, const NC: usize, const NU: usize>(j: usize) -> bool
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
 {
     L::ACTUATED.contains(&j)
 }
@@ -217,7 +215,7 @@ fn solve_closure<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     tol: &Tolerance<T>,
 ) -> Result<(), AssemblyError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     if !q.iter().all(|x| x.is_finite()) {
@@ -299,7 +297,7 @@ pub fn assemble<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     tol: &Tolerance<T>,
 ) -> Result<SVector<T, NQ>, AssemblyError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     if !theta.iter().all(|x| x.is_finite()) {
@@ -323,7 +321,7 @@ pub fn assemble_holding<L, T, const NQ: usize, const NC: usize, const NU: usize>
     tol: &Tolerance<T>,
 ) -> Result<(), AssemblyError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     let free: [bool; NQ] = core::array::from_fn(|j| !held[j]);
@@ -338,7 +336,7 @@ pub fn project_position<L, T, const NQ: usize, const NC: usize, const NU: usize>
     tol: &Tolerance<T>,
 ) -> Result<(), AssemblyError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     solve_closure::<L, T, NQ, NC, NU>(params, q, &[true; NQ], tol)
@@ -352,7 +350,7 @@ pub fn project_velocity<L, T, const NQ: usize, const NC: usize, const NU: usize>
     qd: &mut SVector<T, NQ>,
 ) -> Result<(), AssemblyError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     if NC == 0 {
@@ -383,7 +381,7 @@ pub fn consistent_velocity<L, T, const NQ: usize, const NC: usize, const NU: usi
     theta_dot: &SVector<T, NU>,
 ) -> Result<SVector<T, NQ>, AssemblyError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     if !theta_dot.iter().chain(q.iter()).all(|x| x.is_finite()) {
@@ -409,7 +407,7 @@ pub(crate) fn passive_solve<L, T, const NQ: usize, const NC: usize, const NU: us
     rhs: &SVector<T, NC>,
 ) -> Result<SVector<T, NQ>, AssemblyError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     if NC == 0 {
@@ -572,7 +570,7 @@ pub fn assemble_along<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     tol: &Tolerance<T>,
 ) -> Result<SVector<T, NQ>, AssemblyError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     if !theta.iter().chain(from.iter()).all(|x| x.is_finite()) || !max_step.is_finite() {

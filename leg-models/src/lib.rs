@@ -13,7 +13,7 @@
 //! | [`simulate`] | integrators with drift control, the hybrid simulator, the recorder; the controllers' port |
 //! | [`assembly`] | closing the loops: assembly, projection, continuation along a branch |
 //! | [`dynamics`] | the KKT forward dynamics, structure, contact and impacts, derivatives, batches |
-//! | contract | [`LegModel`], [`Real`], trigonometry, [`simd`] lanes, fixed-size [`linalg`] |
+//! | contract | [`LegDynamics`] and [`LegModel`], [`Real`], trigonometry, [`simd`] lanes, fixed-size [`linalg`] |
 //!
 //! Everything but the simulator's record is fixed-size and allocation-free, and the
 //! crate is `no_std` without the default `std` feature. The geometry specs the generator
@@ -39,7 +39,7 @@ pub use leg::{
 };
 pub use model::contract::{
     Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms, JointKind,
-    LegModel, Parameters, Real, Spring,
+    LegDynamics, LegModel, Parameters, Real, Spring,
 };
 pub use model::shown::{Shown, ShownNumber};
 pub use model::{linalg, simd};

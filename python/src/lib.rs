@@ -556,7 +556,7 @@ macro_rules! leg_class {
             use super::*;
             use leg_models::dynamics::contact::Modes;
             use leg_models::simulate::hybrid::HybridState;
-            use leg_models::{LegModel, Parameters};
+            use leg_models::{LegDynamics, LegModel, Parameters};
 
             type Model = $ty;
             const NQ: usize = $nq;
@@ -662,7 +662,7 @@ macro_rules! leg_class {
                 /// The parameters' names.
                 #[classattr]
                 fn parameter_names() -> Vec<&'static str> {
-                    <Model as LegModel<NQ, NC, NU>>::Params::<f64>::NAMES.to_vec()
+                    <Model as leg_models::LegDynamics<NQ, NC, NU>>::Params::<f64>::NAMES.to_vec()
                 }
 
                 /// The parameters as a dict name → value.
@@ -670,7 +670,7 @@ macro_rules! leg_class {
                 fn params<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
                     let d = PyDict::new(py);
                     let p = self.leg.params();
-                    for (i, n) in <Model as LegModel<NQ, NC, NU>>::Params::<f64>::NAMES.iter().enumerate() {
+                    for (i, n) in <Model as leg_models::LegDynamics<NQ, NC, NU>>::Params::<f64>::NAMES.iter().enumerate() {
                         d.set_item(*n, p.get(i))?;
                     }
                     Ok(d)

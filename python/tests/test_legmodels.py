@@ -4,6 +4,7 @@ Every term of every generated leg equals what the Rust command line (`legs eval 
 prints at the same state; derivatives agree with central differences; a simulation
 without torques or damping keeps its energy; bad input raises the runtime's errors."""
 
+import tomllib
 import pathlib
 import re
 import subprocess
@@ -15,7 +16,18 @@ import pytest
 import legmodels
 from conftest import ROOT, rust_eval
 
-SPECS = sorted(p.stem for p in (ROOT / "leg-models" / "specs").glob("*.toml"))
+def _gravity(spec):
+    g = spec["gravity"]
+    return g["value"] if isinstance(g, dict) else g
+
+
+# The planar legs: the Python classes cover those (a spec's gravity has two entries);
+# spatial legs are generated Rust only for now.
+SPECS = sorted(
+    p.stem
+    for p in (ROOT / "leg-models" / "specs").glob("*.toml")
+    if len(_gravity(tomllib.loads(p.read_text()))) == 2
+)
 
 
 def test_every_spec_is_a_class():

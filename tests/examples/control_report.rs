@@ -365,7 +365,7 @@ fn main() {
     println!("|---|---|---|---|---|---|---|");
     macro_rules! each {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {{
-            const M: usize = <$ty as LegModel<$nq, $nc, $nu>>::MOBILITY;
+            const M: usize = <$ty as leg_models::LegDynamics<$nq, $nc, $nu>>::MOBILITY;
             report::<$ty, $nq, $nc, $nu, M, { 2 * M }>();
         }};
     }

@@ -375,7 +375,7 @@ fn hot_paths_do_not_allocate() {
             check::<$ty, $nq, $nc, $nu>();
             check_hybrid::<$ty, $nq, $nc, $nu, $nk>();
             {
-                const M: usize = <$ty as LegModel<$nq, $nc, $nu>>::MOBILITY;
+                const M: usize = <$ty as leg_models::LegDynamics<$nq, $nc, $nu>>::MOBILITY;
                 check_derivatives::<$ty, $nq, $nc, $nu, $nk, M, { 2 * M }>();
             }
         };

@@ -18,7 +18,7 @@ use leg_models::dynamics::actuation;
 use leg_models::dynamics::contact::{solve_structured, ContactRows};
 use leg_models::linalg::Cholesky;
 use leg_models::nalgebra::{Matrix2, SMatrix, SVector, Vector2};
-use leg_models::{LegModel, Parameters};
+use leg_models::{LegDynamics, LegModel, Parameters};
 use leg_tests::{not_applicable, Rng};
 
 /// The spec's home pose on its closures.
@@ -1165,8 +1165,8 @@ fn impact_mitigation_on_a_body_matches_a_leg_with_that_body() {
     // closures, not a motor count (it has two motors; issue 29 found "the leg has 1 motor").
     {
         use generated::MinitaurPinnedToe as P;
-        let p = <P as LegModel<5, 4, 2>>::Params::<f64>::default();
-        let mut q = SVector::<f64, 5>::from(<P as LegModel<5, 4, 2>>::HOME);
+        let p = <P as leg_models::LegDynamics<5, 4, 2>>::Params::<f64>::default();
+        let mut q = SVector::<f64, 5>::from(<P as leg_models::LegDynamics<5, 4, 2>>::HOME);
         project_position::<P, f64, 5, 4, 2>(&p, &mut q, &Tolerance::default()).unwrap();
         let frame = LegFrame::<5>::of::<P, 4, 2>();
         let e =

@@ -10,7 +10,7 @@ use leg_models::dynamics::contact::{
 use leg_models::nalgebra::{DMatrix, DVector, SMatrix, SVector};
 use leg_models::simulate::hybrid::{EventKind, HybridError, HybridSimulator, HybridState};
 use leg_models::simulate::State;
-use leg_models::{ContactModel, LegModel, Parameters};
+use leg_models::{ContactModel, LegDynamics, Parameters};
 use leg_tests::{not_applicable, Rng};
 
 const STATES: usize = 100;

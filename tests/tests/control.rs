@@ -14,7 +14,7 @@ use leg_models::dynamics::structure::{NotApplicable, Structure};
 use leg_models::nalgebra::{DMatrix, SVector};
 use leg_models::simulate::Simulator;
 use leg_models::simulate::{ControlUpdate, State, StepOptions, TorqueSource};
-use leg_models::{LegModel, Parameters};
+use leg_models::{LegDynamics, LegModel, Parameters};
 use leg_tests::{not_applicable, passive_release_state, random_assembled_state, Rng};
 
 pub fn check_reductions<

@@ -698,7 +698,7 @@ macro_rules! derivative_checks {
         mod $module {
             use super::*;
 
-            const M: usize = <$ty as LegModel<$nq, $nc, $nu>>::MOBILITY;
+            const M: usize = <$ty as leg_models::LegDynamics<$nq, $nc, $nu>>::MOBILITY;
 
             #[test]
             fn generated_directional_terms_match_finite_differences() {

@@ -8,7 +8,7 @@ use leg_models::dynamics::{actuation, forward_dynamics, DynamicsError};
 use leg_models::nalgebra::{DMatrix, DVector, SVector};
 use leg_models::simulate::Simulator;
 use leg_models::simulate::{State, StepError, StepOptions};
-use leg_models::{LegModel, Parameters};
+use leg_models::{LegDynamics, LegModel, Parameters};
 use leg_tests::{
     not_applicable, passive_release_state, random_assembled_state, rcond_of_rows, Rng,
 };

@@ -10,7 +10,7 @@ use leg_models::control::hop::{HopController, HopSettings};
 use leg_models::nalgebra::SVector;
 use leg_models::simulate::hybrid::{EventKind, HybridSimulator};
 use leg_models::simulate::State;
-use leg_models::LegModel;
+use leg_models::LegDynamics;
 
 /// Apexes from a record, `(t, q[forward], q[height])`: the height's rate crossing zero
 /// with every contact in flight.

@@ -167,7 +167,7 @@ macro_rules! lqr_checks {
     ($module:ident, $ty:ty, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
         #[test]
         fn $module() {
-            const M: usize = <$ty as LegModel<$nq, $nc, $nu>>::MOBILITY;
+            const M: usize = <$ty as leg_models::LegDynamics<$nq, $nc, $nu>>::MOBILITY;
             hold_and_decay::<$ty, $nq, $nc, $nu, M, { 2 * M }>();
         }
     };
@@ -180,7 +180,7 @@ generated::for_each_model!(lqr_checks);
 #[test]
 fn minitaur_tracks_a_slow_reference_under_torque_limits() {
     use generated::Minitaur;
-    let p = <Minitaur as LegModel<4, 2, 2>>::Params::<f64>::default();
+    let p = <Minitaur as leg_models::LegDynamics<4, 2, 2>>::Params::<f64>::default();
     let pose = passive_release_state::<Minitaur, 4, 2, 2>(&p).q;
     let chart = ManifoldChart::<f64, 4, 2>::new::<Minitaur, 2, 2>(&p, &pose).unwrap();
     let home = chart.coordinates_of(&State {

@@ -4,7 +4,7 @@
 //! New geometries are covered automatically through `generated::for_each_model!`.
 
 use leg_models::nalgebra::{SMatrix, SVector};
-use leg_models::{ContactModel, JointKind, LegModel, Parameters};
+use leg_models::{ContactModel, JointKind, LegDynamics, LegModel, Parameters};
 use leg_tests::Rng;
 
 const STATES: usize = 200;

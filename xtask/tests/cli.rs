@@ -6,7 +6,7 @@ use std::process::{Command, Output};
 
 use generated::Minitaur;
 use leg_models::nalgebra::SVector;
-use leg_models::LegModel;
+use leg_models::LegDynamics;
 use serde_json::Value;
 
 fn legs(args: &[&str]) -> Output {

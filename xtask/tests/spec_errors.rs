@@ -916,3 +916,113 @@ fn a_broken_spec_does_not_block_generating_another() {
         "{all}"
     );
 }
+
+/// The built-in spatial test leg's text, edited.
+fn spatial_edit(from: &str, to: &str) -> String {
+    let text = std::fs::read_to_string(
+        gen::workspace_root().join("leg-models/specs/abducted_five_bar.toml"),
+    )
+    .unwrap();
+    assert!(text.contains(from), "{from}");
+    text.replacen(from, to, 1)
+}
+
+fn refused(text: &str, field: &str, says: &str) {
+    let e = parse(text).unwrap_err();
+    assert_eq!(e.field, field, "{e}");
+    assert!(e.message.contains(says), "{e}");
+    assert!(e.line > 0, "{e}");
+}
+
+#[test]
+fn spatial_specs_refuse_what_does_not_fit_their_dimension() {
+    // The spatial leg itself validates and builds a 3-D model.
+    let text = spatial_edit("", "");
+    let spec = parse(&text).unwrap();
+    let m = model::build(&spec).unwrap();
+    assert_eq!(m.dimension, 3);
+    assert_eq!(m.gravity.len(), 3);
+    // A 2-vector on a spatial leg, a 3-vector on a planar one: named with the dimension.
+    refused(
+        &spatial_edit("origin = [0.0, 0.04, 0.0]", "origin = [0.0, 0.04]"),
+        "links[1].origin",
+        "the leg is spatial",
+    );
+    refused(
+        &VALID.replacen("origin = [0.05, 0.0]", "origin = [0.05, 0.0, 0.0]", 1),
+        "links[2].origin",
+        "the leg is planar",
+    );
+    refused(
+        &spatial_edit(
+            "gravity = [0.0, 0.0, -9.81]",
+            "gravity = [0.0, 0.0, -9.81, 0.0]",
+        ),
+        "gravity",
+        "4 entries",
+    );
+    // Inertia tensors a rigid body cannot have; a planar inertia on a spatial link.
+    refused(
+        &spatial_edit(
+            "inertia = [1.0e-6, 4.1666666666666665e-5, 4.1666666666666665e-5]",
+            "inertia = [1.0e-6, 1.0e-6, 4.1666666666666665e-5]",
+        ),
+        "links[1].inertia",
+        "no rigid body has it",
+    );
+    refused(
+        &spatial_edit(
+            "inertia = [1.0e-6, 4.1666666666666665e-5, 4.1666666666666665e-5]",
+            "inertia = [1.0, 1.0, 1.0, 2.0, 0.0, 0.0]",
+        ),
+        "links[1].inertia",
+        "not positive semi-definite",
+    );
+    refused(
+        &spatial_edit(
+            "inertia = [1.0e-6, 4.1666666666666665e-5, 4.1666666666666665e-5]",
+            "inertia = 4e-5",
+        ),
+        "links[1].inertia",
+        "has 1 entries",
+    );
+    // Orientation: a quaternion, spatial only, not zero.
+    refused(
+        &spatial_edit(
+            "orientation = [0.9887710779360422, 0.0, -0.14943813247359922, 0.0]",
+            "orientation = [0.0, 0.0, 0.0, 0.0]",
+        ),
+        "links[4].orientation",
+        "must not be zero",
+    );
+    refused(
+        &spatial_edit(
+            "orientation = [0.9887710779360422, 0.0, -0.14943813247359922, 0.0]",
+            "orientation = [1.0, 0.0, 0.0]",
+        ),
+        "links[4].orientation",
+        "quaternion",
+    );
+    refused(
+        &VALID.replacen(
+            "inertia = 4e-5\n",
+            "inertia = 4e-5\norientation = [1.0, 0.0, 0.0, 0.0]\n",
+            1,
+        ),
+        "links[0].orientation",
+        "only a spatial leg",
+    );
+    refused(
+        &spatial_edit("axis = [1.0, 0.0, 0.0]", "axis = [0.0, 0.0, 0.0]"),
+        "links[0].axis",
+        "must not be zero",
+    );
+    // Contacts are planar only for now: said, not dropped.
+    refused(
+        &format!(
+            "{text}\n[[contacts]]\nname = \"toe_contact\"\nlink = \"lower_a\"\nfriction = 1.0\n"
+        ),
+        "contacts[0].name",
+        "spatial leg cannot have contacts yet",
+    );
+}

@@ -12,7 +12,7 @@
 //! ```
 //!
 //! (bracketed: Baumgarte terms, when the dynamics use them). The products are the
-//! generated [`LegModel::dynamics_derivatives`] at `a = q̈`, `f = F`, so no tensor is
+//! generated [`LegDynamics::dynamics_derivatives`] at `a = q̈`, `f = F`, so no tensor is
 //! formed, and the forward dynamics' own factorization of `K` ([`KktFactorization`])
 //! solves every right-hand side. With held contacts the contact rows add the same terms
 //! with `J_c` ([`ContactModel::contact_derivatives`]).
@@ -26,7 +26,7 @@ use crate::dynamics::forward::{
     actuation, classify_non_finite, kkt_rhs, Acceleration, Baumgarte, DynamicsError,
     KktFactorization,
 };
-use crate::model::contract::{ContactModel, DynamicsTerms, LegModel, Real};
+use crate::model::contract::{ContactModel, DynamicsTerms, LegDynamics, Real};
 use crate::model::linalg::{all_finite, negate};
 
 /// Forward dynamics and its derivatives at one state and input.
@@ -52,7 +52,7 @@ pub struct ForwardDynamicsDerivatives<T: Real, const NQ: usize, const NC: usize,
 pub fn actuation_matrix<L, T, const NQ: usize, const NC: usize, const NU: usize>(
 ) -> SMatrix<T, NQ, NU>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     let mut b = SMatrix::<T, NQ, NU>::zeros();
@@ -73,7 +73,7 @@ pub fn forward_dynamics_derivatives<L, T, const NQ: usize, const NC: usize, cons
     baumgarte: Option<Baumgarte<T>>,
 ) -> Result<ForwardDynamicsDerivatives<T, NQ, NC, NU>, DynamicsError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     let terms = L::dynamics_terms(q, qd, params);
@@ -98,7 +98,7 @@ pub fn forward_dynamics_derivatives_from_terms<
     baumgarte: Option<Baumgarte<T>>,
 ) -> Result<ForwardDynamicsDerivatives<T, NQ, NC, NU>, DynamicsError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     let kkt = KktFactorization::new(

@@ -13,7 +13,7 @@ use core::fmt;
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::model::contract::{DynamicsTerms, LegModel, Real};
+use crate::model::contract::{DynamicsTerms, LegDynamics, Real};
 use crate::model::linalg::{all_finite, mul, Cholesky, PivotedLdlt};
 
 /// Why the constrained dynamics cannot be solved at a state.
@@ -100,7 +100,7 @@ pub fn actuation<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     u: &SVector<T, NU>,
 ) -> SVector<T, NQ>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     let mut tau = SVector::<T, NQ>::zeros();
@@ -199,7 +199,7 @@ impl<T: Real, const NQ: usize, const NC: usize> KktFactorization<T, NQ, NC> {
 /// Solves the KKT system from evaluated terms: `tau` is the generalized force on the
 /// right-hand side (`B u − N − D q̇`), `closure_rhs` the constraint row (`−J̇ q̇ − …`).
 /// Up to `deficiency` closure rows may repeat the others (a leg closed redundantly,
-/// [`LegModel::REDUNDANT_ROWS`]): the pivots leave them out and their forces are zero, so
+/// [`LegDynamics::REDUNDANT_ROWS`]): the pivots leave them out and their forces are zero, so
 /// the accelerations are those of the whole system and the forces one of its solutions.
 pub fn solve_kkt<T: Real, const NQ: usize, const NC: usize>(
     mass_matrix: &SMatrix<T, NQ, NQ>,
@@ -302,7 +302,7 @@ pub fn forward_dynamics<L, T, const NQ: usize, const NC: usize, const NU: usize>
     baumgarte: Option<Baumgarte<T>>,
 ) -> Result<Acceleration<T, NQ, NC>, DynamicsError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     let terms = L::dynamics_terms(q, qd, params);
@@ -320,7 +320,7 @@ pub fn forward_dynamics_from_terms<L, T, const NQ: usize, const NC: usize, const
     baumgarte: Option<Baumgarte<T>>,
 ) -> Result<Acceleration<T, NQ, NC>, DynamicsError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     let (tau, rhs) = kkt_rhs::<L, T, NQ, NC, NU>(params, terms, q, qd, u, baumgarte);
@@ -346,7 +346,7 @@ pub(crate) fn kkt_rhs<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     baumgarte: Option<Baumgarte<T>>,
 ) -> (SVector<T, NQ>, SVector<T, NC>)
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     let tau = actuation::<L, T, NQ, NC, NU>(u) - terms.bias_forces - L::damping_forces(qd, params);

@@ -7,7 +7,7 @@ use core::fmt;
 use nalgebra::SMatrix;
 
 use crate::dynamics::forward::rcond_floor;
-use crate::model::contract::{LegModel, Real};
+use crate::model::contract::{LegDynamics, Real};
 use crate::model::linalg::PivotedLdlt;
 
 /// How a leg's motors compare with its degrees of freedom.
@@ -29,9 +29,9 @@ pub struct Structure {
     pub joints: usize,
     /// `NC`.
     pub closure_rows: usize,
-    /// Closure rows implied by the others ([`LegModel::REDUNDANT_ROWS`]).
+    /// Closure rows implied by the others ([`LegDynamics::REDUNDANT_ROWS`]).
     pub redundant_rows: usize,
-    /// `NQ − rank J` ([`LegModel::MOBILITY`]).
+    /// `NQ − rank J` ([`LegDynamics::MOBILITY`]).
     pub mobility: usize,
     /// `NU`.
     pub motors: usize,
@@ -93,7 +93,7 @@ impl Structure {
     /// The structure of leg `L`.
     pub fn of<L, const NQ: usize, const NC: usize, const NU: usize>() -> Structure
     where
-        L: LegModel<NQ, NC, NU>,
+        L: LegDynamics<NQ, NC, NU>,
     {
         Structure {
             joints: NQ,
@@ -153,13 +153,13 @@ impl Structure {
 }
 
 /// Factors a matrix built from the closure rows (`J X Jᵀ`, `J Jᵀ + μ I`), allowing as
-/// many negligible pivots as the leg has redundant rows ([`LegModel::REDUNDANT_ROWS`]
+/// many negligible pivots as the leg has redundant rows ([`LegDynamics::REDUNDANT_ROWS`]
 /// counts them; the pivots choose which, since that depends on the configuration).
 pub(crate) fn factor_closure_rows<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     s: &SMatrix<T, NC, NC>,
 ) -> Option<PivotedLdlt<T, NC>>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     PivotedLdlt::new(s, L::REDUNDANT_ROWS, rcond_floor::<T>())

@@ -264,15 +264,19 @@ pub struct Spring {
     pub rest: usize,
 }
 
-/// A planar leg: a tree of rigid links on revolute and prismatic joints, closed by point-on-link
-/// closures. Implemented by generated code (`cargo xtask gen`), one type per geometry.
+/// What every leg has in any dimension: its structure and its dynamics (`M`, `N`, `φ`,
+/// `J`, `J̇ q̇`, energies, derivatives). Implemented by generated code (`cargo xtask gen`),
+/// one type per geometry, beside [`LegModel`] (its points); the runtime's algorithms that
+/// read only these (forward dynamics, assembly, projection) are bounded by it and so take
+/// planar and spatial legs alike.
 ///
 /// - `NQ`: joints (one per link, relative angles, in spec order);
-/// - `NC`: closure rows (two per closure: x and y of point a minus point b);
+/// - `NC`: closure rows (per closure, the coordinates of point a minus point b: two on a
+///   planar leg, three on a spatial one);
 /// - `NU`: actuated joints.
 ///
 /// All methods are straight-line code: no allocation, no panic, no loop.
-pub trait LegModel<const NQ: usize, const NC: usize, const NU: usize> {
+pub trait LegDynamics<const NQ: usize, const NC: usize, const NU: usize> {
     /// The geometry's name (its spec's file stem).
     const NAME: &'static str;
     /// The name of the link each joint moves, in coordinate order.
@@ -327,32 +331,18 @@ pub trait LegModel<const NQ: usize, const NC: usize, const NU: usize> {
         qd: &SVector<T, NQ>,
         p: &Self::Params<T>,
     ) -> SVector<T, NC>;
-    /// The foot point in the base frame.
-    fn foot_position<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SVector<T, 2>;
-    /// `J_f(q) = ∂(foot)/∂q`.
-    fn foot_jacobian<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, 2, NQ>;
-    /// `J̇_f(q, q̇) q̇`.
-    fn foot_bias<T: Arithmetic>(
-        q: &SVector<T, NQ>,
-        qd: &SVector<T, NQ>,
-        p: &Self::Params<T>,
-    ) -> SVector<T, 2>;
     /// Kinetic energy `½ q̇ᵀ M q̇` (links and rotors).
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, NQ>,
         qd: &SVector<T, NQ>,
         p: &Self::Params<T>,
     ) -> T;
+    /// The leg's size at `q` (m): the largest coordinate of any joint or link tip in the
+    /// base frame. A closure residual is a difference of such coordinates, so its rounding
+    /// error scales with it, and so do the runtime's tolerances.
+    fn leg_size<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> T;
     /// Potential energy `−Σ m g·c` (zero at the base origin).
     fn potential_energy<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> T;
-    /// Each link's joint position in the base frame (column `i` for joint `i`).
-    fn joint_positions<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>)
-        -> SMatrix<T, 2, NQ>;
-    /// Each link's tip (the end of its length vector) in the base frame.
-    fn link_tips<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, 2, NQ>;
-    /// The closure points in the base frame: columns `2k` and `2k + 1` are points a and b
-    /// of closure `k` (they coincide on an assembled leg).
-    fn closure_points<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, 2, NC>;
     /// `M`, `N`, `J` and `J̇ q̇` together, sharing subexpressions.
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, NQ>,
@@ -387,6 +377,43 @@ pub trait LegModel<const NQ: usize, const NC: usize, const NU: usize> {
         f: &SVector<T, NC>,
         p: &Self::Params<T>,
     ) -> DynamicsDerivatives<T, NQ, NC>;
+}
+
+/// A leg's points: the foot, the joints, the link tips and the closure points, in `ND`
+/// coordinates (2 for a planar leg, the default: `LegModel<NQ, NC, NU>` is a planar leg;
+/// 3 for a spatial one). `NP` counts the closure points, two per closure (`NC` on a
+/// planar leg, the default).
+///
+/// All methods are straight-line code: no allocation, no panic, no loop.
+pub trait LegModel<
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize = 2,
+    const NP: usize = NC,
+>: LegDynamics<NQ, NC, NU>
+{
+    /// The foot point in the base frame.
+    fn foot_position<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SVector<T, ND>;
+    /// `J_f(q) = ∂(foot)/∂q`.
+    fn foot_jacobian<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, ND, NQ>;
+    /// `J̇_f(q, q̇) q̇`.
+    fn foot_bias<T: Arithmetic>(
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        p: &Self::Params<T>,
+    ) -> SVector<T, ND>;
+    /// Each link's joint position in the base frame (column `i` for joint `i`).
+    fn joint_positions<T: Arithmetic>(
+        q: &SVector<T, NQ>,
+        p: &Self::Params<T>,
+    ) -> SMatrix<T, ND, NQ>;
+    /// Each link's tip (the end of its length vector) in the base frame.
+    fn link_tips<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SMatrix<T, ND, NQ>;
+    /// The closure points in the base frame: columns `2k` and `2k + 1` are points a and b
+    /// of closure `k` (they coincide on an assembled leg).
+    fn closure_points<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>)
+        -> SMatrix<T, ND, NP>;
 }
 
 /// A leg's contact points and the ground they may touch (DESIGN.md §3.1). Every generated

@@ -6,7 +6,7 @@ use core::marker::PhantomData;
 
 use nalgebra::SVector;
 
-use crate::model::contract::{LegModel, Real};
+use crate::model::contract::{LegDynamics, Real};
 use crate::simulate::source::State;
 use crate::simulate::source::TorqueSource;
 use crate::simulate::step::{check_record, energy, step, StepError, StepOptions};
@@ -63,7 +63,7 @@ impl<T: Real, const NQ: usize, const NC: usize, const NU: usize> std::error::Err
 #[derive(Clone, Copy, Debug)]
 pub struct Simulator<L, T: Real, const NQ: usize, const NC: usize, const NU: usize>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
 {
     /// The leg's parameters.
     pub params: L::Params<T>,
@@ -74,7 +74,7 @@ where
 
 impl<L, T, const NQ: usize, const NC: usize, const NU: usize> Simulator<L, T, NQ, NC, NU>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     /// A simulator of leg `L` with `params`, stepping with `options`.

@@ -8,7 +8,7 @@ use nalgebra::SVector;
 
 use crate::assembly::{project_position, project_velocity, AssemblyError, Tolerance};
 use crate::dynamics::forward::{forward_dynamics, Acceleration, Baumgarte, DynamicsError};
-use crate::model::contract::{LegModel, Real};
+use crate::model::contract::{LegDynamics, Real};
 use crate::simulate::source::ControlError;
 use crate::simulate::source::ControlUpdate;
 use crate::simulate::source::{State, TorqueSource};
@@ -163,7 +163,7 @@ pub fn step<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     opts: &StepOptions<T>,
 ) -> Result<StepReport<T, NQ, NC, NU>, StepError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     let dt = opts.dt;
@@ -233,7 +233,7 @@ pub(crate) fn project_onto_closures<L, T, const NQ: usize, const NC: usize, cons
     opts: &StepOptions<T>,
 ) -> Result<(), AssemblyError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     if opts.project && NC > 0 {
@@ -249,7 +249,7 @@ pub fn energy<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     state: &State<T, NQ>,
 ) -> T
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     L::kinetic_energy(&state.q, &state.qd, params) + L::potential_energy(&state.q, params)

@@ -61,6 +61,11 @@ fn num(v: f64) -> String {
     format!("{v:?}")
 }
 
+/// A planar link's inertia (exports are planar only: [`run`] refuses a spatial leg).
+fn planar_inertia(params: &[Param], inertia: &model::Inertia) -> f64 {
+    value(params, inertia.planar().unwrap_or_default())
+}
+
 fn value(params: &[Param], name: &str) -> f64 {
     params
         .iter()
@@ -69,7 +74,7 @@ fn value(params: &[Param], name: &str) -> f64 {
         .expect("every quantity of a model is one of its parameters")
 }
 
-fn pair(m: &Model, names: &[String; 2]) -> (f64, f64) {
+fn pair(m: &Model, names: &[String]) -> (f64, f64) {
     (value(&m.params, &names[0]), value(&m.params, &names[1]))
 }
 
@@ -100,7 +105,7 @@ pub fn mjcf(m: &Model) -> String {
     let massless = m
         .links
         .iter()
-        .any(|l| value(&m.params, &l.mass) == 0.0 || value(&m.params, &l.inertia) == 0.0);
+        .any(|l| value(&m.params, &l.mass) == 0.0 || planar_inertia(&m.params, &l.inertia) == 0.0);
     let bounds = if massless {
         " boundmass=\"1e-9\" boundinertia=\"1e-12\""
     } else {
@@ -264,7 +269,7 @@ fn mjcf_body(m: &Model, i: usize, depth: usize, out: &mut String) {
     let (cx, cy) = pair(m, &l.com);
     let (mass, inertia, damping) = (
         value(&m.params, &l.mass),
-        value(&m.params, &l.inertia),
+        planar_inertia(&m.params, &l.inertia),
         value(&m.params, &l.damping),
     );
     let armature = l.rotor.as_ref().map_or(0.0, |r| {
@@ -279,7 +284,7 @@ fn mjcf_body(m: &Model, i: usize, depth: usize, out: &mut String) {
         num(oy)
     );
     let (kind, axis) = match l.axis {
-        Some([ax, ay]) => ("slide", format!("{} {} 0", num(ax), num(ay))),
+        Some(ref a) => ("slide", format!("{} {} 0", num(a[0]), num(a[1]))),
         None => ("hinge", "0 0 1".to_string()),
     };
     // A spring on this joint alone is MuJoCo's joint stiffness about `springref`.
@@ -362,7 +367,10 @@ pub fn urdf(m: &Model) -> String {
     for l in &m.links {
         let (cx, cy) = pair(m, &l.com);
         let (lx, ly) = pair(m, &l.length);
-        let (mass, inertia) = (value(&m.params, &l.mass), value(&m.params, &l.inertia));
+        let (mass, inertia) = (
+            value(&m.params, &l.mass),
+            planar_inertia(&m.params, &l.inertia),
+        );
         let _ = writeln!(out, "  <link name=\"{}\">", l.name);
         let _ = writeln!(out, "    <inertial>");
         let _ = writeln!(
@@ -402,8 +410,8 @@ pub fn urdf(m: &Model) -> String {
             "    <parent link=\"{parent}\"/>\n    <child link=\"{}\"/>",
             l.name
         );
-        let axis = l.axis.map_or("0 0 1".to_string(), |[ax, ay]| {
-            format!("{} {} 0", num(ax), num(ay))
+        let axis = l.axis.as_ref().map_or("0 0 1".to_string(), |a| {
+            format!("{} {} 0", num(a[0]), num(a[1]))
         });
         let _ = writeln!(
             out,
@@ -499,6 +507,12 @@ fn load_model(root: &Path, name: &str) -> Result<model::Model, cli::Error> {
 /// `cargo xtask export`: writes `--out FILE` whole (or prints to standard output).
 pub fn run(root: &Path, a: ExportArgs) -> Result<(), cli::Error> {
     let m = load_model(root, &a.model)?;
+    if m.dimension != 2 {
+        return Err(cli::Error::Usage(format!(
+            "`{}` is a spatial leg: the MJCF and URDF exports are planar only for now",
+            a.model
+        )));
+    }
     let text = match a.format {
         ExportFormat::Mjcf => mjcf(&m),
         ExportFormat::Urdf => urdf(&m),

@@ -51,7 +51,7 @@ fn leg_file(m: &Model, qd: &[f64]) -> String {
             v(&l.mass),
             v(&l.com[0]),
             v(&l.com[1]),
-            v(&l.inertia),
+            l.inertia.planar().map_or(f64::NAN, |i| value(&m.params, i)),
             armature,
             v(&l.damping)
         );

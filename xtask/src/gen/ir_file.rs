@@ -50,6 +50,29 @@ pub struct ModelInfo {
     /// The ground `normal · x = offset`, unit normal in the base frame.
     pub ground_normal: [f64; 2],
     pub ground_offset: f64,
+    /// 2 (planar, left out of the file) or 3 (spatial): the rows of every point term.
+    #[serde(default = "planar", skip_serializing_if = "is_planar")]
+    pub dimension: usize,
+}
+
+fn planar() -> usize {
+    2
+}
+
+fn is_planar(d: &usize) -> bool {
+    *d == 2
+}
+
+impl ModelInfo {
+    /// Closure rows: one per coordinate of each closure's point a minus point b.
+    pub fn closure_rows(&self) -> usize {
+        self.dimension * self.closures.len()
+    }
+
+    /// Contact rows: one per coordinate of each contact point.
+    pub fn contact_rows(&self) -> usize {
+        self.dimension * self.contacts.len()
+    }
 }
 
 /// A spring on joint `a`, or on `q_a − q_b`.

@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::gen::spec::{JointKind, PointSpec, Spec, SpecError, Vec2};
+use crate::gen::spec::{JointKind, PointSpec, Spec, SpecError, Vector};
 use toml::Spanned;
 
 /// One run-time parameter: a field of the generated `Params` struct.
@@ -23,24 +23,49 @@ pub struct Link {
     pub parent: Option<usize>,
     /// `"revolute"` or `"prismatic"`.
     pub joint: &'static str,
-    /// The unit sliding direction of a prismatic joint (parent frame). A direction, not a
-    /// size: fixed at generation, not a run-time parameter.
-    pub axis: Option<[f64; 2]>,
-    pub origin: [String; 2],
-    pub length: [String; 2],
-    pub com: [String; 2],
+    /// The unit sliding direction of a prismatic joint (parent frame turned by
+    /// `orientation`), and on a spatial leg the unit axis of a revolute one (link frame).
+    /// A direction, not a size: fixed at generation, not a run-time parameter.
+    pub axis: Option<Vec<f64>>,
+    /// Spatial legs: the link frame in its parent's at `q = 0`, a rotation matrix (rows),
+    /// from the spec's unit quaternion; `None` for the identity. Fixed at generation.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub orientation: Option<[[f64; 3]; 3]>,
+    pub origin: Vec<String>,
+    pub length: Vec<String>,
+    pub com: Vec<String>,
     pub mass: String,
-    pub inertia: String,
+    /// A planar link's inertia parameter; on a spatial leg the tensor's
+    /// `[xx, yy, zz, xy, xz, yz]`, `None` for an entry the spec leaves zero.
+    pub inertia: Inertia,
     pub damping: String,
     /// `[rotor_inertia, gear_ratio]` of an actuated joint.
     pub rotor: Option<[String; 2]>,
+}
+
+/// A link's inertia about its centre of mass (see [`Link::inertia`]).
+#[derive(Clone, Debug, Serialize)]
+#[serde(untagged)]
+pub enum Inertia {
+    Planar(String),
+    Spatial([Option<String>; 6]),
+}
+
+impl Inertia {
+    /// The parameter of a planar link's inertia (`None` on a spatial leg).
+    pub fn planar(&self) -> Option<&str> {
+        match self {
+            Inertia::Planar(name) => Some(name),
+            Inertia::Spatial(_) => None,
+        }
+    }
 }
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Point {
     /// The link, or `None` for a point fixed in the base frame (a closure to the base).
     pub link: Option<usize>,
-    pub point: [String; 2],
+    pub point: Vec<String>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -78,7 +103,9 @@ pub struct Model {
     pub links: Vec<Link>,
     pub closures: Vec<Closure>,
     pub foot: Point,
-    pub gravity: [String; 2],
+    /// 2 (a planar leg) or 3 (spatial): the length of every vector here.
+    pub dimension: usize,
+    pub gravity: Vec<String>,
     pub actuated: Vec<usize>,
     /// The home pose (rad, or m for a prismatic joint).
     pub home: Vec<f64>,
@@ -135,11 +162,28 @@ impl Builder<'_> {
         Ok(name)
     }
 
-    fn vector(&mut self, prefix: &str, v: &Vec2, doc: &str) -> Result<[String; 2], SpecError> {
-        Ok([
-            self.scalar(format!("{prefix}_x"), v.value[0], format!("{doc}, x [m]."))?,
-            self.scalar(format!("{prefix}_y"), v.value[1], format!("{doc}, y [m]."))?,
-        ])
+    fn vector(&mut self, prefix: &str, v: &Vector, doc: &str) -> Result<Vec<String>, SpecError> {
+        self.vector_in(prefix, v, doc, "m")
+    }
+
+    fn vector_in(
+        &mut self,
+        prefix: &str,
+        v: &Vector,
+        doc: &str,
+        unit: &str,
+    ) -> Result<Vec<String>, SpecError> {
+        v.value
+            .iter()
+            .zip(["x", "y", "z"])
+            .map(|(&x, axis)| {
+                self.scalar(
+                    format!("{prefix}_{axis}"),
+                    x,
+                    format!("{doc}, {axis} [{unit}]."),
+                )
+            })
+            .collect()
     }
 
     /// A point on a link: its own parameters when the spec gives one, else the link's tip.
@@ -169,18 +213,13 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
         owner: ("gravity".into(), spec.file.gravity.span().start),
     };
     let f = &spec.file;
-    let gravity = [
-        b.scalar(
-            "gravity_x".into(),
-            f.gravity.get_ref().value[0],
-            "Gravity in the base frame, x [m/s²].".into(),
-        )?,
-        b.scalar(
-            "gravity_y".into(),
-            f.gravity.get_ref().value[1],
-            "Gravity in the base frame, y [m/s²].".into(),
-        )?,
-    ];
+    let dimension = f.gravity.get_ref().value.len();
+    let gravity = b.vector_in(
+        "gravity",
+        f.gravity.get_ref(),
+        "Gravity in the base frame",
+        "m/s²",
+    )?;
     let mut links: Vec<Link> = Vec::new();
     let mut actuated = Vec::new();
     for (i, link) in f.links.iter().enumerate() {
@@ -204,8 +243,8 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
             )?,
             (None, None) => b.vector(
                 &format!("{name}_origin"),
-                &Vec2 {
-                    value: [0.0, 0.0],
+                &Vector {
+                    value: vec![0.0; dimension],
                     source: None,
                 },
                 &format!("Joint of `{name}` in the base frame"),
@@ -227,11 +266,30 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
             l.com.get_ref(),
             &format!("Centre of mass of `{name}` from its joint, link frame"),
         )?;
-        let inertia = b.scalar(
-            format!("{name}_inertia"),
-            l.inertia.get_ref().value,
-            format!("Inertia of `{name}` about its centre of mass [kg m²]."),
-        )?;
+        let given = &l.inertia.get_ref().value.0;
+        let inertia = if dimension == 2 {
+            Inertia::Planar(b.scalar(
+                format!("{name}_inertia"),
+                given[0],
+                format!("Inertia of `{name}` about its centre of mass [kg m²]."),
+            )?)
+        } else {
+            let mut entries: [Option<String>; 6] = Default::default();
+            for (k, (&value, part)) in given
+                .iter()
+                .zip(["xx", "yy", "zz", "xy", "xz", "yz"])
+                .enumerate()
+            {
+                entries[k] = Some(b.scalar(
+                    format!("{name}_inertia_{part}"),
+                    value,
+                    format!(
+                        "Inertia of `{name}` about its centre of mass, link frame, {part} [kg m²]."
+                    ),
+                )?);
+            }
+            Inertia::Spatial(entries)
+        };
         let damping = b.scalar(
             format!("{name}_damping"),
             l.damping.as_ref().map_or(0.0, |d| d.get_ref().value),
@@ -256,19 +314,46 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
                 ])
             }
         };
-        let (joint, axis) = match l.kind() {
-            JointKind::Revolute => ("revolute", None),
-            JointKind::Prismatic => {
-                let [x, y] = l.axis.as_ref().expect("validated").get_ref().value;
-                let norm = x.hypot(y);
-                ("prismatic", Some([x / norm, y / norm]))
-            }
+        let unit = |v: &[f64]| {
+            let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+            v.iter().map(|x| x / norm).collect::<Vec<f64>>()
         };
+        let axis = l.axis.as_ref().map(|a| unit(&a.get_ref().value));
+        let (joint, axis) = match l.kind() {
+            JointKind::Revolute if dimension == 3 => (
+                "revolute",
+                Some(axis.unwrap_or_else(|| vec![0.0, 0.0, 1.0])),
+            ),
+            JointKind::Revolute => ("revolute", None),
+            JointKind::Prismatic => ("prismatic", Some(axis.expect("validated"))),
+        };
+        let orientation = l.orientation.as_ref().map(|o| {
+            let q = unit(&o.get_ref().value);
+            let (w, x, y, z) = (q[0], q[1], q[2], q[3]);
+            [
+                [
+                    1.0 - 2.0 * (y * y + z * z),
+                    2.0 * (x * y - w * z),
+                    2.0 * (x * z + w * y),
+                ],
+                [
+                    2.0 * (x * y + w * z),
+                    1.0 - 2.0 * (x * x + z * z),
+                    2.0 * (y * z - w * x),
+                ],
+                [
+                    2.0 * (x * z - w * y),
+                    2.0 * (y * z + w * x),
+                    1.0 - 2.0 * (x * x + y * y),
+                ],
+            ]
+        });
         links.push(Link {
             name,
             parent,
             joint,
             axis,
+            orientation,
             origin,
             length,
             com,
@@ -367,7 +452,11 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
         None => ([0.0, 1.0], 0.0),
         Some(g) => {
             let g = g.get_ref();
-            let [x, y] = g.normal.as_ref().map_or([0.0, 1.0], |n| n.get_ref().value);
+            let n = g
+                .normal
+                .as_ref()
+                .map_or_else(|| vec![0.0, 1.0], |n| n.get_ref().value.clone());
+            let (x, y) = (n[0], n[1]);
             let norm = x.hypot(y);
             (
                 [x / norm, y / norm],
@@ -382,6 +471,7 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
         links,
         closures,
         foot,
+        dimension,
         gravity,
         actuated,
         home: f

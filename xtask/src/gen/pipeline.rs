@@ -291,8 +291,8 @@ fn assemble(spec: &Spec, model: &Model, derived: Derived) -> IrFile {
                         // Closure forces `f` and contact forces `lambda` have a row each;
                         // every other vector (q, q̇, accelerations `a`) a joint each.
                         let len = match name.as_str() {
-                            "f" => 2 * model.closures.len(),
-                            "lambda" => 2 * model.contacts.len(),
+                            "f" => model.dimension * model.closures.len(),
+                            "lambda" => model.dimension * model.contacts.len(),
                             _ => n,
                         };
                         InputShape::Vector { len }
@@ -333,6 +333,7 @@ fn assemble(spec: &Spec, model: &Model, derived: Derived) -> IrFile {
             contact_friction: model.contacts.iter().map(|c| c.friction).collect(),
             ground_normal: model.ground_normal,
             ground_offset: model.ground_offset,
+            dimension: model.dimension,
         },
         functions,
     }
@@ -434,7 +435,7 @@ fn derive_spec(root: &Path, py: &Path, spec: &Spec) -> Result<(IrFile, String, S
         spec.name,
         h.mobility,
         h.rank,
-        2 * model.closures.len(),
+        model.dimension * model.closures.len(),
         if h.redundant_rows.is_empty() {
             String::new()
         } else {

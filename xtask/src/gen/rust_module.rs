@@ -20,9 +20,9 @@ pub struct Term {
     pub wrap: Option<&'static str>,
 }
 
-/// The terms every model has, in file order, for `nq` joints, `nc` closure rows and `nk`
-/// contact rows.
-pub fn terms(nq: usize, nc: usize, nk: usize) -> Vec<Term> {
+/// The terms every model has, in file order, for `nq` joints, `nc` closure rows, `nk`
+/// contact rows and points of `nd` coordinates (2 planar, 3 spatial).
+pub fn terms(nq: usize, nc: usize, nk: usize, nd: usize) -> Vec<Term> {
     use OutputKind::{Matrix, Scalar, Vector};
     const Q: &[&str] = &["q", "p"];
     const QQ: &[&str] = &["q", "qd", "p"];
@@ -86,19 +86,19 @@ pub fn terms(nq: usize, nc: usize, nk: usize) -> Vec<Term> {
         t(
             "foot_position",
             Q,
-            vec![("foot_position", Vector, 2, 1)],
+            vec![("foot_position", Vector, nd, 1)],
             "The foot point in the base frame.",
         ),
         t(
             "foot_jacobian",
             Q,
-            vec![("foot_jacobian", Matrix, 2, nq)],
+            vec![("foot_jacobian", Matrix, nd, nq)],
             "`J_f(q) = ∂(foot)/∂q`.",
         ),
         t(
             "foot_bias",
             QQ,
-            vec![("foot_bias", Vector, 2, 1)],
+            vec![("foot_bias", Vector, nd, 1)],
             "`J̇_f(q, q̇) q̇`.",
         ),
         t(
@@ -116,20 +116,27 @@ pub fn terms(nq: usize, nc: usize, nk: usize) -> Vec<Term> {
         t(
             "joint_positions",
             Q,
-            vec![("joint_positions", Matrix, 2, nq)],
+            vec![("joint_positions", Matrix, nd, nq)],
             "Joint positions in the base frame, one column per joint.",
         ),
         t(
             "link_tips",
             Q,
-            vec![("link_tips", Matrix, 2, nq)],
+            vec![("link_tips", Matrix, nd, nq)],
             "Link tips in the base frame, one column per link.",
         ),
         t(
             "closure_points",
             Q,
-            vec![("closure_points", Matrix, 2, nc)],
+            vec![("closure_points", Matrix, nd, 2 * nc / nd)],
             "Closure points a, b of each closure in the base frame.",
+        ),
+        t(
+            "leg_size",
+            Q,
+            vec![("leg_size", Scalar, 1, 1)],
+            "The leg's size (m): the largest coordinate of any joint or link tip in the base\n\
+             frame, which tolerances scale with.",
         ),
         t(
             "contact_positions",
@@ -211,6 +218,17 @@ pub fn terms(nq: usize, nc: usize, nk: usize) -> Vec<Term> {
     ]
 }
 
+/// The terms of [`leg_models::LegModel`] (a leg's points, in its dimension); the others
+/// but the contacts' are [`leg_models::LegDynamics`]'s.
+const POINT_TERMS: &[&str] = &[
+    "foot_position",
+    "foot_jacobian",
+    "foot_bias",
+    "joint_positions",
+    "link_tips",
+    "closure_points",
+];
+
 /// `two_link` → `TwoLink`.
 pub fn type_name(model: &str) -> String {
     model
@@ -228,9 +246,18 @@ pub fn type_name(model: &str) -> String {
 /// Checks the IR holds exactly the expected terms with the expected shapes.
 pub fn check_terms(ir: &IrFile) -> Result<(), Error> {
     let nq = ir.model.joints.len();
-    let nc = 2 * ir.model.closures.len();
-    let nk = 2 * ir.model.contacts.len();
-    let expected = terms(nq, nc, nk);
+    let (nc, nk, nd) = (
+        ir.model.closure_rows(),
+        ir.model.contact_rows(),
+        ir.model.dimension,
+    );
+    if nd != 2 && nd != 3 {
+        return Err(Error {
+            context: format!("IR of `{}`", ir.model.name),
+            message: format!("dimension {nd} (a leg is planar, 2, or spatial, 3)"),
+        });
+    }
+    let expected = terms(nq, nc, nk, nd);
     let fail = |m: String| Error {
         context: format!("IR of `{}`", ir.model.name),
         message: m,
@@ -277,11 +304,12 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     let info = &ir.model;
     let ctx = format!("model `{}`", info.name);
     codegen::ident(&ctx, &info.name)?;
-    let (nq, nc, nu, nk) = (
+    let (nq, nc, nu, nk, nd) = (
         info.joints.len(),
-        2 * info.closures.len(),
+        info.closure_rows(),
         info.actuated.len(),
-        2 * info.contacts.len(),
+        info.contact_rows(),
+        info.dimension,
     );
     let ty = codegen::ident(&ctx, &type_name(&info.name))?;
     let name = &info.name;
@@ -432,11 +460,14 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
          by [`Params::new`].",
     )?];
     let mut methods = Vec::new();
+    let mut point_methods = Vec::new();
     let mut contact_methods = Vec::new();
-    for (f, t) in hoisted.programs.iter().zip(terms(nq, nc, nk)) {
+    for (f, t) in hoisted.programs.iter().zip(terms(nq, nc, nk, nd)) {
         functions.push(codegen::emit_function(f, t.doc)?);
         if f.name.starts_with("contact_") {
             contact_methods.push(trait_method(f, nq, t.wrap));
+        } else if POINT_TERMS.contains(&f.name.as_str()) {
+            point_methods.push(trait_method(f, nq, t.wrap));
         } else {
             methods.push(trait_method(f, nq, t.wrap));
         }
@@ -450,6 +481,61 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         info.spec
     );
     let (lq, lc, lu, lk) = (lit(nq), lit(nc), lit(nu), lit(nk));
+    // A planar leg is the runtime's `Leg` with its contacts; a spatial leg implements
+    // `LegModel` with three coordinates per point (its contacts and `Leg` come later).
+    let spatial = nd == 3;
+    let lp = lit(2 * info.closures.len());
+    let imports = if spatial {
+        quote! {
+            use leg_models::{
+                Arithmetic, ConstraintDerivatives, DynamicsDerivatives, DynamicsTerms, JointKind,
+                LegDynamics, LegModel, Parameters,
+            };
+        }
+    } else {
+        quote! {
+            use leg_models::{
+                Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
+                JointKind, LegDynamics, LegModel, Parameters,
+            };
+        }
+    };
+    let aliases = if spatial {
+        quote! {
+            /// Number of coordinates of a point: the leg is spatial.
+            pub const ND: usize = 3;
+            /// Number of closure points (two per closure).
+            pub const NP: usize = #lp;
+        }
+    } else {
+        quote! {
+            /// This leg with its parameters in `f64`, the runtime's entry point:
+            /// `Leg::default()` holds the spec's values. Code generic over the scalar writes
+            /// `leg_models::Leg<Model, T, NQ, NC, NU, NK>` with this module's sizes.
+            pub type Leg = leg_models::Leg<#ty, f64, NQ, NC, NU, NK>;
+
+            /// This leg computing in `f32` (e.g. on a microcontroller).
+            pub type LegF32 = leg_models::Leg<#ty, f32, NQ, NC, NU, NK>;
+        }
+    };
+    let leg_sizes = if spatial {
+        quote!(NQ, NC, NU, ND, NP)
+    } else {
+        quote!(NQ, NC, NU)
+    };
+    let contact_impl = if spatial {
+        quote!()
+    } else {
+        quote! {
+            impl ContactModel<NQ, NC, NU, NK> for #ty {
+                const CONTACT_NAMES: &'static [&'static str] = &[#(#contact_names),*];
+                const CONTACT_FRICTION: &'static [f64] = &[#(#friction),*];
+                const GROUND_NORMAL: [f64; 2] = [#(#normal),*];
+                const GROUND_OFFSET: f64 = #offset;
+                #(#contact_methods)*
+            }
+        }
+    };
     let tokens = quote! {
         #![doc = #doc]
         // prettyplease formats generated code, so that formatting cannot drift.
@@ -465,10 +551,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         )]
 
         use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
-        use leg_models::{
-            Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
-            JointKind, LegModel, Parameters,
-        };
+        #imports
 
         /// Number of joints.
         pub const NQ: usize = #lq;
@@ -483,13 +566,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
         pub struct #ty;
 
-        /// This leg with its parameters in `f64`, the runtime's entry point:
-        /// `Leg::default()` holds the spec's values. Code generic over the scalar writes
-        /// `leg_models::Leg<Model, T, NQ, NC, NU, NK>` with this module's sizes.
-        pub type Leg = leg_models::Leg<#ty, f64, NQ, NC, NU, NK>;
-
-        /// This leg computing in `f32` (e.g. on a microcontroller).
-        pub type LegF32 = leg_models::Leg<#ty, f32, NQ, NC, NU, NK>;
+        #aliases
 
         #[doc = #chart_doc]
         impl leg_models::ChartSize<#mobility, #chart_states> for #ty {}
@@ -572,7 +649,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             }
         }
 
-        impl LegModel<NQ, NC, NU> for #ty {
+        impl LegDynamics<NQ, NC, NU> for #ty {
             const NAME: &'static str = #name;
             const JOINT_NAMES: [&'static str; NQ] = [#(#joints),*];
             const JOINT_KINDS: [JointKind; NQ] = [#(#kinds),*];
@@ -586,13 +663,11 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             #(#methods)*
         }
 
-        impl ContactModel<NQ, NC, NU, NK> for #ty {
-            const CONTACT_NAMES: &'static [&'static str] = &[#(#contact_names),*];
-            const CONTACT_FRICTION: &'static [f64] = &[#(#friction),*];
-            const GROUND_NORMAL: [f64; 2] = [#(#normal),*];
-            const GROUND_OFFSET: f64 = #offset;
-            #(#contact_methods)*
+        impl LegModel<#leg_sizes> for #ty {
+            #(#point_methods)*
         }
+
+        #contact_impl
 
         #(#functions)*
     };
@@ -671,6 +746,7 @@ pub struct Summary {
     pub nc: usize,
     pub nu: usize,
     pub nk: usize,
+    pub spatial: bool,
 }
 
 impl Summary {
@@ -678,9 +754,10 @@ impl Summary {
         Summary {
             name: ir.model.name.clone(),
             nq: ir.model.joints.len(),
-            nc: 2 * ir.model.closures.len(),
+            nc: ir.model.closure_rows(),
             nu: ir.model.actuated.len(),
-            nk: 2 * ir.model.contacts.len(),
+            nk: ir.model.contact_rows(),
+            spatial: ir.model.dimension == 3,
         }
     }
 }
@@ -689,6 +766,7 @@ impl Summary {
 pub fn lib_source(models: &[Summary]) -> Result<String, Error> {
     let mut mods = Vec::new();
     let mut calls = Vec::new();
+    let mut spatial_calls = Vec::new();
     for m in models {
         let module = codegen::ident("lib.rs", &m.name)?;
         let ty = codegen::ident("lib.rs", &type_name(&m.name))?;
@@ -697,7 +775,11 @@ pub fn lib_source(models: &[Summary]) -> Result<String, Error> {
             pub mod #module;
             pub use #module::#ty;
         });
-        calls.push(quote!($callback!(#module, $crate::#module::#ty, #q, #c, #u, #k);));
+        if m.spatial {
+            spatial_calls.push(quote!($callback!(#module, $crate::#module::#ty, #q, #c, #u);));
+        } else {
+            calls.push(quote!($callback!(#module, $crate::#module::#ty, #q, #c, #u, #k);));
+        }
     }
     let tokens = quote! {
         //! Generated leg models, one module per spec in `leg-models/specs/`. Each implements
@@ -708,12 +790,21 @@ pub fn lib_source(models: &[Summary]) -> Result<String, Error> {
 
         #(#mods)*
 
-        /// Calls `$callback!(module, Type, NQ, NC, NU, NK)` once for every generated model, so
-        /// tests and tools cover a new geometry without naming it.
+        /// Calls `$callback!(module, Type, NQ, NC, NU, NK)` once for every generated planar
+        /// model, so tests and tools cover a new geometry without naming it.
         #[macro_export]
         macro_rules! for_each_model {
             ($callback:ident) => {
                 #(#calls)*
+            };
+        }
+
+        /// Calls `$callback!(module, Type, NQ, NC, NU)` once for every generated spatial
+        /// model (`LegModel<NQ, NC, NU, 3>`: three coordinates per point).
+        #[macro_export]
+        macro_rules! for_each_spatial_model {
+            ($callback:ident) => {
+                #(#spatial_calls)*
             };
         }
     };

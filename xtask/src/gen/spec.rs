@@ -1,9 +1,11 @@
 //! Geometry specs: parsing (TOML with serde), validation, and every error with the
 //! file, line, column and field it concerns.
 //!
-//! A spec describes a planar tree of rigid links on revolute joints (each link hangs from
-//! its parent link or from the base by one joint, whose angle is relative to the parent),
-//! any number of point-on-link closures, the actuated joints, the foot point and gravity.
+//! A spec describes a tree of rigid links on revolute and prismatic joints (each link hangs
+//! from its parent link or from the base by one joint, whose value is relative to the
+//! parent), any number of point-on-link closures, the actuated joints, the foot point and
+//! gravity. Its dimension is its gravity's: a 2-vector makes a planar leg, a 3-vector a
+//! spatial one, and every vector of the spec then has that many entries.
 //! Every number may be written plain (`mass = 0.05`) or with its source
 //! (`mass = { value = 0.05, source = "PyBullet minitaur.urdf" }`).
 
@@ -41,7 +43,7 @@ impl fmt::Display for SpecError {
 
 impl std::error::Error for SpecError {}
 
-/// A number or 2-vector, with the optional note of where it comes from.
+/// A number or vector, with the optional note of where it comes from.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Noted<V> {
     pub value: V,
@@ -49,7 +51,16 @@ pub struct Noted<V> {
 }
 
 pub type Num = Noted<f64>;
-pub type Vec2 = Noted<[f64; 2]>;
+/// A vector: 2 entries on a planar leg, 3 on a spatial one (checked by [`validate`]
+/// against the gravity's), 4 for an orientation quaternion.
+pub type Vector = Noted<Vec<f64>>;
+/// A number or a list of numbers: a link's inertia (one number on a planar leg, 3 or 6
+/// entries of the tensor on a spatial one).
+pub type Entries = Noted<NumberList>;
+
+/// One number or several (see [`Entries`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct NumberList(pub Vec<f64>);
 
 /// Plain values a [`Noted`] can hold.
 pub trait PlainValue: Sized {
@@ -75,21 +86,70 @@ impl PlainValue for f64 {
     }
 }
 
-impl PlainValue for [f64; 2] {
-    const EXPECTING: &'static str = "a 2-vector [x, y]";
+fn number_seq<'de, A: SeqAccess<'de>>(mut seq: A, what: &str) -> Result<Vec<f64>, A::Error> {
+    let mut out = Vec::new();
+    while let Some(x) = seq.next_element::<f64>()? {
+        // A spec's vectors have 2 to 6 entries: a longer list is refused as it is read.
+        if out.len() == 16 {
+            return Err(de::Error::custom(format!(
+                "expected {what}: too many entries"
+            )));
+        }
+        out.push(x);
+    }
+    Ok(out)
+}
+
+impl PlainValue for Vec<f64> {
+    const EXPECTING: &'static str =
+        "a 2-vector [x, y] (planar leg) or a 3-vector [x, y, z] (spatial leg)";
     fn from_number(_: f64) -> Option<Self> {
         None
     }
-    fn from_seq<'de, A: SeqAccess<'de>>(mut seq: A) -> Result<Self, A::Error> {
-        let x = seq.next_element()?;
-        let y = seq.next_element()?;
-        match (x, y, seq.next_element::<f64>()?) {
-            (Some(x), Some(y), None) => Ok([x, y]),
-            _ => Err(de::Error::custom("expected a 2-vector [x, y]")),
-        }
+    fn from_seq<'de, A: SeqAccess<'de>>(seq: A) -> Result<Self, A::Error> {
+        number_seq(seq, "a vector")
     }
     fn from_map_value<'de, A: MapAccess<'de>>(map: &mut A) -> Result<Self, A::Error> {
         map.next_value()
+    }
+}
+
+impl PlainValue for NumberList {
+    const EXPECTING: &'static str =
+        "a number (planar leg) or a list of the tensor's entries (spatial leg)";
+    fn from_number(v: f64) -> Option<Self> {
+        Some(NumberList(vec![v]))
+    }
+    fn from_seq<'de, A: SeqAccess<'de>>(seq: A) -> Result<Self, A::Error> {
+        number_seq(seq, "a list of numbers").map(NumberList)
+    }
+    fn from_map_value<'de, A: MapAccess<'de>>(map: &mut A) -> Result<Self, A::Error> {
+        struct Either;
+        impl<'de> Visitor<'de> for Either {
+            type Value = NumberList;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str(NumberList::EXPECTING)
+            }
+            fn visit_f64<E: de::Error>(self, v: f64) -> Result<NumberList, E> {
+                Ok(NumberList(vec![v]))
+            }
+            fn visit_i64<E: de::Error>(self, v: i64) -> Result<NumberList, E> {
+                Ok(NumberList(vec![v as f64]))
+            }
+            fn visit_u64<E: de::Error>(self, v: u64) -> Result<NumberList, E> {
+                Ok(NumberList(vec![v as f64]))
+            }
+            fn visit_seq<A: SeqAccess<'de>>(self, seq: A) -> Result<NumberList, A::Error> {
+                number_seq(seq, "a list of numbers").map(NumberList)
+            }
+        }
+        struct Value(NumberList);
+        impl<'de> Deserialize<'de> for Value {
+            fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+                d.deserialize_any(Either).map(Value)
+            }
+        }
+        map.next_value::<Value>().map(|v| v.0)
     }
 }
 
@@ -149,8 +209,9 @@ pub struct SpecFile {
     /// What the leg is; for people, never emitted into code.
     #[serde(default)]
     pub description: Option<String>,
-    /// Gravity in the base frame [m/s²].
-    pub gravity: Spanned<Vec2>,
+    /// Gravity in the base frame [m/s²]. Its length makes the spec's dimension: `[x, y]`
+    /// a planar leg, `[x, y, z]` a spatial one.
+    pub gravity: Spanned<Vector>,
     pub links: Vec<Spanned<LinkSpec>>,
     /// A typical assembled pose (one joint value per link in file order: rad, or m for a
     /// prismatic joint): the default
@@ -207,7 +268,7 @@ pub struct ContactSpec {
     pub link: Spanned<String>,
     /// In the link frame, from its joint; default the link's tip.
     #[serde(default)]
-    pub point: Option<Spanned<Vec2>>,
+    pub point: Option<Spanned<Vector>>,
     /// Coulomb friction coefficient μ with the ground.
     pub friction: Spanned<Num>,
 }
@@ -217,7 +278,7 @@ pub struct ContactSpec {
 pub struct GroundSpec {
     /// Points out of the ground, base frame; normalized. Default `[0, 1]`.
     #[serde(default)]
-    pub normal: Option<Spanned<Vec2>>,
+    pub normal: Option<Spanned<Vector>>,
     /// The ground is `normal · x = offset` \[m\]; default 0.
     #[serde(default)]
     pub offset: Option<Spanned<Num>>,
@@ -233,22 +294,29 @@ pub struct LinkSpec {
     #[serde(default)]
     pub joint: Option<Spanned<JointKind>>,
     /// The sliding direction of a prismatic joint, in the parent's frame (the base frame
-    /// for a base joint); normalized.
+    /// for a base joint) turned by `orientation`; normalized. On a spatial leg also the
+    /// axis a revolute joint turns about (default `[0, 0, 1]`, as MJCF's hinge).
     #[serde(default)]
-    pub axis: Option<Spanned<Vec2>>,
+    pub axis: Option<Spanned<Vector>>,
+    /// Spatial legs: the link frame's orientation in its parent's frame at `q = 0`, a
+    /// quaternion `[w, x, y, z]` (MJCF's `quat`), normalized; default the identity.
+    #[serde(default)]
+    pub orientation: Option<Spanned<Vector>>,
     /// Where the joint sits: on the base, in the base frame (default `[0, 0]`); on a
     /// parent link, in the parent's frame (default the parent's tip).
     #[serde(default)]
-    pub origin: Option<Spanned<Vec2>>,
+    pub origin: Option<Spanned<Vector>>,
     /// From the joint to the link's tip, in the link frame \[m\].
-    pub length: Spanned<Vec2>,
+    pub length: Spanned<Vector>,
     /// \[kg\]; zero for the massless intermediate links of a floating base (the mass
     /// matrix must stay positive definite).
     pub mass: Spanned<Num>,
     /// Centre of mass, from the joint, in the link frame \[m\].
-    pub com: Spanned<Vec2>,
-    /// About the centre of mass [kg m²].
-    pub inertia: Spanned<Num>,
+    pub com: Spanned<Vector>,
+    /// About the centre of mass [kg m²]: one number on a planar leg; on a spatial leg the
+    /// tensor in the link frame, `[ixx, iyy, izz]` (principal axes along the frame's) or
+    /// `[ixx, iyy, izz, ixy, ixz, iyz]` (MJCF's `fullinertia`).
+    pub inertia: Spanned<Entries>,
     /// Viscous joint damping [N m s/rad, or N s/m for a prismatic joint]; default 0.
     #[serde(default)]
     pub damping: Option<Spanned<Num>>,
@@ -271,7 +339,7 @@ pub struct PointSpec {
     pub link: Spanned<String>,
     /// In the link frame, from its joint; default the link's tip.
     #[serde(default)]
-    pub point: Option<Spanned<Vec2>>,
+    pub point: Option<Spanned<Vector>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -532,7 +600,17 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
             ),
         ));
     }
-    check_vec(ctx, &file.gravity, "gravity", Sign::Any)?;
+    let dim = file.gravity.get_ref().value.len();
+    if dim != 2 && dim != 3 {
+        return Err(ctx.span(
+            &file.gravity,
+            "gravity",
+            format!(
+                "gravity has {dim} entries: [x, y] makes a planar leg, [x, y, z] a spatial one"
+            ),
+        ));
+    }
+    check_vec(ctx, &file.gravity, "gravity", Sign::Any, dim)?;
     // Each name with the field and line that gave it, so that a duplicate names the first.
     let mut names: Vec<(String, String, usize)> = Vec::new();
     let mut check_new_name = |s: &Spanned<String>, field: &str| -> Result<(), SpecError> {
@@ -593,10 +671,10 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
             }
         }
         if let Some(o) = &l.origin {
-            check_vec(ctx, o, &f("origin"), Sign::Any)?;
+            check_vec(ctx, o, &f("origin"), Sign::Any, dim)?;
         }
-        check_vec(ctx, &l.length, &f("length"), Sign::Any)?;
-        check_vec(ctx, &l.com, &f("com"), Sign::Any)?;
+        check_vec(ctx, &l.length, &f("length"), Sign::Any, dim)?;
+        check_vec(ctx, &l.com, &f("com"), Sign::Any, dim)?;
         check_num(ctx, &l.mass, &f("mass"), Sign::NonNegative)?;
         match (l.kind(), &l.axis) {
             (JointKind::Prismatic, None) => {
@@ -607,26 +685,48 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
                     "a prismatic joint needs the `axis` it slides along (parent frame), e.g. `axis = [0.0, 1.0]`",
                 ));
             }
-            (JointKind::Prismatic, Some(axis)) => {
-                check_vec(ctx, axis, &f("axis"), Sign::Any)?;
-                if axis.get_ref().value == [0.0, 0.0] {
-                    return Err(ctx.span(
-                        axis,
-                        f("axis"),
-                        "the axis of a prismatic joint must not be zero",
-                    ));
-                }
-            }
-            (JointKind::Revolute, Some(axis)) => {
+            (JointKind::Revolute, Some(axis)) if dim == 2 => {
                 return Err(ctx.span(
                     axis,
                     f("axis"),
-                    "only a prismatic joint has an axis (add `joint = \"prismatic\"`, or remove `axis`)",
+                    "only a prismatic joint has an axis on a planar leg, where every revolute joint turns in the plane (add `joint = \"prismatic\"`, or remove `axis`)",
                 ));
+            }
+            (_, Some(axis)) => {
+                check_vec(ctx, axis, &f("axis"), Sign::Any, dim)?;
+                if axis.get_ref().value.iter().all(|&x| x == 0.0) {
+                    return Err(ctx.span(axis, f("axis"), "a joint's axis must not be zero"));
+                }
             }
             (JointKind::Revolute, None) => {}
         }
-        check_num(ctx, &l.inertia, &f("inertia"), Sign::NonNegative)?;
+        if let Some(o) = &l.orientation {
+            if dim == 2 {
+                return Err(ctx.span(
+                    o,
+                    f("orientation"),
+                    "only a spatial leg's links have an orientation (a planar link's frame turns with its joint alone)",
+                ));
+            }
+            let v = &o.get_ref().value;
+            if v.len() != 4 {
+                return Err(ctx.span(
+                    o,
+                    f("orientation"),
+                    format!(
+                        "has {} entries: an orientation is a quaternion [w, x, y, z]",
+                        v.len()
+                    ),
+                ));
+            }
+            for &x in v {
+                check_value(x, Sign::Any).map_err(|m| ctx.span(o, f("orientation"), m))?;
+            }
+            if v.iter().all(|&x| x == 0.0) {
+                return Err(ctx.span(o, f("orientation"), "the quaternion must not be zero"));
+            }
+        }
+        check_inertia(ctx, &l.inertia, &f("inertia"), dim)?;
         if let Some(d) = &l.damping {
             check_num(ctx, d, &f("damping"), Sign::NonNegative)?;
         }
@@ -660,7 +760,7 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
             // A point fixed in the base frame (a leg pinned to a stand, a foot held on the
             // ground): it has no tip to default to.
             return match &p.point {
-                Some(pt) => check_vec(ctx, pt, &format!("{field}.point"), Sign::Any),
+                Some(pt) => check_vec(ctx, pt, &format!("{field}.point"), Sign::Any, dim),
                 None => Err(ctx.span(
                     &p.link,
                     format!("{field}.point"),
@@ -680,7 +780,7 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
             ));
         }
         if let Some(pt) = &p.point {
-            check_vec(ctx, pt, &format!("{field}.point"), Sign::Any)?;
+            check_vec(ctx, pt, &format!("{field}.point"), Sign::Any, dim)?;
         }
         Ok(())
     };
@@ -733,21 +833,37 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
             check_num(ctx, r, &f("rest"), Sign::Any)?;
         }
     }
+    if dim == 3 {
+        if let Some(c) = file.contacts.first() {
+            return Err(ctx.span(
+                &c.get_ref().name,
+                "contacts[0].name",
+                "a spatial leg cannot have contacts yet: the ground contact with its friction cone is planar only for now",
+            ));
+        }
+        if let Some(g) = &file.ground {
+            return Err(ctx.span(
+                g,
+                "ground",
+                "a spatial leg has no ground yet (its contacts are planar only for now)",
+            ));
+        }
+    }
     for (k, contact) in file.contacts.iter().enumerate() {
         let c = contact.get_ref();
         let f = |field: &str| format!("contacts[{k}].{field}");
         check_new_name(&c.name, &f("name"))?;
         check_link(&c.link, f("link"))?;
         if let Some(pt) = &c.point {
-            check_vec(ctx, pt, &f("point"), Sign::Any)?;
+            check_vec(ctx, pt, &f("point"), Sign::Any, dim)?;
         }
         check_num(ctx, &c.friction, &f("friction"), Sign::NonNegative)?;
     }
     if let Some(g) = &file.ground {
         let g = g.get_ref();
         if let Some(n) = &g.normal {
-            check_vec(ctx, n, "ground.normal", Sign::Any)?;
-            if n.get_ref().value == [0.0, 0.0] {
+            check_vec(ctx, n, "ground.normal", Sign::Any, dim)?;
+            if n.get_ref().value.iter().all(|&x| x == 0.0) {
                 return Err(ctx.span(n, "ground.normal", "the ground's normal must not be zero"));
             }
         }
@@ -778,7 +894,7 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
 /// A leg whose every length, origin, centre of mass and point is zero has all its points
 /// at the base: nothing moves when a joint turns (J and M vanish).
 fn check_has_size(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
-    let zero = |v: &Spanned<Vec2>| v.get_ref().value == [0.0, 0.0];
+    let zero = |v: &Spanned<Vector>| v.get_ref().value.iter().all(|&x| x == 0.0);
     let point_zero = |p: &PointSpec| p.point.as_ref().is_none_or(zero);
     let all_zero = file.links.iter().all(|l| {
         let l = l.get_ref();
@@ -831,8 +947,105 @@ fn check_num(ctx: &Ctx, n: &Spanned<Num>, field: &str, sign: Sign) -> Result<(),
     check_value(n.get_ref().value, sign).map_err(|m| ctx.span(n, field, m))
 }
 
-fn check_vec(ctx: &Ctx, n: &Spanned<Vec2>, field: &str, sign: Sign) -> Result<(), SpecError> {
-    for v in n.get_ref().value {
+/// A link's inertia about its centre of mass: one number on a planar leg; on a spatial
+/// leg three (principal) or six entries `[ixx, iyy, izz, ixy, ixz, iyz]` of a tensor that
+/// a rigid body can have (positive semi-definite, each principal moment at most the sum
+/// of the other two, as MuJoCo checks).
+fn check_inertia(
+    ctx: &Ctx,
+    n: &Spanned<Entries>,
+    field: &str,
+    dim: usize,
+) -> Result<(), SpecError> {
+    let v = &n.get_ref().value.0;
+    let allowed: &[usize] = if dim == 2 { &[1] } else { &[3, 6] };
+    if !allowed.contains(&v.len()) {
+        let why = if dim == 2 {
+            "a planar link's inertia is one number (about the axis out of the plane)".to_string()
+        } else {
+            "a spatial link's inertia is [ixx, iyy, izz] or [ixx, iyy, izz, ixy, ixz, iyz] (link frame, about the centre of mass)".to_string()
+        };
+        return Err(ctx.span(n, field, format!("has {} entries: {why}", v.len())));
+    }
+    for (i, &x) in v.iter().enumerate() {
+        let sign = if i < 3 { Sign::NonNegative } else { Sign::Any };
+        check_value(x, sign).map_err(|m| ctx.span(n, field, m))?;
+    }
+    if v.len() > 1 {
+        let (xy, xz, yz) = if v.len() == 6 {
+            (v[3], v[4], v[5])
+        } else {
+            (0.0, 0.0, 0.0)
+        };
+        let moments = symmetric_eigenvalues([v[0], v[1], v[2]], [xy, xz, yz]);
+        let scale = moments[2].abs().max(f64::MIN_POSITIVE);
+        if moments[0] < -1e-12 * scale {
+            return Err(ctx.span(
+                n,
+                field,
+                format!(
+                    "is not positive semi-definite (principal moments {:.6e}, {:.6e}, {:.6e})",
+                    moments[0], moments[1], moments[2]
+                ),
+            ));
+        }
+        if moments[2] > (moments[0] + moments[1]) * (1.0 + 1e-9) {
+            return Err(ctx.span(
+                n,
+                field,
+                format!("no rigid body has it: its largest principal moment {:.6e} exceeds the sum of the other two ({:.6e} + {:.6e})", moments[2], moments[0], moments[1]),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The eigenvalues, ascending, of the symmetric 3 × 3 matrix with diagonal `d` and
+/// off-diagonal `[xy, xz, yz]` (the trigonometric closed form; the generator needs no
+/// linear-algebra crate for it).
+fn symmetric_eigenvalues(d: [f64; 3], o: [f64; 3]) -> [f64; 3] {
+    let [xy, xz, yz] = o;
+    let off = xy * xy + xz * xz + yz * yz;
+    let mut e = if off == 0.0 {
+        d
+    } else {
+        let mean = (d[0] + d[1] + d[2]) / 3.0;
+        let (a, b, c) = (d[0] - mean, d[1] - mean, d[2] - mean);
+        let p = ((a * a + b * b + c * c + 2.0 * off) / 6.0).sqrt();
+        // det((A − mean I) / p) / 2, clamped to acos's domain against rounding.
+        let det = a * (b * c - yz * yz) - xy * (xy * c - yz * xz) + xz * (xy * yz - b * xz);
+        let r = (det / (2.0 * p * p * p)).clamp(-1.0, 1.0);
+        let phi = r.acos() / 3.0;
+        let largest = mean + 2.0 * p * phi.cos();
+        let smallest = mean + 2.0 * p * (phi + 2.0 * std::f64::consts::PI / 3.0).cos();
+        [smallest, 3.0 * mean - largest - smallest, largest]
+    };
+    e.sort_by(f64::total_cmp);
+    e
+}
+
+/// `dim` entries (the spec's dimension), each a number of `sign`.
+fn check_vec(
+    ctx: &Ctx,
+    n: &Spanned<Vector>,
+    field: &str,
+    sign: Sign,
+    dim: usize,
+) -> Result<(), SpecError> {
+    let len = n.get_ref().value.len();
+    if len != dim {
+        let (kind, form) = if dim == 2 {
+            ("planar", "[x, y]")
+        } else {
+            ("spatial", "[x, y, z]")
+        };
+        return Err(ctx.span(
+            n,
+            field,
+            format!("has {len} entries: the leg is {kind} (its gravity has {dim}), so its vectors are {form}"),
+        ));
+    }
+    for &v in &n.get_ref().value {
         check_value(v, sign).map_err(|m| ctx.span(n, field, m))?;
     }
     Ok(())

@@ -33,6 +33,18 @@ fn models() -> Vec<&'static str> {
 }
 
 fn unknown(name: &str) -> Error {
+    let mut spatial = false;
+    macro_rules! is_spatial {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+            spatial |= name == stringify!($module);
+        };
+    }
+    generated::for_each_spatial_model!(is_spatial);
+    if spatial {
+        return Error::usage(format!(
+            "`{name}` is a spatial leg: `sim`, `eval` and `analyze` take planar legs only for now (its terms are in the `generated` crate, `LegModel<NQ, NC, NU, 3>`)"
+        ));
+    }
     let spec = xtask::gen::workspace_root()
         .join(xtask::gen::SPECS_DIR)
         .join(format!("{name}.toml"));

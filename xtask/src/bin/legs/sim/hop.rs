@@ -13,7 +13,7 @@ use leg_models::dynamics::contact::{ContactMode, Ground};
 use leg_models::nalgebra::SVector;
 use leg_models::simulate::hybrid::{EventKind, HybridSample, HybridSimulator, HybridState};
 use leg_models::simulate::State;
-use leg_models::{ContactModel, LegModel};
+use leg_models::ContactModel;
 use serde_json::json;
 use xtask::cli::progress::Progress;
 use xtask::cli::{check_targets, write_all, Error};
@@ -77,7 +77,7 @@ pub fn run<
         ],
     )
     .map_err(Error::Failed)?;
-    let p = <L as LegModel<NQ, NC, NU>>::Params::<f64>::default();
+    let p = <L as leg_models::LegDynamics<NQ, NC, NU>>::Params::<f64>::default();
     let fail =
         |what: &str, e: &dyn std::fmt::Display| Error::Failed(format!("{}: {what}: {e}", L::NAME));
     if let Some(name) = s.swing_only() {

@@ -196,7 +196,7 @@ pub(crate) fn body_points(name: &str, nq: usize) -> Vec<Vec<Member>> {
 pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
     s: &Settings,
 ) -> Result<(), Error> {
-    let p = <L as LegModel<NQ, NC, NU>>::Params::<f64>::default();
+    let p = <L as leg_models::LegDynamics<NQ, NC, NU>>::Params::<f64>::default();
     let tol = Tolerance::default();
     let fail =
         |what: &str, e: &dyn std::fmt::Display| Error::Failed(format!("{}: {what}: {e}", L::NAME));

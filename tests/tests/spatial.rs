@@ -1,0 +1,216 @@
+//! Spatial legs (`LegModel<NQ, NC, NU, 3>`, `generated::for_each_spatial_model!`): their
+//! generated terms against independent checks, on every spatial leg without naming it.
+//!
+//! - `G`, `J`, the foot Jacobian and `J̇ q̇` against central differences of `V`, `φ`, the
+//!   foot and `J q̇`;
+//! - `M` symmetric positive definite and `½ q̇ᵀ M q̇` equal to the kinetic energy;
+//! - `C q̇ + G` consistent with `M` and `V`: a passive, undamped swing of the closed chain
+//!   (the runtime's KKT forward dynamics, RK4) keeps its energy to the integrator's order;
+//! - a structurally redundant closure row (a planar loop written as a 3-D point closure)
+//!   is handled with no regularization: `J q̈ + J̇ q̇ = 0` to rounding.
+
+use leg_models::assembly::{project_position, project_velocity, Tolerance};
+use leg_models::dynamics::forward_dynamics;
+use leg_models::nalgebra::{SMatrix, SVector};
+use leg_models::{LegDynamics, LegModel};
+use leg_tests::Rng;
+
+fn central<const N: usize, const R: usize>(
+    f: impl Fn(&SVector<f64, N>) -> SVector<f64, R>,
+    q: &SVector<f64, N>,
+) -> SMatrix<f64, R, N> {
+    let h = 1e-6;
+    let mut out = SMatrix::<f64, R, N>::zeros();
+    for k in 0..N {
+        let mut a = *q;
+        let mut b = *q;
+        a[k] += h;
+        b[k] -= h;
+        out.set_column(k, &((f(&a) - f(&b)) / (2.0 * h)));
+    }
+    out
+}
+
+fn rel(a: f64, scale: f64) -> f64 {
+    a / scale.max(1e-300)
+}
+
+fn assembled<L, const NQ: usize, const NC: usize, const NU: usize>(
+    p: &L::Params<f64>,
+    q: &mut SVector<f64, NQ>,
+) where
+    L: LegDynamics<NQ, NC, NU>,
+{
+    project_position::<L, f64, NQ, NC, NU>(p, q, &Tolerance::default())
+        .unwrap_or_else(|e| panic!("{}: does not assemble: {e}", L::NAME));
+}
+
+fn check_leg<L, const NQ: usize, const NC: usize, const NU: usize, const NP: usize>()
+where
+    L: LegModel<NQ, NC, NU, 3, NP>,
+{
+    let name = L::NAME;
+    let p = L::Params::<f64>::default();
+    let mut rng = Rng::new(30);
+    for trial in 0..5 {
+        // Random poses near home, put on the closures; random velocities.
+        let mut q = SVector::<f64, NQ>::from(L::HOME);
+        for k in 0..NQ {
+            q[k] += 0.1 * rng.range(-1.0, 1.0);
+        }
+        assembled::<L, NQ, NC, NU>(&p, &mut q);
+        let mut qd = SVector::<f64, NQ>::from_fn(|_, _| rng.range(-2.0, 2.0));
+        project_velocity::<L, f64, NQ, NC, NU>(&p, &q, &mut qd).unwrap();
+
+        let g = L::gravity_forces(&q, &p);
+        let g_fd = central(|x| SVector::<f64, 1>::new(L::potential_energy(x, &p)), &q).transpose();
+        let e = rel((g - g_fd).amax(), g.amax());
+        assert!(e < 1e-7, "{name} #{trial}: G vs ∂V/∂q: {e:e}");
+
+        let j = L::constraint_jacobian(&q, &p);
+        let j_fd = central(|x| L::closure_residual(x, &p), &q);
+        let e = rel((j - j_fd).amax(), j.amax());
+        assert!(e < 1e-7, "{name} #{trial}: J vs ∂φ/∂q: {e:e}");
+
+        let jf = L::foot_jacobian(&q, &p);
+        let jf_fd = central(|x| L::foot_position(x, &p), &q);
+        let e = rel((jf - jf_fd).amax(), jf.amax());
+        assert!(e < 1e-7, "{name} #{trial}: J_f vs ∂foot/∂q: {e:e}");
+
+        let b = L::constraint_bias(&q, &qd, &p);
+        let b_fd = central(|x| L::constraint_jacobian(x, &p) * qd, &q) * qd;
+        let e = rel(
+            (b - b_fd).amax(),
+            b.amax().max(j.amax() * qd.norm_squared()),
+        );
+        assert!(e < 1e-6, "{name} #{trial}: J̇ q̇ vs ∂(J q̇)/∂q q̇: {e:e}");
+
+        let m = L::mass_matrix(&q, &p);
+        let e = rel((m - m.transpose()).amax(), m.amax());
+        assert!(e < 1e-14, "{name} #{trial}: M not symmetric: {e:e}");
+        assert!(
+            m.cholesky().is_some(),
+            "{name} #{trial}: M not positive definite"
+        );
+        let t = L::kinetic_energy(&q, &qd, &p);
+        let e = rel((t - 0.5 * qd.dot(&(m * qd))).abs(), t);
+        assert!(e < 1e-12, "{name} #{trial}: T vs ½ q̇ᵀ M q̇: {e:e}");
+
+        // The KKT solve on every row, the redundant ones included, unregularized.
+        let u = SVector::<f64, NU>::from_fn(|_, _| rng.range(-0.5, 0.5));
+        let acc = forward_dynamics::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None)
+            .unwrap_or_else(|e| panic!("{name} #{trial}: forward dynamics: {e}"));
+        let closure = (j * acc.qdd + b).amax();
+        let scale = (j * acc.qdd).amax().max(b.amax());
+        assert!(
+            rel(closure, scale) < 1e-10,
+            "{name} #{trial}: J q̈ + J̇ q̇ = {closure:e}"
+        );
+    }
+}
+
+/// A passive, undamped swing from rest near home for 0.5 s at step `dt` (RK4): the
+/// largest energy error and the peak kinetic energy.
+fn energy_swing<L, const NQ: usize, const NC: usize, const NU: usize, const NP: usize>(
+    dt: f64,
+) -> (f64, f64)
+where
+    L: LegModel<NQ, NC, NU, 3, NP>,
+{
+    let name = L::NAME;
+    let mut p = L::Params::<f64>::default();
+    // Undamped: every damping parameter zero.
+    for (i, n) in <L::Params<f64> as leg_models::Parameters<f64>>::NAMES
+        .iter()
+        .enumerate()
+    {
+        if n.ends_with("_damping") {
+            leg_models::Parameters::set(&mut p, i, 0.0);
+        }
+    }
+    let mut q = SVector::<f64, NQ>::from(L::HOME);
+    assembled::<L, NQ, NC, NU>(&p, &mut q);
+    let mut qd = SVector::<f64, NQ>::zeros();
+    let u = SVector::<f64, NU>::zeros();
+    let energy = |q: &SVector<f64, NQ>, qd: &SVector<f64, NQ>| {
+        L::kinetic_energy(q, qd, &p) + L::potential_energy(q, &p)
+    };
+    let e0 = energy(&q, &qd);
+    let f = |q: &SVector<f64, NQ>, qd: &SVector<f64, NQ>| {
+        forward_dynamics::<L, f64, NQ, NC, NU>(&p, q, qd, &u, None)
+            .unwrap_or_else(|e| panic!("{name}: forward dynamics: {e}"))
+            .qdd
+    };
+    let mut peak_kinetic: f64 = 0.0;
+    let mut drift: f64 = 0.0;
+    for _ in 0..(0.5 / dt).round() as usize {
+        let k1 = (qd, f(&q, &qd));
+        let k2 = (
+            qd + k1.1 * (dt / 2.0),
+            f(&(q + k1.0 * (dt / 2.0)), &(qd + k1.1 * (dt / 2.0))),
+        );
+        let k3 = (
+            qd + k2.1 * (dt / 2.0),
+            f(&(q + k2.0 * (dt / 2.0)), &(qd + k2.1 * (dt / 2.0))),
+        );
+        let k4 = (qd + k3.1 * dt, f(&(q + k3.0 * dt), &(qd + k3.1 * dt)));
+        q += (k1.0 + k2.0 * 2.0 + k3.0 * 2.0 + k4.0) * (dt / 6.0);
+        qd += (k1.1 + k2.1 * 2.0 + k3.1 * 2.0 + k4.1) * (dt / 6.0);
+        peak_kinetic = peak_kinetic.max(L::kinetic_energy(&q, &qd, &p));
+        drift = drift.max((energy(&q, &qd) - e0).abs());
+    }
+    // Plain RK4, no projection: the loop drifts open at the integrator's order only.
+    let gap = L::closure_residual(&q, &p).amax();
+    assert!(gap < 1e-8, "{name}: the loop opened {gap:e} m");
+    (drift, peak_kinetic)
+}
+
+/// Energy is kept to the integrator's order: small, and more than 4 times smaller at half the step (a
+/// wrong `C q̇` or `G` leaves an error that does not shrink with the step).
+fn energy_kept<L, const NQ: usize, const NC: usize, const NU: usize, const NP: usize>()
+where
+    L: LegModel<NQ, NC, NU, 3, NP>,
+{
+    let name = L::NAME;
+    let (coarse, peak) = energy_swing::<L, NQ, NC, NU, NP>(2e-4);
+    let (fine, _) = energy_swing::<L, NQ, NC, NU, NP>(1e-4);
+    assert!(peak > 1e-3, "{name}: the swing did not move ({peak:e} J)");
+    assert!(
+        fine < 1e-6 * peak,
+        "{name}: energy drifted {fine:e} J over 0.5 s (peak kinetic {peak:e} J)"
+    );
+    assert!(
+        coarse > 4.0 * fine,
+        "{name}: the energy error does not shrink with the step ({coarse:e} J at 0.2 ms, {fine:e} J at 0.1 ms)"
+    );
+}
+
+macro_rules! spatial_leg_tests {
+    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+        mod $module {
+            #[test]
+            fn terms_against_finite_differences_and_the_kkt_rows() {
+                super::check_leg::<$ty, $nq, $nc, $nu, { 2 * $nc / 3 }>();
+            }
+
+            #[test]
+            fn passive_swing_keeps_its_energy() {
+                super::energy_kept::<$ty, $nq, $nc, $nu, { 2 * $nc / 3 }>();
+            }
+        }
+    };
+}
+
+generated::for_each_spatial_model!(spatial_leg_tests);
+
+#[test]
+fn there_is_a_spatial_leg() {
+    let mut n = 0;
+    macro_rules! count {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+            n += 1;
+        };
+    }
+    generated::for_each_spatial_model!(count);
+    assert!(n >= 1);
+}
