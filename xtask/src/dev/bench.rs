@@ -86,7 +86,7 @@ fn count_calls(root: &Path, peers: bool) -> Result<std::path::PathBuf, String> {
 pub fn instruction_counts(root: &Path) -> Result<BTreeMap<String, BTreeMap<String, u64>>, String> {
     let bin = count_calls(root, false)?;
     let mut out = BTreeMap::new();
-    let models = crate::gen::model_names(root)?;
+    let models = crate::gen::planar_model_names(root)?;
     let mut progress = Progress::new(
         (models.len() * PATHS.len()) as u64,
         "counting instructions (callgrind)",
@@ -108,7 +108,7 @@ pub fn instruction_counts(root: &Path) -> Result<BTreeMap<String, BTreeMap<Strin
 /// budgeted: the peers' counts only put ours in perspective).
 pub fn compare_instructions(root: &Path) -> Result<String, String> {
     let bin = count_calls(root, true)?;
-    let models = crate::gen::model_names(root)?;
+    let models = crate::gen::planar_model_names(root)?;
     let mut progress = Progress::new(models.len() as u64, "counting CasADi's C (callgrind)");
     let mut lines = vec![
         "| model | harness | fused ours | CasADi C, closed form | ratio | CasADi C, Lagrange | ratio | FD ours | CasADi C, closed form | ratio | CasADi C, Lagrange | ratio | fused batch per state | × scalar | FD batch per state | × scalar |"
@@ -271,7 +271,7 @@ pub fn run(root: &Path, pinocchio: bool) -> Result<(), String> {
     } else {
         BTreeMap::new()
     };
-    let models = crate::gen::model_names(root)?;
+    let models = crate::gen::planar_model_names(root)?;
     println!();
     println!("| model | harness | fused ours | CasADi C closed | ratio | CasADi C Lagrange | ratio | Pinocchio-on-CasADi C | ratio | FD ours | CasADi C closed | ratio | CasADi C Lagrange | ratio | Pinocchio-on-CasADi C | ratio | Pinocchio C++ | ratio | control step | control / FD | fused f32/f64 | FD f32/f64 | sim step | fused batch per state | × scalar | FD batch per state | × scalar |");
     println!("|{}", "---|".repeat(27));

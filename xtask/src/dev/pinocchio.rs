@@ -196,7 +196,7 @@ pub fn run(root: &Path) -> Result<BTreeMap<String, Figures>, String> {
     compile(root, DERIVATIVES_SOURCE, &derivatives_bin, &prefix, None)?;
     let target_legs = crate::cli::build_legs(root)?;
     let mut out = BTreeMap::new();
-    for name in crate::gen::model_names(root)? {
+    for name in crate::gen::planar_model_names(root)? {
         let spec = gen::load_spec(
             root,
             &root.join(gen::SPECS_DIR).join(format!("{name}.toml")),

@@ -678,6 +678,19 @@ pub fn model_names(root: &Path) -> Result<Vec<String>, String> {
         .collect())
 }
 
+/// The planar legs among [`model_names`] (a spec whose gravity has two entries): what the
+/// exports, their cross-checks and the benchmarks take for now.
+pub fn planar_model_names(root: &Path) -> Result<Vec<String>, String> {
+    let mut out = Vec::new();
+    for (path, name) in spec_paths(root)?.iter().zip(model_names(root)?) {
+        let spec = load_spec(root, path)?;
+        if spec.file.gravity.get_ref().value.len() == 2 {
+            out.push(name);
+        }
+    }
+    Ok(out)
+}
+
 pub fn check_model(name: &str, known: &[String]) -> Result<(), Error> {
     if known.iter().any(|k| k == name) {
         Ok(())
