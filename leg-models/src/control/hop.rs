@@ -154,7 +154,7 @@ pub struct Drive {
     /// The joint its effort moves: the motor's own, or the one a coupling spring joins
     /// it to (a series-elastic actuator).
     pub joint: usize,
-    /// The coupling spring (index into [`LegModel::SPRINGS`]) and whether the motor is
+    /// The coupling spring (index into [`LegDynamics::SPRINGS`](crate::LegDynamics::SPRINGS)) and whether the motor is
     /// the spring's `a` (the spring acts on `q_a − q_b`).
     pub spring: Option<(usize, bool)>,
 }

@@ -51,7 +51,7 @@ pub struct Noted<V> {
 }
 
 pub type Num = Noted<f64>;
-/// A vector: 2 entries on a planar leg, 3 on a spatial one (checked by [`validate`]
+/// A vector: 2 entries on a planar leg, 3 on a spatial one (checked on validation
 /// against the gravity's), 4 for an orientation quaternion.
 pub type Vector = Noted<Vec<f64>>;
 /// A number or a list of numbers: a link's inertia (one number on a planar leg, 3 or 6
