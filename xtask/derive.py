@@ -505,7 +505,7 @@ def derive(model):
     # (`c·(r·h) − s·(r×h)`), so that the emitter can compute them once per parameter set;
     # the entries of M then reduce to constants times sines and cosines of relative angles.
     # One sine and cosine per revolute joint; absolute orientations by angle addition.
-    lk = (derive_spatial.SpatialKinematics if spatial else LinkKinematics)(model, sym, q, qd)
+    lk = (derive_spatial.RecursiveKinematics if spatial else LinkKinematics)(model, sym, q, qd)
     M = lk.mass_matrix()
     G = lk.gravity_forces() + G_springs
     M_qd = cs.mtimes(M, qd)

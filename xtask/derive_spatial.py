@@ -5,15 +5,13 @@ has three entries; the planar legs never reach this module.
 Each link's frame sits at its joint point. At q = 0 it is its parent's frame moved by
 `origin` and turned by the constant `orientation`; a revolute joint then turns it by q
 about the unit `axis` of its own frame (Rodrigues' formula: one sine and cosine per
-joint), a prismatic joint slides it by q along that axis. `R[i]` is the link's
-orientation in the base frame, `joint[i]` its joint point there, `z[i]` its joint axis
-there (`R[i] a_i`, which the joint's own rotation leaves fixed).
+joint), a prismatic joint slides it by q along that axis.
 
-The emitted terms use the geometric Jacobians: a point's column of joint k is
-`z_k × (x − o_k)` (revolute) or `z_k` (prismatic), a link's angular column `z_k` for each
-revolute joint above it, and M = Σ m J_vᵀ J_v + J_ωᵀ (R I Rᵀ) J_ω over the centres of mass.
-The Lagrange peer (`lagrangian`) differentiates positions and orientations instead:
-v = ∂c/∂q q̇ and ω from Rᵀ Ṙ, so it checks the Jacobians rather than sharing them.
+The emitted terms come from recursions in the links' own frames (`RecursiveKinematics`:
+velocities passed down the tree, Newton–Euler for C q̇ and G, composite rigid bodies for
+M). The Lagrange peer (`lagrangian`) differentiates positions and orientations composed in
+the base frame instead (`WorldChain`: v = ∂c/∂q q̇ and ω from Rᵀ Ṙ), so it checks the
+recursions rather than sharing them.
 """
 
 import casadi as cs
@@ -64,17 +62,17 @@ def _inertia(sym, entries):
     return cs.vertcat(cs.horzcat(xx, xy, xz), cs.horzcat(xy, yy, yz), cs.horzcat(xz, yz, zz))
 
 
-class SpatialKinematics:
-    """The interface derive.py reads of a leg's kinematics (as `LinkKinematics`):
-    `position`, `jacobian` and `bias` of points, `joint` positions, `mass_matrix`,
-    `gravity_forces`, `potential_energy` and `coriolis_points`."""
+class WorldChain:
+    """Positions and orientations in the base frame composed link by link (`R[i]`,
+    `joint[i]`), for the Lagrange peer: it differentiates these, so it shares nothing
+    with the recursions of `RecursiveKinematics` but the chain's geometry."""
 
-    def __init__(self, model, sym, q, qd):
+    def __init__(self, model, sym, q):
         self.links = links = model["links"]
-        self.sym, self.q, self.qd = sym, q, qd
+        self.sym = sym
         self.gravity = _vec(sym, model["gravity"])
         n = len(links)
-        self.R, self.joint, self.z = [None] * n, [None] * n, [None] * n
+        self.R, self.joint = [None] * n, [None] * n
         for i, link in enumerate(links):
             parent = link["parent"]
             offset = _vec(sym, link["origin"])
@@ -93,7 +91,115 @@ class SpatialKinematics:
             else:
                 self.R[i] = cs.mtimes(self.R[parent], rel)
                 self.joint[i] = self.joint[parent] + cs.mtimes(self.R[parent], offset)
-            self.z[i] = cs.mtimes(self.R[i], _const(axis))
+
+    def position(self, ref):
+        if ref["link"] is None:  # fixed in the base frame
+            return _vec(self.sym, ref["point"])
+        i = ref["link"]
+        return self.joint[i] + cs.mtimes(self.R[i], _vec(self.sym, ref["point"]))
+
+
+def _hoistable(v, state):
+    return all(not cs.depends_on(v[k], state) for k in range(v.size1()))
+
+
+class RecursiveKinematics:
+    """The emitted terms of a spatial leg, by recursions over the tree in each link's own
+    frame (Featherstone, *Rigid Body Dynamics Algorithms*, 2008, ch. 5 and 6), the 3-D form
+    of the planar `LinkKinematics`:
+
+    - velocities and the accelerations at q̈ = 0 passed from parent to child
+      (`ω_i = R_relᵀ ω_λ + a_i q̇_i`, …), so a point's J̇ q̇ is its link's bias acceleration;
+    - C q̇ by the Newton–Euler pass with those accelerations (gravity off), G by the same
+      pass at rest with the base accelerating by −g, M by composite rigid bodies carried
+      from leaf to root in their parents' frames;
+    - a point's Jacobian column of joint k as `R_k (a_k × r_k)` (revolute) or `R_k a_k`
+      (prismatic), `r_k` the point in k's frame built from the point up.
+
+    Every link's relative rotation is `R_rel = O (I + s K + (1 − c) K²)` (O its constant
+    orientation, K the skew matrix of its unit axis): a parameter-only vector turned by it
+    is `O v + s (O K v) + (1 − c)(O K² v)`, three parameter-only vectors the emitter
+    computes once per parameter set. `joint[i]` and `R[i]` are the link's origin and
+    orientation in the base frame (positions, the points to draw)."""
+
+    def __init__(self, model, sym, q, qd):
+        self.links = links = model["links"]
+        self.sym, self.q, self.qd = sym, q, qd
+        self.state = cs.vertcat(q, qd)
+        self.gravity = _vec(sym, model["gravity"])
+        n = len(links)
+        self.axis = [_const(link["axis"]) for link in links]
+        # R_rel's constant factors: (O, O K, O K²), O the identity where the spec has none.
+        self.factors, self.rel, self.offset = [None] * n, [None] * n, [None] * n
+        self.R, self.joint = [None] * n, [None] * n
+        for i, link in enumerate(links):
+            O = _matrix(link["orientation"]) if link.get("orientation") is not None else cs.SX.eye(3)
+            offset = _vec(sym, link["origin"])
+            if link["joint"] == "revolute":
+                K = _skew(self.axis[i])
+                s, c = cs.sin(q[i]), cs.cos(q[i])
+                self.factors[i] = (O, cs.mtimes(O, K), cs.mtimes(O, cs.mtimes(K, K)), s, 1 - c)
+                self.rel[i] = cs.mtimes(O, _axis_rotation(link["axis"], q[i]))
+            else:
+                self.factors[i] = (O, None, None, None, None)
+                self.rel[i] = O
+                offset = offset + q[i] * cs.mtimes(O, self.axis[i])
+            self.offset[i] = offset
+            parent = link["parent"]
+            if parent is None:
+                self.R[i], self.joint[i] = self.rel[i], offset
+            else:
+                self.R[i] = cs.mtimes(self.R[parent], self.rel[i])
+                self.joint[i] = self.joint[parent] + cs.mtimes(self.R[parent], offset)
+        self._velocities()
+
+    # Rotations by a link's relative rotation, parameter-only work grouped for hoisting.
+    def turn(self, i, v):
+        """R_rel v (child frame to parent frame)."""
+        O, OK, OK2, s, omc = self.factors[i]
+        if s is not None and _hoistable(v, self.state):
+            return cs.mtimes(O, v) + s * cs.mtimes(OK, v) + omc * cs.mtimes(OK2, v)
+        return cs.mtimes(self.rel[i], v)
+
+    def unturn(self, i, v):
+        """R_relᵀ v (parent frame to child frame)."""
+        return cs.mtimes(self.rel[i].T, v)
+
+    def _velocities(self):
+        """ω, origin velocity v, and at q̈ = 0 the angular acceleration α and the origin's
+        acceleration A, each in its link's frame (the base at rest, not accelerating)."""
+        n = len(self.links)
+        zero = cs.SX(3, 1)
+        self.omega, self.vel, self.alpha, self.acc = [None] * n, [None] * n, [None] * n, [None] * n
+        for i, link in enumerate(self.links):
+            parent = link["parent"]
+            p = self.offset[i]
+            if parent is None:
+                w, v, al, A = zero, zero, zero, zero
+            else:
+                w, v, al, A = self.omega[parent], self.vel[parent], self.alpha[parent], self.acc[parent]
+            motion = self.axis[i] * self.qd[i]
+            A = A + cs.cross(al, p) + cs.cross(w, cs.cross(w, p))
+            v = v + cs.cross(w, p)
+            if link["joint"] == "prismatic":
+                slide = cs.mtimes(self.rel[i], motion)  # parent frame
+                A = A + 2 * cs.cross(w, slide)
+            w, v, al, A = self.unturn(i, w), self.unturn(i, v), self.unturn(i, al), self.unturn(i, A)
+            if link["joint"] == "revolute":
+                al = al + cs.cross(w, motion)
+                w = w + motion
+            else:
+                v = v + motion
+            self.omega[i], self.vel[i], self.alpha[i], self.acc[i] = w, v, al, A
+
+    def own_inertia(self, i):
+        """Mass, first moment h = m c and the inertia about the joint point, link frame."""
+        link = self.links[i]
+        m = self.sym[link["mass"]]
+        c = _vec(self.sym, link["com"])
+        h = m * c
+        about = _inertia(self.sym, link["inertia"]) - m * cs.mtimes(_skew(c), _skew(c))
+        return m, h, about
 
     def path(self, i):
         out = []
@@ -109,91 +215,139 @@ class SpatialKinematics:
         return self.joint[i] + cs.mtimes(self.R[i], _vec(self.sym, ref["point"]))
 
     def jacobian(self, ref):
-        """∂x/∂q: z_k × (x − o_k) for a revolute joint k above the point, z_k for a
-        prismatic one."""
+        """∂x/∂q, column k `R_k (a_k × r_k)` (revolute) or `R_k a_k` (prismatic)."""
         n = len(self.links)
         cols = [cs.SX(3, 1) for _ in range(n)]
         if ref["link"] is not None:
-            x = self.position(ref)
+            r = _vec(self.sym, ref["point"])  # the point in link k's frame
             for k in self.path(ref["link"]):
                 if self.links[k]["joint"] == "revolute":
-                    cols[k] = cs.cross(self.z[k], x - self.joint[k])
+                    cols[k] = cs.mtimes(self.R[k], cs.cross(self.axis[k], r))
                 else:
-                    cols[k] = self.z[k]
-        return cs.horzcat(*cols)
-
-    def angular_jacobian(self, i):
-        """ω_i = J_ω q̇: the axes z_k of the revolute joints above link i."""
-        n = len(self.links)
-        cols = [cs.SX(3, 1) for _ in range(n)]
-        for k in self.path(i):
-            if self.links[k]["joint"] == "revolute":
-                cols[k] = self.z[k]
+                    cols[k] = cs.mtimes(self.R[k], self.axis[k])
+                r = self.offset[k] + self.turn(k, r)
         return cs.horzcat(*cols)
 
     def bias(self, ref):
-        """J̇ q̇ = ∂(J q̇)/∂q q̇, the point's acceleration at q̈ = 0."""
-        return cs.jtimes(cs.mtimes(self.jacobian(ref), self.qd), self.q, self.qd)
+        """J̇ q̇: the point's acceleration at q̈ = 0, `R_i (A_i + α_i × r + ω_i × (ω_i × r))`."""
+        if ref["link"] is None:
+            return cs.SX(3, 1)
+        i = ref["link"]
+        r = _vec(self.sym, ref["point"])
+        w = self.omega[i]
+        local = self.acc[i] + cs.cross(self.alpha[i], r) + cs.cross(w, cs.cross(w, r))
+        return cs.mtimes(self.R[i], local)
 
-    def com(self, i):
-        return {"link": i, "point": self.links[i]["com"]}
+    def _project(self, i, moment, force):
+        """S_iᵀ (n, f) at joint i (its frame)."""
+        if self.links[i]["joint"] == "revolute":
+            return cs.dot(self.axis[i], moment)
+        return cs.dot(self.axis[i], force)
 
-    def world_inertia(self, i):
-        R = self.R[i]
-        return cs.mtimes(cs.mtimes(R, _inertia(self.sym, self.links[i]["inertia"])), R.T)
+    def _carry(self, i, moment, force):
+        """A force (moment about link i's joint point, force), link i's frame, expressed at
+        its parent's joint point in the parent's frame."""
+        f = self.turn(i, force)
+        return self.turn(i, moment) + cs.cross(self.offset[i], f), f
 
-    def mass_matrix(self):
-        """Σ m J_vᵀ J_v + J_ωᵀ (R I Rᵀ) J_ω over the links' centres of mass, and the
-        reflected rotor inertia I·N² on the actuated joints' diagonal."""
+    def _newton_euler(self, accelerations):
+        """Joint forces of the links' inertial forces, `(n_i, f_i)` per link from
+        `accelerations(i, m, h, I)`, summed from the leaves to the root."""
         n = len(self.links)
-        M = cs.SX(n, n)
-        for i, link in enumerate(self.links):
-            Jv, Jw = self.jacobian(self.com(i)), self.angular_jacobian(i)
-            M += self.sym[link["mass"]] * cs.mtimes(Jv.T, Jv)
-            M += cs.mtimes(cs.mtimes(Jw.T, self.world_inertia(i)), Jw)
-            rotor = link["rotor"]
-            if rotor is not None:
-                M[i, i] += self.sym[rotor[0]] * self.sym[rotor[1]] ** 2
-        return M
+        moment, force = [None] * n, [None] * n
+        for i in range(n):
+            moment[i], force[i] = accelerations(i, *self.own_inertia(i))
+        tau = [None] * n
+        for i in reversed(range(n)):
+            tau[i] = self._project(i, moment[i], force[i])
+            parent = self.links[i]["parent"]
+            if parent is not None:
+                nm, nf = self._carry(i, moment[i], force[i])
+                moment[parent] = moment[parent] + nm
+                force[parent] = force[parent] + nf
+        return cs.vertcat(*tau)
 
     def coriolis_points(self):
-        """C q̇ = Σ m J_vᵀ (J̇_v q̇) + J_ωᵀ (I_w J̇_ω q̇ + ω × I_w ω), the Newton–Euler form."""
-        n = len(self.links)
-        C = cs.SX(n, 1)
+        """C q̇: the Newton–Euler pass at q̈ = 0 without gravity,
+        f = m A + α × h + ω × (ω × h), n = I α + ω × (I ω) + h × A (about the joint)."""
+
+        def inertial(i, m, h, I):
+            w, al, A = self.omega[i], self.alpha[i], self.acc[i]
+            f = m * A + cs.cross(al, h) + cs.cross(w, cs.cross(w, h))
+            nm = cs.mtimes(I, al) + cs.cross(w, cs.mtimes(I, w)) + cs.cross(h, A)
+            return nm, f
+
+        return self._newton_euler(inertial)
+
+    def gravity_in_frames(self):
+        g = [None] * len(self.links)
         for i, link in enumerate(self.links):
-            com = self.com(i)
-            Jv, Jw = self.jacobian(com), self.angular_jacobian(i)
-            C += self.sym[link["mass"]] * cs.mtimes(Jv.T, self.bias(com))
-            omega = cs.mtimes(Jw, self.qd)
-            Iw = self.world_inertia(i)
-            alpha = cs.jtimes(omega, self.q, self.qd)
-            C += cs.mtimes(Jw.T, cs.mtimes(Iw, alpha) + cs.cross(omega, cs.mtimes(Iw, omega)))
-        return C
+            parent = link["parent"]
+            g[i] = self.unturn(i, self.gravity if parent is None else g[parent])
+        return g
 
     def gravity_forces(self):
-        """G = ∂V/∂q = −Σ m J_vᵀ g over the centres of mass."""
-        n = len(self.links)
-        G = cs.SX(n, 1)
-        for i, link in enumerate(self.links):
-            G -= self.sym[link["mass"]] * cs.mtimes(self.jacobian(self.com(i)).T, self.gravity)
-        return G
+        """G = ∂V/∂q: the Newton–Euler pass at rest with the base accelerating by −g,
+        f = −m g_i, n = −h × g_i (g_i gravity in link i's frame)."""
+        g = self.gravity_in_frames()
+        return self._newton_euler(lambda i, m, h, I: (-cs.cross(h, g[i]), -m * g[i]))
 
     def potential_energy(self):
-        """V = −Σ m g·c."""
+        """V = −Σ g·(m o_i + R_i h_i)."""
         V = cs.SX(0)
-        for i, link in enumerate(self.links):
-            V -= self.sym[link["mass"]] * cs.dot(self.gravity, self.position(self.com(i)))
+        for i in range(len(self.links)):
+            m, h, _ = self.own_inertia(i)
+            V -= cs.dot(self.gravity, m * self.joint[i] + cs.mtimes(self.R[i], h))
         return V
+
+    def mass_matrix(self):
+        """M by composite rigid bodies: each subtree's (m, h, I) in its root link's frame,
+        carried to the parent by `h' = R h + m p`,
+        `I' = R I Rᵀ − m [p]ₓ² − [p]ₓ [R h]ₓ − [R h]ₓ [p]ₓ`; then M_ii = S_iᵀ I_i S_i and the
+        force I_i S_i carried up the chain for M_ji. Reflected rotor inertia on the diagonal."""
+        n = len(self.links)
+        comp = [list(self.own_inertia(i)) for i in range(n)]
+        for j in reversed(range(n)):
+            parent = self.links[j]["parent"]
+            if parent is None:
+                continue
+            m, h, I = comp[j]
+            p = self.offset[j]
+            Rh = self.turn(j, h)
+            R = self.rel[j]
+            P, H = _skew(p), _skew(Rh)
+            moved = cs.mtimes(cs.mtimes(R, I), R.T) - m * cs.mtimes(P, P) - cs.mtimes(P, H) - cs.mtimes(H, P)
+            comp[parent][0] = comp[parent][0] + m
+            comp[parent][1] = comp[parent][1] + Rh + m * p
+            comp[parent][2] = comp[parent][2] + moved
+        M = [[None] * n for _ in range(n)]
+        for i, link in enumerate(self.links):
+            m, h, I = comp[i]
+            a = self.axis[i]
+            if link["joint"] == "revolute":
+                moment, force = cs.mtimes(I, a), cs.cross(a, h)
+            else:
+                moment, force = cs.cross(h, a), m * a
+            M[i][i] = self._project(i, moment, force)
+            rotor = link["rotor"]
+            if rotor is not None:
+                M[i][i] = M[i][i] + self.sym[rotor[0]] * self.sym[rotor[1]] ** 2
+            j = i
+            while self.links[j]["parent"] is not None:
+                moment, force = self._carry(j, moment, force)
+                j = self.links[j]["parent"]
+                M[i][j] = M[j][i] = self._project(j, moment, force)
+        return cs.vertcat(*[cs.horzcat(*[M[r][c] if M[r][c] is not None else cs.SX(0) for c in range(n)]) for r in range(n)])
 
 
 def lagrangian(model, sym, q, qd):
     """The notes' Lagrange form in 3-D: kinetic and potential energy from the positions
     and orientations alone (v = ċ, [ω]ₓ = Rᵀ Ṙ in the link frame), and the point function
     of the same chain. Returns (T, V, point)."""
-    kin = SpatialKinematics(model, sym, q, qd)
+    kin = WorldChain(model, sym, q)
     T, V = cs.SX(0), cs.SX(0)
     for i, link in enumerate(model["links"]):
-        c = kin.position(kin.com(i))
+        c = kin.position({"link": i, "point": link["com"]})
         v = cs.jtimes(c, q, qd)
         R = kin.R[i]
         W = cs.mtimes(R.T, cs.jtimes(R, q, qd))  # [ω]ₓ in the link frame

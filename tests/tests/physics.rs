@@ -708,7 +708,7 @@ fn minitaur_hopper_is_minitaur_on_a_rail() {
 /// independent of ours, to 1e-10). Every parameter is changed, one state per change.
 #[cfg(feature = "peers")]
 fn check_prepared_parameters_follow_set<
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     const NQ: usize,
     const NC: usize,
     const NU: usize,
@@ -778,4 +778,13 @@ macro_rules! prepared {
 #[cfg(feature = "peers")]
 mod prepared_parameters {
     generated::for_each_model!(prepared);
+
+    /// Spatial legs: the Lagrange peer differentiates positions and orientations composed
+    /// in the base frame, ours are the recursions in link frames.
+    macro_rules! prepared_spatial {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+            prepared!($module, $ty, $nq, $nc, $nu, 0);
+        };
+    }
+    generated::for_each_spatial_model!(prepared_spatial);
 }
