@@ -18,6 +18,9 @@ import casadi as cs
 
 
 def _vec(sym, names):
+    """The parameters `names` as a vector; none (a ball joint's inner frames): zero."""
+    if not names:
+        return cs.SX(3, 1)
     return cs.vertcat(*[sym[n] for n in names])
 
 
@@ -195,6 +198,8 @@ class RecursiveKinematics:
     def own_inertia(self, i):
         """Mass, first moment h = m c and the inertia about the joint point, link frame."""
         link = self.links[i]
+        if link.get("massless"):
+            return cs.SX(0), cs.SX(3, 1), cs.SX(3, 3)
         m = self.sym[link["mass"]]
         c = _vec(self.sym, link["com"])
         h = m * c
@@ -347,6 +352,8 @@ def lagrangian(model, sym, q, qd):
     kin = WorldChain(model, sym, q)
     T, V = cs.SX(0), cs.SX(0)
     for i, link in enumerate(model["links"]):
+        if link.get("massless"):
+            continue
         c = kin.position({"link": i, "point": link["com"]})
         v = cs.jtimes(c, q, qd)
         R = kin.R[i]

@@ -36,6 +36,8 @@ pub mod open_three_link;
 pub use open_three_link::OpenThreeLink;
 pub mod raibert_hopper;
 pub use raibert_hopper::RaibertHopper;
+pub mod rssr_linkage;
+pub use rssr_linkage::RssrLinkage;
 pub mod three_motor_leg;
 pub use three_motor_leg::ThreeMotorLeg;
 pub mod two_link;
@@ -70,6 +72,6 @@ macro_rules! for_each_model {
 macro_rules! for_each_spatial_model {
     ($callback:ident) => {
         $callback ! (abducted_five_bar, $crate::abducted_five_bar::AbductedFiveBar, 5, 3,
-        3);
+        3); $callback ! (rssr_linkage, $crate::rssr_linkage::RssrLinkage, 5, 3, 1);
     };
 }

@@ -185,9 +185,51 @@ where
     );
 }
 
+/// A leg's ball joints (`BALL_JOINTS`): forward dynamics refuses their angles'
+/// singularity by name, at `β = ±π/2` and within `√ε` of it, and solves a hundredth of a
+/// radian away, where `M` is still positive definite. A leg without ball joints: nothing to
+/// check, said by the return value.
+fn ball_joint_singularity<L, const NQ: usize, const NC: usize, const NU: usize, const NP: usize>(
+) -> usize
+where
+    L: LegModel<NQ, NC, NU, 3, NP>,
+{
+    use leg_models::dynamics::DynamicsError;
+    let p = L::Params::<f64>::default();
+    let home = SVector::<f64, NQ>::from(L::HOME);
+    let (qd, u) = (SVector::<f64, NQ>::zeros(), SVector::<f64, NU>::zeros());
+    for &b in L::BALL_JOINTS {
+        for beta in [
+            std::f64::consts::FRAC_PI_2,
+            -std::f64::consts::FRAC_PI_2,
+            std::f64::consts::FRAC_PI_2 - 1e-9,
+        ] {
+            let mut q = home;
+            q[b + 1] = beta;
+            match forward_dynamics::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None) {
+                Err(DynamicsError::BallJointSingular { joint, cos_beta }) => {
+                    assert_eq!(joint, b);
+                    assert!(cos_beta.abs() < 1e-8);
+                }
+                other => panic!("{}: β = {beta}: {other:?}", L::NAME),
+            }
+        }
+        let mut q = home;
+        q[b + 1] = std::f64::consts::FRAC_PI_2 - 1e-2;
+        assert!(L::mass_matrix(&q, &p).cholesky().is_some());
+        assert!(forward_dynamics::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None).is_ok());
+    }
+    L::BALL_JOINTS.len()
+}
+
 macro_rules! spatial_leg_tests {
     ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
         mod $module {
+            #[test]
+            fn ball_joints_refuse_their_singularity() {
+                super::ball_joint_singularity::<$ty, $nq, $nc, $nu, { 2 * $nc / 3 }>();
+            }
+
             #[test]
             fn terms_against_finite_differences_and_the_kkt_rows() {
                 super::check_leg::<$ty, $nq, $nc, $nu, { 2 * $nc / 3 }>();
@@ -213,4 +255,40 @@ fn there_is_a_spatial_leg() {
     }
     generated::for_each_spatial_model!(count);
     assert!(n >= 1);
+}
+
+/// The ball joint's convention, against rotation matrices written here: the RSSR's
+/// coupler tip is the crank's tip plus `R_x(θ) R_x(α) R_y(β) R_z(γ) (0.25, 0, 0)`, and the
+/// rocker's tip its pivot plus `R_z(ψ) (0, 0.08, 0)` (the spec's lengths).
+#[test]
+fn ball_joint_angles_are_x_then_y_then_z() {
+    use generated::rssr_linkage::RssrLinkage;
+    use leg_models::nalgebra::{Matrix3, Vector3};
+    let rot = |axis: usize, a: f64| {
+        let (s, c) = a.sin_cos();
+        let mut r = Matrix3::identity();
+        let (i, j) = [(1, 2), (2, 0), (0, 1)][axis];
+        r[(i, i)] = c;
+        r[(j, j)] = c;
+        r[(i, j)] = -s;
+        r[(j, i)] = s;
+        r
+    };
+    assert_eq!(
+        RssrLinkage::JOINT_NAMES,
+        ["crank", "coupler.x", "coupler.y", "coupler.z", "rocker"]
+    );
+    assert_eq!(RssrLinkage::BALL_JOINTS, &[1]);
+    let p = <RssrLinkage as LegDynamics<5, 3, 1>>::Params::<f64>::default();
+    let mut rng = Rng::new(7);
+    for _ in 0..5 {
+        let q = SVector::<f64, 5>::from_fn(|_, _| rng.range(-1.2, 1.2));
+        let crank = rot(0, q[0]);
+        let tip = crank * Vector3::new(0.0, 0.05, 0.0)
+            + crank * rot(0, q[1]) * rot(1, q[2]) * rot(2, q[3]) * Vector3::new(0.25, 0.0, 0.0);
+        let rocker = Vector3::new(0.25, 0.0, -0.06) + rot(2, q[4]) * Vector3::new(0.0, 0.08, 0.0);
+        let points = RssrLinkage::closure_points(&q, &p);
+        assert!((points.column(0) - tip).amax() < 1e-15, "{points} vs {tip}");
+        assert!((points.column(1) - rocker).amax() < 1e-15);
+    }
 }

@@ -39,6 +39,15 @@ pub enum DynamicsError {
     /// The state and inputs are finite but a term computed from them is not: rates or
     /// torques so large that `N`, `J̇ q̇` or the solution exceed f64's range.
     Overflow,
+    /// A ball joint's angles are at (or within `√ε` of) their singularity `β = ±π/2`,
+    /// where `R_x(α)` and `R_z(γ)` turn about the same axis and the three angles lose a
+    /// direction of rotation.
+    BallJointSingular {
+        /// The coordinate of the ball joint's first angle `α` (`β` is the next).
+        joint: usize,
+        /// `cos β` there.
+        cos_beta: f64,
+    },
 }
 
 impl fmt::Display for DynamicsError {
@@ -59,6 +68,11 @@ impl fmt::Display for DynamicsError {
             DynamicsError::Overflow => write!(
                 f,
                 "overflow: the state and torques are finite but the terms at them exceed f64's range"
+            ),
+            DynamicsError::BallJointSingular { joint, cos_beta } => write!(
+                f,
+                "the ball joint at coordinates {joint}..{} is at its angles' singularity (cos of the second angle {cos_beta:.1e}): its first and third axes line up",
+                joint + 3
             ),
         }
     }
@@ -292,6 +306,28 @@ pub(crate) fn classify_non_finite<T: Real, const NQ: usize, const NU: usize>(
     }
 }
 
+/// `Err(BallJointSingular)` where a ball joint's second angle is within `√ε` of `±π/2`
+/// (its chart's singularity). A leg without ball joints loops over an empty constant.
+#[inline(always)]
+pub fn check_ball_joints<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    q: &SVector<T, NQ>,
+) -> Result<(), DynamicsError>
+where
+    L: LegDynamics<NQ, NC, NU>,
+    T: Real,
+{
+    for &b in L::BALL_JOINTS {
+        let cos_beta = q[b + 1].cos();
+        if cos_beta.abs() <= T::default_epsilon().sqrt() {
+            return Err(DynamicsError::BallJointSingular {
+                joint: b,
+                cos_beta: to_f64(cos_beta),
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Forward dynamics of the closed chain at `(q, q̇)` under motor torques `u`, with joint
 /// damping, reflected rotor inertia and, optionally, Baumgarte stabilization.
 pub fn forward_dynamics<L, T, const NQ: usize, const NC: usize, const NU: usize>(
@@ -323,6 +359,7 @@ where
     L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
+    check_ball_joints::<L, T, NQ, NC, NU>(q)?;
     let (tau, rhs) = kkt_rhs::<L, T, NQ, NC, NU>(params, terms, q, qd, u, baumgarte);
     // The error is said as what caused it by `DynamicsError::explained`, off this path:
     // mapping it here copied the result, 2 to 3 % of a small leg's forward dynamics.

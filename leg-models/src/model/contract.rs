@@ -301,6 +301,12 @@ pub trait LegDynamics<const NQ: usize, const NC: usize, const NU: usize> {
     /// Degrees of freedom of the closed chain, `NQ − rank J`, at the assembled home pose.
     /// Compared with `NU`, it says which methods apply (see [`crate::dynamics::structure`]).
     const MOBILITY: usize;
+    /// The first coordinate of each ball joint (spatial legs): its three angles
+    /// `q[b..b + 3]` are `(α, β, γ)` of `R = R_x(α) R_y(β) R_z(γ)` in the link's frame,
+    /// singular at `cos β = 0`, where forward dynamics returns
+    /// [`DynamicsError::BallJointSingular`](crate::dynamics::DynamicsError::BallJointSingular).
+    /// None by default.
+    const BALL_JOINTS: &'static [usize] = &[];
 
     /// The physical parameters (lengths, masses, centres of mass, inertias, rotor
     /// inertias and gear ratios, damping, gravity). `Default` holds the spec's values.

@@ -53,6 +53,9 @@ pub struct ModelInfo {
     /// 2 (planar, left out of the file) or 3 (spatial): the rows of every point term.
     #[serde(default = "planar", skip_serializing_if = "is_planar")]
     pub dimension: usize,
+    /// The first coordinate of each ball joint's three angles (left out when none).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub ball_joints: Vec<usize>,
 }
 
 fn planar() -> usize {

@@ -41,6 +41,14 @@ pub struct Link {
     pub damping: String,
     /// `[rotor_inertia, gear_ratio]` of an actuated joint.
     pub rotor: Option<[String; 2]>,
+    /// The first two of a ball joint's three coordinates (`R_x(α)`, `R_y(β)`): frames
+    /// that carry no mass, at their parent's joint point (`origin` and `length` empty:
+    /// zero), named `<link>.x`, `<link>.y`; the third, `R_z(γ)`, carries the link.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub massless: bool,
+    /// The spec's link this coordinate belongs to (its index in `[[links]]`).
+    #[serde(skip)]
+    pub spec_link: usize,
 }
 
 /// A link's inertia about its centre of mass (see [`Link::inertia`]).
@@ -194,7 +202,10 @@ impl Builder<'_> {
         doc: &str,
         links: &[Link],
     ) -> Result<Point, SpecError> {
-        let link = self.spec.link_index(p.link.get_ref());
+        let link = self
+            .spec
+            .link_index(p.link.get_ref())
+            .map(|i| links.iter().rposition(|l| l.spec_link == i).expect("built"));
         let point = match (&p.point, link) {
             (Some(v), _) => self.vector(prefix, v.get_ref(), doc)?,
             (None, Some(link)) => links[link].length.clone(),
@@ -222,13 +233,15 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
     )?;
     let mut links: Vec<Link> = Vec::new();
     let mut actuated = Vec::new();
+    // The coordinate of each spec link (a ball joint's last, which carries the link).
+    let mut index: Vec<usize> = Vec::new();
     for (i, link) in f.links.iter().enumerate() {
         let l = link.get_ref();
         let name = l.name.get_ref().clone();
         b.owned_by(format!("links[{i}].name"), &l.name);
         let parent = match l.parent.get_ref().as_str() {
             "base" => None,
-            p => Some(spec.link_index(p).expect("validated")),
+            p => Some(index[spec.link_index(p).expect("validated")]),
         };
         let origin = match (&l.origin, parent) {
             (Some(o), None) => b.vector(
@@ -298,7 +311,7 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
         let rotor = match &l.actuator {
             None => None,
             Some(a) => {
-                actuated.push(i);
+                actuated.push(links.len() + l.kind().coordinates() - 1);
                 let a = a.get_ref();
                 Some([
                     b.scalar(
@@ -326,6 +339,7 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
             ),
             JointKind::Revolute => ("revolute", None),
             JointKind::Prismatic => ("prismatic", Some(axis.expect("validated"))),
+            JointKind::Ball => ("revolute", Some(vec![0.0, 0.0, 1.0])),
         };
         let orientation = l.orientation.as_ref().map(|o| {
             let q = unit(&o.get_ref().value);
@@ -348,6 +362,35 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
                 ],
             ]
         });
+        let (parent, orientation, origin, name) = if l.kind() == JointKind::Ball {
+            // R_x(α) then R_y(β) on massless frames at the joint point, then the link on
+            // R_z(γ): the damping acts on each angle.
+            let mut parent = parent;
+            let (mut orientation, mut origin) = (orientation, origin);
+            for (suffix, axis) in [("x", [1.0, 0.0, 0.0]), ("y", [0.0, 1.0, 0.0])] {
+                links.push(Link {
+                    name: format!("{name}.{suffix}"),
+                    parent,
+                    joint: "revolute",
+                    axis: Some(axis.to_vec()),
+                    orientation: orientation.take(),
+                    origin: std::mem::take(&mut origin),
+                    length: Vec::new(),
+                    com: Vec::new(),
+                    mass: String::new(),
+                    inertia: Inertia::Spatial(Default::default()),
+                    damping: damping.clone(),
+                    rotor: None,
+                    massless: true,
+                    spec_link: i,
+                });
+                parent = Some(links.len() - 1);
+            }
+            (parent, None, Vec::new(), format!("{name}.z"))
+        } else {
+            (parent, orientation, origin, name)
+        };
+        index.push(links.len());
         links.push(Link {
             name,
             parent,
@@ -361,6 +404,8 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
             inertia,
             damping,
             rotor,
+            massless: false,
+            spec_link: i,
         });
     }
     let mut closures = Vec::new();
@@ -389,10 +434,10 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
         let s = s.get_ref();
         let name = s.name.get_ref().clone();
         b.owned_by(format!("springs[{k}].name"), &s.name);
-        let a = spec.link_index(s.a.get_ref()).expect("validated");
+        let a = index[spec.link_index(s.a.get_ref()).expect("validated")];
         let bl =
             s.b.as_ref()
-                .map(|b| spec.link_index(b.get_ref()).expect("validated"));
+                .map(|b| index[spec.link_index(b.get_ref()).expect("validated")]);
         let on = match bl {
             None => format!("the joint of `{}`", links[a].name),
             Some(bl) => format!("`{}` minus `{}`", links[a].name, links[bl].name),
@@ -464,6 +509,10 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
             )
         }
     };
+    let home = f
+        .home
+        .as_ref()
+        .map_or_else(|| vec![0.0; links.len()], |h| h.get_ref().clone());
     Ok(Model {
         name: spec.name.clone(),
         spec_text: spec.text.clone(),
@@ -474,10 +523,7 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
         dimension,
         gravity,
         actuated,
-        home: f
-            .home
-            .as_ref()
-            .map_or_else(|| vec![0.0; f.links.len()], |h| h.get_ref().clone()),
+        home,
         springs,
         contacts,
         ground_normal,

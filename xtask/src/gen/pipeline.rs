@@ -93,7 +93,7 @@ const HOME_TOLERANCE: f64 = 1e-2;
 const ASSEMBLY_TOLERANCE: f64 = 1000.0 * f64::EPSILON;
 
 /// A home pose that does not assemble is a spec error at `home`.
-fn check_home(spec: &Spec, check: &HomeCheck) -> Result<(), String> {
+fn check_home(spec: &Spec, model: &Model, check: &HomeCheck) -> Result<(), String> {
     let (line, column, field) = match &spec.file.home {
         Some(h) => {
             let (l, c) = crate::gen::spec::line_column(&spec.text, h.span().start);
@@ -151,6 +151,7 @@ fn check_home(spec: &Spec, check: &HomeCheck) -> Result<(), String> {
         }
     }
     if let Some(j) = check.massless_joint {
+        let j = model.links[j].spec_link;
         let link = spec.file.links[j].get_ref();
         let (line, column) = crate::gen::spec::line_column(&spec.text, link.mass.span().start);
         return Err(crate::gen::spec::SpecError {
@@ -334,6 +335,13 @@ fn assemble(spec: &Spec, model: &Model, derived: Derived) -> IrFile {
             ground_normal: model.ground_normal,
             ground_offset: model.ground_offset,
             dimension: model.dimension,
+            ball_joints: model
+                .links
+                .iter()
+                .enumerate()
+                .filter(|(i, l)| l.massless && (*i == 0 || !model.links[i - 1].massless))
+                .map(|(i, _)| i)
+                .collect(),
         },
         functions,
     }
@@ -427,7 +435,7 @@ pub struct GenOptions {
 fn derive_spec(root: &Path, py: &Path, spec: &Spec) -> Result<(IrFile, String, String), Error> {
     let model = model::build(spec).map_err(|e| Error::Usage(e.to_string()))?;
     let mut derived = derive(root, py, &model).map_err(Error::Failed)?;
-    check_home(spec, &derived.home_check).map_err(Error::Usage)?;
+    check_home(spec, &model, &derived.home_check).map_err(Error::Usage)?;
     let h = &derived.home_check;
     let motors = model.actuated.len();
     let note = format!(

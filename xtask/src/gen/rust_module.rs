@@ -316,7 +316,14 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     let joints = info
         .joints
         .iter()
-        .map(|j| codegen::ident(&ctx, j).map(|_| j))
+        .map(|j| {
+            // A ball joint's angles are `<link>.x`, `.y`, `.z`: names a spec cannot choose.
+            let link = match j.rsplit_once('.') {
+                Some((link, "x" | "y" | "z")) => link,
+                _ => j,
+            };
+            codegen::ident(&ctx, link).map(|_| j)
+        })
         .collect::<Result<Vec<_>, _>>()?;
     let actuated = info.actuated.iter().map(|&a| lit(a));
     if info.home.len() != nq || !info.home.iter().all(|h| h.is_finite()) {
@@ -419,6 +426,21 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     let offset = codegen::f64_literal(info.ground_offset);
     let redundant = lit(info.redundant_rows.len());
     let mobility = lit(info.mobility);
+    // Only a leg with ball joints says so: the trait's default is none.
+    let ball_joints = if info.ball_joints.iter().any(|&b| b + 2 >= nq) {
+        return Err(Error {
+            context: ctx.clone(),
+            message: format!(
+                "ball joints {:?} beyond the {nq} coordinates",
+                info.ball_joints
+            ),
+        });
+    } else if info.ball_joints.is_empty() {
+        quote!()
+    } else {
+        let b = info.ball_joints.iter().map(|&b| lit(b));
+        quote!(const BALL_JOINTS: &'static [usize] = &[#(#b),*];)
+    };
     let chart_states = lit(2 * info.mobility);
     let chart_doc = format!(
         " The chart of the constraint manifold: {} coordinates (the mobility), {} states.",
@@ -659,6 +681,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             const HOME: [f64; NQ] = [#(#home),*];
             const REDUNDANT_ROWS: usize = #redundant;
             const MOBILITY: usize = #mobility;
+            #ball_joints
             type Params<T: Arithmetic> = Params<T>;
             #(#methods)*
         }

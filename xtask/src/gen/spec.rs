@@ -242,6 +242,20 @@ pub enum JointKind {
     Revolute,
     /// Slides by `q` (m) along `axis` (parent frame), keeping the parent's orientation.
     Prismatic,
+    /// Spatial legs: turns freely about its joint point, three coordinates (rad): the
+    /// angles `(α, β, γ)` of `R = R_x(α) R_y(β) R_z(γ)` in the link's frame (turned by
+    /// `orientation`), singular at `β = ±π/2` (docs/spec-format.md#ball-joints).
+    Ball,
+}
+
+impl JointKind {
+    /// How many coordinates of `q` the joint has.
+    pub fn coordinates(self) -> usize {
+        match self {
+            JointKind::Ball => 3,
+            _ => 1,
+        }
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -676,7 +690,11 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
         check_vec(ctx, &l.length, &f("length"), Sign::Any, dim)?;
         check_vec(ctx, &l.com, &f("com"), Sign::Any, dim)?;
         check_num(ctx, &l.mass, &f("mass"), Sign::NonNegative)?;
+        if l.kind() == JointKind::Ball {
+            check_ball(ctx, l, i, dim)?;
+        }
         match (l.kind(), &l.axis) {
+            (JointKind::Ball, _) => {}
             (JointKind::Prismatic, None) => {
                 let at = l.joint.as_ref().expect("prismatic is written");
                 return Err(ctx.span(
@@ -818,8 +836,24 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
         let f = |field: &str| format!("springs[{k}].{field}");
         check_new_name(&s.name, &f("name"))?;
         check_link(&s.a, f("a"))?;
+        let ball = |name: &Spanned<String>, field: String| -> Result<(), SpecError> {
+            let on_ball = file.links.iter().any(|l| {
+                let l = l.get_ref();
+                l.name.get_ref() == name.get_ref() && l.kind() == JointKind::Ball
+            });
+            if on_ball {
+                return Err(ctx.span(
+                    name,
+                    field,
+                    "a spring acts on one coordinate: a ball joint has three (put it on a revolute joint)",
+                ));
+            }
+            Ok(())
+        };
+        ball(&s.a, f("a"))?;
         if let Some(b) = &s.b {
             check_link(b, f("b"))?;
+            ball(b, f("b"))?;
             if b.get_ref() == s.a.get_ref() {
                 return Err(ctx.span(
                     b,
@@ -873,20 +907,64 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
     }
     if let Some(home) = &file.home {
         let h = home.get_ref();
-        if h.len() != file.links.len() {
+        let coordinates: usize = file
+            .links
+            .iter()
+            .map(|l| l.get_ref().kind().coordinates())
+            .sum();
+        if h.len() != coordinates {
+            let balls = file.links.len()
+                + 2 * file
+                    .links
+                    .iter()
+                    .filter(|l| l.get_ref().kind() == JointKind::Ball)
+                    .count();
+            let what = if balls > file.links.len() {
+                format!(
+                    "{coordinates} coordinates ({} links, three angles per ball joint)",
+                    file.links.len()
+                )
+            } else {
+                format!("{} links", file.links.len())
+            };
             return Err(ctx.span(
                 home,
                 "home",
-                format!(
-                    "lists {} joint values for {} links",
-                    h.len(),
-                    file.links.len()
-                ),
+                format!("lists {} joint values for {what}", h.len()),
             ));
         }
         for &v in h {
             check_value(v, Sign::Any).map_err(|m| ctx.span(home, "home", m))?;
         }
+    }
+    Ok(())
+}
+
+/// A ball joint: spatial legs only, with no axis (it turns about every axis), no motor
+/// (a motor drives one axis) and no spring (a spring acts on one coordinate).
+fn check_ball(ctx: &Ctx, l: &LinkSpec, i: usize, dim: usize) -> Result<(), SpecError> {
+    let f = |field: &str| format!("links[{i}].{field}");
+    let at = l.joint.as_ref().expect("ball is written");
+    if dim == 2 {
+        return Err(ctx.span(
+            at,
+            f("joint"),
+            "a ball joint turns about three axes: only a spatial leg (gravity [x, y, z]) has one",
+        ));
+    }
+    if let Some(axis) = &l.axis {
+        return Err(ctx.span(
+            axis,
+            f("axis"),
+            "a ball joint has no axis (it turns about every axis; turn its frame with `orientation`)",
+        ));
+    }
+    if let Some(a) = &l.actuator {
+        return Err(ctx.span(
+            a,
+            f("actuator"),
+            "a motor drives one axis: put it on a revolute joint, not on a ball joint",
+        ));
     }
     Ok(())
 }
