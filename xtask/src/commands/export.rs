@@ -507,13 +507,14 @@ fn load_model(root: &Path, name: &str) -> Result<model::Model, cli::Error> {
 /// `cargo xtask export`: writes `--out FILE` whole (or prints to standard output).
 pub fn run(root: &Path, a: ExportArgs) -> Result<(), cli::Error> {
     let m = load_model(root, &a.model)?;
-    if m.dimension != 2 {
+    if m.dimension != 2 && matches!(a.format, ExportFormat::Urdf) {
         return Err(cli::Error::Usage(format!(
-            "`{}` is a spatial leg: the MJCF and URDF exports are planar only for now",
+            "`{}` is a spatial leg: its export is MJCF only for now (`--format mjcf`); URDF is planar only",
             a.model
         )));
     }
     let text = match a.format {
+        ExportFormat::Mjcf if m.dimension == 3 => crate::commands::export_spatial::mjcf(&m),
         ExportFormat::Mjcf => mjcf(&m),
         ExportFormat::Urdf => urdf(&m),
     };

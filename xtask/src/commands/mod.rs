@@ -6,5 +6,6 @@
 //! May import: [`crate::gen`], [`crate::cli`].
 
 pub mod export;
+pub mod export_spatial;
 pub mod list;
 pub mod new;

@@ -70,6 +70,28 @@ fn cross_checks(root: &Path) -> Result<Vec<String>, String> {
             }
         }
     }
+    // Spatial legs: the MJCF in MuJoCo (mass matrix, bias forces, the connect rows and
+    // the foot, a ball joint mapped to MuJoCo's quaternion and angular velocity).
+    for name in crate::gen::spatial_model_names(root)? {
+        let spec = gen::load_spec(
+            root,
+            &root.join(gen::SPECS_DIR).join(format!("{name}.toml")),
+        )?;
+        let model = crate::gen::model::build(&spec).map_err(|e| e.to_string())?;
+        let mjcf = dir.join(format!("{name}.xml"));
+        crate::cli::write_atomic(&mjcf, &crate::commands::export_spatial::mjcf(&model))?;
+        let status = Command::new(&py)
+            .arg(root.join("xtask").join("mujoco_spatial_check.py"))
+            .arg(&legs)
+            .arg(&name)
+            .arg(&mjcf)
+            .current_dir(root)
+            .status()
+            .map_err(|e| format!("cannot run mujoco_spatial_check.py: {e}"))?;
+        if !status.success() {
+            failed.push(format!("MuJoCo disagrees with `{name}` (see above)"));
+        }
+    }
     Ok(failed)
 }
 

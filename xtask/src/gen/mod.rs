@@ -18,6 +18,7 @@ pub mod spec;
 
 pub use pipeline::{
     actuation_note, check_model, committed_ir, committed_irs, dry_run, load_spec, model_names,
-    planar_model_names, python, run, rust_files, spec_paths, stale_files, standalone,
-    workspace_root, GenOptions, CASADI_C_DIR, IR_DIR, REQUIREMENTS, SPECS_DIR, SRC_DIR, VENV_DIR,
+    planar_model_names, python, run, rust_files, spatial_model_names, spec_paths, stale_files,
+    standalone, workspace_root, GenOptions, CASADI_C_DIR, IR_DIR, REQUIREMENTS, SPECS_DIR, SRC_DIR,
+    VENV_DIR,
 };

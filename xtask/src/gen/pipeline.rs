@@ -689,10 +689,19 @@ pub fn model_names(root: &Path) -> Result<Vec<String>, String> {
 /// The planar legs among [`model_names`] (a spec whose gravity has two entries): what the
 /// exports, their cross-checks and the benchmarks take for now.
 pub fn planar_model_names(root: &Path) -> Result<Vec<String>, String> {
+    model_names_of_dimension(root, 2)
+}
+
+/// The spatial legs' names (their exports and cross-checks differ from the planar ones').
+pub fn spatial_model_names(root: &Path) -> Result<Vec<String>, String> {
+    model_names_of_dimension(root, 3)
+}
+
+fn model_names_of_dimension(root: &Path, dimension: usize) -> Result<Vec<String>, String> {
     let mut out = Vec::new();
     for (path, name) in spec_paths(root)?.iter().zip(model_names(root)?) {
         let spec = load_spec(root, path)?;
-        if spec.file.gravity.get_ref().value.len() == 2 {
+        if spec.file.gravity.get_ref().value.len() == dimension {
             out.push(name);
         }
     }

@@ -293,8 +293,20 @@ pub fn run<
             }
         }
     }
-    // A term that overflowed is said so by name, never left as a bare `null` (issue 29).
     let big = largest_input(q.as_slice(), qd.as_slice(), u.as_slice());
+    emit(out, errors, warnings, big, json_out);
+    Ok(())
+}
+
+/// Prints the terms (JSON or text), every term that overflowed said by name in `errors`.
+fn emit(
+    mut out: Map<String, Value>,
+    mut errors: Map<String, Value>,
+    warnings: Map<String, Value>,
+    big: f64,
+    json_out: bool,
+) {
+    // A term that overflowed is said so by name, never left as a bare `null` (issue 29).
     let keys: Vec<String> = out.keys().cloned().collect();
     for key in keys {
         // The error that already explains a term left out (several terms share one).
@@ -348,7 +360,6 @@ pub fn run<
             }
         }
     }
-    Ok(())
 }
 
 /// Coordinates read as a pose obey the rule every pose does ([`leg_models::check_pose`]):
@@ -363,4 +374,122 @@ fn pose(flag: &str, values: Vec<f64>) -> Result<Vec<f64>, Error> {
         ))
     })?;
     Ok(values)
+}
+
+/// `eval` of a spatial leg (`LegModel<…, 3>`): the terms at `--q`, `--qd`, `--u` (with
+/// `--project`, moved onto the closures first) and with `--derivatives` those of forward
+/// dynamics. Assembly from the motors' angles, contacts and the reduction to the motors
+/// are planar only for now: their flags are refused, naming why.
+pub fn run_spatial<
+    L: leg_models::LegModel<NQ, NC, NU, 3, NP>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NP: usize,
+>(
+    args: &EvalArgs,
+) -> Result<(), Error> {
+    for (given, flag) in [
+        (args.assemble, "--assemble"),
+        (args.guess.is_some(), "--guess"),
+        (args.impact.is_some(), "--impact"),
+    ] {
+        if given {
+            return Err(Error::usage(format!(
+                "{flag}: {} is a spatial leg, whose assembly from the motors' angles and contacts are planar only for now (give every coordinate with --q, and --project to put it on the closures)",
+                L::NAME
+            )));
+        }
+    }
+    let p = L::Params::<f64>::default();
+    let mut q = SVector::<f64, NQ>::from_column_slice(&pose(
+        "--q",
+        numbers(
+            "--q",
+            &args.q,
+            NQ,
+            "joint values (three angles per ball joint)",
+        )?,
+    )?);
+    let mut qd = match &args.qd {
+        Some(t) => SVector::from_column_slice(&numbers("--qd", t, NQ, "joint rates")?),
+        None => SVector::zeros(),
+    };
+    if args.project {
+        project_position::<L, f64, NQ, NC, NU>(&p, &mut q, &Tolerance::default())
+            .map_err(|e| Error::usage(format!("cannot project --q onto the closures: {e}")))?;
+        project_velocity::<L, f64, NQ, NC, NU>(&p, &q, &mut qd)
+            .map_err(|e| Error::usage(format!("cannot project --qd onto the closures: {e}")))?;
+    }
+    let u = match &args.u {
+        Some(t) => SVector::<f64, NU>::from_column_slice(&numbers("--u", t, NU, "motor torques")?),
+        None => SVector::zeros(),
+    };
+    let terms = L::dynamics_terms(&q, &qd, &p);
+    let (mut out, mut errors, mut warnings) = (Map::new(), Map::new(), Map::new());
+    out.insert("model".into(), json!(L::NAME));
+    out.insert("joints".into(), json!(L::JOINT_NAMES.to_vec()));
+    out.insert("ball_joints".into(), json!(L::BALL_JOINTS));
+    out.insert("q".into(), vector(&q));
+    out.insert("qd".into(), vector(&qd));
+    out.insert("u".into(), vector(&u));
+    out.insert("M".into(), matrix(&terms.mass_matrix));
+    out.insert("N".into(), vector(&terms.bias_forces));
+    out.insert("G".into(), vector(&L::gravity_forces(&q, &p)));
+    out.insert("J".into(), matrix(&terms.constraint_jacobian));
+    out.insert("Jdot_qdot".into(), vector(&terms.constraint_bias));
+    match forward_dynamics::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None) {
+        Ok(a) => {
+            out.insert("qdd".into(), vector(&a.qdd));
+            out.insert("F".into(), vector(&a.forces));
+        }
+        Err(e) => {
+            out.insert("qdd".into(), Value::Null);
+            out.insert("F".into(), Value::Null);
+            errors.insert("qdd".into(), json!(e.explained(&q, &qd, &u).to_string()));
+        }
+    }
+    if args.derivatives {
+        let names = ["dqdd_dq", "dqdd_dqd", "dqdd_du", "dF_dq", "dF_dqd", "dF_du"];
+        match forward_dynamics_derivatives::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None) {
+            Ok(d) => {
+                let values = [
+                    matrix(&d.qdd_q),
+                    matrix(&d.qdd_qd),
+                    matrix(&d.qdd_u),
+                    matrix(&d.forces_q),
+                    matrix(&d.forces_qd),
+                    matrix(&d.forces_u),
+                ];
+                for (name, value) in names.into_iter().zip(values) {
+                    out.insert(name.into(), value);
+                }
+            }
+            Err(e) => {
+                for name in names {
+                    out.insert(name.into(), Value::Null);
+                }
+                errors.insert("derivatives".into(), json!(e.to_string()));
+            }
+        }
+    }
+    out.insert("foot".into(), vector(&L::foot_position(&q, &p)));
+    out.insert("foot_jacobian".into(), matrix(&L::foot_jacobian(&q, &p)));
+    out.insert("kinetic".into(), json!(L::kinetic_energy(&q, &qd, &p)));
+    out.insert("potential".into(), json!(L::potential_energy(&q, &p)));
+    let phi = L::closure_residual(&q, &p);
+    out.insert("phi".into(), vector(&phi));
+    let size = leg_models::assembly::leg_size::<L, f64, NQ, NC, NU>(&p, &q);
+    if NC > 0 && phi.amax() > 1e-9 * size.max(1e-300) {
+        warnings.insert(
+            "phi".into(),
+            json!(format!(
+                "the state is off the closures by {:.3e} m (phi): the terms are of a pose the leg cannot take; --project puts it on them",
+                phi.amax()
+            )),
+        );
+    }
+    let big = largest_input(q.as_slice(), qd.as_slice(), u.as_slice());
+    emit(out, errors, warnings, big, args.json);
+    Ok(())
 }

@@ -42,7 +42,7 @@ fn unknown(name: &str) -> Error {
     generated::for_each_spatial_model!(is_spatial);
     if spatial {
         return Error::usage(format!(
-            "`{name}` is a spatial leg: `sim`, `eval` and `analyze` take planar legs only for now (its terms are in the `generated` crate, `LegModel<NQ, NC, NU, 3>`)"
+            "`{name}` is a spatial leg: `sim` and `analyze` take planar legs only for now (`eval` takes it; its terms are in the `generated` crate, `LegModel<NQ, NC, NU, 3>`)"
         ));
     }
     let spec = xtask::gen::workspace_root()
@@ -69,6 +69,14 @@ fn eval(args: EvalArgs) -> Result<(), Error> {
         };
     }
     generated::for_each_model!(dispatch);
+    macro_rules! spatial {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+            if args.model == stringify!($module) {
+                return eval::run_spatial::<$ty, $nq, $nc, $nu, { 2 * $nc / 3 }>(&args);
+            }
+        };
+    }
+    generated::for_each_spatial_model!(spatial);
     Err(unknown(&args.model))
 }
 

@@ -1,0 +1,336 @@
+//! Export a spatial leg to MuJoCo (MJCF), from its spec.
+//!
+//! Each spec link is a body placed by its `origin` and `orientation` (the body's `pos` and
+//! `quat`) in its parent's; a revolute joint is a `hinge` and a prismatic one a `slide`
+//! about the link's `axis` (body frame), so `qpos` (by joint name) is `q`. A ball joint is
+//! one MuJoCo `ball` joint named for its link: its `qpos` is the unit quaternion of
+//! `R_x(α) R_y(β) R_z(γ)` and its `qvel` the angular velocity in the link's frame,
+//! `ω = E(β, γ) (α̇, β̇, γ̇)` with `E`'s columns `R_z(γ)ᵀ R_y(β)ᵀ x̂`, `R_z(γ)ᵀ ŷ`, `ẑ`
+//! (see [`ball_rate_map`]). Inertias are written whole (`fullinertia`, the spec's order);
+//! reflected rotor inertia `I·N²` is the joint's `armature`; a spring on one joint its
+//! `stiffness` about `springref`, a coupling spring a fixed tendon; closures are
+//! `<connect>`s between two sites (`<closure>.a`, `<closure>.b`), so MuJoCo's rule for a
+//! second anchor from `qpos0` never applies; the foot is the site `foot.point`. Contact
+//! stays disabled (a spatial leg has no contacts yet).
+
+use std::fmt::Write;
+
+use crate::commands::export::added;
+use crate::gen::model::{Inertia, Model, Param, Point};
+
+fn num(v: f64) -> String {
+    format!("{v:?}")
+}
+
+fn value(params: &[Param], name: &str) -> f64 {
+    params
+        .iter()
+        .find(|p| p.name == name)
+        .map(|p| p.default)
+        .expect("every quantity of a model is one of its parameters")
+}
+
+fn triple(m: &Model, names: &[String]) -> String {
+    if names.is_empty() {
+        return "0 0 0".into();
+    }
+    names
+        .iter()
+        .map(|n| num(value(&m.params, n)))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// The unit quaternion `[w, x, y, z]` of a rotation matrix (Shepperd's method).
+pub fn quaternion(r: &[[f64; 3]; 3]) -> [f64; 4] {
+    let t = r[0][0] + r[1][1] + r[2][2];
+    let q = if t > 0.0 {
+        let s = (t + 1.0).sqrt() * 2.0;
+        [
+            0.25 * s,
+            (r[2][1] - r[1][2]) / s,
+            (r[0][2] - r[2][0]) / s,
+            (r[1][0] - r[0][1]) / s,
+        ]
+    } else if r[0][0] > r[1][1] && r[0][0] > r[2][2] {
+        let s = (1.0 + r[0][0] - r[1][1] - r[2][2]).sqrt() * 2.0;
+        [
+            (r[2][1] - r[1][2]) / s,
+            0.25 * s,
+            (r[0][1] + r[1][0]) / s,
+            (r[0][2] + r[2][0]) / s,
+        ]
+    } else if r[1][1] > r[2][2] {
+        let s = (1.0 + r[1][1] - r[0][0] - r[2][2]).sqrt() * 2.0;
+        [
+            (r[0][2] - r[2][0]) / s,
+            (r[0][1] + r[1][0]) / s,
+            0.25 * s,
+            (r[1][2] + r[2][1]) / s,
+        ]
+    } else {
+        let s = (1.0 + r[2][2] - r[0][0] - r[1][1]).sqrt() * 2.0;
+        [
+            (r[1][0] - r[0][1]) / s,
+            (r[0][2] + r[2][0]) / s,
+            (r[1][2] + r[2][1]) / s,
+            0.25 * s,
+        ]
+    };
+    let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+    q.map(|x| x / n)
+}
+
+/// The quaternion of a ball joint's angles: `q_x(α) ⊗ q_y(β) ⊗ q_z(γ)`.
+pub fn ball_quaternion(alpha: f64, beta: f64, gamma: f64) -> [f64; 4] {
+    let mul = |a: [f64; 4], b: [f64; 4]| {
+        [
+            a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+            a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+            a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+            a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0],
+        ]
+    };
+    let (sa, ca) = (alpha / 2.0).sin_cos();
+    let (sb, cb) = (beta / 2.0).sin_cos();
+    let (sg, cg) = (gamma / 2.0).sin_cos();
+    mul(
+        mul([ca, sa, 0.0, 0.0], [cb, 0.0, sb, 0.0]),
+        [cg, 0.0, 0.0, sg],
+    )
+}
+
+/// `E(β, γ)` (rows), `ω = E (α̇, β̇, γ̇)` in the link's frame: columns `R_z(γ)ᵀ R_y(β)ᵀ x̂`,
+/// `R_z(γ)ᵀ ŷ` and `ẑ`.
+pub fn ball_rate_map(beta: f64, gamma: f64) -> [[f64; 3]; 3] {
+    let (sb, cb) = beta.sin_cos();
+    let (sg, cg) = gamma.sin_cos();
+    [[cb * cg, sg, 0.0], [-cb * sg, cg, 0.0], [sb, 0.0, 1.0]]
+}
+
+/// The joint of MuJoCo's that coordinate `i` belongs to: a ball joint's three angles are
+/// one joint named for its link.
+pub fn joint_name(m: &Model, i: usize) -> String {
+    let name = &m.links[i].name;
+    match name.rsplit_once('.') {
+        Some((link, "x" | "y" | "z")) if m.links[i].massless || link_is_ball_body(m, i) => {
+            link.to_string()
+        }
+        _ => name.clone(),
+    }
+}
+
+fn link_is_ball_body(m: &Model, i: usize) -> bool {
+    m.links[i].parent.is_some_and(|p| m.links[p].massless)
+}
+
+/// The bodies: spec links, i.e. coordinates that carry a link (not a ball's inner frames).
+fn bodies_under(m: &Model, parent: Option<usize>) -> Vec<usize> {
+    (0..m.links.len())
+        .filter(|&i| !m.links[i].massless && body_parent(m, i) == parent)
+        .collect()
+}
+
+/// The body a body hangs from (through a ball joint's inner frames).
+fn body_parent(m: &Model, i: usize) -> Option<usize> {
+    let mut p = m.links[i].parent;
+    while let Some(k) = p {
+        if !m.links[k].massless {
+            return Some(k);
+        }
+        p = m.links[k].parent;
+    }
+    None
+}
+
+/// The coordinate where a body's joint starts (a ball joint's `.x`).
+fn first_coordinate(m: &Model, i: usize) -> usize {
+    if link_is_ball_body(m, i) {
+        i - 2
+    } else {
+        i
+    }
+}
+
+fn sites(m: &Model, body: Option<usize>, pad: &str, out: &mut String) {
+    let site = |out: &mut String, name: &str, p: &Point| {
+        let _ = writeln!(
+            out,
+            "{pad}<site name=\"{name}\" pos=\"{}\"/>",
+            triple(m, &p.point)
+        );
+    };
+    for c in &m.closures {
+        for (side, p) in [("a", &c.a), ("b", &c.b)] {
+            if p.link == body {
+                site(out, &added::closure_point(&c.name, side), p);
+            }
+        }
+    }
+    if m.foot.link == body {
+        site(out, added::FOOT, &m.foot);
+    }
+}
+
+fn body(m: &Model, i: usize, depth: usize, out: &mut String) {
+    let pad = "  ".repeat(depth);
+    let first = first_coordinate(m, i);
+    let placed = &m.links[first];
+    let l = &m.links[i];
+    let quat = placed.orientation.as_ref().map_or(String::new(), |r| {
+        let q = quaternion(r);
+        format!(" quat=\"{}\"", q.map(num).join(" "))
+    });
+    let name = joint_name(m, i);
+    let _ = writeln!(
+        out,
+        "{pad}<body name=\"{name}\" pos=\"{}\"{quat}>",
+        triple(m, &placed.origin)
+    );
+    let damping = num(value(&m.params, &l.damping));
+    let armature = l.rotor.as_ref().map_or(0.0, |r| {
+        let (ir, n) = (value(&m.params, &r[0]), value(&m.params, &r[1]));
+        ir * n * n
+    });
+    if first != i {
+        let _ = writeln!(
+            out,
+            "{pad}  <joint name=\"{name}\" type=\"ball\" damping=\"{damping}\"/>"
+        );
+    } else {
+        let kind = if l.joint == "prismatic" {
+            "slide"
+        } else {
+            "hinge"
+        };
+        let axis = l.axis.as_ref().expect("a spatial joint has its axis");
+        let spring =
+            m.springs
+                .iter()
+                .find(|s| s.a == i && s.b.is_none())
+                .map_or(String::new(), |s| {
+                    format!(
+                        " stiffness=\"{}\" springref=\"{}\"",
+                        num(value(&m.params, &s.stiffness)),
+                        num(value(&m.params, &s.rest))
+                    )
+                });
+        let _ = writeln!(
+            out,
+            "{pad}  <joint name=\"{name}\" type=\"{kind}\" axis=\"{}\" damping=\"{damping}\" armature=\"{}\"{spring}/>",
+            axis.iter().map(|&a| num(a)).collect::<Vec<_>>().join(" "),
+            num(armature)
+        );
+    }
+    let Inertia::Spatial(entries) = &l.inertia else {
+        unreachable!("a spatial link's inertia is a tensor")
+    };
+    let tensor: Vec<String> = entries
+        .iter()
+        .map(|e| num(e.as_ref().map_or(0.0, |n| value(&m.params, n))))
+        .collect();
+    let _ = writeln!(
+        out,
+        "{pad}  <inertial pos=\"{}\" mass=\"{}\" fullinertia=\"{}\"/>",
+        triple(m, &l.com),
+        num(value(&m.params, &l.mass)),
+        tensor.join(" ")
+    );
+    let _ = writeln!(
+        out,
+        "{pad}  <geom type=\"capsule\" fromto=\"0 0 0 {}\" size=\"0.006\" contype=\"0\" conaffinity=\"0\" mass=\"0\"/>",
+        triple(m, &l.length)
+    );
+    sites(m, Some(i), &format!("{pad}  "), out);
+    for c in bodies_under(m, Some(i)) {
+        body(m, c, depth + 1, out);
+    }
+    let _ = writeln!(out, "{pad}</body>");
+}
+
+/// The spatial model as MJCF.
+pub fn mjcf(m: &Model) -> String {
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "<!-- {}: exported from its spec by `cargo xtask export {}`, format mjcf. -->",
+        m.name, m.name
+    );
+    let _ = writeln!(out, "<mujoco model=\"{}\">", m.name);
+    let _ = writeln!(out, "  <compiler angle=\"radian\" autolimits=\"true\"/>");
+    let _ = writeln!(
+        out,
+        "  <option gravity=\"{}\" timestep=\"0.001\" integrator=\"RK4\">\n    <flag contact=\"disable\"/>\n  </option>",
+        triple(m, &m.gravity)
+    );
+    let _ = writeln!(out, "  <worldbody>");
+    sites(m, None, "    ", &mut out);
+    for i in bodies_under(m, None) {
+        body(m, i, 2, &mut out);
+    }
+    let _ = writeln!(out, "  </worldbody>");
+    if !m.closures.is_empty() {
+        let _ = writeln!(out, "  <equality>");
+        for c in &m.closures {
+            let _ = writeln!(
+                out,
+                "    <connect name=\"{}\" site1=\"{}\" site2=\"{}\" solref=\"0.002 1\" solimp=\"0.95 0.99 0.001\"/>",
+                c.name,
+                added::closure_point(&c.name, "a"),
+                added::closure_point(&c.name, "b")
+            );
+        }
+        let _ = writeln!(out, "  </equality>");
+    }
+    let couplings: Vec<_> = m.springs.iter().filter(|s| s.b.is_some()).collect();
+    if !couplings.is_empty() {
+        let _ = writeln!(out, "  <tendon>");
+        for s in couplings {
+            let b = s.b.expect("a coupling");
+            let _ = writeln!(
+                out,
+                "    <fixed name=\"{}\" stiffness=\"{}\" springlength=\"{}\">\n      <joint joint=\"{}\" coef=\"1\"/>\n      <joint joint=\"{}\" coef=\"-1\"/>\n    </fixed>",
+                s.name,
+                num(value(&m.params, &s.stiffness)),
+                num(value(&m.params, &s.rest)),
+                m.links[s.a].name,
+                m.links[b].name
+            );
+        }
+        let _ = writeln!(out, "  </tendon>");
+    }
+    // The home pose as a keyframe, qpos in MuJoCo's order (bodies depth first; a ball
+    // joint's quaternion).
+    fn depth_first(m: &Model, i: usize, qpos: &mut Vec<String>) {
+        let first = first_coordinate(m, i);
+        if first != i {
+            let h = &m.home;
+            qpos.extend(ball_quaternion(h[first], h[first + 1], h[i]).map(num));
+        } else {
+            qpos.push(num(m.home[i]));
+        }
+        for c in bodies_under(m, Some(i)) {
+            depth_first(m, c, qpos);
+        }
+    }
+    let mut qpos = Vec::new();
+    for i in bodies_under(m, None) {
+        depth_first(m, i, &mut qpos);
+    }
+    let _ = writeln!(
+        out,
+        "  <keyframe>\n    <key name=\"home\" qpos=\"{}\"/>\n  </keyframe>",
+        qpos.join(" ")
+    );
+    let _ = writeln!(out, "  <actuator>");
+    for &a in &m.actuated {
+        let _ = writeln!(
+            out,
+            "    <motor name=\"{0}\" joint=\"{0}\" gear=\"1\"/>",
+            m.links[a].name
+        );
+    }
+    let _ = writeln!(out, "  </actuator>");
+    let _ = writeln!(out, "</mujoco>");
+    out
+}
