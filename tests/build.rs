@@ -29,18 +29,32 @@ mod peers {
             println!("cargo:rerun-if-changed={}", f.display());
             build.file(f);
             let name = f.file_stem().unwrap().to_str().unwrap();
-            for what in [
-                "dynamics_terms",
-                "forward_dynamics",
-                "closed_dynamics_terms",
-                "closed_forward_dynamics",
-                "closed_forward_dynamics_derivatives",
-            ] {
-                let _ = writeln!(decls, "    fn {name}_{what}(arg: *const *const f64, res: *const *mut f64, iw: *mut i64, w: *mut f64, mem: i32) -> i32;");
-            }
+            let text = std::fs::read_to_string(f).unwrap();
+            // A spatial leg's file has the fused terms only (derive.py says why).
+            let has = |what: &str| text.contains(&format!("int {name}_{what}("));
+            let mut declared = |what: &str| -> String {
+                if has(what) {
+                    let _ = writeln!(decls, "    fn {name}_{what}(arg: *const *const f64, res: *const *mut f64, iw: *mut i64, w: *mut f64, mem: i32) -> i32;");
+                    format!("Some({name}_{what})")
+                } else {
+                    "None".to_string()
+                }
+            };
+            let terms = declared("dynamics_terms");
+            let forward = declared("forward_dynamics");
+            let closed_terms = declared("closed_dynamics_terms");
+            let closed_forward = declared("closed_forward_dynamics");
+            let derivatives = declared("closed_forward_dynamics_derivatives");
+            let strip = |s: &str| {
+                s.trim_start_matches("Some(")
+                    .trim_end_matches(')')
+                    .to_string()
+            };
             let _ = writeln!(
                 table,
-                "    (\"{name}\", Peers {{ lagrange: Pair {{ terms: {name}_dynamics_terms, forward_dynamics: {name}_forward_dynamics }}, closed: Pair {{ terms: {name}_closed_dynamics_terms, forward_dynamics: {name}_closed_forward_dynamics }}, derivatives: {name}_closed_forward_dynamics_derivatives }}),"
+                "    (\"{name}\", Peers {{ lagrange: Pair {{ terms: {}, forward_dynamics: {forward} }}, closed: Pair {{ terms: {}, forward_dynamics: {closed_forward} }}, derivatives: {derivatives} }}),",
+                strip(&terms),
+                strip(&closed_terms)
             );
         }
         decls.push_str("}\n");

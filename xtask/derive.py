@@ -767,9 +767,16 @@ def casadi_c(model, peer, redundant_rows):
         ("", peer["M"], peer["N"], peer["J_lagrange"], peer["Jdot_qd_lagrange"]),
         ("closed_", peer["M_closed"], peer["N_closed"], peer["J"], peer["Jdot_qd"]),
     ]
+    # A spatial leg's KKT system solved symbolically by CasADi (and its `jacobian`) is
+    # hundreds of thousands of lines of C that take minutes to compile at -O3, a form no
+    # CasADi user would pick for a leg of that size: its peers are the fused terms only.
+    spatial = model.get("dimension", 2) == 3
     for prefix, M, N, J, Jdot_qd in forms:
         Jk, Jdot_qd_k = J[keep, :], Jdot_qd[keep]
         fused = cs.Function(f"{name}_{prefix}dynamics_terms", [q, qd, p], dense([M, N, J, Jdot_qd]))
+        if spatial:
+            cg.add(fused)
+            continue
         if keep:
             A = cs.blockcat([[M, -Jk.T], [Jk, cs.SX(len(keep), len(keep))]])
             b = cs.vertcat(cs.mtimes(B, u) - N - D, -Jdot_qd_k)

@@ -2,8 +2,12 @@
 
 usage: python mujoco_spatial_check.py LEGS_BINARY MODEL MJCF_FILE
 
-At random states near home, put on the closures by `legs eval --project`, compares with
-MuJoCo on the exported MJCF (`cargo xtask export MODEL --format mjcf`):
+MJCF_FILE is the leg exported (`cargo xtask export MODEL --format mjcf`) or the file it
+was imported from (`cargo xtask import`): joints are matched by name through the
+importer's rule (lower case, every other character `_`), a free joint is held at its pose
+as written (`--fix-base`), and MuJoCo's equalities and joints that reach outside the leg
+(`--root`) are left out. At random states near home, put on the closures by
+`legs eval --project`, it compares:
 
 - the mass matrix: ours is `Tᵀ M_mj T`, T mapping our rates to MuJoCo's velocities
   (the identity on a hinge or slide; on a ball joint, whose qpos is the quaternion of
@@ -56,23 +60,64 @@ def rate_map(b, g):
     return E, Eb, Eg
 
 
+def identifier(name):
+    """The importer's rule for names (xtask/src/commands/import/mod.rs, `identifier`)."""
+    out = "".join(c.lower() if c.isascii() and c.isalnum() else "_" for c in name)
+    if not (out[:1].isascii() and out[:1].islower()):
+        out = "n_" + out
+    return out
+
+
 class Map:
     """Our coordinates to MuJoCo's, by joint name."""
 
     def __init__(self, m, t):
         self.m, self.joints, self.balls = m, t["joints"], set(t["ball_joints"])
         self.n = len(self.joints)
+        self.by_name = {}
+        for i in range(m.njnt):
+            j = m.joint(i)
+            self.by_name[j.name] = j
+            self.by_name.setdefault(identifier(j.name), j)
 
     def groups(self):
         """(our first coordinate, count, MuJoCo joint)."""
         i = 0
         while i < self.n:
             if i in self.balls:
-                yield i, 3, self.m.joint(self.joints[i].rsplit(".", 1)[0])
+                yield i, 3, self.by_name[self.joints[i].rsplit(".", 1)[0]]
                 i += 3
             else:
-                yield i, 1, self.m.joint(self.joints[i])
+                yield i, 1, self.by_name[self.joints[i]]
                 i += 1
+
+    def dofs(self):
+        """MuJoCo's velocity coordinates of our joints."""
+        out = []
+        for _, k, j in self.groups():
+            out.extend(range(j.dofadr[0], j.dofadr[0] + k))
+        return out
+
+    def base_body(self):
+        held = [i for i in range(self.m.njnt) if self.m.jnt_type[i] == mujoco.mjtJoint.mjJNT_FREE]
+        return self.m.jnt_bodyid[held[0]] if held else None
+
+    def base_rotation(self, d):
+        """The base frame in the world: a held free body's, else the world's."""
+        b = self.base_body()
+        return np.eye(3) if b is None else np.array(d.xmat[b]).reshape(3, 3)
+
+    def base_position(self, d):
+        b = self.base_body()
+        return np.zeros(3) if b is None else np.array(d.xpos[b])
+
+    def held(self):
+        """MuJoCo's free joints (held at their pose as written): their qpos and dof addresses."""
+        return [
+            (self.m.jnt_qposadr[i], self.m.jnt_dofadr[i])
+            for i in range(self.m.njnt)
+            if self.m.jnt_type[i] == mujoco.mjtJoint.mjJNT_FREE
+        ]
 
     def state(self, d, q, qd):
         """Sets MuJoCo's qpos, qvel; returns T and Ṫ q̇."""
@@ -119,30 +164,61 @@ def main():
         t = ours(legs, name, q, qd, project=True)
         mp = Map(m, t)
         q, qd = np.array(t["q"]), np.array(t["qd"])
+        mujoco.mj_resetData(m, d)  # qpos0: a free joint at its pose as written, at rest
         T, Tdot_qd = mp.state(d, q, qd)
         mujoco.mj_forward(m, d)
         full = np.zeros((m.nv, m.nv))
         mujoco.mj_fullM(m, d, full)
+        dofs = mp.dofs()
+        other = [v for v in range(m.nv) if v not in dofs and not any(a <= v < a + 6 for _, a in mp.held())]
+        T = T[dofs]
+        Tdot_qd = Tdot_qd[dofs]
+        base = mp.base_rotation(d)
+        full_l = full[np.ix_(dofs, dofs)]
+        bias = (d.qfrc_bias - d.qfrc_spring)[dofs]
         checks = [
-            ("M", t["M"], T.T @ full @ T),
-            ("N", t["N"], T.T @ (d.qfrc_bias - d.qfrc_spring + full @ Tdot_qd)),
-            ("foot", t["foot"], d.site("foot.point").xpos),
+            ("M", t["M"], T.T @ full_l @ T),
+            ("N", t["N"], T.T @ (bias + full_l @ Tdot_qd)),
         ]
-        rows = len(t["phi"])
-        if rows:
-            # MuJoCo's connect rows come first among its constraints.
-            efc = np.array(d.efc_J).reshape(d.nefc, m.nv)[:rows]
-            checks.append(("J", t["J"], efc @ T))
+        if "foot.point" in [m.site(i).name for i in range(m.nsite)]:
+            checks.append(("foot", t["foot"], base.T @ (d.site("foot.point").xpos - mp.base_position(d))))
+        if len(t["phi"]):
+            # MuJoCo's connect rows (3 each, in order, world frame), less those that reach
+            # a joint outside the leg, turned into the base's frame (a held free body's).
+            efc = np.array(d.efc_J).reshape(d.nefc, m.nv)
+            rows = []
+            for e in range(m.neq):
+                r = [k for k in range(d.nefc) if d.efc_type[k] == mujoco.mjtConstraint.mjCNSTR_EQUALITY and d.efc_id[k] == e]
+                if len(r) == 3 and not np.any(efc[r][:, other]):
+                    rows.append(base.T @ efc[r][:, dofs] @ T)
+            checks.append(("J", t["J"], np.vstack(rows) if rows else np.zeros((0, len(dofs)))))
         for key, a, b in checks:
             worst[key] = max(worst.get(key, 0.0), close(f"#{trial} {key}", a, b, failures))
-    # MuJoCo's own run from home, motors off: the gap its soft loops leave after 1 s.
+    # MuJoCo's own run from home, motors off, free joints held: the gap its soft loops
+    # leave after 1 s.
     t = ours(legs, name, home, np.zeros_like(home), project=True)
-    Map(m, t).state(d, np.array(t["q"]), np.zeros_like(home))
+    mujoco.mj_resetData(m, d)
+    mp = Map(m, t)
+    mp.state(d, np.array(t["q"]), np.zeros_like(home))
+    held = [(a, v, d.qpos[a : a + 7].copy()) for a, v in mp.held()]
     mujoco.mj_forward(m, d)
-    sites = [(m.site(f"{m.equality(i).name}.a").id, m.site(f"{m.equality(i).name}.b").id) for i in range(m.neq)]
+    sites = []
+    for i in range(m.neq):
+        if m.eq_type[i] != mujoco.mjtEq.mjEQ_CONNECT:
+            continue
+        sites.append(i)
     for _ in range(int(round(1.0 / m.opt.timestep))):
         mujoco.mj_step(m, d)
-    gap = max((float(np.linalg.norm(d.site_xpos[a] - d.site_xpos[b])) for a, b in sites), default=0.0)
+        for a, v, pose in held:
+            d.qpos[a : a + 7] = pose
+            d.qvel[v : v + 6] = 0.0
+    mujoco.mj_forward(m, d)
+    efc_pos = np.array(d.efc_pos)
+    gaps = [
+        float(np.linalg.norm([efc_pos[k] for k in range(d.nefc) if d.efc_type[k] == mujoco.mjtConstraint.mjCNSTR_EQUALITY and d.efc_id[k] == e]))
+        for e in range(m.neq)
+    ]
+    gap = max(gaps, default=0.0)
     if not gap <= CLOSURE_TOL:
         failures.append(f"MuJoCo's loops opened {gap:.2e} m in 1 s")
     if failures:
@@ -151,7 +227,7 @@ def main():
     figures = ", ".join(f"{k} {v:.1e}" for k, v in worst.items())
     ours_gap = float(np.abs(t["phi"]).max(initial=0.0))
     print(
-        f"{name}: MuJoCo agrees at {STATES} assembled states (worst relative difference: {figures}); "
+        f"{name}: MuJoCo agrees on {pathlib.Path(mjcf).name} at {STATES} assembled states (worst relative difference: {figures}); "
         f"loop gap after 1 s passive from home: MuJoCo {gap:.2e} m, ours at its start {ours_gap:.1e} m"
     )
 

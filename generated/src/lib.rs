@@ -6,6 +6,8 @@
 #![cfg_attr(rustfmt, rustfmt::skip)]
 pub mod abducted_five_bar;
 pub use abducted_five_bar::AbductedFiveBar;
+pub mod achilles_leg;
+pub use achilles_leg::AchillesLeg;
 pub mod atrias;
 pub use atrias::Atrias;
 pub mod atrias_hopper;
@@ -72,6 +74,7 @@ macro_rules! for_each_model {
 macro_rules! for_each_spatial_model {
     ($callback:ident) => {
         $callback ! (abducted_five_bar, $crate::abducted_five_bar::AbductedFiveBar, 5, 3,
-        3); $callback ! (rssr_linkage, $crate::rssr_linkage::RssrLinkage, 5, 3, 1);
+        3); $callback ! (achilles_leg, $crate::achilles_leg::AchillesLeg, 10, 6, 4);
+        $callback ! (rssr_linkage, $crate::rssr_linkage::RssrLinkage, 5, 3, 1);
     };
 }

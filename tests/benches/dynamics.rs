@@ -90,7 +90,8 @@ fn bench_model<
         });
         let (mut qdd, mut f) = (vec![0.0; NQ], vec![0.0; NC]);
         let fd = casadi::Prepared::new(
-            pair.forward_dynamics,
+            pair.forward_dynamics
+                .expect("a planar leg has CasADi's forward dynamics"),
             &[q.as_slice(), qd.as_slice(), u.as_slice(), &pv],
             &mut [&mut qdd, &mut f],
         );
@@ -119,7 +120,9 @@ fn bench_model<
         let mut outs: Vec<Vec<f64>> = sizes.iter().map(|&k| vec![0.0; k]).collect();
         let mut refs: Vec<&mut Vec<f64>> = outs.iter_mut().collect();
         let jac = casadi::Prepared::new(
-            peers.derivatives,
+            peers
+                .derivatives
+                .expect("a planar leg has CasADi's derivatives"),
             &[q.as_slice(), qd.as_slice(), u.as_slice(), &pv],
             &mut refs,
         );

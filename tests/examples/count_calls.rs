@@ -175,7 +175,8 @@ fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usiz
                     &mut [&mut first, &mut second, &mut third, &mut fourth],
                 ),
                 "forward_dynamics" => Prepared::new(
-                    pair.forward_dynamics,
+                    pair.forward_dynamics
+                        .expect("a planar leg has CasADi's forward dynamics"),
                     &[q.as_slice(), qd.as_slice(), u.as_slice(), &pv],
                     &mut [&mut first, &mut fourth],
                 ),
@@ -189,7 +190,9 @@ fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usiz
                         unreachable!()
                     };
                     let prepared = Prepared::new(
-                        peers.derivatives,
+                        peers
+                            .derivatives
+                            .expect("a planar leg has CasADi's derivatives"),
                         &[q.as_slice(), qd.as_slice(), u.as_slice(), &pv],
                         &mut [a, b, &mut first, d, e, f, g, h],
                     );

@@ -244,11 +244,12 @@ pub mod casadi {
     pub type CasadiFn =
         unsafe extern "C" fn(*const *const f64, *const *mut f64, *mut i64, *mut f64, i32) -> i32;
 
-    /// One derivation's fused terms (M, N, J, J̇q̇) and forward dynamics (q̈, F).
+    /// One derivation's fused terms (M, N, J, J̇q̇) and forward dynamics (q̈, F; `None` on a
+    /// spatial leg, whose symbolic KKT solve is too large a C file to compile).
     #[derive(Clone, Copy)]
     pub struct Pair {
         pub terms: CasadiFn,
-        pub forward_dynamics: CasadiFn,
+        pub forward_dynamics: Option<CasadiFn>,
     }
 
     /// CasADi's C of the notes' Lagrange derivation and of the closed form ours uses.
@@ -257,8 +258,9 @@ pub mod casadi {
         pub lagrange: Pair,
         pub closed: Pair,
         /// CasADi's `jacobian` of the closed form's forward dynamics: outputs q̈, F,
-        /// ∂q̈/∂q, ∂q̈/∂q̇, ∂q̈/∂u, ∂F/∂q, ∂F/∂q̇, ∂F/∂u (dense, column-major).
-        pub derivatives: CasadiFn,
+        /// ∂q̈/∂q, ∂q̈/∂q̇, ∂q̈/∂u, ∂F/∂q, ∂F/∂q̇, ∂F/∂u (dense, column-major); `None` on a
+        /// spatial leg.
+        pub derivatives: Option<CasadiFn>,
     }
 
     include!(concat!(env!("OUT_DIR"), "/casadi_peers.rs"));

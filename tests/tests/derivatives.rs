@@ -763,7 +763,9 @@ mod casadi_jacobian {
             {
                 let mut refs: Vec<&mut Vec<f64>> = out.iter_mut().collect();
                 let call = Prepared::new(
-                    functions(L::NAME).derivatives,
+                    functions(L::NAME)
+                        .derivatives
+                        .expect("a planar leg has CasADi's derivatives"),
                     &[&q, &qd, &uu, &pv],
                     &mut refs,
                 );

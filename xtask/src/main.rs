@@ -25,6 +25,7 @@ fn main() -> ExitCode {
         Command::Test => dev::test::run(&root).map_err(cli::Error::Failed),
         Command::List => commands::list::run(&root),
         Command::New(a) => commands::new::run(&root, &a.name),
+        Command::Import(a) => commands::import::run(&root, a),
         Command::Export(a) => commands::export::run(&root, a),
         Command::Bench(a) => run_bench(&root, a),
         // Parsed here so that bad input is refused at once; `legs` parses them again.

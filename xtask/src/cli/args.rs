@@ -49,6 +49,9 @@ pub enum Command {
     List,
     /// Write leg-models/specs/NAME.toml, a commented spec to start from
     New(NewArgs),
+    /// Write a spatial spec from a MuJoCo MJCF file (bodies, joints, inertias, <connect>
+    /// closures, motors, springs), then `cargo xtask gen NAME` generates it
+    Import(ImportArgs),
     /// Every check CI runs: formatting, `gen --check`, the workspace tests (snapshots
     /// must be reviewed), the MuJoCo and Pinocchio cross-checks, instruction budgets,
     /// the no_std build, clippy
@@ -105,6 +108,38 @@ pub struct BenchArgs {
     /// Rewrite tests/instruction-budgets.json with today's counts
     #[arg(long, conflicts_with = "pinocchio")]
     pub update_budgets: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct ImportArgs {
+    /// The MJCF file
+    pub file: PathBuf,
+    /// The leg's name: a plain identifier (lower case, digits, underscores)
+    #[arg(long)]
+    pub name: String,
+    /// Hold the body of the file's free joint as the base (its pose as written)
+    #[arg(long)]
+    pub fix_base: bool,
+    /// Import one subtree: the body (with its joint) hanging from the base, e.g. one leg
+    /// of a robot; closures and motors outside it are left out, each said
+    #[arg(long, value_name = "BODY")]
+    pub root: Option<String>,
+    /// The body that carries the foot point
+    #[arg(long, value_name = "BODY")]
+    pub foot: String,
+    /// The foot point in that body's frame, x,y,z in m (default: its origin)
+    #[arg(long, value_name = "X,Y,Z")]
+    pub foot_point: Option<String>,
+    /// The home pose from this <key> (default: qpos0, the pose as written, where every
+    /// <connect> is closed by MuJoCo's rule)
+    #[arg(long, value_name = "KEY")]
+    pub keyframe: Option<String>,
+    /// Where to write (default: leg-models/specs/NAME.toml)
+    #[arg(long, value_name = "FILE")]
+    pub out: Option<PathBuf>,
+    /// Replace the spec if it exists
+    #[arg(long)]
+    pub force: bool,
 }
 
 #[derive(Args, Debug)]

@@ -7,5 +7,6 @@
 
 pub mod export;
 pub mod export_spatial;
+pub mod import;
 pub mod list;
 pub mod new;

@@ -80,16 +80,23 @@ fn cross_checks(root: &Path) -> Result<Vec<String>, String> {
         let model = crate::gen::model::build(&spec).map_err(|e| e.to_string())?;
         let mjcf = dir.join(format!("{name}.xml"));
         crate::cli::write_atomic(&mjcf, &crate::commands::export_spatial::mjcf(&model))?;
-        let status = Command::new(&py)
-            .arg(root.join("xtask").join("mujoco_spatial_check.py"))
-            .arg(&legs)
-            .arg(&name)
-            .arg(&mjcf)
-            .current_dir(root)
-            .status()
-            .map_err(|e| format!("cannot run mujoco_spatial_check.py: {e}"))?;
-        if !status.success() {
-            failed.push(format!("MuJoCo disagrees with `{name}` (see above)"));
+        // An imported leg is checked on the file it came from too (joints by name).
+        let source = crate::commands::import::header_args(root, &spec.text).map(|a| a.file);
+        for file in std::iter::once(mjcf).chain(source) {
+            let status = Command::new(&py)
+                .arg(root.join("xtask").join("mujoco_spatial_check.py"))
+                .arg(&legs)
+                .arg(&name)
+                .arg(&file)
+                .current_dir(root)
+                .status()
+                .map_err(|e| format!("cannot run mujoco_spatial_check.py: {e}"))?;
+            if !status.success() {
+                failed.push(format!(
+                    "MuJoCo disagrees with `{name}` on {} (see above)",
+                    file.display()
+                ));
+            }
         }
     }
     Ok(failed)
