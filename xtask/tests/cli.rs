@@ -1609,3 +1609,126 @@ fn hostile_command_lines_for_the_hopper_and_eval() {
     assert!(!dir.exists(), "hostile input left {}", dir.display());
     eprintln!("{} hostile command lines refused", rows.len());
 }
+
+/// A spatial leg in `eval` (every coordinate, three per ball joint) and the MJCF export;
+/// what applies to planar legs only is refused by name.
+#[test]
+fn eval_and_export_take_a_spatial_leg() {
+    let out = legs(&[
+        "eval",
+        "rssr_linkage",
+        "--q",
+        "0.3,-0.0135,0.3281,0.0348,0.1693",
+        "--project",
+        "--json",
+        "--derivatives",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["ball_joints"], serde_json::json!([1]));
+    assert_eq!(v["joints"][1], "coupler.x");
+    assert_eq!(v["M"].as_array().unwrap().len(), 5);
+    assert_eq!(v["dqdd_dq"].as_array().unwrap().len(), 5);
+    let phi: Vec<f64> = serde_json::from_value(v["phi"].clone()).unwrap();
+    assert!(phi.iter().all(|x| x.abs() < 1e-12), "{phi:?}");
+    refused(
+        &legs(&["eval", "rssr_linkage", "--q", "0.3", "--assemble"]),
+        "--assemble: rssr_linkage is a spatial leg",
+    );
+    refused(&legs(&["eval", "rssr_linkage", "--q", "0.3,0,0"]), "--q");
+    refused(&legs(&["sim", "rssr_linkage"]), "is a spatial leg");
+    let out = xtask(&["export", "rssr_linkage", "--format", "mjcf"]);
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("type=\"ball\"") && text.contains("<connect"),
+        "{text}"
+    );
+    refused(
+        &xtask(&["export", "rssr_linkage", "--format", "urdf"]),
+        "MJCF only for now",
+    );
+}
+
+/// `import`: a spec from an MJCF file; bad input is one line, exit 2, and nothing written.
+#[test]
+fn import_writes_a_spec_gen_takes_and_refuses_bad_input() {
+    let dir = temp_dir("import");
+    std::fs::create_dir_all(&dir).unwrap();
+    let root = xtask::gen::workspace_root();
+    let source = root.join("leg-models/mjcf/achilles_leg.xml");
+    let out_spec = dir.join("leg.toml");
+    let (src, spec) = (source.to_str().unwrap(), out_spec.to_str().unwrap());
+    let base = [
+        "import",
+        src,
+        "--name",
+        "leg",
+        "--fix-base",
+        "--root",
+        "hip-roll",
+        "--foot",
+        "foot",
+        "--out",
+        spec,
+    ];
+    let out = xtask(&base);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains("8 links (10 coordinates), 2 closures, 4 motors"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("note: connect `tail_hip-roll`"), "{stdout}");
+    let text = std::fs::read_to_string(&out_spec).unwrap();
+    let parsed = xtask::gen::spec::Spec::parse(&out_spec, text).unwrap();
+    assert!(xtask::gen::model::build(&parsed).is_ok());
+    // Kept unless --force.
+    refused(&xtask(&base), "exists already");
+    let fresh = dir.join("other.toml");
+    let other = fresh.to_str().unwrap();
+    let with = |from: &str, to: &str| -> Vec<String> {
+        base.iter()
+            .map(|a| {
+                if *a == spec {
+                    other.to_string()
+                } else {
+                    a.to_string()
+                }
+            })
+            .map(|a| if a == from { to.to_string() } else { a })
+            .collect()
+    };
+    for (args, says) in [
+        (with("--fix-base", "--name"), "--name"),
+        (with("hip-roll", "thigh"), "--root thigh: no body"),
+        (with("foot", "heel"), "--foot heel: no body"),
+        (with(src, "missing.xml"), "cannot read missing.xml"),
+        (
+            base.iter()
+                .filter(|a| **a != "--fix-base")
+                .map(|a| {
+                    if *a == spec {
+                        other.to_string()
+                    } else {
+                        a.to_string()
+                    }
+                })
+                .collect(),
+            "give --fix-base",
+        ),
+    ] {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        refused(&xtask(&args), says);
+        assert!(!fresh.exists(), "{args:?} wrote a spec");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1026,3 +1026,60 @@ fn spatial_specs_refuse_what_does_not_fit_their_dimension() {
         "spatial leg cannot have contacts yet",
     );
 }
+
+/// The RSSR test leg's text (a ball joint in its loop), edited.
+fn ball_edit(from: &str, to: &str) -> String {
+    let text =
+        std::fs::read_to_string(gen::workspace_root().join("leg-models/specs/rssr_linkage.toml"))
+            .unwrap();
+    assert!(text.contains(from), "{from}");
+    text.replacen(from, to, 1)
+}
+
+#[test]
+fn ball_joints_are_refused_where_they_do_not_fit() {
+    // The leg itself: three coordinates for its ball joint, named `<link>.x/.y/.z`.
+    let m = model::build(&parse(&ball_edit("", "")).unwrap()).unwrap();
+    assert_eq!(
+        m.joint_names(),
+        ["crank", "coupler.x", "coupler.y", "coupler.z", "rocker"]
+    );
+    assert_eq!(m.home.len(), 5);
+    refused(
+        &ball_edit(
+            "joint = \"ball\"\n",
+            "joint = \"ball\"\naxis = [1.0, 0.0, 0.0]\n",
+        ),
+        "links[1].axis",
+        "a ball joint has no axis",
+    );
+    refused(
+        &ball_edit(
+            "joint = \"ball\"\n",
+            "joint = \"ball\"\nactuator = { rotor_inertia = 1e-5, gear_ratio = 1.0 }\n",
+        ),
+        "links[1].actuator",
+        "a motor drives one axis",
+    );
+    refused(
+        &format!(
+            "{}\n[[springs]]\nname = \"twist\"\na = \"coupler\"\nstiffness = 1.0\n",
+            ball_edit("", "")
+        ),
+        "springs[0].a",
+        "a ball joint has three",
+    );
+    refused(
+        &ball_edit(
+            "home = [0.3, -0.0135, 0.3281, 0.0348, 0.1693]",
+            "home = [0.3, -0.0135, 0.1693]",
+        ),
+        "home",
+        "3 joint values for 5 coordinates (3 links, three angles per ball joint)",
+    );
+    refused(
+        &VALID.replacen("inertia = 4e-5\n", "inertia = 4e-5\njoint = \"ball\"\n", 1),
+        "links[0].joint",
+        "only a spatial leg",
+    );
+}
