@@ -41,62 +41,48 @@ fn cross_checks(root: &Path) -> Result<Vec<String>, String> {
     let target = target_dir(root);
     let py = gen::python(root)?;
     let dir = target.join("exports");
-    let mut failed = Vec::new();
-    // The exports are planar only for now.
-    for name in crate::gen::planar_model_names(root)? {
+    // (script, model, file, tool): the planar exports in MuJoCo and Pinocchio; a spatial
+    // leg's MJCF in MuJoCo (mass matrix, bias forces, the connect rows and the foot, a
+    // ball joint mapped to MuJoCo's quaternion and angular velocity), and an imported leg
+    // on the file it came from too (joints by name).
+    let mut jobs: Vec<(&str, String, std::path::PathBuf, &str)> = Vec::new();
+    let planar = crate::gen::planar_model_names(root)?;
+    for name in planar.iter().chain(&crate::gen::spatial_model_names(root)?) {
         let spec = gen::load_spec(
             root,
             &root.join(gen::SPECS_DIR).join(format!("{name}.toml")),
         )?;
         let model = crate::gen::model::build(&spec).map_err(|e| e.to_string())?;
         let mjcf = dir.join(format!("{name}.xml"));
-        crate::cli::write_atomic(&mjcf, &crate::commands::export::mjcf(&model))?;
-        let urdf = dir.join(format!("{name}.urdf"));
-        crate::cli::write_atomic(&urdf, &crate::commands::export::urdf(&model))?;
-        for (script, file, tool) in [
-            ("mujoco_check.py", &mjcf, "MuJoCo"),
-            ("urdf_check.py", &urdf, "Pinocchio"),
-        ] {
-            let status = Command::new(&py)
-                .arg(root.join("xtask").join(script))
-                .arg(&legs)
-                .arg(&name)
-                .arg(file)
-                .current_dir(root)
-                .status()
-                .map_err(|e| format!("cannot run {script}: {e}"))?;
-            if !status.success() {
-                failed.push(format!("{tool} disagrees with `{name}` (see above)"));
+        if planar.contains(name) {
+            crate::cli::write_atomic(&mjcf, &crate::commands::export::mjcf(&model))?;
+            let urdf = dir.join(format!("{name}.urdf"));
+            crate::cli::write_atomic(&urdf, &crate::commands::export::urdf(&model))?;
+            jobs.push(("mujoco_check.py", name.clone(), mjcf, "MuJoCo"));
+            jobs.push(("urdf_check.py", name.clone(), urdf, "Pinocchio"));
+        } else {
+            crate::cli::write_atomic(&mjcf, &crate::commands::export::spatial::mjcf(&model))?;
+            jobs.push(("mujoco_spatial_check.py", name.clone(), mjcf, "MuJoCo"));
+            if let Some(a) = crate::commands::import::header_args(root, &spec.text) {
+                jobs.push(("mujoco_spatial_check.py", name.clone(), a.file, "MuJoCo"));
             }
         }
     }
-    // Spatial legs: the MJCF in MuJoCo (mass matrix, bias forces, the connect rows and
-    // the foot, a ball joint mapped to MuJoCo's quaternion and angular velocity).
-    for name in crate::gen::spatial_model_names(root)? {
-        let spec = gen::load_spec(
-            root,
-            &root.join(gen::SPECS_DIR).join(format!("{name}.toml")),
-        )?;
-        let model = crate::gen::model::build(&spec).map_err(|e| e.to_string())?;
-        let mjcf = dir.join(format!("{name}.xml"));
-        crate::cli::write_atomic(&mjcf, &crate::commands::export_spatial::mjcf(&model))?;
-        // An imported leg is checked on the file it came from too (joints by name).
-        let source = crate::commands::import::header_args(root, &spec.text).map(|a| a.file);
-        for file in std::iter::once(mjcf).chain(source) {
-            let status = Command::new(&py)
-                .arg(root.join("xtask").join("mujoco_spatial_check.py"))
-                .arg(&legs)
-                .arg(&name)
-                .arg(&file)
-                .current_dir(root)
-                .status()
-                .map_err(|e| format!("cannot run mujoco_spatial_check.py: {e}"))?;
-            if !status.success() {
-                failed.push(format!(
-                    "MuJoCo disagrees with `{name}` on {} (see above)",
-                    file.display()
-                ));
-            }
+    let mut failed = Vec::new();
+    for (script, name, file, tool) in jobs {
+        let status = Command::new(&py)
+            .arg(root.join("xtask").join(script))
+            .arg(&legs)
+            .arg(&name)
+            .arg(&file)
+            .current_dir(root)
+            .status()
+            .map_err(|e| format!("cannot run {script}: {e}"))?;
+        if !status.success() {
+            failed.push(format!(
+                "{tool} disagrees with `{name}` on {} (see above)",
+                file.display()
+            ));
         }
     }
     Ok(failed)

@@ -215,6 +215,27 @@ impl Builder<'_> {
     }
 }
 
+/// The rotation matrix (rows) of a unit quaternion `[w, x, y, z]`.
+pub fn quaternion_matrix([w, x, y, z]: [f64; 4]) -> [[f64; 3]; 3] {
+    [
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - w * z),
+            2.0 * (x * z + w * y),
+        ],
+        [
+            2.0 * (x * y + w * z),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - w * x),
+        ],
+        [
+            2.0 * (x * z - w * y),
+            2.0 * (y * z + w * x),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
+    ]
+}
+
 /// Builds the derivation's model from a validated spec.
 pub fn build(spec: &Spec) -> Result<Model, SpecError> {
     let mut b = Builder {
@@ -343,24 +364,7 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
         };
         let orientation = l.orientation.as_ref().map(|o| {
             let q = unit(&o.get_ref().value);
-            let (w, x, y, z) = (q[0], q[1], q[2], q[3]);
-            [
-                [
-                    1.0 - 2.0 * (y * y + z * z),
-                    2.0 * (x * y - w * z),
-                    2.0 * (x * z + w * y),
-                ],
-                [
-                    2.0 * (x * y + w * z),
-                    1.0 - 2.0 * (x * x + z * z),
-                    2.0 * (y * z - w * x),
-                ],
-                [
-                    2.0 * (x * z - w * y),
-                    2.0 * (y * z + w * x),
-                    1.0 - 2.0 * (x * x + y * y),
-                ],
-            ]
+            quaternion_matrix([q[0], q[1], q[2], q[3]])
         });
         let (parent, orientation, origin, name) = if l.kind() == JointKind::Ball {
             // R_x(α) then R_y(β) on massless frames at the joint point, then the link on

@@ -152,54 +152,8 @@ pub fn run<
     };
 
     let terms = L::dynamics_terms(&q, &qd, &p);
-    let mut out = Map::new();
-    let mut errors = Map::new();
+    let (mut out, mut errors) = dynamics::<L, NQ, NC, NU>(&p, &q, &qd, &u, args.derivatives);
     let mut warnings = Map::new();
-    out.insert("model".into(), json!(L::NAME));
-    out.insert("joints".into(), json!(L::JOINT_NAMES.to_vec()));
-    out.insert("q".into(), vector(&q));
-    out.insert("qd".into(), vector(&qd));
-    out.insert("u".into(), vector(&u));
-    out.insert("M".into(), matrix(&terms.mass_matrix));
-    out.insert("N".into(), vector(&terms.bias_forces));
-    out.insert("G".into(), vector(&L::gravity_forces(&q, &p)));
-    out.insert("J".into(), matrix(&terms.constraint_jacobian));
-    out.insert("Jdot_qdot".into(), vector(&terms.constraint_bias));
-    match forward_dynamics::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None) {
-        Ok(a) => {
-            out.insert("qdd".into(), vector(&a.qdd));
-            out.insert("F".into(), vector(&a.forces));
-        }
-        Err(e) => {
-            out.insert("qdd".into(), Value::Null);
-            out.insert("F".into(), Value::Null);
-            errors.insert("qdd".into(), json!(e.explained(&q, &qd, &u).to_string()));
-        }
-    }
-    if args.derivatives {
-        let names = ["dqdd_dq", "dqdd_dqd", "dqdd_du", "dF_dq", "dF_dqd", "dF_du"];
-        match forward_dynamics_derivatives::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None) {
-            Ok(d) => {
-                let values = [
-                    matrix(&d.qdd_q),
-                    matrix(&d.qdd_qd),
-                    matrix(&d.qdd_u),
-                    matrix(&d.forces_q),
-                    matrix(&d.forces_qd),
-                    matrix(&d.forces_u),
-                ];
-                for (name, value) in names.into_iter().zip(values) {
-                    out.insert(name.into(), value);
-                }
-            }
-            Err(e) => {
-                for name in names {
-                    out.insert(name.into(), Value::Null);
-                }
-                errors.insert("derivatives".into(), json!(e.to_string()));
-            }
-        }
-    }
     match actuated_reduction::<L, f64, NQ, NC, NU>(&p, &terms, &qd) {
         Ok(r) => {
             out.insert("A_tilde".into(), matrix(&r.a_tilde));
@@ -211,23 +165,14 @@ pub fn run<
             errors.insert("A_tilde".into(), json!(e.to_string()));
         }
     }
-    out.insert("foot".into(), vector(&L::foot_position(&q, &p)));
-    out.insert("foot_jacobian".into(), matrix(&L::foot_jacobian(&q, &p)));
-    out.insert("kinetic".into(), json!(L::kinetic_energy(&q, &qd, &p)));
-    out.insert("potential".into(), json!(L::potential_energy(&q, &p)));
-    let phi = L::closure_residual(&q, &p);
-    out.insert("phi".into(), vector(&phi));
-    // Terms and derivatives off the closures are of a state the leg cannot be in: said.
-    let size = leg_models::assembly::leg_size::<L, f64, NQ, NC, NU>(&p, &q);
-    if NC > 0 && phi.amax() > 1e-9 * size.max(1e-300) {
-        warnings.insert(
-            "phi".into(),
-            json!(format!(
-                "the state is off the closures by {:.3e} m (phi): the terms are of a pose the leg cannot take; --assemble or --project puts it on them",
-                phi.amax()
-            )),
-        );
-    }
+    points::<L, NQ, NC, NU, 2, NC>(
+        &p,
+        &q,
+        &qd,
+        &mut out,
+        &mut warnings,
+        "--assemble or --project",
+    );
     let ground = Ground::<f64>::of::<L, NQ, NC, NU, NK>();
     let x = L::contact_positions(&q, &p);
     let coords = ground.coordinates(&x);
@@ -362,6 +307,107 @@ fn emit(
     }
 }
 
+/// The terms every leg has, planar or spatial: the state, `M`, `N`, `G`, `J`, `J̇ q̇`,
+/// forward dynamics and (asked) its derivatives; and the errors of those that failed.
+fn dynamics<
+    L: leg_models::LegDynamics<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>(
+    p: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+    qd: &SVector<f64, NQ>,
+    u: &SVector<f64, NU>,
+    derivatives: bool,
+) -> (Map<String, Value>, Map<String, Value>) {
+    let terms = L::dynamics_terms(q, qd, p);
+    let mut out = Map::new();
+    let mut errors = Map::new();
+    out.insert("model".into(), json!(L::NAME));
+    out.insert("joints".into(), json!(L::JOINT_NAMES.to_vec()));
+    out.insert("q".into(), vector(q));
+    out.insert("qd".into(), vector(qd));
+    out.insert("u".into(), vector(u));
+    out.insert("M".into(), matrix(&terms.mass_matrix));
+    out.insert("N".into(), vector(&terms.bias_forces));
+    out.insert("G".into(), vector(&L::gravity_forces(q, p)));
+    out.insert("J".into(), matrix(&terms.constraint_jacobian));
+    out.insert("Jdot_qdot".into(), vector(&terms.constraint_bias));
+    match forward_dynamics::<L, f64, NQ, NC, NU>(p, q, qd, u, None) {
+        Ok(a) => {
+            out.insert("qdd".into(), vector(&a.qdd));
+            out.insert("F".into(), vector(&a.forces));
+        }
+        Err(e) => {
+            out.insert("qdd".into(), Value::Null);
+            out.insert("F".into(), Value::Null);
+            errors.insert("qdd".into(), json!(e.explained(q, qd, u).to_string()));
+        }
+    }
+    if derivatives {
+        let names = ["dqdd_dq", "dqdd_dqd", "dqdd_du", "dF_dq", "dF_dqd", "dF_du"];
+        match forward_dynamics_derivatives::<L, f64, NQ, NC, NU>(p, q, qd, u, None) {
+            Ok(d) => {
+                let values = [
+                    matrix(&d.qdd_q),
+                    matrix(&d.qdd_qd),
+                    matrix(&d.qdd_u),
+                    matrix(&d.forces_q),
+                    matrix(&d.forces_qd),
+                    matrix(&d.forces_u),
+                ];
+                for (name, value) in names.into_iter().zip(values) {
+                    out.insert(name.into(), value);
+                }
+            }
+            Err(e) => {
+                for name in names {
+                    out.insert(name.into(), Value::Null);
+                }
+                errors.insert("derivatives".into(), json!(e.to_string()));
+            }
+        }
+    }
+    (out, errors)
+}
+
+/// The foot, the energies and the closure residual, in the leg's dimension; a state off
+/// the closures is said (`fix`: the flags that put it on them).
+fn points<
+    L: leg_models::LegModel<NQ, NC, NU, ND, NP>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>(
+    p: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+    qd: &SVector<f64, NQ>,
+    out: &mut Map<String, Value>,
+    warnings: &mut Map<String, Value>,
+    fix: &str,
+) {
+    out.insert("foot".into(), vector(&L::foot_position(q, p)));
+    out.insert("foot_jacobian".into(), matrix(&L::foot_jacobian(q, p)));
+    out.insert("kinetic".into(), json!(L::kinetic_energy(q, qd, p)));
+    out.insert("potential".into(), json!(L::potential_energy(q, p)));
+    let phi = L::closure_residual(q, p);
+    out.insert("phi".into(), vector(&phi));
+    // Terms and derivatives off the closures are of a state the leg cannot be in: said.
+    let size = leg_models::assembly::leg_size::<L, f64, NQ, NC, NU>(p, q);
+    if NC > 0 && phi.amax() > 1e-9 * size.max(1e-300) {
+        warnings.insert(
+            "phi".into(),
+            json!(format!(
+                "the state is off the closures by {:.3e} m (phi): the terms are of a pose the leg cannot take; {fix} puts it on them",
+                phi.amax()
+            )),
+        );
+    }
+}
+
 /// Coordinates read as a pose obey the rule every pose does ([`leg_models::check_pose`]):
 /// an angle of 1e308 rad was taken, and assembling towards it failed on a step size.
 fn pose(flag: &str, values: Vec<f64>) -> Result<Vec<f64>, Error> {
@@ -425,70 +471,10 @@ pub fn run_spatial<
         Some(t) => SVector::<f64, NU>::from_column_slice(&numbers("--u", t, NU, "motor torques")?),
         None => SVector::zeros(),
     };
-    let terms = L::dynamics_terms(&q, &qd, &p);
-    let (mut out, mut errors, mut warnings) = (Map::new(), Map::new(), Map::new());
-    out.insert("model".into(), json!(L::NAME));
-    out.insert("joints".into(), json!(L::JOINT_NAMES.to_vec()));
+    let (mut out, errors) = dynamics::<L, NQ, NC, NU>(&p, &q, &qd, &u, args.derivatives);
+    let mut warnings = Map::new();
     out.insert("ball_joints".into(), json!(L::BALL_JOINTS));
-    out.insert("q".into(), vector(&q));
-    out.insert("qd".into(), vector(&qd));
-    out.insert("u".into(), vector(&u));
-    out.insert("M".into(), matrix(&terms.mass_matrix));
-    out.insert("N".into(), vector(&terms.bias_forces));
-    out.insert("G".into(), vector(&L::gravity_forces(&q, &p)));
-    out.insert("J".into(), matrix(&terms.constraint_jacobian));
-    out.insert("Jdot_qdot".into(), vector(&terms.constraint_bias));
-    match forward_dynamics::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None) {
-        Ok(a) => {
-            out.insert("qdd".into(), vector(&a.qdd));
-            out.insert("F".into(), vector(&a.forces));
-        }
-        Err(e) => {
-            out.insert("qdd".into(), Value::Null);
-            out.insert("F".into(), Value::Null);
-            errors.insert("qdd".into(), json!(e.explained(&q, &qd, &u).to_string()));
-        }
-    }
-    if args.derivatives {
-        let names = ["dqdd_dq", "dqdd_dqd", "dqdd_du", "dF_dq", "dF_dqd", "dF_du"];
-        match forward_dynamics_derivatives::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None) {
-            Ok(d) => {
-                let values = [
-                    matrix(&d.qdd_q),
-                    matrix(&d.qdd_qd),
-                    matrix(&d.qdd_u),
-                    matrix(&d.forces_q),
-                    matrix(&d.forces_qd),
-                    matrix(&d.forces_u),
-                ];
-                for (name, value) in names.into_iter().zip(values) {
-                    out.insert(name.into(), value);
-                }
-            }
-            Err(e) => {
-                for name in names {
-                    out.insert(name.into(), Value::Null);
-                }
-                errors.insert("derivatives".into(), json!(e.to_string()));
-            }
-        }
-    }
-    out.insert("foot".into(), vector(&L::foot_position(&q, &p)));
-    out.insert("foot_jacobian".into(), matrix(&L::foot_jacobian(&q, &p)));
-    out.insert("kinetic".into(), json!(L::kinetic_energy(&q, &qd, &p)));
-    out.insert("potential".into(), json!(L::potential_energy(&q, &p)));
-    let phi = L::closure_residual(&q, &p);
-    out.insert("phi".into(), vector(&phi));
-    let size = leg_models::assembly::leg_size::<L, f64, NQ, NC, NU>(&p, &q);
-    if NC > 0 && phi.amax() > 1e-9 * size.max(1e-300) {
-        warnings.insert(
-            "phi".into(),
-            json!(format!(
-                "the state is off the closures by {:.3e} m (phi): the terms are of a pose the leg cannot take; --project puts it on them",
-                phi.amax()
-            )),
-        );
-    }
+    points::<L, NQ, NC, NU, 3, NP>(&p, &q, &qd, &mut out, &mut warnings, "--project");
     let big = largest_input(q.as_slice(), qd.as_slice(), u.as_slice());
     emit(out, errors, warnings, big, args.json);
     Ok(())

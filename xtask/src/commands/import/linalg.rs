@@ -72,26 +72,9 @@ pub fn rot_axis(axis: Vec3, angle: f64) -> Mat3 {
     ]
 }
 
-/// The rotation of a unit quaternion `[w, x, y, z]`.
+/// The rotation of a unit quaternion `[w, x, y, z]` (the spec's convention).
 pub fn quat_to_mat(q: [f64; 4]) -> Mat3 {
-    let [w, x, y, z] = q;
-    [
-        [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y - w * z),
-            2.0 * (x * z + w * y),
-        ],
-        [
-            2.0 * (x * y + w * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z - w * x),
-        ],
-        [
-            2.0 * (x * z - w * y),
-            2.0 * (y * z + w * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
-    ]
+    crate::gen::model::quaternion_matrix(q)
 }
 
 /// A frame: `x_parent = pos + rot x_child`.

@@ -689,7 +689,7 @@ fn write_spec(file: &Path, command: &str, robot: &Robot, leg: &Imported) -> Stri
         }
         let _ = writeln!(out, "origin = {}", triple(l.origin));
         if l.orientation != linalg::IDENTITY {
-            let q = crate::commands::export_spatial::quaternion(&l.orientation);
+            let q = crate::commands::export::spatial::quaternion(&l.orientation);
             let _ = writeln!(
                 out,
                 "orientation = [{}, {}, {}, {}]",

@@ -1,4 +1,4 @@
-//! Export a leg to MuJoCo (MJCF) and URDF, from its spec.
+//! A planar leg in MJCF and URDF.
 //!
 //! The leg lies in the x–y plane; every revolute joint is a hinge about z at the link's
 //! joint and every prismatic joint a slide along its axis, and each body's frame is its
@@ -21,57 +21,16 @@
 //! friction; without contacts, contact stays disabled.
 //! Every name the exporters add holds a `.` (`foot.point`, `<closure>.a`, `<frame>.joint`,
 //! `<contact>.geom`), which a spec's names cannot: a user may name a link `foot` (Cassie
-//! has a body `left-foot`) and nothing clashes. See [`added`].
+//! has a body `left-foot`) and nothing clashes. See [`super::added`].
 
 use std::fmt::Write;
-use std::path::Path;
 
-use crate::cli::{self, args::ExportArgs, args::ExportFormat};
-use crate::gen;
+use super::common::{added, closures_and_couplings, joint_spring, num, value};
 use crate::gen::model::{self, Model, Param, Point};
-
-/// The names the exporters add beside the spec's: each holds a `.`, which a spec name
-/// (a plain identifier) cannot, so none can clash with a link, joint, closure or contact.
-pub mod added {
-    /// The foot point's frame (URDF link, MJCF site).
-    pub const FOOT: &str = "foot.point";
-
-    /// Point `side` (`a` or `b`) of closure `closure`.
-    pub fn closure_point(closure: &str, side: &str) -> String {
-        format!("{closure}.{side}")
-    }
-
-    /// A contact point's frame (URDF link, MJCF site).
-    pub fn contact_point(contact: &str) -> String {
-        format!("{contact}.point")
-    }
-
-    /// A contact point's collision sphere (MJCF geom).
-    pub fn contact_geom(contact: &str) -> String {
-        format!("{contact}.geom")
-    }
-
-    /// The fixed joint that holds an added URDF frame.
-    pub fn frame_joint(frame: &str) -> String {
-        format!("{frame}.joint")
-    }
-}
-
-fn num(v: f64) -> String {
-    format!("{v:?}")
-}
 
 /// A planar link's inertia (exports are planar only: [`run`] refuses a spatial leg).
 fn planar_inertia(params: &[Param], inertia: &model::Inertia) -> f64 {
     value(params, inertia.planar().unwrap_or_default())
-}
-
-fn value(params: &[Param], name: &str) -> f64 {
-    params
-        .iter()
-        .find(|p| p.name == name)
-        .map(|p| p.default)
-        .expect("every quantity of a model is one of its parameters")
 }
 
 fn pair(m: &Model, names: &[String]) -> (f64, f64) {
@@ -148,38 +107,7 @@ pub fn mjcf(m: &Model) -> String {
         mjcf_body(m, i, 2, &mut out);
     }
     let _ = writeln!(out, "  </worldbody>");
-    if !m.closures.is_empty() {
-        let _ = writeln!(out, "  <equality>");
-        for c in &m.closures {
-            // Stiffer than MuJoCo's default soft constraint (time constant 2 dt).
-            let _ = writeln!(
-                out,
-                "    <connect name=\"{}\" site1=\"{}\" site2=\"{}\" solref=\"0.002 1\" solimp=\"0.95 0.99 0.001\"/>",
-                c.name,
-                added::closure_point(&c.name, "a"),
-                added::closure_point(&c.name, "b")
-            );
-        }
-        let _ = writeln!(out, "  </equality>");
-    }
-    // A coupling spring on q_a − q_b is a fixed tendon of length q_a − q_b with a spring.
-    let couplings: Vec<_> = m.springs.iter().filter(|s| s.b.is_some()).collect();
-    if !couplings.is_empty() {
-        let _ = writeln!(out, "  <tendon>");
-        for s in couplings {
-            let b = s.b.expect("a coupling");
-            let _ = writeln!(
-                out,
-                "    <fixed name=\"{}\" stiffness=\"{}\" springlength=\"{}\">\n      <joint joint=\"{}\" coef=\"1\"/>\n      <joint joint=\"{}\" coef=\"-1\"/>\n    </fixed>",
-                s.name,
-                num(value(&m.params, &s.stiffness)),
-                num(value(&m.params, &s.rest)),
-                m.links[s.a].name,
-                m.links[b].name
-            );
-        }
-        let _ = writeln!(out, "  </tendon>");
-    }
+    closures_and_couplings(m, &mut out);
     // The spec's home pose (near assembled) as a keyframe: MuJoCo starts at q = 0 otherwise,
     // where a closure may be open by centimetres. MuJoCo orders qpos as the bodies are
     // written, depth first.
@@ -287,18 +215,7 @@ fn mjcf_body(m: &Model, i: usize, depth: usize, out: &mut String) {
         Some(ref a) => ("slide", format!("{} {} 0", num(a[0]), num(a[1]))),
         None => ("hinge", "0 0 1".to_string()),
     };
-    // A spring on this joint alone is MuJoCo's joint stiffness about `springref`.
-    let spring = m
-        .springs
-        .iter()
-        .find(|s| s.a == i && s.b.is_none())
-        .map_or(String::new(), |s| {
-            format!(
-                " stiffness=\"{}\" springref=\"{}\"",
-                num(value(&m.params, &s.stiffness)),
-                num(value(&m.params, &s.rest))
-            )
-        });
+    let spring = joint_spring(m, i);
     let _ = writeln!(
         out,
         "{pad}  <joint name=\"{}\" type=\"{kind}\" axis=\"{axis}\" damping=\"{}\" armature=\"{}\"{spring}/>",
@@ -492,38 +409,4 @@ pub fn urdf(m: &Model) -> String {
     }
     let _ = writeln!(out, "</robot>");
     out
-}
-
-/// The validated model of a built-in spec, by name.
-fn load_model(root: &Path, name: &str) -> Result<model::Model, cli::Error> {
-    let known = gen::model_names(root).map_err(cli::Error::Failed)?;
-    gen::check_model(name, &known)?;
-    let path = root.join(gen::SPECS_DIR).join(format!("{name}.toml"));
-    // A spec that does not load is bad input, as in `gen`.
-    let spec = gen::load_spec(root, &path).map_err(cli::Error::Usage)?;
-    model::build(&spec).map_err(|e| cli::Error::Usage(e.to_string()))
-}
-
-/// `cargo xtask export`: writes `--out FILE` whole (or prints to standard output).
-pub fn run(root: &Path, a: ExportArgs) -> Result<(), cli::Error> {
-    let m = load_model(root, &a.model)?;
-    if m.dimension != 2 && matches!(a.format, ExportFormat::Urdf) {
-        return Err(cli::Error::Usage(format!(
-            "`{}` is a spatial leg: its export is MJCF only for now (`--format mjcf`); URDF is planar only",
-            a.model
-        )));
-    }
-    let text = match a.format {
-        ExportFormat::Mjcf if m.dimension == 3 => crate::commands::export_spatial::mjcf(&m),
-        ExportFormat::Mjcf => mjcf(&m),
-        ExportFormat::Urdf => urdf(&m),
-    };
-    match a.out {
-        Some(out) => {
-            cli::write_atomic(&out, &text).map_err(cli::Error::Failed)?;
-            eprintln!("wrote {}", out.display());
-        }
-        None => print!("{text}"),
-    }
-    Ok(())
 }

@@ -15,20 +15,8 @@
 
 use std::fmt::Write;
 
-use crate::commands::export::added;
-use crate::gen::model::{Inertia, Model, Param, Point};
-
-fn num(v: f64) -> String {
-    format!("{v:?}")
-}
-
-fn value(params: &[Param], name: &str) -> f64 {
-    params
-        .iter()
-        .find(|p| p.name == name)
-        .map(|p| p.default)
-        .expect("every quantity of a model is one of its parameters")
-}
+use super::common::{added, closures_and_couplings, joint_spring, num, value};
+use crate::gen::model::{Inertia, Model, Point};
 
 fn triple(m: &Model, names: &[String]) -> String {
     if names.is_empty() {
@@ -204,17 +192,7 @@ fn body(m: &Model, i: usize, depth: usize, out: &mut String) {
             "hinge"
         };
         let axis = l.axis.as_ref().expect("a spatial joint has its axis");
-        let spring =
-            m.springs
-                .iter()
-                .find(|s| s.a == i && s.b.is_none())
-                .map_or(String::new(), |s| {
-                    format!(
-                        " stiffness=\"{}\" springref=\"{}\"",
-                        num(value(&m.params, &s.stiffness)),
-                        num(value(&m.params, &s.rest))
-                    )
-                });
+        let spring = joint_spring(m, i);
         let _ = writeln!(
             out,
             "{pad}  <joint name=\"{name}\" type=\"{kind}\" axis=\"{}\" damping=\"{damping}\" armature=\"{}\"{spring}/>",
@@ -269,36 +247,7 @@ pub fn mjcf(m: &Model) -> String {
         body(m, i, 2, &mut out);
     }
     let _ = writeln!(out, "  </worldbody>");
-    if !m.closures.is_empty() {
-        let _ = writeln!(out, "  <equality>");
-        for c in &m.closures {
-            let _ = writeln!(
-                out,
-                "    <connect name=\"{}\" site1=\"{}\" site2=\"{}\" solref=\"0.002 1\" solimp=\"0.95 0.99 0.001\"/>",
-                c.name,
-                added::closure_point(&c.name, "a"),
-                added::closure_point(&c.name, "b")
-            );
-        }
-        let _ = writeln!(out, "  </equality>");
-    }
-    let couplings: Vec<_> = m.springs.iter().filter(|s| s.b.is_some()).collect();
-    if !couplings.is_empty() {
-        let _ = writeln!(out, "  <tendon>");
-        for s in couplings {
-            let b = s.b.expect("a coupling");
-            let _ = writeln!(
-                out,
-                "    <fixed name=\"{}\" stiffness=\"{}\" springlength=\"{}\">\n      <joint joint=\"{}\" coef=\"1\"/>\n      <joint joint=\"{}\" coef=\"-1\"/>\n    </fixed>",
-                s.name,
-                num(value(&m.params, &s.stiffness)),
-                num(value(&m.params, &s.rest)),
-                m.links[s.a].name,
-                m.links[b].name
-            );
-        }
-        let _ = writeln!(out, "  </tendon>");
-    }
+    closures_and_couplings(m, &mut out);
     // The home pose as a keyframe, qpos in MuJoCo's order (bodies depth first; a ball
     // joint's quaternion).
     fn depth_first(m: &Model, i: usize, qpos: &mut Vec<String>) {
