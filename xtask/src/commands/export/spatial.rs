@@ -11,7 +11,9 @@
 //! `stiffness` about `springref`, a coupling spring a fixed tendon; closures are
 //! `<connect>`s between two sites (`<closure>.a`, `<closure>.b`), so MuJoCo's rule for a
 //! second anchor from `qpos0` never applies; the foot is the site `foot.point`. Contact
-//! stays disabled (a spatial leg has no contacts yet).
+//! stays disabled (a spatial leg has no contacts yet). The time step is 0.5 ms, Cassie's
+//! own: at 1 ms MuJoCo's RK4 diverged within 7 ms on Cassie's leg (its 1500 N m/rad shin
+//! spring beside an achilles rod of 4e-6 kg m² about its axis).
 
 use std::fmt::Write;
 
@@ -238,7 +240,7 @@ pub fn mjcf(m: &Model) -> String {
     let _ = writeln!(out, "  <compiler angle=\"radian\" autolimits=\"true\"/>");
     let _ = writeln!(
         out,
-        "  <option gravity=\"{}\" timestep=\"0.001\" integrator=\"RK4\">\n    <flag contact=\"disable\"/>\n  </option>",
+        "  <option gravity=\"{}\" timestep=\"0.0005\" integrator=\"RK4\">\n    <flag contact=\"disable\"/>\n  </option>",
         triple(m, &m.gravity)
     );
     let _ = writeln!(out, "  <worldbody>");
