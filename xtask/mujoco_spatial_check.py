@@ -202,11 +202,6 @@ def main():
     mp.state(d, np.array(t["q"]), np.zeros_like(home))
     held = [(a, v, d.qpos[a : a + 7].copy()) for a, v in mp.held()]
     mujoco.mj_forward(m, d)
-    sites = []
-    for i in range(m.neq):
-        if m.eq_type[i] != mujoco.mjtEq.mjEQ_CONNECT:
-            continue
-        sites.append(i)
     for _ in range(int(round(1.0 / m.opt.timestep))):
         mujoco.mj_step(m, d)
         for a, v, pose in held:

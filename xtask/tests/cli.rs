@@ -1708,7 +1708,10 @@ fn import_writes_a_spec_gen_takes_and_refuses_bad_input() {
             .collect()
     };
     for (args, says) in [
-        (with("--fix-base", "--name"), "--name"),
+        (
+            with("leg", "Leg"),
+            "--name: `Leg` is not a plain identifier",
+        ),
         (with("hip-roll", "thigh"), "--root thigh: no body"),
         (with("foot", "heel"), "--foot heel: no body"),
         (with(src, "missing.xml"), "cannot read missing.xml"),

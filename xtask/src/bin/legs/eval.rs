@@ -7,7 +7,7 @@ use leg_models::assembly::{
 use leg_models::control::actuated_reduction;
 use leg_models::dynamics::contact::{impact_map, spec_friction, ContactMode, Ground, Modes};
 use leg_models::dynamics::derivatives::forward_dynamics_derivatives;
-use leg_models::dynamics::forward_dynamics;
+use leg_models::dynamics::forward_dynamics_from_terms;
 use leg_models::nalgebra::{SMatrix, SVector};
 use leg_models::ContactModel;
 use serde_json::{json, Map, Value};
@@ -152,7 +152,8 @@ pub fn run<
     };
 
     let terms = L::dynamics_terms(&q, &qd, &p);
-    let (mut out, mut errors) = dynamics::<L, NQ, NC, NU>(&p, &q, &qd, &u, args.derivatives);
+    let (mut out, mut errors) =
+        dynamics::<L, NQ, NC, NU>(&p, &terms, &q, &qd, &u, args.derivatives);
     let mut warnings = Map::new();
     match actuated_reduction::<L, f64, NQ, NC, NU>(&p, &terms, &qd) {
         Ok(r) => {
@@ -307,8 +308,9 @@ fn emit(
     }
 }
 
-/// The terms every leg has, planar or spatial: the state, `M`, `N`, `G`, `J`, `J̇ q̇`,
-/// forward dynamics and (asked) its derivatives; and the errors of those that failed.
+/// The terms every leg has, planar or spatial: the state, `M`, `N`, `G`, `J`, `J̇ q̇` (from
+/// `terms`, evaluated once by the caller), forward dynamics and (asked) its derivatives;
+/// and the errors of those that failed.
 fn dynamics<
     L: leg_models::LegDynamics<NQ, NC, NU>,
     const NQ: usize,
@@ -316,12 +318,12 @@ fn dynamics<
     const NU: usize,
 >(
     p: &L::Params<f64>,
+    terms: &leg_models::DynamicsTerms<f64, NQ, NC>,
     q: &SVector<f64, NQ>,
     qd: &SVector<f64, NQ>,
     u: &SVector<f64, NU>,
     derivatives: bool,
 ) -> (Map<String, Value>, Map<String, Value>) {
-    let terms = L::dynamics_terms(q, qd, p);
     let mut out = Map::new();
     let mut errors = Map::new();
     out.insert("model".into(), json!(L::NAME));
@@ -334,7 +336,7 @@ fn dynamics<
     out.insert("G".into(), vector(&L::gravity_forces(q, p)));
     out.insert("J".into(), matrix(&terms.constraint_jacobian));
     out.insert("Jdot_qdot".into(), vector(&terms.constraint_bias));
-    match forward_dynamics::<L, f64, NQ, NC, NU>(p, q, qd, u, None) {
+    match forward_dynamics_from_terms::<L, f64, NQ, NC, NU>(p, terms, q, qd, u, None) {
         Ok(a) => {
             out.insert("qdd".into(), vector(&a.qdd));
             out.insert("F".into(), vector(&a.forces));
@@ -471,7 +473,8 @@ pub fn run_spatial<
         Some(t) => SVector::<f64, NU>::from_column_slice(&numbers("--u", t, NU, "motor torques")?),
         None => SVector::zeros(),
     };
-    let (mut out, errors) = dynamics::<L, NQ, NC, NU>(&p, &q, &qd, &u, args.derivatives);
+    let terms = L::dynamics_terms(&q, &qd, &p);
+    let (mut out, errors) = dynamics::<L, NQ, NC, NU>(&p, &terms, &q, &qd, &u, args.derivatives);
     let mut warnings = Map::new();
     out.insert("ball_joints".into(), json!(L::BALL_JOINTS));
     points::<L, NQ, NC, NU, 3, NP>(&p, &q, &qd, &mut out, &mut warnings, "--project");
