@@ -596,6 +596,7 @@ impl LegDynamics<NQ, NC, NU> for AbductedFiveBar {
     const HOME: [f64; NQ] = [0.1, -0.7076, -1.253, -2.434, 0.953];
     const REDUNDANT_ROWS: usize = 1;
     const MOBILITY: usize = 3;
+    const DIMENSION: usize = 3;
     type Params<T: Arithmetic> = Params<T>;
     fn mass_matrix<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5> {
         mass_matrix(q, p)

@@ -68,13 +68,14 @@ macro_rules! for_each_model {
         7, 4, 3, 0); $callback ! (two_link, $crate::two_link::TwoLink, 2, 0, 2, 0);
     };
 }
-/// Calls `$callback!(module, Type, NQ, NC, NU)` once for every generated spatial
-/// model (`LegModel<NQ, NC, NU, 3>`: three coordinates per point).
+/// Calls `$callback!(module, Type, NQ, NC, NU, NP)` once for every generated spatial
+/// model (`LegModel<NQ, NC, NU, 3, NP>`: three coordinates per point, `NP` closure
+/// points).
 #[macro_export]
 macro_rules! for_each_spatial_model {
     ($callback:ident) => {
         $callback ! (abducted_five_bar, $crate::abducted_five_bar::AbductedFiveBar, 5, 3,
-        3); $callback ! (achilles_leg, $crate::achilles_leg::AchillesLeg, 10, 6, 4);
-        $callback ! (rssr_linkage, $crate::rssr_linkage::RssrLinkage, 5, 3, 1);
+        3, 2); $callback ! (achilles_leg, $crate::achilles_leg::AchillesLeg, 10, 6, 4,
+        4); $callback ! (rssr_linkage, $crate::rssr_linkage::RssrLinkage, 5, 3, 1, 2);
     };
 }

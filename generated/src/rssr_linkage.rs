@@ -423,6 +423,7 @@ impl LegDynamics<NQ, NC, NU> for RssrLinkage {
     const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 2;
     const BALL_JOINTS: &'static [usize] = &[1];
+    const DIMENSION: usize = 3;
     type Params<T: Arithmetic> = Params<T>;
     fn mass_matrix<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5> {
         mass_matrix(q, p)

@@ -427,35 +427,51 @@ where
 
 /// The assembled configuration that puts the foot at `foot` (base frame), from `guess`
 /// (which picks the branch); the motor angles are its actuated entries.
-pub fn foot_inverse<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+pub fn foot_inverse<
+    L,
+    T,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>(
     params: &L::Params<T>,
-    foot: &SVector<T, 2>,
+    foot: &SVector<T, ND>,
     guess: &SVector<T, NQ>,
     tol: &Tolerance<T>,
 ) -> Result<SVector<T, NQ>, AssemblyError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
     T: Real,
 {
-    foot_inverse_holding::<L, T, NQ, NC, NU>(params, foot, guess, tol, &[false; NQ])
+    foot_inverse_holding::<L, T, NQ, NC, NU, ND, NP>(params, foot, guess, tol, &[false; NQ])
 }
 
 /// [`foot_inverse`] with the joints marked in `held` kept at `guess`'s values: the
 /// leg's joints placing the foot (base frame) under a body that stays where it is (the
 /// body's joints held), as a controller places a hopper's foot in flight.
-pub fn foot_inverse_holding<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+pub fn foot_inverse_holding<
+    L,
+    T,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>(
     params: &L::Params<T>,
-    foot: &SVector<T, 2>,
+    foot: &SVector<T, ND>,
     guess: &SVector<T, NQ>,
     tol: &Tolerance<T>,
     held: &[bool; NQ],
 ) -> Result<SVector<T, NQ>, AssemblyError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
     T: Real,
 {
     let held_count = held.iter().filter(|&&h| h).count();
-    let hold = |mut m: SMatrix<T, NC, NQ>, mut f: SMatrix<T, 2, NQ>| {
+    let hold = |mut m: SMatrix<T, NC, NQ>, mut f: SMatrix<T, ND, NQ>| {
         for (i, &h) in held.iter().enumerate() {
             if h {
                 m.column_mut(i).fill(T::zero());
@@ -473,8 +489,8 @@ where
             L::foot_position(q, params) - foot,
         )
     };
-    let cost = |(phi, e): &(SVector<T, NC>, SVector<T, 2>)| phi.norm_squared() + e.norm_squared();
-    let worst = |(phi, e): &(SVector<T, NC>, SVector<T, 2>)| phi.amax().max(e.amax());
+    let cost = |(phi, e): &(SVector<T, NC>, SVector<T, ND>)| phi.norm_squared() + e.norm_squared();
+    let worst = |(phi, e): &(SVector<T, NC>, SVector<T, ND>)| phi.amax().max(e.amax());
     let mut q = *guess;
     let mut r = residuals(&q);
     // The tolerances are relative to the leg's size at the pose being judged: the
@@ -482,7 +498,7 @@ where
     // the target's coordinates.
     let limit =
         |q: &SVector<T, NQ>| tol.relative_residual * leg_size::<L, T, NQ, NC, NU>(params, q);
-    let met = |q: &SVector<T, NQ>, (phi, e): &(SVector<T, NC>, SVector<T, 2>)| {
+    let met = |q: &SVector<T, NQ>, (phi, e): &(SVector<T, NC>, SVector<T, ND>)| {
         let limit = limit(q);
         within(phi, limit) && within(e, limit.max(tol.relative_residual * foot.amax()))
     };
@@ -505,8 +521,8 @@ where
             residual: to_f64(worst(&r)),
         };
         let phi = r.0;
-        let step = if L::MOBILITY >= 2 + held_count {
-            // At least as many free motions as the foot's two coordinates: the minimal-norm
+        let step = if L::MOBILITY >= ND + held_count {
+            // At least as many free motions as the foot's coordinates: the minimal-norm
             // step `Aᵀ (A Aᵀ + μ I)⁻¹ r` of the stacked residual, A = [J; J_f], by block
             // elimination (JᵀJ + J_fᵀJ_f would be singular at the solution).
             let s11 = mul(&j, &j.transpose()) + SMatrix::<T, NC, NC>::identity() * mu;
@@ -514,7 +530,7 @@ where
             let chol1 = factor_closure_rows::<L, T, NQ, NC, NU>(&s11).ok_or(unreachable)?;
             let mut x = s12;
             chol1.solve_mut(&mut x); // S11⁻¹ S12
-            let schur = mul(&jf, &jf.transpose()) + SMatrix::<T, 2, 2>::identity() * mu
+            let schur = mul(&jf, &jf.transpose()) + SMatrix::<T, ND, ND>::identity() * mu
                 - s12.transpose() * x;
             let chol2 = Cholesky::new(&schur).ok_or(unreachable)?;
             let mut w1 = phi;
@@ -524,7 +540,7 @@ where
             w1 -= x * w2;
             j.transpose() * w1 + jf.transpose() * w2
         } else {
-            // One free motion and two foot coordinates: more equations than unknowns, a
+            // Fewer free motions than foot coordinates: more equations than unknowns, a
             // least-squares step `(AᵀA + μ I)⁻¹ Aᵀ r`. A may lack full column rank (a foot
             // that cannot move at all, e.g. pinned by a closure): a damping floor of
             // `1000 ε` of AᵀA's largest diagonal keeps the step regular there.

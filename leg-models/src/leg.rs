@@ -503,7 +503,12 @@ where
         foot: &SVector<T, 2>,
         guess: &SVector<T, NQ>,
     ) -> Result<SVector<T, NQ>, AssemblyError> {
-        assembly::foot_inverse::<L, T, NQ, NC, NU>(&self.params, foot, guess, &self.tolerance)
+        assembly::foot_inverse::<L, T, NQ, NC, NU, 2, NC>(
+            &self.params,
+            foot,
+            guess,
+            &self.tolerance,
+        )
     }
 
     /// The joint rates of motor rates `theta_dot` at the assembled pose `q`.
@@ -622,7 +627,7 @@ where
 
     /// The foot's apparent mass along x and y at `q`.
     pub fn foot_inertias(&self, q: &SVector<T, NQ>) -> Result<SVector<T, 2>, ControlError> {
-        control::foot_inertias::<L, T, NQ, NC, NU>(&self.params, q)
+        control::foot_inertias::<L, T, NQ, NC, NU, 2, NC>(&self.params, q)
     }
 
     // ---- contact ----

@@ -168,12 +168,12 @@ fn report<
     match structure.foot_space() {
         Ok(()) => {
             // Foot PD scaled by the foot-space inertia Λ = (J_y Ã⁻¹ J_yᵀ)⁻¹ (ω = 20 rad/s).
-            let foot_inertia = foot_inertias::<L, f64, NQ, NC, NU>(&p, &home).unwrap();
+            let foot_inertia = foot_inertias::<L, f64, NQ, NC, NU, 2, NC>(&p, &home).unwrap();
             let foot_pd = Gains {
                 kp: foot_inertia * 400.0,
                 kd: foot_inertia * 40.0,
             };
-            let q_foot = foot_inverse::<L, f64, NQ, NC, NU>(
+            let q_foot = foot_inverse::<L, f64, NQ, NC, NU, 2, NC>(
                 &p,
                 &cycle.sample(0.0).position,
                 &home,

@@ -27,7 +27,7 @@ use leg_models::assembly::{project_position, project_velocity, Tolerance};
 use leg_models::dynamics::forward_dynamics;
 use leg_models::nalgebra::SVector;
 use leg_models::simulate::State;
-use leg_models::LegModel;
+use leg_models::LegDynamics;
 
 /// Records that a check does not apply to a leg, and why (a property of the leg: its
 /// motors, mobility or closures). Printed with the test's output, and collected in
@@ -87,7 +87,7 @@ pub fn workspace_root() -> PathBuf {
 /// `J_p J_pᵀ` above 1e-4), which also leaves out a five-bar's degenerate mode where both
 /// branches coincide. Singular configurations have tests of their own.
 pub fn random_assembled_state<
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     const NQ: usize,
     const NC: usize,
     const NU: usize,
@@ -120,7 +120,7 @@ pub fn random_assembled_state<
 /// `q̈` then `F`, by `q`, then `q̇`, then `u`). The benchmarks' baseline; `false` where a
 /// call fails.
 pub fn forward_difference_derivatives<
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     const NQ: usize,
     const NC: usize,
     const NU: usize,
@@ -169,7 +169,7 @@ pub fn forward_difference_derivatives<
 /// The leg's home pose from its spec, assembled (every joint free), at rest: where the
 /// drift figures release each leg.
 pub fn passive_release_state<
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     const NQ: usize,
     const NC: usize,
     const NU: usize,
@@ -187,7 +187,12 @@ pub fn passive_release_state<
 
 /// The reciprocal condition of `J_p J_pᵀ` (`J` without the actuated columns), from the
 /// pivots of its Cholesky factor; 1 without closures, 0 where it is singular.
-pub fn passive_rcond<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
+pub fn passive_rcond<
+    L: LegDynamics<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>(
     p: &L::Params<f64>,
     q: &SVector<f64, NQ>,
 ) -> f64 {
@@ -217,7 +222,12 @@ pub fn passive_rcond<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, 
 
 /// `(σ_min / σ_max)²` of the closure rows `j`, not counting the leg's redundant rows (their
 /// singular values are zero everywhere); 0 where they lose rank.
-pub fn rcond_of_rows<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
+pub fn rcond_of_rows<
+    L: LegDynamics<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>(
     j: &leg_models::nalgebra::SMatrix<f64, NC, NQ>,
 ) -> f64 {
     let redundant = L::REDUNDANT_ROWS;

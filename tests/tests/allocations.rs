@@ -108,7 +108,7 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
     let foot = L::foot_position(&q, &p) + SVector::<f64, 2>::new(0.002, -0.001);
     zero(
         "foot inverse",
-        allocations(|| foot_inverse::<L, f64, NQ, NC, NU>(&p, &foot, &q, &tol)).0,
+        allocations(|| foot_inverse::<L, f64, NQ, NC, NU, 2, NC>(&p, &foot, &q, &tol)).0,
     );
     let mut moved = q.add_scalar(0.01);
     zero(

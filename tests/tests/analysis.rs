@@ -657,7 +657,7 @@ pub fn check_singularities<
                     let sign = ws.passive_rank[i] > 0.0;
                     for _ in 0..60 {
                         let mid = 0.5 * (lo + hi);
-                        let qm = foot_inverse_holding::<L, f64, NQ, NC, NU>(
+                        let qm = foot_inverse_holding::<L, f64, NQ, NC, NU, 2, NC>(
                             &p,
                             &foot_at(a, b, mid),
                             &q,
@@ -920,7 +920,7 @@ fn follow_ends_at_the_fold_where_a_joint_turns_fast() {
             if h < 1e-15 {
                 break;
             }
-            match foot_inverse_holding::<L, f64, 7, 4, 3>(
+            match foot_inverse_holding::<L, f64, 7, 4, 3, 2, 4>(
                 &p,
                 &foot_at(t + h),
                 &q,

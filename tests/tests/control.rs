@@ -4,7 +4,7 @@
 //! the loop stable; singular configurations are typed errors.
 
 use leg_models::assembly::{assemble, consistent_velocity, foot_inverse, Tolerance};
-use leg_models::control::reference::{Reference, Sinusoid, StepCycle};
+use leg_models::control::reference::{Reference, Setpoint, Sinusoid, StepCycle};
 use leg_models::control::{
     actuated_reduction, actuated_reduction_null_space, ControlError, FootFeedbackLinearization,
     FootPdGravity, Gains, JointFeedbackLinearization, PdGravity,
@@ -18,7 +18,7 @@ use leg_models::{LegDynamics, LegModel, Parameters};
 use leg_tests::{not_applicable, passive_release_state, random_assembled_state, Rng};
 
 pub fn check_reductions<
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     const NQ: usize,
     const NC: usize,
     const NU: usize,
@@ -83,9 +83,52 @@ pub fn check_reductions<
     }
 }
 
+/// A step cycle in the foot's `ND` coordinates: the ellipse `center + a cos ωt e₀ +
+/// b sin ωt e_last` (stride along the base's x, height along its last axis: y in the plane,
+/// z in space), once per 0.5 s. On a planar leg it is [`StepCycle`]'s ellipse.
+#[derive(Clone, Copy)]
+struct Ellipse<const ND: usize> {
+    center: SVector<f64, ND>,
+    half_stride: f64,
+    half_height: f64,
+}
+
+impl<const ND: usize> Ellipse<ND> {
+    fn step_cycle(center: SVector<f64, ND>, half_stride: f64, half_height: f64) -> Self {
+        Ellipse {
+            center,
+            half_stride,
+            half_height,
+        }
+    }
+}
+
+impl<const ND: usize> Reference<f64, ND> for Ellipse<ND> {
+    fn sample(&self, t: f64) -> Setpoint<f64, ND> {
+        let plane = StepCycle {
+            center: SVector::<f64, 2>::zeros(),
+            half_stride: self.half_stride,
+            half_height: self.half_height,
+            period: 0.5,
+        }
+        .sample(t);
+        let embed = |v: SVector<f64, 2>| {
+            let mut w = SVector::<f64, ND>::zeros();
+            w[0] = v[0];
+            w[ND - 1] = v[1];
+            w
+        };
+        Setpoint {
+            position: self.center + embed(plane.position),
+            velocity: embed(plane.velocity),
+            acceleration: embed(plane.acceleration),
+        }
+    }
+}
+
 /// The assembled state whose motors are at `theta` with rates `theta_dot`, on the home
 /// pose's branch.
-fn state_at<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
+fn state_at<L: LegDynamics<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
     p: &L::Params<f64>,
     theta: &SVector<f64, NU>,
     theta_dot: &SVector<f64, NU>,
@@ -96,7 +139,7 @@ fn state_at<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU:
     State { q, qd }
 }
 
-fn home_theta<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
+fn home_theta<L: LegDynamics<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
     p: &L::Params<f64>,
 ) -> SVector<f64, NU> {
     let home = passive_release_state::<L, NQ, NC, NU>(p).q;
@@ -105,7 +148,7 @@ fn home_theta<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const N
 
 /// From an initial error, `θ_ref − θ` follows the solution of `ë + k_d ė + k_p e = 0`.
 pub fn check_error_dynamics<
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     const NQ: usize,
     const NC: usize,
     const NU: usize,
@@ -175,25 +218,28 @@ fn scale_masses<P: Parameters<f64>>(p: &mut P, factor: f64) {
 
 /// The foot's largest distance from the step cycle in each second after the first,
 /// (1 s, 2 s] and (2 s, 3 s], under foot-space feedback linearization (k_p = 400).
-fn foot_tracking<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
+fn foot_tracking<
+    L: LegModel<NQ, NC, NU, ND, NP>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>(
     controller_params: L::Params<f64>,
 ) -> (f64, f64) {
     let p = L::Params::<f64>::default();
     let home = passive_release_state::<L, NQ, NC, NU>(&p).q;
-    let cycle = StepCycle {
-        center: L::foot_position(&home, &p),
-        half_stride: 0.03,
-        half_height: 0.015,
-        period: 0.5,
-    };
+    let cycle = Ellipse::step_cycle(L::foot_position(&home, &p), 0.03, 0.015);
     let r0 = cycle.sample(0.0);
     let q0 =
-        foot_inverse::<L, f64, NQ, NC, NU>(&p, &r0.position, &home, &Tolerance::default()).unwrap();
+        foot_inverse::<L, f64, NQ, NC, NU, ND, NP>(&p, &r0.position, &home, &Tolerance::default())
+            .unwrap();
     let initial = State {
         q: q0,
         qd: SVector::zeros(),
     };
-    let mut controller = FootFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(
+    let mut controller = FootFeedbackLinearization::<L, f64, _, NQ, NC, NU, ND, NP>::new(
         controller_params,
         Gains::critically_damped(400.0),
         cycle,
@@ -212,15 +258,17 @@ fn foot_tracking<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, cons
 }
 
 pub fn check_foot_tracking<
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
     const NQ: usize,
     const NC: usize,
     const NU: usize,
+    const ND: usize,
+    const NP: usize,
 >() {
     if let Err(why) = Structure::of::<L, NQ, NC, NU>().foot_space() {
         return not_applicable(L::NAME, "foot tracking", &why);
     }
-    let (a, b) = foot_tracking::<L, NQ, NC, NU>(L::Params::default());
+    let (a, b) = foot_tracking::<L, NQ, NC, NU, ND, NP>(L::Params::default());
     assert!(
         a.max(b) < 1e-4,
         "{}: steady-state foot error {:e} m",
@@ -230,10 +278,12 @@ pub fn check_foot_tracking<
 }
 
 pub fn check_mass_error_robustness<
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
     const NQ: usize,
     const NC: usize,
     const NU: usize,
+    const ND: usize,
+    const NP: usize,
 >() {
     if let Err(why) = Structure::of::<L, NQ, NC, NU>().foot_space() {
         return not_applicable(L::NAME, "foot tracking with masses 20 % off", &why);
@@ -242,7 +292,7 @@ pub fn check_mass_error_robustness<
     scale_masses(&mut wrong, 1.2);
     // A 20 % model error acts like a disturbance of about 0.2 (g + |ÿ_ref|) ≈ 3 m/s²,
     // which a k_p = 400 loop holds to about 7 mm: bounded, and not growing.
-    let (a, b) = foot_tracking::<L, NQ, NC, NU>(wrong);
+    let (a, b) = foot_tracking::<L, NQ, NC, NU, ND, NP>(wrong);
     assert!(
         b.is_finite() && b < 1e-2,
         "{}: with masses 20 % off, foot error {b:e} m",
@@ -258,10 +308,12 @@ pub fn check_mass_error_robustness<
 /// Every controller is built where its method applies to the leg, and refused with the
 /// reason where it does not; the refusal is decided by the leg's structure alone.
 pub fn check_applicability<
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
     const NQ: usize,
     const NC: usize,
     const NU: usize,
+    const ND: usize,
+    const NP: usize,
 >() {
     let p = L::Params::<f64>::default();
     let structure = Structure::of::<L, NQ, NC, NU>();
@@ -294,7 +346,7 @@ pub fn check_applicability<
         L::NAME
     );
     // Foot directions: J_f on the null space of J.
-    let jf = DMatrix::from_fn(2, NQ, |r, c| L::foot_jacobian(&home, &p)[(r, c)]);
+    let jf = DMatrix::from_fn(ND, NQ, |r, c| L::foot_jacobian(&home, &p)[(r, c)]);
     // The null space of J: eigenvectors of JᵀJ with (numerically) zero eigenvalues.
     let eig = (j.transpose() * &j).symmetric_eigen();
     let top = eig.eigenvalues.amax();
@@ -304,7 +356,7 @@ pub fn check_applicability<
     let null = DMatrix::from_fn(NQ, free.len(), |i, k| eig.eigenvectors[(i, free[k])]);
     let foot_directions = rank(&(&jf * null));
     assert_eq!(
-        determined && foot_directions == 2 && NU >= 2,
+        determined && foot_directions == ND && NU >= ND,
         structure.foot_space().is_ok(),
         "{}: can the motors place the foot?",
         L::NAME
@@ -315,12 +367,7 @@ pub fn check_applicability<
         frequency: SVector::zeros(),
         phase: SVector::zeros(),
     };
-    let cycle = StepCycle {
-        center: L::foot_position(&home, &p),
-        half_stride: 0.01,
-        half_height: 0.01,
-        period: 0.5,
-    };
+    let cycle = Ellipse::step_cycle(L::foot_position(&home, &p), 0.01, 0.01);
     let expect = |built: Result<(), ControlError>, applies: Result<(), NotApplicable>| {
         assert_eq!(
             built,
@@ -331,11 +378,11 @@ pub fn check_applicability<
     };
     let g2 = Gains::critically_damped(100.0);
     expect(
-        FootFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(p, g2, cycle).map(|_| ()),
+        FootFeedbackLinearization::<L, f64, _, NQ, NC, NU, ND, NP>::new(p, g2, cycle).map(|_| ()),
         structure.foot_space(),
     );
     expect(
-        FootPdGravity::<L, f64, _, NQ, NC, NU>::new(p, g2, cycle).map(|_| ()),
+        FootPdGravity::<L, f64, _, NQ, NC, NU, ND, NP>::new(p, g2, cycle).map(|_| ()),
         structure.foot_space(),
     );
     let gu = Gains::critically_damped(100.0);
@@ -372,21 +419,53 @@ macro_rules! control {
             }
             #[test]
             fn foot_tracks_the_step_cycle() {
-                super::check_foot_tracking::<Model, $nq, $nc, $nu>();
+                super::check_foot_tracking::<Model, $nq, $nc, $nu, 2, $nc>();
             }
             #[test]
             fn masses_off_by_20_percent_stay_stable() {
-                super::check_mass_error_robustness::<Model, $nq, $nc, $nu>();
+                super::check_mass_error_robustness::<Model, $nq, $nc, $nu, 2, $nc>();
             }
             #[test]
             fn controllers_apply_by_the_legs_structure() {
-                super::check_applicability::<Model, $nq, $nc, $nu>();
+                super::check_applicability::<Model, $nq, $nc, $nu, 2, $nc>();
             }
         }
     };
 }
 
 generated::for_each_model!(control);
+
+/// The same checks on the spatial legs: a foot with three coordinates, placed where three
+/// motors determine the leg (`abducted_five_bar`), refused with the reason elsewhere.
+macro_rules! spatial_control {
+    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
+        mod $module {
+            type Model = $ty;
+            #[test]
+            fn schur_and_null_space_reductions_agree_with_the_kkt_solve() {
+                super::check_reductions::<Model, $nq, $nc, $nu>();
+            }
+            #[test]
+            fn feedback_linearized_error_follows_the_analytic_solution() {
+                super::check_error_dynamics::<Model, $nq, $nc, $nu>();
+            }
+            #[test]
+            fn foot_tracks_the_step_cycle() {
+                super::check_foot_tracking::<Model, $nq, $nc, $nu, 3, $np>();
+            }
+            #[test]
+            fn masses_off_by_20_percent_stay_stable() {
+                super::check_mass_error_robustness::<Model, $nq, $nc, $nu, 3, $np>();
+            }
+            #[test]
+            fn controllers_apply_by_the_legs_structure() {
+                super::check_applicability::<Model, $nq, $nc, $nu, 3, $np>();
+            }
+        }
+    };
+}
+
+generated::for_each_spatial_model!(spatial_control);
 
 /// The open chain: the same controller is `u = M(q̈_ref + k_p e + k_d ė) + N`.
 #[test]

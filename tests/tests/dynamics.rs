@@ -262,7 +262,7 @@ pub fn check_assembly<
         }
         // Foot → assembled configuration → foot.
         let foot = L::foot_position(&s.q, &p);
-        let q2 = foot_inverse::<L, f64, NQ, NC, NU>(&p, &foot, &guess, &tol).unwrap();
+        let q2 = foot_inverse::<L, f64, NQ, NC, NU, 2, NC>(&p, &foot, &guess, &tol).unwrap();
         assert!(
             (L::foot_position(&q2, &p) - foot).amax() < 1e-12,
             "{}: foot round trip",
@@ -276,7 +276,7 @@ pub fn check_assembly<
     let home = SVector::<f64, NQ>::from_column_slice(&L::HOME);
     let far = SVector::<f64, 2>::new(10.0, -10.0);
     assert!(matches!(
-        foot_inverse::<L, f64, NQ, NC, NU>(&p, &far, &home, &tol),
+        foot_inverse::<L, f64, NQ, NC, NU, 2, NC>(&p, &far, &home, &tol),
         Err(AssemblyError::Unreachable { residual }) if residual > 1.0
     ));
     let nan = SVector::<f64, NU>::from_element(f64::NAN);

@@ -162,7 +162,7 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
         targets.push(L::foot_position(&qa, &p));
     }
     for target in targets {
-        if let Ok(qf) = foot_inverse::<L, f64, NQ, NC, NU>(&p, &target, &q, &tol) {
+        if let Ok(qf) = foot_inverse::<L, f64, NQ, NC, NU, 2, NC>(&p, &target, &q, &tol) {
             assembled("foot inverse", &qf)?;
             // The foot is where it was asked to be, to the solver's tolerance.
             let size = leg_size::<L, f64, NQ, NC, NU>(&p, &qf).max(target.amax());

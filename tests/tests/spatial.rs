@@ -50,6 +50,9 @@ where
     L: LegModel<NQ, NC, NU, 3, NP>,
 {
     let name = L::NAME;
+    // The dimension the runtime decides by (foot control needs as many motors) is the
+    // points' own.
+    assert_eq!(L::DIMENSION, 3, "{name}: LegDynamics::DIMENSION");
     let p = L::Params::<f64>::default();
     let mut rng = Rng::new(30);
     for trial in 0..5 {
@@ -101,10 +104,12 @@ where
         let acc = forward_dynamics::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None)
             .unwrap_or_else(|e| panic!("{name} #{trial}: forward dynamics: {e}"));
         let closure = (j * acc.qdd + b).amax();
-        let scale = (j * acc.qdd).amax().max(b.amax());
+        // Rounding is relative to the terms summed, |J| |q̈|: J q̈ itself can be small
+        // where q̈ lies mostly in J's null space (the achilles rod's fast free spin).
+        let scale = (j.abs() * acc.qdd.abs()).amax().max(b.amax());
         assert!(
             rel(closure, scale) < 1e-10,
-            "{name} #{trial}: J q̈ + J̇ q̇ = {closure:e}"
+            "{name} #{trial}: J q̈ + J̇ q̇ = {closure:e} (scale {scale:e})"
         );
     }
 }
@@ -223,17 +228,17 @@ where
 }
 
 macro_rules! spatial_leg_tests {
-    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
         mod $module {
 
             #[test]
             fn terms_against_finite_differences_and_the_kkt_rows() {
-                super::check_leg::<$ty, $nq, $nc, $nu, { 2 * $nc / 3 }>();
+                super::check_leg::<$ty, $nq, $nc, $nu, $np>();
             }
 
             #[test]
             fn passive_swing_keeps_its_energy() {
-                super::energy_kept::<$ty, $nq, $nc, $nu, { 2 * $nc / 3 }>();
+                super::energy_kept::<$ty, $nq, $nc, $nu, $np>();
             }
         }
     };
@@ -247,8 +252,8 @@ generated::for_each_spatial_model!(spatial_leg_tests);
 fn ball_joints_refuse_their_singularity() {
     let mut balls = 0;
     macro_rules! each {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
-            balls += ball_joint_singularity::<$ty, $nq, $nc, $nu, { 2 * $nc / 3 }>();
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
+            balls += ball_joint_singularity::<$ty, $nq, $nc, $nu, $np>();
         };
     }
     generated::for_each_spatial_model!(each);
@@ -259,7 +264,7 @@ fn ball_joints_refuse_their_singularity() {
 fn there_is_a_spatial_leg() {
     let mut n = 0;
     macro_rules! count {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
             n += 1;
         };
     }

@@ -1640,7 +1640,7 @@ fn eval_and_export_take_a_spatial_leg() {
         "--assemble: rssr_linkage is a spatial leg",
     );
     refused(&legs(&["eval", "rssr_linkage", "--q", "0.3,0,0"]), "--q");
-    refused(&legs(&["sim", "rssr_linkage"]), "is a spatial leg");
+    refused(&legs(&["analyze", "rssr_linkage"]), "is a spatial leg");
     let out = xtask(&["export", "rssr_linkage", "--format", "mjcf"]);
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
@@ -1652,6 +1652,67 @@ fn eval_and_export_take_a_spatial_leg() {
         &xtask(&["export", "rssr_linkage", "--format", "urdf"]),
         "MJCF only for now",
     );
+}
+
+/// `sim` on spatial legs: foot-space control of a foot with three coordinates where three
+/// motors determine the leg, joint space with the reason where they do not; the outputs
+/// carry the third coordinate and the report draws the leg in 3-D.
+#[test]
+fn sim_takes_a_spatial_leg() {
+    let dir = temp_dir("sim-spatial");
+    let out = legs(&[
+        "sim",
+        "abducted_five_bar",
+        "--duration",
+        "0.3",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let run = dir.clone();
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["controller"], "foot-fl");
+    assert!(summary["max_closure_residual_m"].as_f64().unwrap() < 1e-12);
+    // The loop's force rows and the foot in x, y and z.
+    let csv = std::fs::read_to_string(run.join("trajectory.csv")).unwrap();
+    let header = csv.lines().next().unwrap();
+    for column in ["F_0_z", "foot_z", "ref_z", "q_abduction"] {
+        assert!(header.split(',').any(|c| c == column), "{column}: {header}");
+    }
+    let html = std::fs::read_to_string(run.join("report.html")).unwrap();
+    assert!(html.contains("drag it to turn the view"));
+    // One motor cannot place a foot in space: joint space, saying why.
+    let out = legs(&[
+        "sim",
+        "rssr_linkage",
+        "--duration",
+        "0.1",
+        "--out",
+        dir.join("rssr").to_str().unwrap(),
+    ]);
+    assert!(out.status.success());
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("rssr/summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(summary["controller"], "joint-fl");
+    assert!(
+        summary["controller_choice"]
+            .as_str()
+            .unwrap()
+            .contains("the foot has 3 coordinates but the leg has 1 motor"),
+        "{}",
+        summary["controller_choice"]
+    );
+    refused(
+        &legs(&["sim", "rssr_linkage", "--controller", "foot-pd"]),
+        "foot-space control needs at least 3",
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// `import`: a spec from an MJCF file; bad input is one line, exit 2, and nothing written.

@@ -291,8 +291,13 @@ where
     let ix = (((foot[0] - origin[0]) / step).round().max(0.0) as usize).min(n - 1);
     let iy = (((foot[1] - origin[1]) / step).round().max(0.0) as usize).min(n - 1);
     let first = iy * n + ix;
-    let q0 =
-        foot_inverse_holding::<L, f64, NQ, NC, NU>(params, &at(first), start, &tol, &frame.held)?;
+    let q0 = foot_inverse_holding::<L, f64, NQ, NC, NU, 2, NC>(
+        params,
+        &at(first),
+        start,
+        &tol,
+        &frame.held,
+    )?;
     if (q0 - start).amax() > 4.0 * JUMP || !in_range(&q0) {
         return Err(AnalysisError::Assembly(
             crate::assembly::AssemblyError::BranchEnds { fraction: 0.0 },
@@ -466,7 +471,13 @@ where
         let h_now = h.min(1.0 - done);
         let t = done + h_now;
         let target = from_foot + (to - from_foot) * t;
-        match foot_inverse_holding::<L, f64, NQ, NC, NU>(params, &target, &q, tol, &frame.held) {
+        match foot_inverse_holding::<L, f64, NQ, NC, NU, 2, NC>(
+            params,
+            &target,
+            &q,
+            tol,
+            &frame.held,
+        ) {
             Ok(next) if (next - q).amax() <= JUMP => {
                 (q, done, held) = (next, t, held + 1);
                 if held >= 2 {

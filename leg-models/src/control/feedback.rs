@@ -17,7 +17,7 @@ use crate::control::reduction::NullSpace;
 use crate::control::reference::Reference;
 use crate::dynamics::forward::{rcond_floor, to_f64};
 use crate::dynamics::structure::{Actuation, Structure};
-use crate::model::contract::{DynamicsTerms, LegModel, Real};
+use crate::model::contract::{DynamicsTerms, LegDynamics, LegModel, Real};
 use crate::model::linalg::{mul, Cholesky};
 use crate::simulate::source::{ControlError, MAX_GAIN};
 use crate::simulate::source::{State, TorqueSource};
@@ -84,7 +84,7 @@ fn motor_state<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     state: &State<T, NQ>,
 ) -> (SVector<T, NU>, SVector<T, NU>)
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     (
@@ -101,7 +101,7 @@ fn reduction<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     qd: &SVector<T, NQ>,
 ) -> Result<ActuatedDynamics<T, NU>, ControlError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     match Structure::of::<L, NQ, NC, NU>().actuation() {
@@ -123,7 +123,7 @@ pub struct JointFeedbackLinearization<
     const NC: usize,
     const NU: usize,
 > where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
 {
     /// The controller's model of the leg (it may differ from the plant's).
     pub params: L::Params<T>,
@@ -137,7 +137,7 @@ pub struct JointFeedbackLinearization<
 impl<L, T, R, const NQ: usize, const NC: usize, const NU: usize>
     JointFeedbackLinearization<L, T, R, NQ, NC, NU>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
     R: Reference<T, NU>,
 {
@@ -161,7 +161,7 @@ where
 impl<L, T, R, const NQ: usize, const NC: usize, const NU: usize> TorqueSource<T, NQ, NU>
     for JointFeedbackLinearization<L, T, R, NQ, NC, NU>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
     R: Reference<T, NU>,
 {
@@ -181,20 +181,28 @@ where
 
 /// What the foot controllers need at a state: the foot, its rate, `J_f G` and the part of
 /// the foot's acceleration that does not come from `θ̈`.
-struct FootKinematics<T: Real, const NU: usize> {
-    position: SVector<T, 2>,
-    velocity: SVector<T, 2>,
-    jacobian: SMatrix<T, 2, NU>,
-    drift: SVector<T, 2>,
+struct FootKinematics<T: Real, const NU: usize, const ND: usize> {
+    position: SVector<T, ND>,
+    velocity: SVector<T, ND>,
+    jacobian: SMatrix<T, ND, NU>,
+    drift: SVector<T, ND>,
 }
 
-fn foot_kinematics<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+fn foot_kinematics<
+    L,
+    T,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>(
     params: &L::Params<T>,
     state: &State<T, NQ>,
     ns: &NullSpace<T, NQ, NU>,
-) -> FootKinematics<T, NU>
+) -> FootKinematics<T, NU, ND>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
     T: Real,
 {
     let jf = L::foot_jacobian(&state.q, params);
@@ -207,10 +215,10 @@ where
 }
 
 /// Foot-space feedback linearization: the motor accelerations that give the foot
-/// `ÿ = ÿ_ref + k_p e + k_d ė`, then `u = Ã θ̈ − b̃`. With more than two motors the foot
-/// task leaves motions free: they are held at the motor angles of the first state by a
-/// posture law (same gains) in the task's null space, so they neither drift nor fight
-/// the foot.
+/// `ÿ = ÿ_ref + k_p e + k_d ė`, then `u = Ã θ̈ − b̃`. With more motors than the foot has
+/// coordinates (`ND`: two in the plane, three in space) the foot task leaves motions
+/// free: they are held at the motor angles of the first state by a posture law (same
+/// gains) in the task's null space, so they neither drift nor fight the foot.
 pub struct FootFeedbackLinearization<
     L,
     T: Real,
@@ -218,14 +226,16 @@ pub struct FootFeedbackLinearization<
     const NQ: usize,
     const NC: usize,
     const NU: usize,
+    const ND: usize = 2,
+    const NP: usize = NC,
 > where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
 {
     /// The controller's model of the leg (it may differ from the plant's).
     pub params: L::Params<T>,
     /// Gains on the foot error `e = y_ref − y` (`k_p` in 1/s², `k_d` in 1/s); the posture
     /// law uses the first coordinate's.
-    pub gains: Gains<T, 2>,
+    pub gains: Gains<T, ND>,
     /// The foot's reference `y_ref(t)` in the base frame (m).
     pub reference: R,
     /// The motor angles the free motions are held at (set from the first state).
@@ -233,18 +243,26 @@ pub struct FootFeedbackLinearization<
     model: PhantomData<L>,
 }
 
-impl<L, T, R, const NQ: usize, const NC: usize, const NU: usize>
-    FootFeedbackLinearization<L, T, R, NQ, NC, NU>
+impl<
+        L,
+        T,
+        R,
+        const NQ: usize,
+        const NC: usize,
+        const NU: usize,
+        const ND: usize,
+        const NP: usize,
+    > FootFeedbackLinearization<L, T, R, NQ, NC, NU, ND, NP>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
     T: Real,
-    R: Reference<T, 2>,
+    R: Reference<T, ND>,
 {
     /// Fails with [`ControlError::NotApplicable`] unless the motors can place the foot
-    /// (at least two, and they determine the leg).
+    /// (at least as many as its coordinates, and they determine the leg).
     pub fn new(
         params: L::Params<T>,
-        gains: Gains<T, 2>,
+        gains: Gains<T, ND>,
         reference: R,
     ) -> Result<Self, ControlError> {
         Structure::of::<L, NQ, NC, NU>().foot_space()?;
@@ -259,10 +277,10 @@ where
     }
 }
 
-/// `J⁺ w` for a `2 × NU` task Jacobian of full row rank, `J⁺ = Jᵀ (J Jᵀ)⁻¹`.
-fn task_solve<T: Real, const NU: usize>(
-    jy: &SMatrix<T, 2, NU>,
-    w: &SVector<T, 2>,
+/// `J⁺ w` for an `ND × NU` task Jacobian of full row rank, `J⁺ = Jᵀ (J Jᵀ)⁻¹`.
+fn task_solve<T: Real, const NU: usize, const ND: usize>(
+    jy: &SMatrix<T, ND, NU>,
+    w: &SVector<T, ND>,
 ) -> Result<SVector<T, NU>, ControlError> {
     let chol = Cholesky::new(&(jy * jy.transpose())).ok_or(ControlError::SingularTask)?;
     if chol.rcond < rcond_floor::<T>() {
@@ -273,12 +291,20 @@ fn task_solve<T: Real, const NU: usize>(
     Ok(jy.transpose() * x)
 }
 
-impl<L, T, R, const NQ: usize, const NC: usize, const NU: usize> TorqueSource<T, NQ, NU>
-    for FootFeedbackLinearization<L, T, R, NQ, NC, NU>
+impl<
+        L,
+        T,
+        R,
+        const NQ: usize,
+        const NC: usize,
+        const NU: usize,
+        const ND: usize,
+        const NP: usize,
+    > TorqueSource<T, NQ, NU> for FootFeedbackLinearization<L, T, R, NQ, NC, NU, ND, NP>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
     T: Real,
-    R: Reference<T, 2>,
+    R: Reference<T, ND>,
 {
     fn torque(&mut self, t: T, state: &State<T, NQ>) -> Result<SVector<T, NU>, ControlError> {
         check_finite(state)?;
@@ -291,7 +317,7 @@ where
             &terms,
             &passive_forces::<L, T, NQ, NC, NU>(p, &terms, &state.qd),
         );
-        let foot = foot_kinematics::<L, T, NQ, NC, NU>(p, state, &ns);
+        let foot = foot_kinematics::<L, T, NQ, NC, NU, ND, NP>(p, state, &ns);
         let r = self.reference.sample(t);
         let v = r.acceleration
             + self
@@ -299,7 +325,7 @@ where
                 .feedback(&(r.position - foot.position), &(r.velocity - foot.velocity))
             - foot.drift;
         let jy = foot.jacobian;
-        let theta_dd = if NU > 2 {
+        let theta_dd = if NU > ND {
             let (theta, theta_dot) = motor_state::<L, T, NQ, NC, NU>(state);
             let posture = *self.posture.get_or_insert(theta);
             let (kp, kd) = (self.gains.kp[0], self.gains.kd[0]);
@@ -321,7 +347,7 @@ fn gravity_compensation<L, T, const NQ: usize, const NC: usize, const NU: usize>
     q: &SVector<T, NQ>,
 ) -> Result<SVector<T, NU>, ControlError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     if Structure::of::<L, NQ, NC, NU>().actuation() == Actuation::Full {
@@ -337,7 +363,7 @@ where
 /// The baseline: joint PD with gravity compensation, `u = k_p e + k_d ė − b̃(q, 0)`.
 pub struct PdGravity<L, T: Real, R, const NQ: usize, const NC: usize, const NU: usize>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
 {
     /// The controller's model of the leg (it may differ from the plant's).
     pub params: L::Params<T>,
@@ -351,7 +377,7 @@ where
 
 impl<L, T, R, const NQ: usize, const NC: usize, const NU: usize> PdGravity<L, T, R, NQ, NC, NU>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
     R: Reference<T, NU>,
 {
@@ -375,7 +401,7 @@ where
 impl<L, T, R, const NQ: usize, const NC: usize, const NU: usize> TorqueSource<T, NQ, NU>
     for PdGravity<L, T, R, NQ, NC, NU>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
     R: Reference<T, NU>,
 {
@@ -394,29 +420,46 @@ where
 
 /// The foot-space baseline: a virtual spring-damper at the foot through the Jacobian
 /// transpose, with gravity compensation, `u = (J_f G)ᵀ (K_p e + K_d ė) + Gᵀ G(q)`.
-pub struct FootPdGravity<L, T: Real, R, const NQ: usize, const NC: usize, const NU: usize>
-where
-    L: LegModel<NQ, NC, NU>,
+pub struct FootPdGravity<
+    L,
+    T: Real,
+    R,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize = 2,
+    const NP: usize = NC,
+> where
+    L: LegModel<NQ, NC, NU, ND, NP>,
 {
     /// The controller's model of the leg (it may differ from the plant's).
     pub params: L::Params<T>,
     /// Stiffness (N/m) and damping (N s/m) at the foot.
-    pub gains: Gains<T, 2>,
+    pub gains: Gains<T, ND>,
     /// The foot's reference in the base frame (m).
     pub reference: R,
     model: PhantomData<L>,
 }
 
-impl<L, T, R, const NQ: usize, const NC: usize, const NU: usize> FootPdGravity<L, T, R, NQ, NC, NU>
+impl<
+        L,
+        T,
+        R,
+        const NQ: usize,
+        const NC: usize,
+        const NU: usize,
+        const ND: usize,
+        const NP: usize,
+    > FootPdGravity<L, T, R, NQ, NC, NU, ND, NP>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
     T: Real,
-    R: Reference<T, 2>,
+    R: Reference<T, ND>,
 {
     /// Fails with [`ControlError::NotApplicable`] unless the motors can place the foot.
     pub fn new(
         params: L::Params<T>,
-        gains: Gains<T, 2>,
+        gains: Gains<T, ND>,
         reference: R,
     ) -> Result<Self, ControlError> {
         Structure::of::<L, NQ, NC, NU>().foot_space()?;
@@ -430,12 +473,20 @@ where
     }
 }
 
-impl<L, T, R, const NQ: usize, const NC: usize, const NU: usize> TorqueSource<T, NQ, NU>
-    for FootPdGravity<L, T, R, NQ, NC, NU>
+impl<
+        L,
+        T,
+        R,
+        const NQ: usize,
+        const NC: usize,
+        const NU: usize,
+        const ND: usize,
+        const NP: usize,
+    > TorqueSource<T, NQ, NU> for FootPdGravity<L, T, R, NQ, NC, NU, ND, NP>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
     T: Real,
-    R: Reference<T, 2>,
+    R: Reference<T, ND>,
 {
     fn torque(&mut self, t: T, state: &State<T, NQ>) -> Result<SVector<T, NU>, ControlError> {
         check_finite(state)?;
@@ -444,7 +495,7 @@ where
             &SVector::zeros(),
         )?;
         let g = ns.g.transpose() * L::gravity_forces(&state.q, &self.params);
-        let foot = foot_kinematics::<L, T, NQ, NC, NU>(&self.params, state, &ns);
+        let foot = foot_kinematics::<L, T, NQ, NC, NU, ND, NP>(&self.params, state, &ns);
         let r = self.reference.sample(t);
         let force = self
             .gains
@@ -460,7 +511,7 @@ pub fn joint_inertias<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     q: &SVector<T, NQ>,
 ) -> Result<SVector<T, NU>, ControlError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     let rest = SVector::<T, NQ>::zeros();
@@ -475,12 +526,20 @@ where
 /// The foot's effective inertia at a pose: the diagonal of the foot-space inertia
 /// `Λ = (J_y Ã⁻¹ J_yᵀ)⁻¹`, `J_y = J_f G`, at rest (to scale foot-space baseline gains).
 /// Only where the motors can place the foot.
-pub fn foot_inertias<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+pub fn foot_inertias<
+    L,
+    T,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>(
     params: &L::Params<T>,
     q: &SVector<T, NQ>,
-) -> Result<SVector<T, 2>, ControlError>
+) -> Result<SVector<T, ND>, ControlError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
     T: Real,
 {
     Structure::of::<L, NQ, NC, NU>().foot_space()?;

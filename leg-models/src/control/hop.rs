@@ -684,7 +684,7 @@ where
                 guess[i] = q[i];
             }
         }
-        match foot_inverse_holding::<L, T, NQ, NC, NU>(
+        match foot_inverse_holding::<L, T, NQ, NC, NU, 2, NC>(
             &self.params,
             &target,
             &guess,

@@ -23,7 +23,7 @@ use crate::assembly::{assemble_holding, check_on_closures, AssemblyError, Tolera
 use crate::dynamics::derivatives::{forward_dynamics_derivatives, ForwardDynamicsDerivatives};
 use crate::dynamics::forward::DynamicsError;
 use crate::dynamics::structure::factor_closure_rows;
-use crate::model::contract::{LegModel, Real};
+use crate::model::contract::{LegDynamics, Real};
 use crate::model::linalg::{all_finite, mul, Cholesky, Lu};
 pub use crate::simulate::source::LinearizationError;
 use crate::simulate::source::State;
@@ -91,7 +91,7 @@ fn stages<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     opts: &StepOptions<T>,
 ) -> Result<(Stages<T, NQ, NC, NU>, State<T, NQ>), LinearizationError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     let at = |q: &SVector<T, NQ>, qd: &SVector<T, NQ>| {
@@ -162,7 +162,7 @@ fn projection_jacobian<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     state: &State<T, NQ>,
 ) -> Result<ProjectionJacobian<T, NQ>, LinearizationError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     let (q, qd) = (&state.q, &state.qd);
@@ -201,7 +201,7 @@ pub fn linearize_step<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     opts: &StepOptions<T>,
 ) -> Result<(State<T, NQ>, StepJacobian<T, NQ, NU>), LinearizationError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     let (stages, mut next) = stages::<L, T, NQ, NC, NU>(params, state, u, opts)?;
@@ -373,7 +373,7 @@ impl<T: Real, const NQ: usize, const M: usize> ManifoldChart<T, NQ, M> {
         q: &SVector<T, NQ>,
     ) -> Result<Self, LinearizationError>
     where
-        L: LegModel<NQ, NC, NU>,
+        L: LegDynamics<NQ, NC, NU>,
     {
         if !q.iter().all(|x| x.is_finite()) {
             return Err(DynamicsError::NonFinite.into());
@@ -426,7 +426,7 @@ impl<T: Real, const NQ: usize, const M: usize> ManifoldChart<T, NQ, M> {
         tol: &Tolerance<T>,
     ) -> Result<State<T, NQ>, LinearizationError>
     where
-        L: LegModel<NQ, NC, NU>,
+        L: LegDynamics<NQ, NC, NU>,
     {
         let mut q = self.origin;
         for (k, &c) in self.coordinates.iter().enumerate() {
@@ -449,7 +449,7 @@ impl<T: Real, const NQ: usize, const M: usize> ManifoldChart<T, NQ, M> {
         qd: &SVector<T, NQ>,
     ) -> Result<ChartTangent<T, NQ, M>, LinearizationError>
     where
-        L: LegModel<NQ, NC, NU>,
+        L: LegDynamics<NQ, NC, NU>,
     {
         let j = L::constraint_jacobian(q, params);
         let jdot = L::constraint_derivatives(q, qd, &SVector::zeros(), &SVector::zeros(), params)
@@ -506,7 +506,7 @@ impl<T: Real, const NQ: usize, const M: usize> ManifoldChart<T, NQ, M> {
         opts: &StepOptions<T>,
     ) -> Result<ManifoldLinearization<T, NQ, NX, NU>, LinearizationError>
     where
-        L: LegModel<NQ, NC, NU>,
+        L: LegDynamics<NQ, NC, NU>,
     {
         if NX != 2 * M {
             return Err(LinearizationError::Dimension {
@@ -547,7 +547,7 @@ impl<T: Real, const NQ: usize, const M: usize> ManifoldChart<T, NQ, M> {
         q: &SVector<T, NQ>,
     ) -> Result<SVector<T, NU>, LinearizationError>
     where
-        L: LegModel<NQ, NC, NU>,
+        L: LegDynamics<NQ, NC, NU>,
     {
         let rest = SVector::<T, NQ>::zeros();
         let d = forward_dynamics_derivatives::<L, T, NQ, NC, NU>(

@@ -16,7 +16,7 @@ use nalgebra::{SMatrix, SVector};
 use crate::assembly::Tolerance;
 use crate::control::linearize::ManifoldChart;
 use crate::control::reference::Reference;
-use crate::model::contract::{LegModel, Real};
+use crate::model::contract::{LegDynamics, Real};
 use crate::model::linalg::{all_finite, Cholesky, Lu};
 use crate::simulate::source::ControlError;
 use crate::simulate::source::LinearizationError;
@@ -121,7 +121,7 @@ pub struct ManifoldLqr<
     const M: usize,
     const NX: usize,
 > where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
 {
     /// The controller's model of the leg.
     pub params: L::Params<T>,
@@ -151,7 +151,7 @@ impl<
         const NX: usize,
     > ManifoldLqr<L, T, R, NQ, NC, NU, M, NX>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
     R: Reference<T, M>,
 {
@@ -199,7 +199,7 @@ impl<
         const NX: usize,
     > TorqueSource<T, NQ, NU> for ManifoldLqr<L, T, R, NQ, NC, NU, M, NX>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
     R: Reference<T, M>,
 {

@@ -17,7 +17,7 @@ use crate::assembly::passive_solve;
 use crate::dynamics::derivatives::forward_dynamics_derivatives_from_terms;
 use crate::dynamics::forward::{rcond_floor, DynamicsError};
 use crate::dynamics::structure::Structure;
-use crate::model::contract::{DynamicsTerms, LegModel, Real};
+use crate::model::contract::{DynamicsTerms, LegDynamics, Real};
 use crate::model::linalg::all_finite;
 use crate::model::linalg::{mul, mul_tn, Cholesky, PivotedLdlt};
 use crate::simulate::source::ControlError;
@@ -102,7 +102,7 @@ impl<T: Real, const NQ: usize, const NC: usize> PassiveSystem<T, NQ, NC> {
 
 pub(crate) fn actuated_mask<L, const NQ: usize, const NC: usize, const NU: usize>() -> [bool; NQ]
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
 {
     core::array::from_fn(|j| L::ACTUATED.contains(&j))
 }
@@ -114,7 +114,7 @@ pub(crate) fn passive_forces<L, T, const NQ: usize, const NC: usize, const NU: u
     qd: &SVector<T, NQ>,
 ) -> SVector<T, NQ>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     -terms.bias_forces - L::damping_forces(qd, params)
@@ -140,7 +140,7 @@ pub fn actuated_reduction<L, T, const NQ: usize, const NC: usize, const NU: usiz
     qd: &SVector<T, NQ>,
 ) -> Result<ActuatedDynamics<T, NU>, ControlError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     Structure::of::<L, NQ, NC, NU>().joint_space()?;
@@ -196,7 +196,7 @@ pub fn null_space<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     constraint_bias: &SVector<T, NC>,
 ) -> Result<NullSpace<T, NQ, NU>, ControlError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     Structure::of::<L, NQ, NC, NU>().motors_determine_the_leg()?;
@@ -218,7 +218,7 @@ pub fn actuated_reduction_null_space<L, T, const NQ: usize, const NC: usize, con
     qd: &SVector<T, NQ>,
 ) -> Result<ActuatedDynamics<T, NU>, ControlError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     let ns = null_space::<L, T, NQ, NC, NU>(&terms.constraint_jacobian, &terms.constraint_bias)?;
@@ -268,7 +268,7 @@ pub fn reduction_derivatives<L, T, const NQ: usize, const NC: usize, const NU: u
     v: &SVector<T, NU>,
 ) -> Result<ReductionDerivatives<T, NQ, NU>, ControlError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     let terms = L::dynamics_terms(q, qd, params);

@@ -35,6 +35,9 @@ pub struct Structure {
     pub mobility: usize,
     /// `NU`.
     pub motors: usize,
+    /// The foot's coordinates: 2 on a planar leg, 3 on a spatial one
+    /// ([`LegDynamics::DIMENSION`]).
+    pub dimension: usize,
 }
 
 /// Why a method does not apply to a leg; named when a controller or reduction is built.
@@ -55,10 +58,13 @@ pub enum NotApplicable {
         /// Its motors, more.
         motors: usize,
     },
-    /// A foot in the plane has two coordinates; fewer motors cannot place it.
-    FootNeedsTwoMotors {
-        /// The leg's motors, fewer than two.
+    /// The foot has two coordinates in the plane, three in space; fewer motors cannot
+    /// place it.
+    FootNeedsMotors {
+        /// The leg's motors, fewer than the foot's coordinates.
         motors: usize,
+        /// The foot's coordinates.
+        dimension: usize,
     },
 }
 
@@ -77,9 +83,9 @@ impl fmt::Display for NotApplicable {
                 "the leg has {mobility} degree{} of freedom but {motors} motors: the motors over-determine it, so there is no reduction to the motor angles",
                 s(mobility)
             ),
-            NotApplicable::FootNeedsTwoMotors { motors } => write!(
+            NotApplicable::FootNeedsMotors { motors, dimension } => write!(
                 f,
-                "the foot has two coordinates but the leg has {motors} motor{}: foot-space control needs at least two",
+                "the foot has {dimension} coordinates but the leg has {motors} motor{}: foot-space control needs at least {dimension}",
                 s(motors)
             ),
         }
@@ -101,6 +107,7 @@ impl Structure {
             redundant_rows: L::REDUNDANT_ROWS,
             mobility: L::MOBILITY,
             motors: NU,
+            dimension: L::DIMENSION,
         }
     }
 
@@ -140,12 +147,14 @@ impl Structure {
         }
     }
 
-    /// The motors can place the foot: at least two of them, and they determine the leg.
+    /// The motors can place the foot: at least as many as its coordinates (two in the
+    /// plane, three in space), and they determine the leg.
     /// (At a given pose the foot Jacobian may still lose rank: a typed error there.)
     pub fn foot_space(&self) -> Result<(), NotApplicable> {
-        if self.motors < 2 {
-            return Err(NotApplicable::FootNeedsTwoMotors {
+        if self.motors < self.dimension {
+            return Err(NotApplicable::FootNeedsMotors {
                 motors: self.motors,
+                dimension: self.dimension,
             });
         }
         self.motors_determine_the_leg()

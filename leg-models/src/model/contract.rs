@@ -307,6 +307,9 @@ pub trait LegDynamics<const NQ: usize, const NC: usize, const NU: usize> {
     /// [`DynamicsError::BallJointSingular`](crate::dynamics::DynamicsError::BallJointSingular).
     /// None by default.
     const BALL_JOINTS: &'static [usize] = &[];
+    /// The space the leg moves in: 2 for a planar leg (the default), 3 for a spatial one;
+    /// the `ND` of its [`LegModel`] (a foot with that many coordinates).
+    const DIMENSION: usize = 2;
 
     /// The physical parameters (lengths, masses, centres of mass, inertias, rotor
     /// inertias and gear ratios, damping, gravity). `Default` holds the spec's values.

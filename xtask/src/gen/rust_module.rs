@@ -441,6 +441,14 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         let b = info.ball_joints.iter().map(|&b| lit(b));
         quote!(const BALL_JOINTS: &'static [usize] = &[#(#b),*];)
     };
+    // The trait's default is the planar leg's 2.
+    let dimension = if nd == 3 {
+        quote!(
+            const DIMENSION: usize = 3;
+        )
+    } else {
+        quote!()
+    };
     let chart_states = lit(2 * info.mobility);
     let chart_doc = format!(
         " The chart of the constraint manifold: {} coordinates (the mobility), {} states.",
@@ -682,6 +690,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             const REDUNDANT_ROWS: usize = #redundant;
             const MOBILITY: usize = #mobility;
             #ball_joints
+            #dimension
             type Params<T: Arithmetic> = Params<T>;
             #(#methods)*
         }
@@ -769,6 +778,8 @@ pub struct Summary {
     pub nc: usize,
     pub nu: usize,
     pub nk: usize,
+    /// Closure points, two per closure.
+    pub np: usize,
     pub spatial: bool,
 }
 
@@ -780,6 +791,7 @@ impl Summary {
             nc: ir.model.closure_rows(),
             nu: ir.model.actuated.len(),
             nk: ir.model.contact_rows(),
+            np: 2 * ir.model.closures.len(),
             spatial: ir.model.dimension == 3,
         }
     }
@@ -799,7 +811,8 @@ pub fn lib_source(models: &[Summary]) -> Result<String, Error> {
             pub use #module::#ty;
         });
         if m.spatial {
-            spatial_calls.push(quote!($callback!(#module, $crate::#module::#ty, #q, #c, #u);));
+            let p = lit(m.np);
+            spatial_calls.push(quote!($callback!(#module, $crate::#module::#ty, #q, #c, #u, #p);));
         } else {
             calls.push(quote!($callback!(#module, $crate::#module::#ty, #q, #c, #u, #k);));
         }
@@ -822,8 +835,9 @@ pub fn lib_source(models: &[Summary]) -> Result<String, Error> {
             };
         }
 
-        /// Calls `$callback!(module, Type, NQ, NC, NU)` once for every generated spatial
-        /// model (`LegModel<NQ, NC, NU, 3>`: three coordinates per point).
+        /// Calls `$callback!(module, Type, NQ, NC, NU, NP)` once for every generated spatial
+        /// model (`LegModel<NQ, NC, NU, 3, NP>`: three coordinates per point, `NP` closure
+        /// points).
         #[macro_export]
         macro_rules! for_each_spatial_model {
             ($callback:ident) => {

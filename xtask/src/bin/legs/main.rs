@@ -20,8 +20,20 @@ mod eval;
 mod report;
 mod sim;
 
-/// The generated models' names.
+/// The generated models' names, planar then spatial.
 fn models() -> Vec<&'static str> {
+    let mut names = planar_models();
+    macro_rules! name {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
+            names.push(stringify!($module));
+        };
+    }
+    generated::for_each_spatial_model!(name);
+    names
+}
+
+/// The planar models' names (`analyze` takes these).
+fn planar_models() -> Vec<&'static str> {
     let mut names = Vec::new();
     macro_rules! name {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
@@ -33,16 +45,9 @@ fn models() -> Vec<&'static str> {
 }
 
 fn unknown(name: &str) -> Error {
-    let mut spatial = false;
-    macro_rules! is_spatial {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
-            spatial |= name == stringify!($module);
-        };
-    }
-    generated::for_each_spatial_model!(is_spatial);
-    if spatial {
+    if models().contains(&name) {
         return Error::usage(format!(
-            "`{name}` is a spatial leg: `sim` and `analyze` take planar legs only for now (`eval` takes it; its terms are in the `generated` crate, `LegModel<NQ, NC, NU, 3>`)"
+            "`{name}` is a spatial leg: `analyze` takes planar legs only for now (`sim` and `eval` take it)"
         ));
     }
     let spec = xtask::gen::workspace_root()
@@ -70,9 +75,9 @@ fn eval(args: EvalArgs) -> Result<(), Error> {
     }
     generated::for_each_model!(dispatch);
     macro_rules! spatial {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal) => {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
             if args.model == stringify!($module) {
-                return eval::run_spatial::<$ty, $nq, $nc, $nu, { 2 * $nc / 3 }>(&args);
+                return eval::run_spatial::<$ty, $nq, $nc, $nu, $np>(&args);
             }
         };
     }
@@ -90,11 +95,19 @@ fn simulate(args: SimArgs) -> Result<(), Error> {
                 if $nk > 0 {
                     return sim::hop::run::<$ty, $nq, $nc, $nu, $nk>(&settings);
                 }
-                return sim::run::<$ty, $nq, $nc, $nu>(&settings);
+                return sim::run::<$ty, $nq, $nc, $nu, 2, $nc>(&settings);
             }
         };
     }
     generated::for_each_model!(dispatch);
+    macro_rules! spatial {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
+            if name == stringify!($module) {
+                return sim::run::<$ty, $nq, $nc, $nu, 3, $np>(&settings);
+            }
+        };
+    }
+    generated::for_each_spatial_model!(spatial);
     Err(unknown(&name))
 }
 
@@ -102,7 +115,7 @@ fn analyze(args: AnalyzeArgs, raw: &[String]) -> Result<(), Error> {
     let root = xtask::gen::workspace_root();
     let settings = analyze::Settings::from_args(&args, &root)?;
     // Every model is checked before anything is computed.
-    let known = models();
+    let known = planar_models();
     for m in &args.models {
         if !known.contains(&m.as_str()) {
             return Err(unknown(m));

@@ -65,16 +65,18 @@ impl Series {
 }
 
 /// The linkage at one instant: each link as a segment (joint → tip), the closure
-/// points, the foot and its reference.
+/// points, the foot and its reference. A point has the leg's two or three coordinates
+/// (a spatial leg is drawn in 3-D, turned with the mouse).
 pub struct Frame {
     pub t: f64,
     /// Each link's points (joint, tip, children's joints, closure points, foot), drawn as
-    /// a filled outline (their convex hull).
-    pub bodies: Vec<Vec<[f64; 2]>>,
-    pub links: Vec<[f64; 4]>,
-    pub closures: Vec<[f64; 2]>,
-    pub foot: [f64; 2],
-    pub reference: Option<[f64; 2]>,
+    /// a filled outline (their convex hull, in the view).
+    pub bodies: Vec<Vec<Vec<f64>>>,
+    /// Each link's joint then its tip, `2 × dimension` numbers.
+    pub links: Vec<Vec<f64>>,
+    pub closures: Vec<Vec<f64>>,
+    pub foot: Vec<f64>,
+    pub reference: Option<Vec<f64>>,
 }
 
 pub struct Report<'a> {
@@ -678,7 +680,14 @@ fn summary_rows(v: &Value) -> String {
 /// The animation's caption: only what this leg's drawing holds.
 fn animation_caption(r: &Report) -> String {
     let mut parts = vec![
-        "The leg as simulated, played back in real time (scrub with the slider): each link a rigid body (blue outline through all its points)".to_string(),
+        format!(
+            "The leg as simulated, played back in real time (scrub with the slider){}: each link a rigid body (blue outline through all its points)",
+            if r.frames.first().is_some_and(|f| f.foot.len() == 3) {
+                ", in 3-D: drag it to turn the view (the base's axes at the bottom right: x red, y green, z blue)"
+            } else {
+                ""
+            }
+        ),
         "joints (black dots)".to_string(),
     ];
     if r.frames.iter().any(|f| !f.closures.is_empty()) {
@@ -754,8 +763,8 @@ pub fn html(r: &Report) -> Result<String, String> {
         "links": r.frames.iter().map(|f| f.links.clone()).collect::<Vec<_>>(),
         "bodies": r.frames.iter().map(|f| f.bodies.clone()).collect::<Vec<_>>(),
         "closures": r.frames.iter().map(|f| f.closures.clone()).collect::<Vec<_>>(),
-        "foot": r.frames.iter().map(|f| f.foot).collect::<Vec<_>>(),
-        "reference": r.frames.iter().map(|f| f.reference).collect::<Vec<_>>(),
+        "foot": r.frames.iter().map(|f| f.foot.clone()).collect::<Vec<_>>(),
+        "reference": r.frames.iter().map(|f| f.reference.clone()).collect::<Vec<_>>(),
         "ground": r.ground,
     });
     // `</` cannot appear inside a <script> element.
@@ -809,16 +818,32 @@ table.summary th {{ text-align: left; font-weight: bold; padding: 10px 0 3px; bo
   const svg = document.getElementById('leg');
   const ns = 'http://www.w3.org/2000/svg';
   const n = d.t.length;
-  const xs = [], ys = [];
-  d.bodies.forEach(f => f.forEach(b => b.forEach(p => {{ xs.push(p[0]); ys.push(p[1]); }})));
-  d.reference.forEach(p => {{ if (p) {{ xs.push(p[0]); ys.push(p[1]); }} }});
-  const minx = Math.min(...xs), maxx = Math.max(...xs), miny = Math.min(...ys), maxy = Math.max(...ys);
-  const span = Math.max(maxx - minx, maxy - miny, 1e-6) * 1.15;
-  const cx = (minx + maxx) / 2, cy = (miny + maxy) / 2;
-  const X = x => 260 + (x - cx) / span * 500, Y = y => 260 - (y - cy) / span * 500;
+  // A spatial leg's points have three coordinates: it is drawn in an orthographic view
+  // turned by dragging (yaw about the base's z, pitch over it); a planar leg's view is its
+  // plane.
+  const D = d.foot.length && d.foot[0].length === 3 ? 3 : 2;
+  let yaw = -0.5, pitch = 0.35;
+  function P(p) {{
+    if (D === 2) return p;
+    const cy = Math.cos(yaw), sy = Math.sin(yaw), cp = Math.cos(pitch), sp = Math.sin(pitch);
+    return [cy * p[0] + sy * p[1], -sp * sy * p[0] + sp * cy * p[1] + cp * p[2]];
+  }}
+  const all = [];
+  d.bodies.forEach(f => f.forEach(b => b.forEach(p => all.push(p))));
+  d.reference.forEach(p => {{ if (p) all.push(p); }});
+  const lo = [0, 1, 2].slice(0, D).map(i => Math.min(...all.map(p => p[i])));
+  const hi = [0, 1, 2].slice(0, D).map(i => Math.max(...all.map(p => p[i])));
+  const mid = lo.map((l, i) => (l + hi[i]) / 2);
+  // In 3-D the view's extent is the points' bounding sphere: it holds in every turn.
+  const span = (D === 2 ? Math.max(hi[0] - lo[0], hi[1] - lo[1], 1e-6)
+    : 2 * Math.max(1e-6, ...all.map(p => Math.hypot(p[0] - mid[0], p[1] - mid[1], p[2] - mid[2])))) * 1.15;
+  let cx = 0, cy = 0;
+  function centre() {{ const c = P(mid); cx = c[0]; cy = c[1]; }}
+  centre();
+  const X = p => 260 + (P(p)[0] - cx) / span * 500, Y = p => 260 - (P(p)[1] - cy) / span * 500;
   function el(name, attrs) {{ const e = document.createElementNS(ns, name); for (const k in attrs) e.setAttribute(k, attrs[k]); svg.appendChild(e); return e; }}
-  const path = pts => pts.filter(p => p).map((p, i) => (i ? 'L' : 'M') + X(p[0]).toFixed(1) + ' ' + Y(p[1]).toFixed(1)).join(' ');
-  el('path', {{ d: path(d.reference), fill: 'none', stroke: '#999', 'stroke-dasharray': '4 3' }});
+  const path = pts => pts.filter(p => p).map((p, i) => (i ? 'L' : 'M') + X(p).toFixed(1) + ' ' + Y(p).toFixed(1)).join(' ');
+  const refPath = el('path', {{ fill: 'none', stroke: '#999', 'stroke-dasharray': '4 3' }});
   if (d.ground) {{
     // The ground n·x = d: a brown line through the view, earth below.
     const [gx, gy, off] = d.ground, tx = gy, ty = -gx, px = gx * off, py = gy * off;
@@ -844,13 +869,29 @@ table.summary th {{ text-align: left; font-weight: bold; padding: 10px 0 3px; bo
     for (const q of p.slice().reverse()) {{ while (hi.length >= 2 && cross(hi[hi.length - 2], hi[hi.length - 1], q) <= 0) hi.pop(); hi.push(q); }}
     return lo.slice(0, -1).concat(hi.slice(0, -1));
   }}
+  // The hull is taken in the view (screen coordinates), so a body's outline is its
+  // silhouette from wherever it is seen.
+  const outline = b => {{ const h = hull(b.map(p => [X(p), Y(p)])); return h.map((q, i) => (i ? 'L' : 'M') + q[0].toFixed(1) + ' ' + q[1].toFixed(1)).join(' ') + ' Z'; }};
   const links = d.bodies[0].map(() => el('path', {{ fill: '#aec7e8', 'fill-opacity': 0.6, stroke: '#1f77b4', 'stroke-width': 5, 'stroke-linejoin': 'round', 'stroke-linecap': 'round' }}));
   const joints = d.links[0].map(() => el('circle', {{ r: 4, fill: '#222' }}));
   // The foot under the closure rings: a closure at the foot stays visible.
   const foot = el('circle', {{ r: 5, fill: '#2ca02c' }});
   const closures = d.closures[0].map(() => el('circle', {{ r: 7, fill: 'none', stroke: '#d62728', 'stroke-width': 2 }}));
   const ref = el('circle', {{ r: 5, fill: 'none', stroke: '#666', 'stroke-width': 1.5 }});
-  if (!d.ground) el('circle', {{ cx: X(0), cy: Y(0), r: 7, fill: '#888' }});
+  const origin = D === 2 ? [0, 0] : [0, 0, 0];
+  const base = d.ground ? null : el('circle', {{ r: 7, fill: '#888' }});
+  // In 3-D, the base's axes at the bottom right (x red, y green, z blue), turning with the view.
+  const axes = D === 3 ? [0, 1, 2].map(i => [el('line', {{ stroke: ['#d62728', '#2ca02c', '#1f77b4'][i], 'stroke-width': 2 }}), el('text', {{ 'font-size': 13 }})]) : [];
+  function place() {{
+    refPath.setAttribute('d', path(d.reference));
+    if (base) {{ base.setAttribute('cx', X(origin)); base.setAttribute('cy', Y(origin)); }}
+    axes.forEach(([line, text], i) => {{
+      const e = [0, 0, 0]; e[i] = 1; const q = P(e);
+      const x2 = 470 + 30 * q[0], y2 = 470 - 30 * q[1];
+      line.setAttribute('x1', 470); line.setAttribute('y1', 470); line.setAttribute('x2', x2); line.setAttribute('y2', y2);
+      text.setAttribute('x', x2 + 3); text.setAttribute('y', y2 + 4); text.textContent = 'xyz'[i];
+    }});
+  }}
   const scrub = document.getElementById('scrub'), time = document.getElementById('time'), play = document.getElementById('play');
   scrub.max = n - 1;
   // The foot's path over the last second.
@@ -858,16 +899,31 @@ table.summary th {{ text-align: left; font-weight: bold; padding: 10px 0 3px; bo
   const trailFrames = Math.max(1, Math.round(1 / dtFrame));
   let k = 0, playing = true;
   function draw(i) {{
-    d.bodies[i].forEach((b, j) => {{ links[j].setAttribute('d', path(hull(b)) + ' Z'); }});
-    d.links[i].forEach((l, j) => {{ joints[j].setAttribute('cx', X(l[0])); joints[j].setAttribute('cy', Y(l[1])); }});
-    d.closures[i].forEach((p, j) => {{ closures[j].setAttribute('cx', X(p[0])); closures[j].setAttribute('cy', Y(p[1])); }});
-    foot.setAttribute('cx', X(d.foot[i][0])); foot.setAttribute('cy', Y(d.foot[i][1]));
+    d.bodies[i].forEach((b, j) => {{ links[j].setAttribute('d', outline(b)); }});
+    d.links[i].forEach((l, j) => {{ joints[j].setAttribute('cx', X(l)); joints[j].setAttribute('cy', Y(l)); }});
+    d.closures[i].forEach((p, j) => {{ closures[j].setAttribute('cx', X(p)); closures[j].setAttribute('cy', Y(p)); }});
+    foot.setAttribute('cx', X(d.foot[i])); foot.setAttribute('cy', Y(d.foot[i]));
     const r = d.reference[i];
     ref.setAttribute('visibility', r ? 'visible' : 'hidden');
-    if (r) {{ ref.setAttribute('cx', X(r[0])); ref.setAttribute('cy', Y(r[1])); }}
+    if (r) {{ ref.setAttribute('cx', X(r)); ref.setAttribute('cy', Y(r)); }}
     trail.setAttribute('d', path(d.foot.slice(Math.max(0, i - trailFrames), i + 1)));
     scrub.value = i; time.textContent = 't = ' + d.t[i].toFixed(3) + ' s';
   }}
+  if (D === 3) {{
+    // Drag to turn: left–right turns about the base's z, up–down tilts the view.
+    let from = null;
+    svg.style.cursor = 'grab';
+    svg.addEventListener('pointerdown', e => {{ from = [e.clientX, e.clientY]; svg.setPointerCapture(e.pointerId); }});
+    svg.addEventListener('pointerup', () => {{ from = null; }});
+    svg.addEventListener('pointermove', e => {{
+      if (!from) return;
+      yaw += (e.clientX - from[0]) * 0.01;
+      pitch = Math.max(-1.5, Math.min(1.5, pitch + (e.clientY - from[1]) * 0.01));
+      from = [e.clientX, e.clientY];
+      centre(); place(); draw(k);
+    }});
+  }}
+  place();
   let last = null;
   function tick(now) {{
     if (playing && last !== null && now - last > dtFrame * 1000) {{ k = (k + 1) % n; draw(k); last = now; }}

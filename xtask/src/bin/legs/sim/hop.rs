@@ -400,7 +400,7 @@ pub fn run<
     let frames: Vec<report::Frame> = samples
         .iter()
         .step_by(frame_every)
-        .map(|x| frame_at::<L, NQ, NC, NU>(&p, &members, x.t, &x.state.state.q, None))
+        .map(|x| frame_at::<L, NQ, NC, NU, 2, NC>(&p, &members, x.t, &x.state.state.q, None))
         .collect();
     let t: Vec<f64> = samples.iter().map(|x| x.t).collect();
     // Stance phases (any contact on the ground), shaded in every plot over time.

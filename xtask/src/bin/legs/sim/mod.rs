@@ -28,17 +28,39 @@ mod settings;
 pub use settings::Settings;
 use settings::{written, Controller, Trajectory};
 
-/// The foot references `sim` offers.
+/// The foot references `sim` offers, in the foot's `ND` coordinates.
 #[derive(Clone, Copy)]
-enum FootRef {
-    Cycle(StepCycle<f64>),
-    Hold(SVector<f64, 2>),
+enum FootRef<const ND: usize> {
+    /// The step cycle's ellipse, drawn in the plane of `forward` (its stride) and `up`
+    /// (its height): the base's x and y on a planar leg, where the ellipse is the cycle's
+    /// own; on a spatial leg, `up` against gravity and `forward` the base's x made square
+    /// to it.
+    Cycle {
+        cycle: StepCycle<f64>,
+        origin: SVector<f64, ND>,
+        forward: SVector<f64, ND>,
+        up: SVector<f64, ND>,
+    },
+    Hold(SVector<f64, ND>),
 }
 
-impl Reference<f64, 2> for FootRef {
-    fn sample(&self, t: f64) -> Setpoint<f64, 2> {
+impl<const ND: usize> Reference<f64, ND> for FootRef<ND> {
+    fn sample(&self, t: f64) -> Setpoint<f64, ND> {
         match self {
-            FootRef::Cycle(c) => c.sample(t),
+            FootRef::Cycle {
+                cycle,
+                origin,
+                forward,
+                up,
+            } => {
+                let s = cycle.sample(t);
+                let at = |v: SVector<f64, 2>| forward * v[0] + up * v[1];
+                Setpoint {
+                    position: origin + at(s.position),
+                    velocity: at(s.velocity),
+                    acceleration: at(s.acceleration),
+                }
+            }
             FootRef::Hold(p) => Setpoint {
                 position: *p,
                 velocity: SVector::zeros(),
@@ -67,16 +89,29 @@ impl<const NU: usize> Reference<f64, NU> for JointRef<NU> {
 }
 
 /// One of the controllers, as a torque source.
-enum AnyController<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize> {
-    FootFl(FootFeedbackLinearization<L, f64, FootRef, NQ, NC, NU>),
-    FootPd(FootPdGravity<L, f64, FootRef, NQ, NC, NU>),
+enum AnyController<
+    L: LegModel<NQ, NC, NU, ND, NP>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+> {
+    FootFl(FootFeedbackLinearization<L, f64, FootRef<ND>, NQ, NC, NU, ND, NP>),
+    FootPd(FootPdGravity<L, f64, FootRef<ND>, NQ, NC, NU, ND, NP>),
     JointFl(JointFeedbackLinearization<L, f64, JointRef<NU>, NQ, NC, NU>),
     JointPd(PdGravity<L, f64, JointRef<NU>, NQ, NC, NU>),
     Passive,
 }
 
-impl<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>
-    TorqueSource<f64, NQ, NU> for AnyController<L, NQ, NC, NU>
+impl<
+        L: LegModel<NQ, NC, NU, ND, NP>,
+        const NQ: usize,
+        const NC: usize,
+        const NU: usize,
+        const ND: usize,
+        const NP: usize,
+    > TorqueSource<f64, NQ, NU> for AnyController<L, NQ, NC, NU, ND, NP>
 {
     fn torque(&mut self, t: f64, s: &State<f64, NQ>) -> Result<SVector<f64, NU>, ControlError> {
         match self {
@@ -122,37 +157,48 @@ pub(crate) enum Member {
 /// The leg drawn at one instant: each link as the rigid body of its points (`members`,
 /// from [`body_points`]), its joints and tips, the closure points and the foot.
 pub(crate) fn frame_at<
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
     const NQ: usize,
     const NC: usize,
     const NU: usize,
+    const ND: usize,
+    const NP: usize,
 >(
     p: &L::Params<f64>,
     members: &[Vec<Member>],
     t: f64,
     q: &SVector<f64, NQ>,
-    reference: Option<[f64; 2]>,
+    reference: Option<Vec<f64>>,
 ) -> report::Frame {
     let joints = L::joint_positions(q, p);
     let tips = L::link_tips(q, p);
     let closures = L::closure_points(q, p);
     let f = L::foot_position(q, p);
-    let at = |m: &Member| match *m {
-        Member::Joint(i) => [joints[(0, i)], joints[(1, i)]],
-        Member::Tip(i) => [tips[(0, i)], tips[(1, i)]],
-        Member::Closure(c) => [closures[(0, c)], closures[(1, c)]],
-        Member::Foot => [f[0], f[1]],
+    let at = |m: &Member| -> Vec<f64> {
+        match *m {
+            Member::Joint(i) => joints.column(i).iter().copied().collect(),
+            Member::Tip(i) => tips.column(i).iter().copied().collect(),
+            Member::Closure(c) => closures.column(c).iter().copied().collect(),
+            Member::Foot => f.iter().copied().collect(),
+        }
     };
     report::Frame {
         t,
         bodies: members.iter().map(|b| b.iter().map(at).collect()).collect(),
         links: (0..NQ)
-            .map(|i| [joints[(0, i)], joints[(1, i)], tips[(0, i)], tips[(1, i)]])
+            .map(|i| {
+                joints
+                    .column(i)
+                    .iter()
+                    .chain(tips.column(i).iter())
+                    .copied()
+                    .collect()
+            })
             .collect(),
-        closures: (0..NC)
-            .map(|i| [closures[(0, i)], closures[(1, i)]])
+        closures: (0..NP)
+            .map(|i| closures.column(i).iter().copied().collect())
             .collect(),
-        foot: [f[0], f[1]],
+        foot: f.iter().copied().collect(),
         reference,
     }
 }
@@ -193,7 +239,57 @@ pub(crate) fn body_points(name: &str, nq: usize) -> Vec<Vec<Member>> {
     bodies
 }
 
-pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
+/// The step cycle's plane through the foot's home: `(origin, forward, up)`. A planar
+/// leg's is the base's own x and y, the ellipse the cycle's (`origin` zero). A spatial
+/// leg's `up` is against its gravity parameter, `forward` the base's x made square to it
+/// (its y where x is vertical), and the ellipse is centred on the foot's home.
+fn step_plane<
+    L: LegModel<NQ, NC, NU, ND, NP>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>(
+    p: &L::Params<f64>,
+    foot_home: &SVector<f64, ND>,
+) -> (SVector<f64, ND>, SVector<f64, ND>, SVector<f64, ND>) {
+    let axis = |i: usize| SVector::<f64, ND>::from_fn(|r, _| if r == i { 1.0 } else { 0.0 });
+    if ND == 2 {
+        return (SVector::zeros(), axis(0), axis(1));
+    }
+    use leg_models::Parameters;
+    let names = <L::Params<f64> as Parameters<f64>>::NAMES;
+    let g = SVector::<f64, ND>::from_fn(|r, _| {
+        names
+            .iter()
+            .position(|n| *n == ["gravity_x", "gravity_y", "gravity_z"][r])
+            .and_then(|i| p.get(i))
+            .unwrap_or(0.0)
+    });
+    // Without gravity, the base's z is up.
+    let up = if g.norm() > 0.0 {
+        -g / g.norm()
+    } else {
+        axis(2)
+    };
+    let square = |v: SVector<f64, ND>| v - up * up.dot(&v);
+    let forward = [square(axis(0)), square(axis(1))]
+        .into_iter()
+        .find(|v| v.norm() > 1e-6)
+        .map(|v| v / v.norm())
+        .unwrap_or(axis(0));
+    (*foot_home, forward, up)
+}
+
+pub fn run<
+    L: LegModel<NQ, NC, NU, ND, NP>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>(
     s: &Settings,
 ) -> Result<(), Error> {
     let p = <L as leg_models::LegDynamics<NQ, NC, NU>>::Params::<f64>::default();
@@ -221,12 +317,25 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
     let kd = 2.0 * kp.sqrt();
 
     let foot_ref = match trajectory {
-        Trajectory::Step => FootRef::Cycle(StepCycle {
-            center: foot_home,
-            half_stride: 0.03,
-            half_height: 0.015,
-            period: 0.5,
-        }),
+        Trajectory::Step => {
+            let (origin, forward, up) = step_plane::<L, NQ, NC, NU, ND, NP>(&p, &foot_home);
+            let center = if ND == 2 {
+                SVector::<f64, 2>::new(foot_home[0], foot_home[1])
+            } else {
+                SVector::zeros()
+            };
+            FootRef::Cycle {
+                cycle: StepCycle {
+                    center,
+                    half_stride: 0.03,
+                    half_height: 0.015,
+                    period: 0.5,
+                },
+                origin,
+                forward,
+                up,
+            }
+        }
         _ => FootRef::Hold(foot_home),
     };
     if s.speed == Some(0.0) {
@@ -262,8 +371,13 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
 
     // Start on the reference, at rest for foot tasks, at the reference's rates for joint tasks.
     let initial = if controller_kind.in_foot_space() {
-        let q = foot_inverse::<L, f64, NQ, NC, NU>(&p, &foot_ref.sample(0.0).position, &home, &tol)
-            .map_err(|e| fail("the foot reference's start", &e))?;
+        let q = foot_inverse::<L, f64, NQ, NC, NU, ND, NP>(
+            &p,
+            &foot_ref.sample(0.0).position,
+            &home,
+            &tol,
+        )
+        .map_err(|e| fail("the foot reference's start", &e))?;
         State {
             q,
             qd: SVector::zeros(),
@@ -284,63 +398,68 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
     };
 
     let not_applicable = |e: ControlError| fail("the controller", &e);
-    let (controller, gains_text): (AnyController<L, NQ, NC, NU>, String) = match controller_kind {
-        Controller::FootFl => (
-            AnyController::FootFl(
-                FootFeedbackLinearization::new(p, Gains::new(kp, kd), foot_ref)
-                    .map_err(not_applicable)?,
-            ),
-            format!(
-                "k_p = {} 1/s², k_d = {} 1/s",
-                report::significant(kp, 4),
-                report::significant(kd, 4)
-            ),
-        ),
-        Controller::FootPd => {
-            let foot_inertia = foot_inertias::<L, f64, NQ, NC, NU>(&p, &home)
-                .map_err(|e| fail("the foot's inertia at home", &e))?;
-            let g = Gains {
-                kp: foot_inertia * kp,
-                kd: foot_inertia * kd,
-            };
-            (
-                AnyController::FootPd(FootPdGravity::new(p, g, foot_ref).map_err(not_applicable)?),
-                format!(
-                    "K = {:?} N/m, D = {:?} N s/m (Λ × {kp}, Λ × {kd:.3})",
-                    g.kp.as_slice(),
-                    g.kd.as_slice()
+    let (controller, gains_text): (AnyController<L, NQ, NC, NU, ND, NP>, String) =
+        match controller_kind {
+            Controller::FootFl => (
+                AnyController::FootFl(
+                    FootFeedbackLinearization::new(p, Gains::new(kp, kd), foot_ref)
+                        .map_err(not_applicable)?,
                 ),
-            )
-        }
-        Controller::JointFl => (
-            AnyController::JointFl(
-                JointFeedbackLinearization::new(p, Gains::new(kp, kd), joint_ref)
-                    .map_err(not_applicable)?,
-            ),
-            format!(
-                "k_p = {} 1/s², k_d = {} 1/s",
-                report::significant(kp, 4),
-                report::significant(kd, 4)
-            ),
-        ),
-        Controller::JointPd => {
-            let joint_inertia = joint_inertias::<L, f64, NQ, NC, NU>(&p, &home)
-                .map_err(|e| fail("the motors' inertia at home", &e))?;
-            let g = Gains {
-                kp: joint_inertia * kp,
-                kd: joint_inertia * kd,
-            };
-            (
-                AnyController::JointPd(PdGravity::new(p, g, joint_ref).map_err(not_applicable)?),
                 format!(
-                    "k_p = {:?} N m/rad, k_d = {:?} N m s/rad",
-                    g.kp.as_slice(),
-                    g.kd.as_slice()
+                    "k_p = {} 1/s², k_d = {} 1/s",
+                    report::significant(kp, 4),
+                    report::significant(kd, 4)
                 ),
-            )
-        }
-        Controller::Passive => (AnyController::Passive, "none".to_string()),
-    };
+            ),
+            Controller::FootPd => {
+                let foot_inertia = foot_inertias::<L, f64, NQ, NC, NU, ND, NP>(&p, &home)
+                    .map_err(|e| fail("the foot's inertia at home", &e))?;
+                let g = Gains {
+                    kp: foot_inertia * kp,
+                    kd: foot_inertia * kd,
+                };
+                (
+                    AnyController::FootPd(
+                        FootPdGravity::new(p, g, foot_ref).map_err(not_applicable)?,
+                    ),
+                    format!(
+                        "K = {:?} N/m, D = {:?} N s/m (Λ × {kp}, Λ × {kd:.3})",
+                        g.kp.as_slice(),
+                        g.kd.as_slice()
+                    ),
+                )
+            }
+            Controller::JointFl => (
+                AnyController::JointFl(
+                    JointFeedbackLinearization::new(p, Gains::new(kp, kd), joint_ref)
+                        .map_err(not_applicable)?,
+                ),
+                format!(
+                    "k_p = {} 1/s², k_d = {} 1/s",
+                    report::significant(kp, 4),
+                    report::significant(kd, 4)
+                ),
+            ),
+            Controller::JointPd => {
+                let joint_inertia = joint_inertias::<L, f64, NQ, NC, NU>(&p, &home)
+                    .map_err(|e| fail("the motors' inertia at home", &e))?;
+                let g = Gains {
+                    kp: joint_inertia * kp,
+                    kd: joint_inertia * kd,
+                };
+                (
+                    AnyController::JointPd(
+                        PdGravity::new(p, g, joint_ref).map_err(not_applicable)?,
+                    ),
+                    format!(
+                        "k_p = {:?} N m/rad, k_d = {:?} N m s/rad",
+                        g.kp.as_slice(),
+                        g.kd.as_slice()
+                    ),
+                )
+            }
+            Controller::Passive => (AnyController::Passive, "none".to_string()),
+        };
     let limit = s.torque_limit.unwrap_or(f64::INFINITY);
     let source = Saturated::new(controller, SVector::from_element(limit))
         .map_err(|e| Error::usage(format!("`--torque-limit`: {e}")))?;
@@ -406,12 +525,19 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
     for &a in &L::ACTUATED {
         let _ = write!(csv, ",u_{}", L::JOINT_NAMES[a]);
     }
+    // A closure's force has one row per coordinate of its point.
+    const AXES: [&str; 3] = ["x", "y", "z"];
     for r in 0..NC {
-        let _ = write!(csv, ",F_{}{}", r / 2, if r % 2 == 0 { "_x" } else { "_y" });
+        let _ = write!(csv, ",F_{}_{}", r / ND, AXES[r % ND]);
     }
-    csv.push_str(",closure_residual,energy,foot_x,foot_y");
+    csv.push_str(",closure_residual,energy");
+    for a in &AXES[..ND] {
+        let _ = write!(csv, ",foot_{a}");
+    }
     if foot_task {
-        csv.push_str(",ref_x,ref_y");
+        for a in &AXES[..ND] {
+            let _ = write!(csv, ",ref_{a}");
+        }
     } else if tracked {
         for &a in &L::ACTUATED {
             let _ = write!(csv, ",ref_{}", L::JOINT_NAMES[a]);
@@ -437,15 +563,14 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
         {
             let _ = write!(row, ",{v}");
         }
-        let f = foot_of(x);
-        let _ = write!(
-            row,
-            ",{},{},{},{}",
-            x.closure_residual, x.energy, f[0], f[1]
-        );
+        let _ = write!(row, ",{},{}", x.closure_residual, x.energy);
+        for v in foot_of(x).iter() {
+            let _ = write!(row, ",{v}");
+        }
         if foot_task {
-            let r = foot_ref.sample(x.t).position;
-            let _ = write!(row, ",{},{}", r[0], r[1]);
+            for v in foot_ref.sample(x.t).position.iter() {
+                let _ = write!(row, ",{v}");
+            }
         } else if tracked {
             for v in joint_ref.sample(x.t).position.iter() {
                 let _ = write!(row, ",{v}");
@@ -506,11 +631,9 @@ pub fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: 
         .iter()
         .step_by(frame_every)
         .map(|x| {
-            let reference = foot_task.then(|| {
-                let r = foot_ref.sample(x.t).position;
-                [r[0], r[1]]
-            });
-            frame_at::<L, NQ, NC, NU>(&p, &members, x.t, &x.state.q, reference)
+            let reference =
+                foot_task.then(|| foot_ref.sample(x.t).position.iter().copied().collect());
+            frame_at::<L, NQ, NC, NU, ND, NP>(&p, &members, x.t, &x.state.q, reference)
         })
         .collect();
     let t: Vec<f64> = samples.iter().map(|x| x.t).collect();
