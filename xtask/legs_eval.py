@@ -4,10 +4,13 @@ import json
 import subprocess
 
 
-def ours(legs, model, q, qd, assemble=False, project=False):
+def ours(legs, model, q, qd, assemble=False, project=False, u=None):
     """`legs eval MODEL --q … --qd … --json` (with `--assemble`, q and qd are the motors';
-    with `--project`, q and qd are moved onto the closures first)."""
+    with `--project`, q and qd are moved onto the closures first; `u`, the motor torques,
+    for `qdd`)."""
     args = [legs, "eval", model, "--q", ",".join(repr(float(x)) for x in q), "--qd", ",".join(repr(float(x)) for x in qd), "--json"]
+    if u is not None:
+        args += ["--u", ",".join(repr(float(x)) for x in u)]
     if assemble:
         args.append("--assemble")
     if project:

@@ -50,8 +50,8 @@ def pinocchio_leg(name, leg):
     closures = ir["model"]["closures"]
     cmodels = []
     for c in closures:
-        fa = model.frames[model.getFrameId(f"{c}_a")]
-        fb = model.frames[model.getFrameId(f"{c}_b")]
+        fa = model.frames[model.getFrameId(f"{c}.a")]
+        fb = model.frames[model.getFrameId(f"{c}.b")]
         first, second = (fb, fa) if fa.parentJoint == 0 else (fa, fb)
         cmodels.append(pin.RigidConstraintModel(pin.ContactType.CONTACT_3D, model, first.parentJoint,
                                                 first.placement, second.parentJoint, second.placement,

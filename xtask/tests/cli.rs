@@ -1648,10 +1648,16 @@ fn eval_and_export_take_a_spatial_leg() {
         text.contains("type=\"ball\"") && text.contains("<connect"),
         "{text}"
     );
-    refused(
-        &xtask(&["export", "rssr_linkage", "--format", "urdf"]),
-        "MJCF only for now",
-    );
+    // URDF: a ball joint as three continuous joints named for its angles.
+    let out = xtask(&["export", "rssr_linkage", "--format", "urdf"]);
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    for joint in ["coupler.x", "coupler.y", "coupler.z"] {
+        assert!(
+            text.contains(&format!("<joint name=\"{joint}\" type=\"continuous\">")),
+            "{joint}: {text}"
+        );
+    }
 }
 
 /// `sim` on spatial legs: foot-space control of a foot with three coordinates where three

@@ -43,8 +43,9 @@ fn cross_checks(root: &Path) -> Result<Vec<String>, String> {
     let dir = target.join("exports");
     // (script, model, file, tool): the planar exports in MuJoCo and Pinocchio; a spatial
     // leg's MJCF in MuJoCo (mass matrix, bias forces, the connect rows and the foot, a
-    // ball joint mapped to MuJoCo's quaternion and angular velocity), and an imported leg
-    // on the file it came from too (joints by name).
+    // ball joint mapped to MuJoCo's quaternion and angular velocity) and its URDF in
+    // Pinocchio (a ball joint as three revolute joints, so q maps one to one), and an
+    // imported leg on the file it came from too (joints by name).
     let mut jobs: Vec<(&str, String, std::path::PathBuf, &str)> = Vec::new();
     let planar = crate::gen::planar_model_names(root)?;
     for name in planar.iter().chain(&crate::gen::spatial_model_names(root)?) {
@@ -63,6 +64,9 @@ fn cross_checks(root: &Path) -> Result<Vec<String>, String> {
         } else {
             crate::cli::write_atomic(&mjcf, &crate::commands::export::spatial::mjcf(&model))?;
             jobs.push(("mujoco_spatial_check.py", name.clone(), mjcf, "MuJoCo"));
+            let urdf = dir.join(format!("{name}.urdf"));
+            crate::cli::write_atomic(&urdf, &crate::commands::export::spatial::urdf(&model))?;
+            jobs.push(("urdf_check.py", name.clone(), urdf, "Pinocchio"));
             if let Some(a) = crate::commands::import::header_args(root, &spec.text) {
                 jobs.push(("mujoco_spatial_check.py", name.clone(), a.file, "MuJoCo"));
             }

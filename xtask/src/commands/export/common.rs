@@ -1,9 +1,9 @@
-//! What the exporters share: the names they add, exact numbers, and MJCF's closures and
-//! coupling springs.
+//! What the exporters share: the names they add, exact numbers, MJCF's closures and
+//! coupling springs, and URDF's added frames and transmissions.
 
 use std::fmt::Write;
 
-use crate::gen::model::{Model, Param};
+use crate::gen::model::{Model, Param, Point};
 
 /// The names the exporters add beside the spec's: each holds a `.`, which a spec name
 /// (a plain identifier) cannot, so none can clash with a link, joint, closure or contact.
@@ -92,5 +92,73 @@ pub(crate) fn closures_and_couplings(m: &Model, out: &mut String) {
             );
         }
         let _ = writeln!(out, "  </tendon>");
+    }
+}
+
+/// URDF's fixed frames at the closure points (`<closure>.a`, `.b`), the foot and the
+/// contact points, each on its link; `at` writes a point's `xyz`.
+pub(crate) fn urdf_frames(m: &Model, at: impl Fn(&Point) -> String, out: &mut String) {
+    let mut frame = |name: &str, p: &Point| {
+        let _ = writeln!(out, "  <link name=\"{name}\"/>");
+        let _ = writeln!(
+            out,
+            "  <joint name=\"{}\" type=\"fixed\">",
+            added::frame_joint(name)
+        );
+        let _ = writeln!(
+            out,
+            "    <parent link=\"{}\"/>\n    <child link=\"{name}\"/>",
+            p.link.map_or("base", |l| m.links[l].name.as_str())
+        );
+        let _ = writeln!(out, "    <origin xyz=\"{}\" rpy=\"0 0 0\"/>", at(p));
+        let _ = writeln!(out, "  </joint>");
+    };
+    for c in &m.closures {
+        frame(&added::closure_point(&c.name, "a"), &c.a);
+        frame(&added::closure_point(&c.name, "b"), &c.b);
+    }
+    frame(added::FOOT, &m.foot);
+    for c in &m.contacts {
+        frame(&added::contact_point(&c.name), &c.point);
+    }
+}
+
+/// URDF's transmission per motor: its gear as `mechanicalReduction`, and the rotor inertia
+/// and gear as Drake's extension elements (a URDF joint has no armature).
+pub(crate) fn urdf_transmissions(m: &Model, out: &mut String) {
+    for &a in &m.actuated {
+        let l = &m.links[a];
+        let r = l.rotor.as_ref().expect("actuated links have a rotor");
+        let (ir, n) = (value(&m.params, &r[0]), value(&m.params, &r[1]));
+        let _ = writeln!(out, "  <transmission name=\"{}_motor\">", l.name);
+        let _ = writeln!(
+            out,
+            "    <type>transmission_interface/SimpleTransmission</type>"
+        );
+        let _ = writeln!(
+            out,
+            "    <joint name=\"{}\"><hardwareInterface>hardware_interface/EffortJointInterface</hardwareInterface></joint>",
+            l.name
+        );
+        let _ = writeln!(out, "    <actuator name=\"{}_motor\">", l.name);
+        let _ = writeln!(
+            out,
+            "      <mechanicalReduction>{}</mechanicalReduction>",
+            num(n)
+        );
+        let _ = writeln!(
+            out,
+            "      <drake:rotor_inertia value=\"{}\"/>\n      <drake:gear_ratio value=\"{}\"/>",
+            num(ir),
+            num(n)
+        );
+        let _ = writeln!(out, "    </actuator>");
+        let _ = writeln!(
+            out,
+            "    <!-- rotor inertia {} kg m^2, reflected {} kg m^2 -->",
+            num(ir),
+            num(ir * n * n)
+        );
+        let _ = writeln!(out, "  </transmission>");
     }
 }

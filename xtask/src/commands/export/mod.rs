@@ -1,7 +1,7 @@
 //! `cargo xtask export`: a leg for MuJoCo (MJCF) and URDF tools, from its spec.
-//! `planar.rs` writes a planar leg's MJCF and URDF, `spatial.rs` a spatial leg's MJCF,
+//! `planar.rs` writes a planar leg's MJCF and URDF, `spatial.rs` a spatial leg's,
 //! `common.rs` what they share (the names the exporters add, exact numbers, closures and
-//! coupling springs in MJCF).
+//! coupling springs in MJCF, URDF's added frames and transmissions).
 
 mod common;
 pub mod planar;
@@ -28,15 +28,10 @@ fn load_model(root: &Path, name: &str) -> Result<model::Model, cli::Error> {
 /// `cargo xtask export`: writes `--out FILE` whole (or prints to standard output).
 pub fn run(root: &Path, a: ExportArgs) -> Result<(), cli::Error> {
     let m = load_model(root, &a.model)?;
-    if m.dimension != 2 && matches!(a.format, ExportFormat::Urdf) {
-        return Err(cli::Error::Usage(format!(
-            "`{}` is a spatial leg: its export is MJCF only for now (`--format mjcf`); URDF is planar only",
-            a.model
-        )));
-    }
     let text = match a.format {
         ExportFormat::Mjcf if m.dimension == 3 => spatial::mjcf(&m),
         ExportFormat::Mjcf => mjcf(&m),
+        ExportFormat::Urdf if m.dimension == 3 => spatial::urdf(&m),
         ExportFormat::Urdf => urdf(&m),
     };
     match a.out {

@@ -25,7 +25,9 @@
 
 use std::fmt::Write;
 
-use super::common::{added, closures_and_couplings, joint_spring, num, value};
+use super::common::{
+    added, closures_and_couplings, joint_spring, num, urdf_frames, urdf_transmissions, value,
+};
 use crate::gen::model::{self, Model, Param, Point};
 
 /// A planar link's inertia (exports are planar only: [`run`] refuses a spatial leg).
@@ -350,63 +352,8 @@ pub fn urdf(m: &Model) -> String {
         );
         let _ = writeln!(out, "  </joint>");
     }
-    let frame = |name: &str, p: &Point, out: &mut String| {
-        let _ = writeln!(out, "  <link name=\"{name}\"/>");
-        let _ = writeln!(
-            out,
-            "  <joint name=\"{}\" type=\"fixed\">",
-            added::frame_joint(name)
-        );
-        let _ = writeln!(
-            out,
-            "    <parent link=\"{}\"/>\n    <child link=\"{name}\"/>",
-            p.link.map_or("base", |l| m.links[l].name.as_str())
-        );
-        let _ = writeln!(out, "    <origin xyz=\"{}\" rpy=\"0 0 0\"/>", at(m, p));
-        let _ = writeln!(out, "  </joint>");
-    };
-    for c in &m.closures {
-        frame(&added::closure_point(&c.name, "a"), &c.a, &mut out);
-        frame(&added::closure_point(&c.name, "b"), &c.b, &mut out);
-    }
-    frame(added::FOOT, &m.foot, &mut out);
-    for c in &m.contacts {
-        frame(&added::contact_point(&c.name), &c.point, &mut out);
-    }
-    for &a in &m.actuated {
-        let l = &m.links[a];
-        let (ir, n) = pair(m, l.rotor.as_ref().expect("actuated links have a rotor"));
-        let _ = writeln!(out, "  <transmission name=\"{}_motor\">", l.name);
-        let _ = writeln!(
-            out,
-            "    <type>transmission_interface/SimpleTransmission</type>"
-        );
-        let _ = writeln!(
-            out,
-            "    <joint name=\"{}\"><hardwareInterface>hardware_interface/EffortJointInterface</hardwareInterface></joint>",
-            l.name
-        );
-        let _ = writeln!(out, "    <actuator name=\"{}_motor\">", l.name);
-        let _ = writeln!(
-            out,
-            "      <mechanicalReduction>{}</mechanicalReduction>",
-            num(n)
-        );
-        let _ = writeln!(
-            out,
-            "      <drake:rotor_inertia value=\"{}\"/>\n      <drake:gear_ratio value=\"{}\"/>",
-            num(ir),
-            num(n)
-        );
-        let _ = writeln!(out, "    </actuator>");
-        let _ = writeln!(
-            out,
-            "    <!-- rotor inertia {} kg m^2, reflected {} kg m^2 -->",
-            num(ir),
-            num(ir * n * n)
-        );
-        let _ = writeln!(out, "  </transmission>");
-    }
+    urdf_frames(m, |p| at(m, p), &mut out);
+    urdf_transmissions(m, &mut out);
     let _ = writeln!(out, "</robot>");
     out
 }

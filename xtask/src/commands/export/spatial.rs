@@ -1,4 +1,4 @@
-//! Export a spatial leg to MuJoCo (MJCF), from its spec.
+//! Export a spatial leg to MuJoCo (MJCF) and URDF ([`urdf`]), from its spec.
 //!
 //! Each spec link is a body placed by its `origin` and `orientation` (the body's `pos` and
 //! `quat`) in its parent's; a revolute joint is a `hinge` and a prismatic one a `slide`
@@ -17,7 +17,9 @@
 
 use std::fmt::Write;
 
-use super::common::{added, closures_and_couplings, joint_spring, num, value};
+use super::common::{
+    added, closures_and_couplings, joint_spring, num, urdf_frames, urdf_transmissions, value,
+};
 use crate::gen::model::{Inertia, Model, Point};
 
 fn triple(m: &Model, names: &[String]) -> String {
@@ -284,4 +286,147 @@ pub fn mjcf(m: &Model) -> String {
     let _ = writeln!(out, "  </actuator>");
     let _ = writeln!(out, "</mujoco>");
     out
+}
+
+/// URDF's `rpy` (fixed axes: `R = R_z(yaw) R_y(pitch) R_x(roll)`) of a rotation matrix.
+pub fn rpy(r: &[[f64; 3]; 3]) -> [f64; 3] {
+    let pitch = (-r[2][0]).atan2((r[0][0] * r[0][0] + r[1][0] * r[1][0]).sqrt());
+    if (r[0][0] * r[0][0] + r[1][0] * r[1][0]).sqrt() < 1e-12 {
+        // Pitch ±90°: roll and yaw turn about the same axis; all of it as yaw.
+        return [0.0, pitch, (-r[0][1]).atan2(r[1][1])];
+    }
+    [r[2][1].atan2(r[2][2]), pitch, r[1][0].atan2(r[0][0])]
+}
+
+/// The spatial model as URDF: the spanning tree, one link and joint per coordinate. A
+/// ball joint is three `continuous` joints about x, y and z (named `<link>.x`, `.y`,
+/// `.z`, the generated model's own coordinates) on two massless links, so a URDF tool's
+/// configuration is `q` with no map. Each joint is placed by the link's `origin` and
+/// `orientation` (`rpy`) in its parent, about the link's `axis`; inertias are whole, about
+/// the centre of mass in the link's axes. Closures, the foot and the motors are as in the
+/// planar URDF: fixed frames and transmissions. Springs have no URDF element: the spec
+/// holds them.
+pub fn urdf(m: &Model) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "<?xml version=\"1.0\"?>");
+    let _ = writeln!(
+        out,
+        // An XML comment cannot hold two hyphens in a row: no `--format` here.
+        "<!-- {}: exported from its spec by `cargo xtask export {}`, format urdf.",
+        m.name, m.name
+    );
+    let _ = writeln!(
+        out,
+        "     Spatial leg. URDF holds the spanning tree only: each closure k joins the frames\n     k.a and k.b (they must coincide). A ball joint is three continuous joints about x,\n     y, z on massless links. Gravity of the spec: {} m/s^2. Reflected rotor inertia: see\n     the transmissions. Springs: see the spec. -->",
+        triple(m, &m.gravity)
+    );
+    let _ = writeln!(
+        out,
+        "<robot name=\"{}\" xmlns:drake=\"http://drake.mit.edu\">",
+        m.name
+    );
+    let _ = writeln!(out, "  <link name=\"base\"/>");
+    for l in &m.links {
+        if l.massless {
+            let _ = writeln!(out, "  <link name=\"{}\"/>", l.name);
+        } else {
+            let _ = writeln!(out, "  <link name=\"{}\">", l.name);
+            let Inertia::Spatial(e) = &l.inertia else {
+                unreachable!("a spatial link's inertia is a tensor")
+            };
+            let i = |k: usize| num(e[k].as_ref().map_or(0.0, |n| value(&m.params, n)));
+            let _ = writeln!(
+                out,
+                "    <inertial>\n      <origin xyz=\"{}\" rpy=\"0 0 0\"/>\n      <mass value=\"{}\"/>\n      <inertia ixx=\"{}\" ixy=\"{}\" ixz=\"{}\" iyy=\"{}\" iyz=\"{}\" izz=\"{}\"/>\n    </inertial>",
+                triple(m, &l.com),
+                num(value(&m.params, &l.mass)),
+                i(0),
+                i(3),
+                i(4),
+                i(1),
+                i(5),
+                i(2)
+            );
+            let _ = writeln!(out, "  </link>");
+        }
+        let parent = l.parent.map_or("base", |p| m.links[p].name.as_str());
+        let kind = if l.joint == "prismatic" {
+            "prismatic"
+        } else {
+            "continuous"
+        };
+        let rpy = l.orientation.as_ref().map_or([0.0; 3], rpy);
+        let axis = l.axis.as_ref().expect("a spatial joint has its axis");
+        let _ = writeln!(out, "  <joint name=\"{}\" type=\"{kind}\">", l.name);
+        let _ = writeln!(
+            out,
+            "    <parent link=\"{parent}\"/>\n    <child link=\"{}\"/>\n    <origin xyz=\"{}\" rpy=\"{}\"/>\n    <axis xyz=\"{}\"/>",
+            l.name,
+            triple(m, &l.origin),
+            rpy.map(num).join(" "),
+            axis.iter().map(|&a| num(a)).collect::<Vec<_>>().join(" ")
+        );
+        if kind == "prismatic" {
+            // URDF requires limits on a prismatic joint; these never bind.
+            let _ = writeln!(
+                out,
+                "    <limit lower=\"-1000\" upper=\"1000\" effort=\"1e9\" velocity=\"1e9\"/>"
+            );
+        }
+        let _ = writeln!(
+            out,
+            "    <dynamics damping=\"{}\" friction=\"0\"/>\n  </joint>",
+            num(value(&m.params, &l.damping))
+        );
+    }
+    urdf_frames(m, |p| triple(m, &p.point), &mut out);
+    urdf_transmissions(m, &mut out);
+    let _ = writeln!(out, "</robot>");
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::rpy;
+
+    /// `R_z(yaw) R_y(pitch) R_x(roll)` of the angles `rpy` finds gives the matrix back,
+    /// at pitch ±90° too (where roll and yaw share an axis).
+    #[test]
+    fn rpy_composes_back_to_the_rotation() {
+        let rot = |axis: usize, a: f64| {
+            let (s, c) = a.sin_cos();
+            let mut r = [[0.0; 3]; 3];
+            let (i, j) = ((axis + 1) % 3, (axis + 2) % 3);
+            r[axis][axis] = 1.0;
+            r[i][i] = c;
+            r[j][j] = c;
+            r[i][j] = -s;
+            r[j][i] = s;
+            r
+        };
+        let mul = |a: [[f64; 3]; 3], b: [[f64; 3]; 3]| {
+            let mut c = [[0.0; 3]; 3];
+            for i in 0..3 {
+                for j in 0..3 {
+                    c[i][j] = (0..3).map(|k| a[i][k] * b[k][j]).sum();
+                }
+            }
+            c
+        };
+        let compose = |a: [f64; 3]| mul(mul(rot(2, a[2]), rot(1, a[1])), rot(0, a[0]));
+        for angles in [
+            [0.3, -0.2, 1.1],
+            [-2.0, 1.2, -3.0],
+            [0.4, std::f64::consts::FRAC_PI_2, 0.7],
+            [0.4, -std::f64::consts::FRAC_PI_2, -0.2],
+        ] {
+            let r = compose(angles);
+            let back = compose(rpy(&r));
+            for i in 0..3 {
+                for j in 0..3 {
+                    assert!((r[i][j] - back[i][j]).abs() < 1e-12, "{angles:?}");
+                }
+            }
+        }
+    }
 }
