@@ -489,9 +489,17 @@ def derive(model):
     dL_dqd = cs.gradient(L, qd)
     M_lagrange = cs.jacobian(dL_dqd, qd)
     N_lagrange = cs.jtimes(dL_dqd, q, qd) - cs.gradient(L, q)
-    # And the closure's J = ∂φ/∂q and J̇ q̇ of the same kinematics, as the notes write them.
+    def rod_length(c):
+        return sym[c["distance"]] if c.get("distance") else None
+
+    # And the closure's J = ∂φ/∂q and J̇ q̇ of the same kinematics, as the notes write them: a
+    # point closure's rows are a − b, a rod's one row (|a − b|² − L²) / (2L).
+    def closure_rows(c, d):
+        L_rod = rod_length(c)
+        return d if L_rod is None else (cs.dot(d, d) - L_rod**2) / (2 * L_rod)
+
     if model["closures"]:
-        phi_lagrange = cs.vertcat(*[point(c["a"]) - point(c["b"]) for c in model["closures"]])
+        phi_lagrange = cs.vertcat(*[closure_rows(c, point(c["a"]) - point(c["b"])) for c in model["closures"]])
         J_lagrange = cs.jacobian(phi_lagrange, q)
         Jdot_qd_lagrange = cs.jtimes(cs.jtimes(phi_lagrange, q, qd), q, qd)
     else:
@@ -527,9 +535,19 @@ def derive(model):
 
     closures = model["closures"]
     if closures:
-        pa, Ja, ba = stacked([c["a"] for c in closures])
-        pb, Jb, bb = stacked([c["b"] for c in closures])
-        phi, J, Jdot_qd = pa - pb, Ja - Jb, ba - bb
+        rows = []
+        for c in closures:
+            pa, Ja, ba = stacked([c["a"]])
+            pb, Jb, bb = stacked([c["b"]])
+            d, Jd, bd = pa - pb, Ja - Jb, ba - bb
+            L_rod = rod_length(c)
+            if L_rod is None:
+                rows.append((d, Jd, bd))
+            else:
+                # φ = (dᵀd − L²)/(2L): φ̇ = dᵀ J_d q̇ / L, φ̈ = J q̈ + (ḋᵀḋ + dᵀ J̇_d q̇) / L.
+                dd = cs.mtimes(Jd, qd)
+                rows.append((closure_rows(c, d), cs.mtimes(d.T, Jd) / L_rod, (cs.dot(dd, dd) + cs.dot(d, bd)) / L_rod))
+        phi, J, Jdot_qd = (cs.vertcat(*[r[i] for r in rows]) for i in range(3))
         closure_points = cs.horzcat(*[cs.horzcat(point(c["a"]), point(c["b"])) for c in closures])
     else:
         phi, J, Jdot_qd = cs.SX(0, 1), cs.SX(0, n), cs.SX(0, 1)

@@ -14,8 +14,8 @@ as written (`--fix-base`), and MuJoCo's equalities and joints that reach outside
   R_x(α) R_y(β) R_z(γ) and qvel the angular velocity in the link's frame, ω = E(β, γ) of
   the three angles' rates);
 - the bias forces: ours (C q̇ + G, springs in G) is `Tᵀ (qfrc_bias − qfrc_spring + M_mj Ṫ q̇)`;
-- the closure rows: our J is `efc_J T` (MuJoCo's `connect` rows, dense), and J̇ q̇ the
-  same rows of MuJoCo's site accelerations at zero joint acceleration;
+- the closure rows: our J is `efc_J T` (MuJoCo's `connect` rows, dense, and a rod's
+  row, the length of a spatial tendon held by a tendon equality);
 - the foot: the site `foot.point` against our foot position.
 
 Every difference is relative to the largest entry, below 1e-9. Then MuJoCo runs 1 s
@@ -189,8 +189,14 @@ def main():
             rows = []
             for e in range(m.neq):
                 r = [k for k in range(d.nefc) if d.efc_type[k] == mujoco.mjtConstraint.mjCNSTR_EQUALITY and d.efc_id[k] == e]
-                if len(r) == 3 and not np.any(efc[r][:, other]):
+                if np.any(efc[r][:, other]):
+                    continue
+                if len(r) == 3:
                     rows.append(base.T @ efc[r][:, dofs] @ T)
+                elif len(r) == 1 and m.eq_type[e] == mujoco.mjtEq.mjEQ_TENDON:
+                    # A rod: the tendon's length row, d|a − b|/dq, ours (dᵀ J_d / L) where
+                    # the rod is assembled.
+                    rows.append(efc[r][:, dofs] @ T)
             checks.append(("J", t["J"], np.vstack(rows) if rows else np.zeros((0, len(dofs)))))
         for key, a, b in checks:
             worst[key] = max(worst.get(key, 0.0), close(f"#{trial} {key}", a, b, failures))

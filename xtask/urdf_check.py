@@ -100,13 +100,18 @@ def main():
         start = ours(legs, name, near, [0.0] * len(near), project=True)
         qp = configuration(start["q"])
         pin.framesForwardKinematics(model, data, qp)
-        for c in ir["model"]["closures"]:
+        rods = ir["model"].get("distance_closures", [])
+        for k, c in enumerate(ir["model"]["closures"]):
             a = data.oMf[model.getFrameId(f"{c}.a")].translation
             b = data.oMf[model.getFrameId(f"{c}.b")].translation
-            closure = max(closure, float(np.abs(a - b).max()))
+            # A rod's frames are its length apart; a point closure's coincide.
+            gap = abs(np.linalg.norm(a - b) - params[f"{c}_distance"]) if k in rods else float(np.abs(a - b).max())
+            closure = max(closure, gap)
         ok = ok and closure < 1e-12
     dynamics = ""
-    if ir["model"]["closures"] and dim == 3:
+    if ir["model"].get("distance_closures"):
+        dynamics = "; constraintDynamics not compared: Pinocchio has no rod (distance) constraint"
+    elif ir["model"]["closures"] and dim == 3:
         ok_fd, dynamics = constraint_dynamics(legs, name, ir, model, urdf, configuration, idx, spring_forces)
         ok = ok and ok_fd
     print(

@@ -38,6 +38,8 @@ pub mod open_three_link;
 pub use open_three_link::OpenThreeLink;
 pub mod raibert_hopper;
 pub use raibert_hopper::RaibertHopper;
+pub mod rod_knee_leg;
+pub use rod_knee_leg::RodKneeLeg;
 pub mod rssr_linkage;
 pub use rssr_linkage::RssrLinkage;
 pub mod three_motor_leg;
@@ -76,6 +78,7 @@ macro_rules! for_each_spatial_model {
     ($callback:ident) => {
         $callback ! (abducted_five_bar, $crate::abducted_five_bar::AbductedFiveBar, 5, 3,
         3, 2); $callback ! (achilles_leg, $crate::achilles_leg::AchillesLeg, 10, 6, 4,
-        4); $callback ! (rssr_linkage, $crate::rssr_linkage::RssrLinkage, 5, 3, 1, 2);
+        4); $callback ! (rod_knee_leg, $crate::rod_knee_leg::RodKneeLeg, 4, 1, 3, 2);
+        $callback ! (rssr_linkage, $crate::rssr_linkage::RssrLinkage, 5, 3, 1, 2);
     };
 }

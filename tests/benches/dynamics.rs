@@ -318,6 +318,84 @@ fn bench_model<
     g.finish();
 }
 
+/// A spatial leg: the fused terms beside CasADi's C of the Lagrange form and of the closed
+/// form (checked equal first), forward dynamics, and a simulation step.
+fn bench_spatial<L, const NQ: usize, const NC: usize, const NU: usize>(c: &mut Criterion)
+where
+    L: leg_models::LegDynamics<NQ, NC, NU>,
+{
+    let p = L::Params::<f64>::default();
+    let q = passive_release_state::<L, NQ, NC, NU>(&p).q;
+    let mut qd = SVector::<f64, NQ>::from_fn(|i, _| 0.3 + 0.1 * i as f64);
+    project_velocity::<L, f64, NQ, NC, NU>(&p, &q, &mut qd).unwrap();
+    let u = SVector::<f64, NU>::from_fn(|k, _| 0.05 * (k as f64 + 1.0));
+    let pv = casadi::parameter_vector(&p);
+    let peers = casadi::functions(L::NAME);
+    let mut g = c.benchmark_group(L::NAME);
+    g.warm_up_time(Duration::from_millis(300))
+        .measurement_time(Duration::from_millis(1200))
+        .sample_size(40);
+    g.bench_function("empty", |bch| {
+        bch.iter(|| black_box((black_box(&q), black_box(&qd), black_box(&p))))
+    });
+    g.bench_function("fused-ours", |bch| {
+        bch.iter(|| L::dynamics_terms(black_box(&q), black_box(&qd), black_box(&p)))
+    });
+    let ours = L::dynamics_terms(&q, &qd, &p);
+    let close = |a: &[f64], b: &[f64]| {
+        a.iter()
+            .zip(b)
+            .all(|(x, y)| (x - y).abs() <= 1e-12 * (1.0 + y.abs()))
+    };
+    for (form, pair) in [("casadi", peers.lagrange), ("casadi-closed", peers.closed)] {
+        let (mut m, mut n, mut j, mut b) = (
+            vec![0.0; NQ * NQ],
+            vec![0.0; NQ],
+            vec![0.0; NC * NQ],
+            vec![0.0; NC],
+        );
+        let terms = casadi::Prepared::new(
+            pair.terms,
+            &[q.as_slice(), qd.as_slice(), &pv],
+            &mut [&mut m, &mut n, &mut j, &mut b],
+        );
+        // SAFETY: the buffers outlive `terms` and have the function's dense sizes.
+        assert_eq!(unsafe { terms.call() }, 0);
+        assert!(
+            close(&m, ours.mass_matrix.as_slice())
+                && close(&n, ours.bias_forces.as_slice())
+                && close(&j, ours.constraint_jacobian.as_slice())
+                && close(&b, ours.constraint_bias.as_slice()),
+            "{}: {form}'s terms differ from ours",
+            L::NAME
+        );
+        g.bench_function(format!("fused-{form}"), |bch| {
+            // SAFETY: as above.
+            bch.iter(|| unsafe { black_box(&terms).call() })
+        });
+    }
+    g.bench_function("fd-ours", |bch| {
+        bch.iter(|| {
+            forward_dynamics::<L, f64, NQ, NC, NU>(
+                black_box(&p),
+                black_box(&q),
+                black_box(&qd),
+                black_box(&u),
+                None,
+            )
+        })
+    });
+    let opts = StepOptions::rk4(1e-3);
+    g.bench_function("step-ours", |bch| {
+        bch.iter(|| {
+            let mut s = black_box(State { q, qd });
+            let mut hold = |_: f64, _: &State<f64, NQ>| u;
+            step::<L, f64, NQ, NC, NU>(&p, &mut s, 0.0, &mut hold, &opts).map(|_| s)
+        })
+    });
+    g.finish();
+}
+
 fn benches(c: &mut Criterion) {
     macro_rules! each {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
@@ -325,6 +403,12 @@ fn benches(c: &mut Criterion) {
         };
     }
     generated::for_each_model!(each);
+    macro_rules! spatial {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
+            bench_spatial::<$ty, $nq, $nc, $nu>(c);
+        };
+    }
+    generated::for_each_spatial_model!(spatial);
 }
 
 criterion_group!(dynamics, benches);

@@ -55,6 +55,8 @@ where
     assert_eq!(L::DIMENSION, 3, "{name}: LegDynamics::DIMENSION");
     let p = L::Params::<f64>::default();
     let mut rng = Rng::new(30);
+    // Each rod's length |a − b| at every assembled state (the same, whatever the pose).
+    let mut rods: Vec<Vec<f64>> = vec![Vec::new(); L::DISTANCE_CLOSURES.len()];
     for trial in 0..5 {
         // Random poses near home, put on the closures; random velocities.
         let mut q = SVector::<f64, NQ>::from(L::HOME);
@@ -65,6 +67,10 @@ where
         let mut qd = SVector::<f64, NQ>::from_fn(|_, _| rng.range(-2.0, 2.0));
         project_velocity::<L, f64, NQ, NC, NU>(&p, &q, &mut qd).unwrap();
 
+        let points = L::closure_points(&q, &p);
+        for (r, &k) in L::DISTANCE_CLOSURES.iter().enumerate() {
+            rods[r].push((points.column(2 * k) - points.column(2 * k + 1)).norm());
+        }
         let g = L::gravity_forces(&q, &p);
         let g_fd = central(|x| SVector::<f64, 1>::new(L::potential_energy(x, &p)), &q).transpose();
         let e = rel((g - g_fd).amax(), g.amax());
@@ -110,6 +116,18 @@ where
         assert!(
             rel(closure, scale) < 1e-10,
             "{name} #{trial}: J q̈ + J̇ q̇ = {closure:e} (scale {scale:e})"
+        );
+    }
+    for (r, lengths) in rods.iter().enumerate() {
+        let (lo, hi) = lengths
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), &x| {
+                (lo.min(x), hi.max(x))
+            });
+        assert!(
+            hi - lo < 1e-12 * hi,
+            "{name}: rod {} is {lo} to {hi} m long across assembled states",
+            L::DISTANCE_CLOSURES[r]
         );
     }
 }

@@ -1083,3 +1083,36 @@ fn ball_joints_are_refused_where_they_do_not_fit() {
         "only a spatial leg",
     );
 }
+
+/// A distance (rod) closure: one row, its length a parameter; refused on a planar leg and
+/// with a length that is not positive.
+#[test]
+fn distance_closures_are_one_row_and_refused_where_they_do_not_fit() {
+    let rssr = |extra: &str| {
+        ball_edit(
+            "b = { link = \"rocker\" }\n",
+            &format!("b = {{ link = \"rocker\" }}\n{extra}"),
+        )
+    };
+    let m = model::build(&parse(&rssr("distance = 0.1\n")).unwrap()).unwrap();
+    assert_eq!(m.closure_rows(), 1);
+    assert!(m
+        .params
+        .iter()
+        .any(|p| p.name == "joint_distance" && p.default == 0.1));
+    refused(
+        &rssr("distance = 0.0\n"),
+        "closures[0].distance",
+        "must be positive",
+    );
+    refused(
+        &rssr("distance = -0.2\n"),
+        "closures[0].distance",
+        "must be positive",
+    );
+    refused(
+        &VALID.replacen("[[closures]]\n", "[[closures]]\ndistance = 0.1\n", 1),
+        "closures[0].distance",
+        "for spatial legs for now",
+    );
+}

@@ -310,6 +310,11 @@ pub trait LegDynamics<const NQ: usize, const NC: usize, const NU: usize> {
     /// The space the leg moves in: 2 for a planar leg (the default), 3 for a spatial one;
     /// the `ND` of its [`LegModel`] (a foot with that many coordinates).
     const DIMENSION: usize = 2;
+    /// The closures that are rods (spatial legs): closure `k` listed here has one row in
+    /// `φ`, `(|a − b|² − L²) / (2L)`, zero where the points are the rod's length apart
+    /// (and equal to `|a − b| − L` to first order); every other closure one row per
+    /// coordinate of `a − b`. Rows follow the closures' order. None by default.
+    const DISTANCE_CLOSURES: &'static [usize] = &[];
 
     /// The physical parameters (lengths, masses, centres of mass, inertias, rotor
     /// inertias and gear ratios, damping, gravity). `Default` holds the spec's values.

@@ -90,7 +90,7 @@ pub fn table(root: &Path) -> Result<String, cli::Error> {
         rows.push([
             m.name.clone(),
             m.links.len().to_string(),
-            format!("{}{redundant}", m.dimension * m.closures.len()),
+            format!("{}{redundant}", m.closure_rows()),
             m.actuated.len().to_string(),
             mobility,
             actuation,

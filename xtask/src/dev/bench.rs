@@ -266,10 +266,10 @@ pub fn run(root: &Path, pinocchio: bool) -> Result<(), String> {
             "dynamics",
         ],
     )?;
-    let pin = if pinocchio {
+    let (pin, pin_spatial) = if pinocchio {
         crate::dev::pinocchio::run(root)?
     } else {
-        BTreeMap::new()
+        (BTreeMap::new(), BTreeMap::new())
     };
     let models = crate::gen::planar_model_names(root)?;
     println!();
@@ -338,6 +338,31 @@ pub fn run(root: &Path, pinocchio: bool) -> Result<(), String> {
             ns(p.derivatives),
             ratio(ours, p.derivatives)
         );
+    }
+    println!();
+    println!("| spatial model | harness | fused ours | CasADi C Lagrange | ratio | CasADi C closed | ratio | FD ours | Pinocchio C++ constraintDynamics (converged) | ratio | its iterations | Pinocchio, one iteration | ratio | its q̈ off by | sim step |");
+    println!("|{}", "---|".repeat(15));
+    for m in crate::gen::spatial_model_names(root)? {
+        let g = |id: &str| median(root, &m, id);
+        let (fo, fd) = (g("fused-ours"), g("fd-ours"));
+        let p = pin_spatial.get(&m);
+        let cells = [
+            ns(g("empty")),
+            ns(fo),
+            ns(g("fused-casadi")),
+            ratio(fo, g("fused-casadi")),
+            ns(g("fused-casadi-closed")),
+            ratio(fo, g("fused-casadi-closed")),
+            ns(fd),
+            ns(p.map(|p| p.converged)),
+            ratio(fd, p.map(|p| p.converged)),
+            p.map_or("–".into(), |p| p.iterations.to_string()),
+            ns(p.map(|p| p.one_iteration)),
+            ratio(fd, p.map(|p| p.one_iteration)),
+            p.map_or("–".into(), |p| format!("{:.1e}", p.one_iteration_error)),
+            ns(g("step-ours")),
+        ];
+        println!("| {m} | {} |", cells.join(" | "));
     }
     println!("\nmedians of criterion (target/criterion/); `harness` is the measured loop with no contender (included in every other figure); ratios are ours / peer, measured in this one run; batch: four states per call on F64x4 lanes, per state, and the scalar time over it (states per second over the scalar path's)");
     Ok(())

@@ -23,6 +23,7 @@ const REQUIREMENTS: &str = "xtask/requirements-pinocchio.txt";
 const SOURCE: &str = "xtask/pinocchio_bench.cpp";
 const SX_SOURCE: &str = "xtask/pinocchio_casadi.cpp";
 const DERIVATIVES_SOURCE: &str = "xtask/pinocchio_derivatives.cpp";
+const SPATIAL_SOURCE: &str = "xtask/pinocchio_spatial_bench.cpp";
 const LEG_HEADER: &str = "xtask/pinocchio_leg.hpp";
 
 fn value(params: &[Param], name: &str) -> f64 {
@@ -99,6 +100,22 @@ pub struct Figures {
     pub derivatives: Option<f64>,
 }
 
+/// The planar legs' figures and the spatial legs', by model.
+pub type AllFigures = (BTreeMap<String, Figures>, BTreeMap<String, SpatialFigures>);
+
+/// Pinocchio's C++ `constraintDynamics` on a spatial leg's URDF (median ns per call).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SpatialFigures {
+    /// Converged proximal iterations (the exact solution, equal to ours).
+    pub converged: f64,
+    /// The iterations it took.
+    pub iterations: u64,
+    /// One proximal iteration, Pinocchio's fastest setting.
+    pub one_iteration: f64,
+    /// That solution's largest q̈ difference from ours, relative to our largest q̈.
+    pub one_iteration_error: f64,
+}
+
 /// Whether `out` is older than any of `sources` (or missing).
 fn stale(out: &Path, sources: &[PathBuf]) -> bool {
     let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
@@ -150,6 +167,10 @@ fn compile(
         .arg(format!("-L{}", lib.display()))
         .arg("-lpinocchio_default")
         .arg(format!("-Wl,-rpath,{}", lib.display()));
+    if source == SPATIAL_SOURCE {
+        // Pinocchio's URDF parser and urdfdom, from the same wheels.
+        cmd.args(["-lpinocchio_parsers", "-lurdfdom_model"]);
+    }
     if let Some(c) = casadi {
         cmd.arg(format!("-L{}", c.display()))
             .arg("-lcasadi")
@@ -161,7 +182,7 @@ fn compile(
 /// Pinocchio's figures for every model: its C++ pipeline where the C++ program has a
 /// fixed-size instance, and its algorithms on casadi::SX emitted as C for every leg
 /// without redundant closure rows.
-pub fn run(root: &Path) -> Result<BTreeMap<String, Figures>, String> {
+pub fn run(root: &Path) -> Result<AllFigures, String> {
     let py = gen::python(root)?;
     eprintln!("==> installing {REQUIREMENTS} into {}/", gen::VENV_DIR);
     run_command(
@@ -194,7 +215,10 @@ pub fn run(root: &Path) -> Result<BTreeMap<String, Figures>, String> {
     compile(root, SX_SOURCE, &sx_bin, &prefix, Some(&casadi_dir))?;
     let derivatives_bin = dir.join("pinocchio_derivatives");
     compile(root, DERIVATIVES_SOURCE, &derivatives_bin, &prefix, None)?;
+    let spatial_bin = dir.join("pinocchio_spatial_bench");
+    compile(root, SPATIAL_SOURCE, &spatial_bin, &prefix, None)?;
     let target_legs = crate::cli::build_legs(root)?;
+    let spatial = spatial_figures(root, &dir, &spatial_bin, &target_legs)?;
     let mut out = BTreeMap::new();
     for name in crate::gen::planar_model_names(root)? {
         let spec = gen::load_spec(
@@ -307,6 +331,146 @@ pub fn run(root: &Path) -> Result<BTreeMap<String, Figures>, String> {
             show(figures.sx_terms),
             show(figures.sx_forward_dynamics),
             show(figures.derivatives)
+        );
+        out.insert(name, figures);
+    }
+    Ok((out, spatial))
+}
+
+/// Every spatial leg's URDF in `pinocchio_spatial_bench` at its assembled home pose with
+/// rates and torques, its q̈ checked against ours (`legs eval`) before it is timed.
+fn spatial_figures(
+    root: &Path,
+    dir: &Path,
+    bin: &Path,
+    legs: &Path,
+) -> Result<BTreeMap<String, SpatialFigures>, String> {
+    let join = |v: &[f64]| {
+        v.iter()
+            .map(|x| format!("{x:?}"))
+            .collect::<Vec<_>>()
+            .join(",")
+    };
+    let floats = |v: &Value| -> Vec<f64> {
+        v.as_array()
+            .map(|a| a.iter().filter_map(Value::as_f64).collect())
+            .unwrap_or_default()
+    };
+    let mut out = BTreeMap::new();
+    for name in crate::gen::spatial_model_names(root)? {
+        let spec = gen::load_spec(
+            root,
+            &root.join(gen::SPECS_DIR).join(format!("{name}.toml")),
+        )?;
+        let m = crate::gen::model::build(&spec).map_err(|e| e.to_string())?;
+        if m.closures.iter().any(|c| c.distance.is_some()) {
+            eprintln!("{name}: not timed against Pinocchio: its constraintDynamics has no rod (distance) constraint");
+            continue;
+        }
+        let urdf = dir.join(format!("{name}.urdf"));
+        crate::cli::write_atomic(&urdf, &crate::commands::export::spatial::urdf(&m))?;
+        let n = m.links.len();
+        let qd: Vec<f64> = (0..n).map(|i| 0.3 + 0.1 * i as f64).collect();
+        let u: Vec<f64> = (0..m.actuated.len())
+            .map(|k| 0.05 * (k as f64 + 1.0))
+            .collect();
+        let ours: Value = serde_json::from_str(&run_command(
+            Command::new(legs).args([
+                "eval",
+                &name,
+                "--q",
+                &join(&m.home),
+                "--qd",
+                &join(&qd),
+                "--u",
+                &join(&u),
+                "--project",
+                "--json",
+            ]),
+            "legs eval",
+        )?)
+        .map_err(|e| e.to_string())?;
+        let (q, qd, qdd) = (
+            floats(&ours["q"]),
+            floats(&ours["qd"]),
+            floats(&ours["qdd"]),
+        );
+        // τ = B u − D q̇ − ∂V_spring/∂q: Pinocchio's constraintDynamics has no damping or
+        // springs.
+        let v = |p: &String| value(&m.params, p);
+        let mut tau: Vec<f64> = (0..n).map(|i| -v(&m.links[i].damping) * qd[i]).collect();
+        for (k, &a) in m.actuated.iter().enumerate() {
+            tau[a] += u[k];
+        }
+        for sp in &m.springs {
+            let stretch = q[sp.a] - sp.b.map_or(0.0, |b| q[b]) - v(&sp.rest);
+            let force = v(&sp.stiffness) * stretch;
+            tau[sp.a] -= force;
+            if let Some(b) = sp.b {
+                tau[b] += force;
+            }
+        }
+        let mut file = format!(
+            "gravity {}\n",
+            m.gravity
+                .iter()
+                .map(|g| format!("{:?}", v(g)))
+                .collect::<Vec<_>>()
+                .join(" ")
+        );
+        for l in &m.links {
+            let _ = writeln!(file, "joint {}", l.name);
+            if let Some(r) = &l.rotor {
+                let _ = writeln!(
+                    file,
+                    "armature {} {:?}",
+                    l.name,
+                    v(&r[0]) * v(&r[1]) * v(&r[1])
+                );
+            }
+        }
+        for c in &m.closures {
+            let _ = writeln!(file, "closure {}", c.name);
+        }
+        let line = |v: &[f64]| {
+            v.iter()
+                .map(|x| format!("{x:?}"))
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
+        let _ = writeln!(file, "q {}\nv {}\ntau {}", line(&q), line(&qd), line(&tau));
+        let state = dir.join(format!("{name}.state"));
+        crate::cli::write_atomic(&state, &file)?;
+        let text = run_command(
+            Command::new(bin).arg(&urdf).arg(&state),
+            "pinocchio_spatial_bench",
+        )?;
+        let pin: Value = serde_json::from_str(&text)
+            .map_err(|e| format!("pinocchio_spatial_bench printed {text}: {e}"))?;
+        let scale = qdd.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+        let off = |theirs: &[f64]| {
+            theirs
+                .iter()
+                .zip(&qdd)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0f64, f64::max)
+                / scale
+        };
+        let converged = off(&floats(&pin["qdd"]));
+        if converged.is_nan() || converged >= 1e-9 {
+            return Err(format!(
+                "{name}: Pinocchio's constraintDynamics q̈ differs from ours by {converged:e} (relative); not timing different work"
+            ));
+        }
+        let figures = SpatialFigures {
+            converged: pin["median_ns"].as_f64().unwrap_or(f64::NAN),
+            iterations: pin["iterations"].as_u64().unwrap_or(0),
+            one_iteration: pin["one_iteration_ns"].as_f64().unwrap_or(f64::NAN),
+            one_iteration_error: off(&floats(&pin["one_iteration_qdd"])),
+        };
+        eprintln!(
+            "{name:<16} Pinocchio constraintDynamics {:.0} ns ({} iterations, q̈ equal to ours to {converged:.1e}); one iteration {:.0} ns (q̈ off by {:.1e})",
+            figures.converged, figures.iterations, figures.one_iteration, figures.one_iteration_error
         );
         out.insert(name, figures);
     }

@@ -32,6 +32,9 @@ pub struct ModelInfo {
     /// The home pose (rad), in coordinate order.
     pub home: Vec<f64>,
     pub closures: Vec<String>,
+    /// The closures that are rods (one row, the distance), by index (left out when none).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub distance_closures: Vec<usize>,
     /// Closure rows implied by the others at the assembled home pose (their forces are
     /// held at zero), found by the derivation.
     pub redundant_rows: Vec<usize>,
@@ -67,9 +70,17 @@ fn is_planar(d: &usize) -> bool {
 }
 
 impl ModelInfo {
-    /// Closure rows: one per coordinate of each closure's point a minus point b.
+    /// Closure rows: one per coordinate of each point closure's a minus b, one per rod.
     pub fn closure_rows(&self) -> usize {
-        self.dimension * self.closures.len()
+        (0..self.closures.len())
+            .map(|k| {
+                if self.distance_closures.contains(&k) {
+                    1
+                } else {
+                    self.dimension
+                }
+            })
+            .sum()
     }
 
     /// Contact rows: one per coordinate of each contact point.

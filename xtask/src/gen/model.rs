@@ -81,6 +81,27 @@ pub struct Closure {
     pub name: String,
     pub a: Point,
     pub b: Point,
+    /// A distance closure's rod length (its parameter): one row, `|a − b| = L`; without
+    /// it a point closure, one row per coordinate.
+    pub distance: Option<String>,
+}
+
+impl Model {
+    /// The rows of `φ`, closure by closure.
+    pub fn closure_rows(&self) -> usize {
+        self.closures.iter().map(|c| c.rows(self.dimension)).sum()
+    }
+}
+
+impl Closure {
+    /// Its rows in `φ`: one for a rod, one per coordinate for a point closure.
+    pub fn rows(&self, dimension: usize) -> usize {
+        if self.distance.is_some() {
+            1
+        } else {
+            dimension
+        }
+    }
 }
 
 /// `½ k (q_a − q_b − rest)²`, or `½ k (q_a − rest)²` without `b`.
@@ -429,7 +450,23 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
             &format!("Point b of closure `{name}`, link frame"),
             &links,
         )?;
-        closures.push(Closure { name, a, b: bp });
+        let distance = c
+            .distance
+            .as_ref()
+            .map(|d| {
+                b.scalar(
+                    format!("{name}_distance"),
+                    d.get_ref().value,
+                    format!("Length of the rod of closure `{name}`: the distance from point a to point b [m]."),
+                )
+            })
+            .transpose()?;
+        closures.push(Closure {
+            name,
+            a,
+            b: bp,
+            distance,
+        });
     }
     b.owned_by("foot.link".into(), &f.foot.get_ref().link);
     let foot = b.point("foot", f.foot.get_ref(), "Foot point, link frame", &links)?;

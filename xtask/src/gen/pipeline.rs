@@ -292,7 +292,7 @@ fn assemble(spec: &Spec, model: &Model, derived: Derived) -> IrFile {
                         // Closure forces `f` and contact forces `lambda` have a row each;
                         // every other vector (q, q̇, accelerations `a`) a joint each.
                         let len = match name.as_str() {
-                            "f" => model.dimension * model.closures.len(),
+                            "f" => model.closure_rows(),
                             "lambda" => model.dimension * model.contacts.len(),
                             _ => n,
                         };
@@ -316,6 +316,13 @@ fn assemble(spec: &Spec, model: &Model, derived: Derived) -> IrFile {
             actuated: model.actuated.clone(),
             home: model.home.clone(),
             closures: model.closures.iter().map(|c| c.name.clone()).collect(),
+            distance_closures: model
+                .closures
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| c.distance.is_some())
+                .map(|(k, _)| k)
+                .collect(),
             redundant_rows,
             mobility,
             params: model.params.clone(),
@@ -443,7 +450,7 @@ fn derive_spec(root: &Path, py: &Path, spec: &Spec) -> Result<(IrFile, String, S
         spec.name,
         h.mobility,
         h.rank,
-        model.dimension * model.closures.len(),
+        model.closure_rows(),
         if h.redundant_rows.is_empty() {
             String::new()
         } else {

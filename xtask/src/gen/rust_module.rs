@@ -22,7 +22,7 @@ pub struct Term {
 
 /// The terms every model has, in file order, for `nq` joints, `nc` closure rows, `nk`
 /// contact rows and points of `nd` coordinates (2 planar, 3 spatial).
-pub fn terms(nq: usize, nc: usize, nk: usize, nd: usize) -> Vec<Term> {
+pub fn terms(nq: usize, nc: usize, nk: usize, nd: usize, np: usize) -> Vec<Term> {
     use OutputKind::{Matrix, Scalar, Vector};
     const Q: &[&str] = &["q", "p"];
     const QQ: &[&str] = &["q", "qd", "p"];
@@ -128,7 +128,7 @@ pub fn terms(nq: usize, nc: usize, nk: usize, nd: usize) -> Vec<Term> {
         t(
             "closure_points",
             Q,
-            vec![("closure_points", Matrix, nd, 2 * nc / nd)],
+            vec![("closure_points", Matrix, nd, np)],
             "Closure points a, b of each closure in the base frame.",
         ),
         t(
@@ -257,7 +257,7 @@ pub fn check_terms(ir: &IrFile) -> Result<(), Error> {
             message: format!("dimension {nd} (a leg is planar, 2, or spatial, 3)"),
         });
     }
-    let expected = terms(nq, nc, nk, nd);
+    let expected = terms(nq, nc, nk, nd, 2 * ir.model.closures.len());
     let fail = |m: String| Error {
         context: format!("IR of `{}`", ir.model.name),
         message: m,
@@ -449,6 +449,12 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     } else {
         quote!()
     };
+    let distance_closures = if info.distance_closures.is_empty() {
+        quote!()
+    } else {
+        let d = info.distance_closures.iter().map(|&k| lit(k));
+        quote!(const DISTANCE_CLOSURES: &'static [usize] = &[#(#d),*];)
+    };
     let chart_states = lit(2 * info.mobility);
     let chart_doc = format!(
         " The chart of the constraint manifold: {} coordinates (the mobility), {} states.",
@@ -492,7 +498,11 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     let mut methods = Vec::new();
     let mut point_methods = Vec::new();
     let mut contact_methods = Vec::new();
-    for (f, t) in hoisted.programs.iter().zip(terms(nq, nc, nk, nd)) {
+    for (f, t) in hoisted
+        .programs
+        .iter()
+        .zip(terms(nq, nc, nk, nd, 2 * info.closures.len()))
+    {
         functions.push(codegen::emit_function(f, t.doc)?);
         if f.name.starts_with("contact_") {
             contact_methods.push(trait_method(f, nq, t.wrap));
@@ -691,6 +701,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             const MOBILITY: usize = #mobility;
             #ball_joints
             #dimension
+            #distance_closures
             type Params<T: Arithmetic> = Params<T>;
             #(#methods)*
         }

@@ -362,6 +362,10 @@ pub struct ClosureSpec {
     pub name: Spanned<String>,
     pub a: Spanned<PointSpec>,
     pub b: Spanned<PointSpec>,
+    /// A rod of this length between `a` and `b` \[m\] (ball or pin ends: one row, the
+    /// distance); without it the points coincide (one row per coordinate).
+    #[serde(default)]
+    pub distance: Option<Spanned<Num>>,
 }
 
 /// A parsed, validated spec with its source text.
@@ -807,6 +811,16 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
         check_new_name(&c.name, &format!("closures[{k}].name"))?;
         check_point(c.a.get_ref(), &format!("closures[{k}].a"), true)?;
         check_point(c.b.get_ref(), &format!("closures[{k}].b"), true)?;
+        if let Some(d) = &c.distance {
+            if dim == 2 {
+                return Err(ctx.span(
+                    d,
+                    format!("closures[{k}].distance"),
+                    "a distance (rod) closure is for spatial legs for now; on a planar leg a rod with pins at both ends is a link (give it a small mass) closed by a point closure",
+                ));
+            }
+            check_num(ctx, d, &format!("closures[{k}].distance"), Sign::Positive)?;
+        }
         if c.a.get_ref().link.get_ref() == c.b.get_ref().link.get_ref() {
             return Err(ctx.span(
                 &c.b.get_ref().link,

@@ -26,6 +26,11 @@ pub mod added {
         format!("{contact}.geom")
     }
 
+    /// A rod (distance closure) as MJCF's spatial tendon between its two sites.
+    pub fn rod(closure: &str) -> String {
+        format!("{closure}.rod")
+    }
+
     /// The fixed joint that holds an added URDF frame.
     pub fn frame_joint(frame: &str) -> String {
         format!("{frame}.joint")
@@ -58,27 +63,76 @@ pub(crate) fn joint_spring(m: &Model, i: usize) -> String {
         })
 }
 
-/// MJCF's `<equality>` (a `<connect>` between the two sites of each closure) and
-/// `<tendon>` (a coupling spring on `q_a − q_b` is a fixed tendon of length `q_a − q_b`
-/// with a spring), for planar and spatial legs alike.
+/// A point's position in the base frame at `q = 0` (every joint at zero, a ball joint at
+/// the identity), from the spec's values: what MuJoCo computes at `qpos0`.
+fn rest_position(m: &Model, p: &Point) -> [f64; 3] {
+    let coordinate = |names: &[String], k: usize| names.get(k).map_or(0.0, |n| value(&m.params, n));
+    let mut x = [0, 1, 2].map(|k| coordinate(&p.point, k));
+    let mut link = p.link;
+    while let Some(l) = link {
+        let l = &m.links[l];
+        let r = l
+            .orientation
+            .unwrap_or([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]);
+        let turned = [0, 1, 2].map(|i| (0..3).map(|j| r[i][j] * x[j]).sum::<f64>());
+        x = [0, 1, 2].map(|i| coordinate(&l.origin, i) + turned[i]);
+        link = l.parent;
+    }
+    x
+}
+
+/// MJCF's `<equality>` (a `<connect>` between the two sites of a point closure; a rod's
+/// spatial tendon between them held at its length by a tendon equality) and `<tendon>`
+/// (a coupling spring on `q_a − q_b` is a fixed tendon of length `q_a − q_b` with a
+/// spring; the rods' spatial tendons), for planar and spatial legs alike.
 pub(crate) fn closures_and_couplings(m: &Model, out: &mut String) {
     if !m.closures.is_empty() {
         let _ = writeln!(out, "  <equality>");
         for c in &m.closures {
-            // Stiffer than MuJoCo's default soft constraint (time constant 2 dt).
-            let _ = writeln!(
-                out,
-                "    <connect name=\"{}\" site1=\"{}\" site2=\"{}\" solref=\"0.002 1\" solimp=\"0.95 0.99 0.001\"/>",
-                c.name,
+            let (a, b) = (
                 added::closure_point(&c.name, "a"),
-                added::closure_point(&c.name, "b")
+                added::closure_point(&c.name, "b"),
             );
+            // Stiffer than MuJoCo's default soft constraint (time constant 2 dt).
+            let soft = "solref=\"0.002 1\" solimp=\"0.95 0.99 0.001\"";
+            match &c.distance {
+                None => {
+                    let _ = writeln!(
+                        out,
+                        "    <connect name=\"{}\" site1=\"{a}\" site2=\"{b}\" {soft}/>",
+                        c.name
+                    );
+                }
+                Some(length) => {
+                    // MuJoCo holds `length − length(qpos0) = polycoef[0]`: the rod's length
+                    // less the sites' distance at q = 0.
+                    let (pa, pb) = (rest_position(m, &c.a), rest_position(m, &c.b));
+                    let rest = (0..3).map(|k| (pa[k] - pb[k]).powi(2)).sum::<f64>().sqrt();
+                    let _ = writeln!(
+                        out,
+                        "    <tendon name=\"{}\" tendon1=\"{}\" polycoef=\"{} 0 0 0 0\" {soft}/>",
+                        c.name,
+                        added::rod(&c.name),
+                        num(value(&m.params, length) - rest)
+                    );
+                }
+            }
         }
         let _ = writeln!(out, "  </equality>");
     }
     let couplings: Vec<_> = m.springs.iter().filter(|s| s.b.is_some()).collect();
-    if !couplings.is_empty() {
+    let rods: Vec<_> = m.closures.iter().filter(|c| c.distance.is_some()).collect();
+    if !couplings.is_empty() || !rods.is_empty() {
         let _ = writeln!(out, "  <tendon>");
+        for c in rods {
+            let _ = writeln!(
+                out,
+                "    <spatial name=\"{}\" width=\"0.003\">\n      <site site=\"{}\"/>\n      <site site=\"{}\"/>\n    </spatial>",
+                added::rod(&c.name),
+                added::closure_point(&c.name, "a"),
+                added::closure_point(&c.name, "b")
+            );
+        }
         for s in couplings {
             let b = s.b.expect("a coupling");
             let _ = writeln!(

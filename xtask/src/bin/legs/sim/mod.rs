@@ -525,10 +525,17 @@ pub fn run<
     for &a in &L::ACTUATED {
         let _ = write!(csv, ",u_{}", L::JOINT_NAMES[a]);
     }
-    // A closure's force has one row per coordinate of its point.
+    // A point closure's force has one row per coordinate of its point, a rod's one (its
+    // tension along the rod, scaled as φ's row).
     const AXES: [&str; 3] = ["x", "y", "z"];
-    for r in 0..NC {
-        let _ = write!(csv, ",F_{}_{}", r / ND, AXES[r % ND]);
+    for k in 0..NP / 2 {
+        if L::DISTANCE_CLOSURES.contains(&k) {
+            let _ = write!(csv, ",F_{k}");
+        } else {
+            for a in &AXES[..ND] {
+                let _ = write!(csv, ",F_{k}_{a}");
+            }
+        }
     }
     csv.push_str(",closure_residual,energy");
     for a in &AXES[..ND] {
