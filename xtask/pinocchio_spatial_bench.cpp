@@ -10,7 +10,7 @@
 // STATE_FILE, one item per line: `gravity gx gy gz`; `joint NAME` per coordinate in our
 // order; `armature NAME VALUE`; `closure NAME`; `q …`, `v …`, `tau …` in our order (tau is
 // the generalized force B u − D q̇ − the springs' ∂V/∂q: Pinocchio models neither damping
-// nor springs).
+// nor springs, so its call does those few products less than ours).
 //
 // One call = `constraintDynamics` with ProximalSettings(accuracy 1e-12, μ 1e-8, at most
 // 100 iterations): converged, it is the exact constrained solution, redundant rows
@@ -83,8 +83,12 @@ int main(int argc, char** argv) {
     }
   }
   const int n = int(joints.size());
-  if (model.nv != n || int(q_ours.size()) != n || int(v_ours.size()) != n || int(tau_ours.size()) != n) {
+  if (model.nv != n) {
     std::fprintf(stderr, "%s: %d coordinates, Pinocchio's model has nv = %d\n", argv[2], n, model.nv);
+    return 1;
+  }
+  if (int(q_ours.size()) != n || int(v_ours.size()) != n || int(tau_ours.size()) != n) {
+    std::fprintf(stderr, "%s: q, v and tau need %d values each\n", argv[2], n);
     return 1;
   }
   // Our coordinate i is Pinocchio's velocity entry vidx[i]; a revolute (`continuous`)
@@ -92,7 +96,12 @@ int main(int argc, char** argv) {
   std::vector<int> vidx(n);
   Eigen::VectorXd q = pin::neutral(model), v = Eigen::VectorXd::Zero(model.nv), tau = v;
   for (int i = 0; i < n; ++i) {
-    const auto& j = model.joints[model.getJointId(joints[i])];
+    const auto id = model.getJointId(joints[i]);
+    if (id >= model.joints.size()) {
+      std::fprintf(stderr, "%s: no joint `%s` in the URDF\n", argv[2], joints[i].c_str());
+      return 1;
+    }
+    const auto& j = model.joints[id];
     vidx[i] = j.idx_v();
     if (j.nq() == 2) {
       q(j.idx_q()) = std::cos(q_ours[i]);
@@ -103,33 +112,39 @@ int main(int argc, char** argv) {
     v(j.idx_v()) = v_ours[i];
     tau(j.idx_v()) = tau_ours[i];
   }
-  PINOCCHIO_STD_VECTOR_WITH_EIGEN_ALLOCATOR(pin::RigidConstraintModel) cmodels;
+  std::vector<pin::RigidConstraintModel> cmodels;
   for (const auto& c : closures) {
-    const pin::Frame& fa = model.frames[model.getFrameId(c + ".a")];
-    const pin::Frame& fb = model.frames[model.getFrameId(c + ".b")];
+    const auto ia = model.getFrameId(c + ".a"), ib = model.getFrameId(c + ".b");
+    if (ia >= model.frames.size() || ib >= model.frames.size()) {
+      std::fprintf(stderr, "%s: no frames `%s.a`, `%s.b` in the URDF\n", argv[2], c.c_str(), c.c_str());
+      return 1;
+    }
+    const pin::Frame& fa = model.frames[ia];
+    const pin::Frame& fb = model.frames[ib];
     const bool swap = fa.parentJoint == 0;
     const pin::Frame& f1 = swap ? fb : fa;
     const pin::Frame& f2 = swap ? fa : fb;
     cmodels.emplace_back(pin::CONTACT_3D, model, f1.parentJoint, f1.placement, f2.parentJoint, f2.placement,
                          pin::LOCAL_WORLD_ALIGNED);
   }
-  PINOCCHIO_STD_VECTOR_WITH_EIGEN_ALLOCATOR(pin::RigidConstraintData) cdatas;
+  std::vector<pin::RigidConstraintData> cdatas;
   for (const auto& cm : cmodels) cdatas.emplace_back(cm);
   pin::Data data(model);
   pin::initConstraintDynamics(model, data, cmodels, cdatas);
 
   auto timed = [&](pin::ProximalSettings& settings, Eigen::VectorXd& out) {
     out = pin::constraintDynamics(model, data, q, v, tau, cmodels, cdatas, settings);
-    // Median over batches of the time of one call, on states that change every call.
+    // Median over batches of the time of one call, on states that change every call (a
+    // rate: a revolute joint's (cos, sin) stays a unit pair).
     const int batch = 20000, batches = 15;
     std::vector<double> times;
-    Eigen::VectorXd qq = q;
+    Eigen::VectorXd vv = v;
     double sink = 0;
     for (int b = 0; b < batches; ++b) {
       auto t0 = std::chrono::steady_clock::now();
       for (int i = 0; i < batch; ++i) {
-        qq(0) = q(0) + 1e-12 * i;
-        sink += pin::constraintDynamics(model, data, qq, v, tau, cmodels, cdatas, settings)(0);
+        vv(0) = v(0) + 1e-12 * i;
+        sink += pin::constraintDynamics(model, data, q, vv, tau, cmodels, cdatas, settings)(0);
       }
       auto t1 = std::chrono::steady_clock::now();
       times.push_back(std::chrono::duration<double, std::nano>(t1 - t0).count() / batch);

@@ -8,7 +8,9 @@ gravity from the spec,
 then for random states compares Pinocchio's mass matrix (`crba`) and bias forces (`rnea`
 with zero acceleration) with the generated model's `M` and `N` (from `legs eval --json`),
 and its `foot.point` frame with our foot; at an assembled pose, the frames `<closure>.a` and
-`<closure>.b` must coincide. Prints one line per model; exits 1 on a mismatch.
+`<closure>.b` must coincide (a rod's stay its length apart). On a spatial leg without rods,
+Pinocchio's `constraintDynamics` against our forward dynamics too (see
+`constraint_dynamics`). Prints one line per model; exits 1 on a mismatch.
 """
 
 import json

@@ -8,7 +8,7 @@ use leg_models::assembly::{
     assemble, assemble_along, consistent_velocity, foot_inverse, project_position,
     project_velocity, Tolerance,
 };
-use leg_models::control::reference::{Sinusoid, StepCycle};
+use leg_models::control::reference::{Setpoint, Sinusoid};
 use leg_models::control::{
     actuated_reduction, FootFeedbackLinearization, FootPdGravity, Gains,
     JointFeedbackLinearization, PdGravity, Saturated,
@@ -48,7 +48,16 @@ fn allocations<R>(f: impl FnOnce() -> R) -> (usize, R) {
     (ALLOCATIONS.load(Ordering::SeqCst) - before, r)
 }
 
-fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+/// Every hot path a leg has, planar or spatial (`ND` coordinates per point, `NP` closure
+/// points).
+fn check<
+    L: LegModel<NQ, NC, NU, ND, NP>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>() {
     let p = L::Params::<f64>::default();
     let start = passive_release_state::<L, NQ, NC, NU>(&p);
     let (q, tol) = (start.q, Tolerance::default());
@@ -105,10 +114,20 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
         "consistent velocity",
         allocations(|| consistent_velocity::<L, f64, NQ, NC, NU>(&p, &q, &u)).0,
     );
-    let foot = L::foot_position(&q, &p) + SVector::<f64, 2>::new(0.002, -0.001);
+    let foot =
+        L::foot_position(&q, &p) + SVector::<f64, ND>::from_fn(|i, _| [0.002, -0.001, 0.001][i]);
     zero(
         "foot inverse",
-        allocations(|| foot_inverse::<L, f64, NQ, NC, NU, 2, NC>(&p, &foot, &q, &tol)).0,
+        allocations(|| foot_inverse::<L, f64, NQ, NC, NU, ND, NP>(&p, &foot, &q, &tol)).0,
+    );
+    zero(
+        "forward dynamics derivatives",
+        allocations(|| {
+            leg_models::dynamics::derivatives::forward_dynamics_derivatives::<L, f64, NQ, NC, NU>(
+                &p, &q, &qd, &u, None,
+            )
+        })
+        .0,
     );
     let mut moved = q.add_scalar(0.01);
     zero(
@@ -141,11 +160,11 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
         frequency: SVector::from_element(1.0),
         phase: SVector::zeros(),
     };
-    let foot_ref = StepCycle {
-        center: L::foot_position(&q, &p),
-        half_stride: 0.02,
-        half_height: 0.01,
-        period: 0.5,
+    // The foot held where it is (a setpoint is a reference in any dimension).
+    let foot_ref = Setpoint {
+        position: L::foot_position(&q, &p),
+        velocity: SVector::<f64, ND>::zeros(),
+        acceleration: SVector::<f64, ND>::zeros(),
     };
     // Each controller where it applies to this leg (its constructor says why not).
     match JointFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(
@@ -166,7 +185,7 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
         }
         Err(e) => not_applicable(name, "allocations of joint feedback linearization", &e),
     }
-    match FootFeedbackLinearization::<L, f64, _, NQ, NC, NU>::new(
+    match FootFeedbackLinearization::<L, f64, _, NQ, NC, NU, ND, NP>::new(
         p,
         Gains::critically_damped(400.0),
         foot_ref,
@@ -184,7 +203,8 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
         ),
         Err(e) => not_applicable(name, "allocations of PD with gravity compensation", &e),
     }
-    match FootPdGravity::<L, f64, _, NQ, NC, NU>::new(p, Gains::new(2000.0, 40.0), foot_ref) {
+    match FootPdGravity::<L, f64, _, NQ, NC, NU, ND, NP>::new(p, Gains::new(2000.0, 40.0), foot_ref)
+    {
         Ok(mut foot_pd) => zero(
             "foot PD with gravity compensation",
             allocations(|| foot_pd.torque(0.1, &state)).0,
@@ -204,7 +224,24 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
         .0,
     );
 
-    // The design measures at one pose, and the impact mitigation factor on a body.
+    // A whole run allocates its record once, up front.
+    let sim = Simulator::<L, f64, NQ, NC, NU>::new(p, StepOptions::rk4(1e-3));
+    let mut source = |_: f64, _: &State<f64, NQ>| SVector::<f64, NU>::zeros();
+    let (n, run) = allocations(|| sim.run(start, 200, &mut source));
+    assert_eq!(run.expect("runs").len(), 201);
+    assert_eq!(
+        n, 1,
+        "{name}: a 200-step run allocated {n} times (the record only expected)"
+    );
+}
+
+/// The design measures at one pose, and the impact mitigation factor on a body (planar
+/// legs: `analyze` is planar only for now).
+fn check_analysis<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+    let p = L::Params::<f64>::default();
+    let q = passive_release_state::<L, NQ, NC, NU>(&p).q;
+    let name = L::NAME;
+    let zero = |what: &str, n: usize| assert_eq!(n, 0, "{name}: {what} allocated {n} times");
     let frame = leg_models::analysis::LegFrame::of::<L, NC, NU>();
     let limits = leg_models::analysis::MotorLimits {
         torque: SVector::<f64, NU>::from_element(1.0),
@@ -234,16 +271,6 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
             )
         })
         .0,
-    );
-
-    // A whole run allocates its record once, up front.
-    let sim = Simulator::<L, f64, NQ, NC, NU>::new(p, StepOptions::rk4(1e-3));
-    let mut source = |_: f64, _: &State<f64, NQ>| SVector::<f64, NU>::zeros();
-    let (n, run) = allocations(|| sim.run(start, 200, &mut source));
-    assert_eq!(run.expect("runs").len(), 201);
-    assert_eq!(
-        n, 1,
-        "{name}: a 200-step run allocated {n} times (the record only expected)"
     );
 }
 
@@ -372,7 +399,8 @@ fn hot_paths_do_not_allocate() {
     assert_eq!(allocations(|| vec![1u8; 16]).0, 1);
     macro_rules! each {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
-            check::<$ty, $nq, $nc, $nu>();
+            check::<$ty, $nq, $nc, $nu, 2, $nc>();
+            check_analysis::<$ty, $nq, $nc, $nu>();
             check_hybrid::<$ty, $nq, $nc, $nu, $nk>();
             {
                 const M: usize = <$ty as leg_models::LegDynamics<$nq, $nc, $nu>>::MOBILITY;
@@ -381,4 +409,10 @@ fn hot_paths_do_not_allocate() {
         };
     }
     generated::for_each_model!(each);
+    macro_rules! spatial {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
+            check::<$ty, $nq, $nc, $nu, 3, $np>();
+        };
+    }
+    generated::for_each_spatial_model!(spatial);
 }

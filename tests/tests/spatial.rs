@@ -118,17 +118,24 @@ where
             "{name} #{trial}: J q̈ + J̇ q̇ = {closure:e} (scale {scale:e})"
         );
     }
-    for (r, lengths) in rods.iter().enumerate() {
-        let (lo, hi) = lengths
-            .iter()
-            .fold((f64::INFINITY, 0.0f64), |(lo, hi), &x| {
-                (lo.min(x), hi.max(x))
-            });
-        assert!(
-            hi - lo < 1e-12 * hi,
-            "{name}: rod {} is {lo} to {hi} m long across assembled states",
-            L::DISTANCE_CLOSURES[r]
-        );
+    // The rods' lengths are the parameters `<closure>_distance`, in closure order.
+    let names = <L::Params<f64> as leg_models::Parameters<f64>>::NAMES;
+    let lengths: Vec<f64> = names
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| n.ends_with("_distance"))
+        .map(|(i, _)| leg_models::Parameters::get(&p, i).unwrap())
+        .collect();
+    assert_eq!(lengths.len(), rods.len(), "{name}: a parameter per rod");
+    for (r, measured) in rods.iter().enumerate() {
+        for &x in measured {
+            assert!(
+                (x - lengths[r]).abs() < 1e-12 * lengths[r],
+                "{name}: rod {} is {x} m at an assembled state, its parameter {} m",
+                L::DISTANCE_CLOSURES[r],
+                lengths[r]
+            );
+        }
     }
 }
 

@@ -1710,13 +1710,13 @@ fn sim_takes_a_spatial_leg() {
         summary["controller_choice"]
             .as_str()
             .unwrap()
-            .contains("the foot has 3 coordinates but the leg has 1 motor"),
+            .contains("the foot has three coordinates but the leg has 1 motor"),
         "{}",
         summary["controller_choice"]
     );
     refused(
         &legs(&["sim", "rssr_linkage", "--controller", "foot-pd"]),
-        "foot-space control needs at least 3",
+        "foot-space control needs at least three",
     );
     let _ = std::fs::remove_dir_all(&dir);
 }

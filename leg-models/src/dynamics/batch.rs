@@ -12,7 +12,7 @@
 use nalgebra::SVector;
 
 use crate::dynamics::forward::rcond_floor;
-use crate::model::contract::{LegModel, Parameters};
+use crate::model::contract::{LegDynamics, Parameters};
 use crate::model::simd::F64x4;
 
 /// Why a leg has no batched forward dynamics.
@@ -52,7 +52,7 @@ pub fn broadcast<L, const NQ: usize, const NC: usize, const NU: usize>(
     p: &L::Params<f64>,
 ) -> L::Params<F64x4>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
 {
     let mut out = L::Params::<F64x4>::default();
     for i in 0..<L::Params<f64> as Parameters<f64>>::NAMES.len() {
@@ -148,7 +148,7 @@ pub fn forward_dynamics<L, const NQ: usize, const NC: usize, const NU: usize>(
     u: &SVector<F64x4, NU>,
 ) -> Result<BatchAcceleration<NQ, NC>, BatchError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
 {
     if L::REDUNDANT_ROWS > 0 {
         return Err(BatchError::RedundantRows);

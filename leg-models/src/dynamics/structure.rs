@@ -83,11 +83,18 @@ impl fmt::Display for NotApplicable {
                 "the leg has {mobility} degree{} of freedom but {motors} motors: the motors over-determine it, so there is no reduction to the motor angles",
                 s(mobility)
             ),
-            NotApplicable::FootNeedsMotors { motors, dimension } => write!(
-                f,
-                "the foot has {dimension} coordinates but the leg has {motors} motor{}: foot-space control needs at least {dimension}",
-                s(motors)
-            ),
+            NotApplicable::FootNeedsMotors { motors, dimension } => {
+                let n = match dimension {
+                    2 => "two",
+                    3 => "three",
+                    _ => "its",
+                };
+                write!(
+                    f,
+                    "the foot has {n} coordinates but the leg has {motors} motor{}: foot-space control needs at least {n}",
+                    s(motors)
+                )
+            }
         }
     }
 }

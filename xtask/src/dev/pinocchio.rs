@@ -345,12 +345,14 @@ fn spatial_figures(
     bin: &Path,
     legs: &Path,
 ) -> Result<BTreeMap<String, SpatialFigures>, String> {
-    let join = |v: &[f64]| {
+    // Numbers written exactly: comma-separated for `legs`, space-separated for the file.
+    let joined = |v: &[f64], sep: &str| {
         v.iter()
             .map(|x| format!("{x:?}"))
             .collect::<Vec<_>>()
-            .join(",")
+            .join(sep)
     };
+    let join = |v: &[f64]| joined(v, ",");
     let floats = |v: &Value| -> Vec<f64> {
         v.as_array()
             .map(|a| a.iter().filter_map(Value::as_f64).collect())
@@ -432,12 +434,7 @@ fn spatial_figures(
         for c in &m.closures {
             let _ = writeln!(file, "closure {}", c.name);
         }
-        let line = |v: &[f64]| {
-            v.iter()
-                .map(|x| format!("{x:?}"))
-                .collect::<Vec<_>>()
-                .join(" ")
-        };
+        let line = |v: &[f64]| joined(v, " ");
         let _ = writeln!(file, "q {}\nv {}\ntau {}", line(&q), line(&qd), line(&tau));
         let state = dir.join(format!("{name}.state"));
         crate::cli::write_atomic(&state, &file)?;

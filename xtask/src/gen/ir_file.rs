@@ -83,6 +83,11 @@ impl ModelInfo {
             .sum()
     }
 
+    /// Closure points, two per closure (`NP`).
+    pub fn closure_points(&self) -> usize {
+        2 * self.closures.len()
+    }
+
     /// Contact rows: one per coordinate of each contact point.
     pub fn contact_rows(&self) -> usize {
         self.dimension * self.contacts.len()

@@ -257,7 +257,7 @@ pub fn check_terms(ir: &IrFile) -> Result<(), Error> {
             message: format!("dimension {nd} (a leg is planar, 2, or spatial, 3)"),
         });
     }
-    let expected = terms(nq, nc, nk, nd, 2 * ir.model.closures.len());
+    let expected = terms(nq, nc, nk, nd, ir.model.closure_points());
     let fail = |m: String| Error {
         context: format!("IR of `{}`", ir.model.name),
         message: m,
@@ -501,7 +501,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     for (f, t) in hoisted
         .programs
         .iter()
-        .zip(terms(nq, nc, nk, nd, 2 * info.closures.len()))
+        .zip(terms(nq, nc, nk, nd, info.closure_points()))
     {
         functions.push(codegen::emit_function(f, t.doc)?);
         if f.name.starts_with("contact_") {
@@ -524,7 +524,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     // A planar leg is the runtime's `Leg` with its contacts; a spatial leg implements
     // `LegModel` with three coordinates per point (its contacts and `Leg` come later).
     let spatial = nd == 3;
-    let lp = lit(2 * info.closures.len());
+    let lp = lit(info.closure_points());
     let imports = if spatial {
         quote! {
             use leg_models::{
@@ -802,7 +802,7 @@ impl Summary {
             nc: ir.model.closure_rows(),
             nu: ir.model.actuated.len(),
             nk: ir.model.contact_rows(),
-            np: 2 * ir.model.closures.len(),
+            np: ir.model.closure_points(),
             spatial: ir.model.dimension == 3,
         }
     }

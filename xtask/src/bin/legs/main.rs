@@ -44,7 +44,8 @@ fn planar_models() -> Vec<&'static str> {
     names
 }
 
-fn unknown(name: &str) -> Error {
+/// Why `name` is not a model `known` takes (`models()`, or `planar_models()` for `analyze`).
+fn unknown(name: &str, known: &[&str]) -> Error {
     if models().contains(&name) {
         return Error::usage(format!(
             "`{name}` is a spatial leg: `analyze` takes planar legs only for now (`sim` and `eval` take it)"
@@ -61,7 +62,7 @@ fn unknown(name: &str) -> Error {
     Error::usage(format!(
         "unknown model `{}` (expected one of: {})",
         xtask::gen::spec::shown(name),
-        models().join(", ")
+        known.join(", ")
     ))
 }
 
@@ -82,7 +83,7 @@ fn eval(args: EvalArgs) -> Result<(), Error> {
         };
     }
     generated::for_each_spatial_model!(spatial);
-    Err(unknown(&args.model))
+    Err(unknown(&args.model, &models()))
 }
 
 fn simulate(args: SimArgs) -> Result<(), Error> {
@@ -108,7 +109,7 @@ fn simulate(args: SimArgs) -> Result<(), Error> {
         };
     }
     generated::for_each_spatial_model!(spatial);
-    Err(unknown(&name))
+    Err(unknown(&name, &models()))
 }
 
 fn analyze(args: AnalyzeArgs, raw: &[String]) -> Result<(), Error> {
@@ -118,7 +119,7 @@ fn analyze(args: AnalyzeArgs, raw: &[String]) -> Result<(), Error> {
     let known = planar_models();
     for m in &args.models {
         if !known.contains(&m.as_str()) {
-            return Err(unknown(m));
+            return Err(unknown(m, &known));
         }
     }
     let total = args.models.len() as u64 * settings_designs(&args);

@@ -87,6 +87,9 @@ pub struct Report<'a> {
     /// The ground line `n · x = d` as `[n_x, n_y, d]`, drawn under a leg with contacts.
     /// Without it the leg hangs from a fixed base at the origin, drawn as a grey disc.
     pub ground: Option<[f64; 3]>,
+    /// The closures that are rods ([`leg_models::LegDynamics::DISTANCE_CLOSURES`]): a line
+    /// joins their two points, which stay the rod's length apart.
+    pub rods: &'a [usize],
 }
 
 const COLORS: [RGBColor; 4] = [
@@ -691,7 +694,11 @@ fn animation_caption(r: &Report) -> String {
         "joints (black dots)".to_string(),
     ];
     if r.frames.iter().any(|f| !f.closures.is_empty()) {
-        parts.push("the closure points where the chains meet (red rings)".into());
+        parts.push(if r.rods.is_empty() {
+            "the closure points where the chains meet (red rings)".into()
+        } else {
+            "the closure points (red rings) where the chains meet, or at a rod's ends, joined by the rod (grey line)".into()
+        });
     }
     parts.push("the foot (green dot) and its path over the last second (green)".into());
     if r.frames.iter().any(|f| f.reference.is_some()) {
@@ -766,6 +773,7 @@ pub fn html(r: &Report) -> Result<String, String> {
         "foot": r.frames.iter().map(|f| f.foot.clone()).collect::<Vec<_>>(),
         "reference": r.frames.iter().map(|f| f.reference.clone()).collect::<Vec<_>>(),
         "ground": r.ground,
+        "rods": r.rods,
     });
     // `</` cannot appear inside a <script> element.
     let data = frames.to_string().replace("</", "<\\/");
@@ -873,6 +881,7 @@ table.summary th {{ text-align: left; font-weight: bold; padding: 10px 0 3px; bo
   // silhouette from wherever it is seen.
   const outline = b => {{ const h = hull(b.map(p => [X(p), Y(p)])); return h.map((q, i) => (i ? 'L' : 'M') + q[0].toFixed(1) + ' ' + q[1].toFixed(1)).join(' ') + ' Z'; }};
   const links = d.bodies[0].map(() => el('path', {{ fill: '#aec7e8', 'fill-opacity': 0.6, stroke: '#1f77b4', 'stroke-width': 5, 'stroke-linejoin': 'round', 'stroke-linecap': 'round' }}));
+  const rods = (d.rods || []).map(() => el('line', {{ stroke: '#777', 'stroke-width': 3, 'stroke-linecap': 'round' }}));
   const joints = d.links[0].map(() => el('circle', {{ r: 4, fill: '#222' }}));
   // The foot under the closure rings: a closure at the foot stays visible.
   const foot = el('circle', {{ r: 5, fill: '#2ca02c' }});
@@ -902,6 +911,10 @@ table.summary th {{ text-align: left; font-weight: bold; padding: 10px 0 3px; bo
     d.bodies[i].forEach((b, j) => {{ links[j].setAttribute('d', outline(b)); }});
     d.links[i].forEach((l, j) => {{ joints[j].setAttribute('cx', X(l)); joints[j].setAttribute('cy', Y(l)); }});
     d.closures[i].forEach((p, j) => {{ closures[j].setAttribute('cx', X(p)); closures[j].setAttribute('cy', Y(p)); }});
+    (d.rods || []).forEach((k, j) => {{
+      const a = d.closures[i][2 * k], b = d.closures[i][2 * k + 1];
+      rods[j].setAttribute('x1', X(a)); rods[j].setAttribute('y1', Y(a)); rods[j].setAttribute('x2', X(b)); rods[j].setAttribute('y2', Y(b));
+    }});
     foot.setAttribute('cx', X(d.foot[i])); foot.setAttribute('cy', Y(d.foot[i]));
     const r = d.reference[i];
     ref.setAttribute('visibility', r ? 'visible' : 'hidden');
@@ -913,8 +926,10 @@ table.summary th {{ text-align: left; font-weight: bold; padding: 10px 0 3px; bo
     // Drag to turn: left–right turns about the base's z, up–down tilts the view.
     let from = null;
     svg.style.cursor = 'grab';
+    // A touch drags the view, not the page.
+    svg.style.touchAction = 'none';
     svg.addEventListener('pointerdown', e => {{ from = [e.clientX, e.clientY]; svg.setPointerCapture(e.pointerId); }});
-    svg.addEventListener('pointerup', () => {{ from = null; }});
+    for (const end of ['pointerup', 'pointercancel', 'lostpointercapture']) svg.addEventListener(end, () => {{ from = null; }});
     svg.addEventListener('pointermove', e => {{
       if (!from) return;
       yaw += (e.clientX - from[0]) * 0.01;

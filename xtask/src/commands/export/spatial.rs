@@ -8,11 +8,13 @@
 //! `ω = E(β, γ) (α̇, β̇, γ̇)` with `E`'s columns `R_z(γ)ᵀ R_y(β)ᵀ x̂`, `R_z(γ)ᵀ ŷ`, `ẑ`
 //! (see [`ball_rate_map`]). Inertias are written whole (`fullinertia`, the spec's order);
 //! reflected rotor inertia `I·N²` is the joint's `armature`; a spring on one joint its
-//! `stiffness` about `springref`, a coupling spring a fixed tendon; closures are
+//! `stiffness` about `springref`, a coupling spring a fixed tendon; point closures are
 //! `<connect>`s between two sites (`<closure>.a`, `<closure>.b`), so MuJoCo's rule for a
-//! second anchor from `qpos0` never applies; the foot is the site `foot.point`. Contact
-//! stays disabled (a spatial leg has no contacts yet). The time step is 0.5 ms, Cassie's
-//! own: at 1 ms MuJoCo's RK4 diverged within 7 ms on Cassie's leg (its 1500 N m/rad shin
+//! second anchor from `qpos0` never applies; a rod (a distance closure) is a spatial tendon
+//! between its two sites held by a tendon equality, whose offset follows MuJoCo's `qpos0`
+//! rule: the rod's length less the sites' distance at `q = 0`. The foot is the site
+//! `foot.point`. Contact stays disabled (a spatial leg has no contacts yet). The time step
+//! is 0.5 ms, Cassie's own: at 1 ms MuJoCo's RK4 diverged within 7 ms on Cassie's leg (its 1500 N m/rad shin
 //! spring beside an achilles rod of 4e-6 kg m² about its axis).
 
 use std::fmt::Write;
@@ -291,7 +293,9 @@ pub fn mjcf(m: &Model) -> String {
 /// URDF's `rpy` (fixed axes: `R = R_z(yaw) R_y(pitch) R_x(roll)`) of a rotation matrix.
 pub fn rpy(r: &[[f64; 3]; 3]) -> [f64; 3] {
     let pitch = (-r[2][0]).atan2((r[0][0] * r[0][0] + r[1][0] * r[1][0]).sqrt());
-    if (r[0][0] * r[0][0] + r[1][0] * r[1][0]).sqrt() < 1e-12 {
+    // Within √ε of the gimbal, roll and yaw from the normal branch divide rounding by
+    // cos(pitch); the gimbal branch errs by cos(pitch) instead: both near 1e-8 here.
+    if (r[0][0] * r[0][0] + r[1][0] * r[1][0]).sqrt() < 1e-8 {
         // Pitch ±90°: roll and yaw turn about the same axis; all of it as yaw.
         return [0.0, pitch, (-r[0][1]).atan2(r[1][1])];
     }
@@ -315,9 +319,26 @@ pub fn urdf(m: &Model) -> String {
         "<!-- {}: exported from its spec by `cargo xtask export {}`, format urdf.",
         m.name, m.name
     );
+    let rods: Vec<String> = m
+        .closures
+        .iter()
+        .filter_map(|c| {
+            c.distance
+                .as_ref()
+                .map(|l| format!("{} {} m", c.name, num(value(&m.params, l))))
+        })
+        .collect();
     let _ = writeln!(
         out,
-        "     Spatial leg. URDF holds the spanning tree only: each closure k joins the frames\n     k.a and k.b (they must coincide). A ball joint is three continuous joints about x,\n     y, z on massless links. Gravity of the spec: {} m/s^2. Reflected rotor inertia: see\n     the transmissions. Springs: see the spec. -->",
+        "     Spatial leg. URDF holds the spanning tree only: each closure k joins the frames\n     k.a and k.b (they must coincide{}). A ball joint is three continuous joints about x,\n     y, z on massless links. Gravity of the spec: {} m/s^2. Reflected rotor inertia: see\n     the transmissions. Springs: see the spec. -->",
+        if rods.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; a rod's frames stay its length apart: {}",
+                rods.join(", ")
+            )
+        },
         triple(m, &m.gravity)
     );
     let _ = writeln!(
@@ -414,17 +435,21 @@ mod tests {
             c
         };
         let compose = |a: [f64; 3]| mul(mul(rot(2, a[2]), rot(1, a[1])), rot(0, a[0]));
-        for angles in [
-            [0.3, -0.2, 1.1],
-            [-2.0, 1.2, -3.0],
-            [0.4, std::f64::consts::FRAC_PI_2, 0.7],
-            [0.4, -std::f64::consts::FRAC_PI_2, -0.2],
+        let half_pi = std::f64::consts::FRAC_PI_2;
+        for (angles, tolerance) in [
+            ([0.3, -0.2, 1.1], 1e-12),
+            ([-2.0, 1.2, -3.0], 1e-12),
+            ([0.4, half_pi, 0.7], 1e-12),
+            ([0.4, -half_pi, -0.2], 1e-12),
+            // Near the gimbal, on each side of the branch's threshold.
+            ([0.4, half_pi - 1e-10, 0.7], 1e-9),
+            ([0.3, half_pi - 1e-6, -0.4], 1e-9),
         ] {
             let r = compose(angles);
             let back = compose(rpy(&r));
             for i in 0..3 {
                 for j in 0..3 {
-                    assert!((r[i][j] - back[i][j]).abs() < 1e-12, "{angles:?}");
+                    assert!((r[i][j] - back[i][j]).abs() < tolerance, "{angles:?}");
                 }
             }
         }

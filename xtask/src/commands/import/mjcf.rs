@@ -406,7 +406,7 @@ pub fn read(text: &str) -> Result<Robot> {
                 ))
             }
             "tendon" if section.children().any(|c| c.is_element()) => {
-                return Err(at(section, "tendons are not representable in a spec (a fixed tendon's spring is, written as a coupling spring by hand)"));
+                return Err(at(section, "tendons are not imported (a fixed tendon's spring is a coupling spring in a spec, and a rod between two sites a `distance` closure, both written by hand)"));
             }
             "deformable" | "flexcomp" => {
                 return Err(at(

@@ -106,7 +106,7 @@ fn what_a_spec_cannot_represent_is_a_located_error() {
             "</worldbody>",
             "</worldbody><tendon><fixed name=\"t\"><joint joint=\"hip\" coef=\"1\"/></fixed></tendon>",
             0,
-            "tendons are not representable",
+            "tendons are not imported",
         ),
         (
             "<connect body1=\"rod\" body2=\"shin\" anchor=\"0.25 0 0\"/>",

@@ -586,6 +586,7 @@ pub fn run<
         plots: &plots,
         frames: &frames,
         ground: Some([ground.normal[0], ground.normal[1], ground.offset]),
+        rods: L::DISTANCE_CLOSURES,
     })
     .map_err(Error::Failed)?;
     let files = [

@@ -751,6 +751,7 @@ pub fn run<
         plots: &plots,
         frames: &frames,
         ground: None,
+        rods: L::DISTANCE_CLOSURES,
     })
     .map_err(Error::Failed)?;
 
