@@ -161,6 +161,11 @@ fn compile(
     if let Some(c) = casadi {
         cmd.arg(format!("-I{}", c.join("include").display()));
     }
+    if source == SPATIAL_SOURCE {
+        // urdfdom's headers, from cmeel-urdfdom-headers (requirements-pinocchio.txt).
+        cmd.arg(format!("-I{}", inc.join("urdfdom_headers").display()))
+            .arg(format!("-I{}", inc.join("urdfdom").display()));
+    }
     cmd.arg(&sources[0])
         .arg("-o")
         .arg(bin)
@@ -455,9 +460,10 @@ fn spatial_figures(
         };
         let converged = off(&floats(&pin["qdd"]));
         if converged.is_nan() || converged >= 1e-9 {
-            return Err(format!(
-                "{name}: Pinocchio's constraintDynamics q̈ differs from ours by {converged:e} (relative); not timing different work"
-            ));
+            eprintln!(
+                "{name}: not timed: Pinocchio's constraintDynamics q̈ differs from ours by {converged:e} (relative); not timing different work"
+            );
+            continue;
         }
         let figures = SpatialFigures {
             converged: pin["median_ns"].as_f64().unwrap_or(f64::NAN),
