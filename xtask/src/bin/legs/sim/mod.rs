@@ -729,8 +729,12 @@ pub fn run<
         )
         .axis("energy", "J")
         .caption(&format!(
-            "The leg's kinetic plus potential energy T + V (blue) {} because the motors do work on it: W = Σ ∫ u θ̇ dt. With that work subtracted (red) the energy {}: it moves by {} over the run, against {} for T + V.",
-            if NU > 0 { "rises and falls" } else { "changes" },
+            "The leg's kinetic plus potential energy T + V (blue) {}: W = Σ ∫ u θ̇ dt. With that work subtracted (red) the energy {}: it moves by {} over the run, against {} for T + V.",
+            if tracked {
+                "rises and falls because the motors do work on it"
+            } else {
+                "changes with no motor work (the motors are off, W = 0)"
+            },
             if damped { "only falls, by what the joints' damping dissipates" } else { "is conserved up to the integrator's error" },
             report_quantity(spread(&balance), "J"),
             report_quantity(spread(&samples.iter().map(|x| x.energy).collect::<Vec<_>>()), "J"),
