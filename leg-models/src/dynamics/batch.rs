@@ -18,7 +18,7 @@ use crate::model::simd::F64x4;
 /// Why a leg has no batched forward dynamics.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum BatchError {
-    /// Its closure rows repeat each other ([`LegDynamics::REDUNDANT_ROWS`](crate::LegDynamics::REDUNDANT_ROWS)): which rows to
+    /// Its closure rows repeat each other ([`LegDynamics::REDUNDANT_ROWS`]): which rows to
     /// leave out depends on the state (pivoting), which is a branch per lane; solve its
     /// states one by one.
     RedundantRows,
