@@ -17,6 +17,7 @@ import json
 import pathlib
 import sys
 import xml.etree.ElementTree as ET
+from types import SimpleNamespace
 
 import numpy as np
 import pinocchio as pin
@@ -28,16 +29,13 @@ REL_TOL = 1e-9
 DRAKE = "{http://drake.mit.edu}"
 
 
-def main():
-    legs, name, urdf = sys.argv[1:4]
+def pinocchio_leg(urdf, ir):
+    """Pinocchio's model of an exported URDF, set up as ours: gravity from the spec, the
+    joint armature from the transmissions' `<drake:rotor_inertia>` and `<drake:gear_ratio>`,
+    and the maps between our coordinates and Pinocchio's (also used by loop_gaps.py)."""
     model = pin.buildModelFromUrdf(urdf)
-    data = model.createData()
-    ir = json.loads((pathlib.Path(__file__).parent.parent / "generated" / "ir" / f"{name}.json").read_text())
     params = {p["name"]: p["default"] for p in ir["model"]["params"]}
-    # A planar leg lies in the x-y plane; a spatial leg's gravity has three components.
-    dim = ir["model"].get("dimension", 2)
     model.gravity.linear = np.array([params["gravity_x"], params["gravity_y"], params.get("gravity_z", 0.0)])
-    # Reflected rotor inertia from the transmissions' extension elements.
     for t in ET.parse(urdf).getroot().iter("transmission"):
         joint = t.find("joint").get("name")
         act = t.find("actuator")
@@ -51,7 +49,6 @@ def main():
     qidx = [model.joints[model.getJointId(j)].idx_q for j in joints]
     idx = [model.joints[model.getJointId(j)].idx_v for j in joints]
     assert model.nv == len(joints), (model.nv, joints)
-
     kinds = ir["model"]["joint_kinds"]
 
     def configuration(q):
@@ -74,6 +71,54 @@ def main():
             if b is not None:
                 g[b] -= force
         return g
+
+    damping = np.zeros(model.nv)
+    for j in ET.parse(urdf).getroot().iter("joint"):
+        d = j.find("dynamics")
+        if d is not None and j.get("type") != "fixed":
+            damping[model.joints[model.getJointId(j.get("name"))].idx_v] = float(d.get("damping"))
+
+    def constraints(data):
+        """The closures as 3-D point constraints (CONTACT_3D between the frames `<c>.a`
+        and `<c>.b`), initialised on `data`."""
+        cm, cd = pin.StdVec_RigidConstraintModel(), pin.StdVec_RigidConstraintData()
+        for c in ir["model"]["closures"]:
+            fa = model.frames[model.getFrameId(f"{c}.a")]
+            fb = model.frames[model.getFrameId(f"{c}.b")]
+            first, second = (fb, fa) if fa.parentJoint == 0 else (fa, fb)
+            m = pin.RigidConstraintModel(pin.ContactType.CONTACT_3D, model, first.parentJoint, first.placement,
+                                         second.parentJoint, second.placement, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+            cm.append(m)
+            cd.append(m.createData())
+        pin.initConstraintDynamics(model, data, cm, cd)
+        return cm, cd
+
+    def torques(q, qd, u):
+        """Pinocchio's τ for our state and motor torques: the motors, and the damping and
+        springs it does not model."""
+        vp = np.zeros(model.nv)
+        vp[idx] = qd
+        tau = np.zeros(model.nv)
+        for k, a in enumerate(ir["model"]["actuated"]):
+            tau[idx[a]] += u[k]
+        tau -= damping * vp
+        tau[idx] -= spring_forces(q)
+        return tau
+
+    return SimpleNamespace(model=model, params=params, idx=idx, configuration=configuration,
+                           spring_forces=spring_forces, constraints=constraints, torques=torques)
+
+
+def main():
+    legs, name, urdf = sys.argv[1:4]
+    ir = json.loads((pathlib.Path(__file__).parent.parent / "generated" / "ir" / f"{name}.json").read_text())
+    leg = pinocchio_leg(urdf, ir)
+    model, params, idx = leg.model, leg.params, leg.idx
+    configuration, spring_forces = leg.configuration, leg.spring_forces
+    data = model.createData()
+    joints = ir["model"]["joints"]
+    # A planar leg lies in the x-y plane; a spatial leg's gravity has three components.
+    dim = ir["model"].get("dimension", 2)
     rng = np.random.default_rng(5)
     worst = {"M": 0.0, "N": 0.0, "foot": 0.0}
     foot_frame = model.getFrameId("foot.point")
@@ -114,7 +159,7 @@ def main():
     if ir["model"].get("distance_closures"):
         dynamics = "; constraintDynamics not compared: Pinocchio has no rod (distance) constraint"
     elif ir["model"]["closures"] and dim == 3:
-        ok_fd, dynamics = constraint_dynamics(legs, name, ir, model, urdf, configuration, idx, spring_forces)
+        ok_fd, dynamics = constraint_dynamics(legs, name, ir, leg)
         ok = ok and ok_fd
     print(
         f"{name}: Pinocchio loads the URDF; M {worst['M']:.1e}, N {worst['N']:.1e} (relative), "
@@ -124,7 +169,7 @@ def main():
     sys.exit(0 if ok else 1)
 
 
-def constraint_dynamics(legs, name, ir, model, urdf, configuration, idx, spring_forces):
+def constraint_dynamics(legs, name, ir, leg):
     """A spatial leg's forward dynamics beside Pinocchio's `constraintDynamics`, the closures
     as 3-D point constraints (`RigidConstraintModel`, CONTACT_3D between the frames `<c>.a`
     and `<c>.b`), at assembled states: unregularized (μ = 0, a plain factorization of the
@@ -133,22 +178,9 @@ def constraint_dynamics(legs, name, ir, model, urdf, configuration, idx, spring_
     (its proximal iterations converge to the exact solution on these legs, redundant rows
     included); μ = 0 is reported (NaN where rounding leaves a redundant row exactly
     singular), not judged. Pinocchio models neither damping nor springs: both go into τ."""
+    model, idx, configuration = leg.model, leg.idx, leg.configuration
     data = model.createData()
-    cm, cd = pin.StdVec_RigidConstraintModel(), pin.StdVec_RigidConstraintData()
-    for c in ir["model"]["closures"]:
-        fa = model.frames[model.getFrameId(f"{c}.a")]
-        fb = model.frames[model.getFrameId(f"{c}.b")]
-        first, second = (fb, fa) if fa.parentJoint == 0 else (fa, fb)
-        m = pin.RigidConstraintModel(pin.ContactType.CONTACT_3D, model, first.parentJoint, first.placement,
-                                     second.parentJoint, second.placement, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
-        cm.append(m)
-        cd.append(m.createData())
-    pin.initConstraintDynamics(model, data, cm, cd)
-    damping = np.zeros(model.nv)
-    for j in ET.parse(urdf).getroot().iter("joint"):
-        d = j.find("dynamics")
-        if d is not None and j.get("type") != "fixed":
-            damping[model.joints[model.getJointId(j.get("name"))].idx_v] = float(d.get("damping"))
+    cm, cd = leg.constraints(data)
     home, actuated = ir["model"]["home"], ir["model"]["actuated"]
     rng = np.random.default_rng(7)
     worst, residual, nan_free = 0.0, {"ours": 0.0, "pinocchio": 0.0}, 0
@@ -159,11 +191,7 @@ def constraint_dynamics(legs, name, ir, model, urdf, configuration, idx, spring_
         q, qd, u = np.array(t["q"]), np.array(t["qd"]), np.array(t["u"])
         qp, vp = configuration(q), np.zeros(model.nv)
         vp[idx] = qd
-        tau = np.zeros(model.nv)
-        for k, a in enumerate(actuated):
-            tau[idx[a]] += u[k]
-        tau -= damping * vp
-        tau[idx] -= spring_forces(q)
+        tau = leg.torques(q, qd, u)
         exact = pin.constraintDynamics(model, data, qp, vp, tau, cm, cd, pin.ProximalSettings(1e-12, 0.0, 1))
         nan_free += bool(np.all(np.isfinite(exact)))
         qdd = pin.constraintDynamics(model, data, qp, vp, tau, cm, cd, pin.ProximalSettings(1e-12, 1e-8, 100))[idx]

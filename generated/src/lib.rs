@@ -14,6 +14,8 @@ pub mod atrias_hopper;
 pub use atrias_hopper::AtriasHopper;
 pub mod braced_parallelogram;
 pub use braced_parallelogram::BracedParallelogram;
+pub mod cassie_leg;
+pub use cassie_leg::CassieLeg;
 pub mod cassie_planar;
 pub use cassie_planar::CassiePlanar;
 pub mod digit;
@@ -78,7 +80,8 @@ macro_rules! for_each_spatial_model {
     ($callback:ident) => {
         $callback ! (abducted_five_bar, $crate::abducted_five_bar::AbductedFiveBar, 5, 3,
         3, 2); $callback ! (achilles_leg, $crate::achilles_leg::AchillesLeg, 10, 6, 4,
-        4); $callback ! (rod_knee_leg, $crate::rod_knee_leg::RodKneeLeg, 4, 1, 3, 2);
+        4); $callback ! (cassie_leg, $crate::cassie_leg::CassieLeg, 13, 6, 5, 4);
+        $callback ! (rod_knee_leg, $crate::rod_knee_leg::RodKneeLeg, 4, 1, 3, 2);
         $callback ! (rssr_linkage, $crate::rssr_linkage::RssrLinkage, 5, 3, 1, 2);
     };
 }

@@ -595,14 +595,25 @@ fn import(file: &Path, robot: &Robot, args: &ImportArgs) -> Result<Imported, cli
 
 /// The command that imports with these arguments, for the spec's header (the file by
 /// its name only: no path of this machine goes into a spec).
+/// `file` from `dir`, both absolute: `a/b.xml` below it, `../x/b.xml` beside it.
+fn relative_to(file: &Path, dir: &Path) -> String {
+    let (f, d): (Vec<_>, Vec<_>) = (file.components().collect(), dir.components().collect());
+    let common = f.iter().zip(&d).take_while(|(a, b)| a == b).count();
+    let mut parts: Vec<String> = vec!["..".into(); d.len() - common];
+    parts.extend(
+        f[common..]
+            .iter()
+            .map(|c| c.as_os_str().to_string_lossy().into_owned()),
+    );
+    parts.join("/")
+}
+
 fn command_line(root: &Path, a: &ImportArgs) -> String {
-    // The file by its path in the repository, else by its name alone.
+    // The file by its path from the repository's root (`../` for a file beside the
+    // clone, as Menagerie's `cassie.xml` is), else by its name alone.
     let file = std::fs::canonicalize(&a.file)
         .ok()
-        .and_then(|f| {
-            let root = std::fs::canonicalize(root).ok()?;
-            f.strip_prefix(&root).ok().map(|p| p.display().to_string())
-        })
+        .and_then(|f| Some(relative_to(&f, &std::fs::canonicalize(root).ok()?)))
         .unwrap_or_else(|| {
             a.file
                 .file_name()
@@ -871,6 +882,16 @@ pub fn check_imported(root: &Path) -> Result<usize, String> {
         let Some(args) = header_args(root, &text) else {
             continue;
         };
+        if !args.file.exists() {
+            // A source kept outside the repository (Menagerie's `cassie.xml` beside the
+            // clone) is checked where it is present.
+            eprintln!(
+                "note: {} not checked against its import: {} is not here",
+                path.display(),
+                args.file.display()
+            );
+            continue;
+        }
         let (fresh, _) =
             import_text(root, &args).map_err(|e| format!("{}: {e}", path.display()))?;
         if fresh != text {

@@ -71,6 +71,20 @@ fn refused(text: &str, extra: &[&str], line: u32, words: &str) {
 }
 
 #[test]
+fn a_source_is_recorded_by_its_path_from_the_root() {
+    let root = Path::new("/work/main");
+    assert_eq!(
+        relative_to(Path::new("/work/main/leg-models/mjcf/a.xml"), root),
+        "leg-models/mjcf/a.xml"
+    );
+    assert_eq!(
+        relative_to(Path::new("/work/menagerie/agility_cassie/cassie.xml"), root),
+        "../menagerie/agility_cassie/cassie.xml"
+    );
+    assert_eq!(relative_to(Path::new("/a.xml"), root), "../../a.xml");
+}
+
+#[test]
 fn names_become_identifiers_by_one_rule() {
     assert_eq!(identifier("left-hip-roll"), "left_hip_roll");
     assert_eq!(identifier("Knee.Joint 2"), "knee_joint_2");
