@@ -354,11 +354,15 @@ fn assemble(spec: &Spec, model: &Model, derived: Derived) -> IrFile {
     }
 }
 
-/// Every Rust file the committed IR determines (each model's module and `lib.rs`), by
-/// path relative to the root.
-pub fn rust_files(irs: &[IrFile]) -> Result<BTreeMap<PathBuf, String>, String> {
+/// The generated crate's files, by path relative to the root: the module of each model `emit` selects (`gen NAME`
+/// emits NAME's alone; the others' are as their IR left them) and `lib.rs`, which lists
+/// every model.
+pub fn rust_files(
+    irs: &[IrFile],
+    emit: impl Fn(&str) -> bool,
+) -> Result<BTreeMap<PathBuf, String>, String> {
     let mut files = BTreeMap::new();
-    for ir in irs {
+    for ir in irs.iter().filter(|ir| emit(&ir.model.name)) {
         let src = rust_module::model_source(ir).map_err(|e| e.to_string())?;
         files.insert(
             Path::new(SRC_DIR).join(format!("{}.rs", ir.model.name)),
@@ -620,7 +624,7 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, Error> {
     irs.extend(kept_irs);
     irs.sort_by(|a, b| a.model.name.cmp(&b.model.name));
     notes.extend(kept_notes);
-    files.extend(rust_files(&irs).map_err(Error::Failed)?);
+    files.extend(rust_files(&irs, &selected).map_err(Error::Failed)?);
     let names: Vec<&str> = specs
         .iter()
         .map(|s| s.name.as_str())
