@@ -624,7 +624,7 @@ pub fn run(root: &Path, opts: &GenOptions) -> Result<String, Error> {
     irs.extend(kept_irs);
     irs.sort_by(|a, b| a.model.name.cmp(&b.model.name));
     notes.extend(kept_notes);
-    files.extend(rust_files(&irs, &selected).map_err(Error::Failed)?);
+    files.extend(rust_files(&irs, selected).map_err(Error::Failed)?);
     let names: Vec<&str> = specs
         .iter()
         .map(|s| s.name.as_str())
