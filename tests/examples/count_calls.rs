@@ -23,7 +23,7 @@ use std::hint::black_box;
 use leg_models::dynamics::derivatives::forward_dynamics_derivatives;
 use leg_models::dynamics::forward_dynamics;
 use leg_models::nalgebra::SVector;
-use leg_models::{LegModel, Parameters};
+use leg_models::{LegDynamics, Parameters};
 
 /// The measured loop, the same for every contender: `call` once per iteration, its result
 /// kept so that nothing is dropped as unused.
@@ -36,7 +36,7 @@ fn measure(n: usize, mut call: impl FnMut() -> f64) -> f64 {
     acc
 }
 
-fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
+fn run<L: LegDynamics<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>(
     what: &str,
     n: usize,
 ) -> Option<f64> {
@@ -174,9 +174,9 @@ fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usiz
                     &[q.as_slice(), qd.as_slice(), &pv],
                     &mut [&mut first, &mut second, &mut third, &mut fourth],
                 ),
+                // A spatial leg's C has the fused terms only (derive.py says why).
                 "forward_dynamics" => Prepared::new(
-                    pair.forward_dynamics
-                        .expect("a planar leg has CasADi's forward dynamics"),
+                    pair.forward_dynamics?,
                     &[q.as_slice(), qd.as_slice(), u.as_slice(), &pv],
                     &mut [&mut first, &mut fourth],
                 ),
@@ -190,9 +190,7 @@ fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usiz
                         unreachable!()
                     };
                     let prepared = Prepared::new(
-                        peers
-                            .derivatives
-                            .expect("a planar leg has CasADi's derivatives"),
+                        peers.derivatives?,
                         &[q.as_slice(), qd.as_slice(), u.as_slice(), &pv],
                         &mut [a, b, &mut first, d, e, f, g, h],
                     );
@@ -240,6 +238,15 @@ fn main() {
         };
     }
     generated::for_each_model!(dispatch);
+    // Spatial legs (their foot has three coordinates): the same paths.
+    macro_rules! dispatch_spatial {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
+            if model == stringify!($module) {
+                found = run::<$ty, $nq, $nc, $nu>(what, n);
+            }
+        };
+    }
+    generated::for_each_spatial_model!(dispatch_spatial);
     match found {
         Some(acc) => println!("{acc}"),
         None => {

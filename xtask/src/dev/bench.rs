@@ -86,7 +86,8 @@ fn count_calls(root: &Path, peers: bool) -> Result<std::path::PathBuf, String> {
 pub fn instruction_counts(root: &Path) -> Result<BTreeMap<String, BTreeMap<String, u64>>, String> {
     let bin = count_calls(root, false)?;
     let mut out = BTreeMap::new();
-    let models = crate::gen::planar_model_names(root)?;
+    let mut models = crate::gen::planar_model_names(root)?;
+    models.extend(crate::gen::spatial_model_names(root)?);
     let mut progress = Progress::new(
         (models.len() * PATHS.len()) as u64,
         "counting instructions (callgrind)",
@@ -167,6 +168,28 @@ pub fn compare_instructions(root: &Path) -> Result<String, String> {
     }
     lines.push(String::new());
     lines.push("derivatives of forward dynamics per call: q̈ and F with ∂/∂q, ∂/∂q̇, ∂/∂u of both; finite differences: forward differences of our forward dynamics (2 NQ + NU + 1 calls) into preallocated matrices; CasADi: `jacobian` of its forward-dynamics function of the same closed-form terms, compiled at -O3".into());
+    // Spatial legs: CasADi's C has their fused terms only (derive.py says why), so our
+    // forward dynamics, terms and solve, is shown beside its terms alone.
+    lines.push(String::new());
+    lines.push("| spatial model | harness | fused ours | CasADi C, closed form | ratio | CasADi C, Lagrange | ratio | FD ours | FD ours / CasADi C Lagrange fused | derivatives ours | finite differences of ours | ratio |".into());
+    lines.push(format!("|{}", "---|".repeat(12)));
+    for m in crate::gen::spatial_model_names(root)? {
+        let harness = Harness::of(&bin, &m)?;
+        let fused = harness.net(&bin, &m, "fused")?;
+        let closed = harness.net(&bin, &m, "casadi_closed_fused")?;
+        let lagrange = harness.net(&bin, &m, "casadi_fused")?;
+        let fd = harness.net(&bin, &m, "forward_dynamics")?;
+        let derivatives = harness.net(&bin, &m, "derivatives")?;
+        let differences = harness.net(&bin, &m, "finite_differences")?;
+        lines.push(format!(
+            "| {m} | {} | {fused} | {closed} | {} | {lagrange} | {} | {fd} | {} | {derivatives} | {differences} | {} |",
+            harness.per_call(),
+            ratio(fused, closed),
+            ratio(fused, lagrange),
+            ratio(fd, lagrange),
+            ratio(derivatives, differences)
+        ));
+    }
     Ok(lines.join("\n"))
 }
 

@@ -78,8 +78,11 @@ fn a_source_is_recorded_by_its_path_from_the_root() {
         "leg-models/mjcf/a.xml"
     );
     assert_eq!(
-        relative_to(Path::new("/work/menagerie/agility_cassie/cassie.xml"), root),
-        "../menagerie/agility_cassie/cassie.xml"
+        relative_to(
+            Path::new("/work/mujoco_menagerie/agility_cassie/cassie.xml"),
+            root
+        ),
+        "../mujoco_menagerie/agility_cassie/cassie.xml"
     );
     assert_eq!(relative_to(Path::new("/a.xml"), root), "../../a.xml");
 }
