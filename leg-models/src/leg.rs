@@ -44,7 +44,7 @@ use crate::dynamics::structure::Structure;
 use crate::dynamics::{self, Acceleration, Baumgarte, DynamicsError};
 #[cfg(doc)]
 use crate::model::contract::LegModel;
-use crate::model::contract::{ContactModel, DynamicsTerms, Parameters, Real};
+use crate::model::contract::{ContactModel, DynamicsTerms, LegDynamics, Parameters, Real};
 use crate::model::simd::F64x4;
 use crate::simulate::hybrid::{HybridSimulator, HybridState};
 use crate::simulate::source::LinearizationError;
@@ -242,7 +242,7 @@ impl std::error::Error for ParameterError<'_> {}
 /// `f32`); the sizes here are the model's and must match its [`ContactModel`] impl.
 pub struct Leg<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize = 0>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     params: L::Params<T>,
@@ -253,7 +253,7 @@ where
 impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize> Clone
     for Leg<L, T, NQ, NC, NU, NK>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     fn clone(&self) -> Self {
@@ -264,7 +264,7 @@ where
 impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize> Copy
     for Leg<L, T, NQ, NC, NU, NK>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
 }
@@ -272,7 +272,7 @@ where
 impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize> fmt::Debug
     for Leg<L, T, NQ, NC, NU, NK>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -288,7 +288,7 @@ where
 impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize> Default
     for Leg<L, T, NQ, NC, NU, NK>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     /// The spec's parameters.
@@ -300,7 +300,7 @@ where
 impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
     Leg<L, T, NQ, NC, NU, NK>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     // ---- construction and settings ----
@@ -443,21 +443,6 @@ where
         L::constraint_jacobian(q, &self.params)
     }
 
-    /// The foot point in the base frame.
-    pub fn foot_position(&self, q: &SVector<T, NQ>) -> SVector<T, 2> {
-        L::foot_position(q, &self.params)
-    }
-
-    /// `J_f(q) = ∂(foot)/∂q`.
-    pub fn foot_jacobian(&self, q: &SVector<T, NQ>) -> SMatrix<T, 2, NQ> {
-        L::foot_jacobian(q, &self.params)
-    }
-
-    /// The contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
-    pub fn contact_positions(&self, q: &SVector<T, NQ>) -> SVector<T, NK> {
-        L::contact_positions(q, &self.params)
-    }
-
     /// Kinetic plus potential energy, spring energy included ([`simulate::energy`]).
     pub fn energy(&self, state: &State<T, NQ>) -> T {
         simulate::energy::<L, T, NQ, NC, NU>(&self.params, state)
@@ -493,20 +478,6 @@ where
             from,
             theta,
             max_step,
-            &self.tolerance,
-        )
-    }
-
-    /// The closed pose putting the foot at `foot` (base frame), from `guess`.
-    pub fn foot_inverse(
-        &self,
-        foot: &SVector<T, 2>,
-        guess: &SVector<T, NQ>,
-    ) -> Result<SVector<T, NQ>, AssemblyError> {
-        assembly::foot_inverse::<L, T, NQ, NC, NU, 2, NC>(
-            &self.params,
-            foot,
-            guess,
             &self.tolerance,
         )
     }
@@ -625,87 +596,7 @@ where
         control::joint_inertias::<L, T, NQ, NC, NU>(&self.params, q)
     }
 
-    /// The foot's apparent mass along x and y at `q`.
-    pub fn foot_inertias(&self, q: &SVector<T, NQ>) -> Result<SVector<T, 2>, ControlError> {
-        control::foot_inertias::<L, T, NQ, NC, NU, 2, NC>(&self.params, q)
-    }
-
     // ---- contact ----
-
-    /// The spec's ground.
-    pub fn ground(&self) -> Ground<T> {
-        Ground::of::<L, NQ, NC, NU, NK>()
-    }
-
-    /// The spec's friction coefficient per contact row.
-    pub fn friction(&self) -> SVector<T, NK> {
-        contact::spec_friction::<L, T, NQ, NC, NU, NK>()
-    }
-
-    /// The forward dynamics with the contacts in `modes` held (sticking at `anchors`) or
-    /// sliding, on the spec's ground with its friction
-    /// ([`contact::forward_dynamics_with_contacts`]).
-    pub fn forward_dynamics_with_contacts(
-        &self,
-        q: &SVector<T, NQ>,
-        qd: &SVector<T, NQ>,
-        u: &SVector<T, NU>,
-        modes: &Modes<NK>,
-        anchors: &SVector<T, NK>,
-    ) -> Result<ContactSolution<T, NQ, NC, NK>, DynamicsError> {
-        contact::forward_dynamics_with_contacts::<L, T, NQ, NC, NU, NK>(
-            &self.params,
-            q,
-            qd,
-            u,
-            modes,
-            anchors,
-            &self.ground(),
-            &self.friction(),
-            self.baumgarte,
-        )
-    }
-
-    /// [`Leg::forward_dynamics_with_contacts`] and its derivatives
-    /// ([`derivatives::contact_dynamics_derivatives`]).
-    pub fn contact_dynamics_derivatives(
-        &self,
-        q: &SVector<T, NQ>,
-        qd: &SVector<T, NQ>,
-        u: &SVector<T, NU>,
-        modes: &Modes<NK>,
-        anchors: &SVector<T, NK>,
-    ) -> Result<ContactDynamicsDerivatives<T, NQ, NC, NU, NK>, DynamicsError> {
-        derivatives::contact_dynamics_derivatives::<L, T, NQ, NC, NU, NK>(
-            &self.params,
-            q,
-            qd,
-            u,
-            modes,
-            anchors,
-            &self.ground(),
-            &self.friction(),
-            self.baumgarte,
-        )
-    }
-
-    /// The plastic impact of the contacts `modes` marks as landing
-    /// ([`contact::impact_map`]); `modes` gets the contacts' modes after it.
-    pub fn impact_map(
-        &self,
-        q: &SVector<T, NQ>,
-        qd: &SVector<T, NQ>,
-        modes: &mut Modes<NK>,
-    ) -> Result<Impact<T, NQ, NC, NK>, ImpactError> {
-        contact::impact_map::<L, T, NQ, NC, NU, NK>(
-            &self.params,
-            q,
-            qd,
-            modes,
-            &self.ground(),
-            &self.friction(),
-        )
-    }
 
     // ---- time stepping and simulation ----
 
@@ -726,29 +617,11 @@ where
         crate::simulate::Simulator::new(self.params, opts)
     }
 
-    /// A simulator of this leg on the ground (contacts, impacts, events), RK4 steps of
-    /// `dt` on the spec's ground; its `options` hold the rest.
-    pub fn hybrid_simulator(&self, dt: T) -> HybridSimulator<L, T, NQ, NC, NU, NK> {
-        let mut sim = HybridSimulator::new(self.params, dt);
-        sim.options.baumgarte = self.baumgarte;
-        sim.options.tolerance = self.tolerance;
-        sim
-    }
-
     /// `torques` as a torque source of this leg: the closure's argument types come from
     /// the leg, so it needs no annotation (`leg.torque_source(|_t, s| -0.5 * leg.motor_angles(&s.qd))`).
     pub fn torque_source<F>(&self, torques: F) -> F
     where
         F: FnMut(T, &State<T, NQ>) -> SVector<T, NU>,
-    {
-        torques
-    }
-
-    /// `torques` as a torque source of this leg on the ground ([`Leg::torque_source`]
-    /// for a [`HybridSimulator`]).
-    pub fn hybrid_torque_source<F>(&self, torques: F) -> F
-    where
-        F: FnMut(T, &HybridState<T, NQ, NK>) -> SVector<T, NU>,
     {
         torques
     }
@@ -764,16 +637,6 @@ where
         JointFeedbackLinearization::new(self.params, gains, reference)
     }
 
-    /// Feedback linearization tracking `reference` with the foot (two motors that
-    /// determine the leg).
-    pub fn foot_feedback_linearization<R: Reference<T, 2>>(
-        &self,
-        gains: Gains<T, 2>,
-        reference: R,
-    ) -> Result<FootFeedbackLinearization<L, T, R, NQ, NC, NU>, ControlError> {
-        FootFeedbackLinearization::new(self.params, gains, reference)
-    }
-
     /// PD on the motor angles with gravity compensation (the baseline).
     pub fn pd_gravity<R: Reference<T, NU>>(
         &self,
@@ -781,15 +644,6 @@ where
         reference: R,
     ) -> Result<PdGravity<L, T, R, NQ, NC, NU>, ControlError> {
         PdGravity::new(self.params, gains, reference)
-    }
-
-    /// PD on the foot with gravity compensation (the baseline).
-    pub fn foot_pd_gravity<R: Reference<T, 2>>(
-        &self,
-        gains: Gains<T, 2>,
-        reference: R,
-    ) -> Result<FootPdGravity<L, T, R, NQ, NC, NU>, ControlError> {
-        FootPdGravity::new(self.params, gains, reference)
     }
 
     // ---- linearization and LQR ----
@@ -888,6 +742,161 @@ where
     }
 
     // ---- design measures ----
+}
+
+/// What needs the leg's contacts or its planar foot: a [`ContactModel`] (every planar leg,
+/// with or without contacts; a spatial leg has the methods above).
+impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
+    Leg<L, T, NQ, NC, NU, NK>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+    T: Real,
+{
+    /// The foot point in the base frame.
+    pub fn foot_position(&self, q: &SVector<T, NQ>) -> SVector<T, 2> {
+        L::foot_position(q, &self.params)
+    }
+
+    /// `J_f(q) = ∂(foot)/∂q`.
+    pub fn foot_jacobian(&self, q: &SVector<T, NQ>) -> SMatrix<T, 2, NQ> {
+        L::foot_jacobian(q, &self.params)
+    }
+
+    /// The contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
+    pub fn contact_positions(&self, q: &SVector<T, NQ>) -> SVector<T, NK> {
+        L::contact_positions(q, &self.params)
+    }
+
+    /// The closed pose putting the foot at `foot` (base frame), from `guess`.
+    pub fn foot_inverse(
+        &self,
+        foot: &SVector<T, 2>,
+        guess: &SVector<T, NQ>,
+    ) -> Result<SVector<T, NQ>, AssemblyError> {
+        assembly::foot_inverse::<L, T, NQ, NC, NU, 2, NC>(
+            &self.params,
+            foot,
+            guess,
+            &self.tolerance,
+        )
+    }
+
+    /// The foot's apparent mass along x and y at `q`.
+    pub fn foot_inertias(&self, q: &SVector<T, NQ>) -> Result<SVector<T, 2>, ControlError> {
+        control::foot_inertias::<L, T, NQ, NC, NU, 2, NC>(&self.params, q)
+    }
+
+    /// The spec's ground.
+    pub fn ground(&self) -> Ground<T> {
+        Ground::of::<L, NQ, NC, NU, NK>()
+    }
+
+    /// The spec's friction coefficient per contact row.
+    pub fn friction(&self) -> SVector<T, NK> {
+        contact::spec_friction::<L, T, NQ, NC, NU, NK>()
+    }
+
+    /// The forward dynamics with the contacts in `modes` held (sticking at `anchors`) or
+    /// sliding, on the spec's ground with its friction
+    /// ([`contact::forward_dynamics_with_contacts`]).
+    pub fn forward_dynamics_with_contacts(
+        &self,
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        u: &SVector<T, NU>,
+        modes: &Modes<NK>,
+        anchors: &SVector<T, NK>,
+    ) -> Result<ContactSolution<T, NQ, NC, NK>, DynamicsError> {
+        contact::forward_dynamics_with_contacts::<L, T, NQ, NC, NU, NK>(
+            &self.params,
+            q,
+            qd,
+            u,
+            modes,
+            anchors,
+            &self.ground(),
+            &self.friction(),
+            self.baumgarte,
+        )
+    }
+
+    /// [`Leg::forward_dynamics_with_contacts`] and its derivatives
+    /// ([`derivatives::contact_dynamics_derivatives`]).
+    pub fn contact_dynamics_derivatives(
+        &self,
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        u: &SVector<T, NU>,
+        modes: &Modes<NK>,
+        anchors: &SVector<T, NK>,
+    ) -> Result<ContactDynamicsDerivatives<T, NQ, NC, NU, NK>, DynamicsError> {
+        derivatives::contact_dynamics_derivatives::<L, T, NQ, NC, NU, NK>(
+            &self.params,
+            q,
+            qd,
+            u,
+            modes,
+            anchors,
+            &self.ground(),
+            &self.friction(),
+            self.baumgarte,
+        )
+    }
+
+    /// The plastic impact of the contacts `modes` marks as landing
+    /// ([`contact::impact_map`]); `modes` gets the contacts' modes after it.
+    pub fn impact_map(
+        &self,
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        modes: &mut Modes<NK>,
+    ) -> Result<Impact<T, NQ, NC, NK>, ImpactError> {
+        contact::impact_map::<L, T, NQ, NC, NU, NK>(
+            &self.params,
+            q,
+            qd,
+            modes,
+            &self.ground(),
+            &self.friction(),
+        )
+    }
+
+    /// A simulator of this leg on the ground (contacts, impacts, events), RK4 steps of
+    /// `dt` on the spec's ground; its `options` hold the rest.
+    pub fn hybrid_simulator(&self, dt: T) -> HybridSimulator<L, T, NQ, NC, NU, NK> {
+        let mut sim = HybridSimulator::new(self.params, dt);
+        sim.options.baumgarte = self.baumgarte;
+        sim.options.tolerance = self.tolerance;
+        sim
+    }
+
+    /// `torques` as a torque source of this leg on the ground ([`Leg::torque_source`]
+    /// for a [`HybridSimulator`]).
+    pub fn hybrid_torque_source<F>(&self, torques: F) -> F
+    where
+        F: FnMut(T, &HybridState<T, NQ, NK>) -> SVector<T, NU>,
+    {
+        torques
+    }
+
+    /// Feedback linearization tracking `reference` with the foot (two motors that
+    /// determine the leg).
+    pub fn foot_feedback_linearization<R: Reference<T, 2>>(
+        &self,
+        gains: Gains<T, 2>,
+        reference: R,
+    ) -> Result<FootFeedbackLinearization<L, T, R, NQ, NC, NU>, ControlError> {
+        FootFeedbackLinearization::new(self.params, gains, reference)
+    }
+
+    /// PD on the foot with gravity compensation (the baseline).
+    pub fn foot_pd_gravity<R: Reference<T, 2>>(
+        &self,
+        gains: Gains<T, 2>,
+        reference: R,
+    ) -> Result<FootPdGravity<L, T, R, NQ, NC, NU>, ControlError> {
+        FootPdGravity::new(self.params, gains, reference)
+    }
 
     /// The frame the design measures use: the leg's body joints held
     /// ([`analysis::LegFrame`]).
@@ -945,7 +954,7 @@ where
 impl<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
     Leg<L, f64, NQ, NC, NU, NK>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: LegDynamics<NQ, NC, NU>,
 {
     /// The parameters on four SIMD lanes, each lane this leg's (set a lane's value with
     /// [`Parameters::set`] for a sweep).
@@ -964,7 +973,13 @@ where
     ) -> Result<BatchAcceleration<NQ, NC>, BatchError> {
         batch::forward_dynamics::<L, NQ, NC, NU>(params, q, qd, u)
     }
+}
 
+impl<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
+    Leg<L, f64, NQ, NC, NU, NK>
+where
+    L: ContactModel<NQ, NC, NU, NK>,
+{
     /// The workspace of the branch of `start` (an assembled pose) over a grid of foot
     /// positions, with every design measure at every node
     /// ([`analysis::workspace::workspace`]).

@@ -14,7 +14,8 @@ use leg_models::assembly::AssemblyError as RustAssemblyError;
 use leg_models::control::linearize::LinearizationError as RustLinearizationError;
 use leg_models::control::reference::Sinusoid;
 use leg_models::control::{
-    check_torque_limits, ControlError as RustControlError, Gains, Saturated,
+    check_torque_limits, foot_inertias, ControlError as RustControlError,
+    FootFeedbackLinearization, FootPdGravity, Gains, Saturated,
 };
 use leg_models::dynamics::DynamicsError as RustDynamicsError;
 use leg_models::nalgebra::{SMatrix, SVector};
@@ -514,7 +515,7 @@ fn run_simulation<'py, L, S, const NQ: usize, const NC: usize, const NU: usize, 
     callable_error: fn(&mut S) -> Option<PyErr>,
 ) -> PyResult<Bound<'py, PyDict>>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: leg_models::LegDynamics<NQ, NC, NU>,
     S: TorqueSource<f64, NQ, NU> + Send,
     Leg<L, f64, NQ, NC, NU, NK>: Sync,
 {
@@ -550,11 +551,17 @@ fn no_callable<S>(_: &mut S) -> Option<PyErr> {
     None
 }
 
-macro_rules! leg_class {
-    ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $nk:expr) => {
+/// One class per leg: the methods of every leg (terms, the foot in `nd` coordinates,
+/// assembly, dynamics and derivatives, reductions, simulation with joint- or foot-space
+/// controllers, linearization and LQR), then `extra`, the methods of the leg's kind.
+macro_rules! leg_module {
+    ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $nk:expr, $nd:expr, $np:expr, { $($extra:tt)* }) => {
         mod $module {
             use super::*;
+            // The planar extras' (contacts and the hybrid simulator).
+            #[allow(unused_imports)]
             use leg_models::dynamics::contact::Modes;
+            #[allow(unused_imports)]
             use leg_models::simulate::hybrid::HybridState;
             use leg_models::{LegDynamics, LegModel, Parameters};
 
@@ -563,6 +570,9 @@ macro_rules! leg_class {
             const NC: usize = $nc;
             const NU: usize = $nu;
             const NK: usize = $nk;
+            /// Coordinates of the foot (2 planar, 3 spatial) and closure points.
+            const ND: usize = $nd;
+            const NP: usize = $np;
             type L = Leg<Model, f64, NQ, NC, NU, NK>;
 
             /// A generated leg: its parameters (the spec's by default, keyword arguments
@@ -624,20 +634,20 @@ macro_rules! leg_class {
                 fn nq() -> usize {
                     NQ
                 }
-                /// Number of closure rows (two per closure).
+                /// Number of closure rows (a point closure: one per coordinate; a rod: one).
                 #[classattr]
                 fn nc() -> usize {
                     NC
+                }
+                /// Coordinates of a point: 2 for a planar leg, 3 for a spatial one.
+                #[classattr]
+                fn dimension() -> usize {
+                    ND
                 }
                 /// Number of motors.
                 #[classattr]
                 fn nu() -> usize {
                     NU
-                }
-                /// Number of contact rows (two per contact point).
-                #[classattr]
-                fn nk() -> usize {
-                    NK
                 }
                 /// Degrees of freedom of the closed chain.
                 #[classattr]
@@ -653,11 +663,6 @@ macro_rules! leg_class {
                 #[classattr]
                 fn actuated() -> Vec<usize> {
                     Model::ACTUATED.to_vec()
-                }
-                /// The contact points' names.
-                #[classattr]
-                fn contact_names() -> Vec<&'static str> {
-                    <Model as ContactModel<NQ, NC, NU, NK>>::CONTACT_NAMES.to_vec()
                 }
                 /// The parameters' names.
                 #[classattr]
@@ -760,18 +765,6 @@ macro_rules! leg_class {
                 fn closure_points<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
                     Ok(out_matrix(py, &Model::closure_points(&pose("q", q)?, self.leg.params())))
                 }
-                /// The contact points stacked (x₀, y₀, x₁, y₁, …).
-                fn contact_positions<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-                    Ok(out_vector(py, &Model::contact_positions(&pose("q", q)?, self.leg.params())))
-                }
-                /// `J_c(q)`.
-                fn contact_jacobian<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-                    Ok(out_matrix(py, &Model::contact_jacobian(&pose("q", q)?, self.leg.params())))
-                }
-                /// `J̇_c q̇`.
-                fn contact_bias<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-                    Ok(out_vector(py, &Model::contact_bias(&pose("q", q)?, &vector("qd", qd)?, self.leg.params())))
-                }
                 /// `M`, `N`, `J`, `J̇ q̇` together (dict).
                 fn dynamics_terms<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
                     let t = self.leg.dynamics_terms(&pose("q", q)?, &vector("qd", qd)?);
@@ -800,7 +793,9 @@ macro_rules! leg_class {
                 #[pyo3(signature = (foot, guess = None))]
                 fn foot_inverse<'py>(&self, py: Python<'py>, foot: &Bound<'py, PyAny>, guess: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyArray1<f64>>> {
                     let guess = match guess { Some(g) => pose("guess", g)?, None => self.leg.home() };
-                    Ok(out_vector(py, &self.leg.foot_inverse(&vector("foot", foot)?, &guess).map_err(assembly_err)?))
+                    let foot = vector::<ND>("foot", foot)?;
+                    let q = leg_models::assembly::foot_inverse::<Model, f64, NQ, NC, NU, ND, NP>(self.leg.params(), &foot, &guess, self.leg.tolerance());
+                    Ok(out_vector(py, &q.map_err(assembly_err)?))
                 }
                 /// Joint rates of motor rates `theta_dot` at the assembled `q`.
                 fn consistent_velocity<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, theta_dot: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
@@ -811,6 +806,14 @@ macro_rules! leg_class {
                     let mut q = pose("q", q)?;
                     self.leg.project_position(&mut q).map_err(assembly_err)?;
                     Ok(out_vector(py, &q))
+                }
+                /// `qd` less its part off the closures' tangent at the assembled `q` (the
+                /// correction of least kinetic energy): rates for any leg, its motors
+                /// determining it or not.
+                fn project_velocity<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                    let mut qd = vector("qd", qd)?;
+                    self.leg.project_velocity(&pose("q", q)?, &mut qd).map_err(assembly_err)?;
+                    Ok(out_vector(py, &qd))
                 }
 
                 // ---- dynamics ----
@@ -866,19 +869,6 @@ macro_rules! leg_class {
                     d.set_item("torque_qd", out_matrix(py, &r.torque_qd))?;
                     Ok(d)
                 }
-                /// `(q̈, closure forces, contact forces)` with contacts held at `anchors`
-                /// (`held[k]`: contact k sticks; others in flight), spec ground and friction.
-                fn forward_dynamics_with_contacts<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, u: &Bound<'py, PyAny>, held: Vec<bool>, anchors: &Bound<'py, PyAny>) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
-                    if held.len() * 2 != NK {
-                        return Err(PyValueError::new_err(format!("`held` has {} entries, this leg has {} contacts", held.len(), NK / 2)));
-                    }
-                    let mut modes = Modes::<NK>::flight();
-                    for (k, h) in held.iter().enumerate() {
-                        if *h { modes.set(k, leg_models::dynamics::contact::ContactMode::Stick); }
-                    }
-                    let s = self.leg.forward_dynamics_with_contacts(&pose("q", q)?, &vector("qd", qd)?, &vector("u", u)?, &modes, &vector("anchors", anchors)?).map_err(dynamics_err)?;
-                    Ok((out_vector(py, &s.x), out_vector(py, &s.closure), out_vector(py, &s.contact)))
-                }
 
                 // ---- control ----
 
@@ -897,8 +887,8 @@ macro_rules! leg_class {
                             c.torque(0.0, &state)
                         }
                         "foot" => {
-                            let r = leg_models::control::reference::Setpoint::<f64, 2> { position: pose("target", target)?, velocity: vector("rate", rate)?, acceleration: vector("accel", accel)? };
-                            let mut c = self.leg.foot_feedback_linearization(Gains::new(kp, gains_kd), r).map_err(control_err)?;
+                            let r = leg_models::control::reference::Setpoint::<f64, ND> { position: pose("target", target)?, velocity: vector("rate", rate)?, acceleration: vector("accel", accel)? };
+                            let mut c = FootFeedbackLinearization::<Model, f64, _, NQ, NC, NU, ND, NP>::new(*self.leg.params(), Gains::new(kp, gains_kd), r).map_err(control_err)?;
                             c.torque(0.0, &state)
                         }
                         other => return Err(PyValueError::new_err(format!("unknown `kind` {other:?}: \"joint\" or \"foot\""))),
@@ -956,16 +946,19 @@ macro_rules! leg_class {
                             }
                         }
                         "foot_feedback_linearization" | "foot_pd_gravity" => {
-                            let r = sinusoid::<2>(setpoint()?, amplitude, frequency, phase)?;
+                            let r = sinusoid::<ND>(setpoint()?, amplitude, frequency, phase)?;
                             let g = Gains::new(kp, gains_kd);
+                            let params = *self.leg.params();
                             if kind == "foot_pd_gravity" {
                                 g.check().map_err(control_err)?;
-                                let inertia: SVector<f64, 2> = self.leg.foot_inertias(&initial.q).map_err(control_err)?;
+                                let inertia: SVector<f64, ND> = foot_inertias::<Model, f64, NQ, NC, NU, ND, NP>(&params, &initial.q).map_err(control_err)?;
                                 let g = Gains { kp: inertia * kp, kd: inertia * gains_kd };
-                                let c = Saturated::new(self.leg.foot_pd_gravity(g, r).map_err(control_err)?, limit).map_err(control_err)?;
+                                let c = FootPdGravity::<Model, f64, _, NQ, NC, NU, ND, NP>::new(params, g, r).map_err(control_err)?;
+                                let c = Saturated::new(c, limit).map_err(control_err)?;
                                 run_simulation(py, &self.leg, initial, steps, opts, c, no_callable)
                             } else {
-                                let c = Saturated::new(self.leg.foot_feedback_linearization(g, r).map_err(control_err)?, limit).map_err(control_err)?;
+                                let c = FootFeedbackLinearization::<Model, f64, _, NQ, NC, NU, ND, NP>::new(params, g, r).map_err(control_err)?;
+                                let c = Saturated::new(c, limit).map_err(control_err)?;
                                 run_simulation(py, &self.leg, initial, steps, opts, c, no_callable)
                             }
                         }
@@ -973,6 +966,110 @@ macro_rules! leg_class {
                     }
                 }
 
+
+                // ---- design measures (leg_models::analysis) ----
+
+
+
+
+
+
+                // ---- linearization and LQR ----
+
+                /// One step of `dt` linearized on the constraint manifold at the rest pose
+                /// `q` under its holding torque: dict with A, B (chart coordinates and
+                /// rates), the chart's joints `coordinates`, and `holding_torque`.
+                #[pyo3(signature = (q, dt, method = "rk4"))]
+                fn linearize<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, dt: f64, method: &str) -> PyResult<Bound<'py, PyDict>> {
+                    let q = pose("q", q)?;
+                    let opts = step_options(dt, method, true)?;
+                    let chart = self.leg.chart(&q).map_err(linearization_err)?;
+                    let u = self.leg.holding_torque(&chart, &q).map_err(linearization_err)?;
+                    let lin = self.leg.linearize_on_chart(&chart, &State { q, qd: SVector::zeros() }, &u, &opts).map_err(linearization_err)?;
+                    let d = PyDict::new(py);
+                    d.set_item("A", out_matrix(py, &lin.a))?;
+                    d.set_item("B", out_matrix(py, &lin.b))?;
+                    d.set_item("coordinates", chart.coordinates.to_vec())?;
+                    d.set_item("holding_torque", out_vector(py, &u))?;
+                    Ok(d)
+                }
+
+                /// A discrete LQR about the rest pose `q` for steps of `dt`: dict with the
+                /// gain K, the closed loop A − B K and the Riccati solution P.
+                fn lqr<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, dt: f64, state_weights: &Bound<'py, PyAny>, torque_weights: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
+                    let q = pose("q", q)?;
+                    let opts = step_options(dt, "rk4", true)?;
+                    let chart = self.leg.chart(&q).map_err(linearization_err)?;
+                    let theta = chart.coordinates_of(&State { q, qd: SVector::zeros() }).0;
+                    let c = self.leg.manifold_lqr(&q, &opts, &matrix("state_weights", state_weights)?, &matrix("torque_weights", torque_weights)?, leg_models::control::reference::Hold(theta), SVector::from_element(f64::INFINITY)).map_err(control_err)?;
+                    let d = PyDict::new(py);
+                    d.set_item("K", out_matrix(py, &c.lqr.gain))?;
+                    d.set_item("closed_loop", out_matrix(py, &c.lqr.closed_loop))?;
+                    d.set_item("P", out_matrix(py, &c.lqr.cost))?;
+                    Ok(d)
+                }
+                $($extra)*
+            }
+
+            fn class_name() -> &'static str {
+                let path = stringify!($ty);
+                path.rsplit("::").next().unwrap_or(path).trim()
+            }
+
+            pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+                let class = m.py().get_type::<PyLeg>();
+                // One Rust type per leg, each named for its leg (pickle finds a class by
+                // `module.__qualname__`: under one shared name `Leg` none pickled).
+                class.setattr("__name__", class_name())?;
+                class.setattr("__qualname__", class_name())?;
+                m.add(class_name(), &class)?;
+                m.getattr("models")?.set_item(Model::NAME, class)?;
+                Ok(())
+            }
+        }
+    };
+}
+
+/// A planar leg: every method, its contacts, the hybrid simulator and the design
+/// measures too.
+macro_rules! leg_class {
+    ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $nk:expr) => {
+        leg_module!($module, $ty, $nq, $nc, $nu, $nk, 2, $nc, {
+                /// Number of contact rows (two per contact point).
+                #[classattr]
+                fn nk() -> usize {
+                    NK
+                }
+                /// The contact points' names.
+                #[classattr]
+                fn contact_names() -> Vec<&'static str> {
+                    <Model as ContactModel<NQ, NC, NU, NK>>::CONTACT_NAMES.to_vec()
+                }
+                /// The contact points stacked (x₀, y₀, x₁, y₁, …).
+                fn contact_positions<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                    Ok(out_vector(py, &Model::contact_positions(&pose("q", q)?, self.leg.params())))
+                }
+                /// `J_c(q)`.
+                fn contact_jacobian<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+                    Ok(out_matrix(py, &Model::contact_jacobian(&pose("q", q)?, self.leg.params())))
+                }
+                /// `J̇_c q̇`.
+                fn contact_bias<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                    Ok(out_vector(py, &Model::contact_bias(&pose("q", q)?, &vector("qd", qd)?, self.leg.params())))
+                }
+                /// `(q̈, closure forces, contact forces)` with contacts held at `anchors`
+                /// (`held[k]`: contact k sticks; others in flight), spec ground and friction.
+                fn forward_dynamics_with_contacts<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, u: &Bound<'py, PyAny>, held: Vec<bool>, anchors: &Bound<'py, PyAny>) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
+                    if held.len() * 2 != NK {
+                        return Err(PyValueError::new_err(format!("`held` has {} entries, this leg has {} contacts", held.len(), NK / 2)));
+                    }
+                    let mut modes = Modes::<NK>::flight();
+                    for (k, h) in held.iter().enumerate() {
+                        if *h { modes.set(k, leg_models::dynamics::contact::ContactMode::Stick); }
+                    }
+                    let s = self.leg.forward_dynamics_with_contacts(&pose("q", q)?, &vector("qd", qd)?, &vector("u", u)?, &modes, &vector("anchors", anchors)?).map_err(dynamics_err)?;
+                    Ok((out_vector(py, &s.x), out_vector(py, &s.closure), out_vector(py, &s.contact)))
+                }
                 /// Simulates the leg on the ground (contacts, impacts, events) for `steps`
                 /// RK4 steps of `dt` from `(q, qd)` with every contact in flight. Torques as
                 /// in `simulate`. Returns a dict of arrays (t, q, qd, u, contact_forces,
@@ -1018,9 +1115,6 @@ macro_rules! leg_class {
                     };
                     finish(py, pending, stopped, record(r))
                 }
-
-                // ---- design measures (leg_models::analysis) ----
-
                 /// Every design measure at the assembled pose `q`, with the joints' torque
                 /// limits `torque_limit` (N m after the gearbox) and speed limits
                 /// `speed_limit` (rad/s), each one number for every motor or one per motor.
@@ -1069,7 +1163,6 @@ macro_rules! leg_class {
                     d.set_item("effective_mass", m.effective_mass)?;
                     Ok(d)
                 }
-
                 /// The foot's inverse operational-space inertia Λ⁻¹ (2 × 2, 1/kg) at the
                 /// assembled pose `q`, the motors free (rotors backdriven) or locked.
                 #[pyo3(signature = (q, motors_locked = false))]
@@ -1077,7 +1170,6 @@ macro_rules! leg_class {
                     let inv = self.leg.foot_inverse_inertia(&pose("q", q)?, motors_locked).map_err(analysis_err)?;
                     Ok(out_matrix(py, &inv))
                 }
-
                 /// The impact mitigation factor ξ = det(I − Λ Λ_L⁻¹) (Wensing et al. 2017) at
                 /// the assembled pose `q`: with `body_mass` (kg) the hip on a body of that
                 /// mass translating in the plane; without, on a fixed base (a leg with body
@@ -1091,7 +1183,6 @@ macro_rules! leg_class {
                     };
                     self.leg.impact_mitigation(&pose("q", q)?, &body).map_err(analysis_err)
                 }
-
                 /// The leg's assembly branches at the motor angles (and held body joints) of
                 /// the assembled pose `q` (default: the assembled home pose): an `n × nq`
                 /// array of closed poses, `q` first, each a `start` for `workspace`.
@@ -1109,7 +1200,6 @@ macro_rules! leg_class {
                     let modes = leg_models::analysis::workspace::assembly_modes::<Model, NQ, NC, NU>(self.leg.params(), &q, &self.leg.analysis_frame(), tries);
                     Ok(out_rows(py, modes.into_iter()))
                 }
-
                 /// The workspace of the assembly branch of `start` (default: the assembled
                 /// home pose) over a grid of `nodes × nodes` foot positions centred on
                 /// `centre` with half-width `half_width` (default: on the hip of the foot's
@@ -1181,63 +1271,27 @@ macro_rules! leg_class {
                     d.set_item("foot_curves", out_segments(py, &w.foot_curves))?;
                     Ok(d)
                 }
+        });
+    };
+}
 
-                // ---- linearization and LQR ----
-
-                /// One step of `dt` linearized on the constraint manifold at the rest pose
-                /// `q` under its holding torque: dict with A, B (chart coordinates and
-                /// rates), the chart's joints `coordinates`, and `holding_torque`.
-                #[pyo3(signature = (q, dt, method = "rk4"))]
-                fn linearize<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, dt: f64, method: &str) -> PyResult<Bound<'py, PyDict>> {
-                    let q = pose("q", q)?;
-                    let opts = step_options(dt, method, true)?;
-                    let chart = self.leg.chart(&q).map_err(linearization_err)?;
-                    let u = self.leg.holding_torque(&chart, &q).map_err(linearization_err)?;
-                    let lin = self.leg.linearize_on_chart(&chart, &State { q, qd: SVector::zeros() }, &u, &opts).map_err(linearization_err)?;
-                    let d = PyDict::new(py);
-                    d.set_item("A", out_matrix(py, &lin.a))?;
-                    d.set_item("B", out_matrix(py, &lin.b))?;
-                    d.set_item("coordinates", chart.coordinates.to_vec())?;
-                    d.set_item("holding_torque", out_vector(py, &u))?;
-                    Ok(d)
-                }
-
-                /// A discrete LQR about the rest pose `q` for steps of `dt`: dict with the
-                /// gain K, the closed loop A − B K and the Riccati solution P.
-                fn lqr<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, dt: f64, state_weights: &Bound<'py, PyAny>, torque_weights: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
-                    let q = pose("q", q)?;
-                    let opts = step_options(dt, "rk4", true)?;
-                    let chart = self.leg.chart(&q).map_err(linearization_err)?;
-                    let theta = chart.coordinates_of(&State { q, qd: SVector::zeros() }).0;
-                    let c = self.leg.manifold_lqr(&q, &opts, &matrix("state_weights", state_weights)?, &matrix("torque_weights", torque_weights)?, leg_models::control::reference::Hold(theta), SVector::from_element(f64::INFINITY)).map_err(control_err)?;
-                    let d = PyDict::new(py);
-                    d.set_item("K", out_matrix(py, &c.lqr.gain))?;
-                    d.set_item("closed_loop", out_matrix(py, &c.lqr.closed_loop))?;
-                    d.set_item("P", out_matrix(py, &c.lqr.cost))?;
-                    Ok(d)
-                }
+/// A spatial leg: the methods of every leg, its foot and foot-space control in three
+/// coordinates; it has no contacts yet, and the design measures are planar.
+macro_rules! spatial_leg_class {
+    ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $np:expr) => {
+        leg_module!($module, $ty, $nq, $nc, $nu, 0, 3, $np, {
+            /// The first coordinate of each ball joint (its three angles follow:
+            /// `R_x(α) R_y(β) R_z(γ)`, singular at `β = ±π/2`).
+            #[classattr]
+            fn ball_joints() -> Vec<usize> {
+                <Model as LegDynamics<NQ, NC, NU>>::BALL_JOINTS.to_vec()
             }
-
-            fn class_name() -> &'static str {
-                let path = stringify!($ty);
-                path.rsplit("::").next().unwrap_or(path).trim()
-            }
-
-            pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-                let class = m.py().get_type::<PyLeg>();
-                // One Rust type per leg, each named for its leg (pickle finds a class by
-                // `module.__qualname__`: under one shared name `Leg` none pickled).
-                class.setattr("__name__", class_name())?;
-                class.setattr("__qualname__", class_name())?;
-                m.add(class_name(), &class)?;
-                m.getattr("models")?.set_item(Model::NAME, class)?;
-                Ok(())
-            }
-        }
+        });
     };
 }
 
 generated::for_each_model!(leg_class);
+generated::for_each_spatial_model!(spatial_leg_class);
 
 /// The generated leg models: one class per spec (`legmodels.Minitaur`, …), and
 /// `legmodels.models`, a dict spec name → class.
@@ -1261,5 +1315,6 @@ fn legmodels(m: &Bound<'_, PyModule>) -> PyResult<()> {
         };
     }
     generated::for_each_model!(register);
+    generated::for_each_spatial_model!(register);
     Ok(())
 }

@@ -18,8 +18,8 @@ def _gravity(spec):
     return g["value"] if isinstance(g, dict) else g
 
 
-# The planar legs: the Python classes cover those (a spec's gravity has two entries);
-# spatial legs are generated Rust only for now.
+# The planar legs (a spec's gravity has two entries): the design measures are planar for
+# now, and a spatial leg's class has none.
 SPECS = sorted(
     p.stem
     for p in (ROOT / "leg-models" / "specs").glob("*.toml")

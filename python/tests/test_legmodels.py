@@ -6,6 +6,7 @@ without torques or damping keeps its energy; bad input raises the runtime's erro
 
 import tomllib
 import pathlib
+import pickle
 import re
 import subprocess
 import sys
@@ -21,12 +22,12 @@ def _gravity(spec):
     return g["value"] if isinstance(g, dict) else g
 
 
-# The planar legs: the Python classes cover those (a spec's gravity has two entries);
-# spatial legs are generated Rust only for now.
-SPECS = sorted(
+# Every leg, planar (a spec's gravity has two entries) and spatial (three).
+SPECS = sorted(p.stem for p in (ROOT / "leg-models" / "specs").glob("*.toml"))
+SPATIAL = sorted(
     p.stem
     for p in (ROOT / "leg-models" / "specs").glob("*.toml")
-    if len(_gravity(tomllib.loads(p.read_text()))) == 2
+    if len(_gravity(tomllib.loads(p.read_text()))) == 3
 )
 
 
@@ -36,6 +37,8 @@ def test_every_spec_is_a_class():
         assert cls.name == name
         leg = cls()
         assert len(leg.home()) == cls.nq and len(cls.actuated) == cls.nu
+        assert cls.dimension == (3 if name in SPATIAL else 2)
+        assert len(leg.foot_position(leg.home())) == cls.dimension
 
 
 def assembled_state(leg, rng):
@@ -49,9 +52,12 @@ def assembled_state(leg, rng):
             continue
         return q, qd
     # Motors that over-determine the leg (a pinned toe: mobility 1, two motors) cannot be
-    # set independently: a pose near home projected onto the closures, at rest.
-    assert leg.mobility < leg.nu, f"{leg.name}: no assembled state near home"
-    return leg.project_position(leg.home() + rng.uniform(-0.05, 0.05, leg.nq)), np.zeros(leg.nq)
+    # set independently, nor fix one that has more freedom than motors (a spatial leg's
+    # rod spins freely): a pose near home projected onto the closures, rates projected
+    # onto their tangent.
+    assert leg.mobility != leg.nu, f"{leg.name}: no assembled state near home"
+    q = leg.project_position(leg.home() + rng.uniform(-0.05, 0.05, leg.nq))
+    return q, leg.project_velocity(q, rng.uniform(-1.0, 1.0, leg.nq))
 
 
 def close(ours, theirs, what, rtol=1e-12):
@@ -340,12 +346,13 @@ def test_controllers_apply_by_structure(name):
     """On every leg (one motor, three motors, over-actuated, floating bodies) each built-in
     controller runs or raises ControlError, as the leg's structure says: joint-space control
     needs motors that do not over-determine the leg (mobility ≥ motors), foot-space control
-    two or more motors that determine it (mobility = motors ≥ 2)."""
+    as many motors as the foot has coordinates or more, determining the leg (mobility =
+    motors ≥ 2 on a planar leg, ≥ 3 on a spatial one)."""
     leg = legmodels.models[name]()
     q = leg.assembled_home()
     for controller in ["joint_feedback_linearization", "pd_gravity", "foot_feedback_linearization", "foot_pd_gravity"]:
         foot = controller.startswith("foot")
-        applies = leg.mobility == leg.nu >= 2 if foot else leg.mobility >= leg.nu
+        applies = leg.mobility == leg.nu >= leg.dimension if foot else leg.mobility >= leg.nu
         setpoint = leg.foot_position(q) if foot else q[leg.actuated]
         try:
             run = leg.simulate(q, np.zeros(leg.nq), 5, 1e-3, controller=controller, setpoint=setpoint)
@@ -371,3 +378,31 @@ def test_pd_gains_mean_the_error_dynamics_as_on_the_command_line(cls):
     foot = leg.foot_position(q)
     run = leg.simulate(q, np.zeros(leg.nq), 2000, 1e-3, controller="foot_pd_gravity", setpoint=foot + 0.01)
     assert np.abs(leg.foot_position(run["q"][-1]) - foot - 0.01).max() < 1e-5
+
+
+@pytest.mark.parametrize("name", SPATIAL)
+def test_spatial_legs_swing_track_and_pickle(name):
+    """A spatial leg's class: undamped and unforced, a swing keeps its energy and its loops
+    (RK4 with projection); joint-space feedback linearization brings the motors to a
+    setpoint 0.05 rad away where the motors do not over-determine the leg; a pickled leg
+    computes bit for bit what the original does."""
+    cls = legmodels.models[name]
+    dampings = {n: 0.0 for n in cls.parameter_names if n.endswith("_damping")}
+    leg = cls(**dampings)
+    q = leg.assembled_home()
+    run = leg.simulate(q, np.zeros(cls.nq), 500, 1e-4)
+    energy = run["energy"]
+    peak = max(leg.kinetic_energy(a, b) for a, b in zip(run["q"], run["qd"]))
+    assert peak > 1e-4, (name, peak)
+    assert np.abs(energy - energy[0]).max() < 1e-6 * peak, (name, np.abs(energy - energy[0]).max(), peak)
+    assert run["closure_residual"].max() < 1e-10, name
+    if cls.mobility >= cls.nu:
+        theta = q[cls.actuated]
+        run = leg.simulate(q, np.zeros(cls.nq), 1500, 1e-3, controller="joint_feedback_linearization",
+                           setpoint=theta + 0.05, kp=400.0)
+        assert np.abs(run["q"][-1][cls.actuated] - theta - 0.05).max() < 1e-4, name
+    again = pickle.loads(pickle.dumps(leg))
+    assert type(again) is cls and again.params == leg.params
+    u = np.full(cls.nu, 0.1)
+    for a, b in zip(leg.forward_dynamics(q, np.zeros(cls.nq), u), again.forward_dynamics(q, np.zeros(cls.nq), u)):
+        assert np.array_equal(a, b)

@@ -259,6 +259,35 @@ where
     L::BALL_JOINTS.len()
 }
 
+/// A spatial leg through the runtime's `Leg` (the generated `Leg` alias): its home
+/// assembles onto the closures, its forward dynamics is the free function's bit for bit,
+/// and its recording simulator runs, the loops kept.
+fn leg_wrapper<L, const NQ: usize, const NC: usize, const NU: usize, const NP: usize>()
+where
+    L: LegModel<NQ, NC, NU, 3, NP>,
+{
+    let leg = leg_models::Leg::<L, f64, NQ, NC, NU>::default();
+    let q = leg.assembled_home().expect("home assembles");
+    assert!(leg.closure_residual(&q).amax() < 1e-12, "{}", L::NAME);
+    let qd = SVector::<f64, NQ>::zeros();
+    let u = SVector::<f64, NU>::from_element(0.1);
+    let wrapped = leg.forward_dynamics(&q, &qd, &u).expect("forward dynamics");
+    let free = forward_dynamics::<L, f64, NQ, NC, NU>(leg.params(), &q, &qd, &u, None).unwrap();
+    assert_eq!(wrapped.qdd, free.qdd, "{}", L::NAME);
+    let opts = leg_models::simulate::StepOptions::rk4(1e-3);
+    let mut torques = leg.torque_source(|_t, _s| SVector::<f64, NU>::zeros());
+    let run = leg
+        .simulator(opts)
+        .run(leg_models::simulate::State { q, qd }, 20, &mut torques)
+        .expect("runs");
+    assert_eq!(run.len(), 21);
+    assert!(
+        run.iter().all(|s| s.closure_residual < 1e-12),
+        "{}",
+        L::NAME
+    );
+}
+
 macro_rules! spatial_leg_tests {
     ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
         mod $module {
@@ -271,6 +300,11 @@ macro_rules! spatial_leg_tests {
             #[test]
             fn passive_swing_keeps_its_energy() {
                 super::energy_kept::<$ty, $nq, $nc, $nu, $np>();
+            }
+
+            #[test]
+            fn the_runtime_leg_takes_it() {
+                super::leg_wrapper::<$ty, $nq, $nc, $nu, $np>();
             }
         }
     };

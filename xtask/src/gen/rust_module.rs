@@ -522,7 +522,8 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     );
     let (lq, lc, lu, lk) = (lit(nq), lit(nc), lit(nu), lit(nk));
     // A planar leg is the runtime's `Leg` with its contacts; a spatial leg implements
-    // `LegModel` with three coordinates per point (its contacts and `Leg` come later).
+    // `LegModel` with three coordinates per point and is a `Leg` without contacts (its
+    // contacts come later).
     let spatial = nd == 3;
     let lp = lit(info.closure_points());
     let imports = if spatial {
@@ -546,6 +547,15 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             pub const ND: usize = 3;
             /// Number of closure points (two per closure).
             pub const NP: usize = #lp;
+
+            /// This leg with its parameters in `f64`, the runtime's entry point:
+            /// `Leg::default()` holds the spec's values. A spatial leg has the methods of
+            /// every leg (terms, assembly, dynamics, derivatives, simulation, joint-space
+            /// control, linearization and LQR); its foot is this module's `foot_position`.
+            pub type Leg = leg_models::Leg<#ty, f64, NQ, NC, NU>;
+
+            /// This leg computing in `f32` (e.g. on a microcontroller).
+            pub type LegF32 = leg_models::Leg<#ty, f32, NQ, NC, NU>;
         }
     } else {
         quote! {
