@@ -708,6 +708,8 @@ def home_check(model, numeric):
     phi, J, points = evaluate(home)
     scale = max(float(np.abs(points).max()), 1e-300)
     raw = float(np.abs(phi).max()) if phi.size else 0.0
+    # The row open widest at home as written: Rust names its closure in the error.
+    worst_row = int(np.argmax(np.abs(phi))) if phi.size else None
     q = home.copy()
     for _ in range(100):
         if phi.size == 0 or np.abs(phi).max() <= ASSEMBLY_TOLERANCE * scale:
@@ -750,6 +752,7 @@ def home_check(model, numeric):
         "massless_joint": massless_joint,
         "scale": scale,
         "raw_residual": raw,
+        "worst_row": worst_row,
         "residual": residual,
         "assembled": [float(x) for x in q],
         "moved": float(np.abs(q - home).max()),

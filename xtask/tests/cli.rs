@@ -1802,3 +1802,25 @@ fn import_writes_a_spec_gen_takes_and_refuses_bad_input() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `eval` of a spatial leg says what `--q` holds (a ball joint's three angles named where
+/// the leg has one) and why `--assemble` and `--impact` do not apply, each in its words.
+#[test]
+fn eval_of_a_spatial_leg_says_what_it_takes() {
+    refused(
+        &legs(&["eval", "cassie_leg", "--q", "0.1"]),
+        "expected 13 (joint values, one per joint and three angles for the ball joint `left_achilles_rod`)",
+    );
+    let out = legs(&["eval", "abducted_five_bar", "--q", "0.1"]);
+    refused(&out, "expected 5 (joint values, one per joint)");
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("ball"));
+    let q = ["0.1"; 13].join(",");
+    refused(
+        &legs(&["eval", "cassie_leg", "--q", &q, "--impact", "foot"]),
+        "--impact: cassie_leg is a spatial leg; contacts on a spatial leg come later",
+    );
+    refused(
+        &legs(&["eval", "cassie_leg", "--q", &q, "--assemble"]),
+        "--assemble: cassie_leg is a spatial leg; its assembly from the motors' angles is planar only for now",
+    );
+}

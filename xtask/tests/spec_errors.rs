@@ -500,6 +500,8 @@ fn a_home_pose_that_does_not_assemble_is_located() {
         err.starts_with(&format!("leg-models/specs/leg.toml:{l}:{c}: home: the home pose does not assemble: closure residual 5.000e-2 m")),
         "{err}"
     );
+    // The closure open there, by name.
+    assert!(err.contains("closure `toe` is open widest"), "{err}");
     assert_eq!(root.listing(), before, "a failed generation changed files");
 }
 

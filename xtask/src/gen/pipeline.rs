@@ -76,6 +76,9 @@ struct HomeCheck {
     scale: f64,
     /// `max |φ|` at the home pose as written.
     raw_residual: f64,
+    /// The row of `φ` where it is largest there.
+    #[serde(default)]
+    worst_row: Option<usize>,
     /// `max |φ|` after assembly.
     residual: f64,
     assembled: Vec<f64>,
@@ -128,8 +131,21 @@ fn check_home(spec: &Spec, model: &Model, check: &HomeCheck) -> Result<(), Strin
                 check.residual
             )
         };
+        // The closure that row belongs to, by name: the one to look at first.
+        let widest = check
+            .worst_row
+            .and_then(|row| {
+                let mut first = 0;
+                model.closures.iter().find(|c| {
+                    first += c.rows(model.dimension);
+                    row < first
+                })
+            })
+            .map_or(String::new(), |c| {
+                format!("; closure `{}` is open widest", c.name)
+            });
         return Err(error(format!(
-            "the home pose does not assemble: closure residual {:.3e} m, more than {} of the leg's size {:.3} m{hint}",
+            "the home pose does not assemble: closure residual {:.3e} m, more than {} of the leg's size {:.3} m{widest}{hint}",
             check.raw_residual, HOME_TOLERANCE, scale
         )));
     }

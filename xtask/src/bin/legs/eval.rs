@@ -437,28 +437,41 @@ pub fn run_spatial<
 >(
     args: &EvalArgs,
 ) -> Result<(), Error> {
-    for (given, flag) in [
-        (args.assemble, "--assemble"),
-        (args.guess.is_some(), "--guess"),
-        (args.impact.is_some(), "--impact"),
+    let assembly = "its assembly from the motors' angles is planar only for now: give every coordinate with --q, and --project to put it on the closures";
+    for (given, flag, why) in [
+        (args.assemble, "--assemble", assembly),
+        (args.guess.is_some(), "--guess", assembly),
+        (
+            args.impact.is_some(),
+            "--impact",
+            "contacts on a spatial leg come later: it has no contact points to land",
+        ),
     ] {
         if given {
             return Err(Error::usage(format!(
-                "{flag}: {} is a spatial leg, whose assembly from the motors' angles and contacts are planar only for now (give every coordinate with --q, and --project to put it on the closures)",
+                "{flag}: {} is a spatial leg; {why}",
                 L::NAME
             )));
         }
     }
+    // What --q holds: one value per joint, a ball joint's three angles named where the
+    // leg has one.
+    let balls: Vec<&str> = L::BALL_JOINTS
+        .iter()
+        .map(|&b| L::JOINT_NAMES[b].trim_end_matches(".x"))
+        .collect();
+    let what = if balls.is_empty() {
+        "joint values, one per joint".to_string()
+    } else {
+        format!(
+            "joint values, one per joint and three angles for the ball joint{} `{}`",
+            if balls.len() == 1 { "" } else { "s" },
+            balls.join("`, `")
+        )
+    };
     let p = L::Params::<f64>::default();
-    let mut q = SVector::<f64, NQ>::from_column_slice(&pose(
-        "--q",
-        numbers(
-            "--q",
-            &args.q,
-            NQ,
-            "joint values (three angles per ball joint)",
-        )?,
-    )?);
+    let mut q =
+        SVector::<f64, NQ>::from_column_slice(&pose("--q", numbers("--q", &args.q, NQ, &what)?)?);
     let mut qd = match &args.qd {
         Some(t) => SVector::from_column_slice(&numbers("--qd", t, NQ, "joint rates")?),
         None => SVector::zeros(),
