@@ -5,7 +5,9 @@ came from and beside Pinocchio's regularized `constraintDynamics` on our URDF. R
 
 usage: python loop_gaps.py LEGS_BINARY MODEL SOURCE_MJCF URDF_FILE OUT_DIR
 
-Two runs of 1 s each, the base held, each simulator at its own step:
+Two runs of 1 s each, the base held (MuJoCo's free joint removed, its body welded where
+the file writes it; joint limits and contacts off, as our leg has neither), each
+simulator at its own step:
 - passive: the motors off, from the file's keyframe named in the spec's header
   (`--keyframe`). Ours (`legs sim --controller passive`, RK4 at 1 ms with projection) starts
   from it put on the closures; MuJoCo (the file's `timestep`) once from the keyframe as the
@@ -15,7 +17,7 @@ Two runs of 1 s each, the base held, each simulator at its own step:
   closed start.
 - tracking: ours under `sim`'s default controller for the leg; MuJoCo and Pinocchio are
   given our motor torques sample by sample (open loop, each held for our 1 ms), from our
-  closed start.
+  closed start; how far MuJoCo's motor joints drift from ours is printed too.
 
 Prints the largest gap of any closure point over each run, in m; exits 1 if ours exceeds
 1e-12 m, or if either peer's run is not finite.
@@ -41,8 +43,10 @@ OURS_TOL = 1e-12
 
 def sim(legs, name, out, *extra):
     """Our run: the samples of trajectory.csv as columns, and summary.json."""
-    subprocess.run([legs, "sim", name, "--duration", str(DURATION), "--out", str(out), *extra],
-                   check=True, capture_output=True)
+    run = subprocess.run([legs, "sim", name, "--duration", str(DURATION), "--out", str(out), *extra],
+                         capture_output=True, text=True)
+    if run.returncode != 0:
+        sys.exit(f"{name}: legs sim failed: {run.stderr.strip()}")
     with open(out / "trajectory.csv") as f:
         rows = list(csv.DictReader(f))
     summary = json.loads((out / "summary.json").read_text())
@@ -58,7 +62,7 @@ class MuJoCoRun:
     leg's own `connect` rows leave (those that touch only its joints)."""
 
     def __init__(self, mjcf):
-        self.m = load(mjcf)
+        self.m, self.base = load(mjcf)
         self.d = mujoco.MjData(self.m)
 
     def start(self, t, key=None):
@@ -67,27 +71,28 @@ class MuJoCoRun:
             mujoco.mj_resetData(m, d)
         else:
             mujoco.mj_resetDataKeyframe(m, d, mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, key))
-        self.map = Map(m, t)
+        self.map = Map(m, t, self.base)
         if key is None:
             self.map.state(d, np.array(t["q"]), np.zeros(len(t["q"])))
-        self.pose = [(a, v, d.qpos[a:a + 7].copy()) for a, v in self.map.held()]
         mujoco.mj_forward(m, d)
         dofs = set(self.map.dofs())
         self.eqs = []
         for e in range(m.neq):
             b1, b2 = m.eq_obj1id[e], m.eq_obj2id[e]
-            # The equality is the leg's when both bodies move only by its joints.
+            # The leg's `connect`s: both bodies moved only by its joints (a body-anchored
+            # point pair, what `gap` measures).
+            if m.eq_type[e] != mujoco.mjtEq.mjEQ_CONNECT or m.eq_objtype[e] != mujoco.mjtObj.mjOBJ_BODY:
+                continue
             if all(self.moved_by_leg(b, dofs) for b in (b1, b2)):
                 self.eqs.append(e)
         return self.gap()
 
     def moved_by_leg(self, body, dofs):
+        """Whether only the leg's joints move `body` (and at least one does)."""
         m = self.m
         touched = False
         while body > 0:
             for j in range(m.body_jntadr[body], m.body_jntadr[body] + m.body_jntnum[body]):
-                if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE:
-                    return touched
                 if m.jnt_dofadr[j] not in dofs:
                     return False
                 touched = True
@@ -103,22 +108,29 @@ class MuJoCoRun:
             worst = max(worst, float(np.linalg.norm(a - b)))
         return worst
 
-    def run(self, torques=None):
-        """1 s; `torques(t)` gives the generalized forces on our coordinates (0 if None)."""
+    def run(self, torques=None, follow=None):
+        """1 s; `torques(t)` gives the generalized forces on our coordinates (0 if None).
+        `follow = (times, joints, q)`: our run's values of those hinge joints at its
+        samples, and the largest difference of MuJoCo's from them is returned too."""
         m, d = self.m, self.d
         dofs = self.map.dofs()
-        worst = self.gap()
+        worst, apart = self.gap(), 0.0
+        if follow is not None:
+            times, joints, q_ours = follow
+            adr = [self.map.by_name[j].qposadr[0] for j in joints]
         for step in range(int(round(DURATION / m.opt.timestep))):
             d.qfrc_applied[:] = 0.0
             if torques is not None:
                 d.qfrc_applied[dofs] = torques(step * m.opt.timestep)
             mujoco.mj_step(m, d)
-            for a, v, pose in self.pose:
-                d.qpos[a:a + 7] = pose
-                d.qvel[v:v + 6] = 0.0
-            mujoco.mj_kinematics(m, d)
             worst = max(worst, self.gap())
-        return worst if np.all(np.isfinite(d.qpos)) else float("nan")
+            if follow is not None:
+                k = int(round(d.time / (times[1] - times[0])))
+                if k < len(times) and abs(times[k] - d.time) < 1e-9:
+                    apart = max(apart, float(np.abs(d.qpos[adr] - q_ours[k]).max()))
+        if not np.all(np.isfinite(d.qpos)):
+            return float("nan"), apart
+        return worst, apart
 
 
 def pinocchio_run(leg, ir, q0, dt, torques=None):
@@ -185,9 +197,9 @@ def main():
     mj = MuJoCoRun(mjcf)
     if key is not None:
         at_key = mj.start(start, key)
-        figures[f"MuJoCo passive from `{key}` (open {at_key:.2e} m there)"] = mj.run()
+        figures[f"MuJoCo passive from `{key}` (open {at_key:.2e} m there)"] = mj.run()[0]
     mj.start(start)
-    figures["MuJoCo passive from our start"] = mj.run()
+    figures["MuJoCo passive from our start"] = mj.run()[0]
     tracking_start = ours(legs, name, [float(tracking[0][f"q_{j}"]) for j in joints], [0.0] * len(joints))
     mj.start(tracking_start)
 
@@ -197,7 +209,9 @@ def main():
         tau = np.zeros(len(joints))
         tau[actuated] = held(t)
         return tau
-    figures["MuJoCo tracking, our torques"] = mj.run(mj_torques)
+    motors = column(tracking, "q_", motor_names)
+    gap, apart = mj.run(mj_torques, (times, motor_names, motors))
+    figures["MuJoCo tracking, our torques"] = gap
 
     leg = pinocchio_leg(urdf, ir)
     dt = mj.m.opt.timestep
@@ -207,6 +221,7 @@ def main():
         if not np.isfinite(v):
             failures.append(f"{k}: the run is not finite")
     print(f"{name}: largest loop gap over {DURATION:g} s (m): " + "; ".join(f"{k} {v:.2e}" for k, v in figures.items()))
+    print(f"{name}: under our torques, MuJoCo's motor joints stay within {apart:.2e} rad of ours over the run")
     if failures:
         print(f"{name}: " + "; ".join(failures))
         sys.exit(1)

@@ -4,7 +4,7 @@ usage: python mujoco_spatial_check.py LEGS_BINARY MODEL MJCF_FILE
 
 MJCF_FILE is the leg exported (`cargo xtask export MODEL --format mjcf`) or the file it
 was imported from (`cargo xtask import`): joints are matched by name through the
-importer's rule (lower case, every other character `_`), a free joint is held at its pose
+importer's rule (lower case, every other character `_`), a free joint is removed, its body held at its pose
 as written (`--fix-base`), and MuJoCo's equalities and joints that reach outside the leg
 (`--root`) are left out. At random states near home, put on the closures by
 `legs eval --project`, it compares:
@@ -71,8 +71,9 @@ def identifier(name):
 class Map:
     """Our coordinates to MuJoCo's, by joint name."""
 
-    def __init__(self, m, t):
+    def __init__(self, m, t, base=None):
         self.m, self.joints, self.balls = m, t["joints"], set(t["ball_joints"])
+        self.base = base
         self.n = len(self.joints)
         self.by_name = {}
         for i in range(m.njnt):
@@ -99,6 +100,9 @@ class Map:
         return out
 
     def base_body(self):
+        """The body held as the base: the one `load` welded, else a free joint's."""
+        if self.base is not None:
+            return self.base
         held = [i for i in range(self.m.njnt) if self.m.jnt_type[i] == mujoco.mjtJoint.mjJNT_FREE]
         return self.m.jnt_bodyid[held[0]] if held else None
 
@@ -149,28 +153,51 @@ def close(what, ours_value, theirs, failures):
 
 
 def load(mjcf):
-    """The model of `mjcf`. Where its mesh files are not here (Menagerie's `cassie.xml`
-    without its `assets/`), its mesh geoms, meshes, textures and materials are dropped
-    first: they are drawing only where every such body gives its `<inertial>`, which is
-    checked, so the dynamics compared is the file's own."""
+    """The model of `mjcf` as our leg sees it, and the body held as its base (None: the
+    world). A free joint is removed (its body welded where the file writes it, each
+    keyframe's seven entries for it dropped): held by MuJoCo itself, not reset after each
+    step, so that inside a step the base does not float. Joint limits and contacts are
+    off: our leg has neither. Where the file's mesh files are not here (Menagerie's
+    `cassie.xml` without its `assets/`), its mesh geoms, meshes, textures and materials
+    are dropped first: they are drawing only where every such body gives its
+    `<inertial>`, which is checked, so the dynamics compared is the file's own."""
     spec = mujoco.MjSpec.from_file(mjcf)
     folder = pathlib.Path(mjcf).parent / (spec.meshdir or "")
-    if all((folder / mesh.file).exists() for mesh in spec.meshes):
-        return spec.compile()
-    for g in list(spec.geoms):
-        if g.type == mujoco.mjtGeom.mjGEOM_MESH:
-            if not g.parent.explicitinertial:
-                sys.exit(f"{mjcf}: body `{g.parent.name}` takes its inertia from a mesh whose file is not in {folder}")
-            spec.delete(g)
-    for x in list(spec.meshes) + list(spec.textures) + list(spec.materials):
-        spec.delete(x)
-    print(f"{pathlib.Path(mjcf).name}: its mesh files are not in {folder}: drawn geoms dropped (the bodies' inertials are given)")
-    return spec.compile()
+    if not all((folder / mesh.file).exists() for mesh in spec.meshes):
+        for g in list(spec.geoms):
+            if g.type == mujoco.mjtGeom.mjGEOM_MESH:
+                if not g.parent.explicitinertial:
+                    sys.exit(f"{mjcf}: body `{g.parent.name}` takes its inertia from a mesh whose file is not in {folder}")
+                spec.delete(g)
+        for x in list(spec.meshes) + list(spec.textures) + list(spec.materials):
+            spec.delete(x)
+        print(f"{pathlib.Path(mjcf).name}: its mesh files are not in {folder}: drawn geoms dropped (the bodies' inertials are given)")
+    first = spec.compile()
+    free = [j for j in range(first.njnt) if first.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
+    held = None
+    if free:
+        drop = set()
+        for j in free:
+            a = first.jnt_qposadr[j]
+            drop.update(range(a, a + 7))
+        held = first.body(first.jnt_bodyid[free[0]]).name
+        keys = [(k, [x for i, x in enumerate(k.qpos) if i not in drop]) for k in spec.keys if len(k.qpos)]
+        for k, _ in keys:
+            k.qpos = []
+        for j in list(spec.joints):
+            if j.type == mujoco.mjtJoint.mjJNT_FREE:
+                spec.delete(j)
+        for k, qpos in keys:
+            k.qpos = qpos
+    m = spec.compile()
+    m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_LIMIT | mujoco.mjtDisableBit.mjDSBL_CONTACT
+    base = None if held is None else mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, held)
+    return m, base
 
 
 def main():
     legs, name, mjcf = sys.argv[1:4]
-    m = load(mjcf)
+    m, held = load(mjcf)
     m.opt.jacobian = mujoco.mjtJacobian.mjJAC_DENSE
     d = mujoco.MjData(m)
     ir = json.loads((pathlib.Path(__file__).parent.parent / "generated" / "ir" / f"{name}.json").read_text())
@@ -182,7 +209,7 @@ def main():
         q = home + 0.1 * rng.uniform(-1, 1, len(home))
         qd = rng.uniform(-2, 2, len(home))
         t = ours(legs, name, q, qd, project=True)
-        mp = Map(m, t)
+        mp = Map(m, t, held)
         q, qd = np.array(t["q"]), np.array(t["qd"])
         mujoco.mj_resetData(m, d)  # qpos0: a free joint at its pose as written, at rest
         T, Tdot_qd = mp.state(d, q, qd)
@@ -224,7 +251,7 @@ def main():
     # leave after 1 s.
     t = ours(legs, name, home, np.zeros_like(home), project=True)
     mujoco.mj_resetData(m, d)
-    mp = Map(m, t)
+    mp = Map(m, t, held)
     mp.state(d, np.array(t["q"]), np.zeros_like(home))
     held = [(a, v, d.qpos[a : a + 7].copy()) for a, v in mp.held()]
     mujoco.mj_forward(m, d)

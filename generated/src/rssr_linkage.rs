@@ -15,7 +15,7 @@ use leg_models::{
 };
 /// Number of joints.
 pub const NQ: usize = 5;
-/// Number of closure rows (two per closure).
+/// Number of closure rows (three per point closure, one per rod).
 pub const NC: usize = 3;
 /// Number of actuated joints.
 pub const NU: usize = 1;

@@ -238,8 +238,9 @@ impl std::error::Error for ParameterError<'_> {}
 /// copy; every method is allocation-free except those returning a recording simulator's
 /// run.
 ///
-/// Write it through the generated alias (`generated::minitaur::Leg`, `Leg<f32>` for
-/// `f32`); the sizes here are the model's and must match its [`ContactModel`] impl.
+/// Write it through the generated alias (`generated::minitaur::Leg`, `LegF32` for `f32`);
+/// the sizes here are the model's. Every leg has the methods of the first block; a planar
+/// leg's [`ContactModel`] adds its foot in the plane, contacts and design measures.
 pub struct Leg<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize = 0>
 where
     L: LegDynamics<NQ, NC, NU>,
@@ -740,8 +741,6 @@ where
             torque_limit,
         )
     }
-
-    // ---- design measures ----
 }
 
 /// What needs the leg's contacts or its planar foot: a [`ContactModel`] (every planar leg,

@@ -558,11 +558,6 @@ macro_rules! leg_module {
     ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $nk:expr, $nd:expr, $np:expr, { $($extra:tt)* }) => {
         mod $module {
             use super::*;
-            // The planar extras' (contacts and the hybrid simulator).
-            #[allow(unused_imports)]
-            use leg_models::dynamics::contact::Modes;
-            #[allow(unused_imports)]
-            use leg_models::simulate::hybrid::HybridState;
             use leg_models::{LegDynamics, LegModel, Parameters};
 
             type Model = $ty;
@@ -643,6 +638,17 @@ macro_rules! leg_module {
                 #[classattr]
                 fn dimension() -> usize {
                     ND
+                }
+                /// Number of contact rows (two per contact point; none yet on a spatial leg).
+                #[classattr]
+                fn nk() -> usize {
+                    NK
+                }
+                /// The first coordinate of each ball joint (its three angles follow:
+                /// `R_x(α) R_y(β) R_z(γ)`, singular at `β = ±π/2`); none on a planar leg.
+                #[classattr]
+                fn ball_joints() -> Vec<usize> {
+                    <Model as LegDynamics<NQ, NC, NU>>::BALL_JOINTS.to_vec()
                 }
                 /// Number of motors.
                 #[classattr]
@@ -966,14 +972,6 @@ macro_rules! leg_module {
                     }
                 }
 
-
-                // ---- design measures (leg_models::analysis) ----
-
-
-
-
-
-
                 // ---- linearization and LQR ----
 
                 /// One step of `dt` linearized on the constraint manifold at the rest pose
@@ -1035,11 +1033,6 @@ macro_rules! leg_module {
 macro_rules! leg_class {
     ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $nk:expr) => {
         leg_module!($module, $ty, $nq, $nc, $nu, $nk, 2, $nc, {
-                /// Number of contact rows (two per contact point).
-                #[classattr]
-                fn nk() -> usize {
-                    NK
-                }
                 /// The contact points' names.
                 #[classattr]
                 fn contact_names() -> Vec<&'static str> {
@@ -1063,7 +1056,7 @@ macro_rules! leg_class {
                     if held.len() * 2 != NK {
                         return Err(PyValueError::new_err(format!("`held` has {} entries, this leg has {} contacts", held.len(), NK / 2)));
                     }
-                    let mut modes = Modes::<NK>::flight();
+                    let mut modes = leg_models::dynamics::contact::Modes::<NK>::flight();
                     for (k, h) in held.iter().enumerate() {
                         if *h { modes.set(k, leg_models::dynamics::contact::ContactMode::Stick); }
                     }
@@ -1280,11 +1273,10 @@ macro_rules! leg_class {
 macro_rules! spatial_leg_class {
     ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $np:expr) => {
         leg_module!($module, $ty, $nq, $nc, $nu, 0, 3, $np, {
-            /// The first coordinate of each ball joint (its three angles follow:
-            /// `R_x(α) R_y(β) R_z(γ)`, singular at `β = ±π/2`).
+            /// The contact points' names: none yet on a spatial leg.
             #[classattr]
-            fn ball_joints() -> Vec<usize> {
-                <Model as LegDynamics<NQ, NC, NU>>::BALL_JOINTS.to_vec()
+            fn contact_names() -> Vec<&'static str> {
+                Vec::new()
             }
         });
     };
@@ -1310,7 +1302,7 @@ fn legmodels(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let module = m;
     // Defined here so that `module` in its body is this function's.
     macro_rules! register {
-        ($name:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $nk:expr) => {
+        ($name:ident, $($sizes:tt)*) => {
             $name::register(module)?;
         };
     }

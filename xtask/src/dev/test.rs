@@ -41,13 +41,14 @@ fn cross_checks(root: &Path) -> Result<Vec<String>, String> {
     let target = target_dir(root);
     let py = gen::python(root)?;
     let dir = target.join("exports");
-    // (script, model, file, tool): the planar exports in MuJoCo and Pinocchio; a spatial
+    // The planar exports in MuJoCo and Pinocchio; a spatial
     // leg's MJCF in MuJoCo (mass matrix, bias forces, the connect rows and the foot, a
     // ball joint mapped to MuJoCo's quaternion and angular velocity) and its URDF in
     // Pinocchio (a ball joint as three revolute joints, so q maps one to one), and an
     // imported leg on the file it came from too (joints by name).
-    // An imported leg whose source is here also runs loop_gaps.py: 1 s passive and
-    // tracking, its loop gaps beside MuJoCo's on the source and Pinocchio's on the URDF.
+    // (script, model, its files, tool). An imported leg whose source is here also runs
+    // loop_gaps.py: 1 s passive and tracking, its loop gaps beside MuJoCo's on the source
+    // and Pinocchio's on the URDF.
     let mut jobs: Vec<(&str, String, Vec<std::path::PathBuf>, &str)> = Vec::new();
     let planar = crate::gen::planar_model_names(root)?;
     for name in planar.iter().chain(&crate::gen::spatial_model_names(root)?) {
@@ -80,7 +81,8 @@ fn cross_checks(root: &Path) -> Result<Vec<String>, String> {
                 "Pinocchio",
             ));
             if let Some(a) = crate::commands::import::header_args(root, &spec.text) {
-                if a.file.exists() {
+                // A source in the repository that is missing fails its check below.
+                if a.file.exists() || !crate::commands::import::outside_repository(root, &a.file) {
                     let file = a.file.clone();
                     jobs.push((
                         "mujoco_spatial_check.py",

@@ -526,6 +526,12 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     // contacts come later).
     let spatial = nd == 3;
     let lp = lit(info.closure_points());
+    // Planar modules keep their words (their snapshots unchanged).
+    let nc_doc = if spatial {
+        " Number of closure rows (three per point closure, one per rod)."
+    } else {
+        " Number of closure rows (two per closure)."
+    };
     let imports = if spatial {
         quote! {
             use leg_models::{
@@ -605,7 +611,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
 
         /// Number of joints.
         pub const NQ: usize = #lq;
-        /// Number of closure rows (two per closure).
+        #[doc = #nc_doc]
         pub const NC: usize = #lc;
         /// Number of actuated joints.
         pub const NU: usize = #lu;

@@ -368,6 +368,15 @@ fn import(file: &Path, robot: &Robot, args: &ImportArgs) -> Result<Imported, cli
             }
         }
         let (mass, com, inertia) = combined(&parts);
+        if j.kind == JointKind::Ball && j.damping != 0.0 {
+            // MuJoCo damps a ball joint's angular velocity ω = E q̇ (a force Eᵀ b E q̇ on
+            // the angles); a spec damps each angle. Equal where E is a rotation (β = 0).
+            notes.push(format!(
+                "ball joint `{}`: damping {} acts on each of its angles' rates, MuJoCo's on its angular velocity; the two agree where its second angle is 0",
+                j.name,
+                num(j.damping)
+            ));
+        }
         links.push(Link {
             name,
             source: body.name.clone(),
@@ -593,27 +602,40 @@ fn import(file: &Path, robot: &Robot, args: &ImportArgs) -> Result<Imported, cli
     })
 }
 
-/// The command that imports with these arguments, for the spec's header (the file by
-/// its name only: no path of this machine goes into a spec).
-/// `file` from `dir`, both absolute: `a/b.xml` below it, `../x/b.xml` beside it.
-fn relative_to(file: &Path, dir: &Path) -> String {
+/// `file` from `dir`, both absolute, where it lies below `dir` (`a/b.xml`) or beside it,
+/// under `dir`'s parent (`../x/b.xml`: a clone such as Menagerie's next to this one);
+/// `None` elsewhere, so that no other path of this machine goes into a spec.
+fn relative_to(file: &Path, dir: &Path) -> Option<String> {
     let (f, d): (Vec<_>, Vec<_>) = (file.components().collect(), dir.components().collect());
     let common = f.iter().zip(&d).take_while(|(a, b)| a == b).count();
-    let mut parts: Vec<String> = vec!["..".into(); d.len() - common];
+    let up = d.len() - common;
+    if up > 1 || common == 0 {
+        return None;
+    }
+    let mut parts: Vec<String> = vec!["..".into(); up];
     parts.extend(
         f[common..]
             .iter()
             .map(|c| c.as_os_str().to_string_lossy().into_owned()),
     );
-    parts.join("/")
+    Some(parts.join("/"))
 }
 
+/// Whether a spec header's source (as [`header_args`] resolves it) lies outside the
+/// repository (`../…`): such a file is checked where it is present and its absence is
+/// said, not failed; a file in the repository must be there.
+pub fn outside_repository(root: &Path, file: &Path) -> bool {
+    file.strip_prefix(root)
+        .map_or(true, |r| r.starts_with(".."))
+}
+
+/// The command that imports with these arguments, for the spec's header: the file by its
+/// path from the repository's root where it lies in it or beside it, else by its name
+/// alone.
 fn command_line(root: &Path, a: &ImportArgs) -> String {
-    // The file by its path from the repository's root (`../` for a file beside the
-    // clone, as Menagerie's `cassie.xml` is), else by its name alone.
     let file = std::fs::canonicalize(&a.file)
         .ok()
-        .and_then(|f| Some(relative_to(&f, &std::fs::canonicalize(root).ok()?)))
+        .and_then(|f| relative_to(&f, &std::fs::canonicalize(root).ok()?))
         .unwrap_or_else(|| {
             a.file
                 .file_name()
@@ -882,7 +904,7 @@ pub fn check_imported(root: &Path) -> Result<usize, String> {
         let Some(args) = header_args(root, &text) else {
             continue;
         };
-        if !args.file.exists() {
+        if !args.file.exists() && outside_repository(root, &args.file) {
             // A source kept outside the repository (Menagerie's `cassie.xml` beside the
             // clone) is checked where it is present.
             eprintln!(

@@ -74,17 +74,32 @@ fn refused(text: &str, extra: &[&str], line: u32, words: &str) {
 fn a_source_is_recorded_by_its_path_from_the_root() {
     let root = Path::new("/work/main");
     assert_eq!(
-        relative_to(Path::new("/work/main/leg-models/mjcf/a.xml"), root),
-        "leg-models/mjcf/a.xml"
+        relative_to(Path::new("/work/main/leg-models/mjcf/a.xml"), root).as_deref(),
+        Some("leg-models/mjcf/a.xml")
     );
     assert_eq!(
         relative_to(
             Path::new("/work/mujoco_menagerie/agility_cassie/cassie.xml"),
             root
-        ),
-        "../mujoco_menagerie/agility_cassie/cassie.xml"
+        )
+        .as_deref(),
+        Some("../mujoco_menagerie/agility_cassie/cassie.xml")
     );
-    assert_eq!(relative_to(Path::new("/a.xml"), root), "../../a.xml");
+    // Elsewhere on the machine: no path goes into the spec (its name alone does).
+    assert_eq!(
+        relative_to(Path::new("/home/me/Downloads/a.xml"), root),
+        None
+    );
+    assert_eq!(relative_to(Path::new("/a.xml"), root), None);
+    // Outside the repository is said, inside is not.
+    assert!(outside_repository(
+        root,
+        &root.join("../mujoco_menagerie/c.xml")
+    ));
+    assert!(!outside_repository(
+        root,
+        &root.join("leg-models/mjcf/a.xml")
+    ));
 }
 
 #[test]
