@@ -51,7 +51,7 @@ use crate::simulate::source::LinearizationError;
 use crate::simulate::{self, State, StepError, StepOptions, StepReport, TorqueSource};
 
 /// The size of a leg's constraint manifold chart: `M` coordinates (its mobility,
-/// [`LegDynamics::MOBILITY`](crate::LegDynamics::MOBILITY)) and `NX = 2 M` states (coordinates and rates). Generated models
+/// [`LegDynamics::MOBILITY`]) and `NX = 2 M` states (coordinates and rates). Generated models
 /// implement it, which lets [`Leg::chart`] and [`Leg::manifold_lqr`] infer both sizes;
 /// stable Rust cannot compute `2 · MOBILITY` in a signature.
 pub trait ChartSize<const M: usize, const NX: usize> {}
@@ -63,7 +63,7 @@ pub enum ParameterError<'a> {
     Unknown {
         /// The name asked for.
         name: &'a str,
-        /// The leg's name ([`LegDynamics::NAME`](crate::LegDynamics::NAME)).
+        /// The leg's name ([`LegDynamics::NAME`]).
         leg: &'static str,
         /// The leg's parameter names, for the message's suggestion.
         known: &'static [&'static str],
@@ -408,14 +408,14 @@ where
         Ok(q)
     }
 
-    /// The motor angles of joint angles `q` (`q` at [`LegDynamics::ACTUATED`](crate::LegDynamics::ACTUATED)).
+    /// The motor angles of joint angles `q` (`q` at [`LegDynamics::ACTUATED`]).
     pub fn motor_angles(&self, q: &SVector<T, NQ>) -> SVector<T, NU> {
         SVector::from_fn(|k, _| q[L::ACTUATED[k]])
     }
 
     // ---- generated terms ----
 
-    /// `M`, `N`, `J` and `J̇ q̇` together ([`LegDynamics::dynamics_terms`](crate::LegDynamics::dynamics_terms)).
+    /// `M`, `N`, `J` and `J̇ q̇` together ([`LegDynamics::dynamics_terms`]).
     pub fn dynamics_terms(
         &self,
         q: &SVector<T, NQ>,
