@@ -10,8 +10,8 @@
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
-    Arithmetic, ConstraintDerivatives, DynamicsDerivatives, DynamicsTerms, JointKind,
-    LegDynamics, LegModel, Parameters,
+    Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
+    JointKind, LegDynamics, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 5;
@@ -19,7 +19,7 @@ pub const NQ: usize = 5;
 pub const NC: usize = 3;
 /// Number of actuated joints.
 pub const NU: usize = 3;
-/// Number of contact rows (two per contact point).
+/// Number of contact rows (three per contact point).
 pub const NK: usize = 0;
 /// The `abducted_five_bar` leg: 5 joints, 1 closure(s), actuated joints ["abduction", "upper_a", "upper_b"]. Generated from `leg-models/specs/abducted_five_bar.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -761,6 +761,52 @@ impl LegModel<NQ, NC, NU, ND, NP> for AbductedFiveBar {
         p: &Params<T>,
     ) -> SMatrix<T, 3, 2> {
         closure_points(q, p)
+    }
+}
+impl ContactModel<NQ, NC, NU, NK, ND> for AbductedFiveBar {
+    const CONTACT_NAMES: &'static [&'static str] = &[];
+    const CONTACT_FRICTION: &'static [f64] = &[];
+    const GROUND_NORMAL: [f64; 3] = [0.0, 0.0, 1.0];
+    const GROUND_OFFSET: f64 = 0.0;
+    fn contact_positions<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SVector<T, 0> {
+        contact_positions(q, p)
+    }
+    fn contact_jacobian<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 0, 5> {
+        contact_jacobian(q, p)
+    }
+    fn contact_bias<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        p: &Params<T>,
+    ) -> SVector<T, 0> {
+        contact_bias(q, qd, p)
+    }
+    fn contact_derivatives<T: Arithmetic>(
+        q: &SVector<T, 5>,
+        qd: &SVector<T, 5>,
+        a: &SVector<T, 5>,
+        lambda: &SVector<T, 0>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 5, 0> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
+            q,
+            qd,
+            a,
+            lambda,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and

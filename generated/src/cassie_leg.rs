@@ -10,8 +10,8 @@
 )]
 use leg_models::nalgebra::{ArrayStorage, SMatrix, SVector};
 use leg_models::{
-    Arithmetic, ConstraintDerivatives, DynamicsDerivatives, DynamicsTerms, JointKind,
-    LegDynamics, LegModel, Parameters,
+    Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
+    JointKind, LegDynamics, LegModel, Parameters,
 };
 /// Number of joints.
 pub const NQ: usize = 13;
@@ -19,7 +19,7 @@ pub const NQ: usize = 13;
 pub const NC: usize = 6;
 /// Number of actuated joints.
 pub const NU: usize = 5;
-/// Number of contact rows (two per contact point).
+/// Number of contact rows (three per contact point).
 pub const NK: usize = 0;
 /// The `cassie_leg` leg: 13 joints, 2 closure(s), actuated joints ["left_hip_roll", "left_hip_yaw", "left_hip_pitch", "left_knee", "left_foot"]. Generated from `leg-models/specs/cassie_leg.toml`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -1667,6 +1667,52 @@ impl LegModel<NQ, NC, NU, ND, NP> for CassieLeg {
         p: &Params<T>,
     ) -> SMatrix<T, 3, 4> {
         closure_points(q, p)
+    }
+}
+impl ContactModel<NQ, NC, NU, NK, ND> for CassieLeg {
+    const CONTACT_NAMES: &'static [&'static str] = &[];
+    const CONTACT_FRICTION: &'static [f64] = &[];
+    const GROUND_NORMAL: [f64; 3] = [0.0, 0.0, 1.0];
+    const GROUND_OFFSET: f64 = 0.0;
+    fn contact_positions<T: Arithmetic>(
+        q: &SVector<T, 13>,
+        p: &Params<T>,
+    ) -> SVector<T, 0> {
+        contact_positions(q, p)
+    }
+    fn contact_jacobian<T: Arithmetic>(
+        q: &SVector<T, 13>,
+        p: &Params<T>,
+    ) -> SMatrix<T, 0, 13> {
+        contact_jacobian(q, p)
+    }
+    fn contact_bias<T: Arithmetic>(
+        q: &SVector<T, 13>,
+        qd: &SVector<T, 13>,
+        p: &Params<T>,
+    ) -> SVector<T, 0> {
+        contact_bias(q, qd, p)
+    }
+    fn contact_derivatives<T: Arithmetic>(
+        q: &SVector<T, 13>,
+        qd: &SVector<T, 13>,
+        a: &SVector<T, 13>,
+        lambda: &SVector<T, 0>,
+        p: &Params<T>,
+    ) -> ConstraintDerivatives<T, 13, 0> {
+        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
+            q,
+            qd,
+            a,
+            lambda,
+            p,
+        );
+        ConstraintDerivatives {
+            force_q,
+            jacobian_q,
+            bias_q,
+            jacobian_rate,
+        }
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and

@@ -44,6 +44,8 @@ pub mod rod_knee_leg;
 pub use rod_knee_leg::RodKneeLeg;
 pub mod rssr_linkage;
 pub use rssr_linkage::RssrLinkage;
+pub mod sliding_mass;
+pub use sliding_mass::SlidingMass;
 pub mod three_motor_leg;
 pub use three_motor_leg::ThreeMotorLeg;
 pub mod two_link;
@@ -83,5 +85,6 @@ macro_rules! for_each_spatial_model {
         4); $callback ! (cassie_leg, $crate::cassie_leg::CassieLeg, 13, 6, 5, 4);
         $callback ! (rod_knee_leg, $crate::rod_knee_leg::RodKneeLeg, 4, 1, 3, 2);
         $callback ! (rssr_linkage, $crate::rssr_linkage::RssrLinkage, 5, 3, 1, 2);
+        $callback ! (sliding_mass, $crate::sliding_mass::SlidingMass, 3, 0, 2, 0);
     };
 }

@@ -44,7 +44,9 @@ use crate::dynamics::structure::Structure;
 use crate::dynamics::{self, Acceleration, Baumgarte, DynamicsError};
 #[cfg(doc)]
 use crate::model::contract::LegModel;
-use crate::model::contract::{ContactModel, DynamicsTerms, LegDynamics, Parameters, Real};
+use crate::model::contract::{
+    ContactModel, DynamicsTerms, LegDynamics, LegModel, Parameters, Real,
+};
 use crate::model::simd::F64x4;
 use crate::simulate::hybrid::{HybridSimulator, HybridState};
 use crate::simulate::source::LinearizationError;
@@ -748,7 +750,7 @@ where
 impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
     Leg<L, T, NQ, NC, NU, NK>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + LegModel<NQ, NC, NU>,
     T: Real,
 {
     /// The foot point in the base frame.
@@ -792,7 +794,7 @@ where
 
     /// The spec's friction coefficient per contact row.
     pub fn friction(&self) -> SVector<T, NK> {
-        contact::spec_friction::<L, T, NQ, NC, NU, NK>()
+        contact::spec_friction::<L, T, NQ, NC, NU, NK, 2>()
     }
 
     /// The forward dynamics with the contacts in `modes` held (sticking at `anchors`) or
@@ -806,7 +808,7 @@ where
         modes: &Modes<NK>,
         anchors: &SVector<T, NK>,
     ) -> Result<ContactSolution<T, NQ, NC, NK>, DynamicsError> {
-        contact::forward_dynamics_with_contacts::<L, T, NQ, NC, NU, NK>(
+        contact::forward_dynamics_with_contacts::<L, T, NQ, NC, NU, NK, 2>(
             &self.params,
             q,
             qd,
@@ -850,7 +852,7 @@ where
         qd: &SVector<T, NQ>,
         modes: &mut Modes<NK>,
     ) -> Result<Impact<T, NQ, NC, NK>, ImpactError> {
-        contact::impact_map::<L, T, NQ, NC, NU, NK>(
+        contact::impact_map::<L, T, NQ, NC, NU, NK, 2>(
             &self.params,
             q,
             qd,
@@ -977,7 +979,7 @@ where
 impl<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
     Leg<L, f64, NQ, NC, NU, NK>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + LegModel<NQ, NC, NU>,
 {
     /// The workspace of the branch of `start` (an assembled pose) over a grid of foot
     /// positions, with every design measure at every node

@@ -1269,14 +1269,15 @@ macro_rules! leg_class {
 }
 
 /// A spatial leg: the methods of every leg, its foot and foot-space control in three
-/// coordinates; it has no contacts yet, and the design measures are planar.
+/// coordinates, and its contacts' names; its contact dynamics and hybrid simulator are
+/// the runtime's (not yet in Python), and the design measures are planar.
 macro_rules! spatial_leg_class {
     ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $np:expr) => {
         leg_module!($module, $ty, $nq, $nc, $nu, 0, 3, $np, {
-            /// The contact points' names: none yet on a spatial leg.
+            /// The contact points' names (three rows each).
             #[classattr]
             fn contact_names() -> Vec<&'static str> {
-                Vec::new()
+                <$ty as leg_models::ContactModel<$nq, $nc, $nu, { generated::$module::NK }, 3>>::CONTACT_NAMES.to_vec()
             }
         });
     };

@@ -19,7 +19,7 @@ use leg_tests::casadi;
 use leg_tests::passive_release_state;
 
 fn bench_model<
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + leg_models::LegModel<NQ, NC, NU>,
     const NQ: usize,
     const NC: usize,
     const NU: usize,

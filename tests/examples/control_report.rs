@@ -294,7 +294,7 @@ fn report<
 /// derivatives of the contact dynamics. A positive real part is a falling mode (the body
 /// over its foot: an inverted pendulum), its inverse the time it takes to grow e-fold.
 fn stance<
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + leg_models::LegModel<NQ, NC, NU>,
     const NQ: usize,
     const NC: usize,
     const NU: usize,
@@ -309,7 +309,7 @@ fn stance<
     let home = passive_release_state::<L, NQ, NC, NU>(&p);
     let (ground, mu) = (
         Ground::of::<L, NQ, NC, NU, NK>(),
-        spec_friction::<L, f64, NQ, NC, NU, NK>(),
+        spec_friction::<L, f64, NQ, NC, NU, NK, 2>(),
     );
     let mut modes = Modes::<NK>::flight();
     for k in 0..NK / 2 {

@@ -278,7 +278,7 @@ fn check_analysis<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, con
 /// event on the way: a leg with contacts dropped onto the ground, step by step.
 fn check_hybrid<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>()
 where
-    L: leg_models::ContactModel<NQ, NC, NU, NK>,
+    L: leg_models::ContactModel<NQ, NC, NU, NK> + leg_models::LegModel<NQ, NC, NU>,
 {
     use leg_models::simulate::hybrid::{HybridSimulator, HybridState};
     if NK == 0 {
@@ -318,7 +318,7 @@ fn check_derivatives<
     const NX: usize,
 >()
 where
-    L: leg_models::ContactModel<NQ, NC, NU, NK>,
+    L: leg_models::ContactModel<NQ, NC, NU, NK> + leg_models::LegModel<NQ, NC, NU>,
 {
     use leg_models::control::linearize::{linearize_step, ManifoldChart};
     use leg_models::control::lqr::ManifoldLqr;
@@ -344,7 +344,7 @@ where
     if NK > 0 {
         let (ground, mu) = (
             Ground::of::<L, NQ, NC, NU, NK>(),
-            spec_friction::<L, f64, NQ, NC, NU, NK>(),
+            spec_friction::<L, f64, NQ, NC, NU, NK, 2>(),
         );
         let mut modes = Modes::<NK>::flight();
         modes.set(0, ContactMode::Stick);

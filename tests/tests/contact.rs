@@ -105,7 +105,7 @@ fn dense_solve<const NQ: usize, const NC: usize, const NK: usize>(
 
 fn check_against_dense<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>()
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + leg_models::LegModel<NQ, NC, NU>,
 {
     if NK == 0 {
         not_applicable(
@@ -117,14 +117,14 @@ where
     }
     let p = L::Params::<f64>::default();
     let ground = Ground::of::<L, NQ, NC, NU, NK>();
-    let mu = spec_friction::<L, f64, NQ, NC, NU, NK>();
+    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 2>();
     let mut rng = Rng::new(21);
     let mut compared = 0;
     for _ in 0..STATES {
         let (q, qd) = random_state::<NQ>(&mut rng);
         let u = SVector::<f64, NU>::from_fn(|_, _| rng.range(-3.0, 3.0));
         let modes = random_modes::<NK>(&mut rng);
-        let ours = forward_dynamics_with_contacts::<L, f64, NQ, NC, NU, NK>(
+        let ours = forward_dynamics_with_contacts::<L, f64, NQ, NC, NU, NK, 2>(
             &p,
             &q,
             &qd,
@@ -196,7 +196,7 @@ where
 
 fn check_impact_identities<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>()
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + leg_models::LegModel<NQ, NC, NU>,
 {
     if NK == 0 {
         not_applicable(L::NAME, "impact map", &"the leg has no contact points");
@@ -224,7 +224,7 @@ where
         let mut outcome = None;
         for _ in 0..=NK / 2 {
             let mut trial = modes;
-            match impact_map::<L, f64, NQ, NC, NU, NK>(&p, &q, &qd, &mut trial, &ground, &mu) {
+            match impact_map::<L, f64, NQ, NC, NU, NK, 2>(&p, &q, &qd, &mut trial, &ground, &mu) {
                 Ok(imp) => {
                     outcome = Some((modes, trial, imp));
                     break;
@@ -506,7 +506,7 @@ fn drop_test<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usi
     kp: f64,
 ) -> leg_models::simulate::hybrid::HybridRecord<f64, NQ, NC, NU, NK>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + leg_models::LegModel<NQ, NC, NU>,
 {
     // Without damping, so that energy is kept between events.
     let mut p = L::Params::<f64>::default();
@@ -612,7 +612,7 @@ fn sticking_stance_equals_the_toe_pinned_by_a_closure() {
         generated::minitaur_pinned_toe::Params::<f64>::default(),
     );
     let ground = Ground::of::<H, 5, 2, 2, 2>();
-    let mu = spec_friction::<H, f64, 5, 2, 2, 2>();
+    let mu = spec_friction::<H, f64, 5, 2, 2, 2, 2>();
     let mut rng = Rng::new(23);
     let mut compared = 0;
     for _ in 0..STATES {
@@ -634,7 +634,7 @@ fn sticking_stance_equals_the_toe_pinned_by_a_closure() {
         modes.set(0, ContactMode::Stick);
         let anchors = ground.coordinates(&H::contact_positions(&q, &ph));
         assert!(anchors[1].abs() < 1e-12, "the pinned toe is on the ground");
-        let stance = forward_dynamics_with_contacts::<H, f64, 5, 2, 2, 2>(
+        let stance = forward_dynamics_with_contacts::<H, f64, 5, 2, 2, 2, 2>(
             &ph, &q, &qd, &u, &modes, &anchors, &ground, &mu, None,
         )
         .unwrap();

@@ -185,7 +185,7 @@ fn check_q<
 /// The generated directional terms against differences of the generated terms they
 /// differentiate, at random (unassembled) states and random accelerations and forces.
 fn generated_terms<
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + leg_models::LegModel<NQ, NC, NU>,
     const NQ: usize,
     const NC: usize,
     const NU: usize,
@@ -435,7 +435,7 @@ fn forward_dynamics_fd<
 /// With contacts held (the first sticking, the second, if any, sliding), against
 /// differences of forward dynamics with the same modes.
 fn contact_fd<
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + leg_models::LegModel<NQ, NC, NU>,
     const NQ: usize,
     const NC: usize,
     const NU: usize,
@@ -447,7 +447,7 @@ fn contact_fd<
     let p = L::Params::<f64>::default();
     let (ground, mu) = (
         Ground::of::<L, NQ, NC, NU, NK>(),
-        spec_friction::<L, f64, NQ, NC, NU, NK>(),
+        spec_friction::<L, f64, NQ, NC, NU, NK, 2>(),
     );
     let mut modes = Modes::<NK>::flight();
     modes.set(0, ContactMode::Stick);
@@ -467,7 +467,7 @@ fn contact_fd<
             beta: 5.0,
         });
         let solve = |q: &SVector<f64, NQ>, qd: &SVector<f64, NQ>, u: &SVector<f64, NU>| {
-            forward_dynamics_with_contacts::<L, f64, NQ, NC, NU, NK>(
+            forward_dynamics_with_contacts::<L, f64, NQ, NC, NU, NK, 2>(
                 &p, q, qd, u, &modes, &anchors, &ground, &mu, baumgarte,
             )
         };

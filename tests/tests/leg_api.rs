@@ -12,7 +12,7 @@ use leg_tests::{random_assembled_state, Rng};
 
 fn check<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>()
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + leg_models::LegModel<NQ, NC, NU>,
 {
     let leg = Leg::<L, f64, NQ, NC, NU, NK>::default();
     assert_eq!(*leg.params(), L::Params::<f64>::default(), "{}", L::NAME);

@@ -336,7 +336,7 @@ pub fn check_damping<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, 
 
 /// Contact terms against differences of the generated contact positions.
 pub fn check_contact_terms<
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + leg_models::LegModel<NQ, NC, NU>,
     const NQ: usize,
     const NC: usize,
     const NU: usize,

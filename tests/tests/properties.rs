@@ -317,7 +317,7 @@ fn run<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usiz
 /// or above the ground and a start under it is refused.
 fn run_analysis_and_hybrid<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>()
 where
-    L: leg_models::ContactModel<NQ, NC, NU, NK>,
+    L: leg_models::ContactModel<NQ, NC, NU, NK> + leg_models::LegModel<NQ, NC, NU>,
 {
     use leg_models::analysis::{
         foot_inverse_inertia, impact_mitigation, point_measures, Body, BodyCoupling, LegFrame,

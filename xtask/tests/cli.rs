@@ -1817,7 +1817,7 @@ fn eval_of_a_spatial_leg_says_what_it_takes() {
     let q = ["0.1"; 13].join(",");
     refused(
         &legs(&["eval", "cassie_leg", "--q", &q, "--impact", "foot"]),
-        "--impact: cassie_leg is a spatial leg; contacts on a spatial leg come later",
+        "--impact: cassie_leg is a spatial leg; eval lands planar contacts only for now",
     );
     refused(
         &legs(&["eval", "cassie_leg", "--q", &q, "--assemble"]),

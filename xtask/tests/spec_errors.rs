@@ -1019,14 +1019,29 @@ fn spatial_specs_refuse_what_does_not_fit_their_dimension() {
         "links[0].axis",
         "must not be zero",
     );
-    // Contacts are planar only for now: said, not dropped.
+    // A spatial contact's point and the ground's normal have three coordinates.
     refused(
         &format!(
-            "{text}\n[[contacts]]\nname = \"toe_contact\"\nlink = \"lower_a\"\nfriction = 1.0\n"
+            "{text}\n[[contacts]]\nname = \"toe_contact\"\nlink = \"lower_a\"\npoint = [0.2, 0.0]\nfriction = 1.0\n"
         ),
-        "contacts[0].name",
-        "spatial leg cannot have contacts yet",
+        "contacts[0].point",
+        "the leg is spatial",
     );
+    refused(
+        &format!("{text}\n[ground]\nnormal = [0.0, 1.0]\n"),
+        "ground.normal",
+        "the leg is spatial",
+    );
+    // Accepted with three: the ground's normal normalized, +z by default.
+    let with_contact = format!(
+        "{text}\n[[contacts]]\nname = \"toe_contact\"\nlink = \"lower_a\"\nfriction = 1.0\n"
+    );
+    let m = model::build(&parse(&with_contact).unwrap()).unwrap();
+    assert_eq!(m.ground_normal, [0.0, 0.0, 1.0]);
+    let tilted = format!("{with_contact}\n[ground]\nnormal = [0.0, 3.0, 4.0]\noffset = -0.2\n");
+    let m = model::build(&parse(&tilted).unwrap()).unwrap();
+    assert_eq!(m.ground_normal, [0.0, 0.6, 0.8]);
+    assert_eq!(m.ground_offset, -0.2);
 }
 
 /// The RSSR test leg's text (a ball joint in its loop), edited.

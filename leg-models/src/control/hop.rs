@@ -60,7 +60,7 @@ pub fn height_joint<L, T, const NQ: usize, const NC: usize, const NU: usize, con
     q: &SVector<T, NQ>,
 ) -> Option<usize>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + LegModel<NQ, NC, NU>,
     T: Real,
 {
     slider_along::<L, T, NQ, NC, NU, NK>(params, q, 1)
@@ -73,7 +73,7 @@ pub fn forward_joint<L, T, const NQ: usize, const NC: usize, const NU: usize, co
     q: &SVector<T, NQ>,
 ) -> Option<usize>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + LegModel<NQ, NC, NU>,
     T: Real,
 {
     slider_along::<L, T, NQ, NC, NU, NK>(params, q, 0)
@@ -87,7 +87,7 @@ fn slider_along<L, T, const NQ: usize, const NC: usize, const NU: usize, const N
     row: usize,
 ) -> Option<usize>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + LegModel<NQ, NC, NU>,
     T: Real,
 {
     let rows = Ground::<T>::of::<L, NQ, NC, NU, NK>().rows(&L::contact_jacobian(q, params));
@@ -367,7 +367,7 @@ impl<T: Real, const NU: usize> HopSettings<T, NU> {
         torque_limit: T,
     ) -> Result<Self, HopSetupError>
     where
-        L: ContactModel<NQ, NC, NU, NK>,
+        L: ContactModel<NQ, NC, NU, NK> + LegModel<NQ, NC, NU>,
     {
         let height_joint = height_joint::<L, T, NQ, NC, NU, NK>(params, home)
             .ok_or(HopSetupError::NoHeightJoint)?;
@@ -481,7 +481,7 @@ pub struct HopController<
     const NU: usize,
     const NK: usize,
 > where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + LegModel<NQ, NC, NU>,
 {
     /// The controller's model of the leg.
     pub params: L::Params<T>,
@@ -527,7 +527,7 @@ pub struct HopController<
 impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
     HopController<L, T, NQ, NC, NU, NK>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + LegModel<NQ, NC, NU>,
     T: Real,
 {
     /// A controller that has seen no hop yet (nothing learnt; the last stance taken to last
@@ -939,7 +939,7 @@ where
 impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
     HybridTorqueSource<T, NQ, NK, NU> for HopController<L, T, NQ, NC, NU, NK>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + LegModel<NQ, NC, NU>,
     T: Real,
 {
     fn torque(

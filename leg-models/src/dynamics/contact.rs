@@ -1,17 +1,22 @@
 //! Contact with the ground: the contact rows in the ground's frame, the constrained
 //! dynamics with loop closures and contact rows in one structured solve, and the plastic
-//! impact map (DESIGN.md §3.1).
+//! impact map (DESIGN.md §3.1), for planar legs (`ND = 2`) and spatial ones (`ND = 3`).
 //!
-//! Contact `k` owns rows `2k` (tangential, along `t`) and `2k + 1` (normal, along `n`) of
-//! every contact quantity here: `C = R J_c` with `R = diag([t; n], …)`, the forces
-//! `λ = (λ_t, λ_n)` the ground puts on the leg, the impulses `Λ` of an impact. A row is
-//! held (an equation `C_r q̈ = r_r` with its force unknown) or free (its force known:
-//! zero in flight, `λ_t = −μ s λ_n` when sliding).
+//! Contact `k` owns rows `ND k … ND k + ND − 1` of every contact quantity here: first its
+//! tangential rows (along the ground's tangents, [`Ground::frame`]), last its normal row
+//! (along `n`): `C = R J_c` with `R = diag(frame, …)`, the forces `λ = (λ_t, λ_n)` the
+//! ground puts on the leg, the impulses `Λ` of an impact. A row is held (an equation
+//! `C_r q̈ = r_r` with its force unknown) or free (its force known: zero in flight,
+//! `λ_t = −μ ŝ λ_n` when sliding along the unit slip direction `ŝ`).
+//!
+//! The friction law is Coulomb's with its exact cone, `|λ_t| ≤ μ λ_n` with `|·|` the
+//! Euclidean norm of the tangential force (two entries in 3-D): no pyramid anywhere. A
+//! planar contact is its special case, one tangent and `ŝ = ±1`.
 //!
 //! The structured solve eliminates the closure rows as the swing-leg dynamics do
 //! (`S = J M⁻¹ Jᵀ`, pivoted for redundant rows) and then the held contact rows
 //! (`K = C P M⁻¹ Wᵀ`, `P` the closure projection, `W` the force directions: `W = C`
-//! except on a sliding normal row, `C_n − μ s C_t`), by Gaussian elimination over the
+//! except on a sliding normal row, `C_n − μ ŝ · C_t`), by Gaussian elimination over the
 //! held rows. Everything is fixed-size and on the stack.
 
 use core::fmt;
@@ -22,56 +27,92 @@ use crate::dynamics::forward::{actuation, rcond_floor, Baumgarte, DynamicsError}
 use crate::model::contract::{ContactModel, Real};
 use crate::model::linalg::{all_finite, mul, Cholesky, PivotedLdlt};
 
-/// The ground line `n · x = d` (base frame), `n` a unit normal out of the ground.
+/// The ground `n · x = d` (base frame), `n` a unit normal out of the ground: a line for a
+/// planar leg (`ND = 2`), a plane for a spatial one (`ND = 3`).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Ground<T: Real> {
+pub struct Ground<T: Real, const ND: usize = 2> {
     /// The unit normal `n`, pointing out of the ground (base frame).
-    pub normal: SVector<T, 2>,
+    pub normal: SVector<T, ND>,
     /// The offset `d` (m).
     pub offset: T,
 }
 
-impl<T: Real> Ground<T> {
+impl<T: Real, const ND: usize> Ground<T, ND> {
     /// The ground of leg `L`'s spec.
     pub fn of<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>() -> Self
     where
-        L: ContactModel<NQ, NC, NU, NK>,
+        L: ContactModel<NQ, NC, NU, NK, ND>,
     {
-        let [x, y] = L::GROUND_NORMAL;
         Ground {
-            normal: SVector::<T, 2>::new(T::lit(x), T::lit(y)),
+            normal: SVector::from_fn(|i, _| T::lit(L::GROUND_NORMAL[i])),
             offset: T::lit(L::GROUND_OFFSET),
         }
     }
 
-    /// The unit tangent `t = (n_y, −n_x)`: `+x` on level ground.
-    pub fn tangent(&self) -> SVector<T, 2> {
-        SVector::<T, 2>::new(self.normal[1], -self.normal[0])
+    /// The ground's frame as rows: the tangents, then the normal `n`. Planar: the tangent
+    /// `t = (n_y, −n_x)`, `+x` on level ground. Spatial: `t₁` the base's x axis (its y
+    /// where x is within 26° of the normal) projected on the ground, `t₂ = n × t₁`, so
+    /// that `(t₁, t₂, n)` is right-handed: the base's `(x, y, z)` on level ground.
+    pub fn frame(&self) -> SMatrix<T, ND, ND> {
+        let n = &self.normal;
+        let mut out = SMatrix::<T, ND, ND>::zeros();
+        if ND == 2 {
+            out[(0, 0)] = n[1];
+            out[(0, 1)] = -n[0];
+        } else if ND == 3 {
+            let axis = if n[0].abs() < T::lit(0.9) { 0 } else { 1 };
+            let mut t1 = -(n * n[axis]);
+            t1[axis] += T::one();
+            let t1 = t1 / t1.norm();
+            let t2 = [
+                n[1] * t1[2] - n[2] * t1[1],
+                n[2] * t1[0] - n[0] * t1[2],
+                n[0] * t1[1] - n[1] * t1[0],
+            ];
+            for j in 0..3 {
+                out[(0, j)] = t1[j];
+                out[(1, j)] = t2[j];
+            }
+        }
+        for j in 0..ND {
+            out[(ND - 1, j)] = n[j];
+        }
+        out
     }
 
-    /// Stacked base-frame rows (`x, y` per contact) turned into ground rows (`t, n`).
+    /// The first tangent (the frame's first row): `+x` on level ground.
+    pub fn tangent(&self) -> SVector<T, ND> {
+        self.frame().row(0).transpose()
+    }
+
+    /// Stacked base-frame rows (`ND` per contact) turned into ground rows (the tangents,
+    /// then the normal).
     pub fn rows<const NK: usize, const C: usize>(
         &self,
         base: &SMatrix<T, NK, C>,
     ) -> SMatrix<T, NK, C> {
-        let (t, n) = (self.tangent(), self.normal);
+        let frame = self.frame();
         let mut out = SMatrix::<T, NK, C>::zeros();
-        for k in 0..NK / 2 {
+        for k in 0..NK / ND {
             for c in 0..C {
-                let (x, y) = (base[(2 * k, c)], base[(2 * k + 1, c)]);
-                out[(2 * k, c)] = t[0] * x + t[1] * y;
-                out[(2 * k + 1, c)] = n[0] * x + n[1] * y;
+                for i in 0..ND {
+                    let mut s = frame[(i, 0)] * base[(ND * k, c)];
+                    for j in 1..ND {
+                        s += frame[(i, j)] * base[(ND * k + j, c)];
+                    }
+                    out[(ND * k + i, c)] = s;
+                }
             }
         }
         out
     }
 
-    /// Contact positions in ground coordinates: `(t · x_c, n · x_c − d)` per contact (the
-    /// second is the gap).
+    /// Contact positions in ground coordinates: `(t · x_c, …, n · x_c − d)` per contact
+    /// (the last is the gap).
     pub fn coordinates<const NK: usize>(&self, positions: &SVector<T, NK>) -> SVector<T, NK> {
         let mut out = self.rows(positions);
-        for k in 0..NK / 2 {
-            out[2 * k + 1] -= self.offset;
+        for k in 0..NK / ND {
+            out[ND * k + ND - 1] -= self.offset;
         }
         out
     }
@@ -84,10 +125,13 @@ pub enum ContactMode {
     Flight,
     /// On the ground, held where it touched down.
     Stick,
-    /// On the ground, sliding along `+t` (`forward`) or `−t`; the friction force is
-    /// `μ λ_n` against the slip.
+    /// On the ground and sliding; the friction force is `μ λ_n` against the slip. On a
+    /// planar leg the slip runs along `+t` (`forward`) or `−t`. On a spatial leg it runs
+    /// in any direction of the ground, the direction of the contact's velocity along it
+    /// (or, from rest, the slip direction given with the state), and `forward` is
+    /// unused (`true`).
     Slide {
-        /// Sliding along `+t` (`false`: along `−t`).
+        /// Sliding along `+t` (`false`: along `−t`); planar legs only.
         forward: bool,
     },
 }
@@ -99,39 +143,41 @@ impl ContactMode {
     }
 }
 
-/// The modes of every contact, indexed by contact (entry `2k` of an `NK`-array holds
-/// contact `k`; entry `2k + 1` mirrors it, so that the array has one entry per row).
+/// The modes of every contact, indexed by contact (entry `ND k` of an `NK`-array holds
+/// contact `k`; its other rows' entries mirror it, so that the array has one entry per
+/// row).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Modes<const NK: usize>(pub [ContactMode; NK]);
+pub struct Modes<const NK: usize, const ND: usize = 2>(pub [ContactMode; NK]);
 
-impl<const NK: usize> Modes<NK> {
+impl<const NK: usize, const ND: usize> Modes<NK, ND> {
     /// Every contact in flight.
     pub fn flight() -> Self {
         Modes([ContactMode::Flight; NK])
     }
 
-    /// The number of contacts, `NK / 2`.
+    /// The number of contacts, `NK / ND`.
     pub fn contacts(&self) -> usize {
-        NK / 2
+        NK / ND
     }
 
     /// The mode of contact `k`.
     pub fn get(&self, k: usize) -> ContactMode {
-        self.0[2 * k]
+        self.0[ND * k]
     }
 
-    /// Sets the mode of contact `k` (both its rows).
+    /// Sets the mode of contact `k` (all its rows).
     pub fn set(&mut self, k: usize, mode: ContactMode) {
-        self.0[2 * k] = mode;
-        self.0[2 * k + 1] = mode;
+        for r in ND * k..ND * (k + 1) {
+            self.0[r] = mode;
+        }
     }
 
-    /// Which rows are held: both of a sticking contact, the normal one of a sliding one.
+    /// Which rows are held: all of a sticking contact, the normal one of a sliding one.
     pub fn held_rows(&self) -> [bool; NK] {
         core::array::from_fn(|r| match self.0[r] {
             ContactMode::Flight => false,
             ContactMode::Stick => true,
-            ContactMode::Slide { .. } => r % 2 == 1,
+            ContactMode::Slide { .. } => r % ND == ND - 1,
         })
     }
 }
@@ -159,13 +205,20 @@ pub struct ContactSolution<T: Real, const NQ: usize, const NC: usize, const NK: 
 ///
 /// `rows.w` holds the force direction of every held row (zero rows elsewhere). After the
 /// solve the free tangential rows of sliding contacts get `λ_t = slide[r] λ_n`
-/// (`rows.slide[2k] = −μ s`, zero for other rows).
-pub fn solve_structured<T: Real, const NQ: usize, const NC: usize, const NK: usize>(
+/// (`rows.slide` holds `−μ ŝ` on the tangential rows of sliding contacts, zero for other
+/// rows).
+pub fn solve_structured<
+    T: Real,
+    const NQ: usize,
+    const NC: usize,
+    const NK: usize,
+    const ND: usize,
+>(
     chol_m: &Cholesky<T, NQ>,
     j: &SMatrix<T, NC, NQ>,
     r_j: &SVector<T, NC>,
     closure_deficiency: usize,
-    rows: &ContactRows<T, NQ, NK>,
+    rows: &ContactRows<T, NQ, NK, ND>,
     r_c: &SVector<T, NK>,
     tau: &SVector<T, NQ>,
 ) -> Result<ContactSolution<T, NQ, NC, NK>, DynamicsError> {
@@ -187,13 +240,14 @@ pub fn solve_structured_columns<
     const NQ: usize,
     const NC: usize,
     const NK: usize,
+    const ND: usize,
     const C: usize,
 >(
     chol_m: &Cholesky<T, NQ>,
     j: &SMatrix<T, NC, NQ>,
     r_j: &SMatrix<T, NC, C>,
     closure_deficiency: usize,
-    rows: &ContactRows<T, NQ, NK>,
+    rows: &ContactRows<T, NQ, NK, ND>,
     r_c: &SMatrix<T, NK, C>,
     tau: &SMatrix<T, NQ, C>,
 ) -> Result<(SMatrix<T, NQ, C>, SMatrix<T, NC, C>, SMatrix<T, NK, C>), DynamicsError> {
@@ -243,10 +297,13 @@ pub fn solve_structured_columns<
     let x = a0 + mul(&zp, &lambda);
     let closure = f0 - mul(&g, &lambda);
     let mut contact = lambda;
-    for r in (0..NK).step_by(2) {
-        if !held[r] && held[r + 1] {
-            for col in 0..C {
-                contact[(r, col)] = rows.slide[r] * lambda[(r + 1, col)];
+    for k in 0..NK / ND {
+        let n = ND * k + ND - 1;
+        if held[n] && !held[ND * k] {
+            for r in ND * k..n {
+                for col in 0..C {
+                    contact[(r, col)] = rows.slide[r] * lambda[(n, col)];
+                }
             }
         }
     }
@@ -355,47 +412,95 @@ fn to_f64<T: Real>(x: T) -> f64 {
     x.to_subset().unwrap_or(f64::NAN)
 }
 
+/// `|λ_t|` of contact `k`: the Euclidean norm of its tangential entries (`ND − 1` of
+/// them), the absolute value on a planar leg.
+pub(crate) fn tangential_norm<T: Real, const NK: usize, const ND: usize>(
+    v: &SVector<T, NK>,
+    k: usize,
+) -> T {
+    if ND == 2 {
+        return v[ND * k].abs();
+    }
+    (ND * k..ND * k + ND - 1)
+        .fold(T::zero(), |a, r| a + v[r] * v[r])
+        .sqrt()
+}
+
+/// Writes the unit direction of `v`'s entries `rows` into `slip`'s; leaves them where `v`
+/// has none there (zero or not finite).
+fn set_direction<T: Real, const NK: usize>(
+    slip: &mut SVector<T, NK>,
+    v: &SVector<T, NK>,
+    rows: core::ops::Range<usize>,
+) {
+    let norm = rows.clone().fold(T::zero(), |a, r| a + v[r] * v[r]).sqrt();
+    if norm > T::zero() && norm.is_finite() {
+        for r in rows {
+            slip[r] = v[r] / norm;
+        }
+    }
+}
+
 /// The contact rows of leg `L` at `q` in the ground's frame, and the force directions of
-/// the held rows under `modes` with friction `mu` (per contact, entry `2k`).
+/// the held rows under `modes` with friction `mu` (per row, every row of contact `k`
+/// holding its μ).
 #[derive(Clone, Copy, Debug)]
-pub struct ContactRows<T: Real, const NQ: usize, const NK: usize> {
+pub struct ContactRows<T: Real, const NQ: usize, const NK: usize, const ND: usize = 2> {
     /// `C = R J_c`.
     pub c: SMatrix<T, NK, NQ>,
-    /// `W`: `C` on held rows, `C_n − μ s C_t` on a sliding normal row.
+    /// `W`: `C` on held rows, `C_n − μ ŝ · C_t` on a sliding normal row.
     pub w: SMatrix<T, NK, NQ>,
-    /// `−μ s` on the tangential row of a sliding contact, zero elsewhere.
+    /// `−μ ŝ` on the tangential rows of a sliding contact, zero elsewhere.
     pub slide: SVector<T, NK>,
     /// Which rows are held ([`Modes::held_rows`]).
     pub held: [bool; NK],
 }
 
-impl<T: Real, const NQ: usize, const NK: usize> ContactRows<T, NQ, NK> {
+impl<T: Real, const NQ: usize, const NK: usize, const ND: usize> ContactRows<T, NQ, NK, ND> {
     /// The rows of the base-frame contact Jacobian `jacobian` (`J_c`) on `ground`, under
-    /// `modes`, with friction `mu` (per contact, entry `2k`).
+    /// `modes`, with friction `mu`. `slip` holds the unit slip direction `ŝ` of each
+    /// sliding contact on its tangential rows ([`slip_directions`]); a planar contact's
+    /// is its mode's `forward` (`±1`) and `slip` is not read for it.
     pub fn new(
-        ground: &Ground<T>,
+        ground: &Ground<T, ND>,
         jacobian: &SMatrix<T, NK, NQ>,
-        modes: &Modes<NK>,
+        modes: &Modes<NK, ND>,
         mu: &SVector<T, NK>,
+        slip: &SVector<T, NK>,
     ) -> Self {
         let c = ground.rows(jacobian);
         let held = modes.held_rows();
         let mut w = c;
         let mut slide = SVector::<T, NK>::zeros();
-        for k in 0..NK / 2 {
+        for k in 0..NK / ND {
+            let n = ND * k + ND - 1;
             match modes.get(k) {
                 ContactMode::Slide { forward } => {
-                    let s = if forward { T::one() } else { -T::one() };
-                    let coefficient = -mu[2 * k] * s;
-                    slide[2 * k] = coefficient;
+                    for r in ND * k..n {
+                        let s = if ND == 2 {
+                            if forward {
+                                T::one()
+                            } else {
+                                -T::one()
+                            }
+                        } else {
+                            slip[r]
+                        };
+                        slide[r] = -mu[r] * s;
+                    }
                     for col in 0..NQ {
-                        w[(2 * k + 1, col)] = c[(2 * k + 1, col)] + coefficient * c[(2 * k, col)];
-                        w[(2 * k, col)] = T::zero();
+                        let mut normal = c[(n, col)];
+                        for r in ND * k..n {
+                            normal += slide[r] * c[(r, col)];
+                            w[(r, col)] = T::zero();
+                        }
+                        w[(n, col)] = normal;
                     }
                 }
                 ContactMode::Flight => {
-                    w.row_mut(2 * k).fill(T::zero());
-                    w.row_mut(2 * k + 1).fill(T::zero());
+                    for r in ND * k..=n {
+                        w.row_mut(r).fill(T::zero());
+                    }
                 }
                 ContactMode::Stick => {}
             }
@@ -404,22 +509,102 @@ impl<T: Real, const NQ: usize, const NK: usize> ContactRows<T, NQ, NK> {
     }
 }
 
-/// Friction coefficients of leg `L`'s spec, one per row (both rows of contact `k` hold
+/// The unit slip direction `ŝ` of each sliding contact of a spatial leg, on its
+/// tangential rows (zero elsewhere): the direction of its velocity along the ground,
+/// `v_t / |v_t|` with `v = C q̇` (`C` the rows of `jacobian` on `ground`). A contact whose
+/// `|v_t|` is within rounding of zero (`√ε` of the speeds its rows could have at `q̇`)
+/// slides from rest: its direction is `rest`'s (normalized), and without one it is
+/// [`DynamicsError::SlipFromRest`]. Where `rest` is given, it is also the direction the
+/// slide keeps once its velocity has turned back against it (`v_t · rest ≤ 0`): friction
+/// then keeps its direction through the stop, as a planar slide's does, so that the
+/// velocity crosses zero cleanly and the simulator's slide guard finds the stop instead
+/// of friction turning over at every stage of a step around it. A planar contact's direction is its mode's, `±1`.
+pub fn slip_directions<T: Real, const NQ: usize, const NK: usize, const ND: usize>(
+    ground: &Ground<T, ND>,
+    jacobian: &SMatrix<T, NK, NQ>,
+    qd: &SVector<T, NQ>,
+    modes: &Modes<NK, ND>,
+    rest: Option<&SVector<T, NK>>,
+) -> Result<SVector<T, NK>, DynamicsError> {
+    let mut out = SVector::<T, NK>::zeros();
+    let c = if ND > 2 {
+        ground.rows(jacobian)
+    } else {
+        SMatrix::zeros()
+    };
+    for k in 0..NK / ND {
+        let ContactMode::Slide { forward } = modes.get(k) else {
+            continue;
+        };
+        let tangential = ND * k..ND * k + ND - 1;
+        if ND == 2 {
+            out[ND * k] = if forward { T::one() } else { -T::one() };
+            continue;
+        }
+        let (mut speed, mut scale) = (T::zero(), T::zero());
+        for r in tangential.clone() {
+            let (mut v, mut s) = (T::zero(), T::zero());
+            for j in 0..NQ {
+                v += c[(r, j)] * qd[j];
+                s += (c[(r, j)] * qd[j]).abs();
+            }
+            out[r] = v;
+            speed += v * v;
+            scale += s * s;
+        }
+        let (speed, scale) = (speed.sqrt(), scale.sqrt());
+        let given = rest.map_or(T::zero(), |d| {
+            tangential
+                .clone()
+                .fold(T::zero(), |a, r| a + d[r] * d[r])
+                .sqrt()
+        });
+        let ahead = rest.map_or(T::one(), |d| {
+            tangential.clone().fold(T::zero(), |a, r| a + d[r] * out[r])
+        });
+        if speed > T::default_epsilon().sqrt() * scale && ahead > T::zero() {
+            for r in tangential {
+                out[r] /= speed;
+            }
+            continue;
+        }
+        match rest {
+            Some(d) if given > T::zero() && given.is_finite() => {
+                for r in tangential {
+                    out[r] = d[r] / given;
+                }
+            }
+            _ => return Err(DynamicsError::SlipFromRest { contact: k }),
+        }
+    }
+    Ok(out)
+}
+
+/// Friction coefficients of leg `L`'s spec, one per row (every row of contact `k` holds
 /// its `μ`).
-pub fn spec_friction<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
-) -> SVector<T, NK>
+pub fn spec_friction<
+    L,
+    T,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+    const ND: usize,
+>() -> SVector<T, NK>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK, ND>,
     T: Real,
 {
-    SVector::from_fn(|r, _| T::lit(L::CONTACT_FRICTION[r / 2]))
+    SVector::from_fn(|r, _| T::lit(L::CONTACT_FRICTION[r / ND]))
 }
 
 /// Constrained forward dynamics with the contacts in `modes`: closure rows and held
 /// contact rows in one structured solve. Baumgarte terms, when given, act on the closure
 /// residual and on the held contacts' drift from `anchors` (ground coordinates: the
-/// tangential entry of a sticking contact is where it touched down; the normal entry is
-/// the ground, 0).
+/// tangential entries of a sticking contact are where it touched down; the normal entry
+/// is the ground, 0). A sliding contact of a spatial leg slides against its velocity along
+/// the ground; one that slides from rest needs its direction:
+/// [`ContactSystem::with_slip`].
 #[allow(clippy::too_many_arguments)]
 pub fn forward_dynamics_with_contacts<
     L,
@@ -428,19 +613,20 @@ pub fn forward_dynamics_with_contacts<
     const NC: usize,
     const NU: usize,
     const NK: usize,
+    const ND: usize,
 >(
     params: &L::Params<T>,
     q: &SVector<T, NQ>,
     qd: &SVector<T, NQ>,
     u: &SVector<T, NU>,
-    modes: &Modes<NK>,
+    modes: &Modes<NK, ND>,
     anchors: &SVector<T, NK>,
-    ground: &Ground<T>,
+    ground: &Ground<T, ND>,
     mu: &SVector<T, NK>,
     baumgarte: Option<Baumgarte<T>>,
 ) -> Result<ContactSolution<T, NQ, NC, NK>, DynamicsError>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK, ND>,
     T: Real,
 {
     ContactSystem::new::<L, NU>(params, q, qd, modes, anchors, ground, mu, baumgarte)?
@@ -452,12 +638,20 @@ where
 /// to each motor (or to any generalized force) calls instead of
 /// [`forward_dynamics_with_contacts`] once per right-hand side.
 #[derive(Clone, Copy, Debug)]
-pub struct ContactSystem<T: Real, const NQ: usize, const NC: usize, const NK: usize> {
+pub struct ContactSystem<
+    T: Real,
+    const NQ: usize,
+    const NC: usize,
+    const NK: usize,
+    const ND: usize = 2,
+> {
     pub(crate) chol_m: Cholesky<T, NQ>,
     pub(crate) jacobian: SMatrix<T, NC, NQ>,
     pub(crate) r_j: SVector<T, NC>,
     redundant_rows: usize,
-    pub(crate) rows: ContactRows<T, NQ, NK>,
+    pub(crate) rows: ContactRows<T, NQ, NK, ND>,
+    /// The slip direction of each sliding contact ([`slip_directions`]).
+    pub slip: SVector<T, NK>,
     pub(crate) r_c: SVector<T, NK>,
     /// `−N − D q̇`: the forces that act whatever is applied.
     pub(crate) passive: SVector<T, NQ>,
@@ -465,7 +659,9 @@ pub struct ContactSystem<T: Real, const NQ: usize, const NC: usize, const NK: us
     pub mass_matrix: SMatrix<T, NQ, NQ>,
 }
 
-impl<T: Real, const NQ: usize, const NC: usize, const NK: usize> ContactSystem<T, NQ, NC, NK> {
+impl<T: Real, const NQ: usize, const NC: usize, const NK: usize, const ND: usize>
+    ContactSystem<T, NQ, NC, NK, ND>
+{
     /// Evaluates the terms and factors `M` (the arguments as for
     /// [`forward_dynamics_with_contacts`]).
     #[allow(clippy::too_many_arguments)]
@@ -473,14 +669,36 @@ impl<T: Real, const NQ: usize, const NC: usize, const NK: usize> ContactSystem<T
         params: &L::Params<T>,
         q: &SVector<T, NQ>,
         qd: &SVector<T, NQ>,
-        modes: &Modes<NK>,
+        modes: &Modes<NK, ND>,
         anchors: &SVector<T, NK>,
-        ground: &Ground<T>,
+        ground: &Ground<T, ND>,
         mu: &SVector<T, NK>,
         baumgarte: Option<Baumgarte<T>>,
     ) -> Result<Self, DynamicsError>
     where
-        L: ContactModel<NQ, NC, NU, NK>,
+        L: ContactModel<NQ, NC, NU, NK, ND>,
+    {
+        Self::with_slip::<L, NU>(params, q, qd, modes, anchors, ground, mu, baumgarte, None)
+    }
+
+    /// [`ContactSystem::new`] with the direction `rest` (unit, on the tangential rows) of
+    /// each sliding contact of a spatial leg that slides from rest: a contact whose
+    /// velocity along the ground is zero has no slip direction of its own, and the one it
+    /// starts to slip in depends on the applied forces ([`slip_directions`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn with_slip<L, const NU: usize>(
+        params: &L::Params<T>,
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        modes: &Modes<NK, ND>,
+        anchors: &SVector<T, NK>,
+        ground: &Ground<T, ND>,
+        mu: &SVector<T, NK>,
+        baumgarte: Option<Baumgarte<T>>,
+        rest: Option<&SVector<T, NK>>,
+    ) -> Result<Self, DynamicsError>
+    where
+        L: ContactModel<NQ, NC, NU, NK, ND>,
     {
         let terms = L::dynamics_terms(q, qd, params);
         let chol_m = Cholesky::new(&terms.mass_matrix)
@@ -491,7 +709,8 @@ impl<T: Real, const NQ: usize, const NC: usize, const NK: usize> ContactSystem<T
         let passive = -terms.bias_forces - L::damping_forces(qd, params);
         let mut r_j = -terms.constraint_bias;
         let jc = L::contact_jacobian(q, params);
-        let rows = ContactRows::new(ground, &jc, modes, mu);
+        let slip = slip_directions(ground, &jc, qd, modes, rest)?;
+        let rows = ContactRows::new(ground, &jc, modes, mu, &slip);
         let mut r_c = -ground.rows(&L::contact_bias(q, qd, params));
         if let Some(b) = baumgarte {
             let (two_alpha, beta2) = (b.alpha + b.alpha, b.beta * b.beta);
@@ -508,6 +727,7 @@ impl<T: Real, const NQ: usize, const NC: usize, const NK: usize> ContactSystem<T
             r_j,
             redundant_rows: L::REDUNDANT_ROWS,
             rows,
+            slip,
             r_c,
             passive,
             mass_matrix: terms.mass_matrix,
@@ -539,8 +759,11 @@ pub struct Impact<T: Real, const NQ: usize, const NC: usize, const NK: usize> {
     pub qd_plus: SVector<T, NQ>,
     /// Closure impulses (base frame).
     pub closure_impulses: SVector<T, NC>,
-    /// Ground impulses per contact `(Λ_t, Λ_n)`.
+    /// Ground impulses per contact, `(Λ_t, Λ_n)` in the ground's frame.
     pub impulses: SVector<T, NK>,
+    /// The slip direction `ŝ` each sliding contact of a spatial leg was resolved with
+    /// (unit, on its tangential rows; zero elsewhere and on a planar leg).
+    pub slip: SVector<T, NK>,
     /// `T(q̇⁻) − T(q̇⁺)`; for a sticking impact it equals `½ Δq̇ᵀ M Δq̇ ≥ 0`.
     pub energy_lost: T,
 }
@@ -593,24 +816,35 @@ impl From<DynamicsError> for ImpactError {
 /// ```
 ///
 /// over the rows `modes` hold. A sticking contact whose impulse leaves the friction cone
-/// (`|Λ_t| > μ Λ_n`) is resolved again as sliding, its friction impulse `μ Λ_n` against
-/// the slip after the impact, and its mode in `modes` becomes `Slide`. Every held normal
+/// (`|Λ_t| > μ Λ_n`, the Euclidean norm of the tangential impulse) is resolved again as
+/// sliding, its friction impulse `μ Λ_n` against the slip after the impact, and its mode
+/// in `modes` becomes `Slide`. That slip direction is found by iteration on a spatial leg
+/// (from the sticking impulse's, each round the slip the last round left, until it
+/// repeats to `√ε`); a planar leg's is one of two, tried once each. Every held normal
 /// impulse must be non-negative ([`ImpactError::Pulling`] otherwise).
 ///
 /// A sticking impact loses exactly `½ Δq̇ᵀ M Δq̇`. A sliding one loses energy unless the
 /// impulse reverses the slip (then Coulomb's law applied to impulses can add energy, a
 /// known limit of the model, Stronge 1991); `energy_lost` reports what happened.
 #[allow(clippy::too_many_arguments)]
-pub fn impact_map<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+pub fn impact_map<
+    L,
+    T,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+    const ND: usize,
+>(
     params: &L::Params<T>,
     q: &SVector<T, NQ>,
     qd: &SVector<T, NQ>,
-    modes: &mut Modes<NK>,
-    ground: &Ground<T>,
+    modes: &mut Modes<NK, ND>,
+    ground: &Ground<T, ND>,
     mu: &SVector<T, NK>,
 ) -> Result<Impact<T, NQ, NC, NK>, ImpactError>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK, ND>,
     T: Real,
 {
     if !(all_finite(q) && all_finite(qd)) {
@@ -628,8 +862,8 @@ where
     let j = L::constraint_jacobian(q, params);
     let jc = L::contact_jacobian(q, params);
     let momentum = mul(&m, qd);
-    let solve = |modes: &Modes<NK>| {
-        let rows = ContactRows::new(ground, &jc, modes, mu);
+    let solve = |modes: &Modes<NK, ND>, slip: &SVector<T, NK>| {
+        let rows = ContactRows::new(ground, &jc, modes, mu, slip);
         solve_structured(
             &chol_m,
             &j,
@@ -640,48 +874,82 @@ where
             &momentum,
         )
     };
-    let mut sol = solve(modes)?;
+    // A spatial contact already sliding into the impact starts from its slip before it
+    // (the ground's first tangent if it had none).
+    let tangential = |k: usize| ND * k..ND * k + ND - 1;
+    let mut slip = SVector::<T, NK>::zeros();
+    if ND > 2 {
+        let before = ground.rows(&mul(&jc, qd));
+        for k in 0..NK / ND {
+            if let ContactMode::Slide { .. } = modes.get(k) {
+                set_direction(&mut slip, &before, tangential(k));
+            }
+        }
+    }
+    let mut sol = solve(modes, &slip)?;
     // A sticking impulse outside the cone slides instead (at most once per contact).
     let mut changed = false;
-    for k in 0..NK / 2 {
+    for k in 0..NK / ND {
         if modes.get(k) == ContactMode::Stick {
-            let (lt, ln) = (sol.contact[2 * k], sol.contact[2 * k + 1]);
-            if lt.abs() > mu[2 * k] * ln {
-                // λ_t = −μ s λ_n: the slip runs against the friction impulse.
+            let n = ND * k + ND - 1;
+            if tangential_norm::<T, NK, ND>(&sol.contact, k) > mu[n] * sol.contact[n] {
+                // λ_t = −μ ŝ λ_n: the slip runs against the friction impulse.
                 modes.set(
                     k,
                     ContactMode::Slide {
-                        forward: lt < T::zero(),
+                        forward: ND > 2 || sol.contact[ND * k] < T::zero(),
                     },
                 );
+                set_direction(&mut slip, &-sol.contact, tangential(k));
                 changed = true;
             }
         }
     }
-    if changed {
-        sol = solve(modes)?;
-        // The slip after the impact must run the way its friction opposes; where it does
-        // not (the impulse reversed the slip), the other direction is the consistent one.
-        let slip = ground.rows(&mul(&jc, &sol.x));
-        let mut flipped = false;
-        for k in 0..NK / 2 {
-            if let ContactMode::Slide { forward } = modes.get(k) {
-                let along = if forward { slip[2 * k] } else { -slip[2 * k] };
-                if along < T::zero() {
-                    modes.set(k, ContactMode::Slide { forward: !forward });
-                    flipped = true;
+    let sliding = (0..NK / ND).any(|k| matches!(modes.get(k), ContactMode::Slide { .. }));
+    if changed || (ND > 2 && sliding) {
+        sol = solve(modes, &slip)?;
+        // The slip after the impact must run the way its friction opposes. On a planar
+        // leg, where it does not (the impulse reversed the slip), the other direction is
+        // the consistent one. On a spatial leg the direction turns to the slip the impact
+        // leaves, until that repeats.
+        let rounds = if ND == 2 { 1 } else { 64 };
+        for _ in 0..rounds {
+            let after = ground.rows(&mul(&jc, &sol.x));
+            let mut moved = false;
+            for k in 0..NK / ND {
+                let ContactMode::Slide { forward } = modes.get(k) else {
+                    continue;
+                };
+                if ND == 2 {
+                    let along = if forward {
+                        after[ND * k]
+                    } else {
+                        -after[ND * k]
+                    };
+                    if along < T::zero() {
+                        modes.set(k, ContactMode::Slide { forward: !forward });
+                        moved = true;
+                    }
+                } else {
+                    let old = slip;
+                    set_direction(&mut slip, &after, tangential(k));
+                    let turn =
+                        tangential(k).fold(T::zero(), |a, r| a.max((slip[r] - old[r]).abs()));
+                    moved |= turn > T::default_epsilon().sqrt();
                 }
             }
-        }
-        if flipped {
-            sol = solve(modes)?;
+            if !moved {
+                break;
+            }
+            sol = solve(modes, &slip)?;
         }
     }
-    for k in 0..NK / 2 {
-        if modes.get(k).on_ground() && sol.contact[2 * k + 1] < T::zero() {
+    for k in 0..NK / ND {
+        let n = ND * k + ND - 1;
+        if modes.get(k).on_ground() && sol.contact[n] < T::zero() {
             return Err(ImpactError::Pulling {
                 contact: k,
-                normal_impulse: to_f64(sol.contact[2 * k + 1]),
+                normal_impulse: to_f64(sol.contact[n]),
             });
         }
     }
@@ -700,6 +968,7 @@ where
         qd_plus: sol.x,
         closure_impulses: sol.closure,
         impulses: sol.contact,
+        slip: if ND == 2 { SVector::zeros() } else { slip },
         energy_lost,
     })
 }

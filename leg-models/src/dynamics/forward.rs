@@ -48,6 +48,13 @@ pub enum DynamicsError {
         /// `cos β` there.
         cos_beta: f64,
     },
+    /// A contact of a spatial leg slides from rest (no velocity along the ground) and no
+    /// slip direction was given: the direction it starts to slip in depends on the
+    /// applied forces ([`crate::dynamics::contact::ContactSystem::with_slip`]).
+    SlipFromRest {
+        /// The contact's index.
+        contact: usize,
+    },
 }
 
 impl fmt::Display for DynamicsError {
@@ -73,6 +80,10 @@ impl fmt::Display for DynamicsError {
                 f,
                 "the ball joint at coordinates {joint}..{} is at its angles' singularity (cos of the second angle {cos_beta:.1e}): its first and third axes line up",
                 joint + 3
+            ),
+            DynamicsError::SlipFromRest { contact } => write!(
+                f,
+                "contact {contact} slides from rest with no slip direction given (a spatial contact at rest can start to slip in any direction along the ground)"
             ),
         }
     }

@@ -430,26 +430,33 @@ pub trait LegModel<
         -> SMatrix<T, ND, NP>;
 }
 
-/// A leg's contact points and the ground they may touch (DESIGN.md §3.1). Every generated
-/// model implements it; a leg without `[[contacts]]` has `NK = 0`.
+/// A leg's contact points and the ground they may touch (DESIGN.md §3.1), in `ND`
+/// coordinates (2 for a planar leg, the default; 3 for a spatial one). Every planar
+/// generated model implements it; a leg without `[[contacts]]` has `NK = 0`.
 ///
-/// - `NK`: contact rows, two per contact point (x and y in the base frame), in spec order.
+/// - `NK`: contact rows, `ND` per contact point (its base-frame coordinates), in spec
+///   order.
 ///
-/// The ground is the line `n · x = d` with unit normal `n` pointing out of the ground;
-/// a contact's gap is `n · x_c − d`.
-pub trait ContactModel<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>:
-    LegModel<NQ, NC, NU>
+/// The ground is `n · x = d` (a line in the plane, a plane in space) with unit normal `n`
+/// pointing out of the ground; a contact's gap is `n · x_c − d`.
+pub trait ContactModel<
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+    const ND: usize = 2,
+>: LegDynamics<NQ, NC, NU>
 {
-    /// The contact points' names; contact `k` owns rows `2k` and `2k + 1`.
+    /// The contact points' names; contact `k` owns rows `ND k … ND k + ND − 1`.
     const CONTACT_NAMES: &'static [&'static str];
     /// The spec's Coulomb friction coefficient of each contact with the ground.
     const CONTACT_FRICTION: &'static [f64];
     /// The spec's ground normal `n` (unit, base frame).
-    const GROUND_NORMAL: [f64; 2];
+    const GROUND_NORMAL: [f64; ND];
     /// The spec's ground offset `d` (m).
     const GROUND_OFFSET: f64;
 
-    /// The contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
+    /// The contact points in the base frame, stacked `(x₀, y₀, [z₀,] x₁, y₁, …)`.
     fn contact_positions<T: Arithmetic>(q: &SVector<T, NQ>, p: &Self::Params<T>) -> SVector<T, NK>;
     /// `J_c(q) = ∂x_c/∂q`, the rows of [`ContactModel::contact_positions`].
     fn contact_jacobian<T: Arithmetic>(

@@ -4,13 +4,23 @@
 //! after each step. A step allocates nothing; [`HybridSimulator::run`] (with `std`)
 //! records samples and events in vectors reserved before the first step.
 //!
-//! Each contact row has a guard that is non-negative while its mode is valid:
+//! Planar legs (`ND = 2`) and spatial ones (`ND = 3`) step alike: contact `k` owns rows
+//! `ND k …` (its tangential rows, then its normal row), and the friction cone is exact,
+//! `|λ_t| ≤ μ λ_n` with the Euclidean norm. Each contact has guards that are
+//! non-negative while its mode is valid, on its first tangential row and its normal row:
 //!
-//! | mode  | tangential row `2k`      | normal row `2k + 1` |
-//! |-------|--------------------------|---------------------|
-//! | flight| —                        | gap `n·x_c − d + δ` |
-//! | stick | `μ λ_n − abs(λ_t)`       | `λ_n`               |
-//! | slide | slip speed `s (t·ẋ_c)`   | `λ_n`               |
+//! | mode  | first tangential row `ND k`       | normal row `ND k + ND − 1` |
+//! |-------|-----------------------------------|----------------------------|
+//! | flight| —                                 | gap `n·x_c − d + δ`        |
+//! | stick | `μ λ_n − |λ_t|`                   | `λ_n`                      |
+//! | slide | slip speed along `ŝ`, `ŝ · v_t`   | `λ_n`                      |
+//!
+//! `ŝ` is the slip direction at the start of the step ([`HybridState::slip`]): `±1` on a
+//! planar leg, a unit vector along the ground on a spatial one, where friction opposes
+//! the slip velocity itself (its direction turns while it slides) and the slide ends when
+//! that velocity turns back against the direction it had. A spatial contact that starts
+//! to slip from rest slips in the direction its acceleration then takes, found by
+//! iteration ([`HybridSimulator::slip_from_rest`]).
 //!
 //! `δ` is the projection's tolerance ([`Tolerance::relative_residual`] of the leg's size):
 //! a held contact sits on the ground only to within it, so a contact that has just lifted
@@ -35,10 +45,10 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::assembly::{leg_size, AssemblyError, Tolerance};
 use crate::dynamics::contact::{
-    forward_dynamics_with_contacts, impact_map, solve_structured, spec_friction, ContactMode,
-    ContactRows, ContactSolution, Ground, ImpactError, Modes,
+    impact_map, solve_structured, spec_friction, tangential_norm, ContactMode, ContactRows,
+    ContactSolution, ContactSystem, Ground, ImpactError, Modes,
 };
-use crate::dynamics::forward::{Baumgarte, DynamicsError};
+use crate::dynamics::forward::{actuation, Baumgarte, DynamicsError};
 use crate::model::contract::{ContactModel, Real};
 use crate::model::linalg::{mul, Cholesky};
 use crate::simulate::source::ControlError;
@@ -46,23 +56,29 @@ use crate::simulate::source::{ControlUpdate, State};
 
 /// A leg's state with its contacts.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct HybridState<T: Real, const NQ: usize, const NK: usize> {
+pub struct HybridState<T: Real, const NQ: usize, const NK: usize, const ND: usize = 2> {
     /// The joint state `(q, q̇)`.
     pub state: State<T, NQ>,
     /// Each contact's mode.
-    pub modes: Modes<NK>,
+    pub modes: Modes<NK, ND>,
     /// Ground coordinates the held rows keep: a sticking contact's tangential position at
-    /// touchdown (entry `2k`) and the ground (entry `2k + 1`, always 0).
+    /// touchdown (its tangential entries) and the ground (its normal entry, always 0).
     pub anchors: SVector<T, NK>,
+    /// The slip direction of each sliding contact of a spatial leg at the start of the
+    /// current step (unit, on its tangential rows; zero elsewhere and on a planar leg,
+    /// whose direction is its mode's): the direction a slide from rest takes, and the
+    /// one its slide guard measures the slip speed along.
+    pub slip: SVector<T, NK>,
 }
 
-impl<T: Real, const NQ: usize, const NK: usize> HybridState<T, NQ, NK> {
+impl<T: Real, const NQ: usize, const NK: usize, const ND: usize> HybridState<T, NQ, NK, ND> {
     /// Every contact in flight.
     pub fn flight(state: State<T, NQ>) -> Self {
         HybridState {
             state,
             modes: Modes::flight(),
             anchors: SVector::zeros(),
+            slip: SVector::zeros(),
         }
     }
 }
@@ -90,6 +106,8 @@ pub struct Event<T: Real> {
     /// The contact's index (in [`ContactModel::CONTACT_NAMES`]).
     pub contact: usize,
     /// The ground's impulse on the leg at a touchdown `(Λ_t, Λ_n)` [N s]; zero otherwise.
+    /// `Λ_t` is signed along the ground's tangent on a planar leg, the tangential
+    /// impulse's magnitude on a spatial one.
     pub impulse: [T; 2],
     /// Kinetic energy the impact took (J); zero for other events.
     pub energy_lost: T,
@@ -234,24 +252,31 @@ fn to_f64<T: Real>(x: T) -> f64 {
 
 /// Motor torques from the time and the hybrid state (the contact modes included): a
 /// hopping controller, or any closure `FnMut(t, &HybridState) -> u`.
-pub trait HybridTorqueSource<T: Real, const NQ: usize, const NK: usize, const NU: usize> {
+pub trait HybridTorqueSource<
+    T: Real,
+    const NQ: usize,
+    const NK: usize,
+    const NU: usize,
+    const ND: usize = 2,
+>
+{
     /// The motor torques `u` at time `t` (s) and hybrid state `state`, or why there are none.
     fn torque(
         &mut self,
         t: T,
-        state: &HybridState<T, NQ, NK>,
+        state: &HybridState<T, NQ, NK, ND>,
     ) -> Result<SVector<T, NU>, ControlError>;
 }
 
-impl<T: Real, const NQ: usize, const NK: usize, const NU: usize, F>
-    HybridTorqueSource<T, NQ, NK, NU> for F
+impl<T: Real, const NQ: usize, const NK: usize, const NU: usize, const ND: usize, F>
+    HybridTorqueSource<T, NQ, NK, NU, ND> for F
 where
-    F: FnMut(T, &HybridState<T, NQ, NK>) -> SVector<T, NU>,
+    F: FnMut(T, &HybridState<T, NQ, NK, ND>) -> SVector<T, NU>,
 {
     fn torque(
         &mut self,
         t: T,
-        state: &HybridState<T, NQ, NK>,
+        state: &HybridState<T, NQ, NK, ND>,
     ) -> Result<SVector<T, NU>, ControlError> {
         Ok(self(t, state))
     }
@@ -259,12 +284,12 @@ where
 
 /// How to step.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct HybridOptions<T: Real, const NK: usize> {
+pub struct HybridOptions<T: Real, const NK: usize, const ND: usize = 2> {
     /// The step (s).
     pub dt: T,
     /// The ground the contacts meet.
-    pub ground: Ground<T>,
-    /// Coulomb μ per row (both rows of contact `k` hold its value).
+    pub ground: Ground<T, ND>,
+    /// Coulomb μ per row (every row of contact `k` holds its value).
     pub friction: SVector<T, NK>,
     /// Baumgarte terms on closures and held contacts (`None`: projection only).
     pub baumgarte: Option<Baumgarte<T>>,
@@ -286,20 +311,21 @@ pub struct HybridSimulator<
     const NC: usize,
     const NU: usize,
     const NK: usize,
+    const ND: usize = 2,
 > where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK, ND>,
 {
     /// The leg's parameters.
     pub params: L::Params<T>,
     /// How to step.
-    pub options: HybridOptions<T, NK>,
+    pub options: HybridOptions<T, NK, ND>,
     model: PhantomData<L>,
 }
 
-impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
-    HybridSimulator<L, T, NQ, NC, NU, NK>
+impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize, const ND: usize>
+    HybridSimulator<L, T, NQ, NC, NU, NK, ND>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK, ND>,
     T: Real,
 {
     /// The spec's ground and friction, RK4 steps of `dt`, events to 1e-12 s (`f64`).
@@ -309,7 +335,7 @@ where
             options: HybridOptions {
                 dt,
                 ground: Ground::of::<L, NQ, NC, NU, NK>(),
-                friction: spec_friction::<L, T, NQ, NC, NU, NK>(),
+                friction: spec_friction::<L, T, NQ, NC, NU, NK, ND>(),
                 baumgarte: None,
                 tolerance: Tolerance::default(),
                 time_tolerance: T::lit(1e-12).max(T::default_epsilon() * T::lit(10.0)),
@@ -320,25 +346,27 @@ where
     }
 
     /// Constrained accelerations and forces in the state's modes.
+    /// A spatial contact sliding from rest slides along [`HybridState::slip`].
     pub fn dynamics(
         &self,
-        hs: &HybridState<T, NQ, NK>,
+        hs: &HybridState<T, NQ, NK, ND>,
         u: &SVector<T, NU>,
     ) -> Result<ContactSolution<T, NQ, NC, NK>, DynamicsError> {
-        forward_dynamics_with_contacts::<L, T, NQ, NC, NU, NK>(
+        ContactSystem::with_slip::<L, NU>(
             &self.params,
             &hs.state.q,
             &hs.state.qd,
-            u,
             &hs.modes,
             &hs.anchors,
             &self.options.ground,
             &self.options.friction,
             self.options.baumgarte,
-        )
+            Some(&hs.slip),
+        )?
+        .solve(&actuation::<L, T, NQ, NC, NU>(u))
     }
 
-    /// Contact positions and velocities in ground coordinates `(t, n − d)`.
+    /// Contact positions and velocities in ground coordinates `(t, [t₂,] n − d)`.
     pub fn contact_coordinates(&self, state: &State<T, NQ>) -> (SVector<T, NK>, SVector<T, NK>) {
         let g = &self.options.ground;
         let x = g.coordinates(&L::contact_positions(&state.q, &self.params));
@@ -349,9 +377,9 @@ where
     /// The torques at time `t` and state `hs` for a step that started with `u0`.
     fn torque_at(
         &self,
-        source: &mut impl HybridTorqueSource<T, NQ, NK, NU>,
+        source: &mut impl HybridTorqueSource<T, NQ, NK, NU, ND>,
         t: T,
-        hs: &HybridState<T, NQ, NK>,
+        hs: &HybridState<T, NQ, NK, ND>,
         u0: &SVector<T, NU>,
     ) -> Result<SVector<T, NU>, HybridError> {
         match self.options.control {
@@ -363,8 +391,8 @@ where
     /// One RK4 step of length `h` from time `t0` in fixed modes.
     fn rk4(
         &self,
-        hs: &HybridState<T, NQ, NK>,
-        source: &mut impl HybridTorqueSource<T, NQ, NK, NU>,
+        hs: &HybridState<T, NQ, NK, ND>,
+        source: &mut impl HybridTorqueSource<T, NQ, NK, NU, ND>,
         t0: T,
         u0: &SVector<T, NU>,
         h: T,
@@ -405,11 +433,11 @@ where
     /// The guards of every row (see the module docs); `+∞` where a row has none.
     pub fn guards(
         &self,
-        hs: &HybridState<T, NQ, NK>,
+        hs: &HybridState<T, NQ, NK, ND>,
         u: &SVector<T, NU>,
     ) -> Result<SVector<T, NK>, DynamicsError> {
         let mut g = SVector::<T, NK>::from_element(T::max_value().unwrap_or(T::one()));
-        let any_ground = (0..NK / 2).any(|k| hs.modes.get(k).on_ground());
+        let any_ground = (0..NK / ND).any(|k| hs.modes.get(k).on_ground());
         let forces = if any_ground {
             self.dynamics(hs, u)?.contact
         } else {
@@ -420,27 +448,43 @@ where
         // Within the projection's tolerance of the ground is on it (see the module docs).
         let band = self.options.tolerance.relative_residual
             * leg_size::<L, T, NQ, NC, NU>(&self.params, &hs.state.q);
-        for k in 0..NK / 2 {
-            let (t, n) = (2 * k, 2 * k + 1);
+        for k in 0..NK / ND {
+            let (t, n) = (ND * k, ND * k + ND - 1);
             match hs.modes.get(k) {
                 ContactMode::Flight => g[n] = x[n] + band,
                 ContactMode::Stick => {
                     g[n] = forces[n];
-                    g[t] = self.options.friction[t] * forces[n] + floor - forces[t].abs();
+                    g[t] = self.options.friction[t] * forces[n] + floor
+                        - tangential_norm::<T, NK, ND>(&forces, k);
                 }
                 ContactMode::Slide { forward } => {
                     g[n] = forces[n];
-                    g[t] = if forward { v[t] } else { -v[t] };
+                    g[t] = self.slip_speed(hs, &v, k, forward);
                 }
             }
         }
         Ok(g)
     }
 
+    /// The slip speed of sliding contact `k` along the direction of its slide: `±v_t` on a
+    /// planar leg, `ŝ · v_t` with `ŝ` the state's [`HybridState::slip`] on a spatial one.
+    fn slip_speed(
+        &self,
+        hs: &HybridState<T, NQ, NK, ND>,
+        v: &SVector<T, NK>,
+        k: usize,
+        forward: bool,
+    ) -> T {
+        if ND == 2 {
+            return if forward { v[ND * k] } else { -v[ND * k] };
+        }
+        (ND * k..ND * k + ND - 1).fold(T::zero(), |a, r| a + hs.slip[r] * v[r])
+    }
+
     /// Moves `q` onto every active constraint (closures, held contacts at their anchors)
     /// by the smallest correction, and `q̇` onto their velocity constraints in the metric
     /// of `M`.
-    pub fn project(&self, hs: &mut HybridState<T, NQ, NK>) -> Result<(), HybridError> {
+    pub fn project(&self, hs: &mut HybridState<T, NQ, NK, ND>) -> Result<(), HybridError> {
         let p = &self.params;
         let g = &self.options.ground;
         let identity = Cholesky::new(&SMatrix::<T, NQ, NQ>::identity())
@@ -460,6 +504,21 @@ where
             }
             (phi, rc)
         };
+        // Corrections along the rows themselves (W = C), none sliding.
+        let rows_at = |q: &SVector<T, NQ>| {
+            let rows = ContactRows::new(
+                g,
+                &L::contact_jacobian(q, p),
+                &hs.modes,
+                &self.options.friction,
+                &SVector::zeros(),
+            );
+            ContactRows {
+                w: rows.c,
+                slide: SVector::zeros(),
+                ..rows
+            }
+        };
         let mut q = hs.state.q;
         let mut converged = false;
         let mut worst = T::zero();
@@ -474,24 +533,12 @@ where
                 converged = true;
                 break;
             }
-            let rows = ContactRows::new(
-                g,
-                &L::contact_jacobian(&q, p),
-                &hs.modes,
-                &self.options.friction,
-            );
-            // Corrections along the rows themselves (W = C), none sliding.
-            let rows = ContactRows {
-                w: rows.c,
-                slide: SVector::zeros(),
-                ..rows
-            };
             let sol = solve_structured(
                 &identity,
                 &L::constraint_jacobian(&q, p),
                 &-phi,
                 L::REDUNDANT_ROWS,
-                &rows,
+                &rows_at(&q),
                 &-rc,
                 &SVector::zeros(),
             )
@@ -507,23 +554,12 @@ where
         hs.state.q = q;
         let m = L::mass_matrix(&q, p);
         let chol_m = Cholesky::new(&m).ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
-        let rows = ContactRows::new(
-            g,
-            &L::contact_jacobian(&q, p),
-            &hs.modes,
-            &self.options.friction,
-        );
-        let rows = ContactRows {
-            w: rows.c,
-            slide: SVector::zeros(),
-            ..rows
-        };
         let sol = solve_structured(
             &chol_m,
             &L::constraint_jacobian(&q, p),
             &SVector::zeros(),
             L::REDUNDANT_ROWS,
-            &rows,
+            &rows_at(&q),
             &SVector::zeros(),
             &mul(&m, &hs.state.qd),
         )?;
@@ -531,22 +567,30 @@ where
         Ok(())
     }
 
+    /// Holds contact `k` where it is now: its tangential anchors at its position, its
+    /// normal one on the ground.
+    fn anchor(&self, hs: &mut HybridState<T, NQ, NK, ND>, k: usize) {
+        let (x, _) = self.contact_coordinates(&hs.state);
+        for r in ND * k..ND * k + ND - 1 {
+            hs.anchors[r] = x[r];
+        }
+        hs.anchors[ND * k + ND - 1] = T::zero();
+    }
+
     /// Touchdown of contact `k` at the current state: stick there, with the plastic impact
     /// of every held row; a contact that would pull stays (or goes) in flight.
     fn touchdown(
         &self,
-        hs: &mut HybridState<T, NQ, NK>,
+        hs: &mut HybridState<T, NQ, NK, ND>,
         k: usize,
         t: T,
         events: &mut StepEvents<T>,
     ) -> Result<(), HybridError> {
-        let (x, _) = self.contact_coordinates(&hs.state);
         hs.modes.set(k, ContactMode::Stick);
-        hs.anchors[2 * k] = x[2 * k];
-        hs.anchors[2 * k + 1] = T::zero();
-        for _ in 0..=NK / 2 {
+        self.anchor(hs, k);
+        for _ in 0..=NK / ND {
             let mut modes = hs.modes;
-            match impact_map::<L, T, NQ, NC, NU, NK>(
+            match impact_map::<L, T, NQ, NC, NU, NK, ND>(
                 &self.params,
                 &hs.state.q,
                 &hs.state.qd,
@@ -557,12 +601,20 @@ where
                 Ok(imp) => {
                     hs.modes = modes;
                     hs.state.qd = imp.qd_plus;
+                    if ND > 2 {
+                        hs.slip = imp.slip;
+                    }
+                    let tangential = if ND == 2 {
+                        imp.impulses[ND * k]
+                    } else {
+                        tangential_norm::<T, NK, ND>(&imp.impulses, k)
+                    };
                     return events.push(
                         Event {
                             t,
                             kind: EventKind::Touchdown,
                             contact: k,
-                            impulse: [imp.impulses[2 * k], imp.impulses[2 * k + 1]],
+                            impulse: [tangential, imp.impulses[ND * k + ND - 1]],
                             energy_lost: imp.energy_lost,
                         },
                         t,
@@ -581,26 +633,79 @@ where
         Ok(())
     }
 
+    /// The direction in which sliding contact `k` of a spatial leg, at rest along the
+    /// ground, starts to slip under `u`: the unit `ŝ` for which the tangential
+    /// acceleration it gets sliding along `ŝ` (friction `μ λ_n` against it) points along
+    /// `ŝ`. Found by fixed-point iteration from `start` (the sticking force's opposite):
+    /// each round slides along the direction the last round's acceleration took, until
+    /// it repeats to `√ε` (at most 64 rounds; the last is kept). Returns the state's
+    /// slip directions with contact `k`'s set, and whether the acceleration then points
+    /// along `ŝ` with the normal force pushing (the slide is consistent).
+    pub fn slip_from_rest(
+        &self,
+        hs: &HybridState<T, NQ, NK, ND>,
+        k: usize,
+        u: &SVector<T, NU>,
+        start: &SVector<T, NK>,
+    ) -> Result<(SVector<T, NK>, bool), HybridError> {
+        let tangential = ND * k..ND * k + ND - 1;
+        let mut trial = *hs;
+        trial.modes.set(k, ContactMode::Slide { forward: true });
+        set_unit(&mut trial.slip, start, tangential.clone());
+        let mut consistent = false;
+        for _ in 0..64 {
+            let sol = self.dynamics(&trial, u)?;
+            let a = self.contact_acceleration(&trial, &sol.x);
+            let along = tangential
+                .clone()
+                .fold(T::zero(), |s, r| s + a[r] * trial.slip[r]);
+            consistent = sol.contact[ND * k + ND - 1] >= T::zero() && along >= T::zero();
+            let old = trial.slip;
+            if !set_unit(&mut trial.slip, &a, tangential.clone()) {
+                break; // no tangential acceleration: any direction is as good
+            }
+            let turn = tangential
+                .clone()
+                .fold(T::zero(), |m, r| m.max((trial.slip[r] - old[r]).abs()));
+            if turn <= T::default_epsilon().sqrt() {
+                break;
+            }
+        }
+        Ok((trial.slip, consistent))
+    }
+
+    /// The contacts' accelerations in ground coordinates, `R (J_c q̈ + J̇_c q̇)`.
+    fn contact_acceleration(
+        &self,
+        hs: &HybridState<T, NQ, NK, ND>,
+        qdd: &SVector<T, NQ>,
+    ) -> SVector<T, NK> {
+        let (q, qd) = (&hs.state.q, &hs.state.qd);
+        self.options.ground.rows(
+            &(L::contact_jacobian(q, &self.params) * qdd + L::contact_bias(q, qd, &self.params)),
+        )
+    }
+
     /// Makes the modes consistent with the forces at the current state: a held contact
     /// that pulls lifts off, one outside the cone slides, a slide that has stopped sticks.
     fn settle(
         &self,
-        hs: &mut HybridState<T, NQ, NK>,
+        hs: &mut HybridState<T, NQ, NK, ND>,
         u: &SVector<T, NU>,
         t: T,
         events: &mut StepEvents<T>,
     ) -> Result<(), HybridError> {
         for _ in 0..NK + 2 {
             let forces = self.dynamics(hs, u)?.contact;
-            let (x, v) = self.contact_coordinates(&hs.state);
+            let (_, v) = self.contact_coordinates(&hs.state);
             let floor = self.force_floor(&hs.state.q, u);
             // A contact speed below rounding (as in `step`).
             let still = self.options.tolerance.relative_residual
                 * leg_size::<L, T, NQ, NC, NU>(&self.params, &hs.state.q)
                 / self.options.dt;
             let mut change = None;
-            for k in 0..NK / 2 {
-                let (ti, ni) = (2 * k, 2 * k + 1);
+            for k in 0..NK / ND {
+                let (ti, ni) = (ND * k, ND * k + ND - 1);
                 let mu = self.options.friction[ti];
                 match hs.modes.get(k) {
                     ContactMode::Flight => {}
@@ -609,47 +714,56 @@ where
                         // started), the mode consistent with the forces and motions
                         // (Painlevé: Coulomb sliding may pull where sticking pushes
                         // out of the cone and flight would sink); else it lifts off.
-                        let next = if v[ti].abs() <= still {
+                        let next = if tangential_norm::<T, NK, ND>(&v, k) <= still {
                             self.consistent_mode(hs, k, u, floor)?
-                                .filter(|m| *m != mode)
-                                .unwrap_or(ContactMode::Flight)
+                                .filter(|m| m.0 != mode)
+                                .unwrap_or((ContactMode::Flight, hs.slip))
                         } else {
-                            ContactMode::Flight
+                            (ContactMode::Flight, hs.slip)
                         };
-                        change = Some((k, next, kind_of(next)));
+                        change = Some((k, next, kind_of(next.0)));
                     }
                     _ if forces[ni] < T::zero() => {
-                        change = Some((k, ContactMode::Flight, EventKind::Liftoff))
+                        change = Some((k, (ContactMode::Flight, hs.slip), EventKind::Liftoff))
                     }
-                    ContactMode::Stick if forces[ti].abs() > mu * forces[ni] + floor => {
+                    ContactMode::Stick
+                        if tangential_norm::<T, NK, ND>(&forces, k) > mu * forces[ni] + floor =>
+                    {
                         // It slips: the way the unheld demand pushes it, if that slide
                         // is consistent, else the other way (or off the ground).
-                        let slide = ContactMode::Slide {
-                            forward: forces[ti] < T::zero(),
-                        };
+                        let slide = self.slide_against(hs, &forces, k);
                         let next = match self.consistent_mode(hs, k, u, floor)? {
-                            Some(m) if m != ContactMode::Stick => m,
+                            Some(m) if m.0 != ContactMode::Stick => m,
                             _ => slide,
                         };
-                        change = Some((k, next, kind_of(next)));
+                        change = Some((k, next, kind_of(next.0)));
                     }
                     ContactMode::Slide { forward } => {
-                        let speed = if forward { v[ti] } else { -v[ti] };
-                        if speed <= T::zero() {
+                        if self.slip_speed(hs, &v, k, forward) <= T::zero() {
                             // Stopped: it sticks if the cone can hold it there, else it
                             // slides the way the unheld friction demand pushes it.
                             let mut held = *hs;
                             held.modes.set(k, ContactMode::Stick);
-                            held.anchors[ti] = x[ti];
+                            self.anchor(&mut held, k);
                             let f = self.dynamics(&held, u)?.contact;
-                            if f[ti].abs() <= mu * f[ni] + floor {
-                                hs.anchors[ti] = x[ti];
-                                change = Some((k, ContactMode::Stick, EventKind::Stick));
-                            } else if (f[ti] < T::zero()) != forward {
-                                let slide = ContactMode::Slide {
-                                    forward: f[ti] < T::zero(),
+                            if tangential_norm::<T, NK, ND>(&f, k) <= mu * f[ni] + floor {
+                                *hs = HybridState {
+                                    modes: hs.modes,
+                                    ..held
                                 };
-                                change = Some((k, slide, EventKind::Slip));
+                                change = Some((k, (ContactMode::Stick, hs.slip), EventKind::Stick));
+                            } else if ND == 2 {
+                                if (f[ti] < T::zero()) != forward {
+                                    let slide = self.slide_against(hs, &f, k);
+                                    change = Some((k, slide, EventKind::Slip));
+                                }
+                            } else {
+                                let (slip, _) = self.slip_from_rest(hs, k, u, &-f)?;
+                                let turn = (ti..ni)
+                                    .fold(T::zero(), |m, r| m.max((slip[r] - hs.slip[r]).abs()));
+                                if turn > T::default_epsilon().sqrt() {
+                                    change = Some((k, (hs.modes.get(k), slip), EventKind::Slip));
+                                }
                             }
                         }
                     }
@@ -661,8 +775,9 @@ where
             }
             match change {
                 None => return Ok(()),
-                Some((k, mode, kind)) => {
+                Some((k, (mode, slip), kind)) => {
                     hs.modes.set(k, mode);
+                    hs.slip = slip;
                     events.push(Event::switch(t, kind, k), t)?;
                 }
             }
@@ -670,56 +785,74 @@ where
         Err(HybridError::TooManyEvents { t: to_f64(t) })
     }
 
+    /// Contact `k` sliding against the tangential force `forces` holds it with (the way
+    /// that force's opposite points), and the state's slip directions with its own.
+    fn slide_against(
+        &self,
+        hs: &HybridState<T, NQ, NK, ND>,
+        forces: &SVector<T, NK>,
+        k: usize,
+    ) -> (ContactMode, SVector<T, NK>) {
+        let mut slip = hs.slip;
+        if ND > 2 {
+            set_unit(&mut slip, &-forces, ND * k..ND * k + ND - 1);
+        }
+        let forward = ND > 2 || forces[ND * k] < T::zero();
+        (ContactMode::Slide { forward }, slip)
+    }
+
     /// The first mode of contact `k` (others as they are) that its forces and motion are
-    /// consistent with, in the order stick, slide either way (the way the sticking force
-    /// points first), flight; `None` if none is. Stick: `λ_n ≥ 0` in the cone. Slide from
-    /// rest: `λ_n ≥ 0` and the contact accelerating the way it slides. Flight: the contact
-    /// not accelerating into the ground.
+    /// consistent with, in the order stick, slide (planar: either way, the way the
+    /// sticking force points first; spatial: in the direction of
+    /// [`HybridSimulator::slip_from_rest`]), flight; `None` if none is. Stick: `λ_n ≥ 0`
+    /// in the cone. Slide from rest: `λ_n ≥ 0` and the contact accelerating the way it
+    /// slides. Flight: the contact not accelerating into the ground. Each comes with the
+    /// state's slip directions for it.
+    #[allow(clippy::type_complexity)]
     fn consistent_mode(
         &self,
-        hs: &HybridState<T, NQ, NK>,
+        hs: &HybridState<T, NQ, NK, ND>,
         k: usize,
         u: &SVector<T, NU>,
         floor: T,
-    ) -> Result<Option<ContactMode>, HybridError> {
-        let (ti, ni) = (2 * k, 2 * k + 1);
+    ) -> Result<Option<(ContactMode, SVector<T, NK>)>, HybridError> {
+        let (ti, ni) = (ND * k, ND * k + ND - 1);
         let mu = self.options.friction[ti];
-        let (x, _) = self.contact_coordinates(&hs.state);
         let with = |mode: ContactMode| {
             let mut trial = *hs;
             trial.modes.set(k, mode);
             if mode == ContactMode::Stick {
-                trial.anchors[ti] = x[ti];
+                self.anchor(&mut trial, k);
             }
             trial
         };
-        let acceleration = |trial: &HybridState<T, NQ, NK>, qdd: &SVector<T, NQ>| {
-            let (q, qd) = (&trial.state.q, &trial.state.qd);
-            self.options.ground.rows(
-                &(L::contact_jacobian(q, &self.params) * qdd
-                    + L::contact_bias(q, qd, &self.params)),
-            )
-        };
         let stick = with(ContactMode::Stick);
         let f = self.dynamics(&stick, u)?.contact;
-        if f[ni] >= T::zero() && f[ti].abs() <= mu * f[ni] + floor {
-            return Ok(Some(ContactMode::Stick));
+        if f[ni] >= T::zero() && tangential_norm::<T, NK, ND>(&f, k) <= mu * f[ni] + floor {
+            return Ok(Some((ContactMode::Stick, hs.slip)));
         }
-        let first = f[ti] < T::zero();
-        for forward in [first, !first] {
-            let mode = ContactMode::Slide { forward };
-            let trial = with(mode);
-            let sol = self.dynamics(&trial, u)?;
-            let a = acceleration(&trial, &sol.x)[ti];
-            let along = if forward { a } else { -a };
-            if sol.contact[ni] >= T::zero() && along >= T::zero() {
-                return Ok(Some(mode));
+        if ND == 2 {
+            let first = f[ti] < T::zero();
+            for forward in [first, !first] {
+                let mode = ContactMode::Slide { forward };
+                let trial = with(mode);
+                let sol = self.dynamics(&trial, u)?;
+                let a = self.contact_acceleration(&trial, &sol.x)[ti];
+                let along = if forward { a } else { -a };
+                if sol.contact[ni] >= T::zero() && along >= T::zero() {
+                    return Ok(Some((mode, hs.slip)));
+                }
+            }
+        } else {
+            let (slip, consistent) = self.slip_from_rest(hs, k, u, &-f)?;
+            if consistent {
+                return Ok(Some((ContactMode::Slide { forward: true }, slip)));
             }
         }
         let flight = with(ContactMode::Flight);
         let sol = self.dynamics(&flight, u)?;
-        if acceleration(&flight, &sol.x)[ni] >= T::zero() {
-            return Ok(Some(ContactMode::Flight));
+        if self.contact_acceleration(&flight, &sol.x)[ni] >= T::zero() {
+            return Ok(Some((ContactMode::Flight, hs.slip)));
         }
         Ok(None)
     }
@@ -731,25 +864,27 @@ where
         &self,
         state: State<T, NQ>,
         u: &SVector<T, NU>,
-    ) -> Result<HybridState<T, NQ, NK>, HybridError> {
+    ) -> Result<HybridState<T, NQ, NK, ND>, HybridError> {
         let mut hs = HybridState::flight(state);
         let (x, v) = self.contact_coordinates(&state);
         let size = leg_size::<L, T, NQ, NC, NU>(&self.params, &state.q);
         // A contact under the ground is refused, not moved up onto it (issue 29).
-        for k in 0..NK / 2 {
-            if x[2 * k + 1] < -(size * T::lit(crate::assembly::ON_CLOSURES)) {
+        for k in 0..NK / ND {
+            let n = ND * k + ND - 1;
+            if x[n] < -(size * T::lit(crate::assembly::ON_CLOSURES)) {
                 return Err(HybridError::StartsUnderGround {
                     contact: L::CONTACT_NAMES[k],
-                    depth: -to_f64(x[2 * k + 1]),
+                    depth: -to_f64(x[n]),
                 });
             }
         }
-        for k in 0..NK / 2 {
-            if x[2 * k + 1] <= self.options.tolerance.relative_residual * size
-                && v[2 * k + 1] <= T::zero()
-            {
+        for k in 0..NK / ND {
+            let n = ND * k + ND - 1;
+            if x[n] <= self.options.tolerance.relative_residual * size && v[n] <= T::zero() {
                 hs.modes.set(k, ContactMode::Stick);
-                hs.anchors[2 * k] = x[2 * k];
+                for r in ND * k..n {
+                    hs.anchors[r] = x[r];
+                }
             }
         }
         let mut events = StepEvents::new();
@@ -763,9 +898,9 @@ where
     /// step's events.
     pub fn step(
         &self,
-        hs: &mut HybridState<T, NQ, NK>,
+        hs: &mut HybridState<T, NQ, NK, ND>,
         t: T,
-        source: &mut impl HybridTorqueSource<T, NQ, NK, NU>,
+        source: &mut impl HybridTorqueSource<T, NQ, NK, NU, ND>,
     ) -> Result<StepEvents<T>, HybridError> {
         let mut events = StepEvents::new();
         let mut now = t;
@@ -783,14 +918,24 @@ where
             let (x, v) = self.contact_coordinates(&hs.state);
             let size = leg_size::<L, T, NQ, NC, NU>(&self.params, &hs.state.q);
             let still = self.options.tolerance.relative_residual * size / self.options.dt;
-            if let Some(k) = (0..NK / 2).find(|&k| {
-                hs.modes.get(k) == ContactMode::Flight
-                    && x[2 * k + 1] <= T::zero()
-                    && v[2 * k + 1] < -still
+            if let Some(k) = (0..NK / ND).find(|&k| {
+                let n = ND * k + ND - 1;
+                hs.modes.get(k) == ContactMode::Flight && x[n] <= T::zero() && v[n] < -still
             }) {
                 self.touchdown(hs, k, now, &mut events)?;
                 self.settle(hs, &u, now, &mut events)?;
                 continue;
+            }
+            // A spatial slide's guard measures the slip speed along the direction it has
+            // now (which it keeps from rest until it moves).
+            if ND > 2 {
+                for k in 0..NK / ND {
+                    if let ContactMode::Slide { .. } = hs.modes.get(k) {
+                        if tangential_norm::<T, NK, ND>(&v, k) > still {
+                            set_unit(&mut hs.slip, &v, ND * k..ND * k + ND - 1);
+                        }
+                    }
+                }
             }
             let trial = self.rk4(hs, source, now, &u, h)?;
             let at = |s: State<T, NQ>| HybridState { state: s, ..*hs };
@@ -834,26 +979,22 @@ where
             hs.state = s;
             now += tau;
             self.project(hs)?;
-            let k = r / 2;
-            match (hs.modes.get(k), r % 2) {
+            let k = r / ND;
+            match (hs.modes.get(k), r % ND == ND - 1) {
                 (ContactMode::Flight, _) => self.touchdown(hs, k, now, &mut events)?,
-                (_, 1) => {
+                (_, true) => {
                     hs.modes.set(k, ContactMode::Flight);
                     events.push(Event::switch(now, EventKind::Liftoff, k), now)?;
                 }
                 (ContactMode::Stick, _) => {
                     let forces = self.dynamics(hs, &u)?.contact;
-                    hs.modes.set(
-                        k,
-                        ContactMode::Slide {
-                            forward: forces[r] < T::zero(),
-                        },
-                    );
+                    let (mode, slip) = self.slide_against(hs, &forces, k);
+                    hs.modes.set(k, mode);
+                    hs.slip = slip;
                     events.push(Event::switch(now, EventKind::Slip, k), now)?;
                 }
                 (ContactMode::Slide { .. }, _) => {
-                    let (x, _) = self.contact_coordinates(&hs.state);
-                    hs.anchors[r] = x[r];
+                    self.anchor(hs, k);
                     hs.modes.set(k, ContactMode::Stick);
                     events.push(Event::switch(now, EventKind::Stick, k), now)?;
                 }
@@ -863,6 +1004,23 @@ where
         }
         Ok(events)
     }
+}
+
+/// Writes the unit direction of `v`'s entries `rows` into `slip`'s and says whether it
+/// could (`v` not zero there, and finite).
+fn set_unit<T: Real, const NK: usize>(
+    slip: &mut SVector<T, NK>,
+    v: &SVector<T, NK>,
+    rows: core::ops::Range<usize>,
+) -> bool {
+    let norm = rows.clone().fold(T::zero(), |a, r| a + v[r] * v[r]).sqrt();
+    if !(norm > T::zero() && norm.is_finite()) {
+        return false;
+    }
+    for r in rows {
+        slip[r] = v[r] / norm;
+    }
+    true
 }
 
 /// The event a switch to `mode` is.
@@ -936,14 +1094,15 @@ mod record {
         const NC: usize,
         const NU: usize,
         const NK: usize,
+        const ND: usize = 2,
     > {
         /// Time (s).
         pub t: T,
         /// The state and contact modes.
-        pub state: HybridState<T, NQ, NK>,
+        pub state: HybridState<T, NQ, NK, ND>,
         /// The torques the source gives at this instant.
         pub u: SVector<T, NU>,
-        /// Ground forces `(λ_t, λ_n)` per contact at this instant.
+        /// Ground forces `(λ_t, λ_n)` per contact at this instant, in the ground's frame.
         pub contact_forces: SVector<T, NK>,
         /// The closure forces `F` at this instant (base frame).
         pub closure_forces: SVector<T, NC>,
@@ -963,9 +1122,10 @@ mod record {
         const NC: usize,
         const NU: usize,
         const NK: usize,
+        const ND: usize = 2,
     > {
         /// The recorded instants, in time order.
-        pub samples: Vec<HybridSample<T, NQ, NC, NU, NK>>,
+        pub samples: Vec<HybridSample<T, NQ, NC, NU, NK, ND>>,
         /// Every event, in time order.
         pub events: Vec<Event<T>>,
     }
@@ -978,6 +1138,7 @@ mod record {
         const NC: usize,
         const NU: usize,
         const NK: usize,
+        const ND: usize = 2,
     > {
         /// When it stopped (s): the start of the step, or the instant of the sample, that
         /// failed.
@@ -985,11 +1146,17 @@ mod record {
         /// Why it failed.
         pub cause: HybridError,
         /// Everything recorded before.
-        pub record: HybridRecord<T, NQ, NC, NU, NK>,
+        pub record: HybridRecord<T, NQ, NC, NU, NK, ND>,
     }
 
-    impl<T: Real, const NQ: usize, const NC: usize, const NU: usize, const NK: usize> fmt::Display
-        for HybridStopped<T, NQ, NC, NU, NK>
+    impl<
+            T: Real,
+            const NQ: usize,
+            const NC: usize,
+            const NU: usize,
+            const NK: usize,
+            const ND: usize,
+        > fmt::Display for HybridStopped<T, NQ, NC, NU, NK, ND>
     {
         fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
             write!(
@@ -1003,23 +1170,36 @@ mod record {
         }
     }
 
-    impl<T: Real, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
-        std::error::Error for HybridStopped<T, NQ, NC, NU, NK>
+    impl<
+            T: Real,
+            const NQ: usize,
+            const NC: usize,
+            const NU: usize,
+            const NK: usize,
+            const ND: usize,
+        > std::error::Error for HybridStopped<T, NQ, NC, NU, NK, ND>
     {
     }
 
-    impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
-        HybridSimulator<L, T, NQ, NC, NU, NK>
+    impl<
+            L,
+            T,
+            const NQ: usize,
+            const NC: usize,
+            const NU: usize,
+            const NK: usize,
+            const ND: usize,
+        > HybridSimulator<L, T, NQ, NC, NU, NK, ND>
     where
-        L: ContactModel<NQ, NC, NU, NK>,
+        L: ContactModel<NQ, NC, NU, NK, ND>,
         T: Real,
     {
         fn sample(
             &self,
             t: T,
-            hs: &HybridState<T, NQ, NK>,
+            hs: &HybridState<T, NQ, NK, ND>,
             u: SVector<T, NU>,
-        ) -> Result<HybridSample<T, NQ, NC, NU, NK>, HybridError> {
+        ) -> Result<HybridSample<T, NQ, NC, NU, NK, ND>, HybridError> {
             let sol = self.dynamics(hs, &u)?;
             let (x, _) = self.contact_coordinates(&hs.state);
             let held = hs.modes.held_rows();
@@ -1047,13 +1227,14 @@ mod record {
         /// every event. Stops at the first failure, keeping the record so far.
         pub fn run(
             &self,
-            initial: HybridState<T, NQ, NK>,
+            initial: HybridState<T, NQ, NK, ND>,
             steps: usize,
-            source: &mut impl HybridTorqueSource<T, NQ, NK, NU>,
-        ) -> Result<HybridRecord<T, NQ, NC, NU, NK>, HybridStopped<T, NQ, NC, NU, NK>> {
+            source: &mut impl HybridTorqueSource<T, NQ, NK, NU, ND>,
+        ) -> Result<HybridRecord<T, NQ, NC, NU, NK, ND>, HybridStopped<T, NQ, NC, NU, NK, ND>>
+        {
             crate::simulate::step::check_record(
                 steps,
-                core::mem::size_of::<HybridSample<T, NQ, NC, NU, NK>>(),
+                core::mem::size_of::<HybridSample<T, NQ, NC, NU, NK, ND>>(),
             )
             .map_err(|e| HybridStopped {
                 t: T::zero(),

@@ -50,8 +50,9 @@ pub struct ModelInfo {
     pub contacts: Vec<String>,
     /// Coulomb μ of each contact (the spec's).
     pub contact_friction: Vec<f64>,
-    /// The ground `normal · x = offset`, unit normal in the base frame.
-    pub ground_normal: [f64; 2],
+    /// The ground `normal · x = offset`, unit normal in the base frame (`dimension`
+    /// entries).
+    pub ground_normal: Vec<f64>,
     pub ground_offset: f64,
     /// 2 (planar, left out of the file) or 3 (spatial): the rows of every point term.
     #[serde(default = "planar", skip_serializing_if = "is_planar")]

@@ -140,8 +140,9 @@ pub struct Model {
     pub home: Vec<f64>,
     pub springs: Vec<Spring>,
     pub contacts: Vec<Contact>,
-    /// The ground line `normal · x = offset`, unit normal (base frame).
-    pub ground_normal: [f64; 2],
+    /// The ground `normal · x = offset` (a line in the plane, a plane in space), unit
+    /// normal (base frame, `dimension` entries).
+    pub ground_normal: Vec<f64>,
     pub ground_offset: f64,
 }
 
@@ -534,18 +535,25 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
             friction: c.friction.get_ref().value,
         });
     }
+    // Level ground by default: normal +y in the plane, +z in space.
+    let up = if dimension == 3 {
+        vec![0.0, 0.0, 1.0]
+    } else {
+        vec![0.0, 1.0]
+    };
     let (ground_normal, ground_offset) = match &f.ground {
-        None => ([0.0, 1.0], 0.0),
+        None => (up, 0.0),
         Some(g) => {
             let g = g.get_ref();
-            let n = g
-                .normal
-                .as_ref()
-                .map_or_else(|| vec![0.0, 1.0], |n| n.get_ref().value.clone());
-            let (x, y) = (n[0], n[1]);
-            let norm = x.hypot(y);
+            let n = g.normal.as_ref().map_or(up, |n| n.get_ref().value.clone());
+            // The planar norm as `hypot` (the planar legs' bits unchanged).
+            let norm = if n.len() == 2 {
+                n[0].hypot(n[1])
+            } else {
+                n.iter().map(|x| x * x).sum::<f64>().sqrt()
+            };
             (
-                [x / norm, y / norm],
+                n.iter().map(|x| x / norm).collect(),
                 g.offset.as_ref().map_or(0.0, |o| o.get_ref().value),
             )
         }

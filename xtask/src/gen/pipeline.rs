@@ -355,7 +355,7 @@ fn assemble(spec: &Spec, model: &Model, derived: Derived) -> IrFile {
                 .collect(),
             contacts: model.contacts.iter().map(|c| c.name.clone()).collect(),
             contact_friction: model.contacts.iter().map(|c| c.friction).collect(),
-            ground_normal: model.ground_normal,
+            ground_normal: model.ground_normal.clone(),
             ground_offset: model.ground_offset,
             dimension: model.dimension,
             ball_joints: model

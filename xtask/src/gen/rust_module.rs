@@ -351,6 +351,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             .any(|(i, p)| p.is_some_and(|p| p >= i))
         || info.contact_friction.len() != info.contacts.len()
         || !info.contact_friction.iter().all(|m| m.is_finite())
+        || info.ground_normal.len() != nd
         || !info.ground_normal.iter().all(|v| v.is_finite())
         || !info.ground_offset.is_finite()
     {
@@ -522,9 +523,9 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     );
     let (lq, lc, lu, lk) = (lit(nq), lit(nc), lit(nu), lit(nk));
     // A planar leg is the runtime's `Leg` with its contacts; a spatial leg implements
-    // `LegModel` with three coordinates per point and is a `Leg` without contacts (its
-    // contacts come later).
+    // `LegModel` and `ContactModel` with three coordinates per point.
     let spatial = nd == 3;
+    let nd_lit = lit(nd);
     let lp = lit(info.closure_points());
     // Planar modules keep their words (their snapshots unchanged).
     let nc_doc = if spatial {
@@ -532,20 +533,11 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     } else {
         " Number of closure rows (two per closure)."
     };
-    let imports = if spatial {
-        quote! {
-            use leg_models::{
-                Arithmetic, ConstraintDerivatives, DynamicsDerivatives, DynamicsTerms, JointKind,
-                LegDynamics, LegModel, Parameters,
-            };
-        }
-    } else {
-        quote! {
-            use leg_models::{
-                Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
-                JointKind, LegDynamics, LegModel, Parameters,
-            };
-        }
+    let imports = quote! {
+        use leg_models::{
+            Arithmetic, ConstraintDerivatives, ContactModel, DynamicsDerivatives, DynamicsTerms,
+            JointKind, LegDynamics, LegModel, Parameters,
+        };
     };
     let aliases = if spatial {
         quote! {
@@ -579,17 +571,24 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     } else {
         quote!(NQ, NC, NU)
     };
-    let contact_impl = if spatial {
-        quote!()
+    let (contact_sizes, nk_doc) = if spatial {
+        (
+            quote!(NQ, NC, NU, NK, ND),
+            " Number of contact rows (three per contact point).",
+        )
     } else {
-        quote! {
-            impl ContactModel<NQ, NC, NU, NK> for #ty {
-                const CONTACT_NAMES: &'static [&'static str] = &[#(#contact_names),*];
-                const CONTACT_FRICTION: &'static [f64] = &[#(#friction),*];
-                const GROUND_NORMAL: [f64; 2] = [#(#normal),*];
-                const GROUND_OFFSET: f64 = #offset;
-                #(#contact_methods)*
-            }
+        (
+            quote!(NQ, NC, NU, NK),
+            " Number of contact rows (two per contact point).",
+        )
+    };
+    let contact_impl = quote! {
+        impl ContactModel<#contact_sizes> for #ty {
+            const CONTACT_NAMES: &'static [&'static str] = &[#(#contact_names),*];
+            const CONTACT_FRICTION: &'static [f64] = &[#(#friction),*];
+            const GROUND_NORMAL: [f64; #nd_lit] = [#(#normal),*];
+            const GROUND_OFFSET: f64 = #offset;
+            #(#contact_methods)*
         }
     };
     let tokens = quote! {
@@ -615,7 +614,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         pub const NC: usize = #lc;
         /// Number of actuated joints.
         pub const NU: usize = #lu;
-        /// Number of contact rows (two per contact point).
+        #[doc = #nk_doc]
         pub const NK: usize = #lk;
 
         #[doc = #doc]

@@ -881,22 +881,6 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
             check_num(ctx, r, &f("rest"), Sign::Any)?;
         }
     }
-    if dim == 3 {
-        if let Some(c) = file.contacts.first() {
-            return Err(ctx.span(
-                &c.get_ref().name,
-                "contacts[0].name",
-                "a spatial leg cannot have contacts yet: the ground contact with its friction cone is planar only for now",
-            ));
-        }
-        if let Some(g) = &file.ground {
-            return Err(ctx.span(
-                g,
-                "ground",
-                "a spatial leg has no ground yet (its contacts are planar only for now)",
-            ));
-        }
-    }
     for (k, contact) in file.contacts.iter().enumerate() {
         let c = contact.get_ref();
         let f = |field: &str| format!("contacts[{k}].{field}");

@@ -46,7 +46,7 @@ fn largest_input(q: &[f64], qd: &[f64], u: &[f64]) -> f64 {
 }
 
 pub fn run<
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + leg_models::LegModel<NQ, NC, NU>,
     const NQ: usize,
     const NC: usize,
     const NU: usize,
@@ -194,8 +194,8 @@ pub fn run<
     if let Some(k) = impact_contact {
         let mut modes = Modes::<NK>::flight();
         modes.set(k, ContactMode::Stick);
-        let mu = spec_friction::<L, f64, NQ, NC, NU, NK>();
-        match impact_map::<L, f64, NQ, NC, NU, NK>(&p, &q, &qd, &mut modes, &ground, &mu) {
+        let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 2>();
+        match impact_map::<L, f64, NQ, NC, NU, NK, 2>(&p, &q, &qd, &mut modes, &ground, &mu) {
             Ok(imp) => {
                 let mode = match modes.get(k) {
                     ContactMode::Stick => "stick",
@@ -444,7 +444,7 @@ pub fn run_spatial<
         (
             args.impact.is_some(),
             "--impact",
-            "contacts on a spatial leg come later: it has no contact points to land",
+            "eval lands planar contacts only for now (a spatial leg's impact map is the runtime's `impact_map`)",
         ),
     ] {
         if given {

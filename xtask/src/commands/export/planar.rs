@@ -93,7 +93,7 @@ pub fn mjcf(m: &Model) -> String {
     if !m.contacts.is_empty() {
         // The plane n·x = d, lowered by the spheres' radius so that a sphere touches it
         // when its centre (the contact point) reaches the ground.
-        let [nx, ny] = m.ground_normal;
+        let (nx, ny) = (m.ground_normal[0], m.ground_normal[1]);
         let d = m.ground_offset - CONTACT_RADIUS;
         let _ = writeln!(
             out,

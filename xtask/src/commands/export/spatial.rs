@@ -13,7 +13,7 @@
 //! second anchor from `qpos0` never applies; a rod (a distance closure) is a spatial tendon
 //! between its two sites held by a tendon equality, whose offset follows MuJoCo's `qpos0`
 //! rule: the rod's length less the sites' distance at `q = 0`. The foot is the site
-//! `foot.point`. Contact stays disabled (a spatial leg has no contacts yet). The time step
+//! `foot.point`. Contact stays disabled (the export checks the swing leg). The time step
 //! is 0.5 ms, Cassie's own: at 1 ms MuJoCo's RK4 diverged within 7 ms on Cassie's leg (its 1500 N m/rad shin
 //! spring beside an achilles rod of 4e-6 kg m² about its axis).
 

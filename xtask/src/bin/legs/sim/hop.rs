@@ -23,7 +23,7 @@ use crate::sim::{body_points, frame_at, max, Settings};
 
 enum Source<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + leg_models::LegModel<NQ, NC, NU>,
 {
     Hop(Box<HopController<L, f64, NQ, NC, NU, NK>>),
     Passive,
@@ -31,7 +31,7 @@ where
 
 struct WithProgress<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + leg_models::LegModel<NQ, NC, NU>,
 {
     source: Source<L, NQ, NC, NU, NK>,
     progress: Progress,
@@ -42,7 +42,7 @@ impl<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
     leg_models::simulate::hybrid::HybridTorqueSource<f64, NQ, NK, NU>
     for WithProgress<L, NQ, NC, NU, NK>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + leg_models::LegModel<NQ, NC, NU>,
 {
     fn torque(
         &mut self,
@@ -58,7 +58,7 @@ where
 }
 
 pub fn run<
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + leg_models::LegModel<NQ, NC, NU>,
     const NQ: usize,
     const NC: usize,
     const NU: usize,
@@ -658,7 +658,7 @@ fn serve<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
     controller: &mut HopController<L, f64, NQ, NC, NU, NK>,
 ) -> Result<(), Error>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK> + leg_models::LegModel<NQ, NC, NU>,
 {
     use leg_models::simulate::hybrid::HybridTorqueSource;
     use std::io::{BufRead, Write};
