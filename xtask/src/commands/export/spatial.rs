@@ -220,11 +220,20 @@ fn body(m: &Model, i: usize, depth: usize, out: &mut String) {
         num(value(&m.params, &l.mass)),
         tensor.join(" ")
     );
-    let _ = writeln!(
-        out,
-        "{pad}  <geom type=\"capsule\" fromto=\"0 0 0 {}\" size=\"0.006\" contype=\"0\" conaffinity=\"0\" mass=\"0\"/>",
-        triple(m, &l.length)
-    );
+    // A link of no length (a prismatic stage) is drawn as a dot: MuJoCo refuses a capsule
+    // whose ends coincide.
+    let length = triple(m, &l.length);
+    if length.split(' ').all(|x| x.parse::<f64>() == Ok(0.0)) {
+        let _ = writeln!(
+            out,
+            "{pad}  <geom type=\"sphere\" size=\"0.006\" contype=\"0\" conaffinity=\"0\" mass=\"0\"/>"
+        );
+    } else {
+        let _ = writeln!(
+            out,
+            "{pad}  <geom type=\"capsule\" fromto=\"0 0 0 {length}\" size=\"0.006\" contype=\"0\" conaffinity=\"0\" mass=\"0\"/>"
+        );
+    }
     sites(m, Some(i), &format!("{pad}  "), out);
     for c in bodies_under(m, Some(i)) {
         body(m, c, depth + 1, out);
@@ -241,7 +250,18 @@ pub fn mjcf(m: &Model) -> String {
         m.name, m.name
     );
     let _ = writeln!(out, "<mujoco model=\"{}\">", m.name);
-    let _ = writeln!(out, "  <compiler angle=\"radian\" autolimits=\"true\"/>");
+    // MuJoCo refuses a moving body without mass; massless stages (a prismatic x, y) get
+    // a mass it accepts instead (mjMINVAL is 1e-15), small enough to stay below the
+    // cross-check's 1e-9 beside a light leg.
+    let bounds = if m.links.iter().any(|l| value(&m.params, &l.mass) == 0.0) {
+        " boundmass=\"1e-12\" boundinertia=\"1e-14\""
+    } else {
+        ""
+    };
+    let _ = writeln!(
+        out,
+        "  <compiler angle=\"radian\" autolimits=\"true\"{bounds}/>"
+    );
     let _ = writeln!(
         out,
         "  <option gravity=\"{}\" timestep=\"0.0005\" integrator=\"RK4\">\n    <flag contact=\"disable\"/>\n  </option>",
