@@ -253,7 +253,12 @@ pub fn mjcf(m: &Model) -> String {
     // MuJoCo refuses a moving body without mass; massless stages (a prismatic x, y) get
     // a mass it accepts instead (mjMINVAL is 1e-15), small enough to stay below the
     // cross-check's 1e-9 beside a light leg.
-    let bounds = if m.links.iter().any(|l| value(&m.params, &l.mass) == 0.0) {
+    // (A ball joint's massless helper links are not bodies here.)
+    let bounds = if m
+        .links
+        .iter()
+        .any(|l| !l.massless && value(&m.params, &l.mass) == 0.0)
+    {
         " boundmass=\"1e-12\" boundinertia=\"1e-14\""
     } else {
         ""
