@@ -6,11 +6,16 @@
 //! as the point-mass ODE `m v̇ = F − μ m g v / |v|` (integrated here on its own), and
 //! impacts that keep `|v_t| − μ v_n` of the tangential speed or stop it.
 
+use generated::abducted_five_bar::AbductedFiveBar;
 use generated::sliding_mass::{self, SlidingMass};
-use leg_models::dynamics::contact::{impact_map, ContactMode, Ground, Modes};
-use leg_models::nalgebra::{SVector, Vector3};
+use leg_models::dynamics::contact::{
+    forward_dynamics_with_contacts, impact_map, spec_friction, ContactMode, Ground, Modes,
+};
+use leg_models::nalgebra::{DMatrix, DVector, SVector, Vector3};
 use leg_models::simulate::hybrid::{EventKind, HybridSimulator, HybridState};
 use leg_models::simulate::State;
+use leg_models::{ContactModel, LegDynamics};
+use leg_tests::{random_assembled_state, Rng};
 
 type Sim = HybridSimulator<SlidingMass, f64, 3, 0, 2, 3, 3>;
 type Hs = HybridState<f64, 3, 3, 3>;
@@ -290,4 +295,323 @@ fn a_block_thrown_onto_the_ground_lands_slides_and_stops_as_coulomb_says() {
             "{q} against {expected:?}"
         );
     }
+}
+
+// Every spatial leg with contacts: the structured solve against one dense solve (SVD,
+// least squares) of the whole KKT system written in the base frame, and the impact map's identities. Run on
+// `sliding_mass` and on `abducted_five_bar`, whose toe touches the ground while its loop,
+// with one structurally redundant row, stays closed.
+
+/// The ground's frame built here on its own (not `Ground::frame`): `t₁` along the base's
+/// x projected on the ground, `t₂ = n × t₁`.
+fn frame_of(n: &Vector3<f64>) -> [Vector3<f64>; 3] {
+    let t1 = (Vector3::x() - n * n.x).normalize();
+    [t1, n.cross(&t1), *n]
+}
+
+/// Random modes, each contact flying, sticking or sliding.
+fn random_modes<const NK: usize>(rng: &mut Rng) -> Modes<NK, 3> {
+    let mut m = Modes::<NK, 3>::flight();
+    for k in 0..NK / 3 {
+        let mode = match (rng.range(0.0, 3.0)) as usize {
+            0 => ContactMode::Flight,
+            1 => ContactMode::Stick,
+            _ => ContactMode::Slide { forward: true },
+        };
+        m.set(k, mode);
+    }
+    m
+}
+
+fn check_against_dense<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>()
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    assert!(NK > 0, "{} has contacts", L::NAME);
+    let p = L::Params::<f64>::default();
+    let ground = Ground::<f64, 3>::of::<L, NQ, NC, NU, NK>();
+    let frame = frame_of(&ground.normal);
+    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
+    let mut rng = Rng::new(33);
+    let mut compared = 0;
+    for _ in 0..100 {
+        let s = random_assembled_state::<L, NQ, NC, NU>(&p, &mut rng, 2.0);
+        let u = SVector::<f64, NU>::from_fn(|_, _| rng.range(-3.0, 3.0));
+        let modes = random_modes::<NK>(&mut rng);
+        let ours = forward_dynamics_with_contacts::<L, f64, NQ, NC, NU, NK, 3>(
+            &p,
+            &s.q,
+            &s.qd,
+            &u,
+            &modes,
+            &SVector::zeros(),
+            &ground,
+            &mu,
+            None,
+        )
+        .unwrap();
+        let terms = L::dynamics_terms(&s.q, &s.qd, &p);
+        let mut tau = -terms.bias_forces - L::damping_forces(&s.qd, &p);
+        for (k, &a) in L::ACTUATED.iter().enumerate() {
+            tau[a] += u[k];
+        }
+        // Rows of contact k along a direction: d · J_c (base frame), and d · (−J̇_c q̇).
+        let jc = L::contact_jacobian(&s.q, &p);
+        let bias = L::contact_bias(&s.q, &s.qd, &p);
+        let row = |k: usize, d: &Vector3<f64>| {
+            DVector::from_fn(NQ, |c, _| (0..3).map(|i| d[i] * jc[(3 * k + i, c)]).sum())
+        };
+        let rhs = |k: usize, d: &Vector3<f64>| -(0..3).map(|i| d[i] * bias[3 * k + i]).sum::<f64>();
+        let mut cons = Vec::new(); // (C row, W row, rhs)
+        let mut held = Vec::new();
+        for k in 0..NK / 3 {
+            match modes.get(k) {
+                ContactMode::Flight => {}
+                ContactMode::Stick => {
+                    for (i, d) in frame.iter().enumerate() {
+                        cons.push((row(k, d), row(k, d), rhs(k, d)));
+                        held.push(3 * k + i);
+                    }
+                }
+                ContactMode::Slide { .. } => {
+                    // Friction −μ λ_n ŝ against the slip velocity along the ground.
+                    let v = Vector3::from_fn(|i, _| {
+                        (0..NQ).map(|c| jc[(3 * k + i, c)] * s.qd[c]).sum()
+                    });
+                    let slip = (v - frame[2] * frame[2].dot(&v)).normalize();
+                    let w = row(k, &frame[2]) - row(k, &slip) * mu[3 * k];
+                    cons.push((row(k, &frame[2]), w, rhs(k, &frame[2])));
+                    held.push(3 * k + 2);
+                }
+            }
+        }
+        let size = NQ + NC + cons.len();
+        let mut a = DMatrix::<f64>::zeros(size, size);
+        let mut b = DVector::<f64>::zeros(size);
+        for r in 0..NQ {
+            for c in 0..NQ {
+                a[(r, c)] = terms.mass_matrix[(r, c)];
+            }
+            b[r] = tau[r];
+        }
+        for i in 0..NC {
+            for c in 0..NQ {
+                a[(NQ + i, c)] = terms.constraint_jacobian[(i, c)];
+                a[(c, NQ + i)] = -terms.constraint_jacobian[(i, c)];
+            }
+            b[NQ + i] = -terms.constraint_bias[i];
+        }
+        for (i, (crow, wrow, r)) in cons.iter().enumerate() {
+            for c in 0..NQ {
+                a[(NQ + NC + i, c)] = crow[c];
+                a[(c, NQ + NC + i)] = -wrow[c];
+            }
+            b[NQ + NC + i] = *r;
+        }
+        // A redundant closure row makes the dense system singular: least squares by SVD
+        // (the accelerations and contact forces are unique; the closure forces are not).
+        let x = a.svd(true, true).solve(&b, 1e-12).unwrap();
+        let scale = 1.0 + x.rows(0, NQ).amax();
+        for r in 0..NQ {
+            assert!(
+                (ours.x[r] - x[r]).abs() < 1e-8 * scale,
+                "{}: q̈[{r}] {} against the dense {} ({:?})",
+                L::NAME,
+                ours.x[r],
+                x[r],
+                modes
+            );
+        }
+        for (i, &r) in held.iter().enumerate() {
+            assert!(
+                (ours.contact[r] - x[NQ + NC + i]).abs() < 1e-8 * scale,
+                "{}: contact row {r}: {} against the dense {}",
+                L::NAME,
+                ours.contact[r],
+                x[NQ + NC + i]
+            );
+        }
+        for k in 0..NK / 3 {
+            let f = ours.contact.fixed_rows::<3>(3 * k);
+            match modes.get(k) {
+                ContactMode::Flight => assert_eq!(f.amax(), 0.0),
+                // Exactly on the cone while sliding.
+                ContactMode::Slide { .. } => {
+                    assert!((f.xy().norm() - mu[3 * k] * f[2].abs()).abs() < 1e-9 * scale)
+                }
+                ContactMode::Stick => {}
+            }
+        }
+        compared += 1;
+    }
+    assert_eq!(compared, 100);
+}
+
+#[test]
+fn sliding_mass_contact_dynamics_solve_the_dense_kkt_system() {
+    check_against_dense::<SlidingMass, 3, 0, 2, 3>();
+}
+
+#[test]
+fn abducted_five_bar_contact_dynamics_solve_the_dense_kkt_system() {
+    check_against_dense::<AbductedFiveBar, 5, 3, 3, 3>();
+}
+
+/// At random assembled states and velocities: after the impact every closure and every
+/// held contact row is at rest, a sticking impact loses exactly `½ Δq̇ᵀ M Δq̇`, a sliding
+/// contact's impulse lies on the cone against the slip it leaves, and the normal impulses
+/// push.
+fn check_impact_identities<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>()
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    let p = L::Params::<f64>::default();
+    let ground = Ground::<f64, 3>::of::<L, NQ, NC, NU, NK>();
+    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
+    let mut rng = Rng::new(34);
+    let (mut sticking, mut sliding) = (0, 0);
+    for _ in 0..200 {
+        let s = random_assembled_state::<L, NQ, NC, NU>(&p, &mut rng, 2.0);
+        let mut modes = Modes::<NK, 3>::flight();
+        for k in 0..NK / 3 {
+            modes.set(k, ContactMode::Stick);
+        }
+        let Ok(imp) =
+            impact_map::<L, f64, NQ, NC, NU, NK, 3>(&p, &s.q, &s.qd, &mut modes, &ground, &mu)
+        else {
+            continue; // pulling: the contact separates instead
+        };
+        let m = L::mass_matrix(&s.q, &p);
+        let scale = 1.0 + s.qd.amax();
+        if NC > 0 {
+            let jq = L::constraint_jacobian(&s.q, &p) * imp.qd_plus;
+            assert!(jq.amax() < 1e-10 * scale, "{}: J q̇⁺ = {jq}", L::NAME);
+        }
+        let v = ground.rows(&(L::contact_jacobian(&s.q, &p) * imp.qd_plus));
+        for k in 0..NK / 3 {
+            let lambda = imp.impulses.fixed_rows::<3>(3 * k);
+            assert!(lambda[2] >= 0.0, "{}: pulling {lambda}", L::NAME);
+            assert!(
+                v[3 * k + 2].abs() < 1e-10 * scale,
+                "{}: normal v⁺ {}",
+                L::NAME,
+                v[3 * k + 2]
+            );
+            match modes.get(k) {
+                ContactMode::Stick => {
+                    sticking += 1;
+                    assert!(v.fixed_rows::<3>(3 * k).amax() < 1e-10 * scale);
+                    assert!(lambda.xy().norm() <= mu[3 * k] * lambda[2] * (1.0 + 1e-12));
+                    let dq = s.qd - imp.qd_plus;
+                    let lost = 0.5 * dq.dot(&(m * dq));
+                    assert!(
+                        (imp.energy_lost - lost).abs() < 1e-10 * (1.0 + lost),
+                        "{}: {} against ½ Δq̇ᵀ M Δq̇ = {lost}",
+                        L::NAME,
+                        imp.energy_lost
+                    );
+                }
+                ContactMode::Slide { .. } => {
+                    sliding += 1;
+                    let vt = v.fixed_rows::<2>(3 * k);
+                    assert!(
+                        (lambda.xy().norm() - mu[3 * k] * lambda[2]).abs()
+                            < 1e-9 * (1.0 + lambda[2])
+                    );
+                    // Against the slip after the impact (to the iteration's √ε).
+                    if vt.norm() > 1e-9 {
+                        let cos = lambda.xy().dot(&vt) / (lambda.xy().norm() * vt.norm());
+                        assert!(
+                            cos < -1.0 + 1e-6,
+                            "{}: friction impulse at cos {cos} to the slip",
+                            L::NAME
+                        );
+                    }
+                }
+                ContactMode::Flight => unreachable!("held contacts stay held or slide"),
+            }
+        }
+    }
+    assert!(
+        sticking >= 5 && sliding >= 5,
+        "{}: {sticking} sticking, {sliding} sliding",
+        L::NAME
+    );
+}
+
+#[test]
+fn sliding_mass_impacts_hold_the_impact_identities() {
+    check_impact_identities::<SlidingMass, 3, 0, 2, 3>();
+}
+
+#[test]
+fn abducted_five_bar_impacts_hold_the_impact_identities() {
+    check_impact_identities::<AbductedFiveBar, 5, 3, 3, 3>();
+}
+
+#[test]
+fn abducted_five_bar_lands_its_toe_and_stands_with_its_loop_closed() {
+    // Home, the toe 5 mm over the floor, moving down at 0.5 m/s along the closures (the
+    // least-norm q̇ with J q̇ = 0 and the toe's velocity (0, 0, −0.5)); motors off.
+    type L = AbductedFiveBar;
+    let p = <L as LegDynamics<5, 3, 3>>::Params::<f64>::default();
+    let q = SVector::<f64, 5>::from(<L as LegDynamics<5, 3, 3>>::HOME);
+    let mut q = q;
+    leg_models::assembly::project_position::<L, f64, 5, 3, 3>(
+        &p,
+        &mut q,
+        &leg_models::assembly::Tolerance::default(),
+    )
+    .unwrap();
+    let j = <L as LegDynamics<5, 3, 3>>::constraint_jacobian(&q, &p);
+    let jc = <L as ContactModel<5, 3, 3, 3, 3>>::contact_jacobian(&q, &p);
+    let a = DMatrix::from_fn(6, 5, |r, c| if r < 3 { j[(r, c)] } else { jc[(r - 3, c)] });
+    let b = DVector::from_vec(vec![0.0, 0.0, 0.0, 0.0, 0.0, -0.5]);
+    let qd = a.svd(true, true).solve(&b, 1e-12).unwrap();
+    let qd = SVector::<f64, 5>::from_fn(|i, _| qd[i]);
+    let mut s = HybridSimulator::<L, f64, 5, 3, 3, 3, 3>::new(p, 1e-3);
+    s.options.tolerance = leg_models::assembly::Tolerance::default();
+    let start = HybridState::<f64, 5, 3, 3>::flight(State { q, qd });
+    let toe = <L as ContactModel<5, 3, 3, 3, 3>>::contact_positions(&q, &p);
+    assert!(
+        (toe[2] + 0.245).abs() < 1e-3,
+        "the toe 5 mm over the floor: {toe}"
+    );
+    let mut off = |_: f64, _: &HybridState<f64, 5, 3, 3>| SVector::<f64, 3>::zeros();
+    let record = s.run(start, 300, &mut off).unwrap();
+    let touchdown = record.events.first().expect("the toe lands");
+    assert_eq!(touchdown.kind, EventKind::Touchdown);
+    assert!(touchdown.energy_lost > 0.0 && touchdown.impulse[1] > 0.0);
+    let mu = s.options.friction[0];
+    let mut energy = f64::INFINITY;
+    for sample in &record.samples {
+        assert!(
+            sample.closure_residual < 1e-12,
+            "loop open {}",
+            sample.closure_residual
+        );
+        assert!(
+            sample.contact_residual < 1e-12,
+            "toe off its anchor {}",
+            sample.contact_residual
+        );
+        let x = s.contact_coordinates(&sample.state.state).0;
+        assert!(x[2] > -1e-12, "the toe under the floor: {}", x[2]);
+        let f = sample.contact_forces;
+        if sample.state.modes.get(0).on_ground() {
+            assert!(
+                f[2] >= 0.0 && f.xy().norm() <= mu * f[2] + 1e-9,
+                "outside the cone: {f}"
+            );
+        }
+        // Passive, damped, plastic: the energy never grows (beyond RK4's error).
+        assert!(
+            sample.energy <= energy + 1e-9,
+            "energy grew to {}",
+            sample.energy
+        );
+        energy = sample.energy;
+    }
+    let last = record.samples.last().unwrap();
+    assert!(last.state.modes.get(0).on_ground(), "{:?}", record.events);
 }

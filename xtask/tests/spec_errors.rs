@@ -1019,26 +1019,27 @@ fn spatial_specs_refuse_what_does_not_fit_their_dimension() {
         "links[0].axis",
         "must not be zero",
     );
-    // A spatial contact's point and the ground's normal have three coordinates.
+    // A spatial contact's point and the ground's normal have three coordinates (the leg
+    // has its toe contact and a floor 0.25 m under the hip).
     refused(
-        &format!(
-            "{text}\n[[contacts]]\nname = \"toe_contact\"\nlink = \"lower_a\"\npoint = [0.2, 0.0]\nfriction = 1.0\n"
+        &spatial_edit(
+            "link = \"lower_a\"\nfriction",
+            "link = \"lower_a\"\npoint = [0.2, 0.0]\nfriction",
         ),
         "contacts[0].point",
         "the leg is spatial",
     );
     refused(
-        &format!("{text}\n[ground]\nnormal = [0.0, 1.0]\n"),
+        &spatial_edit("offset = -0.25", "normal = [0.0, 1.0]\noffset = -0.25"),
         "ground.normal",
         "the leg is spatial",
     );
     // Accepted with three: the ground's normal normalized, +z by default.
-    let with_contact = format!(
-        "{text}\n[[contacts]]\nname = \"toe_contact\"\nlink = \"lower_a\"\nfriction = 1.0\n"
-    );
-    let m = model::build(&parse(&with_contact).unwrap()).unwrap();
+    let m = model::build(&parse(&text).unwrap()).unwrap();
     assert_eq!(m.ground_normal, [0.0, 0.0, 1.0]);
-    let tilted = format!("{with_contact}\n[ground]\nnormal = [0.0, 3.0, 4.0]\noffset = -0.2\n");
+    assert_eq!(m.ground_offset, -0.25);
+    assert_eq!(m.contacts.len(), 1);
+    let tilted = spatial_edit("offset = -0.25", "normal = [0.0, 3.0, 4.0]\noffset = -0.2");
     let m = model::build(&parse(&tilted).unwrap()).unwrap();
     assert_eq!(m.ground_normal, [0.0, 0.6, 0.8]);
     assert_eq!(m.ground_offset, -0.2);

@@ -412,6 +412,74 @@ fn to_f64<T: Real>(x: T) -> f64 {
     x.to_subset().unwrap_or(f64::NAN)
 }
 
+/// The slip direction `ŝ` (unit, along the ground's two tangents) that is consistent
+/// with what sliding along it leaves: `motion(ŝ)` is the slip velocity (after an impact)
+/// or acceleration (from rest) that sliding along `ŝ` gives, with friction against `ŝ`,
+/// and `ŝ` is consistent where that points along `ŝ` (parallel, not opposed). From
+/// `start`, a few rounds of `ŝ ← motion(ŝ)/|motion(ŝ)|`; where that does not settle to
+/// `√ε`, a scan of the circle from `start`'s angle (36 directions) for where the
+/// component of `motion` across `ŝ` changes sign with `motion` along `ŝ`, refined by
+/// bisection. Returns the direction and whether it is consistent (else the last tried).
+/// A `motion` of zero (the slip stops) is consistent with any direction.
+pub(crate) fn consistent_slip<T: Real, E>(
+    start: [T; 2],
+    mut motion: impl FnMut([T; 2]) -> Result<[T; 2], E>,
+) -> Result<([T; 2], bool), E> {
+    let tol = T::default_epsilon().sqrt();
+    let unit = |a: T| [a.cos(), a.sin()];
+    // (across, along): the cross and dot products of ŝ and the motion.
+    let split = |s: [T; 2], v: [T; 2]| (s[0] * v[1] - s[1] * v[0], s[0] * v[0] + s[1] * v[1]);
+    let mut s = start;
+    for _ in 0..8 {
+        let v = motion(s)?;
+        let norm = (v[0] * v[0] + v[1] * v[1]).sqrt();
+        if norm == T::zero() {
+            return Ok((s, true));
+        }
+        if !norm.is_finite() {
+            break;
+        }
+        let next = [v[0] / norm, v[1] / norm];
+        let turn = (next[0] - s[0]).abs().max((next[1] - s[1]).abs());
+        s = next;
+        if turn <= tol {
+            return Ok((s, true));
+        }
+    }
+    let a0 = start[1].atan2(start[0]);
+    const SCAN: usize = 36;
+    let step = T::two_pi() / T::lit(SCAN as f64);
+    let mut previous: Option<(T, T)> = None;
+    for i in 0..=SCAN {
+        let a = a0 + step * T::lit(i as f64);
+        let (across, _) = split(unit(a), motion(unit(a))?);
+        if let Some((pa, pacross)) = previous {
+            if (pacross <= T::zero()) != (across <= T::zero()) {
+                let (mut lo, mut hi, mut lo_across) = (pa, a, pacross);
+                for _ in 0..64 {
+                    let mid = (lo + hi) * T::lit(0.5);
+                    let (m_across, _) = split(unit(mid), motion(unit(mid))?);
+                    if (m_across <= T::zero()) == (lo_across <= T::zero()) {
+                        (lo, lo_across) = (mid, m_across);
+                    } else {
+                        hi = mid;
+                    }
+                    if hi - lo <= tol * tol {
+                        break;
+                    }
+                }
+                let root = (lo + hi) * T::lit(0.5);
+                let (_, along_root) = split(unit(root), motion(unit(root))?);
+                if along_root > T::zero() {
+                    return Ok((unit(root), true));
+                }
+            }
+        }
+        previous = Some((a, across));
+    }
+    Ok((s, false))
+}
+
 /// `|λ_t|` of contact `k`: the Euclidean norm of its tangential entries (`ND − 1` of
 /// them), the absolute value on a planar leg.
 pub(crate) fn tangential_norm<T: Real, const NK: usize, const ND: usize>(
@@ -906,43 +974,54 @@ where
         }
     }
     let sliding = (0..NK / ND).any(|k| matches!(modes.get(k), ContactMode::Slide { .. }));
-    if changed || (ND > 2 && sliding) {
+    if ND == 2 && changed {
         sol = solve(modes, &slip)?;
-        // The slip after the impact must run the way its friction opposes. On a planar
-        // leg, where it does not (the impulse reversed the slip), the other direction is
-        // the consistent one. On a spatial leg the direction turns to the slip the impact
-        // leaves, until that repeats.
-        let rounds = if ND == 2 { 1 } else { 64 };
-        for _ in 0..rounds {
-            let after = ground.rows(&mul(&jc, &sol.x));
-            let mut moved = false;
-            for k in 0..NK / ND {
-                let ContactMode::Slide { forward } = modes.get(k) else {
-                    continue;
-                };
-                if ND == 2 {
-                    let along = if forward {
-                        after[ND * k]
-                    } else {
-                        -after[ND * k]
-                    };
-                    if along < T::zero() {
-                        modes.set(k, ContactMode::Slide { forward: !forward });
-                        moved = true;
-                    }
+        // The slip after the impact must run the way its friction opposes; where it does
+        // not (the impulse reversed the slip), the other direction is the consistent one.
+        let after = ground.rows(&mul(&jc, &sol.x));
+        let mut flipped = false;
+        for k in 0..NK / ND {
+            if let ContactMode::Slide { forward } = modes.get(k) {
+                let along = if forward {
+                    after[ND * k]
                 } else {
-                    let old = slip;
-                    set_direction(&mut slip, &after, tangential(k));
-                    let turn =
-                        tangential(k).fold(T::zero(), |a, r| a.max((slip[r] - old[r]).abs()));
-                    moved |= turn > T::default_epsilon().sqrt();
+                    -after[ND * k]
+                };
+                if along < T::zero() {
+                    modes.set(k, ContactMode::Slide { forward: !forward });
+                    flipped = true;
                 }
             }
-            if !moved {
-                break;
-            }
+        }
+        if flipped {
             sol = solve(modes, &slip)?;
         }
+    } else if ND > 2 && sliding {
+        // Each sliding contact's direction is the one the slip after the impact takes
+        // (`consistent_slip`), the others' held as they are, until none turns.
+        for _ in 0..8 {
+            let mut turned = false;
+            for k in 0..NK / ND {
+                if !matches!(modes.get(k), ContactMode::Slide { .. }) {
+                    continue;
+                }
+                let (t0, t1) = (ND * k, ND * k + 1);
+                let (found, _) = consistent_slip([slip[t0], slip[t1]], |d| {
+                    let mut trial = slip;
+                    (trial[t0], trial[t1]) = (d[0], d[1]);
+                    let x = solve(modes, &trial)?.x;
+                    let after = ground.rows(&mul(&jc, &x));
+                    Ok::<_, DynamicsError>([after[t0], after[t1]])
+                })?;
+                let turn = (found[0] - slip[t0]).abs().max((found[1] - slip[t1]).abs());
+                turned |= turn > T::default_epsilon().sqrt();
+                (slip[t0], slip[t1]) = (found[0], found[1]);
+            }
+            if !turned {
+                break;
+            }
+        }
+        sol = solve(modes, &slip)?;
     }
     for k in 0..NK / ND {
         let n = ND * k + ND - 1;

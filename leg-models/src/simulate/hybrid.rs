@@ -45,8 +45,8 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::assembly::{leg_size, AssemblyError, Tolerance};
 use crate::dynamics::contact::{
-    impact_map, solve_structured, spec_friction, tangential_norm, ContactMode, ContactRows,
-    ContactSolution, ContactSystem, Ground, ImpactError, Modes,
+    consistent_slip, impact_map, solve_structured, spec_friction, tangential_norm, ContactMode,
+    ContactRows, ContactSolution, ContactSystem, Ground, ImpactError, Modes,
 };
 use crate::dynamics::forward::{actuation, Baumgarte, DynamicsError};
 use crate::model::contract::{ContactModel, Real};
@@ -636,11 +636,10 @@ where
     /// The direction in which sliding contact `k` of a spatial leg, at rest along the
     /// ground, starts to slip under `u`: the unit `ŝ` for which the tangential
     /// acceleration it gets sliding along `ŝ` (friction `μ λ_n` against it) points along
-    /// `ŝ`. Found by fixed-point iteration from `start` (the sticking force's opposite):
-    /// each round slides along the direction the last round's acceleration took, until
-    /// it repeats to `√ε` (at most 64 rounds; the last is kept). Returns the state's
-    /// slip directions with contact `k`'s set, and whether the acceleration then points
-    /// along `ŝ` with the normal force pushing (the slide is consistent).
+    /// `ŝ` (`consistent_slip`: a few fixed-point rounds from `start`, the sticking force's
+    /// opposite, then a scan of the circle refined by bisection). Returns the state's
+    /// slip directions with contact `k`'s set, and whether that slide is consistent (the
+    /// acceleration along `ŝ`, the normal force pushing).
     pub fn slip_from_rest(
         &self,
         hs: &HybridState<T, NQ, NK, ND>,
@@ -648,30 +647,23 @@ where
         u: &SVector<T, NU>,
         start: &SVector<T, NK>,
     ) -> Result<(SVector<T, NK>, bool), HybridError> {
-        let tangential = ND * k..ND * k + ND - 1;
+        let (t0, t1) = (ND * k, ND * k + 1);
         let mut trial = *hs;
         trial.modes.set(k, ContactMode::Slide { forward: true });
-        set_unit(&mut trial.slip, start, tangential.clone());
-        let mut consistent = false;
-        for _ in 0..64 {
-            let sol = self.dynamics(&trial, u)?;
-            let a = self.contact_acceleration(&trial, &sol.x);
-            let along = tangential
-                .clone()
-                .fold(T::zero(), |s, r| s + a[r] * trial.slip[r]);
-            consistent = sol.contact[ND * k + ND - 1] >= T::zero() && along >= T::zero();
-            let old = trial.slip;
-            if !set_unit(&mut trial.slip, &a, tangential.clone()) {
-                break; // no tangential acceleration: any direction is as good
-            }
-            let turn = tangential
-                .clone()
-                .fold(T::zero(), |m, r| m.max((trial.slip[r] - old[r]).abs()));
-            if turn <= T::default_epsilon().sqrt() {
-                break;
-            }
-        }
-        Ok((trial.slip, consistent))
+        set_unit(&mut trial.slip, start, t0..t0 + ND - 1);
+        let along = |d: [T; 2]| {
+            let mut s = trial;
+            (s.slip[t0], s.slip[t1]) = (d[0], d[1]);
+            s
+        };
+        let (found, consistent) = consistent_slip([trial.slip[t0], trial.slip[t1]], |d| {
+            let s = along(d);
+            let a = self.contact_acceleration(&s, &self.dynamics(&s, u)?.x);
+            Ok::<_, HybridError>([a[t0], a[t1]])
+        })?;
+        let s = along(found);
+        let pushes = self.dynamics(&s, u)?.contact[ND * k + ND - 1] >= T::zero();
+        Ok((s.slip, consistent && pushes))
     }
 
     /// The contacts' accelerations in ground coordinates, `R (J_c q̈ + J̇_c q̇)`.
