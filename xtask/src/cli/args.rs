@@ -112,7 +112,7 @@ pub struct BenchArgs {
 
 #[derive(Args, Debug)]
 pub struct ImportArgs {
-    /// The MJCF file
+    /// The MJCF or URDF file
     pub file: PathBuf,
     /// The leg's name: a plain identifier (lower case, digits, underscores)
     #[arg(long)]
@@ -134,6 +134,19 @@ pub struct ImportArgs {
     /// <connect> is closed by MuJoCo's rule)
     #[arg(long, value_name = "KEY")]
     pub keyframe: Option<String>,
+    /// The home pose, one value per coordinate (rad or m; a ball joint's three angles),
+    /// instead of the file's: a URDF's is every joint at 0, where its loops may be open
+    #[arg(long, value_name = "Q,...", allow_hyphen_values = true)]
+    pub home: Option<String>,
+    /// URDF: a loop closure, the point on LINK_A (x,y,z in its frame, default its origin)
+    /// held to the point on LINK_B (default: where the first point is in the pose as
+    /// written); repeat for each loop
+    #[arg(long, value_name = "NAME=LINK_A[:X,Y,Z]/LINK_B[:X,Y,Z]")]
+    pub closure: Vec<String>,
+    /// URDF: a motor on JOINT with gear ratio GEAR (default 1), beside the file's
+    /// transmissions; repeat for each motor
+    #[arg(long, value_name = "JOINT[:GEAR]")]
+    pub motor: Vec<String>,
     /// Where to write (default: leg-models/specs/NAME.toml)
     #[arg(long, value_name = "FILE")]
     pub out: Option<PathBuf>,

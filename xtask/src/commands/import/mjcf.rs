@@ -112,6 +112,8 @@ pub struct Motor {
 #[derive(Debug, Default)]
 pub struct Robot {
     pub model: String,
+    /// `"MJCF"` or `"URDF"`: what the file was.
+    pub format: &'static str,
     pub gravity: Vec3,
     pub bodies: Vec<Body>,
     pub connects: Vec<Connect>,
@@ -357,6 +359,7 @@ pub fn read(text: &str) -> Result<Robot> {
     };
     let mut robot = Robot {
         model: root.attribute("model").unwrap_or("mjcf").to_string(),
+        format: "MJCF",
         gravity: [0.0, 0.0, -9.81],
         ..Robot::default()
     };

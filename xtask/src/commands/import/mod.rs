@@ -1,5 +1,6 @@
-//! `cargo xtask import FILE --name NAME`: a spatial spec from a MuJoCo MJCF file
-//! (docs/spec-format.md#importing-mjcf).
+//! `cargo xtask import FILE --name NAME`: a spatial spec from a MuJoCo MJCF file or a
+//! URDF (docs/spec-format.md#importing-mjcf; URDF through [`urdf`], its loops and extra
+//! motors named on the command line).
 //!
 //! The tree: every body with one joint is a link; a body without a joint is welded to the
 //! link above it (its inertia merged into that link's) or to the base; `--fix-base` holds
@@ -16,13 +17,14 @@
 
 mod linalg;
 mod mjcf;
+mod urdf;
 
 use std::collections::HashMap;
 use std::fmt::Write;
 use std::path::Path;
 
 use linalg::{rot_axis, scale, sub, xyz_angles, Mat3, Pose, Vec3};
-use mjcf::{Anchor, Body, JointKind, Robot};
+use mjcf::{Anchor, Body, Connect, JointKind, Motor, Robot};
 
 use crate::cli::{self, args::ImportArgs};
 use crate::gen::{self, spec};
@@ -655,6 +657,15 @@ fn command_line(root: &Path, a: &ImportArgs) -> String {
     if let Some(k) = &a.keyframe {
         let _ = write!(c, " --keyframe {k}");
     }
+    if let Some(h) = &a.home {
+        let _ = write!(c, " --home {h}");
+    }
+    for closure in &a.closure {
+        let _ = write!(c, " --closure {closure}");
+    }
+    for motor in &a.motor {
+        let _ = write!(c, " --motor {motor}");
+    }
     c
 }
 
@@ -663,21 +674,27 @@ fn write_spec(file: &Path, command: &str, robot: &Robot, leg: &Imported) -> Stri
     let _ = writeln!(out, "# Imported by `{command}`");
     let _ = writeln!(
         out,
-        "# from `{}` (model \"{}\"). A link's frame is at its joint's anchor and its coordinate is\n# MuJoCo's qpos of the same joint (a ball joint: the angles of R_x R_y R_z of its quaternion).",
+        "# from `{}` (model \"{}\"). A link's frame is at its joint's anchor and its coordinate is\n# {} of the same joint (a ball joint: the angles of R_x R_y R_z of its quaternion).",
         file.file_name().map_or(String::new(), |f| f.to_string_lossy().into_owned()),
-        robot.model.replace('\n', " ")
+        robot.model.replace('\n', " "),
+        if robot.format == "URDF" {
+            "the URDF's position"
+        } else {
+            "MuJoCo's qpos"
+        }
     );
     for n in &leg.notes {
         let _ = writeln!(out, "# Note: {n}");
     }
     let _ = writeln!(
         out,
-        "description = \"{}, imported from MJCF\"",
+        "description = \"{}, imported from {}\"",
         robot
             .model
             .chars()
             .filter(|c| c.is_ascii_alphanumeric() || " -_.".contains(*c))
-            .collect::<String>()
+            .collect::<String>(),
+        robot.format
     );
     let _ = writeln!(out, "gravity = {}", triple(leg.gravity));
     let _ = writeln!(
@@ -809,16 +826,70 @@ fn import_str(
     command: &str,
 ) -> Result<(String, Vec<String>), cli::Error> {
     spec::check_name(&args.name).map_err(|m| cli::Error::usage(format!("--name: {m}")))?;
-    if !text.contains("<mujoco") {
-        let what = if text.contains("<robot") {
-            "URDF import is not built yet; MJCF (MuJoCo's XML) is"
-        } else {
-            "not an MJCF file (no <mujoco> element)"
-        };
-        return Err(cli::Error::usage(format!("{}: {what}", file.display())));
+    let robot = if text.contains("<mujoco") {
+        for (given, flag) in [
+            (!args.closure.is_empty(), "--closure"),
+            (!args.motor.is_empty(), "--motor"),
+        ] {
+            if given {
+                return Err(cli::Error::usage(format!(
+                    "{flag}: {} is MJCF, which names its closures (<connect>) and motors (<motor>) itself; {flag} is for URDF",
+                    file.display()
+                )));
+            }
+        }
+        mjcf::read(text).map_err(|e| err(file, e.line, e.message))?
+    } else if text.contains("<robot") {
+        for (given, flag, why) in [
+            (
+                args.fix_base,
+                "--fix-base",
+                "a URDF's root link is the base already",
+            ),
+            (
+                args.keyframe.is_some(),
+                "--keyframe",
+                "a URDF has no keyframes (the home pose is every joint at 0)",
+            ),
+        ] {
+            if given {
+                return Err(cli::Error::usage(format!("{flag}: {why}")));
+            }
+        }
+        let mut robot = urdf::read(text).map_err(|e| err(file, e.line, e.message))?;
+        add_closures_and_motors(&mut robot, args)?;
+        robot
+    } else {
+        return Err(cli::Error::usage(format!(
+            "{}: neither MJCF (no <mujoco> element) nor URDF (no <robot>)",
+            file.display()
+        )));
+    };
+    let mut leg = import(file, &robot, args)?;
+    if let Some(home) = &args.home {
+        if args.keyframe.is_some() {
+            return Err(cli::Error::usage(
+                "--home and --keyframe: give the home pose one way".to_string(),
+            ));
+        }
+        let values: Vec<f64> = home
+            .split(',')
+            .map(|x| x.trim().parse::<f64>())
+            .collect::<Result<_, _>>()
+            .ok()
+            .filter(|v: &Vec<f64>| v.iter().all(|x| x.is_finite()))
+            .ok_or_else(|| {
+                cli::Error::usage(format!("--home {home}: not numbers separated by commas"))
+            })?;
+        if values.len() != leg.home.len() {
+            return Err(cli::Error::usage(format!(
+                "--home {home}: {} values for the leg's {} coordinates",
+                values.len(),
+                leg.home.len()
+            )));
+        }
+        leg.home = values;
     }
-    let robot = mjcf::read(text).map_err(|e| err(file, e.line, e.message))?;
-    let leg = import(file, &robot, args)?;
     let spec_text = write_spec(file, command, &robot, &leg);
     // The spec must be one `gen` takes: checked before anything is written.
     let checked = spec::Spec::parse(Path::new(&format!("{}.toml", args.name)), spec_text.clone())
@@ -842,6 +913,114 @@ fn import_str(
     )];
     lines.extend(leg.notes.iter().map(|n| format!("note: {n}")));
     Ok((spec_text, lines))
+}
+
+/// A URDF's closures and extra motors, from the command line (`--closure`, `--motor`).
+fn add_closures_and_motors(robot: &mut Robot, args: &ImportArgs) -> Result<(), cli::Error> {
+    let usage =
+        |flag: &str, given: &str, why: String| cli::Error::usage(format!("{flag} {given}: {why}"));
+    let body = |robot: &Robot, flag: &str, given: &str, name: &str| {
+        body_named(robot, name).ok_or_else(|| usage(flag, given, format!("no link `{name}`")))
+    };
+    let point = |flag: &str, given: &str, text: Option<&str>| -> Result<Option<Vec3>, cli::Error> {
+        let Some(text) = text else { return Ok(None) };
+        let v: Vec<f64> = text
+            .split(',')
+            .map(|x| x.trim().parse::<f64>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| usage(flag, given, format!("`{text}` is not x,y,z in m")))?;
+        match v.as_slice() {
+            [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(Some([*x, *y, *z])),
+            _ => Err(usage(flag, given, format!("`{text}` is not x,y,z in m"))),
+        }
+    };
+    let mut names = Vec::new();
+    for given in &args.closure {
+        let flag = "--closure";
+        let (name, ends) = given
+            .split_once('=')
+            .ok_or_else(|| usage(flag, given, "not NAME=LINK_A[:X,Y,Z]/LINK_B[:X,Y,Z]".into()))?;
+        let (a, b) = ends
+            .split_once('/')
+            .ok_or_else(|| usage(flag, given, "not NAME=LINK_A[:X,Y,Z]/LINK_B[:X,Y,Z]".into()))?;
+        if name.is_empty() || names.contains(&name) {
+            return Err(usage(
+                flag,
+                given,
+                format!("the closure's name `{name}` is empty or given twice"),
+            ));
+        }
+        names.push(name);
+        let split = |end: &str| match end.split_once(':') {
+            Some((link, at)) => (link.to_string(), Some(at.to_string())),
+            None => (end.to_string(), None),
+        };
+        let ((la, pa), (lb, pb)) = (split(a), split(b));
+        let (ba, bb) = (
+            body(robot, flag, given, &la)?,
+            body(robot, flag, given, &lb)?,
+        );
+        if ba == bb {
+            return Err(usage(
+                flag,
+                given,
+                "a closure joins two different links".into(),
+            ));
+        }
+        let pa = point(flag, given, pa.as_deref())?.unwrap_or([0.0; 3]);
+        let pb = point(flag, given, pb.as_deref())?;
+        robot.connects.push(Connect {
+            name: Some(name.to_string()),
+            line: 0,
+            a: Anchor::Body {
+                body: Some(ba),
+                point: pa,
+            },
+            b: pb.map(|point| Anchor::Body {
+                body: Some(bb),
+                point,
+            }),
+            body2: Some(bb),
+            active: true,
+        });
+    }
+    for given in &args.motor {
+        let flag = "--motor";
+        let (joint, gear) = match given.split_once(':') {
+            Some((j, g)) => (
+                j,
+                g.trim()
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|g| g.is_finite() && *g != 0.0)
+                    .ok_or_else(|| {
+                        usage(flag, given, format!("gear `{g}` is not a nonzero number"))
+                    })?,
+            ),
+            None => (given.as_str(), 1.0),
+        };
+        let moving = robot
+            .bodies
+            .iter()
+            .flat_map(|b| &b.joints)
+            .any(|j| j.name == joint);
+        if !moving {
+            return Err(usage(
+                flag,
+                given,
+                format!("no revolute, continuous or prismatic joint `{joint}`"),
+            ));
+        }
+        if robot.motors.iter().any(|m| m.joint == joint) {
+            return Err(usage(flag, given, format!("joint `{joint}` has a motor already (its <transmission> or an earlier --motor)")));
+        }
+        robot.motors.push(Motor {
+            line: 0,
+            joint: joint.to_string(),
+            gear,
+        });
+    }
+    Ok(())
 }
 
 pub fn run(root: &Path, args: ImportArgs) -> Result<(), cli::Error> {

@@ -268,3 +268,270 @@ fn imported_specs_are_what_importing_their_files_gives() {
         "no imported spec in leg-models/specs (achilles_leg is one)"
     );
 }
+
+// URDF.
+
+fn value(params: &[gen::model::Param], name: &str) -> f64 {
+    params
+        .iter()
+        .find(|p| p.name == name)
+        .expect("a parameter")
+        .default
+}
+
+/// World poses at `q = 0` of a spatial model's links, `(joint point, rotation)`, as
+/// derive_spatial.py places them: `p_i = p_parent + R_parent origin_i`, `R_i = R_parent O_i`.
+fn world_frames(m: &gen::model::Model) -> Vec<(Vec3, Mat3)> {
+    let v = |names: &[String]| -> Vec3 {
+        let mut out = [0.0; 3];
+        for (o, n) in out.iter_mut().zip(names) {
+            *o = value(&m.params, n);
+        }
+        out
+    };
+    let mut out: Vec<(Vec3, Mat3)> = Vec::new();
+    for l in &m.links {
+        let o = l.orientation.unwrap_or(linalg::IDENTITY);
+        let (p, r) = match l.parent {
+            None => ([0.0; 3], linalg::IDENTITY),
+            Some(k) => out[k],
+        };
+        out.push((
+            linalg::add(p, linalg::mat_vec(&r, v(&l.origin))),
+            linalg::mat_mul(&r, &o),
+        ));
+    }
+    out
+}
+
+fn world_point(m: &gen::model::Model, frames: &[(Vec3, Mat3)], p: &gen::model::Point) -> Vec3 {
+    let at: Vec3 = std::array::from_fn(|i| p.point.get(i).map_or(0.0, |n| value(&m.params, n)));
+    match p.link {
+        None => at,
+        Some(k) => linalg::add(frames[k].0, linalg::mat_vec(&frames[k].1, at)),
+    }
+}
+
+fn close(a: Vec3, b: Vec3, what: &str) {
+    for i in 0..3 {
+        assert!((a[i] - b[i]).abs() < 1e-12, "{what}: {a:?} against {b:?}");
+    }
+}
+
+#[test]
+fn a_urdf_export_imports_back_to_the_same_leg() {
+    // abducted_five_bar written as URDF by our exporter (checked against Pinocchio in
+    // `cargo xtask test`), read back with its loop named on the command line.
+    let root = gen::workspace_root();
+    let spec =
+        gen::load_spec(&root, &root.join("leg-models/specs/abducted_five_bar.toml")).unwrap();
+    let original = gen::model::build(&spec).unwrap();
+    let urdf = crate::commands::export::spatial::urdf(&original);
+    let mut a = args(&[
+        "--closure",
+        "toe=toe.a/toe.b:0,0,0",
+        "--foot-point",
+        "0.2,0,0",
+    ]);
+    a.foot = "lower_a".into();
+    a.file = "leg.urdf".into();
+    let (text, lines) = import_str(
+        Path::new("leg.urdf"),
+        &urdf,
+        &a,
+        "cargo xtask import leg.urdf",
+    )
+    .unwrap();
+    assert!(
+        lines[0].starts_with("5 links (5 coordinates), 1 closures, 3 motors"),
+        "{lines:?}"
+    );
+    let imported =
+        gen::model::build(&spec::Spec::parse(Path::new("leg.toml"), text.clone()).unwrap())
+            .unwrap();
+    assert_eq!(imported.links.len(), original.links.len(), "{text}");
+    let (fo, fi) = (world_frames(&original), world_frames(&imported));
+    for (k, (lo, li)) in original.links.iter().zip(&imported.links).enumerate() {
+        assert_eq!(identifier(&lo.name), li.name);
+        assert_eq!(lo.joint, li.joint);
+        close(fo[k].0, fi[k].0, &format!("{}: joint point", lo.name));
+        let axis = |l: &gen::model::Link, r: &Mat3| {
+            linalg::mat_vec(r, std::array::from_fn(|i| l.axis.as_ref().unwrap()[i]))
+        };
+        close(
+            axis(lo, &fo[k].1),
+            axis(li, &fi[k].1),
+            &format!("{}: axis", lo.name),
+        );
+        assert!(
+            (value(&original.params, &lo.mass) - value(&imported.params, &li.mass)).abs() < 1e-15
+        );
+        let com = |m: &gen::model::Model, f: &[(Vec3, Mat3)], l: &gen::model::Link| {
+            world_point(
+                m,
+                f,
+                &gen::model::Point {
+                    link: Some(k),
+                    point: l.com.clone(),
+                },
+            )
+        };
+        close(
+            com(&original, &fo, lo),
+            com(&imported, &fi, li),
+            &format!("{}: centre of mass", lo.name),
+        );
+        // Motors: the gear and the rotor inertia (Drake's tag in our export).
+        let rotor = |m: &gen::model::Model, l: &gen::model::Link| {
+            l.rotor
+                .as_ref()
+                .map(|[i, n]| (value(&m.params, i), value(&m.params, n)))
+        };
+        match (rotor(&original, lo), rotor(&imported, li)) {
+            (None, None) => {}
+            (Some(a), Some(b)) => assert!((a.0 - b.0).abs() < 1e-15 && a.1 == b.1, "{a:?} {b:?}"),
+            (a, b) => panic!("{}: motor {a:?} against {b:?}", lo.name),
+        }
+    }
+    // The loop's points are the same (the file's closure frames, `toe.b`'s origin named
+    // on the command line: at q = 0 the loop is open), and the foot is the same point.
+    let (c0, c1) = (&original.closures[0], &imported.closures[0]);
+    close(
+        world_point(&original, &fo, &c0.a),
+        world_point(&imported, &fi, &c1.a),
+        "closure a",
+    );
+    close(
+        world_point(&original, &fo, &c0.b),
+        world_point(&imported, &fi, &c1.b),
+        "closure b",
+    );
+    close(
+        world_point(&original, &fo, &original.foot),
+        world_point(&imported, &fi, &imported.foot),
+        "foot",
+    );
+    // The home pose of a URDF is every joint at 0, and its header says how it was made.
+    assert!(
+        text.starts_with("# Imported by `cargo xtask import leg.urdf"),
+        "{text}"
+    );
+}
+
+const URDF: &str = r#"<robot name="two">
+  <link name="base"/>
+  <link name="thigh">
+    <inertial><origin xyz="0.1 0 0" rpy="0 0 1.5707963267948966"/><mass value="1"/>
+      <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.0105"/></inertial>
+  </link>
+  <joint name="hip" type="revolute">
+    <parent link="base"/><child link="thigh"/>
+    <origin xyz="0 0 1" rpy="0 0 0"/><axis xyz="0 1 0"/>
+    <limit lower="-1" upper="1" effort="10" velocity="10"/>
+    <dynamics damping="0.1"/>
+  </joint>
+  <link name="shin"><inertial><mass value="0.5"/><inertia ixx="1e-3" iyy="1e-3" izz="1e-3"/></inertial></link>
+  <joint name="knee" type="continuous">
+    <parent link="thigh"/><child link="shin"/>
+    <origin xyz="0.2 0 0"/><axis xyz="0 1 0"/>
+  </joint>
+  <transmission name="t"><joint name="hip"/><actuator name="m"><mechanicalReduction>10</mechanicalReduction></actuator></transmission>
+</robot>"#;
+
+fn import_urdf(text: &str, extra: &[&str]) -> Result<String, String> {
+    let mut a = args(extra);
+    a.file = "leg.urdf".into();
+    import_str(
+        Path::new("leg.urdf"),
+        text,
+        &a,
+        "cargo xtask import leg.urdf",
+    )
+    .map(|(s, _)| s)
+    .map_err(|e| e.to_string())
+}
+
+#[test]
+fn a_urdf_gives_its_joints_limits_damping_inertias_and_transmissions() {
+    let text = import_urdf(URDF, &["--motor", "knee:2"]).unwrap();
+    let m = gen::model::build(&spec::Spec::parse(Path::new("leg.toml"), text.clone()).unwrap())
+        .unwrap();
+    assert_eq!(m.links.len(), 2);
+    assert_eq!(m.actuated, [0, 1], "{text}");
+    // The thigh's inertia, written in a frame turned 90° about z: xx and yy swap.
+    let gen::model::Inertia::Spatial(i) = &m.links[0].inertia else {
+        panic!()
+    };
+    let get = |k: usize| i[k].as_ref().map_or(0.0, |n| value(&m.params, n));
+    assert!(
+        (get(0) - 0.01).abs() < 1e-15
+            && (get(1) - 0.001).abs() < 1e-15
+            && (get(2) - 0.0105).abs() < 1e-15,
+        "{text}"
+    );
+    assert!(text.contains("damping = 0.1"), "{text}");
+    assert!(
+        text.contains("gear_ratio = 10.0") && text.contains("gear_ratio = 2.0"),
+        "{text}"
+    );
+}
+
+#[test]
+fn a_urdf_refuses_what_a_spec_cannot_hold_at_its_line() {
+    let edit = |from: &str, to: &str| URDF.replacen(from, to, 1);
+    let at = |text: &str, extra: &[&str], line: u32, words: &str| {
+        let e = import_urdf(text, extra).unwrap_err();
+        assert!(
+            line == 0 || e.contains(&format!("leg.urdf:{line}:")),
+            "{e}: not at line {line}"
+        );
+        assert!(e.contains(words), "{e}: does not say `{words}`");
+    };
+    at(
+        &edit("type=\"continuous\"", "type=\"floating\""),
+        &[],
+        14,
+        "floating",
+    );
+    at(
+        &edit(
+            "<dynamics damping=\"0.1\"/>",
+            "<dynamics damping=\"0.1\" friction=\"0.5\"/>",
+        ),
+        &[],
+        11,
+        "friction",
+    );
+    at(
+        &edit(
+            "<axis xyz=\"0 1 0\"/>\n  </joint>",
+            "<axis xyz=\"0 1 0\"/><mimic joint=\"hip\"/>\n  </joint>",
+        ),
+        &[],
+        16,
+        "mimic",
+    );
+    at(
+        &edit("<child link=\"shin\"/>", "<child link=\"thigh\"/>"),
+        &[],
+        14,
+        "carried by joint `hip` already",
+    );
+    at(
+        URDF,
+        &["--closure", "c=thigh/nowhere"],
+        0,
+        "no link `nowhere`",
+    );
+    at(URDF, &["--closure", "c=thigh"], 0, "not NAME=LINK_A");
+    at(URDF, &["--motor", "hip"], 0, "has a motor already");
+    at(
+        URDF,
+        &["--motor", "ankle"],
+        0,
+        "no revolute, continuous or prismatic joint `ankle`",
+    );
+    at(URDF, &["--fix-base"], 0, "root link is the base already");
+    at(URDF, &["--keyframe", "home"], 0, "no keyframes");
+    at(LEG, &["--closure", "c=a/b"], 0, "--closure is for URDF");
+}
