@@ -498,12 +498,8 @@ def derive(model):
         L_rod = rod_length(c)
         return d if L_rod is None else (cs.dot(d, d) - L_rod**2) / (2 * L_rod)
 
-    if model["closures"]:
-        phi_lagrange = cs.vertcat(*[closure_rows(c, point(c["a"]) - point(c["b"])) for c in model["closures"]])
-        J_lagrange = cs.jacobian(phi_lagrange, q)
-        Jdot_qd_lagrange = cs.jtimes(cs.jtimes(phi_lagrange, q, qd), q, qd)
-    else:
-        J_lagrange, Jdot_qd_lagrange = cs.SX(0, n), cs.SX(0, 1)
+    # (The Lagrange form's closure Jacobian is formed below, once a revolute closure's
+    # turning rows can be written.)
 
     # The terms our generator emits, in link-local form (DESIGN.md §3): the mass matrix by
     # the composite-rigid-body recursion in each link's frame, the gravity forces from each
@@ -514,6 +510,26 @@ def derive(model):
     # the entries of M then reduce to constants times sines and cosines of relative angles.
     # One sine and cosine per revolute joint; absolute orientations by angle addition.
     lk = (derive_spatial.RecursiveKinematics if spatial else LinkKinematics)(model, sym, q, qd)
+
+    def turning_rows(c):
+        """A revolute closure's two rows beyond its point: (R_a a)·(R_b u), (R_a a)·(R_b w),
+        zero while link a's axis stays along link b's."""
+        r = c["revolute"]
+        rot = lambda ref: cs.SX.eye(3) if ref["link"] is None else lk.R[ref["link"]]
+        along = cs.mtimes(rot(c["a"]), cs.SX(r["a"]))
+        return cs.vertcat(*[cs.dot(along, cs.mtimes(rot(c["b"]), cs.SX(r[k]))) for k in ("u", "w")])
+
+    if model["closures"]:
+        phi_lagrange = cs.vertcat(
+            *[
+                cs.vertcat(closure_rows(c, point(c["a"]) - point(c["b"])), *([turning_rows(c)] if c.get("revolute") else []))
+                for c in model["closures"]
+            ]
+        )
+        J_lagrange = cs.jacobian(phi_lagrange, q)
+        Jdot_qd_lagrange = cs.jtimes(cs.jtimes(phi_lagrange, q, qd), q, qd)
+    else:
+        J_lagrange, Jdot_qd_lagrange = cs.SX(0, n), cs.SX(0, 1)
     M = lk.mass_matrix()
     G = lk.gravity_forces() + G_springs
     M_qd = cs.mtimes(M, qd)
@@ -541,7 +557,12 @@ def derive(model):
             pb, Jb, bb = stacked([c["b"]])
             d, Jd, bd = pa - pb, Ja - Jb, ba - bb
             L_rod = rod_length(c)
-            if L_rod is None:
+            if c.get("revolute"):
+                # The point's three rows, then the axes' two, differentiated by CasADi.
+                turn = turning_rows(c)
+                J_turn = cs.jacobian(turn, q)
+                rows.append((cs.vertcat(d, turn), cs.vertcat(Jd, J_turn), cs.vertcat(bd, cs.jtimes(cs.mtimes(J_turn, qd), q, qd))))
+            elif L_rod is None:
                 rows.append((d, Jd, bd))
             else:
                 # φ = (dᵀd − L²)/(2L): φ̇ = dᵀ J_d q̇ / L, φ̈ = J q̈ + (ḋᵀḋ + dᵀ J̇_d q̇) / L.

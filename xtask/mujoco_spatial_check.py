@@ -152,6 +152,23 @@ def close(what, ours_value, theirs, failures):
     return err
 
 
+def same_span(what, ours_value, theirs, failures):
+    """How far either matrix's rows lie outside the other's row space, relative to the
+    rows' size; a failure above REL_TOL."""
+    a, b = np.asarray(ours_value, float), np.asarray(theirs, float)
+
+    def outside(x, y):
+        u, sv, vt = np.linalg.svd(y, full_matrices=False)
+        basis = vt[sv > 1e-9 * sv.max()]
+        rest = x - (x @ basis.T) @ basis
+        return np.abs(rest).max(initial=0.0) / max(np.abs(x).max(initial=0.0), 1e-12)
+
+    err = max(outside(a, b), outside(b, a))
+    if not err <= REL_TOL:
+        failures.append(f"{what}: rows outside the other's span by {err:.2e} (relative)")
+    return err
+
+
 def load(mjcf):
     """The model of `mjcf` as our leg sees it, and the body held as its base (None: the
     world). A free joint is removed (its body welded where the file writes it, each
@@ -244,7 +261,14 @@ def main():
                     # A rod: the tendon's length row, d|a − b|/dq, ours (dᵀ J_d / L) where
                     # the rod is assembled.
                     rows.append(efc[r][:, dofs] @ T)
-            checks.append(("J", t["J"], np.vstack(rows) if rows else np.zeros((0, len(dofs)))))
+            theirs = np.vstack(rows) if rows else np.zeros((0, len(dofs)))
+            if ir["model"].get("revolute_closures"):
+                # A revolute closure is five rows of ours and two connects (six rows, one
+                # implied) of MuJoCo's: the rows must span the same space, each side's
+                # rows inside the other's span (relative to their size).
+                worst["J"] = max(worst.get("J", 0.0), same_span(f"#{trial} J", t["J"], theirs, failures))
+            else:
+                checks.append(("J", t["J"], theirs))
         for key, a, b in checks:
             worst[key] = max(worst.get(key, 0.0), close(f"#{trial} {key}", a, b, failures))
     # MuJoCo's own run from home, motors off, free joints held: the gap its soft loops

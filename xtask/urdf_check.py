@@ -80,11 +80,19 @@ def pinocchio_leg(urdf, ir):
 
     def constraints(data):
         """The closures as 3-D point constraints (CONTACT_3D between the frames `<c>.a`
-        and `<c>.b`), initialised on `data`."""
+        and `<c>.b`), initialised on `data`. A revolute closure, which Pinocchio has no
+        5-D constraint for (pinocchio#2729), is two: at its point and at the frames
+        `<c>.a.axis`, `<c>.b.axis` along its axes (six rows, one implied: a hinge)."""
         cm, cd = pin.StdVec_RigidConstraintModel(), pin.StdVec_RigidConstraintData()
-        for c in ir["model"]["closures"]:
-            fa = model.frames[model.getFrameId(f"{c}.a")]
-            fb = model.frames[model.getFrameId(f"{c}.b")]
+        revolute = ir["model"].get("revolute_closures", [])
+        pairs = []
+        for k, c in enumerate(ir["model"]["closures"]):
+            pairs.append((f"{c}.a", f"{c}.b"))
+            if k in revolute:
+                pairs.append((f"{c}.a.axis", f"{c}.b.axis"))
+        for a, b in pairs:
+            fa = model.frames[model.getFrameId(a)]
+            fb = model.frames[model.getFrameId(b)]
             first, second = (fb, fa) if fa.parentJoint == 0 else (fa, fb)
             m = pin.RigidConstraintModel(pin.ContactType.CONTACT_3D, model, first.parentJoint, first.placement,
                                          second.parentJoint, second.placement, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
@@ -154,6 +162,11 @@ def main():
             # A rod's frames are its length apart; a point closure's coincide.
             gap = abs(np.linalg.norm(a - b) - params[f"{c}_distance"]) if k in rods else float(np.abs(a - b).max())
             closure = max(closure, gap)
+            if k in ir["model"].get("revolute_closures", []):
+                # A revolute closure's points along its axes coincide too.
+                a = data.oMf[model.getFrameId(f"{c}.a.axis")].translation
+                b = data.oMf[model.getFrameId(f"{c}.b.axis")].translation
+                closure = max(closure, float(np.abs(a - b).max()))
         ok = ok and closure < 1e-12
     dynamics = ""
     if ir["model"].get("distance_closures"):

@@ -40,6 +40,8 @@ pub mod open_three_link;
 pub use open_three_link::OpenThreeLink;
 pub mod raibert_hopper;
 pub use raibert_hopper::RaibertHopper;
+pub mod revolute_knee_leg;
+pub use revolute_knee_leg::RevoluteKneeLeg;
 pub mod rod_knee_leg;
 pub use rod_knee_leg::RodKneeLeg;
 pub mod rssr_linkage;
@@ -83,7 +85,8 @@ macro_rules! for_each_spatial_model {
         $callback ! (abducted_five_bar, $crate::abducted_five_bar::AbductedFiveBar, 5, 3,
         3, 2); $callback ! (achilles_leg, $crate::achilles_leg::AchillesLeg, 10, 6, 4,
         4); $callback ! (cassie_leg, $crate::cassie_leg::CassieLeg, 13, 6, 5, 4);
-        $callback ! (rod_knee_leg, $crate::rod_knee_leg::RodKneeLeg, 4, 1, 3, 2);
+        $callback ! (revolute_knee_leg, $crate::revolute_knee_leg::RevoluteKneeLeg, 7, 5,
+        3, 2); $callback ! (rod_knee_leg, $crate::rod_knee_leg::RodKneeLeg, 4, 1, 3, 2);
         $callback ! (rssr_linkage, $crate::rssr_linkage::RssrLinkage, 5, 3, 1, 2);
         $callback ! (sliding_mass, $crate::sliding_mass::SlidingMass, 3, 0, 2, 0);
     };

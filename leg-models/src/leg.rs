@@ -42,8 +42,6 @@ use crate::dynamics::contact::{self, ContactSolution, Ground, Impact, ImpactErro
 use crate::dynamics::derivatives::{self, ContactDynamicsDerivatives, ForwardDynamicsDerivatives};
 use crate::dynamics::structure::Structure;
 use crate::dynamics::{self, Acceleration, Baumgarte, DynamicsError};
-#[cfg(doc)]
-use crate::model::contract::LegModel;
 use crate::model::contract::{
     ContactModel, DynamicsTerms, LegDynamics, LegModel, Parameters, Real,
 };

@@ -196,7 +196,8 @@ where
 }
 
 /// Energy is kept to the integrator's order: small, and more than 4 times smaller at half the step (a
-/// wrong `C q̇` or `G` leaves an error that does not shrink with the step).
+/// wrong `C q̇` or `G` leaves an error that does not shrink with the step), unless it is
+/// rounding alone (below 1e-12 of the peak kinetic energy).
 fn energy_kept<L, const NQ: usize, const NC: usize, const NU: usize, const NP: usize>()
 where
     L: LegModel<NQ, NC, NU, 3, NP>,
@@ -216,8 +217,10 @@ where
         fine < 1e-6 * peak,
         "{name}: energy drifted {fine:e} J over 0.5 s (peak kinetic {peak:e} J)"
     );
+    // Where RK4 is exact (a block falling at constant acceleration), rounding is all
+    // that is left, and it does not shrink with the step.
     assert!(
-        coarse > 4.0 * fine,
+        fine < 1e-12 * peak || coarse > 4.0 * fine,
         "{name}: the energy error does not shrink with the step ({coarse:e} J at 0.2 ms, {fine:e} J at 0.1 ms)"
     );
 }

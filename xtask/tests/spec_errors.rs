@@ -1134,3 +1134,67 @@ fn distance_closures_are_one_row_and_refused_where_they_do_not_fit() {
         "for spatial legs for now",
     );
 }
+
+/// The revolute-closure test leg's text, edited.
+fn revolute_edit(from: &str, to: &str) -> String {
+    let text = std::fs::read_to_string(
+        gen::workspace_root().join("leg-models/specs/revolute_knee_leg.toml"),
+    )
+    .unwrap();
+    assert!(text.contains(from), "{from}");
+    text.replacen(from, to, 1)
+}
+
+#[test]
+fn revolute_closures_are_refused_where_they_do_not_fit() {
+    // The leg itself: five rows, its axes unit and b's perpendicular pair.
+    let m = model::build(&parse(&revolute_edit("", "")).unwrap()).unwrap();
+    assert_eq!(m.closure_rows(), 5);
+    let r = m.closures[0].revolute.as_ref().unwrap();
+    assert_eq!(r.a, [0.0, 0.0, 1.0]);
+    let b = r.axis_b();
+    assert!(
+        (b[1] - 1.0).abs() < 1e-15 && b[0].abs() < 1e-15 && b[2].abs() < 1e-15,
+        "{b:?}"
+    );
+    let dot = |x: [f64; 3], y: [f64; 3]| x[0] * y[0] + x[1] * y[1] + x[2] * y[2];
+    assert!(dot(r.u, b).abs() < 1e-15 && dot(r.w, b).abs() < 1e-15 && dot(r.u, r.w).abs() < 1e-15);
+    // Not both a rod and a hinge; axis_b only with axis; no zero or 2-vector axis.
+    refused(
+        &revolute_edit(
+            "axis_b = [0.0, 1.0, 0.0]",
+            "axis_b = [0.0, 1.0, 0.0]\ndistance = 0.1",
+        ),
+        "closures[0].distance",
+        "not both",
+    );
+    refused(
+        &revolute_edit("axis = [0.0, 0.0, 1.0]\naxis_b", "axis_b"),
+        "closures[0].axis_b",
+        "give `axis`",
+    );
+    refused(
+        &revolute_edit(
+            "axis = [0.0, 0.0, 1.0]\naxis_b",
+            "axis = [0.0, 0.0, 0.0]\naxis_b",
+        ),
+        "closures[0].axis",
+        "must not be zero",
+    );
+    refused(
+        &revolute_edit(
+            "axis = [0.0, 0.0, 1.0]\naxis_b",
+            "axis = [0.0, 1.0]\naxis_b",
+        ),
+        "closures[0].axis",
+        "the leg is spatial",
+    );
+    // On a planar leg a closure is a pin already.
+    let planar =
+        std::fs::read_to_string(gen::workspace_root().join("leg-models/specs/minitaur.toml"))
+            .unwrap();
+    let at = planar.find("[[closures]]").unwrap();
+    let end = planar[at..].find("\n\n").map_or(planar.len(), |e| at + e);
+    let text = format!("{}\naxis = [0.0, 1.0]{}", &planar[..end], &planar[end..]);
+    refused(&text, "closures[0].axis", "planar leg");
+}

@@ -315,6 +315,12 @@ pub trait LegDynamics<const NQ: usize, const NC: usize, const NU: usize> {
     /// (and equal to `|a − b| − L` to first order); every other closure one row per
     /// coordinate of `a − b`. Rows follow the closures' order. None by default.
     const DISTANCE_CLOSURES: &'static [usize] = &[];
+    /// The revolute closures (spatial legs): closure `k` listed here has five rows, the
+    /// point's three (`a − b`) and two that keep link a's axis along link b's,
+    /// `(R_a â)·(R_b û)` and `(R_a â)·(R_b ŵ)` (`û`, `ŵ` perpendicular to b's axis): their
+    /// forces are the joint's reaction force and the two moments across its axis. None by
+    /// default.
+    const REVOLUTE_CLOSURES: &'static [usize] = &[];
 
     /// The physical parameters (lengths, masses, centres of mass, inertias, rotor
     /// inertias and gear ratios, damping, gravity). `Default` holds the spec's values.

@@ -370,6 +370,10 @@ fn spatial_figures(
             &root.join(gen::SPECS_DIR).join(format!("{name}.toml")),
         )?;
         let m = crate::gen::model::build(&spec).map_err(|e| e.to_string())?;
+        if m.closures.iter().any(|c| c.revolute.is_some()) {
+            eprintln!("{name}: not timed against Pinocchio: its constraintDynamics has no 5-D (revolute) loop constraint (pinocchio#2729)");
+            continue;
+        }
         if m.closures.iter().any(|c| c.distance.is_some()) {
             eprintln!("{name}: not timed against Pinocchio: its constraintDynamics has no rod (distance) constraint");
             continue;

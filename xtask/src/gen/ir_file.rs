@@ -35,6 +35,10 @@ pub struct ModelInfo {
     /// The closures that are rods (one row, the distance), by index (left out when none).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub distance_closures: Vec<usize>,
+    /// The revolute closures (five rows: the point's three, then two keeping the axes
+    /// parallel), by index (left out when none).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub revolute_closures: Vec<usize>,
     /// Closure rows implied by the others at the assembled home pose (their forces are
     /// held at zero), found by the derivation.
     pub redundant_rows: Vec<usize>,
@@ -77,6 +81,8 @@ impl ModelInfo {
             .map(|k| {
                 if self.distance_closures.contains(&k) {
                     1
+                } else if self.revolute_closures.contains(&k) {
+                    5
                 } else {
                     self.dimension
                 }

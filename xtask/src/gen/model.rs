@@ -84,6 +84,59 @@ pub struct Closure {
     /// A distance closure's rod length (its parameter): one row, `|a − b| = L`; without
     /// it a point closure, one row per coordinate.
     pub distance: Option<String>,
+    /// A revolute closure's axes, fixed at generation: `a` on link a (unit, its frame) and
+    /// `u`, `w` on link b (unit, its frame, perpendicular to its axis and to each other).
+    /// Its rows are the point closure's three and `(R_a a)·(R_b u)`, `(R_a a)·(R_b w)`:
+    /// zero while the axes stay parallel.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub revolute: Option<RevoluteAxes>,
+}
+
+/// See [`Closure::revolute`].
+#[derive(Clone, Debug, Serialize)]
+pub struct RevoluteAxes {
+    pub a: [f64; 3],
+    pub u: [f64; 3],
+    pub w: [f64; 3],
+}
+
+impl RevoluteAxes {
+    /// Link b's axis, `u × w`.
+    pub fn axis_b(&self) -> [f64; 3] {
+        let (u, w) = (self.u, self.w);
+        [
+            u[1] * w[2] - u[2] * w[1],
+            u[2] * w[0] - u[0] * w[2],
+            u[0] * w[1] - u[1] * w[0],
+        ]
+    }
+
+    /// From link a's axis and link b's (any length, not zero): `u` is the base axis least
+    /// along b's axis, made perpendicular to it; `w = b × u`.
+    pub fn new(a: [f64; 3], b: [f64; 3]) -> Self {
+        let unit = |v: [f64; 3]| {
+            let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            [v[0] / n, v[1] / n, v[2] / n]
+        };
+        let (a, b) = (unit(a), unit(b));
+        let least = (0..3)
+            .min_by(|&i, &j| b[i].abs().total_cmp(&b[j].abs()))
+            .expect("three axes");
+        let mut e = [0.0; 3];
+        e[least] = 1.0;
+        let along = b[least];
+        let u = unit([
+            e[0] - along * b[0],
+            e[1] - along * b[1],
+            e[2] - along * b[2],
+        ]);
+        let w = [
+            b[1] * u[2] - b[2] * u[1],
+            b[2] * u[0] - b[0] * u[2],
+            b[0] * u[1] - b[1] * u[0],
+        ];
+        RevoluteAxes { a, u, w }
+    }
 }
 
 impl Model {
@@ -94,10 +147,13 @@ impl Model {
 }
 
 impl Closure {
-    /// Its rows in `φ`: one for a rod, one per coordinate for a point closure.
+    /// Its rows in `φ`: one for a rod, one per coordinate for a point closure, five for
+    /// a revolute closure.
     pub fn rows(&self, dimension: usize) -> usize {
         if self.distance.is_some() {
             1
+        } else if self.revolute.is_some() {
+            5
         } else {
             dimension
         }
@@ -462,11 +518,17 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
                 )
             })
             .transpose()?;
+        let revolute = c.axis.as_ref().map(|axis| {
+            let v =
+                |x: &Spanned<Vector>| -> [f64; 3] { std::array::from_fn(|i| x.get_ref().value[i]) };
+            RevoluteAxes::new(v(axis), v(c.axis_b.as_ref().unwrap_or(axis)))
+        });
         closures.push(Closure {
             name,
             a,
             b: bp,
             distance,
+            revolute,
         });
     }
     b.owned_by("foot.link".into(), &f.foot.get_ref().link);

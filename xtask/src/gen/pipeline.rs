@@ -339,6 +339,13 @@ fn assemble(spec: &Spec, model: &Model, derived: Derived) -> IrFile {
                 .filter(|(_, c)| c.distance.is_some())
                 .map(|(k, _)| k)
                 .collect(),
+            revolute_closures: model
+                .closures
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| c.revolute.is_some())
+                .map(|(k, _)| k)
+                .collect(),
             redundant_rows,
             mobility,
             params: model.params.clone(),

@@ -456,6 +456,12 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         let d = info.distance_closures.iter().map(|&k| lit(k));
         quote!(const DISTANCE_CLOSURES: &'static [usize] = &[#(#d),*];)
     };
+    let revolute_closures = if info.revolute_closures.is_empty() {
+        quote!()
+    } else {
+        let r = info.revolute_closures.iter().map(|&k| lit(k));
+        quote!(const REVOLUTE_CLOSURES: &'static [usize] = &[#(#r),*];)
+    };
     let chart_states = lit(2 * info.mobility);
     let chart_doc = format!(
         " The chart of the constraint manifold: {} coordinates (the mobility), {} states.",
@@ -717,6 +723,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             #ball_joints
             #dimension
             #distance_closures
+            #revolute_closures
             type Params<T: Arithmetic> = Params<T>;
             #(#methods)*
         }

@@ -366,6 +366,14 @@ pub struct ClosureSpec {
     /// distance); without it the points coincide (one row per coordinate).
     #[serde(default)]
     pub distance: Option<Spanned<Num>>,
+    /// A revolute closure (spatial legs): the points coincide and this axis of link a
+    /// (its frame) stays along `axis_b` of link b; five rows, where a point closure has
+    /// three and leaves the two links free to turn about every axis through the point.
+    #[serde(default)]
+    pub axis: Option<Spanned<Vector>>,
+    /// The revolute closure's axis in link b's frame (default: `axis`'s numbers).
+    #[serde(default)]
+    pub axis_b: Option<Spanned<Vector>>,
 }
 
 /// A parsed, validated spec with its source text.
@@ -820,6 +828,40 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
                 ));
             }
             check_num(ctx, d, &format!("closures[{k}].distance"), Sign::Positive)?;
+        }
+        if let (Some(_), Some(d)) = (&c.axis, &c.distance) {
+            return Err(ctx.span(
+                d,
+                format!("closures[{k}].distance"),
+                "a closure is a rod (distance) or a revolute joint (axis), not both",
+            ));
+        }
+        if c.axis.is_none() {
+            if let Some(ab) = &c.axis_b {
+                return Err(ctx.span(
+                    ab,
+                    format!("closures[{k}].axis_b"),
+                    "axis_b is the revolute closure's axis on link b: give `axis` (link a's) too",
+                ));
+            }
+        }
+        for (field, axis) in [("axis", &c.axis), ("axis_b", &c.axis_b)] {
+            let Some(axis) = axis else { continue };
+            if dim == 2 {
+                return Err(ctx.span(
+                    axis,
+                    format!("closures[{k}].{field}"),
+                    "a revolute closure is for spatial legs: on a planar leg every closure is a pin about the plane's normal already",
+                ));
+            }
+            check_vec(ctx, axis, &format!("closures[{k}].{field}"), Sign::Any, dim)?;
+            if axis.get_ref().value.iter().all(|&x| x == 0.0) {
+                return Err(ctx.span(
+                    axis,
+                    format!("closures[{k}].{field}"),
+                    "a revolute closure's axis must not be zero",
+                ));
+            }
         }
         if c.a.get_ref().link.get_ref() == c.b.get_ref().link.get_ref() {
             return Err(ctx.span(

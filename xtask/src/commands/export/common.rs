@@ -16,6 +16,16 @@ pub mod added {
         format!("{closure}.{side}")
     }
 
+    /// A revolute closure's second point on side `side`, [`AXIS_LEVER`] along its axis:
+    /// MJCF holds the closure as two `connect`s, at its point and there (six rows, one
+    /// of them implied by the others: a hinge).
+    pub fn closure_axis_point(closure: &str, side: &str) -> String {
+        format!("{closure}.{side}.axis")
+    }
+
+    /// How far along a revolute closure's axis MJCF's second `connect` sits (m).
+    pub const AXIS_LEVER: f64 = 0.05;
+
     /// A contact point's frame (URDF link, MJCF site).
     pub fn contact_point(contact: &str) -> String {
         format!("{contact}.point")
@@ -102,6 +112,15 @@ pub(crate) fn closures_and_couplings(m: &Model, out: &mut String) {
                         "    <connect name=\"{}\" site1=\"{a}\" site2=\"{b}\" {soft}/>",
                         c.name
                     );
+                    if c.revolute.is_some() {
+                        let _ = writeln!(
+                            out,
+                            "    <connect name=\"{}.axis\" site1=\"{}\" site2=\"{}\" {soft}/>",
+                            c.name,
+                            added::closure_axis_point(&c.name, "a"),
+                            added::closure_axis_point(&c.name, "b")
+                        );
+                    }
                 }
                 Some(length) => {
                     // MuJoCo holds `length − length(qpos0) = polycoef[0]`: the rod's length
@@ -152,7 +171,7 @@ pub(crate) fn closures_and_couplings(m: &Model, out: &mut String) {
 /// URDF's fixed frames at the closure points (`<closure>.a`, `.b`), the foot and the
 /// contact points, each on its link; `at` writes a point's `xyz`.
 pub(crate) fn urdf_frames(m: &Model, at: impl Fn(&Point) -> String, out: &mut String) {
-    let mut frame = |name: &str, p: &Point| {
+    let mut frame = |name: &str, link: Option<usize>, xyz: String| {
         let _ = writeln!(out, "  <link name=\"{name}\"/>");
         let _ = writeln!(
             out,
@@ -162,18 +181,35 @@ pub(crate) fn urdf_frames(m: &Model, at: impl Fn(&Point) -> String, out: &mut St
         let _ = writeln!(
             out,
             "    <parent link=\"{}\"/>\n    <child link=\"{name}\"/>",
-            p.link.map_or("base", |l| m.links[l].name.as_str())
+            link.map_or("base", |l| m.links[l].name.as_str())
         );
-        let _ = writeln!(out, "    <origin xyz=\"{}\" rpy=\"0 0 0\"/>", at(p));
+        let _ = writeln!(out, "    <origin xyz=\"{xyz}\" rpy=\"0 0 0\"/>");
         let _ = writeln!(out, "  </joint>");
     };
     for c in &m.closures {
-        frame(&added::closure_point(&c.name, "a"), &c.a);
-        frame(&added::closure_point(&c.name, "b"), &c.b);
+        frame(&added::closure_point(&c.name, "a"), c.a.link, at(&c.a));
+        frame(&added::closure_point(&c.name, "b"), c.b.link, at(&c.b));
+        // A revolute closure's points on its axes, as in MJCF (a URDF tool that holds
+        // the two pairs together holds the hinge).
+        if let Some(r) = &c.revolute {
+            for (side, p, axis) in [("a", &c.a, r.a), ("b", &c.b, r.axis_b())] {
+                let xyz: Vec<String> = (0..3)
+                    .map(|k| {
+                        let x = p.point.get(k).map_or(0.0, |n| value(&m.params, n));
+                        num(x + added::AXIS_LEVER * axis[k])
+                    })
+                    .collect();
+                frame(
+                    &added::closure_axis_point(&c.name, side),
+                    p.link,
+                    xyz.join(" "),
+                );
+            }
+        }
     }
-    frame(added::FOOT, &m.foot);
+    frame(added::FOOT, m.foot.link, at(&m.foot));
     for c in &m.contacts {
-        frame(&added::contact_point(&c.name), &c.point);
+        frame(&added::contact_point(&c.name), c.point.link, at(&c.point));
     }
 }
 

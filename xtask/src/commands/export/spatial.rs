@@ -158,6 +158,22 @@ fn sites(m: &Model, body: Option<usize>, pad: &str, out: &mut String) {
         for (side, p) in [("a", &c.a), ("b", &c.b)] {
             if p.link == body {
                 site(out, &added::closure_point(&c.name, side), p);
+                // A revolute closure's second pair of points, on its axes.
+                if let Some(r) = &c.revolute {
+                    let axis = if side == "a" { r.a } else { r.axis_b() };
+                    let at: Vec<String> = (0..3)
+                        .map(|k| {
+                            let x = p.point.get(k).map_or(0.0, |n| value(&m.params, n));
+                            num(x + added::AXIS_LEVER * axis[k])
+                        })
+                        .collect();
+                    let _ = writeln!(
+                        out,
+                        "{pad}<site name=\"{}\" pos=\"{}\"/>",
+                        added::closure_axis_point(&c.name, side),
+                        at.join(" ")
+                    );
+                }
             }
         }
     }

@@ -1,5 +1,5 @@
 //! `cargo xtask import FILE --name NAME`: a spatial spec from a MuJoCo MJCF file or a
-//! URDF (docs/spec-format.md#importing-mjcf; URDF through [`urdf`], its loops and extra
+//! URDF (docs/spec-format.md#importing-mjcf; URDF through `urdf.rs`, its loops and extra
 //! motors named on the command line).
 //!
 //! The tree: every body with one joint is a link; a body without a joint is welded to the

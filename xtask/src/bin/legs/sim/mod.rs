@@ -526,7 +526,9 @@ pub fn run<
         let _ = write!(csv, ",u_{}", L::JOINT_NAMES[a]);
     }
     // A point closure's force has one row per coordinate of its point, a rod's one (its
-    // tension along the rod, scaled as φ's row).
+    // tension along the rod, scaled as φ's row), a revolute closure's its point's and two
+    // moments across its axis (`M_k_u`, `M_k_w`: about link b's `û`, `ŵ`, scaled as φ's
+    // rows).
     const AXES: [&str; 3] = ["x", "y", "z"];
     for k in 0..NP / 2 {
         if L::DISTANCE_CLOSURES.contains(&k) {
@@ -534,6 +536,9 @@ pub fn run<
         } else {
             for a in &AXES[..ND] {
                 let _ = write!(csv, ",F_{k}_{a}");
+            }
+            if L::REVOLUTE_CLOSURES.contains(&k) {
+                let _ = write!(csv, ",M_{k}_u,M_{k}_w");
             }
         }
     }
