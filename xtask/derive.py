@@ -702,7 +702,17 @@ def derive(model):
         "Jdot_qd_lagrange": Jdot_qd_lagrange,
     }
     points = cs.horzcat(cs.horzcat(*joint), tips, closure_points, foot)
-    numeric = cs.Function("home_check", [q, params], [phi, J, points, M])
+    # Each revolute closure's (R_a â)·(R_b b̂): its turning rows vanish for antiparallel axes
+    # too, which home_check refuses (the exports' second points would sit apart).
+    def axes_dot(c):
+        r = c["revolute"]
+        b = [r["u"][1] * r["w"][2] - r["u"][2] * r["w"][1], r["u"][2] * r["w"][0] - r["u"][0] * r["w"][2], r["u"][0] * r["w"][1] - r["u"][1] * r["w"][0]]
+        rot = lambda ref: cs.SX.eye(3) if ref["link"] is None else lk.R[ref["link"]]
+        return cs.dot(cs.mtimes(rot(c["a"]), cs.SX(r["a"])), cs.mtimes(rot(c["b"]), cs.SX(b)))
+
+    revolute = [c for c in closures if c.get("revolute")]
+    axes = cs.vertcat(*[axes_dot(c) for c in revolute]) if revolute else cs.SX(0, 1)
+    numeric = cs.Function("home_check", [q, params], [phi, J, points, M, axes])
     return inputs, terms, peer, numeric
 
 
@@ -723,7 +733,7 @@ def home_check(model, numeric):
     n = len(home)
 
     def evaluate(q):
-        phi, J, points, _ = numeric(q, p)
+        phi, J, points, _, _ = numeric(q, p)
         return np.array(phi).reshape(-1), np.array(J).reshape(-1, n), np.array(points)
 
     phi, J, points = evaluate(home)
@@ -765,12 +775,17 @@ def home_check(model, numeric):
     # only where other links' mass moves with its joint (a floating base's intermediate
     # links). Otherwise name the joint that carries no inertia.
     M = np.array(numeric(q, p)[3])
+    # Revolute closures whose axes point against each other at the assembled home.
+    dots = np.array(numeric(q, p)[4]).reshape(-1)
+    revolute = [k for k, c in enumerate(model["closures"]) if c.get("revolute")]
+    antiparallel = [k for k, d in zip(revolute, dots) if d < 0.0]
     eigenvalues, vectors = np.linalg.eigh(0.5 * (M + M.T))
     massless_joint = None
     if eigenvalues[0] <= 1e-12 * max(float(eigenvalues[-1]), 1e-300):
         massless_joint = int(np.argmax(np.abs(vectors[:, 0])))
     return {
         "massless_joint": massless_joint,
+        "antiparallel": antiparallel,
         "scale": scale,
         "raw_residual": raw,
         "worst_row": worst_row,

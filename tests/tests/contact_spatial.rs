@@ -302,10 +302,16 @@ fn a_block_thrown_onto_the_ground_lands_slides_and_stops_as_coulomb_says() {
 // `sliding_mass` and on `abducted_five_bar`, whose toe touches the ground while its loop,
 // with one structurally redundant row, stays closed.
 
-/// The ground's frame built here on its own (not `Ground::frame`): `t₁` along the base's
-/// x projected on the ground, `t₂ = n × t₁`.
+/// The ground's frame built here on its own (not `Ground::frame`), by its documented
+/// rule: `t₁` along the base's x projected on the ground (its y where `|n_x| ≥ 0.9`),
+/// `t₂ = n × t₁`.
 fn frame_of(n: &Vector3<f64>) -> [Vector3<f64>; 3] {
-    let t1 = (Vector3::x() - n * n.x).normalize();
+    let e = if n.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    let t1 = (e - n * n.dot(&e)).normalize();
     [t1, n.cross(&t1), *n]
 }
 
@@ -323,13 +329,18 @@ fn random_modes<const NK: usize>(rng: &mut Rng) -> Modes<NK, 3> {
     m
 }
 
-fn check_against_dense<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>()
-where
+/// On the spec's ground, or on `tilted` (its normal normalized here).
+fn check_against_dense<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    tilted: Option<[f64; 3]>,
+) where
     L: ContactModel<NQ, NC, NU, NK, 3>,
 {
     assert!(NK > 0, "{} has contacts", L::NAME);
     let p = L::Params::<f64>::default();
-    let ground = Ground::<f64, 3>::of::<L, NQ, NC, NU, NK>();
+    let mut ground = Ground::<f64, 3>::of::<L, NQ, NC, NU, NK>();
+    if let Some(n) = tilted {
+        ground.normal = Vector3::from(n).normalize();
+    }
     let frame = frame_of(&ground.normal);
     let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
     let mut rng = Rng::new(33);
@@ -449,12 +460,15 @@ where
 
 #[test]
 fn sliding_mass_contact_dynamics_solve_the_dense_kkt_system() {
-    check_against_dense::<SlidingMass, 3, 0, 2, 3>();
+    check_against_dense::<SlidingMass, 3, 0, 2, 3>(None);
+    check_against_dense::<SlidingMass, 3, 0, 2, 3>(Some([0.3, -0.2, 0.9]));
 }
 
 #[test]
 fn abducted_five_bar_contact_dynamics_solve_the_dense_kkt_system() {
-    check_against_dense::<AbductedFiveBar, 5, 3, 3, 3>();
+    check_against_dense::<AbductedFiveBar, 5, 3, 3, 3>(None);
+    // A ground steep enough that its frame's first tangent is the base's y projected.
+    check_against_dense::<AbductedFiveBar, 5, 3, 3, 3>(Some([0.95, 0.1, 0.3]));
 }
 
 /// At random assembled states and velocities: after the impact every closure and every

@@ -1198,3 +1198,28 @@ fn revolute_closures_are_refused_where_they_do_not_fit() {
     let text = format!("{}\naxis = [0.0, 1.0]{}", &planar[..end], &planar[end..]);
     refused(&text, "closures[0].axis", "planar leg");
 }
+
+/// Runs the derivation: a revolute closure whose axes point against each other at the
+/// assembled home is refused at `axis_b` (its rows vanish there too, but the exports
+/// place their second points along each axis), and nothing is written.
+#[test]
+fn a_revolute_closure_with_antiparallel_axes_is_located() {
+    let text = revolute_edit("axis_b = [0.0, 1.0, 0.0]", "axis_b = [0.0, -1.0, 0.0]");
+    let root = scratch("antiparallel", &text);
+    let before = root.listing();
+    let err = generate(&root).unwrap_err();
+    assert!(
+        err.is_usage(),
+        "bad input must be a usage error (exit 2): {err}"
+    );
+    let err = err.to_string();
+    let line = text[..text.find("axis_b = [0.0, -1.0").unwrap()]
+        .lines()
+        .count()
+        + 1;
+    assert!(
+        err.starts_with(&format!("leg-models/specs/leg.toml:{line}:10: closures[0].axis_b: closure `knee_link`: link b's axis points against link a's")),
+        "{err}"
+    );
+    assert_eq!(root.listing(), before, "a failed generation changed files");
+}

@@ -886,9 +886,11 @@ impl From<DynamicsError> for ImpactError {
 /// over the rows `modes` hold. A sticking contact whose impulse leaves the friction cone
 /// (`|Λ_t| > μ Λ_n`, the Euclidean norm of the tangential impulse) is resolved again as
 /// sliding, its friction impulse `μ Λ_n` against the slip after the impact, and its mode
-/// in `modes` becomes `Slide`. That slip direction is found by iteration on a spatial leg
-/// (from the sticking impulse's, each round the slip the last round left, until it
-/// repeats to `√ε`); a planar leg's is one of two, tried once each. Every held normal
+/// in `modes` becomes `Slide`. On a spatial leg that slip direction is the one the slip
+/// after the impact takes (a fixed point from the sticking impulse's, then a scan of the
+/// circle refined by bisection, contact by contact; where none is consistent, as
+/// Coulomb's law on impulses allows, the last one tried is kept); a planar leg's is one
+/// of two, tried once each. Every held normal
 /// impulse must be non-negative ([`ImpactError::Pulling`] otherwise).
 ///
 /// A sticking impact loses exactly `½ Δq̇ᵀ M Δq̇`. A sliding one loses energy unless the
@@ -942,15 +944,26 @@ where
             &momentum,
         )
     };
-    // A spatial contact already sliding into the impact starts from its slip before it
-    // (the ground's first tangent if it had none).
+    // A spatial contact already sliding into the impact starts from its slip before it;
+    // one at rest along the ground (its speed within rounding, as in `slip_directions`)
+    // from none: `consistent_slip` then starts from the slip a frictionless impact leaves.
     let tangential = |k: usize| ND * k..ND * k + ND - 1;
     let mut slip = SVector::<T, NK>::zeros();
     if ND > 2 {
-        let before = ground.rows(&mul(&jc, qd));
+        let c = ground.rows(&jc);
+        let before = mul(&c, qd);
         for k in 0..NK / ND {
             if let ContactMode::Slide { .. } = modes.get(k) {
-                set_direction(&mut slip, &before, tangential(k));
+                let scale = tangential(k)
+                    .map(|r| {
+                        let s = (0..NQ).fold(T::zero(), |a, j| a + (c[(r, j)] * qd[j]).abs());
+                        s * s
+                    })
+                    .fold(T::zero(), |a, b| a + b)
+                    .sqrt();
+                if tangential_norm::<T, NK, ND>(&before, k) > T::default_epsilon().sqrt() * scale {
+                    set_direction(&mut slip, &before, tangential(k));
+                }
             }
         }
     }
@@ -960,7 +973,7 @@ where
     for k in 0..NK / ND {
         if modes.get(k) == ContactMode::Stick {
             let n = ND * k + ND - 1;
-            if tangential_norm::<T, NK, ND>(&sol.contact, k) > mu[n] * sol.contact[n] {
+            if tangential_norm::<T, NK, ND>(&sol.contact, k) > mu[ND * k] * sol.contact[n] {
                 // λ_t = −μ ŝ λ_n: the slip runs against the friction impulse.
                 modes.set(
                     k,

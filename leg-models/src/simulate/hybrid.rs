@@ -707,8 +707,18 @@ where
                         // (Painlevé: Coulomb sliding may pull where sticking pushes
                         // out of the cone and flight would sink); else it lifts off.
                         let next = if tangential_norm::<T, NK, ND>(&v, k) <= still {
+                            // Another mode, or on a spatial leg the same slide in
+                            // another direction.
+                            let other = |m: &(ContactMode, SVector<T, NK>)| {
+                                m.0 != mode
+                                    || (ND > 2
+                                        && (ti..ni).any(|r| {
+                                            (m.1[r] - hs.slip[r]).abs()
+                                                > T::default_epsilon().sqrt()
+                                        }))
+                            };
                             self.consistent_mode(hs, k, u, floor)?
-                                .filter(|m| m.0 != mode)
+                                .filter(other)
                                 .unwrap_or((ContactMode::Flight, hs.slip))
                         } else {
                             (ContactMode::Flight, hs.slip)

@@ -72,6 +72,9 @@ struct HomeCheck {
     /// A joint that moves no inertia at home (`M` singular there): a massless link with
     /// nothing massive beyond it.
     massless_joint: Option<usize>,
+    /// Revolute closures whose axes point against each other at the assembled home.
+    #[serde(default)]
+    antiparallel: Vec<usize>,
     /// The largest coordinate of any point of the leg at home (m): the leg's size.
     scale: f64,
     /// `max |φ|` at the home pose as written.
@@ -148,6 +151,26 @@ fn check_home(spec: &Spec, model: &Model, check: &HomeCheck) -> Result<(), Strin
             "the home pose does not assemble: closure residual {:.3e} m, more than {} of the leg's size {:.3} m{widest}{hint}",
             check.raw_residual, HOME_TOLERANCE, scale
         )));
+    }
+    if let Some(&k) = check.antiparallel.first() {
+        let c = spec.file.closures[k].get_ref();
+        let at = c
+            .axis_b
+            .as_ref()
+            .or(c.axis.as_ref())
+            .expect("a revolute closure");
+        let (line, column) = crate::gen::spec::line_column(&spec.text, at.span().start);
+        return Err(crate::gen::spec::SpecError {
+            file: spec.path.clone(),
+            line,
+            column,
+            field: format!("closures[{k}].axis_b"),
+            message: format!(
+                "closure `{}`: link b's axis points against link a's at the assembled home (the same hinge line, but the exports place their second points along each axis): turn axis_b around",
+                c.name.get_ref()
+            ),
+        }
+        .to_string());
     }
     if check.mobility == 0 {
         if let Some(c) = spec.file.closures.first() {

@@ -535,3 +535,75 @@ fn a_urdf_refuses_what_a_spec_cannot_hold_at_its_line() {
     at(URDF, &["--keyframe", "home"], 0, "no keyframes");
     at(LEG, &["--closure", "c=a/b"], 0, "--closure is for URDF");
 }
+
+#[test]
+fn a_urdf_inertia_written_in_a_turned_frame_is_turned_into_the_link_frame() {
+    // A full tensor in the frame of <inertial><origin rpy>, against R I Rᵀ with R written
+    // out here in closed form (URDF's rpy: R = R_z(yaw) R_y(pitch) R_x(roll)).
+    let (r, p, y) = (0.3_f64, -0.4_f64, 0.7_f64);
+    let local = [
+        [0.005, 0.0003, -0.0002],
+        [0.0003, 0.006, 0.0001],
+        [-0.0002, 0.0001, 0.004],
+    ];
+    let text = URDF.replacen(
+        r#"<origin xyz="0.1 0 0" rpy="0 0 1.5707963267948966"/><mass value="1"/>
+      <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.0105"/>"#,
+        &format!(
+            r#"<origin xyz="0.1 0 0" rpy="{r} {p} {y}"/><mass value="1"/>
+      <inertia ixx="{}" ixy="{}" ixz="{}" iyy="{}" iyz="{}" izz="{}"/>"#,
+            local[0][0], local[0][1], local[0][2], local[1][1], local[1][2], local[2][2]
+        ),
+        1,
+    );
+    assert_ne!(text, URDF);
+    let spec_text = import_urdf(&text, &[]).unwrap();
+    let m =
+        gen::model::build(&spec::Spec::parse(Path::new("leg.toml"), spec_text.clone()).unwrap())
+            .unwrap();
+    let (cr, sr, cp, sp, cy, sy) = (r.cos(), r.sin(), p.cos(), p.sin(), y.cos(), y.sin());
+    let rot = [
+        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+        [-sp, cp * sr, cp * cr],
+    ];
+    let expected = |i: usize, j: usize| {
+        let mut s = 0.0;
+        for a in 0..3 {
+            for b in 0..3 {
+                s += rot[i][a] * local[a][b] * rot[j][b];
+            }
+        }
+        s
+    };
+    let gen::model::Inertia::Spatial(entries) = &m.links[0].inertia else {
+        panic!("a spatial inertia")
+    };
+    let get = |k: usize| entries[k].as_ref().map_or(0.0, |n| value(&m.params, n));
+    for (k, (i, j)) in [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]
+        .into_iter()
+        .enumerate()
+    {
+        assert!(
+            (get(k) - expected(i, j)).abs() < 1e-15,
+            "I[{i}][{j}]: {} against {}\n{spec_text}",
+            get(k),
+            expected(i, j)
+        );
+    }
+}
+
+#[test]
+fn a_urdf_link_the_tree_does_not_reach_is_refused() {
+    // Two links that carry each other, apart from the tree.
+    let text = URDF.replacen(
+        "  <transmission",
+        r#"  <link name="p"/><link name="r"/>
+  <joint name="pr" type="fixed"><parent link="p"/><child link="r"/></joint>
+  <joint name="rp" type="fixed"><parent link="r"/><child link="p"/></joint>
+  <transmission"#,
+        1,
+    );
+    let e = import_urdf(&text, &[]).unwrap_err();
+    assert!(e.contains("is not reached from the root `base`"), "{e}");
+}

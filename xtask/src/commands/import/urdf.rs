@@ -236,6 +236,16 @@ pub fn read(text: &str) -> Result<Robot> {
             stack.push((c, Some(index)));
         }
     }
+    if let Some(l) = (0..links.len()).find(|&l| !seen[l]) {
+        return Err(at(
+            links[l],
+            format!(
+                "link `{}` is not reached from the root `{}`: its joints make a loop or hang it from no link of the tree",
+                links[l].attribute("name").unwrap_or(""),
+                links[top].attribute("name").unwrap_or("")
+            ),
+        ));
+    }
     for t in root.children().filter(|c| c.has_tag_name("transmission")) {
         for j in t.children().filter(|c| c.has_tag_name("joint")) {
             let name = j
