@@ -2,6 +2,7 @@
 //! every model. One test in this file, so that no other test allocates meanwhile.
 
 use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use leg_models::assembly::{
@@ -24,16 +25,29 @@ struct Counting;
 
 static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
 
+thread_local! {
+    // Only the measured thread's allocations count: the test harness's own threads
+    // allocate at start-up and while a test runs (on a loaded machine that raced with
+    // the first measurements and failed them, one run in four).
+    static MEASURED: Cell<bool> = const { Cell::new(false) };
+}
+
+fn counted() {
+    if MEASURED.try_with(Cell::get).unwrap_or(false) {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+    }
+}
+
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        counted();
         unsafe { System.alloc(layout) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
         unsafe { System.dealloc(ptr, layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        counted();
         unsafe { System.realloc(ptr, layout, new_size) }
     }
 }
@@ -41,10 +55,12 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
-/// How many allocations `f` makes.
+/// How many allocations `f` makes on this thread.
 fn allocations<R>(f: impl FnOnce() -> R) -> (usize, R) {
     let before = ALLOCATIONS.load(Ordering::SeqCst);
+    MEASURED.with(|m| m.set(true));
     let r = std::hint::black_box(f());
+    MEASURED.with(|m| m.set(false));
     (ALLOCATIONS.load(Ordering::SeqCst) - before, r)
 }
 
