@@ -494,19 +494,44 @@ pub(crate) fn tangential_norm<T: Real, const NK: usize, const ND: usize>(
         .sqrt()
 }
 
-/// Writes the unit direction of `v`'s entries `rows` into `slip`'s; leaves them where `v`
-/// has none there (zero or not finite).
-fn set_direction<T: Real, const NK: usize>(
+/// Writes the unit direction of `v`'s entries `rows` into `slip`'s and says whether it
+/// could; leaves them where `v` has none there (zero or not finite).
+pub(crate) fn set_unit<T: Real, const NK: usize>(
     slip: &mut SVector<T, NK>,
     v: &SVector<T, NK>,
     rows: core::ops::Range<usize>,
-) {
+) -> bool {
     let norm = rows.clone().fold(T::zero(), |a, r| a + v[r] * v[r]).sqrt();
-    if norm > T::zero() && norm.is_finite() {
-        for r in rows {
-            slip[r] = v[r] / norm;
-        }
+    if !(norm > T::zero() && norm.is_finite()) {
+        return false;
     }
+    for r in rows {
+        slip[r] = v[r] / norm;
+    }
+    true
+}
+
+/// Contact `k`'s velocity along the ground, `(C q̇)` on its tangential rows (`c` the
+/// ground rows, [`Ground::rows`]), and whether it moves: `|v_t|` above rounding, `√ε` of
+/// the speeds its rows could have at `q̇`.
+fn tangential_velocity<T: Real, const NQ: usize, const NK: usize, const ND: usize>(
+    c: &SMatrix<T, NK, NQ>,
+    qd: &SVector<T, NQ>,
+    k: usize,
+) -> (SVector<T, NK>, bool) {
+    let mut v = SVector::<T, NK>::zeros();
+    let (mut speed, mut scale) = (T::zero(), T::zero());
+    for r in ND * k..ND * k + ND - 1 {
+        let mut s = T::zero();
+        for j in 0..NQ {
+            v[r] += c[(r, j)] * qd[j];
+            s += (c[(r, j)] * qd[j]).abs();
+        }
+        speed += v[r] * v[r];
+        scale += s * s;
+    }
+    let moving = speed.sqrt() > T::default_epsilon().sqrt() * scale.sqrt();
+    (v, moving)
 }
 
 /// The contact rows of leg `L` at `q` in the ground's frame, and the force directions of
@@ -536,7 +561,16 @@ impl<T: Real, const NQ: usize, const NK: usize, const ND: usize> ContactRows<T, 
         mu: &SVector<T, NK>,
         slip: &SVector<T, NK>,
     ) -> Self {
-        let c = ground.rows(jacobian);
+        Self::from_rows(ground.rows(jacobian), modes, mu, slip)
+    }
+
+    /// [`ContactRows::new`] from the rows already in the ground's frame, `C`.
+    pub fn from_rows(
+        c: SMatrix<T, NK, NQ>,
+        modes: &Modes<NK, ND>,
+        mu: &SVector<T, NK>,
+        slip: &SVector<T, NK>,
+    ) -> Self {
         let held = modes.held_rows();
         let mut w = c;
         let mut slide = SVector::<T, NK>::zeros();
@@ -579,7 +613,7 @@ impl<T: Real, const NQ: usize, const NK: usize, const ND: usize> ContactRows<T, 
 
 /// The unit slip direction `ŝ` of each sliding contact of a spatial leg, on its
 /// tangential rows (zero elsewhere): the direction of its velocity along the ground,
-/// `v_t / |v_t|` with `v = C q̇` (`C` the rows of `jacobian` on `ground`). A contact whose
+/// `v_t / |v_t|` with `v = C q̇` (`c`, the ground rows [`Ground::rows`]). A contact whose
 /// `|v_t|` is within rounding of zero (`√ε` of the speeds its rows could have at `q̇`)
 /// slides from rest: its direction is `rest`'s (normalized), and without one it is
 /// [`DynamicsError::SlipFromRest`]. Where `rest` is given, it is also the direction the
@@ -588,60 +622,30 @@ impl<T: Real, const NQ: usize, const NK: usize, const ND: usize> ContactRows<T, 
 /// velocity crosses zero cleanly and the simulator's slide guard finds the stop instead
 /// of friction turning over at every stage of a step around it. A planar contact's direction is its mode's, `±1`.
 pub fn slip_directions<T: Real, const NQ: usize, const NK: usize, const ND: usize>(
-    ground: &Ground<T, ND>,
-    jacobian: &SMatrix<T, NK, NQ>,
+    c: &SMatrix<T, NK, NQ>,
     qd: &SVector<T, NQ>,
     modes: &Modes<NK, ND>,
     rest: Option<&SVector<T, NK>>,
 ) -> Result<SVector<T, NK>, DynamicsError> {
     let mut out = SVector::<T, NK>::zeros();
-    let c = if ND > 2 {
-        ground.rows(jacobian)
-    } else {
-        SMatrix::zeros()
-    };
     for k in 0..NK / ND {
         let ContactMode::Slide { forward } = modes.get(k) else {
             continue;
         };
-        let tangential = ND * k..ND * k + ND - 1;
         if ND == 2 {
             out[ND * k] = if forward { T::one() } else { -T::one() };
             continue;
         }
-        let (mut speed, mut scale) = (T::zero(), T::zero());
-        for r in tangential.clone() {
-            let (mut v, mut s) = (T::zero(), T::zero());
-            for j in 0..NQ {
-                v += c[(r, j)] * qd[j];
-                s += (c[(r, j)] * qd[j]).abs();
-            }
-            out[r] = v;
-            speed += v * v;
-            scale += s * s;
-        }
-        let (speed, scale) = (speed.sqrt(), scale.sqrt());
-        let given = rest.map_or(T::zero(), |d| {
-            tangential
-                .clone()
-                .fold(T::zero(), |a, r| a + d[r] * d[r])
-                .sqrt()
-        });
+        let tangential = ND * k..ND * k + ND - 1;
+        let (v, moving) = tangential_velocity::<T, NQ, NK, ND>(c, qd, k);
         let ahead = rest.map_or(T::one(), |d| {
-            tangential.clone().fold(T::zero(), |a, r| a + d[r] * out[r])
+            tangential.clone().fold(T::zero(), |a, r| a + d[r] * v[r])
         });
-        if speed > T::default_epsilon().sqrt() * scale && ahead > T::zero() {
-            for r in tangential {
-                out[r] /= speed;
-            }
+        if moving && ahead > T::zero() && set_unit(&mut out, &v, tangential.clone()) {
             continue;
         }
         match rest {
-            Some(d) if given > T::zero() && given.is_finite() => {
-                for r in tangential {
-                    out[r] = d[r] / given;
-                }
-            }
+            Some(d) if set_unit(&mut out, d, tangential) => {}
             _ => return Err(DynamicsError::SlipFromRest { contact: k }),
         }
     }
@@ -777,8 +781,10 @@ impl<T: Real, const NQ: usize, const NC: usize, const NK: usize, const ND: usize
         let passive = -terms.bias_forces - L::damping_forces(qd, params);
         let mut r_j = -terms.constraint_bias;
         let jc = L::contact_jacobian(q, params);
-        let slip = slip_directions(ground, &jc, qd, modes, rest)?;
-        let rows = ContactRows::new(ground, &jc, modes, mu, &slip);
+        // C once: the slip directions and the rows both read it.
+        let c = ground.rows(&jc);
+        let slip = slip_directions(&c, qd, modes, rest)?;
+        let rows = ContactRows::from_rows(c, modes, mu, &slip);
         let mut r_c = -ground.rows(&L::contact_bias(q, qd, params));
         if let Some(b) = baumgarte {
             let (two_alpha, beta2) = (b.alpha + b.alpha, b.beta * b.beta);
@@ -951,18 +957,11 @@ where
     let mut slip = SVector::<T, NK>::zeros();
     if ND > 2 {
         let c = ground.rows(&jc);
-        let before = mul(&c, qd);
         for k in 0..NK / ND {
             if let ContactMode::Slide { .. } = modes.get(k) {
-                let scale = tangential(k)
-                    .map(|r| {
-                        let s = (0..NQ).fold(T::zero(), |a, j| a + (c[(r, j)] * qd[j]).abs());
-                        s * s
-                    })
-                    .fold(T::zero(), |a, b| a + b)
-                    .sqrt();
-                if tangential_norm::<T, NK, ND>(&before, k) > T::default_epsilon().sqrt() * scale {
-                    set_direction(&mut slip, &before, tangential(k));
+                let (before, moving) = tangential_velocity::<T, NQ, NK, ND>(&c, qd, k);
+                if moving {
+                    set_unit(&mut slip, &before, tangential(k));
                 }
             }
         }
@@ -981,7 +980,7 @@ where
                         forward: ND > 2 || sol.contact[ND * k] < T::zero(),
                     },
                 );
-                set_direction(&mut slip, &-sol.contact, tangential(k));
+                set_unit(&mut slip, &-sol.contact, tangential(k));
                 changed = true;
             }
         }

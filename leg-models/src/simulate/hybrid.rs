@@ -45,8 +45,8 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::assembly::{leg_size, AssemblyError, Tolerance};
 use crate::dynamics::contact::{
-    consistent_slip, impact_map, solve_structured, spec_friction, tangential_norm, ContactMode,
-    ContactRows, ContactSolution, ContactSystem, Ground, ImpactError, Modes,
+    consistent_slip, impact_map, set_unit, solve_structured, spec_friction, tangential_norm,
+    ContactMode, ContactRows, ContactSolution, ContactSystem, Ground, ImpactError, Modes,
 };
 use crate::dynamics::forward::{actuation, Baumgarte, DynamicsError};
 use crate::model::contract::{ContactModel, Real};
@@ -1006,23 +1006,6 @@ where
         }
         Ok(events)
     }
-}
-
-/// Writes the unit direction of `v`'s entries `rows` into `slip`'s and says whether it
-/// could (`v` not zero there, and finite).
-fn set_unit<T: Real, const NK: usize>(
-    slip: &mut SVector<T, NK>,
-    v: &SVector<T, NK>,
-    rows: core::ops::Range<usize>,
-) -> bool {
-    let norm = rows.clone().fold(T::zero(), |a, r| a + v[r] * v[r]).sqrt();
-    if !(norm > T::zero() && norm.is_finite()) {
-        return false;
-    }
-    for r in rows {
-        slip[r] = v[r] / norm;
-    }
-    true
 }
 
 /// The event a switch to `mode` is.
