@@ -76,18 +76,18 @@ macro_rules! for_each_model {
         7, 4, 3, 0); $callback ! (two_link, $crate::two_link::TwoLink, 2, 0, 2, 0);
     };
 }
-/// Calls `$callback!(module, Type, NQ, NC, NU, NP)` once for every generated spatial
-/// model (`LegModel<NQ, NC, NU, 3, NP>`: three coordinates per point, `NP` closure
-/// points).
+/// Calls `$callback!(module, Type, NQ, NC, NU, NP, NK)` once for every generated
+/// spatial model (`LegModel<NQ, NC, NU, 3, NP>`: three coordinates per point, `NP`
+/// closure points; `ContactModel<NQ, NC, NU, NK, 3>`: three rows per contact).
 #[macro_export]
 macro_rules! for_each_spatial_model {
     ($callback:ident) => {
         $callback ! (abducted_five_bar, $crate::abducted_five_bar::AbductedFiveBar, 5, 3,
-        3, 2); $callback ! (achilles_leg, $crate::achilles_leg::AchillesLeg, 10, 6, 4,
-        4); $callback ! (cassie_leg, $crate::cassie_leg::CassieLeg, 13, 6, 5, 4);
+        3, 2, 3); $callback ! (achilles_leg, $crate::achilles_leg::AchillesLeg, 10, 6, 4,
+        4, 0); $callback ! (cassie_leg, $crate::cassie_leg::CassieLeg, 13, 6, 5, 4, 0);
         $callback ! (revolute_knee_leg, $crate::revolute_knee_leg::RevoluteKneeLeg, 7, 5,
-        3, 2); $callback ! (rod_knee_leg, $crate::rod_knee_leg::RodKneeLeg, 4, 1, 3, 2);
-        $callback ! (rssr_linkage, $crate::rssr_linkage::RssrLinkage, 5, 3, 1, 2);
-        $callback ! (sliding_mass, $crate::sliding_mass::SlidingMass, 3, 0, 2, 0);
+        3, 2, 0); $callback ! (rod_knee_leg, $crate::rod_knee_leg::RodKneeLeg, 4, 1, 3,
+        2, 0); $callback ! (rssr_linkage, $crate::rssr_linkage::RssrLinkage, 5, 3, 1, 2,
+        0); $callback ! (sliding_mass, $crate::sliding_mass::SlidingMass, 3, 0, 2, 0, 3);
     };
 }

@@ -1272,7 +1272,7 @@ macro_rules! leg_class {
 /// coordinates, and its contacts' names; its contact dynamics and hybrid simulator are
 /// the runtime's (not yet in Python), and the design measures are planar.
 macro_rules! spatial_leg_class {
-    ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $np:expr) => {
+    ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $np:expr, $nk:expr) => {
         leg_module!($module, $ty, $nq, $nc, $nu, 0, 3, $np, {
             /// The contact points' names (three rows each).
             #[classattr]

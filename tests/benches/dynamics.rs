@@ -404,7 +404,7 @@ fn benches(c: &mut Criterion) {
     }
     generated::for_each_model!(each);
     macro_rules! spatial {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
             bench_spatial::<$ty, $nq, $nc, $nu>(c);
         };
     }

@@ -240,7 +240,7 @@ fn main() {
     generated::for_each_model!(dispatch);
     // Spatial legs (their foot has three coordinates): the same paths.
     macro_rules! dispatch_spatial {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
             if model == stringify!($module) {
                 found = run::<$ty, $nq, $nc, $nu>(what, n);
             }

@@ -426,7 +426,7 @@ fn hot_paths_do_not_allocate() {
     }
     generated::for_each_model!(each);
     macro_rules! spatial {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
             check::<$ty, $nq, $nc, $nu, 3, $np>();
         };
     }

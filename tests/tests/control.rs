@@ -438,7 +438,7 @@ generated::for_each_model!(control);
 /// The same checks on the spatial legs: a foot with three coordinates, placed where three
 /// motors determine the leg (`abducted_five_bar`), refused with the reason elsewhere.
 macro_rules! spatial_control {
-    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
+    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
         mod $module {
             type Model = $ty;
             #[test]

@@ -782,7 +782,7 @@ mod prepared_parameters {
     /// Spatial legs: the Lagrange peer differentiates positions and orientations composed
     /// in the base frame, ours are the recursions in link frames.
     macro_rules! prepared_spatial {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
             prepared!($module, $ty, $nq, $nc, $nu, 0);
         };
     }

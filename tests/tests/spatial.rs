@@ -292,7 +292,7 @@ where
 }
 
 macro_rules! spatial_leg_tests {
-    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
+    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
         mod $module {
 
             #[test]
@@ -321,7 +321,7 @@ generated::for_each_spatial_model!(spatial_leg_tests);
 fn ball_joints_refuse_their_singularity() {
     let mut balls = 0;
     macro_rules! each {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
             balls += ball_joint_singularity::<$ty, $nq, $nc, $nu, $np>();
         };
     }
@@ -333,7 +333,7 @@ fn ball_joints_refuse_their_singularity() {
 fn there_is_a_spatial_leg() {
     let mut n = 0;
     macro_rules! count {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
             n += 1;
         };
     }

@@ -845,7 +845,8 @@ pub fn lib_source(models: &[Summary]) -> Result<String, Error> {
         });
         if m.spatial {
             let p = lit(m.np);
-            spatial_calls.push(quote!($callback!(#module, $crate::#module::#ty, #q, #c, #u, #p);));
+            spatial_calls
+                .push(quote!($callback!(#module, $crate::#module::#ty, #q, #c, #u, #p, #k);));
         } else {
             calls.push(quote!($callback!(#module, $crate::#module::#ty, #q, #c, #u, #k);));
         }
@@ -868,9 +869,9 @@ pub fn lib_source(models: &[Summary]) -> Result<String, Error> {
             };
         }
 
-        /// Calls `$callback!(module, Type, NQ, NC, NU, NP)` once for every generated spatial
-        /// model (`LegModel<NQ, NC, NU, 3, NP>`: three coordinates per point, `NP` closure
-        /// points).
+        /// Calls `$callback!(module, Type, NQ, NC, NU, NP, NK)` once for every generated
+        /// spatial model (`LegModel<NQ, NC, NU, 3, NP>`: three coordinates per point, `NP`
+        /// closure points; `ContactModel<NQ, NC, NU, NK, 3>`: three rows per contact).
         #[macro_export]
         macro_rules! for_each_spatial_model {
             ($callback:ident) => {

@@ -24,7 +24,7 @@ mod sim;
 fn models() -> Vec<&'static str> {
     let mut names = planar_models();
     macro_rules! name {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
             names.push(stringify!($module));
         };
     }
@@ -76,7 +76,7 @@ fn eval(args: EvalArgs) -> Result<(), Error> {
     }
     generated::for_each_model!(dispatch);
     macro_rules! spatial {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
             if args.model == stringify!($module) {
                 return eval::run_spatial::<$ty, $nq, $nc, $nu, $np>(&args);
             }
@@ -102,7 +102,7 @@ fn simulate(args: SimArgs) -> Result<(), Error> {
     }
     generated::for_each_model!(dispatch);
     macro_rules! spatial {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal) => {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
             if name == stringify!($module) {
                 return sim::run::<$ty, $nq, $nc, $nu, 3, $np>(&settings);
             }
