@@ -1692,6 +1692,7 @@ fn sim_takes_a_spatial_leg() {
     }
     let html = std::fs::read_to_string(run.join("report.html")).unwrap();
     assert!(html.contains("drag it to turn the view"));
+    assert!(html.contains("a brown square of its plane"));
     // One motor cannot place a foot in space: joint space, saying why.
     let out = legs(&[
         "sim",
@@ -1717,6 +1718,157 @@ fn sim_takes_a_spatial_leg() {
     refused(
         &legs(&["sim", "rssr_linkage", "--controller", "foot-pd"]),
         "foot-space control needs at least three",
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A CSV's rows as maps from the header's names to the cells.
+fn csv_rows(text: &str) -> Vec<std::collections::HashMap<String, String>> {
+    let mut lines = text.lines();
+    let header: Vec<String> = lines
+        .next()
+        .unwrap()
+        .split(',')
+        .map(str::to_string)
+        .collect();
+    lines
+        .map(|l| {
+            header
+                .iter()
+                .cloned()
+                .zip(l.split(',').map(str::to_string))
+                .collect()
+        })
+        .collect()
+}
+
+/// `sim` of a spatial leg with contacts runs it on its ground under the swing-leg
+/// controllers: the five-bar's step cycle dips 1 cm under the floor (5 mm under the toe at
+/// home), so the toe lands, presses and lifts off again each cycle. Checked from the
+/// written trajectory, not the summary's own figures: the toe never below the floor, the
+/// normal force never pulling, the tangential force inside the cone |λ_t| ≤ μ λ_n while it
+/// sticks and on it while it slides, the toe still while it sticks, the loop closed. A
+/// block resting on the ground with its motors off stays put, pressed by its weight.
+#[test]
+fn sim_runs_a_spatial_leg_with_contacts_on_its_ground() {
+    let dir = temp_dir("sim-ground");
+    let out = legs(&[
+        "sim",
+        "abducted_five_bar",
+        "--duration",
+        "1",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["controller"], "foot-fl");
+    assert!(
+        summary["events"]["touchdowns"].as_u64().unwrap() >= 2,
+        "{summary}"
+    );
+    assert!(
+        summary["events"]["liftoffs"].as_u64().unwrap() >= 2,
+        "{summary}"
+    );
+    let events = std::fs::read_to_string(dir.join("events.csv")).unwrap();
+    assert!(events.contains(",Touchdown,toe_contact,"), "{events}");
+    // A torque step at a step's start may push a contact out of its mode's bounds (a
+    // stick out of the cone, a normal force below zero): the mode changes at that instant,
+    // and the row before the change holds the old mode's forces (the run's own summary
+    // leaves those rows out the same way).
+    let switches: Vec<f64> = csv_rows(&events)
+        .iter()
+        .map(|e| e["t"].parse().unwrap())
+        .collect();
+    let rows: Vec<_> = csv_rows(&std::fs::read_to_string(dir.join("trajectory.csv")).unwrap())
+        .into_iter()
+        .filter(|r| {
+            let t: f64 = r["t"].parse().unwrap();
+            !switches.iter().any(|s| (s - t).abs() < 1e-9)
+        })
+        .collect();
+    let v = |r: &std::collections::HashMap<String, String>, c: &str| -> f64 {
+        r[c].parse().unwrap_or_else(|_| panic!("{c}: {}", r[c]))
+    };
+    // The spec: the floor 0.25 m under the hip along +z, μ 0.8; the foot is the toe.
+    let (floor, mu) = (-0.25, 0.8);
+    let mut stance = 0;
+    let mut stuck_at: Option<(f64, f64)> = None;
+    for r in &rows {
+        assert!(v(r, "foot_z") >= floor - 1e-9, "toe under the floor: {r:?}");
+        assert!(v(r, "closure_residual") < 1e-12);
+        let mode = r["mode_toe_contact"].as_str();
+        let (t1, t2, n) = (
+            v(r, "lambda_t1_toe_contact"),
+            v(r, "lambda_t2_toe_contact"),
+            v(r, "lambda_n_toe_contact"),
+        );
+        match mode {
+            "flight" => {
+                assert_eq!((t1, t2, n), (0.0, 0.0, 0.0));
+                stuck_at = None;
+            }
+            _ => {
+                stance += 1;
+                assert!(n >= -1e-9, "pulling on the ground: {r:?}");
+                assert!((v(r, "foot_z") - floor).abs() < 1e-9, "{r:?}");
+                let bound = mu * n;
+                if mode == "slide" {
+                    assert!(
+                        (t1.hypot(t2) - bound).abs() <= 1e-9 * bound.max(1.0),
+                        "{r:?}"
+                    );
+                    stuck_at = None;
+                } else {
+                    assert!(t1.hypot(t2) <= bound * (1.0 + 1e-9), "{r:?}");
+                    let xy = (v(r, "foot_x"), v(r, "foot_y"));
+                    if let Some(at) = stuck_at {
+                        assert!((xy.0 - at.0).hypot(xy.1 - at.1) < 1e-9, "{r:?}");
+                    }
+                    stuck_at = Some(xy);
+                }
+            }
+        }
+    }
+    assert!(stance > 100, "{stance} rows in stance");
+    assert!(summary["max_friction_cone_ratio"].as_f64().unwrap() <= 1.0 + 1e-9);
+    assert!(summary["max_contact_residual_m"].as_f64().unwrap() < 1e-12);
+
+    // At rest on the ground, motors off: it stays, its weight on the ground.
+    let rest = dir.join("rest");
+    let out = legs(&[
+        "sim",
+        "sliding_mass",
+        "--controller",
+        "passive",
+        "--duration",
+        "0.2",
+        "--out",
+        rest.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rows = csv_rows(&std::fs::read_to_string(rest.join("trajectory.csv")).unwrap());
+    for r in &rows {
+        assert_eq!(r["mode_bottom"], "stick");
+        // The block's 2 kg under 9.81 m/s².
+        assert!((v(r, "lambda_n_bottom") - 2.0 * 9.81).abs() < 1e-9, "{r:?}");
+        assert!(v(r, "lambda_t1_bottom").abs() < 1e-9 && v(r, "lambda_t2_bottom").abs() < 1e-9);
+        assert!(v(r, "q_slide_x").abs() < 1e-12 && v(r, "q_block").abs() < 1e-12);
+    }
+    // The hopping controller's flag means nothing here: refused, with the reason.
+    refused(
+        &legs(&["sim", "sliding_mass", "--apex", "0.3"]),
+        "has no body that hops",
     );
     let _ = std::fs::remove_dir_all(&dir);
 }

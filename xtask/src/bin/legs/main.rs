@@ -104,6 +104,10 @@ fn simulate(args: SimArgs) -> Result<(), Error> {
     macro_rules! spatial {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
             if name == stringify!($module) {
+                // A leg with contacts runs on its ground.
+                if $nk > 0 {
+                    return sim::ground::run::<$ty, $nq, $nc, $nu, 3, $np, $nk>(&settings);
+                }
                 return sim::run::<$ty, $nq, $nc, $nu, 3, $np>(&settings);
             }
         };

@@ -84,9 +84,12 @@ pub struct Report<'a> {
     pub summary: &'a Value,
     pub plots: &'a [Series],
     pub frames: &'a [Frame],
-    /// The ground line `n · x = d` as `[n_x, n_y, d]`, drawn under a leg with contacts.
-    /// Without it the leg hangs from a fixed base at the origin, drawn as a grey disc.
-    pub ground: Option<[f64; 3]>,
+    /// The ground `n · x = d` as the normal's entries then `d` (`[n_x, n_y, d]` on a
+    /// planar leg, `[n_x, n_y, n_z, d]` on a spatial one), drawn under a leg with
+    /// contacts: a line with the earth below it in the plane, a square of the plane under
+    /// the leg in 3-D. Without it the leg hangs from a fixed base at the origin, drawn as
+    /// a grey disc.
+    pub ground: Option<Vec<f64>>,
     /// The closures that are rods ([`leg_models::LegDynamics::DISTANCE_CLOSURES`]): a line
     /// joins their two points, which stay the rod's length apart.
     pub rods: &'a [usize],
@@ -704,7 +707,10 @@ fn animation_caption(r: &Report) -> String {
     if r.frames.iter().any(|f| f.reference.is_some()) {
         parts.push("the reference the foot tracks (grey ring, its path dashed)".into());
     }
-    match r.ground {
+    match &r.ground {
+        Some(g) if g.len() == 4 => {
+            parts.push("the ground (a brown square of its plane under the leg, with a grid)".into())
+        }
         Some(_) => parts.push("the ground (brown line, earth below)".into()),
         None => parts.push("the fixed base at the origin (grey disc)".into()),
     }
@@ -852,13 +858,30 @@ table.summary th {{ text-align: left; font-weight: bold; padding: 10px 0 3px; bo
   function el(name, attrs) {{ const e = document.createElementNS(ns, name); for (const k in attrs) e.setAttribute(k, attrs[k]); svg.appendChild(e); return e; }}
   const path = pts => pts.filter(p => p).map((p, i) => (i ? 'L' : 'M') + X(p).toFixed(1) + ' ' + Y(p).toFixed(1)).join(' ');
   const refPath = el('path', {{ fill: 'none', stroke: '#999', 'stroke-dasharray': '4 3' }});
-  if (d.ground) {{
+  let groundPatch = null, groundGrid = null, groundSquare = null;
+  if (d.ground && D === 2) {{
     // The ground n·x = d: a brown line through the view, earth below.
     const [gx, gy, off] = d.ground, tx = gy, ty = -gx, px = gx * off, py = gy * off;
     const a = [px - tx * 10 * span, py - ty * 10 * span], b = [px + tx * 10 * span, py + ty * 10 * span];
     const below = [[b[0] - gx * span, b[1] - gy * span], [a[0] - gx * span, a[1] - gy * span]];
     el('path', {{ d: path([a, b, below[0], below[1]]) + ' Z', fill: '#d9c7a7', stroke: 'none' }});
     el('path', {{ d: path([a, b]), stroke: '#8c6d3f', 'stroke-width': 2 }});
+  }} else if (d.ground) {{
+    // The ground n·x = d in 3-D: a square of the plane, a view's span wide, centred under
+    // the leg (the points' centre projected on it), with a grid; redrawn as the view turns.
+    const n = d.ground.slice(0, 3), off = d.ground[3];
+    const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    const unit = v => {{ const l = Math.hypot(...v); return v.map(x => x / l); }};
+    const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+    const e = Math.abs(n[0]) < 0.9 ? [1, 0, 0] : [0, 1, 0];
+    const t1 = unit(e.map((x, i) => x - dot(e, n) * n[i])), t2 = cross(n, t1);
+    const c = mid.map((x, i) => x - (dot(mid, n) - off) * n[i]);
+    const at = (u, v) => c.map((x, i) => x + (u * t1[i] + v * t2[i]) * span / 2);
+    groundSquare = [at(-1, -1), at(1, -1), at(1, 1), at(-1, 1)];
+    groundGrid = [];
+    for (let k = -1; k <= 1; k += 0.5) {{ groundGrid.push([at(k, -1), at(k, 1)], [at(-1, k), at(1, k)]); }}
+    groundPatch = [el('path', {{ fill: '#d9c7a7', 'fill-opacity': 0.7, stroke: '#8c6d3f', 'stroke-width': 2 }}),
+      el('path', {{ fill: 'none', stroke: '#8c6d3f', 'stroke-width': 0.5 }})];
   }}
   const trail = el('path', {{ fill: 'none', stroke: '#2ca02c', 'stroke-width': 1.5 }});
   // A scale bar of a round length near a fifth of the view, at the bottom left.
@@ -893,6 +916,10 @@ table.summary th {{ text-align: left; font-weight: bold; padding: 10px 0 3px; bo
   const axes = D === 3 ? [0, 1, 2].map(i => [el('line', {{ stroke: ['#d62728', '#2ca02c', '#1f77b4'][i], 'stroke-width': 2 }}), el('text', {{ 'font-size': 13 }})]) : [];
   function place() {{
     refPath.setAttribute('d', path(d.reference));
+    if (groundPatch) {{
+      groundPatch[0].setAttribute('d', path(groundSquare) + ' Z');
+      groundPatch[1].setAttribute('d', groundGrid.map(l => path(l)).join(' '));
+    }}
     if (base) {{ base.setAttribute('cx', X(origin)); base.setAttribute('cy', Y(origin)); }}
     axes.forEach(([line, text], i) => {{
       const e = [0, 0, 0]; e[i] = 1; const q = P(e);

@@ -463,7 +463,7 @@ fn drive<
     // Start on the reference, at rest for foot tasks, at the reference's rates for joint tasks.
     let initial = if controller_kind.in_foot_space() {
         let q = foot_inverse::<L, f64, NQ, NC, NU, ND, NP>(
-            &p,
+            p,
             &foot_ref.sample(0.0).position,
             &home,
             &tol,

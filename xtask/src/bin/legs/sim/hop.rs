@@ -80,6 +80,14 @@ pub fn run<
     let p = <L as leg_models::LegDynamics<NQ, NC, NU>>::Params::<f64>::default();
     let fail =
         |what: &str, e: &dyn std::fmt::Display| Error::Failed(format!("{}: {what}: {e}", L::NAME));
+    let mut home = SVector::<f64, NQ>::from_column_slice(&L::HOME);
+    project_position::<L, f64, NQ, NC, NU>(&p, &mut home, &Tolerance::default())
+        .map_err(|e| fail("the home pose does not assemble", &e))?;
+    // A leg whose body cannot rise (a fixed base) does not hop: the swing-leg controllers
+    // drive it on the ground.
+    let Some(h) = height_joint::<L, f64, NQ, NC, NU, NK>(&p, &home) else {
+        return crate::sim::ground::run::<L, NQ, NC, NU, 2, NC, NK>(s);
+    };
     if let Some(name) = s.swing_only() {
         return Err(Error::usage(format!(
             "{} has contacts: `sim` runs it on the ground under the hopping controller (or with --controller passive); `{name}` is for legs in the air",
@@ -103,11 +111,6 @@ pub fn run<
             }
         }
     }
-    let mut home = SVector::<f64, NQ>::from_column_slice(&L::HOME);
-    project_position::<L, f64, NQ, NC, NU>(&p, &mut home, &Tolerance::default())
-        .map_err(|e| fail("the home pose does not assemble", &e))?;
-    let h = height_joint::<L, f64, NQ, NC, NU, NK>(&p, &home)
-        .ok_or_else(|| Error::usage(format!("{}: {}", L::NAME, HopSetupError::NoHeightJoint)))?;
     let mut sim = HybridSimulator::<L, f64, NQ, NC, NU, NK>::new(p, s.dt);
     sim.options.control = leg_models::simulate::ControlUpdate::PerStep;
     let apex = s.apex.unwrap_or(home[h] + 0.05);
@@ -331,16 +334,7 @@ pub fn run<
     });
 
     // trajectory.csv and events.csv
-    let mut csv = String::from("t");
-    for j in L::JOINT_NAMES {
-        let _ = write!(csv, ",q_{j}");
-    }
-    for j in L::JOINT_NAMES {
-        let _ = write!(csv, ",qd_{j}");
-    }
-    for &a in &L::ACTUATED {
-        let _ = write!(csv, ",u_{}", L::JOINT_NAMES[a]);
-    }
+    let mut csv = crate::sim::state_columns::<L, NQ, NC, NU, 2, NC>();
     for c in L::CONTACT_NAMES {
         let _ = write!(csv, ",mode_{c},lambda_t_{c},lambda_n_{c}");
     }
@@ -380,19 +374,7 @@ pub fn run<
         );
         csv.push_str(&row);
     }
-    let mut events_csv = String::from("t,kind,contact,impulse_t,impulse_n,energy_lost\n");
-    for e in events {
-        let _ = writeln!(
-            events_csv,
-            "{},{:?},{},{},{},{}",
-            e.t,
-            e.kind,
-            L::CONTACT_NAMES[e.contact],
-            e.impulse[0],
-            e.impulse[1],
-            e.energy_lost
-        );
-    }
+    let events_csv = crate::sim::ground::events_csv(events, L::CONTACT_NAMES);
 
     // report.html: the leg on the ground, heights, forces and the cone, energy.
     let members = body_points(L::NAME, NQ);
@@ -404,21 +386,7 @@ pub fn run<
         .collect();
     let t: Vec<f64> = samples.iter().map(|x| x.t).collect();
     // Stance phases (any contact on the ground), shaded in every plot over time.
-    let mut stance: Vec<(f64, f64)> = Vec::new();
-    let mut since: Option<f64> = None;
-    for x in samples {
-        match (in_flight(x), since) {
-            (false, None) => since = Some(x.t),
-            (true, Some(t0)) => {
-                stance.push((t0, x.t));
-                since = None;
-            }
-            _ => {}
-        }
-    }
-    if let (Some(t0), Some(last)) = (since, samples.last()) {
-        stance.push((t0, last.t));
-    }
+    let stance = crate::sim::ground::stance_bands(samples.iter().map(|x| (x.t, x.state)));
     let mut plots = vec![Series::new(
         "Body height",
         &t,
@@ -494,50 +462,18 @@ pub fn run<
             .axis("contact", ""),
         );
     }
-    // Energy, and energy plus every impact's loss so far (flat where only the motors act).
-    let mut lost = 0.0;
-    let mut next = 0;
-    let with_losses: Vec<f64> = samples
+    let energy_samples: Vec<(f64, f64, Vec<f64>, Vec<f64>)> = samples
         .iter()
         .map(|x| {
-            while next < events.len() && events[next].t <= x.t {
-                lost += events[next].energy_lost;
-                next += 1;
-            }
-            x.energy + lost
+            (
+                x.t,
+                x.energy,
+                x.u.iter().copied().collect(),
+                L::ACTUATED.iter().map(|&a| x.state.state.q[a]).collect(),
+            )
         })
         .collect();
-    // The motors' work: the torques are held over each step (and after each event), so
-    // W = Σ u · Δθ over the samples is exact up to the events inside a step.
-    let mut w = 0.0;
-    let balance: Vec<f64> = samples
-        .iter()
-        .enumerate()
-        .map(|(i, x)| {
-            if i > 0 {
-                let prev = &samples[i - 1];
-                for (k, &a) in L::ACTUATED.iter().enumerate() {
-                    w += prev.u[k] * (x.state.state.q[a] - prev.state.state.q[a]);
-                }
-            }
-            with_losses[i] - w
-        })
-        .collect();
-    let spread = balance.iter().copied().fold(f64::NEG_INFINITY, f64::max)
-        - balance.iter().copied().fold(f64::INFINITY, f64::min);
-    plots.push(
-        Series::new(
-            "Energy",
-            &t,
-            vec![
-                ("T + V".into(), samples.iter().map(|x| x.energy).collect()),
-                ("T + V + impact losses".into(), with_losses),
-                ("T + V + losses − motor work".into(), balance),
-            ],
-        )
-        .axis("energy", "J")
-        .caption(&format!("The energy T + V (blue) falls at each touchdown by what the plastic impact dissipates and changes in stance because the motors do work W = Σ ∫ u θ̇ dt. The impacts' losses added back (red), only the motors' work remains; with that subtracted too (green) what is left moves by {} over the run: what neither the impacts nor the motors account for (joint damping, if the leg has any, and integration error).", crate::report::quantity(spread, "J"))),
-    );
+    plots.push(crate::sim::ground::energy_plot(&energy_samples, events));
     plots.push(
         Series::new(
             "Motor torques",
@@ -585,7 +521,7 @@ pub fn run<
         summary: &summary,
         plots: &plots,
         frames: &frames,
-        ground: Some([ground.normal[0], ground.normal[1], ground.offset]),
+        ground: Some(vec![ground.normal[0], ground.normal[1], ground.offset]),
         rods: L::DISTANCE_CLOSURES,
     })
     .map_err(Error::Failed)?;

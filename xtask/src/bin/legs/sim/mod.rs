@@ -15,6 +15,7 @@ use xtask::cli::{check_targets, write_all, Error};
 use crate::report::{self, quantity as report_quantity, Report, Series};
 
 mod drive;
+pub mod ground;
 pub mod hop;
 mod settings;
 
@@ -36,6 +37,58 @@ impl<S: TorqueSource<f64, NQ, NU>, const NQ: usize, const NU: usize> TorqueSourc
     fn torque(&mut self, t: f64, s: &State<f64, NQ>) -> Result<SVector<f64, NU>, ControlError> {
         self.progress.set((t / self.dt).round() as u64);
         self.inner.torque(t, s)
+    }
+}
+
+/// trajectory.csv's first columns: the time, the joints' positions and rates, and the
+/// motors' torques.
+pub(crate) fn state_columns<
+    L: LegModel<NQ, NC, NU, ND, NP>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>() -> String {
+    let mut csv = String::from("t");
+    for j in L::JOINT_NAMES {
+        let _ = write!(csv, ",q_{j}");
+    }
+    for j in L::JOINT_NAMES {
+        let _ = write!(csv, ",qd_{j}");
+    }
+    for &a in &L::ACTUATED {
+        let _ = write!(csv, ",u_{}", L::JOINT_NAMES[a]);
+    }
+    csv
+}
+
+/// The closure forces' columns. A point closure's force has one row per coordinate of its
+/// point, a rod's one (its tension along the rod, scaled as φ's row), a revolute closure's
+/// its point's and two moments across its axis (`M_k_u`, `M_k_w`: about link b's `û`,
+/// `ŵ`, scaled as φ's rows).
+pub(crate) fn closure_force_columns<
+    L: LegModel<NQ, NC, NU, ND, NP>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>(
+    csv: &mut String,
+) {
+    const AXES: [&str; 3] = ["x", "y", "z"];
+    for k in 0..NP / 2 {
+        if L::DISTANCE_CLOSURES.contains(&k) {
+            let _ = write!(csv, ",F_{k}");
+        } else {
+            for a in &AXES[..ND] {
+                let _ = write!(csv, ",F_{k}_{a}");
+            }
+            if L::REVOLUTE_CLOSURES.contains(&k) {
+                let _ = write!(csv, ",M_{k}_u,M_{k}_w");
+            }
+        }
     }
 }
 
@@ -193,33 +246,8 @@ pub fn run<
     let out = s.out_dir(L::NAME);
 
     // trajectory.csv
-    let mut csv = String::from("t");
-    for j in L::JOINT_NAMES {
-        let _ = write!(csv, ",q_{j}");
-    }
-    for j in L::JOINT_NAMES {
-        let _ = write!(csv, ",qd_{j}");
-    }
-    for &a in &L::ACTUATED {
-        let _ = write!(csv, ",u_{}", L::JOINT_NAMES[a]);
-    }
-    // A point closure's force has one row per coordinate of its point, a rod's one (its
-    // tension along the rod, scaled as φ's row), a revolute closure's its point's and two
-    // moments across its axis (`M_k_u`, `M_k_w`: about link b's `û`, `ŵ`, scaled as φ's
-    // rows).
-    const AXES: [&str; 3] = ["x", "y", "z"];
-    for k in 0..NP / 2 {
-        if L::DISTANCE_CLOSURES.contains(&k) {
-            let _ = write!(csv, ",F_{k}");
-        } else {
-            for a in &AXES[..ND] {
-                let _ = write!(csv, ",F_{k}_{a}");
-            }
-            if L::REVOLUTE_CLOSURES.contains(&k) {
-                let _ = write!(csv, ",M_{k}_u,M_{k}_w");
-            }
-        }
-    }
+    let mut csv = state_columns::<L, NQ, NC, NU, ND, NP>();
+    closure_force_columns::<L, NQ, NC, NU, ND, NP>(&mut csv);
     csv.push_str(",closure_residual,energy");
     drive.csv_header(&mut csv);
     csv.push('\n');
