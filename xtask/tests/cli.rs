@@ -1955,8 +1955,57 @@ fn import_writes_a_spec_gen_takes_and_refuses_bad_input() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `eval --impact` on a spatial leg: the 2 kg block of `sliding_mass` (μ 0.5) landing at
+/// v = (1, 0.5, −0.3) m/s. Written out: the normal impulse m v_n = 0.6 N s stops the fall;
+/// sticking would need m |v_t| = 2.24 N s > μ Λ_n = 0.3 N s, so it slides, friction μ Λ_n
+/// against the slip: v_t keeps 1 − μ v_n / |v_t| of itself, along the same direction, and
+/// the energy lost is ½ m (|v|² − |v_t⁺|²).
+#[test]
+fn eval_lands_a_spatial_contact() {
+    let out = legs(&[
+        "eval",
+        "sliding_mass",
+        "--q",
+        "0,0,0",
+        "--qd",
+        "1,0.5,-0.3",
+        "--impact",
+        "bottom",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let impact = &v["impact"];
+    assert_eq!(impact["mode_after"], "slide");
+    let (m, mu, vt, vn) = (2.0, 0.5, (1.0f64, 0.5f64), 0.3);
+    let speed = vt.0.hypot(vt.1);
+    let keep = 1.0 - mu * vn / speed;
+    let got = |key: &str, i: usize| impact[key][i].as_f64().unwrap();
+    let close = |a: f64, b: f64| assert!((a - b).abs() < 1e-12, "{a} vs {b}: {impact}");
+    close(got("qd_plus", 0), keep * vt.0);
+    close(got("qd_plus", 1), keep * vt.1);
+    close(got("qd_plus", 2), 0.0);
+    close(got("impulses", 2), m * vn);
+    // The ground's frame on level ground: t₁ = x, t₂ = y.
+    close(got("impulses", 0), -mu * m * vn * vt.0 / speed);
+    close(got("impulses", 1), -mu * m * vn * vt.1 / speed);
+    close(got("slip_direction", 0), vt.0 / speed);
+    close(got("slip_direction", 1), vt.1 / speed);
+    let lost = 0.5 * m * (speed * speed + vn * vn - (keep * speed).powi(2));
+    close(impact["energy_lost"].as_f64().unwrap(), lost);
+    let contact = &v["contacts"][0];
+    assert_eq!(contact["name"], "bottom");
+    assert_eq!(contact["gap"].as_f64().unwrap(), 0.0);
+    assert_eq!(contact["tangential"].as_array().unwrap().len(), 2);
+}
+
 /// `eval` of a spatial leg says what `--q` holds (a ball joint's three angles named where
-/// the leg has one) and why `--assemble` and `--impact` do not apply, each in its words.
+/// the leg has one) and why `--assemble` does not apply; `--impact` names a contact the
+/// leg has.
 #[test]
 fn eval_of_a_spatial_leg_says_what_it_takes() {
     refused(
@@ -1969,7 +2018,11 @@ fn eval_of_a_spatial_leg_says_what_it_takes() {
     let q = ["0.1"; 13].join(",");
     refused(
         &legs(&["eval", "cassie_leg", "--q", &q, "--impact", "foot"]),
-        "--impact: cassie_leg is a spatial leg; eval lands planar contacts only for now",
+        "--impact foot: cassie_leg has no contact points",
+    );
+    refused(
+        &legs(&["eval", "sliding_mass", "--q", "0,0,0", "--impact", "toe"]),
+        "--impact: unknown contact `toe` (contacts of sliding_mass: bottom)",
     );
     refused(
         &legs(&["eval", "cassie_leg", "--q", &q, "--assemble"]),

@@ -56,27 +56,7 @@ pub fn run<
 ) -> Result<(), Error> {
     let p = L::Params::<f64>::default();
     // The contact to land, named before anything is computed.
-    let impact_contact = match &args.impact {
-        None => None,
-        Some(name) => match L::CONTACT_NAMES.iter().position(|c| c == name) {
-            Some(k) => Some(k),
-            None if L::CONTACT_NAMES.is_empty() => {
-                return Err(Error::usage(format!(
-                    "--impact {}: {} has no contact points (add [[contacts]] to its spec)",
-                    xtask::gen::spec::shown(name),
-                    L::NAME
-                )))
-            }
-            None => {
-                return Err(Error::usage(format!(
-                    "--impact: unknown contact `{}` (contacts of {}: {})",
-                    xtask::gen::spec::shown(name),
-                    L::NAME,
-                    L::CONTACT_NAMES.join(", ")
-                )))
-            }
-        },
-    };
+    let impact_contact = impact_contact::<L, NQ, NC, NU, NK, 2>(args)?;
     let json_out = args.json;
     let assembled = args.assemble;
     let q_text = &args.q;
@@ -174,74 +154,147 @@ pub fn run<
         &mut warnings,
         "--assemble or --project",
     );
-    let ground = Ground::<f64>::of::<L, NQ, NC, NU, NK>();
-    let x = L::contact_positions(&q, &p);
+    contacts::<L, NQ, NC, NU, NK, 2>(
+        &p,
+        &q,
+        &qd,
+        impact_contact,
+        &mut out,
+        &mut errors,
+        &mut warnings,
+    );
+    let big = largest_input(q.as_slice(), qd.as_slice(), u.as_slice());
+    emit(out, errors, warnings, big, json_out);
+    Ok(())
+}
+
+/// The contact `--impact` names, checked before anything is computed.
+fn impact_contact<
+    L: ContactModel<NQ, NC, NU, NK, ND>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+    const ND: usize,
+>(
+    args: &EvalArgs,
+) -> Result<Option<usize>, Error> {
+    let Some(name) = &args.impact else {
+        return Ok(None);
+    };
+    match L::CONTACT_NAMES.iter().position(|c| c == name) {
+        Some(k) => Ok(Some(k)),
+        None if L::CONTACT_NAMES.is_empty() => Err(Error::usage(format!(
+            "--impact {}: {} has no contact points (add [[contacts]] to its spec)",
+            xtask::gen::spec::shown(name),
+            L::NAME
+        ))),
+        None => Err(Error::usage(format!(
+            "--impact: unknown contact `{}` (contacts of {}: {})",
+            xtask::gen::spec::shown(name),
+            L::NAME,
+            L::CONTACT_NAMES.join(", ")
+        ))),
+    }
+}
+
+/// `contacts` (each contact's position, its coordinates in the ground's frame: along the
+/// ground, one number on a planar leg and two on a spatial one, and its gap) and, with
+/// `--impact`, `impact`: contact `impact` landing at this state with the others in the
+/// air (its impulses in the ground's frame, the tangential ones then the normal one).
+#[allow(clippy::too_many_arguments)]
+fn contacts<
+    L: ContactModel<NQ, NC, NU, NK, ND>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+    const ND: usize,
+>(
+    p: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+    qd: &SVector<f64, NQ>,
+    impact: Option<usize>,
+    out: &mut Map<String, Value>,
+    errors: &mut Map<String, Value>,
+    warnings: &mut Map<String, Value>,
+) {
+    let ground = Ground::<f64, ND>::of::<L, NQ, NC, NU, NK>();
+    let x = L::contact_positions(q, p);
     let coords = ground.coordinates(&x);
+    // A planar leg's one tangential coordinate is a number, a spatial leg's two a list.
+    let along = |k: usize, v: &SVector<f64, NK>| -> Value {
+        if ND == 2 {
+            json!(v[ND * k])
+        } else {
+            json!(v.rows(ND * k, ND - 1).iter().copied().collect::<Vec<_>>())
+        }
+    };
     let contacts: Vec<Value> = L::CONTACT_NAMES
         .iter()
         .enumerate()
         .map(|(k, name)| {
             json!({
                 "name": name,
-                "position": [x[2 * k], x[2 * k + 1]],
-                "tangential": coords[2 * k],
-                "gap": coords[2 * k + 1],
+                "position": x.rows(ND * k, ND).iter().copied().collect::<Vec<_>>(),
+                "tangential": along(k, &coords),
+                "gap": coords[ND * k + ND - 1],
                 "friction": L::CONTACT_FRICTION[k],
             })
         })
         .collect();
     out.insert("contacts".into(), Value::Array(contacts));
-    if let Some(k) = impact_contact {
-        let mut modes = Modes::<NK>::flight();
-        modes.set(k, ContactMode::Stick);
-        let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 2>();
-        match impact_map::<L, f64, NQ, NC, NU, NK, 2>(&p, &q, &qd, &mut modes, &ground, &mu) {
-            Ok(imp) => {
-                let mode = match modes.get(k) {
-                    ContactMode::Stick => "stick",
-                    _ => "slide",
-                };
-                // An impact happens at the ground: the map at a state away from it is
-                // computed as asked, and said so.
-                let gap = coords[2 * k + 1];
-                let size = leg_models::assembly::leg_size::<L, f64, NQ, NC, NU>(&p, &q);
-                if gap.abs() > 1e-6 * size.max(1.0) {
-                    warnings.insert(
-                        "impact".into(),
-                        json!(format!(
-                            "contact `{}` is {gap:.3e} m from the ground (its gap): an impact happens at the ground; this is the map at the state given",
-                            L::CONTACT_NAMES[k]
-                        )),
-                    );
-                }
-                out.insert(
+    let Some(k) = impact else {
+        return;
+    };
+    let mut modes = Modes::<NK, ND>::flight();
+    modes.set(k, ContactMode::Stick);
+    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, ND>();
+    match impact_map::<L, f64, NQ, NC, NU, NK, ND>(p, q, qd, &mut modes, &ground, &mu) {
+        Ok(imp) => {
+            let mode = match modes.get(k) {
+                ContactMode::Stick => "stick",
+                _ => "slide",
+            };
+            // An impact happens at the ground: the map at a state away from it is
+            // computed as asked, and said so.
+            let gap = coords[ND * k + ND - 1];
+            let size = leg_models::assembly::leg_size::<L, f64, NQ, NC, NU>(p, q);
+            if gap.abs() > 1e-6 * size.max(1.0) {
+                warnings.insert(
                     "impact".into(),
-                    json!({
-                        "contact": L::CONTACT_NAMES[k],
-                        "qd_plus": imp.qd_plus.as_slice(),
-                        "impulses": [imp.impulses[2 * k], imp.impulses[2 * k + 1]],
-                        "closure_impulses": imp.closure_impulses.as_slice(),
-                        "energy_lost": imp.energy_lost,
-                        "mode_after": mode,
-                    }),
+                    json!(format!(
+                        "contact `{}` is {gap:.3e} m from the ground (its gap): an impact happens at the ground; this is the map at the state given",
+                        L::CONTACT_NAMES[k]
+                    )),
                 );
             }
-            Err(e) => {
-                out.insert("impact".into(), Value::Null);
-                let why = match e {
-                    leg_models::dynamics::contact::ImpactError::Pulling { normal_impulse, .. } => format!(
-                        "impact: contact `{}` would need a pulling normal impulse ({normal_impulse:.3e} N s): it separates instead",
-                        L::CONTACT_NAMES[k]
-                    ),
-                    other => other.to_string(),
-                };
-                errors.insert("impact".into(), json!(why));
+            let mut impact = json!({
+                "contact": L::CONTACT_NAMES[k],
+                "qd_plus": imp.qd_plus.as_slice(),
+                "impulses": imp.impulses.rows(ND * k, ND).iter().copied().collect::<Vec<_>>(),
+                "closure_impulses": imp.closure_impulses.as_slice(),
+                "energy_lost": imp.energy_lost,
+                "mode_after": mode,
+            });
+            // In 3-D a slide's direction is one of a circle: said with the impact.
+            if ND == 3 && mode == "slide" {
+                impact["slip_direction"] = along(k, &imp.slip);
             }
+            out.insert("impact".into(), impact);
+        }
+        Err(e) => {
+            out.insert("impact".into(), Value::Null);
+            let why = match e {
+                leg_models::dynamics::contact::ImpactError::Pulling { normal_impulse, .. } => format!(
+                    "impact: contact `{}` would need a pulling normal impulse ({normal_impulse:.3e} N s): it separates instead",
+                    L::CONTACT_NAMES[k]
+                ),
+                other => other.to_string(),
+            };
+            errors.insert("impact".into(), json!(why));
         }
     }
-    let big = largest_input(q.as_slice(), qd.as_slice(), u.as_slice());
-    emit(out, errors, warnings, big, json_out);
-    Ok(())
 }
 
 /// Prints the terms (JSON or text), every term that overflowed said by name in `errors`.
@@ -425,15 +478,17 @@ fn pose(flag: &str, values: Vec<f64>) -> Result<Vec<f64>, Error> {
 }
 
 /// `eval` of a spatial leg (`LegModel<…, 3>`): the terms at `--q`, `--qd`, `--u` (with
-/// `--project`, moved onto the closures first) and with `--derivatives` those of forward
-/// dynamics. Assembly from the motors' angles, contacts and the reduction to the motors
-/// are planar only for now: their flags are refused, naming why.
+/// `--project`, moved onto the closures first), with `--derivatives` those of forward
+/// dynamics, the contacts and with `--impact` one's landing. Assembly from the motors'
+/// angles and the reduction to the motors are planar only for now: their flags are
+/// refused, naming why.
 pub fn run_spatial<
-    L: leg_models::LegModel<NQ, NC, NU, 3, NP>,
+    L: leg_models::LegModel<NQ, NC, NU, 3, NP> + ContactModel<NQ, NC, NU, NK, 3>,
     const NQ: usize,
     const NC: usize,
     const NU: usize,
     const NP: usize,
+    const NK: usize,
 >(
     args: &EvalArgs,
 ) -> Result<(), Error> {
@@ -441,11 +496,6 @@ pub fn run_spatial<
     for (given, flag, why) in [
         (args.assemble, "--assemble", assembly),
         (args.guess.is_some(), "--guess", assembly),
-        (
-            args.impact.is_some(),
-            "--impact",
-            "eval lands planar contacts only for now (a spatial leg's impact map is the runtime's `impact_map`)",
-        ),
     ] {
         if given {
             return Err(Error::usage(format!(
@@ -454,6 +504,7 @@ pub fn run_spatial<
             )));
         }
     }
+    let impact_contact = impact_contact::<L, NQ, NC, NU, NK, 3>(args)?;
     // What --q holds: one value per joint, a ball joint's three angles named where the
     // leg has one.
     let balls: Vec<&str> = L::BALL_JOINTS
@@ -487,10 +538,20 @@ pub fn run_spatial<
         None => SVector::zeros(),
     };
     let terms = L::dynamics_terms(&q, &qd, &p);
-    let (mut out, errors) = dynamics::<L, NQ, NC, NU>(&p, &terms, &q, &qd, &u, args.derivatives);
+    let (mut out, mut errors) =
+        dynamics::<L, NQ, NC, NU>(&p, &terms, &q, &qd, &u, args.derivatives);
     let mut warnings = Map::new();
     out.insert("ball_joints".into(), json!(L::BALL_JOINTS));
     points::<L, NQ, NC, NU, 3, NP>(&p, &q, &qd, &mut out, &mut warnings, "--project");
+    contacts::<L, NQ, NC, NU, NK, 3>(
+        &p,
+        &q,
+        &qd,
+        impact_contact,
+        &mut out,
+        &mut errors,
+        &mut warnings,
+    );
     let big = largest_input(q.as_slice(), qd.as_slice(), u.as_slice());
     emit(out, errors, warnings, big, args.json);
     Ok(())

@@ -78,7 +78,7 @@ fn eval(args: EvalArgs) -> Result<(), Error> {
     macro_rules! spatial {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
             if args.model == stringify!($module) {
-                return eval::run_spatial::<$ty, $nq, $nc, $nu, $np>(&args);
+                return eval::run_spatial::<$ty, $nq, $nc, $nu, $np, $nk>(&args);
             }
         };
     }
