@@ -829,7 +829,7 @@ where
         modes: &Modes<NK>,
         anchors: &SVector<T, NK>,
     ) -> Result<ContactDynamicsDerivatives<T, NQ, NC, NU, NK>, DynamicsError> {
-        derivatives::contact_dynamics_derivatives::<L, T, NQ, NC, NU, NK>(
+        derivatives::contact_dynamics_derivatives::<L, T, NQ, NC, NU, NK, 2>(
             &self.params,
             q,
             qd,
@@ -839,6 +839,7 @@ where
             &self.ground(),
             &self.friction(),
             self.baumgarte,
+            None,
         )
     }
 

@@ -17,9 +17,14 @@ use leg_models::control::{
     check_torque_limits, foot_inertias, ControlError as RustControlError,
     FootFeedbackLinearization, FootPdGravity, Gains, Saturated,
 };
+use leg_models::dynamics::contact::{
+    forward_dynamics_with_contacts, spec_friction, ContactMode, Ground, Modes,
+};
 use leg_models::dynamics::DynamicsError as RustDynamicsError;
 use leg_models::nalgebra::{SMatrix, SVector};
-use leg_models::simulate::hybrid::{HybridState, HybridTorqueSource};
+use leg_models::simulate::hybrid::{
+    HybridRecord, HybridSimulator, HybridState, HybridTorqueSource,
+};
 use leg_models::simulate::{Method, State, StepOptions, TorqueSource};
 use leg_models::{ContactModel, Leg};
 use leg_models::{Shown, ShownNumber};
@@ -469,15 +474,15 @@ impl<S: TorqueSource<f64, NQ, NU>, const NQ: usize, const NU: usize> TorqueSourc
     }
 }
 
-impl<S, const NQ: usize, const NK: usize, const NU: usize> HybridTorqueSource<f64, NQ, NK, NU>
-    for Interruptible<S>
+impl<S, const NQ: usize, const NK: usize, const NU: usize, const ND: usize>
+    HybridTorqueSource<f64, NQ, NK, NU, ND> for Interruptible<S>
 where
-    S: HybridTorqueSource<f64, NQ, NK, NU>,
+    S: HybridTorqueSource<f64, NQ, NK, NU, ND>,
 {
     fn torque(
         &mut self,
         t: f64,
-        state: &HybridState<f64, NQ, NK>,
+        state: &HybridState<f64, NQ, NK, ND>,
     ) -> Result<SVector<f64, NU>, RustControlError> {
         self.poll()?;
         self.inner.torque(t, state)
@@ -544,6 +549,155 @@ where
         .take()
         .or_else(|| callable_error(&mut source.inner));
     finish(py, pending, stopped, record(samples))
+}
+
+/// Runs leg `L` on the ground in `sim` from `(q, qd)` (every contact's mode found from the
+/// state at rest torques) for `steps` steps without the GIL, torques as in `simulate`; the
+/// record as arrays (t, q, qd, u, contact_forces: each contact's tangential rows then its
+/// normal one, in the ground's frame; energy; closure_residual) and `events`, a list of
+/// dicts (t, kind, contact, impulse `[Λ_t, Λ_n]`: on a spatial leg `Λ_t` is the tangential
+/// impulse's magnitude, energy_lost). A run that stops early raises `SimulationError`
+/// with the record so far as its `record`.
+#[allow(clippy::too_many_arguments)]
+fn simulate_on_ground<
+    'py,
+    L,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+    const ND: usize,
+>(
+    py: Python<'py>,
+    sim: &HybridSimulator<L, f64, NQ, NC, NU, NK, ND>,
+    q: &Bound<'py, PyAny>,
+    qd: &Bound<'py, PyAny>,
+    steps: &Bound<'py, PyAny>,
+    dt: f64,
+    torque: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyDict>>
+where
+    L: ContactModel<NQ, NC, NU, NK, ND>,
+    HybridSimulator<L, f64, NQ, NC, NU, NK, ND>: Sync,
+{
+    step_options(dt, "rk4", true)?;
+    let steps = step_count(steps)?;
+    let mut torques = PythonTorques::<NQ, NU>::new(torque)?;
+    let start = sim
+        .start(
+            State {
+                q: pose("q", q)?,
+                qd: vector("qd", qd)?,
+            },
+            &SVector::zeros(),
+        )
+        .map_err(|e| SimulationError::new_err(e.to_string()))?;
+    let mut source = Interruptible::new(|t: f64, hs: &HybridState<f64, NQ, NK, ND>| {
+        torques.call(t, &hs.state.q, &hs.state.qd)
+    });
+    // Without the GIL (the callable takes it for its calls), Ctrl-C seen.
+    let result = py.detach(|| sim.run(start, steps, &mut source));
+    let pending = source.interrupt.take().or_else(|| torques.error.take());
+    let record = |r: &HybridRecord<f64, NQ, NC, NU, NK, ND>| -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        let s = &r.samples;
+        d.set_item("t", PyArray1::from_iter(py, s.iter().map(|s| s.t)))?;
+        d.set_item("q", out_rows(py, s.iter().map(|s| s.state.state.q)))?;
+        d.set_item("qd", out_rows(py, s.iter().map(|s| s.state.state.qd)))?;
+        d.set_item("u", out_rows(py, s.iter().map(|s| s.u)))?;
+        d.set_item(
+            "contact_forces",
+            out_rows(py, s.iter().map(|s| s.contact_forces)),
+        )?;
+        d.set_item(
+            "energy",
+            PyArray1::from_iter(py, s.iter().map(|s| s.energy)),
+        )?;
+        d.set_item(
+            "closure_residual",
+            PyArray1::from_iter(py, s.iter().map(|s| s.closure_residual)),
+        )?;
+        let events = PyList::empty(py);
+        for e in &r.events {
+            let ev = PyDict::new(py);
+            ev.set_item("t", e.t)?;
+            ev.set_item("kind", format!("{:?}", e.kind).to_lowercase())?;
+            ev.set_item("contact", L::CONTACT_NAMES[e.contact])?;
+            ev.set_item("impulse", e.impulse.to_vec())?;
+            ev.set_item("energy_lost", e.energy_lost)?;
+            events.append(ev)?;
+        }
+        d.set_item("events", events)?;
+        Ok(d)
+    };
+    let (r, stopped) = match &result {
+        Ok(r) => (r, None),
+        Err(stopped) => (&stopped.record, Some(stopped.to_string())),
+    };
+    finish(py, pending, stopped, record(r))
+}
+
+/// Three vectors returned together.
+type ThreeArrays<'py> = (
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+);
+
+/// `(q̈, closure forces, contact forces)` of leg `L` with the contacts `held[k]` sticking
+/// at `anchors` (their ground coordinates) and the others in flight.
+#[allow(clippy::too_many_arguments)]
+fn held_contact_dynamics<
+    'py,
+    L,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+    const ND: usize,
+>(
+    py: Python<'py>,
+    params: &L::Params<f64>,
+    baumgarte: Option<leg_models::dynamics::Baumgarte<f64>>,
+    q: &Bound<'py, PyAny>,
+    qd: &Bound<'py, PyAny>,
+    u: &Bound<'py, PyAny>,
+    held: &[bool],
+    anchors: &Bound<'py, PyAny>,
+) -> PyResult<ThreeArrays<'py>>
+where
+    L: ContactModel<NQ, NC, NU, NK, ND>,
+{
+    if held.len() * ND != NK {
+        return Err(PyValueError::new_err(format!(
+            "`held` has {} entries, this leg has {} contacts",
+            held.len(),
+            NK / ND
+        )));
+    }
+    let mut modes = Modes::<NK, ND>::flight();
+    for (k, h) in held.iter().enumerate() {
+        if *h {
+            modes.set(k, ContactMode::Stick);
+        }
+    }
+    let s = forward_dynamics_with_contacts::<L, f64, NQ, NC, NU, NK, ND>(
+        params,
+        &pose("q", q)?,
+        &vector("qd", qd)?,
+        &vector("u", u)?,
+        &modes,
+        &vector("anchors", anchors)?,
+        &Ground::of::<L, NQ, NC, NU, NK>(),
+        &spec_friction::<L, f64, NQ, NC, NU, NK, ND>(),
+        baumgarte,
+    )
+    .map_err(dynamics_err)?;
+    Ok((
+        out_vector(py, &s.x),
+        out_vector(py, &s.closure),
+        out_vector(py, &s.contact),
+    ))
 }
 
 /// No Python callable: no error of its own.
@@ -1053,15 +1207,7 @@ macro_rules! leg_class {
                 /// `(q̈, closure forces, contact forces)` with contacts held at `anchors`
                 /// (`held[k]`: contact k sticks; others in flight), spec ground and friction.
                 fn forward_dynamics_with_contacts<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, u: &Bound<'py, PyAny>, held: Vec<bool>, anchors: &Bound<'py, PyAny>) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
-                    if held.len() * 2 != NK {
-                        return Err(PyValueError::new_err(format!("`held` has {} entries, this leg has {} contacts", held.len(), NK / 2)));
-                    }
-                    let mut modes = leg_models::dynamics::contact::Modes::<NK>::flight();
-                    for (k, h) in held.iter().enumerate() {
-                        if *h { modes.set(k, leg_models::dynamics::contact::ContactMode::Stick); }
-                    }
-                    let s = self.leg.forward_dynamics_with_contacts(&pose("q", q)?, &vector("qd", qd)?, &vector("u", u)?, &modes, &vector("anchors", anchors)?).map_err(dynamics_err)?;
-                    Ok((out_vector(py, &s.x), out_vector(py, &s.closure), out_vector(py, &s.contact)))
+                    held_contact_dynamics::<Model, NQ, NC, NU, NK, 2>(py, self.leg.params(), self.leg.baumgarte(), q, qd, u, &held, anchors)
                 }
                 /// Simulates the leg on the ground (contacts, impacts, events) for `steps`
                 /// RK4 steps of `dt` from `(q, qd)` with every contact in flight. Torques as
@@ -1070,43 +1216,7 @@ macro_rules! leg_class {
                 /// energy_lost).
                 #[pyo3(signature = (q, qd, steps, dt, torque = None))]
                 fn simulate_hybrid<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, steps: &Bound<'py, PyAny>, dt: f64, torque: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyDict>> {
-                    step_options(dt, "rk4", true)?;
-                    let steps = step_count(steps)?;
-                    let sim = self.leg.hybrid_simulator(dt);
-                    let mut torques = PythonTorques::<NQ, NU>::new(torque)?;
-                    let start = sim.start(State { q: pose("q", q)?, qd: vector("qd", qd)? }, &SVector::zeros())
-                        .map_err(|e| SimulationError::new_err(e.to_string()))?;
-                    let mut source = Interruptible::new(|t: f64, hs: &HybridState<f64, NQ, NK>| torques.call(t, &hs.state.q, &hs.state.qd));
-                    // Without the GIL (the callable takes it for its calls), Ctrl-C seen.
-                    let result = py.detach(|| sim.run(start, steps, &mut source));
-                    let pending = source.interrupt.take().or_else(|| torques.error.take());
-                    let record = |r: &leg_models::simulate::hybrid::HybridRecord<f64, NQ, NC, NU, NK>| -> PyResult<Bound<'py, PyDict>> {
-                        let d = PyDict::new(py);
-                        let s = &r.samples;
-                        d.set_item("t", PyArray1::from_iter(py, s.iter().map(|s| s.t)))?;
-                        d.set_item("q", out_rows(py, s.iter().map(|s| s.state.state.q)))?;
-                        d.set_item("qd", out_rows(py, s.iter().map(|s| s.state.state.qd)))?;
-                        d.set_item("u", out_rows(py, s.iter().map(|s| s.u)))?;
-                        d.set_item("contact_forces", out_rows(py, s.iter().map(|s| s.contact_forces)))?;
-                        d.set_item("energy", PyArray1::from_iter(py, s.iter().map(|s| s.energy)))?;
-                        let events = PyList::empty(py);
-                        for e in &r.events {
-                            let ev = PyDict::new(py);
-                            ev.set_item("t", e.t)?;
-                            ev.set_item("kind", format!("{:?}", e.kind).to_lowercase())?;
-                            ev.set_item("contact", <Model as ContactModel<NQ, NC, NU, NK>>::CONTACT_NAMES[e.contact])?;
-                            ev.set_item("impulse", e.impulse.to_vec())?;
-                            ev.set_item("energy_lost", e.energy_lost)?;
-                            events.append(ev)?;
-                        }
-                        d.set_item("events", events)?;
-                        Ok(d)
-                    };
-                    let (r, stopped) = match &result {
-                        Ok(r) => (r, None),
-                        Err(stopped) => (&stopped.record, Some(stopped.to_string())),
-                    };
-                    finish(py, pending, stopped, record(r))
+                    simulate_on_ground(py, &self.leg.hybrid_simulator(dt), q, qd, steps, dt, torque)
                 }
                 /// Every design measure at the assembled pose `q`, with the joints' torque
                 /// limits `torque_limit` (N m after the gearbox) and speed limits
@@ -1269,15 +1379,110 @@ macro_rules! leg_class {
 }
 
 /// A spatial leg: the methods of every leg, its foot and foot-space control in three
-/// coordinates, and its contacts' names; its contact dynamics and hybrid simulator are
-/// the runtime's (not yet in Python), and the design measures are planar.
+/// coordinates, and its contacts in 3-D (three rows each: the ground's two tangents, then
+/// its normal) with their dynamics and the hybrid simulator; the design measures are
+/// planar.
 macro_rules! spatial_leg_class {
     ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $np:expr, $nk:expr) => {
         leg_module!($module, $ty, $nq, $nc, $nu, 0, 3, $np, {
             /// The contact points' names (three rows each).
             #[classattr]
             fn contact_names() -> Vec<&'static str> {
-                <$ty as leg_models::ContactModel<$nq, $nc, $nu, { generated::$module::NK }, 3>>::CONTACT_NAMES.to_vec()
+                <Model as ContactModel<NQ, NC, NU, $nk, 3>>::CONTACT_NAMES.to_vec()
+            }
+            /// The contact points stacked (x₀, y₀, z₀, x₁, …).
+            fn contact_positions<'py>(
+                &self,
+                py: Python<'py>,
+                q: &Bound<'py, PyAny>,
+            ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                Ok(out_vector(
+                    py,
+                    &<Model as ContactModel<NQ, NC, NU, $nk, 3>>::contact_positions(
+                        &pose("q", q)?,
+                        self.leg.params(),
+                    ),
+                ))
+            }
+            /// `J_c(q)`, three rows per contact (base frame).
+            fn contact_jacobian<'py>(
+                &self,
+                py: Python<'py>,
+                q: &Bound<'py, PyAny>,
+            ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+                Ok(out_matrix(
+                    py,
+                    &<Model as ContactModel<NQ, NC, NU, $nk, 3>>::contact_jacobian(
+                        &pose("q", q)?,
+                        self.leg.params(),
+                    ),
+                ))
+            }
+            /// `J̇_c q̇` (base frame).
+            fn contact_bias<'py>(
+                &self,
+                py: Python<'py>,
+                q: &Bound<'py, PyAny>,
+                qd: &Bound<'py, PyAny>,
+            ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                Ok(out_vector(
+                    py,
+                    &<Model as ContactModel<NQ, NC, NU, $nk, 3>>::contact_bias(
+                        &pose("q", q)?,
+                        &vector("qd", qd)?,
+                        self.leg.params(),
+                    ),
+                ))
+            }
+            /// `(q̈, closure forces, contact forces)` with contacts held at `anchors`
+            /// (`held[k]`: contact k sticks at its ground coordinates `anchors[3k..3k+3]`;
+            /// others in flight), spec ground and friction; contact forces in the ground's
+            /// frame (t₁, t₂, n).
+            fn forward_dynamics_with_contacts<'py>(
+                &self,
+                py: Python<'py>,
+                q: &Bound<'py, PyAny>,
+                qd: &Bound<'py, PyAny>,
+                u: &Bound<'py, PyAny>,
+                held: Vec<bool>,
+                anchors: &Bound<'py, PyAny>,
+            ) -> PyResult<(
+                Bound<'py, PyArray1<f64>>,
+                Bound<'py, PyArray1<f64>>,
+                Bound<'py, PyArray1<f64>>,
+            )> {
+                held_contact_dynamics::<Model, NQ, NC, NU, $nk, 3>(
+                    py,
+                    self.leg.params(),
+                    self.leg.baumgarte(),
+                    q,
+                    qd,
+                    u,
+                    &held,
+                    anchors,
+                )
+            }
+            /// Simulates the leg on the ground in 3-D (the exact friction cone, slip in any
+            /// direction, impacts, events) for `steps` RK4 steps of `dt` from `(q, qd)`.
+            /// Torques as in `simulate`. Returns a dict of arrays (t, q, qd, u,
+            /// contact_forces: three per contact in the ground's frame, energy,
+            /// closure_residual) and `events`, a list of dicts (t, kind, contact, impulse
+            /// `[|Λ_t|, Λ_n]`, energy_lost).
+            #[pyo3(signature = (q, qd, steps, dt, torque = None))]
+            fn simulate_hybrid<'py>(
+                &self,
+                py: Python<'py>,
+                q: &Bound<'py, PyAny>,
+                qd: &Bound<'py, PyAny>,
+                steps: &Bound<'py, PyAny>,
+                dt: f64,
+                torque: Option<&Bound<'py, PyAny>>,
+            ) -> PyResult<Bound<'py, PyDict>> {
+                let mut sim =
+                    HybridSimulator::<Model, f64, NQ, NC, NU, $nk, 3>::new(*self.leg.params(), dt);
+                sim.options.baumgarte = self.leg.baumgarte();
+                sim.options.tolerance = *self.leg.tolerance();
+                simulate_on_ground(py, &sim, q, qd, steps, dt, torque)
             }
         });
     };

@@ -316,7 +316,7 @@ fn stance<
         modes.set(k, ContactMode::Stick);
     }
     let anchors = ground.coordinates(&L::contact_positions(&home.q, &p));
-    match contact_dynamics_derivatives::<L, f64, NQ, NC, NU, NK>(
+    match contact_dynamics_derivatives::<L, f64, NQ, NC, NU, NK, 2>(
         &p,
         &home.q,
         &home.qd,
@@ -325,6 +325,7 @@ fn stance<
         &anchors,
         &ground,
         &mu,
+        None,
         None,
     ) {
         Ok(d) => {

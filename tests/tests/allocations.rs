@@ -368,8 +368,8 @@ where
         zero(
             "contact dynamics derivatives",
             allocations(|| {
-                contact_dynamics_derivatives::<L, f64, NQ, NC, NU, NK>(
-                    &p, &q, &qd, &u, &modes, &anchors, &ground, &mu, None,
+                contact_dynamics_derivatives::<L, f64, NQ, NC, NU, NK, 2>(
+                    &p, &q, &qd, &u, &modes, &anchors, &ground, &mu, None, None,
                 )
             })
             .0,

@@ -11,7 +11,9 @@ use generated::sliding_mass::{self, SlidingMass};
 use leg_models::dynamics::contact::{
     forward_dynamics_with_contacts, impact_map, spec_friction, ContactMode, Ground, Modes,
 };
-use leg_models::nalgebra::{DMatrix, DVector, SVector, Vector3};
+use leg_models::dynamics::derivatives::contact_dynamics_derivatives;
+use leg_models::dynamics::Baumgarte;
+use leg_models::nalgebra::{DMatrix, DVector, SMatrix, SVector, Vector3};
 use leg_models::simulate::hybrid::{EventKind, HybridSimulator, HybridState};
 use leg_models::simulate::State;
 use leg_models::{ContactModel, LegDynamics};
@@ -469,6 +471,175 @@ fn abducted_five_bar_contact_dynamics_solve_the_dense_kkt_system() {
     check_against_dense::<AbductedFiveBar, 5, 3, 3, 3>(None);
     // A ground steep enough that its frame's first tangent is the base's y projected.
     check_against_dense::<AbductedFiveBar, 5, 3, 3, 3>(Some([0.95, 0.1, 0.3]));
+}
+
+/// Central differences of `f` at `x`, one column per coordinate.
+fn central<const N: usize, const R: usize>(
+    x: &SVector<f64, N>,
+    h: f64,
+    f: impl Fn(&SVector<f64, N>) -> SVector<f64, R>,
+) -> SMatrix<f64, R, N> {
+    let mut out = SMatrix::<f64, R, N>::zeros();
+    for i in 0..N {
+        let mut e = SVector::<f64, N>::zeros();
+        e[i] = h;
+        out.set_column(i, &((f(&(x + e)) - f(&(x - e))) / (2.0 * h)));
+    }
+    out
+}
+
+/// The derivatives of the 3-D contact dynamics (`contact_dynamics_derivatives` with
+/// `ND = 3`) against central differences of the dynamics themselves, at random assembled
+/// states, torques and modes, with and without Baumgarte terms: a sticking contact's
+/// rows, and a sliding one's friction `−μ λ_n ŝ` turning with its slip velocity (`ŝ`
+/// depends on `q` and `q̇`). Returns the largest error relative to the derivative's size.
+fn check_derivatives<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>() -> f64
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    let p = L::Params::<f64>::default();
+    let ground = Ground::<f64, 3>::of::<L, NQ, NC, NU, NK>();
+    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
+    let mut rng = Rng::new(71);
+    let (mut checked, mut sliding, mut tried) = (0, 0, 0);
+    let mut worst = 0.0f64;
+    while checked < 24 && tried < 2000 {
+        tried += 1;
+        let s = random_assembled_state::<L, NQ, NC, NU>(&p, &mut rng, 2.0);
+        let u = SVector::<f64, NU>::from_fn(|_, _| rng.range(-3.0, 3.0));
+        let modes = random_modes::<NK>(&mut rng);
+        let anchors = ground.coordinates(&L::contact_positions(&s.q, &p));
+        let baumgarte = (tried % 2 == 0).then_some(Baumgarte {
+            alpha: 5.0,
+            beta: 5.0,
+        });
+        let solve = |q: &SVector<f64, NQ>, qd: &SVector<f64, NQ>, u: &SVector<f64, NU>| {
+            forward_dynamics_with_contacts::<L, f64, NQ, NC, NU, NK, 3>(
+                &p, q, qd, u, &modes, &anchors, &ground, &mu, baumgarte,
+            )
+        };
+        let Ok(d) = contact_dynamics_derivatives::<L, f64, NQ, NC, NU, NK, 3>(
+            &p, &s.q, &s.qd, &u, &modes, &anchors, &ground, &mu, baumgarte, None,
+        ) else {
+            continue;
+        };
+        // Near a singular stance the differences are noise: regular states only.
+        let h = 1e-6;
+        let regular = L::REDUNDANT_ROWS > 0
+            || (0..NQ).all(|i| {
+                let mut e = SVector::<f64, NQ>::zeros();
+                e[i] = h;
+                [s.q + e, s.q - e]
+                    .iter()
+                    .all(|q| solve(q, &s.qd, &u).is_ok_and(|x| x.x.amax() < 1e4))
+            });
+        if !regular {
+            continue;
+        }
+        assert_eq!(d.solution, solve(&s.q, &s.qd, &u).unwrap());
+        let sol = |q: &SVector<f64, NQ>, qd: &SVector<f64, NQ>, u: &SVector<f64, NU>| {
+            solve(q, qd, u).unwrap()
+        };
+        let mut compare = |got: DMatrix<f64>, want: DMatrix<f64>, what: &str| {
+            let e = (&got - &want).amax() / (1.0 + want.amax());
+            assert!(e < 1e-5, "{}: {what} off by {e:.1e} ({modes:?})", L::NAME);
+            worst = worst.max(e);
+        };
+        let dense = |m: &[f64], r: usize| DMatrix::from_column_slice(r, m.len() / r, m);
+        if L::REDUNDANT_ROWS == 0 {
+            let dq = central(&s.q, h, |x| sol(x, &s.qd, &u).x);
+            let dc = central(&s.q, h, |x| sol(x, &s.qd, &u).contact);
+            compare(
+                dense(d.qdd_q.as_slice(), NQ),
+                dense(dq.as_slice(), NQ),
+                "∂q̈/∂q",
+            );
+            compare(
+                dense(d.contact_q.as_slice(), NK),
+                dense(dc.as_slice(), NK),
+                "∂λ/∂q",
+            );
+        } else {
+            // Off the closures a redundantly closed leg's rows are no longer dependent and
+            // its dynamics are not smooth in q: along the manifold instead (the null space
+            // of J, each direction projected back onto φ = 0, q̇ kept consistent), where
+            // d/ds f(q(s), q̇(s)) = ∂f/∂q q' + ∂f/∂q̇ q̇'.
+            let jq = L::constraint_jacobian(&s.q, &p);
+            let j = DMatrix::from_fn(NQ, NQ, |r, c| if r < NC { jq[(r, c)] } else { 0.0 });
+            let svd = j.transpose().svd(true, false);
+            let (basis, top) = (svd.u.unwrap(), svd.singular_values.max());
+            let tol = leg_models::assembly::Tolerance::default();
+            for k in (0..NQ).filter(|&k| svd.singular_values[k] <= 1e-9 * top) {
+                let t = SVector::<f64, NQ>::from_fn(|r, _| basis[(r, k)]);
+                let curve = |x: f64| {
+                    let mut q = s.q + t * x;
+                    leg_models::assembly::project_position::<L, f64, NQ, NC, NU>(&p, &mut q, &tol)
+                        .unwrap();
+                    let mut qd = s.qd;
+                    leg_models::assembly::project_velocity::<L, f64, NQ, NC, NU>(&p, &q, &mut qd)
+                        .unwrap();
+                    (q, qd)
+                };
+                let (plus, minus) = (curve(h), curve(-h));
+                let (dq, dqd) = (
+                    (plus.0 - minus.0) / (2.0 * h),
+                    (plus.1 - minus.1) / (2.0 * h),
+                );
+                let (a, b) = (sol(&plus.0, &plus.1, &u), sol(&minus.0, &minus.1, &u));
+                let want_x = (a.x - b.x) / (2.0 * h);
+                let want_c = (a.contact - b.contact) / (2.0 * h);
+                let got_x = d.qdd_q * dq + d.qdd_qd * dqd;
+                let got_c = d.contact_q * dq + d.contact_qd * dqd;
+                compare(
+                    dense(got_x.as_slice(), NQ),
+                    dense(want_x.as_slice(), NQ),
+                    "∂q̈/∂q along the manifold",
+                );
+                compare(
+                    dense(got_c.as_slice(), NK),
+                    dense(want_c.as_slice(), NK),
+                    "∂λ/∂q along the manifold",
+                );
+            }
+        }
+        let dq = central(&s.qd, h, |x| sol(&s.q, x, &u).x);
+        let dc = central(&s.qd, h, |x| sol(&s.q, x, &u).contact);
+        compare(
+            dense(d.qdd_qd.as_slice(), NQ),
+            dense(dq.as_slice(), NQ),
+            "∂q̈/∂q̇",
+        );
+        compare(
+            dense(d.contact_qd.as_slice(), NK),
+            dense(dc.as_slice(), NK),
+            "∂λ/∂q̇",
+        );
+        let want = central(&u, 1e-3, |x| sol(&s.q, &s.qd, x).x);
+        let e = (d.qdd_u - want).amax() / (1.0 + want.amax());
+        assert!(e < 1e-6, "{}: ∂q̈/∂u off by {e:.1e}", L::NAME);
+        checked += 1;
+        if (0..NK / 3).any(|k| matches!(modes.get(k), ContactMode::Slide { .. })) {
+            sliding += 1;
+        }
+    }
+    assert!(
+        checked >= 24 && sliding >= 4,
+        "{}: {checked} states checked, {sliding} sliding",
+        L::NAME
+    );
+    worst
+}
+
+#[test]
+fn sliding_mass_contact_derivatives_match_central_differences() {
+    let worst = check_derivatives::<SlidingMass, 3, 0, 2, 3>();
+    println!("sliding_mass: worst relative error {worst:.1e}");
+}
+
+#[test]
+fn abducted_five_bar_contact_derivatives_match_central_differences() {
+    let worst = check_derivatives::<AbductedFiveBar, 5, 3, 3, 3>();
+    println!("abducted_five_bar: worst relative error {worst:.1e}");
 }
 
 /// At random assembled states and velocities: after the impact every closure and every

@@ -472,8 +472,8 @@ fn contact_fd<
             )
         };
         // Held contacts may repeat the closures at some poses: those are not regular.
-        let Ok(d) = contact_dynamics_derivatives::<L, f64, NQ, NC, NU, NK>(
-            &p, &s.q, &s.qd, &u, &modes, &anchors, &ground, &mu, baumgarte,
+        let Ok(d) = contact_dynamics_derivatives::<L, f64, NQ, NC, NU, NK, 2>(
+            &p, &s.q, &s.qd, &u, &modes, &anchors, &ground, &mu, baumgarte, None,
         ) else {
             continue;
         };

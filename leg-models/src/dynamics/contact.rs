@@ -514,7 +514,7 @@ pub(crate) fn set_unit<T: Real, const NK: usize>(
 /// Contact `k`'s velocity along the ground, `(C q̇)` on its tangential rows (`c` the
 /// ground rows, [`Ground::rows`]), and whether it moves: `|v_t|` above rounding, `√ε` of
 /// the speeds its rows could have at `q̇`.
-fn tangential_velocity<T: Real, const NQ: usize, const NK: usize, const ND: usize>(
+pub(crate) fn tangential_velocity<T: Real, const NQ: usize, const NK: usize, const ND: usize>(
     c: &SMatrix<T, NK, NQ>,
     qd: &SVector<T, NQ>,
     k: usize,

@@ -20,7 +20,8 @@
 use nalgebra::{SMatrix, SVector};
 
 use crate::dynamics::contact::{
-    solve_structured_columns, ContactSolution, ContactSystem, Ground, Modes,
+    solve_structured_columns, tangential_velocity, ContactMode, ContactSolution, ContactSystem,
+    Ground, Modes,
 };
 use crate::dynamics::forward::{
     actuation, classify_non_finite, kkt_rhs, Acceleration, Baumgarte, DynamicsError,
@@ -181,9 +182,49 @@ pub struct ContactDynamicsDerivatives<
     pub contact_u: SMatrix<T, NK, NU>,
 }
 
+/// Contact `k` of a spatial leg sliding along its own velocity (not from rest in a given
+/// direction): `(−μ λ_n, ∂ŝ/∂q, ∂ŝ/∂q̇)` with `ŝ = v_t / |v_t|`, `v_t = C_t q̇`, so
+/// `∂ŝ = (I − ŝ ŝᵀ) ∂v_t / |v_t|`, `∂v_t/∂q̇ = C_t`, `∂v_t/∂q = R_t J̇_c` (`rate_rows`).
+/// `None` for every other contact, and on a planar leg.
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn turning_slip<T: Real, const NQ: usize, const NK: usize, const ND: usize>(
+    k: usize,
+    modes: &Modes<NK, ND>,
+    c: &SMatrix<T, NK, NQ>,
+    rate_rows: &SMatrix<T, NK, NQ>,
+    qd: &SVector<T, NQ>,
+    slip: &SVector<T, NK>,
+    rest: Option<&SVector<T, NK>>,
+    mu: &SVector<T, NK>,
+    contact: &SVector<T, NK>,
+) -> Option<(T, SMatrix<T, 2, NQ>, SMatrix<T, 2, NQ>)> {
+    if ND != 3 || !matches!(modes.get(k), ContactMode::Slide { .. }) {
+        return None;
+    }
+    let (t0, t1) = (ND * k, ND * k + 1);
+    let (v, moving) = tangential_velocity::<T, NQ, NK, ND>(c, qd, k);
+    // Where `slip_directions` took the velocity's direction, not the given one.
+    let ahead = rest.map_or(T::one(), |d| d[t0] * v[t0] + d[t1] * v[t1]);
+    if !(moving && ahead > T::zero()) {
+        return None;
+    }
+    let speed = (v[t0] * v[t0] + v[t1] * v[t1]).sqrt();
+    let s = SVector::<T, 2>::new(slip[t0], slip[t1]);
+    let p = (SMatrix::<T, 2, 2>::identity() - s * s.transpose()) / speed;
+    let ds_q = p * rate_rows.fixed_rows::<2>(t0);
+    let ds_qd = p * c.fixed_rows::<2>(t0);
+    Some((-(mu[t0] * contact[ND * k + 2]), ds_q, ds_qd))
+}
+
 /// [`crate::dynamics::contact::forward_dynamics_with_contacts`] (contacts in `modes`, Baumgarte on
 /// closures and held contacts as there) and its derivatives with respect to `q`, `q̇` and
-/// `u`, holding the modes: the linearization of stance (or of flight, or sliding).
+/// `u`, holding the modes: the linearization of stance (or of flight, or sliding). On a
+/// spatial leg (`ND = 3`) a sliding contact's friction `−μ λ_n ŝ` turns with its slip
+/// velocity `v_t = C_t q̇` (`ŝ = v_t / |v_t|`), so the derivatives carry
+/// `∂ŝ/∂q̇ = (I − ŝ ŝᵀ) C_t / |v_t|` and `∂ŝ/∂q = (I − ŝ ŝᵀ) R_t J̇_c / |v_t|`
+/// (`∂(J_c q̇)/∂q = J̇_c`); a contact sliding from rest keeps the direction `rest` gives
+/// it (as [`ContactSystem::with_slip`]), a constant. A planar slide's direction is its
+/// mode's, a constant too.
 #[allow(clippy::too_many_arguments)]
 pub fn contact_dynamics_derivatives<
     L,
@@ -192,55 +233,89 @@ pub fn contact_dynamics_derivatives<
     const NC: usize,
     const NU: usize,
     const NK: usize,
+    const ND: usize,
 >(
     params: &L::Params<T>,
     q: &SVector<T, NQ>,
     qd: &SVector<T, NQ>,
     u: &SVector<T, NU>,
-    modes: &Modes<NK>,
+    modes: &Modes<NK, ND>,
     anchors: &SVector<T, NK>,
-    ground: &Ground<T>,
+    ground: &Ground<T, ND>,
     mu: &SVector<T, NK>,
     baumgarte: Option<Baumgarte<T>>,
+    rest: Option<&SVector<T, NK>>,
 ) -> Result<ContactDynamicsDerivatives<T, NQ, NC, NU, NK>, DynamicsError>
 where
-    L: ContactModel<NQ, NC, NU, NK>,
+    L: ContactModel<NQ, NC, NU, NK, ND>,
     T: Real,
 {
     // The system forward dynamics with contacts solves, so that the solution is the same
     // to the bit.
-    let sys = ContactSystem::new::<L, NU>(params, q, qd, modes, anchors, ground, mu, baumgarte)?;
+    let sys = ContactSystem::with_slip::<L, NU>(
+        params, q, qd, modes, anchors, ground, mu, baumgarte, rest,
+    )?;
     let (chol_m, j, rows) = (&sys.chol_m, &sys.jacobian, &sys.rows);
     let (two, zero) = (T::lit(2.0), T::zero());
     let (two_alpha, beta2) = baumgarte.map_or((zero, zero), |b| (b.alpha * two, b.beta * b.beta));
     let tau = actuation::<L, T, NQ, NC, NU>(u) + sys.passive;
     let (x, closure, contact) =
         solve_structured_columns(chol_m, j, &sys.r_j, L::REDUNDANT_ROWS, rows, &sys.r_c, &tau)?;
-    // The ground forces in the base frame (λ_t t + λ_n n per contact) for J_cᵀ λ.
-    let (t, n) = (ground.tangent(), ground.normal);
+    // The ground forces in the base frame (Σ_j λ_j e_j over the frame's rows: the
+    // tangents, then the normal) for J_cᵀ λ.
+    let frame = ground.frame();
     let lambda = SVector::<T, NK>::from_fn(|r, _| {
-        let k = r - r % 2;
-        t[r % 2] * contact[k] + n[r % 2] * contact[k + 1]
+        let (k, i) = (r - r % ND, r % ND);
+        let mut s = frame[(0, i)] * contact[k];
+        for j in 1..ND {
+            s += frame[(j, i)] * contact[k + j];
+        }
+        s
     });
     let d = L::dynamics_derivatives(q, qd, &x, &closure, params);
     let dc = L::contact_derivatives(q, qd, &x, &lambda, params);
     // Contact rows: C = R J_c, so ∂(C a + R J̇_c q̇)/∂q = R (∂(J_c a)/∂q + ∂(J̇_c q̇)/∂q).
-    let tau_q = dc.force_q - d.dynamics_q;
+    let mut tau_q = dc.force_q - d.dynamics_q;
+    let rate_rows = ground.rows(&dc.jacobian_rate);
     let rj_q = -d.constraint_q - d.jacobian_rate * two_alpha - j * beta2;
-    let rc_q = -ground.rows(&(dc.jacobian_q + dc.bias_q))
-        - ground.rows(&dc.jacobian_rate) * two_alpha
-        - rows.c * beta2;
-    let tau_qd = -d.dynamics_qd;
+    let rc_q = -ground.rows(&(dc.jacobian_q + dc.bias_q)) - rate_rows * two_alpha - rows.c * beta2;
+    let mut tau_qd = -d.dynamics_qd;
     let rj_qd = -(d.jacobian_rate * two) - j * two_alpha;
-    let rc_qd = -(ground.rows(&dc.jacobian_rate) * two) - rows.c * two_alpha;
+    let rc_qd = -(rate_rows * two) - rows.c * two_alpha;
+    // A spatial slide's direction follows its velocity: the friction force's change with
+    // it, at the solved λ_n, on the right-hand side; its share of λ_t after the solve.
+    let turning = |k: usize| {
+        turning_slip::<T, NQ, NK, ND>(
+            k, modes, &rows.c, &rate_rows, qd, &sys.slip, rest, mu, &contact,
+        )
+    };
+    for k in 0..NK / ND {
+        if let Some((scale, ds_q, ds_qd)) = turning(k) {
+            // τ += C_tᵀ (−μ λ_n) ∂ŝ.
+            let ct = rows.c.fixed_rows::<2>(ND * k).transpose() * scale;
+            tau_q += ct * ds_q;
+            tau_qd += ct * ds_qd;
+        }
+    }
     let tau_u = actuation_matrix::<L, T, NQ, NC, NU>();
     let (rj_u, rc_u) = (SMatrix::<T, NC, NU>::zeros(), SMatrix::<T, NK, NU>::zeros());
-    let (qdd_q, forces_q, contact_q) =
+    let (qdd_q, forces_q, mut contact_q) =
         solve_structured_columns(chol_m, j, &rj_q, L::REDUNDANT_ROWS, rows, &rc_q, &tau_q)?;
-    let (qdd_qd, forces_qd, contact_qd) =
+    let (qdd_qd, forces_qd, mut contact_qd) =
         solve_structured_columns(chol_m, j, &rj_qd, L::REDUNDANT_ROWS, rows, &rc_qd, &tau_qd)?;
     let (qdd_u, forces_u, contact_u) =
         solve_structured_columns(chol_m, j, &rj_u, L::REDUNDANT_ROWS, rows, &rc_u, &tau_u)?;
+    // λ_t = −μ λ_n ŝ: its change with ŝ.
+    for k in 0..NK / ND {
+        if let Some((scale, ds_q, ds_qd)) = turning(k) {
+            for a in 0..2 {
+                for c in 0..NQ {
+                    contact_q[(ND * k + a, c)] += scale * ds_q[(a, c)];
+                    contact_qd[(ND * k + a, c)] += scale * ds_qd[(a, c)];
+                }
+            }
+        }
+    }
     Ok(ContactDynamicsDerivatives {
         solution: ContactSolution {
             x,
