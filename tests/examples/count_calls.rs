@@ -7,7 +7,9 @@
 //! `batch_fused`, `batch_forward_dynamics` (four states per call, `F64x4` lanes),
 //! `set_parameter` (one parameter set, everything prepared again), `derivatives` (forward
 //! dynamics and its derivatives), `finite_differences` (the same by forward differences of
-//! forward dynamics) and, with the `peers` feature, `casadi_fused`, `casadi_forward_dynamics`,
+//! forward dynamics), on a leg with contacts `contact_stance` (forward dynamics with every
+//! contact sticking where it is) and `contact_slide` (every contact sliding: in 3-D its
+//! friction along its slip velocity) and, with the `peers` feature, `casadi_fused`, `casadi_forward_dynamics`,
 //! `casadi_closed_fused`, `casadi_closed_forward_dynamics`, `casadi_closed_derivatives`.
 //!
 //! Every contender runs in the same loop (`measure`) and does only its own work per call:
@@ -20,10 +22,13 @@
 
 use std::hint::black_box;
 
+use leg_models::dynamics::contact::{
+    forward_dynamics_with_contacts, spec_friction, ContactMode, Ground, Modes,
+};
 use leg_models::dynamics::derivatives::forward_dynamics_derivatives;
 use leg_models::dynamics::forward_dynamics;
 use leg_models::nalgebra::SVector;
-use leg_models::{LegDynamics, Parameters};
+use leg_models::{ContactModel, LegDynamics, Parameters};
 
 /// The measured loop, the same for every contender: `call` once per iteration, its result
 /// kept so that nothing is dropped as unused.
@@ -219,6 +224,57 @@ fn run<L: LegDynamics<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: u
     })
 }
 
+/// The contact paths of leg `L` (`ND` rows per contact): forward dynamics with every
+/// contact held where it is, or sliding; `None` for another path, or where the state
+/// does not allow the path (a slide with no slip velocity).
+fn run_contact<
+    L: ContactModel<NQ, NC, NU, NK, ND>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+    const ND: usize,
+>(
+    what: &str,
+    n: usize,
+) -> Option<f64> {
+    if NK == 0 {
+        return None;
+    }
+    let p = L::Params::<f64>::default();
+    let u = SVector::<f64, NU>::from_element(0.1);
+    let q = SVector::<f64, NQ>::from_fn(|i, _| L::HOME[i] + 1e-3);
+    let qd = SVector::<f64, NQ>::from_fn(|i, _| 0.2 * i as f64 - 0.3);
+    let ground = Ground::<f64, ND>::of::<L, NQ, NC, NU, NK>();
+    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, ND>();
+    let anchors = ground.coordinates(&L::contact_positions(&q, &p));
+    let mode = match what {
+        "contact_stance" => ContactMode::Stick,
+        "contact_slide" => ContactMode::Slide { forward: true },
+        _ => return None,
+    };
+    let mut modes = Modes::<NK, ND>::flight();
+    for k in 0..NK / ND {
+        modes.set(k, mode);
+    }
+    let call = || {
+        forward_dynamics_with_contacts::<L, f64, NQ, NC, NU, NK, ND>(
+            black_box(&p),
+            black_box(&q),
+            black_box(&qd),
+            black_box(&u),
+            black_box(&modes),
+            black_box(&anchors),
+            &ground,
+            &mu,
+            None,
+        )
+    };
+    // Measured only where the path solves: its error path is not what a budget guards.
+    call().ok()?;
+    Some(measure(n, || call().map_or(0.0, |s| s.x[0])))
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let (Some(model), Some(what), Some(n)) = (
@@ -233,7 +289,8 @@ fn main() {
     macro_rules! dispatch {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
             if model == stringify!($module) {
-                found = run::<$ty, $nq, $nc, $nu>(what, n);
+                found = run::<$ty, $nq, $nc, $nu>(what, n)
+                    .or_else(|| run_contact::<$ty, $nq, $nc, $nu, $nk, 2>(what, n));
             }
         };
     }
@@ -242,7 +299,8 @@ fn main() {
     macro_rules! dispatch_spatial {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
             if model == stringify!($module) {
-                found = run::<$ty, $nq, $nc, $nu>(what, n);
+                found = run::<$ty, $nq, $nc, $nu>(what, n)
+                    .or_else(|| run_contact::<$ty, $nq, $nc, $nu, $nk, 3>(what, n));
             }
         };
     }

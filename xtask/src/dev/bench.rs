@@ -17,6 +17,9 @@ pub const BUDGETS: &str = "tests/instruction-budgets.json";
 /// (they are repeatable, but differ slightly between compiler versions).
 pub const TOLERANCE: f64 = 0.02;
 const PATHS: [&str; 3] = ["fused", "forward_dynamics", "derivatives"];
+/// The paths of a leg with contacts: forward dynamics with every contact held, and with
+/// every contact sliding.
+const CONTACT_PATHS: [&str; 2] = ["contact_stance", "contact_slide"];
 /// The paths CasADi's C has in both forms (its derivatives are compared apart).
 const COMPARED: [&str; 2] = ["fused", "forward_dynamics"];
 const CALLS: u64 = 10_000;
@@ -43,6 +46,15 @@ fn collected(bin: &Path, model: &str, path: &str, calls: u64) -> Result<u64, Str
         .find_map(|l| l.split("Collected : ").nth(1))
         .and_then(|n| n.trim().parse().ok())
         .ok_or_else(|| format!("no instruction count in callgrind's output:\n{text}"))
+}
+
+/// Whether `model` has `path` (count_calls runs it with no calls, or says it has none).
+fn applies(bin: &Path, model: &str, path: &str) -> Result<bool, String> {
+    let out = Command::new(bin)
+        .args([model, path, "0"])
+        .output()
+        .map_err(|e| format!("{}: {e}", bin.display()))?;
+    Ok(out.status.success())
 }
 
 /// Instructions of `CALLS` calls of `path` of `model`, less those of none (so start-up
@@ -88,16 +100,27 @@ pub fn instruction_counts(root: &Path) -> Result<BTreeMap<String, BTreeMap<Strin
     let mut out = BTreeMap::new();
     let mut models = crate::gen::planar_model_names(root)?;
     models.extend(crate::gen::spatial_model_names(root)?);
-    let mut progress = Progress::new(
-        (models.len() * PATHS.len()) as u64,
-        "counting instructions (callgrind)",
-    );
+    // A leg with contacts adds its contact paths (count_calls refuses them elsewhere).
+    let mut paths: Vec<(String, Vec<&str>)> = Vec::new();
     for model in models {
+        let mut own = PATHS.to_vec();
+        for path in CONTACT_PATHS {
+            if applies(&bin, &model, path)? {
+                own.push(path);
+            }
+        }
+        paths.push((model, own));
+    }
+    let total = paths.iter().map(|(_, p)| p.len()).sum::<usize>();
+    let mut progress = Progress::new(total as u64, "counting instructions (callgrind)");
+    let mut done = 0;
+    for (model, own) in paths {
         let harness = Harness::of(&bin, &model)?;
         let mut per = BTreeMap::new();
-        for path in PATHS {
+        for path in own {
             per.insert(path.to_string(), harness.net(&bin, &model, path)?);
-            progress.set((out.len() * PATHS.len() + per.len()) as u64);
+            done += 1;
+            progress.set(done as u64);
         }
         out.insert(model, per);
     }
