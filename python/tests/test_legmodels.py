@@ -281,6 +281,44 @@ def test_hybrid_drop_lands_when_free_fall_says():
     assert abs(touchdown["t"] - np.sqrt(2 * height / g)) < 1e-9
 
 
+def test_spatial_hybrid_throw_lands_slides_and_stops_where_coulomb_says():
+    """A spatial leg on the ground from Python: `sliding_mass`'s block (μ 0.5 in its spec)
+    thrown level at 2 m/s from 5 cm lands at √(2h/g); the plastic impact stops the fall and
+    its friction impulse μ m v_n takes μ v_n off the slide; friction μ m g then stops it
+    after v⁺/(μ g), where it sticks. Meanwhile the ground force is m g with |λ_t| = μ λ_n.
+    Every figure is written out here from free fall and Coulomb's law."""
+    leg = legmodels.SlidingMass()
+    assert leg.contact_names == ["bottom"]
+    mu, g, h, v = 0.5, -leg.get("gravity_z"), 0.05, 2.0
+    m = leg.mass_matrix(np.zeros(3))[0, 0]
+    rec = leg.simulate_hybrid(np.array([0.0, 0.0, h]), np.array([v, 0.0, 0.0]), 600, 1e-3)
+    kinds = [e["kind"] for e in rec["events"]]
+    assert kinds[:1] == ["touchdown"] and "stick" in kinds, kinds
+    touchdown = rec["events"][0]
+    t_land = np.sqrt(2 * h / g)
+    assert abs(touchdown["t"] - t_land) < 1e-9
+    v_n = g * t_land
+    np.testing.assert_allclose(touchdown["impulse"], [mu * m * v_n, m * v_n], rtol=1e-9)
+    v_slide = v - mu * v_n
+    stick = next(e for e in rec["events"] if e["kind"] == "stick")
+    assert abs(stick["t"] - (t_land + v_slide / (mu * g))) < 1e-9
+    # Where it stops: the flight's v t_land, then the slide's v⁺² / (2 μ g).
+    x_stop = v * t_land + v_slide**2 / (2 * mu * g)
+    assert abs(rec["q"][-1][0] - x_stop) < 1e-9 and abs(rec["q"][-1][2]) < 1e-12
+    sliding = (rec["t"] > t_land + 1e-3) & (rec["t"] < stick["t"] - 1e-3)
+    f = rec["contact_forces"][sliding]
+    np.testing.assert_allclose(f[:, 2], m * g, rtol=1e-9)
+    np.testing.assert_allclose(np.hypot(f[:, 0], f[:, 1]), mu * m * g, rtol=1e-9)
+    # Held at rest on the ground: no acceleration, the weight on the contact.
+    qdd, closure, contact = leg.forward_dynamics_with_contacts(
+        np.zeros(3), np.zeros(3), np.zeros(2), [True], np.zeros(3))
+    np.testing.assert_allclose(qdd, 0.0, atol=1e-12)
+    np.testing.assert_allclose(contact, [0.0, 0.0, m * g], atol=1e-12)
+    assert leg.contact_jacobian(np.zeros(3)).shape == (3, 3)
+    with pytest.raises(ValueError, match="this leg has 1 contacts"):
+        leg.forward_dynamics_with_contacts(np.zeros(3), np.zeros(3), np.zeros(2), [True, False], np.zeros(3))
+
+
 def test_example_script_runs(tmp_path):
     out = tmp_path / "minitaur.png"
     subprocess.run([sys.executable, str(ROOT / "python" / "examples" / "simulate_leg.py"), "--out", str(out)], check=True)
