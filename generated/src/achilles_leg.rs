@@ -31,10 +31,11 @@ pub const NP: usize = 4;
 /// This leg with its parameters in `f64`, the runtime's entry point:
 /// `Leg::default()` holds the spec's values. A spatial leg has the methods of
 /// every leg (terms, assembly, dynamics, derivatives, simulation, joint-space
-/// control, linearization and LQR); its foot is this module's `foot_position`.
-pub type Leg = leg_models::Leg<AchillesLeg, f64, NQ, NC, NU>;
+/// control, linearization and LQR) and its contacts' (three rows each); its
+/// foot is this module's `foot_position`.
+pub type Leg = leg_models::Leg<AchillesLeg, f64, NQ, NC, NU, NK>;
 /// This leg computing in `f32` (e.g. on a microcontroller).
-pub type LegF32 = leg_models::Leg<AchillesLeg, f32, NQ, NC, NU>;
+pub type LegF32 = leg_models::Leg<AchillesLeg, f32, NQ, NC, NU, NK>;
 /// The chart of the constraint manifold: 5 coordinates (the mobility), 10 states.
 impl leg_models::ChartSize<5, 10> for AchillesLeg {}
 /// The physical quantities of the spec; `Default` holds its values.

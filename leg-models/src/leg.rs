@@ -743,7 +743,143 @@ where
     }
 }
 
-/// What needs the leg's contacts or its planar foot: a [`ContactModel`] (every planar leg,
+/// The leg's contacts on its ground, planar or spatial. Each method takes the contacts'
+/// dimension `ND` (two rows per contact in the plane, three in space) from the leg's
+/// [`ContactModel`], so `leg.hybrid_simulator(dt)` needs no annotation on a generated leg.
+impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
+    Leg<L, T, NQ, NC, NU, NK>
+where
+    L: LegDynamics<NQ, NC, NU>,
+    T: Real,
+{
+    /// The contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)` (with `z` in 3-D).
+    pub fn contact_positions<const ND: usize>(&self, q: &SVector<T, NQ>) -> SVector<T, NK>
+    where
+        L: ContactModel<NQ, NC, NU, NK, ND>,
+    {
+        <L as ContactModel<NQ, NC, NU, NK, ND>>::contact_positions(q, &self.params)
+    }
+
+    /// The spec's ground.
+    pub fn ground<const ND: usize>(&self) -> Ground<T, ND>
+    where
+        L: ContactModel<NQ, NC, NU, NK, ND>,
+    {
+        Ground::of::<L, NQ, NC, NU, NK>()
+    }
+
+    /// The spec's friction coefficient per contact row.
+    pub fn friction<const ND: usize>(&self) -> SVector<T, NK>
+    where
+        L: ContactModel<NQ, NC, NU, NK, ND>,
+    {
+        contact::spec_friction::<L, T, NQ, NC, NU, NK, ND>()
+    }
+
+    /// The forward dynamics with the contacts in `modes` held (sticking at `anchors`) or
+    /// sliding, on the spec's ground with its friction
+    /// ([`contact::forward_dynamics_with_contacts`]). A spatial contact sliding from rest
+    /// needs its direction: [`contact::ContactSystem::with_slip`].
+    pub fn forward_dynamics_with_contacts<const ND: usize>(
+        &self,
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        u: &SVector<T, NU>,
+        modes: &Modes<NK, ND>,
+        anchors: &SVector<T, NK>,
+    ) -> Result<ContactSolution<T, NQ, NC, NK>, DynamicsError>
+    where
+        L: ContactModel<NQ, NC, NU, NK, ND>,
+    {
+        contact::forward_dynamics_with_contacts::<L, T, NQ, NC, NU, NK, ND>(
+            &self.params,
+            q,
+            qd,
+            u,
+            modes,
+            anchors,
+            &self.ground(),
+            &self.friction(),
+            self.baumgarte,
+        )
+    }
+
+    /// [`Leg::forward_dynamics_with_contacts`] and its derivatives
+    /// ([`derivatives::contact_dynamics_derivatives`]; a spatial slide's friction turns
+    /// with its slip velocity).
+    pub fn contact_dynamics_derivatives<const ND: usize>(
+        &self,
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        u: &SVector<T, NU>,
+        modes: &Modes<NK, ND>,
+        anchors: &SVector<T, NK>,
+    ) -> Result<ContactDynamicsDerivatives<T, NQ, NC, NU, NK>, DynamicsError>
+    where
+        L: ContactModel<NQ, NC, NU, NK, ND>,
+    {
+        derivatives::contact_dynamics_derivatives::<L, T, NQ, NC, NU, NK, ND>(
+            &self.params,
+            q,
+            qd,
+            u,
+            modes,
+            anchors,
+            &self.ground(),
+            &self.friction(),
+            self.baumgarte,
+            None,
+        )
+    }
+
+    /// The plastic impact of the contacts `modes` marks as landing
+    /// ([`contact::impact_map`]); `modes` gets the contacts' modes after it.
+    pub fn impact_map<const ND: usize>(
+        &self,
+        q: &SVector<T, NQ>,
+        qd: &SVector<T, NQ>,
+        modes: &mut Modes<NK, ND>,
+    ) -> Result<Impact<T, NQ, NC, NK>, ImpactError>
+    where
+        L: ContactModel<NQ, NC, NU, NK, ND>,
+    {
+        contact::impact_map::<L, T, NQ, NC, NU, NK, ND>(
+            &self.params,
+            q,
+            qd,
+            modes,
+            &self.ground(),
+            &self.friction(),
+        )
+    }
+
+    /// A simulator of this leg on the ground (contacts, impacts, events), RK4 steps of
+    /// `dt` on the spec's ground; its `options` hold the rest.
+    pub fn hybrid_simulator<const ND: usize>(
+        &self,
+        dt: T,
+    ) -> HybridSimulator<L, T, NQ, NC, NU, NK, ND>
+    where
+        L: ContactModel<NQ, NC, NU, NK, ND>,
+    {
+        let mut sim = HybridSimulator::new(self.params, dt);
+        sim.options.baumgarte = self.baumgarte;
+        sim.options.tolerance = self.tolerance;
+        sim
+    }
+
+    /// `torques` as a torque source of this leg on the ground ([`Leg::torque_source`]
+    /// for a [`HybridSimulator`]).
+    pub fn hybrid_torque_source<F, const ND: usize>(&self, torques: F) -> F
+    where
+        L: ContactModel<NQ, NC, NU, NK, ND>,
+        F: FnMut(T, &HybridState<T, NQ, NK, ND>) -> SVector<T, NU>,
+    {
+        torques
+    }
+}
+
+/// What needs the leg's planar foot: a [`ContactModel`] (every planar leg,
 /// with or without contacts; a spatial leg has the methods above).
 impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
     Leg<L, T, NQ, NC, NU, NK>
@@ -759,11 +895,6 @@ where
     /// `J_f(q) = ∂(foot)/∂q`.
     pub fn foot_jacobian(&self, q: &SVector<T, NQ>) -> SMatrix<T, 2, NQ> {
         L::foot_jacobian(q, &self.params)
-    }
-
-    /// The contact points in the base frame, stacked `(x₀, y₀, x₁, y₁, …)`.
-    pub fn contact_positions(&self, q: &SVector<T, NQ>) -> SVector<T, NK> {
-        L::contact_positions(q, &self.params)
     }
 
     /// The closed pose putting the foot at `foot` (base frame), from `guess`.
@@ -783,100 +914,6 @@ where
     /// The foot's apparent mass along x and y at `q`.
     pub fn foot_inertias(&self, q: &SVector<T, NQ>) -> Result<SVector<T, 2>, ControlError> {
         control::foot_inertias::<L, T, NQ, NC, NU, 2, NC>(&self.params, q)
-    }
-
-    /// The spec's ground.
-    pub fn ground(&self) -> Ground<T> {
-        Ground::of::<L, NQ, NC, NU, NK>()
-    }
-
-    /// The spec's friction coefficient per contact row.
-    pub fn friction(&self) -> SVector<T, NK> {
-        contact::spec_friction::<L, T, NQ, NC, NU, NK, 2>()
-    }
-
-    /// The forward dynamics with the contacts in `modes` held (sticking at `anchors`) or
-    /// sliding, on the spec's ground with its friction
-    /// ([`contact::forward_dynamics_with_contacts`]).
-    pub fn forward_dynamics_with_contacts(
-        &self,
-        q: &SVector<T, NQ>,
-        qd: &SVector<T, NQ>,
-        u: &SVector<T, NU>,
-        modes: &Modes<NK>,
-        anchors: &SVector<T, NK>,
-    ) -> Result<ContactSolution<T, NQ, NC, NK>, DynamicsError> {
-        contact::forward_dynamics_with_contacts::<L, T, NQ, NC, NU, NK, 2>(
-            &self.params,
-            q,
-            qd,
-            u,
-            modes,
-            anchors,
-            &self.ground(),
-            &self.friction(),
-            self.baumgarte,
-        )
-    }
-
-    /// [`Leg::forward_dynamics_with_contacts`] and its derivatives
-    /// ([`derivatives::contact_dynamics_derivatives`]).
-    pub fn contact_dynamics_derivatives(
-        &self,
-        q: &SVector<T, NQ>,
-        qd: &SVector<T, NQ>,
-        u: &SVector<T, NU>,
-        modes: &Modes<NK>,
-        anchors: &SVector<T, NK>,
-    ) -> Result<ContactDynamicsDerivatives<T, NQ, NC, NU, NK>, DynamicsError> {
-        derivatives::contact_dynamics_derivatives::<L, T, NQ, NC, NU, NK, 2>(
-            &self.params,
-            q,
-            qd,
-            u,
-            modes,
-            anchors,
-            &self.ground(),
-            &self.friction(),
-            self.baumgarte,
-            None,
-        )
-    }
-
-    /// The plastic impact of the contacts `modes` marks as landing
-    /// ([`contact::impact_map`]); `modes` gets the contacts' modes after it.
-    pub fn impact_map(
-        &self,
-        q: &SVector<T, NQ>,
-        qd: &SVector<T, NQ>,
-        modes: &mut Modes<NK>,
-    ) -> Result<Impact<T, NQ, NC, NK>, ImpactError> {
-        contact::impact_map::<L, T, NQ, NC, NU, NK, 2>(
-            &self.params,
-            q,
-            qd,
-            modes,
-            &self.ground(),
-            &self.friction(),
-        )
-    }
-
-    /// A simulator of this leg on the ground (contacts, impacts, events), RK4 steps of
-    /// `dt` on the spec's ground; its `options` hold the rest.
-    pub fn hybrid_simulator(&self, dt: T) -> HybridSimulator<L, T, NQ, NC, NU, NK> {
-        let mut sim = HybridSimulator::new(self.params, dt);
-        sim.options.baumgarte = self.baumgarte;
-        sim.options.tolerance = self.tolerance;
-        sim
-    }
-
-    /// `torques` as a torque source of this leg on the ground ([`Leg::torque_source`]
-    /// for a [`HybridSimulator`]).
-    pub fn hybrid_torque_source<F>(&self, torques: F) -> F
-    where
-        F: FnMut(T, &HybridState<T, NQ, NK>) -> SVector<T, NU>,
-    {
-        torques
     }
 
     /// Feedback linearization tracking `reference` with the foot (two motors that

@@ -1384,11 +1384,11 @@ macro_rules! leg_class {
 /// planar.
 macro_rules! spatial_leg_class {
     ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $np:expr, $nk:expr) => {
-        leg_module!($module, $ty, $nq, $nc, $nu, 0, 3, $np, {
+        leg_module!($module, $ty, $nq, $nc, $nu, $nk, 3, $np, {
             /// The contact points' names (three rows each).
             #[classattr]
             fn contact_names() -> Vec<&'static str> {
-                <Model as ContactModel<NQ, NC, NU, $nk, 3>>::CONTACT_NAMES.to_vec()
+                <Model as ContactModel<NQ, NC, NU, NK, 3>>::CONTACT_NAMES.to_vec()
             }
             /// The contact points stacked (x₀, y₀, z₀, x₁, …).
             fn contact_positions<'py>(
@@ -1398,7 +1398,7 @@ macro_rules! spatial_leg_class {
             ) -> PyResult<Bound<'py, PyArray1<f64>>> {
                 Ok(out_vector(
                     py,
-                    &<Model as ContactModel<NQ, NC, NU, $nk, 3>>::contact_positions(
+                    &<Model as ContactModel<NQ, NC, NU, NK, 3>>::contact_positions(
                         &pose("q", q)?,
                         self.leg.params(),
                     ),
@@ -1412,7 +1412,7 @@ macro_rules! spatial_leg_class {
             ) -> PyResult<Bound<'py, PyArray2<f64>>> {
                 Ok(out_matrix(
                     py,
-                    &<Model as ContactModel<NQ, NC, NU, $nk, 3>>::contact_jacobian(
+                    &<Model as ContactModel<NQ, NC, NU, NK, 3>>::contact_jacobian(
                         &pose("q", q)?,
                         self.leg.params(),
                     ),
@@ -1427,7 +1427,7 @@ macro_rules! spatial_leg_class {
             ) -> PyResult<Bound<'py, PyArray1<f64>>> {
                 Ok(out_vector(
                     py,
-                    &<Model as ContactModel<NQ, NC, NU, $nk, 3>>::contact_bias(
+                    &<Model as ContactModel<NQ, NC, NU, NK, 3>>::contact_bias(
                         &pose("q", q)?,
                         &vector("qd", qd)?,
                         self.leg.params(),
@@ -1451,7 +1451,7 @@ macro_rules! spatial_leg_class {
                 Bound<'py, PyArray1<f64>>,
                 Bound<'py, PyArray1<f64>>,
             )> {
-                held_contact_dynamics::<Model, NQ, NC, NU, $nk, 3>(
+                held_contact_dynamics::<Model, NQ, NC, NU, NK, 3>(
                     py,
                     self.leg.params(),
                     self.leg.baumgarte(),

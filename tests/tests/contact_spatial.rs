@@ -56,6 +56,50 @@ fn the_spec_gives_the_block_its_mass_friction_and_level_ground() {
     );
 }
 
+/// The runtime's `Leg` of a spatial leg reaches its contacts with no annotation (the
+/// contacts' dimension comes from the leg): its ground, friction, the block held at rest
+/// carrying its weight m g, an impact that slides keeping `1 − μ v_n/|v_t|` of its
+/// tangential speed, and its hybrid simulator, the same as one built by hand.
+#[test]
+fn the_leg_of_a_spatial_leg_reaches_its_contacts() {
+    let leg = sliding_mass::Leg::default();
+    assert_eq!(leg.ground().normal, Vector3::new(0.0, 0.0, 1.0));
+    assert_eq!(leg.friction(), SVector::<f64, 3>::from_element(MU));
+    let mut held = Modes::<3, 3>::flight();
+    held.set(0, ContactMode::Stick);
+    let rest = leg
+        .forward_dynamics_with_contacts(
+            &SVector::zeros(),
+            &SVector::zeros(),
+            &SVector::zeros(),
+            &held,
+            &SVector::zeros(),
+        )
+        .unwrap();
+    assert!(rest.x.amax() < 1e-12);
+    assert!((rest.contact - Vector3::new(0.0, 0.0, MASS * G)).amax() < 1e-12);
+    let mut landing = held;
+    let (vt, vn) = (1.0, 0.3);
+    let impact = leg
+        .impact_map(&SVector::zeros(), &Vector3::new(vt, 0.0, -vn), &mut landing)
+        .unwrap();
+    assert!(matches!(landing.get(0), ContactMode::Slide { .. }));
+    assert!((impact.qd_plus - Vector3::new(vt - MU * vn, 0.0, 0.0)).amax() < 1e-12);
+    let d = leg
+        .contact_dynamics_derivatives(
+            &SVector::zeros(),
+            &SVector::zeros(),
+            &SVector::zeros(),
+            &held,
+            &SVector::zeros(),
+        )
+        .unwrap();
+    assert_eq!(d.solution, rest);
+    let built = leg.hybrid_simulator(1e-3);
+    assert_eq!(built.options.friction, sim(1e-3).options.friction);
+    assert_eq!(built.options.ground, sim(1e-3).options.ground);
+}
+
 /// The ground tilted by `theta` about x: normal `(0, sin θ, cos θ)`, downhill along
 /// the frame's second tangent `(0, cos θ, −sin θ)`.
 fn incline(theta: f64) -> Sim {

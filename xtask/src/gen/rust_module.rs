@@ -555,11 +555,12 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             /// This leg with its parameters in `f64`, the runtime's entry point:
             /// `Leg::default()` holds the spec's values. A spatial leg has the methods of
             /// every leg (terms, assembly, dynamics, derivatives, simulation, joint-space
-            /// control, linearization and LQR); its foot is this module's `foot_position`.
-            pub type Leg = leg_models::Leg<#ty, f64, NQ, NC, NU>;
+            /// control, linearization and LQR) and its contacts' (three rows each); its
+            /// foot is this module's `foot_position`.
+            pub type Leg = leg_models::Leg<#ty, f64, NQ, NC, NU, NK>;
 
             /// This leg computing in `f32` (e.g. on a microcontroller).
-            pub type LegF32 = leg_models::Leg<#ty, f32, NQ, NC, NU>;
+            pub type LegF32 = leg_models::Leg<#ty, f32, NQ, NC, NU, NK>;
         }
     } else {
         quote! {
