@@ -120,6 +120,8 @@ def hop_closed_loop(legs, name, m, d, joints, qadr, vadr, ir):
 
 
 def main():
+    if len(sys.argv) != 4:
+        sys.exit(f"usage: {sys.argv[0]} LEGS_BINARY MODEL MJCF_FILE  (e.g. target/debug/legs my_leg my_leg.xml, the file from `cargo xtask export my_leg --format mjcf`)")
     legs, name, mjcf = sys.argv[1:4]
     m = mujoco.MjModel.from_xml_path(mjcf)
     d = mujoco.MjData(m)

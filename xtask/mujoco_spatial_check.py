@@ -213,6 +213,8 @@ def load(mjcf):
 
 
 def main():
+    if len(sys.argv) != 4:
+        sys.exit(f"usage: {sys.argv[0]} LEGS_BINARY MODEL MJCF_FILE  (e.g. target/debug/legs my_leg my_leg.xml, the file from `cargo xtask export my_leg --format mjcf`)")
     legs, name, mjcf = sys.argv[1:4]
     m, held = load(mjcf)
     m.opt.jacobian = mujoco.mjtJacobian.mjJAC_DENSE

@@ -118,6 +118,8 @@ def pinocchio_leg(urdf, ir):
 
 
 def main():
+    if len(sys.argv) != 4:
+        sys.exit(f"usage: {sys.argv[0]} LEGS_BINARY MODEL URDF_FILE  (e.g. target/debug/legs my_leg my_leg.urdf, the file from `cargo xtask export my_leg --format urdf`)")
     legs, name, urdf = sys.argv[1:4]
     ir = json.loads((pathlib.Path(__file__).parent.parent / "generated" / "ir" / f"{name}.json").read_text())
     leg = pinocchio_leg(urdf, ir)

@@ -26,7 +26,8 @@
 use std::fmt::Write;
 
 use super::common::{
-    added, closures_and_couplings, joint_spring, num, urdf_frames, urdf_transmissions, value,
+    added, closures_and_couplings, joint_spring, mjcf_contact, mjcf_contact_option, mjcf_floor,
+    num, urdf_frames, urdf_transmissions, value,
 };
 use crate::gen::model::{self, Model, Param, Point};
 
@@ -78,32 +79,15 @@ pub fn mjcf(m: &Model) -> String {
     );
     // Contact only where the spec has contact points: a small sphere at each (the only
     // geoms that collide) against the floor, the spec's ground.
-    let contact = if m.contacts.is_empty() {
-        "\n    <flag contact=\"disable\"/>\n  "
-    } else {
-        ""
-    };
+    let (attributes, flag) = mjcf_contact_option(m);
     let _ = writeln!(
         out,
-        "  <option gravity=\"{} {} 0\" timestep=\"0.001\" integrator=\"RK4\">{contact}</option>",
+        "  <option gravity=\"{} {} 0\" timestep=\"0.001\" integrator=\"RK4\"{attributes}>{flag}</option>",
         num(g.0),
-        num(g.1)
+        num(g.1),
     );
     let _ = writeln!(out, "  <worldbody>");
-    if !m.contacts.is_empty() {
-        // The plane n·x = d, lowered by the spheres' radius so that a sphere touches it
-        // when its centre (the contact point) reaches the ground.
-        let (nx, ny) = (m.ground_normal[0], m.ground_normal[1]);
-        let d = m.ground_offset - CONTACT_RADIUS;
-        let _ = writeln!(
-            out,
-            "    <geom name=\"floor\" type=\"plane\" size=\"0 0 1\" pos=\"{} {} 0\" zaxis=\"{} {} 0\" contype=\"0\" conaffinity=\"1\"/>",
-            num(nx * d),
-            num(ny * d),
-            num(nx),
-            num(ny)
-        );
-    }
+    mjcf_floor(m, &mut out);
     sites(m, None, "    ", &mut out);
     for i in children(m, None) {
         mjcf_body(m, i, 2, &mut out);
@@ -168,28 +152,10 @@ fn sites(m: &Model, link: Option<usize>, pad: &str, out: &mut String) {
     }
     for c in &m.contacts {
         if c.point.link == link {
-            let _ = writeln!(
-                out,
-                "{pad}<site name=\"{}\" pos=\"{}\"/>",
-                added::contact_point(&c.name),
-                at(m, &c.point)
-            );
-            // MuJoCo's contact is soft: a sphere that collides with the floor only, with
-            // the spec's sliding friction (MuJoCo's default torsional and rolling).
-            let _ = writeln!(
-                out,
-                "{pad}<geom name=\"{}\" type=\"sphere\" size=\"{}\" pos=\"{}\" contype=\"1\" conaffinity=\"0\" condim=\"3\" friction=\"{} 0.005 0.0001\" mass=\"0\"/>",
-                added::contact_geom(&c.name),
-                num(CONTACT_RADIUS),
-                at(m, &c.point),
-                num(c.friction)
-            );
+            mjcf_contact(&c.name, &at(m, &c.point), c.friction, pad, out);
         }
     }
 }
-
-/// The radius of the MJCF spheres at the contact points [m].
-const CONTACT_RADIUS: f64 = 0.002;
 
 fn mjcf_body(m: &Model, i: usize, depth: usize, out: &mut String) {
     let l = &m.links[i];

@@ -13,14 +13,19 @@
 //! second anchor from `qpos0` never applies; a rod (a distance closure) is a spatial tendon
 //! between its two sites held by a tendon equality, whose offset follows MuJoCo's `qpos0`
 //! rule: the rod's length less the sites' distance at `q = 0`. The foot is the site
-//! `foot.point`. Contact stays disabled (the export checks the swing leg). The time step
+//! `foot.point`. A leg with contact points gets MuJoCo's contact as a planar leg does: a
+//! 2 mm sphere at each (`<contact>.geom`, the only geoms that collide, with the spec's
+//! friction) against a floor plane at the spec's ground, with MuJoCo's elliptic cone (ours
+//! is the exact cone; MuJoCo's default is a pyramid); without, contact stays disabled.
+//! The time step
 //! is 0.5 ms, Cassie's own: at 1 ms MuJoCo's RK4 diverged within 7 ms on Cassie's leg (its 1500 N m/rad shin
 //! spring beside an achilles rod of 4e-6 kg m² about its axis).
 
 use std::fmt::Write;
 
 use super::common::{
-    added, closures_and_couplings, joint_spring, num, urdf_frames, urdf_transmissions, value,
+    added, closures_and_couplings, joint_spring, mjcf_contact, mjcf_contact_option, mjcf_floor,
+    num, urdf_frames, urdf_transmissions, value,
 };
 use crate::gen::model::{Inertia, Model, Point};
 
@@ -180,6 +185,11 @@ fn sites(m: &Model, body: Option<usize>, pad: &str, out: &mut String) {
     if m.foot.link == body {
         site(out, added::FOOT, &m.foot);
     }
+    for c in &m.contacts {
+        if c.point.link == body {
+            mjcf_contact(&c.name, &triple(m, &c.point.point), c.friction, pad, out);
+        }
+    }
 }
 
 fn body(m: &Model, i: usize, depth: usize, out: &mut String) {
@@ -283,12 +293,14 @@ pub fn mjcf(m: &Model) -> String {
         out,
         "  <compiler angle=\"radian\" autolimits=\"true\"{bounds}/>"
     );
+    let (attributes, flag) = mjcf_contact_option(m);
     let _ = writeln!(
         out,
-        "  <option gravity=\"{}\" timestep=\"0.0005\" integrator=\"RK4\">\n    <flag contact=\"disable\"/>\n  </option>",
-        triple(m, &m.gravity)
+        "  <option gravity=\"{}\" timestep=\"0.0005\" integrator=\"RK4\"{attributes}>{flag}</option>",
+        triple(m, &m.gravity),
     );
     let _ = writeln!(out, "  <worldbody>");
+    mjcf_floor(m, &mut out);
     sites(m, None, "    ", &mut out);
     for i in bodies_under(m, None) {
         body(m, i, 2, &mut out);
