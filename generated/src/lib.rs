@@ -8,6 +8,8 @@ pub mod abducted_five_bar;
 pub use abducted_five_bar::AbductedFiveBar;
 pub mod achilles_leg;
 pub use achilles_leg::AchillesLeg;
+pub mod ankle_rod_leg;
+pub use ankle_rod_leg::AnkleRodLeg;
 pub mod atrias;
 pub use atrias::Atrias;
 pub mod atrias_hopper;
@@ -84,7 +86,8 @@ macro_rules! for_each_spatial_model {
     ($callback:ident) => {
         $callback ! (abducted_five_bar, $crate::abducted_five_bar::AbductedFiveBar, 5, 3,
         3, 2, 3); $callback ! (achilles_leg, $crate::achilles_leg::AchillesLeg, 10, 6, 4,
-        4, 0); $callback ! (cassie_leg, $crate::cassie_leg::CassieLeg, 13, 6, 5, 4, 0);
+        4, 0); $callback ! (ankle_rod_leg, $crate::ankle_rod_leg::AnkleRodLeg, 6, 4, 3,
+        4, 6); $callback ! (cassie_leg, $crate::cassie_leg::CassieLeg, 13, 6, 5, 4, 0);
         $callback ! (revolute_knee_leg, $crate::revolute_knee_leg::RevoluteKneeLeg, 7, 5,
         3, 2, 0); $callback ! (rod_knee_leg, $crate::rod_knee_leg::RodKneeLeg, 4, 1, 3,
         2, 0); $callback ! (rssr_linkage, $crate::rssr_linkage::RssrLinkage, 5, 3, 1, 2,

@@ -892,7 +892,8 @@ impl From<DynamicsError> for ImpactError {
 /// over the rows `modes` hold. A sticking contact whose impulse leaves the friction cone
 /// (`|Λ_t| > μ Λ_n`, the Euclidean norm of the tangential impulse) is resolved again as
 /// sliding, its friction impulse `μ Λ_n` against the slip after the impact, and its mode
-/// in `modes` becomes `Slide`. On a spatial leg that slip direction is the one the slip
+/// in `modes` becomes `Slide`; the check runs again after each such change, which moves
+/// the other contacts' impulses (one round per contact at most). On a spatial leg that slip direction is the one the slip
 /// after the impact takes (a fixed point from the sticking impulse's, then a scan of the
 /// circle refined by bisection, contact by contact; where none is consistent, as
 /// Coulomb's law on impulses allows, the last one tried is kept); a planar leg's is one
@@ -967,73 +968,85 @@ where
         }
     }
     let mut sol = solve(modes, &slip)?;
-    // A sticking impulse outside the cone slides instead (at most once per contact).
-    let mut changed = false;
-    for k in 0..NK / ND {
-        if modes.get(k) == ContactMode::Stick {
-            let n = ND * k + ND - 1;
-            if tangential_norm::<T, NK, ND>(&sol.contact, k) > mu[ND * k] * sol.contact[n] {
-                // λ_t = −μ ŝ λ_n: the slip runs against the friction impulse.
-                modes.set(
-                    k,
-                    ContactMode::Slide {
-                        forward: ND > 2 || sol.contact[ND * k] < T::zero(),
-                    },
-                );
-                set_unit(&mut slip, &-sol.contact, tangential(k));
-                changed = true;
-            }
-        }
-    }
-    let sliding = (0..NK / ND).any(|k| matches!(modes.get(k), ContactMode::Slide { .. }));
-    if ND == 2 && changed {
-        sol = solve(modes, &slip)?;
-        // The slip after the impact must run the way its friction opposes; where it does
-        // not (the impulse reversed the slip), the other direction is the consistent one.
-        let after = ground.rows(&mul(&jc, &sol.x));
-        let mut flipped = false;
+    // A sticking impulse outside the cone slides instead. Resolving one contact as sliding
+    // moves the others' impulses (two points of one foot share them), so the check runs
+    // again until no sticking impulse leaves its cone: each round turns at least one
+    // contact from sticking to sliding, so there are at most as many rounds as contacts.
+    let mut first = true;
+    for _ in 0..=NK / ND {
+        let mut changed = false;
         for k in 0..NK / ND {
-            if let ContactMode::Slide { forward } = modes.get(k) {
-                let along = if forward {
-                    after[ND * k]
-                } else {
-                    -after[ND * k]
-                };
-                if along < T::zero() {
-                    modes.set(k, ContactMode::Slide { forward: !forward });
-                    flipped = true;
+            if modes.get(k) == ContactMode::Stick {
+                let n = ND * k + ND - 1;
+                if tangential_norm::<T, NK, ND>(&sol.contact, k) > mu[ND * k] * sol.contact[n] {
+                    // λ_t = −μ ŝ λ_n: the slip runs against the friction impulse.
+                    modes.set(
+                        k,
+                        ContactMode::Slide {
+                            forward: ND > 2 || sol.contact[ND * k] < T::zero(),
+                        },
+                    );
+                    set_unit(&mut slip, &-sol.contact, tangential(k));
+                    changed = true;
                 }
             }
         }
-        if flipped {
+        let sliding = (0..NK / ND).any(|k| matches!(modes.get(k), ContactMode::Slide { .. }));
+        // After the first round, only a change asks for another solve.
+        if !changed && !(first && ND > 2 && sliding) {
+            break;
+        }
+        first = false;
+        if ND == 2 {
+            sol = solve(modes, &slip)?;
+            // The slip after the impact must run the way its friction opposes; where it
+            // does not (the impulse reversed the slip), the other direction is the
+            // consistent one.
+            let after = ground.rows(&mul(&jc, &sol.x));
+            let mut flipped = false;
+            for k in 0..NK / ND {
+                if let ContactMode::Slide { forward } = modes.get(k) {
+                    let along = if forward {
+                        after[ND * k]
+                    } else {
+                        -after[ND * k]
+                    };
+                    if along < T::zero() {
+                        modes.set(k, ContactMode::Slide { forward: !forward });
+                        flipped = true;
+                    }
+                }
+            }
+            if flipped {
+                sol = solve(modes, &slip)?;
+            }
+        } else {
+            // Each sliding contact's direction is the one the slip after the impact takes
+            // (`consistent_slip`), the others' held as they are, until none turns.
+            for _ in 0..8 {
+                let mut turned = false;
+                for k in 0..NK / ND {
+                    if !matches!(modes.get(k), ContactMode::Slide { .. }) {
+                        continue;
+                    }
+                    let (t0, t1) = (ND * k, ND * k + 1);
+                    let (found, _) = consistent_slip([slip[t0], slip[t1]], |d| {
+                        let mut trial = slip;
+                        (trial[t0], trial[t1]) = (d[0], d[1]);
+                        let x = solve(modes, &trial)?.x;
+                        let after = ground.rows(&mul(&jc, &x));
+                        Ok::<_, DynamicsError>([after[t0], after[t1]])
+                    })?;
+                    let turn = (found[0] - slip[t0]).abs().max((found[1] - slip[t1]).abs());
+                    turned |= turn > T::default_epsilon().sqrt();
+                    (slip[t0], slip[t1]) = (found[0], found[1]);
+                }
+                if !turned {
+                    break;
+                }
+            }
             sol = solve(modes, &slip)?;
         }
-    } else if ND > 2 && sliding {
-        // Each sliding contact's direction is the one the slip after the impact takes
-        // (`consistent_slip`), the others' held as they are, until none turns.
-        for _ in 0..8 {
-            let mut turned = false;
-            for k in 0..NK / ND {
-                if !matches!(modes.get(k), ContactMode::Slide { .. }) {
-                    continue;
-                }
-                let (t0, t1) = (ND * k, ND * k + 1);
-                let (found, _) = consistent_slip([slip[t0], slip[t1]], |d| {
-                    let mut trial = slip;
-                    (trial[t0], trial[t1]) = (d[0], d[1]);
-                    let x = solve(modes, &trial)?.x;
-                    let after = ground.rows(&mul(&jc, &x));
-                    Ok::<_, DynamicsError>([after[t0], after[t1]])
-                })?;
-                let turn = (found[0] - slip[t0]).abs().max((found[1] - slip[t1]).abs());
-                turned |= turn > T::default_epsilon().sqrt();
-                (slip[t0], slip[t1]) = (found[0], found[1]);
-            }
-            if !turned {
-                break;
-            }
-        }
-        sol = solve(modes, &slip)?;
     }
     for k in 0..NK / ND {
         let n = ND * k + ND - 1;
