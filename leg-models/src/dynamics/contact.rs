@@ -993,7 +993,7 @@ where
         }
         let sliding = (0..NK / ND).any(|k| matches!(modes.get(k), ContactMode::Slide { .. }));
         // After the first round, only a change asks for another solve.
-        if !changed && !(first && ND > 2 && sliding) {
+        if !(changed || (first && ND > 2 && sliding)) {
             break;
         }
         first = false;
