@@ -24,7 +24,7 @@ fn main() -> ExitCode {
         Command::Gen(a) => run_gen(&root, a),
         Command::Test => dev::test::run(&root).map_err(cli::Error::Failed),
         Command::List => commands::list::run(&root),
-        Command::New(a) => commands::new::run(&root, &a.name),
+        Command::New(a) => commands::new::run(&root, &a.name, a.spatial),
         Command::Import(a) => commands::import::run(&root, a),
         Command::Export(a) => commands::export::run(&root, a),
         Command::Bench(a) => run_bench(&root, a),

@@ -470,6 +470,55 @@ fn export_writes_mjcf_and_urdf_and_refuses_bad_input() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// `new NAME --spatial` writes a spatial template whose home pose `gen` assembles (one
+/// redundant closure row found), as `new NAME` does for the planar one; the file is
+/// removed after.
+#[test]
+fn new_writes_templates_gen_takes() {
+    let root = xtask::gen::workspace_root();
+    let dir = temp_dir("new");
+    std::fs::create_dir_all(&dir).unwrap();
+    for (flag, says) in [
+        (
+            Some("--spatial"),
+            "rank J 2 of 3 closure rows, redundant rows [2]",
+        ),
+        (None, "rank J 2 of 2 closure rows"),
+    ] {
+        let name = format!(
+            "zz_new_{}_{}",
+            flag.map_or("planar", |_| "spatial"),
+            std::process::id()
+        );
+        let mut args = vec!["new", name.as_str()];
+        args.extend(flag);
+        let out = xtask(&args);
+        let spec = root.join("leg-models/specs").join(format!("{name}.toml"));
+        let generated = dir.join(format!("{name}.rs"));
+        let gen = xtask(&[
+            "gen",
+            "--spec",
+            spec.to_str().unwrap(),
+            "--out",
+            generated.to_str().unwrap(),
+        ]);
+        let _ = std::fs::remove_file(&spec);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(
+            gen.status.success(),
+            "{}",
+            String::from_utf8_lossy(&gen.stderr)
+        );
+        let text = String::from_utf8_lossy(&gen.stdout);
+        assert!(text.contains(says), "{text}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn list_new_and_unknown_commands() {
     let out = xtask(&["list"]);

@@ -159,6 +159,10 @@ pub struct ImportArgs {
 pub struct NewArgs {
     /// The new model's name: a plain identifier (lower case, digits, underscores)
     pub name: String,
+    /// A spatial leg (a five-bar on a hip abduction motor, with a toe contact) instead
+    /// of a planar five-bar
+    #[arg(long)]
+    pub spatial: bool,
 }
 
 /// `cargo xtask sim`.
