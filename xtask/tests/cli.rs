@@ -527,6 +527,14 @@ fn list_new_and_unknown_commands() {
         assert!(text.contains(m), "{text}");
     }
     assert!(text.contains("upper_a, upper_b"));
+    // A spatial leg's dimension and its contacts by name.
+    let ankle = text
+        .lines()
+        .find(|l| l.starts_with("ankle_rod_leg "))
+        .expect("listed");
+    let cells: Vec<&str> = ankle.split_whitespace().collect();
+    assert_eq!(cells[1], "3", "{ankle}");
+    assert!(ankle.ends_with("heel, toe"), "{ankle}");
     refused(&xtask(&["new", "Bad-Name"]), "not a plain identifier");
     refused(&xtask(&["new", "minitaur"]), "exists already");
     refused(

@@ -1,4 +1,5 @@
-//! `cargo xtask list`: every spec with its sizes, mobility and actuation, from the spec
+//! `cargo xtask list`: every spec with its dimension (2: planar, 3: spatial), sizes,
+//! mobility, actuation and contacts, from the spec
 //! and the committed IR. A spec that does not validate, or has no generated code yet, is
 //! listed with what `gen` says of it; long messages stand under the table, which stays
 //! narrow.
@@ -18,21 +19,17 @@ pub fn run(root: &Path) -> Result<(), cli::Error> {
 pub fn table(root: &Path) -> Result<String, cli::Error> {
     let mut rows = vec![[
         "model".to_string(),
+        "dim".into(),
         "NQ".into(),
         "NC".into(),
         "NU".into(),
         "mobility".into(),
         "actuation".into(),
         "actuated joints".into(),
-        "spec".into(),
+        "contacts".into(),
     ]];
     let mut notes = Vec::new();
     for path in gen::spec_paths(root).map_err(cli::Error::Failed)? {
-        let shown = path
-            .strip_prefix(root)
-            .unwrap_or(&path)
-            .display()
-            .to_string();
         // A spec that does not validate is listed with its error, not in the way of the rest.
         let built = gen::load_spec(root, &path).and_then(|spec| {
             model::build(&spec)
@@ -46,10 +43,9 @@ pub fn table(root: &Path) -> Result<String, cli::Error> {
                     .file_stem()
                     .and_then(|s| s.to_str())
                     .unwrap_or_default();
-                let mut row: [String; 8] = Default::default();
+                let mut row: [String; 9] = Default::default();
                 row[0] = name.to_string();
-                row[5] = "does not validate (below)".into();
-                row[7] = shown;
+                row[6] = "does not validate (below)".into();
                 rows.push(row);
                 notes.push(format!("{name}: {e}"));
                 continue;
@@ -87,18 +83,24 @@ pub fn table(root: &Path) -> Result<String, cli::Error> {
                     (String::new(), "–".into(), "not generated (below)".into())
                 }
             };
+        let contacts: Vec<&str> = m.contacts.iter().map(|c| c.name.as_str()).collect();
         rows.push([
             m.name.clone(),
+            m.dimension.to_string(),
             m.links.len().to_string(),
             format!("{}{redundant}", m.closure_rows()),
             m.actuated.len().to_string(),
             mobility,
             actuation,
             actuated.join(", "),
-            spec.path.display().to_string(),
+            if contacts.is_empty() {
+                "–".to_string()
+            } else {
+                contacts.join(", ")
+            },
         ]);
     }
-    let mut out = text_table(&rows, |c| (1..=4).contains(&c));
+    let mut out = text_table(&rows, |c| (1..=5).contains(&c));
     if !notes.is_empty() {
         out.push('\n');
         for n in notes {
