@@ -257,6 +257,18 @@ pub fn run<
         .map(|x| drive.error(&p, x.t, &x.state.state.q))
         .collect();
     let count = |k: EventKind| events.iter().filter(|e| e.kind == k).count();
+    // A landing whose impulse leaves the cone slides from the impact on: no Slip event
+    // marks it, so it is counted here (the contact's mode at the first sample after it).
+    let landed_sliding = events
+        .iter()
+        .filter(|e| e.kind == EventKind::Touchdown)
+        .filter(|e| {
+            samples
+                .iter()
+                .find(|x| x.t > e.t)
+                .is_some_and(|x| matches!(x.state.modes.get(e.contact), ContactMode::Slide { .. }))
+        })
+        .count();
     let energy_lost: f64 = events.iter().map(|e| e.energy_lost).sum();
     // Over the samples whose modes hold: at a step's start the new torques may push a
     // sticking contact out of the cone, and it slips at that instant (an event within
@@ -290,6 +302,7 @@ pub fn run<
         "tracking_error": drive.tracking_summary(&t, &errors),
         "events": {
             "touchdowns": count(EventKind::Touchdown),
+            "touchdowns_sliding": landed_sliding,
             "liftoffs": count(EventKind::Liftoff),
             "slips": count(EventKind::Slip),
             "sticks": count(EventKind::Stick),
@@ -513,7 +526,7 @@ pub fn run<
         );
     }
     println!(
-        "  {} touchdowns ({:.4} J lost in impacts), {} liftoffs, {} slips, {} sticks; ground forces at most {:.3} of the friction cone's bound; peak torque {:.4} N m, {} saturations; max residual closures {:.1e} m, contacts {:.1e} m",
+        "  {} touchdowns ({landed_sliding} sliding from the impact on; {:.4} J lost in impacts), {} liftoffs, {} slips, {} sticks; ground forces at most {:.3} of the friction cone's bound; peak torque {:.4} N m, {} saturations; max residual closures {:.1e} m, contacts {:.1e} m",
         count(EventKind::Touchdown),
         energy_lost,
         count(EventKind::Liftoff),
