@@ -1478,11 +1478,15 @@ macro_rules! spatial_leg_class {
                 dt: f64,
                 torque: Option<&Bound<'py, PyAny>>,
             ) -> PyResult<Bound<'py, PyDict>> {
-                let mut sim =
-                    HybridSimulator::<Model, f64, NQ, NC, NU, $nk, 3>::new(*self.leg.params(), dt);
-                sim.options.baumgarte = self.leg.baumgarte();
-                sim.options.tolerance = *self.leg.tolerance();
-                simulate_on_ground(py, &sim, q, qd, steps, dt, torque)
+                simulate_on_ground(
+                    py,
+                    &self.leg.hybrid_simulator::<3>(dt),
+                    q,
+                    qd,
+                    steps,
+                    dt,
+                    torque,
+                )
             }
         });
     };

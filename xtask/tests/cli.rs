@@ -349,7 +349,7 @@ fn sim_refuses_bad_input_and_writes_nothing() {
     );
     refused(
         &legs(&["sim", "minitaur", "--speed", "0", "--out", d]),
-        "--speed 0: on a leg in the air (minitaur) the speed is the spin trajectory's motor speed",
+        "--speed 0: under the swing-leg controllers (minitaur) the speed is the spin trajectory's motor speed",
     );
     // A controller that does not apply to the leg is refused with the reason.
     refused(
@@ -1835,6 +1835,24 @@ fn sim_runs_a_spatial_leg_with_contacts_on_its_ground() {
     );
     let events = std::fs::read_to_string(dir.join("events.csv")).unwrap();
     assert!(events.contains(",Touchdown,toe_contact,"), "{events}");
+    // One landing per 0.5 s cycle, answered by the controller: no liftoff at a landing's
+    // instant (with the step's torques a braking controller pulled the toe off again).
+    let listed = csv_rows(&events);
+    let at = |kind: &str| -> Vec<f64> {
+        listed
+            .iter()
+            .filter(|e| e["kind"] == kind)
+            .map(|e| e["t"].parse().unwrap())
+            .collect()
+    };
+    let (landings, liftoffs) = (at("Touchdown"), at("Liftoff"));
+    assert_eq!(landings.len(), 2, "{events}");
+    assert!(
+        liftoffs
+            .iter()
+            .all(|l| landings.iter().all(|t| (l - t).abs() > 1e-6)),
+        "{events}"
+    );
     // A torque step at a step's start may push a contact out of its mode's bounds (a
     // stick out of the cone, a normal force below zero): the mode changes at that instant,
     // and the row before the change holds the old mode's forces (the run's own summary
@@ -1894,6 +1912,39 @@ fn sim_runs_a_spatial_leg_with_contacts_on_its_ground() {
         }
     }
     assert!(stance > 100, "{stance} rows in stance");
+    // While it slides, friction opposes the slip: against the toe's displacement to the
+    // next row (both sliding, no event between), in whatever direction it slides. The
+    // force opposes the velocity at the row; the displacement over 1 ms turns with it, by
+    // up to 27° where the slip starts.
+    let mut cosines = Vec::new();
+    for w in rows.windows(2) {
+        let (a, b) = (&w[0], &w[1]);
+        if a["mode_toe_contact"] != "slide" || b["mode_toe_contact"] != "slide" {
+            continue;
+        }
+        let (ta, tb): (f64, f64) = (a["t"].parse().unwrap(), b["t"].parse().unwrap());
+        if switches.iter().any(|s| *s > ta - 1e-9 && *s < tb + 1e-9) {
+            continue;
+        }
+        let step = (
+            v(b, "foot_x") - v(a, "foot_x"),
+            v(b, "foot_y") - v(a, "foot_y"),
+        );
+        let force = (v(a, "lambda_t1_toe_contact"), v(a, "lambda_t2_toe_contact"));
+        let cos =
+            (step.0 * force.0 + step.1 * force.1) / (step.0.hypot(step.1) * force.0.hypot(force.1));
+        assert!(
+            cos < -0.5,
+            "friction not against the slip at {ta}: cos {cos}"
+        );
+        cosines.push(cos);
+    }
+    let aligned = cosines.iter().filter(|c| **c < -0.99).count();
+    assert!(
+        cosines.len() > 10 && aligned * 10 >= cosines.len() * 9,
+        "{aligned} of {} sliding steps with friction within 8° of against the slip",
+        cosines.len()
+    );
     assert!(summary["max_friction_cone_ratio"].as_f64().unwrap() <= 1.0 + 1e-9);
     assert!(summary["max_contact_residual_m"].as_f64().unwrap() < 1e-12);
 

@@ -300,6 +300,13 @@ pub struct HybridOptions<T: Real, const NK: usize, const ND: usize = 2> {
     /// Torques held over each step (and re-asked after each event), or asked at every
     /// integrator stage and guard evaluation (a continuous-time law).
     pub control: ControlUpdate,
+    /// Settle the contacts' modes after an impact under torques asked right after it
+    /// (`true`), or under those the step started with (`false`, the default). With the
+    /// step's, a controller that brakes the fall pulls the landed contact off again at the
+    /// impact's instant (a liftoff, then a second, tiny touchdown); asked after, it
+    /// answers the impact. The hopping controller is tuned with the step's: its stance
+    /// law asked at a landing's instant drove `atrias_hopper` to diverge.
+    pub ask_after_impact: bool,
 }
 
 /// Steps leg `L` on the ground.
@@ -340,6 +347,7 @@ where
                 tolerance: Tolerance::default(),
                 time_tolerance: T::lit(1e-12).max(T::default_epsilon() * T::lit(10.0)),
                 control: ControlUpdate::PerStep,
+                ask_after_impact: false,
             },
             model: PhantomData,
         }
@@ -895,6 +903,26 @@ where
         Ok(hs)
     }
 
+    /// Settles the modes after an impact at `now`: under torques asked again
+    /// ([`HybridOptions::ask_after_impact`], returned to be held for the rest of the step)
+    /// or under `u`, the step's.
+    fn settle_after_impact(
+        &self,
+        hs: &mut HybridState<T, NQ, NK, ND>,
+        source: &mut impl HybridTorqueSource<T, NQ, NK, NU, ND>,
+        u: &SVector<T, NU>,
+        now: T,
+        events: &mut StepEvents<T>,
+    ) -> Result<Option<SVector<T, NU>>, HybridError> {
+        if !self.options.ask_after_impact {
+            self.settle(hs, u, now, events)?;
+            return Ok(None);
+        }
+        let after = source.torque(now, hs)?;
+        self.settle(hs, &after, now, events)?;
+        Ok(Some(after))
+    }
+
     /// Advances `hs` from `t` by one step of [`HybridOptions::dt`] with torques from
     /// `source` (asked at the step's start and after each event), and returns the
     /// step's events.
@@ -908,12 +936,17 @@ where
         let mut now = t;
         let end = t + self.options.dt;
         let tol = self.options.time_tolerance;
+        // Torques asked after an event, for the event's new modes and the rest of the step.
+        let mut asked: Option<SVector<T, NU>> = None;
         loop {
             let h = end - now;
             if h <= tol {
                 break;
             }
-            let u = source.torque(now, hs)?;
+            let u = match asked.take() {
+                Some(u) => u,
+                None => source.torque(now, hs)?,
+            };
             // A flight contact at or under the ground and moving in touches down now. A
             // contact that just lifted off sits at the ground with no normal speed (up
             // to rounding: below `size · tolerance / dt`); it is left to fly.
@@ -925,7 +958,7 @@ where
                 hs.modes.get(k) == ContactMode::Flight && x[n] <= T::zero() && v[n] < -still
             }) {
                 self.touchdown(hs, k, now, &mut events)?;
-                self.settle(hs, &u, now, &mut events)?;
+                asked = self.settle_after_impact(hs, source, &u, now, &mut events)?;
                 continue;
             }
             // A spatial slide's guard measures the slip speed along the direction it has
@@ -982,6 +1015,7 @@ where
             now += tau;
             self.project(hs)?;
             let k = r / ND;
+            let landed = hs.modes.get(k) == ContactMode::Flight;
             match (hs.modes.get(k), r % ND == ND - 1) {
                 (ContactMode::Flight, _) => self.touchdown(hs, k, now, &mut events)?,
                 (_, true) => {
@@ -1002,7 +1036,11 @@ where
                 }
             }
             self.project(hs)?;
-            self.settle(hs, &u, now, &mut events)?;
+            if landed {
+                asked = self.settle_after_impact(hs, source, &u, now, &mut events)?;
+            } else {
+                self.settle(hs, &u, now, &mut events)?;
+            }
         }
         Ok(events)
     }

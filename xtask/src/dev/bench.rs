@@ -48,13 +48,22 @@ fn collected(bin: &Path, model: &str, path: &str, calls: u64) -> Result<u64, Str
         .ok_or_else(|| format!("no instruction count in callgrind's output:\n{text}"))
 }
 
-/// Whether `model` has `path` (count_calls runs it with no calls, or says it has none).
+/// Whether `model` has `path`: count_calls runs it with no calls, or says it has none
+/// (exit code 2: the path does not apply, or its solve fails at the counted state); any
+/// other failure (a panic) is an error, not a path left out.
 fn applies(bin: &Path, model: &str, path: &str) -> Result<bool, String> {
     let out = Command::new(bin)
         .args([model, path, "0"])
         .output()
         .map_err(|e| format!("{}: {e}", bin.display()))?;
-    Ok(out.status.success())
+    match out.status.code() {
+        Some(0) => Ok(true),
+        Some(2) => Ok(false),
+        _ => Err(format!(
+            "count_calls {model} {path} failed:\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        )),
+    }
 }
 
 /// Instructions of `CALLS` calls of `path` of `model`, less those of none (so start-up
@@ -247,6 +256,16 @@ pub fn check_budgets(root: &Path, update: bool) -> Result<String, String> {
                 over.push(format!(
                     "{model} {p}: {n} instructions, over the budget {b} (+{:.0} %)",
                     TOLERANCE * 100.0
+                ));
+            }
+        }
+    }
+    // A budget whose path no longer runs is a regression too, not a row that drops out.
+    for (model, per) in &budgets {
+        for p in per.keys() {
+            if counts.get(model).is_none_or(|m| !m.contains_key(p)) {
+                over.push(format!(
+                    "{model} {p}: budgeted but not measured (the leg is gone, or the path no longer solves at the counted state)"
                 ));
             }
         }

@@ -106,7 +106,7 @@ fn simulate(args: SimArgs) -> Result<(), Error> {
             if name == stringify!($module) {
                 // A leg with contacts runs on its ground.
                 if $nk > 0 {
-                    return sim::ground::run::<$ty, $nq, $nc, $nu, 3, $np, $nk>(&settings);
+                    return sim::ground::run::<$ty, $nq, $nc, $nu, 3, $np, $nk>(&settings, None);
                 }
                 return sim::run::<$ty, $nq, $nc, $nu, 3, $np>(&settings);
             }

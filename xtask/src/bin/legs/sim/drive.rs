@@ -431,7 +431,7 @@ fn drive<
     };
     if s.speed == Some(0.0) {
         return Err(Error::usage(format!(
-            "--speed 0: on a leg in the air ({}) the speed is the spin trajectory's motor speed, which is not zero",
+            "--speed 0: under the swing-leg controllers ({}) the speed is the spin trajectory's motor speed, which is not zero",
             L::NAME
         )));
     }

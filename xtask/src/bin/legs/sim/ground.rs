@@ -11,9 +11,7 @@ use std::fmt::Write as _;
 
 use leg_models::dynamics::contact::{ContactMode, Ground};
 use leg_models::nalgebra::SVector;
-use leg_models::simulate::hybrid::{
-    Event, EventKind, HybridSample, HybridSimulator, HybridState, HybridTorqueSource,
-};
+use leg_models::simulate::hybrid::{Event, EventKind, HybridSample, HybridSimulator, HybridState};
 use leg_models::simulate::TorqueSource;
 use leg_models::{ContactModel, LegModel};
 use serde_json::json;
@@ -23,30 +21,9 @@ use xtask::cli::{check_targets, write_all, Error};
 use crate::report::{self, Report, Series};
 use crate::sim::drive::Drive;
 use crate::sim::settings::written;
-use crate::sim::{body_points, closure_force_columns, frame_at, max, state_columns, Settings};
-
-/// A swing-leg controller as the hybrid simulator's torque source: it reads the state and
-/// not the contact modes (it does not know the ground), and moves the progress bar.
-struct OnGround<S> {
-    inner: S,
-    progress: Progress,
-    dt: f64,
-}
-
-impl<S, const NQ: usize, const NK: usize, const NU: usize, const ND: usize>
-    HybridTorqueSource<f64, NQ, NK, NU, ND> for OnGround<S>
-where
-    S: TorqueSource<f64, NQ, NU>,
-{
-    fn torque(
-        &mut self,
-        t: f64,
-        s: &HybridState<f64, NQ, NK, ND>,
-    ) -> Result<SVector<f64, NU>, leg_models::control::ControlError> {
-        self.progress.set((t / self.dt).round() as u64);
-        self.inner.torque(t, &s.state)
-    }
-}
+use crate::sim::{
+    body_points, closure_force_columns, frame_at, max, state_columns, Settings, WithProgress,
+};
 
 /// Whether no contact of `x` is on the ground.
 fn in_flight<const NQ: usize, const NK: usize, const ND: usize>(
@@ -171,6 +148,8 @@ fn cone_ratio<
     }))
 }
 
+/// Runs leg `L` on its ground under the swing-leg controllers; `note` says why, where the
+/// leg has contacts but the hopping controller does not apply to it.
 pub fn run<
     L: ContactModel<NQ, NC, NU, NK, ND> + LegModel<NQ, NC, NU, ND, NP>,
     const NQ: usize,
@@ -181,6 +160,7 @@ pub fn run<
     const NK: usize,
 >(
     s: &Settings,
+    note: Option<&str>,
 ) -> Result<(), Error> {
     // A target in the way is found before the simulation runs, not after.
     check_targets(
@@ -193,11 +173,24 @@ pub fn run<
         ],
     )
     .map_err(Error::Failed)?;
-    if s.apex.is_some() {
-        return Err(Error::usage(format!(
-            "--apex is the hopping controller's apex height; {} has no body that hops (it is driven on the ground by the swing-leg controllers)",
-            L::NAME
-        )));
+    for (flag, given, what) in [
+        (
+            "--apex",
+            s.apex.is_some(),
+            "the hopping controller's apex height",
+        ),
+        (
+            "--serve",
+            s.serve,
+            "serves the hopping controller's torques",
+        ),
+    ] {
+        if given {
+            return Err(Error::usage(format!(
+                "{flag}: {what}; {} has no body that hops (it is driven on the ground by the swing-leg controllers)",
+                L::NAME
+            )));
+        }
     }
     let p = <L as leg_models::LegDynamics<NQ, NC, NU>>::Params::<f64>::default();
     let fail =
@@ -205,19 +198,38 @@ pub fn run<
     let (drive, source) = Drive::<L, NQ, NC, NU, ND, NP>::new(s, &p)?;
     let sim = HybridSimulator::<L, f64, NQ, NC, NU, NK, ND>::new(p, s.dt);
     let mut sim = sim;
-    // As in the air: torques held over each step (and re-asked after each event).
+    // As in the air: torques held over each step (and re-asked after each event); the
+    // swing controllers answer a landing (the modes after it settle under their torques).
     sim.options.control = leg_models::simulate::ControlUpdate::PerStep;
-    // The contacts' modes at the start are those under the controller's first torques.
-    // (Asked of the controller itself, so the saturation counts are the run's alone.)
+    sim.options.ask_after_impact = true;
+    // A contact on the ground at the start holds it: the start is at rest there (the
+    // simulator applies no impact at its start, and would drop the reference's rates
+    // unsaid). Elsewhere it is on the reference, at its rates.
+    let mut initial = drive.initial;
+    let (gaps, _) = sim.contact_coordinates(&initial);
+    let size = leg_models::assembly::leg_size::<L, f64, NQ, NC, NU>(&p, &initial.q);
+    let touching = (0..NK / ND)
+        .any(|k| gaps[ND * k + ND - 1] <= sim.options.tolerance.relative_residual * size);
+    let at_rest = touching && initial.qd.amax() > 0.0;
+    if at_rest {
+        initial.qd = SVector::zeros();
+    }
+    // The contacts' modes at the start are those under the controller's first torques
+    // there. (Asked of the controller itself, so the saturation counts are the run's.)
     let mut source = source;
     let first = source
         .inner
-        .torque(0.0, &drive.initial)
+        .torque(0.0, &initial)
         .map_err(|e| fail("the controller at the start", &e))?
         .zip_map(&source.limits, |u, l| u.clamp(-l, l));
     let start = sim
-        .start(drive.initial, &first)
+        .start(initial, &first)
         .map_err(|e| fail("the start (on the controller's reference)", &e))?;
+    let start_note = if at_rest {
+        "at rest on the reference's first pose: a contact touches the ground there"
+    } else {
+        "on the reference (a foot task at rest, a joint task at its rates)"
+    };
     let steps = (s.duration / s.dt).round() as usize;
     // Refused before the run, as bad input, not after it with empty files.
     leg_models::simulate::check_record(
@@ -225,7 +237,7 @@ pub fn run<
         std::mem::size_of::<HybridSample<f64, NQ, NC, NU, NK, ND>>(),
     )
     .map_err(|e| Error::usage(format!("`--duration` over `--dt`: {e}")))?;
-    let mut source = OnGround {
+    let mut source = WithProgress {
         inner: source,
         progress: Progress::new(
             steps as u64,
@@ -240,7 +252,7 @@ pub fn run<
             (stop.record, Some(why))
         }
     };
-    let OnGround {
+    let WithProgress {
         inner: source,
         progress,
         ..
@@ -269,7 +281,8 @@ pub fn run<
                 .is_some_and(|x| matches!(x.state.modes.get(e.contact), ContactMode::Slide { .. }))
         })
         .count();
-    let energy_lost: f64 = events.iter().map(|e| e.energy_lost).sum();
+    // (From +0: a sum of no impacts is 0, not −0.)
+    let energy_lost = events.iter().fold(0.0, |a, e| a + e.energy_lost);
     // Over the samples whose modes hold: at a step's start the new torques may push a
     // sticking contact out of the cone, and it slips at that instant (an event within
     // 1e-9 s of the sample); that sample's forces are the stick's, before the switch.
@@ -282,6 +295,8 @@ pub fn run<
         "model": L::NAME,
         "controller": drive.kind.name(),
         "controller_choice": drive.choice,
+        "why_not_hopping": note,
+        "start": start_note,
         "structure": drive.structure_summary(),
         "trajectory": if drive.tracked() { json!(drive.trajectory.name()) } else { json!(null) },
         "settings": {
@@ -508,6 +523,9 @@ pub fn run<
         ("report.html".into(), html),
     ];
     write_all(&out, &files).map_err(Error::Failed)?;
+    if let Some(note) = note {
+        println!("{}: {note}", L::NAME);
+    }
     println!(
         "{} on the ground with {} ({}; {} s at dt = {} s): wrote {}/{{trajectory.csv, events.csv, summary.json, report.html}}",
         L::NAME,

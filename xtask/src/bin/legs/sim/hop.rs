@@ -86,7 +86,10 @@ pub fn run<
     // A leg whose body cannot rise (a fixed base) does not hop: the swing-leg controllers
     // drive it on the ground.
     let Some(h) = height_joint::<L, f64, NQ, NC, NU, NK>(&p, &home) else {
-        return crate::sim::ground::run::<L, NQ, NC, NU, 2, NC, NK>(s);
+        return crate::sim::ground::run::<L, NQ, NC, NU, 2, NC, NK>(
+            s,
+            Some("no prismatic joint of its body raises its contacts (no height joint), so it does not hop: it runs on the ground under the swing-leg controllers"),
+        );
     };
     if let Some(name) = s.swing_only() {
         return Err(Error::usage(format!(

@@ -25,10 +25,10 @@ pub use settings::Settings;
 
 /// A torque source that moves a progress bar: the simulator asks for torques once per
 /// step (torques are held over the step), at the step's start time.
-struct WithProgress<S> {
-    inner: S,
-    progress: Progress,
-    dt: f64,
+pub(crate) struct WithProgress<S> {
+    pub(crate) inner: S,
+    pub(crate) progress: Progress,
+    pub(crate) dt: f64,
 }
 
 impl<S: TorqueSource<f64, NQ, NU>, const NQ: usize, const NU: usize> TorqueSource<f64, NQ, NU>
@@ -37,6 +37,22 @@ impl<S: TorqueSource<f64, NQ, NU>, const NQ: usize, const NU: usize> TorqueSourc
     fn torque(&mut self, t: f64, s: &State<f64, NQ>) -> Result<SVector<f64, NU>, ControlError> {
         self.progress.set((t / self.dt).round() as u64);
         self.inner.torque(t, s)
+    }
+}
+
+/// On the ground, the same source reads the state and not the contact modes (a swing-leg
+/// controller does not know the ground).
+impl<S, const NQ: usize, const NK: usize, const NU: usize, const ND: usize>
+    leg_models::simulate::hybrid::HybridTorqueSource<f64, NQ, NK, NU, ND> for WithProgress<S>
+where
+    S: TorqueSource<f64, NQ, NU>,
+{
+    fn torque(
+        &mut self,
+        t: f64,
+        s: &leg_models::simulate::hybrid::HybridState<f64, NQ, NK, ND>,
+    ) -> Result<SVector<f64, NU>, ControlError> {
+        TorqueSource::torque(self, t, &s.state)
     }
 }
 
