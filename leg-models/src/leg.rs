@@ -806,7 +806,8 @@ where
 
     /// [`Leg::forward_dynamics_with_contacts`] and its derivatives
     /// ([`derivatives::contact_dynamics_derivatives`]; a spatial slide's friction turns
-    /// with its slip velocity).
+    /// with its slip velocity). A spatial contact sliding from rest has no direction here
+    /// (`DynamicsError::SlipFromRest`): give it one with the free function's `rest`.
     pub fn contact_dynamics_derivatives<const ND: usize>(
         &self,
         q: &SVector<T, NQ>,

@@ -467,6 +467,7 @@ def test_mujoco_agrees_on_a_throw_in_3d(tmp_path):
         mujoco.mj_step(m, d)
         if landed is None and d.ncon > 0:
             landed = d.time
+    assert landed is not None, "MuJoCo's block never touched its floor"
     leg = legmodels.SlidingMass()
     rec = leg.simulate_hybrid(start, speed, 1000, 1e-3)
     touchdown = next(e for e in rec["events"] if e["kind"] == "touchdown")

@@ -139,8 +139,6 @@ where
     }
 }
 
-/// A passive, undamped swing from rest near home for 0.5 s at step `dt` (RK4): the
-/// largest energy error and the peak kinetic energy.
 /// `(largest |E(t) − E(0)|, peak kinetic energy, largest |V|, the loop's gap at the end)`
 /// of an undamped, unforced swing from home over 0.5 s, plain RK4 at `dt`.
 fn energy_swing<L, const NQ: usize, const NC: usize, const NU: usize, const NP: usize>(

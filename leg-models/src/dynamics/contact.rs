@@ -893,12 +893,13 @@ impl From<DynamicsError> for ImpactError {
 /// (`|Λ_t| > μ Λ_n`, the Euclidean norm of the tangential impulse) is resolved again as
 /// sliding, its friction impulse `μ Λ_n` against the slip after the impact, and its mode
 /// in `modes` becomes `Slide`; the check runs again after each such change, which moves
-/// the other contacts' impulses (one round per contact at most). On a spatial leg that slip direction is the one the slip
-/// after the impact takes (a fixed point from the sticking impulse's, then a scan of the
-/// circle refined by bisection, contact by contact; where none is consistent, as
-/// Coulomb's law on impulses allows, the last one tried is kept); a planar leg's is one
-/// of two, tried once each. Every held normal
-/// impulse must be non-negative ([`ImpactError::Pulling`] otherwise).
+/// the other contacts' impulses (one round per contact at most). On a spatial leg that
+/// slip direction is the one the slip after the impact takes (a fixed point from the
+/// sticking impulse's, then a scan of the circle refined by bisection, contact by
+/// contact; where none is consistent, as Coulomb's law on impulses allows, the last one
+/// tried is kept); a planar leg's is one of two: against its impulse, flipped in each
+/// round where the slip after the impact runs the other way. Every held normal impulse
+/// must be non-negative ([`ImpactError::Pulling`] otherwise).
 ///
 /// A sticking impact loses exactly `½ Δq̇ᵀ M Δq̇`. A sliding one loses energy unless the
 /// impulse reverses the slip (then Coulomb's law applied to impulses can add energy, a
