@@ -9,10 +9,11 @@
 use generated::abducted_five_bar::AbductedFiveBar;
 use generated::sliding_mass::{self, SlidingMass};
 use leg_models::dynamics::contact::{
-    forward_dynamics_with_contacts, impact_map, spec_friction, ContactMode, Ground, Modes,
+    forward_dynamics_with_contacts, impact_map, spec_friction, ContactMode, ContactSystem, Ground,
+    Modes,
 };
 use leg_models::dynamics::derivatives::contact_dynamics_derivatives;
-use leg_models::dynamics::{Baumgarte, DynamicsError};
+use leg_models::dynamics::{actuation, Baumgarte, DynamicsError};
 use leg_models::nalgebra::{DMatrix, DVector, SMatrix, SVector, Vector3};
 use leg_models::simulate::hybrid::{EventKind, HybridSimulator, HybridState};
 use leg_models::simulate::State;
@@ -576,8 +577,9 @@ where
     let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
     let mut rng = Rng::new(71);
     let (mut checked, mut sliding, mut tried) = (0, 0, 0);
+    let (mut kept_rest, mut followed) = (0, 0);
     let mut worst = 0.0f64;
-    while checked < 24 && tried < 2000 {
+    while checked < 36 && tried < 3000 {
         tried += 1;
         let s = random_assembled_state::<L, NQ, NC, NU>(&p, &mut rng, 2.0);
         let u = SVector::<f64, NU>::from_fn(|_, _| rng.range(-3.0, 3.0));
@@ -587,13 +589,42 @@ where
             alpha: 5.0,
             beta: 5.0,
         });
+        // A third of the states give each slide a direction of its own (`rest`): where
+        // the slip runs against it (v_t · d ≤ 0) the slide keeps it, a constant; else
+        // it follows the slip velocity, as with none.
+        let rest = (tried % 3 == 0).then(|| {
+            let mut d = SVector::<f64, NK>::zeros();
+            for k in 0..NK / 3 {
+                let a = rng.range(0.0, std::f64::consts::TAU);
+                (d[3 * k], d[3 * k + 1]) = (a.cos(), a.sin());
+            }
+            d
+        });
         let solve = |q: &SVector<f64, NQ>, qd: &SVector<f64, NQ>, u: &SVector<f64, NU>| {
-            forward_dynamics_with_contacts::<L, f64, NQ, NC, NU, NK, 3>(
-                &p, q, qd, u, &modes, &anchors, &ground, &mu, baumgarte,
+            ContactSystem::<f64, NQ, NC, NK, 3>::with_slip::<L, NU>(
+                &p,
+                q,
+                qd,
+                &modes,
+                &anchors,
+                &ground,
+                &mu,
+                baumgarte,
+                rest.as_ref(),
             )
+            .and_then(|sys| sys.solve(&actuation::<L, f64, NQ, NC, NU>(u)))
         };
         let Ok(d) = contact_dynamics_derivatives::<L, f64, NQ, NC, NU, NK, 3>(
-            &p, &s.q, &s.qd, &u, &modes, &anchors, &ground, &mu, baumgarte, None,
+            &p,
+            &s.q,
+            &s.qd,
+            &u,
+            &modes,
+            &anchors,
+            &ground,
+            &mu,
+            baumgarte,
+            rest.as_ref(),
         ) else {
             continue;
         };
@@ -694,11 +725,27 @@ where
         checked += 1;
         if (0..NK / 3).any(|k| matches!(modes.get(k), ContactMode::Slide { .. })) {
             sliding += 1;
+            if let Some(d) = &rest {
+                // Which way each slide went: kept `rest` (v_t · d ≤ 0) or followed v_t.
+                let c = ground.rows(&L::contact_jacobian(&s.q, &p)) * s.qd;
+                for k in 0..NK / 3 {
+                    if matches!(modes.get(k), ContactMode::Slide { .. }) {
+                        let ahead = d[3 * k] * c[3 * k] + d[3 * k + 1] * c[3 * k + 1];
+                        kept_rest += usize::from(ahead <= 0.0);
+                        followed += usize::from(ahead > 0.0);
+                    }
+                }
+            }
         }
     }
     assert!(
-        checked >= 24 && sliding >= 4,
+        checked >= 36 && sliding >= 6,
         "{}: {checked} states checked, {sliding} sliding",
+        L::NAME
+    );
+    assert!(
+        kept_rest >= 1 && followed >= 1,
+        "{}: slides given a direction: {kept_rest} kept it, {followed} followed the slip",
         L::NAME
     );
     worst
