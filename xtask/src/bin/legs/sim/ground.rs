@@ -121,6 +121,27 @@ pub(crate) fn energy_plot(
     .caption(&format!("The energy T + V (blue) falls at each touchdown by what the plastic impact dissipates and changes in stance because the motors do work W = Σ ∫ u θ̇ dt. The impacts' losses added back (red), only the motors' work remains; with that subtracted too (green) what is left moves by {} over the run: what neither the impacts nor the motors account for (joint damping, if the leg has any, and integration error).", crate::report::quantity(spread, "J")))
 }
 
+/// The report's log plot of the residuals after each step's projection: the closures'
+/// largest gap and the held contacts' largest distance from their anchors, per sample.
+pub(crate) fn residual_plot(
+    t: &[f64],
+    residuals: impl Iterator<Item = (f64, f64)> + Clone,
+) -> Series {
+    Series::log(
+        "Residuals",
+        t,
+        vec![
+            (
+                "closures max |φ|".into(),
+                residuals.clone().map(|r| r.0).collect(),
+            ),
+            ("held contacts".into(), residuals.map(|r| r.1).collect()),
+        ],
+    )
+    .axis("residual", "m")
+    .caption("The largest gap of the closure constraints and of the contacts held on the ground, after each step's projection: rounding error.")
+}
+
 /// The largest `|λ_t| / (μ λ_n)` over the contacts on the ground in `x`: at most 1 inside
 /// the cone (equal to 1 while sliding).
 fn cone_ratio<
@@ -460,42 +481,17 @@ pub fn run<
         })
         .collect();
     plots.push(energy_plot(&energy_samples, events));
-    plots.push(
-        Series::new(
-            "Motor torques",
-            &t,
-            L::ACTUATED
-                .iter()
-                .enumerate()
-                .map(|(k, &a)| {
-                    (
-                        L::JOINT_NAMES[a].to_string(),
-                        samples.iter().map(|x| x.u[k]).collect(),
-                    )
-                })
-                .collect(),
-        )
-        .axis("torque", "N m")
-        .caption("Each motor's torque at its joint, held over each step."),
-    );
-    plots.push(
-        Series::log(
-            "Residuals",
-            &t,
-            vec![
-                (
-                    "closures max |φ|".into(),
-                    samples.iter().map(|x| x.closure_residual).collect(),
-                ),
-                (
-                    "held contacts".into(),
-                    samples.iter().map(|x| x.contact_residual).collect(),
-                ),
-            ],
-        )
-        .axis("residual", "m")
-        .caption("The largest gap of the closure constraints and of the contacts held on the ground, after each step's projection: rounding error."),
-    );
+    plots.push(crate::sim::torque_plot(
+        &t,
+        &crate::sim::motor_names::<L, NQ, NC, NU>(),
+        samples.iter().map(|x| x.u),
+    ));
+    plots.push(crate::sim::ground::residual_plot(
+        &t,
+        samples
+            .iter()
+            .map(|x| (x.closure_residual, x.contact_residual)),
+    ));
     let stance = stance_bands(samples.iter().map(|x| (x.t, x.state)));
     let plots: Vec<Series> = plots.into_iter().map(|p| p.shaded(&stance)).collect();
     let ground = Ground::<f64, ND>::of::<L, NQ, NC, NU, NK>();

@@ -477,42 +477,17 @@ pub fn run<
         })
         .collect();
     plots.push(crate::sim::ground::energy_plot(&energy_samples, events));
-    plots.push(
-        Series::new(
-            "Motor torques",
-            &t,
-            L::ACTUATED
-                .iter()
-                .enumerate()
-                .map(|(k, &a)| {
-                    (
-                        L::JOINT_NAMES[a].to_string(),
-                        samples.iter().map(|x| x.u[k]).collect(),
-                    )
-                })
-                .collect(),
-        )
-        .axis("torque", "N m")
-        .caption("Each motor's torque at its joint, held over each step."),
-    );
-    plots.push(
-        Series::log(
-            "Residuals",
-            &t,
-            vec![
-                (
-                    "closures max |φ|".into(),
-                    samples.iter().map(|x| x.closure_residual).collect(),
-                ),
-                (
-                    "held contacts".into(),
-                    samples.iter().map(|x| x.contact_residual).collect(),
-                ),
-            ],
-        )
-        .axis("residual", "m")
-        .caption("The largest gap of the closure constraints and of the contacts held on the ground, after each step's projection: rounding error."),
-    );
+    plots.push(crate::sim::torque_plot(
+        &t,
+        &crate::sim::motor_names::<L, NQ, NC, NU>(),
+        samples.iter().map(|x| x.u),
+    ));
+    plots.push(crate::sim::ground::residual_plot(
+        &t,
+        samples
+            .iter()
+            .map(|x| (x.closure_residual, x.contact_residual)),
+    ));
     let plots: Vec<Series> = plots.into_iter().map(|p| p.shaded(&stance)).collect();
     let ground = Ground::<f64>::of::<L, NQ, NC, NU, NK>();
     let html = report::html(&Report {

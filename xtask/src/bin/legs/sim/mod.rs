@@ -108,6 +108,35 @@ pub(crate) fn closure_force_columns<
     }
 }
 
+/// The motors' names: their joints', in `u`'s order.
+pub(crate) fn motor_names<
+    L: leg_models::LegDynamics<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>() -> Vec<&'static str> {
+    L::ACTUATED.iter().map(|&a| L::JOINT_NAMES[a]).collect()
+}
+
+/// The report's plot of the motors' torques over time, one line per motor.
+pub(crate) fn torque_plot<const NU: usize>(
+    t: &[f64],
+    names: &[&str],
+    torques: impl Iterator<Item = SVector<f64, NU>> + Clone,
+) -> Series {
+    Series::new(
+        "Motor torques",
+        t,
+        names
+            .iter()
+            .enumerate()
+            .map(|(k, name)| (name.to_string(), torques.clone().map(|u| u[k]).collect()))
+            .collect(),
+    )
+    .axis("torque", "N m")
+    .caption("Each motor's torque at its joint (after the gearbox), held over each step.")
+}
+
 pub(crate) fn max(xs: impl Iterator<Item = f64>) -> f64 {
     xs.fold(0.0, f64::max)
 }
@@ -333,24 +362,11 @@ pub fn run<
         })
         .collect();
     let mut plots: Vec<Series> = drive.tracking_plot(&t, &errors).into_iter().collect();
-    plots.push(
-        Series::new(
-            "Motor torques",
-            &t,
-            L::ACTUATED
-                .iter()
-                .enumerate()
-                .map(|(k, &a)| {
-                    (
-                        L::JOINT_NAMES[a].to_string(),
-                        samples.iter().map(|x| x.u[k]).collect(),
-                    )
-                })
-                .collect(),
-        )
-        .axis("torque", "N m")
-        .caption("Each motor's torque at its joint (after the gearbox), held over each step."),
-    );
+    plots.push(crate::sim::torque_plot(
+        &t,
+        &crate::sim::motor_names::<L, NQ, NC, NU>(),
+        samples.iter().map(|x| x.u),
+    ));
     plots.push(
         Series::log(
             "Closure residual",
