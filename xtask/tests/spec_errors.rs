@@ -505,6 +505,27 @@ fn a_home_pose_that_does_not_assemble_is_located() {
     assert_eq!(root.listing(), before, "a failed generation changed files");
 }
 
+/// With two closures, the one open widest is named, not the first: `ankle_rod_leg` (a
+/// five-bar's toe and an ankle rod) with its rod written 3 cm too long, the five-bar left
+/// as it is.
+#[test]
+fn of_two_closures_the_one_open_widest_is_named() {
+    let spec =
+        std::fs::read_to_string(gen::workspace_root().join("leg-models/specs/ankle_rod_leg.toml"))
+            .unwrap();
+    let text = spec.replace("distance = 0.1019", "distance = 0.1319");
+    assert_ne!(text, spec, "the rod's length is in the spec");
+    let root = scratch("two-closures", &text);
+    let before = root.listing();
+    let err = generate(&root).unwrap_err().to_string();
+    assert!(
+        err.contains("home: the home pose does not assemble"),
+        "{err}"
+    );
+    assert!(err.contains("closure `ankle_rod` is open widest"), "{err}");
+    assert_eq!(root.listing(), before, "a failed generation changed files");
+}
+
 /// Runs the derivation: `list` gives a spec that `gen` would refuse its own error (not
 /// advice to run `gen`), and a spec that does not validate its message under the table,
 /// which stays narrow.
