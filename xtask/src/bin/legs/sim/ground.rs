@@ -71,23 +71,30 @@ pub(crate) fn events_csv(events: &[Event<f64>], names: &[&str]) -> String {
 }
 
 /// The energy plot of a run on the ground: `T + V`, with every impact's loss so far added
-/// back, and with the motors' work subtracted too. Each sample is `(t, energy, u, θ)`
-/// (the torques held over the step, the motors' angles at its start).
-pub(crate) fn energy_plot(
-    samples: &[(f64, f64, Vec<f64>, Vec<f64>)],
+/// back, and with the motors' work subtracted too (the torques held over each step, the
+/// motors at joints `actuated`).
+pub(crate) fn energy_plot<
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+    const ND: usize,
+>(
+    samples: &[HybridSample<f64, NQ, NC, NU, NK, ND>],
     events: &[Event<f64>],
+    actuated: &[usize],
 ) -> Series {
-    let t: Vec<f64> = samples.iter().map(|x| x.0).collect();
+    let t: Vec<f64> = samples.iter().map(|x| x.t).collect();
     let mut lost = 0.0;
     let mut next = 0;
     let with_losses: Vec<f64> = samples
         .iter()
         .map(|x| {
-            while next < events.len() && events[next].t <= x.0 {
+            while next < events.len() && events[next].t <= x.t {
                 lost += events[next].energy_lost;
                 next += 1;
             }
-            x.1 + lost
+            x.energy + lost
         })
         .collect();
     // The motors' work: the torques are held over each step (and after each event), so
@@ -99,8 +106,8 @@ pub(crate) fn energy_plot(
         .map(|(i, x)| {
             if i > 0 {
                 let prev = &samples[i - 1];
-                for k in 0..x.3.len() {
-                    w += prev.2[k] * (x.3[k] - prev.3[k]);
+                for (k, &a) in actuated.iter().enumerate() {
+                    w += prev.u[k] * (x.state.state.q[a] - prev.state.state.q[a]);
                 }
             }
             with_losses[i] - w
@@ -112,7 +119,7 @@ pub(crate) fn energy_plot(
         "Energy",
         &t,
         vec![
-            ("T + V".into(), samples.iter().map(|x| x.1).collect()),
+            ("T + V".into(), samples.iter().map(|x| x.energy).collect()),
             ("T + V + impact losses".into(), with_losses),
             ("T + V + losses − motor work".into(), balance),
         ],
@@ -469,18 +476,7 @@ pub fn run<
             .axis("contact", ""),
         );
     }
-    let energy_samples: Vec<(f64, f64, Vec<f64>, Vec<f64>)> = samples
-        .iter()
-        .map(|x| {
-            (
-                x.t,
-                x.energy,
-                x.u.iter().copied().collect(),
-                L::ACTUATED.iter().map(|&a| x.state.state.q[a]).collect(),
-            )
-        })
-        .collect();
-    plots.push(energy_plot(&energy_samples, events));
+    plots.push(energy_plot(samples, events, &L::ACTUATED));
     plots.push(crate::sim::torque_plot(
         &t,
         &crate::sim::motor_names::<L, NQ, NC, NU>(),

@@ -465,18 +465,11 @@ pub fn run<
             .axis("contact", ""),
         );
     }
-    let energy_samples: Vec<(f64, f64, Vec<f64>, Vec<f64>)> = samples
-        .iter()
-        .map(|x| {
-            (
-                x.t,
-                x.energy,
-                x.u.iter().copied().collect(),
-                L::ACTUATED.iter().map(|&a| x.state.state.q[a]).collect(),
-            )
-        })
-        .collect();
-    plots.push(crate::sim::ground::energy_plot(&energy_samples, events));
+    plots.push(crate::sim::ground::energy_plot(
+        samples,
+        events,
+        &L::ACTUATED,
+    ));
     plots.push(crate::sim::torque_plot(
         &t,
         &crate::sim::motor_names::<L, NQ, NC, NU>(),
