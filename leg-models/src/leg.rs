@@ -240,7 +240,8 @@ impl std::error::Error for ParameterError<'_> {}
 ///
 /// Write it through the generated alias (`generated::minitaur::Leg`, `LegF32` for `f32`);
 /// the sizes here are the model's. Every leg has the methods of the first block; a planar
-/// leg's [`ContactModel`] adds its foot in the plane, contacts and design measures.
+/// leg's [`ContactModel`] adds its foot in the plane and contacts; the design measures
+/// take planar and spatial legs.
 pub struct Leg<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize = 0>
 where
     L: LegDynamics<NQ, NC, NU>,
@@ -935,7 +936,17 @@ where
     ) -> Result<FootPdGravity<L, T, R, NQ, NC, NU>, ControlError> {
         FootPdGravity::new(self.params, gains, reference)
     }
+}
 
+/// The design measures at one pose, planar or spatial: each method takes the foot's
+/// dimension `ND` (and the closure points `NP`) from the leg's [`LegModel`], so
+/// `leg.design_measures(&q, &limits)` needs no annotation on a generated leg.
+impl<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
+    Leg<L, T, NQ, NC, NU, NK>
+where
+    L: LegDynamics<NQ, NC, NU>,
+    T: Real,
+{
     /// The frame the design measures use: the leg's body joints held
     /// ([`analysis::LegFrame`]).
     pub fn analysis_frame(&self) -> analysis::LegFrame<NQ> {
@@ -943,12 +954,15 @@ where
     }
 
     /// Every design measure at the assembled pose `q` ([`analysis::point_measures`]).
-    pub fn design_measures(
+    pub fn design_measures<const ND: usize, const NP: usize>(
         &self,
         q: &SVector<T, NQ>,
         limits: &analysis::MotorLimits<T, NU>,
-    ) -> Result<analysis::PointMeasures<T, NQ, NU>, analysis::AnalysisError> {
-        analysis::point_measures::<L, T, NQ, NC, NU>(
+    ) -> Result<analysis::PointMeasures<T, NQ, NU, ND>, analysis::AnalysisError>
+    where
+        L: LegModel<NQ, NC, NU, ND, NP>,
+    {
+        analysis::point_measures::<L, T, NQ, NC, NU, ND, NP>(
             &self.params,
             q,
             &self.analysis_frame(),
@@ -956,14 +970,17 @@ where
         )
     }
 
-    /// The foot's inverse operational-space inertia `Λ⁻¹` at `q`, the motors free or
-    /// locked ([`analysis::foot_inverse_inertia`]).
-    pub fn foot_inverse_inertia(
+    /// The foot's inverse operational-space inertia `Λ⁻¹` (`ND × ND`) at `q`, the motors
+    /// free or locked ([`analysis::foot_inverse_inertia`]).
+    pub fn foot_inverse_inertia<const ND: usize, const NP: usize>(
         &self,
         q: &SVector<T, NQ>,
         motors_locked: bool,
-    ) -> Result<nalgebra::Matrix2<T>, analysis::AnalysisError> {
-        analysis::foot_inverse_inertia::<L, T, NQ, NC, NU>(
+    ) -> Result<SMatrix<T, ND, ND>, analysis::AnalysisError>
+    where
+        L: LegModel<NQ, NC, NU, ND, NP>,
+    {
+        analysis::foot_inverse_inertia::<L, T, NQ, NC, NU, ND, NP>(
             &self.params,
             q,
             &self.analysis_frame(),
@@ -973,13 +990,16 @@ where
 
     /// The impact mitigation factor at `q` with the hip on `body` (a leg with body joints
     /// of its own uses them) ([`analysis::impact_mitigation`]).
-    pub fn impact_mitigation(
+    pub fn impact_mitigation<const ND: usize, const NP: usize>(
         &self,
         q: &SVector<T, NQ>,
         body: &analysis::Body<T>,
-    ) -> Result<T, analysis::AnalysisError> {
+    ) -> Result<T, analysis::AnalysisError>
+    where
+        L: LegModel<NQ, NC, NU, ND, NP>,
+    {
         let coupling = analysis::BodyCoupling::new::<L, T, NQ, NC, NU>(&self.params);
-        analysis::impact_mitigation::<L, T, NQ, NC, NU>(
+        analysis::impact_mitigation::<L, T, NQ, NC, NU, ND, NP>(
             &self.params,
             q,
             &self.analysis_frame(),

@@ -1236,7 +1236,7 @@ macro_rules! leg_class {
                     let m = self.leg.design_measures(&q, &limits).map_err(analysis_err)?;
                     let kin = &m.kinematics;
                     let params = self.leg.params();
-                    let hold = leg_models::analysis::holding_torque::<Model, f64, NQ, NC, NU>(params, &q, kin);
+                    let hold = leg_models::analysis::holding_torque::<Model, f64, NQ, NC, NU, 2>(params, &q, kin);
                     let frame = self.leg.analysis_frame();
                     let polygons = frame.foot_polygons().is_ok();
                     let held: Vec<usize> = (0..NQ).filter(|&j| frame.held[j]).collect();

@@ -43,7 +43,12 @@ fn bench_leg<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU
         .sample_size(40);
     g.bench_function("point", |b| {
         b.iter(|| {
-            point_measures::<L, f64, NQ, NC, NU>(black_box(&p), black_box(&q), &frame, &limits)
+            point_measures::<L, f64, NQ, NC, NU, 2, NC>(
+                black_box(&p),
+                black_box(&q),
+                &frame,
+                &limits,
+            )
         })
     });
     g.finish();

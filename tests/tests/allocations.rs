@@ -267,7 +267,9 @@ fn check_analysis<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, con
         Ok(()) => zero(
             "design measures at a pose",
             allocations(|| {
-                leg_models::analysis::point_measures::<L, f64, NQ, NC, NU>(&p, &q, &frame, &limits)
+                leg_models::analysis::point_measures::<L, f64, NQ, NC, NU, 2, NC>(
+                    &p, &q, &frame, &limits,
+                )
             })
             .0,
         ),
@@ -278,7 +280,7 @@ fn check_analysis<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, con
     zero(
         "impact mitigation factor",
         allocations(|| {
-            leg_models::analysis::impact_mitigation::<L, f64, NQ, NC, NU>(
+            leg_models::analysis::impact_mitigation::<L, f64, NQ, NC, NU, 2, NC>(
                 &p,
                 &q,
                 &frame,

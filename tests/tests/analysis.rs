@@ -155,13 +155,13 @@ pub fn check_every_measure<
     let q = home::<L, NQ, NC, NU>(&p);
     let lim = limits::<NU>(2.0, 20.0);
     // The inverse inertia applies to every leg whose mass matrix is regular.
-    let inv = foot_inverse_inertia::<L, f64, NQ, NC, NU>(&p, &q, &frame, false).unwrap();
+    let inv = foot_inverse_inertia::<L, f64, NQ, NC, NU, 2, NC>(&p, &q, &frame, false).unwrap();
     assert!(inv.iter().all(|x| x.is_finite()), "{}", L::NAME);
     // Positive semi-definite, to rounding on the scale of J_f M⁻¹ J_fᵀ.
     let scale = inverse_inertia_scale::<L, NQ, NC, NU>(&p, &q);
     let eig = inv.symmetric_eigenvalues();
     assert!(eig.min() >= -1e-12 * scale, "{}: {eig:?}", L::NAME);
-    let point = point_measures::<L, f64, NQ, NC, NU>(&p, &q, &frame, &lim);
+    let point = point_measures::<L, f64, NQ, NC, NU, 2, NC>(&p, &q, &frame, &lim);
     let ws = workspace::<L, NQ, NC, NU>(&p, &q, &frame, &grid::<NU>(40));
     match frame.foot_polygons() {
         Ok(()) => {
@@ -217,7 +217,7 @@ pub fn check_force_polygon<
     let torque = limits::<NU>(2.0, 1.0).torque;
     let mut checked = 0;
     for q in sample_poses(&ws, &start, 6, &mut rng) {
-        let Ok(kin) = motor_kinematics::<L, f64, NQ, NC, NU>(&p, &q, &frame) else {
+        let Ok(kin) = motor_kinematics::<L, f64, NQ, NC, NU, 2, NC>(&p, &q, &frame) else {
             continue;
         };
         let poly = force_polygon::<L, f64, NQ, NC, NU>(&p, &q, &kin, &torque);
@@ -229,7 +229,7 @@ pub fn check_force_polygon<
         let gravity = L::gravity_forces(&q, &p);
         let scale = poly.vertices().iter().map(|v| v.amax()).fold(0.0, f64::max);
         for f in poly.vertices() {
-            let u = leg_models::analysis::holding_torque::<L, f64, NQ, NC, NU>(&p, &q, &kin)
+            let u = leg_models::analysis::holding_torque::<L, f64, NQ, NC, NU, 2>(&p, &q, &kin)
                 + kin.foot_jacobian.transpose() * f;
             let at_limit = (0..NU)
                 .filter(|&k| (u[k].abs() - torque[k]).abs() <= 1e-9 * torque[k])
@@ -273,10 +273,10 @@ pub fn check_force_polygon<
         // The largest downward push is on the polygon's boundary, straight down.
         if let Some(fv) = leg_models::analysis::vertical_force(
             &kin.foot_jacobian,
-            &leg_models::analysis::holding_torque::<L, f64, NQ, NC, NU>(&p, &q, &kin),
+            &leg_models::analysis::holding_torque::<L, f64, NQ, NC, NU, 2>(&p, &q, &kin),
             &torque,
         ) {
-            let u = leg_models::analysis::holding_torque::<L, f64, NQ, NC, NU>(&p, &q, &kin)
+            let u = leg_models::analysis::holding_torque::<L, f64, NQ, NC, NU, 2>(&p, &q, &kin)
                 + kin.foot_jacobian.transpose() * Vector2::new(0.0, -fv);
             let worst = (0..NU).map(|k| u[k].abs() / torque[k]).fold(0.0, f64::max);
             assert!((worst - 1.0).abs() < 1e-9, "{}: {worst}", L::NAME);
@@ -303,7 +303,8 @@ pub fn check_foot_inertia<
     let mut rng = Rng::new(11);
     let actuated: [bool; NQ] = core::array::from_fn(|c| L::ACTUATED.contains(&c));
     for locked in [false, true] {
-        let inv = foot_inverse_inertia::<L, f64, NQ, NC, NU>(&p, &q, &frame, locked).unwrap();
+        let inv =
+            foot_inverse_inertia::<L, f64, NQ, NC, NU, 2, NC>(&p, &q, &frame, locked).unwrap();
         let extra = if locked { actuated } else { [false; NQ] };
         // A pre-impact velocity on the closures, the held joints at rest.
         let mut qd = SVector::<f64, NQ>::from_fn(|_, _| rng.range(-1.0, 1.0));
@@ -383,9 +384,10 @@ pub fn check_foot_inertia<
         any = true;
     }
     assert!(any, "{}: no rotor inertia parameter", L::NAME);
-    let locked = foot_inverse_inertia::<L, f64, NQ, NC, NU>(&p, &q, &frame, true).unwrap();
-    let nearly = foot_inverse_inertia::<L, f64, NQ, NC, NU>(&heavy, &q, &frame, false).unwrap();
-    let free = foot_inverse_inertia::<L, f64, NQ, NC, NU>(&p, &q, &frame, false).unwrap();
+    let locked = foot_inverse_inertia::<L, f64, NQ, NC, NU, 2, NC>(&p, &q, &frame, true).unwrap();
+    let nearly =
+        foot_inverse_inertia::<L, f64, NQ, NC, NU, 2, NC>(&heavy, &q, &frame, false).unwrap();
+    let free = foot_inverse_inertia::<L, f64, NQ, NC, NU, 2, NC>(&p, &q, &frame, false).unwrap();
     assert!(
         (locked - nearly).amax()
             <= 1e-5
@@ -491,9 +493,9 @@ pub fn check_foot_rank<
     // the two kinds meet (a parallelogram's straight leg) both vanish: a crossing whose
     // foot rank is small must then be at the workspace's edge, within two cells of a node
     // the branch does not reach.
-    let at_home = leg_models::analysis::foot_rank::<L, f64, NQ, NC, NU>(
+    let at_home = leg_models::analysis::foot_rank::<L, f64, NQ, NC, NU, 2>(
         &frame,
-        &motor_kinematics::<L, f64, NQ, NC, NU>(&p, &start, &frame).unwrap(),
+        &motor_kinematics::<L, f64, NQ, NC, NU, 2, NC>(&p, &start, &frame).unwrap(),
     )
     .abs();
     let n = ws.nodes;
@@ -612,7 +614,7 @@ pub fn check_singularities<
     let foot_at = |a: [f64; 2], b: [f64; 2], t: f64| {
         Vector2::new(a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]))
     };
-    let home_kin = motor_kinematics::<L, f64, NQ, NC, NU>(&p, &start, &frame).unwrap();
+    let home_kin = motor_kinematics::<L, f64, NQ, NC, NU, 2, NC>(&p, &start, &frame).unwrap();
     let mut passive_checked = 0;
     let mut drawn_checked = 0;
     let mut edges_checked = 0;
@@ -693,7 +695,7 @@ pub fn check_singularities<
                         .is_ok());
                     }
                     assert_eq!(
-                        motor_kinematics::<L, f64, NQ, NC, NU>(&p, &q, &frame).err(),
+                        motor_kinematics::<L, f64, NQ, NC, NU, 2, NC>(&p, &q, &frame).err(),
                         Some(AnalysisError::PassiveSingular)
                     );
                     if on_square {
@@ -735,11 +737,13 @@ pub fn check_singularities<
 
                     let interior = home_kin.foot_jacobian;
                     let (s_in_hi, s_in_lo) = leg_models::analysis::singular_values(&interior);
-                    match motor_kinematics::<L, f64, NQ, NC, NU>(&p, &q, &frame) {
+                    match motor_kinematics::<L, f64, NQ, NC, NU, 2, NC>(&p, &q, &frame) {
                         Ok(kin) => {
                             let rank = |kin| {
-                                leg_models::analysis::foot_rank::<L, f64, NQ, NC, NU>(&frame, kin)
-                                    .abs()
+                                leg_models::analysis::foot_rank::<L, f64, NQ, NC, NU, 2>(
+                                    &frame, kin,
+                                )
+                                .abs()
                             };
                             let (at_end, at_home) = (rank(&kin), rank(&home_kin));
                             assert!(
@@ -901,8 +905,8 @@ fn follow_ends_at_the_fold_where_a_joint_turns_fast() {
     let tol = Tolerance::default();
     let n = ws.nodes;
     let rank = |q: &SVector<f64, 7>| {
-        let kin = motor_kinematics::<L, f64, 7, 4, 3>(&p, q, &frame).unwrap();
-        leg_models::analysis::foot_rank::<L, f64, 7, 4, 3>(&frame, &kin).abs()
+        let kin = motor_kinematics::<L, f64, 7, 4, 3, 2, 4>(&p, q, &frame).unwrap();
+        leg_models::analysis::foot_rank::<L, f64, 7, 4, 3, 2>(&frame, &kin).abs()
     };
     let at_home = rank(&start);
     let (mut checked, mut short) = (0, 0.0f64);
@@ -1132,7 +1136,7 @@ fn impact_mitigation_on_a_body_matches_a_leg_with_that_body() {
         qr[3] += rng.range(-0.3, 0.3);
         qr[4] += rng.range(-0.3, 0.3);
         let qa = SVector::<f64, 2>::new(qr[3], qr[4]);
-        let of_runner = impact_mitigation::<KneeRunner, f64, 5, 0, 2>(
+        let of_runner = impact_mitigation::<KneeRunner, f64, 5, 0, 2, 2, 0>(
             &runner,
             &qr,
             &frame_runner,
@@ -1140,7 +1144,7 @@ fn impact_mitigation_on_a_body_matches_a_leg_with_that_body() {
             None,
         )
         .unwrap();
-        let of_arm = impact_mitigation::<TwoLink, f64, 2, 0, 2>(
+        let of_arm = impact_mitigation::<TwoLink, f64, 2, 0, 2, 2, 0>(
             &arm,
             &qa,
             &frame_arm,
@@ -1156,7 +1160,13 @@ fn impact_mitigation_on_a_body_matches_a_leg_with_that_body() {
     }
     // On a fixed hip the locked leg is rigid: the factor needs a body.
     assert_eq!(
-        impact_mitigation::<TwoLink, f64, 2, 0, 2>(&arm, &q_arm, &frame_arm, &Body::Fixed, None),
+        impact_mitigation::<TwoLink, f64, 2, 0, 2, 2, 0>(
+            &arm,
+            &q_arm,
+            &frame_arm,
+            &Body::Fixed,
+            None
+        ),
         Err(AnalysisError::NotApplicable(
             leg_models::analysis::Inapplicable::RigidWhenLocked
         ))
@@ -1169,8 +1179,8 @@ fn impact_mitigation_on_a_body_matches_a_leg_with_that_body() {
         let mut q = SVector::<f64, 5>::from(<P as leg_models::LegDynamics<5, 4, 2>>::HOME);
         project_position::<P, f64, 5, 4, 2>(&p, &mut q, &Tolerance::default()).unwrap();
         let frame = LegFrame::<5>::of::<P, 4, 2>();
-        let e =
-            impact_mitigation::<P, f64, 5, 4, 2>(&p, &q, &frame, &Body::Fixed, None).unwrap_err();
+        let e = impact_mitigation::<P, f64, 5, 4, 2, 2, 4>(&p, &q, &frame, &Body::Fixed, None)
+            .unwrap_err();
         assert_eq!(
             e,
             AnalysisError::NotApplicable(leg_models::analysis::Inapplicable::FootHeld),
@@ -1179,7 +1189,7 @@ fn impact_mitigation_on_a_body_matches_a_leg_with_that_body() {
         assert!(!e.to_string().contains("1 motor"), "{e}");
     }
     // A heavier body mitigates more (the leg is a smaller share of what hits).
-    let light = impact_mitigation::<TwoLink, f64, 2, 0, 2>(
+    let light = impact_mitigation::<TwoLink, f64, 2, 0, 2, 2, 0>(
         &arm,
         &q_arm,
         &frame_arm,
@@ -1187,7 +1197,7 @@ fn impact_mitigation_on_a_body_matches_a_leg_with_that_body() {
         Some(&coupling),
     )
     .unwrap();
-    let heavy = impact_mitigation::<TwoLink, f64, 2, 0, 2>(
+    let heavy = impact_mitigation::<TwoLink, f64, 2, 0, 2, 2, 0>(
         &arm,
         &q_arm,
         &frame_arm,
@@ -1201,7 +1211,7 @@ fn impact_mitigation_on_a_body_matches_a_leg_with_that_body() {
     // mitigates fully: ξ → 1, approached monotonically by ever heavier bodies.
     let mut last = heavy;
     for mass in [1e4, 1e8, 1e16, 1e308] {
-        let xi = impact_mitigation::<TwoLink, f64, 2, 0, 2>(
+        let xi = impact_mitigation::<TwoLink, f64, 2, 0, 2, 2, 0>(
             &arm,
             &q_arm,
             &frame_arm,

@@ -392,7 +392,7 @@ where
                 torque: SVector::<f64, NU>::from_element(limit),
                 speed: SVector::<f64, NU>::from_element(limit),
             };
-            if let Ok(m) = point_measures::<L, f64, NQ, NC, NU>(&p, &q, &frame, &limits) {
+            if let Ok(m) = point_measures::<L, f64, NQ, NC, NU, 2, NC>(&p, &q, &frame, &limits) {
                 prop_assert!(on_closures, "measures off the closures at {q:?}");
                 prop_assert!(
                     m.passive_rank.abs() <= 1.0 + 1e-12 && m.foot_rank.abs() <= 1.0 + 1e-12,
@@ -409,14 +409,19 @@ where
                 );
                 oks.borrow_mut()[0] += 1;
             }
-            if let Ok(inv) = foot_inverse_inertia::<L, f64, NQ, NC, NU>(&p, &q, &frame, true) {
+            if let Ok(inv) = foot_inverse_inertia::<L, f64, NQ, NC, NU, 2, NC>(&p, &q, &frame, true)
+            {
                 prop_assert!(on_closures && inv.iter().all(|x| x.is_finite()), "{inv:?}");
             }
             let coupling = BodyCoupling::new::<L, f64, NQ, NC, NU>(&p);
             let body = Body::Translating { mass: 10.0 };
-            if let Ok(xi) =
-                impact_mitigation::<L, f64, NQ, NC, NU>(&p, &q, &frame, &body, coupling.as_ref())
-            {
+            if let Ok(xi) = impact_mitigation::<L, f64, NQ, NC, NU, 2, NC>(
+                &p,
+                &q,
+                &frame,
+                &body,
+                coupling.as_ref(),
+            ) {
                 prop_assert!(on_closures, "ξ off the closures at {q:?}");
                 prop_assert!((-1e-9..=1.0 + 1e-9).contains(&xi), "ξ = {xi}");
             }

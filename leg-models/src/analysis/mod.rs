@@ -45,14 +45,15 @@
 
 use core::fmt;
 
-use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
+use nalgebra::{SMatrix, SVector, Vector2};
 
 use crate::assembly::{check_on_closures, AssemblyError};
 use crate::dynamics::forward::rcond_floor;
 use crate::dynamics::structure::{Actuation, NotApplicable};
-use crate::model::contract::{LegModel, Parameters, Real};
+use crate::model::contract::{LegDynamics, LegModel, Parameters, Real};
 use crate::model::linalg::{mul, mul_tn, Cholesky, PivotedLdlt};
 
+pub mod polytope;
 #[cfg(feature = "std")]
 pub mod workspace;
 
@@ -65,8 +66,12 @@ pub enum Inapplicable {
     /// Motor coordinates or the foot's two directions need other motors
     /// ([`NotApplicable`]: under-, over-actuated, or one motor for a 2-D polygon).
     Structure(NotApplicable),
-    /// One motor moves the foot along a curve: no area, no 2-D polygon.
+    /// One motor moves the foot along a curve: no area, no 2-D polygon (nor a 3-D
+    /// polytope).
     FootOnACurve,
+    /// Two motors move a spatial leg's foot over a surface: no volume, no 3-D force or
+    /// speed polytope.
+    FootOnASurface,
     /// The foot's path over one motor's turn is for a one-motor leg; this one has more
     /// (its workspace is an area).
     NotOneMotor {
@@ -85,8 +90,8 @@ pub enum Inapplicable {
     /// With its motors locked the foot cannot move (a leg on a fixed hip): the impact
     /// mitigation factor needs a body that moves ([`Body::Translating`]).
     RigidWhenLocked,
-    /// The leg's parameters have no `gravity_x`/`gravity_y` or no `<link>_mass` (a
-    /// hand-written model): the body's coupling cannot be computed.
+    /// The leg's parameters have no `gravity_x`/`gravity_y` (and `gravity_z` in space) or
+    /// no `<link>_mass` (a hand-written model): the body's coupling cannot be computed.
     MissingParameters,
 }
 
@@ -97,6 +102,10 @@ impl fmt::Display for Inapplicable {
             Inapplicable::FootOnACurve => write!(
                 f,
                 "the foot has two coordinates but the leg has 1 motor: it moves the foot along a curve, so there is no workspace area and no 2-D force or speed polygon"
+            ),
+            Inapplicable::FootOnASurface => write!(
+                f,
+                "the foot has three coordinates but the leg has 2 motors: they move the foot over a surface, so there is no workspace volume and no 3-D force or speed polytope"
             ),
             Inapplicable::FootHeld => write!(
                 f,
@@ -116,7 +125,7 @@ impl fmt::Display for Inapplicable {
             ),
             Inapplicable::MissingParameters => write!(
                 f,
-                "the model's parameters lack gravity_x, gravity_y or a <link>_mass: the body's coupling cannot be computed"
+                "the model's parameters lack gravity_x, gravity_y (gravity_z in space) or a <link>_mass: the body's coupling cannot be computed"
             ),
         }
     }
@@ -220,7 +229,7 @@ impl<const NQ: usize> LegFrame<NQ> {
     /// The frame of leg `L`.
     pub fn of<L, const NC: usize, const NU: usize>() -> Self
     where
-        L: LegModel<NQ, NC, NU>,
+        L: LegDynamics<NQ, NC, NU>,
     {
         let above = |j: usize, a: usize| {
             let mut k = L::PARENTS[a];
@@ -273,12 +282,22 @@ impl<const NQ: usize> LegFrame<NQ> {
         }
     }
 
-    /// The motors span the foot's two directions: motor coordinates, and two motors or
-    /// more (at most [`MAX_MOTORS`]).
+    /// The motors span the planar foot's two directions: motor coordinates, and two
+    /// motors or more (at most [`MAX_MOTORS`]).
     pub fn foot_polygons(&self) -> Result<(), Inapplicable> {
+        self.foot_spans(2)
+    }
+
+    /// The motors can span a foot of `dims` coordinates (2 planar, 3 spatial): motor
+    /// coordinates, and `dims` motors or more (at most [`MAX_MOTORS`]).
+    pub fn foot_spans(&self, dims: usize) -> Result<(), Inapplicable> {
         self.motor_coordinates()?;
-        if self.motors < 2 {
-            return Err(Inapplicable::FootOnACurve);
+        if self.motors < dims {
+            return Err(if self.motors < 2 {
+                Inapplicable::FootOnACurve
+            } else {
+                Inapplicable::FootOnASurface
+            });
         }
         if self.motors > MAX_MOTORS {
             return Err(Inapplicable::TooManyMotors {
@@ -304,24 +323,25 @@ pub struct MotorLimits<T: Real, const NU: usize> {
 pub enum Body<T: Real> {
     /// The hip on a fixed base (or, on a leg with body joints, the spec's own body).
     Fixed,
-    /// The hip on a body of this mass (kg) that translates in the plane (held upright):
-    /// the base frame moves with it.
+    /// The hip on a body of this mass (kg) that translates (held upright): in the plane
+    /// for a planar leg, in space for a spatial one. The base frame moves with it.
     Translating {
         /// The body's mass without the leg (kg).
         mass: T,
     },
 }
 
-/// The motion of a leg in its motor coordinates at one pose: `q̇ = G θ̇`, `ẏ = J_θ θ̇`.
+/// The motion of a leg in its motor coordinates at one pose: `q̇ = G θ̇`, `ẏ = J_θ θ̇`,
+/// the foot `ẏ` with `ND` coordinates (2 planar, the default; 3 spatial).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MotorKinematics<T: Real, const NQ: usize, const NU: usize> {
+pub struct MotorKinematics<T: Real, const NQ: usize, const NU: usize, const ND: usize = 2> {
     /// `G` (`NQ × NU`): the joint rates when motor `k` turns at unit rate (held joints
     /// at rest).
     pub g: SMatrix<T, NQ, NU>,
     /// `J_θ = J_f G`: the foot's velocity per unit motor rate.
-    pub foot_jacobian: SMatrix<T, 2, NU>,
+    pub foot_jacobian: SMatrix<T, ND, NU>,
     /// `J_f`: the foot's velocity per unit joint rate.
-    pub joint_foot_jacobian: SMatrix<T, 2, NQ>,
+    pub joint_foot_jacobian: SMatrix<T, ND, NQ>,
     /// The passive joints' rank measure ([`PointMeasures::passive_rank`]).
     pub passive_rank: T,
 }
@@ -406,13 +426,21 @@ fn passive_rank<T: Real, const NQ: usize, const NC: usize>(
 /// `G` and `J_θ` at an assembled pose `q`, the joints of `frame.held` at rest. Fails
 /// where the passive joints lose rank ([`AnalysisError::PassiveSingular`]) and where
 /// motor coordinates do not exist for this leg.
-pub fn motor_kinematics<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+pub fn motor_kinematics<
+    L,
+    T,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>(
     params: &L::Params<T>,
     q: &SVector<T, NQ>,
     frame: &LegFrame<NQ>,
-) -> Result<MotorKinematics<T, NQ, NU>, AnalysisError>
+) -> Result<MotorKinematics<T, NQ, NU, ND>, AnalysisError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
     T: Real,
 {
     frame.motor_coordinates()?;
@@ -485,6 +513,55 @@ pub fn singular_values<T: Real, const N: usize>(a: &SMatrix<T, 2, N>) -> (T, T) 
     (hi.sqrt(), (det / hi).sqrt())
 }
 
+/// The extreme singular values `(σ_max, σ_min)` of an `ND × N` matrix over its `ND`
+/// rows (`σ_min = 0` where `N < ND`): the closed form of [`singular_values`] in the
+/// plane; in space one-sided Jacobi rotations (Hestenes 1958) on the columns of `Aᵀ`,
+/// which keep `σ_min` to relative accuracy where `A Aᵀ`'s eigenvalues would lose it.
+pub fn extreme_singular_values<T: Real, const ND: usize, const N: usize>(
+    a: &SMatrix<T, ND, N>,
+) -> (T, T) {
+    if ND == 2 {
+        return singular_values(&SMatrix::<T, 2, N>::from_fn(|r, c| a[(r, c)]));
+    }
+    let mut b = a.transpose();
+    // Rotations until every pair of columns is orthogonal to rounding; a few sweeps do
+    // at these sizes, the bound keeps a NaN from looping.
+    for _ in 0..64 {
+        let mut rotated = false;
+        for i in 0..ND {
+            for k in i + 1..ND {
+                let alpha = b.column(i).norm_squared();
+                let beta = b.column(k).norm_squared();
+                let gamma = b.column(i).dot(&b.column(k));
+                if !(gamma.abs() > T::default_epsilon() * (alpha * beta).sqrt()) {
+                    continue;
+                }
+                rotated = true;
+                let zeta = (beta - alpha) / (gamma * T::lit(2.0));
+                let t = zeta.signum() / (zeta.abs() + (T::one() + zeta * zeta).sqrt());
+                let c = T::one() / (T::one() + t * t).sqrt();
+                let s = c * t;
+                for r in 0..N {
+                    let (x, y) = (b[(r, i)], b[(r, k)]);
+                    b[(r, i)] = c * x - s * y;
+                    b[(r, k)] = s * x + c * y;
+                }
+            }
+        }
+        if !rotated {
+            break;
+        }
+    }
+    let mut hi = T::zero();
+    let mut lo = T::one() / T::zero();
+    for i in 0..ND {
+        let n = b.column(i).norm();
+        hi = hi.max(n);
+        lo = lo.min(n);
+    }
+    (hi, lo)
+}
+
 /// Whether the passive joints' Jacobian `J_p` (the closures' columns of the joints that
 /// are neither motors nor held) is square with no redundant rows: then
 /// [`PointMeasures::passive_rank`] is the signed `det J_p` over its columns' norms.
@@ -492,7 +569,7 @@ pub fn passive_square<L, const NQ: usize, const NC: usize, const NU: usize>(
     frame: &LegFrame<NQ>,
 ) -> bool
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
 {
     let passive = (0..NQ)
         .filter(|&c| !frame.held[c] && !L::ACTUATED.contains(&c))
@@ -501,21 +578,22 @@ where
 }
 
 /// The foot's rank measure ("type I") with motor kinematics `kin`: `σ_min / σ_max` of
-/// `J_f Q`, `Q` an orthonormal basis of the motions the mechanism has with the held
+/// `J_f Q` over the foot's `ND` directions, `Q` an orthonormal basis of the motions the mechanism has with the held
 /// joints at rest (the span of `G`). It depends on where the foot can move and not on
 /// how the motors parametrize that motion: zero exactly where the foot loses a
 /// direction, and finite where the passive joints lose rank (there `J_θ = J_f G` blows
-/// up and its columns align, so a measure of `J_θ`'s own shape would vanish). With two
-/// motors and a square `J_p` ([`passive_square`]) it carries the sign of `det J_p ·
-/// det J_θ`, which is `± det [J; J_f]` over the free joints (the sign fixed by the
-/// joints' order): it changes across a foot singularity and not across a passive one.
-/// Zero with one motor (the foot has one direction).
-pub fn foot_rank<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+/// up and its columns align, so a measure of `J_θ`'s own shape would vanish). With as
+/// many motors as the foot has coordinates and a square `J_p` ([`passive_square`]) it
+/// carries the sign of `det J_p · det J_θ`, which is `± det [J; J_f]` over the free
+/// joints (the sign fixed by the joints' order): it changes across a foot singularity
+/// and not across a passive one. Zero with fewer motors than the foot's coordinates (the
+/// foot moves on a curve or a surface).
+pub fn foot_rank<L, T, const NQ: usize, const NC: usize, const NU: usize, const ND: usize>(
     frame: &LegFrame<NQ>,
-    kin: &MotorKinematics<T, NQ, NU>,
+    kin: &MotorKinematics<T, NQ, NU, ND>,
 ) -> T
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     // Gram–Schmidt, twice per column: G's columns can be nearly parallel near a passive
@@ -535,14 +613,14 @@ where
         }
         basis.column_mut(k).unscale_mut(norm);
     }
-    let (hi, lo) = singular_values(&mul(&kin.joint_foot_jacobian, &basis));
-    if hi == T::zero() || NU < 2 {
+    let (hi, lo) = extreme_singular_values(&mul(&kin.joint_foot_jacobian, &basis));
+    if hi == T::zero() || NU < ND {
         return T::zero();
     }
     let ratio = lo / hi;
-    if NU == 2 && passive_square::<L, NQ, NC, NU>(frame) {
+    if NU == ND && passive_square::<L, NQ, NC, NU>(frame) {
         let jt = &kin.foot_jacobian;
-        let det = jt[(0, 0)] * jt[(1, 1)] - jt[(0, 1)] * jt[(1, 0)];
+        let det = determinant(SMatrix::<T, ND, ND>::from_fn(|r, c| jt[(r, c)]));
         if (det < T::zero()) != (kin.passive_rank < T::zero()) {
             return -ratio;
         }
@@ -663,40 +741,41 @@ pub fn force_polygon<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     torque: &SVector<T, NU>,
 ) -> Polygon<T>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
-    let hold = holding_torque::<L, T, NQ, NC, NU>(params, q, kin);
+    let hold = holding_torque::<L, T, NQ, NC, NU, 2>(params, q, kin);
     slab_polygon(&kin.foot_jacobian, &(-torque - hold), &(torque - hold))
 }
 
 /// `Gᵀ G(q)`: the motor torques that hold the leg still with no force at the foot.
-pub fn holding_torque<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+pub fn holding_torque<L, T, const NQ: usize, const NC: usize, const NU: usize, const ND: usize>(
     params: &L::Params<T>,
     q: &SVector<T, NQ>,
-    kin: &MotorKinematics<T, NQ, NU>,
+    kin: &MotorKinematics<T, NQ, NU, ND>,
 ) -> SVector<T, NU>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     mul_tn(&kin.g, &L::gravity_forces(q, params))
 }
 
-/// The largest downward push `F ≥ 0` (the foot putting `(0, −F)` on the ground) the
-/// motors hold at rest within `torque`; `None` where no downward force can be held,
-/// infinite where no motor takes any of it (the structure holds it all).
-pub fn vertical_force<T: Real, const NU: usize>(
-    foot_jacobian: &SMatrix<T, 2, NU>,
+/// The largest downward push `F ≥ 0` (the foot putting `−F` along the vertical, `y` in
+/// the plane and `z` in space, on the ground) the motors hold at rest within `torque`;
+/// `None` where no downward force can be held, infinite where no motor takes any of it
+/// (the structure holds it all).
+pub fn vertical_force<T: Real, const ND: usize, const NU: usize>(
+    foot_jacobian: &SMatrix<T, ND, NU>,
     hold: &SVector<T, NU>,
     torque: &SVector<T, NU>,
 ) -> Option<T> {
-    // u_k = hold_k − F a_k with a_k = J_θ[1, k]: F within [lo, hi] for every motor.
-    // Unbounded until a motor bounds it: infinite where no motor is loaded by a vertical
-    // force (the structure holds it).
+    // u_k = hold_k − F a_k with a_k = J_θ[vertical, k]: F within [lo, hi] for every
+    // motor. Unbounded until a motor bounds it: infinite where no motor is loaded by a
+    // vertical force (the structure holds it).
     let (mut lo, mut hi) = (T::zero(), T::one() / T::zero());
     for k in 0..NU {
-        let a = foot_jacobian[(1, k)];
+        let a = foot_jacobian[(ND - 1, k)];
         let (below, above) = (-torque[k] - hold[k], torque[k] - hold[k]);
         // −F a ∈ [below, above]
         if a == T::zero() {
@@ -756,12 +835,18 @@ pub fn speed_polygon<T: Real, const NU: usize>(
 }
 
 /// The fastest vertical foot speed with motor speeds `|θ̇_k| ≤ ω_k` and no sideways
-/// motion: the largest `v` with `(0, v)` in [`speed_polygon`].
-pub fn vertical_speed<T: Real, const NU: usize>(
-    foot_jacobian: &SMatrix<T, 2, NU>,
+/// motion: the largest `v` with `(0, v)` in [`speed_polygon`], or `(0, 0, v)` in the
+/// speed zonotope of a spatial leg ([`polytope::zonotope_reach`]).
+pub fn vertical_speed<T: Real, const ND: usize, const NU: usize>(
+    foot_jacobian: &SMatrix<T, ND, NU>,
     speed: &SVector<T, NU>,
 ) -> T {
-    let poly = speed_polygon(foot_jacobian, speed);
+    if ND == 3 {
+        let jt = SMatrix::<T, 3, NU>::from_fn(|r, c| foot_jacobian[(r, c)]);
+        return polytope::zonotope_reach(&jt, speed, &nalgebra::Vector3::z());
+    }
+    let jt = SMatrix::<T, 2, NU>::from_fn(|r, c| foot_jacobian[(r, c)]);
+    let poly = speed_polygon(&jt, speed);
     ray_reach(&poly, &Vector2::new(T::zero(), T::one()))
 }
 
@@ -854,30 +939,46 @@ fn delassus<T: Real, const NQ: usize, const NC: usize, const NR: usize>(
 /// The foot's inverse operational-space inertia `Λ⁻¹ = J_f C J_fᵀ` (1/kg) at `q`: the
 /// foot's velocity change per unit impulse there. The joints of `frame.held` fixed (the
 /// leg in its body's frame); with `motors_locked`, the motors' joints too.
-pub fn foot_inverse_inertia<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+pub fn foot_inverse_inertia<
+    L,
+    T,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>(
     params: &L::Params<T>,
     q: &SVector<T, NQ>,
     frame: &LegFrame<NQ>,
     motors_locked: bool,
-) -> Result<Matrix2<T>, AnalysisError>
+) -> Result<SMatrix<T, ND, ND>, AnalysisError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
     T: Real,
 {
     check_on_closures::<L, T, NQ, NC, NU>(params, q)?;
-    inverse_inertia_on_closures::<L, T, NQ, NC, NU>(params, q, frame, motors_locked)
+    inverse_inertia_on_closures::<L, T, NQ, NC, NU, ND, NP>(params, q, frame, motors_locked)
 }
 
 /// [`foot_inverse_inertia`] at a pose already checked to be on its closures (the check
 /// solves for `φ`; [`point_measures`] does it once for all its measures).
-fn inverse_inertia_on_closures<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+fn inverse_inertia_on_closures<
+    L,
+    T,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>(
     params: &L::Params<T>,
     q: &SVector<T, NQ>,
     frame: &LegFrame<NQ>,
     motors_locked: bool,
-) -> Result<Matrix2<T>, AnalysisError>
+) -> Result<SMatrix<T, ND, ND>, AnalysisError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
     T: Real,
 {
     let locked: [bool; NQ] =
@@ -893,7 +994,7 @@ where
 
 /// The effective mass along the unit direction `d` of a foot with inverse inertia
 /// `inv`: `1 / (dᵀ Λ⁻¹ d)` (infinite where the foot cannot move along `d`).
-pub fn effective_mass<T: Real>(inv: &Matrix2<T>, d: &Vector2<T>) -> T {
+pub fn effective_mass<T: Real, const ND: usize>(inv: &SMatrix<T, ND, ND>, d: &SVector<T, ND>) -> T {
     let x = d.dot(&(inv * d));
     if x > T::zero() {
         T::one() / x
@@ -903,30 +1004,51 @@ pub fn effective_mass<T: Real>(inv: &Matrix2<T>, d: &Vector2<T>) -> T {
 }
 
 /// What the body of [`Body::Translating`] needs from the leg's parameters: copies with
-/// gravity along `x`, along `y` and off (so that `∂V/∂q` gives the momentum Jacobian of
-/// the links, `P = Σ mᵢ J_cᵢ`), and the leg's mass. Prepared once per parameter set.
+/// gravity along each axis of the leg's space (`x`, `y`, and `z` on a spatial leg) and
+/// off (so that `∂V/∂q` gives the momentum Jacobian of the links, `P = Σ mᵢ J_cᵢ`), and
+/// the leg's mass. Prepared once per parameter set.
 #[derive(Clone, Copy, Debug)]
 pub struct BodyCoupling<P> {
-    unit_x: P,
-    unit_y: P,
+    /// Gravity of 1 along axis `i` (the first `dimension` used).
+    units: [P; 3],
     zero: P,
+    /// 2 on a planar leg, 3 on a spatial one.
+    dimension: usize,
     /// The leg's mass (kg): the sum of its links' `<link>_mass`.
     pub leg_mass: f64,
 }
 
 impl<P> BodyCoupling<P> {
-    /// From the parameters of leg `L`; `None` without `gravity_x`, `gravity_y` or a
-    /// link's `<link>_mass`.
+    /// From the parameters of leg `L`; `None` without `gravity_x`, `gravity_y` (and
+    /// `gravity_z` on a spatial leg) or a link's `<link>_mass`. A ball joint's three
+    /// coordinates (`rod.x`, `rod.y`, `rod.z`) move one link, `rod`, counted once.
     pub fn new<L, T, const NQ: usize, const NC: usize, const NU: usize>(params: &P) -> Option<Self>
     where
-        L: LegModel<NQ, NC, NU, Params<T> = P>,
+        L: LegDynamics<NQ, NC, NU, Params<T> = P>,
         T: Real,
         P: Parameters<T> + Clone,
     {
         let index = |name: &str| P::NAMES.iter().position(|n| *n == name);
-        let (gx, gy) = (index("gravity_x")?, index("gravity_y")?);
+        let dimension = L::DIMENSION;
+        let axes = [
+            index("gravity_x")?,
+            index("gravity_y")?,
+            index("gravity_z").unwrap_or(usize::MAX),
+        ];
+        if dimension == 3 && axes[2] == usize::MAX {
+            return None;
+        }
         let mut leg_mass = 0.0;
-        for link in L::JOINT_NAMES {
+        for (j, joint) in L::JOINT_NAMES.iter().enumerate() {
+            // A ball joint's second and third angles move the link its first one names.
+            if L::BALL_JOINTS.iter().any(|&b| j == b + 1 || j == b + 2) {
+                continue;
+            }
+            let link = if L::BALL_JOINTS.contains(&j) {
+                joint.strip_suffix(".x").unwrap_or(joint)
+            } else {
+                joint
+            };
             let i = P::NAMES.iter().position(|n| {
                 n.strip_prefix(link)
                     .and_then(|rest| rest.strip_prefix('_'))
@@ -935,16 +1057,17 @@ impl<P> BodyCoupling<P> {
             let m: f64 = params.get(i)?.to_subset()?;
             leg_mass += m;
         }
-        let with = |x: f64, y: f64| {
+        let with = |along: Option<usize>| {
             let mut p = params.clone();
-            p.set(gx, T::lit(x));
-            p.set(gy, T::lit(y));
+            for (k, &i) in axes.iter().enumerate().take(dimension) {
+                p.set(i, T::lit(if along == Some(k) { 1.0 } else { 0.0 }));
+            }
             p
         };
         Some(BodyCoupling {
-            unit_x: with(1.0, 0.0),
-            unit_y: with(0.0, 1.0),
-            zero: with(0.0, 0.0),
+            units: [with(Some(0)), with(Some(1)), with(Some(2))],
+            zero: with(None),
+            dimension,
             leg_mass,
         })
     }
@@ -955,8 +1078,17 @@ impl<P> BodyCoupling<P> {
 /// own (`frame.has_body()`), `body` must be [`Body::Fixed`] and the spec's body moves;
 /// otherwise the hip is put on `body` (a translating body of mass `m_b`: with the links'
 /// momentum Jacobian `P` and `m_t = m_b + m_leg`, `Λ⁻¹ = I/m_t + Ā C(M̄) Āᵀ` with
-/// `M̄ = M − PᵀP/m_t`, `Ā = J_f − P/m_t`; locked, `Λ_L = m_t I`).
-pub fn impact_mitigation<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+/// `M̄ = M − PᵀP/m_t`, `Ā = J_f − P/m_t`; locked, `Λ_L = m_t I`). In space the body
+/// translates along all three axes and the determinants are 3 × 3.
+pub fn impact_mitigation<
+    L,
+    T,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>(
     params: &L::Params<T>,
     q: &SVector<T, NQ>,
     frame: &LegFrame<NQ>,
@@ -964,7 +1096,7 @@ pub fn impact_mitigation<L, T, const NQ: usize, const NC: usize, const NU: usize
     coupling: Option<&BodyCoupling<L::Params<T>>>,
 ) -> Result<T, AnalysisError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
     T: Real,
 {
     check_on_closures::<L, T, NQ, NC, NU>(params, q)?;
@@ -976,11 +1108,15 @@ where
     let (free, locked) = match (body, frame.has_body()) {
         (Body::Translating { mass }, false) => {
             let c = coupling.ok_or(Inapplicable::MissingParameters)?;
+            if c.dimension != ND {
+                return Err(Inapplicable::MissingParameters.into());
+            }
             let g0 = L::gravity_forces(q, &c.zero);
             // ∂V/∂q with unit gravity along x is −Σ mᵢ J_cᵢ,xᵀ (springs cancel with g0).
-            let px = g0 - L::gravity_forces(q, &c.unit_x);
-            let py = g0 - L::gravity_forces(q, &c.unit_y);
-            let p = SMatrix::<T, 2, NQ>::from_fn(|r, col| if r == 0 { px[col] } else { py[col] });
+            let mut p = SMatrix::<T, ND, NQ>::zeros();
+            for (r, unit) in c.units.iter().enumerate().take(ND) {
+                p.set_row(r, &(g0 - L::gravity_forces(q, unit)).transpose());
+            }
             let total = *mass + T::lit(c.leg_mass);
             if total <= T::zero() || !total.is_finite() {
                 return Err(AnalysisError::NonFinite);
@@ -988,13 +1124,13 @@ where
             let inv_t = T::one() / total;
             let m_bar = m - mul_tn(&p, &p) * inv_t;
             let a_bar = jf - p * inv_t;
-            let own = Matrix2::identity() * inv_t;
+            let own = SMatrix::<T, ND, ND>::identity() * inv_t;
             let leg_free = delassus(&m_bar, &j, &a_bar, &none, L::REDUNDANT_ROWS)?;
             // A foot the closures hold to the body moves only with it: free and locked are
             // both the body's own 1/m, and their difference is rounding (ξ = 3 was found).
             let scale = leg_free.amax();
-            let det = leg_free.determinant();
-            if !det.is_finite() || det <= scale * scale * T::default_epsilon() * T::lit(1e3) {
+            let det = small_determinant(leg_free);
+            if !det.is_finite() || det <= power(scale, ND) * T::default_epsilon() * T::lit(1e3) {
                 return Err(Inapplicable::FootHeld.into());
             }
             let free = own + leg_free;
@@ -1006,7 +1142,7 @@ where
             delassus(&m, &j, &jf, &actuated, L::REDUNDANT_ROWS)?,
         ),
     };
-    let det_free = free.determinant();
+    let det_free = small_determinant(free);
     if !det_free.is_finite() {
         return Err(AnalysisError::NonFinite);
     }
@@ -1014,10 +1150,10 @@ where
     // rounding's size, and ξ = 3.
     // The scale is the foot's inverse inertia with the closures cut (J_f M⁻¹ J_fᵀ): a
     // pinned foot's Λ⁻¹ is all rounding, small against it.
-    let scale = delassus::<T, NQ, 0, 2>(&m, &SMatrix::zeros(), &jf, &none, 0)?
+    let scale = delassus::<T, NQ, 0, ND>(&m, &SMatrix::zeros(), &jf, &none, 0)?
         .amax()
         .max(free.amax());
-    if det_free <= scale * scale * T::default_epsilon() * T::lit(1e3) {
+    if det_free <= power(scale, ND) * T::default_epsilon() * T::lit(1e3) {
         // Λ⁻¹ with the motors free is singular: a direction the foot cannot move in,
         // whatever the motors (their number is not the reason).
         return Err(Inapplicable::FootHeld.into());
@@ -1028,18 +1164,34 @@ where
     if !on_body && locked.amax() <= free.amax() * T::default_epsilon() * T::lit(1e3) {
         return Err(Inapplicable::RigidWhenLocked.into());
     }
-    Ok((free - locked).determinant() / det_free)
+    Ok(small_determinant(free - locked) / det_free)
 }
 
-/// Every measure at one assembled pose, in the leg's frame.
+/// `det A` of the foot's small matrices: the 2 × 2 closed form in the plane (as before
+/// spatial legs, to the bit), elimination otherwise.
+fn small_determinant<T: Real, const N: usize>(a: SMatrix<T, N, N>) -> T {
+    if N == 2 {
+        a[(0, 0)] * a[(1, 1)] - a[(1, 0)] * a[(0, 1)]
+    } else {
+        determinant(a)
+    }
+}
+
+/// `x^n`.
+fn power<T: Real>(x: T, n: usize) -> T {
+    (0..n).fold(T::one(), |p, _| p * x)
+}
+
+/// Every measure at one assembled pose, in the leg's frame; the foot has `ND`
+/// coordinates (2 planar, the default; 3 spatial, vertical `z`).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PointMeasures<T: Real, const NQ: usize, const NU: usize> {
+pub struct PointMeasures<T: Real, const NQ: usize, const NU: usize, const ND: usize = 2> {
     /// The foot (base frame, m).
-    pub foot: Vector2<T>,
+    pub foot: SVector<T, ND>,
     /// The motor angles.
     pub motor_angles: SVector<T, NU>,
     /// `q̇ = G θ̇` and `J_θ`.
-    pub kinematics: MotorKinematics<T, NQ, NU>,
+    pub kinematics: MotorKinematics<T, NQ, NU, ND>,
     /// Passive joints' rank ("type II"): signed Hadamard ratio of `J_p` where it is square,
     /// `√rcond(J_p J_pᵀ)` otherwise; zero at the singularity.
     pub passive_rank: T,
@@ -1047,52 +1199,63 @@ pub struct PointMeasures<T: Real, const NQ: usize, const NU: usize> {
     /// orthonormal basis of the mechanism's motions, signed where that is square; zero
     /// at the singularity, finite at a passive one.
     pub foot_rank: T,
-    /// `κ(J_θ) = σ_max / σ_min` (infinite with one motor: `J_θ` has rank one).
+    /// `κ(J_θ) = σ_max / σ_min` over the foot's `ND` directions (infinite with fewer
+    /// motors than those: `J_θ` has lost rank).
     pub condition: T,
     /// Largest downward push at rest within the torque limits (N); `None` where the
-    /// motors cannot push down here (or a one-motor leg).
+    /// motors cannot push down here (or fewer motors than the foot's coordinates).
     pub vertical_force: Option<T>,
     /// Fastest vertical foot speed within the speed limits (m/s), no sideways motion.
     pub vertical_speed: T,
     /// `Λ⁻¹` with the motors free (rotors backdriven), the body held (1/kg).
-    pub inverse_inertia: Matrix2<T>,
+    pub inverse_inertia: SMatrix<T, ND, ND>,
     /// `Λ⁻¹` with the motors locked, the body held (zero on a fully actuated leg).
-    pub inverse_inertia_locked: Matrix2<T>,
+    pub inverse_inertia_locked: SMatrix<T, ND, ND>,
     /// Effective mass felt by a vertical impact at the foot, motors free (kg).
     pub effective_mass: T,
 }
 
 /// Every measure at the assembled pose `q` (allocation-free). Fails where motor
 /// coordinates do not apply or the passive joints lose rank.
-pub fn point_measures<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+pub fn point_measures<
+    L,
+    T,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>(
     params: &L::Params<T>,
     q: &SVector<T, NQ>,
     frame: &LegFrame<NQ>,
     limits: &MotorLimits<T, NU>,
-) -> Result<PointMeasures<T, NQ, NU>, AnalysisError>
+) -> Result<PointMeasures<T, NQ, NU, ND>, AnalysisError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
     T: Real,
 {
     // Measures of a pose the leg cannot take are refused, not returned (issue 29).
     check_on_closures::<L, T, NQ, NC, NU>(params, q)?;
-    let kin = motor_kinematics::<L, T, NQ, NC, NU>(params, q, frame)?;
+    let kin = motor_kinematics::<L, T, NQ, NC, NU, ND, NP>(params, q, frame)?;
     let jt = kin.foot_jacobian;
-    let (hi, lo) = singular_values(&jt);
-    let condition = if NU >= 2 && lo > T::zero() {
+    // The motors span the foot's directions (two in the plane, three in space).
+    let spans = NU >= ND;
+    let (hi, lo) = extreme_singular_values(&jt);
+    let condition = if spans && lo > T::zero() {
         hi / lo
     } else {
-        // One motor (or a lost direction): σ_min = 0.
+        // Fewer motors than directions (or a lost direction): σ_min = 0.
         T::one() / T::zero()
     };
-    let hold = holding_torque::<L, T, NQ, NC, NU>(params, q, &kin);
-    let two = NU >= 2;
-    let inverse_inertia = inverse_inertia_on_closures::<L, T, NQ, NC, NU>(params, q, frame, false)?;
+    let hold = holding_torque::<L, T, NQ, NC, NU, ND>(params, q, &kin);
+    let inverse_inertia =
+        inverse_inertia_on_closures::<L, T, NQ, NC, NU, ND, NP>(params, q, frame, false)?;
     let inverse_inertia_locked =
-        inverse_inertia_on_closures::<L, T, NQ, NC, NU>(params, q, frame, true)?;
+        inverse_inertia_on_closures::<L, T, NQ, NC, NU, ND, NP>(params, q, frame, true)?;
     let foot = L::foot_position(q, params);
     // A NaN parameter the terms do not use passes every solve: the foot shows it.
-    if !(foot[0].is_finite() && foot[1].is_finite()) {
+    if !foot.iter().all(|x| x.is_finite()) {
         return Err(AnalysisError::NonFinite);
     }
     Ok(PointMeasures {
@@ -1100,22 +1263,27 @@ where
         motor_angles: SVector::<T, NU>::from_fn(|k, _| q[L::ACTUATED[k]]),
         kinematics: kin,
         passive_rank: kin.passive_rank,
-        foot_rank: foot_rank::<L, T, NQ, NC, NU>(frame, &kin),
+        foot_rank: foot_rank::<L, T, NQ, NC, NU, ND>(frame, &kin),
         condition,
-        vertical_force: if two {
+        vertical_force: if spans {
             vertical_force(&jt, &hold, &limits.torque)
         } else {
             None
         },
-        vertical_speed: if two {
+        vertical_speed: if spans {
             vertical_speed(&jt, &limits.speed)
         } else {
             T::zero()
         },
         inverse_inertia,
         inverse_inertia_locked,
-        effective_mass: effective_mass(&inverse_inertia, &Vector2::new(T::zero(), T::one())),
+        effective_mass: effective_mass(&inverse_inertia, &vertical::<T, ND>()),
     })
+}
+
+/// The unit vertical of the foot's space: `y` in the plane, `z` in space.
+pub fn vertical<T: Real, const ND: usize>() -> SVector<T, ND> {
+    SVector::<T, ND>::from_fn(|r, _| if r + 1 == ND { T::one() } else { T::zero() })
 }
 
 /// The passive joints' rank measure at `q` ([`PointMeasures::passive_rank`]), computed
@@ -1126,7 +1294,7 @@ pub fn passive_rank_at<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     frame: &LegFrame<NQ>,
 ) -> T
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
     let fixed: [bool; NQ] = core::array::from_fn(|c| frame.held[c] || L::ACTUATED.contains(&c));

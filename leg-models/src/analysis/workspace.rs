@@ -13,7 +13,7 @@ use nalgebra::SVector;
 
 use super::{passive_rank, point_measures, AnalysisError, LegFrame, MotorLimits, PointMeasures};
 use crate::assembly::{foot_inverse_holding, Tolerance};
-use crate::model::contract::LegModel;
+use crate::model::contract::{LegDynamics, LegModel};
 
 /// How the grid is laid out and what limits apply.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -355,7 +355,7 @@ where
                 &fixed,
                 L::REDUNDANT_ROWS,
             );
-            let m = point_measures::<L, f64, NQ, NC, NU>(params, q, frame, &options.limits);
+            let m = point_measures::<L, f64, NQ, NC, NU, 2, NC>(params, q, frame, &options.limits);
             if let Ok(m) = &m {
                 foot_ranks[i] = m.foot_rank;
             }
@@ -648,7 +648,7 @@ pub fn assembly_modes<L, const NQ: usize, const NC: usize, const NU: usize>(
     tries: usize,
 ) -> Vec<SVector<f64, NQ>>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
 {
     use crate::model::contract::JointKind;
     // Without motor coordinates (an under-actuated leg's passive joints are free, an

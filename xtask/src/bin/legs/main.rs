@@ -22,7 +22,13 @@ mod sim;
 
 /// The generated models' names, planar then spatial.
 fn models() -> Vec<&'static str> {
-    let mut names = planar_models();
+    let mut names = Vec::new();
+    macro_rules! planar {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
+            names.push(stringify!($module));
+        };
+    }
+    generated::for_each_model!(planar);
     macro_rules! name {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
             names.push(stringify!($module));
@@ -32,25 +38,8 @@ fn models() -> Vec<&'static str> {
     names
 }
 
-/// The planar models' names (`analyze` takes these).
-fn planar_models() -> Vec<&'static str> {
-    let mut names = Vec::new();
-    macro_rules! name {
-        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
-            names.push(stringify!($module));
-        };
-    }
-    generated::for_each_model!(name);
-    names
-}
-
-/// Why `name` is not a model `known` takes (`models()`, or `planar_models()` for `analyze`).
+/// Why `name` is not one of the models `known` takes.
 fn unknown(name: &str, known: &[&str]) -> Error {
-    if models().contains(&name) {
-        return Error::usage(format!(
-            "`{name}` is a spatial leg: `analyze` takes planar legs only for now (`sim` and `eval` take it)"
-        ));
-    }
     let spec = xtask::gen::workspace_root()
         .join(xtask::gen::SPECS_DIR)
         .join(format!("{name}.toml"));
@@ -120,7 +109,7 @@ fn analyze(args: AnalyzeArgs, raw: &[String]) -> Result<(), Error> {
     let root = xtask::gen::workspace_root();
     let settings = analyze::Settings::from_args(&args, &root)?;
     // Every model is checked before anything is computed.
-    let known = planar_models();
+    let known = models();
     for m in &args.models {
         if !known.contains(&m.as_str()) {
             return Err(unknown(m, &known));
@@ -137,11 +126,27 @@ fn analyze(args: AnalyzeArgs, raw: &[String]) -> Result<(), Error> {
         macro_rules! dispatch {
             ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
                 if name == stringify!($module) {
-                    designs.extend(analyze::run::<$ty, $nq, $nc, $nu>(&settings, &progress)?);
+                    designs.extend(analyze::run::<$ty, $nq, $nc, $nu, 2, $nc>(
+                        &settings,
+                        &progress,
+                        analyze::planar_grid::<$ty, $nq, $nc, $nu>,
+                    )?);
                 }
             };
         }
         generated::for_each_model!(dispatch);
+        macro_rules! spatial {
+            ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
+                if name == stringify!($module) {
+                    designs.extend(analyze::run::<$ty, $nq, $nc, $nu, 3, $np>(
+                        &settings,
+                        &progress,
+                        analyze::spatial_grid,
+                    )?);
+                }
+            };
+        }
+        generated::for_each_spatial_model!(spatial);
     }
     drop(progress);
     let command = format!("cargo xtask {}", raw.join(" "));

@@ -8,13 +8,15 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 
+use leg_models::analysis::polytope::{force_polytope, speed_zonotope_volume};
 use leg_models::analysis::workspace::{assembly_modes, workspace, GridOptions, NodeState, Segment};
 use leg_models::analysis::{
-    impact_mitigation, point_measures, Body, BodyCoupling, LegFrame, MotorLimits,
+    effective_mass, foot_inverse_inertia, force_polygon, impact_mitigation, point_measures,
+    speed_polygon, vertical, Body, BodyCoupling, LegFrame, MotorKinematics, MotorLimits,
 };
 use leg_models::assembly::{project_position, Tolerance};
-use leg_models::nalgebra::SVector;
-use leg_models::{LegModel, ParameterError, Parameters};
+use leg_models::nalgebra::{SMatrix, SVector};
+use leg_models::{LegDynamics, LegModel, ParameterError, Parameters};
 use rayon::prelude::*;
 use serde_json::{json, Value};
 use xtask::cli::args::AnalyzeArgs;
@@ -253,7 +255,7 @@ fn index_of<L, const NQ: usize, const NC: usize, const NU: usize>(
     name: &str,
 ) -> Result<usize, Error>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
 {
     L::Params::<f64>::NAMES
         .iter()
@@ -292,12 +294,13 @@ fn number(x: f64) -> Value {
 }
 
 /// Analyses model `L` under `settings`: one design, or one per swept value (in parallel).
-pub fn run<L, const NQ: usize, const NC: usize, const NU: usize>(
+pub fn run<L, const NQ: usize, const NC: usize, const NU: usize, const ND: usize, const NP: usize>(
     settings: &Settings,
     progress: &Mutex<(Progress, u64)>,
+    grid: Grid<L::Params<f64>, NQ, NU>,
 ) -> Result<Vec<Design>, Error>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
     L::Params<f64>: Send + Sync,
 {
     // A target in the way is found before the designs are computed, not after.
@@ -350,12 +353,16 @@ where
             )));
         }
         let designs: Vec<Design> = if modes.is_empty() {
-            vec![design::<L, NQ, NC, NU>(&base, settings, None, None)]
+            vec![design::<L, NQ, NC, NU, ND, NP>(
+                &base, settings, None, None, grid,
+            )]
         } else {
             modes
                 .par_iter()
                 .enumerate()
-                .map(|(b, q)| design::<L, NQ, NC, NU>(&base, settings, None, Some((b, q))))
+                .map(|(b, q)| {
+                    design::<L, NQ, NC, NU, ND, NP>(&base, settings, None, Some((b, q)), grid)
+                })
                 .collect()
         };
         tick(progress);
@@ -374,11 +381,12 @@ where
                     p.set(i, v);
                 }
             }
-            let d = design::<L, NQ, NC, NU>(
+            let d = design::<L, NQ, NC, NU, ND, NP>(
                 &p,
                 settings,
                 sweep.as_ref().map(|(_, s)| (*s, v.unwrap_or(f64::NAN))),
                 None,
+                grid,
             );
             tick(progress);
             d
@@ -397,7 +405,7 @@ fn tick(progress: &Mutex<(Progress, u64)>) {
 
 fn gear<L, const NQ: usize, const NC: usize, const NU: usize>(p: &L::Params<f64>, k: usize) -> f64
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
 {
     let name = format!("{}_gear_ratio", L::JOINT_NAMES[L::ACTUATED[k]]);
     L::Params::<f64>::NAMES
@@ -416,14 +424,15 @@ const MAX_LIMIT: f64 = 1e9;
 const MOTOR_TORQUE: f64 = 1.0;
 const MOTOR_SPEED: f64 = 100.0;
 
-fn design<L, const NQ: usize, const NC: usize, const NU: usize>(
+fn design<L, const NQ: usize, const NC: usize, const NU: usize, const ND: usize, const NP: usize>(
     p: &L::Params<f64>,
     settings: &Settings,
     swept: Option<(&Sweep, f64)>,
     branch: Option<(usize, &SVector<f64, NQ>)>,
+    grid: Grid<L::Params<f64>, NQ, NU>,
 ) -> Design
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
 {
     let label = match (swept, branch) {
         (Some((s, v)), _) => format!("{} {}={v}", L::NAME, s.name),
@@ -554,15 +563,16 @@ where
     let foot = L::foot_position(&q, p);
     json["stance"] = json!({
         "q": q.as_slice(),
-        "foot": [foot[0], foot[1]],
+        "foot": foot.as_slice(),
         "what": match branch {
             Some((b, _)) if b > 0 => format!("assembly branch {} at the home pose's motor angles", b + 1),
             _ => "the spec's home pose, assembled".to_string(),
         },
     });
     let mut table = serde_json::Map::new();
-    match point_measures::<L, f64, NQ, NC, NU>(p, &q, &frame, &limits) {
+    match point_measures::<L, f64, NQ, NC, NU, ND, NP>(p, &q, &frame, &limits) {
         Ok(m) => {
+            let spans = frame.foot_spans(ND);
             table.insert(
                 "vertical_force_n".into(),
                 m.vertical_force.map_or(Value::Null, number),
@@ -570,10 +580,10 @@ where
             if m.vertical_force.is_none() {
                 why.insert(
                     "vertical_force_n".into(),
-                    json!(if NU < 2 {
-                        "one motor: no 2-D force polygon".to_string()
-                    } else {
-                        "the motors cannot hold the leg with the foot pushing down here".to_string()
+                    json!(match spans {
+                        Err(why) => why.to_string(),
+                        Ok(()) => "the motors cannot hold the leg with the foot pushing down here"
+                            .to_string(),
                     }),
                 );
             } else if m.vertical_force.is_some_and(f64::is_infinite) {
@@ -582,50 +592,26 @@ where
                     json!("unbounded: no motor takes a vertical force at the foot here (the structure holds it)"),
                 );
             }
-            if NU >= 2 {
-                table.insert("vertical_speed_m_s".into(), number(m.vertical_speed));
-                table.insert("condition".into(), number(m.condition));
-            } else {
-                for key in ["vertical_speed_m_s", "condition"] {
-                    table.insert(key.into(), Value::Null);
-                    why.insert(
-                        key.into(),
-                        json!("one motor: the foot moves along a curve (J_θ has rank one)"),
-                    );
+            match spans {
+                Ok(()) => {
+                    table.insert("vertical_speed_m_s".into(), number(m.vertical_speed));
+                    table.insert("condition".into(), number(m.condition));
+                }
+                Err(reason) => {
+                    for key in ["vertical_speed_m_s", "condition"] {
+                        table.insert(key.into(), Value::Null);
+                        why.insert(key.into(), json!(reason.to_string()));
+                    }
                 }
             }
             table.insert("effective_mass_kg".into(), number(m.effective_mass));
             table.insert("passive_rank".into(), number(m.passive_rank));
             table.insert("foot_rank".into(), number(m.foot_rank));
-            let matrix = |m: &leg_models::nalgebra::Matrix2<f64>| {
-                json!([[m[(0, 0)], m[(0, 1)]], [m[(1, 0)], m[(1, 1)]]])
-            };
             json["stance"]["inverse_inertia_free"] = matrix(&m.inverse_inertia);
             json["stance"]["inverse_inertia_locked"] = matrix(&m.inverse_inertia_locked);
-            json["stance"]["foot_jacobian_motor"] = json!((0..2)
-                .map(|r| (0..NU)
-                    .map(|c| m.kinematics.foot_jacobian[(r, c)])
-                    .collect::<Vec<_>>())
-                .collect::<Vec<_>>());
-            if NU >= 2 && NU <= leg_models::analysis::MAX_MOTORS {
-                let poly = leg_models::analysis::force_polygon::<L, f64, NQ, NC, NU>(
-                    p,
-                    &q,
-                    &m.kinematics,
-                    &limits.torque,
-                );
-                json["stance"]["force_polygon_n"] = json!(poly
-                    .vertices()
-                    .iter()
-                    .map(|v| [v[0], v[1]])
-                    .collect::<Vec<_>>());
-                let speed =
-                    leg_models::analysis::speed_polygon(&m.kinematics.foot_jacobian, &limits.speed);
-                json["stance"]["speed_polygon_m_s"] = json!(speed
-                    .vertices()
-                    .iter()
-                    .map(|v| [v[0], v[1]])
-                    .collect::<Vec<_>>());
+            json["stance"]["foot_jacobian_motor"] = matrix(&m.kinematics.foot_jacobian);
+            if spans.is_ok() {
+                capacity_sets::<L, NQ, NC, NU, ND>(p, &q, &m.kinematics, &limits, &mut json);
             }
         }
         Err(e) => {
@@ -638,9 +624,19 @@ where
                 table.insert(key.into(), Value::Null);
                 why.insert(key.into(), json!(e.to_string()));
             }
+            // The foot's inertia needs no motor coordinates: a leg its motors do not
+            // determine (springs, a free rod) still has it.
+            if let Ok(inv) =
+                foot_inverse_inertia::<L, f64, NQ, NC, NU, ND, NP>(p, &q, &frame, false)
+            {
+                let mass = effective_mass(&inv, &vertical::<f64, ND>());
+                table.insert("effective_mass_kg".into(), number(mass));
+                why.remove("effective_mass_kg");
+                json["stance"]["inverse_inertia_free"] = matrix(&inv);
+            }
         }
     }
-    match impact_mitigation::<L, f64, NQ, NC, NU>(p, &q, &frame, &body, coupling.as_ref()) {
+    match impact_mitigation::<L, f64, NQ, NC, NU, ND, NP>(p, &q, &frame, &body, coupling.as_ref()) {
         Ok(x) => {
             table.insert("impact_mitigation".into(), number(x));
         }
@@ -649,14 +645,161 @@ where
             why.insert("impact_mitigation".into(), json!(e.to_string()));
         }
     }
+    let part = grid(p, &q, &frame, settings, &limits, &file_stem);
+    table.extend(part.table);
+    why.extend(part.why);
+    for (key, value) in part.json {
+        json[key] = value;
+    }
+    // A dash always has its reason: a measure that is not a number and has none overflowed.
+    for (key, value) in &table {
+        if value.is_null() && !why.contains_key(key) {
+            why.insert(
+                key.clone(),
+                json!("overflow: beyond f64's range with these parameters and limits"),
+            );
+        }
+    }
+    json["table"] = Value::Object(table);
+    json["not_computed"] = Value::Object(why);
+    Design {
+        label,
+        file_stem,
+        swept: swept.map(|s| s.1),
+        json,
+        csv: part.csv,
+        view: part.view,
+    }
+}
+
+/// A small matrix as rows.
+fn matrix<const R: usize, const C: usize>(m: &SMatrix<f64, R, C>) -> Value {
+    json!((0..R)
+        .map(|r| (0..C).map(|c| m[(r, c)]).collect::<Vec<_>>())
+        .collect::<Vec<_>>())
+}
+
+/// The same motor kinematics typed with the foot's dimension `B` (only called where the
+/// leg's `A` is `B`: the polygon takes a planar foot, the polytope a spatial one).
+fn retyped<const NQ: usize, const NU: usize, const A: usize, const B: usize>(
+    k: &MotorKinematics<f64, NQ, NU, A>,
+) -> MotorKinematics<f64, NQ, NU, B> {
+    MotorKinematics {
+        g: k.g,
+        foot_jacobian: SMatrix::from_fn(|r, c| k.foot_jacobian[(r, c)]),
+        joint_foot_jacobian: SMatrix::from_fn(|r, c| k.joint_foot_jacobian[(r, c)]),
+        passive_rank: k.passive_rank,
+    }
+}
+
+/// The force and speed sets at the stance pose: polygons in the plane, the force
+/// polytope and the speed zonotope's volume in space.
+fn capacity_sets<L, const NQ: usize, const NC: usize, const NU: usize, const ND: usize>(
+    p: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+    kin: &MotorKinematics<f64, NQ, NU, ND>,
+    limits: &MotorLimits<f64, NU>,
+    json: &mut Value,
+) where
+    L: LegDynamics<NQ, NC, NU>,
+{
+    if NU > leg_models::analysis::MAX_MOTORS {
+        return;
+    }
+    if ND == 2 {
+        let kin = retyped::<NQ, NU, ND, 2>(kin);
+        let poly = force_polygon::<L, f64, NQ, NC, NU>(p, q, &kin, &limits.torque);
+        json["stance"]["force_polygon_n"] = json!(poly
+            .vertices()
+            .iter()
+            .map(|v| [v[0], v[1]])
+            .collect::<Vec<_>>());
+        let speed = speed_polygon(&kin.foot_jacobian, &limits.speed);
+        json["stance"]["speed_polygon_m_s"] = json!(speed
+            .vertices()
+            .iter()
+            .map(|v| [v[0], v[1]])
+            .collect::<Vec<_>>());
+    } else {
+        let kin = retyped::<NQ, NU, ND, 3>(kin);
+        let poly = force_polytope::<L, f64, NQ, NC, NU>(p, q, &kin, &limits.torque);
+        json["stance"]["force_polytope_n"] = json!(poly
+            .vertices()
+            .iter()
+            .map(|v| [v[0], v[1], v[2]])
+            .collect::<Vec<_>>());
+        json["stance"]["force_polytope_volume_n3"] = number(poly.volume());
+        json["stance"]["speed_zonotope_volume_m3_s3"] =
+            number(speed_zonotope_volume(&kin.foot_jacobian, &limits.speed));
+    }
+}
+
+/// What a design's grid adds to it: measures for the table (or their reasons), fields of
+/// its JSON, its CSV and what the report draws.
+pub struct GridPart {
+    table: serde_json::Map<String, Value>,
+    why: serde_json::Map<String, Value>,
+    json: Vec<(&'static str, Value)>,
+    csv: Option<String>,
+    view: Option<View>,
+}
+
+/// How a design's grid is computed, by the leg's dimension ([`planar_grid`], [`spatial_grid`]).
+pub type Grid<P, const NQ: usize, const NU: usize> =
+    fn(&P, &SVector<f64, NQ>, &LegFrame<NQ>, &Settings, &MotorLimits<f64, NU>, &str) -> GridPart;
+
+/// A spatial leg's workspace is not mapped yet: its measures at the stance pose are.
+pub fn spatial_grid<P, const NQ: usize, const NU: usize>(
+    _: &P,
+    _: &SVector<f64, NQ>,
+    _: &LegFrame<NQ>,
+    _: &Settings,
+    _: &MotorLimits<f64, NU>,
+    _: &str,
+) -> GridPart {
+    let mut why = serde_json::Map::new();
+    let mut table = serde_json::Map::new();
+    for key in ["workspace_area_m2", "singularity_distance_m"] {
+        table.insert(key.into(), Value::Null);
+        why.insert(
+            key.into(),
+            json!("a spatial leg's workspace is not mapped yet (by slices or as a volume): its measures at the stance pose are computed"),
+        );
+    }
+    GridPart {
+        table,
+        why,
+        json: Vec::new(),
+        csv: None,
+        view: None,
+    }
+}
+
+/// A planar leg's workspace: the measures over a grid of foot positions, its
+/// singularity curves and area, or a one-motor leg's foot path.
+pub fn planar_grid<L, const NQ: usize, const NC: usize, const NU: usize>(
+    p: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+    frame: &LegFrame<NQ>,
+    settings: &Settings,
+    limits: &MotorLimits<f64, NU>,
+    file_stem: &str,
+) -> GridPart
+where
+    L: LegModel<NQ, NC, NU>,
+{
+    let mut table = serde_json::Map::new();
+    let mut why = serde_json::Map::new();
+    let mut fields = Vec::new();
+    let foot = L::foot_position(q, p);
     let options = GridOptions {
         nodes: settings.nodes,
         window: None,
         motor_range: settings.motor_range.map(|r| [r; NU]),
-        limits,
+        limits: *limits,
     };
     let started = Instant::now();
-    let ws = workspace::<L, NQ, NC, NU>(p, &q, &frame, &options);
+    let ws = workspace::<L, NQ, NC, NU>(p, q, frame, &options);
     let seconds = started.elapsed().as_secs_f64();
     let (csv, view) = match ws {
         Ok(ws) => {
@@ -682,33 +825,37 @@ where
                 .iter()
                 .filter(|m| matches!(m, Some(Err(_))))
                 .count();
-            json["grid"] = json!({
-                "nodes_per_side": ws.nodes,
-                "origin": ws.origin,
-                "step_m": ws.step,
-                "reached": reached,
-                "singular_nodes": singular,
-                "seconds": seconds,
-                "csv": format!("{file_stem}.csv"),
-            });
+            fields.push((
+                "grid",
+                json!({
+                    "nodes_per_side": ws.nodes,
+                    "origin": ws.origin,
+                    "step_m": ws.step,
+                    "reached": reached,
+                    "singular_nodes": singular,
+                    "seconds": seconds,
+                    "csv": format!("{file_stem}.csv"),
+                }),
+            ));
             let seg = |s: &[Segment]| {
                 s.iter()
                     .map(|s| [s[0][0], s[0][1], s[1][0], s[1][1]])
                     .collect::<Vec<_>>()
             };
-            json["curves"] = json!({
+            let mut curves = json!({
                 "passive": seg(&ws.passive_curves),
                 "passive_located": ws.passive_signed,
                 "foot": seg(&ws.foot_curves),
             });
             if !ws.passive_signed {
-                json["curves"]["passive_note"] = json!(
+                curves["passive_note"] = json!(
                     "the passive rank measure is unsigned here (redundant rows, a body's held joints or more than two motors): its curves are not located"
                 );
             }
+            fields.push(("curves", curves));
             (
                 Some(csv::<L, NQ, NC, NU>(&ws)),
-                Some(view::<L, NQ, NC, NU>(p, &q, Some(&ws))),
+                Some(view::<L, NQ, NC, NU>(p, q, Some(&ws))),
             )
         }
         Err(e) => {
@@ -719,20 +866,23 @@ where
             // A one-motor linkage's workspace is the path of its foot.
             let path = leg_models::analysis::workspace::foot_path::<L, NQ, NC, NU>(
                 p,
-                &q,
-                &frame,
+                q,
+                frame,
                 360,
                 settings.motor_range,
             );
             match path {
                 Ok(path) => {
-                    json["foot_path"] = json!({
-                        "full_turn": path.full_turn,
-                        "length_m": path.length,
-                        "motor_angles": path.angles,
-                        "feet": path.feet,
-                    });
-                    let mut v = view::<L, NQ, NC, NU>(p, &q, None);
+                    fields.push((
+                        "foot_path",
+                        json!({
+                            "full_turn": path.full_turn,
+                            "length_m": path.length,
+                            "motor_angles": path.angles,
+                            "feet": path.feet,
+                        }),
+                    ));
+                    let mut v = view::<L, NQ, NC, NU>(p, q, None);
                     v.path = path.feet;
                     (None, Some(v))
                 }
@@ -740,22 +890,10 @@ where
             }
         }
     };
-    // A dash always has its reason: a measure that is not a number and has none overflowed.
-    for (key, value) in &table {
-        if value.is_null() && !why.contains_key(key) {
-            why.insert(
-                key.clone(),
-                json!("overflow: beyond f64's range with these parameters and limits"),
-            );
-        }
-    }
-    json["table"] = Value::Object(table);
-    json["not_computed"] = Value::Object(why);
-    Design {
-        label,
-        file_stem,
-        swept: swept.map(|s| s.1),
-        json,
+    GridPart {
+        table,
+        why,
+        json: fields,
         csv,
         view,
     }
