@@ -1036,18 +1036,21 @@ where
 impl<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
     Leg<L, f64, NQ, NC, NU, NK>
 where
-    L: ContactModel<NQ, NC, NU, NK> + LegModel<NQ, NC, NU>,
+    L: LegDynamics<NQ, NC, NU>,
 {
     /// The workspace of the branch of `start` (an assembled pose) over a grid of foot
-    /// positions, with every design measure at every node
-    /// ([`analysis::workspace::workspace`]).
+    /// positions, with every design measure at every node; a spatial leg's in a slice
+    /// through its foot (`options.plane`) ([`analysis::workspace::workspace`]).
     #[cfg(feature = "std")]
-    pub fn workspace(
+    pub fn workspace<const ND: usize, const NP: usize>(
         &self,
         start: &SVector<f64, NQ>,
         options: &analysis::workspace::GridOptions<NU>,
-    ) -> Result<analysis::workspace::Workspace<NQ, NU>, analysis::AnalysisError> {
-        analysis::workspace::workspace::<L, NQ, NC, NU>(
+    ) -> Result<analysis::workspace::Workspace<NQ, NU, ND>, analysis::AnalysisError>
+    where
+        L: LegModel<NQ, NC, NU, ND, NP>,
+    {
+        analysis::workspace::workspace::<L, NQ, NC, NU, ND, NP>(
             &self.params,
             start,
             &self.analysis_frame(),

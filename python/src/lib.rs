@@ -1331,7 +1331,7 @@ macro_rules! leg_class {
                         None => None,
                         Some(r) => Some(motor_ranges::<NU>(r)?),
                     };
-                    let options = GridOptions { nodes, window, motor_range, limits };
+                    let options = GridOptions { nodes, window, plane: None, motor_range, limits };
                     // The grid's rules are the Rust API's, said with the argument's name.
                     options.check().map_err(grid_err)?;
                     // Up to 2000 × 2000 nodes of continuation: without the GIL.

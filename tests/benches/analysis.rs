@@ -26,6 +26,7 @@ fn bench_leg<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU
     let options = GridOptions {
         nodes: 200,
         window: None,
+        plane: None,
         motor_range: None,
         limits,
     };
@@ -34,7 +35,7 @@ fn bench_leg<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU
         .measurement_time(Duration::from_secs(8))
         .sample_size(10);
     g.bench_function("grid-200", |b| {
-        b.iter(|| workspace::<L, NQ, NC, NU>(black_box(&p), &q, &frame, &options).unwrap())
+        b.iter(|| workspace::<L, NQ, NC, NU, 2, NC>(black_box(&p), &q, &frame, &options).unwrap())
     });
     g.finish();
     let mut g = c.benchmark_group(format!("analysis/{}", L::NAME));

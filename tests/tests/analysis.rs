@@ -113,6 +113,7 @@ fn grid<const NU: usize>(nodes: usize) -> GridOptions<NU> {
     GridOptions {
         nodes,
         window: None,
+        plane: None,
         motor_range: None,
         limits: limits(2.0, 20.0),
     }
@@ -138,7 +139,7 @@ fn leg_grid<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU:
     }
     let p = L::Params::<f64>::default();
     let start = home::<L, NQ, NC, NU>(&p);
-    let ws = workspace::<L, NQ, NC, NU>(&p, &start, &frame, &grid::<NU>(nodes)).unwrap();
+    let ws = workspace::<L, NQ, NC, NU, 2, NC>(&p, &start, &frame, &grid::<NU>(nodes)).unwrap();
     Some((p, frame, start, ws))
 }
 
@@ -162,7 +163,7 @@ pub fn check_every_measure<
     let eig = inv.symmetric_eigenvalues();
     assert!(eig.min() >= -1e-12 * scale, "{}: {eig:?}", L::NAME);
     let point = point_measures::<L, f64, NQ, NC, NU, 2, NC>(&p, &q, &frame, &lim);
-    let ws = workspace::<L, NQ, NC, NU>(&p, &q, &frame, &grid::<NU>(40));
+    let ws = workspace::<L, NQ, NC, NU, 2, NC>(&p, &q, &frame, &grid::<NU>(40));
     match frame.foot_polygons() {
         Ok(()) => {
             let m = point.unwrap_or_else(|e| panic!("{}: {e}", L::NAME));
@@ -719,7 +720,7 @@ pub fn check_singularities<
                     let from = Vector2::new(a[0], a[1]);
                     for _ in 0..50 {
                         let mid = 0.5 * (lo + hi);
-                        match follow::<L, NQ, NC, NU>(
+                        match follow::<L, NQ, NC, NU, 2, NC>(
                             &p,
                             &ws.poses[i],
                             &from,
@@ -837,7 +838,7 @@ fn five_bar_annuli<L: LegModel<4, 2, 2>>() {
         (L::foot_position(&q, &p) - tips.column(1)).norm() < 1e-12,
         "the foot is the toe"
     );
-    let ws = workspace::<L, 4, 2, 2>(&p, &q, &frame, &grid::<2>(100)).unwrap();
+    let ws = workspace::<L, 4, 2, 2, 2, 2>(&p, &q, &frame, &grid::<2>(100)).unwrap();
     // Signed distance inside the intersection of the annuli (positive inside).
     let inside = |x: Vector2<f64>| {
         let (ra, rb) = ((x - hip_a).norm(), (x - hip_b).norm());
@@ -883,7 +884,8 @@ fn five_bar_workspace_is_the_intersection_of_the_annuli() {
     let p = generated::minitaur::Params::<f64>::default();
     let frame = LegFrame::of::<generated::Minitaur, 2, 2>();
     let q = home::<generated::Minitaur, 4, 2, 2>(&p);
-    let ws = workspace::<generated::Minitaur, 4, 2, 2>(&p, &q, &frame, &grid::<2>(100)).unwrap();
+    let ws =
+        workspace::<generated::Minitaur, 4, 2, 2, 2, 2>(&p, &q, &frame, &grid::<2>(100)).unwrap();
     let annulus = std::f64::consts::PI * (0.3f64.powi(2) - 0.1f64.powi(2));
     assert!((ws.area - annulus).abs() < 0.03 * annulus, "{}", ws.area);
 }
@@ -937,7 +939,7 @@ fn follow_ends_at_the_fold_where_a_joint_turns_fast() {
         }
         assert!(h < 1e-15 && t < 1.0, "the march crosses the edge: t = {t}");
         let to = |s: f64, floor: f64| {
-            follow::<L, 7, 4, 3>(
+            follow::<L, 7, 4, 3, 2, 4>(
                 &p,
                 &ws.poses[i],
                 &Vector2::new(a[0], a[1]),
@@ -989,7 +991,7 @@ fn motor_ranges_refuse_a_start_outside_and_count_angles_modulo_a_turn() {
     let theta = [q[L::ACTUATED[0]], q[L::ACTUATED[1]]];
     let mut options = grid::<2>(30);
     options.motor_range = Some([(theta[0] + 0.1, theta[0] + 1.0), (-10.0, 10.0)]);
-    let e = workspace::<L, 4, 2, 2>(&p, &q, &frame, &options).unwrap_err();
+    let e = workspace::<L, 4, 2, 2, 2, 2>(&p, &q, &frame, &options).unwrap_err();
     assert_eq!(
         e,
         AnalysisError::StartOutOfRange {
@@ -1003,7 +1005,7 @@ fn motor_ranges_refuse_a_start_outside_and_count_angles_modulo_a_turn() {
         (theta[0] - 0.3, theta[0] + 0.3),
         (theta[1] - 0.3, theta[1] + 0.3),
     ]);
-    let ws = workspace::<L, 4, 2, 2>(&p, &q, &frame, &options).unwrap();
+    let ws = workspace::<L, 4, 2, 2, 2, 2>(&p, &q, &frame, &options).unwrap();
     let turn = std::f64::consts::TAU;
     for (state, pose) in ws.states.iter().zip(&ws.poses) {
         if *state == NodeState::Reached {
@@ -1022,7 +1024,7 @@ fn motor_ranges_refuse_a_start_outside_and_count_angles_modulo_a_turn() {
         (theta[1] - 3.0, theta[1] + 3.0),
     ];
     options.motor_range = Some(range);
-    let almost = workspace::<L, 4, 2, 2>(&p, &q, &frame, &options).unwrap();
+    let almost = workspace::<L, 4, 2, 2, 2, 2>(&p, &q, &frame, &options).unwrap();
     let mut wrapped = 0;
     for (state, pose) in almost.states.iter().zip(&almost.poses) {
         if *state == NodeState::Reached {
@@ -1035,7 +1037,7 @@ fn motor_ranges_refuse_a_start_outside_and_count_angles_modulo_a_turn() {
     }
     assert!(wrapped > 0, "no node needed the turn");
     options.motor_range = None;
-    let free = workspace::<L, 4, 2, 2>(&p, &q, &frame, &options).unwrap();
+    let free = workspace::<L, 4, 2, 2, 2, 2>(&p, &q, &frame, &options).unwrap();
     assert!(
         almost.area > 0.8 * free.area,
         "{} of {}",
@@ -1074,7 +1076,7 @@ fn a_five_bar_has_two_assembly_modes_mirrored_in_its_knees() {
             "{}: {foot} against {mirrored}",
             L::NAME
         );
-        let ws = workspace::<L, 4, 2, 2>(&p, &other, &frame, &grid::<2>(40)).unwrap();
+        let ws = workspace::<L, 4, 2, 2, 2, 2>(&p, &other, &frame, &grid::<2>(40)).unwrap();
         assert!(ws.area > 0.0);
     }
     check::<generated::Minitaur>();

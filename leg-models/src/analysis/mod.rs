@@ -78,6 +78,8 @@ pub enum Inapplicable {
         /// The leg's motors.
         motors: usize,
     },
+    /// A slice plane was given for a planar leg, whose workspace is its own plane.
+    PlanarSlice,
     /// More than [`MAX_MOTORS`] motors.
     TooManyMotors {
         /// The leg's motors.
@@ -114,6 +116,10 @@ impl fmt::Display for Inapplicable {
             Inapplicable::NotOneMotor { motors } => write!(
                 f,
                 "the foot's path over a motor's turn is for a one-motor leg; this one has {motors} motors (its workspace is an area)"
+            ),
+            Inapplicable::PlanarSlice => write!(
+                f,
+                "a planar leg's workspace is its own plane: it takes no slice plane (a spatial leg does)"
             ),
             Inapplicable::TooManyMotors { motors } => write!(
                 f,
@@ -1003,6 +1009,44 @@ pub fn effective_mass<T: Real, const ND: usize>(inv: &SMatrix<T, ND, ND>, d: &SV
     }
 }
 
+/// The effective mass felt by a vertical impact at the foot (`y` in the plane, `z` in
+/// space) with inverse inertia `inv` at `q`: [`effective_mass`] along the vertical, and
+/// infinite where `inv` has no vertical part beyond rounding, judged against the open
+/// chain's `J_f M⁻¹ J_fᵀ` (a leg stretched straight down gave 1.9e30 kg, rounding's
+/// reciprocal).
+pub fn vertical_effective_mass<
+    L,
+    T,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+    inv: &SMatrix<T, ND, ND>,
+) -> T
+where
+    L: LegModel<NQ, NC, NU, ND, NP>,
+    T: Real,
+{
+    let up = vertical::<T, ND>();
+    let along = up.dot(&(inv * up));
+    let open = delassus::<T, NQ, 0, ND>(
+        &L::mass_matrix(q, params),
+        &SMatrix::zeros(),
+        &L::foot_jacobian(q, params),
+        &[false; NQ],
+        0,
+    )
+    .map_or(T::zero(), |d| d.amax());
+    if along <= open * T::default_epsilon() * T::lit(1e3) {
+        return T::one() / T::zero();
+    }
+    effective_mass(inv, &up)
+}
+
 /// What the body of [`Body::Translating`] needs from the leg's parameters: copies with
 /// gravity along each axis of the leg's space (`x`, `y`, and `z` on a spatial leg) and
 /// off (so that `∂V/∂q` gives the momentum Jacobian of the links, `P = Σ mᵢ J_cᵢ`), and
@@ -1277,7 +1321,11 @@ where
         },
         inverse_inertia,
         inverse_inertia_locked,
-        effective_mass: effective_mass(&inverse_inertia, &vertical::<T, ND>()),
+        effective_mass: vertical_effective_mass::<L, T, NQ, NC, NU, ND, NP>(
+            params,
+            q,
+            &inverse_inertia,
+        ),
     })
 }
 

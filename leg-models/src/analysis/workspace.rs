@@ -3,26 +3,85 @@
 //! solved from a neighbour's, so the branch never changes), and the singularity curves
 //! drawn through it.
 //!
+//! A spatial leg's foot moves in space: its grid lies in a [`SlicePlane`] through the
+//! stance foot (sagittal by default), each node a foot position in that plane solved by
+//! the same continuation, its curves and area those of the slice.
+//!
 //! In foot space the foot's rank loss ("type I") is where the branch ends: the edge of the
 //! workspace. The passive joints' rank loss ("type II") is inside it, where the signed
 //! [`PointMeasures::passive_rank`] changes sign between neighbouring nodes.
 
 use std::collections::VecDeque;
 
-use nalgebra::SVector;
+use nalgebra::{SVector, Vector3};
 
 use super::{passive_rank, point_measures, AnalysisError, LegFrame, MotorLimits, PointMeasures};
 use crate::assembly::{foot_inverse_holding, Tolerance};
 use crate::model::contract::{LegDynamics, LegModel};
+
+/// The plane a spatial leg's workspace grid lies in: through the stance foot, spanned by
+/// two orthogonal unit axes of the base frame. Grid coordinates are the foot's components
+/// along them (m).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SlicePlane {
+    /// The grid's first (`a`) and second (`b`) axis, unit and orthogonal.
+    pub axes: [[f64; 3]; 2],
+}
+
+impl SlicePlane {
+    /// The sagittal plane: `x` forward, `z` up (the default).
+    pub const SAGITTAL: SlicePlane = SlicePlane {
+        axes: [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]],
+    };
+    /// The frontal plane: `y` to the side, `z` up.
+    pub const FRONTAL: SlicePlane = SlicePlane {
+        axes: [[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+    };
+    /// The transverse (horizontal) plane: `x`, `y`.
+    pub const TRANSVERSE: SlicePlane = SlicePlane {
+        axes: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+    };
+
+    /// The plane spanned by `a` and `b` (made unit; they must be finite, not zero and
+    /// orthogonal to 1e-9).
+    pub fn new(a: [f64; 3], b: [f64; 3]) -> Result<SlicePlane, AnalysisError> {
+        let (u, w) = (Vector3::from(a), Vector3::from(b));
+        for v in [&u, &w] {
+            if !v.iter().all(|x| x.is_finite()) || v.norm() == 0.0 {
+                return Err(AnalysisError::Grid {
+                    what: "slice axes that are finite and not zero",
+                    value: v.norm(),
+                });
+            }
+        }
+        let (u, w) = (u.normalize(), w.normalize());
+        if u.dot(&w).abs() > 1e-9 {
+            return Err(AnalysisError::Grid {
+                what: "orthogonal slice axes (their cosine)",
+                value: u.dot(&w),
+            });
+        }
+        Ok(SlicePlane {
+            axes: [u.into(), w.into()],
+        })
+    }
+
+    fn checked(&self) -> Result<SlicePlane, AnalysisError> {
+        SlicePlane::new(self.axes[0], self.axes[1])
+    }
+}
 
 /// How the grid is laid out and what limits apply.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GridOptions<const NU: usize> {
     /// Nodes per side (the grid has `nodes²`).
     pub nodes: usize,
-    /// The grid's centre and half-width (m); `None`: centred on the hip of the foot's
-    /// chain, as wide as that chain is long.
+    /// The grid's centre (grid coordinates) and half-width (m); `None`: centred on the hip
+    /// of the foot's chain, as wide as that chain is long.
     pub window: Option<([f64; 2], f64)>,
+    /// A spatial leg's slice ([`SlicePlane`]); `None`: sagittal. A planar leg's grid is
+    /// its own plane and takes none.
+    pub plane: Option<SlicePlane>,
     /// Motor angle range `(low, high)` per motor (rad, a revolute motor's modulo a turn;
     /// m on a slider); `None`: no limit.
     pub motor_range: Option<[(f64, f64); NU]>,
@@ -50,6 +109,9 @@ impl<const NU: usize> GridOptions<NU> {
             if !(half.is_finite() && half > 0.0) {
                 return bad("a positive, finite half-width", half);
             }
+        }
+        if let Some(plane) = &self.plane {
+            plane.checked()?;
         }
         for &(low, high) in self.motor_range.iter().flatten() {
             if !low.is_finite() {
@@ -95,12 +157,17 @@ impl NodeState {
 /// A line segment in the base frame (m).
 pub type Segment = [[f64; 2]; 2];
 
-/// The measures over the grid.
+/// The measures over the grid (of a planar leg's plane, or of a spatial leg's slice: its
+/// foot has `ND` coordinates).
 #[derive(Clone, Debug)]
-pub struct Workspace<const NQ: usize, const NU: usize> {
+pub struct Workspace<const NQ: usize, const NU: usize, const ND: usize = 2> {
     /// Nodes per side.
     pub nodes: usize,
-    /// The node `(0, 0)` (lowest `x`, lowest `y`), base frame (m).
+    /// A spatial leg's slice (the plane's axes and its offset along their normal, m);
+    /// `None` on a planar leg.
+    pub slice: Option<(SlicePlane, f64)>,
+    /// The node `(0, 0)` (lowest `a`, lowest `b`: `x` and `y` on a planar leg), grid
+    /// coordinates (m).
     pub origin: [f64; 2],
     /// Node spacing (m).
     pub step: f64,
@@ -110,14 +177,14 @@ pub struct Workspace<const NQ: usize, const NU: usize> {
     pub poses: Vec<SVector<f64, NQ>>,
     /// Each reached node's measures; `Err` where they cannot be computed there (a
     /// singular pose), `None` at nodes not reached.
-    pub measures: Vec<Option<Result<PointMeasures<f64, NQ, NU>, AnalysisError>>>,
+    pub measures: Vec<Option<Result<PointMeasures<f64, NQ, NU, ND>, AnalysisError>>>,
     /// The passive rank measure at each reached node (NaN elsewhere).
     pub passive_rank: Vec<f64>,
     /// Which joints are revolute (compared modulo a turn by [`Workspace::joined`]).
     pub revolute: [bool; NQ],
     /// Whether [`Workspace::passive_rank`] is signed (its zero crossings are curves).
     pub passive_signed: bool,
-    /// Workspace area: reached nodes × step² (m²).
+    /// Workspace area (of the slice, on a spatial leg): reached nodes × step² (m²).
     pub area: f64,
     /// Where the passive joints lose rank ("type II"), as segments.
     pub passive_curves: Vec<Segment>,
@@ -126,8 +193,8 @@ pub struct Workspace<const NQ: usize, const NU: usize> {
     pub foot_curves: Vec<Segment>,
 }
 
-impl<const NQ: usize, const NU: usize> Workspace<NQ, NU> {
-    /// The foot position of node `(ix, iy)`.
+impl<const NQ: usize, const NU: usize, const ND: usize> Workspace<NQ, NU, ND> {
+    /// The foot position of node `(ix, iy)`, in grid coordinates.
     pub fn node(&self, ix: usize, iy: usize) -> [f64; 2] {
         [
             self.origin[0] + ix as f64 * self.step,
@@ -153,14 +220,55 @@ impl<const NQ: usize, const NU: usize> Workspace<NQ, NU> {
         })
     }
 
-    /// The distance (m) from `point` to the nearest singularity curve (either kind);
-    /// `None` when there is none in the grid.
+    /// The foot position (base frame) at grid coordinates `ab`.
+    pub fn foot_at(&self, ab: [f64; 2]) -> SVector<f64, ND> {
+        embed(self.slice.as_ref(), ab)
+    }
+
+    /// The grid coordinates of the foot position `foot` (base frame): its components
+    /// along the slice's axes.
+    pub fn grid_coordinates(&self, foot: &SVector<f64, ND>) -> [f64; 2] {
+        project(self.slice.as_ref(), foot)
+    }
+
+    /// The distance (m) from `point` (grid coordinates) to the nearest singularity curve
+    /// (either kind); `None` when there is none in the grid.
     pub fn distance_to_singularity(&self, point: [f64; 2]) -> Option<f64> {
         self.passive_curves
             .iter()
             .chain(&self.foot_curves)
             .map(|s| segment_distance(point, s))
             .fold(None, |best, d| Some(best.map_or(d, |b: f64| b.min(d))))
+    }
+}
+
+/// The foot at grid coordinates `ab`: `(a, b)` in the plane; `a u + b w + d n` on a slice
+/// (`n = u × w`, `d` its offset).
+fn embed<const ND: usize>(slice: Option<&(SlicePlane, f64)>, ab: [f64; 2]) -> SVector<f64, ND> {
+    match slice {
+        Some((plane, offset)) if ND == 3 => {
+            let (u, w) = (Vector3::from(plane.axes[0]), Vector3::from(plane.axes[1]));
+            let p = u * ab[0] + w * ab[1] + u.cross(&w) * *offset;
+            SVector::from_fn(|r, _| p[r])
+        }
+        _ => SVector::from_fn(|r, _| if r < 2 { ab[r] } else { 0.0 }),
+    }
+}
+
+/// The grid coordinates of `foot`: [`embed`]'s inverse on the slice.
+fn project<const ND: usize>(
+    slice: Option<&(SlicePlane, f64)>,
+    foot: &SVector<f64, ND>,
+) -> [f64; 2] {
+    match slice {
+        Some((plane, _)) if ND == 3 => {
+            let p = Vector3::new(foot[0], foot[1], foot[2]);
+            [
+                Vector3::from(plane.axes[0]).dot(&p),
+                Vector3::from(plane.axes[1]).dot(&p),
+            ]
+        }
+        _ => [foot[0], foot[1]],
     }
 }
 
@@ -177,15 +285,22 @@ pub fn segment_distance(p: [f64; 2], s: &Segment) -> f64 {
     (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
 }
 
-/// The hip of the foot's chain and the chain's length at pose `q` (the joints that move
-/// the foot in the tree, without held ones): the default window.
-pub fn reach<L, const NQ: usize, const NC: usize, const NU: usize>(
+/// The hip of the foot's chain (base frame) and the chain's length at pose `q` (the
+/// joints that move the foot in the tree, without held ones): the default window.
+pub fn reach<
+    L,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>(
     params: &L::Params<f64>,
     q: &SVector<f64, NQ>,
     frame: &LegFrame<NQ>,
-) -> ([f64; 2], f64)
+) -> (SVector<f64, ND>, f64)
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
 {
     let jf = L::foot_jacobian(q, params);
     let joints = L::joint_positions(q, params);
@@ -204,17 +319,17 @@ where
     let mut chain: Vec<usize> = (0..NQ).filter(|&j| in_chain(j)).collect();
     chain.sort_by_key(|&j| depth(j));
     let Some(&hip) = chain.first() else {
-        return ([foot[0], foot[1]], size.max(f64::EPSILON));
+        return (foot, size.max(f64::EPSILON));
     };
-    let point = |j: usize| [joints[(0, j)], joints[(1, j)]];
+    let point = |j: usize| joints.column(j).into_owned();
     let mut length = 0.0;
     let mut last = point(hip);
     for &j in chain.iter().skip(1) {
         let p = point(j);
-        length += (p[0] - last[0]).hypot(p[1] - last[1]);
+        length += (p - last).norm();
         last = p;
     }
-    length += (foot[0] - last[0]).hypot(foot[1] - last[1]);
+    length += (foot - last).norm();
     // A slider's reach is not fixed by its pose: allow the leg's size for each.
     let sliders = chain
         .iter()
@@ -225,27 +340,49 @@ where
 
 /// The workspace of the branch of `start` (an assembled pose) over the grid, with every
 /// measure at every node. Allocates the grid; each node's work allocates nothing.
-pub fn workspace<L, const NQ: usize, const NC: usize, const NU: usize>(
+pub fn workspace<
+    L,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>(
     params: &L::Params<f64>,
     start: &SVector<f64, NQ>,
     frame: &LegFrame<NQ>,
     options: &GridOptions<NU>,
-) -> Result<Workspace<NQ, NU>, AnalysisError>
+) -> Result<Workspace<NQ, NU, ND>, AnalysisError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
 {
     options.check()?;
-    frame.foot_polygons()?;
+    if ND == 2 && options.plane.is_some() {
+        return Err(super::Inapplicable::PlanarSlice.into());
+    }
+    frame.foot_spans(ND)?;
     let n = options.nodes;
-    let (center, half) = options
-        .window
-        .unwrap_or_else(|| reach::<L, NQ, NC, NU>(params, start, frame));
+    let foot = L::foot_position(start, params);
+    // The slice through the stance foot.
+    let slice = (ND == 3).then(|| {
+        let plane = options.plane.unwrap_or(SlicePlane::SAGITTAL);
+        let (u, w) = (Vector3::from(plane.axes[0]), Vector3::from(plane.axes[1]));
+        let offset = u.cross(&w).dot(&Vector3::new(foot[0], foot[1], foot[2]));
+        (plane, offset)
+    });
+    let (center, half) = options.window.unwrap_or_else(|| {
+        let (hip, length) = reach::<L, NQ, NC, NU, ND, NP>(params, start, frame);
+        (project(slice.as_ref(), &hip), length)
+    });
     let step = 2.0 * half / (n - 1) as f64;
     let origin = [center[0] - half, center[1] - half];
-    let at = |i: usize| {
-        SVector::<f64, 2>::new(
-            origin[0] + (i % n) as f64 * step,
-            origin[1] + (i / n) as f64 * step,
+    let at = |i: usize| -> SVector<f64, ND> {
+        embed(
+            slice.as_ref(),
+            [
+                origin[0] + (i % n) as f64 * step,
+                origin[1] + (i / n) as f64 * step,
+            ],
         )
     };
     let tol = Tolerance {
@@ -287,11 +424,11 @@ where
     let mut poses = vec![SVector::<f64, NQ>::zeros(); n * n];
     let mut queue = VecDeque::new();
     // The node nearest the start's foot, solved from the start.
-    let foot = L::foot_position(start, params);
-    let ix = (((foot[0] - origin[0]) / step).round().max(0.0) as usize).min(n - 1);
-    let iy = (((foot[1] - origin[1]) / step).round().max(0.0) as usize).min(n - 1);
+    let stance = project(slice.as_ref(), &foot);
+    let ix = (((stance[0] - origin[0]) / step).round().max(0.0) as usize).min(n - 1);
+    let iy = (((stance[1] - origin[1]) / step).round().max(0.0) as usize).min(n - 1);
     let first = iy * n + ix;
-    let q0 = foot_inverse_holding::<L, f64, NQ, NC, NU, 2, NC>(
+    let q0 = foot_inverse_holding::<L, f64, NQ, NC, NU, ND, NP>(
         params,
         &at(first),
         start,
@@ -318,7 +455,7 @@ where
             if matches!(states[k], NodeState::Reached | NodeState::OutOfRange) {
                 continue;
             }
-            match follow::<L, NQ, NC, NU>(
+            match follow::<L, NQ, NC, NU, ND, NP>(
                 params,
                 &poses[i],
                 &at(i),
@@ -343,7 +480,7 @@ where
     let fixed: [bool; NQ] = core::array::from_fn(|c| frame.held[c] || L::ACTUATED.contains(&c));
     // Curves in foot space need the pose to be a function of the foot on the branch (two
     // motors that determine the leg): with more, the pose at a foot depends on the path.
-    let passive_signed = NU == 2 && NC > 0 && super::passive_square::<L, NQ, NC, NU>(frame);
+    let passive_signed = NU == ND && NC > 0 && super::passive_square::<L, NQ, NC, NU>(frame);
     let mut measures = vec![None; n * n];
     let mut ranks = vec![f64::NAN; n * n];
     let mut foot_ranks = vec![f64::NAN; n * n];
@@ -355,7 +492,7 @@ where
                 &fixed,
                 L::REDUNDANT_ROWS,
             );
-            let m = point_measures::<L, f64, NQ, NC, NU, 2, NC>(params, q, frame, &options.limits);
+            let m = point_measures::<L, f64, NQ, NC, NU, ND, NP>(params, q, frame, &options.limits);
             if let Ok(m) = &m {
                 foot_ranks[i] = m.foot_rank;
             }
@@ -371,6 +508,7 @@ where
     };
     let mut ws = Workspace {
         nodes: n,
+        slice,
         origin,
         step,
         states,
@@ -402,7 +540,7 @@ where
         })
         .collect();
     let mut foot_curves = contour(n, &edge, node, |_, _| true);
-    if NU == 2 {
+    if NU == ND {
         foot_curves.extend(contour(n, &foot_ranks, node, joined));
     }
     ws.passive_curves = passive_curves;
@@ -443,17 +581,24 @@ pub const FOLLOW_SOLVES: usize = 2000;
 /// shorter than `floor` cannot follow it. [`workspace`] uses [`GRID_FLOOR`];
 /// [`FOLD_FLOOR`] puts the failure at the fold. A `floor` that is not positive (or NaN)
 /// is taken as `f64::EPSILON`; at most [`FOLLOW_SOLVES`] solves.
-pub fn follow<L, const NQ: usize, const NC: usize, const NU: usize>(
+pub fn follow<
+    L,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>(
     params: &L::Params<f64>,
     from: &SVector<f64, NQ>,
-    from_foot: &SVector<f64, 2>,
-    to: &SVector<f64, 2>,
+    from_foot: &SVector<f64, ND>,
+    to: &SVector<f64, ND>,
     frame: &LegFrame<NQ>,
     tol: &Tolerance<f64>,
     floor: f64,
 ) -> Result<SVector<f64, NQ>, AnalysisError>
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
 {
     use crate::assembly::AssemblyError;
     let floor = if floor > 0.0 {
@@ -471,7 +616,7 @@ where
         let h_now = h.min(1.0 - done);
         let t = done + h_now;
         let target = from_foot + (to - from_foot) * t;
-        match foot_inverse_holding::<L, f64, NQ, NC, NU, 2, NC>(
+        match foot_inverse_holding::<L, f64, NQ, NC, NU, ND, NP>(
             params,
             &target,
             &q,

@@ -353,6 +353,10 @@ pub struct AnalyzeArgs {
     #[arg(long, value_name = "N", default_value_t = 200,
           value_parser = clap::value_parser!(u32).range(2..=2000))]
     pub nodes: u32,
+    /// The plane a spatial leg's workspace grid lies in, through its stance foot: `xz`
+    /// (sagittal, the default), `yz` (frontal) or `xy` (transverse); not for a planar leg
+    #[arg(long, value_name = "PLANE", value_parser = ["xz", "yz", "xy"])]
+    pub slice: Option<String>,
     /// Where to write (default target/analyze)
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,

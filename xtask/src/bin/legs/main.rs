@@ -141,7 +141,7 @@ fn analyze(args: AnalyzeArgs, raw: &[String]) -> Result<(), Error> {
                     designs.extend(analyze::run::<$ty, $nq, $nc, $nu, 3, $np>(
                         &settings,
                         &progress,
-                        analyze::spatial_grid,
+                        analyze::spatial_grid::<$ty, $nq, $nc, $nu, $np>,
                     )?);
                 }
             };

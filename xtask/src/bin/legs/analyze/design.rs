@@ -18,6 +18,9 @@ pub struct View {
     pub stance: [f64; 2],
     /// A one-motor leg's foot path (no maps then).
     pub path: Vec<[f64; 2]>,
+    /// The names of the grid's two axes (`x`, `y` on a planar leg; a spatial leg's slice
+    /// axes, its leg drawn projected onto them).
+    pub axes: [String; 2],
 }
 
 /// One analysed design.

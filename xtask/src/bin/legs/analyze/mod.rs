@@ -9,10 +9,12 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use leg_models::analysis::polytope::{force_polytope, speed_zonotope_volume};
-use leg_models::analysis::workspace::{assembly_modes, workspace, GridOptions, NodeState, Segment};
+use leg_models::analysis::workspace::{
+    assembly_modes, workspace, GridOptions, NodeState, Segment, SlicePlane, Workspace,
+};
 use leg_models::analysis::{
-    effective_mass, foot_inverse_inertia, force_polygon, impact_mitigation, point_measures,
-    speed_polygon, vertical, Body, BodyCoupling, LegFrame, MotorKinematics, MotorLimits,
+    foot_inverse_inertia, force_polygon, impact_mitigation, point_measures, speed_polygon,
+    vertical_effective_mass, Body, BodyCoupling, LegFrame, MotorKinematics, MotorLimits,
 };
 use leg_models::assembly::{project_position, Tolerance};
 use leg_models::nalgebra::{SMatrix, SVector};
@@ -38,6 +40,8 @@ pub struct Settings {
     motor_range: Option<(f64, f64)>,
     nodes: usize,
     branches: bool,
+    /// A spatial leg's slice (`--slice`), with its axes' names.
+    slice: Option<(SlicePlane, [&'static str; 2])>,
     /// Grid nodes the run's designs hold (checked against [`MAX_NODES`]).
     planned_nodes: AtomicUsize,
     pub out: PathBuf,
@@ -238,6 +242,11 @@ impl Settings {
             motor_range,
             nodes: a.nodes as usize,
             branches: a.branches,
+            slice: a.slice.as_deref().map(|s| match s {
+                "yz" => (SlicePlane::FRONTAL, ["y", "z"]),
+                "xy" => (SlicePlane::TRANSVERSE, ["x", "y"]),
+                _ => (SlicePlane::SAGITTAL, ["x", "z"]),
+            }),
             planned_nodes: AtomicUsize::new(total),
             out: a
                 .out
@@ -320,6 +329,12 @@ where
         )),
         None => None,
     };
+    if ND == 2 && settings.slice.is_some() {
+        return Err(Error::usage(format!(
+            "`--slice` is for spatial legs: `{}` is planar (its workspace is its own plane)",
+            L::NAME
+        )));
+    }
     for list in [&settings.torque, &settings.speed].into_iter().flatten() {
         if list.len() != 1 && list.len() != NU {
             return Err(Error::usage(format!(
@@ -629,7 +644,7 @@ where
             if let Ok(inv) =
                 foot_inverse_inertia::<L, f64, NQ, NC, NU, ND, NP>(p, &q, &frame, false)
             {
-                let mass = effective_mass(&inv, &vertical::<f64, ND>());
+                let mass = vertical_effective_mass::<L, f64, NQ, NC, NU, ND, NP>(p, &q, &inv);
                 table.insert("effective_mass_kg".into(), number(mass));
                 why.remove("effective_mass_kg");
                 json["stance"]["inverse_inertia_free"] = matrix(&inv);
@@ -644,6 +659,15 @@ where
             table.insert("impact_mitigation".into(), Value::Null);
             why.insert("impact_mitigation".into(), json!(e.to_string()));
         }
+    }
+    if table
+        .get("effective_mass_kg")
+        .is_some_and(|v| v.is_null() && !why.contains_key("effective_mass_kg"))
+    {
+        why.insert(
+            "effective_mass_kg".into(),
+            json!("infinite: the foot cannot move vertically here (the leg stretched along the vertical, or its closures hold the foot)"),
+        );
     }
     let part = grid(p, &q, &frame, settings, &limits, &file_stem);
     table.extend(part.table);
@@ -748,35 +772,24 @@ pub struct GridPart {
 pub type Grid<P, const NQ: usize, const NU: usize> =
     fn(&P, &SVector<f64, NQ>, &LegFrame<NQ>, &Settings, &MotorLimits<f64, NU>, &str) -> GridPart;
 
-/// A spatial leg's workspace is not mapped yet: its measures at the stance pose are.
-pub fn spatial_grid<P, const NQ: usize, const NU: usize>(
-    _: &P,
-    _: &SVector<f64, NQ>,
-    _: &LegFrame<NQ>,
-    _: &Settings,
-    _: &MotorLimits<f64, NU>,
-    _: &str,
-) -> GridPart {
-    let mut why = serde_json::Map::new();
-    let mut table = serde_json::Map::new();
-    for key in ["workspace_area_m2", "singularity_distance_m"] {
-        table.insert(key.into(), Value::Null);
-        why.insert(
-            key.into(),
-            json!("a spatial leg's workspace is not mapped yet (by slices or as a volume): its measures at the stance pose are computed"),
-        );
-    }
-    GridPart {
-        table,
-        why,
-        json: Vec::new(),
-        csv: None,
-        view: None,
-    }
+/// A spatial leg's workspace: the grid of [`mapped`] in its slice (`--slice`, sagittal by
+/// default), or the reason it has none.
+pub fn spatial_grid<L, const NQ: usize, const NC: usize, const NU: usize, const NP: usize>(
+    p: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+    frame: &LegFrame<NQ>,
+    settings: &Settings,
+    limits: &MotorLimits<f64, NU>,
+    file_stem: &str,
+) -> GridPart
+where
+    L: LegModel<NQ, NC, NU, 3, NP>,
+{
+    mapped::<L, NQ, NC, NU, 3, NP>(p, q, frame, settings, limits, file_stem)
+        .unwrap_or_else(|e| unmapped(&e))
 }
 
-/// A planar leg's workspace: the measures over a grid of foot positions, its
-/// singularity curves and area, or a one-motor leg's foot path.
+/// A planar leg's workspace: the grid of [`mapped`], or a one-motor leg's foot path.
 pub fn planar_grid<L, const NQ: usize, const NC: usize, const NU: usize>(
     p: &L::Params<f64>,
     q: &SVector<f64, NQ>,
@@ -788,124 +801,152 @@ pub fn planar_grid<L, const NQ: usize, const NC: usize, const NU: usize>(
 where
     L: LegModel<NQ, NC, NU>,
 {
+    let e = match mapped::<L, NQ, NC, NU, 2, NC>(p, q, frame, settings, limits, file_stem) {
+        Ok(part) => return part,
+        Err(e) => e,
+    };
+    let mut part = unmapped(&e);
+    // A one-motor linkage's workspace is the path of its foot.
+    let path = leg_models::analysis::workspace::foot_path::<L, NQ, NC, NU>(
+        p,
+        q,
+        frame,
+        360,
+        settings.motor_range,
+    );
+    if let Ok(path) = path {
+        part.json.push((
+            "foot_path",
+            json!({
+                "full_turn": path.full_turn,
+                "length_m": path.length,
+                "motor_angles": path.angles,
+                "feet": path.feet,
+            }),
+        ));
+        let mut v = view::<L, NQ, NC, NU, 2, NC>(p, q, None);
+        v.path = path.feet;
+        part.view = Some(v);
+    }
+    part
+}
+
+/// No grid, and why.
+fn unmapped(e: &leg_models::analysis::AnalysisError) -> GridPart {
+    let mut table = serde_json::Map::new();
+    let mut why = serde_json::Map::new();
+    for key in ["workspace_area_m2", "singularity_distance_m"] {
+        table.insert(key.into(), Value::Null);
+        why.insert(key.into(), json!(e.to_string()));
+    }
+    GridPart {
+        table,
+        why,
+        json: Vec::new(),
+        csv: None,
+        view: None,
+    }
+}
+
+/// The measures over a grid of foot positions (a spatial leg's in its slice), its
+/// singularity curves and area.
+fn mapped<L, const NQ: usize, const NC: usize, const NU: usize, const ND: usize, const NP: usize>(
+    p: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+    frame: &LegFrame<NQ>,
+    settings: &Settings,
+    limits: &MotorLimits<f64, NU>,
+    file_stem: &str,
+) -> Result<GridPart, leg_models::analysis::AnalysisError>
+where
+    L: LegModel<NQ, NC, NU, ND, NP>,
+{
     let mut table = serde_json::Map::new();
     let mut why = serde_json::Map::new();
     let mut fields = Vec::new();
-    let foot = L::foot_position(q, p);
     let options = GridOptions {
         nodes: settings.nodes,
         window: None,
+        plane: settings.slice.map(|s| s.0),
         motor_range: settings.motor_range.map(|r| [r; NU]),
         limits: *limits,
     };
     let started = Instant::now();
-    let ws = workspace::<L, NQ, NC, NU>(p, q, frame, &options);
+    let ws = workspace::<L, NQ, NC, NU, ND, NP>(p, q, frame, &options)?;
     let seconds = started.elapsed().as_secs_f64();
-    let (csv, view) = match ws {
-        Ok(ws) => {
-            table.insert("workspace_area_m2".into(), number(ws.area));
-            let d = ws.distance_to_singularity([foot[0], foot[1]]);
-            table.insert(
-                "singularity_distance_m".into(),
-                d.map_or(Value::Null, number),
-            );
-            if d.is_none() {
-                why.insert(
-                    "singularity_distance_m".into(),
-                    json!("no singularity in the grid"),
-                );
-            }
-            let reached = ws
-                .states
-                .iter()
-                .filter(|&&s| s == NodeState::Reached)
-                .count();
-            let singular = ws
-                .measures
-                .iter()
-                .filter(|m| matches!(m, Some(Err(_))))
-                .count();
-            fields.push((
-                "grid",
-                json!({
-                    "nodes_per_side": ws.nodes,
-                    "origin": ws.origin,
-                    "step_m": ws.step,
-                    "reached": reached,
-                    "singular_nodes": singular,
-                    "seconds": seconds,
-                    "csv": format!("{file_stem}.csv"),
-                }),
-            ));
-            let seg = |s: &[Segment]| {
-                s.iter()
-                    .map(|s| [s[0][0], s[0][1], s[1][0], s[1][1]])
-                    .collect::<Vec<_>>()
-            };
-            let mut curves = json!({
-                "passive": seg(&ws.passive_curves),
-                "passive_located": ws.passive_signed,
-                "foot": seg(&ws.foot_curves),
-            });
-            if !ws.passive_signed {
-                curves["passive_note"] = json!(
-                    "the passive rank measure is unsigned here (redundant rows, a body's held joints or more than two motors): its curves are not located"
-                );
-            }
-            fields.push(("curves", curves));
-            (
-                Some(csv::<L, NQ, NC, NU>(&ws)),
-                Some(view::<L, NQ, NC, NU>(p, q, Some(&ws))),
-            )
-        }
-        Err(e) => {
-            for key in ["workspace_area_m2", "singularity_distance_m"] {
-                table.insert(key.into(), Value::Null);
-                why.insert(key.into(), json!(e.to_string()));
-            }
-            // A one-motor linkage's workspace is the path of its foot.
-            let path = leg_models::analysis::workspace::foot_path::<L, NQ, NC, NU>(
-                p,
-                q,
-                frame,
-                360,
-                settings.motor_range,
-            );
-            match path {
-                Ok(path) => {
-                    fields.push((
-                        "foot_path",
-                        json!({
-                            "full_turn": path.full_turn,
-                            "length_m": path.length,
-                            "motor_angles": path.angles,
-                            "feet": path.feet,
-                        }),
-                    ));
-                    let mut v = view::<L, NQ, NC, NU>(p, q, None);
-                    v.path = path.feet;
-                    (None, Some(v))
-                }
-                Err(_) => (None, None),
-            }
-        }
+    table.insert("workspace_area_m2".into(), number(ws.area));
+    let stance = ws.grid_coordinates(&L::foot_position(q, p));
+    let d = ws.distance_to_singularity(stance);
+    table.insert(
+        "singularity_distance_m".into(),
+        d.map_or(Value::Null, number),
+    );
+    if d.is_none() {
+        why.insert(
+            "singularity_distance_m".into(),
+            json!("no singularity in the grid"),
+        );
+    }
+    let reached = ws
+        .states
+        .iter()
+        .filter(|&&s| s == NodeState::Reached)
+        .count();
+    let singular = ws
+        .measures
+        .iter()
+        .filter(|m| matches!(m, Some(Err(_))))
+        .count();
+    let mut grid = json!({
+        "nodes_per_side": ws.nodes,
+        "origin": ws.origin,
+        "step_m": ws.step,
+        "reached": reached,
+        "singular_nodes": singular,
+        "seconds": seconds,
+        "csv": format!("{file_stem}.csv"),
+    });
+    if let Some((plane, offset)) = ws.slice {
+        grid["slice"] = json!({
+            "axes": plane.axes,
+            "offset_m": offset,
+            "what": "grid coordinates (origin, curves, area) are along the slice's two axes; the plane is a·axes[0] + b·axes[1] + offset·(axes[0] × axes[1]), through the stance foot",
+        });
+    }
+    fields.push(("grid", grid));
+    let seg = |s: &[Segment]| {
+        s.iter()
+            .map(|s| [s[0][0], s[0][1], s[1][0], s[1][1]])
+            .collect::<Vec<_>>()
     };
-    GridPart {
+    let mut curves = json!({
+        "passive": seg(&ws.passive_curves),
+        "passive_located": ws.passive_signed,
+        "foot": seg(&ws.foot_curves),
+    });
+    if !ws.passive_signed {
+        curves["passive_note"] = json!(
+            "the passive rank measure is unsigned here (redundant rows, a body's held joints or more motors than the foot has coordinates): its curves are not located"
+        );
+    }
+    fields.push(("curves", curves));
+    Ok(GridPart {
         table,
         why,
         json: fields,
-        csv,
-        view,
-    }
+        csv: Some(csv::<L, NQ, NC, NU, ND, NP>(&ws)),
+        view: Some(view::<L, NQ, NC, NU, ND, NP>(p, q, Some(&ws))),
+    })
 }
 
-fn csv<L, const NQ: usize, const NC: usize, const NU: usize>(
-    ws: &leg_models::analysis::workspace::Workspace<NQ, NU>,
+fn csv<L, const NQ: usize, const NC: usize, const NU: usize, const ND: usize, const NP: usize>(
+    ws: &Workspace<NQ, NU, ND>,
 ) -> String
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
 {
-    let mut out = String::from("x,y,state");
+    // Each node's foot in the base frame: x, y (and z on a spatial leg's slice).
+    let mut out = String::from(if ND == 3 { "x,y,z,state" } else { "x,y,state" });
     for name in L::JOINT_NAMES {
         write!(out, ",q_{name}").unwrap();
     }
@@ -917,8 +958,11 @@ where
             .map_or(String::new(), |v| v.to_string())
     };
     for i in 0..ws.states.len() {
-        let [x, y] = ws.node(i % ws.nodes, i / ws.nodes);
-        write!(out, "{x},{y},{}", ws.states[i].name()).unwrap();
+        let foot = ws.foot_at(ws.node(i % ws.nodes, i / ws.nodes));
+        for x in foot.iter() {
+            write!(out, "{x},").unwrap();
+        }
+        write!(out, "{}", ws.states[i].name()).unwrap();
         let reached = ws.states[i] == NodeState::Reached;
         for j in 0..NQ {
             write!(out, ",{}", cell(reached.then(|| ws.poses[i][j]))).unwrap();
@@ -942,24 +986,25 @@ where
     out
 }
 
-fn view<L, const NQ: usize, const NC: usize, const NU: usize>(
+fn view<L, const NQ: usize, const NC: usize, const NU: usize, const ND: usize, const NP: usize>(
     p: &L::Params<f64>,
     q: &SVector<f64, NQ>,
-    ws: Option<&leg_models::analysis::workspace::Workspace<NQ, NU>>,
+    ws: Option<&Workspace<NQ, NU, ND>>,
 ) -> View
 where
-    L: LegModel<NQ, NC, NU>,
+    L: LegModel<NQ, NC, NU, ND, NP>,
 {
-    let values = |f: &dyn Fn(&leg_models::analysis::PointMeasures<f64, NQ, NU>) -> Option<f64>| {
-        let Some(ws) = ws else { return Vec::new() };
-        ws.measures
-            .iter()
-            .map(|m| match m {
-                Some(Ok(m)) => f(m).filter(|v| v.is_finite()).unwrap_or(f64::NAN),
-                _ => f64::NAN,
-            })
-            .collect::<Vec<f64>>()
-    };
+    let values =
+        |f: &dyn Fn(&leg_models::analysis::PointMeasures<f64, NQ, NU, ND>) -> Option<f64>| {
+            let Some(ws) = ws else { return Vec::new() };
+            ws.measures
+                .iter()
+                .map(|m| match m {
+                    Some(Ok(m)) => f(m).filter(|v| v.is_finite()).unwrap_or(f64::NAN),
+                    _ => f64::NAN,
+                })
+                .collect::<Vec<f64>>()
+        };
     let mut maps = vec![
         (
             "vertical force capacity (downward push)".to_string(),
@@ -980,23 +1025,34 @@ where
     if ws.is_none() {
         maps.clear();
     }
+    // The leg drawn in the grid's coordinates: a spatial leg projected onto its slice.
+    let flat = |x: SVector<f64, ND>| match ws {
+        Some(ws) => ws.grid_coordinates(&x),
+        None => [x[0], x[1]],
+    };
     let joints = L::joint_positions(q, p);
     let tips = L::link_tips(q, p);
+    let (joint, tip) = (
+        |j: usize| flat(joints.column(j).into_owned()),
+        |j: usize| flat(tips.column(j).into_owned()),
+    );
     let mut links: Vec<[f64; 4]> = (0..NQ)
-        .map(|j| [joints[(0, j)], joints[(1, j)], tips[(0, j)], tips[(1, j)]])
+        .map(|j| {
+            let (a, b) = (joint(j), tip(j));
+            [a[0], a[1], b[0], b[1]]
+        })
         .collect();
     // A child joint off its parent's tip, and closure points inside links: joined too.
     for j in 0..NQ {
         if let Some(parent) = L::PARENTS[j] {
-            links.push([
-                tips[(0, parent)],
-                tips[(1, parent)],
-                joints[(0, j)],
-                joints[(1, j)],
-            ]);
+            let (a, b) = (tip(parent), joint(j));
+            links.push([a[0], a[1], b[0], b[1]]);
         }
     }
-    let foot = L::foot_position(q, p);
+    let axes = match ws.and_then(|w| w.slice) {
+        Some((plane, _)) => plane.axes.map(|a| axis_name(&a)),
+        None => ["x".to_string(), "y".to_string()],
+    };
     View {
         nodes: ws.map_or(0, |w| w.nodes),
         origin: ws.map_or([0.0; 2], |w| w.origin),
@@ -1005,8 +1061,19 @@ where
         passive: ws.map_or_else(Vec::new, |w| w.passive_curves.clone()),
         foot: ws.map_or_else(Vec::new, |w| w.foot_curves.clone()),
         links,
-        stance: [foot[0], foot[1]],
+        stance: flat(L::foot_position(q, p)),
         path: Vec::new(),
+        axes,
+    }
+}
+
+/// A slice axis's name: `x`, `y` or `z` for a base axis, its components otherwise.
+fn axis_name(a: &[f64; 3]) -> String {
+    match a {
+        [1.0, 0.0, 0.0] => "x".into(),
+        [0.0, 1.0, 0.0] => "y".into(),
+        [0.0, 0.0, 1.0] => "z".into(),
+        _ => format!("({:.3}, {:.3}, {:.3})", a[0], a[1], a[2]),
     }
 }
 

@@ -71,6 +71,7 @@ pub fn html(designs: &[Design], sweep: Option<&str>, command: &str) -> Result<St
                 "links": v.links,
                 "stance": v.stance,
                 "path": v.path,
+                "axes": v.axes,
             })
         })
         .collect();
@@ -138,8 +139,9 @@ code {{ background: #f4f4f4; padding: 0 0.2em; }}
 <h1>Leg designs compared</h1>
 <p><code>{command}</code></p>
 <p>Each leg in its assembly branch of the home pose (continuation over a grid of foot
-positions); measures in motor coordinates, the stance pose is the spec's home. Hover a
-dash in the table for why a measure does not apply.</p>
+positions); measures in motor coordinates, the stance pose is the spec's home. A spatial
+leg's grid is a slice through its stance foot (its axes label the map), the leg drawn
+projected onto it. Hover a dash in the table for why a measure does not apply.</p>
 {table}
 <div id="sweep"></div>
 <p class="legend"><span style="color:#d62728">━ passive joints lose rank (type II)</span>
@@ -202,10 +204,10 @@ function drawMap(d, m) {{
   const tx = ticks(x0, x0 + ext, 4), ty = ticks(y0, y0 + ext, 4);
   g.textAlign = 'center'; g.textBaseline = 'top';
   for (const v of tx.values) {{ const x = X(v); g.beginPath(); g.moveTo(x, T + S); g.lineTo(x, T + S + 5); g.stroke(); g.fillText(tickText(v, tx.step), x, T + S + 7); }}
-  g.fillText('x (m)', L + S / 2, T + S + 26);
+  g.fillText(d.axes[0] + ' (m)', L + S / 2, T + S + 26);
   g.textAlign = 'right'; g.textBaseline = 'middle';
   for (const v of ty.values) {{ const y = Y(v); g.beginPath(); g.moveTo(L, y); g.lineTo(L - 5, y); g.stroke(); g.fillText(tickText(v, ty.step), L - 7, y); }}
-  g.save(); g.translate(12, T + S / 2); g.rotate(-Math.PI / 2); g.textAlign = 'center'; g.fillText('y (m)', 0, 0); g.restore();
+  g.save(); g.translate(12, T + S / 2); g.rotate(-Math.PI / 2); g.textAlign = 'center'; g.fillText(d.axes[1] + ' (m)', 0, 0); g.restore();
   // The colour bar: the map's colours from lo to hi, ticked in the measure's unit.
   const BX = L + S + 20, BW = 14;
   if (vals.length) {{
