@@ -251,9 +251,19 @@ fn check<
     );
 }
 
-/// The design measures at one pose, and the impact mitigation factor on a body (planar
-/// legs: `analyze` is planar only for now).
-fn check_analysis<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
+/// The design measures at one pose (with the spatial force polytope), and the impact
+/// mitigation factor on a body, planar and spatial.
+fn check_analysis<
+    L,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>()
+where
+    L: LegModel<NQ, NC, NU, ND, NP>,
+{
     let p = L::Params::<f64>::default();
     let q = passive_release_state::<L, NQ, NC, NU>(&p).q;
     let name = L::NAME;
@@ -267,9 +277,28 @@ fn check_analysis<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, con
         Ok(()) => zero(
             "design measures at a pose",
             allocations(|| {
-                leg_models::analysis::point_measures::<L, f64, NQ, NC, NU, 2, NC>(
+                let m = leg_models::analysis::point_measures::<L, f64, NQ, NC, NU, ND, NP>(
                     &p, &q, &frame, &limits,
-                )
+                );
+                // In space, the polytope on the stack too.
+                if let (Ok(m), true) = (&m, ND == 3 && NU >= 3) {
+                    let kin = leg_models::analysis::MotorKinematics::<f64, NQ, NU, 3> {
+                        g: m.kinematics.g,
+                        foot_jacobian: SMatrix::from_fn(|r, c| m.kinematics.foot_jacobian[(r, c)]),
+                        joint_foot_jacobian: SMatrix::from_fn(|r, c| {
+                            m.kinematics.joint_foot_jacobian[(r, c)]
+                        }),
+                        passive_rank: m.passive_rank,
+                    };
+                    let poly = leg_models::analysis::polytope::force_polytope::<L, f64, NQ, NC, NU>(
+                        &p,
+                        &q,
+                        &kin,
+                        &limits.torque,
+                    );
+                    assert!(poly.volume() > 0.0);
+                }
+                m
             })
             .0,
         ),
@@ -280,7 +309,7 @@ fn check_analysis<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, con
     zero(
         "impact mitigation factor",
         allocations(|| {
-            leg_models::analysis::impact_mitigation::<L, f64, NQ, NC, NU, 2, NC>(
+            leg_models::analysis::impact_mitigation::<L, f64, NQ, NC, NU, ND, NP>(
                 &p,
                 &q,
                 &frame,
@@ -418,7 +447,7 @@ fn hot_paths_do_not_allocate() {
     macro_rules! each {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
             check::<$ty, $nq, $nc, $nu, 2, $nc>();
-            check_analysis::<$ty, $nq, $nc, $nu>();
+            check_analysis::<$ty, $nq, $nc, $nu, 2, $nc>();
             check_hybrid::<$ty, $nq, $nc, $nu, $nk>();
             {
                 const M: usize = <$ty as leg_models::LegDynamics<$nq, $nc, $nu>>::MOBILITY;
@@ -430,6 +459,7 @@ fn hot_paths_do_not_allocate() {
     macro_rules! spatial {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
             check::<$ty, $nq, $nc, $nu, 3, $np>();
+            check_analysis::<$ty, $nq, $nc, $nu, 3, $np>();
         };
     }
     generated::for_each_spatial_model!(spatial);

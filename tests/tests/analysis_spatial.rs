@@ -21,6 +21,7 @@
 use leg_models::analysis::polytope::{
     force_polytope, slab_polytope, speed_zonotope_volume, zonotope_reach,
 };
+use leg_models::analysis::workspace::{workspace, GridOptions, NodeState, SlicePlane};
 use leg_models::analysis::{
     extreme_singular_values, foot_inverse_inertia, holding_torque, impact_mitigation,
     motor_kinematics, point_measures, AnalysisError, Body, BodyCoupling, Inapplicable, LegFrame,
@@ -264,10 +265,23 @@ where
         let Err(why) = frame.foot_spans(3) else {
             let pm = point.unwrap_or_else(|e| panic!("{what}: {e}"));
             check_motor_measures::<L, NQ, NC, NU, NP>(&p, q, &frame, &lim, &pm, &what);
+            if trial == 0 {
+                check_slices::<L, NQ, NC, NU, NP>(&p, q, &frame, &lim);
+            }
             continue;
         };
         if trial == 0 {
-            not_applicable(name, "force and speed polytopes (3-D)", &why);
+            not_applicable(
+                name,
+                "force and speed polytopes, workspace slices (3-D)",
+                &why,
+            );
+            let options = grid::<NU>(8, None, &lim);
+            assert_eq!(
+                workspace::<L, NQ, NC, NU, 3, NP>(&p, q, &frame, &options).err(),
+                Some(AnalysisError::NotApplicable(why)),
+                "{what}"
+            );
         }
         match frame.motor_coordinates() {
             Ok(()) => {
@@ -289,6 +303,75 @@ where
                     "{what}"
                 );
             }
+        }
+    }
+}
+
+fn grid<const NU: usize>(
+    nodes: usize,
+    plane: Option<SlicePlane>,
+    lim: &MotorLimits<f64, NU>,
+) -> GridOptions<NU> {
+    GridOptions {
+        nodes,
+        window: None,
+        plane,
+        motor_range: None,
+        limits: *lim,
+    }
+}
+
+/// The workspace in the sagittal and the frontal slice through the stance foot: each
+/// reached node's pose is on the closures with its foot on the node's point in the
+/// plane, and the stance node is reached.
+fn check_slices<L, const NQ: usize, const NC: usize, const NU: usize, const NP: usize>(
+    p: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+    frame: &LegFrame<NQ>,
+    lim: &MotorLimits<f64, NU>,
+) where
+    L: LegModel<NQ, NC, NU, 3, NP>,
+{
+    let name = L::NAME;
+    let stance = L::foot_position(q, p);
+    for (plane, normal) in [
+        (SlicePlane::SAGITTAL, Vector3::y()),
+        (SlicePlane::FRONTAL, Vector3::x()),
+    ] {
+        let ws = workspace::<L, NQ, NC, NU, 3, NP>(p, q, frame, &grid::<NU>(24, Some(plane), lim))
+            .unwrap_or_else(|e| panic!("{name}: slice {plane:?}: {e}"));
+        let reached: Vec<usize> = (0..ws.states.len())
+            .filter(|&i| ws.states[i] == NodeState::Reached)
+            .collect();
+        assert!(
+            reached.len() > 20,
+            "{name}: {} nodes reached",
+            reached.len()
+        );
+        assert!(ws.area > 0.0 && ws.area.is_finite());
+        let size = leg_models::assembly::leg_size::<L, f64, NQ, NC, NU>(p, q);
+        for &i in &reached {
+            let pose = &ws.poses[i];
+            let foot = L::foot_position(pose, p);
+            let node = ws.node(i % ws.nodes, i / ws.nodes);
+            // On the plane through the stance foot, at the node's coordinates.
+            assert!(
+                (foot - stance).dot(&normal).abs() < 1e-9 * size,
+                "{name}: node {i} off the slice"
+            );
+            let along = [
+                foot.dot(&Vector3::from(plane.axes[0])),
+                foot.dot(&Vector3::from(plane.axes[1])),
+            ];
+            assert!(
+                (along[0] - node[0]).abs() < 1e-9 * size
+                    && (along[1] - node[1]).abs() < 1e-9 * size,
+                "{name}: node {i} at {along:?}, not {node:?}"
+            );
+            assert!(
+                L::closure_residual(pose, p).amax() < 1e-9 * size,
+                "{name}: node {i} open"
+            );
         }
     }
 }
@@ -656,4 +739,82 @@ fn jacobi_singular_values_against_svd() {
     // Fewer columns than rows: σ_min = 0.
     let a = SMatrix::<f64, 3, 2>::new(1.0, 0.0, 0.0, 1.0, 1.0, 1.0);
     assert!(extreme_singular_values(&a).1 < 1e-15);
+}
+
+#[test]
+fn revolute_knee_slices_against_their_closed_forms() {
+    // The thigh (0.2 m) and shin (0.25 m) put the foot anywhere at 0.05 to 0.45 m from the
+    // hip pitch joint in the pitch plane (the knee turns freely); that plane turns with the
+    // abduction about x, 0.06 m off the x axis. In the frame turned by the abduction the foot
+    // is (a, 0.06, c) with a² + c² in [0.05², 0.45²]: the foot at (x, y, z) has
+    // x² + y² + z² − 0.06² in that range, with y² + z² ≥ 0.06².
+    // - Sagittal slice y = y₀ (|y₀| > 0.06 at stance): x² + z² in a range 0.2 wide, an
+    //   annulus of area π (0.45² − 0.05²) whatever y₀.
+    // - Frontal slice x = x₀: y² + z² − 0.06² in [0.05² − x₀², 0.45² − x₀²] and ≥ 0: an
+    //   annulus of area π (0.45² − max(x₀², 0.05²)).
+    type L = generated::revolute_knee_leg::RevoluteKneeLeg;
+    let p = <L as LegDynamics<7, 5, 3>>::Params::<f64>::default();
+    let q = home::<L, 7, 5, 3>(&p);
+    let frame = LegFrame::of::<L, 5, 3>();
+    let foot = <L as LegModel<7, 5, 3, 3, 2>>::foot_position(&q, &p);
+    assert!(foot[1].abs() > 0.06, "stance y {}", foot[1]);
+    let (r, big) = (0.05f64, 0.45f64);
+    let lim = limits::<3>();
+    for (plane, closed) in [
+        (
+            SlicePlane::SAGITTAL,
+            std::f64::consts::PI * (big * big - r * r),
+        ),
+        (
+            SlicePlane::FRONTAL,
+            std::f64::consts::PI * (big * big - (foot[0] * foot[0]).max(r * r)),
+        ),
+    ] {
+        let ws = workspace::<L, 7, 5, 3, 3, 2>(&p, &q, &frame, &grid::<3>(120, Some(plane), &lim))
+            .unwrap();
+        let e = (ws.area - closed).abs() / closed;
+        assert!(
+            e < 0.01,
+            "{plane:?}: slice area {} m² against {closed} m² ({e:.4})",
+            ws.area
+        );
+    }
+}
+
+#[test]
+fn slices_are_refused_where_they_do_not_apply() {
+    // A planar leg's workspace is its own plane.
+    type P = generated::minitaur::Minitaur;
+    let p = <P as LegDynamics<4, 2, 2>>::Params::<f64>::default();
+    let q = home::<P, 4, 2, 2>(&p);
+    let frame = LegFrame::of::<P, 2, 2>();
+    let e = workspace::<P, 4, 2, 2, 2, 2>(
+        &p,
+        &q,
+        &frame,
+        &grid::<2>(8, Some(SlicePlane::SAGITTAL), &limits::<2>()),
+    )
+    .unwrap_err();
+    assert_eq!(e, AnalysisError::NotApplicable(Inapplicable::PlanarSlice));
+    // Axes that are not orthogonal, or not finite.
+    assert!(SlicePlane::new([1.0, 0.0, 0.0], [1.0, 1.0, 0.0]).is_err());
+    assert!(SlicePlane::new([f64::NAN, 0.0, 0.0], [0.0, 1.0, 0.0]).is_err());
+    assert!(SlicePlane::new([0.0; 3], [0.0, 1.0, 0.0]).is_err());
+    let tilted = SlicePlane::new([1.0, 1.0, 0.0], [0.0, 0.0, 2.0]).unwrap();
+    assert!((Vector3::from(tilted.axes[0]).norm() - 1.0).abs() < 1e-15);
+    // A bad plane in the options is refused before any work.
+    type S = generated::abducted_five_bar::AbductedFiveBar;
+    let p = <S as LegDynamics<5, 3, 3>>::Params::<f64>::default();
+    let q = home::<S, 5, 3, 3>(&p);
+    let bad = SlicePlane {
+        axes: [[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]],
+    };
+    let e = workspace::<S, 5, 3, 3, 3, 2>(
+        &p,
+        &q,
+        &LegFrame::of::<S, 3, 3>(),
+        &grid::<3>(8, Some(bad), &limits::<3>()),
+    )
+    .unwrap_err();
+    assert!(matches!(e, AnalysisError::Grid { .. }), "{e}");
 }
