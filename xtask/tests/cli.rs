@@ -846,6 +846,132 @@ fn analyze_writes_the_table_the_grids_and_the_report() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `analyze` on spatial legs: the measures at stance in 3-D (the force polytope, the speed
+/// zonotope, 3 × 3 inertias), the workspace in a slice through the stance foot (its area
+/// against the closed form of revolute_knee_leg's annulus), the CSV's nodes in space, and
+/// the reasons where a measure does not apply (a leg its motors do not determine).
+#[test]
+fn analyze_takes_a_spatial_leg() {
+    let dir = temp_dir("analyze-spatial");
+    let d = dir.to_str().unwrap();
+    let out = legs(&[
+        "analyze",
+        "revolute_knee_leg",
+        "rssr_linkage",
+        "minitaur",
+        "--nodes",
+        "80",
+        "--out",
+        d,
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains("rssr_linkage: ") && stdout.contains("1 motor"),
+        "{stdout}"
+    );
+    let json: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("analysis.json")).unwrap()).unwrap();
+    let designs = json["designs"].as_array().unwrap();
+    let knee = &designs[0];
+    // The thigh (0.2 m) and shin (0.25 m) sweep an annulus of radii 0.05 and 0.45 m in the
+    // sagittal slice through the foot, whatever the abduction (analysis_spatial.rs).
+    let area = knee["table"]["workspace_area_m2"].as_f64().unwrap();
+    let annulus = std::f64::consts::PI * (0.45f64.powi(2) - 0.05f64.powi(2));
+    assert!(
+        (area - annulus).abs() < 0.01 * annulus,
+        "{area} against {annulus}"
+    );
+    assert_eq!(
+        knee["grid"]["slice"]["axes"],
+        serde_json::json!([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    );
+    assert_eq!(knee["stance"]["foot"].as_array().unwrap().len(), 3);
+    assert_eq!(
+        knee["stance"]["inverse_inertia_free"]
+            .as_array()
+            .unwrap()
+            .len(),
+        3
+    );
+    assert!(knee["stance"]["force_polytope_n"].as_array().unwrap().len() >= 8);
+    assert!(knee["stance"]["force_polytope_volume_n3"].as_f64().unwrap() > 0.0);
+    assert!(
+        knee["stance"]["speed_zonotope_volume_m3_s3"]
+            .as_f64()
+            .unwrap()
+            > 0.0
+    );
+    for key in [
+        "vertical_force_n",
+        "vertical_speed_m_s",
+        "condition",
+        "impact_mitigation",
+    ] {
+        assert!(knee["table"][key].as_f64().is_some(), "{key}: {knee}");
+    }
+    // The CSV's nodes are points in space, on the slice's plane through the foot.
+    let csv = std::fs::read_to_string(dir.join("revolute_knee_leg.csv")).unwrap();
+    assert!(csv.starts_with("x,y,z,state,q_abduction"), "{}", &csv[..80]);
+    assert_eq!(csv.lines().count(), 1 + 80 * 80);
+    let foot_y = knee["stance"]["foot"][1].as_f64().unwrap();
+    for line in csv.lines().skip(1).take(200) {
+        let y: f64 = line.split(',').nth(1).unwrap().parse().unwrap();
+        assert!((y - foot_y).abs() < 1e-12, "{line}");
+    }
+    // One motor: no polytope, no slice; the foot's inertia still.
+    let rssr = &designs[1];
+    assert!(rssr["table"]["workspace_area_m2"].is_null());
+    assert!(rssr["not_computed"]["workspace_area_m2"]
+        .as_str()
+        .unwrap()
+        .contains("1 motor"));
+    assert!(rssr["table"]["effective_mass_kg"].as_f64().unwrap() > 0.0);
+    // The planar leg beside it is unchanged: its grid in its own plane.
+    assert!(designs[2]["grid"]["slice"].is_null());
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert!(
+        html.contains("\"axes\":[\"x\",\"z\"]"),
+        "the slice's axes label its maps"
+    );
+    // A frontal slice; a slice of a planar leg is refused by name.
+    let out = legs(&[
+        "analyze",
+        "revolute_knee_leg",
+        "--slice",
+        "yz",
+        "--nodes",
+        "40",
+        "--out",
+        d,
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("analysis.json")).unwrap()).unwrap();
+    assert_eq!(
+        json["designs"][0]["grid"]["slice"]["axes"],
+        serde_json::json!([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+    refused(
+        &legs(&["analyze", "minitaur", "--slice", "xz", "--out", d]),
+        "`--slice` is for spatial legs: `minitaur` is planar",
+    );
+    refused(
+        &legs(&["analyze", "revolute_knee_leg", "--slice", "xq", "--out", d]),
+        "--slice",
+    );
+    assert!(!dir.exists());
+}
+
 #[test]
 fn analyze_sweeps_a_parameter() {
     let dir = temp_dir("analyze-sweep");
@@ -1697,7 +1823,6 @@ fn eval_and_export_take_a_spatial_leg() {
         "--assemble: rssr_linkage is a spatial leg",
     );
     refused(&legs(&["eval", "rssr_linkage", "--q", "0.3,0,0"]), "--q");
-    refused(&legs(&["analyze", "rssr_linkage"]), "is a spatial leg");
     let out = xtask(&["export", "rssr_linkage", "--format", "mjcf"]);
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
