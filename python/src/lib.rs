@@ -8,8 +8,10 @@
 //! generated crate (`generated::for_each_model!`): a new spec is a new class after
 //! `cargo xtask gen` and a rebuild, with nothing to write here.
 
-use leg_models::analysis::workspace::{GridOptions, NodeState, Segment};
-use leg_models::analysis::{AnalysisError as RustAnalysisError, Body, MotorLimits, Polygon};
+use leg_models::analysis::workspace::{GridOptions, NodeState, Segment, SlicePlane};
+use leg_models::analysis::{
+    AnalysisError as RustAnalysisError, Body, CapacitySets, MotorLimits, Polygon,
+};
 use leg_models::assembly::AssemblyError as RustAssemblyError;
 use leg_models::control::linearize::LinearizationError as RustLinearizationError;
 use leg_models::control::reference::Sinusoid;
@@ -1160,85 +1162,29 @@ macro_rules! leg_module {
                     d.set_item("P", out_matrix(py, &c.lqr.cost))?;
                     Ok(d)
                 }
-                $($extra)*
-            }
-
-            fn class_name() -> &'static str {
-                let path = stringify!($ty);
-                path.rsplit("::").next().unwrap_or(path).trim()
-            }
-
-            pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-                let class = m.py().get_type::<PyLeg>();
-                // One Rust type per leg, each named for its leg (pickle finds a class by
-                // `module.__qualname__`: under one shared name `Leg` none pickled).
-                class.setattr("__name__", class_name())?;
-                class.setattr("__qualname__", class_name())?;
-                m.add(class_name(), &class)?;
-                m.getattr("models")?.set_item(Model::NAME, class)?;
-                Ok(())
-            }
-        }
-    };
-}
-
-/// A planar leg: every method, its contacts, the hybrid simulator and the design
-/// measures too.
-macro_rules! leg_class {
-    ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $nk:expr) => {
-        leg_module!($module, $ty, $nq, $nc, $nu, $nk, 2, $nc, {
-                /// The contact points' names.
-                #[classattr]
-                fn contact_names() -> Vec<&'static str> {
-                    <Model as ContactModel<NQ, NC, NU, NK>>::CONTACT_NAMES.to_vec()
-                }
-                /// The contact points stacked (x₀, y₀, x₁, y₁, …).
-                fn contact_positions<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-                    Ok(out_vector(py, &Model::contact_positions(&pose("q", q)?, self.leg.params())))
-                }
-                /// `J_c(q)`.
-                fn contact_jacobian<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-                    Ok(out_matrix(py, &Model::contact_jacobian(&pose("q", q)?, self.leg.params())))
-                }
-                /// `J̇_c q̇`.
-                fn contact_bias<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<f64>>> {
-                    Ok(out_vector(py, &Model::contact_bias(&pose("q", q)?, &vector("qd", qd)?, self.leg.params())))
-                }
-                /// `(q̈, closure forces, contact forces)` with contacts held at `anchors`
-                /// (`held[k]`: contact k sticks; others in flight), spec ground and friction.
-                fn forward_dynamics_with_contacts<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, u: &Bound<'py, PyAny>, held: Vec<bool>, anchors: &Bound<'py, PyAny>) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
-                    held_contact_dynamics::<Model, NQ, NC, NU, NK, 2>(py, self.leg.params(), self.leg.baumgarte(), q, qd, u, &held, anchors)
-                }
-                /// Simulates the leg on the ground (contacts, impacts, events) for `steps`
-                /// RK4 steps of `dt` from `(q, qd)` with every contact in flight. Torques as
-                /// in `simulate`. Returns a dict of arrays (t, q, qd, u, contact_forces,
-                /// energy) and `events`, a list of dicts (t, kind, contact, impulse,
-                /// energy_lost).
-                #[pyo3(signature = (q, qd, steps, dt, torque = None))]
-                fn simulate_hybrid<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, qd: &Bound<'py, PyAny>, steps: &Bound<'py, PyAny>, dt: f64, torque: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyDict>> {
-                    simulate_on_ground(py, &self.leg.hybrid_simulator(dt), q, qd, steps, dt, torque)
-                }
                 /// Every design measure at the assembled pose `q`, with the joints' torque
                 /// limits `torque_limit` (N m after the gearbox) and speed limits
                 /// `speed_limit` (rad/s), each one number for every motor or one per motor.
                 /// Dict: held_joints (the body's joints, held: indices), foot, motor_angles,
                 /// G (q̇ = G θ̇, the held joints at rest), foot_jacobian (J_θ = J_f G),
                 /// passive_rank and foot_rank (zero at the two kinds of singularity),
-                /// condition (κ(J_θ); inf with one motor), holding_torque, force_polygon and
-                /// speed_polygon (vertices counter-clockwise; None with one motor),
-                /// vertical_force (the largest downward push; None where there is none,
-                /// inf where no motor takes any of it),
-                /// vertical_speed, inverse_inertia and inverse_inertia_locked (the foot's
-                /// Λ⁻¹ with the motors free and locked, 1/kg) and effective_mass (kg).
+                /// condition (κ(J_θ); inf with fewer motors than the foot's coordinates),
+                /// holding_torque; on a planar leg force_polygon and speed_polygon
+                /// (vertices counter-clockwise), on a spatial one force_polytope (its
+                /// vertices), force_polytope_volume (N³) and speed_zonotope_volume (m³/s³),
+                /// each None where the motors do not span the foot; vertical_force (the
+                /// largest downward push, along y planar and z spatial; None where there is
+                /// none, inf where no motor takes any of it), vertical_speed,
+                /// inverse_inertia and inverse_inertia_locked (the foot's Λ⁻¹ with the
+                /// motors free and locked, 1/kg) and effective_mass (kg).
                 fn design_measures<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, torque_limit: &Bound<'py, PyAny>, speed_limit: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
                     let q = pose("q", q)?;
                     let limits = MotorLimits { torque: per_motor("torque_limit", torque_limit)?, speed: per_motor("speed_limit", speed_limit)? };
                     let m = self.leg.design_measures(&q, &limits).map_err(analysis_err)?;
                     let kin = &m.kinematics;
                     let params = self.leg.params();
-                    let hold = leg_models::analysis::holding_torque::<Model, f64, NQ, NC, NU, 2>(params, &q, kin);
+                    let hold = leg_models::analysis::holding_torque::<Model, f64, NQ, NC, NU, ND>(params, &q, kin);
                     let frame = self.leg.analysis_frame();
-                    let polygons = frame.foot_polygons().is_ok();
                     let held: Vec<usize> = (0..NQ).filter(|&j| frame.held[j]).collect();
                     let d = PyDict::new(py);
                     d.set_item("held_joints", held)?;
@@ -1250,14 +1196,25 @@ macro_rules! leg_class {
                     d.set_item("foot_rank", m.foot_rank)?;
                     d.set_item("condition", m.condition)?;
                     d.set_item("holding_torque", out_vector(py, &hold))?;
-                    if polygons {
-                        let force = leg_models::analysis::force_polygon::<Model, f64, NQ, NC, NU>(params, &q, kin, &limits.torque);
-                        let speed = leg_models::analysis::speed_polygon(&kin.foot_jacobian, &limits.speed);
-                        d.set_item("force_polygon", out_polygon(py, &force))?;
-                        d.set_item("speed_polygon", out_polygon(py, &speed))?;
+                    let keys: &[&str] = if ND == 3 {
+                        &["force_polytope", "force_polytope_volume", "speed_zonotope_volume"]
                     } else {
-                        d.set_item("force_polygon", py.None())?;
-                        d.set_item("speed_polygon", py.None())?;
+                        &["force_polygon", "speed_polygon"]
+                    };
+                    for key in keys {
+                        d.set_item(*key, py.None())?;
+                    }
+                    match leg_models::analysis::capacity_sets::<Model, f64, NQ, NC, NU, ND>(params, &q, &frame, kin, &limits) {
+                        Ok(CapacitySets::Planar { force, speed }) => {
+                            d.set_item("force_polygon", out_polygon(py, &force))?;
+                            d.set_item("speed_polygon", out_polygon(py, &speed))?;
+                        }
+                        Ok(CapacitySets::Spatial { force, speed_volume }) => {
+                            d.set_item("force_polytope", out_rows(py, force.vertices().iter().copied()))?;
+                            d.set_item("force_polytope_volume", force.volume())?;
+                            d.set_item("speed_zonotope_volume", speed_volume)?;
+                        }
+                        Err(_) => {}
                     }
                     d.set_item("vertical_force", m.vertical_force)?;
                     d.set_item("vertical_speed", m.vertical_speed)?;
@@ -1266,7 +1223,7 @@ macro_rules! leg_class {
                     d.set_item("effective_mass", m.effective_mass)?;
                     Ok(d)
                 }
-                /// The foot's inverse operational-space inertia Λ⁻¹ (2 × 2, 1/kg) at the
+                /// The foot's inverse operational-space inertia Λ⁻¹ (2 × 2, 3 × 3 spatial; 1/kg) at the
                 /// assembled pose `q`, the motors free (rotors backdriven) or locked.
                 #[pyo3(signature = (q, motors_locked = false))]
                 fn foot_inverse_inertia<'py>(&self, py: Python<'py>, q: &Bound<'py, PyAny>, motors_locked: bool) -> PyResult<Bound<'py, PyArray2<f64>>> {
@@ -1275,7 +1232,7 @@ macro_rules! leg_class {
                 }
                 /// The impact mitigation factor ξ = det(I − Λ Λ_L⁻¹) (Wensing et al. 2017) at
                 /// the assembled pose `q`: with `body_mass` (kg) the hip on a body of that
-                /// mass translating in the plane; without, on a fixed base (a leg with body
+                /// mass translating in the plane (in space, spatial); without, on a fixed base (a leg with body
                 /// joints of its own uses them).
                 #[pyo3(signature = (q, body_mass = None))]
                 fn impact_mitigation(&self, q: &Bound<'_, PyAny>, body_mass: Option<f64>) -> PyResult<f64> {
@@ -1307,16 +1264,20 @@ macro_rules! leg_class {
                 /// home pose) over a grid of `nodes × nodes` foot positions centred on
                 /// `centre` with half-width `half_width` (default: on the hip of the foot's
                 /// chain, as wide as the chain is long), motors within `motor_range` (one
-                /// `(low, high)` per motor, a revolute one modulo a turn; default none). Dict: x, y (the grid's nodes),
+                /// `(low, high)` per motor, a revolute one modulo a turn; default none); a
+                /// spatial leg's in the plane `slice` through its stance foot ("xz", the
+                /// default, "yz" or "xy"). Dict: x, y (the grid's nodes; a spatial leg's
+                /// coordinates along the slice's axes, with plane_axes (2 × 3) and
+                /// plane_offset (m, along their cross product)),
                 /// state (`nodes × nodes` strings indexed [iy, ix]: "reached", "branch_ends",
                 /// "out_of_range", "unvisited"), area (m²), the measures as `nodes × nodes`
                 /// arrays (NaN where not reached or singular): condition, vertical_force,
                 /// vertical_speed, effective_mass, foot_rank, passive_rank; poses
                 /// (`nodes × nodes × nq`, NaN where not reached); passive_curves and
                 /// foot_curves (`n × 2 × 2` segments).
-                #[pyo3(signature = (torque_limit, speed_limit, nodes = 200, start = None, centre = None, half_width = None, motor_range = None))]
+                #[pyo3(signature = (torque_limit, speed_limit, nodes = 200, start = None, centre = None, half_width = None, motor_range = None, slice = None))]
                 #[allow(clippy::too_many_arguments)]
-                fn workspace<'py>(&self, py: Python<'py>, torque_limit: &Bound<'py, PyAny>, speed_limit: &Bound<'py, PyAny>, nodes: usize, start: Option<&Bound<'py, PyAny>>, centre: Option<[f64; 2]>, half_width: Option<f64>, motor_range: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyDict>> {
+                fn workspace<'py>(&self, py: Python<'py>, torque_limit: &Bound<'py, PyAny>, speed_limit: &Bound<'py, PyAny>, nodes: usize, start: Option<&Bound<'py, PyAny>>, centre: Option<[f64; 2]>, half_width: Option<f64>, motor_range: Option<&Bound<'py, PyAny>>, slice: Option<&str>) -> PyResult<Bound<'py, PyDict>> {
                     let limits = MotorLimits { torque: per_motor("torque_limit", torque_limit)?, speed: per_motor("speed_limit", speed_limit)? };
                     let start = match start {
                         Some(q) => pose("start", q)?,
@@ -1331,7 +1292,15 @@ macro_rules! leg_class {
                         None => None,
                         Some(r) => Some(motor_ranges::<NU>(r)?),
                     };
-                    let options = GridOptions { nodes, window, plane: None, motor_range, limits };
+                    let plane = match (slice, ND) {
+                        (None, _) => None,
+                        (Some(_), 2) => return Err(PyValueError::new_err("`slice`: a planar leg's workspace is its own plane (a spatial leg takes \"xz\", \"yz\" or \"xy\")")),
+                        (Some("xz"), _) => Some(SlicePlane::SAGITTAL),
+                        (Some("yz"), _) => Some(SlicePlane::FRONTAL),
+                        (Some("xy"), _) => Some(SlicePlane::TRANSVERSE),
+                        (Some(other), _) => return Err(PyValueError::new_err(format!("`slice`: expected \"xz\", \"yz\" or \"xy\", got {:?}", Shown(other).to_string()))),
+                    };
+                    let options = GridOptions { nodes, window, plane, motor_range, limits };
                     // The grid's rules are the Rust API's, said with the argument's name.
                     options.check().map_err(grid_err)?;
                     // Up to 2000 × 2000 nodes of continuation: without the GIL.
@@ -1341,7 +1310,7 @@ macro_rules! leg_class {
                     let x: Vec<f64> = (0..n).map(|i| w.node(i, 0)[0]).collect();
                     let y: Vec<f64> = (0..n).map(|i| w.node(0, i)[1]).collect();
                     let state: Vec<Vec<&str>> = (0..n).map(|iy| (0..n).map(|ix| w.states[iy * n + ix].name()).collect()).collect();
-                    let grid = |f: &dyn Fn(&leg_models::analysis::PointMeasures<f64, NQ, NU>) -> Option<f64>| {
+                    let grid = |f: &dyn Fn(&leg_models::analysis::PointMeasures<f64, NQ, NU, ND>) -> Option<f64>| {
                         let a = Array2::from_shape_fn((n, n), |(iy, ix)| match &w.measures[iy * n + ix] {
                             Some(Ok(m)) => f(m).unwrap_or(f64::NAN),
                             _ => f64::NAN,
@@ -1363,6 +1332,10 @@ macro_rules! leg_class {
                     d.set_item("y", y)?;
                     d.set_item("state", state)?;
                     d.set_item("area", w.area)?;
+                    if let Some((plane, offset)) = w.slice {
+                        d.set_item("plane_axes", plane.axes.to_vec())?;
+                        d.set_item("plane_offset", offset)?;
+                    }
                     d.set_item("condition", grid(&|m| Some(m.condition)))?;
                     d.set_item("vertical_force", grid(&|m| m.vertical_force))?;
                     d.set_item("vertical_speed", grid(&|m| Some(m.vertical_speed)))?;
@@ -1374,14 +1347,121 @@ macro_rules! leg_class {
                     d.set_item("foot_curves", out_segments(py, &w.foot_curves))?;
                     Ok(d)
                 }
+                $($extra)*
+            }
+
+            fn class_name() -> &'static str {
+                let path = stringify!($ty);
+                path.rsplit("::").next().unwrap_or(path).trim()
+            }
+
+            pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+                let class = m.py().get_type::<PyLeg>();
+                // One Rust type per leg, each named for its leg (pickle finds a class by
+                // `module.__qualname__`: under one shared name `Leg` none pickled).
+                class.setattr("__name__", class_name())?;
+                class.setattr("__qualname__", class_name())?;
+                m.add(class_name(), &class)?;
+                m.getattr("models")?.set_item(Model::NAME, class)?;
+                Ok(())
+            }
+        }
+    };
+}
+
+/// A planar leg: every method, its contacts and the hybrid simulator.
+macro_rules! leg_class {
+    ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $nk:expr) => {
+        leg_module!($module, $ty, $nq, $nc, $nu, $nk, 2, $nc, {
+            /// The contact points' names.
+            #[classattr]
+            fn contact_names() -> Vec<&'static str> {
+                <Model as ContactModel<NQ, NC, NU, NK>>::CONTACT_NAMES.to_vec()
+            }
+            /// The contact points stacked (x₀, y₀, x₁, y₁, …).
+            fn contact_positions<'py>(
+                &self,
+                py: Python<'py>,
+                q: &Bound<'py, PyAny>,
+            ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                Ok(out_vector(
+                    py,
+                    &Model::contact_positions(&pose("q", q)?, self.leg.params()),
+                ))
+            }
+            /// `J_c(q)`.
+            fn contact_jacobian<'py>(
+                &self,
+                py: Python<'py>,
+                q: &Bound<'py, PyAny>,
+            ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+                Ok(out_matrix(
+                    py,
+                    &Model::contact_jacobian(&pose("q", q)?, self.leg.params()),
+                ))
+            }
+            /// `J̇_c q̇`.
+            fn contact_bias<'py>(
+                &self,
+                py: Python<'py>,
+                q: &Bound<'py, PyAny>,
+                qd: &Bound<'py, PyAny>,
+            ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+                Ok(out_vector(
+                    py,
+                    &Model::contact_bias(&pose("q", q)?, &vector("qd", qd)?, self.leg.params()),
+                ))
+            }
+            /// `(q̈, closure forces, contact forces)` with contacts held at `anchors`
+            /// (`held[k]`: contact k sticks; others in flight), spec ground and friction.
+            fn forward_dynamics_with_contacts<'py>(
+                &self,
+                py: Python<'py>,
+                q: &Bound<'py, PyAny>,
+                qd: &Bound<'py, PyAny>,
+                u: &Bound<'py, PyAny>,
+                held: Vec<bool>,
+                anchors: &Bound<'py, PyAny>,
+            ) -> PyResult<(
+                Bound<'py, PyArray1<f64>>,
+                Bound<'py, PyArray1<f64>>,
+                Bound<'py, PyArray1<f64>>,
+            )> {
+                held_contact_dynamics::<Model, NQ, NC, NU, NK, 2>(
+                    py,
+                    self.leg.params(),
+                    self.leg.baumgarte(),
+                    q,
+                    qd,
+                    u,
+                    &held,
+                    anchors,
+                )
+            }
+            /// Simulates the leg on the ground (contacts, impacts, events) for `steps`
+            /// RK4 steps of `dt` from `(q, qd)` with every contact in flight. Torques as
+            /// in `simulate`. Returns a dict of arrays (t, q, qd, u, contact_forces,
+            /// energy) and `events`, a list of dicts (t, kind, contact, impulse,
+            /// energy_lost).
+            #[pyo3(signature = (q, qd, steps, dt, torque = None))]
+            fn simulate_hybrid<'py>(
+                &self,
+                py: Python<'py>,
+                q: &Bound<'py, PyAny>,
+                qd: &Bound<'py, PyAny>,
+                steps: &Bound<'py, PyAny>,
+                dt: f64,
+                torque: Option<&Bound<'py, PyAny>>,
+            ) -> PyResult<Bound<'py, PyDict>> {
+                simulate_on_ground(py, &self.leg.hybrid_simulator(dt), q, qd, steps, dt, torque)
+            }
         });
     };
 }
 
 /// A spatial leg: the methods of every leg, its foot and foot-space control in three
 /// coordinates, and its contacts in 3-D (three rows each: the ground's two tangents, then
-/// its normal) with their dynamics and the hybrid simulator; the design measures are
-/// planar.
+/// its normal) with their dynamics and the hybrid simulator.
 macro_rules! spatial_leg_class {
     ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $np:expr, $nk:expr) => {
         leg_module!($module, $ty, $nq, $nc, $nu, $nk, 3, $np, {

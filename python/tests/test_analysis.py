@@ -18,8 +18,7 @@ def _gravity(spec):
     return g["value"] if isinstance(g, dict) else g
 
 
-# The planar legs (a spec's gravity has two entries): the design measures are planar for
-# now, and a spatial leg's class has none.
+# The planar legs (a spec's gravity has two entries); the spatial ones are below.
 SPECS = sorted(
     p.stem
     for p in (ROOT / "leg-models" / "specs").glob("*.toml")
@@ -260,3 +259,117 @@ def test_assembly_branches_each_start_a_workspace():
     assert other["area"] > 0
     a, b = (leg.design_measures(x, 2.0, 30.0)["effective_mass"] for x in branches)
     assert a != b
+
+
+# The spatial legs (a spec's gravity has three entries): the foot in space, vertical z.
+SPATIAL = sorted(
+    p.stem
+    for p in (ROOT / "leg-models" / "specs").glob("*.toml")
+    if len(_gravity(tomllib.loads(p.read_text()))) == 3
+)
+
+
+@pytest.mark.parametrize("name", SPATIAL)
+def test_spatial_design_measures_against_numpy(name):
+    """A spatial leg's measures: where its motors span the foot, G closes the loops, κ is
+    numpy's, every force-polytope vertex and the largest push are held within the limits
+    (three limits active at a vertex), and with three motors the polytope's and the speed
+    zonotope's volumes and the vertical speed are the closed forms; on every leg, Λ⁻¹ free
+    and locked are numpy's Delassus matrices; elsewhere a typed error."""
+    leg = legmodels.models[name]()
+    q = leg.assembled_home()
+    torque, speed = 20.0, 10.0
+    free = inverse_inertia(leg, q, [])
+    locked = inverse_inertia(leg, q, list(leg.actuated))
+    s = np.abs(leg.foot_jacobian(q) @ np.linalg.solve(leg.mass_matrix(q), leg.foot_jacobian(q).T)).max()
+    assert leg.foot_inverse_inertia(q).shape == (3, 3)
+    np.testing.assert_allclose(leg.foot_inverse_inertia(q), free, rtol=0, atol=1e-9 * s)
+    np.testing.assert_allclose(leg.foot_inverse_inertia(q, motors_locked=True), locked, rtol=0, atol=1e-9 * s)
+    d, why = measures_or_reason(leg, q, torque, speed)
+    if d is None:
+        assert "not applicable" in why, (name, why)
+        with pytest.raises(legmodels.AnalysisError):
+            leg.workspace(torque, speed, nodes=5)
+        return
+    g = d["G"]
+    jt = leg.foot_jacobian(q) @ g
+    assert jt.shape == (3, leg.nu)
+    assert np.abs(leg.constraint_jacobian(q) @ g).max() < 1e-9 * max(np.abs(g).max(), 1.0)
+    np.testing.assert_allclose(d["foot_jacobian"], jt, rtol=1e-10, atol=1e-12)
+    hold = g.T @ leg.gravity_forces(q)
+    np.testing.assert_allclose(d["inverse_inertia"], free, rtol=0, atol=1e-9 * s)
+    assert d["effective_mass"] == pytest.approx(1.0 / free[2, 2], rel=1e-8)
+    if leg.nu < 3:
+        assert d["force_polytope"] is None and d["condition"] == np.inf
+        return
+    assert d["condition"] == pytest.approx(np.linalg.cond(jt), rel=1e-9), name
+    assert len(d["force_polytope"]) >= 8
+    for v in d["force_polytope"]:
+        u = hold + jt.T @ v
+        assert np.all(np.abs(u) <= torque * (1 + 1e-9)), (name, u)
+        assert np.sum(np.isclose(np.abs(u), torque, rtol=1e-8)) >= 3, (name, u)
+    f = d["vertical_force"]
+    u = hold + jt.T @ np.array([0.0, 0.0, -f])
+    assert np.all(np.abs(u) <= torque * (1 + 1e-9)), (name, u)
+    beyond = hold + jt.T @ np.array([0.0, 0.0, -f * (1 + 1e-6) - 1e-9])
+    assert np.any(np.abs(beyond) > torque), (name, "a larger push is held too")
+    if leg.nu == 3:
+        det = abs(np.linalg.det(jt))
+        assert d["force_polytope_volume"] == pytest.approx((2 * torque) ** 3 / det, rel=1e-9)
+        assert d["speed_zonotope_volume"] == pytest.approx(8 * speed**3 * det, rel=1e-9)
+        column = np.linalg.solve(jt, [0.0, 0.0, 1.0])
+        assert d["vertical_speed"] == pytest.approx(speed / np.abs(column).max(), rel=1e-9)
+
+
+@pytest.mark.parametrize("name", ["abducted_five_bar", "revolute_knee_leg", "cassie_leg"])
+def test_spatial_impact_mitigation_against_the_augmented_system(name):
+    """ξ on a body translating in space, against numpy's Delassus matrices of the leg and
+    body as one system: coordinates (b_x, b_y, b_z, q), M_aug = [[m_t I, P], [Pᵀ, M]], P from
+    the gravity term under unit gravity along x, y and z; a ball joint's three coordinates
+    move one link, counted once in the leg's mass."""
+    cls = legmodels.models[name]
+    leg = cls()
+    q = leg.assembled_home()
+    m_b = 5.0
+    grav = lambda gx, gy, gz: cls(gravity_x=gx, gravity_y=gy, gravity_z=gz).gravity_forces(q)
+    g0 = grav(0.0, 0.0, 0.0)
+    p = np.vstack([g0 - grav(*e) for e in np.eye(3)])
+    links = {j.split(".")[0] for j in leg.joint_names}
+    m_leg = sum(leg.get(f"{j}_mass") for j in links)
+    m_t = m_b + m_leg
+    m_aug = np.block([[m_t * np.eye(3), p], [p.T, leg.mass_matrix(q)]])
+    jf = np.hstack([np.eye(3), leg.foot_jacobian(q)])
+    closures = np.hstack([np.zeros((leg.nc, 3)), leg.constraint_jacobian(q)])
+    locks = np.zeros((leg.nu, 3 + leg.nq))
+    for k, j in enumerate(leg.actuated):
+        locks[k, 3 + j] = 1.0
+    free = delassus(m_aug, closures, jf)
+    locked = delassus(m_aug, np.vstack([closures, locks]), jf)
+    xi = np.linalg.det(np.eye(3) - np.linalg.solve(free, locked))
+    assert leg.impact_mitigation(q, body_mass=m_b) == pytest.approx(xi, rel=1e-6, abs=1e-12), name
+
+
+def test_spatial_workspace_slices():
+    """revolute_knee_leg's sagittal slice is the annulus π(0.45² − 0.05²) (thigh 0.2 m,
+    shin 0.25 m, whatever the abduction); every reached node's pose puts the foot on the
+    slice at its coordinates and closes the loop; a frontal slice is another plane through
+    the same foot; a planar leg and an unknown plane are refused."""
+    leg = legmodels.RevoluteKneeLeg()
+    q = leg.assembled_home()
+    foot = leg.foot_position(q)
+    w = leg.workspace(20.0, 10.0, nodes=60)
+    np.testing.assert_allclose(w["plane_axes"], [[1, 0, 0], [0, 0, 1]])
+    assert w["area"] == pytest.approx(np.pi * (0.45**2 - 0.05**2), rel=0.02)
+    a, b = np.asarray(w["x"]), np.asarray(w["y"])
+    reached = np.asarray(w["state"]) == "reached"
+    for iy, ix in list(zip(*np.nonzero(reached)))[::37]:
+        pose = w["poses"][iy, ix]
+        np.testing.assert_allclose(leg.foot_position(pose), [a[ix], foot[1], b[iy]], atol=1e-9)
+        assert np.abs(leg.closure_residual(pose)).max() < 1e-9
+    frontal = leg.workspace(20.0, 10.0, nodes=30, slice="yz")
+    np.testing.assert_allclose(frontal["plane_axes"], [[0, 1, 0], [0, 0, 1]])
+    assert frontal["plane_offset"] == pytest.approx(foot[0], abs=1e-12)
+    with pytest.raises(ValueError, match="slice"):
+        leg.workspace(20.0, 10.0, nodes=5, slice="xq")
+    with pytest.raises(ValueError, match="its own plane"):
+        legmodels.Minitaur().workspace(2.0, 30.0, nodes=5, slice="xz")

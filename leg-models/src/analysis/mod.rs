@@ -539,7 +539,8 @@ pub fn extreme_singular_values<T: Real, const ND: usize, const N: usize>(
                 let alpha = b.column(i).norm_squared();
                 let beta = b.column(k).norm_squared();
                 let gamma = b.column(i).dot(&b.column(k));
-                if !(gamma.abs() > T::default_epsilon() * (alpha * beta).sqrt()) {
+                if !gamma.is_finite() || gamma.abs() <= T::default_epsilon() * (alpha * beta).sqrt()
+                {
                     continue;
                 }
                 rotated = true;
@@ -752,6 +753,67 @@ where
 {
     let hold = holding_torque::<L, T, NQ, NC, NU, 2>(params, q, kin);
     slab_polygon(&kin.foot_jacobian, &(-torque - hold), &(torque - hold))
+}
+
+/// The force and speed sets at a pose, by the foot's dimension ([`capacity_sets`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum CapacitySets<T: Real> {
+    /// A planar foot's force and speed polygons ([`force_polygon`], [`speed_polygon`]).
+    Planar {
+        /// Foot forces held at rest within the torque limits (N).
+        force: Polygon<T>,
+        /// Foot velocities within the speed limits (m/s).
+        speed: Polygon<T>,
+    },
+    /// A spatial foot's force polytope ([`polytope::force_polytope`]) and the volume of
+    /// its speed zonotope ([`polytope::speed_zonotope_volume`], m³/s³).
+    Spatial {
+        /// Foot forces held at rest within the torque limits (N).
+        force: polytope::Polytope<T>,
+        /// The speed zonotope's volume.
+        speed_volume: T,
+    },
+}
+
+/// The force and speed sets of a leg at the assembled pose `q` with motor kinematics
+/// `kin`: polygons for a planar foot, the polytope and the zonotope's volume for a spatial
+/// one. Fails where the motors do not span the foot ([`LegFrame::foot_spans`]).
+pub fn capacity_sets<L, T, const NQ: usize, const NC: usize, const NU: usize, const ND: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+    frame: &LegFrame<NQ>,
+    kin: &MotorKinematics<T, NQ, NU, ND>,
+    limits: &MotorLimits<T, NU>,
+) -> Result<CapacitySets<T>, Inapplicable>
+where
+    L: LegDynamics<NQ, NC, NU>,
+    T: Real,
+{
+    frame.foot_spans(ND)?;
+    // The same kinematics typed with the foot's dimension (ND is 2 or 3 here).
+    fn retyped<T: Real, const NQ: usize, const NU: usize, const A: usize, const B: usize>(
+        k: &MotorKinematics<T, NQ, NU, A>,
+    ) -> MotorKinematics<T, NQ, NU, B> {
+        MotorKinematics {
+            g: k.g,
+            foot_jacobian: SMatrix::from_fn(|r, c| k.foot_jacobian[(r, c)]),
+            joint_foot_jacobian: SMatrix::from_fn(|r, c| k.joint_foot_jacobian[(r, c)]),
+            passive_rank: k.passive_rank,
+        }
+    }
+    Ok(if ND == 3 {
+        let kin = retyped::<T, NQ, NU, ND, 3>(kin);
+        CapacitySets::Spatial {
+            force: polytope::force_polytope::<L, T, NQ, NC, NU>(params, q, &kin, &limits.torque),
+            speed_volume: polytope::speed_zonotope_volume(&kin.foot_jacobian, &limits.speed),
+        }
+    } else {
+        let kin = retyped::<T, NQ, NU, ND, 2>(kin);
+        CapacitySets::Planar {
+            force: force_polygon::<L, T, NQ, NC, NU>(params, q, &kin, &limits.torque),
+            speed: speed_polygon(&kin.foot_jacobian, &limits.speed),
+        }
+    })
 }
 
 /// `Gᵀ G(q)`: the motor torques that hold the leg still with no force at the foot.

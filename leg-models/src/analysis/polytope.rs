@@ -247,7 +247,7 @@ pub fn zonotope_reach<T: Real, const NU: usize>(
     let g = |k: usize| -> Vector3<T> { foot_jacobian.column(k) * speed[k] };
     let size: T = (0..NU).map(|k| g(k).norm()).fold(T::zero(), |a, b| a + b);
     let volume = speed_zonotope_volume(foot_jacobian, speed);
-    if !(volume > size * size * size * T::default_epsilon() * T::lit(1e3)) {
+    if !volume.is_finite() || volume <= size * size * size * T::default_epsilon() * T::lit(1e3) {
         return T::zero();
     }
     let mut best = T::one() / T::zero();

@@ -8,13 +8,13 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 
-use leg_models::analysis::polytope::{force_polytope, speed_zonotope_volume};
 use leg_models::analysis::workspace::{
     assembly_modes, workspace, GridOptions, NodeState, Segment, SlicePlane, Workspace,
 };
 use leg_models::analysis::{
-    foot_inverse_inertia, force_polygon, impact_mitigation, point_measures, speed_polygon,
-    vertical_effective_mass, Body, BodyCoupling, LegFrame, MotorKinematics, MotorLimits,
+    capacity_sets, foot_inverse_inertia, impact_mitigation, point_measures,
+    vertical_effective_mass, Body, BodyCoupling, CapacitySets, LegFrame, MotorKinematics,
+    MotorLimits,
 };
 use leg_models::assembly::{project_position, Tolerance};
 use leg_models::nalgebra::{SMatrix, SVector};
@@ -625,9 +625,7 @@ where
             json["stance"]["inverse_inertia_free"] = matrix(&m.inverse_inertia);
             json["stance"]["inverse_inertia_locked"] = matrix(&m.inverse_inertia_locked);
             json["stance"]["foot_jacobian_motor"] = matrix(&m.kinematics.foot_jacobian);
-            if spans.is_ok() {
-                capacity_sets::<L, NQ, NC, NU, ND>(p, &q, &m.kinematics, &limits, &mut json);
-            }
+            capacity_json::<L, NQ, NC, NU, ND>(p, &q, &frame, &m.kinematics, &limits, &mut json);
         }
         Err(e) => {
             for key in [
@@ -703,58 +701,44 @@ fn matrix<const R: usize, const C: usize>(m: &SMatrix<f64, R, C>) -> Value {
         .collect::<Vec<_>>())
 }
 
-/// The same motor kinematics typed with the foot's dimension `B` (only called where the
-/// leg's `A` is `B`: the polygon takes a planar foot, the polytope a spatial one).
-fn retyped<const NQ: usize, const NU: usize, const A: usize, const B: usize>(
-    k: &MotorKinematics<f64, NQ, NU, A>,
-) -> MotorKinematics<f64, NQ, NU, B> {
-    MotorKinematics {
-        g: k.g,
-        foot_jacobian: SMatrix::from_fn(|r, c| k.foot_jacobian[(r, c)]),
-        joint_foot_jacobian: SMatrix::from_fn(|r, c| k.joint_foot_jacobian[(r, c)]),
-        passive_rank: k.passive_rank,
-    }
-}
-
 /// The force and speed sets at the stance pose: polygons in the plane, the force
 /// polytope and the speed zonotope's volume in space.
-fn capacity_sets<L, const NQ: usize, const NC: usize, const NU: usize, const ND: usize>(
+fn capacity_json<L, const NQ: usize, const NC: usize, const NU: usize, const ND: usize>(
     p: &L::Params<f64>,
     q: &SVector<f64, NQ>,
+    frame: &LegFrame<NQ>,
     kin: &MotorKinematics<f64, NQ, NU, ND>,
     limits: &MotorLimits<f64, NU>,
     json: &mut Value,
 ) where
     L: LegDynamics<NQ, NC, NU>,
 {
-    if NU > leg_models::analysis::MAX_MOTORS {
-        return;
-    }
-    if ND == 2 {
-        let kin = retyped::<NQ, NU, ND, 2>(kin);
-        let poly = force_polygon::<L, f64, NQ, NC, NU>(p, q, &kin, &limits.torque);
-        json["stance"]["force_polygon_n"] = json!(poly
-            .vertices()
-            .iter()
-            .map(|v| [v[0], v[1]])
-            .collect::<Vec<_>>());
-        let speed = speed_polygon(&kin.foot_jacobian, &limits.speed);
-        json["stance"]["speed_polygon_m_s"] = json!(speed
-            .vertices()
-            .iter()
-            .map(|v| [v[0], v[1]])
-            .collect::<Vec<_>>());
-    } else {
-        let kin = retyped::<NQ, NU, ND, 3>(kin);
-        let poly = force_polytope::<L, f64, NQ, NC, NU>(p, q, &kin, &limits.torque);
-        json["stance"]["force_polytope_n"] = json!(poly
-            .vertices()
-            .iter()
-            .map(|v| [v[0], v[1], v[2]])
-            .collect::<Vec<_>>());
-        json["stance"]["force_polytope_volume_n3"] = number(poly.volume());
-        json["stance"]["speed_zonotope_volume_m3_s3"] =
-            number(speed_zonotope_volume(&kin.foot_jacobian, &limits.speed));
+    match capacity_sets::<L, f64, NQ, NC, NU, ND>(p, q, frame, kin, limits) {
+        Ok(CapacitySets::Planar { force, speed }) => {
+            let rows = |poly: &leg_models::analysis::Polygon<f64>| {
+                json!(poly
+                    .vertices()
+                    .iter()
+                    .map(|v| [v[0], v[1]])
+                    .collect::<Vec<_>>())
+            };
+            json["stance"]["force_polygon_n"] = rows(&force);
+            json["stance"]["speed_polygon_m_s"] = rows(&speed);
+        }
+        Ok(CapacitySets::Spatial {
+            force,
+            speed_volume,
+        }) => {
+            json["stance"]["force_polytope_n"] = json!(force
+                .vertices()
+                .iter()
+                .map(|v| [v[0], v[1], v[2]])
+                .collect::<Vec<_>>());
+            json["stance"]["force_polytope_volume_n3"] = number(force.volume());
+            json["stance"]["speed_zonotope_volume_m3_s3"] = number(speed_volume);
+        }
+        // The table says why (its push and speed have the same reason).
+        Err(_) => {}
     }
 }
 
