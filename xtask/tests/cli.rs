@@ -938,7 +938,7 @@ fn analyze_takes_a_spatial_leg() {
         html.contains("\"axes\":[\"x\",\"z\"]"),
         "the slice's axes label its maps"
     );
-    // A frontal slice; a slice of a planar leg is refused by name.
+    // A frontal slice, and the volume; a slice of a planar leg is refused by name.
     let out = legs(&[
         "analyze",
         "revolute_knee_leg",
@@ -946,9 +946,13 @@ fn analyze_takes_a_spatial_leg() {
         "yz",
         "--nodes",
         "40",
+        "--volume",
+        "16",
         "--out",
         d,
     ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("workspace volume (cm³)"), "{stdout}");
     assert!(
         out.status.success(),
         "{}",
@@ -960,6 +964,17 @@ fn analyze_takes_a_spatial_leg() {
         json["designs"][0]["grid"]["slice"]["axes"],
         serde_json::json!([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
     );
+    // The shell of radii 0.05 and 0.45 m swept by the abduction (analysis_spatial.rs), to
+    // a coarse 16³ grid.
+    let volume = json["designs"][0]["table"]["workspace_volume_m3"]
+        .as_f64()
+        .unwrap();
+    let shell = 4.0 * std::f64::consts::PI / 3.0 * (0.45f64.powi(3) - 0.05f64.powi(3));
+    assert!(
+        (volume - shell).abs() < 0.15 * shell,
+        "{volume} against {shell}"
+    );
+    assert_eq!(json["designs"][0]["volume"]["nodes_per_side"], 16);
     let _ = std::fs::remove_dir_all(&dir);
     refused(
         &legs(&["analyze", "minitaur", "--slice", "xz", "--out", d]),
@@ -968,6 +983,21 @@ fn analyze_takes_a_spatial_leg() {
     refused(
         &legs(&["analyze", "revolute_knee_leg", "--slice", "xq", "--out", d]),
         "--slice",
+    );
+    refused(
+        &legs(&["analyze", "atrias", "--volume", "10", "--out", d]),
+        "`--volume` is for spatial legs: `atrias` is planar",
+    );
+    refused(
+        &legs(&[
+            "analyze",
+            "revolute_knee_leg",
+            "--volume",
+            "101",
+            "--out",
+            d,
+        ]),
+        "--volume",
     );
     assert!(!dir.exists());
 }

@@ -385,98 +385,32 @@ where
             ],
         )
     };
-    let tol = Tolerance {
-        max_iterations: 30,
-        ..Tolerance::default()
-    };
-    // A revolute motor's angle is in range if it is there modulo a turn: the fronts of
-    // the continuation can reach one node with angles a turn apart (around a hole in
-    // the workspace), and both are the same pose.
-    let motor_in = |a: usize, x: f64, (lo, hi): (f64, f64)| {
-        if L::JOINT_KINDS[a] == crate::model::contract::JointKind::Revolute {
-            // A turn or more limits nothing (and keeps an infinite bound out of the sum).
-            hi - lo >= core::f64::consts::TAU
-                || lo + (x - lo).rem_euclid(core::f64::consts::TAU) <= hi
-        } else {
-            x >= lo && x <= hi
-        }
-    };
-    let in_range = |q: &SVector<f64, NQ>| {
-        options.motor_range.is_none_or(|r| {
-            L::ACTUATED
-                .iter()
-                .zip(r.iter())
-                .all(|(&a, &range)| motor_in(a, q[a], range))
-        })
-    };
-    if let Some(r) = &options.motor_range {
-        for (k, (&a, &range)) in L::ACTUATED.iter().zip(r.iter()).enumerate() {
-            if !motor_in(a, start[a], range) {
-                return Err(AnalysisError::StartOutOfRange {
-                    motor: k,
-                    angle: start[a],
-                    range,
-                });
-            }
-        }
-    }
-    let mut states = vec![NodeState::Unvisited; n * n];
-    let mut poses = vec![SVector::<f64, NQ>::zeros(); n * n];
-    let mut queue = VecDeque::new();
+    start_in_range::<L, NQ, NC, NU>(start, options.motor_range.as_ref())?;
     // The node nearest the start's foot, solved from the start.
     let stance = project(slice.as_ref(), &foot);
     let ix = (((stance[0] - origin[0]) / step).round().max(0.0) as usize).min(n - 1);
     let iy = (((stance[1] - origin[1]) / step).round().max(0.0) as usize).min(n - 1);
-    let first = iy * n + ix;
-    let q0 = foot_inverse_holding::<L, f64, NQ, NC, NU, ND, NP>(
-        params,
-        &at(first),
-        start,
-        &tol,
-        &frame.held,
-    )?;
-    if (q0 - start).amax() > 4.0 * JUMP || !in_range(&q0) {
-        return Err(AnalysisError::Assembly(
-            crate::assembly::AssemblyError::BranchEnds { fraction: 0.0 },
-        ));
-    }
-    states[first] = NodeState::Reached;
-    poses[first] = q0;
-    queue.push_back(first);
-    while let Some(i) = queue.pop_front() {
+    let neighbours = |i: usize| {
         let (x, y) = (i % n, i / n);
-        let neighbours = [
+        [
             (x > 0).then(|| i - 1),
             (x + 1 < n).then(|| i + 1),
             (y > 0).then(|| i - n),
             (y + 1 < n).then(|| i + n),
-        ];
-        for k in neighbours.into_iter().flatten() {
-            if matches!(states[k], NodeState::Reached | NodeState::OutOfRange) {
-                continue;
-            }
-            match follow::<L, NQ, NC, NU, ND, NP>(
-                params,
-                &poses[i],
-                &at(i),
-                &at(k),
-                frame,
-                &tol,
-                GRID_FLOOR,
-            ) {
-                Ok(q) => {
-                    if in_range(&q) {
-                        states[k] = NodeState::Reached;
-                        poses[k] = q;
-                        queue.push_back(k);
-                    } else {
-                        states[k] = NodeState::OutOfRange;
-                    }
-                }
-                _ => states[k] = NodeState::BranchEnds,
-            }
-        }
-    }
+            None,
+            None,
+        ]
+    };
+    let (states, poses) = continuation::<L, NQ, NC, NU, ND, NP>(
+        params,
+        start,
+        frame,
+        options.motor_range.as_ref(),
+        n * n,
+        iy * n + ix,
+        at,
+        neighbours,
+    )?;
     let fixed: [bool; NQ] = core::array::from_fn(|c| frame.held[c] || L::ACTUATED.contains(&c));
     // Curves in foot space need the pose to be a function of the foot on the branch (two
     // motors that determine the leg): with more, the pose at a foot depends on the path.
@@ -546,6 +480,242 @@ where
     ws.passive_curves = passive_curves;
     ws.foot_curves = foot_curves;
     Ok(ws)
+}
+
+/// Whether motor joint `a` at `x` is within `(lo, hi)`: a revolute one modulo a turn (the
+/// fronts of a continuation can reach one node with angles a turn apart, around a hole in
+/// the workspace, and both are the same pose); a range a turn wide limits nothing.
+fn motor_in<L, const NQ: usize, const NC: usize, const NU: usize>(
+    a: usize,
+    x: f64,
+    (lo, hi): (f64, f64),
+) -> bool
+where
+    L: LegDynamics<NQ, NC, NU>,
+{
+    if L::JOINT_KINDS[a] == crate::model::contract::JointKind::Revolute {
+        // A turn or more limits nothing (and keeps an infinite bound out of the sum).
+        hi - lo >= core::f64::consts::TAU || lo + (x - lo).rem_euclid(core::f64::consts::TAU) <= hi
+    } else {
+        x >= lo && x <= hi
+    }
+}
+
+/// Every motor of `q` within `range` (none: no limit).
+fn in_range<L, const NQ: usize, const NC: usize, const NU: usize>(
+    q: &SVector<f64, NQ>,
+    range: Option<&[(f64, f64); NU]>,
+) -> bool
+where
+    L: LegDynamics<NQ, NC, NU>,
+{
+    range.is_none_or(|r| {
+        L::ACTUATED
+            .iter()
+            .zip(r.iter())
+            .all(|(&a, &range)| motor_in::<L, NQ, NC, NU>(a, q[a], range))
+    })
+}
+
+/// The start's motors within `range`, or the first outside it.
+fn start_in_range<L, const NQ: usize, const NC: usize, const NU: usize>(
+    start: &SVector<f64, NQ>,
+    range: Option<&[(f64, f64); NU]>,
+) -> Result<(), AnalysisError>
+where
+    L: LegDynamics<NQ, NC, NU>,
+{
+    for (k, (&a, &range)) in L::ACTUATED
+        .iter()
+        .zip(range.into_iter().flatten())
+        .enumerate()
+    {
+        if !motor_in::<L, NQ, NC, NU>(a, start[a], range) {
+            return Err(AnalysisError::StartOutOfRange {
+                motor: k,
+                angle: start[a],
+                range,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The branch of `start` over `count` nodes of foot positions `at(i)`: node `first` solved
+/// from `start`, then breadth first, each node from a reached neighbour ([`follow`], so
+/// the branch never changes). Each node's state and pose (zero where not reached).
+#[allow(clippy::too_many_arguments)]
+fn continuation<
+    L,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const ND: usize,
+    const NP: usize,
+>(
+    params: &L::Params<f64>,
+    start: &SVector<f64, NQ>,
+    frame: &LegFrame<NQ>,
+    range: Option<&[(f64, f64); NU]>,
+    count: usize,
+    first: usize,
+    at: impl Fn(usize) -> SVector<f64, ND>,
+    neighbours: impl Fn(usize) -> [Option<usize>; 6],
+) -> Result<(Vec<NodeState>, Vec<SVector<f64, NQ>>), AnalysisError>
+where
+    L: LegModel<NQ, NC, NU, ND, NP>,
+{
+    let tol = Tolerance {
+        max_iterations: 30,
+        ..Tolerance::default()
+    };
+    let mut states = vec![NodeState::Unvisited; count];
+    let mut poses = vec![SVector::<f64, NQ>::zeros(); count];
+    let q0 = foot_inverse_holding::<L, f64, NQ, NC, NU, ND, NP>(
+        params,
+        &at(first),
+        start,
+        &tol,
+        &frame.held,
+    )?;
+    if (q0 - start).amax() > 4.0 * JUMP || !in_range::<L, NQ, NC, NU>(&q0, range) {
+        return Err(AnalysisError::Assembly(
+            crate::assembly::AssemblyError::BranchEnds { fraction: 0.0 },
+        ));
+    }
+    states[first] = NodeState::Reached;
+    poses[first] = q0;
+    let mut queue = VecDeque::from([first]);
+    while let Some(i) = queue.pop_front() {
+        for k in neighbours(i).into_iter().flatten() {
+            if matches!(states[k], NodeState::Reached | NodeState::OutOfRange) {
+                continue;
+            }
+            match follow::<L, NQ, NC, NU, ND, NP>(
+                params,
+                &poses[i],
+                &at(i),
+                &at(k),
+                frame,
+                &tol,
+                GRID_FLOOR,
+            ) {
+                Ok(q) if in_range::<L, NQ, NC, NU>(&q, range) => {
+                    states[k] = NodeState::Reached;
+                    poses[k] = q;
+                    queue.push_back(k);
+                }
+                Ok(_) => states[k] = NodeState::OutOfRange,
+                _ => states[k] = NodeState::BranchEnds,
+            }
+        }
+    }
+    Ok((states, poses))
+}
+
+/// The most nodes per side of [`workspace_volume`]'s cube (a million nodes).
+pub const VOLUME_NODES: core::ops::RangeInclusive<usize> = 2..=100;
+
+/// A spatial leg's workspace as a volume ([`workspace_volume`]).
+#[derive(Clone, Debug)]
+pub struct WorkspaceVolume {
+    /// Nodes per side of the cube.
+    pub nodes: usize,
+    /// The node `(0, 0, 0)` (lowest `x`, `y`, `z`), base frame (m).
+    pub origin: [f64; 3],
+    /// Node spacing (m).
+    pub step: f64,
+    /// Each node's state (`index = (iz · nodes + iy) · nodes + ix`).
+    pub states: Vec<NodeState>,
+    /// Nodes reached on the branch.
+    pub reached: usize,
+    /// Reached nodes × step³ (m³).
+    pub volume: f64,
+}
+
+/// The workspace of the branch of `start` as a volume: the continuation of [`workspace`]
+/// over a cube of `nodes³` foot positions centred on the hip of the foot's chain, as wide
+/// as the chain is long ([`reach`]), motors within `motor_range`; no measures at the nodes.
+pub fn workspace_volume<L, const NQ: usize, const NC: usize, const NU: usize, const NP: usize>(
+    params: &L::Params<f64>,
+    start: &SVector<f64, NQ>,
+    frame: &LegFrame<NQ>,
+    nodes: usize,
+    motor_range: Option<&[(f64, f64); NU]>,
+) -> Result<WorkspaceVolume, AnalysisError>
+where
+    L: LegModel<NQ, NC, NU, 3, NP>,
+{
+    if !VOLUME_NODES.contains(&nodes) {
+        return Err(AnalysisError::Grid {
+            what: "from 2 to 100 nodes per side of a volume",
+            value: nodes as f64,
+        });
+    }
+    let limits = MotorLimits {
+        torque: SVector::repeat(1.0),
+        speed: SVector::repeat(1.0),
+    };
+    GridOptions {
+        nodes,
+        window: None,
+        plane: None,
+        motor_range: motor_range.copied(),
+        limits,
+    }
+    .check()?;
+    frame.foot_spans(3)?;
+    start_in_range::<L, NQ, NC, NU>(start, motor_range)?;
+    let n = nodes;
+    let (hip, half) = reach::<L, NQ, NC, NU, 3, NP>(params, start, frame);
+    let step = 2.0 * half / (n - 1) as f64;
+    let origin = [hip[0] - half, hip[1] - half, hip[2] - half];
+    let index = |c: [usize; 3]| (c[2] * n + c[1]) * n + c[0];
+    let cell = |i: usize| [i % n, (i / n) % n, i / (n * n)];
+    let at = |i: usize| {
+        let c = cell(i);
+        SVector::<f64, 3>::from_fn(|r, _| origin[r] + c[r] as f64 * step)
+    };
+    let foot = L::foot_position(start, params);
+    let nearest: [usize; 3] = core::array::from_fn(|r| {
+        (((foot[r] - origin[r]) / step).round().max(0.0) as usize).min(n - 1)
+    });
+    let neighbours = |i: usize| {
+        let c = cell(i);
+        let mut out = [None; 6];
+        for axis in 0..3 {
+            if c[axis] > 0 {
+                let mut d = c;
+                d[axis] -= 1;
+                out[2 * axis] = Some(index(d));
+            }
+            if c[axis] + 1 < n {
+                let mut d = c;
+                d[axis] += 1;
+                out[2 * axis + 1] = Some(index(d));
+            }
+        }
+        out
+    };
+    let (states, _) = continuation::<L, NQ, NC, NU, 3, NP>(
+        params,
+        start,
+        frame,
+        motor_range,
+        n * n * n,
+        index(nearest),
+        at,
+        neighbours,
+    )?;
+    let reached = states.iter().filter(|&&s| s == NodeState::Reached).count();
+    Ok(WorkspaceVolume {
+        nodes: n,
+        origin,
+        step,
+        states,
+        reached,
+        volume: reached as f64 * step * step * step,
+    })
 }
 
 /// Steps of a branch change each joint by at most this much (rad, or m): a larger change

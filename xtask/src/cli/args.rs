@@ -357,6 +357,10 @@ pub struct AnalyzeArgs {
     /// (sagittal, the default), `yz` (frontal) or `xy` (transverse); not for a planar leg
     #[arg(long, value_name = "PLANE", value_parser = ["xz", "yz", "xy"])]
     pub slice: Option<String>,
+    /// Also measure a spatial leg's workspace as a volume: the continuation over a cube of
+    /// N³ foot positions around the hip (N from 2 to 100; no measures at the nodes)
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(2..=100))]
+    pub volume: Option<u32>,
     /// Where to write (default target/analyze)
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,

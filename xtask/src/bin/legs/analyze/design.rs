@@ -54,14 +54,30 @@ pub const COLUMNS: [(&str, &str, f64, usize); 7] = [
     ("condition", "κ(J_θ) at stance", 1.0, 2),
 ];
 
+/// A column of its own for a spatial leg's workspace volume (`--volume`).
+const VOLUME: (&str, &str, f64, usize) = ("workspace_volume_m3", "workspace volume (cm³)", 1e6, 0);
+
+/// The table's columns for these designs: [`COLUMNS`], and the volume where one was asked.
+pub fn columns(designs: &[Design]) -> Vec<(&'static str, &'static str, f64, usize)> {
+    let mut columns = COLUMNS.to_vec();
+    if designs
+        .iter()
+        .any(|d| d.json["table"].get(VOLUME.0).is_some())
+    {
+        columns.insert(1, VOLUME);
+    }
+    columns
+}
+
 /// The table as text, one design a row.
 pub fn table(designs: &[Design]) -> String {
+    let columns = columns(designs);
     let mut rows = vec![std::iter::once("design".to_string())
-        .chain(COLUMNS.iter().map(|c| c.1.to_string()))
+        .chain(columns.iter().map(|c| c.1.to_string()))
         .collect::<Vec<_>>()];
     for d in designs {
         let mut row = vec![d.label.clone()];
-        for (key, _, scale, digits) in COLUMNS {
+        for &(key, _, scale, digits) in &columns {
             row.push(match d.json["table"].get(key).and_then(Value::as_f64) {
                 Some(v) => format!("{:.*}", digits, v * scale),
                 None => "–".to_string(),

@@ -9,7 +9,8 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use leg_models::analysis::workspace::{
-    assembly_modes, workspace, GridOptions, NodeState, Segment, SlicePlane, Workspace,
+    assembly_modes, workspace, workspace_volume, GridOptions, NodeState, Segment, SlicePlane,
+    Workspace,
 };
 use leg_models::analysis::{
     capacity_sets, foot_inverse_inertia, impact_mitigation, point_measures,
@@ -42,6 +43,8 @@ pub struct Settings {
     branches: bool,
     /// A spatial leg's slice (`--slice`), with its axes' names.
     slice: Option<(SlicePlane, [&'static str; 2])>,
+    /// Nodes per side of a spatial leg's volume (`--volume`).
+    volume: Option<usize>,
     /// Grid nodes the run's designs hold (checked against [`MAX_NODES`]).
     planned_nodes: AtomicUsize,
     pub out: PathBuf,
@@ -224,7 +227,8 @@ impl Settings {
         // Every design's grid and CSV are held until all are done (nothing is written
         // before): bound their total, about 250 bytes a node.
         let designs = sweep.as_ref().map_or(a.models.len(), |s| s.count);
-        let total = (a.nodes as usize).pow(2) * designs;
+        let total =
+            ((a.nodes as usize).pow(2) + a.volume.map_or(0, |n| (n as usize).pow(3))) * designs;
         if total > MAX_NODES {
             return Err(Error::usage(format!(
                 "`--nodes {}` for {designs} designs is {:.1} million grid nodes; one run takes at most {} million (held in memory until every design is done): fewer nodes or designs",
@@ -247,6 +251,7 @@ impl Settings {
                 "xy" => (SlicePlane::TRANSVERSE, ["x", "y"]),
                 _ => (SlicePlane::SAGITTAL, ["x", "z"]),
             }),
+            volume: a.volume.map(|n| n as usize),
             planned_nodes: AtomicUsize::new(total),
             out: a
                 .out
@@ -329,11 +334,16 @@ where
         )),
         None => None,
     };
-    if ND == 2 && settings.slice.is_some() {
-        return Err(Error::usage(format!(
-            "`--slice` is for spatial legs: `{}` is planar (its workspace is its own plane)",
-            L::NAME
-        )));
+    for (flag, given) in [
+        ("--slice", settings.slice.is_some()),
+        ("--volume", settings.volume.is_some()),
+    ] {
+        if ND == 2 && given {
+            return Err(Error::usage(format!(
+                "`{flag}` is for spatial legs: `{}` is planar (its workspace is its own plane)",
+                L::NAME
+            )));
+        }
     }
     for list in [&settings.torque, &settings.speed].into_iter().flatten() {
         if list.len() != 1 && list.len() != NU {
@@ -769,8 +779,35 @@ pub fn spatial_grid<L, const NQ: usize, const NC: usize, const NU: usize, const 
 where
     L: LegModel<NQ, NC, NU, 3, NP>,
 {
-    mapped::<L, NQ, NC, NU, 3, NP>(p, q, frame, settings, limits, file_stem)
-        .unwrap_or_else(|e| unmapped(&e))
+    let mut part = mapped::<L, NQ, NC, NU, 3, NP>(p, q, frame, settings, limits, file_stem)
+        .unwrap_or_else(|e| unmapped(&e));
+    if let Some(nodes) = settings.volume {
+        let range = settings.motor_range.map(|r| [r; NU]);
+        let started = Instant::now();
+        match workspace_volume::<L, NQ, NC, NU, NP>(p, q, frame, nodes, range.as_ref()) {
+            Ok(v) => {
+                part.table
+                    .insert("workspace_volume_m3".into(), number(v.volume));
+                part.json.push((
+                    "volume",
+                    json!({
+                        "nodes_per_side": v.nodes,
+                        "origin": v.origin,
+                        "step_m": v.step,
+                        "reached": v.reached,
+                        "volume_m3": v.volume,
+                        "seconds": started.elapsed().as_secs_f64(),
+                    }),
+                ));
+            }
+            Err(e) => {
+                part.table.insert("workspace_volume_m3".into(), Value::Null);
+                part.why
+                    .insert("workspace_volume_m3".into(), json!(e.to_string()));
+            }
+        }
+    }
+    part
 }
 
 /// A planar leg's workspace: the grid of [`mapped`], or a one-motor leg's foot path.

@@ -5,7 +5,7 @@
 
 use serde_json::{json, Value};
 
-use crate::analyze::design::{Design, COLUMNS};
+use crate::analyze::design::{columns, Design};
 
 /// Heat maps are drawn from at most this many nodes per side (every k-th node).
 const MAX_SHOWN: usize = 120;
@@ -30,6 +30,7 @@ fn round(x: f64) -> Value {
 }
 
 pub fn html(designs: &[Design], sweep: Option<&str>, command: &str) -> Result<String, String> {
+    let columns = columns(designs);
     let mut shown: Vec<usize> = (0..designs.len())
         .filter(|&i| designs[i].view.is_some())
         .collect();
@@ -81,7 +82,7 @@ pub fn html(designs: &[Design], sweep: Option<&str>, command: &str) -> Result<St
             json!({
                 "label": d.label,
                 "swept": d.swept,
-                "values": COLUMNS.iter().map(|(key, _, scale, _)| {
+                "values": columns.iter().map(|(key, _, scale, _)| {
                     d.json["table"].get(*key).and_then(Value::as_f64).map(|v| v * scale)
                 }).collect::<Vec<_>>(),
             })
@@ -90,20 +91,20 @@ pub fn html(designs: &[Design], sweep: Option<&str>, command: &str) -> Result<St
     let data = json!({
         "maps": maps,
         "rows": rows,
-        "columns": COLUMNS.iter().map(|c| c.1).collect::<Vec<_>>(),
+        "columns": columns.iter().map(|c| c.1).collect::<Vec<_>>(),
         "sweep": sweep,
     });
     let data = serde_json::to_string(&data)
         .map_err(|e| e.to_string())?
         .replace("</", "<\\/");
     let mut table = String::from("<table><tr><th>design</th>");
-    for c in COLUMNS {
+    for c in &columns {
         table.push_str(&format!("<th>{}</th>", escape(c.1)));
     }
     table.push_str("</tr>");
     for d in designs {
         table.push_str(&format!("<tr><td>{}</td>", escape(&d.label)));
-        for (key, _, scale, digits) in COLUMNS {
+        for &(key, _, scale, digits) in &columns {
             let cell = match d.json["table"].get(key).and_then(Value::as_f64) {
                 Some(v) => format!("{:.*}", digits, v * scale),
                 None => {
