@@ -280,23 +280,16 @@ where
                 let m = leg_models::analysis::point_measures::<L, f64, NQ, NC, NU, ND, NP>(
                     &p, &q, &frame, &limits,
                 );
-                // In space, the polytope on the stack too.
-                if let (Ok(m), true) = (&m, ND == 3 && NU >= 3) {
-                    let kin = leg_models::analysis::MotorKinematics::<f64, NQ, NU, 3> {
-                        g: m.kinematics.g,
-                        foot_jacobian: SMatrix::from_fn(|r, c| m.kinematics.foot_jacobian[(r, c)]),
-                        joint_foot_jacobian: SMatrix::from_fn(|r, c| {
-                            m.kinematics.joint_foot_jacobian[(r, c)]
-                        }),
-                        passive_rank: m.passive_rank,
-                    };
-                    let poly = leg_models::analysis::polytope::force_polytope::<L, f64, NQ, NC, NU>(
+                // The force and speed sets (a spatial foot's polytope) on the stack too.
+                if let Ok(m) = &m {
+                    let sets = leg_models::analysis::capacity_sets::<L, f64, NQ, NC, NU, ND>(
                         &p,
                         &q,
-                        &kin,
-                        &limits.torque,
+                        &frame,
+                        &m.kinematics,
+                        &limits,
                     );
-                    assert!(poly.volume() > 0.0);
+                    assert_eq!(sets.is_ok(), frame.foot_spans(ND).is_ok());
                 }
                 m
             })

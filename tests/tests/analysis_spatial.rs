@@ -234,6 +234,28 @@ where
         }
         // ξ against the body written out (ten times the leg's mass).
         let coupling = BodyCoupling::new::<L, f64, NQ, NC, NU>(&p).expect("masses and gravity");
+        // The leg's mass from its links' `<link>_mass`, each link once (a ball joint's three
+        // coordinates `rod.x`, `rod.y`, `rod.z` move one link).
+        let names = L::Params::<f64>::NAMES;
+        let mut links: Vec<&str> = L::JOINT_NAMES
+            .iter()
+            .map(|j| j.split('.').next().unwrap())
+            .collect();
+        links.dedup();
+        let leg_mass: f64 = links
+            .iter()
+            .map(|l| {
+                let i = names
+                    .iter()
+                    .position(|n| *n == format!("{l}_mass"))
+                    .unwrap();
+                p.get(i).unwrap()
+            })
+            .sum();
+        assert!(
+            (coupling.leg_mass - leg_mass).abs() < 1e-12 * leg_mass,
+            "{what}"
+        );
         let body = Body::Translating {
             mass: 10.0 * coupling.leg_mass,
         };
@@ -242,10 +264,9 @@ where
         match xi {
             Ok(xi) => {
                 let mb = 10.0 * coupling.leg_mass;
-                let free = body_delassus::<L, NQ, NC, NU, NP>(&p, q, mb, coupling.leg_mass, &held);
+                let free = body_delassus::<L, NQ, NC, NU, NP>(&p, q, mb, leg_mass, &held);
                 let lock: Vec<bool> = (0..NQ).map(|c| held[c] || actuated[c]).collect();
-                let locked =
-                    body_delassus::<L, NQ, NC, NU, NP>(&p, q, mb, coupling.leg_mass, &lock);
+                let locked = body_delassus::<L, NQ, NC, NU, NP>(&p, q, mb, leg_mass, &lock);
                 let theirs = (free.clone() - locked).determinant() / free.determinant();
                 assert!(
                     (xi - theirs).abs() < 1e-6 * theirs.abs().max(1e-3),
@@ -351,6 +372,13 @@ fn check_slices<L, const NQ: usize, const NC: usize, const NU: usize, const NP: 
             reached.len()
         );
         assert!(ws.area > 0.0 && ws.area.is_finite());
+        // The node nearest the stance foot is reached.
+        let at = ws.grid_coordinates(&stance);
+        let (ix, iy) = (
+            ((at[0] - ws.origin[0]) / ws.step).round() as usize,
+            ((at[1] - ws.origin[1]) / ws.step).round() as usize,
+        );
+        assert_eq!(ws.states[iy * ws.nodes + ix], NodeState::Reached, "{name}");
         let size = leg_models::assembly::leg_size::<L, f64, NQ, NC, NU>(p, q);
         for &i in &reached {
             let pose = &ws.poses[i];
@@ -654,6 +682,18 @@ fn a_repeated_slab_counts_its_faces_once() {
     let poly = slab_polytope(&a, &lo, &hi);
     assert_eq!(poly.vertices().len(), 8);
     assert!((poly.volume() - 8.0).abs() < 1e-12, "{}", poly.volume());
+    // A cube with its corner cut within rounding and its z slab repeated scaled by 3: the
+    // faces found on each slab's plane in the vertices' units, each counted once.
+    let a = SMatrix::<f64, 3, 5>::new(
+        1.0, 1.0, 0.0, 0.0, 0.0, //
+        1.0, 0.0, 1.0, 0.0, 0.0, //
+        1.0, 0.0, 0.0, 1.0, 3.0,
+    );
+    let slack = 9.0 * f64::EPSILON * 1e4;
+    let lo = SVector::<f64, 5>::new(0.0, 0.0, 0.0, 0.0, 0.0);
+    let hi = SVector::<f64, 5>::new(3.0 - 0.6 * slack, 1.0, 1.0, 1.0, 3.0);
+    let poly = slab_polytope(&a, &lo, &hi);
+    assert!((poly.volume() - 1.0).abs() < 1e-9, "{}", poly.volume());
     // Slabs that leave a direction free: unbounded.
     let flat = SMatrix::<f64, 3, 3>::new(1.0, 0.0, 1.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0);
     let poly = slab_polytope(&flat, &SVector::repeat(-1.0), &SVector::repeat(1.0));
@@ -709,10 +749,26 @@ fn zonotope_reach_with_four_motors_against_a_linear_program() {
             (ours - a).abs() < 1e-9 * a,
             "#{trial}: reach {ours} against the linear program {a}"
         );
-        // The volume of a zonotope of four generators against Monte Carlo membership by
-        // the same linear program in every direction would repeat the reach; its sum of
-        // determinants is Shephard's closed form, checked with three motors on the legs.
-        assert!(speed_zonotope_volume(&j, &w) > 0.0);
+        // Its volume: the zonotope is the polytope of its facets' slabs, one per pair of
+        // generators g_i × g_j, bounded by ± Σ_k |n · g_k|.
+        let g = |k: usize| j.column(k) * w[k];
+        let mut normals = SMatrix::<f64, 3, 6>::zeros();
+        let mut bound = SVector::<f64, 6>::zeros();
+        let mut c = 0;
+        for i in 0..4 {
+            for k in i + 1..4 {
+                let n = g(i).cross(&g(k));
+                normals.set_column(c, &n);
+                bound[c] = (0..4).map(|m| n.dot(&g(m)).abs()).sum();
+                c += 1;
+            }
+        }
+        let facets = slab_polytope(&normals, &(-bound), &bound).volume();
+        let zono = speed_zonotope_volume(&j, &w);
+        assert!(
+            (zono - facets).abs() < 1e-9 * facets,
+            "#{trial}: {zono} against {facets}"
+        );
     }
 }
 
@@ -750,8 +806,9 @@ fn revolute_knee_slices_against_their_closed_forms() {
     // abduction about x, 0.06 m off the x axis. In the frame turned by the abduction the foot
     // is (a, 0.06, c) with a² + c² in [0.05², 0.45²]: the foot at (x, y, z) has
     // x² + y² + z² − 0.06² in that range, with y² + z² ≥ 0.06².
-    // - Sagittal slice y = y₀ (|y₀| > 0.06 at stance): x² + z² in a range 0.2 wide, an
-    //   annulus of area π (0.45² − 0.05²) whatever y₀.
+    // - Sagittal slice y = y₀ (|y₀| > 0.06): x² + z² in [0.05² + 0.06² − y₀², 0.45² + 0.06² −
+    //   y₀²], an annulus (a disc where the first is negative) of area
+    //   π (0.45² − max(0.05², y₀² − 0.06²)): π (0.45² − 0.05²) for |y₀| up to 0.078 m.
     // - Frontal slice x = x₀: y² + z² − 0.06² in [0.05² − x₀², 0.45² − x₀²] and ≥ 0: an
     //   annulus of area π (0.45² − max(x₀², 0.05²)).
     type L = generated::revolute_knee_leg::RevoluteKneeLeg;
@@ -762,18 +819,43 @@ fn revolute_knee_slices_against_their_closed_forms() {
     assert!(foot[1].abs() > 0.06, "stance y {}", foot[1]);
     let (r, big) = (0.05f64, 0.45f64);
     let lim = limits::<3>();
+    // Other abductions move y₀ and the sagittal slice shrinks as the formula says.
+    for abduction in [0.3, 0.6] {
+        let mut q2 = q;
+        q2[0] = abduction;
+        project_position::<L, f64, 7, 5, 3>(&p, &mut q2, &Tolerance::default()).unwrap();
+        let y0 = <L as LegModel<7, 5, 3, 3, 2>>::foot_position(&q2, &p)[1];
+        let closed = std::f64::consts::PI * (big * big - (y0 * y0 - 0.0036).max(r * r));
+        let ws =
+            workspace::<L, 7, 5, 3, 3, 2>(&p, &q2, &frame, &grid::<3>(80, None, &lim)).unwrap();
+        let e = (ws.area - closed).abs() / closed;
+        assert!(
+            e < 0.01,
+            "abduction {abduction}: {} m² against {closed} m² ({e:.4})",
+            ws.area
+        );
+    }
     for (plane, closed) in [
         (
             SlicePlane::SAGITTAL,
-            std::f64::consts::PI * (big * big - r * r),
+            std::f64::consts::PI * (big * big - (foot[1] * foot[1] - 0.0036).max(r * r)),
         ),
         (
             SlicePlane::FRONTAL,
             std::f64::consts::PI * (big * big - (foot[0] * foot[0]).max(r * r)),
         ),
     ] {
-        let ws = workspace::<L, 7, 5, 3, 3, 2>(&p, &q, &frame, &grid::<3>(120, Some(plane), &lim))
+        let ws = workspace::<L, 7, 5, 3, 3, 2>(&p, &q, &frame, &grid::<3>(80, Some(plane), &lim))
             .unwrap();
+        // Axes given longer are made unit: the same grid.
+        let long = SlicePlane {
+            axes: plane.axes.map(|a| a.map(|x| 2.0 * x)),
+        };
+        let same = workspace::<L, 7, 5, 3, 3, 2>(&p, &q, &frame, &grid::<3>(20, Some(long), &lim))
+            .unwrap();
+        let unit = workspace::<L, 7, 5, 3, 3, 2>(&p, &q, &frame, &grid::<3>(20, Some(plane), &lim))
+            .unwrap();
+        assert_eq!((same.area, same.origin), (unit.area, unit.origin));
         let e = (ws.area - closed).abs() / closed;
         assert!(
             e < 0.01,

@@ -878,10 +878,11 @@ fn analyze_takes_a_spatial_leg() {
         serde_json::from_str(&std::fs::read_to_string(dir.join("analysis.json")).unwrap()).unwrap();
     let designs = json["designs"].as_array().unwrap();
     let knee = &designs[0];
-    // The thigh (0.2 m) and shin (0.25 m) sweep an annulus of radii 0.05 and 0.45 m in the
-    // sagittal slice through the foot, whatever the abduction (analysis_spatial.rs).
+    // The thigh (0.2 m) and shin (0.25 m) sweep an annulus in the sagittal slice through the
+    // foot: π (0.45² − max(0.05², y₀² − 0.06²)) (analysis_spatial.rs).
     let area = knee["table"]["workspace_area_m2"].as_f64().unwrap();
-    let annulus = std::f64::consts::PI * (0.45f64.powi(2) - 0.05f64.powi(2));
+    let y0 = knee["stance"]["foot"][1].as_f64().unwrap();
+    let annulus = std::f64::consts::PI * (0.45f64.powi(2) - 0.05f64.powi(2).max(y0 * y0 - 0.0036));
     assert!(
         (area - annulus).abs() < 0.01 * annulus,
         "{area} against {annulus}"

@@ -12,10 +12,12 @@
 //!   "Design principles for a family of direct-drive legged robots", IEEE RA-L 1(2)).
 //! - **Force capacity**: with the leg at rest, the motors hold `u = Gᵀ G(q) + J_θᵀ f` for
 //!   a force `f` the foot puts on the ground (`Gᵀ B = I`, `Gᵀ Jᵀ = 0`; `G(q)` the gravity
-//!   and spring torques). Limits `|u_k| ≤ τ_k` bound `f` to a polygon, the intersection of
-//!   one slab per motor ([`force_polygon`]); the largest downward push is
+//!   and spring torques). Limits `|u_k| ≤ τ_k` bound `f` to a polygon (a polytope for a
+//!   spatial foot, [`polytope`]), the intersection of one slab per motor
+//!   ([`force_polygon`], [`capacity_sets`]); the largest downward push is
 //!   [`PointMeasures::vertical_force`].
-//! - **Speed capacity**: `ẏ = J_θ θ̇` with `|θ̇_k| ≤ ω_k`: a zonotope ([`speed_polygon`]);
+//! - **Speed capacity**: `ẏ = J_θ θ̇` with `|θ̇_k| ≤ ω_k`: a zonotope ([`speed_polygon`]; in
+//!   space its volume, [`polytope::speed_zonotope_volume`]);
 //!   the fastest vertical foot speed is [`PointMeasures::vertical_speed`].
 //! - **Operational-space inertia at the foot** (Khatib 1987): `Λ⁻¹ = J_f C J_fᵀ` with
 //!   `C` the inverse inertia of the closed chain (`M⁻¹` projected onto `J q̇ = 0`),
@@ -31,13 +33,19 @@
 //!   its joints locked. `ξ = 0` when backdriving changes nothing, `ξ → 1` when the leg
 //!   keeps the body's inertia away from the ground. It needs a body: a leg with body
 //!   joints of its own (a hopper) uses them; a leg on a fixed hip is put on a body that
-//!   translates in the plane ([`Body::Translating`]).
+//!   translates in the plane, or in space for a spatial leg ([`Body::Translating`]).
+//!
+//! A spatial leg's foot has three coordinates (`ND = 3`, vertical `z`): the same measures
+//! with 3 × 3 inertias and determinants, `κ` over three directions (one-sided Jacobi), the
+//! polytope for the polygon; its workspace is mapped in a slice through the stance foot or
+//! as a volume ([`workspace`]).
 //!
 //! A leg with body joints of its own (passive joints above every motor: a hopper's
 //! sliders) is analysed in its body's frame ([`LegFrame`]): those joints are held where
 //! the pose has them, the rest is the leg. Which measures apply is decided by the leg's
 //! properties, never its name: motor coordinates need motors that determine the leg
-//! (mobility with the body held = motors), polygons need two motors or more.
+//! (mobility with the body held = motors), the force and speed sets as many motors as the
+//! foot has coordinates or more ([`LegFrame::foot_spans`]).
 //!
 //! [`workspace`] (with `std`) runs these over a grid of foot positions.
 //!
@@ -66,8 +74,8 @@ pub enum Inapplicable {
     /// Motor coordinates or the foot's two directions need other motors
     /// ([`NotApplicable`]: under-, over-actuated, or one motor for a 2-D polygon).
     Structure(NotApplicable),
-    /// One motor moves the foot along a curve: no area, no 2-D polygon (nor a 3-D
-    /// polytope).
+    /// One motor moves the foot along a curve: no area, no polygon (nor a volume or a
+    /// polytope in space).
     FootOnACurve,
     /// Two motors move a spatial leg's foot over a surface: no volume, no 3-D force or
     /// speed polytope.
@@ -103,7 +111,7 @@ impl fmt::Display for Inapplicable {
             Inapplicable::Structure(n) => write!(f, "{n}"),
             Inapplicable::FootOnACurve => write!(
                 f,
-                "the foot has two coordinates but the leg has 1 motor: it moves the foot along a curve, so there is no workspace area and no 2-D force or speed polygon"
+                "the leg has 1 motor: it moves the foot along a curve, so there is no workspace area (or volume) and no force or speed polygon (or polytope)"
             ),
             Inapplicable::FootOnASurface => write!(
                 f,
@@ -123,7 +131,7 @@ impl fmt::Display for Inapplicable {
             ),
             Inapplicable::TooManyMotors { motors } => write!(
                 f,
-                "the leg has {motors} motors; the polygons handle at most {MAX_MOTORS}"
+                "the leg has {motors} motors; the force and speed sets handle at most {MAX_MOTORS}"
             ),
             Inapplicable::RigidWhenLocked => write!(
                 f,
@@ -529,6 +537,9 @@ pub fn extreme_singular_values<T: Real, const ND: usize, const N: usize>(
     if ND == 2 {
         return singular_values(&SMatrix::<T, 2, N>::from_fn(|r, c| a[(r, c)]));
     }
+    if !a.iter().all(|x| x.is_finite()) {
+        return (T::zero() / T::zero(), T::zero() / T::zero());
+    }
     let mut b = a.transpose();
     // Rotations until every pair of columns is orthogonal to rounding; a few sweeps do
     // at these sizes, the bound keeps a NaN from looping.
@@ -545,8 +556,9 @@ pub fn extreme_singular_values<T: Real, const ND: usize, const N: usize>(
                 }
                 rotated = true;
                 let zeta = (beta - alpha) / (gamma * T::lit(2.0));
-                let t = zeta.signum() / (zeta.abs() + (T::one() + zeta * zeta).sqrt());
-                let c = T::one() / (T::one() + t * t).sqrt();
+                // hypot: ζ² overflows where a column is rounding beside another.
+                let t = zeta.signum() / (zeta.abs() + T::one().hypot(zeta));
+                let c = T::one() / T::one().hypot(t);
                 let s = c * t;
                 for r in 0..N {
                     let (x, y) = (b[(r, i)], b[(r, k)]);
@@ -566,7 +578,8 @@ pub fn extreme_singular_values<T: Real, const ND: usize, const N: usize>(
         hi = hi.max(n);
         lo = lo.min(n);
     }
-    (hi, lo)
+    // Fewer columns than rows: a direction is missing, whatever rounding leaves.
+    (hi, if N < ND { T::zero() } else { lo })
 }
 
 /// Whether the passive joints' Jacobian `J_p` (the closures' columns of the joints that
@@ -627,7 +640,7 @@ where
     let ratio = lo / hi;
     if NU == ND && passive_square::<L, NQ, NC, NU>(frame) {
         let jt = &kin.foot_jacobian;
-        let det = determinant(SMatrix::<T, ND, ND>::from_fn(|r, c| jt[(r, c)]));
+        let det = small_determinant(SMatrix::<T, ND, ND>::from_fn(|r, c| jt[(r, c)]));
         if (det < T::zero()) != (kin.passive_rank < T::zero()) {
             return -ratio;
         }
@@ -801,6 +814,7 @@ where
             passive_rank: k.passive_rank,
         }
     }
+    const { assert!(ND == 2 || ND == 3, "a foot has 2 or 3 coordinates") };
     Ok(if ND == 3 {
         let kin = retyped::<T, NQ, NU, ND, 3>(kin);
         CapacitySets::Spatial {
@@ -909,6 +923,7 @@ pub fn vertical_speed<T: Real, const ND: usize, const NU: usize>(
     foot_jacobian: &SMatrix<T, ND, NU>,
     speed: &SVector<T, NU>,
 ) -> T {
+    const { assert!(ND == 2 || ND == 3, "a foot has 2 or 3 coordinates") };
     if ND == 3 {
         let jt = SMatrix::<T, 3, NU>::from_fn(|r, c| foot_jacobian[(r, c)]);
         return polytope::zonotope_reach(&jt, speed, &nalgebra::Vector3::z());

@@ -15,6 +15,8 @@ use crate::model::contract::{LegDynamics, Real};
 /// Room for the vertices: `4 MAX_MOTORS − 4` is the most a polytope of `2 MAX_MOTORS`
 /// faces has; the rest is margin for vertices that rounding keeps apart.
 const MAX_VERTICES: usize = 8 * MAX_MOTORS;
+// A face is a set of vertices held in a u64 mask.
+const _: () = assert!(MAX_VERTICES <= 64);
 
 /// A convex polytope in space: its vertices and its volume, on the stack.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -31,7 +33,8 @@ impl<T: Real> Polytope<T> {
     }
 
     /// The enclosed volume: zero where the slabs do not meet, infinite where they leave a
-    /// direction free (`J_θ` has lost rank: the foot can push that way for free).
+    /// direction free (`J_θ` has lost rank: the foot can push that way for free), NaN for
+    /// a non-finite input or more than [`MAX_MOTORS`] slabs.
     pub fn volume(&self) -> T {
         self.volume
     }
@@ -56,7 +59,12 @@ pub fn slab_polytope<T: Real, const NU: usize>(
         len: 0,
         volume: T::zero(),
     };
-    if NU > MAX_MOTORS {
+    let finite = a
+        .iter()
+        .chain(lo.iter())
+        .chain(hi.iter())
+        .all(|x| x.is_finite());
+    if NU > MAX_MOTORS || !finite {
         poly.volume = T::zero() / T::zero();
         return poly;
     }
@@ -131,6 +139,11 @@ fn faces_volume<T: Real, const NU: usize>(
         centre += p;
     }
     centre /= T::from_usize(v.len()).unwrap_or_else(T::one);
+    // Distances to a face's plane in the vertices' own units (a slab given twice, scaled,
+    // must find the same vertices on its planes), as far as vertices merged within `slack`
+    // of each other (in each coordinate) can lie off it.
+    let size = v.iter().fold(T::zero(), |s, p| s.max(p.amax()));
+    let near = size * T::default_epsilon() * T::lit(1e4) + slack * T::lit(2.0);
     let mut seen_faces = [0u64; 2 * MAX_MOTORS];
     let mut faces = 0;
     let mut volume = T::zero();
@@ -145,7 +158,7 @@ fn faces_volume<T: Real, const NU: usize>(
             let mut count = 0;
             let mut mask = 0u64;
             for (i, p) in v.iter().enumerate() {
-                if (normal.dot(p) - bound).abs() <= slack {
+                if (normal.dot(p) - bound).abs() / length <= near {
                     on[count] = i;
                     count += 1;
                     mask |= 1 << i;
@@ -246,6 +259,9 @@ pub fn zonotope_reach<T: Real, const NU: usize>(
 ) -> T {
     let g = |k: usize| -> Vector3<T> { foot_jacobian.column(k) * speed[k] };
     let size: T = (0..NU).map(|k| g(k).norm()).fold(T::zero(), |a, b| a + b);
+    if !size.is_finite() || !d.iter().all(|x| x.is_finite()) {
+        return T::zero() / T::zero();
+    }
     let volume = speed_zonotope_volume(foot_jacobian, speed);
     if !volume.is_finite() || volume <= size * size * size * T::default_epsilon() * T::lit(1e3) {
         return T::zero();

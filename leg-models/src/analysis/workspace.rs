@@ -363,9 +363,12 @@ where
     frame.foot_spans(ND)?;
     let n = options.nodes;
     let foot = L::foot_position(start, params);
-    // The slice through the stance foot.
+    // The slice through the stance foot, its axes made unit (longer ones, which check()
+    // accepts, would scale the grid).
+    let plane = options
+        .plane
+        .map_or(Ok(SlicePlane::SAGITTAL), |p| p.checked())?;
     let slice = (ND == 3).then(|| {
-        let plane = options.plane.unwrap_or(SlicePlane::SAGITTAL);
         let (u, w) = (Vector3::from(plane.axes[0]), Vector3::from(plane.axes[1]));
         let offset = u.cross(&w).dot(&Vector3::new(foot[0], foot[1], foot[2]));
         (plane, offset)

@@ -110,9 +110,19 @@ fn analyze(args: AnalyzeArgs, raw: &[String]) -> Result<(), Error> {
     let settings = analyze::Settings::from_args(&args, &root)?;
     // Every model is checked before anything is computed.
     let known = models();
+    let mut planar = Vec::new();
+    macro_rules! planar {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
+            planar.push(stringify!($module));
+        };
+    }
+    generated::for_each_model!(planar);
     for m in &args.models {
         if !known.contains(&m.as_str()) {
             return Err(unknown(m, &known));
+        }
+        if planar.contains(&m.as_str()) {
+            settings.spatial_only(m)?;
         }
     }
     let total = args.models.len() as u64 * settings_designs(&args);

@@ -41,8 +41,8 @@ pub struct Settings {
     motor_range: Option<(f64, f64)>,
     nodes: usize,
     branches: bool,
-    /// A spatial leg's slice (`--slice`), with its axes' names.
-    slice: Option<(SlicePlane, [&'static str; 2])>,
+    /// A spatial leg's slice (`--slice`).
+    slice: Option<SlicePlane>,
     /// Nodes per side of a spatial leg's volume (`--volume`).
     volume: Option<usize>,
     /// Grid nodes the run's designs hold (checked against [`MAX_NODES`]).
@@ -247,9 +247,9 @@ impl Settings {
             nodes: a.nodes as usize,
             branches: a.branches,
             slice: a.slice.as_deref().map(|s| match s {
-                "yz" => (SlicePlane::FRONTAL, ["y", "z"]),
-                "xy" => (SlicePlane::TRANSVERSE, ["x", "y"]),
-                _ => (SlicePlane::SAGITTAL, ["x", "z"]),
+                "yz" => SlicePlane::FRONTAL,
+                "xy" => SlicePlane::TRANSVERSE,
+                _ => SlicePlane::SAGITTAL,
             }),
             volume: a.volume.map(|n| n as usize),
             planned_nodes: AtomicUsize::new(total),
@@ -258,6 +258,21 @@ impl Settings {
                 .clone()
                 .unwrap_or_else(|| xtask::cli::target_dir(root).join("analyze")),
         })
+    }
+
+    /// `--slice` and `--volume` are for spatial legs: refused for the planar `model`.
+    pub fn spatial_only(&self, model: &str) -> Result<(), Error> {
+        for (flag, given) in [
+            ("--slice", self.slice.is_some()),
+            ("--volume", self.volume.is_some()),
+        ] {
+            if given {
+                return Err(Error::usage(format!(
+                    "`{flag}` is for spatial legs: `{model}` is planar (its workspace is its own plane)"
+                )));
+            }
+        }
+        Ok(())
     }
 
     pub fn sweeping(&self) -> Option<&str> {
@@ -334,16 +349,8 @@ where
         )),
         None => None,
     };
-    for (flag, given) in [
-        ("--slice", settings.slice.is_some()),
-        ("--volume", settings.volume.is_some()),
-    ] {
-        if ND == 2 && given {
-            return Err(Error::usage(format!(
-                "`{flag}` is for spatial legs: `{}` is planar (its workspace is its own plane)",
-                L::NAME
-            )));
-        }
+    if ND == 2 {
+        settings.spatial_only(L::NAME)?;
     }
     for list in [&settings.torque, &settings.speed].into_iter().flatten() {
         if list.len() != 1 && list.len() != NU {
@@ -888,7 +895,7 @@ where
     let options = GridOptions {
         nodes: settings.nodes,
         window: None,
-        plane: settings.slice.map(|s| s.0),
+        plane: settings.slice,
         motor_range: settings.motor_range.map(|r| [r; NU]),
         limits: *limits,
     };
