@@ -450,6 +450,26 @@ fn check_motor_measures<L, const NQ: usize, const NC: usize, const NU: usize, co
     );
     let inv_z = pm.inverse_inertia[(2, 2)];
     assert!((pm.effective_mass * inv_z - 1.0).abs() < 1e-12, "{what}");
+    // Far from a singularity the passive rank measure is not rounding, structurally
+    // redundant rows or not (their pivots counted, a loop at home measured 1e-9): between
+    // σ_min / σ_max of the passive columns and its square root (the pivots' estimate).
+    let mut jp = dense(&L::constraint_jacobian(q, p));
+    for &a in L::ACTUATED.iter() {
+        jp.column_mut(a).fill(0.0);
+    }
+    let sv = jp.svd(false, false).singular_values;
+    let mut sv: Vec<f64> = sv
+        .iter()
+        .copied()
+        .filter(|&x| x > 1e-9 * sv.max())
+        .collect();
+    sv.sort_by(f64::total_cmp);
+    let ratio = sv[0] / sv[sv.len() - 1];
+    let rank = pm.passive_rank.abs();
+    assert!(
+        rank > 0.1 * ratio && rank < 10.0 * ratio.sqrt(),
+        "{what}: passive rank {rank:e} against σ_min/σ_max {ratio:e}"
+    );
 
     // The force polytope: each vertex is a foot force the motors hold at rest within their
     // limits, three of them (at least) at a limit. Virtual work: the joint torques

@@ -430,8 +430,16 @@ fn passive_rank<T: Real, const NQ: usize, const NC: usize>(
             jp.column_mut(col).fill(T::zero());
         }
     }
-    // Every pivot counts here (no floor): a singular `J_p` gives rcond 0.
-    match PivotedLdlt::new(&mul(&jp, &jp.transpose()), redundant_rows, T::zero()) {
+    // Every pivot counts here (no floor): a singular `J_p` gives rcond 0. Where rows are
+    // structurally redundant their pivots are rounding, never a measure of the pose: the
+    // floor leaves them out (it counted them, and a leg far from any singularity measured
+    // 1e-9), and any other pivot under it makes the measure zero.
+    let floor = if redundant_rows > 0 {
+        rcond_floor::<T>()
+    } else {
+        T::zero()
+    };
+    match PivotedLdlt::new(&mul(&jp, &jp.transpose()), redundant_rows, floor) {
         Some(f) => f.rcond.max(T::zero()).sqrt(),
         None => T::zero(),
     }

@@ -937,6 +937,7 @@ where
     if let Some((plane, offset)) = ws.slice {
         grid["slice"] = json!({
             "axes": plane.axes,
+            "through_m": L::foot_position(q, p).as_slice(),
             "offset_m": offset,
             "what": "grid coordinates (origin, curves, area) are along the slice's two axes; the plane is a·axes[0] + b·axes[1] + offset·(axes[0] × axes[1]), through the stance foot",
         });
@@ -954,7 +955,7 @@ where
     });
     if !ws.passive_signed {
         curves["passive_note"] = json!(
-            "the passive rank measure is unsigned here (redundant rows, a body's held joints or more motors than the foot has coordinates): its curves are not located"
+            "the passive rank measure is unsigned here (redundant rows, a body's held joints or more motors than the foot has coordinates): its curves are not located, and the distance to a singularity counts the foot's (type I) only"
         );
     }
     fields.push(("curves", curves));

@@ -73,6 +73,8 @@ pub fn html(designs: &[Design], sweep: Option<&str>, command: &str) -> Result<St
                 "stance": v.stance,
                 "path": v.path,
                 "axes": v.axes,
+                // Where the type II curves are not located the reader is told so.
+                "note": d.json["curves"]["passive_note"].as_str().filter(|_| v.nodes > 0),
             })
         })
         .collect();
@@ -159,11 +161,15 @@ function colour(t) {{
 }}
 // Round ticks (1, 2 or 5 times a power of ten apart, about n of them) over [lo, hi].
 function ticks(lo, hi, n) {{
+  // About n round ticks, at least three: a window of ±0.49 m took a step of 0.5 and had
+  // one tick, 0.
   const raw = (hi - lo) / n || 1, dec = Math.pow(10, Math.floor(Math.log10(raw)));
-  const step = [1, 2, 5, 10].map(m => m * dec).find(s => s >= raw * 0.999);
-  const out = [];
-  for (let i = Math.ceil(lo / step - 1e-9); i * step <= hi + step * 1e-9; i++) out.push(i * step);
-  return {{ values: out, step }};
+  const steps = [0.1, 0.2, 0.5, 1, 2, 5, 10].map(m => m * dec);
+  for (let k = steps.findIndex(s => s >= raw * 0.999); ; k--) {{
+    const step = steps[k], out = [];
+    for (let i = Math.ceil(lo / step - 1e-9); i * step <= hi + step * 1e-9; i++) out.push(i * step);
+    if (out.length >= 3 || k === 0) return {{ values: out, step }};
+  }}
 }}
 function tickText(v, step) {{
   const dec = Math.max(0, Math.ceil(-Math.log10(step) - 1e-9));
@@ -243,6 +249,7 @@ function drawPath(d) {{
 for (const d of DATA.maps) {{
   const sec = document.createElement('div'); sec.className = 'design';
   const h = document.createElement('h2'); h.textContent = d.label; sec.appendChild(h);
+  if (d.note) {{ const p = document.createElement('p'); p.className = 'note'; p.textContent = 'No type II curves drawn: ' + d.note + '.'; sec.appendChild(p); }}
   const row = document.createElement('div'); row.className = 'maps';
   for (const m of d.maps) row.appendChild(drawMap(d, m));
   if (d.path.length) row.appendChild(drawPath(d));
