@@ -47,7 +47,8 @@
 //! (mobility with the body held = motors), the force and speed sets as many motors as the
 //! foot has coordinates or more ([`LegFrame::foot_spans`]).
 //!
-//! [`workspace`] (with `std`) runs these over a grid of foot positions.
+//! [`workspace`] (with `std`) runs these over a grid of foot positions; [`summary`] gives a
+//! design's row of `cargo xtask analyze`'s table, with the command's defaults.
 //!
 //! May import: [`crate::assembly`], [`crate::dynamics`], the contract ([`LegModel`], [`Real`], [`linalg`](crate::linalg)); not the controllers or the simulators.
 
@@ -62,6 +63,8 @@ use crate::model::contract::{LegDynamics, LegModel, Parameters, Real};
 use crate::model::linalg::{mul, mul_tn, Cholesky, PivotedLdlt};
 
 pub mod polytope;
+#[cfg(feature = "std")]
+pub mod summary;
 #[cfg(feature = "std")]
 pub mod workspace;
 

@@ -8,13 +8,15 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 
+use leg_models::analysis::summary::{
+    default_body, default_limits, gear_ratio, limit_out_of_range, summary, COLUMNS, MAX_LIMIT,
+    MOTOR_SPEED, MOTOR_TORQUE,
+};
 use leg_models::analysis::workspace::{
-    assembly_modes, workspace, workspace_volume, GridOptions, NodeState, Segment, SlicePlane,
-    Workspace,
+    assembly_modes, workspace_volume, GridOptions, NodeState, Segment, SlicePlane, Workspace,
 };
 use leg_models::analysis::{
-    capacity_sets, foot_inverse_inertia, impact_mitigation, point_measures,
-    vertical_effective_mass, Body, BodyCoupling, CapacitySets, LegFrame, MotorKinematics,
+    capacity_sets, AnalysisError, BodyCoupling, CapacitySets, LegFrame, MotorKinematics,
     MotorLimits,
 };
 use leg_models::assembly::{project_position, Tolerance};
@@ -326,7 +328,7 @@ fn number(x: f64) -> Value {
 pub fn run<L, const NQ: usize, const NC: usize, const NU: usize, const ND: usize, const NP: usize>(
     settings: &Settings,
     progress: &Mutex<(Progress, u64)>,
-    grid: Grid<L::Params<f64>, NQ, NU>,
+    grid: Grid<L::Params<f64>, NQ, NU, ND>,
 ) -> Result<Vec<Design>, Error>
 where
     L: LegModel<NQ, NC, NU, ND, NP>,
@@ -435,33 +437,12 @@ fn tick(progress: &Mutex<(Progress, u64)>) {
     guard.0.set(done);
 }
 
-fn gear<L, const NQ: usize, const NC: usize, const NU: usize>(p: &L::Params<f64>, k: usize) -> f64
-where
-    L: LegDynamics<NQ, NC, NU>,
-{
-    let name = format!("{}_gear_ratio", L::JOINT_NAMES[L::ACTUATED[k]]);
-    L::Params::<f64>::NAMES
-        .iter()
-        .position(|n| *n == name)
-        .and_then(|i| p.get(i))
-        .filter(|g| g.is_finite() && *g != 0.0)
-        .map_or(1.0, f64::abs)
-}
-
-/// The largest torque (N m) or speed (rad/s) limit taken, given or from a gear ratio:
-/// beyond it the polygons' products overflow f64 (a limit of 1e308 read as "unbounded").
-const MAX_LIMIT: f64 = 1e9;
-
-/// Motor torque at the shaft (N m) and speed (rad/s) of the defaults.
-const MOTOR_TORQUE: f64 = 1.0;
-const MOTOR_SPEED: f64 = 100.0;
-
 fn design<L, const NQ: usize, const NC: usize, const NU: usize, const ND: usize, const NP: usize>(
     p: &L::Params<f64>,
     settings: &Settings,
     swept: Option<(&Sweep, f64)>,
     branch: Option<(usize, &SVector<f64, NQ>)>,
-    grid: Grid<L::Params<f64>, NQ, NU>,
+    grid: Grid<L::Params<f64>, NQ, NU, ND>,
 ) -> Design
 where
     L: LegModel<NQ, NC, NU, ND, NP>,
@@ -490,21 +471,10 @@ where
         Some(v) => v[k],
         None => default,
     };
+    let defaults = default_limits::<L, NQ, NC, NU>(p);
     let limits = MotorLimits {
-        torque: SVector::<f64, NU>::from_fn(|k, _| {
-            pick(
-                &settings.torque,
-                k,
-                MOTOR_TORQUE * gear::<L, NQ, NC, NU>(p, k),
-            )
-        }),
-        speed: SVector::<f64, NU>::from_fn(|k, _| {
-            pick(
-                &settings.speed,
-                k,
-                MOTOR_SPEED / gear::<L, NQ, NC, NU>(p, k),
-            )
-        }),
+        torque: SVector::<f64, NU>::from_fn(|k, _| pick(&settings.torque, k, defaults.torque[k])),
+        speed: SVector::<f64, NU>::from_fn(|k, _| pick(&settings.speed, k, defaults.speed[k])),
     };
     let mut changed = serde_json::Map::new();
     for (name, value) in &settings.sets {
@@ -516,16 +486,10 @@ where
         }
     }
     let coupling = BodyCoupling::new::<L, f64, NQ, NC, NU>(p);
-    let body_mass = settings
-        .body_mass
-        .or_else(|| coupling.as_ref().map(|c| 10.0 * c.leg_mass));
-    let body = if frame.has_body() {
-        Body::Fixed
-    } else {
-        match body_mass {
-            Some(mass) => Body::Translating { mass },
-            None => Body::Fixed,
-        }
+    let body = default_body(&frame, coupling.as_ref(), settings.body_mass);
+    let body_mass = match body {
+        leg_models::analysis::Body::Translating { mass } => Some(mass),
+        leg_models::analysis::Body::Fixed => None,
     };
     let held: Vec<&str> = (0..NQ)
         .filter(|&j| frame.held[j])
@@ -553,20 +517,13 @@ where
     let mut why = serde_json::Map::new();
     // A default limit from a gear ratio out of range (1e-200 made a speed limit of 1e202
     // rad/s and a dash with no reason): the design says so and computes nothing.
-    for (kind, unit, values) in [
-        ("torque", "N m", &limits.torque),
-        ("speed", "rad/s", &limits.speed),
-    ] {
-        if let Some((k, v)) = values
-            .iter()
-            .enumerate()
-            .find(|(_, v)| !(v.is_finite() && **v > 0.0 && **v <= MAX_LIMIT))
-        {
+    {
+        if let Some((kind, unit, k, v)) = limit_out_of_range(&limits) {
             json["error"] = json!(format!(
                 "the {kind} limit of motor {} ({}) is {v:.3e} {unit}, from its gear ratio {:e}: beyond (0, {MAX_LIMIT:e}]; give --{kind}-limit or a gear ratio in range",
                 k + 1,
                 L::JOINT_NAMES[L::ACTUATED[k]],
-                gear::<L, NQ, NC, NU>(p, k)
+                gear_ratio::<L, NQ, NC, NU>(p, k)
             ));
             return Design {
                 label,
@@ -601,14 +558,25 @@ where
             _ => "the spec's home pose, assembled".to_string(),
         },
     });
+    let options = GridOptions {
+        nodes: settings.nodes,
+        window: None,
+        plane: settings.slice,
+        motor_range: settings.motor_range.map(|r| [r; NU]),
+        limits,
+    };
+    let started = Instant::now();
+    let s = summary::<L, NQ, NC, NU, ND, NP>(p, &q, &frame, &body, coupling.as_ref(), &options);
+    let seconds = started.elapsed().as_secs_f64();
+    // The row's numbers are the library's (a sweep in Python gives the same); the reasons
+    // for a dash are the command's.
     let mut table = serde_json::Map::new();
-    match point_measures::<L, f64, NQ, NC, NU, ND, NP>(p, &q, &frame, &limits) {
+    for (key, value) in COLUMNS.iter().zip(s.row(&frame)) {
+        table.insert((*key).into(), number(value));
+    }
+    match &s.measures {
         Ok(m) => {
             let spans = frame.foot_spans(ND);
-            table.insert(
-                "vertical_force_n".into(),
-                m.vertical_force.map_or(Value::Null, number),
-            );
             if m.vertical_force.is_none() {
                 why.insert(
                     "vertical_force_n".into(),
@@ -624,21 +592,11 @@ where
                     json!("unbounded: no motor takes a vertical force at the foot here (the structure holds it)"),
                 );
             }
-            match spans {
-                Ok(()) => {
-                    table.insert("vertical_speed_m_s".into(), number(m.vertical_speed));
-                    table.insert("condition".into(), number(m.condition));
-                }
-                Err(reason) => {
-                    for key in ["vertical_speed_m_s", "condition"] {
-                        table.insert(key.into(), Value::Null);
-                        why.insert(key.into(), json!(reason.to_string()));
-                    }
+            if let Err(reason) = spans {
+                for key in ["vertical_speed_m_s", "condition"] {
+                    why.insert(key.into(), json!(reason.to_string()));
                 }
             }
-            table.insert("effective_mass_kg".into(), number(m.effective_mass));
-            table.insert("passive_rank".into(), number(m.passive_rank));
-            table.insert("foot_rank".into(), number(m.foot_rank));
             json["stance"]["inverse_inertia_free"] = matrix(&m.inverse_inertia);
             json["stance"]["inverse_inertia_locked"] = matrix(&m.inverse_inertia_locked);
             json["stance"]["foot_jacobian_motor"] = matrix(&m.kinematics.foot_jacobian);
@@ -650,30 +608,21 @@ where
                 "vertical_speed_m_s",
                 "effective_mass_kg",
                 "condition",
+                "passive_rank",
+                "foot_rank",
             ] {
-                table.insert(key.into(), Value::Null);
                 why.insert(key.into(), json!(e.to_string()));
             }
             // The foot's inertia needs no motor coordinates: a leg its motors do not
             // determine (springs, a free rod) still has it.
-            if let Ok(inv) =
-                foot_inverse_inertia::<L, f64, NQ, NC, NU, ND, NP>(p, &q, &frame, false)
-            {
-                let mass = vertical_effective_mass::<L, f64, NQ, NC, NU, ND, NP>(p, &q, &inv);
-                table.insert("effective_mass_kg".into(), number(mass));
+            if let Some(inv) = &s.inverse_inertia {
                 why.remove("effective_mass_kg");
-                json["stance"]["inverse_inertia_free"] = matrix(&inv);
+                json["stance"]["inverse_inertia_free"] = matrix(inv);
             }
         }
     }
-    match impact_mitigation::<L, f64, NQ, NC, NU, ND, NP>(p, &q, &frame, &body, coupling.as_ref()) {
-        Ok(x) => {
-            table.insert("impact_mitigation".into(), number(x));
-        }
-        Err(e) => {
-            table.insert("impact_mitigation".into(), Value::Null);
-            why.insert("impact_mitigation".into(), json!(e.to_string()));
-        }
+    if let Err(e) = &s.impact_mitigation {
+        why.insert("impact_mitigation".into(), json!(e.to_string()));
     }
     if table
         .get("effective_mass_kg")
@@ -684,7 +633,7 @@ where
             json!("infinite: the foot cannot move vertically here (the leg stretched along the vertical, or its closures hold the foot)"),
         );
     }
-    let part = grid(p, &q, &frame, settings, &limits, &file_stem);
+    let part = grid(p, &q, &frame, settings, s.workspace, seconds, &file_stem);
     table.extend(part.table);
     why.extend(part.why);
     for (key, value) in part.json {
@@ -770,8 +719,16 @@ pub struct GridPart {
 }
 
 /// How a design's grid is computed, by the leg's dimension ([`planar_grid`], [`spatial_grid`]).
-pub type Grid<P, const NQ: usize, const NU: usize> =
-    fn(&P, &SVector<f64, NQ>, &LegFrame<NQ>, &Settings, &MotorLimits<f64, NU>, &str) -> GridPart;
+/// It is handed the workspace grid the design's summary computed, and its time (s).
+pub type Grid<P, const NQ: usize, const NU: usize, const ND: usize> = fn(
+    &P,
+    &SVector<f64, NQ>,
+    &LegFrame<NQ>,
+    &Settings,
+    Result<Workspace<NQ, NU, ND>, AnalysisError>,
+    f64,
+    &str,
+) -> GridPart;
 
 /// A spatial leg's workspace: the grid of [`mapped`] in its slice (`--slice`, sagittal by
 /// default), or the reason it has none.
@@ -780,13 +737,15 @@ pub fn spatial_grid<L, const NQ: usize, const NC: usize, const NU: usize, const 
     q: &SVector<f64, NQ>,
     frame: &LegFrame<NQ>,
     settings: &Settings,
-    limits: &MotorLimits<f64, NU>,
+    ws: Result<Workspace<NQ, NU, 3>, AnalysisError>,
+    seconds: f64,
     file_stem: &str,
 ) -> GridPart
 where
     L: LegModel<NQ, NC, NU, 3, NP>,
 {
-    let mut part = mapped::<L, NQ, NC, NU, 3, NP>(p, q, frame, settings, limits, file_stem)
+    let mut part = ws
+        .map(|ws| mapped::<L, NQ, NC, NU, 3, NP>(p, q, ws, seconds, file_stem))
         .unwrap_or_else(|e| unmapped(&e));
     if let Some(nodes) = settings.volume {
         let range = settings.motor_range.map(|r| [r; NU]);
@@ -823,14 +782,15 @@ pub fn planar_grid<L, const NQ: usize, const NC: usize, const NU: usize>(
     q: &SVector<f64, NQ>,
     frame: &LegFrame<NQ>,
     settings: &Settings,
-    limits: &MotorLimits<f64, NU>,
+    ws: Result<Workspace<NQ, NU>, AnalysisError>,
+    seconds: f64,
     file_stem: &str,
 ) -> GridPart
 where
     L: LegModel<NQ, NC, NU>,
 {
-    let e = match mapped::<L, NQ, NC, NU, 2, NC>(p, q, frame, settings, limits, file_stem) {
-        Ok(part) => return part,
+    let e = match ws {
+        Ok(ws) => return mapped::<L, NQ, NC, NU, 2, NC>(p, q, ws, seconds, file_stem),
         Err(e) => e,
     };
     let mut part = unmapped(&e);
@@ -881,35 +841,19 @@ fn unmapped(e: &leg_models::analysis::AnalysisError) -> GridPart {
 fn mapped<L, const NQ: usize, const NC: usize, const NU: usize, const ND: usize, const NP: usize>(
     p: &L::Params<f64>,
     q: &SVector<f64, NQ>,
-    frame: &LegFrame<NQ>,
-    settings: &Settings,
-    limits: &MotorLimits<f64, NU>,
+    ws: Workspace<NQ, NU, ND>,
+    seconds: f64,
     file_stem: &str,
-) -> Result<GridPart, leg_models::analysis::AnalysisError>
+) -> GridPart
 where
     L: LegModel<NQ, NC, NU, ND, NP>,
 {
-    let mut table = serde_json::Map::new();
+    // The area and the distance are in the table already (the summary's row).
+    let table = serde_json::Map::new();
     let mut why = serde_json::Map::new();
     let mut fields = Vec::new();
-    let options = GridOptions {
-        nodes: settings.nodes,
-        window: None,
-        plane: settings.slice,
-        motor_range: settings.motor_range.map(|r| [r; NU]),
-        limits: *limits,
-    };
-    let started = Instant::now();
-    let ws = workspace::<L, NQ, NC, NU, ND, NP>(p, q, frame, &options)?;
-    let seconds = started.elapsed().as_secs_f64();
-    table.insert("workspace_area_m2".into(), number(ws.area));
     let stance = ws.grid_coordinates(&L::foot_position(q, p));
-    let d = ws.distance_to_singularity(stance);
-    table.insert(
-        "singularity_distance_m".into(),
-        d.map_or(Value::Null, number),
-    );
-    if d.is_none() {
+    if ws.distance_to_singularity(stance).is_none() {
         why.insert(
             "singularity_distance_m".into(),
             json!("no singularity in the grid"),
@@ -959,13 +903,13 @@ where
         );
     }
     fields.push(("curves", curves));
-    Ok(GridPart {
+    GridPart {
         table,
         why,
         json: fields,
         csv: Some(csv::<L, NQ, NC, NU, ND, NP>(&ws)),
         view: Some(view::<L, NQ, NC, NU, ND, NP>(p, q, Some(&ws))),
-    })
+    }
 }
 
 fn csv<L, const NQ: usize, const NC: usize, const NU: usize, const ND: usize, const NP: usize>(
