@@ -150,6 +150,18 @@ fn motor_ranges<const N: usize>(value: &Bound<'_, PyAny>) -> PyResult<[(f64, f64
 }
 
 /// A motor limit: one positive number for every motor, or one per motor.
+/// A spatial leg's slice plane by its axes' names (`None`: sagittal); a planar leg takes none.
+fn slice_plane(slice: Option<&str>, nd: usize) -> PyResult<Option<SlicePlane>> {
+    match (slice, nd) {
+        (None, _) => Ok(None),
+        (Some(_), 2) => Err(PyValueError::new_err("`slice`: a planar leg's workspace is its own plane (a spatial leg takes \"xz\", \"yz\" or \"xy\")")),
+        (Some("xz"), _) => Ok(Some(SlicePlane::SAGITTAL)),
+        (Some("yz"), _) => Ok(Some(SlicePlane::FRONTAL)),
+        (Some("xy"), _) => Ok(Some(SlicePlane::TRANSVERSE)),
+        (Some(other), _) => Err(PyValueError::new_err(format!("`slice`: expected \"xz\", \"yz\" or \"xy\", got {:?}", Shown(other).to_string()))),
+    }
+}
+
 fn per_motor<const N: usize>(name: &str, value: &Bound<'_, PyAny>) -> PyResult<SVector<f64, N>> {
     let v: SVector<f64, N> = match value.extract::<f64>() {
         Ok(x) => SVector::from_element(x),
@@ -1292,14 +1304,7 @@ macro_rules! leg_module {
                         None => None,
                         Some(r) => Some(motor_ranges::<NU>(r)?),
                     };
-                    let plane = match (slice, ND) {
-                        (None, _) => None,
-                        (Some(_), 2) => return Err(PyValueError::new_err("`slice`: a planar leg's workspace is its own plane (a spatial leg takes \"xz\", \"yz\" or \"xy\")")),
-                        (Some("xz"), _) => Some(SlicePlane::SAGITTAL),
-                        (Some("yz"), _) => Some(SlicePlane::FRONTAL),
-                        (Some("xy"), _) => Some(SlicePlane::TRANSVERSE),
-                        (Some(other), _) => return Err(PyValueError::new_err(format!("`slice`: expected \"xz\", \"yz\" or \"xy\", got {:?}", Shown(other).to_string()))),
-                    };
+                    let plane = slice_plane(slice, ND)?;
                     let options = GridOptions { nodes, window, plane, motor_range, limits };
                     // The grid's rules are the Rust API's, said with the argument's name.
                     options.check().map_err(grid_err)?;
@@ -1345,6 +1350,57 @@ macro_rules! leg_module {
                     d.set_item("poses", PyArray3::from_owned_array(py, poses))?;
                     d.set_item("passive_curves", out_segments(py, &w.passive_curves))?;
                     d.set_item("foot_curves", out_segments(py, &w.foot_curves))?;
+                    Ok(d)
+                }
+                /// A design's row of `cargo xtask analyze`'s table, the command's numbers to
+                /// the bit: a dict of `analysis_columns` → float (NaN where the measure does
+                /// not apply; `vertical_force_n` infinite where no motor takes a vertical
+                /// force) at the assembled home pose, under `torque_limit` and
+                /// `speed_limit` (N m, rad/s: one for all motors or one each; default 1 N m
+                /// times and 100 rad/s over each motor's gear ratio), ξ with the hip on a
+                /// body of `body_mass` (kg; default ten times the leg's), the workspace of a
+                /// `nodes × nodes` grid (a spatial leg's in `slice`, "xz" by default) with
+                /// every motor in `motor_range` (one `(low, high)` for all, as `--motor-range`).
+                /// Raises `AssemblyError` where the home pose does not assemble and
+                /// `AnalysisError` where a limit is out of range.
+                #[pyo3(signature = (torque_limit = None, speed_limit = None, body_mass = None, nodes = 200, motor_range = None, slice = None))]
+                #[allow(clippy::too_many_arguments)]
+                fn design_summary<'py>(&self, py: Python<'py>, torque_limit: Option<&Bound<'py, PyAny>>, speed_limit: Option<&Bound<'py, PyAny>>, body_mass: Option<f64>, nodes: usize, motor_range: Option<(f64, f64)>, slice: Option<&str>) -> PyResult<Bound<'py, PyDict>> {
+                    use leg_models::analysis::summary;
+                    let params = self.leg.params();
+                    let mut limits = summary::default_limits::<Model, NQ, NC, NU>(params);
+                    if let Some(t) = torque_limit {
+                        limits.torque = per_motor("torque_limit", t)?;
+                    }
+                    if let Some(w) = speed_limit {
+                        limits.speed = per_motor("speed_limit", w)?;
+                    }
+                    if let Some((kind, unit, k, v)) = summary::limit_out_of_range(&limits) {
+                        return Err(AnalysisError::new_err(format!(
+                            "the {kind} limit of motor {} ({}) is {v:.3e} {unit}: beyond (0, {:e}]; give `{kind}_limit` or a gear ratio in range",
+                            k + 1,
+                            Model::JOINT_NAMES[Model::ACTUATED[k]],
+                            summary::MAX_LIMIT
+                        )));
+                    }
+                    if let Some(mass) = body_mass {
+                        if !(mass.is_finite() && mass > 0.0) {
+                            return Err(PyValueError::new_err(format!("`body_mass` must be positive and finite, got {mass}")));
+                        }
+                    }
+                    let options = GridOptions { nodes, window: None, plane: slice_plane(slice, ND)?, motor_range: motor_range.map(|r| [r; NU]), limits };
+                    options.check().map_err(grid_err)?;
+                    let stance = self.leg.assembled_home().map_err(assembly_err)?;
+                    let frame = self.leg.analysis_frame();
+                    let coupling = leg_models::analysis::BodyCoupling::new::<Model, f64, NQ, NC, NU>(params);
+                    let body = summary::default_body(&frame, coupling.as_ref(), body_mass);
+                    let row = py.detach(|| {
+                        summary::summary::<Model, NQ, NC, NU, ND, NP>(params, &stance, &frame, &body, coupling.as_ref(), &options).row(&frame)
+                    });
+                    let d = PyDict::new(py);
+                    for (key, value) in summary::COLUMNS.iter().zip(row) {
+                        d.set_item(*key, value)?;
+                    }
                     Ok(d)
                 }
                 $($extra)*
@@ -1576,11 +1632,18 @@ generated::for_each_model!(leg_class);
 generated::for_each_spatial_model!(spatial_leg_class);
 
 /// The generated leg models: one class per spec (`legmodels.Minitaur`, …), and
-/// `legmodels.models`, a dict spec name → class.
+/// `legmodels.models`, a dict spec name → class. The native part of the package
+/// (`legmodels._legmodels`): `python/legmodels/__init__.py` re-exports it beside the
+/// package's Python modules (`legmodels.sweep`).
 #[pymodule]
+#[pyo3(name = "_legmodels")]
 fn legmodels(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add("models", PyDict::new(py))?;
+    m.add(
+        "analysis_columns",
+        leg_models::analysis::summary::COLUMNS.to_vec(),
+    )?;
     m.add("LegError", py.get_type::<LegError>())?;
     m.add("AssemblyError", py.get_type::<AssemblyError>())?;
     m.add("DynamicsError", py.get_type::<DynamicsError>())?;
