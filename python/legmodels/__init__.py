@@ -3,5 +3,4 @@
 :mod:`legmodels.sweep` (design sweeps and randomized rollouts, serial or on a cluster)."""
 
 from ._legmodels import *  # noqa: F401,F403 (the classes, `models`, the exceptions)
-from ._legmodels import __doc__ as _native_doc  # noqa: F401
-from . import sweep  # noqa: F401
+from . import sweep  # noqa: F401,E402

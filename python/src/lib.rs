@@ -149,7 +149,6 @@ fn motor_ranges<const N: usize>(value: &Bound<'_, PyAny>) -> PyResult<[(f64, f64
     }
 }
 
-/// A motor limit: one positive number for every motor, or one per motor.
 /// A spatial leg's slice plane by its axes' names (`None`: sagittal); a planar leg takes none.
 fn slice_plane(slice: Option<&str>, nd: usize) -> PyResult<Option<SlicePlane>> {
     match (slice, nd) {
@@ -162,6 +161,7 @@ fn slice_plane(slice: Option<&str>, nd: usize) -> PyResult<Option<SlicePlane>> {
     }
 }
 
+/// A motor limit: one positive number for every motor, or one per motor.
 fn per_motor<const N: usize>(name: &str, value: &Bound<'_, PyAny>) -> PyResult<SVector<f64, N>> {
     let v: SVector<f64, N> = match value.extract::<f64>() {
         Ok(x) => SVector::from_element(x),
@@ -1353,15 +1353,17 @@ macro_rules! leg_module {
                     Ok(d)
                 }
                 /// A design's row of `cargo xtask analyze`'s table, the command's numbers to
-                /// the bit: a dict of `analysis_columns` → float (NaN where the measure does
-                /// not apply; `vertical_force_n` infinite where no motor takes a vertical
-                /// force) at the assembled home pose, under `torque_limit` and
-                /// `speed_limit` (N m, rad/s: one for all motors or one each; default 1 N m
-                /// times and 100 rad/s over each motor's gear ratio), ξ with the hip on a
-                /// body of `body_mass` (kg; default ten times the leg's), the workspace of a
-                /// `nodes × nodes` grid (a spatial leg's in `slice`, "xz" by default) with
-                /// every motor in `motor_range` (one `(low, high)` for all, as `--motor-range`).
-                /// Raises `AssemblyError` where the home pose does not assemble and
+                /// the bit: a dict of `analysis_columns` → float (NaN or infinite where a
+                /// measure is not a number) and `not_computed` (column → why, for each of
+                /// those, as `analysis.json` says it), at the assembled home pose.
+                /// `torque_limit`, `speed_limit` (N m, rad/s; one for all motors or one
+                /// each): by default each motor's 1 N m multiplied by its gear ratio and 100
+                /// rad/s divided by it. `body_mass` (kg): the body ξ puts the hip on, by
+                /// default ten times the leg's links' mass (a leg with body joints of its
+                /// own uses them and ignores it). `nodes`: the workspace grid's per side (a
+                /// spatial leg's in `slice`, "xz" by default), every motor within
+                /// `motor_range` (one `(low, high)` for all, as `--motor-range`). Raises
+                /// `AssemblyError` where the home pose does not assemble and
                 /// `AnalysisError` where a limit is out of range.
                 #[pyo3(signature = (torque_limit = None, speed_limit = None, body_mass = None, nodes = 200, motor_range = None, slice = None))]
                 #[allow(clippy::too_many_arguments)]
@@ -1394,13 +1396,21 @@ macro_rules! leg_module {
                     let frame = self.leg.analysis_frame();
                     let coupling = leg_models::analysis::BodyCoupling::new::<Model, f64, NQ, NC, NU>(params);
                     let body = summary::default_body(&frame, coupling.as_ref(), body_mass);
-                    let row = py.detach(|| {
-                        summary::summary::<Model, NQ, NC, NU, ND, NP>(params, &stance, &frame, &body, coupling.as_ref(), &options).row(&frame)
+                    let (row, reasons) = py.detach(|| {
+                        let s = summary::summary::<Model, NQ, NC, NU, ND, NP>(params, &stance, &frame, &body, coupling.as_ref(), &options);
+                        (s.row(&frame), s.reasons(&frame))
                     });
                     let d = PyDict::new(py);
                     for (key, value) in summary::COLUMNS.iter().zip(row) {
                         d.set_item(*key, value)?;
                     }
+                    let why = PyDict::new(py);
+                    for (key, reason) in summary::COLUMNS.iter().zip(reasons) {
+                        if let Some(reason) = reason {
+                            why.set_item(*key, reason)?;
+                        }
+                    }
+                    d.set_item("not_computed", why)?;
                     Ok(d)
                 }
                 $($extra)*

@@ -5,6 +5,9 @@
 //! package, so that a sweep run anywhere (on a cluster's workers, say) gives the
 //! command's numbers to the bit.
 
+use std::string::{String, ToString};
+use std::time::Instant;
+
 use nalgebra::{SMatrix, SVector};
 
 use super::workspace::{workspace, GridOptions, Workspace};
@@ -105,6 +108,8 @@ pub struct Summary<const NQ: usize, const NU: usize, const ND: usize = 2> {
     pub impact_mitigation: Result<f64, AnalysisError>,
     /// The workspace grid through the stance (a spatial leg's in its slice).
     pub workspace: Result<Workspace<NQ, NU, ND>, AnalysisError>,
+    /// The workspace grid's time (s).
+    pub workspace_seconds: f64,
     /// From the stance foot to the nearest singularity curve in the grid (m).
     pub singularity_distance: Option<f64>,
 }
@@ -142,6 +147,59 @@ impl<const NQ: usize, const NU: usize, const ND: usize> Summary<NQ, NU, ND> {
             *self.impact_mitigation.as_ref().unwrap_or(&f64::NAN),
             self.workspace.as_ref().map_or(f64::NAN, |w| w.area),
             self.singularity_distance.unwrap_or(f64::NAN),
+        ]
+    }
+
+    /// Why each of the row's measures (by [`COLUMNS`]) is not a finite number, where it
+    /// is not: the analysis' error, the structure's reason, or what an infinite value
+    /// means.
+    pub fn reasons(&self, frame: &LegFrame<NQ>) -> [Option<String>; 9] {
+        let spans = frame.foot_spans(ND);
+        let failed = self.measures.as_ref().err().map(ToString::to_string);
+        let unspanned = || spans.err().map(|why| why.to_string());
+        let (force, speed) = match &self.measures {
+            Err(_) => (failed.clone(), failed.clone()),
+            Ok(m) => (
+                match m.vertical_force {
+                    None => Some(unspanned().unwrap_or_else(|| {
+                        "the motors cannot hold the leg with the foot pushing down here".into()
+                    })),
+                    Some(f) if f.is_infinite() => Some(
+                        "unbounded: no motor takes a vertical force at the foot here (the structure holds it)"
+                            .into(),
+                    ),
+                    Some(_) => None,
+                },
+                unspanned(),
+            ),
+        };
+        let effective_mass = match self.effective_mass {
+            None => failed.clone(),
+            Some(m) if m.is_infinite() => Some(
+                "infinite: the foot cannot move vertically here (the leg stretched along the vertical, or its closures hold the foot)"
+                    .into(),
+            ),
+            Some(_) => None,
+        };
+        let grid = self.workspace.as_ref().err().map(ToString::to_string);
+        let distance = match (&grid, self.singularity_distance) {
+            (Some(e), _) => Some(e.clone()),
+            (None, None) => Some("no singularity in the grid".into()),
+            (None, Some(_)) => None,
+        };
+        [
+            force,
+            speed.clone(),
+            speed,
+            effective_mass,
+            failed.clone(),
+            failed,
+            self.impact_mitigation
+                .as_ref()
+                .err()
+                .map(ToString::to_string),
+            grid,
+            distance,
         ]
     }
 }
@@ -185,7 +243,9 @@ where
     };
     let impact =
         impact_mitigation::<L, f64, NQ, NC, NU, ND, NP>(params, stance, frame, body, coupling);
+    let started = Instant::now();
     let workspace = workspace::<L, NQ, NC, NU, ND, NP>(params, stance, frame, grid);
+    let workspace_seconds = started.elapsed().as_secs_f64();
     let singularity_distance = workspace.as_ref().ok().and_then(|w| {
         w.distance_to_singularity(w.grid_coordinates(&L::foot_position(stance, params)))
     });
@@ -195,6 +255,7 @@ where
         effective_mass,
         impact_mitigation: impact,
         workspace,
+        workspace_seconds,
         singularity_distance,
     }
 }

@@ -565,74 +565,29 @@ where
         motor_range: settings.motor_range.map(|r| [r; NU]),
         limits,
     };
-    let started = Instant::now();
     let s = summary::<L, NQ, NC, NU, ND, NP>(p, &q, &frame, &body, coupling.as_ref(), &options);
-    let seconds = started.elapsed().as_secs_f64();
-    // The row's numbers are the library's (a sweep in Python gives the same); the reasons
-    // for a dash are the command's.
+    // The row and the reasons for its dashes are the library's (a sweep in Python gives
+    // the same).
     let mut table = serde_json::Map::new();
     for (key, value) in COLUMNS.iter().zip(s.row(&frame)) {
         table.insert((*key).into(), number(value));
     }
-    match &s.measures {
-        Ok(m) => {
-            let spans = frame.foot_spans(ND);
-            if m.vertical_force.is_none() {
-                why.insert(
-                    "vertical_force_n".into(),
-                    json!(match spans {
-                        Err(why) => why.to_string(),
-                        Ok(()) => "the motors cannot hold the leg with the foot pushing down here"
-                            .to_string(),
-                    }),
-                );
-            } else if m.vertical_force.is_some_and(f64::is_infinite) {
-                why.insert(
-                    "vertical_force_n".into(),
-                    json!("unbounded: no motor takes a vertical force at the foot here (the structure holds it)"),
-                );
-            }
-            if let Err(reason) = spans {
-                for key in ["vertical_speed_m_s", "condition"] {
-                    why.insert(key.into(), json!(reason.to_string()));
-                }
-            }
-            json["stance"]["inverse_inertia_free"] = matrix(&m.inverse_inertia);
-            json["stance"]["inverse_inertia_locked"] = matrix(&m.inverse_inertia_locked);
-            json["stance"]["foot_jacobian_motor"] = matrix(&m.kinematics.foot_jacobian);
-            capacity_json::<L, NQ, NC, NU, ND>(p, &q, &frame, &m.kinematics, &limits, &mut json);
-        }
-        Err(e) => {
-            for key in [
-                "vertical_force_n",
-                "vertical_speed_m_s",
-                "effective_mass_kg",
-                "condition",
-                "passive_rank",
-                "foot_rank",
-            ] {
-                why.insert(key.into(), json!(e.to_string()));
-            }
-            // The foot's inertia needs no motor coordinates: a leg its motors do not
-            // determine (springs, a free rod) still has it.
-            if let Some(inv) = &s.inverse_inertia {
-                why.remove("effective_mass_kg");
-                json["stance"]["inverse_inertia_free"] = matrix(inv);
-            }
+    for (key, reason) in COLUMNS.iter().zip(s.reasons(&frame)) {
+        if let Some(reason) = reason {
+            why.insert((*key).into(), json!(reason));
         }
     }
-    if let Err(e) = &s.impact_mitigation {
-        why.insert("impact_mitigation".into(), json!(e.to_string()));
+    // The foot's inertia needs no motor coordinates: a leg its motors do not determine
+    // (springs, a free rod) still has it.
+    if let Some(inv) = &s.inverse_inertia {
+        json["stance"]["inverse_inertia_free"] = matrix(inv);
     }
-    if table
-        .get("effective_mass_kg")
-        .is_some_and(|v| v.is_null() && !why.contains_key("effective_mass_kg"))
-    {
-        why.insert(
-            "effective_mass_kg".into(),
-            json!("infinite: the foot cannot move vertically here (the leg stretched along the vertical, or its closures hold the foot)"),
-        );
+    if let Ok(m) = &s.measures {
+        json["stance"]["inverse_inertia_locked"] = matrix(&m.inverse_inertia_locked);
+        json["stance"]["foot_jacobian_motor"] = matrix(&m.kinematics.foot_jacobian);
+        capacity_json::<L, NQ, NC, NU, ND>(p, &q, &frame, &m.kinematics, &limits, &mut json);
     }
+    let seconds = s.workspace_seconds;
     let part = grid(p, &q, &frame, settings, s.workspace, seconds, &file_stem);
     table.extend(part.table);
     why.extend(part.why);
@@ -848,17 +803,11 @@ fn mapped<L, const NQ: usize, const NC: usize, const NU: usize, const ND: usize,
 where
     L: LegModel<NQ, NC, NU, ND, NP>,
 {
-    // The area and the distance are in the table already (the summary's row).
+    // The area and the distance, and their reasons, are in the table already (the
+    // summary's row).
     let table = serde_json::Map::new();
-    let mut why = serde_json::Map::new();
+    let why = serde_json::Map::new();
     let mut fields = Vec::new();
-    let stance = ws.grid_coordinates(&L::foot_position(q, p));
-    if ws.distance_to_singularity(stance).is_none() {
-        why.insert(
-            "singularity_distance_m".into(),
-            json!("no singularity in the grid"),
-        );
-    }
     let reached = ws
         .states
         .iter()
