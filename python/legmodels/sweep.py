@@ -243,6 +243,11 @@ def sweep(
         raise TypeError(f"`task` is the class {task.__name__}: give an instance, {task.__name__}(…)")
     if not callable(task):
         raise TypeError(f"`task` must be callable (a leg → a dict of numbers), got {task!r}")
+    # A parameter named like a measure (or `index`, `error`) would lose the table at the end.
+    named = set(getattr(task, "columns", ())) | set(getattr(task, "text_columns", ())) | _RESERVED
+    clash = sorted(named & {name for d in designs for name in d})
+    if clash:
+        raise ValueError(f"parameters named like the table's own columns: {', '.join(clash)}")
     n = len(designs)
     if batch_size is None:
         batch_size = 1 if client is None else min(256, max(1, math.ceil(n / (4 * _workers(client)))))
@@ -287,6 +292,9 @@ def sweep(
     return _table(cls, designs, rows, task)
 
 
+_RESERVED = {"index", "error"}
+
+
 def _table(cls, designs, rows, task) -> np.recarray:
     """The rows in the designs' order: index, parameters, measures, text, error."""
     rows = sorted(rows, key=lambda r: r[0])
@@ -296,15 +304,19 @@ def _table(cls, designs, rows, task) -> np.recarray:
     spec = cls().params
     text = list(getattr(task, "text_columns", ()))
     columns = list(getattr(task, "columns", ()))
-    # Every measure any row gave, the task's declared ones first.
+    # Every measure any row gave, the task's declared ones first; one an undeclared
+    # measure's name takes from a parameter or the table is the column `result_<name>`.
+    taken = set(parameters) | _RESERVED | set(text)
+    names = {c: c for c in columns}
     for r in rows:
         for key in r[2] or {}:
-            if key not in columns and key not in text:
-                columns.append(key)
-    clash = set(parameters) & (set(columns) | set(text) | {"index", "error"})
-    if clash:
-        raise ValueError(f"measure or parameter names clash: {sorted(clash)}")
-    dtype = [("index", np.int64)] + [(p, np.float64) for p in parameters] + [(c, np.float64) for c in columns] + [(t, object) for t in text] + [("error", object)]
+            if key not in names and key not in text:
+                name = key
+                while name in taken or name in names.values():
+                    name = f"result_{name}"
+                names[key] = name
+    columns = list(names)
+    dtype = [("index", np.int64)] + [(p, np.float64) for p in parameters] + [(names[c], np.float64) for c in columns] + [(t, object) for t in text] + [("error", object)]
     table = np.recarray(len(rows), dtype=dtype)
     for i, (index, params, result, error) in enumerate(rows):
         table["index"][i] = index
@@ -316,7 +328,7 @@ def _table(cls, designs, rows, task) -> np.recarray:
             except (TypeError, ValueError):
                 table[p][i] = np.nan
         for c in columns:
-            table[c][i] = np.nan if result is None else result.get(c, np.nan)
+            table[names[c]][i] = np.nan if result is None else result.get(c, np.nan)
         for t in text:
             table[t][i] = "" if result is None else result.get(t, "")
         table["error"][i] = error

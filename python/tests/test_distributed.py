@@ -267,6 +267,17 @@ def test_bad_arguments_are_refused():
         DesignSummary(nodez=20)
     with pytest.raises(TypeError, match="not controler"):
         Rollout(10, 1e-3, controler="pd_gravity")
+    with pytest.raises(ValueError, match="named like the table's own columns: condition, error"):
+        sweep("minitaur", [{"error": 1.0, "condition": 2.0}], DesignSummary())
+
+
+def test_a_measure_named_like_a_parameter_keeps_both():
+    """An undeclared measure that takes a parameter's or the table's name gets a column of
+    its own (`result_<name>`): nothing computed is lost at the end."""
+    table = sweep("minitaur", [{"lower_a_length_x": 0.2}], lambda leg: {"lower_a_length_x": 7.0, "error": 8.0, "index": 9.0})
+    assert table["lower_a_length_x"][0] == 0.2
+    assert (table["result_lower_a_length_x"][0], table["result_error"][0], table["result_index"][0]) == (7.0, 8.0, 9.0)
+    assert table["error"][0] == "" and table["index"][0] == 0
     with pytest.raises(ValueError, match="no model `minitaurr`"):
         sweep("minitaurr", [{}], DesignSummary())
     with pytest.raises(ValueError, match="batch_size"):
