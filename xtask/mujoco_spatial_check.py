@@ -73,6 +73,7 @@ class Map:
 
     def __init__(self, m, t, base=None):
         self.m, self.joints, self.balls = m, t["joints"], set(t["ball_joints"])
+        self.free = t.get("free_joint")
         self.base = base
         self.n = len(self.joints)
         self.by_name = {}
@@ -85,7 +86,11 @@ class Map:
         """(our first coordinate, count, MuJoCo joint)."""
         i = 0
         while i < self.n:
-            if i in self.balls:
+            if i == self.free:
+                # A floating robot's body: MuJoCo's free joint, named for its link.
+                yield i, 6, self.by_name[self.joints[i].rsplit(".", 1)[0]]
+                i += 6
+            elif i in self.balls:
                 yield i, 3, self.by_name[self.joints[i].rsplit(".", 1)[0]]
                 i += 3
             else:
@@ -103,6 +108,8 @@ class Map:
         """The body held as the base: the one `load` welded, else a free joint's."""
         if self.base is not None:
             return self.base
+        if self.free is not None:
+            return None  # a floating robot's chart is centred on the world
         held = [i for i in range(self.m.njnt) if self.m.jnt_type[i] == mujoco.mjtJoint.mjJNT_FREE]
         return self.m.jnt_bodyid[held[0]] if held else None
 
@@ -133,6 +140,19 @@ class Map:
                 d.qpos[qa] = q[i]
                 d.qvel[va] = qd[i]
                 T[va, i] = 1.0
+            elif k == 6:
+                # Our chart is centred on MuJoCo's world: the body at δ, turned by the
+                # ball joint's angles; MuJoCo's qvel is ṗ = δ̇ in the world, then ω in the
+                # body, ω = E(β, γ) of the angles' rates.
+                a, b, g = q[i + 3:i + 6]
+                E, Eb, Eg = rate_map(b, g)
+                d.qpos[qa:qa + 3] = q[i:i + 3]
+                d.qpos[qa + 3:qa + 7] = ball_quaternion(a, b, g)
+                d.qvel[va:va + 3] = qd[i:i + 3]
+                d.qvel[va + 3:va + 6] = E @ qd[i + 3:i + 6]
+                T[va:va + 3, i:i + 3] = np.eye(3)
+                T[va + 3:va + 6, i + 3:i + 6] = E
+                Tdot_qd[va + 3:va + 6] = (Eb * qd[i + 4] + Eg * qd[i + 5]) @ qd[i + 3:i + 6]
             else:
                 a, b, g = q[i:i + 3]
                 E, Eb, Eg = rate_map(b, g)
@@ -169,11 +189,12 @@ def same_span(what, ours_value, theirs, failures):
     return err
 
 
-def load(mjcf):
+def load(mjcf, floating=False):
     """The model of `mjcf` as our leg sees it, and the body held as its base (None: the
     world). A free joint is removed (its body welded where the file writes it, each
     keyframe's seven entries for it dropped): held by MuJoCo itself, not reset after each
-    step, so that inside a step the base does not float. Joint limits and contacts are
+    step, so that inside a step the base does not float. A floating robot's (`floating`:
+    ours has a free joint too) is kept: it is one of the compared coordinates. Joint limits and contacts are
     off: our leg has neither. Where the file's mesh files are not here (Menagerie's
     `cassie.xml` without its `assets/`), its mesh geoms, meshes, textures and materials
     are dropped first: they are drawing only where every such body gives its
@@ -190,7 +211,7 @@ def load(mjcf):
             spec.delete(x)
         print(f"{pathlib.Path(mjcf).name}: its mesh files are not in {folder}: drawn geoms dropped (the bodies' inertials are given)")
     first = spec.compile()
-    free = [j for j in range(first.njnt) if first.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
+    free = [j for j in range(first.njnt) if first.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE and not floating]
     held = None
     if free:
         drop = set()
@@ -216,10 +237,10 @@ def main():
     if len(sys.argv) != 4:
         sys.exit(f"usage: {sys.argv[0]} LEGS_BINARY MODEL MJCF_FILE  (e.g. target/debug/legs my_leg my_leg.xml, the file from `cargo xtask export my_leg --format mjcf`)")
     legs, name, mjcf = sys.argv[1:4]
-    m, held = load(mjcf)
+    ir = json.loads((pathlib.Path(__file__).parent.parent / "generated" / "ir" / f"{name}.json").read_text())
+    m, held = load(mjcf, floating=ir["model"].get("free_joint") is not None)
     m.opt.jacobian = mujoco.mjtJacobian.mjJAC_DENSE
     d = mujoco.MjData(m)
-    ir = json.loads((pathlib.Path(__file__).parent.parent / "generated" / "ir" / f"{name}.json").read_text())
     home = np.array(ir["model"]["home"])
     rng = np.random.default_rng(30)
     failures, worst = [], {}
@@ -279,7 +300,7 @@ def main():
     mujoco.mj_resetData(m, d)
     mp = Map(m, t, held)
     mp.state(d, np.array(t["q"]), np.zeros_like(home))
-    held = [(a, v, d.qpos[a : a + 7].copy()) for a, v in mp.held()]
+    held = [(a, v, d.qpos[a : a + 7].copy()) for a, v in mp.held() if mp.free is None]
     mujoco.mj_forward(m, d)
     for _ in range(int(round(1.0 / m.opt.timestep))):
         mujoco.mj_step(m, d)

@@ -24,6 +24,8 @@ pub mod digit;
 pub use digit::Digit;
 pub mod five_bar_offset;
 pub use five_bar_offset::FiveBarOffset;
+pub mod floating_arm;
+pub use floating_arm::FloatingArm;
 pub mod klann_linkage;
 pub use klann_linkage::KlannLinkage;
 pub mod knee_hopper;
@@ -92,5 +94,15 @@ macro_rules! for_each_spatial_model {
         3, 2, 0); $callback ! (rod_knee_leg, $crate::rod_knee_leg::RodKneeLeg, 4, 1, 3,
         2, 0); $callback ! (rssr_linkage, $crate::rssr_linkage::RssrLinkage, 5, 3, 1, 2,
         0); $callback ! (sliding_mass, $crate::sliding_mass::SlidingMass, 3, 0, 2, 0, 3);
+    };
+}
+/// Calls `$callback!(module, Type, NQ, NC, NU, NP, NK)` once for every generated
+/// floating robot: a spatial model whose first link is a free joint
+/// (`LegDynamics::FREE_JOINT`), driven through `leg_models::robot`. Its size
+/// constants are a spatial model's.
+#[macro_export]
+macro_rules! for_each_floating_model {
+    ($callback:ident) => {
+        $callback ! (floating_arm, $crate::floating_arm::FloatingArm, 9, 0, 2, 0, 0);
     };
 }

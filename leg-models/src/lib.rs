@@ -10,6 +10,7 @@
 //! | [`Leg`] | the facade: every operation as a method of one leg with its parameters |
 //! | [`analysis`] | design measures: singularities, force and speed polygons, foot inertia, workspace |
 //! | [`control`] | controllers in the motor coordinates, references, linearization, LQR, hopping |
+//! | [`robot`] | whole robots: a body on a free joint, its pose (a unit quaternion) and the chart centred on it, steps, energy, momentum |
 //! | [`simulate`] | integrators with drift control, the hybrid simulator, the recorder; the controllers' port |
 //! | [`assembly`] | closing the loops: assembly, projection, continuation along a branch |
 //! | [`dynamics`] | the KKT forward dynamics, structure, contact and impacts, derivatives, batches |
@@ -32,6 +33,7 @@ pub mod control;
 pub mod dynamics;
 pub mod leg;
 mod model;
+pub mod robot;
 pub mod simulate;
 
 pub use leg::{

@@ -456,4 +456,54 @@ fn hot_paths_do_not_allocate() {
         };
     }
     generated::for_each_spatial_model!(spatial);
+    macro_rules! floating {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
+            check::<$ty, $nq, $nc, $nu, 3, $np>();
+            check_robot::<$ty, $nq, $nc, $nu>();
+        };
+    }
+    generated::for_each_floating_model!(floating);
+}
+
+/// A floating robot's step (its chart centred on the body before and after), forward
+/// dynamics, energies and momentum.
+fn check_robot<
+    L: leg_models::LegDynamics<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>() {
+    use leg_models::nalgebra::{UnitQuaternion, Vector3};
+    use leg_models::robot::{self, RobotState};
+    let p = L::Params::<f64>::default();
+    let name = L::NAME;
+    let start = passive_release_state::<L, NQ, NC, NU>(&p);
+    let mut s = RobotState::at_rest(
+        Vector3::new(0.1, 0.2, 0.5),
+        UnitQuaternion::from_euler_angles(0.2, 0.1, -0.3),
+        start.q,
+    );
+    s.v = SVector::from_element(0.2);
+    let u = SVector::<f64, NU>::from_element(0.1);
+    let opts = StepOptions::rk4(1e-3);
+    let mut source = |_: f64, _: &State<f64, NQ>| u;
+    let zero = |what: &str, n: usize| assert_eq!(n, 0, "{name}: {what} allocated {n} times");
+    zero(
+        "robot::step",
+        allocations(|| robot::step::<L, f64, NQ, NC, NU>(&p, &mut s, 0.0, &mut source, &opts)).0,
+    );
+    zero(
+        "robot::forward_dynamics_at",
+        allocations(|| robot::forward_dynamics_at::<L, f64, NQ, NC, NU>(&p, &s, &u)).0,
+    );
+    zero(
+        "robot::energies and momentum",
+        allocations(|| {
+            (
+                robot::energies::<L, f64, NQ, NC, NU>(&p, &s),
+                robot::momentum::<L, f64, NQ, NC, NU>(&p, &s),
+            )
+        })
+        .0,
+    );
 }

@@ -320,6 +320,9 @@ macro_rules! spatial_leg_tests {
 }
 
 generated::for_each_spatial_model!(spatial_leg_tests);
+// A floating robot's terms in its body's chart are a spatial model's: the same checks
+// (the free joint's six coordinates among the others).
+generated::for_each_floating_model!(spatial_leg_tests);
 
 /// The ball-joint singularity on every spatial leg that has one; at least one does, so the
 /// check cannot pass by finding none.

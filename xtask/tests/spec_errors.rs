@@ -1123,6 +1123,110 @@ fn ball_joints_are_refused_where_they_do_not_fit() {
     );
 }
 
+/// The floating test robot's text (a body on a free joint), edited.
+fn free_edit(from: &str, to: &str) -> String {
+    let text =
+        std::fs::read_to_string(gen::workspace_root().join("leg-models/specs/floating_arm.toml"))
+            .unwrap();
+    assert!(text.contains(from), "{from}");
+    text.replacen(from, to, 1)
+}
+
+#[test]
+fn free_joints_are_a_floating_robots_body_and_refused_elsewhere() {
+    // Six coordinates: the translation `<link>.tx/.ty/.tz`, then a ball joint's angles.
+    let m = model::build(&parse(&free_edit("", "")).unwrap()).unwrap();
+    assert_eq!(
+        m.joint_names(),
+        ["body.tx", "body.ty", "body.tz", "body.x", "body.y", "body.z", "hip", "thigh", "shin"]
+    );
+    assert_eq!(
+        m.links.iter().map(|l| l.joint).collect::<Vec<_>>(),
+        [
+            "prismatic",
+            "prismatic",
+            "prismatic",
+            "revolute",
+            "revolute",
+            "revolute",
+            "revolute",
+            "revolute",
+            "revolute"
+        ]
+    );
+    // Only the body carries mass; its five stages are frames.
+    assert_eq!(m.links.iter().filter(|l| l.massless).count(), 5);
+    let free = "joint = \"free\"\n";
+    for (extra, field, message) in [
+        (
+            "axis = [1.0, 0.0, 0.0]\n",
+            "links[0].axis",
+            "a free joint has no axis",
+        ),
+        (
+            "actuator = { rotor_inertia = 1e-5, gear_ratio = 1.0 }\n",
+            "links[0].actuator",
+            "carries no motor",
+        ),
+        ("damping = 0.1\n", "links[0].damping", "no damping"),
+        (
+            "origin = [0.0, 0.0, 0.5]\n",
+            "links[0].origin",
+            "the body's state",
+        ),
+        (
+            "orientation = [1.0, 0.0, 0.0, 0.0]\n",
+            "links[0].orientation",
+            "the body's state",
+        ),
+    ] {
+        refused(&free_edit(free, &format!("{free}{extra}")), field, message);
+    }
+    // Not first, or another link on the base.
+    refused(
+        &free_edit(
+            "parent = \"body\"\norigin = [0.12",
+            "parent = \"base\"\norigin = [0.12",
+        ),
+        "links[1].parent",
+        "every link hangs from its body `body`",
+    );
+    refused(
+        &ball_edit("joint = \"ball\"\n", "joint = \"free\"\n"),
+        "links[1].joint",
+        "list it first",
+    );
+    refused(
+        &format!(
+            "{}\n[[springs]]\nname = \"sway\"\na = \"body\"\nstiffness = 1.0\n",
+            free_edit("", "")
+        ),
+        "springs[0].a",
+        "a free joint has six",
+    );
+    refused(
+        &format!(
+            "{}\n[[closures]]\nname = \"tether\"\na = {{ link = \"shin\" }}\nb = {{ link = \"base\", point = [0.0, 0.0, 0.0] }}\n",
+            free_edit("", "")
+        ),
+        "closures[0].b.link",
+        "no point fixed in the world",
+    );
+    refused(
+        &free_edit(
+            "home = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.3, -0.6, 1.1]",
+            "home = [0.3, -0.6, 1.1]",
+        ),
+        "home",
+        "3 joint values for 9 coordinates (4 links, six coordinates for the free joint)",
+    );
+    refused(
+        &VALID.replacen("inertia = 4e-5\n", "inertia = 4e-5\njoint = \"free\"\n", 1),
+        "links[0].joint",
+        "only a spatial robot",
+    );
+}
+
 /// A distance (rod) closure: one row, its length a parameter; refused on a planar leg and
 /// with a length that is not positive.
 #[test]

@@ -307,6 +307,14 @@ pub trait LegDynamics<const NQ: usize, const NC: usize, const NU: usize> {
     /// [`DynamicsError::BallJointSingular`](crate::dynamics::DynamicsError::BallJointSingular).
     /// None by default.
     const BALL_JOINTS: &'static [usize] = &[];
+    /// The free joint of a floating robot's body (spatial robots): its first coordinate
+    /// `f`, with `q[f..f + 3]` a translation along the base frame's axes (m) and
+    /// `q[f + 3..f + 6]` a ball joint's angles (listed in [`LegDynamics::BALL_JOINTS`]).
+    /// The base frame is then not a place in the world but the chart's centre, which
+    /// [`crate::robot`] keeps on the body's pose (a position and a unit quaternion) and
+    /// moves with it every step; gravity, a parameter, is turned into it. `None` (the
+    /// default): the base is fixed.
+    const FREE_JOINT: Option<usize> = None;
     /// The space the leg moves in: 2 for a planar leg (the default), 3 for a spatial one;
     /// the `ND` of its [`LegModel`] (a foot with that many coordinates).
     const DIMENSION: usize = 2;

@@ -64,6 +64,10 @@ pub struct ModelInfo {
     /// The first coordinate of each ball joint's three angles (left out when none).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub ball_joints: Vec<usize>,
+    /// The first coordinate of the free joint of a floating robot's body (its
+    /// translation; its angles are a ball joint's), left out on a leg with a fixed base.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub free_joint: Option<usize>,
 }
 
 fn planar() -> usize {

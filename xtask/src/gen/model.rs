@@ -49,6 +49,10 @@ pub struct Link {
     /// The spec's link this coordinate belongs to (its index in `[[links]]`).
     #[serde(skip)]
     pub spec_link: usize,
+    /// That spec link's joint: a ball joint's three coordinates and a free joint's six
+    /// all say theirs.
+    #[serde(skip)]
+    pub spec_kind: JointKind,
 }
 
 /// A link's inertia about its centre of mass (see [`Link::inertia`]).
@@ -438,40 +442,58 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
             ),
             JointKind::Revolute => ("revolute", None),
             JointKind::Prismatic => ("prismatic", Some(axis.expect("validated"))),
-            JointKind::Ball => ("revolute", Some(vec![0.0, 0.0, 1.0])),
+            JointKind::Ball | JointKind::Free => ("revolute", Some(vec![0.0, 0.0, 1.0])),
         };
         let orientation = l.orientation.as_ref().map(|o| {
             let q = unit(&o.get_ref().value);
             quaternion_matrix([q[0], q[1], q[2], q[3]])
         });
-        let (parent, orientation, origin, name) = if l.kind() == JointKind::Ball {
-            // R_x(α) then R_y(β) on massless frames at the joint point, then the link on
-            // R_z(γ): the damping acts on each angle.
-            let mut parent = parent;
-            let (mut orientation, mut origin) = (orientation, origin);
-            for (suffix, axis) in [("x", [1.0, 0.0, 0.0]), ("y", [0.0, 1.0, 0.0])] {
-                links.push(Link {
-                    name: format!("{name}.{suffix}"),
-                    parent,
-                    joint: "revolute",
-                    axis: Some(axis.to_vec()),
-                    orientation: orientation.take(),
-                    origin: std::mem::take(&mut origin),
-                    length: Vec::new(),
-                    com: Vec::new(),
-                    mass: String::new(),
-                    inertia: Inertia::Spatial(Default::default()),
-                    damping: damping.clone(),
-                    rotor: None,
-                    massless: true,
-                    spec_link: i,
-                });
-                parent = Some(links.len() - 1);
-            }
-            (parent, None, Vec::new(), format!("{name}.z"))
-        } else {
-            (parent, orientation, origin, name)
-        };
+        let kind = l.kind();
+        let (parent, orientation, origin, name) =
+            if matches!(kind, JointKind::Ball | JointKind::Free) {
+                // A free joint: slides along the base's x, y and z on massless frames, then
+                // turns as a ball joint. A ball joint: R_x(α) then R_y(β) on massless frames
+                // at the joint point, then the link on R_z(γ): the damping acts on each angle.
+                let mut parent = parent;
+                let (mut orientation, mut origin) = (orientation, origin);
+                let x = [1.0, 0.0, 0.0];
+                let y = [0.0, 1.0, 0.0];
+                let z = [0.0, 0.0, 1.0];
+                let frames: &[(&str, &str, [f64; 3])] = if kind == JointKind::Free {
+                    &[
+                        ("tx", "prismatic", x),
+                        ("ty", "prismatic", y),
+                        ("tz", "prismatic", z),
+                        ("x", "revolute", x),
+                        ("y", "revolute", y),
+                    ]
+                } else {
+                    &[("x", "revolute", x), ("y", "revolute", y)]
+                };
+                for &(suffix, joint, axis) in frames {
+                    links.push(Link {
+                        name: format!("{name}.{suffix}"),
+                        parent,
+                        joint,
+                        axis: Some(axis.to_vec()),
+                        orientation: orientation.take(),
+                        origin: std::mem::take(&mut origin),
+                        length: Vec::new(),
+                        com: Vec::new(),
+                        mass: String::new(),
+                        inertia: Inertia::Spatial(Default::default()),
+                        damping: damping.clone(),
+                        rotor: None,
+                        massless: true,
+                        spec_link: i,
+                        spec_kind: kind,
+                    });
+                    parent = Some(links.len() - 1);
+                }
+                (parent, None, Vec::new(), format!("{name}.z"))
+            } else {
+                (parent, orientation, origin, name)
+            };
         index.push(links.len());
         links.push(Link {
             name,
@@ -488,6 +510,7 @@ pub fn build(spec: &Spec) -> Result<Model, SpecError> {
             rotor,
             massless: false,
             spec_link: i,
+            spec_kind: kind,
         });
     }
     let mut closures = Vec::new();

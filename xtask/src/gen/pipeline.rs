@@ -388,13 +388,24 @@ fn assemble(spec: &Spec, model: &Model, derived: Derived) -> IrFile {
             ground_normal: model.ground_normal.clone(),
             ground_offset: model.ground_offset,
             dimension: model.dimension,
+            // The angles of a ball joint, and of a free joint after its translation.
             ball_joints: model
                 .links
                 .iter()
                 .enumerate()
-                .filter(|(i, l)| l.massless && (*i == 0 || !model.links[i - 1].massless))
+                .filter(|(i, l)| {
+                    l.massless
+                        && l.joint == "revolute"
+                        && (*i == 0
+                            || model.links[i - 1].spec_link != l.spec_link
+                            || model.links[i - 1].joint != "revolute")
+                })
                 .map(|(i, _)| i)
                 .collect(),
+            free_joint: model
+                .links
+                .iter()
+                .position(|l| l.spec_kind == crate::gen::spec::JointKind::Free),
         },
         functions,
     }

@@ -317,9 +317,10 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         .joints
         .iter()
         .map(|j| {
-            // A ball joint's angles are `<link>.x`, `.y`, `.z`: names a spec cannot choose.
+            // A ball joint's angles are `<link>.x`, `.y`, `.z`, a free joint's translation
+            // `<link>.tx`, `.ty`, `.tz`: names a spec cannot choose.
             let link = match j.rsplit_once('.') {
-                Some((link, "x" | "y" | "z")) => link,
+                Some((link, "x" | "y" | "z" | "tx" | "ty" | "tz")) => link,
                 _ => j,
             };
             codegen::ident(&ctx, link).map(|_| j)
@@ -441,6 +442,20 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     } else {
         let b = info.ball_joints.iter().map(|&b| lit(b));
         quote!(const BALL_JOINTS: &'static [usize] = &[#(#b),*];)
+    };
+    // Only a floating robot says so: the trait's default is a fixed base.
+    let free_joint = match info.free_joint {
+        Some(f) if f + 5 >= nq => {
+            return Err(Error {
+                context: ctx.clone(),
+                message: format!("a free joint at {f} beyond the {nq} coordinates"),
+            })
+        }
+        Some(f) => {
+            let f = lit(f);
+            quote!(const FREE_JOINT: Option<usize> = Some(#f);)
+        }
+        None => quote!(),
     };
     // The trait's default is the planar leg's 2.
     let dimension = if nd == 3 {
@@ -722,6 +737,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             const REDUNDANT_ROWS: usize = #redundant;
             const MOBILITY: usize = #mobility;
             #ball_joints
+            #free_joint
             #dimension
             #distance_closures
             #revolute_closures
@@ -815,6 +831,8 @@ pub struct Summary {
     /// Closure points, two per closure.
     pub np: usize,
     pub spatial: bool,
+    /// A robot whose body floats (a free joint).
+    pub floating: bool,
 }
 
 impl Summary {
@@ -827,6 +845,7 @@ impl Summary {
             nk: ir.model.contact_rows(),
             np: ir.model.closure_points(),
             spatial: ir.model.dimension == 3,
+            floating: ir.model.free_joint.is_some(),
         }
     }
 }
@@ -836,6 +855,7 @@ pub fn lib_source(models: &[Summary]) -> Result<String, Error> {
     let mut mods = Vec::new();
     let mut calls = Vec::new();
     let mut spatial_calls = Vec::new();
+    let mut floating_calls = Vec::new();
     for m in models {
         let module = codegen::ident("lib.rs", &m.name)?;
         let ty = codegen::ident("lib.rs", &type_name(&m.name))?;
@@ -844,7 +864,11 @@ pub fn lib_source(models: &[Summary]) -> Result<String, Error> {
             pub mod #module;
             pub use #module::#ty;
         });
-        if m.spatial {
+        if m.floating {
+            let p = lit(m.np);
+            floating_calls
+                .push(quote!($callback!(#module, $crate::#module::#ty, #q, #c, #u, #p, #k);));
+        } else if m.spatial {
             let p = lit(m.np);
             spatial_calls
                 .push(quote!($callback!(#module, $crate::#module::#ty, #q, #c, #u, #p, #k);));
@@ -877,6 +901,17 @@ pub fn lib_source(models: &[Summary]) -> Result<String, Error> {
         macro_rules! for_each_spatial_model {
             ($callback:ident) => {
                 #(#spatial_calls)*
+            };
+        }
+
+        /// Calls `$callback!(module, Type, NQ, NC, NU, NP, NK)` once for every generated
+        /// floating robot: a spatial model whose first link is a free joint
+        /// (`LegDynamics::FREE_JOINT`), driven through `leg_models::robot`. Its size
+        /// constants are a spatial model's.
+        #[macro_export]
+        macro_rules! for_each_floating_model {
+            ($callback:ident) => {
+                #(#floating_calls)*
             };
         }
     };

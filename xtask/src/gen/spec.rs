@@ -246,6 +246,12 @@ pub enum JointKind {
     /// angles `(α, β, γ)` of `R = R_x(α) R_y(β) R_z(γ)` in the link's frame (turned by
     /// `orientation`), singular at `β = ±π/2` (docs/spec-format.md#ball-joints).
     Ball,
+    /// Spatial robots: the body of a robot that floats, six coordinates in the chart the
+    /// runtime keeps centred on the body's pose (its position and unit quaternion): a
+    /// translation `(x, y, z)` (m) along the base frame's axes, then a ball joint's
+    /// angles (rad). The first link, on `base`, and the only link there
+    /// (docs/spec-format.md#free-joints).
+    Free,
 }
 
 impl JointKind {
@@ -253,6 +259,7 @@ impl JointKind {
     pub fn coordinates(self) -> usize {
         match self {
             JointKind::Ball => 3,
+            JointKind::Free => 6,
             _ => 1,
         }
     }
@@ -705,8 +712,20 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
         if l.kind() == JointKind::Ball {
             check_ball(ctx, l, i, dim)?;
         }
+        if l.kind() == JointKind::Free {
+            check_free(ctx, file, l, i, dim)?;
+        } else if i > 0 && file.links[0].get_ref().kind() == JointKind::Free && parent == "base" {
+            return Err(ctx.span(
+                &l.parent,
+                f("parent"),
+                format!(
+                    "on a floating robot every link hangs from its body `{}` (the free joint), not from `base`",
+                    file.links[0].get_ref().name.get_ref()
+                ),
+            ));
+        }
         match (l.kind(), &l.axis) {
-            (JointKind::Ball, _) => {}
+            (JointKind::Ball | JointKind::Free, _) => {}
             (JointKind::Prismatic, None) => {
                 let at = l.joint.as_ref().expect("prismatic is written");
                 return Err(ctx.span(
@@ -893,18 +912,22 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
         check_new_name(&s.name, &f("name"))?;
         check_link(&s.a, f("a"))?;
         let ball = |name: &Spanned<String>, field: String| -> Result<(), SpecError> {
-            let on_ball = file.links.iter().any(|l| {
-                let l = l.get_ref();
-                l.name.get_ref() == name.get_ref() && l.kind() == JointKind::Ball
-            });
-            if on_ball {
-                return Err(ctx.span(
-                    name,
-                    field,
-                    "a spring acts on one coordinate: a ball joint has three (put it on a revolute joint)",
-                ));
-            }
-            Ok(())
+            let kind = file
+                .links
+                .iter()
+                .map(|l| l.get_ref())
+                .find(|l| l.name.get_ref() == name.get_ref())
+                .map(|l| l.kind());
+            let many = match kind {
+                Some(JointKind::Ball) => "a ball joint has three",
+                Some(JointKind::Free) => "a free joint has six",
+                _ => return Ok(()),
+            };
+            Err(ctx.span(
+                name,
+                field,
+                format!("a spring acts on one coordinate: {many} (put it on a revolute joint)"),
+            ))
         };
         ball(&s.a, f("a"))?;
         if let Some(b) = &s.b {
@@ -953,17 +976,16 @@ fn validate(ctx: &Ctx, file: &SpecFile) -> Result<(), SpecError> {
             .map(|l| l.get_ref().kind().coordinates())
             .sum();
         if h.len() != coordinates {
-            let balls = file.links.len()
-                + 2 * file
-                    .links
-                    .iter()
-                    .filter(|l| l.get_ref().kind() == JointKind::Ball)
-                    .count();
-            let what = if balls > file.links.len() {
-                format!(
-                    "{coordinates} coordinates ({} links, three angles per ball joint)",
-                    file.links.len()
-                )
+            let has = |k: JointKind| file.links.iter().any(|l| l.get_ref().kind() == k);
+            let mut parts = vec![format!("{} links", file.links.len())];
+            if has(JointKind::Free) {
+                parts.push("six coordinates for the free joint".to_string());
+            }
+            if has(JointKind::Ball) {
+                parts.push("three angles per ball joint".to_string());
+            }
+            let what = if coordinates > file.links.len() {
+                format!("{coordinates} coordinates ({})", parts.join(", "))
             } else {
                 format!("{} links", file.links.len())
             };
@@ -1005,6 +1027,91 @@ fn check_ball(ctx: &Ctx, l: &LinkSpec, i: usize, dim: usize) -> Result<(), SpecE
             f("actuator"),
             "a motor drives one axis: put it on a revolute joint, not on a ball joint",
         ));
+    }
+    Ok(())
+}
+
+/// A free joint: the body of a spatial robot that floats. It is the first link and the
+/// only one on `base` (checked at the other links), with no axis, motor or damping, and
+/// no point of the spec is fixed in the base frame: the base frame is where the body's
+/// chart is centred, not a place in the world.
+fn check_free(
+    ctx: &Ctx,
+    file: &SpecFile,
+    l: &LinkSpec,
+    i: usize,
+    dim: usize,
+) -> Result<(), SpecError> {
+    let f = |field: &str| format!("links[{i}].{field}");
+    let at = l.joint.as_ref().expect("free is written");
+    if dim == 2 {
+        return Err(ctx.span(
+            at,
+            f("joint"),
+            "a free joint moves in six coordinates: only a spatial robot (gravity [x, y, z]) has one (a planar body floats on two prismatic joints and a revolute one)",
+        ));
+    }
+    if i > 0 {
+        return Err(ctx.span(
+            at,
+            f("joint"),
+            "a free joint is the robot's body: list it first, on `base`",
+        ));
+    }
+    if l.parent.get_ref() != "base" {
+        return Err(ctx.span(
+            &l.parent,
+            f("parent"),
+            "a free joint is the robot's body: its parent is `base`",
+        ));
+    }
+    if let Some(axis) = &l.axis {
+        return Err(ctx.span(
+            axis,
+            f("axis"),
+            "a free joint has no axis (it moves along and about every axis)",
+        ));
+    }
+    if let Some(a) = &l.actuator {
+        return Err(ctx.span(
+            a,
+            f("actuator"),
+            "a free joint carries no motor: nothing in the world pushes the body but its legs and the ground",
+        ));
+    }
+    if let Some(d) = &l.damping {
+        if d.get_ref().value != 0.0 {
+            return Err(ctx.span(
+                d,
+                f("damping"),
+                "a free joint has no damping: it is not a joint to anything",
+            ));
+        }
+    }
+    if let Some(o) = &l.origin {
+        return Err(ctx.span(
+            o,
+            f("origin"),
+            "a free joint's position is the body's state (the runtime's position), not a constant of the spec",
+        ));
+    }
+    if let Some(o) = &l.orientation {
+        return Err(ctx.span(
+            o,
+            f("orientation"),
+            "a free joint's orientation is the body's state (the runtime's quaternion), not a constant of the spec",
+        ));
+    }
+    for (k, c) in file.closures.iter().enumerate() {
+        for (end, p) in [("a", &c.get_ref().a), ("b", &c.get_ref().b)] {
+            if p.get_ref().link.get_ref() == "base" {
+                return Err(ctx.span(
+                    &p.get_ref().link,
+                    format!("closures[{k}].{end}.link"),
+                    "a floating robot has no point fixed in the world: name the link this point is on",
+                ));
+            }
+        }
     }
     Ok(())
 }

@@ -542,6 +542,7 @@ pub fn run_spatial<
         dynamics::<L, NQ, NC, NU>(&p, &terms, &q, &qd, &u, args.derivatives);
     let mut warnings = Map::new();
     out.insert("ball_joints".into(), json!(L::BALL_JOINTS));
+    out.insert("free_joint".into(), json!(L::FREE_JOINT));
     points::<L, NQ, NC, NU, 3, NP>(&p, &q, &qd, &mut out, &mut warnings, "--project");
     contacts::<L, NQ, NC, NU, NK, 3>(
         &p,

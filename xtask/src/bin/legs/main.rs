@@ -35,7 +35,31 @@ fn models() -> Vec<&'static str> {
         };
     }
     generated::for_each_spatial_model!(name);
+    generated::for_each_floating_model!(name);
     names
+}
+
+/// Floating robots' names: `eval` takes them (the terms in the body's chart); the
+/// commands built for a leg on a fixed base say so.
+fn floating_models() -> Vec<&'static str> {
+    let mut names = Vec::new();
+    macro_rules! name {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
+            names.push(stringify!($module));
+        };
+    }
+    generated::for_each_floating_model!(name);
+    names
+}
+
+/// The refusal of a command that does not take a floating robot yet.
+fn not_for_floating(command: &str, name: &str) -> Result<(), Error> {
+    if floating_models().contains(&name) {
+        return Err(Error::usage(format!(
+            "`{name}` is a floating robot (its body is on a free joint): `legs {command}` takes legs on a fixed base; `legs eval {name}` gives its terms in the body's chart, and leg_models::robot steps it"
+        )));
+    }
+    Ok(())
 }
 
 /// Why `name` is not one of the models `known` takes.
@@ -72,11 +96,13 @@ fn eval(args: EvalArgs) -> Result<(), Error> {
         };
     }
     generated::for_each_spatial_model!(spatial);
+    generated::for_each_floating_model!(spatial);
     Err(unknown(&args.model, &models()))
 }
 
 fn simulate(args: SimArgs) -> Result<(), Error> {
     let name = args.model.clone().unwrap_or_else(|| "minitaur".to_string());
+    not_for_floating("sim", &name)?;
     let settings = sim::Settings::from_args(&args)?;
     macro_rules! dispatch {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
@@ -121,6 +147,7 @@ fn analyze(args: AnalyzeArgs, raw: &[String]) -> Result<(), Error> {
         if !known.contains(&m.as_str()) {
             return Err(unknown(m, &known));
         }
+        not_for_floating("analyze", m)?;
         if planar.contains(&m.as_str()) {
             settings.spatial_only(m)?;
         }

@@ -115,6 +115,7 @@ pub fn joint_name(m: &Model, i: usize) -> String {
         Some((link, "x" | "y" | "z")) if m.links[i].massless || link_is_ball_body(m, i) => {
             link.to_string()
         }
+        Some((link, "tx" | "ty" | "tz")) if is_free(m, i) => link.to_string(),
         _ => name.clone(),
     }
 }
@@ -142,9 +143,17 @@ fn body_parent(m: &Model, i: usize) -> Option<usize> {
     None
 }
 
-/// The coordinate where a body's joint starts (a ball joint's `.x`).
+/// Coordinate `i` belongs to a free joint (a floating robot's body).
+fn is_free(m: &Model, i: usize) -> bool {
+    m.links[i].spec_kind == crate::gen::spec::JointKind::Free
+}
+
+/// The coordinate where a body's joint starts (a ball joint's `.x`, a free joint's
+/// `.tx`).
 fn first_coordinate(m: &Model, i: usize) -> usize {
-    if link_is_ball_body(m, i) {
+    if is_free(m, i) {
+        i - 5
+    } else if link_is_ball_body(m, i) {
         i - 2
     } else {
         i
@@ -212,7 +221,11 @@ fn body(m: &Model, i: usize, depth: usize, out: &mut String) {
         let (ir, n) = (value(&m.params, &r[0]), value(&m.params, &r[1]));
         ir * n * n
     });
-    if first != i {
+    if is_free(m, i) {
+        // MuJoCo's free joint: qpos the position and the quaternion of the ball joint's
+        // angles, qvel the linear velocity in the world and ω in the body.
+        let _ = writeln!(out, "{pad}  <freejoint name=\"{name}\"/>");
+    } else if first != i {
         let _ = writeln!(
             out,
             "{pad}  <joint name=\"{name}\" type=\"ball\" damping=\"{damping}\"/>"
@@ -311,8 +324,11 @@ pub fn mjcf(m: &Model) -> String {
     // joint's quaternion).
     fn depth_first(m: &Model, i: usize, qpos: &mut Vec<String>) {
         let first = first_coordinate(m, i);
-        if first != i {
-            let h = &m.home;
+        let h = &m.home;
+        if is_free(m, i) {
+            qpos.extend(h[first..first + 3].iter().map(|&x| num(x)));
+            qpos.extend(ball_quaternion(h[first + 3], h[first + 4], h[i]).map(num));
+        } else if first != i {
             qpos.extend(ball_quaternion(h[first], h[first + 1], h[i]).map(num));
         } else {
             qpos.push(num(m.home[i]));

@@ -1,0 +1,412 @@
+//! Whole robots: legs on a body that floats (DESIGN.md §3.3).
+//!
+//! A floating robot's spec gives its body a free joint ([`LegDynamics::FREE_JOINT`]):
+//! the generated model then has six coordinates for it, a translation `δ` along the base
+//! frame's axes and a ball joint's angles `(α, β, γ)`, and its base frame is a chart's
+//! centre rather than a place in the world. [`RobotState`] holds the body's pose in the
+//! world, a position and a unit quaternion, and keeps the chart centred on it:
+//!
+//! ```text
+//! p = p₀ + R₀ δ,   R = R₀ R_x(α) R_y(β) R_z(γ),   gravity in the chart = R₀ᵀ g
+//! ```
+//!
+//! At the centre (`δ = 0`, angles zero) the chart's rates are the robot's velocity `v`:
+//! the body's linear velocity `Rᵀ ṗ` and angular velocity `ω`, both in the body frame,
+//! then the joint rates. So `q̇ ≠ v` for the pose (`ṗ = R v_b`, `q̇_quat = ½ q ⊗ (0, ω)`,
+//! [`RobotState::pose_rate`]) while the dynamics are the generated ones, unchanged. A
+//! step ([`step`]) integrates in the chart centred at the step's start, with every
+//! integrator and projection of [`crate::simulate::step`], then moves the centre to
+//! where the body went ([`RobotState::recentre`]): the Runge–Kutta–Munthe-Kaas idea,
+//! with the ball joint's angles as the chart. They are singular only at `β = ±π/2`,
+//! which a step of a body turning at less than `π/(2 dt)` rad/s never nears; the
+//! quaternion is renormalized after each step, so it stays unit to rounding.
+//!
+//! Gravity is a parameter of the generated model: the robot's parameters hold it in
+//! the world, and [`chart_params`] turns it into the chart each step. Closures are
+//! between the robot's own links, so they do not see the chart at all.
+
+use core::fmt;
+
+use nalgebra::{Quaternion, SVector, UnitQuaternion, Vector3};
+
+use crate::dynamics::{forward_dynamics, Acceleration, DynamicsError};
+use crate::model::contract::{LegDynamics, Parameters, Real};
+use crate::simulate::{self, State, StepError, StepOptions, StepReport, TorqueSource};
+
+/// Why a robot's operation cannot be done.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RobotError {
+    /// The model has no free joint: its base is fixed (use the leg's own functions).
+    NotFloating {
+        /// The model's name.
+        model: &'static str,
+    },
+    /// The model's parameters have no gravity named `gravity_x`, `gravity_y`,
+    /// `gravity_z` (a model not made by `cargo xtask gen`).
+    NoGravity {
+        /// The model's name.
+        model: &'static str,
+    },
+}
+
+impl fmt::Display for RobotError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            RobotError::NotFloating { model } => write!(
+                f,
+                "`{model}` has a fixed base: a robot's body is a link with `joint = \"free\"`"
+            ),
+            RobotError::NoGravity { model } => write!(
+                f,
+                "`{model}` has no parameters gravity_x, gravity_y, gravity_z to turn into the body's chart"
+            ),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for RobotError {}
+
+/// The free joint's first coordinate, or why the model has none.
+pub fn free_joint<L, const NQ: usize, const NC: usize, const NU: usize>(
+) -> Result<usize, RobotError>
+where
+    L: LegDynamics<NQ, NC, NU>,
+{
+    match L::FREE_JOINT {
+        Some(f) if f + 6 <= NQ && L::DIMENSION == 3 => Ok(f),
+        _ => Err(RobotError::NotFloating { model: L::NAME }),
+    }
+}
+
+/// The indices of `gravity_x`, `gravity_y`, `gravity_z` in the parameters.
+fn gravity_indices<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+) -> Result<[usize; 3], RobotError>
+where
+    L: LegDynamics<NQ, NC, NU>,
+    T: Real,
+{
+    let names = <L::Params<T> as Parameters<T>>::NAMES;
+    let mut out = [0; 3];
+    for (k, want) in ["gravity_x", "gravity_y", "gravity_z"].iter().enumerate() {
+        out[k] = names
+            .iter()
+            .position(|n| n == want)
+            .ok_or(RobotError::NoGravity { model: L::NAME })?;
+    }
+    Ok(out)
+}
+
+/// The robot's gravity in the world (its parameters' `gravity_*`).
+pub fn world_gravity<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+) -> Result<Vector3<T>, RobotError>
+where
+    L: LegDynamics<NQ, NC, NU>,
+    T: Real,
+{
+    let [x, y, z] = gravity_indices::<L, T, NQ, NC, NU>()?;
+    let get = |i| params.get(i).expect("an index of NAMES");
+    Ok(Vector3::new(get(x), get(y), get(z)))
+}
+
+/// The parameters of the chart centred on a body turned by `orientation`: the robot's
+/// (`params`, gravity in the world) with gravity turned into the body's frame, `R₀ᵀ g`.
+pub fn chart_params<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    orientation: &UnitQuaternion<T>,
+) -> Result<L::Params<T>, RobotError>
+where
+    L: LegDynamics<NQ, NC, NU>,
+    T: Real,
+{
+    let idx = gravity_indices::<L, T, NQ, NC, NU>()?;
+    let g = world_gravity::<L, T, NQ, NC, NU>(params)?;
+    let local = orientation.inverse_transform_vector(&g);
+    let mut out = *params;
+    for k in 0..3 {
+        out.set(idx[k], local[k]);
+    }
+    Ok(out)
+}
+
+/// `R_x(α) R_y(β) R_z(γ)`, the ball joint's rotation, as a unit quaternion.
+pub fn ball_rotation<T: Real>(angles: &Vector3<T>) -> UnitQuaternion<T> {
+    UnitQuaternion::from_axis_angle(&Vector3::x_axis(), angles[0])
+        * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), angles[1])
+        * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), angles[2])
+}
+
+/// `ω = E(β, γ) (α̇, β̇, γ̇)`, the body-frame angular velocity of the ball joint's angle
+/// rates (`E`'s columns are `R_z(γ)ᵀ R_y(β)ᵀ x̂`, `R_z(γ)ᵀ ŷ`, `ẑ`).
+pub fn ball_angular_velocity<T: Real>(angles: &Vector3<T>, rates: &Vector3<T>) -> Vector3<T> {
+    let (sb, cb) = angles[1].sincos();
+    let (sg, cg) = angles[2].sincos();
+    Vector3::new(
+        cb * cg * rates[0] + sg * rates[1],
+        -cb * sg * rates[0] + cg * rates[1],
+        sb * rates[0] + rates[2],
+    )
+}
+
+/// A floating robot's state: the body's pose in the world and the chart's coordinates
+/// and rates, centred on it after every [`step`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RobotState<T: Real, const NQ: usize> {
+    /// The chart's centre: the body frame's origin in the world (m).
+    pub position: Vector3<T>,
+    /// The chart's centre: the body frame's orientation (body to world).
+    pub orientation: UnitQuaternion<T>,
+    /// The chart's coordinates: the free joint's six (zero when centred), then the
+    /// joints' (rad, or m).
+    pub q: SVector<T, NQ>,
+    /// The chart's rates. Centred, they are the velocity `v`: the body's linear
+    /// velocity `Rᵀ ṗ` (m/s) and angular velocity `ω` (rad/s), both in the body frame,
+    /// then the joint rates.
+    pub v: SVector<T, NQ>,
+}
+
+impl<T: Real, const NQ: usize> RobotState<T, NQ> {
+    /// The body at `position` turned by `orientation`, the joints at `q` (the free
+    /// joint's six entries are the chart's: give zeros), everything at rest.
+    pub fn at_rest(
+        position: Vector3<T>,
+        orientation: UnitQuaternion<T>,
+        q: SVector<T, NQ>,
+    ) -> Self {
+        RobotState {
+            position,
+            orientation,
+            q,
+            v: SVector::zeros(),
+        }
+    }
+
+    /// Moves the chart's centre to the body's pose: the free joint's coordinates
+    /// (from `f`) become zero and its rates the body-frame velocities there.
+    pub fn recentre(&mut self, f: usize) {
+        let delta = Vector3::new(self.q[f], self.q[f + 1], self.q[f + 2]);
+        let angles = Vector3::new(self.q[f + 3], self.q[f + 4], self.q[f + 5]);
+        let delta_rate = Vector3::new(self.v[f], self.v[f + 1], self.v[f + 2]);
+        let angle_rates = Vector3::new(self.v[f + 3], self.v[f + 4], self.v[f + 5]);
+        let turn = ball_rotation(&angles);
+        // ṗ = R₀ δ̇, so Rᵀ ṗ = (R₀ turn)ᵀ R₀ δ̇ = turnᵀ δ̇.
+        let linear = turn.inverse_transform_vector(&delta_rate);
+        let angular = ball_angular_velocity(&angles, &angle_rates);
+        self.position += self.orientation.transform_vector(&delta);
+        // Renormalized: the product of unit quaternions drifts off the unit sphere by
+        // rounding alone, step after step.
+        self.orientation =
+            UnitQuaternion::new_normalize(self.orientation.into_inner() * turn.into_inner());
+        for k in 0..3 {
+            self.q[f + k] = T::zero();
+            self.q[f + 3 + k] = T::zero();
+            self.v[f + k] = linear[k];
+            self.v[f + 3 + k] = angular[k];
+        }
+    }
+
+    /// The pose's time derivative at a centred state (`q̇ ≠ v`): the body's velocity in
+    /// the world `ṗ = R v_b`, and `q̇_quat = ½ q ⊗ (0, ω)`.
+    pub fn pose_rate(&self, f: usize) -> (Vector3<T>, Quaternion<T>) {
+        let linear = Vector3::new(self.v[f], self.v[f + 1], self.v[f + 2]);
+        let omega = Vector3::new(self.v[f + 3], self.v[f + 4], self.v[f + 5]);
+        let half = T::lit(0.5);
+        (
+            self.orientation.transform_vector(&linear),
+            self.orientation.into_inner() * Quaternion::from_imag(omega) * half,
+        )
+    }
+}
+
+/// The robot's forward dynamics at a state (centred first, on a copy): `q̈` of the chart
+/// and the closure forces. The free joint's accelerations are the chart's: `Rᵀ p̈` and the
+/// angles'; [`velocity_derivative`] turns them into `v̇`.
+pub fn forward_dynamics_at<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    state: &RobotState<T, NQ>,
+    u: &SVector<T, NU>,
+) -> Result<Acceleration<T, NQ, NC>, RobotDynamicsError>
+where
+    L: LegDynamics<NQ, NC, NU>,
+    T: Real,
+{
+    let f = free_joint::<L, NQ, NC, NU>()?;
+    let mut s = *state;
+    s.recentre(f);
+    let chart = chart_params::<L, T, NQ, NC, NU>(params, &s.orientation)?;
+    Ok(forward_dynamics::<L, T, NQ, NC, NU>(
+        &chart, &s.q, &s.v, u, None,
+    )?)
+}
+
+/// `v̇` at a centred state from the chart's `q̈` there: the body's `d(Rᵀ ṗ)/dt =
+/// Rᵀ p̈ − ω × v_b` and `ω̇ = θ̈ + Ė θ̇` (the angles' rate map at zero moves with them),
+/// both in the body frame, then the joints' `q̈`. This is what Pinocchio's `aba` returns
+/// for a free flyer.
+pub fn velocity_derivative<T: Real, const NQ: usize>(
+    f: usize,
+    v: &SVector<T, NQ>,
+    qdd: &SVector<T, NQ>,
+) -> SVector<T, NQ> {
+    let lin = Vector3::new(v[f], v[f + 1], v[f + 2]);
+    let w = Vector3::new(v[f + 3], v[f + 4], v[f + 5]);
+    let coriolis = w.cross(&lin);
+    // Ė at zero angles, times the rates (= ω there): (ω_y ω_z, −ω_x ω_z, ω_x ω_y).
+    let turn = Vector3::new(w[1] * w[2], -w[0] * w[2], w[0] * w[1]);
+    let mut out = *qdd;
+    for k in 0..3 {
+        out[f + k] -= coriolis[k];
+        out[f + 3 + k] += turn[k];
+    }
+    out
+}
+
+/// Why the robot's dynamics failed: not a floating robot, or the dynamics' own reason.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RobotDynamicsError {
+    /// See [`RobotError`].
+    Robot(RobotError),
+    /// See [`DynamicsError`].
+    Dynamics(DynamicsError),
+}
+
+impl From<RobotError> for RobotDynamicsError {
+    fn from(e: RobotError) -> Self {
+        RobotDynamicsError::Robot(e)
+    }
+}
+
+impl From<DynamicsError> for RobotDynamicsError {
+    fn from(e: DynamicsError) -> Self {
+        RobotDynamicsError::Dynamics(e)
+    }
+}
+
+impl fmt::Display for RobotDynamicsError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            RobotDynamicsError::Robot(e) => write!(f, "{e}"),
+            RobotDynamicsError::Dynamics(e) => write!(f, "dynamics: {e}"),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for RobotDynamicsError {}
+
+/// Why a robot's step failed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RobotStepError {
+    /// See [`RobotError`].
+    Robot(RobotError),
+    /// See [`StepError`].
+    Step(StepError),
+}
+
+impl From<RobotError> for RobotStepError {
+    fn from(e: RobotError) -> Self {
+        RobotStepError::Robot(e)
+    }
+}
+
+impl From<StepError> for RobotStepError {
+    fn from(e: StepError) -> Self {
+        RobotStepError::Step(e)
+    }
+}
+
+impl fmt::Display for RobotStepError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            RobotStepError::Robot(e) => write!(f, "{e}"),
+            RobotStepError::Step(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for RobotStepError {}
+
+/// Advances a floating robot from time `t` by one step of `opts` (any integrator,
+/// projection onto the closures, Baumgarte terms), with motor torques from `source`
+/// (which sees the centred chart: the free joint's coordinates zero, its rates `v`).
+/// The chart is centred on the body at the step's start and on where it went at the
+/// end. On an error `state` is left as it was.
+pub fn step<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    state: &mut RobotState<T, NQ>,
+    t: T,
+    source: &mut impl TorqueSource<T, NQ, NU>,
+    opts: &StepOptions<T>,
+) -> Result<StepReport<T, NQ, NC, NU>, RobotStepError>
+where
+    L: LegDynamics<NQ, NC, NU>,
+    T: Real,
+{
+    let f = free_joint::<L, NQ, NC, NU>()?;
+    let mut next = *state;
+    next.recentre(f);
+    let chart = chart_params::<L, T, NQ, NC, NU>(params, &next.orientation)?;
+    let mut local = State {
+        q: next.q,
+        qd: next.v,
+    };
+    let report = simulate::step::<L, T, NQ, NC, NU>(&chart, &mut local, t, source, opts)?;
+    next.q = local.q;
+    next.v = local.qd;
+    next.recentre(f);
+    *state = next;
+    Ok(report)
+}
+
+/// The robot's kinetic and potential energy in the world (J): the chart's kinetic
+/// energy, and its potential plus the body's height's share, `−m g·p₀` (the total
+/// weight `m g` read off the chart's generalized gravity on the translation, `G_δ =
+/// −m R₀ᵀ g`).
+pub fn energies<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    state: &RobotState<T, NQ>,
+) -> Result<(T, T), RobotError>
+where
+    L: LegDynamics<NQ, NC, NU>,
+    T: Real,
+{
+    let f = free_joint::<L, NQ, NC, NU>()?;
+    let mut s = *state;
+    s.recentre(f);
+    let chart = chart_params::<L, T, NQ, NC, NU>(params, &s.orientation)?;
+    let kinetic = L::kinetic_energy(&s.q, &s.v, &chart);
+    let g = L::gravity_forces(&s.q, &chart);
+    let weight_in_world = s
+        .orientation
+        .transform_vector(&Vector3::new(g[f], g[f + 1], g[f + 2]));
+    let potential = L::potential_energy(&s.q, &chart) + weight_in_world.dot(&s.position);
+    Ok((kinetic, potential))
+}
+
+/// The robot's momentum in the world: linear (kg m/s) and angular about the world's
+/// origin (kg m²/s). At the centre the chart's generalized momentum `M v` on the
+/// translation is the linear momentum in the body frame, and on the angles (whose rates
+/// are `ω` there) the angular momentum about the body's origin in the body frame.
+pub fn momentum<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    state: &RobotState<T, NQ>,
+) -> Result<(Vector3<T>, Vector3<T>), RobotError>
+where
+    L: LegDynamics<NQ, NC, NU>,
+    T: Real,
+{
+    let f = free_joint::<L, NQ, NC, NU>()?;
+    let mut s = *state;
+    s.recentre(f);
+    let chart = chart_params::<L, T, NQ, NC, NU>(params, &s.orientation)?;
+    let h = L::mass_matrix(&s.q, &chart) * s.v;
+    let linear = s
+        .orientation
+        .transform_vector(&Vector3::new(h[f], h[f + 1], h[f + 2]));
+    let about_body = s
+        .orientation
+        .transform_vector(&Vector3::new(h[f + 3], h[f + 4], h[f + 5]));
+    Ok((linear, about_body + s.position.cross(&linear)))
+}

@@ -1,0 +1,312 @@
+//! Floating robots (`generated::for_each_floating_model!`, `leg_models::robot`): the body's
+//! pose on its free joint, against laws the code does not use.
+//!
+//! - In zero gravity, with motors pushing the joints, the robot's linear momentum and its
+//!   angular momentum about the world's origin stay what they were (nothing outside acts);
+//!   with gravity, the linear momentum grows by `m g t` exactly;
+//! - passive and undamped, the energy in the world (with the body's height) stays;
+//! - the chart moved to the body every step gives the trajectory of one chart held
+//!   fixed for the whole run (where it stays away from its singularity): the recentring's
+//!   position, quaternion and velocity maps against none at all;
+//! - the quaternion stays unit, `q̇_quat = ½ q ⊗ (0, ω)` against differences of the pose.
+
+use leg_models::nalgebra::{SVector, UnitQuaternion, Vector3};
+use leg_models::robot::{self, RobotState};
+use leg_models::simulate::State;
+use leg_models::simulate::{step as fixed_step, StepOptions};
+use leg_models::{LegDynamics, Parameters};
+use leg_tests::Rng;
+
+/// A tumbling start: the body off the origin, turned, moving and spinning; the joints at
+/// home (assembled), with rates that keep the closures.
+fn tumbling<L, const NQ: usize, const NC: usize, const NU: usize>(
+    p: &L::Params<f64>,
+    seed: u64,
+) -> RobotState<f64, NQ>
+where
+    L: LegDynamics<NQ, NC, NU>,
+{
+    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
+    let mut rng = Rng::new(seed);
+    let mut q = SVector::<f64, NQ>::from_column_slice(&L::HOME);
+    for k in 0..6 {
+        q[f + k] = 0.0;
+    }
+    leg_models::assembly::project_position::<L, f64, NQ, NC, NU>(
+        p,
+        &mut q,
+        &leg_models::assembly::Tolerance::default(),
+    )
+    .unwrap_or_else(|e| panic!("{}: home does not assemble: {e}", L::NAME));
+    let orientation = UnitQuaternion::from_euler_angles(0.3, -0.2, 0.7);
+    let mut s = RobotState::at_rest(Vector3::new(0.4, -0.3, 1.2), orientation, q);
+    for k in 0..NQ {
+        s.v[k] = rng.range(-1.0, 1.0);
+    }
+    leg_models::assembly::project_velocity::<L, f64, NQ, NC, NU>(p, &s.q, &mut s.v).unwrap();
+    s
+}
+
+fn with_gravity<L, const NQ: usize, const NC: usize, const NU: usize>(
+    g: [f64; 3],
+    damping: bool,
+) -> L::Params<f64>
+where
+    L: LegDynamics<NQ, NC, NU>,
+{
+    let mut p = L::Params::<f64>::default();
+    let names = <L::Params<f64> as Parameters<f64>>::NAMES;
+    for (i, name) in names.iter().enumerate() {
+        match *name {
+            "gravity_x" => assert!(p.set(i, g[0])),
+            "gravity_y" => assert!(p.set(i, g[1])),
+            "gravity_z" => assert!(p.set(i, g[2])),
+            n if !damping && n.ends_with("_damping") => assert!(p.set(i, 0.0)),
+            _ => {}
+        }
+    }
+    p
+}
+
+/// The largest drift of the linear and angular momentum over 1 s at step `dt`, and the
+/// quaternion's largest distance from the unit sphere.
+fn momentum_drift<L, const NQ: usize, const NC: usize, const NU: usize>(
+    p: &L::Params<f64>,
+    dt: f64,
+) -> (f64, f64, f64, RobotState<f64, NQ>)
+where
+    L: LegDynamics<NQ, NC, NU>,
+{
+    let name = L::NAME;
+    let mut s = tumbling::<L, NQ, NC, NU>(p, 31);
+    let (lin0, ang0) = robot::momentum::<L, f64, NQ, NC, NU>(p, &s).unwrap();
+    // The motors push the joints back and forth: internal forces only.
+    let mut motors = |t: f64, _: &State<f64, NQ>| {
+        SVector::<f64, NU>::from_fn(|i, _| 0.3 * (3.0 * t + i as f64).sin())
+    };
+    let opts = StepOptions::rk4(dt);
+    let (mut lin_err, mut ang_err, mut unit_err) = (0.0f64, 0.0f64, 0.0f64);
+    let steps = (1.0 / dt).round() as usize;
+    for i in 0..steps {
+        robot::step::<L, f64, NQ, NC, NU>(p, &mut s, i as f64 * dt, &mut motors, &opts)
+            .unwrap_or_else(|e| panic!("{name}: step {i}: {e}"));
+        let (lin, ang) = robot::momentum::<L, f64, NQ, NC, NU>(p, &s).unwrap();
+        lin_err = lin_err.max((lin - lin0).norm() / lin0.norm().max(1.0));
+        ang_err = ang_err.max((ang - ang0).norm() / ang0.norm().max(1.0));
+        unit_err = unit_err.max((s.orientation.into_inner().norm() - 1.0).abs());
+    }
+    (lin_err, ang_err, unit_err, s)
+}
+
+/// Momentum is a law of the equations, not of RK4 (it is not linear in the state): the
+/// drift is the integrator's, falling as `dt⁴`, or at rounding already.
+fn momentum_is_kept<L, const NQ: usize, const NC: usize, const NU: usize>()
+where
+    L: LegDynamics<NQ, NC, NU>,
+{
+    let name = L::NAME;
+    let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, 0.0], true);
+    let (lin1, ang1, unit1, s) = momentum_drift::<L, NQ, NC, NU>(&p, 2e-3);
+    let (lin2, ang2, unit2, _) = momentum_drift::<L, NQ, NC, NU>(&p, 1e-3);
+    // The joints turned: the run is not trivially still.
+    let home = SVector::<f64, NQ>::from_column_slice(&L::HOME);
+    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
+    let moved = (f + 6..NQ)
+        .map(|k| (s.q[k] - home[k]).abs())
+        .fold(0.0, f64::max);
+    assert!(moved > 0.05, "{name}: the joints hardly moved ({moved})");
+    eprintln!(
+        "{name}: 1 s in zero gravity, motors on, relative drift of P and L: {lin1:.1e}, {ang1:.1e} at dt 2 ms; {lin2:.1e}, {ang2:.1e} at 1 ms; quaternion norm off by {:.1e}",
+        unit1.max(unit2)
+    );
+    let fourth_order = |a: f64, b: f64| b < 1e-12 || (b < 1e-7 && a / b > 10.0);
+    assert!(
+        fourth_order(lin1, lin2),
+        "{name}: linear momentum drifts {lin1:e} then {lin2:e}"
+    );
+    assert!(
+        fourth_order(ang1, ang2),
+        "{name}: angular momentum drifts {ang1:e} then {ang2:e}"
+    );
+    assert!(
+        unit1.max(unit2) < 1e-14,
+        "{name}: the quaternion left the unit sphere"
+    );
+}
+
+fn falls_with_gravity<L, const NQ: usize, const NC: usize, const NU: usize>()
+where
+    L: LegDynamics<NQ, NC, NU>,
+{
+    let name = L::NAME;
+    // Gravity along a slant: nothing about the code's axes is special.
+    let g = Vector3::new(1.5, -2.0, -9.0);
+    let p = with_gravity::<L, NQ, NC, NU>([g[0], g[1], g[2]], false);
+    let mut s = tumbling::<L, NQ, NC, NU>(&p, 32);
+    let (lin0, _) = robot::momentum::<L, f64, NQ, NC, NU>(&p, &s).unwrap();
+    let (k0, v0) = robot::energies::<L, f64, NQ, NC, NU>(&p, &s).unwrap();
+    // The total mass, from the momentum a pure translation of the whole robot has.
+    let mut moving = s;
+    moving.v = SVector::zeros();
+    moving.v[0] = 1.0;
+    let mass = robot::momentum::<L, f64, NQ, NC, NU>(&p, &moving)
+        .unwrap()
+        .0
+        .norm();
+    let mut passive = |_: f64, _: &State<f64, NQ>| SVector::<f64, NU>::zeros();
+    let dt = 1e-3;
+    let opts = StepOptions::rk4(dt);
+    let mut energy_err = 0.0f64;
+    for i in 0..500 {
+        robot::step::<L, f64, NQ, NC, NU>(&p, &mut s, i as f64 * dt, &mut passive, &opts)
+            .unwrap_or_else(|e| panic!("{name}: step {i}: {e}"));
+        let (k, v) = robot::energies::<L, f64, NQ, NC, NU>(&p, &s).unwrap();
+        energy_err = energy_err.max((k + v - k0 - v0).abs());
+    }
+    let (lin, _) = robot::momentum::<L, f64, NQ, NC, NU>(&p, &s).unwrap();
+    let expected = lin0 + g * (mass * 0.5);
+    let scale = (k0.abs() + v0.abs()).max(1.0);
+    eprintln!(
+        "{name}: 0.5 s falling: |P − (P₀ + m g t)| {:.1e} (m {mass:.4} kg), energy off by {energy_err:.1e} J of {scale:.2}",
+        (lin - expected).norm()
+    );
+    assert!(
+        (lin - expected).norm() < 1e-9 * expected.norm(),
+        "{name}: P {lin} not P₀ + m g t = {expected}"
+    );
+    assert!(
+        energy_err < 1e-8 * scale,
+        "{name}: energy moved by {energy_err:e} J"
+    );
+}
+
+/// The recentred run against one chart held at the start's centre: the same motion in
+/// two charts, so the same world pose and velocity at the end.
+fn recentring_matches_a_fixed_chart<L, const NQ: usize, const NC: usize, const NU: usize>()
+where
+    L: LegDynamics<NQ, NC, NU>,
+{
+    let name = L::NAME;
+    let p = with_gravity::<L, NQ, NC, NU>([0.3, 0.5, -9.81], true);
+    let start = tumbling::<L, NQ, NC, NU>(&p, 33);
+    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
+    let mut motors = |t: f64, _: &State<f64, NQ>| {
+        SVector::<f64, NU>::from_fn(|i, _| 0.2 * (2.0 * t - i as f64).cos())
+    };
+    let dt = 5e-4;
+    let opts = StepOptions::rk4(dt);
+    let steps = 600;
+    let mut moving = start;
+    for i in 0..steps {
+        robot::step::<L, f64, NQ, NC, NU>(&p, &mut moving, i as f64 * dt, &mut motors, &opts)
+            .unwrap();
+    }
+    let chart = robot::chart_params::<L, f64, NQ, NC, NU>(&p, &start.orientation).unwrap();
+    let mut fixed = State {
+        q: start.q,
+        qd: start.v,
+    };
+    for i in 0..steps {
+        fixed_step::<L, f64, NQ, NC, NU>(&chart, &mut fixed, i as f64 * dt, &mut motors, &opts)
+            .unwrap();
+    }
+    let turned = (f + 3..f + 6).map(|k| fixed.q[k].abs()).fold(0.0, f64::max);
+    assert!(
+        turned > 0.1,
+        "{name}: the body hardly turned in the fixed chart ({turned} rad)"
+    );
+    let mut held = RobotState {
+        position: start.position,
+        orientation: start.orientation,
+        q: fixed.q,
+        v: fixed.qd,
+    };
+    held.recentre(f);
+    let dp = (held.position - moving.position).norm();
+    let dr = held.orientation.angle_to(&moving.orientation);
+    let dv = (held.v - moving.v).norm();
+    eprintln!("{name}: recentred every step vs one chart: |Δp| {dp:.1e} m, angle {dr:.1e} rad, |Δv| {dv:.1e}");
+    assert!(
+        dp < 1e-9 && dr < 1e-9 && dv < 1e-8,
+        "{name}: Δp {dp:e}, angle {dr:e}, Δv {dv:e}"
+    );
+}
+
+/// `ṗ = R v_b` and `q̇_quat = ½ q ⊗ (0, ω)` against the pose's central differences in time.
+fn pose_rate_is_the_pose_derivative<L, const NQ: usize, const NC: usize, const NU: usize>()
+where
+    L: LegDynamics<NQ, NC, NU>,
+{
+    let name = L::NAME;
+    let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
+    let s = tumbling::<L, NQ, NC, NU>(&p, 34);
+    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
+    let (pd, qd) = s.pose_rate(f);
+    let h = 1e-5;
+    let mut zero = |_: f64, _: &State<f64, NQ>| SVector::<f64, NU>::zeros();
+    let opts = StepOptions::rk4(h);
+    let mut ahead = s;
+    robot::step::<L, f64, NQ, NC, NU>(&p, &mut ahead, 0.0, &mut zero, &opts).unwrap();
+    let mut behind = s;
+    robot::step::<L, f64, NQ, NC, NU>(&p, &mut behind, 0.0, &mut zero, &StepOptions::rk4(-h))
+        .unwrap();
+    let pd_fd = (ahead.position - behind.position) / (2.0 * h);
+    let qd_fd = (ahead.orientation.into_inner() - behind.orientation.into_inner()) / (2.0 * h);
+    let e_p = (pd - pd_fd).norm();
+    let e_q = (qd - qd_fd).norm();
+    assert!(
+        e_p < 1e-6 * pd.norm().max(1.0),
+        "{name}: ṗ {pd} vs differences {pd_fd}"
+    );
+    assert!(
+        e_q < 1e-6 * qd.norm().max(1.0),
+        "{name}: q̇ {qd} vs differences {qd_fd}"
+    );
+}
+
+macro_rules! floating_robot_tests {
+    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
+        mod $module {
+            #[test]
+            fn momentum_is_kept_in_zero_gravity() {
+                super::momentum_is_kept::<$ty, $nq, $nc, $nu>();
+            }
+
+            #[test]
+            fn falls_with_momentum_and_energy_as_physics_says() {
+                super::falls_with_gravity::<$ty, $nq, $nc, $nu>();
+            }
+
+            #[test]
+            fn recentring_every_step_matches_one_fixed_chart() {
+                super::recentring_matches_a_fixed_chart::<$ty, $nq, $nc, $nu>();
+            }
+
+            #[test]
+            fn pose_rate_is_the_pose_derivative() {
+                super::pose_rate_is_the_pose_derivative::<$ty, $nq, $nc, $nu>();
+            }
+        }
+    };
+}
+
+generated::for_each_floating_model!(floating_robot_tests);
+
+#[test]
+fn there_is_a_floating_robot() {
+    let mut n = 0;
+    macro_rules! count {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
+            n += 1;
+        };
+    }
+    generated::for_each_floating_model!(count);
+    assert!(n >= 1);
+}
+
+#[test]
+fn a_fixed_base_is_not_a_robot() {
+    use generated::cassie_leg::CassieLeg;
+    let e = robot::free_joint::<CassieLeg, 13, 6, 5>().unwrap_err();
+    assert!(e.to_string().contains("fixed base"), "{e}");
+}
