@@ -38,6 +38,8 @@ pub mod minitaur_hopper;
 pub use minitaur_hopper::MinitaurHopper;
 pub mod minitaur_pinned_toe;
 pub use minitaur_pinned_toe::MinitaurPinnedToe;
+pub mod minitaur_quadruped;
+pub use minitaur_quadruped::MinitaurQuadruped;
 pub mod offset_five_bar;
 pub use offset_five_bar::OffsetFiveBar;
 pub mod open_three_link;
@@ -104,5 +106,7 @@ macro_rules! for_each_spatial_model {
 macro_rules! for_each_floating_model {
     ($callback:ident) => {
         $callback ! (floating_arm, $crate::floating_arm::FloatingArm, 9, 0, 2, 0, 0);
+        $callback ! (minitaur_quadruped, $crate::minitaur_quadruped::MinitaurQuadruped,
+        22, 12, 8, 8, 12);
     };
 }

@@ -40,11 +40,33 @@ where
     .unwrap_or_else(|e| panic!("{}: home does not assemble: {e}", L::NAME));
     let orientation = UnitQuaternion::from_euler_angles(0.3, -0.2, 0.7);
     let mut s = RobotState::at_rest(Vector3::new(0.4, -0.3, 1.2), orientation, q);
+    // The body tumbles; the joints move gently (a light leg driven hard reaches its
+    // loops' singularities within a fraction of a second, which is not what is tested).
     for k in 0..NQ {
-        s.v[k] = rng.range(-1.0, 1.0);
+        let size = if (f..f + 6).contains(&k) { 1.0 } else { 0.3 };
+        s.v[k] = rng.range(-size, size);
     }
     leg_models::assembly::project_velocity::<L, f64, NQ, NC, NU>(p, &s.q, &mut s.v).unwrap();
     s
+}
+
+/// Motor torques that move the joints back and forth about home without driving them far:
+/// a critically damped pull to home at 10 rad/s and a push of 2 rad/s² at 3 rad/s, each
+/// scaled by the joint's own inertia. Internal forces only.
+fn excitation<L, const NQ: usize, const NC: usize, const NU: usize>(
+    p: L::Params<f64>,
+) -> impl FnMut(f64, &State<f64, NQ>) -> SVector<f64, NU>
+where
+    L: LegDynamics<NQ, NC, NU>,
+{
+    move |t: f64, s: &State<f64, NQ>| {
+        let m = L::mass_matrix(&s.q, &p);
+        SVector::<f64, NU>::from_fn(|i, _| {
+            let a = L::ACTUATED[i];
+            let pull = -100.0 * (s.q[a] - L::HOME[a]) - 20.0 * s.qd[a];
+            m[(a, a)] * (pull + 2.0 * (3.0 * t + i as f64).sin())
+        })
+    }
 }
 
 fn with_gravity<L, const NQ: usize, const NC: usize, const NU: usize>(
@@ -80,10 +102,7 @@ where
     let name = L::NAME;
     let mut s = tumbling::<L, NQ, NC, NU>(p, 31);
     let (lin0, ang0) = robot::momentum::<L, f64, NQ, NC, NU>(p, &s).unwrap();
-    // The motors push the joints back and forth: internal forces only.
-    let mut motors = |t: f64, _: &State<f64, NQ>| {
-        SVector::<f64, NU>::from_fn(|i, _| 0.3 * (3.0 * t + i as f64).sin())
-    };
+    let mut motors = excitation::<L, NQ, NC, NU>(*p);
     let opts = StepOptions::rk4(dt);
     let (mut lin_err, mut ang_err, mut unit_err) = (0.0f64, 0.0f64, 0.0f64);
     let steps = (1.0 / dt).round() as usize;
@@ -114,7 +133,7 @@ where
     let moved = (f + 6..NQ)
         .map(|k| (s.q[k] - home[k]).abs())
         .fold(0.0, f64::max);
-    assert!(moved > 0.05, "{name}: the joints hardly moved ({moved})");
+    assert!(moved > 0.01, "{name}: the joints hardly moved ({moved})");
     eprintln!(
         "{name}: 1 s in zero gravity, motors on, relative drift of P and L: {lin1:.1e}, {ang1:.1e} at dt 2 ms; {lin2:.1e}, {ang2:.1e} at 1 ms; quaternion norm off by {:.1e}",
         unit1.max(unit2)
@@ -190,9 +209,7 @@ where
     let p = with_gravity::<L, NQ, NC, NU>([0.3, 0.5, -9.81], true);
     let start = tumbling::<L, NQ, NC, NU>(&p, 33);
     let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
-    let mut motors = |t: f64, _: &State<f64, NQ>| {
-        SVector::<f64, NU>::from_fn(|i, _| 0.2 * (2.0 * t - i as f64).cos())
-    };
+    let mut motors = excitation::<L, NQ, NC, NU>(p);
     let dt = 5e-4;
     let opts = StepOptions::rk4(dt);
     let steps = 600;
