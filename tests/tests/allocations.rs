@@ -459,7 +459,7 @@ fn hot_paths_do_not_allocate() {
     macro_rules! floating {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
             check::<$ty, $nq, $nc, $nu, 3, $np>();
-            check_robot::<$ty, $nq, $nc, $nu>();
+            check_robot::<$ty, $nq, $nc, $nu, $nk>();
         };
     }
     generated::for_each_floating_model!(floating);
@@ -468,11 +468,13 @@ fn hot_paths_do_not_allocate() {
 /// A floating robot's step (its chart centred on the body before and after), forward
 /// dynamics, energies and momentum.
 fn check_robot<
-    L: leg_models::LegDynamics<NQ, NC, NU>,
+    L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
     const NQ: usize,
     const NC: usize,
     const NU: usize,
+    const NK: usize,
 >() {
+    use leg_models::dynamics::contact::{ContactMode, Ground, Modes};
     use leg_models::nalgebra::{UnitQuaternion, Vector3};
     use leg_models::robot::{self, RobotState};
     let p = L::Params::<f64>::default();
@@ -503,6 +505,37 @@ fn check_robot<
                 robot::energies::<L, f64, NQ, NC, NU>(&p, &s),
                 robot::momentum::<L, f64, NQ, NC, NU>(&p, &s),
             )
+        })
+        .0,
+    );
+    // On the ground, every contact sticking.
+    let mut modes = Modes::<NK, 3>::flight();
+    for k in 0..NK / 3 {
+        modes.set(k, ContactMode::Stick);
+    }
+    let ground = Ground {
+        normal: Vector3::z(),
+        offset: -1.0,
+    };
+    let mu = SVector::<f64, NK>::from_element(1.0);
+    zero(
+        "robot::stance_dynamics",
+        allocations(|| {
+            robot::stance_dynamics::<L, f64, NQ, NC, NU, NK>(&p, &s, &u, &modes, &ground, &mu)
+        })
+        .0,
+    );
+    zero(
+        "robot::holding_torques",
+        allocations(|| {
+            robot::holding_torques::<L, f64, NQ, NC, NU, NK>(&p, &s, &modes, &ground, &mu)
+        })
+        .0,
+    );
+    zero(
+        "robot::stance_step",
+        allocations(|| {
+            robot::stance_step::<L, f64, NQ, NC, NU, NK>(&p, &mut s, &u, &modes, &ground, &mu, 1e-3)
         })
         .0,
     );

@@ -281,6 +281,133 @@ where
     );
 }
 
+/// The robot at home on a ground through its contact points (their plane), holding still
+/// with the least torques that do: it stays at rest for a second, and the ground forces
+/// add up to its weight, the spec's masses times gravity.
+fn stands_still_on_its_feet<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>()
+where
+    L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
+{
+    use leg_models::dynamics::contact::{ContactMode, Ground, Modes};
+    let name = L::NAME;
+    if NK < 9 {
+        leg_tests::not_applicable(name, "standing", &"fewer than three contact points");
+        return;
+    }
+    let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
+    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
+    let mut q = SVector::<f64, NQ>::from_column_slice(&L::HOME);
+    for k in 0..6 {
+        q[f + k] = 0.0;
+    }
+    leg_models::assembly::project_position::<L, f64, NQ, NC, NU>(
+        &p,
+        &mut q,
+        &leg_models::assembly::Tolerance::default(),
+    )
+    .unwrap();
+    let turn = UnitQuaternion::from_euler_angles(0.02, -0.03, 0.4);
+    let mut s = RobotState::at_rest(Vector3::new(1.0, -2.0, 0.5), turn, q);
+    // The contact points in the world, and the plane through them.
+    let chart = robot::chart_params::<L, f64, NQ, NC, NU>(&p, &s.orientation).unwrap();
+    let x = L::contact_positions(&s.q, &chart);
+    let at = |k: usize| {
+        s.position
+            + s.orientation
+                .transform_vector(&Vector3::new(x[3 * k], x[3 * k + 1], x[3 * k + 2]))
+    };
+    let mut n = (at(1) - at(0)).cross(&(at(2) - at(0))).normalize();
+    if n.dot(&(s.position - at(0))) < 0.0 {
+        n = -n;
+    }
+    let size = (at(1) - at(0)).norm();
+    for k in 3..NK / 3 {
+        let off = n.dot(&(at(k) - at(0))).abs();
+        if off > 1e-12 * size {
+            leg_tests::not_applicable(
+                name,
+                "standing",
+                &"its contact points at home are not on one plane",
+            );
+            return;
+        }
+    }
+    let ground = Ground {
+        normal: n,
+        offset: n.dot(&at(0)),
+    };
+    let mut modes = Modes::<NK, 3>::flight();
+    for k in 0..NK / 3 {
+        modes.set(k, ContactMode::Stick);
+    }
+    let mu = leg_models::dynamics::contact::spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
+    let (u, left) =
+        robot::holding_torques::<L, f64, NQ, NC, NU, NK>(&p, &s, &modes, &ground, &mu).unwrap();
+    assert!(
+        left < 1e-10 * 9.81,
+        "{name}: the motors cannot hold the stance: |q̈| {left:e} left"
+    );
+    // The weight from the spec's masses, not from the dynamics.
+    let names = <L::Params<f64> as Parameters<f64>>::NAMES;
+    let mass: f64 = names
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| n.ends_with("_mass"))
+        .map(|(i, _)| p.get(i).unwrap())
+        .sum();
+    let weight = Vector3::new(0.0, 0.0, -9.81) * mass;
+    let start = s;
+    let (mut moved, mut force_err) = (0.0f64, 0.0f64);
+    // Held torques alone leave the stance's free motions (two on a quadruped) at an
+    // unstable balance that rounding tips over (the legs buckle under the weight); a
+    // joint PD about the pose keeps them, and adds nothing at the pose. Its stiffness is
+    // the robot's weight times its size per radian, its damping that over 10 rad/s.
+    let stiffness = weight.norm() * size;
+    let damping = stiffness / 10.0;
+    for _ in 0..1000 {
+        let pd = SVector::<f64, NU>::from_fn(|i, _| {
+            let a = L::ACTUATED[i];
+            -stiffness * (s.q[a] - start.q[a]) - damping * s.v[a]
+        });
+        let stance = robot::stance_step::<L, f64, NQ, NC, NU, NK>(
+            &p,
+            &mut s,
+            &(u + pd),
+            &modes,
+            &ground,
+            &mu,
+            1e-3,
+        )
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let total = (0..NK / 3).fold(Vector3::zeros(), |a, k| {
+            a + Vector3::new(
+                stance.world_forces[3 * k],
+                stance.world_forces[3 * k + 1],
+                stance.world_forces[3 * k + 2],
+            )
+        });
+        force_err = force_err.max((total + weight).norm());
+        moved = moved
+            .max((s.position - start.position).norm())
+            .max(s.v.amax());
+    }
+    let angle = s.orientation.angle_to(&start.orientation);
+    eprintln!(
+        "{name}: 1 s standing on {} feet, holding torques {:.3e} N m at most (|q̈| {left:.1e} left): moved {moved:.1e} (m, m/s), turned {angle:.1e} rad; ground forces minus the weight ({:.4} N): {force_err:.1e} N",
+        NK / 3,
+        u.amax(),
+        weight.norm()
+    );
+    assert!(
+        moved < 1e-10 && angle < 1e-10,
+        "{name}: moved {moved:e}, turned {angle:e}"
+    );
+    assert!(
+        force_err < 1e-10 * weight.norm(),
+        "{name}: ground forces off the weight by {force_err:e} N"
+    );
+}
+
 macro_rules! floating_robot_tests {
     ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
         mod $module {
@@ -302,6 +429,11 @@ macro_rules! floating_robot_tests {
             #[test]
             fn pose_rate_is_the_pose_derivative() {
                 super::pose_rate_is_the_pose_derivative::<$ty, $nq, $nc, $nu>();
+            }
+
+            #[test]
+            fn stands_still_with_its_weight_on_its_feet() {
+                super::stands_still_on_its_feet::<$ty, $nq, $nc, $nu, $nk>();
             }
         }
     };

@@ -27,11 +27,15 @@
 
 use core::fmt;
 
-use nalgebra::{Quaternion, SVector, UnitQuaternion, Vector3};
+use nalgebra::{Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
 
-use crate::dynamics::{forward_dynamics, Acceleration, DynamicsError};
-use crate::model::contract::{LegDynamics, Parameters, Real};
-use crate::simulate::{self, State, StepError, StepOptions, StepReport, TorqueSource};
+use crate::assembly::{project_position, project_velocity, Tolerance};
+use crate::dynamics::contact::{ContactSolution, ContactSystem, Ground, Modes};
+use crate::dynamics::{actuation, forward_dynamics, Acceleration, DynamicsError};
+use crate::model::contract::{ContactModel, LegDynamics, Parameters, Real};
+use crate::model::linalg::Cholesky;
+use crate::simulate::step::advance;
+use crate::simulate::{self, Method, State, StepError, StepOptions, StepReport, TorqueSource};
 
 /// Why a robot's operation cannot be done.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -409,4 +413,211 @@ where
         .orientation
         .transform_vector(&Vector3::new(h[f + 3], h[f + 4], h[f + 5]));
     Ok((linear, about_body + s.position.cross(&linear)))
+}
+
+/// The world's ground `n · x = d` seen from the chart centred on a body at `position`
+/// turned by `orientation`: `n₀ = R₀ᵀ n`, `d₀ = d − n · p₀`.
+pub fn ground_in_chart<T: Real>(
+    ground: &Ground<T, 3>,
+    position: &Vector3<T>,
+    orientation: &UnitQuaternion<T>,
+) -> Ground<T, 3> {
+    Ground {
+        normal: orientation.inverse_transform_vector(&ground.normal),
+        offset: ground.offset - ground.normal.dot(position),
+    }
+}
+
+/// The ground forces on the robot in the world, per contact a vector (stacked `x, y, z`),
+/// from the solution's `(λ_t₁, λ_t₂, λ_n)` in the frame of the chart's ground
+/// ([`Ground::frame`]).
+pub fn forces_in_world<T: Real, const NK: usize>(
+    chart_ground: &Ground<T, 3>,
+    orientation: &UnitQuaternion<T>,
+    lambda: &SVector<T, NK>,
+) -> SVector<T, NK> {
+    let frame = chart_ground.frame();
+    let mut out = SVector::<T, NK>::zeros();
+    for k in 0..NK / 3 {
+        let local =
+            frame.transpose() * Vector3::new(lambda[3 * k], lambda[3 * k + 1], lambda[3 * k + 2]);
+        let world = orientation.transform_vector(&local);
+        for i in 0..3 {
+            out[3 * k + i] = world[i];
+        }
+    }
+    out
+}
+
+/// What the robot's dynamics on the ground give at one state: the chart's solution and
+/// the ground forces in the world.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Stance<T: Real, const NQ: usize, const NC: usize, const NK: usize> {
+    /// `q̈` of the chart, closure forces, and ground forces in the chart ground's frame.
+    pub solution: ContactSolution<T, NQ, NC, NK>,
+    /// The ground force on each contact in the world (stacked `x, y, z`).
+    pub world_forces: SVector<T, NK>,
+}
+
+/// The stance system factored in the chart, the ground seen from it, and the chart's
+/// orientation.
+type ChartStance<T, const NQ: usize, const NC: usize, const NK: usize> = (
+    ContactSystem<T, NQ, NC, NK, 3>,
+    Ground<T, 3>,
+    UnitQuaternion<T>,
+);
+
+/// The stance system at a state: the chart centred on the body, gravity and the ground
+/// turned into it, the contacts in `modes` held (sticking, or sliding with friction
+/// `mu`), evaluated and factored once.
+fn stance_system<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    params: &L::Params<T>,
+    state: &RobotState<T, NQ>,
+    modes: &Modes<NK, 3>,
+    ground: &Ground<T, 3>,
+    mu: &SVector<T, NK>,
+) -> Result<ChartStance<T, NQ, NC, NK>, RobotDynamicsError>
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+    T: Real,
+{
+    let f = free_joint::<L, NQ, NC, NU>()?;
+    let mut s = *state;
+    s.recentre(f);
+    let chart = chart_params::<L, T, NQ, NC, NU>(params, &s.orientation)?;
+    let local = ground_in_chart(ground, &s.position, &s.orientation);
+    let system = ContactSystem::new::<L, NU>(
+        &chart,
+        &s.q,
+        &s.v,
+        modes,
+        &SVector::zeros(),
+        &local,
+        mu,
+        None,
+    )?;
+    Ok((system, local, s.orientation))
+}
+
+/// The robot's forward dynamics on the ground: the contacts in `modes` held (sticking or
+/// sliding), the closures closed, motor torques `u`. The ground and its forces are the
+/// world's.
+pub fn stance_dynamics<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    params: &L::Params<T>,
+    state: &RobotState<T, NQ>,
+    u: &SVector<T, NU>,
+    modes: &Modes<NK, 3>,
+    ground: &Ground<T, 3>,
+    mu: &SVector<T, NK>,
+) -> Result<Stance<T, NQ, NC, NK>, RobotDynamicsError>
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+    T: Real,
+{
+    let (system, local, orientation) =
+        stance_system::<L, T, NQ, NC, NU, NK>(params, state, modes, ground, mu)?;
+    let solution = system.solve(&actuation::<L, T, NQ, NC, NU>(u))?;
+    Ok(Stance {
+        world_forces: forces_in_world(&local, &orientation, &solution.contact),
+        solution,
+    })
+}
+
+/// Motor torques that hold the robot still where it stands (`q̈ = 0` with the contacts
+/// in `modes` held), the least ones in the least-squares sense, and the largest `|q̈|`
+/// they leave: zero to rounding where the motors can hold the pose, more where they
+/// cannot (too few motors for what the contacts leave free). `q̈` is affine in `u`, so
+/// its response to each motor comes from one factorization.
+pub fn holding_torques<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    params: &L::Params<T>,
+    state: &RobotState<T, NQ>,
+    modes: &Modes<NK, 3>,
+    ground: &Ground<T, 3>,
+    mu: &SVector<T, NK>,
+) -> Result<(SVector<T, NU>, T), RobotDynamicsError>
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+    T: Real,
+{
+    let (system, _, _) = stance_system::<L, T, NQ, NC, NU, NK>(params, state, modes, ground, mu)?;
+    let free = system.solve(&SVector::zeros())?.x;
+    let mut response = SMatrix::<T, NQ, NU>::zeros();
+    for i in 0..NU {
+        let mut e = SVector::<T, NU>::zeros();
+        e[i] = T::one();
+        let x = system.solve(&actuation::<L, T, NQ, NC, NU>(&e))?.x;
+        response.set_column(i, &(x - free));
+    }
+    // The least-squares torques, the least ones where several hold (the response has
+    // the rank of what the contacts leave free, often less than NU): a ridge of 1e-10
+    // of the normal matrix's size, then refinement, which removes the ridge's bias by a
+    // factor of ridge / σ² a pass.
+    let normal = response.transpose() * response;
+    let size = (0..NU).fold(T::zero(), |a, i| a.max(normal[(i, i)]));
+    if size <= T::zero() {
+        // No motor moves anything the contacts leave free.
+        return Ok((SVector::zeros(), free.amax()));
+    }
+    let ridge = T::lit(1e-10) * size;
+    let chol = Cholesky::new(&(normal + SMatrix::<T, NU, NU>::identity() * ridge))
+        .ok_or(RobotDynamicsError::Dynamics(DynamicsError::NonFinite))?;
+    let mut u = SVector::<T, NU>::zeros();
+    for _ in 0..16 {
+        let mut step = response.transpose() * (-(response * u + free));
+        chol.solve_mut(&mut step);
+        u += step;
+    }
+    let left = (response * u + free).amax();
+    Ok((u, left))
+}
+
+/// One step of the robot on the ground with the contacts in `modes` held, RK4 in the
+/// chart centred at the step's start, the closures projected after it (the contacts'
+/// drift, of the integrator's order, is left: a stance that lasts long wants Baumgarte
+/// terms, next). Torques `u` are held over the step. On an error `state` is left as it
+/// was.
+#[allow(clippy::too_many_arguments)]
+pub fn stance_step<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    params: &L::Params<T>,
+    state: &mut RobotState<T, NQ>,
+    u: &SVector<T, NU>,
+    modes: &Modes<NK, 3>,
+    ground: &Ground<T, 3>,
+    mu: &SVector<T, NK>,
+    dt: T,
+) -> Result<Stance<T, NQ, NC, NK>, RobotStepError>
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+    T: Real,
+{
+    let f = free_joint::<L, NQ, NC, NU>()?;
+    let mut next = *state;
+    next.recentre(f);
+    let chart = chart_params::<L, T, NQ, NC, NU>(params, &next.orientation)?;
+    let local = ground_in_chart(ground, &next.position, &next.orientation);
+    let applied = actuation::<L, T, NQ, NC, NU>(u);
+    let accel = |q: &SVector<T, NQ>, qd: &SVector<T, NQ>| {
+        ContactSystem::new::<L, NU>(&chart, q, qd, modes, &SVector::zeros(), &local, mu, None)
+            .and_then(|s| s.solve(&applied))
+            .map_err(StepError::from)
+    };
+    let first = accel(&next.q, &next.v)?;
+    let out = advance(Method::Rk4, dt, &next.q, &next.v, first.x, |_, q, qd| {
+        accel(&q, &qd).map(|s| s.x)
+    })?;
+    next.q = out.q;
+    next.v = out.qd;
+    if NC > 0 {
+        project_position::<L, T, NQ, NC, NU>(&chart, &mut next.q, &Tolerance::default())
+            .map_err(StepError::from)?;
+        project_velocity::<L, T, NQ, NC, NU>(&chart, &next.q, &mut next.v)
+            .map_err(StepError::from)?;
+    }
+    next.recentre(f);
+    let stance = Stance {
+        world_forces: forces_in_world(&local, &state.orientation, &first.contact),
+        solution: first,
+    };
+    *state = next;
+    Ok(stance)
 }
