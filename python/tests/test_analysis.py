@@ -18,12 +18,17 @@ def _gravity(spec):
     return g["value"] if isinstance(g, dict) else g
 
 
+def _legs():
+    """The specs of legs, without the floating robots (a link on a free joint): those
+    are driven through the Rust crate's `robot` module and have no Python class yet."""
+    for p in sorted((ROOT / "leg-models" / "specs").glob("*.toml")):
+        spec = tomllib.loads(p.read_text())
+        if not any(link.get("joint") == "free" for link in spec.get("links", [])):
+            yield p, spec
+
+
 # The planar legs (a spec's gravity has two entries); the spatial ones are below.
-SPECS = sorted(
-    p.stem
-    for p in (ROOT / "leg-models" / "specs").glob("*.toml")
-    if len(_gravity(tomllib.loads(p.read_text()))) == 2
-)
+SPECS = sorted(p.stem for p, spec in _legs() if len(_gravity(spec)) == 2)
 
 
 def measures_or_reason(leg, q, torque, speed):
@@ -262,11 +267,7 @@ def test_assembly_branches_each_start_a_workspace():
 
 
 # The spatial legs (a spec's gravity has three entries): the foot in space, vertical z.
-SPATIAL = sorted(
-    p.stem
-    for p in (ROOT / "leg-models" / "specs").glob("*.toml")
-    if len(_gravity(tomllib.loads(p.read_text()))) == 3
-)
+SPATIAL = sorted(p.stem for p, spec in _legs() if len(_gravity(spec)) == 3)
 
 
 @pytest.mark.parametrize("name", SPATIAL)

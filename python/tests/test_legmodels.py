@@ -22,13 +22,18 @@ def _gravity(spec):
     return g["value"] if isinstance(g, dict) else g
 
 
+def _legs():
+    """The specs of legs, without the floating robots (a link on a free joint): those
+    are driven through the Rust crate's `robot` module and have no Python class yet."""
+    for p in sorted((ROOT / "leg-models" / "specs").glob("*.toml")):
+        spec = tomllib.loads(p.read_text())
+        if not any(link.get("joint") == "free" for link in spec.get("links", [])):
+            yield p, spec
+
+
 # Every leg, planar (a spec's gravity has two entries) and spatial (three).
-SPECS = sorted(p.stem for p in (ROOT / "leg-models" / "specs").glob("*.toml"))
-SPATIAL = sorted(
-    p.stem
-    for p in (ROOT / "leg-models" / "specs").glob("*.toml")
-    if len(_gravity(tomllib.loads(p.read_text()))) == 3
-)
+SPECS = sorted(p.stem for p, _ in _legs())
+SPATIAL = sorted(p.stem for p, spec in _legs() if len(_gravity(spec)) == 3)
 
 
 def test_every_spec_is_a_class():

@@ -4,6 +4,9 @@ wheel's `pybullet_data/quadruped/minitaur.urdf` (U) and `pybullet_envs/bullet/mi
 
 usage: python leg-models/specs/derive/minitaur_quadruped.py > leg-models/specs/minitaur_quadruped.toml
 
+`--legs N` keeps M's first N legs (1, 2 or 4), for measuring how generation grows with
+the robot; the built-in spec is all four.
+
 What the spec takes from the files, and what it decides:
 
 - Masses, joint origins and axes as U writes them; no link of U gives an inertial
@@ -29,6 +32,8 @@ What the spec takes from the files, and what it decides:
   cannot close (by about 1e-5 m, which pybullet's soft constraint absorbs); taken as π/2
   and π, as the robot is built, the motors are coaxial and each loop closes exactly.
 """
+
+import sys
 
 import numpy as np
 
@@ -124,6 +129,8 @@ PIVOT = {"R": [0.0, 0.005, 0.2], "L": [0.0, 0.01, 0.2]}  # M l.12-13
 LEGS = ["front_left", "back_left", "front_right", "back_right"]
 DIRECTION = {"front_left": -1, "back_left": -1, "front_right": 1, "back_right": 1}
 KNEE_HOME = -2.1834  # M l.189
+if "--legs" in sys.argv:
+    LEGS = LEGS[: int(sys.argv[sys.argv.index("--legs") + 1])]
 
 out = []
 w = out.append
