@@ -2209,7 +2209,7 @@ fn import_writes_a_spec_gen_takes_and_refuses_bad_input() {
                     }
                 })
                 .collect(),
-            "give --fix-base",
+            "import one leg with --fix-base --root",
         ),
     ] {
         let args: Vec<&str> = args.iter().map(String::as_str).collect();

@@ -117,7 +117,9 @@ pub struct ImportArgs {
     /// The leg's name: a plain identifier (lower case, digits, underscores)
     #[arg(long)]
     pub name: String,
-    /// Hold the body of the file's free joint as the base (its pose as written)
+    /// Hold the body of the file's free joint as the base (its pose as written); without
+    /// it, a file whose top body has a free joint is imported as a floating robot (that
+    /// body a link on `joint = "free"`)
     #[arg(long)]
     pub fix_base: bool,
     /// Import one subtree: the body (with its joint) hanging from the base, e.g. one leg

@@ -159,6 +159,8 @@ fn import(file: &Path, robot: &Robot, args: &ImportArgs) -> Result<Imported, cli
                 .any(|j| j.kind == JointKind::Free)
         })
         .collect();
+    // Without --fix-base, a file whose top body floats is imported as a floating robot:
+    // that body becomes the spec's first link, on a free joint.
     let base_body = match (free.as_slice(), args.fix_base) {
         ([], false) => None,
         ([], true) => {
@@ -167,7 +169,7 @@ fn import(file: &Path, robot: &Robot, args: &ImportArgs) -> Result<Imported, cli
                 file.display()
             )))
         }
-        ([b], true) if robot.bodies[*b].parent.is_none() => Some(*b),
+        ([b], _) if robot.bodies[*b].parent.is_none() => Some(*b),
         ([b, ..], true) => {
             return Err(err(
                 file,
@@ -188,12 +190,32 @@ fn import(file: &Path, robot: &Robot, args: &ImportArgs) -> Result<Imported, cli
                 file,
                 j.line,
                 format!(
-                    "body `{}` has a free joint: give --fix-base to hold it as the base (a floating base comes with whole robots)",
+                    "body `{}`: a robot floats on one free joint, at the top of the tree (this one is below another body, or there are several)",
                     robot.bodies[*b].name
                 ),
             ));
         }
     };
+    let floating = base_body.is_some() && !args.fix_base;
+    if floating && args.root.is_some() {
+        return Err(cli::Error::usage(format!(
+            "--root: {} floats (its top body has a free joint): import one leg with --fix-base --root, or the whole robot without --root",
+            file.display()
+        )));
+    }
+    if let (true, Some(b)) = (floating, base_body) {
+        let j = &robot.bodies[b].joints[0];
+        if robot.bodies[b].joints.len() > 1 || j.pos != [0.0; 3] || j.damping != 0.0 {
+            return Err(err(
+                file,
+                j.line,
+                format!(
+                    "body `{}`: a floating robot's free joint is its body's only joint, at its frame's origin, undamped",
+                    robot.bodies[b].name
+                ),
+            ));
+        }
+    }
     let base = base_body.map_or(Pose::IDENTITY, |b| world[b]);
     // Which bodies move (one joint), which are welded to the base, which to a link.
     #[derive(Clone, Copy, PartialEq)]
@@ -205,6 +227,10 @@ fn import(file: &Path, robot: &Robot, args: &ImportArgs) -> Result<Imported, cli
     let mut role = vec![Role::Base; n];
     for (i, b) in robot.bodies.iter().enumerate() {
         if Some(i) == base_body {
+            // A floating robot's body is its first link; a held one is the base.
+            if floating {
+                role[i] = Role::Link;
+            }
             continue;
         }
         let parent_role = b.parent.map_or(Role::Base, |p| role[p]);
@@ -219,7 +245,7 @@ fn import(file: &Path, robot: &Robot, args: &ImportArgs) -> Result<Imported, cli
                     file,
                     b.joints[0].line,
                     format!(
-                        "body `{}`: a free joint below the base (whole robots come later)",
+                        "body `{}`: a free joint below the base (a robot floats on one, at the top of the tree)",
                         b.name
                     ),
                 ))
@@ -585,6 +611,8 @@ fn import(file: &Path, robot: &Robot, args: &ImportArgs) -> Result<Imported, cli
         let j = &robot.bodies[l.body].joints[0];
         let a = address[&j.name];
         match (j.kind, key) {
+            // The chart's centre: the body's pose is the state, not a coordinate.
+            (JointKind::Free, _) => home.extend([0.0; 6]),
             (JointKind::Ball, Some(q)) => {
                 home.extend(xyz_angles(&quaternion_to_matrix(&q[a..a + 4])))
             }
@@ -593,7 +621,38 @@ fn import(file: &Path, robot: &Robot, args: &ImportArgs) -> Result<Imported, cli
             (_, None) => home.push(j.reference),
         }
     }
-    let gravity = linalg::mat_vec(&linalg::transpose(&base.rot), robot.gravity);
+    // A floating robot's spec holds the world's gravity (the runtime turns it into the
+    // body's chart); a held base's, gravity in the base frame.
+    let gravity = if floating {
+        robot.gravity
+    } else {
+        linalg::mat_vec(&linalg::transpose(&base.rot), robot.gravity)
+    };
+    if floating {
+        let pose = match key {
+            Some(q) => {
+                let a = address[&robot.bodies[base_body.expect("floating")].joints[0].name];
+                q[a..a + 7].to_vec()
+            }
+            None => {
+                let r = crate::commands::export::spatial::quaternion(&base.rot);
+                vec![
+                    base.pos[0],
+                    base.pos[1],
+                    base.pos[2],
+                    r[0],
+                    r[1],
+                    r[2],
+                    r[3],
+                ]
+            }
+        };
+        notes.push(format!(
+            "`{}` floats: its pose ({}) is the robot's state in leg_models::robot (position, then quaternion w x y z), not a coordinate; home's first six values are the chart's centre",
+            robot.bodies[base_body.expect("floating")].name,
+            pose.iter().map(|&x| num(x)).collect::<Vec<_>>().join(", ")
+        ));
+    }
     Ok(Imported {
         links,
         closures,
@@ -726,7 +785,12 @@ fn write_spec(file: &Path, command: &str, robot: &Robot, leg: &Imported) -> Stri
             .parent
             .map_or("base".to_string(), |p| leg.links[p].name.clone());
         let _ = writeln!(out, "parent = \"{parent}\"");
+        if l.kind == JointKind::Free {
+            // Its frame is the base frame: no origin or orientation.
+            let _ = writeln!(out, "joint = \"free\"");
+        }
         match l.kind {
+            JointKind::Free => {}
             JointKind::Ball => {
                 let _ = writeln!(out, "joint = \"ball\"");
             }
@@ -737,8 +801,10 @@ fn write_spec(file: &Path, command: &str, robot: &Robot, leg: &Imported) -> Stri
                 let _ = writeln!(out, "axis = {}", triple(l.axis));
             }
         }
-        let _ = writeln!(out, "origin = {}", triple(l.origin));
-        if l.orientation != linalg::IDENTITY {
+        if l.kind != JointKind::Free {
+            let _ = writeln!(out, "origin = {}", triple(l.origin));
+        }
+        if l.orientation != linalg::IDENTITY && l.kind != JointKind::Free {
             let q = crate::commands::export::spatial::quaternion(&l.orientation);
             let _ = writeln!(
                 out,

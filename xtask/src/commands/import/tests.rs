@@ -210,7 +210,7 @@ fn what_a_spec_cannot_represent_is_a_located_error() {
             "<body name=\"thigh\" pos=\"0 0 1\">",
             "<body name=\"thigh\" pos=\"0 0 1\"><freejoint/>",
             0,
-            "give --fix-base",
+            "its body's only joint",
         ),
         (
             "<body name=\"thigh\" pos=\"0 0 1\">",
@@ -606,4 +606,56 @@ fn a_urdf_link_the_tree_does_not_reach_is_refused() {
     );
     let e = import_urdf(&text, &[]).unwrap_err();
     assert!(e.contains("is not reached from the root `base`"), "{e}");
+}
+
+/// A file whose top body floats, imported without --fix-base: that body is the spec's
+/// first link on a free joint (no origin, orientation or motor), everything else hangs
+/// from it, home starts with the chart's six zeros, gravity is the world's, and the
+/// body's pose is said, not lost. The spec validates and builds.
+#[test]
+fn a_floating_file_imports_as_a_robot() {
+    let floating = LEG.replace(
+        "<worldbody>\n    <body name=\"thigh\" pos=\"0 0 1\">",
+        "<worldbody>\n  <body name=\"pelvis\" pos=\"0 0 0.9\" quat=\"0.9950041652780258 0 0.09983341664682815 0\">\n    <freejoint/>\n    <inertial pos=\"0.01 0 0.02\" mass=\"5\" diaginertia=\"0.05 0.04 0.03\"/>\n    <body name=\"thigh\" pos=\"0 0 1\">",
+    )
+    .replace("  </worldbody>", "  </body>\n  </worldbody>");
+    let spec = import_leg(&floating, &[]).unwrap();
+    assert!(
+        spec.contains("name = \"pelvis\"\nparent = \"base\"\njoint = \"free\"\nlength"),
+        "{spec}"
+    );
+    assert!(
+        spec.contains("`pelvis` floats: its pose (0.0, 0.0, 0.9, 0.995"),
+        "{spec}"
+    );
+    assert!(spec.contains("gravity = [0.0, 0.0, -9.81]"), "{spec}");
+    let parsed = gen::spec::Spec::parse(Path::new("leg-models/specs/leg.toml"), spec.clone())
+        .unwrap_or_else(|e| panic!("{e}\n{spec}"));
+    let m = gen::model::build(&parsed).unwrap();
+    let names = m.joint_names();
+    assert_eq!(
+        names[..7],
+        [
+            "pelvis.tx",
+            "pelvis.ty",
+            "pelvis.tz",
+            "pelvis.x",
+            "pelvis.y",
+            "pelvis.z",
+            "hip"
+        ]
+    );
+    assert_eq!(m.home[..6], [0.0; 6]);
+    // The thigh hangs from the pelvis where the file puts it: 1 m up its frame.
+    assert!(
+        spec.contains("name = \"hip\"\nparent = \"pelvis\""),
+        "{spec}"
+    );
+    // A floating file cut to one leg needs the body held.
+    refused(
+        &floating,
+        &["--root", "thigh"],
+        0,
+        "import one leg with --fix-base --root",
+    );
 }
