@@ -87,8 +87,11 @@ class Map:
         i = 0
         while i < self.n:
             if i == self.free:
-                # A floating robot's body: MuJoCo's free joint, named for its link.
-                yield i, 6, self.by_name[self.joints[i].rsplit(".", 1)[0]]
+                # A floating robot's body: MuJoCo's free joint, named for its link (an
+                # unnamed one, as Menagerie's Cassie's, is the file's only free joint).
+                name = self.joints[i].rsplit(".", 1)[0]
+                free = [self.m.joint(k) for k in range(self.m.njnt) if self.m.jnt_type[k] == mujoco.mjtJoint.mjJNT_FREE]
+                yield i, 6, self.by_name.get(name) or (free[0] if len(free) == 1 else self.by_name[name])
                 i += 6
             elif i in self.balls:
                 yield i, 3, self.by_name[self.joints[i].rsplit(".", 1)[0]]

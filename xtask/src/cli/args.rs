@@ -149,6 +149,10 @@ pub struct ImportArgs {
     /// transmissions; repeat for each motor
     #[arg(long, value_name = "JOINT[:GEAR]")]
     pub motor: Vec<String>,
+    /// A ground contact NAME at the point X,Y,Z of BODY's frame (m), friction 1 (MuJoCo's
+    /// default; edit the spec for another); repeat for each contact point
+    #[arg(long, value_name = "NAME=BODY:X,Y,Z", allow_hyphen_values = true)]
+    pub contact: Vec<String>,
     /// Where to write (default: leg-models/specs/NAME.toml)
     #[arg(long, value_name = "FILE")]
     pub out: Option<PathBuf>,

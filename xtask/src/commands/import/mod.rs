@@ -91,6 +91,8 @@ struct Point {
 struct Imported {
     links: Vec<Link>,
     closures: Vec<(String, Point, Point)>,
+    /// `--contact`s: name and point.
+    contacts: Vec<(String, Point)>,
     foot: Point,
     gravity: Vec3,
     home: Vec<f64>,
@@ -653,9 +655,32 @@ fn import(file: &Path, robot: &Robot, args: &ImportArgs) -> Result<Imported, cli
             pose.iter().map(|&x| num(x)).collect::<Vec<_>>().join(", ")
         ));
     }
+    // Contacts named on the command line.
+    let mut contacts = Vec::new();
+    for given in &args.contact {
+        let bad = |why: &str| {
+            cli::Error::usage(format!(
+                "--contact {}: {why} (expected NAME=BODY:X,Y,Z, the point in BODY's frame)",
+                spec::shown(given)
+            ))
+        };
+        let (name, rest) = given.split_once('=').ok_or_else(|| bad("no `=`"))?;
+        let (body, point) = rest
+            .split_once(':')
+            .ok_or_else(|| bad("no `:` before the point"))?;
+        spec::check_name(name).map_err(|m| bad(&m))?;
+        let b = body_named(robot, body).ok_or_else(|| bad(&format!("no body `{body}`")))?;
+        let v = cli::numbers("--contact", point, 3, "x, y, z in the body's frame (m)")?;
+        let at = to_link(Some(b), [v[0], v[1], v[2]]);
+        if at.link.is_none() {
+            return Err(bad("that body does not move with the imported leg"));
+        }
+        contacts.push((name.to_string(), at));
+    }
     Ok(Imported {
         links,
         closures,
+        contacts,
         foot,
         gravity,
         home,
@@ -724,6 +749,9 @@ fn command_line(root: &Path, a: &ImportArgs) -> String {
     }
     for motor in &a.motor {
         let _ = write!(c, " --motor {motor}");
+    }
+    for contact in &a.contact {
+        let _ = write!(c, " --contact {contact}");
     }
     c
 }
@@ -873,6 +901,14 @@ fn write_spec(file: &Path, command: &str, robot: &Robot, leg: &Imported) -> Stri
         "\n[foot]\nlink = \"{foot}\"\npoint = {}",
         triple(leg.foot.at)
     );
+    for (name, p) in &leg.contacts {
+        let link = &leg.links[p.link.expect("checked")].name;
+        let _ = writeln!(
+            out,
+            "\n[[contacts]]\nname = \"{name}\"\nlink = \"{link}\"\npoint = {}\nfriction = 1.0",
+            triple(p.at)
+        );
+    }
     out
 }
 
@@ -970,7 +1006,11 @@ fn import_str(
     let coordinates: usize = leg
         .links
         .iter()
-        .map(|l| if l.kind == JointKind::Ball { 3 } else { 1 })
+        .map(|l| match l.kind {
+            JointKind::Ball => 3,
+            JointKind::Free => 6,
+            _ => 1,
+        })
         .sum();
     let mut lines = vec![format!(
         "{} links ({coordinates} coordinates), {} closures, {motors} motors",
