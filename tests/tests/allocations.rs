@@ -533,6 +533,15 @@ fn check_robot<
         .0,
     );
     zero(
+        "robot::impact",
+        allocations(|| {
+            let mut m = modes;
+            let mut landing = s;
+            robot::impact::<L, f64, NQ, NC, NU, NK>(&p, &mut landing, &mut m, &ground, &mu)
+        })
+        .0,
+    );
+    zero(
         "robot::stance_step",
         allocations(|| {
             robot::stance_step::<L, f64, NQ, NC, NU, NK>(&p, &mut s, &u, &modes, &ground, &mu, 1e-3)

@@ -288,54 +288,17 @@ fn stands_still_on_its_feet<L, const NQ: usize, const NC: usize, const NU: usize
 where
     L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
 {
-    use leg_models::dynamics::contact::{ContactMode, Ground, Modes};
+    use leg_models::dynamics::contact::{ContactMode, Modes};
     let name = L::NAME;
-    if NK < 9 {
-        leg_tests::not_applicable(name, "standing", &"fewer than three contact points");
-        return;
-    }
     let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
-    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
-    let mut q = SVector::<f64, NQ>::from_column_slice(&L::HOME);
-    for k in 0..6 {
-        q[f + k] = 0.0;
-    }
-    leg_models::assembly::project_position::<L, f64, NQ, NC, NU>(
-        &p,
-        &mut q,
-        &leg_models::assembly::Tolerance::default(),
-    )
-    .unwrap();
-    let turn = UnitQuaternion::from_euler_angles(0.02, -0.03, 0.4);
-    let mut s = RobotState::at_rest(Vector3::new(1.0, -2.0, 0.5), turn, q);
-    // The contact points in the world, and the plane through them.
-    let chart = robot::chart_params::<L, f64, NQ, NC, NU>(&p, &s.orientation).unwrap();
-    let x = L::contact_positions(&s.q, &chart);
-    let at = |k: usize| {
-        s.position
-            + s.orientation
-                .transform_vector(&Vector3::new(x[3 * k], x[3 * k + 1], x[3 * k + 2]))
-    };
-    let mut n = (at(1) - at(0)).cross(&(at(2) - at(0))).normalize();
-    if n.dot(&(s.position - at(0))) < 0.0 {
-        n = -n;
-    }
-    let size = (at(1) - at(0)).norm();
-    for k in 3..NK / 3 {
-        let off = n.dot(&(at(k) - at(0))).abs();
-        if off > 1e-12 * size {
-            leg_tests::not_applicable(
-                name,
-                "standing",
-                &"its contact points at home are not on one plane",
-            );
+    let (mut s, ground) = match on_its_feet::<L, NQ, NC, NU, NK>(&p) {
+        Ok(x) => x,
+        Err(why) => {
+            leg_tests::not_applicable(name, "standing", &why);
             return;
         }
-    }
-    let ground = Ground {
-        normal: n,
-        offset: n.dot(&at(0)),
     };
+    let size = L::leg_size(&s.q, &p);
     let mut modes = Modes::<NK, 3>::flight();
     for k in 0..NK / 3 {
         modes.set(k, ContactMode::Stick);
@@ -408,6 +371,157 @@ where
     );
 }
 
+/// The robot at home, its contact points on a ground plane through them (the plane's
+/// normal up along the body's side), or why it cannot stand there.
+fn on_its_feet<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    p: &L::Params<f64>,
+) -> Result<
+    (
+        RobotState<f64, NQ>,
+        leg_models::dynamics::contact::Ground<f64, 3>,
+    ),
+    &'static str,
+>
+where
+    L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
+{
+    if NK < 9 {
+        return Err("fewer than three contact points");
+    }
+    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
+    let mut q = SVector::<f64, NQ>::from_column_slice(&L::HOME);
+    for k in 0..6 {
+        q[f + k] = 0.0;
+    }
+    leg_models::assembly::project_position::<L, f64, NQ, NC, NU>(
+        p,
+        &mut q,
+        &leg_models::assembly::Tolerance::default(),
+    )
+    .unwrap();
+    let turn = UnitQuaternion::from_euler_angles(0.02, -0.03, 0.4);
+    let s = RobotState::at_rest(Vector3::new(1.0, -2.0, 0.5), turn, q);
+    let chart = robot::chart_params::<L, f64, NQ, NC, NU>(p, &s.orientation).unwrap();
+    let x = L::contact_positions(&s.q, &chart);
+    let at = |k: usize| {
+        s.position
+            + s.orientation
+                .transform_vector(&Vector3::new(x[3 * k], x[3 * k + 1], x[3 * k + 2]))
+    };
+    let mut n = (at(1) - at(0)).cross(&(at(2) - at(0))).normalize();
+    if n.dot(&(s.position - at(0))) < 0.0 {
+        n = -n;
+    }
+    let size = (at(1) - at(0)).norm();
+    for k in 3..NK / 3 {
+        if n.dot(&(at(k) - at(0))).abs() > 1e-12 * size {
+            return Err("its contact points at home are not on one plane");
+        }
+    }
+    Ok((
+        s,
+        leg_models::dynamics::contact::Ground {
+            normal: n,
+            offset: n.dot(&at(0)),
+        },
+    ))
+}
+
+/// Dropped flat onto every foot at once, 1 m/s into the ground and 0.2 m/s along it, the
+/// motors free: every foot takes a normal impulse that pushes, every foot's velocity
+/// into the ground is zero after it (a sticking one's along it too), the impulses add
+/// up to the change of the robot's momentum, and the energy lost is the impulses' energy
+/// identity to rounding: `T⁻ − T⁺ = ½ Δq̇ᵀ M Δq̇ − Σ v_k⁺ · Λ_k` (the last term, Coulomb's
+/// friction work on the feet that slide, is zero for those that stick).
+fn lands_flat_on_every_foot<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>()
+where
+    L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
+{
+    use leg_models::dynamics::contact::{ContactMode, Modes};
+    let name = L::NAME;
+    let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
+    let (mut s, ground) = match on_its_feet::<L, NQ, NC, NU, NK>(&p) {
+        Ok(x) => x,
+        Err(why) => {
+            leg_tests::not_applicable(name, "landing", &why);
+            return;
+        }
+    };
+    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
+    // Down along the ground's normal and along the ground, as a rigid body: the body's
+    // velocity in its own frame, the joints still.
+    let along = ground.normal.cross(&Vector3::x()).normalize();
+    let velocity = s
+        .orientation
+        .inverse_transform_vector(&(-ground.normal + along * 0.2));
+    for k in 0..3 {
+        s.v[f + k] = velocity[k];
+    }
+    let before = s;
+    let (lin0, _) = robot::momentum::<L, f64, NQ, NC, NU>(&p, &s).unwrap();
+    let mut modes = Modes::<NK, 3>::flight();
+    for k in 0..NK / 3 {
+        modes.set(k, ContactMode::Stick);
+    }
+    let mu = leg_models::dynamics::contact::spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
+    let (impact, world) =
+        robot::impact::<L, f64, NQ, NC, NU, NK>(&p, &mut s, &mut modes, &ground, &mu)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+    let chart = robot::chart_params::<L, f64, NQ, NC, NU>(&p, &s.orientation).unwrap();
+    let m = L::mass_matrix(&s.q, &chart);
+    let dv = before.v - s.v;
+    let (k0, _) = robot::energies::<L, f64, NQ, NC, NU>(&p, &before).unwrap();
+    let (k1, _) = robot::energies::<L, f64, NQ, NC, NU>(&p, &s).unwrap();
+    let (lin1, _) = robot::momentum::<L, f64, NQ, NC, NU>(&p, &s).unwrap();
+    // Each foot's velocity after it and its impulse, in the world.
+    let rates = L::contact_jacobian(&s.q, &chart) * s.v;
+    let foot = |v: &SVector<f64, NK>, k: usize| Vector3::new(v[3 * k], v[3 * k + 1], v[3 * k + 2]);
+    let (mut work, mut total, mut into, mut stuck_speed) = (0.0, Vector3::zeros(), 0.0f64, 0.0f64);
+    let mut sliding = 0;
+    for k in 0..NK / 3 {
+        let v = s.orientation.transform_vector(&foot(&rates, k));
+        work += v.dot(&foot(&world, k));
+        total += foot(&world, k);
+        into = into.max(v.dot(&ground.normal).abs());
+        match modes.get(k) {
+            ContactMode::Stick => stuck_speed = stuck_speed.max(v.norm()),
+            _ => sliding += 1,
+        }
+    }
+    let identity = 0.5 * dv.dot(&(m * dv)) - work;
+    let pushes = (0..NK / 3)
+        .map(|k| impact.impulses[3 * k + 2])
+        .fold(f64::INFINITY, f64::min);
+    eprintln!(
+        "{name}: flat landing on {} feet ({sliding} sliding after it): energy lost {:.6} J of {k0:.6} J; the identity ½ Δq̇ᵀ M Δq̇ − Σ v⁺·Λ off it by {:.1e} J; impulses minus Δ momentum {:.1e} N s; feet's speed into the ground after {into:.1e} m/s; smallest normal impulse {pushes:.4} N s",
+        NK / 3,
+        impact.energy_lost,
+        (impact.energy_lost - identity).abs(),
+        (total - (lin1 - lin0)).norm()
+    );
+    assert!(pushes > 0.0, "{name}: a foot takes no push ({pushes} N s)");
+    assert!(
+        (k0 - k1 - impact.energy_lost).abs() < 1e-12 * k0,
+        "{name}: energy_lost is not T⁻ − T⁺"
+    );
+    // Rounding through solves with M, whose condition on a robot of light legs under a
+    // heavy body is 1e6 or more.
+    assert!(
+        (impact.energy_lost - identity).abs() < 1e-10 * k0,
+        "{name}: energy identity off by {:e}",
+        impact.energy_lost - identity
+    );
+    assert!(
+        impact.energy_lost > 0.0,
+        "{name}: the landing gained energy"
+    );
+    assert!(
+        (total - (lin1 - lin0)).norm() < 1e-12 * lin0.norm(),
+        "{name}: impulses are not the change of momentum"
+    );
+    assert!(into < 1e-12 && stuck_speed < 1e-12, "{name}: a foot still moves into the ground ({into:e}) or a stuck one along it ({stuck_speed:e})");
+}
+
 macro_rules! floating_robot_tests {
     ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
         mod $module {
@@ -429,6 +543,11 @@ macro_rules! floating_robot_tests {
             #[test]
             fn pose_rate_is_the_pose_derivative() {
                 super::pose_rate_is_the_pose_derivative::<$ty, $nq, $nc, $nu>();
+            }
+
+            #[test]
+            fn lands_flat_on_every_foot_at_once() {
+                super::lands_flat_on_every_foot::<$ty, $nq, $nc, $nu, $nk>();
             }
 
             #[test]

@@ -30,7 +30,9 @@ use core::fmt;
 use nalgebra::{Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
 
 use crate::assembly::{project_position, project_velocity, Tolerance};
-use crate::dynamics::contact::{ContactSolution, ContactSystem, Ground, Modes};
+use crate::dynamics::contact::{
+    impact_map, ContactSolution, ContactSystem, Ground, Impact, ImpactError, Modes,
+};
 use crate::dynamics::{actuation, forward_dynamics, Acceleration, DynamicsError};
 use crate::model::contract::{ContactModel, LegDynamics, Parameters, Real};
 use crate::model::linalg::Cholesky;
@@ -621,3 +623,65 @@ where
     *state = next;
     Ok(stance)
 }
+
+/// A plastic impact of the robot on the world's ground: the contacts in `modes` (those
+/// touching) held after it, every closure kept, a sticking impulse outside the cone
+/// resolved as sliding (and its mode changed), by [`impact_map`] in the chart centred on
+/// the body. The state's velocities jump in place (the pose does not move); the impulses
+/// are returned in the chart ground's frame with the energy lost, and in the world (per
+/// contact a vector) beside them. On an error `state` is left as it was.
+pub fn impact<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    params: &L::Params<T>,
+    state: &mut RobotState<T, NQ>,
+    modes: &mut Modes<NK, 3>,
+    ground: &Ground<T, 3>,
+    mu: &SVector<T, NK>,
+) -> Result<(Impact<T, NQ, NC, NK>, SVector<T, NK>), RobotImpactError>
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+    T: Real,
+{
+    let f = free_joint::<L, NQ, NC, NU>()?;
+    let mut next = *state;
+    next.recentre(f);
+    let chart = chart_params::<L, T, NQ, NC, NU>(params, &next.orientation)?;
+    let local = ground_in_chart(ground, &next.position, &next.orientation);
+    let out = impact_map::<L, T, NQ, NC, NU, NK, 3>(&chart, &next.q, &next.v, modes, &local, mu)?;
+    next.v = out.qd_plus;
+    let world = forces_in_world(&local, &next.orientation, &out.impulses);
+    *state = next;
+    Ok((out, world))
+}
+
+/// Why a robot's impact failed: not a floating robot, or the impact's own reason.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RobotImpactError {
+    /// See [`RobotError`].
+    Robot(RobotError),
+    /// See [`ImpactError`].
+    Impact(ImpactError),
+}
+
+impl From<RobotError> for RobotImpactError {
+    fn from(e: RobotError) -> Self {
+        RobotImpactError::Robot(e)
+    }
+}
+
+impl From<ImpactError> for RobotImpactError {
+    fn from(e: ImpactError) -> Self {
+        RobotImpactError::Impact(e)
+    }
+}
+
+impl fmt::Display for RobotImpactError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            RobotImpactError::Robot(e) => write!(f, "{e}"),
+            RobotImpactError::Impact(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for RobotImpactError {}
