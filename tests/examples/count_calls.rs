@@ -305,6 +305,8 @@ fn main() {
         };
     }
     generated::for_each_spatial_model!(dispatch_spatial);
+    // Floating robots: their terms in the body's chart, the same paths.
+    generated::for_each_floating_model!(dispatch_spatial);
     match found {
         Some(acc) => println!("{acc}"),
         None => {
