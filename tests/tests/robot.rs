@@ -6,9 +6,12 @@
 //!   with gravity, the linear momentum grows by `m g t` exactly;
 //! - passive and undamped, the energy in the world (with the body's height) stays;
 //! - the chart moved to the body every step gives the trajectory of one chart held
-//!   fixed for the whole run (where it stays away from its singularity): the recentring's
-//!   position, quaternion and velocity maps against none at all;
-//! - the quaternion stays unit, `q̇_quat = ½ q ⊗ (0, ω)` against differences of the pose.
+//!   fixed for the whole run (where it stays away from its singularity), the latter
+//!   turned into the world by rotation matrices written in the test;
+//! - the quaternion stays unit, `q̇_quat = ½ q ⊗ (0, ω)` and `v̇` against differences of
+//!   the pose and velocity over a step each way;
+//! - standing on coplanar feet (forces equal to the spec masses' weight) and landing on
+//!   them (the impulses' energy identity, the momentum balance).
 
 use leg_models::nalgebra::{SVector, UnitQuaternion, Vector3};
 use leg_models::robot::{self, RobotState};
@@ -67,6 +70,20 @@ where
             m[(a, a)] * (pull + 2.0 * (3.0 * t + i as f64).sin())
         })
     }
+}
+
+/// The robot's mass, the sum of its spec's link masses (not read off the dynamics).
+fn spec_mass<L, const NQ: usize, const NC: usize, const NU: usize>(p: &L::Params<f64>) -> f64
+where
+    L: LegDynamics<NQ, NC, NU>,
+{
+    let names = <L::Params<f64> as Parameters<f64>>::NAMES;
+    names
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| n.ends_with("_mass"))
+        .map(|(i, _)| p.get(i).unwrap())
+        .sum()
 }
 
 fn with_gravity<L, const NQ: usize, const NC: usize, const NU: usize>(
@@ -164,14 +181,7 @@ where
     let mut s = tumbling::<L, NQ, NC, NU>(&p, 32);
     let (lin0, _) = robot::momentum::<L, f64, NQ, NC, NU>(&p, &s).unwrap();
     let (k0, v0) = robot::energies::<L, f64, NQ, NC, NU>(&p, &s).unwrap();
-    // The total mass, from the momentum a pure translation of the whole robot has.
-    let mut moving = s;
-    moving.v = SVector::zeros();
-    moving.v[0] = 1.0;
-    let mass = robot::momentum::<L, f64, NQ, NC, NU>(&p, &moving)
-        .unwrap()
-        .0
-        .norm();
+    let mass = spec_mass::<L, NQ, NC, NU>(&p);
     let mut passive = |_: f64, _: &State<f64, NQ>| SVector::<f64, NU>::zeros();
     let dt = 1e-3;
     let opts = StepOptions::rk4(dt);
@@ -232,16 +242,41 @@ where
         turned > 0.1,
         "{name}: the body hardly turned in the fixed chart ({turned} rad)"
     );
-    let mut held = RobotState {
-        position: start.position,
-        orientation: start.orientation,
-        q: fixed.q,
-        v: fixed.qd,
-    };
-    held.recentre(f);
-    let dp = (held.position - moving.position).norm();
-    let dr = held.orientation.angle_to(&moving.orientation);
-    let dv = (held.v - moving.v).norm();
+    // The fixed chart's pose and velocities in the world, by rotation matrices written
+    // here: p = p₀ + R₀ δ, R = R₀ R_x(α) R_y(β) R_z(γ); ṗ = R₀ δ̇, and the angles' rates
+    // turned into the world one axis at a time.
+    use leg_models::nalgebra::Rotation3;
+    let c = |k: usize| fixed.q[f + k];
+    let rate = |k: usize| fixed.qd[f + k];
+    let (rx, ry, rz) = (
+        Rotation3::from_axis_angle(&Vector3::x_axis(), c(3)),
+        Rotation3::from_axis_angle(&Vector3::y_axis(), c(4)),
+        Rotation3::from_axis_angle(&Vector3::z_axis(), c(5)),
+    );
+    let r0 = start.orientation.to_rotation_matrix();
+    let position = start.position + r0 * Vector3::new(c(0), c(1), c(2));
+    let turned = r0 * rx * ry * rz;
+    let velocity = r0 * Vector3::new(rate(0), rate(1), rate(2));
+    let spin = r0
+        * (Vector3::x() * rate(3)
+            + rx * (Vector3::y() * rate(4))
+            + rx * ry * (Vector3::z() * rate(5)));
+    let r1 = moving.orientation.to_rotation_matrix();
+    let lin = Vector3::new(moving.v[f], moving.v[f + 1], moving.v[f + 2]);
+    let ang = Vector3::new(moving.v[f + 3], moving.v[f + 4], moving.v[f + 5]);
+    let dp = (position - moving.position).norm();
+    let dr = (turned.matrix() - r1.matrix()).amax();
+    let joints = (f + 6..NQ)
+        .map(|k| {
+            (fixed.qd[k] - moving.v[k])
+                .abs()
+                .max((fixed.q[k] - moving.q[k]).abs())
+        })
+        .fold(0.0, f64::max);
+    let dv = (velocity - r1 * lin)
+        .norm()
+        .max((spin - r1 * ang).norm())
+        .max(joints);
     eprintln!("{name}: recentred every step vs one chart: |Δp| {dp:.1e} m, angle {dr:.1e} rad, |Δv| {dv:.1e}");
     assert!(
         dp < 1e-9 && dr < 1e-9 && dv < 1e-8,
@@ -272,12 +307,22 @@ where
     let e_p = (pd - pd_fd).norm();
     let e_q = (qd - qd_fd).norm();
     assert!(
-        e_p < 1e-6 * pd.norm().max(1.0),
+        e_p < 1e-8 * pd.norm().max(1.0),
         "{name}: ṗ {pd} vs differences {pd_fd}"
     );
     assert!(
-        e_q < 1e-6 * qd.norm().max(1.0),
+        e_q < 1e-8 * qd.norm().max(1.0),
         "{name}: q̇ {qd} vs differences {qd_fd}"
+    );
+    // v̇ (Pinocchio's convention for a free flyer: the derivative of the body-frame
+    // velocities) against the same differences of v.
+    let a = robot::forward_dynamics_at::<L, f64, NQ, NC, NU>(&p, &s, &SVector::zeros()).unwrap();
+    let vd = robot::velocity_derivative(f, &s.v, &a.qdd);
+    let vd_fd = (ahead.v - behind.v) / (2.0 * h);
+    let e_v = (vd - vd_fd).amax();
+    assert!(
+        e_v < 1e-6 * vd.amax().max(1.0),
+        "{name}: v̇ off its differences by {e_v:e}"
     );
 }
 
@@ -311,15 +356,35 @@ where
         "{name}: the motors cannot hold the stance: |q̈| {left:e} left"
     );
     // The weight from the spec's masses, not from the dynamics.
-    let names = <L::Params<f64> as Parameters<f64>>::NAMES;
-    let mass: f64 = names
-        .iter()
-        .enumerate()
-        .filter(|(_, n)| n.ends_with("_mass"))
-        .map(|(i, _)| p.get(i).unwrap())
-        .sum();
+    let mass = spec_mass::<L, NQ, NC, NU>(&p);
     let weight = Vector3::new(0.0, 0.0, -9.81) * mass;
     let start = s;
+    // The same stance written in a chart off its centre (at rest, so only the pose moves
+    // into the chart): the step reports the same forces in the world.
+    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
+    let (delta, angles) = (
+        Vector3::new(0.01, 0.02, -0.01),
+        Vector3::new(0.05, -0.04, 0.03),
+    );
+    let mut off = start;
+    off.orientation = start.orientation * robot::ball_rotation(&angles).inverse();
+    off.position = start.position - off.orientation.transform_vector(&delta);
+    for k in 0..3 {
+        off.q[f + k] = delta[k];
+        off.q[f + 3 + k] = angles[k];
+    }
+    let (mut a, mut b) = (start, off);
+    let at_centre =
+        robot::stance_step::<L, f64, NQ, NC, NU, NK>(&p, &mut a, &u, &modes, &ground, &mu, 1e-3)
+            .unwrap();
+    let off_centre =
+        robot::stance_step::<L, f64, NQ, NC, NU, NK>(&p, &mut b, &u, &modes, &ground, &mu, 1e-3)
+            .unwrap();
+    let d = (at_centre.world_forces - off_centre.world_forces).amax();
+    assert!(
+        d < 1e-9 * weight.norm(),
+        "{name}: off the chart's centre the forces turn by {d:e} N"
+    );
     let (mut moved, mut force_err) = (0.0f64, 0.0f64);
     // Held torques alone leave the stance's free motions (two on a quadruped) at an
     // unstable balance that rounding tips over (the legs buckle under the weight); a

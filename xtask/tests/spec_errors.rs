@@ -1221,6 +1221,19 @@ fn free_joints_are_a_floating_robots_body_and_refused_elsewhere() {
         "3 joint values for 9 coordinates (4 links, six coordinates for the free joint)",
     );
     refused(
+        &format!("{}\n[ground]\noffset = -1.0\n", free_edit("", "")),
+        "ground",
+        "the world's, given at run time",
+    );
+    refused(
+        &free_edit(
+            "home = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.3",
+            "home = [0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.3",
+        ),
+        "home",
+        "the chart's centre: zeros",
+    );
+    refused(
         &VALID.replacen("inertia = 4e-5\n", "inertia = 4e-5\njoint = \"free\"\n", 1),
         "links[0].joint",
         "only a spatial robot",

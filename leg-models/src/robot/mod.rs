@@ -335,10 +335,13 @@ impl fmt::Display for RobotStepError {
 impl std::error::Error for RobotStepError {}
 
 /// Advances a floating robot from time `t` by one step of `opts` (any integrator,
-/// projection onto the closures, Baumgarte terms), with motor torques from `source`
-/// (which sees the centred chart: the free joint's coordinates zero, its rates `v`).
+/// projection onto the closures, Baumgarte terms), with motor torques from `source`.
 /// The chart is centred on the body at the step's start and on where it went at the
-/// end. On an error `state` is left as it was.
+/// end. The source sees the chart: at the step's start the free joint's coordinates are
+/// zero and its rates `v`; with `ControlUpdate::PerStage` it is also asked at the later
+/// stages, where they are the chart's `δ`, angles and their rates. The report's
+/// acceleration is the chart's `q̈` at the start ([`velocity_derivative`] turns it into
+/// `v̇`). On an error `state` is left as it was.
 pub fn step<L, T, const NQ: usize, const NC: usize, const NU: usize>(
     params: &L::Params<T>,
     state: &mut RobotState<T, NQ>,
@@ -392,7 +395,9 @@ where
 }
 
 /// The robot's momentum in the world: linear (kg m/s) and angular about the world's
-/// origin (kg m²/s). At the centre the chart's generalized momentum `M v` on the
+/// origin (kg m²/s), the model's (a rotor's own spin, `I n q̇` about its axis, is not in
+/// it: the model keeps only its reflected inertia on the joint, as the generated `M`
+/// does). At the centre the chart's generalized momentum `M v` on the
 /// translation is the linear momentum in the body frame, and on the angles (whose rates
 /// are `ω` there) the angular momentum about the body's origin in the body frame.
 pub fn momentum<L, T, const NQ: usize, const NC: usize, const NU: usize>(
@@ -597,6 +602,8 @@ where
     next.recentre(f);
     let chart = chart_params::<L, T, NQ, NC, NU>(params, &next.orientation)?;
     let local = ground_in_chart(ground, &next.position, &next.orientation);
+    // The forces are in the chart of the step's start, turned by its centre.
+    let centre = next.orientation;
     let applied = actuation::<L, T, NQ, NC, NU>(u);
     let accel = |q: &SVector<T, NQ>, qd: &SVector<T, NQ>| {
         ContactSystem::new::<L, NU>(&chart, q, qd, modes, &SVector::zeros(), &local, mu, None)
@@ -617,7 +624,7 @@ where
     }
     next.recentre(f);
     let stance = Stance {
-        world_forces: forces_in_world(&local, &state.orientation, &first.contact),
+        world_forces: forces_in_world(&local, &centre, &first.contact),
         solution: first,
     };
     *state = next;
@@ -629,7 +636,7 @@ where
 /// resolved as sliding (and its mode changed), by [`impact_map`] in the chart centred on
 /// the body. The state's velocities jump in place (the pose does not move); the impulses
 /// are returned in the chart ground's frame with the energy lost, and in the world (per
-/// contact a vector) beside them. On an error `state` is left as it was.
+/// contact a vector) beside them. On an error `state` and `modes` are left as they were.
 pub fn impact<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
     params: &L::Params<T>,
     state: &mut RobotState<T, NQ>,
@@ -646,7 +653,11 @@ where
     next.recentre(f);
     let chart = chart_params::<L, T, NQ, NC, NU>(params, &next.orientation)?;
     let local = ground_in_chart(ground, &next.position, &next.orientation);
-    let out = impact_map::<L, T, NQ, NC, NU, NK, 3>(&chart, &next.q, &next.v, modes, &local, mu)?;
+    // `modes` changes (a sticking contact resolved as sliding) only if the impact does.
+    let mut resolved = *modes;
+    let out =
+        impact_map::<L, T, NQ, NC, NU, NK, 3>(&chart, &next.q, &next.v, &mut resolved, &local, mu)?;
+    *modes = resolved;
     next.v = out.qd_plus;
     let world = forces_in_world(&local, &next.orientation, &out.impulses);
     *state = next;

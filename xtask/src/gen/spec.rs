@@ -1102,6 +1102,28 @@ fn check_free(
             "a free joint's orientation is the body's state (the runtime's quaternion), not a constant of the spec",
         ));
     }
+    if let Some(g) = &file.ground {
+        return Err(ctx.span(
+            g,
+            "ground",
+            "a floating robot's ground is the world's, given at run time (leg_models::robot), not a plane of the spec's base frame",
+        ));
+    }
+    let coordinates: usize = file
+        .links
+        .iter()
+        .map(|l| l.get_ref().kind().coordinates())
+        .sum();
+    if let Some(h) = &file.home {
+        // (A home of the wrong length is said below, counting the coordinates.)
+        if h.get_ref().len() == coordinates && h.get_ref().iter().take(6).any(|&x| x != 0.0) {
+            return Err(ctx.span(
+                h,
+                "home",
+                "a free joint's six home values are the chart's centre: zeros (the body's pose is the state)",
+            ));
+        }
+    }
     for (k, c) in file.closures.iter().enumerate() {
         for (end, p) in [("a", &c.get_ref().a), ("b", &c.get_ref().b)] {
             if p.get_ref().link.get_ref() == "base" {
