@@ -16,6 +16,8 @@ pub mod atrias_hopper;
 pub use atrias_hopper::AtriasHopper;
 pub mod braced_parallelogram;
 pub use braced_parallelogram::BracedParallelogram;
+pub mod cassie;
+pub use cassie::Cassie;
 pub mod cassie_leg;
 pub use cassie_leg::CassieLeg;
 pub mod cassie_planar;
@@ -105,8 +107,9 @@ macro_rules! for_each_spatial_model {
 #[macro_export]
 macro_rules! for_each_floating_model {
     ($callback:ident) => {
-        $callback ! (floating_arm, $crate::floating_arm::FloatingArm, 9, 0, 2, 0, 0);
-        $callback ! (minitaur_quadruped, $crate::minitaur_quadruped::MinitaurQuadruped,
-        22, 12, 8, 8, 12);
+        $callback ! (cassie, $crate::cassie::Cassie, 32, 12, 10, 8, 12); $callback !
+        (floating_arm, $crate::floating_arm::FloatingArm, 9, 0, 2, 0, 0); $callback !
+        (minitaur_quadruped, $crate::minitaur_quadruped::MinitaurQuadruped, 22, 12, 8, 8,
+        12);
     };
 }

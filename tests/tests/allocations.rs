@@ -526,13 +526,18 @@ fn check_robot<
         offset: -1.0,
     };
     let mu = SVector::<f64, NK>::from_element(1.0);
+    // Standing still: rates that move a held contact contradict themselves where two
+    // contacts share a rigid foot (Cassie's toe and heel: their distance's second
+    // derivative is then the foot's centripetal term, not zero), and the solve refuses.
+    let mut standing = s;
+    standing.v = SVector::zeros();
     none_and_ok!(
         "robot::stance_dynamics",
-        robot::stance_dynamics::<L, f64, NQ, NC, NU, NK>(&p, &s, &u, &modes, &ground, &mu)
+        robot::stance_dynamics::<L, f64, NQ, NC, NU, NK>(&p, &standing, &u, &modes, &ground, &mu)
     );
     none_and_ok!(
         "robot::holding_torques",
-        robot::holding_torques::<L, f64, NQ, NC, NU, NK>(&p, &s, &modes, &ground, &mu)
+        robot::holding_torques::<L, f64, NQ, NC, NU, NK>(&p, &standing, &modes, &ground, &mu)
     );
     // A landing: the whole robot moving straight down, 1 m/s.
     let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
@@ -551,6 +556,14 @@ fn check_robot<
     );
     none_and_ok!(
         "robot::stance_step",
-        robot::stance_step::<L, f64, NQ, NC, NU, NK>(&p, &mut s, &u, &modes, &ground, &mu, 1e-3)
+        robot::stance_step::<L, f64, NQ, NC, NU, NK>(
+            &p,
+            &mut standing,
+            &u,
+            &modes,
+            &ground,
+            &mu,
+            1e-3
+        )
     );
 }
