@@ -217,7 +217,7 @@ where
     // (the laws hold over any span; a debug build takes milliseconds per step of a
     // 32-coordinate robot).
     let dt = time_step::<L, NQ, NC, NU>(&p);
-    let duration = (500.0 * dt).max(0.0625).min(1.0);
+    let duration = (500.0 * dt).clamp(0.0625, 1.0);
     let (lin1, ang1, unit1, s) = momentum_drift::<L, NQ, NC, NU>(&p, dt, duration);
     let (lin2, ang2, unit2, _) = momentum_drift::<L, NQ, NC, NU>(&p, dt / 2.0, duration);
     // The joints turned: the run is not trivially still.
@@ -303,7 +303,7 @@ where
     // scale is short: long enough to turn (the start spins at up to 1 rad/s an axis).
     let dt = time_step::<L, NQ, NC, NU>(&p) / 2.0;
     let opts = StepOptions::rk4(dt);
-    let duration = (1200.0 * dt).max(0.075).min(0.3);
+    let duration = (1200.0 * dt).clamp(0.075, 0.3);
     let steps = (duration / dt).round() as usize;
     let mut moving = start;
     for i in 0..steps {
