@@ -21,6 +21,8 @@ pub mod spec_format {}
 
 // Helpers shared by the workspace tests.
 
+pub mod standing;
+
 use std::path::{Path, PathBuf};
 
 use leg_models::assembly::{project_position, project_velocity, Tolerance};

@@ -566,4 +566,25 @@ fn check_robot<
             1e-3
         )
     );
+    // The balance QP: its first command sets the solver up (and allocates); the next,
+    // with the same held contacts, update it in place. Clarabel 0.11.1's `solve` itself
+    // allocates once a call (measured on Clarabel alone: its updates allocate nothing,
+    // its `solve` one block: its timers, cleared and filled again each call), so a command may allocate that once and no more.
+    use leg_models::robot::balance::{BalanceController, BalanceGains, BalanceTarget};
+    let mut control = BalanceController::<NQ, NC, NU, NK>::new(
+        BalanceTarget::holding(&standing),
+        BalanceGains::default(),
+        None,
+    );
+    match control.command::<L>(&p, &standing, &modes, &ground, &mu) {
+        Ok(_) => {
+            let (n, r) = allocations(|| control.command::<L>(&p, &standing, &modes, &ground, &mu));
+            r.unwrap_or_else(|e| panic!("{name}: balance: {e}"));
+            assert!(
+                n <= 1,
+                "{name}: the balance QP's command allocated {n} times"
+            );
+        }
+        Err(e) => leg_tests::not_applicable(name, "balance QP allocations", &e),
+    }
 }

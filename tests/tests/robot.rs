@@ -12,13 +12,16 @@
 //!   the pose and velocity over a step each way, at two sizes combined (Richardson);
 //! - every run steps at the robot's own time scale (`time_step`).
 //! - standing on coplanar feet (forces equal to the spec masses' weight) and landing on
-//!   them (the impulses' energy identity, the momentum balance).
+//!   them (the impulses' energy identity, the momentum balance);
+//! - balanced by the QP and pushed: every foot's force, from the simulator, inside its
+//!   friction cone, and back where it stood.
 
 use leg_models::nalgebra::{SVector, UnitQuaternion, Vector3};
 use leg_models::robot::{self, RobotState};
 use leg_models::simulate::State;
 use leg_models::simulate::{step as fixed_step, StepOptions};
-use leg_models::{LegDynamics, Parameters};
+use leg_models::LegDynamics;
+use leg_tests::standing::{on_its_feet, spec_mass, with_gravity};
 use leg_tests::Rng;
 
 /// A tumbling start: the body off the origin, turned, moving and spinning; the joints at
@@ -140,41 +143,6 @@ where
         dt * 2.0,
         report.join(", ")
     );
-}
-
-/// The robot's mass, the sum of its spec's link masses (not read off the dynamics).
-fn spec_mass<L, const NQ: usize, const NC: usize, const NU: usize>(p: &L::Params<f64>) -> f64
-where
-    L: LegDynamics<NQ, NC, NU>,
-{
-    let names = <L::Params<f64> as Parameters<f64>>::NAMES;
-    names
-        .iter()
-        .enumerate()
-        .filter(|(_, n)| n.ends_with("_mass"))
-        .map(|(i, _)| p.get(i).unwrap())
-        .sum()
-}
-
-fn with_gravity<L, const NQ: usize, const NC: usize, const NU: usize>(
-    g: [f64; 3],
-    damping: bool,
-) -> L::Params<f64>
-where
-    L: LegDynamics<NQ, NC, NU>,
-{
-    let mut p = L::Params::<f64>::default();
-    let names = <L::Params<f64> as Parameters<f64>>::NAMES;
-    for (i, name) in names.iter().enumerate() {
-        match *name {
-            "gravity_x" => assert!(p.set(i, g[0])),
-            "gravity_y" => assert!(p.set(i, g[1])),
-            "gravity_z" => assert!(p.set(i, g[2])),
-            n if !damping && n.ends_with("_damping") => assert!(p.set(i, 0.0)),
-            _ => {}
-        }
-    }
-    p
 }
 
 /// The largest drift of the linear and angular momentum over `duration` at step `dt`, and
@@ -534,62 +502,6 @@ where
     );
 }
 
-/// The robot at home, its contact points on a ground plane through them (the plane's
-/// normal up along the body's side), or why it cannot stand there.
-fn on_its_feet<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
-    p: &L::Params<f64>,
-) -> Result<
-    (
-        RobotState<f64, NQ>,
-        leg_models::dynamics::contact::Ground<f64, 3>,
-    ),
-    &'static str,
->
-where
-    L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
-{
-    if NK < 9 {
-        return Err("fewer than three contact points");
-    }
-    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
-    let mut q = SVector::<f64, NQ>::from_column_slice(&L::HOME);
-    for k in 0..6 {
-        q[f + k] = 0.0;
-    }
-    leg_models::assembly::project_position::<L, f64, NQ, NC, NU>(
-        p,
-        &mut q,
-        &leg_models::assembly::Tolerance::default(),
-    )
-    .unwrap();
-    let turn = UnitQuaternion::from_euler_angles(0.02, -0.03, 0.4);
-    let s = RobotState::at_rest(Vector3::new(1.0, -2.0, 0.5), turn, q);
-    let chart = robot::chart_params::<L, f64, NQ, NC, NU>(p, &s.orientation).unwrap();
-    let x = L::contact_positions(&s.q, &chart);
-    let at = |k: usize| {
-        s.position
-            + s.orientation
-                .transform_vector(&Vector3::new(x[3 * k], x[3 * k + 1], x[3 * k + 2]))
-    };
-    let mut n = (at(1) - at(0)).cross(&(at(2) - at(0))).normalize();
-    if n.dot(&(s.position - at(0))) < 0.0 {
-        n = -n;
-    }
-    let size = (at(1) - at(0)).norm();
-    for k in 3..NK / 3 {
-        if n.dot(&(at(k) - at(0))).abs() > 1e-12 * size {
-            return Err("its contact points at home are not on one plane");
-        }
-    }
-    Ok((
-        s,
-        leg_models::dynamics::contact::Ground {
-            normal: n,
-            offset: n.dot(&at(0)),
-        },
-    ))
-}
-
 /// Dropped flat onto every foot at once, 1 m/s into the ground and 0.2 m/s along it, the
 /// motors free: every foot takes a normal impulse that pushes, every foot's velocity
 /// into the ground is zero after it (a sticking one's along it too), the impulses add
@@ -685,6 +597,143 @@ where
     assert!(into < 1e-12 && stuck_speed < 1e-12, "{name}: a foot still moves into the ground ({into:e}) or a stuck one along it ({stuck_speed:e})");
 }
 
+/// Balanced by the QP (`robot::balance`) on its feet at 1 ms steps: unpushed for 0.25 s,
+/// the ground forces the simulator applies add up to the weight from the spec's masses
+/// and every foot's stays well inside its friction cone (the least holding torques of
+/// the standing test load the feet sideways, outside their cones: printed beside it);
+/// pushed sideways on the body at 15 % of its weight for 0.1 s, it stays on its feet
+/// (every force in its cone, every step) and is back within 1 mm and 1 mrad after 1.25 s;
+/// pushed at three times its weight, the run fails, and says which foot slipped.
+fn balances_and_recovers_from_a_push<
+    L,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+>()
+where
+    L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
+{
+    use leg_models::dynamics::contact::{spec_friction, ContactMode, Modes};
+    use leg_models::robot::balance::{BalanceController, BalanceGains, BalanceTarget};
+    use leg_tests::standing::{push_run, Holding};
+    let name = L::NAME;
+    let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
+    let (start, ground) = match on_its_feet::<L, NQ, NC, NU, NK>(&p) {
+        Ok(x) => x,
+        Err(why) => {
+            leg_tests::not_applicable(name, "balance", &why);
+            return;
+        }
+    };
+    let weight = spec_mass::<L, NQ, NC, NU>(&p) * 9.81;
+    let mut modes = Modes::<NK, 3>::flight();
+    for k in 0..NK / 3 {
+        modes.set(k, ContactMode::Stick);
+    }
+    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
+    // Unpushed: the weight on the feet, inside the cones.
+    let mut control = BalanceController::<NQ, NC, NU, NK>::new(
+        BalanceTarget::holding(&start),
+        BalanceGains::default(),
+        None,
+    );
+    let (mut s, mut force_err, mut ratio) = (start, 0.0f64, 0.0f64);
+    for _ in 0..250 {
+        let cmd = control
+            .command::<L>(&p, &s, &modes, &ground, &mu)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let stance = robot::stance_step::<L, f64, NQ, NC, NU, NK>(
+            &p,
+            &mut s,
+            &cmd.torques,
+            &modes,
+            &ground,
+            &mu,
+            1e-3,
+        )
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let mut total = Vector3::zeros();
+        for k in 0..NK / 3 {
+            let f = Vector3::new(
+                stance.world_forces[3 * k],
+                stance.world_forces[3 * k + 1],
+                stance.world_forces[3 * k + 2],
+            );
+            total += f;
+            let normal = f.dot(&ground.normal);
+            assert!(normal > 0.0, "{name}: foot {k} pulls ({normal:e} N)");
+            ratio = ratio.max((f - ground.normal * normal).norm() / (mu[3 * k + 2] * normal));
+        }
+        force_err = force_err.max((total - Vector3::new(0.0, 0.0, weight)).norm());
+    }
+    let (_, moved) = ((), (s.position - start.position).norm());
+    let held = push_run::<L, NQ, NC, NU, NK>(
+        &p,
+        &start,
+        &ground,
+        Holding::JointPd,
+        Vector3::zeros(),
+        0.0,
+        0.01,
+        1e-3,
+    );
+    eprintln!(
+        "{name}: balanced 0.25 s: ground forces minus the weight ({weight:.3} N) {force_err:.1e} N, moved {moved:.1e} m, largest |λ_t|/(μ λ_n) {ratio:.3} (the least holding torques: {:.2})",
+        held.worst_friction
+    );
+    // The body's accelerations are its task's, so the forces balance the weight to the
+    // size of those: the small tangential-force weight moves its equilibrium by
+    // hundredths of a micrometre, which it settles to.
+    assert!(
+        force_err < 1e-4 * weight,
+        "{name}: forces off the weight by {force_err:e} N"
+    );
+    assert!(
+        ratio < 0.5,
+        "{name}: a foot's force is near its cone's edge ({ratio})"
+    );
+    assert!(moved < 1e-6, "{name}: moved {moved:e} m unpushed");
+    let side = ground
+        .normal
+        .cross(&start.orientation.transform_vector(&Vector3::x()))
+        .normalize();
+    let pushed = push_run::<L, NQ, NC, NU, NK>(
+        &p,
+        &start,
+        &ground,
+        Holding::Balance(BalanceGains::default()),
+        side * (0.15 * weight),
+        0.1,
+        1.25,
+        1e-3,
+    );
+    eprintln!(
+        "{name}: pushed sideways at 0.15 of its weight for 0.1 s: {:?}; went {:.2e} m; largest |λ_t|/(μ λ_n) {:.3}, least normal force {:.3} N; after 1.25 s {:.1e} m, {:.1e} rad, |v| {:.1e}; {:.1} QP iterations a tick",
+        pushed.failed, pushed.excursion, pushed.worst_friction, pushed.least_normal, pushed.end.0, pushed.end.1, pushed.end.2, pushed.mean_iterations
+    );
+    assert!(pushed.failed.is_none(), "{name}: {:?}", pushed.failed);
+    assert!(
+        pushed.excursion > 1e-5,
+        "{name}: the push did not move the body"
+    );
+    let shoved = push_run::<L, NQ, NC, NU, NK>(
+        &p,
+        &start,
+        &ground,
+        Holding::Balance(BalanceGains::default()),
+        side * (3.0 * weight),
+        0.1,
+        0.1,
+        1e-3,
+    );
+    let why = shoved.failed.map(|(_, w)| w).unwrap_or_default();
+    assert!(
+        why.contains("friction cone") || why.contains("QP"),
+        "{name}: a push of three times the weight did not unseat it ({why:?})"
+    );
+}
+
 macro_rules! floating_robot_tests {
     ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
         mod $module {
@@ -711,6 +760,11 @@ macro_rules! floating_robot_tests {
             #[test]
             fn lands_flat_on_every_foot_at_once() {
                 super::lands_flat_on_every_foot::<$ty, $nq, $nc, $nu, $nk>();
+            }
+
+            #[test]
+            fn balances_and_recovers_from_a_push() {
+                super::balances_and_recovers_from_a_push::<$ty, $nq, $nc, $nu, $nk>();
             }
 
             #[test]

@@ -25,6 +25,9 @@
 //! the world, and [`chart_params`] turns it into the chart each step. Closures are
 //! between the robot's own links, so they do not see the chart at all.
 
+#[cfg(feature = "balance")]
+pub mod balance;
+
 use core::fmt;
 
 use nalgebra::{Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
@@ -468,7 +471,7 @@ pub struct Stance<T: Real, const NQ: usize, const NC: usize, const NK: usize> {
 
 /// The stance system factored in the chart, the ground seen from it, and the chart's
 /// orientation.
-type ChartStance<T, const NQ: usize, const NC: usize, const NK: usize> = (
+pub(crate) type ChartStance<T, const NQ: usize, const NC: usize, const NK: usize> = (
     ContactSystem<T, NQ, NC, NK, 3>,
     Ground<T, 3>,
     UnitQuaternion<T>,
@@ -477,7 +480,14 @@ type ChartStance<T, const NQ: usize, const NC: usize, const NK: usize> = (
 /// The stance system at a state: the chart centred on the body, gravity and the ground
 /// turned into it, the contacts in `modes` held (sticking, or sliding with friction
 /// `mu`), evaluated and factored once.
-fn stance_system<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+pub(crate) fn stance_system<
+    L,
+    T,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+>(
     params: &L::Params<T>,
     state: &RobotState<T, NQ>,
     modes: &Modes<NK, 3>,
@@ -597,6 +607,44 @@ where
     L: ContactModel<NQ, NC, NU, NK, 3>,
     T: Real,
 {
+    pushed_stance_step::<L, T, NQ, NC, NU, NK>(
+        params,
+        state,
+        u,
+        &Vector3::zeros(),
+        modes,
+        ground,
+        mu,
+        dt,
+    )
+}
+
+/// [`stance_step`] with a force `push` (N, in the world) on the body frame's origin,
+/// held over the step: a push, or any load carried at that point. In the chart centred
+/// at the step's start the origin is `p₀ + R₀ δ`, so the push's generalized force is
+/// `R₀ᵀ F` on `δ` and nothing on the angles, exactly, for the whole step.
+#[allow(clippy::too_many_arguments)]
+pub fn pushed_stance_step<
+    L,
+    T,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+>(
+    params: &L::Params<T>,
+    state: &mut RobotState<T, NQ>,
+    u: &SVector<T, NU>,
+    push: &Vector3<T>,
+    modes: &Modes<NK, 3>,
+    ground: &Ground<T, 3>,
+    mu: &SVector<T, NK>,
+    dt: T,
+) -> Result<Stance<T, NQ, NC, NK>, RobotStepError>
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+    T: Real,
+{
     let f = free_joint::<L, NQ, NC, NU>()?;
     let mut next = *state;
     next.recentre(f);
@@ -604,7 +652,11 @@ where
     let local = ground_in_chart(ground, &next.position, &next.orientation);
     // The forces are in the chart of the step's start, turned by its centre.
     let centre = next.orientation;
-    let applied = actuation::<L, T, NQ, NC, NU>(u);
+    let mut applied = actuation::<L, T, NQ, NC, NU>(u);
+    let on_body = centre.inverse_transform_vector(push);
+    for k in 0..3 {
+        applied[f + k] += on_body[k];
+    }
     let accel = |q: &SVector<T, NQ>, qd: &SVector<T, NQ>| {
         ContactSystem::new::<L, NU>(&chart, q, qd, modes, &SVector::zeros(), &local, mu, None)
             .and_then(|s| s.solve(&applied))

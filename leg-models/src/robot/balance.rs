@@ -1,0 +1,424 @@
+//! A whole-body balance controller for a floating robot standing on its feet: each tick a
+//! quadratic program, solved by Clarabel (pure Rust, exact second-order friction cones),
+//! picks the motor torques.
+//!
+//! With the held contacts and the closures, the stance dynamics are linear in what is
+//! applied: one factorization of the stance system ([`super::stance_dynamics`]) gives
+//! the chart's accelerations and every ground force as affine maps of the torques,
+//!
+//! ```text
+//! q̈ = q̈₀ + A u,   λ = λ₀ + F u,
+//! ```
+//!
+//! so the QP over joint accelerations, ground forces and torques is solved in the
+//! torques alone, with the other two eliminated exactly (the equality rows of the
+//! dynamics, the closures and the held contacts are then satisfied by construction, and
+//! the forces the controller plans are the ones the simulator applies):
+//!
+//! ```text
+//! min ½ |W (S q̈ − a*)|² + ½ w_t |λ_t / m|² + ½ w_u |u|²
+//! s.t. |λ_t,k| ≤ μ_k λ_n,k for every held contact k   (second-order cones)
+//!      |u_i| ≤ u_max,i                                (when limits are given)
+//! ```
+//!
+//! The tasks `a*` are a PD on the body's pose (its position in the world, its
+//! orientation by the rotation vector of `R*ᵀ R`, both critically damped by default)
+//! and, with a small weight, a PD on every joint towards a posture: the motions the body
+//! task leaves free (the legs' internal ones) would otherwise drift; the tangential
+//! forces over the robot's mass `m` (from its mass matrix's body block), with a small
+//! weight, keep the feet's forces off their cones' edges. Angular rows and joint rows are
+//! scaled by the robot's size, so every row is an acceleration in m/s².
+//!
+//! The problem's sparsity is fixed by the held contacts: the solver is set up once and
+//! its data updated in place while they stay the same (a new set of held contacts sets
+//! it up again).
+
+use core::fmt;
+use std::vec::Vec;
+
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{
+    DefaultSettings, DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
+};
+use nalgebra::{SMatrix, SVector, UnitQuaternion, Vector3};
+
+use super::{
+    forces_in_world, free_joint, stance_system, velocity_derivative, RobotDynamicsError,
+    RobotState, Stance,
+};
+use crate::dynamics::actuation;
+use crate::dynamics::contact::{ContactMode, Ground, Modes};
+use crate::model::contract::ContactModel;
+
+/// The controller's gains: natural frequencies (rad/s), damping ratio and weights.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BalanceGains {
+    /// The body pose's natural frequency `ω_n`: stiffness `ω_n²`, damping `2 ζ ω_n`.
+    pub body_frequency: f64,
+    /// `ζ` of the body's and the posture's PD.
+    pub damping_ratio: f64,
+    /// The posture's natural frequency.
+    pub posture_frequency: f64,
+    /// The posture task's weight beside the body's (1).
+    pub posture_weight: f64,
+    /// The ground forces' tangential parts' weight, per `m g`-sized force beside a `g`-sized
+    /// acceleration: it keeps the forces inside their cones where the tasks allow (the
+    /// internal forces between feet cost no acceleration, and the least torques load the
+    /// feet sideways up to the cones' edges).
+    pub tangential_weight: f64,
+    /// The torques' weight, relative to the tasks' mean curvature per torque.
+    pub torque_weight: f64,
+}
+
+impl Default for BalanceGains {
+    fn default() -> Self {
+        BalanceGains {
+            body_frequency: 10.0,
+            damping_ratio: 1.0,
+            posture_frequency: 10.0,
+            posture_weight: 1e-2,
+            tangential_weight: 1e-4,
+            torque_weight: 1e-8,
+        }
+    }
+}
+
+/// Where the controller holds the robot: the body's pose in the world and the joints'
+/// posture (the free joint's six entries of `posture` are not read).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BalanceTarget<const NQ: usize> {
+    /// The body frame's origin in the world (m).
+    pub position: Vector3<f64>,
+    /// The body frame's orientation.
+    pub orientation: UnitQuaternion<f64>,
+    /// The joints' coordinates.
+    pub posture: SVector<f64, NQ>,
+}
+
+impl<const NQ: usize> BalanceTarget<NQ> {
+    /// The pose and posture of `state`: hold the robot where it stands.
+    pub fn holding(state: &RobotState<f64, NQ>) -> Self {
+        BalanceTarget {
+            position: state.position,
+            orientation: state.orientation,
+            posture: state.q,
+        }
+    }
+}
+
+/// One tick's command: the torques and what the stance dynamics give under them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BalanceCommand<const NQ: usize, const NC: usize, const NU: usize, const NK: usize> {
+    /// The motor torques.
+    pub torques: SVector<f64, NU>,
+    /// `q̈`, closure and ground forces under `torques`, the ground forces in the world.
+    pub stance: Stance<f64, NQ, NC, NK>,
+    /// Clarabel's interior-point iterations.
+    pub iterations: u32,
+}
+
+/// Why the controller has no command.
+#[derive(Clone, Debug, PartialEq)]
+pub enum BalanceError {
+    /// The stance dynamics failed (or the model is not a floating robot).
+    Dynamics(RobotDynamicsError),
+    /// No contact is held: there is nothing to balance on.
+    NoStance,
+    /// Contact `contact` slides: the controller plans for held (sticking) contacts only.
+    Sliding {
+        /// The contact's index.
+        contact: usize,
+    },
+    /// Clarabel did not solve the QP: `status` is its verdict (`PrimalInfeasible` means
+    /// no torques within their limits keep every held contact's force in its cone: the
+    /// robot cannot stay on its feet as they are).
+    NotSolved {
+        /// Clarabel's status.
+        status: String,
+    },
+}
+
+impl From<RobotDynamicsError> for BalanceError {
+    fn from(e: RobotDynamicsError) -> Self {
+        BalanceError::Dynamics(e)
+    }
+}
+
+impl fmt::Display for BalanceError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            BalanceError::Dynamics(e) => write!(f, "balance: {e}"),
+            BalanceError::NoStance => write!(f, "balance: no contact is held"),
+            BalanceError::Sliding { contact } => write!(
+                f,
+                "balance: contact {contact} slides; the controller plans for held contacts"
+            ),
+            BalanceError::NotSolved { status } => {
+                write!(f, "balance: the QP was not solved ({status})")
+            }
+        }
+    }
+}
+
+impl std::error::Error for BalanceError {}
+
+/// The balance controller of a robot with `NQ` coordinates, `NC` closure rows, `NU`
+/// motors and `NK` contact rows (three per contact).
+pub struct BalanceController<const NQ: usize, const NC: usize, const NU: usize, const NK: usize> {
+    /// Where it holds the robot.
+    pub target: BalanceTarget<NQ>,
+    /// Its gains.
+    pub gains: BalanceGains,
+    /// `|u_i| ≤ torque_limit[i]` when given.
+    pub torque_limit: Option<SVector<f64, NU>>,
+    /// The solver and the held contacts it was set up for.
+    qp: Option<(DefaultSolver<f64>, Modes<NK, 3>)>,
+    /// The QP's data, refilled each tick (dense, in the solver's column order).
+    p: Vec<f64>,
+    q: Vec<f64>,
+    a: Vec<f64>,
+    b: Vec<f64>,
+    /// The force rows in the cones, `(row, scale)`: `(μ λ_n, λ_t₁, λ_t₂)` per contact.
+    cone_rows: Vec<(usize, f64)>,
+}
+
+impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
+    BalanceController<NQ, NC, NU, NK>
+{
+    /// A controller holding `target` with `gains`.
+    pub fn new(
+        target: BalanceTarget<NQ>,
+        gains: BalanceGains,
+        torque_limit: Option<SVector<f64, NU>>,
+    ) -> Self {
+        BalanceController {
+            target,
+            gains,
+            torque_limit,
+            qp: None,
+            p: Vec::new(),
+            q: Vec::new(),
+            a: Vec::new(),
+            b: Vec::new(),
+            cone_rows: Vec::new(),
+        }
+    }
+
+    /// The torques for `state`, the contacts in `modes` held on `ground` with friction
+    /// `mu` (per row, as [`crate::dynamics::contact::spec_friction`]).
+    pub fn command<L>(
+        &mut self,
+        params: &L::Params<f64>,
+        state: &RobotState<f64, NQ>,
+        modes: &Modes<NK, 3>,
+        ground: &Ground<f64, 3>,
+        mu: &SVector<f64, NK>,
+    ) -> Result<BalanceCommand<NQ, NC, NU, NK>, BalanceError>
+    where
+        L: ContactModel<NQ, NC, NU, NK, 3>,
+    {
+        let contacts = NK / 3;
+        let mut held = 0;
+        for k in 0..contacts {
+            match modes.get(k) {
+                ContactMode::Stick => held += 1,
+                ContactMode::Slide { .. } => return Err(BalanceError::Sliding { contact: k }),
+                ContactMode::Flight => {}
+            }
+        }
+        if held == 0 {
+            return Err(BalanceError::NoStance);
+        }
+        let f = free_joint::<L, NQ, NC, NU>().map_err(RobotDynamicsError::from)?;
+        let mut s = *state;
+        s.recentre(f);
+        let (system, local, orientation) =
+            stance_system::<L, f64, NQ, NC, NU, NK>(params, &s, modes, ground, mu)?;
+        let solve = |u: &SVector<f64, NU>| {
+            system
+                .solve(&actuation::<L, f64, NQ, NC, NU>(u))
+                .map_err(|e| BalanceError::Dynamics(e.into()))
+        };
+        // The affine maps q̈ = q̈₀ + A u, λ = λ₀ + F u.
+        let free = solve(&SVector::zeros())?;
+        let mut accel = SMatrix::<f64, NQ, NU>::zeros();
+        let mut force = SMatrix::<f64, NK, NU>::zeros();
+        for i in 0..NU {
+            let mut e = SVector::<f64, NU>::zeros();
+            e[i] = 1.0;
+            let x = solve(&e)?;
+            accel.set_column(i, &(x.x - free.x));
+            force.set_column(i, &(x.contact - free.contact));
+        }
+
+        // The tasks: the desired q̈ of each coordinate and its row's scale.
+        let size = L::leg_size(&s.q, params);
+        let g = &self.gains;
+        let (kp, kd) = (
+            g.body_frequency * g.body_frequency,
+            2.0 * g.damping_ratio * g.body_frequency,
+        );
+        let (jp, jd) = (
+            g.posture_frequency * g.posture_frequency,
+            2.0 * g.damping_ratio * g.posture_frequency,
+        );
+        let mut desired = SVector::<f64, NQ>::zeros();
+        let mut scale = SVector::<f64, NQ>::zeros();
+        // The body: p̈* in the world, which is R₀ q̈_δ in the chart centred on it.
+        let velocity = orientation.transform_vector(&Vector3::new(s.v[f], s.v[f + 1], s.v[f + 2]));
+        let linear = orientation
+            .inverse_transform_vector(&(-(s.position - self.target.position) * kp - velocity * kd));
+        // ω̇* in the body frame, then the angles' q̈ = ω̇ − Ė θ̇ at the centre.
+        let error = (self.target.orientation.inverse() * orientation).scaled_axis();
+        let omega = Vector3::new(s.v[f + 3], s.v[f + 4], s.v[f + 5]);
+        let bias = velocity_derivative(f, &s.v, &SVector::zeros());
+        let angular = -error * kp - omega * kd;
+        for k in 0..3 {
+            desired[f + k] = linear[k];
+            scale[f + k] = 1.0;
+            desired[f + 3 + k] = angular[k] - bias[f + 3 + k];
+            scale[f + 3 + k] = size;
+        }
+        let posture_scale = g.posture_weight.sqrt() * size;
+        for i in (0..NQ).filter(|&i| i < f || i >= f + 6) {
+            desired[i] = -jp * (s.q[i] - self.target.posture[i]) - jd * s.v[i];
+            scale[i] = posture_scale;
+        }
+        // ½|W(q̈₀ + A u − a*)|² + ½ w_u |u|²: P = (WA)ᵀ WA + w_u I, c = (WA)ᵀ W(q̈₀ − a*),
+        // and the tangential forces' term likewise.
+        let wa = SMatrix::<f64, NQ, NQ>::from_diagonal(&scale) * accel;
+        let residual = (free.x - desired).component_mul(&scale);
+        let mut hessian = wa.transpose() * wa;
+        let mut linear_cost = wa.transpose() * residual;
+        // The tangential forces of the held contacts, over the mass (an acceleration).
+        let mass = system.mass_matrix[(f, f)];
+        let wt = g.tangential_weight.sqrt() / mass;
+        for k in (0..contacts).filter(|&k| modes.get(k) == ContactMode::Stick) {
+            for r in [3 * k, 3 * k + 1] {
+                let row = force.row(r) * wt;
+                hessian += row.transpose() * row;
+                linear_cost += row.transpose() * (free.contact[r] * wt);
+            }
+        }
+        let mean = hessian.trace() / NU as f64;
+        let ridge = g.torque_weight * mean.max(f64::MIN_POSITIVE);
+        for i in 0..NU {
+            hessian[(i, i)] += ridge;
+        }
+
+        // Constraints s = b − A u ∈ K: per held contact (μ λ_n, λ_t₁, λ_t₂) in the
+        // second-order cone, then the torque limits.
+        let limits = self.torque_limit.is_some();
+        let rows = 3 * held + if limits { 2 * NU } else { 0 };
+        self.p.clear();
+        for j in 0..NU {
+            for i in 0..=j {
+                self.p.push(hessian[(i, j)]);
+            }
+        }
+        self.q.clear();
+        self.q.extend(linear_cost.iter());
+        self.b.clear();
+        let cone_rows = &mut self.cone_rows;
+        cone_rows.clear();
+        for k in (0..contacts).filter(|&k| modes.get(k) == ContactMode::Stick) {
+            let m = mu[3 * k + 2];
+            cone_rows.push((3 * k + 2, m));
+            cone_rows.push((3 * k, 1.0));
+            cone_rows.push((3 * k + 1, 1.0));
+        }
+        for &(r, m) in cone_rows.iter() {
+            self.b.push(m * free.contact[r]);
+        }
+        if let Some(lim) = &self.torque_limit {
+            self.b.extend(lim.iter());
+            self.b.extend(lim.iter());
+        }
+        self.a.clear();
+        for j in 0..NU {
+            for &(r, m) in cone_rows.iter() {
+                self.a.push(-m * force[(r, j)]);
+            }
+            if limits {
+                for i in 0..NU {
+                    self.a.push(if i == j { 1.0 } else { 0.0 });
+                }
+                for i in 0..NU {
+                    self.a.push(if i == j { -1.0 } else { 0.0 });
+                }
+            }
+        }
+
+        let setup = !matches!(&self.qp, Some((_, m)) if m == modes);
+        if setup {
+            let p = CscMatrix::new(
+                NU,
+                NU,
+                (0..=NU).map(|j| j * (j + 1) / 2).collect(),
+                (0..NU).flat_map(|j| 0..=j).collect(),
+                self.p.clone(),
+            );
+            let a = CscMatrix::new(
+                rows,
+                NU,
+                (0..=NU).map(|j| j * rows).collect(),
+                (0..NU).flat_map(|_| 0..rows).collect(),
+                self.a.clone(),
+            );
+            let mut cones = Vec::with_capacity(held + 1);
+            cones.extend((0..held).map(|_| SupportedConeT::SecondOrderConeT(3)));
+            if limits {
+                cones.push(SupportedConeT::NonnegativeConeT(2 * NU));
+            }
+            let solver =
+                DefaultSolver::new(&p, &self.q, &a, &self.b, &cones, settings()).map_err(|e| {
+                    BalanceError::NotSolved {
+                        status: format!("set-up: {e}"),
+                    }
+                })?;
+            self.qp = Some((solver, *modes));
+        }
+        let Some((solver, _)) = self.qp.as_mut() else {
+            unreachable!("set up above")
+        };
+        if !setup {
+            solver
+                .update_data(&self.p, &self.q, &self.a, &self.b)
+                .map_err(|e| BalanceError::NotSolved {
+                    status: format!("update: {e}"),
+                })?;
+        }
+        solver.solve();
+        let out = &solver.solution;
+        match out.status {
+            SolverStatus::Solved | SolverStatus::AlmostSolved => {}
+            status => {
+                // Set up afresh next time: an interrupted solve leaves nothing to reuse.
+                let status = format!("{status:?}");
+                self.qp = None;
+                return Err(BalanceError::NotSolved { status });
+            }
+        }
+        let torques = SVector::<f64, NU>::from_column_slice(&out.x);
+        let iterations = out.iterations;
+        let solution = solve(&torques)?;
+        Ok(BalanceCommand {
+            torques,
+            stance: Stance {
+                world_forces: forces_in_world(&local, &orientation, &solution.contact),
+                solution,
+            },
+            iterations,
+        })
+    }
+}
+
+/// Clarabel's settings: quiet, and no presolve (it would forbid updating the data in
+/// place).
+fn settings() -> DefaultSettings<f64> {
+    DefaultSettingsBuilder::default()
+        .verbose(false)
+        .presolve_enable(false)
+        .build()
+        .expect("valid settings")
+}

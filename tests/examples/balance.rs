@@ -1,0 +1,109 @@
+//! The floating robots standing on their feet under the balance QP
+//! (`leg_models::robot::balance`), pushed on the
+//! body's origin for 0.1 s along the ground (sideways, then forwards): the largest push
+//! each survives (no foot's force leaves its friction cone, and the body is back within
+//! 1 mm and 1 mrad after 2 s), found by bisection. Robots whose contact points at home
+//! are not on one plane are skipped, and the example says why.
+//!
+//! `cargo run --release -p leg-tests --example balance`
+
+use leg_models::nalgebra::Vector3;
+use leg_models::robot::balance::BalanceGains;
+use leg_models::ContactModel;
+use leg_tests::standing::{largest_push, on_its_feet, push_run, spec_mass, with_gravity, Holding};
+
+const DT: f64 = 1e-3;
+const PUSH_TIME: f64 = 0.1;
+const DURATION: f64 = 2.0;
+
+fn report<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>()
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
+    let (start, ground) = match on_its_feet::<L, NQ, NC, NU, NK>(&p) {
+        Ok(x) => x,
+        Err(why) => {
+            println!("{}: skipped: {why}", L::NAME);
+            return;
+        }
+    };
+    let weight = spec_mass::<L, NQ, NC, NU>(&p) * 9.81;
+    println!("{}: weight {weight:.3} N, {} feet", L::NAME, NK / 3);
+    let t0 = std::time::Instant::now();
+    let still = push_run::<L, NQ, NC, NU, NK>(
+        &p,
+        &start,
+        &ground,
+        Holding::Balance(BalanceGains::default()),
+        Vector3::zeros(),
+        0.0,
+        1.0,
+        DT,
+    );
+    println!(
+        "  balance QP, 1 s unpushed: {:?}; end {:.1e} m {:.1e} rad; {:.1} iterations a tick; {:.1} µs a tick (QP and step)",
+        still.failed,
+        still.end.0,
+        still.end.1,
+        still.mean_iterations,
+        t0.elapsed().as_secs_f64() * 1e6 / 1000.0
+    );
+    // The standing test's holding (least torques, joint PD), unpushed: its feet's forces
+    // against their cones.
+    let pd = push_run::<L, NQ, NC, NU, NK>(
+        &p,
+        &start,
+        &ground,
+        Holding::JointPd,
+        Vector3::zeros(),
+        0.0,
+        1.0,
+        DT,
+    );
+    println!(
+        "  joint PD on the least holding torques, 1 s unpushed: {:?}; largest |λ_t|/(μ λ_n) {:.2}",
+        pd.failed, pd.worst_friction
+    );
+    println!(
+        "  balance QP, 1 s unpushed: largest |λ_t|/(μ λ_n) {:.3}, least normal force {:.3} N",
+        still.worst_friction, still.least_normal
+    );
+    // Sideways and forwards along the ground, in the body's frame turned onto it.
+    let side = ground
+        .normal
+        .cross(&start.orientation.transform_vector(&Vector3::x()))
+        .normalize();
+    let forward = side.cross(&ground.normal);
+    for (name, d) in [
+        ("sideways", side),
+        ("forwards", forward),
+        ("backwards", -forward),
+    ] {
+        let (lo, hi, why) = largest_push::<L, NQ, NC, NU, NK>(
+            &p,
+            &start,
+            &ground,
+            Holding::Balance(BalanceGains::default()),
+            d,
+            PUSH_TIME,
+            DURATION,
+            DT,
+            6,
+        );
+        println!(
+            "  balance QP, pushed {name} for {PUSH_TIME} s: survives {lo:.2} N ({:.2} of its weight); fails at {hi:.2} N: {why}",
+            lo / weight
+        );
+    }
+}
+
+macro_rules! each {
+    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
+        report::<$ty, $nq, $nc, $nu, $nk>();
+    };
+}
+
+fn main() {
+    generated::for_each_floating_model!(each);
+}
