@@ -49,6 +49,51 @@ where
         still.mean_iterations,
         t0.elapsed().as_secs_f64() * 1e6 / 1000.0
     );
+    // One command and one step alone, at the standing state (median of 9 batches).
+    {
+        use leg_models::dynamics::contact::{spec_friction, ContactMode, Modes};
+        use leg_models::robot::balance::{BalanceController, BalanceTarget};
+        let mut modes = Modes::<NK, 3>::flight();
+        for k in 0..NK / 3 {
+            modes.set(k, ContactMode::Stick);
+        }
+        let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
+        let mut c = BalanceController::<NQ, NC, NU, NK>::new(
+            BalanceTarget::holding(&start),
+            BalanceGains::default(),
+            None,
+        );
+        let u = c
+            .command::<L>(&p, &start, &modes, &ground, &mu)
+            .unwrap()
+            .torques;
+        let median = |f: &mut dyn FnMut()| {
+            let mut t: Vec<f64> = (0..9)
+                .map(|_| {
+                    let t0 = std::time::Instant::now();
+                    for _ in 0..200 {
+                        f();
+                    }
+                    t0.elapsed().as_secs_f64() * 1e6 / 200.0
+                })
+                .collect();
+            t.sort_by(f64::total_cmp);
+            t[4]
+        };
+        let command = median(&mut || {
+            std::hint::black_box(c.command::<L>(&p, &start, &modes, &ground, &mu).unwrap());
+        });
+        let step = median(&mut || {
+            let mut s = start;
+            std::hint::black_box(
+                leg_models::robot::stance_step::<L, f64, NQ, NC, NU, NK>(
+                    &p, &mut s, &u, &modes, &ground, &mu, DT,
+                )
+                .unwrap(),
+            );
+        });
+        println!("  one QP command {command:.1} µs, one RK4 stance step {step:.1} µs (medians)");
+    }
     // The standing test's holding (least torques, joint PD), unpushed: its feet's forces
     // against their cones.
     let pd = push_run::<L, NQ, NC, NU, NK>(
