@@ -51,12 +51,9 @@ where
     );
     // One command and one step alone, at the standing state (median of 9 batches).
     {
-        use leg_models::dynamics::contact::{spec_friction, ContactMode, Modes};
+        use leg_models::dynamics::contact::{spec_friction, Modes};
         use leg_models::robot::balance::{BalanceController, BalanceTarget};
-        let mut modes = Modes::<NK, 3>::flight();
-        for k in 0..NK / 3 {
-            modes.set(k, ContactMode::Stick);
-        }
+        let modes = Modes::<NK, 3>::stick();
         let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
         let mut c = BalanceController::<NQ, NC, NU, NK>::new(
             BalanceTarget::holding(&start),

@@ -3,7 +3,7 @@
 //! its contact points, and a push run under a holding controller, judged by the forces
 //! the simulator applies.
 
-use leg_models::dynamics::contact::{spec_friction, ContactMode, Ground, Modes};
+use leg_models::dynamics::contact::{spec_friction, Ground, Modes};
 use leg_models::nalgebra::{SVector, UnitQuaternion, Vector3};
 use leg_models::robot::balance::{BalanceController, BalanceGains, BalanceTarget};
 use leg_models::robot::{self, RobotState};
@@ -119,7 +119,8 @@ pub struct PushRun {
     pub least_normal: f64,
     /// The body's largest distance from where it started (m).
     pub excursion: f64,
-    /// At the end: the body's distance from the start (m), its angle (rad), `|v|`.
+    /// At the end: the body's distance from the start (m), its angle (rad), `|v|` (NaN
+    /// where the run failed before its end).
     pub end: (f64, f64, f64),
     /// The QP's mean interior-point iterations (zero for the joint PD).
     pub mean_iterations: f64,
@@ -145,10 +146,7 @@ pub fn push_run<L, const NQ: usize, const NC: usize, const NU: usize, const NK: 
 where
     L: ContactModel<NQ, NC, NU, NK, 3>,
 {
-    let mut modes = Modes::<NK, 3>::flight();
-    for k in 0..NK / 3 {
-        modes.set(k, ContactMode::Stick);
-    }
+    let modes = Modes::<NK, 3>::stick();
     let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
     let mut balance = match holding {
         Holding::Balance(gains) => Some(BalanceController::<NQ, NC, NU, NK>::new(
@@ -158,9 +156,13 @@ where
         )),
         Holding::JointPd => None,
     };
-    let hold = robot::holding_torques::<L, f64, NQ, NC, NU, NK>(p, start, &modes, ground, &mu)
-        .map(|(u, _)| u)
-        .unwrap_or_else(|_| SVector::zeros());
+    let hold = match holding {
+        Holding::JointPd => {
+            robot::holding_torques::<L, f64, NQ, NC, NU, NK>(p, start, &modes, ground, &mu)
+                .map(|(u, _)| u)
+        }
+        Holding::Balance(_) => Ok(SVector::zeros()),
+    };
     let weight = spec_mass::<L, NQ, NC, NU>(p) * 9.81;
     let stiffness = weight * L::leg_size(&start.q, p);
     let damping = stiffness / 10.0;
@@ -169,8 +171,15 @@ where
         worst_friction: 0.0,
         least_normal: f64::INFINITY,
         excursion: 0.0,
-        end: (0.0, 0.0, 0.0),
+        end: (f64::NAN, f64::NAN, f64::NAN),
         mean_iterations: 0.0,
+    };
+    let hold = match hold {
+        Ok(u) => u,
+        Err(e) => {
+            run.failed = Some((0.0, format!("no holding torques: {e}")));
+            return run;
+        }
     };
     let steps = (duration / dt).round() as usize;
     let pushed = (push_time / dt).round() as usize;
@@ -221,7 +230,12 @@ where
                 f64::INFINITY
             };
             run.worst_friction = run.worst_friction.max(ratio);
-            if ratio > 1.0 && run.failed.is_none() {
+            if normal <= 0.0 && run.failed.is_none() {
+                run.failed = Some((
+                    t,
+                    format!("contact {k} pulls on the ground ({normal:.3} N)"),
+                ));
+            } else if ratio > 1.0 && run.failed.is_none() {
                 run.failed = Some((
                     t,
                     format!(

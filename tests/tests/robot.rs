@@ -603,7 +603,8 @@ where
 /// the standing test load the feet sideways, outside their cones: printed beside it);
 /// pushed sideways on the body at 15 % of its weight for 0.1 s, it stays on its feet
 /// (every force in its cone, every step) and is back within 1 mm and 1 mrad after 1.25 s;
-/// pushed at three times its weight, the run fails, and says which foot slipped.
+/// pushed at three times its weight, the run fails, and says which foot slipped or
+/// lifted (or that no torques keep the feet in their cones).
 fn balances_and_recovers_from_a_push<
     L,
     const NQ: usize,
@@ -614,7 +615,7 @@ fn balances_and_recovers_from_a_push<
 where
     L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
 {
-    use leg_models::dynamics::contact::{spec_friction, ContactMode, Modes};
+    use leg_models::dynamics::contact::{spec_friction, Modes};
     use leg_models::robot::balance::{BalanceController, BalanceGains, BalanceTarget};
     use leg_tests::standing::{push_run, Holding};
     let name = L::NAME;
@@ -627,10 +628,7 @@ where
         }
     };
     let weight = spec_mass::<L, NQ, NC, NU>(&p) * 9.81;
-    let mut modes = Modes::<NK, 3>::flight();
-    for k in 0..NK / 3 {
-        modes.set(k, ContactMode::Stick);
-    }
+    let modes = Modes::<NK, 3>::stick();
     let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
     // Unpushed: the weight on the feet, inside the cones.
     let mut control = BalanceController::<NQ, NC, NU, NK>::new(
@@ -667,7 +665,7 @@ where
         }
         force_err = force_err.max((total - Vector3::new(0.0, 0.0, weight)).norm());
     }
-    let (_, moved) = ((), (s.position - start.position).norm());
+    let moved = (s.position - start.position).norm();
     let held = push_run::<L, NQ, NC, NU, NK>(
         &p,
         &start,
@@ -729,9 +727,122 @@ where
     );
     let why = shoved.failed.map(|(_, w)| w).unwrap_or_default();
     assert!(
-        why.contains("friction cone") || why.contains("QP"),
+        why.contains("friction cone") || why.contains("pulls") || why.contains("PrimalInfeasible"),
         "{name}: a push of three times the weight did not unseat it ({why:?})"
     );
+}
+
+/// The QP's constraints, made to bind: on a ground whose friction is just above the
+/// least the stance needs, every planned force is inside its cone and one is on its
+/// edge; with torque limits below the torques it picks unlimited, every torque is within
+/// its limit and one is at it. The forces it plans are the ones the stance step applies,
+/// and bad limits are refused with the motor named.
+fn balance_constraints_bind<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>()
+where
+    L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
+{
+    use leg_models::dynamics::contact::{spec_friction, Modes};
+    use leg_models::robot::balance::{BalanceController, BalanceGains, BalanceTarget};
+    let name = L::NAME;
+    let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
+    let (start, ground) = match on_its_feet::<L, NQ, NC, NU, NK>(&p) {
+        Ok(x) => x,
+        Err(why) => {
+            leg_tests::not_applicable(name, "balance constraints", &why);
+            return;
+        }
+    };
+    let modes = Modes::<NK, 3>::stick();
+    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
+    // A state off the target, so the tasks ask for something.
+    let mut s = start;
+    s.position += ground.normal.cross(&Vector3::x()).normalize() * 2e-3;
+    let new = |limit| {
+        BalanceController::<NQ, NC, NU, NK>::new(
+            BalanceTarget::holding(&start),
+            BalanceGains::default(),
+            limit,
+        )
+    };
+    let ratios = |w: &SVector<f64, NK>, mu: &SVector<f64, NK>| {
+        (0..NK / 3)
+            .map(|k| {
+                let f = Vector3::new(w[3 * k], w[3 * k + 1], w[3 * k + 2]);
+                let n = f.dot(&ground.normal);
+                (f - ground.normal * n).norm() / (mu[3 * k + 2] * n)
+            })
+            .fold(0.0f64, f64::max)
+    };
+    let free = new(None)
+        .command::<L>(&p, &s, &modes, &ground, &mu)
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
+    // The planned forces are the step's.
+    let mut stepped = s;
+    let stance = robot::stance_step::<L, f64, NQ, NC, NU, NK>(
+        &p,
+        &mut stepped,
+        &free.torques,
+        &modes,
+        &ground,
+        &mu,
+        1e-3,
+    )
+    .unwrap();
+    let d = (stance.world_forces - free.stance.world_forces).amax();
+    assert!(
+        d < 1e-12 * free.stance.world_forces.amax(),
+        "{name}: planned and applied forces differ by {d:e} N"
+    );
+    // Friction scaled so the unconstrained forces' worst foot would need 1.5 times it:
+    // the cone binds.
+    let need = ratios(&free.stance.world_forces, &mu);
+    let low = mu * (need / 1.5);
+    let tight = new(None)
+        .command::<L>(&p, &s, &modes, &ground, &low)
+        .unwrap_or_else(|e| panic!("{name}: low friction: {e}"));
+    let r = ratios(&tight.stance.world_forces, &low);
+    eprintln!("{name}: balance: unconstrained forces need μ ratio {need:.4}; on 1/1.5 of that the worst foot is at {r:.6} of its cone");
+    assert!(
+        r <= 1.0 + 1e-6 && r > 0.99,
+        "{name}: on low friction the worst foot is at {r} of its cone"
+    );
+    // One limit for every motor, 0.95 of the largest torque picked unlimited (the others
+    // take up the load): every torque within, one at it.
+    let limit = SVector::<f64, NU>::from_element(0.95 * free.torques.amax());
+    let limited = new(Some(limit))
+        .command::<L>(&p, &s, &modes, &ground, &mu)
+        .unwrap_or_else(|e| panic!("{name}: limited: {e}"));
+    let over = (0..NU)
+        .map(|i| limited.torques[i].abs() / limit[i])
+        .fold(0.0f64, f64::max);
+    assert!(
+        over <= 1.0 + 1e-6 && over > 0.99,
+        "{name}: the torques reach {over} of their limits"
+    );
+    // Bad limits, named.
+    let mut bad = limit;
+    bad[NU - 1] = f64::INFINITY;
+    let e = new(Some(bad))
+        .command::<L>(&p, &s, &modes, &ground, &mu)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains(&format!("motor {}", NU - 1)), "{name}: {e}");
+    // A controller whose limits are switched on after set-up sets itself up again.
+    let mut c = new(None);
+    c.command::<L>(&p, &s, &modes, &ground, &mu).unwrap();
+    c.torque_limit = Some(limit);
+    let again = c
+        .command::<L>(&p, &s, &modes, &ground, &mu)
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
+    assert!(
+        (again.torques - limited.torques).amax() < 1e-6 * limit.amax(),
+        "{name}: the limits switched on give other torques"
+    );
+    // No contact held: nothing to balance on.
+    let e = c
+        .command::<L>(&p, &s, &Modes::<NK, 3>::flight(), &ground, &mu)
+        .unwrap_err();
+    assert!(e.to_string().contains("no contact is held"), "{name}: {e}");
 }
 
 macro_rules! floating_robot_tests {
@@ -765,6 +876,11 @@ macro_rules! floating_robot_tests {
             #[test]
             fn balances_and_recovers_from_a_push() {
                 super::balances_and_recovers_from_a_push::<$ty, $nq, $nc, $nu, $nk>();
+            }
+
+            #[test]
+            fn balance_constraints_bind() {
+                super::balance_constraints_bind::<$ty, $nq, $nc, $nu, $nk>();
             }
 
             #[test]

@@ -155,6 +155,11 @@ impl<const NK: usize, const ND: usize> Modes<NK, ND> {
         Modes([ContactMode::Flight; NK])
     }
 
+    /// Every contact held (sticking): a stance on all of them.
+    pub fn stick() -> Self {
+        Modes([ContactMode::Stick; NK])
+    }
+
     /// The number of contacts, `NK / ND`.
     pub fn contacts(&self) -> usize {
         NK / ND

@@ -16,7 +16,7 @@
 //! the forces the controller plans are the ones the simulator applies):
 //!
 //! ```text
-//! min ½ |W (S q̈ − a*)|² + ½ w_t |λ_t / m|² + ½ w_u |u|²
+//! min ½ |W (S q̈ − a*)|² + ½ w_t |λ_t / m|² + ½ r |u|²
 //! s.t. |λ_t,k| ≤ μ_k λ_n,k for every held contact k   (second-order cones)
 //!      |u_i| ≤ u_max,i                                (when limits are given)
 //! ```
@@ -26,8 +26,10 @@
 //! and, with a small weight, a PD on every joint towards a posture: the motions the body
 //! task leaves free (the legs' internal ones) would otherwise drift; the tangential
 //! forces over the robot's mass `m` (from its mass matrix's body block), with a small
-//! weight, keep the feet's forces off their cones' edges. Angular rows and joint rows are
-//! scaled by the robot's size, so every row is an acceleration in m/s².
+//! weight, keep the feet's forces off their cones' edges; the ridge `r` is `w_u` times the
+//! mean of the others' curvature per torque. Angular rows and joint rows are scaled by
+//! the robot's size, so that the body's rows and the revolute joints' are accelerations
+//! in m/s².
 //!
 //! The problem's sparsity is fixed by the held contacts: the solver is set up once and
 //! its data updated in place while they stay the same (a new set of held contacts sets
@@ -129,6 +131,13 @@ pub enum BalanceError {
         /// The contact's index.
         contact: usize,
     },
+    /// A torque limit is not a positive finite number.
+    TorqueLimit {
+        /// The motor's index.
+        motor: usize,
+        /// Its limit.
+        limit: f64,
+    },
     /// Clarabel did not solve the QP: `status` is its verdict (`PrimalInfeasible` means
     /// no torques within their limits keep every held contact's force in its cone: the
     /// robot cannot stay on its feet as they are).
@@ -153,6 +162,10 @@ impl fmt::Display for BalanceError {
                 f,
                 "balance: contact {contact} slides; the controller plans for held contacts"
             ),
+            BalanceError::TorqueLimit { motor, limit } => write!(
+                f,
+                "balance: motor {motor}'s torque limit {limit} is not a positive finite number"
+            ),
             BalanceError::NotSolved { status } => {
                 write!(f, "balance: the QP was not solved ({status})")
             }
@@ -171,8 +184,8 @@ pub struct BalanceController<const NQ: usize, const NC: usize, const NU: usize, 
     pub gains: BalanceGains,
     /// `|u_i| ≤ torque_limit[i]` when given.
     pub torque_limit: Option<SVector<f64, NU>>,
-    /// The solver and the held contacts it was set up for.
-    qp: Option<(DefaultSolver<f64>, Modes<NK, 3>)>,
+    /// The solver, and the held contacts and constraint rows it was set up for.
+    qp: Option<(DefaultSolver<f64>, Modes<NK, 3>, usize)>,
     /// The QP's data, refilled each tick (dense, in the solver's column order).
     p: Vec<f64>,
     q: Vec<f64>,
@@ -228,6 +241,15 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
         }
         if held == 0 {
             return Err(BalanceError::NoStance);
+        }
+        if let Some(lim) = &self.torque_limit {
+            if let Some((motor, &limit)) = lim
+                .iter()
+                .enumerate()
+                .find(|(_, l)| !(l.is_finite() && **l > 0.0))
+            {
+                return Err(BalanceError::TorqueLimit { motor, limit });
+            }
         }
         let f = free_joint::<L, NQ, NC, NU>().map_err(RobotDynamicsError::from)?;
         let mut s = *state;
@@ -349,7 +371,9 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
             }
         }
 
-        let setup = !matches!(&self.qp, Some((_, m)) if m == modes);
+        // Set up again where the held contacts or the rows (torque limits on or off)
+        // changed: the data's pattern is the solver's.
+        let setup = !matches!(&self.qp, Some((_, m, r)) if m == modes && *r == rows);
         if setup {
             let p = CscMatrix::new(
                 NU,
@@ -376,17 +400,18 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
                         status: format!("set-up: {e}"),
                     }
                 })?;
-            self.qp = Some((solver, *modes));
+            self.qp = Some((solver, *modes, rows));
         }
-        let Some((solver, _)) = self.qp.as_mut() else {
+        let Some((solver, _, _)) = self.qp.as_mut() else {
             unreachable!("set up above")
         };
         if !setup {
-            solver
-                .update_data(&self.p, &self.q, &self.a, &self.b)
-                .map_err(|e| BalanceError::NotSolved {
+            if let Err(e) = solver.update_data(&self.p, &self.q, &self.a, &self.b) {
+                self.qp = None;
+                return Err(BalanceError::NotSolved {
                     status: format!("update: {e}"),
-                })?;
+                });
+            }
         }
         solver.solve();
         let out = &solver.solution;
