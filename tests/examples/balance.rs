@@ -2,8 +2,9 @@
 //! (`leg_models::robot::balance`), pushed on the
 //! body's origin for 0.1 s along the ground (sideways, then forwards): the largest push
 //! each survives (no foot's force leaves its friction cone, and the body is back within
-//! 1 mm and 1 mrad after 2 s), found by bisection. Robots whose contact points at home
-//! are not on one plane are skipped, and the example says why.
+//! 1 mm and 1 mrad after 2 s), found by bisection. Robots that cannot stand this way
+//! (fewer than three contact points, or two on one rigid foot, whose load split is not
+//! resolved yet) are skipped, and the example says why.
 //!
 //! `cargo run --release -p leg-tests --example balance`
 

@@ -47,7 +47,9 @@ where
 }
 
 /// The robot at home, its contact points on a ground plane through them (the plane's
-/// normal up along the body's side), or why it cannot stand there.
+/// normal up along the body's side), or why it cannot stand there. Where they are not on
+/// one plane at home, the joints put them flat under the body first
+/// ([`robot::feet_on_a_plane`], the plane square to the body's `z`).
 pub fn on_its_feet<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
     p: &L::Params<f64>,
 ) -> Result<(RobotState<f64, NQ>, Ground<f64, 3>), &'static str>
@@ -68,6 +70,20 @@ where
         &leg_models::assembly::Tolerance::default(),
     )
     .unwrap();
+    if !coplanar::<L, NQ, NC, NU, NK>(p, &q) {
+        robot::feet_on_a_plane::<L, f64, NQ, NC, NU, NK>(
+            p,
+            &mut q,
+            &Vector3::z(),
+            &leg_models::assembly::Tolerance::default(),
+        )
+        .map_err(|_| "its contact points cannot be put on one plane from home")?;
+    }
+    if redundant_stance::<L, NQ, NC, NU, NK>(p, &q) {
+        // Cassie's toe and heel on one rigid foot: how the load splits between them is
+        // not the rows' to say, and the stance solve picks a split of its own.
+        return Err("its held contact rows repeat each other (two contacts on one rigid foot): the split of the load between them is not resolved yet");
+    }
     let turn = UnitQuaternion::from_euler_angles(0.02, -0.03, 0.4);
     let s = RobotState::at_rest(Vector3::new(1.0, -2.0, 0.5), turn, q);
     let chart = robot::chart_params::<L, f64, NQ, NC, NU>(p, &s.orientation).unwrap();
@@ -94,6 +110,55 @@ where
             offset: n.dot(&at(0)),
         },
     ))
+}
+
+/// Whether the contact points at `q` (a chart centred on the body) are on one plane, to
+/// rounding of their spread.
+fn coplanar<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    p: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+) -> bool
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    let x = L::contact_positions(q, p);
+    let at = |k: usize| Vector3::new(x[3 * k], x[3 * k + 1], x[3 * k + 2]);
+    let n = (at(1) - at(0)).cross(&(at(2) - at(0)));
+    if n.norm() == 0.0 {
+        return false;
+    }
+    let n = n.normalize();
+    let size = (at(1) - at(0)).norm();
+    (3..NK / 3).all(|k| n.dot(&(at(k) - at(0))).abs() <= 1e-12 * size)
+}
+
+/// Whether the contact rows of every contact held at `q` lose rank with the closures:
+/// some contacts' motions follow from the others' (two points of one rigid foot).
+pub fn redundant_stance<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    p: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+) -> bool
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    use leg_models::nalgebra::DMatrix;
+    let rank = |m: &DMatrix<f64>| {
+        let sv = m.clone().svd(false, false).singular_values;
+        let top = sv.max();
+        sv.iter().filter(|&&x| x > 1e-9 * top).count()
+    };
+    let jc = L::constraint_jacobian(q, p);
+    let c = L::contact_jacobian(q, p);
+    let closures = DMatrix::from_fn(NC, NQ, |i, j| jc[(i, j)]);
+    let both = DMatrix::from_fn(NC + NK, NQ, |i, j| {
+        if i < NC {
+            jc[(i, j)]
+        } else {
+            c[(i - NC, j)]
+        }
+    });
+    let base = if NC > 0 { rank(&closures) } else { 0 };
+    rank(&both) < base + NK
 }
 
 /// What holds the robot up during a push run.

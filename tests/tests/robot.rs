@@ -845,6 +845,67 @@ where
     assert!(e.to_string().contains("no contact is held"), "{name}: {e}");
 }
 
+/// `robot::feet_on_a_plane` from home: the contact points' heights along the body's `z`,
+/// read off the contact positions, are equal; the closures are closed; the body's six
+/// coordinates did not move; the joints moved little (a robot whose feet are flat at
+/// home is left where it was; the quadruped's toes are on one plane at home, but one
+/// tilted from the body's `z`).
+fn puts_its_feet_on_a_plane<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>()
+where
+    L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
+{
+    let name = L::NAME;
+    if NK < 6 {
+        leg_tests::not_applicable(name, "feet on a plane", &"fewer than two contact points");
+        return;
+    }
+    let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
+    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
+    let mut home = SVector::<f64, NQ>::from_column_slice(&L::HOME);
+    for k in 0..6 {
+        home[f + k] = 0.0;
+    }
+    let tol = leg_models::assembly::Tolerance::default();
+    leg_models::assembly::project_position::<L, f64, NQ, NC, NU>(&p, &mut home, &tol).unwrap();
+    let heights = |q: &SVector<f64, NQ>| {
+        let x = L::contact_positions(q, &p);
+        (0..NK / 3).map(|k| x[3 * k + 2]).collect::<Vec<_>>()
+    };
+    let spread = |h: &[f64]| {
+        h.iter().cloned().fold(f64::MIN, f64::max) - h.iter().cloned().fold(f64::MAX, f64::min)
+    };
+    let before = spread(&heights(&home));
+    let mut q = home;
+    robot::feet_on_a_plane::<L, f64, NQ, NC, NU, NK>(&p, &mut q, &Vector3::z(), &tol)
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
+    let size = L::leg_size(&q, &p);
+    let after = spread(&heights(&q));
+    let closure = L::closure_residual(&q, &p).amax();
+    // (Closing the loops from home may have moved the chart's six a little already.)
+    let body = (0..6)
+        .map(|k| (q[f + k] - home[f + k]).abs())
+        .fold(0.0, f64::max);
+    let moved = (q - home).amax();
+    eprintln!("{name}: feet on a plane: heights spread {before:.3e} m at home, {after:.1e} m after; closures {closure:.1e} m; joints moved {moved:.3e} rad at most");
+    assert!(
+        after <= 1e-12 * size,
+        "{name}: heights still spread by {after:e} m"
+    );
+    assert!(
+        closure <= 1e-12 * size,
+        "{name}: closures open by {closure:e} m"
+    );
+    assert!(body == 0.0, "{name}: the body moved ({body:e})");
+    if before <= 1e-12 * size {
+        assert!(moved <= 1e-12, "{name}: flat at home, yet moved {moved:e}");
+    } else {
+        assert!(
+            moved < 0.5,
+            "{name}: moved {moved} rad to put its feet flat"
+        );
+    }
+}
+
 macro_rules! floating_robot_tests {
     ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
         mod $module {
@@ -881,6 +942,11 @@ macro_rules! floating_robot_tests {
             #[test]
             fn balance_constraints_bind() {
                 super::balance_constraints_bind::<$ty, $nq, $nc, $nu, $nk>();
+            }
+
+            #[test]
+            fn puts_its_feet_on_a_plane() {
+                super::puts_its_feet_on_a_plane::<$ty, $nq, $nc, $nu, $nk>();
             }
 
             #[test]

@@ -32,7 +32,7 @@ use core::fmt;
 
 use nalgebra::{Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
 
-use crate::assembly::{project_position, project_velocity, Tolerance};
+use crate::assembly::{project_position, project_velocity, AssemblyError, Tolerance};
 use crate::dynamics::contact::{
     impact_map, ContactSolution, ContactSystem, Ground, Impact, ImpactError, Modes,
 };
@@ -423,6 +423,111 @@ where
         .orientation
         .transform_vector(&Vector3::new(h[f + 3], h[f + 4], h[f + 5]));
     Ok((linear, about_body + s.position.cross(&linear)))
+}
+
+/// Puts every contact point on one plane square to `up` (a unit vector in the chart's
+/// base frame, the body's where the chart is centred on it): from `q`, moves the joints,
+/// not the free joint's six coordinates, until the closures close and the contact points'
+/// heights along `up` are equal, the robot's feet put flat for a stance. Damped
+/// Gauss–Newton on the closure rows and the heights' differences from the first
+/// contact's, the damping `|r|²` plus `1e-10` of the normal matrix's size, which keeps
+/// the step least where the rows leave joints free (most of a robot's); backtracking as
+/// the assembly's. Fails as [`crate::assembly::project_position`] does: `Unreachable`
+/// with the residual left where the feet cannot be put flat from `q`.
+pub fn feet_on_a_plane<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    params: &L::Params<T>,
+    q: &mut SVector<T, NQ>,
+    up: &Vector3<T>,
+    tol: &Tolerance<T>,
+) -> Result<(), AssemblyError>
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+    T: Real,
+{
+    let f = free_joint::<L, NQ, NC, NU>().map_err(|_| AssemblyError::Singular)?;
+    if !q.iter().chain(up.iter()).all(|x| x.is_finite()) {
+        return Err(AssemblyError::NonFinite);
+    }
+    if NK < 6 {
+        // One contact point, or none: on a plane already.
+        return Ok(());
+    }
+    let body = |c: usize| c >= f && c < f + 6;
+    // The heights' differences from the first contact's, and the closures.
+    let heights = |q: &SVector<T, NQ>| {
+        let x = L::contact_positions(q, params);
+        let h = |k: usize| up.dot(&Vector3::new(x[3 * k], x[3 * k + 1], x[3 * k + 2]));
+        SVector::<T, NK>::from_fn(|k, _| {
+            if k + 1 < NK / 3 {
+                h(k + 1) - h(0)
+            } else {
+                T::zero()
+            }
+        })
+    };
+    let cost = |r: &(SVector<T, NC>, SVector<T, NK>)| r.0.norm_squared() + r.1.norm_squared();
+    let residual = |q: &SVector<T, NQ>| (L::closure_residual(q, params), heights(q));
+    let mut r = residual(q);
+    let limit = tol.relative_residual * crate::assembly::leg_size::<L, T, NQ, NC, NU>(params, q);
+    let done = |r: &(SVector<T, NC>, SVector<T, NK>)| r.0.amax() <= limit && r.1.amax() <= limit;
+    for _ in 0..tol.max_iterations {
+        if done(&r) {
+            return Ok(());
+        }
+        let mut jc = L::constraint_jacobian(q, params);
+        let xj = L::contact_jacobian(q, params);
+        let mut jh = SMatrix::<T, NK, NQ>::zeros();
+        for k in 0..NK / 3 - 1 {
+            for c in 0..NQ {
+                let d = |k: usize| {
+                    up[0] * xj[(3 * k, c)] + up[1] * xj[(3 * k + 1, c)] + up[2] * xj[(3 * k + 2, c)]
+                };
+                jh[(k, c)] = d(k + 1) - d(0);
+            }
+        }
+        for c in (0..NQ).filter(|&c| body(c)) {
+            jc.column_mut(c).fill(T::zero());
+            jh.column_mut(c).fill(T::zero());
+        }
+        let mut a = jc.transpose() * jc + jh.transpose() * jh;
+        let size = (0..NQ).fold(T::zero(), |m, i| m.max(a[(i, i)]));
+        let damping = cost(&r) + T::lit(1e-10) * size;
+        for c in 0..NQ {
+            if body(c) {
+                a.row_mut(c).fill(T::zero());
+                a.column_mut(c).fill(T::zero());
+                a[(c, c)] = T::one();
+            } else {
+                a[(c, c)] += damping;
+            }
+        }
+        let chol = Cholesky::new(&a).ok_or(AssemblyError::Singular)?;
+        let mut step = jc.transpose() * r.0 + jh.transpose() * r.1;
+        chol.solve_mut(&mut step);
+        // Backtracking: the first of step, step/2, … that lowers the cost.
+        let (mut alpha, c0) = (T::one(), cost(&r));
+        let mut moved = false;
+        for _ in 0..40 {
+            let trial = *q - step * alpha;
+            let rt = residual(&trial);
+            if cost(&rt) < c0 {
+                (*q, r) = (trial, rt);
+                moved = true;
+                break;
+            }
+            alpha *= T::lit(0.5);
+        }
+        if !moved {
+            break;
+        }
+    }
+    if done(&r) {
+        Ok(())
+    } else {
+        Err(AssemblyError::Unreachable {
+            residual: r.0.amax().max(r.1.amax()).to_subset().unwrap_or(f64::NAN),
+        })
+    }
 }
 
 /// The world's ground `n · x = d` seen from the chart centred on a body at `position`
