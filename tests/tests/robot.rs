@@ -906,6 +906,151 @@ where
     }
 }
 
+/// The centre of mass (`robot::centre_of_mass`, from the potential energy) moves with the
+/// linear momentum (`robot::momentum`, from the mass matrix): `m ċ = P` at a moving state,
+/// `ċ` by central differences along the rates, the chart held (Cassie's springs, whose
+/// energy is in the potential too, are left out by the difference from no gravity).
+fn centre_of_mass_moves_with_the_momentum<
+    L,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+>()
+where
+    L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
+{
+    let name = L::NAME;
+    let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
+    let s = tumbling::<L, NQ, NC, NU>(&p, 3);
+    let chart = robot::chart_params::<L, f64, NQ, NC, NU>(&p, &s.orientation).unwrap();
+    let com =
+        |q: &SVector<f64, NQ>| robot::centre_of_mass::<L, f64, NQ, NC, NU>(&chart, q).unwrap();
+    let h = 1e-6;
+    let rate = (com(&(s.q + s.v * h)) - com(&(s.q - s.v * h))) / (2.0 * h);
+    let mass = spec_mass::<L, NQ, NC, NU>(&p);
+    let (linear, _) = robot::momentum::<L, f64, NQ, NC, NU>(&p, &s).unwrap();
+    let from_com = s.orientation.transform_vector(&(rate * mass));
+    let e = (from_com - linear).norm();
+    eprintln!("{name}: m ċ against P: {e:.1e} N s of {:.3}", linear.norm());
+    assert!(
+        e < 1e-7 * linear.norm().max(mass),
+        "{name}: m ċ off P by {e:e}"
+    );
+}
+
+/// Two held contacts on one rigid foot share the load along their distance equally (the
+/// least of the stance solve's solutions, the split being no row's to say): its feet put
+/// flat, at rest, with the motors off, the toe's and heel's forces along the line from one
+/// to the other are equal. And the rates projected onto the held contacts and closures
+/// (`project_held_velocity`) move no held contact and lose energy as an M-orthogonal
+/// projection does: `T⁻ − T⁺ = ½ Δq̇ᵀ M Δq̇`.
+fn held_rows_split_and_project<
+    L,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+>()
+where
+    L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
+{
+    use leg_models::dynamics::contact::{project_held_velocity, spec_friction, Ground, Modes};
+    let name = L::NAME;
+    if NK < 6 {
+        leg_tests::not_applicable(name, "held rows", &"fewer than two contact points");
+        return;
+    }
+    let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
+    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
+    let mut q = SVector::<f64, NQ>::from_column_slice(&L::HOME);
+    for k in 0..6 {
+        q[f + k] = 0.0;
+    }
+    let tol = leg_models::assembly::Tolerance::default();
+    leg_models::assembly::project_position::<L, f64, NQ, NC, NU>(&p, &mut q, &tol).unwrap();
+    robot::feet_on_a_plane::<L, f64, NQ, NC, NU, NK>(&p, &mut q, &Vector3::z(), &tol).unwrap();
+    let x = L::contact_positions(&q, &p);
+    let at = |k: usize| Vector3::new(x[3 * k], x[3 * k + 1], x[3 * k + 2]);
+    let ground = Ground {
+        normal: Vector3::z(),
+        offset: at(0).z,
+    };
+    let modes = Modes::<NK, 3>::stick();
+    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
+    let s = RobotState::at_rest(Vector3::zeros(), UnitQuaternion::identity(), q);
+    let size = L::leg_size(&q, &p);
+    // Pairs of contacts on one rigid body: their distance's rate is zero whatever the
+    // rates (checked on random rates), so their rows repeat each other.
+    let c = L::contact_jacobian(&q, &p);
+    let mut rng = Rng::new(11);
+    let rates = SVector::<f64, NQ>::from_fn(|_, _| rng.range(-1.0, 1.0));
+    let v = c * rates;
+    let mut pairs = Vec::new();
+    for a in 0..NK / 3 {
+        for b in a + 1..NK / 3 {
+            let d = at(b) - at(a);
+            let dv = Vector3::new(
+                v[3 * b] - v[3 * a],
+                v[3 * b + 1] - v[3 * a + 1],
+                v[3 * b + 2] - v[3 * a + 2],
+            );
+            if d.dot(&dv).abs() < 1e-12 * d.norm() * v.amax() {
+                pairs.push((a, b, d.normalize()));
+            }
+        }
+    }
+    if pairs.is_empty() {
+        leg_tests::not_applicable(
+            name,
+            "held rows' split",
+            &"no two contacts on one rigid body",
+        );
+    } else {
+        let stance = robot::stance_dynamics::<L, f64, NQ, NC, NU, NK>(
+            &p,
+            &s,
+            &SVector::zeros(),
+            &modes,
+            &ground,
+            &mu,
+        )
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let w = stance.world_forces;
+        let force = |k: usize| Vector3::new(w[3 * k], w[3 * k + 1], w[3 * k + 2]);
+        for &(a, b, d) in &pairs {
+            let (fa, fb) = (force(a).dot(&d), force(b).dot(&d));
+            eprintln!("{name}: contacts {a} and {b} on one body: along their line {fa:.6} N and {fb:.6} N");
+            assert!(
+                (fa - fb).abs() < 1e-9 * w.amax(),
+                "{name}: contacts {a}, {b} split {fa} / {fb}"
+            );
+        }
+    }
+    // The projection.
+    let mut moving = rates;
+    leg_models::assembly::project_velocity::<L, f64, NQ, NC, NU>(&p, &q, &mut moving).unwrap();
+    let before = moving;
+    project_held_velocity::<L, f64, NQ, NC, NU, NK, 3>(&p, &q, &mut moving, &modes, &ground)
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
+    let m = L::mass_matrix(&q, &p);
+    let held = (c * moving).amax();
+    let closure = (L::constraint_jacobian(&q, &p) * moving).amax();
+    let dv = before - moving;
+    let lost = 0.5 * before.dot(&(m * before)) - 0.5 * moving.dot(&(m * moving));
+    let identity = 0.5 * dv.dot(&(m * dv));
+    eprintln!("{name}: held rates projected: contacts {held:.1e}, closures {closure:.1e}; energy lost {lost:.6} J, ½ Δq̇ᵀ M Δq̇ off it by {:.1e} J", (lost - identity).abs());
+    let scale = before.amax() * size;
+    assert!(
+        held < 1e-12 * scale && closure < 1e-12 * scale,
+        "{name}: held {held:e}, closures {closure:e}"
+    );
+    assert!(
+        (lost - identity).abs() < 1e-10 * lost,
+        "{name}: not M-orthogonal: {lost} vs {identity}"
+    );
+}
+
 macro_rules! floating_robot_tests {
     ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
         mod $module {
@@ -947,6 +1092,16 @@ macro_rules! floating_robot_tests {
             #[test]
             fn puts_its_feet_on_a_plane() {
                 super::puts_its_feet_on_a_plane::<$ty, $nq, $nc, $nu, $nk>();
+            }
+
+            #[test]
+            fn centre_of_mass_moves_with_the_momentum() {
+                super::centre_of_mass_moves_with_the_momentum::<$ty, $nq, $nc, $nu, $nk>();
+            }
+
+            #[test]
+            fn held_rows_split_and_project() {
+                super::held_rows_split_and_project::<$ty, $nq, $nc, $nu, $nk>();
             }
 
             #[test]

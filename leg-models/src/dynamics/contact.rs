@@ -298,7 +298,12 @@ pub fn solve_structured_columns<
     // Held contact rows: K λ = r_c − C a0, K = C Zp.
     let k = mul(c, &zp);
     let rhs = r_c - mul(c, &a0);
-    let lambda = solve_held(&k, &rhs, held)?;
+    // The size of what the right-hand side is made of, per column: a held row left out
+    // must hold to rounding of these, not of their difference (at rest, or nearly, the
+    // difference is itself rounding).
+    let pieces: [T; C] =
+        core::array::from_fn(|col| r_c.column(col).amax().max(c.amax() * a0.column(col).amax()));
+    let lambda = solve_held(&k, &rhs, held, &pieces)?;
     let x = a0 + mul(&zp, &lambda);
     let closure = f0 - mul(&g, &lambda);
     let mut contact = lambda;
@@ -323,12 +328,15 @@ pub fn solve_structured_columns<
 /// other (two contacts of one flat foot: the distance between them is fixed, so their
 /// tangential rows are one): once every remaining pivot is below `rcond_floor` of the
 /// first, the remaining unknowns are zero, provided their equations then hold (to the
-/// same relative precision); otherwise the held rows contradict each other or the
-/// closures and the solve refuses.
+/// same relative precision of the right-hand side or of `pieces`, the size of what it
+/// was computed from; otherwise the held rows contradict each other or the
+/// closures and the solve refuses), and the solution is then made the least of all
+/// ([`least_norm`]).
 fn solve_held<T: Real, const N: usize, const C: usize>(
     k: &SMatrix<T, N, N>,
     rhs: &SMatrix<T, N, C>,
     held: &[bool; N],
+    pieces: &[T; C],
 ) -> Result<SMatrix<T, N, C>, DynamicsError> {
     let mut idx = [0usize; N];
     let mut m = 0;
@@ -354,7 +362,7 @@ fn solve_held<T: Real, const N: usize, const C: usize>(
     // Columns follow their unknowns through the pivoting.
     let mut cols: [usize; N] = core::array::from_fn(|i| i);
     let (mut first, mut rank) = (T::zero(), m);
-    let b_scale: [T; C] = core::array::from_fn(|col| b.column(col).amax());
+    let b_scale: [T; C] = core::array::from_fn(|col| b.column(col).amax().max(pieces[col]));
     for col in 0..m {
         let (mut pr, mut pc, mut best) = (col, col, T::zero());
         for i in col..m {
@@ -410,7 +418,62 @@ fn solve_held<T: Real, const N: usize, const C: usize>(
             out[(idx[cols[i]], rc)] = x[i];
         }
     }
+    if rank < m {
+        least_norm(&mut out, &a, rank, m, &idx, &cols);
+    }
     Ok(out)
+}
+
+/// Turns the basic solution of a held system that lost rank (its unknowns past `rank`
+/// zero) into the least one: `K` is symmetric, so its solutions differ by its null
+/// space, and the least is the basic one less its projection on that space. The null
+/// space comes from the elimination: in the pivoted order, `U₁₁ n₁ + U₁₂ n₂ = 0` with
+/// `n₂` each unit vector; its vectors are made orthonormal (Gram–Schmidt) and projected
+/// out of every column. Two contacts of one rigid foot then share the load along their
+/// distance equally, rather than as the pivoting happened to order them.
+fn least_norm<T: Real, const N: usize, const C: usize>(
+    out: &mut SMatrix<T, N, C>,
+    a: &SMatrix<T, N, N>,
+    rank: usize,
+    m: usize,
+    idx: &[usize; N],
+    cols: &[usize; N],
+) {
+    let mut basis = SMatrix::<T, N, N>::zeros();
+    let mut found = 0;
+    for t in rank..m {
+        let mut n = SVector::<T, N>::zeros();
+        n[t] = T::one();
+        for i in (0..rank).rev() {
+            let mut s = -a[(i, t)];
+            for jj in i + 1..rank {
+                s -= a[(i, jj)] * n[jj];
+            }
+            n[i] = s / a[(i, i)];
+        }
+        // In the unknowns' own order.
+        let mut v = SVector::<T, N>::zeros();
+        for i in 0..m {
+            v[idx[cols[i]]] = n[i];
+        }
+        for k in 0..found {
+            let e = basis.column(k).into_owned();
+            v -= e * e.dot(&v);
+        }
+        let norm = v.norm();
+        if norm > T::zero() {
+            basis.set_column(found, &(v / norm));
+            found += 1;
+        }
+    }
+    for rc in 0..C {
+        let mut x = out.column(rc).into_owned();
+        for k in 0..found {
+            let e = basis.column(k).into_owned();
+            x -= e * e.dot(&x);
+        }
+        out.set_column(rc, &x);
+    }
 }
 
 fn to_f64<T: Real>(x: T) -> f64 {
@@ -829,6 +892,64 @@ impl<T: Real, const NQ: usize, const NC: usize, const NK: usize, const ND: usize
             &(applied + self.passive),
         )
     }
+}
+
+/// Removes from `q̇` the part that moves a held contact or opens a closure, in the metric
+/// of `M` (the least kinetic energy taken away): the velocity projection of a stance,
+/// which keeps its held rows consistent step after step (two held contacts on one rigid
+/// foot contradict each other as soon as the foot's points move apart in the rates, see
+/// [`solve_structured`]). Only sticking contacts' rows count (a sliding one keeps its
+/// speed along the ground, its normal rate removed). It is a plastic impact without its
+/// friction cones: at the drift's size of a step's rounding, a cone has no say.
+pub fn project_held_velocity<
+    L,
+    T,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+    const ND: usize,
+>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+    qd: &mut SVector<T, NQ>,
+    modes: &Modes<NK, ND>,
+    ground: &Ground<T, ND>,
+) -> Result<(), DynamicsError>
+where
+    L: ContactModel<NQ, NC, NU, NK, ND>,
+    T: Real,
+{
+    if !(all_finite(q) && all_finite(qd)) {
+        return Err(DynamicsError::NonFinite);
+    }
+    let m = L::mass_matrix(q, params);
+    let chol_m = Cholesky::new(&m).ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
+    if chol_m.rcond < rcond_floor::<T>() {
+        return Err(DynamicsError::MassMatrixNotPositiveDefinite);
+    }
+    let j = L::constraint_jacobian(q, params);
+    let jc = L::contact_jacobian(q, params);
+    // A sliding contact's normal row only: its tangential rows are left out (friction
+    // plays no part in a projection).
+    let mut held = *modes;
+    for k in 0..NK / ND {
+        if let ContactMode::Slide { .. } = modes.get(k) {
+            held.set(k, ContactMode::Slide { forward: true });
+        }
+    }
+    let rows = ContactRows::new(ground, &jc, &held, &SVector::zeros(), &SVector::zeros());
+    let sol = solve_structured(
+        &chol_m,
+        &j,
+        &SVector::zeros(),
+        L::REDUNDANT_ROWS,
+        &rows,
+        &SVector::zeros(),
+        &mul(&m, qd),
+    )?;
+    *qd = sol.x;
+    Ok(())
 }
 
 /// A plastic impact: the velocities after it and what it cost.

@@ -32,9 +32,10 @@ use core::fmt;
 
 use nalgebra::{Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
 
-use crate::assembly::{project_position, project_velocity, AssemblyError, Tolerance};
+use crate::assembly::{project_position, AssemblyError, Tolerance};
 use crate::dynamics::contact::{
-    impact_map, ContactSolution, ContactSystem, Ground, Impact, ImpactError, Modes,
+    impact_map, project_held_velocity, ContactSolution, ContactSystem, Ground, Impact, ImpactError,
+    Modes,
 };
 use crate::dynamics::{actuation, forward_dynamics, Acceleration, DynamicsError};
 use crate::model::contract::{ContactModel, LegDynamics, Parameters, Real};
@@ -425,10 +426,40 @@ where
     Ok((linear, about_body + s.position.cross(&linear)))
 }
 
+/// The robot's centre of mass in the chart's base frame (m), read off the generated
+/// potential energy `V = −Σ mᵢ g·cᵢ` under unit gravities along each axis (`V = −m c_k`
+/// for gravity along `k`, less `V` without gravity: the springs' energy), the mass from
+/// the mass matrix's translation block.
+pub fn centre_of_mass<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &SVector<T, NQ>,
+) -> Result<Vector3<T>, RobotError>
+where
+    L: LegDynamics<NQ, NC, NU>,
+    T: Real,
+{
+    let f = free_joint::<L, NQ, NC, NU>()?;
+    let idx = gravity_indices::<L, T, NQ, NC, NU>()?;
+    let mass = L::mass_matrix(q, params)[(f, f)];
+    let with = |k: Option<usize>| {
+        let mut p = *params;
+        for (i, &g) in idx.iter().enumerate() {
+            p.set(g, if Some(i) == k { T::one() } else { T::zero() });
+        }
+        L::potential_energy(q, &p)
+    };
+    let springs = with(None);
+    Ok(Vector3::new(
+        springs - with(Some(0)),
+        springs - with(Some(1)),
+        springs - with(Some(2)),
+    ) / mass)
+}
+
 /// Puts every contact point on one plane square to `up` (a unit vector in the chart's
 /// base frame, the body's where the chart is centred on it): from `q`, moves the joints,
-/// not the free joint's six coordinates, until the closures close and the contact points'
-/// heights along `up` are equal, the robot's feet put flat for a stance. Damped
+/// not the free joint's six coordinates, until the closures close and the contact
+/// points' heights along `up` are equal, the robot's feet put flat for a stance. Damped
 /// Gauss–Newton on the closure rows and the heights' differences from the first
 /// contact's, the damping `|r|²` plus `1e-10` of the normal matrix's size, which keeps
 /// the step least where the rows leave joints free (most of a robot's); backtracking as
@@ -448,26 +479,25 @@ where
     if !q.iter().chain(up.iter()).all(|x| x.is_finite()) {
         return Err(AssemblyError::NonFinite);
     }
-    if NK < 6 {
+    let contacts = NK / 3;
+    if contacts < 2 {
         // One contact point, or none: on a plane already.
         return Ok(());
     }
     let body = |c: usize| c >= f && c < f + 6;
-    // The heights' differences from the first contact's, and the closures.
-    let heights = |q: &SVector<T, NQ>| {
+    // The heights' differences from the first contact's; the closures beside them.
+    let rows = |q: &SVector<T, NQ>| -> Result<SVector<T, NK>, AssemblyError> {
         let x = L::contact_positions(q, params);
-        let h = |k: usize| up.dot(&Vector3::new(x[3 * k], x[3 * k + 1], x[3 * k + 2]));
-        SVector::<T, NK>::from_fn(|k, _| {
-            if k + 1 < NK / 3 {
-                h(k + 1) - h(0)
-            } else {
-                T::zero()
-            }
-        })
+        let at = |k: usize| Vector3::new(x[3 * k], x[3 * k + 1], x[3 * k + 2]);
+        let mut r = SVector::<T, NK>::zeros();
+        for k in 1..contacts {
+            r[k - 1] = up.dot(&(at(k) - at(0)));
+        }
+        Ok(r)
     };
     let cost = |r: &(SVector<T, NC>, SVector<T, NK>)| r.0.norm_squared() + r.1.norm_squared();
-    let residual = |q: &SVector<T, NQ>| (L::closure_residual(q, params), heights(q));
-    let mut r = residual(q);
+    let residual = |q: &SVector<T, NQ>| rows(q).map(|h| (L::closure_residual(q, params), h));
+    let mut r = residual(q)?;
     let limit = tol.relative_residual * crate::assembly::leg_size::<L, T, NQ, NC, NU>(params, q);
     let done = |r: &(SVector<T, NC>, SVector<T, NK>)| r.0.amax() <= limit && r.1.amax() <= limit;
     for _ in 0..tol.max_iterations {
@@ -477,17 +507,16 @@ where
         let mut jc = L::constraint_jacobian(q, params);
         let xj = L::contact_jacobian(q, params);
         let mut jh = SMatrix::<T, NK, NQ>::zeros();
-        for k in 0..NK / 3 - 1 {
-            for c in 0..NQ {
-                let d = |k: usize| {
-                    up[0] * xj[(3 * k, c)] + up[1] * xj[(3 * k + 1, c)] + up[2] * xj[(3 * k + 2, c)]
-                };
-                jh[(k, c)] = d(k + 1) - d(0);
+        for c in (0..NQ).filter(|&c| !body(c)) {
+            let d = |k: usize| {
+                up[0] * xj[(3 * k, c)] + up[1] * xj[(3 * k + 1, c)] + up[2] * xj[(3 * k + 2, c)]
+            };
+            for k in 1..contacts {
+                jh[(k - 1, c)] = d(k) - d(0);
             }
         }
         for c in (0..NQ).filter(|&c| body(c)) {
             jc.column_mut(c).fill(T::zero());
-            jh.column_mut(c).fill(T::zero());
         }
         let mut a = jc.transpose() * jc + jh.transpose() * jh;
         let size = (0..NQ).fold(T::zero(), |m, i| m.max(a[(i, i)]));
@@ -509,11 +538,12 @@ where
         let mut moved = false;
         for _ in 0..40 {
             let trial = *q - step * alpha;
-            let rt = residual(&trial);
-            if cost(&rt) < c0 {
-                (*q, r) = (trial, rt);
-                moved = true;
-                break;
+            if let Ok(rt) = residual(&trial) {
+                if cost(&rt) < c0 {
+                    (*q, r) = (trial, rt);
+                    moved = true;
+                    break;
+                }
             }
             alpha *= T::lit(0.5);
         }
@@ -694,9 +724,10 @@ where
 }
 
 /// One step of the robot on the ground with the contacts in `modes` held, RK4 in the
-/// chart centred at the step's start, the closures projected after it (the contacts'
-/// drift, of the integrator's order, is left: a stance that lasts long wants Baumgarte
-/// terms, next). Torques `u` are held over the step. On an error `state` is left as it
+/// chart centred at the step's start, the closures projected after it and the rates put
+/// back on the closures and the held contacts ([`project_held_velocity`]; the contacts'
+/// drift in position, of the integrator's order, is left: a stance that lasts long wants
+/// Baumgarte terms, next). Torques `u` are held over the step. On an error `state` is left as it
 /// was.
 #[allow(clippy::too_many_arguments)]
 pub fn stance_step<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
@@ -776,9 +807,11 @@ where
     if NC > 0 {
         project_position::<L, T, NQ, NC, NU>(&chart, &mut next.q, &Tolerance::default())
             .map_err(StepError::from)?;
-        project_velocity::<L, T, NQ, NC, NU>(&chart, &next.q, &mut next.v)
-            .map_err(StepError::from)?;
     }
+    // The rates back on the closures and the held contacts: the step's drift off them
+    // would make the held rows of one rigid foot contradict each other next step.
+    project_held_velocity::<L, T, NQ, NC, NU, NK, 3>(&chart, &next.q, &mut next.v, modes, &local)
+        .map_err(StepError::from)?;
     next.recentre(f);
     let stance = Stance {
         world_forces: forces_in_world(&local, &centre, &first.contact),
