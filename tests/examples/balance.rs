@@ -13,7 +13,8 @@ use leg_models::robot::balance::BalanceGains;
 use leg_models::ContactModel;
 use leg_tests::standing::{largest_push, on_its_feet, push_run, spec_mass, with_gravity, Holding};
 
-const DT: f64 = 6.25e-5;
+// 1 ms: finer than the quadruped's own step (2 ms, `time_step` in tests/tests/robot.rs).
+const DT: f64 = 1e-3;
 const PUSH_TIME: f64 = 0.1;
 const DURATION: f64 = 2.0;
 
@@ -147,87 +148,6 @@ macro_rules! each {
     };
 }
 
-macro_rules! each_trace {
-    ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
-        trace::<$ty, $nq, $nc, $nu, $nk>();
-    };
-}
-
 fn main() {
-    if std::env::var_os("BALANCE_TRACE").is_some() {
-        generated::for_each_floating_model!(each_trace);
-        return;
-    }
     generated::for_each_floating_model!(each);
-}
-
-/// A diagnostic trace of the unpushed stand (`BALANCE_TRACE=1`).
-#[allow(dead_code)]
-fn trace<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>()
-where
-    L: ContactModel<NQ, NC, NU, NK, 3>,
-{
-    use leg_models::dynamics::contact::{spec_friction, Modes};
-    use leg_models::robot::balance::{BalanceController, BalanceTarget};
-    let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
-    let Ok((start, ground)) = on_its_feet::<L, NQ, NC, NU, NK>(&p) else {
-        return;
-    };
-    let modes = Modes::<NK, 3>::stick();
-    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
-    let mut c = BalanceController::<NQ, NC, NU, NK>::new(
-        BalanceTarget::holding(&start),
-        BalanceGains::default(),
-        None,
-    );
-    let mut s = start;
-    for i in 0..16000 {
-        let cmd = match c.command::<L>(&p, &s, &modes, &ground, &mu) {
-            Ok(x) => x,
-            Err(e) => {
-                println!("{}: {i}: {e}", L::NAME);
-                return;
-            }
-        };
-        if i % 800 == 0 {
-            let w = cmd.stance.world_forces;
-            let normals: Vec<String> = (0..NK / 3)
-                .map(|k| {
-                    format!(
-                        "{:.1}",
-                        Vector3::new(w[3 * k], w[3 * k + 1], w[3 * k + 2]).dot(&ground.normal)
-                    )
-                })
-                .collect();
-            let dq = (s.q - start.q).abs();
-            let worst = dq
-                .iter()
-                .enumerate()
-                .fold((0, 0.0), |a, (i, &x)| if x > a.1 { (i, x) } else { a });
-            println!(
-                "{} t {:.3}: body {:.2e} m {:.2e} rad; normals {:?}; |u| {:.1}; worst joint {} by {:.3}; iterations {}",
-                L::NAME,
-                i as f64 * DT,
-                (s.position - start.position).norm(),
-                s.orientation.angle_to(&start.orientation),
-                normals,
-                cmd.torques.amax(),
-                worst.0,
-                worst.1,
-                cmd.iterations
-            );
-        }
-        if let Err(e) = leg_models::robot::stance_step::<L, f64, NQ, NC, NU, NK>(
-            &p,
-            &mut s,
-            &cmd.torques,
-            &modes,
-            &ground,
-            &mu,
-            DT,
-        ) {
-            println!("{}: step {i}: {e}", L::NAME);
-            return;
-        }
-    }
 }

@@ -703,7 +703,7 @@ where
     // The least-squares torques, the least ones where several hold (the response has
     // the rank of what the contacts leave free, often less than NU): a ridge of 1e-10
     // of the normal matrix's size, then refinement, which removes the ridge's bias by a
-    // factor of ridge / σ² a pass.
+    // factor of ridge / (σ² + ridge) a pass.
     let normal = response.transpose() * response;
     let size = (0..NU).fold(T::zero(), |a, i| a.max(normal[(i, i)]));
     if size <= T::zero() {
@@ -713,11 +713,16 @@ where
     let ridge = T::lit(1e-10) * size;
     let chol = Cholesky::new(&(normal + SMatrix::<T, NU, NU>::identity() * ridge))
         .ok_or(RobotDynamicsError::Dynamics(DynamicsError::NonFinite))?;
+    // Refined until a pass changes nothing (a motor that moves little, its σ² near the
+    // ridge, takes many), 200 passes at most.
     let mut u = SVector::<T, NU>::zeros();
-    for _ in 0..16 {
+    for _ in 0..200 {
         let mut step = response.transpose() * (-(response * u + free));
         chol.solve_mut(&mut step);
         u += step;
+        if step.amax() <= T::default_epsilon() * u.amax() {
+            break;
+        }
     }
     let left = (response * u + free).amax();
     Ok((u, left))
