@@ -949,7 +949,7 @@ fn ankle_rod_leg_impacts_hold_the_impact_identities() {
 /// The foot put flat on the ground (home moved onto the closures and both contacts' gaps
 /// to zero, along the ground as it must) at rest, both contacts sticking, and released
 /// with the motors off. A fixed-base leg of three coordinates cannot move with six held
-/// rows: they repeat each other, their forces are not unique (the solve picks one), and
+/// rows: they repeat each other, their forces are not unique (the solve takes the least), and
 /// where the pick leaves a cone the contact slips at that instant. Throughout, the loops
 /// stay closed, a held contact on its anchor, every force (but at the instant of a change
 /// of mode) inside its cone and pushing, and the energy never grows.

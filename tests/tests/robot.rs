@@ -923,7 +923,7 @@ where
         "{name}: closures open by {closure:e} m"
     );
     assert!(body == 0.0, "{name}: the body moved ({body:e})");
-    if before <= 1e-12 * size {
+    if before <= tol.relative_residual * size {
         assert!(moved <= 1e-12, "{name}: flat at home, yet moved {moved:e}");
     } else {
         assert!(
@@ -1158,4 +1158,20 @@ fn a_fixed_base_is_not_a_robot() {
     use generated::cassie_leg::CassieLeg;
     let e = robot::free_joint::<CassieLeg, 13, 6, 5>().unwrap_err();
     assert!(e.to_string().contains("fixed base"), "{e}");
+}
+
+#[test]
+fn feet_on_a_plane_refuses_no_direction_and_keeps_the_pose() {
+    use generated::minitaur_quadruped::MinitaurQuadruped as R;
+    use leg_models::assembly::AssemblyError;
+    let p = <R as LegDynamics<22, 12, 8>>::Params::<f64>::default();
+    let home = SVector::<f64, 22>::from_column_slice(&R::HOME);
+    for up in [Vector3::zeros(), Vector3::new(f64::NAN, 0.0, 1.0)] {
+        let mut q = home;
+        let e =
+            robot::feet_on_a_plane::<R, f64, 22, 12, 8, 12>(&p, &mut q, &up, &Default::default())
+                .unwrap_err();
+        assert_eq!(e, AssemblyError::NonFinite);
+        assert_eq!(q, home, "a refused request moved the pose");
+    }
 }

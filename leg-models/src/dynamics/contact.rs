@@ -300,10 +300,9 @@ pub fn solve_structured_columns<
     let rhs = r_c - mul(c, &a0);
     // The size of what the right-hand side is made of, per column: a held row left out
     // must hold to rounding of these, not of their difference (at rest, or nearly, the
-    // difference is itself rounding).
-    let pieces: [T; C] =
-        core::array::from_fn(|col| r_c.column(col).amax().max(c.amax() * a0.column(col).amax()));
-    let lambda = solve_held(&k, &rhs, held, &pieces)?;
+    // difference is itself rounding). Only asked for where held rows repeat.
+    let pieces = |col: usize| r_c.column(col).amax().max(c.amax() * a0.column(col).amax());
+    let lambda = solve_held(&k, &rhs, held, pieces)?;
     let x = a0 + mul(&zp, &lambda);
     let closure = f0 - mul(&g, &lambda);
     let mut contact = lambda;
@@ -336,7 +335,7 @@ fn solve_held<T: Real, const N: usize, const C: usize>(
     k: &SMatrix<T, N, N>,
     rhs: &SMatrix<T, N, C>,
     held: &[bool; N],
-    pieces: &[T; C],
+    pieces: impl Fn(usize) -> T,
 ) -> Result<SMatrix<T, N, C>, DynamicsError> {
     let mut idx = [0usize; N];
     let mut m = 0;
@@ -362,7 +361,7 @@ fn solve_held<T: Real, const N: usize, const C: usize>(
     // Columns follow their unknowns through the pivoting.
     let mut cols: [usize; N] = core::array::from_fn(|i| i);
     let (mut first, mut rank) = (T::zero(), m);
-    let b_scale: [T; C] = core::array::from_fn(|col| b.column(col).amax().max(pieces[col]));
+    let b_scale: [T; C] = core::array::from_fn(|col| b.column(col).amax());
     for col in 0..m {
         let (mut pr, mut pc, mut best) = (col, col, T::zero());
         for i in col..m {
@@ -397,10 +396,13 @@ fn solve_held<T: Real, const N: usize, const C: usize>(
         }
     }
     // The rows left out must hold with their unknowns at zero.
-    for i in rank..m {
+    if rank < m {
         for (rc, scale) in b_scale.iter().enumerate() {
-            if b[(i, rc)].abs() > T::default_epsilon().sqrt() * *scale {
-                return Err(DynamicsError::SingularContacts { rcond: 0.0 });
+            let scale = scale.max(pieces(rc));
+            for i in rank..m {
+                if b[(i, rc)].abs() > T::default_epsilon().sqrt() * scale {
+                    return Err(DynamicsError::SingularContacts { rcond: 0.0 });
+                }
             }
         }
     }
@@ -425,12 +427,15 @@ fn solve_held<T: Real, const N: usize, const C: usize>(
 }
 
 /// Turns the basic solution of a held system that lost rank (its unknowns past `rank`
-/// zero) into the least one: `K` is symmetric, so its solutions differ by its null
-/// space, and the least is the basic one less its projection on that space. The null
-/// space comes from the elimination: in the pivoted order, `U₁₁ n₁ + U₁₂ n₂ = 0` with
-/// `n₂` each unit vector; its vectors are made orthonormal (Gram–Schmidt) and projected
-/// out of every column. Two contacts of one rigid foot then share the load along their
-/// distance equally, rather than as the pivoting happened to order them.
+/// zero) into the least one: its solutions differ by `K`'s null space, and the least is
+/// the basic one less its projection on that space. The null space comes from the
+/// elimination: in the pivoted order, `U₁₁ n₁ + U₁₂ n₂ = 0` with `n₂` each unit vector;
+/// its vectors are made orthonormal (Gram–Schmidt) and projected out of every column.
+/// Two contacts of one rigid foot then share the load along their distance equally,
+/// rather than as the pivoting happened to order them. (For the derivative columns of
+/// [`crate::dynamics::derivatives`] this projection is not the derivative of the least
+/// solution, whose null space turns with `q`: there the forces' derivatives are not
+/// exact, though `q̈`'s are, since the null space moves nothing.)
 fn least_norm<T: Real, const N: usize, const C: usize>(
     out: &mut SMatrix<T, N, C>,
     a: &SMatrix<T, N, N>,
@@ -924,7 +929,11 @@ where
         return Err(DynamicsError::NonFinite);
     }
     let m = L::mass_matrix(q, params);
-    let chol_m = Cholesky::new(&m).ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
+    let chol_m = Cholesky::new(&m).ok_or(if all_finite(&m) {
+        DynamicsError::MassMatrixNotPositiveDefinite
+    } else {
+        DynamicsError::NonFinite
+    })?;
     if chol_m.rcond < rcond_floor::<T>() {
         return Err(DynamicsError::MassMatrixNotPositiveDefinite);
     }

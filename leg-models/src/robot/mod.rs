@@ -464,7 +464,8 @@ where
 /// contact's, the damping `|r|²` plus `1e-10` of the normal matrix's size, which keeps
 /// the step least where the rows leave joints free (most of a robot's); backtracking as
 /// the assembly's. Fails as [`crate::assembly::project_position`] does: `Unreachable`
-/// with the residual left where the feet cannot be put flat from `q`.
+/// with the residual left where the feet cannot be put flat from `q`; `NonFinite` for a
+/// non-finite `q` or a zero or non-finite `up`; `Singular` on a fixed base.
 pub fn feet_on_a_plane<L, T, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
     params: &L::Params<T>,
     q: &mut SVector<T, NQ>,
@@ -475,10 +476,13 @@ where
     L: ContactModel<NQ, NC, NU, NK, 3>,
     T: Real,
 {
+    // A fixed base has no body to hold still: `Singular`, as for any request without a
+    // determined answer.
     let f = free_joint::<L, NQ, NC, NU>().map_err(|_| AssemblyError::Singular)?;
-    if !q.iter().chain(up.iter()).all(|x| x.is_finite()) {
+    if !q.iter().chain(up.iter()).all(|x| x.is_finite()) || up.norm() == T::zero() {
         return Err(AssemblyError::NonFinite);
     }
+    let up = &up.normalize();
     let contacts = NK / 3;
     if contacts < 2 {
         // One contact point, or none: on a plane already.
@@ -486,18 +490,18 @@ where
     }
     let body = |c: usize| c >= f && c < f + 6;
     // The heights' differences from the first contact's; the closures beside them.
-    let rows = |q: &SVector<T, NQ>| -> Result<SVector<T, NK>, AssemblyError> {
+    let rows = |q: &SVector<T, NQ>| {
         let x = L::contact_positions(q, params);
         let at = |k: usize| Vector3::new(x[3 * k], x[3 * k + 1], x[3 * k + 2]);
         let mut r = SVector::<T, NK>::zeros();
         for k in 1..contacts {
             r[k - 1] = up.dot(&(at(k) - at(0)));
         }
-        Ok(r)
+        r
     };
     let cost = |r: &(SVector<T, NC>, SVector<T, NK>)| r.0.norm_squared() + r.1.norm_squared();
-    let residual = |q: &SVector<T, NQ>| rows(q).map(|h| (L::closure_residual(q, params), h));
-    let mut r = residual(q)?;
+    let residual = |q: &SVector<T, NQ>| (L::closure_residual(q, params), rows(q));
+    let mut r = residual(q);
     let limit = tol.relative_residual * crate::assembly::leg_size::<L, T, NQ, NC, NU>(params, q);
     let done = |r: &(SVector<T, NC>, SVector<T, NK>)| r.0.amax() <= limit && r.1.amax() <= limit;
     for _ in 0..tol.max_iterations {
@@ -538,12 +542,11 @@ where
         let mut moved = false;
         for _ in 0..40 {
             let trial = *q - step * alpha;
-            if let Ok(rt) = residual(&trial) {
-                if cost(&rt) < c0 {
-                    (*q, r) = (trial, rt);
-                    moved = true;
-                    break;
-                }
+            let rt = residual(&trial);
+            if cost(&rt) < c0 {
+                (*q, r) = (trial, rt);
+                moved = true;
+                break;
             }
             alpha *= T::lit(0.5);
         }
