@@ -30,6 +30,14 @@ where
             return;
         }
     };
+    if leg_tests::standing::redundant_stance::<L, NQ, NC, NU, NK>(&p, &start.q) {
+        println!(
+            "{}: skipped: {}",
+            L::NAME,
+            leg_tests::standing::REDUNDANT_STANCE
+        );
+        return;
+    }
     let weight = spec_mass::<L, NQ, NC, NU>(&p) * 9.81;
     println!("{}: weight {weight:.3} N, {} feet", L::NAME, NK / 3);
     let t0 = std::time::Instant::now();
