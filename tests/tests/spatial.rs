@@ -297,6 +297,91 @@ where
     );
 }
 
+/// The KKT solve the leg's structure chooses (its mass matrix factored along the tree on a
+/// body carrying legs, densely on one leg) against its definition and against the dense
+/// solve, at states off home with rates and torques: `M q̈ − Jᵀ F = τ`, `J q̈ = r`
+/// (forces compared as `Jᵀ F`, which redundant rows leave unique), and the derivatives'
+/// own factorization of `K` solving `∂q̈/∂u` as the dense solve does column by column.
+fn kkt_solve_meets_its_definition<
+    L,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NP: usize,
+>()
+where
+    L: LegModel<NQ, NC, NU, 3, NP>,
+{
+    use leg_models::dynamics::derivatives::forward_dynamics_derivatives;
+    use leg_models::dynamics::structure::{factors_along_the_tree, mass_factor_operations};
+    use leg_models::dynamics::{actuation, solve_kkt};
+    let name = L::NAME;
+    let (dense_ops, tree_ops) = mass_factor_operations(&L::PARENTS);
+    eprintln!(
+        "{name}: mass matrix factored {} (multiply–adds dense {dense_ops}, along the tree {tree_ops:?})",
+        if factors_along_the_tree(&L::PARENTS) { "along the tree" } else { "densely" }
+    );
+    let p = L::Params::<f64>::default();
+    let mut rng = Rng::new(77);
+    for trial in 0..5 {
+        // On the closures with rates that keep them, where rows that repeat the others are
+        // consistent with them.
+        let mut q = SVector::<f64, NQ>::from_fn(|i, _| L::HOME[i] + 0.05 * rng.range(-1.0, 1.0));
+        assembled::<L, NQ, NC, NU>(&p, &mut q);
+        let mut qd = SVector::<f64, NQ>::from_fn(|_, _| rng.range(-1.0, 1.0));
+        project_velocity::<L, f64, NQ, NC, NU>(&p, &q, &mut qd).unwrap();
+        let u = SVector::<f64, NU>::from_fn(|_, _| rng.range(-1.0, 1.0));
+        let terms = L::dynamics_terms(&q, &qd, &p);
+        let (m, j) = (&terms.mass_matrix, &terms.constraint_jacobian);
+        let tau =
+            actuation::<L, f64, NQ, NC, NU>(&u) - terms.bias_forces - L::damping_forces(&qd, &p);
+        let r = -terms.constraint_bias;
+        let chosen = forward_dynamics::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None).unwrap();
+        let dense = solve_kkt(m, j, &tau, &r, L::REDUNDANT_ROWS).unwrap();
+        let scale = tau.amax() + m.amax() * chosen.qdd.amax();
+        let e_dyn = (m * chosen.qdd - j.transpose() * chosen.forces - tau).amax();
+        let e_rows = (j * chosen.qdd - r).amax();
+        let e_qdd = (chosen.qdd - dense.qdd).amax();
+        let e_f = (j.transpose() * (chosen.forces - dense.forces)).amax();
+        assert!(
+            e_dyn <= 1e-11 * scale,
+            "{name} #{trial}: M q̈ − Jᵀ F − τ {e_dyn:e} of {scale:e}"
+        );
+        assert!(
+            e_rows <= 1e-11 * (r.amax() + j.amax() * chosen.qdd.amax()),
+            "{name} #{trial}: J q̈ − r {e_rows:e}"
+        );
+        assert!(
+            e_qdd < 1e-10 * chosen.qdd.amax().max(1.0),
+            "{name} #{trial}: q̈ off the dense solve's by {e_qdd:e}"
+        );
+        assert!(
+            e_f <= 1e-10 * scale,
+            "{name} #{trial}: Jᵀ F off the dense solve's by {e_f:e}"
+        );
+        let d = forward_dynamics_derivatives::<L, f64, NQ, NC, NU>(&p, &q, &qd, &u, None).unwrap();
+        assert!((d.acceleration.qdd - chosen.qdd).amax() < 1e-10 * chosen.qdd.amax().max(1.0));
+        for k in 0..NU {
+            let mut e = SVector::<f64, NU>::zeros();
+            e[k] = 1.0;
+            let column = solve_kkt(
+                m,
+                j,
+                &actuation::<L, f64, NQ, NC, NU>(&e),
+                &SVector::zeros(),
+                L::REDUNDANT_ROWS,
+            )
+            .unwrap()
+            .qdd;
+            let e_u = (d.qdd_u.column(k) - column).amax();
+            assert!(
+                e_u < 1e-10 * column.amax().max(1e-300),
+                "{name} #{trial}: ∂q̈/∂u{k} off the dense solve by {e_u:e}"
+            );
+        }
+    }
+}
+
 macro_rules! spatial_leg_tests {
     ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
         mod $module {
@@ -309,6 +394,11 @@ macro_rules! spatial_leg_tests {
             #[test]
             fn passive_swing_keeps_its_energy() {
                 super::energy_kept::<$ty, $nq, $nc, $nu, $np>();
+            }
+
+            #[test]
+            fn kkt_solve_meets_its_definition() {
+                super::kkt_solve_meets_its_definition::<$ty, $nq, $nc, $nu, $np>();
             }
 
             #[test]

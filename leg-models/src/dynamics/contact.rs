@@ -24,6 +24,7 @@ use core::fmt;
 use nalgebra::{SMatrix, SVector};
 
 use crate::dynamics::forward::{actuation, rcond_floor, Baumgarte, DynamicsError};
+use crate::dynamics::structure::checked_mass_factor;
 use crate::model::contract::{ContactModel, Real};
 use crate::model::linalg::{all_finite, mul, Cholesky, PivotedLdlt};
 
@@ -929,14 +930,7 @@ where
         return Err(DynamicsError::NonFinite);
     }
     let m = L::mass_matrix(q, params);
-    let chol_m = Cholesky::new(&m).ok_or(if all_finite(&m) {
-        DynamicsError::MassMatrixNotPositiveDefinite
-    } else {
-        DynamicsError::NonFinite
-    })?;
-    if chol_m.rcond < rcond_floor::<T>() {
-        return Err(DynamicsError::MassMatrixNotPositiveDefinite);
-    }
+    let chol_m = checked_mass_factor(Cholesky::new(&m), &m)?;
     let j = L::constraint_jacobian(q, params);
     let jc = L::contact_jacobian(q, params);
     // A sliding contact's normal row only: its tangential rows are left out (friction
@@ -1064,14 +1058,7 @@ where
         return Err(DynamicsError::NonFinite.into());
     }
     let m = L::mass_matrix(q, params);
-    let chol_m = Cholesky::new(&m).ok_or(if all_finite(&m) {
-        DynamicsError::MassMatrixNotPositiveDefinite
-    } else {
-        DynamicsError::NonFinite
-    })?;
-    if chol_m.rcond < rcond_floor::<T>() {
-        return Err(DynamicsError::MassMatrixNotPositiveDefinite.into());
-    }
+    let chol_m = checked_mass_factor(Cholesky::new(&m), &m)?;
     let j = L::constraint_jacobian(q, params);
     let jc = L::contact_jacobian(q, params);
     let momentum = mul(&m, qd);

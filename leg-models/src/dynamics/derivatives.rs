@@ -27,8 +27,9 @@ use crate::dynamics::forward::{
     actuation, classify_non_finite, kkt_rhs, Acceleration, Baumgarte, DynamicsError,
     KktFactorization,
 };
+use crate::dynamics::structure::{checked_mass_factor, mass_tree};
 use crate::model::contract::{ContactModel, DynamicsTerms, LegDynamics, Real};
-use crate::model::linalg::{all_finite, negate};
+use crate::model::linalg::{all_finite, negate, Factored, TreeLdl};
 
 /// Forward dynamics and its derivatives at one state and input.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -102,12 +103,37 @@ where
     L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
-    let kkt = KktFactorization::new(
-        &terms.mass_matrix,
-        &terms.constraint_jacobian,
-        L::REDUNDANT_ROWS,
-    )
-    .map_err(|e| classify_non_finite(e, q, qd, u))?;
+    let (m, j) = (&terms.mass_matrix, &terms.constraint_jacobian);
+    let explained = |e| classify_non_finite(e, q, qd, u);
+    if let Some(ends) = mass_tree::<L, NQ, NC, NU>() {
+        let kkt = checked_mass_factor(TreeLdl::new(m, ends), m)
+            .and_then(|f| KktFactorization::with_mass_factor(f, j, L::REDUNDANT_ROWS))
+            .map_err(explained)?;
+        derivatives_with::<L, T, _, NQ, NC, NU>(&kkt, params, terms, q, qd, u, baumgarte)
+    } else {
+        let kkt = KktFactorization::new(m, j, L::REDUNDANT_ROWS).map_err(explained)?;
+        derivatives_with::<L, T, _, NQ, NC, NU>(&kkt, params, terms, q, qd, u, baumgarte)
+    }
+}
+
+/// [`forward_dynamics_derivatives_from_terms`] on the factored KKT matrix (its mass matrix
+/// factored densely or along the tree).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn derivatives_with<L, T, F, const NQ: usize, const NC: usize, const NU: usize>(
+    kkt: &KktFactorization<T, NQ, NC, F>,
+    params: &L::Params<T>,
+    terms: &DynamicsTerms<T, NQ, NC>,
+    q: &SVector<T, NQ>,
+    qd: &SVector<T, NQ>,
+    u: &SVector<T, NU>,
+    baumgarte: Option<Baumgarte<T>>,
+) -> Result<ForwardDynamicsDerivatives<T, NQ, NC, NU>, DynamicsError>
+where
+    L: LegDynamics<NQ, NC, NU>,
+    T: Real,
+    F: Factored<T, NQ>,
+{
     let j = &terms.constraint_jacobian;
     let (mut qdd, mut forces) = kkt_rhs::<L, T, NQ, NC, NU>(params, terms, q, qd, u, baumgarte);
     if !(all_finite(&qdd) && all_finite(&forces)) {

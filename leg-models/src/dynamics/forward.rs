@@ -13,8 +13,9 @@ use core::fmt;
 
 use nalgebra::{SMatrix, SVector};
 
+use crate::dynamics::structure::{checked_mass_factor, mass_tree};
 use crate::model::contract::{DynamicsTerms, LegDynamics, Real};
-use crate::model::linalg::{all_finite, mul, Cholesky, PivotedLdlt};
+use crate::model::linalg::{all_finite, mul, mul_tn, Cholesky, Factored, PivotedLdlt, TreeLdl};
 
 /// Why the constrained dynamics cannot be solved at a state.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -147,8 +148,13 @@ enum ConstraintFactor<T: Real, const NC: usize> {
 /// `S = J Y` factored) for the solves of any number of right-hand sides: forward dynamics
 /// solves one, its derivatives ([`crate::dynamics::derivatives`]) `2 NQ + NU` more.
 #[derive(Clone, Copy, Debug)]
-pub struct KktFactorization<T: Real, const NQ: usize, const NC: usize> {
-    chol_m: Cholesky<T, NQ>,
+pub struct KktFactorization<
+    T: Real,
+    const NQ: usize,
+    const NC: usize,
+    F: Factored<T, NQ> = Cholesky<T, NQ>,
+> {
+    chol_m: F,
     jacobian: SMatrix<T, NC, NQ>,
     y: SMatrix<T, NQ, NC>,
     s: Option<ConstraintFactor<T, NC>>,
@@ -164,11 +170,20 @@ impl<T: Real, const NQ: usize, const NC: usize> KktFactorization<T, NQ, NC> {
         deficiency: usize,
     ) -> Result<Self, DynamicsError> {
         // A NaN or infinity anywhere shows in M's pivots or in the solutions.
-        let chol_m =
-            Cholesky::new(mass_matrix).ok_or_else(|| not_positive_definite(mass_matrix))?;
-        if chol_m.rcond < rcond_floor::<T>() {
-            return Err(DynamicsError::MassMatrixNotPositiveDefinite);
-        }
+        let chol_m = checked_mass_factor(Cholesky::new(mass_matrix), mass_matrix)?;
+        Self::with_mass_factor(chol_m, jacobian, deficiency)
+    }
+}
+
+impl<T: Real, const NQ: usize, const NC: usize, F: Factored<T, NQ>> KktFactorization<T, NQ, NC, F> {
+    /// [`KktFactorization::new`] from `M` already factored (along the tree where that
+    /// pays, [`TreeLdl`]).
+    #[inline(always)]
+    pub(crate) fn with_mass_factor(
+        chol_m: F,
+        jacobian: &SMatrix<T, NC, NQ>,
+        deficiency: usize,
+    ) -> Result<Self, DynamicsError> {
         let mut y = jacobian.transpose();
         let mut s = None;
         if NC > 0 {
@@ -233,14 +248,26 @@ pub fn solve_kkt<T: Real, const NQ: usize, const NC: usize>(
     closure_rhs: &SVector<T, NC>,
     deficiency: usize,
 ) -> Result<Acceleration<T, NQ, NC>, DynamicsError> {
-    // The one-right-hand-side solve is written out rather than through `KktFactorization`
-    // (the same steps): carrying the factorization costs the simulation's hot path up to
-    // 8 % (minitaur_pinned_toe 2392 → 2588 instructions, braced_parallelogram 3478 → 3650).
     // A NaN or infinity anywhere shows in M's pivots or in the result, checked below.
     let chol_m = Cholesky::new(mass_matrix).ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
     if chol_m.rcond < rcond_floor::<T>() {
         return Err(DynamicsError::MassMatrixNotPositiveDefinite);
     }
+    solve_kkt_factored(&chol_m, jacobian, tau, closure_rhs, deficiency)
+}
+
+/// [`solve_kkt`] with `M` already factored.
+#[inline(always)]
+pub(crate) fn solve_kkt_factored<T: Real, F: Factored<T, NQ>, const NQ: usize, const NC: usize>(
+    chol_m: &F,
+    jacobian: &SMatrix<T, NC, NQ>,
+    tau: &SVector<T, NQ>,
+    closure_rhs: &SVector<T, NC>,
+    deficiency: usize,
+) -> Result<Acceleration<T, NQ, NC>, DynamicsError> {
+    // The one-right-hand-side solve is written out rather than through `KktFactorization`
+    // (the same steps): carrying the factorization costs the simulation's hot path up to
+    // 8 % (minitaur_pinned_toe 2392 → 2588 instructions, braced_parallelogram 3478 → 3650).
     let mut qdd = *tau;
     chol_m.solve_mut(&mut qdd); // a = M⁻¹ τ
     let mut forces = SVector::<T, NC>::zeros();
@@ -249,26 +276,73 @@ pub fn solve_kkt<T: Real, const NQ: usize, const NC: usize>(
         chol_m.solve_mut(&mut y); // Y = M⁻¹ Jᵀ
         let s = mul(jacobian, &y);
         forces = closure_rhs - mul(jacobian, &qdd);
-        if deficiency == 0 {
-            let chol_s =
-                Cholesky::new(&s).ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?;
-            if chol_s.rcond < rcond_floor::<T>() {
-                return Err(DynamicsError::SingularConstraints {
-                    rcond: to_f64(chol_s.rcond),
-                });
-            }
-            chol_s.solve_mut(&mut forces);
-        } else {
-            PivotedLdlt::new(&s, deficiency, rcond_floor::<T>())
-                .ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?
-                .solve_mut(&mut forces);
-        }
+        solve_closure_forces(&s, &mut forces, deficiency)?;
         qdd += mul(&y, &forces);
     }
     if !(all_finite(&qdd) && all_finite(&forces) && all_finite(tau) && all_finite(closure_rhs)) {
         return Err(DynamicsError::NonFinite);
     }
     Ok(Acceleration { qdd, forces })
+}
+
+/// [`solve_kkt`] with `M = Lᵀ D L` factored along the tree, in half solves: with
+/// `W = L⁻ᵀ Jᵀ` and `t = L⁻ᵀ τ`, `S = J M⁻¹ Jᵀ = Wᵀ D⁻¹ W`, `F = S⁻¹ (r − Wᵀ D⁻¹ t)`,
+/// `q̈ = L⁻¹ D⁻¹ (t + W F)`. That is `NC + 2` half solves where the full form takes
+/// `2 NC + 2`, and a symmetric product in place of `J Y` (Featherstone, RBDA §8.5).
+#[inline(always)]
+pub(crate) fn solve_kkt_on_tree<T: Real, const NQ: usize, const NC: usize>(
+    chol_m: &TreeLdl<T, NQ>,
+    jacobian: &SMatrix<T, NC, NQ>,
+    tau: &SVector<T, NQ>,
+    closure_rhs: &SVector<T, NC>,
+    deficiency: usize,
+) -> Result<Acceleration<T, NQ, NC>, DynamicsError> {
+    let mut t = *tau;
+    chol_m.solve_lt_mut(&mut t);
+    let inv_d = chol_m.inv_diag();
+    let mut forces = SVector::<T, NC>::zeros();
+    if NC > 0 {
+        let mut w = jacobian.transpose();
+        chol_m.solve_lt_mut(&mut w);
+        let mut w_d = w;
+        for mut column in w_d.column_iter_mut() {
+            column.component_mul_assign(inv_d);
+        }
+        let s = mul_tn(&w, &w_d);
+        forces = closure_rhs - mul_tn(&w_d, &t);
+        solve_closure_forces(&s, &mut forces, deficiency)?;
+        t += mul(&w, &forces);
+    }
+    let mut qdd = t.component_mul(inv_d);
+    chol_m.solve_l_mut(&mut qdd);
+    if !(all_finite(&qdd) && all_finite(&forces) && all_finite(tau) && all_finite(closure_rhs)) {
+        return Err(DynamicsError::NonFinite);
+    }
+    Ok(Acceleration { qdd, forces })
+}
+
+/// Overwrites `forces` with `S⁻¹ forces`, `S = J M⁻¹ Jᵀ`; up to `deficiency` of its rows
+/// may repeat the others (their forces are zero).
+#[inline(always)]
+fn solve_closure_forces<T: Real, const NC: usize>(
+    s: &SMatrix<T, NC, NC>,
+    forces: &mut SVector<T, NC>,
+    deficiency: usize,
+) -> Result<(), DynamicsError> {
+    if deficiency == 0 {
+        let chol_s = Cholesky::new(s).ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?;
+        if chol_s.rcond < rcond_floor::<T>() {
+            return Err(DynamicsError::SingularConstraints {
+                rcond: to_f64(chol_s.rcond),
+            });
+        }
+        chol_s.solve_mut(forces);
+    } else {
+        PivotedLdlt::new(s, deficiency, rcond_floor::<T>())
+            .ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?
+            .solve_mut(forces);
+    }
+    Ok(())
 }
 
 impl DynamicsError {
@@ -285,17 +359,6 @@ impl DynamicsError {
         u: &SVector<T, NU>,
     ) -> DynamicsError {
         classify_non_finite(self, q, qd, u)
-    }
-}
-
-/// Why `M` has no Cholesky factor: a NaN or infinity in it (a non-finite pose or
-/// parameter) is said as such, not as a mass matrix that is not positive definite.
-#[cold]
-fn not_positive_definite<T: Real, const NQ: usize>(m: &SMatrix<T, NQ, NQ>) -> DynamicsError {
-    if all_finite(m) {
-        DynamicsError::MassMatrixNotPositiveDefinite
-    } else {
-        DynamicsError::NonFinite
     }
 }
 
@@ -374,13 +437,13 @@ where
     let (tau, rhs) = kkt_rhs::<L, T, NQ, NC, NU>(params, terms, q, qd, u, baumgarte);
     // The error is said as what caused it by `DynamicsError::explained`, off this path:
     // mapping it here copied the result, 2 to 3 % of a small leg's forward dynamics.
-    solve_kkt(
-        &terms.mass_matrix,
-        &terms.constraint_jacobian,
-        &tau,
-        &rhs,
-        L::REDUNDANT_ROWS,
-    )
+    let (m, j) = (&terms.mass_matrix, &terms.constraint_jacobian);
+    if let Some(ends) = mass_tree::<L, NQ, NC, NU>() {
+        let chol_m = checked_mass_factor(TreeLdl::new(m, ends), m)?;
+        solve_kkt_on_tree(&chol_m, j, &tau, &rhs, L::REDUNDANT_ROWS)
+    } else {
+        solve_kkt(m, j, &tau, &rhs, L::REDUNDANT_ROWS)
+    }
 }
 
 /// The right-hand side of the KKT system at a state: `(B u − N − D q̇, −J̇ q̇ − 2α J q̇ − β² φ)`.

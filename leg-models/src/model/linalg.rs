@@ -93,6 +93,168 @@ impl<T: Real, const N: usize> Cholesky<T, N> {
     }
 }
 
+/// `A = Lᵀ D L` (`L` unit lower triangular, `D` diagonal and positive) of a joint-space
+/// mass matrix whose sparsity is a tree's: `Aᵢⱼ` is zero unless one of `i`, `j` descends
+/// from the other. With the coordinates in depth-first order (every subtree contiguous,
+/// `i`'s descendants `i + 1 .. ends[i]`) and eliminated from the leaves up, nothing fills
+/// in (Featherstone's LTDL, RBDA §6.5): column `i` of `L` is nonzero on `i`'s descendants
+/// only, so every loop runs over one contiguous stretch of a column. The work is
+/// `Σ dₖ²/2` for coordinates at depth `dₖ`, not `N³/6`: on a body carrying legs, whose
+/// branches meet only at the body, a fraction of the dense factorization. Only entries of
+/// `A` between a coordinate and its descendants are read (upper triangle).
+#[derive(Clone, Copy, Debug)]
+pub struct TreeLdl<T: Real, const N: usize> {
+    /// `Lⱼᵢ` below the diagonal for `j` a descendant of `i` (`A`'s upper triangle above it,
+    /// not read again); other entries are not read.
+    l: SMatrix<T, N, N>,
+    inv_diag: nalgebra::SVector<T, N>,
+    /// One past the last descendant of each coordinate: the model's constant, referred to
+    /// rather than copied.
+    ends: &'static [usize; N],
+    /// Reciprocal condition estimate: `min Dᵢᵢ / max Dᵢᵢ`.
+    pub rcond: T,
+}
+
+impl<T: Real, const N: usize> TreeLdl<T, N> {
+    /// `None` unless every pivot is positive and finite. `ends[i]` is one past the last
+    /// coordinate of `i`'s subtree, in depth-first order
+    /// ([`crate::dynamics::structure::subtree_ends`]).
+    #[inline]
+    pub fn new(a: &SMatrix<T, N, N>, ends: &'static [usize; N]) -> Option<Self> {
+        // Factored in place in a copy of A: L below the diagonal (column-major, so a
+        // column's stretch is contiguous), A read from above it.
+        let mut l = *a;
+        let mut d = nalgebra::SVector::<T, N>::zeros();
+        let mut inv_diag = nalgebra::SVector::<T, N>::zeros();
+        let (mut lo, mut hi) = (T::zero(), T::zero());
+        let data = l.as_mut_slice();
+        for i in (0..N).rev() {
+            debug_assert!(ends[i] > i && ends[i] <= N);
+            // Lⱼᵢ for j below i, from the deepest up:
+            // Lⱼᵢ Dⱼ = Aᵢⱼ − Σ_{k below j} Lₖᵢ Dₖ Lₖⱼ.
+            let mut di = data[i + i * N];
+            for j in (i + 1..ends[i]).rev() {
+                let mut s = data[i + j * N];
+                let below = j + 1..ends[j];
+                let col_i = &data[i * N + below.start..i * N + below.end];
+                let col_j = &data[j * N + below.start..j * N + below.end];
+                for ((x, y), dk) in col_i.iter().zip(col_j).zip(&d.as_slice()[below]) {
+                    s -= *x * *dk * *y;
+                }
+                let lji = s * inv_diag[j];
+                data[j + i * N] = lji;
+                di -= lji * s;
+            }
+            // A NaN pivot compares as nothing, so it is refused too.
+            if di.partial_cmp(&T::zero()) != Some(core::cmp::Ordering::Greater) || !di.is_finite() {
+                return None;
+            }
+            if i == N - 1 {
+                (lo, hi) = (di, di);
+            } else {
+                lo = lo.min(di);
+                hi = hi.max(di);
+            }
+            d[i] = di;
+            inv_diag[i] = T::one() / di;
+        }
+        let rcond = if N == 0 { T::one() } else { lo / hi };
+        Some(TreeLdl {
+            l,
+            inv_diag,
+            ends,
+            rcond,
+        })
+    }
+
+    /// Overwrites `b` with `A⁻¹ b`: `Lᵀ y = b` from the leaves up, `D z = y`, `L x = z`
+    /// from the root down, each over a column's contiguous stretch.
+    #[inline]
+    pub fn solve_mut<const C: usize>(&self, b: &mut SMatrix<T, N, C>) {
+        self.solve_lt_mut(b);
+        for c in 0..C {
+            for i in 0..N {
+                b[(i, c)] *= self.inv_diag[i];
+            }
+        }
+        self.solve_l_mut(b);
+    }
+
+    /// `1 / Dᵢᵢ`.
+    #[inline(always)]
+    pub fn inv_diag(&self) -> &nalgebra::SVector<T, N> {
+        &self.inv_diag
+    }
+
+    /// Overwrites `b` with `L⁻ᵀ b` (`Lᵀ y = b`, from the leaves up): the first half of a
+    /// solve, `A⁻¹ = L⁻¹ D⁻¹ L⁻ᵀ`.
+    #[inline]
+    pub fn solve_lt_mut<const C: usize>(&self, b: &mut SMatrix<T, N, C>) {
+        let l = self.l.as_slice();
+        for bc in b.as_mut_slice().chunks_exact_mut(N.max(1)).take(C) {
+            for i in (0..N).rev() {
+                let (head, tail) = bc.split_at_mut(i + 1);
+                let below = &tail[..self.ends[i] - i - 1];
+                let col = &l[i * N + i + 1..i * N + self.ends[i]];
+                let mut s = head[i];
+                for (x, y) in col.iter().zip(below) {
+                    s -= *x * *y;
+                }
+                head[i] = s;
+            }
+        }
+    }
+
+    /// Overwrites `b` with `L⁻¹ b` (`L x = b`, from the root down): the last half of a
+    /// solve.
+    #[inline]
+    pub fn solve_l_mut<const C: usize>(&self, b: &mut SMatrix<T, N, C>) {
+        let l = self.l.as_slice();
+        for bc in b.as_mut_slice().chunks_exact_mut(N.max(1)).take(C) {
+            for i in 0..N {
+                let (head, tail) = bc.split_at_mut(i + 1);
+                let xi = head[i];
+                let col = &l[i * N + i + 1..i * N + self.ends[i]];
+                for (y, x) in tail[..self.ends[i] - i - 1].iter_mut().zip(col) {
+                    *y -= *x * xi;
+                }
+            }
+        }
+    }
+}
+
+/// A factored symmetric positive definite matrix: what the solves need of it, so that a
+/// path that factors and solves in one place is compiled for the factor its model uses
+/// (no enum to match in the hot loop).
+pub trait Factored<T: Real, const N: usize> {
+    /// Reciprocal condition estimate: the pivots' `min / max`.
+    fn rcond(&self) -> T;
+    /// Overwrites `b` with `A⁻¹ b`.
+    fn solve_mut<const C: usize>(&self, b: &mut SMatrix<T, N, C>);
+}
+
+impl<T: Real, const N: usize> Factored<T, N> for Cholesky<T, N> {
+    #[inline(always)]
+    fn rcond(&self) -> T {
+        self.rcond
+    }
+    #[inline(always)]
+    fn solve_mut<const C: usize>(&self, b: &mut SMatrix<T, N, C>) {
+        Cholesky::solve_mut(self, b)
+    }
+}
+
+impl<T: Real, const N: usize> Factored<T, N> for TreeLdl<T, N> {
+    #[inline(always)]
+    fn rcond(&self) -> T {
+        self.rcond
+    }
+    #[inline(always)]
+    fn solve_mut<const C: usize>(&self, b: &mut SMatrix<T, N, C>) {
+        TreeLdl::solve_mut(self, b)
+    }
+}
+
 /// `P A Pᵀ = L D Lᵀ` with symmetric (diagonal) pivoting, for a positive semidefinite `A`
 /// whose rank may fall short of `N` by up to `deficiency`: the closure rows of a leg
 /// closed redundantly (a parallelogram closed twice). Which rows repeat the others
@@ -372,6 +534,67 @@ mod tests {
             Cholesky::new(&SMatrix::<f64, 0, 0>::zeros()).unwrap().rcond,
             1.0
         );
+    }
+
+    /// The tree factorization against the dense one on a mass matrix with a tree's
+    /// sparsity (a chain of three carrying two branches, one of them forked), built as
+    /// `Σ vₖ vₖᵀ` over vectors supported on each coordinate's path to the root: it solves
+    /// to rounding, refuses what the dense one refuses, and never reads off the tree.
+    #[test]
+    fn tree_ldl_solves_as_the_dense_factor() {
+        const N: usize = 8;
+        const PARENTS: [Option<usize>; N] = [
+            None,
+            Some(0),
+            Some(1),
+            Some(2),
+            Some(3),
+            Some(3),
+            Some(2),
+            Some(6),
+        ];
+        const ENDS: [usize; N] = match crate::dynamics::structure::subtree_ends(&PARENTS) {
+            Some(ends) => ends,
+            None => panic!("not depth-first"),
+        };
+        let (parents, ends) = (PARENTS, &ENDS);
+        assert_eq!(*ends, [8, 8, 8, 6, 5, 6, 8, 8]);
+        let mut a = SMatrix::<f64, N, N>::identity() * 0.5;
+        for k in 0..N {
+            let mut v = SMatrix::<f64, N, 1>::zeros();
+            let mut i = Some(k);
+            while let Some(j) = i {
+                v[j] = 1.0 + 0.37 * ((k * 7 + j * 3) % 5) as f64 - 0.6;
+                i = parents[j];
+            }
+            a += v * v.transpose() * (1.0 + k as f64);
+        }
+        // Off the tree (4 and 5 are siblings; 4 and 6 in different branches) it is zero.
+        assert_eq!(a[(4, 5)], 0.0);
+        assert_eq!(a[(4, 6)], 0.0);
+        let tree = TreeLdl::new(&a, ends).unwrap();
+        let dense = Cholesky::new(&a).unwrap();
+        let b = SMatrix::<f64, N, 2>::from_fn(|i, j| (i as f64 - 2.5) * (j as f64 + 1.0));
+        let (mut x, mut y) = (b, b);
+        tree.solve_mut(&mut x);
+        dense.solve_mut(&mut y);
+        assert!((a * x - b).amax() < 1e-13, "{}", a * x - b);
+        assert!((x - y).amax() < 1e-13);
+        assert!(tree.rcond > 0.0 && tree.rcond <= 1.0);
+        // Whatever is off the tree is not read.
+        let mut noisy = a;
+        noisy[(4, 6)] = 7.0;
+        noisy[(6, 4)] = 7.0;
+        let mut z = b;
+        TreeLdl::new(&noisy, ends).unwrap().solve_mut(&mut z);
+        assert_eq!(z, x);
+        // Not positive definite, NaN: refused.
+        let mut indefinite = a;
+        indefinite[(7, 7)] = -1.0;
+        assert!(TreeLdl::new(&indefinite, ends).is_none());
+        let mut nan = a;
+        nan[(0, 0)] = f64::NAN;
+        assert!(TreeLdl::new(&nan, ends).is_none());
     }
 
     /// The general LU against its definition (`A x = b` for a non-symmetric `A` that needs
