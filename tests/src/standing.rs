@@ -60,16 +60,7 @@ where
         return Err("fewer than three contact points");
     }
     let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
-    let mut q = SVector::<f64, NQ>::from_column_slice(&L::HOME);
-    for k in 0..6 {
-        q[f + k] = 0.0;
-    }
-    leg_models::assembly::project_position::<L, f64, NQ, NC, NU>(
-        p,
-        &mut q,
-        &leg_models::assembly::Tolerance::default(),
-    )
-    .unwrap();
+    let mut q = assembled_home::<L, NQ, NC, NU>(p);
     if !coplanar::<L, NQ, NC, NU, NK>(p, &q) {
         robot::feet_on_a_plane::<L, f64, NQ, NC, NU, NK>(
             p,
@@ -139,6 +130,101 @@ where
 /// first tick, two contact points at their cones' edges, and the robot sinks 0.37 m in a
 /// second.
 pub const REDUNDANT_STANCE: &str = "its held contact rows repeat each other (two contacts on one rigid foot): the balance QP does not hold such a stance yet";
+
+/// Contact `k`'s force from `world_forces` (three a contact, in the world), its normal
+/// part on `ground` and how far it is into its friction cone: `‖λ_t‖ / (μ λ_n)`, at most
+/// 1 inside the cone, infinite where the contact pulls or bears nothing.
+pub fn cone_reading<const NK: usize>(
+    world_forces: &SVector<f64, NK>,
+    ground: &Ground<f64, 3>,
+    mu: &SVector<f64, NK>,
+    k: usize,
+) -> (Vector3<f64>, f64, f64) {
+    let f = Vector3::new(
+        world_forces[3 * k],
+        world_forces[3 * k + 1],
+        world_forces[3 * k + 2],
+    );
+    let normal = f.dot(&ground.normal);
+    let tangential = (f - ground.normal * normal).norm();
+    let ratio = if normal > 0.0 {
+        tangential / (mu[3 * k + 2] * normal)
+    } else {
+        f64::INFINITY
+    };
+    (f, normal, ratio)
+}
+
+/// The robot's home with the body's six chart coordinates zeroed, put on its closures
+/// (an imported home is off them by a little); the body may have moved in closing them.
+pub fn assembled_home<L, const NQ: usize, const NC: usize, const NU: usize>(
+    p: &L::Params<f64>,
+) -> SVector<f64, NQ>
+where
+    L: LegDynamics<NQ, NC, NU>,
+{
+    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
+    let mut q = SVector::<f64, NQ>::from_column_slice(&L::HOME);
+    for k in 0..6 {
+        q[f + k] = 0.0;
+    }
+    leg_models::assembly::project_position::<L, f64, NQ, NC, NU>(
+        p,
+        &mut q,
+        &leg_models::assembly::Tolerance::default(),
+    )
+    .unwrap_or_else(|e| panic!("{}: home does not assemble: {e}", L::NAME));
+    q
+}
+
+/// A robot standing for a check: its parameters with gravity along −z, its start on its
+/// feet ([`on_its_feet`]) and the ground there, every contact held, the spec's friction.
+pub struct Stance<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    /// The parameters, with gravity.
+    pub params: L::Params<f64>,
+    /// On its feet, at rest.
+    pub start: RobotState<f64, NQ>,
+    /// The ground through its contact points.
+    pub ground: Ground<f64, 3>,
+    /// Every contact sticking.
+    pub modes: Modes<NK, 3>,
+    /// The spec's friction coefficients.
+    pub mu: SVector<f64, NK>,
+}
+
+/// [`Stance`] for the check named `check`, or `None`, said as not applicable with why:
+/// where the robot cannot be put on its feet, and, with `distinct_rows`, where its held
+/// rows repeat each other ([`redundant_stance`], [`REDUNDANT_STANCE`]).
+pub fn standing_start<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    check: &str,
+    distinct_rows: bool,
+) -> Option<Stance<L, NQ, NC, NU, NK>>
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    let params = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
+    let (start, ground) = match on_its_feet::<L, NQ, NC, NU, NK>(&params) {
+        Ok(x) => x,
+        Err(why) => {
+            crate::not_applicable(L::NAME, check, &why);
+            return None;
+        }
+    };
+    if distinct_rows && redundant_stance::<L, NQ, NC, NU, NK>(&params, &start.q) {
+        crate::not_applicable(L::NAME, check, &REDUNDANT_STANCE);
+        return None;
+    }
+    Some(Stance {
+        params,
+        start,
+        ground,
+        modes: Modes::stick(),
+        mu: spec_friction::<L, f64, NQ, NC, NU, NK, 3>(),
+    })
+}
 
 /// The free motions of the stance with every contact held at `q`: `NQ` less the rank of
 /// the closure and contact rows together (singular values above 1e-9 of the largest).
@@ -313,19 +399,8 @@ where
             }
         };
         for k in 0..NK / 3 {
-            let f = Vector3::new(
-                stance.world_forces[3 * k],
-                stance.world_forces[3 * k + 1],
-                stance.world_forces[3 * k + 2],
-            );
-            let normal = f.dot(&ground.normal);
-            let tangential = (f - ground.normal * normal).norm();
+            let (_, normal, ratio) = cone_reading(&stance.world_forces, ground, &mu, k);
             run.least_normal = run.least_normal.min(normal);
-            let ratio = if normal > 0.0 {
-                tangential / (mu[3 * k + 2] * normal)
-            } else {
-                f64::INFINITY
-            };
             run.worst_friction = run.worst_friction.max(ratio);
             if normal <= 0.0 && run.failed.is_none() {
                 run.failed = Some((
@@ -336,7 +411,8 @@ where
                 run.failed = Some((
                     t,
                     format!(
-                        "contact {k} leaves its friction cone (normal {normal:.3} N, tangential {tangential:.3} N)"
+                        "contact {k} leaves its friction cone (normal {normal:.3} N, tangential {:.3} N)",
+                        ratio * mu[3 * k + 2] * normal
                     ),
                 ));
             }

@@ -21,7 +21,9 @@ use leg_models::robot::{self, RobotState};
 use leg_models::simulate::State;
 use leg_models::simulate::{step as fixed_step, StepOptions};
 use leg_models::LegDynamics;
-use leg_tests::standing::{on_its_feet, spec_mass, with_gravity};
+use leg_tests::standing::{
+    assembled_home, cone_reading, spec_mass, standing_start, with_gravity, Stance,
+};
 use leg_tests::Rng;
 
 /// A tumbling start: the body off the origin, turned, moving and spinning; the joints at
@@ -35,16 +37,7 @@ where
 {
     let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
     let mut rng = Rng::new(seed);
-    let mut q = SVector::<f64, NQ>::from_column_slice(&L::HOME);
-    for k in 0..6 {
-        q[f + k] = 0.0;
-    }
-    leg_models::assembly::project_position::<L, f64, NQ, NC, NU>(
-        p,
-        &mut q,
-        &leg_models::assembly::Tolerance::default(),
-    )
-    .unwrap_or_else(|e| panic!("{}: home does not assemble: {e}", L::NAME));
+    let q = assembled_home::<L, NQ, NC, NU>(p);
     let orientation = UnitQuaternion::from_euler_angles(0.3, -0.2, 0.7);
     let mut s = RobotState::at_rest(Vector3::new(0.4, -0.3, 1.2), orientation, q);
     // Closing the loops may have moved the body too (a home off its closures by a little,
@@ -399,22 +392,18 @@ fn stands_still_on_its_feet<L, const NQ: usize, const NC: usize, const NU: usize
 where
     L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
 {
-    use leg_models::dynamics::contact::{ContactMode, Modes};
     let name = L::NAME;
-    let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
-    let (mut s, ground) = match on_its_feet::<L, NQ, NC, NU, NK>(&p) {
-        Ok(x) => x,
-        Err(why) => {
-            leg_tests::not_applicable(name, "standing", &why);
-            return;
-        }
+    let Some(Stance {
+        params: p,
+        start: mut s,
+        ground,
+        modes,
+        mu,
+    }) = standing_start::<L, NQ, NC, NU, NK>("standing", false)
+    else {
+        return;
     };
     let size = L::leg_size(&s.q, &p);
-    let mut modes = Modes::<NK, 3>::flight();
-    for k in 0..NK / 3 {
-        modes.set(k, ContactMode::Stick);
-    }
-    let mu = leg_models::dynamics::contact::spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
     let (u, left) =
         robot::holding_torques::<L, f64, NQ, NC, NU, NK>(&p, &s, &modes, &ground, &mu).unwrap();
     if left >= 1e-10 * 9.81 {
@@ -524,15 +513,17 @@ fn lands_flat_on_every_foot<L, const NQ: usize, const NC: usize, const NU: usize
 where
     L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
 {
-    use leg_models::dynamics::contact::{ContactMode, Modes};
+    use leg_models::dynamics::contact::ContactMode;
     let name = L::NAME;
-    let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
-    let (mut s, ground) = match on_its_feet::<L, NQ, NC, NU, NK>(&p) {
-        Ok(x) => x,
-        Err(why) => {
-            leg_tests::not_applicable(name, "landing", &why);
-            return;
-        }
+    let Some(Stance {
+        params: p,
+        start: mut s,
+        ground,
+        mut modes,
+        mu,
+    }) = standing_start::<L, NQ, NC, NU, NK>("landing", false)
+    else {
+        return;
     };
     let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
     // Down along the ground's normal and along the ground, as a rigid body: the body's
@@ -546,11 +537,6 @@ where
     }
     let before = s;
     let (lin0, _) = robot::momentum::<L, f64, NQ, NC, NU>(&p, &s).unwrap();
-    let mut modes = Modes::<NK, 3>::flight();
-    for k in 0..NK / 3 {
-        modes.set(k, ContactMode::Stick);
-    }
-    let mu = leg_models::dynamics::contact::spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
     let (impact, world) =
         robot::impact::<L, f64, NQ, NC, NU, NK>(&p, &mut s, &mut modes, &ground, &mu)
             .unwrap_or_else(|e| panic!("{name}: {e}"));
@@ -630,25 +616,20 @@ fn balances_and_recovers_from_a_push<
 where
     L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
 {
-    use leg_models::dynamics::contact::{spec_friction, Modes};
     use leg_models::robot::balance::{BalanceController, BalanceGains, BalanceTarget};
     use leg_tests::standing::{push_run, Holding};
     let name = L::NAME;
-    let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
-    let (start, ground) = match on_its_feet::<L, NQ, NC, NU, NK>(&p) {
-        Ok(x) => x,
-        Err(why) => {
-            leg_tests::not_applicable(name, "balance", &why);
-            return;
-        }
-    };
-    if leg_tests::standing::redundant_stance::<L, NQ, NC, NU, NK>(&p, &start.q) {
-        leg_tests::not_applicable(name, "balance", &leg_tests::standing::REDUNDANT_STANCE);
+    let Some(Stance {
+        params: p,
+        start,
+        ground,
+        modes,
+        mu,
+    }) = standing_start::<L, NQ, NC, NU, NK>("balance", true)
+    else {
         return;
-    }
+    };
     let weight = spec_mass::<L, NQ, NC, NU>(&p) * 9.81;
-    let modes = Modes::<NK, 3>::stick();
-    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
     // Unpushed: the weight on the feet, inside the cones.
     let mut control = BalanceController::<NQ, NC, NU, NK>::new(
         BalanceTarget::holding(&start),
@@ -672,15 +653,10 @@ where
         .unwrap_or_else(|e| panic!("{name}: {e}"));
         let mut total = Vector3::zeros();
         for k in 0..NK / 3 {
-            let f = Vector3::new(
-                stance.world_forces[3 * k],
-                stance.world_forces[3 * k + 1],
-                stance.world_forces[3 * k + 2],
-            );
+            let (f, normal, r) = cone_reading(&stance.world_forces, &ground, &mu, k);
             total += f;
-            let normal = f.dot(&ground.normal);
             assert!(normal > 0.0, "{name}: foot {k} pulls ({normal:e} N)");
-            ratio = ratio.max((f - ground.normal * normal).norm() / (mu[3 * k + 2] * normal));
+            ratio = ratio.max(r);
         }
         force_err = force_err.max((total - Vector3::new(0.0, 0.0, weight)).norm());
     }
@@ -760,27 +736,19 @@ fn balance_constraints_bind<L, const NQ: usize, const NC: usize, const NU: usize
 where
     L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
 {
-    use leg_models::dynamics::contact::{spec_friction, Modes};
+    use leg_models::dynamics::contact::Modes;
     use leg_models::robot::balance::{BalanceController, BalanceGains, BalanceTarget};
     let name = L::NAME;
-    let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
-    let (start, ground) = match on_its_feet::<L, NQ, NC, NU, NK>(&p) {
-        Ok(x) => x,
-        Err(why) => {
-            leg_tests::not_applicable(name, "balance constraints", &why);
-            return;
-        }
-    };
-    if leg_tests::standing::redundant_stance::<L, NQ, NC, NU, NK>(&p, &start.q) {
-        leg_tests::not_applicable(
-            name,
-            "balance constraints",
-            &leg_tests::standing::REDUNDANT_STANCE,
-        );
+    let Some(Stance {
+        params: p,
+        start,
+        ground,
+        modes,
+        mu,
+    }) = standing_start::<L, NQ, NC, NU, NK>("balance constraints", true)
+    else {
         return;
-    }
-    let modes = Modes::<NK, 3>::stick();
-    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
+    };
     // A state off the target, so the tasks ask for something.
     let mut s = start;
     s.position += ground.normal.cross(&Vector3::x()).normalize() * 2e-3;
@@ -793,11 +761,7 @@ where
     };
     let ratios = |w: &SVector<f64, NK>, mu: &SVector<f64, NK>| {
         (0..NK / 3)
-            .map(|k| {
-                let f = Vector3::new(w[3 * k], w[3 * k + 1], w[3 * k + 2]);
-                let n = f.dot(&ground.normal);
-                (f - ground.normal * n).norm() / (mu[3 * k + 2] * n)
-            })
+            .map(|k| cone_reading(w, &ground, mu, k).2)
             .fold(0.0f64, f64::max)
     };
     let free = new(None)
@@ -888,12 +852,8 @@ where
     }
     let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
     let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
-    let mut home = SVector::<f64, NQ>::from_column_slice(&L::HOME);
-    for k in 0..6 {
-        home[f + k] = 0.0;
-    }
+    let home = assembled_home::<L, NQ, NC, NU>(&p);
     let tol = leg_models::assembly::Tolerance::default();
-    leg_models::assembly::project_position::<L, f64, NQ, NC, NU>(&p, &mut home, &tol).unwrap();
     let heights = |q: &SVector<f64, NQ>| {
         let x = L::contact_positions(q, &p);
         (0..NK / 3).map(|k| x[3 * k + 2]).collect::<Vec<_>>()
@@ -989,13 +949,8 @@ where
         return;
     }
     let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
-    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
-    let mut q = SVector::<f64, NQ>::from_column_slice(&L::HOME);
-    for k in 0..6 {
-        q[f + k] = 0.0;
-    }
+    let mut q = assembled_home::<L, NQ, NC, NU>(&p);
     let tol = leg_models::assembly::Tolerance::default();
-    leg_models::assembly::project_position::<L, f64, NQ, NC, NU>(&p, &mut q, &tol).unwrap();
     robot::feet_on_a_plane::<L, f64, NQ, NC, NU, NK>(&p, &mut q, &Vector3::z(), &tol).unwrap();
     let x = L::contact_positions(&q, &p);
     let at = |k: usize| Vector3::new(x[3 * k], x[3 * k + 1], x[3 * k + 2]);

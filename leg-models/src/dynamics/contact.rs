@@ -24,9 +24,9 @@ use core::fmt;
 use nalgebra::{SMatrix, SVector};
 
 use crate::dynamics::forward::{actuation, rcond_floor, Baumgarte, DynamicsError};
-use crate::dynamics::structure::checked_mass_factor;
+use crate::dynamics::structure::{checked_mass_factor, mass_tree};
 use crate::model::contract::{ContactModel, Real};
-use crate::model::linalg::{all_finite, mul, Cholesky, PivotedLdlt};
+use crate::model::linalg::{all_finite, mul, Cholesky, Factored, PivotedLdlt, TreeLdl};
 
 /// The ground `n · x = d` (base frame), `n` a unit normal out of the ground: a line for a
 /// planar leg (`ND = 2`), a plane for a spatial one (`ND = 3`).
@@ -219,8 +219,9 @@ pub fn solve_structured<
     const NC: usize,
     const NK: usize,
     const ND: usize,
+    F: Factored<T, NQ>,
 >(
-    chol_m: &Cholesky<T, NQ>,
+    chol_m: &F,
     j: &SMatrix<T, NC, NQ>,
     r_j: &SVector<T, NC>,
     closure_deficiency: usize,
@@ -248,8 +249,9 @@ pub fn solve_structured_columns<
     const NK: usize,
     const ND: usize,
     const C: usize,
+    F: Factored<T, NQ>,
 >(
-    chol_m: &Cholesky<T, NQ>,
+    chol_m: &F,
     j: &SMatrix<T, NC, NQ>,
     r_j: &SMatrix<T, NC, C>,
     closure_deficiency: usize,
@@ -930,7 +932,6 @@ where
         return Err(DynamicsError::NonFinite);
     }
     let m = L::mass_matrix(q, params);
-    let chol_m = checked_mass_factor(Cholesky::new(&m), &m)?;
     let j = L::constraint_jacobian(q, params);
     let jc = L::contact_jacobian(q, params);
     // A sliding contact's normal row only: its tangential rows are left out (friction
@@ -942,16 +943,51 @@ where
         }
     }
     let rows = ContactRows::new(ground, &jc, &held, &SVector::zeros(), &SVector::zeros());
-    let sol = solve_structured(
-        &chol_m,
-        &j,
-        &SVector::zeros(),
-        L::REDUNDANT_ROWS,
-        &rows,
-        &SVector::zeros(),
-        &mul(&m, qd),
-    )?;
-    *qd = sol.x;
+    // M q̇⁺ − Rᵀ Λ = M q̇, R q̇⁺ = 0: the least change in M's metric onto the rows.
+    fn onto<
+        T: Real,
+        F: Factored<T, NQ>,
+        const NQ: usize,
+        const NC: usize,
+        const NK: usize,
+        const ND: usize,
+    >(
+        chol_m: &F,
+        j: &SMatrix<T, NC, NQ>,
+        deficiency: usize,
+        rows: &ContactRows<T, NQ, NK, ND>,
+        momentum: &SVector<T, NQ>,
+    ) -> Result<SVector<T, NQ>, DynamicsError> {
+        Ok(solve_structured(
+            chol_m,
+            j,
+            &SVector::zeros(),
+            deficiency,
+            rows,
+            &SVector::zeros(),
+            momentum,
+        )?
+        .x)
+    }
+    let momentum = mul(&m, qd);
+    let d = L::REDUNDANT_ROWS;
+    *qd = if let Some(ends) = mass_tree::<L, NQ, NC, NU>() {
+        onto(
+            &checked_mass_factor(TreeLdl::new(&m, ends), &m)?,
+            &j,
+            d,
+            &rows,
+            &momentum,
+        )?
+    } else {
+        onto(
+            &checked_mass_factor(Cholesky::new(&m), &m)?,
+            &j,
+            d,
+            &rows,
+            &momentum,
+        )?
+    };
     Ok(())
 }
 
