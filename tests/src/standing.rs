@@ -132,27 +132,48 @@ where
 pub const REDUNDANT_STANCE: &str = "its held contact rows repeat each other (two contacts on one rigid foot): the balance QP does not hold such a stance yet";
 
 /// Contact `k`'s force from `world_forces` (three a contact, in the world), its normal
-/// part on `ground` and how far it is into its friction cone: `‖λ_t‖ / (μ λ_n)`, at most
-/// 1 inside the cone, infinite where the contact pulls or bears nothing.
+/// and tangential parts on `ground`, and how far it is into its friction cone:
+/// `‖λ_t‖ / (μ λ_n)`, at most 1 inside the cone, 0 for a contact that bears nothing,
+/// infinite where it pulls or slides on no load.
 pub fn cone_reading<const NK: usize>(
     world_forces: &SVector<f64, NK>,
     ground: &Ground<f64, 3>,
     mu: &SVector<f64, NK>,
     k: usize,
-) -> (Vector3<f64>, f64, f64) {
-    let f = Vector3::new(
+) -> ConeReading {
+    let force = Vector3::new(
         world_forces[3 * k],
         world_forces[3 * k + 1],
         world_forces[3 * k + 2],
     );
-    let normal = f.dot(&ground.normal);
-    let tangential = (f - ground.normal * normal).norm();
+    let normal = force.dot(&ground.normal);
+    let tangential = (force - ground.normal * normal).norm();
     let ratio = if normal > 0.0 {
         tangential / (mu[3 * k + 2] * normal)
+    } else if normal == 0.0 && tangential == 0.0 {
+        0.0
     } else {
         f64::INFINITY
     };
-    (f, normal, ratio)
+    ConeReading {
+        force,
+        normal,
+        tangential,
+        ratio,
+    }
+}
+
+/// What [`cone_reading`] reads.
+#[derive(Clone, Copy, Debug)]
+pub struct ConeReading {
+    /// The force (N, world).
+    pub force: Vector3<f64>,
+    /// Along the ground's normal (N).
+    pub normal: f64,
+    /// Along the ground (N).
+    pub tangential: f64,
+    /// `‖λ_t‖ / (μ λ_n)`.
+    pub ratio: f64,
 }
 
 /// The robot's home with the body's six chart coordinates zeroed, put on its closures
@@ -399,7 +420,12 @@ where
             }
         };
         for k in 0..NK / 3 {
-            let (_, normal, ratio) = cone_reading(&stance.world_forces, ground, &mu, k);
+            let ConeReading {
+                normal,
+                tangential,
+                ratio,
+                ..
+            } = cone_reading(&stance.world_forces, ground, &mu, k);
             run.least_normal = run.least_normal.min(normal);
             run.worst_friction = run.worst_friction.max(ratio);
             if normal <= 0.0 && run.failed.is_none() {
@@ -411,8 +437,7 @@ where
                 run.failed = Some((
                     t,
                     format!(
-                        "contact {k} leaves its friction cone (normal {normal:.3} N, tangential {:.3} N)",
-                        ratio * mu[3 * k + 2] * normal
+                        "contact {k} leaves its friction cone (normal {normal:.3} N, tangential {tangential:.3} N)"
                     ),
                 ));
             }

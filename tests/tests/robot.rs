@@ -653,10 +653,10 @@ where
         .unwrap_or_else(|e| panic!("{name}: {e}"));
         let mut total = Vector3::zeros();
         for k in 0..NK / 3 {
-            let (f, normal, r) = cone_reading(&stance.world_forces, &ground, &mu, k);
-            total += f;
-            assert!(normal > 0.0, "{name}: foot {k} pulls ({normal:e} N)");
-            ratio = ratio.max(r);
+            let c = cone_reading(&stance.world_forces, &ground, &mu, k);
+            total += c.force;
+            assert!(c.normal > 0.0, "{name}: foot {k} pulls ({:e} N)", c.normal);
+            ratio = ratio.max(c.ratio);
         }
         force_err = force_err.max((total - Vector3::new(0.0, 0.0, weight)).norm());
     }
@@ -761,7 +761,7 @@ where
     };
     let ratios = |w: &SVector<f64, NK>, mu: &SVector<f64, NK>| {
         (0..NK / 3)
-            .map(|k| cone_reading(w, &ground, mu, k).2)
+            .map(|k| cone_reading(w, &ground, mu, k).ratio)
             .fold(0.0f64, f64::max)
     };
     let free = new(None)

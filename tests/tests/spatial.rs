@@ -414,6 +414,29 @@ generated::for_each_spatial_model!(spatial_leg_tests);
 // (the free joint's six coordinates among the others).
 generated::for_each_floating_model!(spatial_leg_tests);
 
+/// The tree factorization is in use: at least one floating robot (a body carrying legs)
+/// has its mass matrix factored along the tree, so `kkt_solve_meets_its_definition` checks
+/// that path and not only the dense one.
+#[test]
+fn a_robot_factors_its_mass_matrix_along_the_tree() {
+    let mut along = Vec::new();
+    macro_rules! tree {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
+            if leg_models::dynamics::structure::factors_along_the_tree(
+                &<$ty as LegDynamics<$nq, $nc, $nu>>::PARENTS,
+            ) {
+                along.push(stringify!($module));
+            }
+        };
+    }
+    generated::for_each_floating_model!(tree);
+    assert!(
+        !along.is_empty(),
+        "no floating robot factors along the tree"
+    );
+    eprintln!("factored along the tree: {along:?}");
+}
+
 /// The ball-joint singularity on every spatial leg that has one; at least one does, so the
 /// check cannot pass by finding none.
 #[test]

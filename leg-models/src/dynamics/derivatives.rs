@@ -34,7 +34,9 @@ use crate::model::linalg::{all_finite, negate, Factored, TreeLdl};
 /// Forward dynamics and its derivatives at one state and input.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ForwardDynamicsDerivatives<T: Real, const NQ: usize, const NC: usize, const NU: usize> {
-    /// `q̈` and the closure forces `F`, as [`crate::dynamics::forward_dynamics`] returns them.
+    /// `q̈` and the closure forces `F`, as [`crate::dynamics::forward_dynamics`] returns them
+    /// (bit for bit where `M` is factored densely; to rounding on a robot, whose forward
+    /// dynamics takes half solves on the tree factor where this takes full ones).
     pub acceleration: Acceleration<T, NQ, NC>,
     /// `∂q̈/∂q`.
     pub qdd_q: SMatrix<T, NQ, NQ>,

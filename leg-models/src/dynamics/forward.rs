@@ -144,8 +144,8 @@ enum ConstraintFactor<T: Real, const NC: usize> {
     Redundant(PivotedLdlt<T, NC>),
 }
 
-/// The KKT matrix `[M −Jᵀ; J 0]` of one state, factored once (`M = L D Lᵀ`, `Y = M⁻¹ Jᵀ`,
-/// `S = J Y` factored) for the solves of any number of right-hand sides: forward dynamics
+/// The KKT matrix `[M −Jᵀ; J 0]` of one state, factored once (`M` densely, `L D Lᵀ`, or
+/// along the tree, `Lᵀ D L`; `Y = M⁻¹ Jᵀ`, `S = J Y` factored) for the solves of any number of right-hand sides: forward dynamics
 /// solves one, its derivatives ([`crate::dynamics::derivatives`]) `2 NQ + NU` more.
 #[derive(Clone, Copy, Debug)]
 pub struct KktFactorization<
@@ -258,8 +258,8 @@ pub fn solve_kkt<T: Real, const NQ: usize, const NC: usize>(
 
 /// [`solve_kkt`] with `M` already factored.
 #[inline(always)]
-pub(crate) fn solve_kkt_factored<T: Real, F: Factored<T, NQ>, const NQ: usize, const NC: usize>(
-    chol_m: &F,
+fn solve_kkt_factored<T: Real, const NQ: usize, const NC: usize>(
+    chol_m: &Cholesky<T, NQ>,
     jacobian: &SMatrix<T, NC, NQ>,
     tau: &SVector<T, NQ>,
     closure_rhs: &SVector<T, NC>,
@@ -439,7 +439,11 @@ where
     // mapping it here copied the result, 2 to 3 % of a small leg's forward dynamics.
     let (m, j) = (&terms.mass_matrix, &terms.constraint_jacobian);
     if let Some(ends) = mass_tree::<L, NQ, NC, NU>() {
-        let chol_m = checked_mass_factor(TreeLdl::new(m, ends), m)?;
+        // The same raw error as the dense path's (`solve_kkt`); said by `explained`.
+        let chol_m = match TreeLdl::new(m, ends) {
+            Some(f) if f.rcond >= rcond_floor::<T>() => f,
+            _ => return Err(DynamicsError::MassMatrixNotPositiveDefinite),
+        };
         solve_kkt_on_tree(&chol_m, j, &tau, &rhs, L::REDUNDANT_ROWS)
     } else {
         solve_kkt(m, j, &tau, &rhs, L::REDUNDANT_ROWS)

@@ -8,7 +8,7 @@ use nalgebra::SMatrix;
 
 use crate::dynamics::forward::{rcond_floor, DynamicsError};
 use crate::model::contract::{LegDynamics, Real};
-use crate::model::linalg::{all_finite, Factored, PivotedLdlt};
+use crate::model::linalg::{all_finite, Factored, PivotedLdlt, SubtreeEnds};
 
 /// How a leg's motors compare with its degrees of freedom.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -182,39 +182,13 @@ where
 }
 
 /// One past the last coordinate of each coordinate's subtree, where the coordinates are
-/// in depth-first order (parents first, every subtree contiguous: the order the generator
-/// emits); `None` otherwise, and the mass matrix is then factored densely.
+/// in depth-first order (parents first, every subtree contiguous); `None` otherwise, and
+/// the mass matrix is then factored densely ([`SubtreeEnds::of`]).
 pub const fn subtree_ends<const N: usize>(parents: &[Option<usize>; N]) -> Option<[usize; N]> {
-    let mut ends = [0; N];
-    let mut k = N;
-    while k > 0 {
-        k -= 1;
-        if ends[k] == 0 {
-            ends[k] = k + 1; // a leaf
-        }
-        if let Some(p) = parents[k] {
-            if p >= k {
-                return None;
-            }
-            if ends[k] > ends[p] {
-                ends[p] = ends[k];
-            }
-        }
+    match SubtreeEnds::of(parents) {
+        Some(ends) => Some(*ends.get()),
+        None => None,
     }
-    // Contiguous: everything in `k + 1 .. ends[k]` has its parent in `k .. itself`.
-    let mut k = 0;
-    while k < N {
-        let mut j = k + 1;
-        while j < ends[k] {
-            match parents[j] {
-                Some(p) if p >= k => {}
-                _ => return None,
-            }
-            j += 1;
-        }
-        k += 1;
-    }
-    Some(ends)
 }
 
 /// Multiply–adds of factoring a mass matrix with the tree `parents` and solving one
@@ -264,7 +238,7 @@ pub const fn factors_along_the_tree<const N: usize>(parents: &[Option<usize>; N]
 /// The subtree ends of `L`'s coordinates ([`subtree_ends`]) where its mass matrix is
 /// factored along the tree ([`factors_along_the_tree`]); `None` where it is dense.
 pub(crate) const fn mass_tree<L, const NQ: usize, const NC: usize, const NU: usize>(
-) -> Option<&'static [usize; NQ]>
+) -> Option<&'static SubtreeEnds<NQ>>
 where
     L: LegDynamics<NQ, NC, NU>,
 {
@@ -277,12 +251,12 @@ where
     }
 }
 
-/// [`subtree_ends`] where they exist (`factors_along_the_tree` says so), a value of the
-/// const to refer to.
-const fn ends_of<const N: usize>(parents: &[Option<usize>; N]) -> [usize; N] {
-    match subtree_ends(parents) {
+/// [`SubtreeEnds::of`] where they exist (`factors_along_the_tree` says so): a value of
+/// the const to refer to, never evaluated otherwise.
+const fn ends_of<const N: usize>(parents: &[Option<usize>; N]) -> SubtreeEnds<N> {
+    match SubtreeEnds::of(parents) {
         Some(ends) => ends,
-        None => [N; N],
+        None => panic!("not in depth-first order"),
     }
 }
 

@@ -93,6 +93,56 @@ impl<T: Real, const N: usize> Cholesky<T, N> {
     }
 }
 
+/// One past the last coordinate of each coordinate's subtree, for coordinates in
+/// depth-first order (parents first, every subtree contiguous); built only by
+/// [`SubtreeEnds::of`], which checks that order, so a [`TreeLdl`] cannot be given ends that
+/// do not describe a tree.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SubtreeEnds<const N: usize>([usize; N]);
+
+impl<const N: usize> SubtreeEnds<N> {
+    /// The ends of the tree `parents` (each coordinate's parent, `None` at a root), or
+    /// `None` where the coordinates are not in depth-first order.
+    pub const fn of(parents: &[Option<usize>; N]) -> Option<Self> {
+        let mut ends = [0; N];
+        let mut k = N;
+        while k > 0 {
+            k -= 1;
+            if ends[k] == 0 {
+                ends[k] = k + 1; // a leaf
+            }
+            if let Some(p) = parents[k] {
+                if p >= k {
+                    return None;
+                }
+                if ends[k] > ends[p] {
+                    ends[p] = ends[k];
+                }
+            }
+        }
+        // Contiguous: everything in `k + 1 .. ends[k]` has its parent in `k .. itself`
+        // (so, by induction, descends from k).
+        let mut k = 0;
+        while k < N {
+            let mut j = k + 1;
+            while j < ends[k] {
+                match parents[j] {
+                    Some(p) if p >= k => {}
+                    _ => return None,
+                }
+                j += 1;
+            }
+            k += 1;
+        }
+        Some(SubtreeEnds(ends))
+    }
+
+    /// The ends, one per coordinate.
+    pub const fn get(&self) -> &[usize; N] {
+        &self.0
+    }
+}
+
 /// `A = Lᵀ D L` (`L` unit lower triangular, `D` diagonal and positive) of a joint-space
 /// mass matrix whose sparsity is a tree's: `Aᵢⱼ` is zero unless one of `i`, `j` descends
 /// from the other. With the coordinates in depth-first order (every subtree contiguous,
@@ -116,11 +166,12 @@ pub struct TreeLdl<T: Real, const N: usize> {
 }
 
 impl<T: Real, const N: usize> TreeLdl<T, N> {
-    /// `None` unless every pivot is positive and finite. `ends[i]` is one past the last
-    /// coordinate of `i`'s subtree, in depth-first order
-    /// ([`crate::dynamics::structure::subtree_ends`]).
+    /// `None` unless every pivot is positive and finite. The pivots are taken from the
+    /// leaves up, so `rcond` is not the dense factor's estimate for the same matrix (both
+    /// are pivot ratios of an `L D Lᵀ`-type factor, of different orderings).
     #[inline]
-    pub fn new(a: &SMatrix<T, N, N>, ends: &'static [usize; N]) -> Option<Self> {
+    pub fn new(a: &SMatrix<T, N, N>, tree: &'static SubtreeEnds<N>) -> Option<Self> {
+        let ends = &tree.0;
         // Factored in place in a copy of A: L below the diagonal (column-major, so a
         // column's stretch is contiguous), A read from above it.
         let mut l = *a;
@@ -129,7 +180,6 @@ impl<T: Real, const N: usize> TreeLdl<T, N> {
         let (mut lo, mut hi) = (T::zero(), T::zero());
         let data = l.as_mut_slice();
         for i in (0..N).rev() {
-            debug_assert!(ends[i] > i && ends[i] <= N);
             // Lⱼᵢ for j below i, from the deepest up:
             // Lⱼᵢ Dⱼ = Aᵢⱼ − Σ_{k below j} Lₖᵢ Dₖ Lₖⱼ.
             let mut di = data[i + i * N];
@@ -553,12 +603,12 @@ mod tests {
             Some(2),
             Some(6),
         ];
-        const ENDS: [usize; N] = match crate::dynamics::structure::subtree_ends(&PARENTS) {
+        const ENDS: SubtreeEnds<N> = match SubtreeEnds::of(&PARENTS) {
             Some(ends) => ends,
             None => panic!("not depth-first"),
         };
         let (parents, ends) = (PARENTS, &ENDS);
-        assert_eq!(*ends, [8, 8, 8, 6, 5, 6, 8, 8]);
+        assert_eq!(*ends.get(), [8, 8, 8, 6, 5, 6, 8, 8]);
         let mut a = SMatrix::<f64, N, N>::identity() * 0.5;
         for k in 0..N {
             let mut v = SMatrix::<f64, N, 1>::zeros();
