@@ -23,8 +23,9 @@ use core::fmt;
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::dynamics::forward::{actuation, rcond_floor, Baumgarte, DynamicsError};
-use crate::dynamics::structure::{checked_mass_factor, mass_tree};
+use crate::dynamics::forward::{
+    actuation, checked_mass_factor, mass_tree, rcond_floor, Baumgarte, DynamicsError,
+};
 use crate::model::contract::{ContactModel, Real};
 use crate::model::linalg::{all_finite, mul, Cholesky, Factored, PivotedLdlt, TreeLdl};
 

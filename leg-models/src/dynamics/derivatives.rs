@@ -24,10 +24,9 @@ use crate::dynamics::contact::{
     Ground, Modes,
 };
 use crate::dynamics::forward::{
-    actuation, classify_non_finite, kkt_rhs, Acceleration, Baumgarte, DynamicsError,
-    KktFactorization,
+    actuation, checked_mass_factor, classify_non_finite, kkt_rhs, mass_tree, Acceleration,
+    Baumgarte, DynamicsError, KktFactorization,
 };
-use crate::dynamics::structure::{checked_mass_factor, mass_tree};
 use crate::model::contract::{ContactModel, DynamicsTerms, LegDynamics, Real};
 use crate::model::linalg::{all_finite, negate, Factored, TreeLdl};
 

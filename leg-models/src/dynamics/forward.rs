@@ -13,9 +13,11 @@ use core::fmt;
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::dynamics::structure::{checked_mass_factor, mass_tree};
 use crate::model::contract::{DynamicsTerms, LegDynamics, Real};
-use crate::model::linalg::{all_finite, mul, mul_tn, Cholesky, Factored, PivotedLdlt, TreeLdl};
+use crate::model::linalg::{
+    all_finite, factors_along_the_tree, mul, mul_tn, Cholesky, Factored, PivotedLdlt, SubtreeEnds,
+    TreeLdl,
+};
 
 /// Why the constrained dynamics cannot be solved at a state.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -343,6 +345,57 @@ fn solve_closure_forces<T: Real, const NC: usize>(
             .solve_mut(forces);
     }
     Ok(())
+}
+
+/// The subtree ends of `L`'s coordinates ([`SubtreeEnds`]) where its mass matrix is
+/// factored along the tree ([`factors_along_the_tree`]); `None` where it is dense.
+pub(crate) const fn mass_tree<L, const NQ: usize, const NC: usize, const NU: usize>(
+) -> Option<&'static SubtreeEnds<NQ>>
+where
+    L: LegDynamics<NQ, NC, NU>,
+{
+    const {
+        if factors_along_the_tree(&L::PARENTS) {
+            Some(&ends_of(&L::PARENTS))
+        } else {
+            None
+        }
+    }
+}
+
+/// [`SubtreeEnds::of`] where they exist (`factors_along_the_tree` says so): a value of
+/// the const to refer to, never evaluated otherwise.
+const fn ends_of<const N: usize>(parents: &[Option<usize>; N]) -> SubtreeEnds<N> {
+    match SubtreeEnds::of(parents) {
+        Some(ends) => ends,
+        None => panic!("not in depth-first order"),
+    }
+}
+
+/// A factor of `M` checked: a NaN or infinity in `M` is `NonFinite`; a pivot that is not
+/// positive, or a pivot ratio below [`rcond_floor`], `MassMatrixNotPositiveDefinite`.
+#[inline(always)]
+pub(crate) fn checked_mass_factor<T: Real, F: Factored<T, NQ>, const NQ: usize>(
+    factor: Option<F>,
+    m: &SMatrix<T, NQ, NQ>,
+) -> Result<F, DynamicsError> {
+    match factor {
+        Some(f) if f.rcond() >= rcond_floor::<T>() => Ok(f),
+        _ => Err(not_positive_definite(m)),
+    }
+}
+
+/// Why `M` has no factor: a NaN or infinity in it (a non-finite pose or parameter) is
+/// said as such, not as a mass matrix that is not positive definite.
+#[cold]
+pub(crate) fn not_positive_definite<T: Real, const NQ: usize>(
+    m: &SMatrix<T, NQ, NQ>,
+) -> DynamicsError {
+    if all_finite(m) {
+        DynamicsError::MassMatrixNotPositiveDefinite
+    } else {
+        DynamicsError::NonFinite
+    }
 }
 
 impl DynamicsError {

@@ -6,9 +6,10 @@ use core::fmt;
 
 use nalgebra::SMatrix;
 
-use crate::dynamics::forward::{rcond_floor, DynamicsError};
+use crate::dynamics::forward::rcond_floor;
 use crate::model::contract::{LegDynamics, Real};
-use crate::model::linalg::{all_finite, Factored, PivotedLdlt, SubtreeEnds};
+use crate::model::linalg::PivotedLdlt;
+pub use crate::model::linalg::{factors_along_the_tree, mass_factor_operations, subtree_ends};
 
 /// How a leg's motors compare with its degrees of freedom.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -179,111 +180,6 @@ where
     T: Real,
 {
     PivotedLdlt::new(s, L::REDUNDANT_ROWS, rcond_floor::<T>())
-}
-
-/// One past the last coordinate of each coordinate's subtree, where the coordinates are
-/// in depth-first order (parents first, every subtree contiguous); `None` otherwise, and
-/// the mass matrix is then factored densely ([`SubtreeEnds::of`]).
-pub const fn subtree_ends<const N: usize>(parents: &[Option<usize>; N]) -> Option<[usize; N]> {
-    match SubtreeEnds::of(parents) {
-        Some(ends) => Some(*ends.get()),
-        None => None,
-    }
-}
-
-/// Multiply–adds of factoring a mass matrix with the tree `parents` and solving one
-/// right-hand side: `(dense, along the tree)`. Dense is `Σⱼ j (N − j)` for the factor and
-/// `N²` for the solve; along the tree, a coordinate with `s` descendants costs their
-/// depths below it in the factor and `2 s` in the solve. `None` along the tree where the
-/// coordinates are not in depth-first order ([`subtree_ends`]).
-pub const fn mass_factor_operations<const N: usize>(
-    parents: &[Option<usize>; N],
-) -> (usize, Option<usize>) {
-    let mut dense = N * N;
-    let mut k = 0;
-    while k < N {
-        dense += k * (N - k);
-        k += 1;
-    }
-    let Some(ends) = subtree_ends(parents) else {
-        return (dense, None);
-    };
-    let mut tree = 0;
-    let mut i = 0;
-    while i < N {
-        tree += 2 * (ends[i] - i - 1);
-        let mut j = i + 1;
-        while j < ends[i] {
-            tree += ends[j] - j; // Uᵢⱼ: one multiply–add per descendant of j, and itself
-            j += 1;
-        }
-        i += 1;
-    }
-    (dense, Some(tree))
-}
-
-/// Whether the mass matrix of a mechanism with the tree `parents` is factored along the
-/// tree ([`crate::model::linalg::TreeLdl`]) rather than densely. The tree's loops run over stretches whose
-/// lengths are known only at run time, where the dense ones unroll; counted under
-/// callgrind that costs about 16 multiply–adds' worth a coordinate, so the tree is chosen
-/// where its multiply–adds plus `16 N` are at most half the dense ones: a body carrying
-/// legs (`minitaur_quadruped`, `cassie`), not a single leg.
-pub const fn factors_along_the_tree<const N: usize>(parents: &[Option<usize>; N]) -> bool {
-    match mass_factor_operations(parents) {
-        (dense, Some(tree)) => 2 * (tree + 16 * N) <= dense,
-        _ => false,
-    }
-}
-
-/// The subtree ends of `L`'s coordinates ([`subtree_ends`]) where its mass matrix is
-/// factored along the tree ([`factors_along_the_tree`]); `None` where it is dense.
-pub(crate) const fn mass_tree<L, const NQ: usize, const NC: usize, const NU: usize>(
-) -> Option<&'static SubtreeEnds<NQ>>
-where
-    L: LegDynamics<NQ, NC, NU>,
-{
-    const {
-        if factors_along_the_tree(&L::PARENTS) {
-            Some(&ends_of(&L::PARENTS))
-        } else {
-            None
-        }
-    }
-}
-
-/// [`SubtreeEnds::of`] where they exist (`factors_along_the_tree` says so): a value of
-/// the const to refer to, never evaluated otherwise.
-const fn ends_of<const N: usize>(parents: &[Option<usize>; N]) -> SubtreeEnds<N> {
-    match SubtreeEnds::of(parents) {
-        Some(ends) => ends,
-        None => panic!("not in depth-first order"),
-    }
-}
-
-/// A factor of `M` checked: a NaN or infinity in `M` is `NonFinite`; a pivot that is not
-/// positive, or a pivot ratio below [`rcond_floor`], `MassMatrixNotPositiveDefinite`.
-#[inline(always)]
-pub(crate) fn checked_mass_factor<T: Real, F: Factored<T, NQ>, const NQ: usize>(
-    factor: Option<F>,
-    m: &SMatrix<T, NQ, NQ>,
-) -> Result<F, DynamicsError> {
-    match factor {
-        Some(f) if f.rcond() >= rcond_floor::<T>() => Ok(f),
-        _ => Err(not_positive_definite(m)),
-    }
-}
-
-/// Why `M` has no factor: a NaN or infinity in it (a non-finite pose or parameter) is
-/// said as such, not as a mass matrix that is not positive definite.
-#[cold]
-pub(crate) fn not_positive_definite<T: Real, const NQ: usize>(
-    m: &SMatrix<T, NQ, NQ>,
-) -> DynamicsError {
-    if all_finite(m) {
-        DynamicsError::MassMatrixNotPositiveDefinite
-    } else {
-        DynamicsError::NonFinite
-    }
 }
 
 #[cfg(test)]

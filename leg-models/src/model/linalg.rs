@@ -143,6 +143,60 @@ impl<const N: usize> SubtreeEnds<N> {
     }
 }
 
+/// One past the last coordinate of each coordinate's subtree, where the coordinates are
+/// in depth-first order (parents first, every subtree contiguous); `None` otherwise, and
+/// the mass matrix is then factored densely ([`SubtreeEnds::of`]).
+pub const fn subtree_ends<const N: usize>(parents: &[Option<usize>; N]) -> Option<[usize; N]> {
+    match SubtreeEnds::of(parents) {
+        Some(ends) => Some(*ends.get()),
+        None => None,
+    }
+}
+
+/// Multiply–adds of factoring a mass matrix with the tree `parents` and solving one
+/// right-hand side: `(dense, along the tree)`. Dense is `Σⱼ j (N − j)` for the factor and
+/// `N²` for the solve; along the tree, a coordinate with `s` descendants costs their
+/// depths below it in the factor and `2 s` in the solve. `None` along the tree where the
+/// coordinates are not in depth-first order ([`subtree_ends`]).
+pub const fn mass_factor_operations<const N: usize>(
+    parents: &[Option<usize>; N],
+) -> (usize, Option<usize>) {
+    let mut dense = N * N;
+    let mut k = 0;
+    while k < N {
+        dense += k * (N - k);
+        k += 1;
+    }
+    let Some(ends) = subtree_ends(parents) else {
+        return (dense, None);
+    };
+    let mut tree = 0;
+    let mut i = 0;
+    while i < N {
+        tree += 2 * (ends[i] - i - 1);
+        let mut j = i + 1;
+        while j < ends[i] {
+            tree += ends[j] - j; // Uᵢⱼ: one multiply–add per descendant of j, and itself
+            j += 1;
+        }
+        i += 1;
+    }
+    (dense, Some(tree))
+}
+
+/// Whether the mass matrix of a mechanism with the tree `parents` is factored along the
+/// tree ([`TreeLdl`]) rather than densely. The tree's loops run over stretches whose
+/// lengths are known only at run time, where the dense ones unroll; counted under
+/// callgrind that costs about 16 multiply–adds' worth a coordinate, so the tree is chosen
+/// where its multiply–adds plus `16 N` are at most half the dense ones: a body carrying
+/// legs (`minitaur_quadruped`, `cassie`), not a single leg.
+pub const fn factors_along_the_tree<const N: usize>(parents: &[Option<usize>; N]) -> bool {
+    match mass_factor_operations(parents) {
+        (dense, Some(tree)) => 2 * (tree + 16 * N) <= dense,
+        _ => false,
+    }
+}
+
 /// `A = Lᵀ D L` (`L` unit lower triangular, `D` diagonal and positive) of a joint-space
 /// mass matrix whose sparsity is a tree's: `Aᵢⱼ` is zero unless one of `i`, `j` descends
 /// from the other. With the coordinates in depth-first order (every subtree contiguous,
