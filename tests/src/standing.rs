@@ -238,37 +238,59 @@ where
         crate::not_applicable(L::NAME, check, &REDUNDANT_STANCE);
         return None;
     }
+    let modes = Modes::stick();
+    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
+    let start = match held_start::<L, NQ, NC, NU, NK>(&params, &start, &modes, &ground, &mu) {
+        Ok(s) => s,
+        Err(why) => {
+            crate::not_applicable(L::NAME, check, &why);
+            return None;
+        }
+    };
     Some(Stance {
         params,
         start,
         ground,
-        modes: Modes::stick(),
-        mu: spec_friction::<L, f64, NQ, NC, NU, NK, 3>(),
+        modes,
+        mu,
     })
 }
 
-/// The free motions of the stance with every contact held at `q`: `NQ` less the rank of
-/// the closure and contact rows together (singular values above 1e-9 of the largest).
-pub fn stance_mobility<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
-    p: &L::Params<f64>,
-    q: &SVector<f64, NQ>,
-) -> usize
+/// The largest `|q̈|` (m/s² or rad/s²) the least holding torques may leave for a pose
+/// to count as one the robot stands still in: 1e-10 g.
+pub const HELD: f64 = 1e-10 * 9.81;
+
+/// `start` where its least holding torques hold it still ([`HELD`]); else the pose
+/// [`robot::standing::standing_pose`] finds near it (springs settled under the weight,
+/// posture weight 0.1 per radian), or why there is none.
+fn held_start<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    params: &L::Params<f64>,
+    start: &RobotState<f64, NQ>,
+    modes: &Modes<NK, 3>,
+    ground: &Ground<f64, 3>,
+    mu: &SVector<f64, NK>,
+) -> Result<RobotState<f64, NQ>, String>
 where
     L: ContactModel<NQ, NC, NU, NK, 3>,
 {
-    use leg_models::nalgebra::DMatrix;
-    let jc = L::constraint_jacobian(q, p);
-    let c = L::contact_jacobian(q, p);
-    let both = DMatrix::from_fn(NC + NK, NQ, |i, j| {
-        if i < NC {
-            jc[(i, j)]
-        } else {
-            c[(i - NC, j)]
-        }
-    });
-    let sv = both.svd(false, false).singular_values;
-    let top = sv.max();
-    NQ - sv.iter().filter(|&&x| x > 1e-9 * top).count()
+    let (_, left) =
+        robot::holding_torques::<L, f64, NQ, NC, NU, NK>(params, start, modes, ground, mu)
+            .map_err(|e| e.to_string())?;
+    if left < HELD {
+        return Ok(*start);
+    }
+    let pose = robot::standing::standing_pose::<L, NQ, NC, NU, NK>(
+        params, start, modes, ground, mu, 0.1, 100,
+    )
+    .map_err(|e| e.to_string())?;
+    if pose.left < HELD {
+        Ok(pose.state)
+    } else {
+        Err(format!(
+            "its least holding torques leave |q̈| {left:.1e} at home, and {:.1e} at the best standing pose found near it",
+            pose.left
+        ))
+    }
 }
 
 /// Whether the contact rows of every contact held at `q` lose rank with the closures:

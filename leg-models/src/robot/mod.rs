@@ -27,6 +27,8 @@
 
 #[cfg(feature = "balance")]
 pub mod balance;
+#[cfg(feature = "std")]
+pub mod standing;
 
 use core::fmt;
 
