@@ -2,16 +2,16 @@
 //! (`leg_models::robot::balance`), pushed on the
 //! body's origin for 0.1 s along the ground (sideways, then forwards): the largest push
 //! each survives (no foot's force leaves its friction cone, and the body is back within
-//! 1 mm and 1 mrad after 2 s), found by bisection. Robots that cannot stand this way
-//! (fewer than three contact points, or two on one rigid foot, whose load split is not
-//! resolved yet) are skipped, and the example says why.
+//! 1 mm and 1 mrad after 2 s), found by bisection. A robot whose home it cannot hold
+//! still stands where `standing_pose` puts it; robots that cannot stand this way (fewer
+//! than three contact points) are said not applicable, with why.
 //!
 //! `cargo run --release -p leg-tests --example balance`
 
 use leg_models::nalgebra::Vector3;
 use leg_models::robot::balance::BalanceGains;
 use leg_models::ContactModel;
-use leg_tests::standing::{largest_push, on_its_feet, push_run, spec_mass, with_gravity, Holding};
+use leg_tests::standing::{largest_push, push_run, spec_mass, standing_start, Holding, Stance};
 
 // 1 ms: finer than the quadruped's own step (2 ms, `time_step` in tests/tests/robot.rs).
 const DT: f64 = 1e-3;
@@ -22,22 +22,16 @@ fn report<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
 where
     L: ContactModel<NQ, NC, NU, NK, 3>,
 {
-    let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
-    let (start, ground) = match on_its_feet::<L, NQ, NC, NU, NK>(&p) {
-        Ok(x) => x,
-        Err(why) => {
-            println!("{}: skipped: {why}", L::NAME);
-            return;
-        }
-    };
-    if leg_tests::standing::redundant_stance::<L, NQ, NC, NU, NK>(&p, &start.q) {
-        println!(
-            "{}: skipped: {}",
-            L::NAME,
-            leg_tests::standing::REDUNDANT_STANCE
-        );
+    let Some(Stance {
+        params: p,
+        start,
+        ground,
+        modes,
+        mu,
+    }) = standing_start::<L, NQ, NC, NU, NK>("balance example")
+    else {
         return;
-    }
+    };
     let weight = spec_mass::<L, NQ, NC, NU>(&p) * 9.81;
     println!("{}: weight {weight:.3} N, {} feet", L::NAME, NK / 3);
     let t0 = std::time::Instant::now();
@@ -61,10 +55,7 @@ where
     );
     // One command and one step alone, at the standing state (median of 9 batches).
     {
-        use leg_models::dynamics::contact::{spec_friction, Modes};
         use leg_models::robot::balance::{BalanceController, BalanceTarget};
-        let modes = Modes::<NK, 3>::stick();
-        let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
         let mut c = BalanceController::<NQ, NC, NU, NK>::new(
             BalanceTarget::holding(&start),
             BalanceGains::default(),

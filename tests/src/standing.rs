@@ -124,13 +124,6 @@ where
     (3..NK / 3).all(|k| n.dot(&(at(k) - at(0))).abs() <= 1e-12 * size)
 }
 
-/// Why the balance QP does not apply to a stance whose held contact rows repeat each
-/// other (two contacts on one rigid foot: Cassie's toe and heel). Measured on Cassie
-/// (2026-12-06, at its own step, 62.5 µs): the QP plans 47 N of its 327 N weight at the
-/// first tick, two contact points at their cones' edges, and the robot sinks 0.37 m in a
-/// second.
-pub const REDUNDANT_STANCE: &str = "its held contact rows repeat each other (two contacts on one rigid foot): the balance QP does not hold such a stance yet";
-
 /// Contact `k`'s force from `world_forces` (three a contact, in the world), its normal
 /// and tangential parts on `ground`, and how far it is into its friction cone:
 /// `‖λ_t‖ / (μ λ_n)`, at most 1 inside the cone, 0 for a contact that bears nothing,
@@ -176,6 +169,32 @@ pub struct ConeReading {
     pub ratio: f64,
 }
 
+/// The ground forces of `stance` (a step from `before`, centred, on `ground`) in the world,
+/// with their internal part split as puts every held contact deepest inside its cone
+/// ([`leg_models::robot::balance::deepest_split`]): two points of one rigid foot hold if
+/// any split of its load between them does, whatever split the stance solve reports (the
+/// least). Where no held rows repeat each other, the stance's own forces.
+pub fn judged_forces<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    p: &L::Params<f64>,
+    before: &RobotState<f64, NQ>,
+    stance: &robot::Stance<f64, NQ, NC, NK>,
+    modes: &Modes<NK, 3>,
+    ground: &Ground<f64, 3>,
+    mu: &SVector<f64, NK>,
+) -> SVector<f64, NK>
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    use leg_models::robot::balance::{deepest_split, internal_forces};
+    let internal = internal_forces::<L, NQ, NC, NU, NK>(p, before, modes, ground).unwrap();
+    if internal.ncols() == 0 {
+        return stance.world_forces;
+    }
+    let (split, _) = deepest_split(&stance.solution.contact, &internal, modes, mu).unwrap();
+    let local = robot::ground_in_chart(ground, &before.position, &before.orientation);
+    robot::forces_in_world(&local, &before.orientation, &split)
+}
+
 /// The robot's home with the body's six chart coordinates zeroed, put on its closures
 /// (an imported home is off them by a little); the body may have moved in closing them.
 pub fn assembled_home<L, const NQ: usize, const NC: usize, const NU: usize>(
@@ -217,11 +236,11 @@ where
 }
 
 /// [`Stance`] for the check named `check`, or `None`, said as not applicable with why:
-/// where the robot cannot be put on its feet, and, with `distinct_rows`, where its held
-/// rows repeat each other ([`redundant_stance`], [`REDUNDANT_STANCE`]).
+/// where the robot cannot be put on its feet or stand still there. Where its home is not
+/// a pose its least torques hold, it starts where [`robot::standing::standing_pose`]
+/// puts it.
 pub fn standing_start<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
     check: &str,
-    distinct_rows: bool,
 ) -> Option<Stance<L, NQ, NC, NU, NK>>
 where
     L: ContactModel<NQ, NC, NU, NK, 3>,
@@ -234,10 +253,6 @@ where
             return None;
         }
     };
-    if distinct_rows && redundant_stance::<L, NQ, NC, NU, NK>(&params, &start.q) {
-        crate::not_applicable(L::NAME, check, &REDUNDANT_STANCE);
-        return None;
-    }
     let modes = Modes::stick();
     let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
     let start = match held_start::<L, NQ, NC, NU, NK>(&params, &start, &modes, &ground, &mu) {
@@ -291,35 +306,6 @@ where
             pose.left
         ))
     }
-}
-
-/// Whether the contact rows of every contact held at `q` lose rank with the closures:
-/// some contacts' motions follow from the others' (two points of one rigid foot).
-pub fn redundant_stance<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
-    p: &L::Params<f64>,
-    q: &SVector<f64, NQ>,
-) -> bool
-where
-    L: ContactModel<NQ, NC, NU, NK, 3>,
-{
-    use leg_models::nalgebra::DMatrix;
-    let rank = |m: &DMatrix<f64>| {
-        let sv = m.clone().svd(false, false).singular_values;
-        let top = sv.max();
-        sv.iter().filter(|&&x| x > 1e-9 * top).count()
-    };
-    let jc = L::constraint_jacobian(q, p);
-    let c = L::contact_jacobian(q, p);
-    let closures = DMatrix::from_fn(NC, NQ, |i, j| jc[(i, j)]);
-    let both = DMatrix::from_fn(NC + NK, NQ, |i, j| {
-        if i < NC {
-            jc[(i, j)]
-        } else {
-            c[(i - NC, j)]
-        }
-    });
-    let base = if NC > 0 { rank(&closures) } else { 0 };
-    rank(&both) < base + NK
 }
 
 /// What holds the robot up during a push run.
@@ -432,6 +418,7 @@ where
             }
         };
         let force = if i < pushed { push } else { Vector3::zeros() };
+        let before = s;
         let stance = match robot::pushed_stance_step::<L, f64, NQ, NC, NU, NK>(
             p, &mut s, &u, &force, &modes, ground, &mu, dt,
         ) {
@@ -441,13 +428,14 @@ where
                 return run;
             }
         };
+        let forces = judged_forces::<L, NQ, NC, NU, NK>(p, &before, &stance, &modes, ground, &mu);
         for k in 0..NK / 3 {
             let ConeReading {
                 normal,
                 tangential,
                 ratio,
                 ..
-            } = cone_reading(&stance.world_forces, ground, &mu, k);
+            } = cone_reading(&forces, ground, &mu, k);
             run.least_normal = run.least_normal.min(normal);
             run.worst_friction = run.worst_friction.max(ratio);
             if normal <= 0.0 && run.failed.is_none() {

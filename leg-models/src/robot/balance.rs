@@ -31,6 +31,15 @@
 //! the robot's size, so that the body's rows and the revolute joints' are accelerations
 //! in m/s².
 //!
+//! Where held contacts repeat each other (two points of one rigid foot: Cassie's toe and
+//! heel), part of their forces moves nothing: the foot's two points can push apart or
+//! together along their line ([`internal_forces`], a basis `N`). The stance solve gives
+//! the least of the forces that act (`λ₀ + F u`, least in norm), and the QP adds the
+//! internal part as variables `z`, `λ = λ₀ + F u + N z`, with the cones on the sum: the
+//! foot holds if some split of its load between its points is inside their cones, and
+//! the controller picks one. [`deepest_split`] answers the same question for any forces
+//! (a simulator's): the split that puts every held contact deepest inside its cone.
+//!
 //! The problem's sparsity is fixed by the held contacts: the solver is set up once and
 //! its data updated in place while they stay the same (a new set of held contacts sets
 //! it up again).
@@ -42,11 +51,11 @@ use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
     DefaultSettings, DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
 };
-use nalgebra::{SMatrix, SVector, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, DVector, SMatrix, SVector, UnitQuaternion, Vector3};
 
 use super::{
-    forces_in_world, free_joint, stance_system, velocity_derivative, RobotDynamicsError,
-    RobotState, Stance,
+    chart_params, forces_in_world, free_joint, ground_in_chart, stance_system, velocity_derivative,
+    RobotDynamicsError, RobotState, Stance,
 };
 use crate::dynamics::actuation;
 use crate::dynamics::contact::{ContactMode, Ground, Modes};
@@ -113,7 +122,9 @@ impl<const NQ: usize> BalanceTarget<NQ> {
 pub struct BalanceCommand<const NQ: usize, const NC: usize, const NU: usize, const NK: usize> {
     /// The motor torques.
     pub torques: SVector<f64, NU>,
-    /// `q̈`, closure and ground forces under `torques`, the ground forces in the world.
+    /// `q̈`, closure and ground forces under `torques`, the ground forces in the world:
+    /// the planned ones, with the split of the internal forces the controller chose
+    /// (the stance solve alone gives the least split).
     pub stance: Stance<f64, NQ, NC, NK>,
     /// Clarabel's interior-point iterations.
     pub iterations: u32,
@@ -184,8 +195,9 @@ pub struct BalanceController<const NQ: usize, const NC: usize, const NU: usize, 
     pub gains: BalanceGains,
     /// `|u_i| ≤ torque_limit[i]` when given.
     pub torque_limit: Option<SVector<f64, NU>>,
-    /// The solver, and the held contacts and constraint rows it was set up for.
-    qp: Option<(DefaultSolver<f64>, Modes<NK, 3>, usize)>,
+    /// The solver, and the held contacts, constraint rows and internal forces it was set
+    /// up for.
+    qp: Option<(DefaultSolver<f64>, Modes<NK, 3>, usize, usize)>,
     /// The QP's data, refilled each tick (dense, in the solver's column order).
     p: Vec<f64>,
     q: Vec<f64>,
@@ -273,6 +285,20 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
             force.set_column(i, &(x.contact - free.contact));
         }
 
+        // The internal forces' directions, and the variables: the torques, then their
+        // weights `z`.
+        let internal = internal_forces::<L, NQ, NC, NU, NK>(params, &s, modes, ground)?;
+        let nz = internal.ncols();
+        let nx = NU + nz;
+        // λ's map over all variables: [F N].
+        let force_map = |r: usize, j: usize| {
+            if j < NU {
+                force[(r, j)]
+            } else {
+                internal[(r, j - NU)]
+            }
+        };
+
         // The tasks: the desired q̈ of each coordinate and its row's scale.
         let size = L::leg_size(&s.q, params);
         let g = &self.gains;
@@ -310,21 +336,27 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
         // and the tangential forces' term likewise.
         let wa = SMatrix::<f64, NQ, NQ>::from_diagonal(&scale) * accel;
         let residual = (free.x - desired).component_mul(&scale);
-        let mut hessian = wa.transpose() * wa;
-        let mut linear_cost = wa.transpose() * residual;
+        let mut hessian = DMatrix::<f64>::zeros(nx, nx);
+        hessian
+            .view_mut((0, 0), (NU, NU))
+            .copy_from(&(wa.transpose() * wa));
+        let mut linear_cost = DVector::<f64>::zeros(nx);
+        linear_cost
+            .rows_mut(0, NU)
+            .copy_from(&(wa.transpose() * residual));
         // The tangential forces of the held contacts, over the mass (an acceleration).
         let mass = system.mass_matrix[(f, f)];
         let wt = g.tangential_weight.sqrt() / mass;
         for k in (0..contacts).filter(|&k| modes.get(k) == ContactMode::Stick) {
             for r in [3 * k, 3 * k + 1] {
-                let row = force.row(r) * wt;
-                hessian += row.transpose() * row;
-                linear_cost += row.transpose() * (free.contact[r] * wt);
+                let row = DVector::<f64>::from_fn(nx, |j, _| force_map(r, j) * wt);
+                hessian += &row * row.transpose();
+                linear_cost += &row * (free.contact[r] * wt);
             }
         }
-        let mean = hessian.trace() / NU as f64;
+        let mean = hessian.trace() / nx as f64;
         let ridge = g.torque_weight * mean.max(f64::MIN_POSITIVE);
-        for i in 0..NU {
+        for i in 0..nx {
             hessian[(i, i)] += ridge;
         }
 
@@ -333,7 +365,7 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
         let limits = self.torque_limit.is_some();
         let rows = 3 * held + if limits { 2 * NU } else { 0 };
         self.p.clear();
-        for j in 0..NU {
+        for j in 0..nx {
             for i in 0..=j {
                 self.p.push(hessian[(i, j)]);
             }
@@ -357,11 +389,12 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
             self.b.extend(lim.iter());
         }
         self.a.clear();
-        for j in 0..NU {
+        for j in 0..nx {
             for &(r, m) in cone_rows.iter() {
-                self.a.push(-m * force[(r, j)]);
+                self.a.push(-m * force_map(r, j));
             }
             if limits {
+                // The limits bind the torques, not the internal forces.
                 for i in 0..NU {
                     self.a.push(if i == j { 1.0 } else { 0.0 });
                 }
@@ -373,20 +406,20 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
 
         // Set up again where the held contacts or the rows (torque limits on or off)
         // changed: the data's pattern is the solver's.
-        let setup = !matches!(&self.qp, Some((_, m, r)) if m == modes && *r == rows);
+        let setup = !matches!(&self.qp, Some((_, m, r, z)) if m == modes && *r == rows && *z == nz);
         if setup {
             let p = CscMatrix::new(
-                NU,
-                NU,
-                (0..=NU).map(|j| j * (j + 1) / 2).collect(),
-                (0..NU).flat_map(|j| 0..=j).collect(),
+                nx,
+                nx,
+                (0..=nx).map(|j| j * (j + 1) / 2).collect(),
+                (0..nx).flat_map(|j| 0..=j).collect(),
                 self.p.clone(),
             );
             let a = CscMatrix::new(
                 rows,
-                NU,
-                (0..=NU).map(|j| j * rows).collect(),
-                (0..NU).flat_map(|_| 0..rows).collect(),
+                nx,
+                (0..=nx).map(|j| j * rows).collect(),
+                (0..nx).flat_map(|_| 0..rows).collect(),
                 self.a.clone(),
             );
             let mut cones = Vec::with_capacity(held + 1);
@@ -400,9 +433,9 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
                         status: format!("set-up: {e}"),
                     }
                 })?;
-            self.qp = Some((solver, *modes, rows));
+            self.qp = Some((solver, *modes, rows, nz));
         }
-        let Some((solver, _, _)) = self.qp.as_mut() else {
+        let Some((solver, _, _, _)) = self.qp.as_mut() else {
             unreachable!("set up above")
         };
         if !setup {
@@ -424,9 +457,14 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
                 return Err(BalanceError::NotSolved { status });
             }
         }
-        let torques = SVector::<f64, NU>::from_column_slice(&out.x);
+        let torques = SVector::<f64, NU>::from_column_slice(&out.x[..NU]);
         let iterations = out.iterations;
-        let solution = solve(&torques)?;
+        let mut solution = solve(&torques)?;
+        for (c, z) in out.x[NU..].iter().enumerate() {
+            for r in 0..NK {
+                solution.contact[r] += internal[(r, c)] * z;
+            }
+        }
         Ok(BalanceCommand {
             torques,
             stance: Stance {
@@ -436,6 +474,163 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
             iterations,
         })
     }
+}
+
+/// The held contacts' internal forces at `state`: an orthonormal basis (columns) of the
+/// ground forces on the contacts in `modes` that sticking hold and that move nothing,
+/// their generalized force taken up by the closures alone (`Cᵀ λ + Jᵀ μ = 0` for some
+/// closure forces `μ`). Rows as [`crate::dynamics::contact::ContactSolution::contact`]:
+/// `(λ_t₁, λ_t₂, λ_n)` per contact in the frame of the ground seen from the chart centred
+/// on the body. None (zero columns) where no held rows repeat each other; one for each
+/// rigid foot held at two points (they may push apart or together along their line).
+pub fn internal_forces<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    params: &L::Params<f64>,
+    state: &RobotState<f64, NQ>,
+    modes: &Modes<NK, 3>,
+    ground: &Ground<f64, 3>,
+) -> Result<DMatrix<f64>, RobotDynamicsError>
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    let f = free_joint::<L, NQ, NC, NU>()?;
+    let mut s = *state;
+    s.recentre(f);
+    let chart = chart_params::<L, f64, NQ, NC, NU>(params, &s.orientation)?;
+    let frame = ground_in_chart(ground, &s.position, &s.orientation).frame();
+    let contact = L::contact_jacobian(&s.q, &chart);
+    let closure = L::constraint_jacobian(&s.q, &chart);
+    let held: Vec<usize> = (0..NK)
+        .filter(|&r| modes.get(r / 3) == ContactMode::Stick)
+        .collect();
+    let (nh, n) = (held.len(), held.len() + NC);
+    // A = [Cᵀ Jᵀ] (NQ × n), padded with zero rows to be at least square so that the SVD
+    // gives all of V; its null space is V's columns whose singular values are below
+    // 1e-9 of the largest.
+    let a = DMatrix::<f64>::from_fn(NQ.max(n), n, |i, j| {
+        if i >= NQ {
+            0.0
+        } else if j < nh {
+            let r = held[j];
+            let (k, row) = (r / 3, r % 3);
+            (0..3)
+                .map(|c| frame[(row, c)] * contact[(3 * k + c, i)])
+                .sum()
+        } else {
+            closure[(j - nh, i)]
+        }
+    });
+    if nh == 0 || !a.iter().all(|x| x.is_finite()) {
+        return Ok(DMatrix::zeros(NK, 0));
+    }
+    let svd = a.svd(false, true);
+    let v_t = svd.v_t.expect("asked for");
+    let top = svd.singular_values.amax();
+    let null: Vec<usize> = (0..n)
+        .filter(|&i| svd.singular_values[i] <= 1e-9 * top)
+        .collect();
+    if null.is_empty() {
+        return Ok(DMatrix::zeros(NK, 0));
+    }
+    // Their contact parts (unit null vectors whose contact part is nothing are closure
+    // rows repeating each other), made orthonormal.
+    let parts = v_t.select_rows(&null).transpose().rows(0, nh).into_owned();
+    let svd = parts.svd(true, false);
+    let u = svd.u.expect("asked for");
+    let keep: Vec<usize> = (0..svd.singular_values.len())
+        .filter(|&i| svd.singular_values[i] > 1e-6)
+        .collect();
+    let mut out = DMatrix::<f64>::zeros(NK, keep.len());
+    for (c, &i) in keep.iter().enumerate() {
+        for (j, &r) in held.iter().enumerate() {
+            out[(r, c)] = u[(j, i)];
+        }
+    }
+    Ok(out)
+}
+
+/// The split of the held contacts' internal forces (`internal`, from [`internal_forces`])
+/// that puts every held contact deepest inside its friction cone: `forces + N z` with
+/// `z` maximizing the least margin `μ_k λ_n,k − |λ_t,k|` (N) over the contacts in
+/// `modes` that stick, and that margin, negative where no split keeps every held contact
+/// in its cone (the feet slip whatever the split). `forces` and the result are in the
+/// ground's frame per contact (`(λ_t₁, λ_t₂, λ_n)`); with no internal forces they are
+/// `forces` unchanged. A second-order cone program, by Clarabel.
+pub fn deepest_split<const NK: usize>(
+    forces: &SVector<f64, NK>,
+    internal: &DMatrix<f64>,
+    modes: &Modes<NK, 3>,
+    mu: &SVector<f64, NK>,
+) -> Result<(SVector<f64, NK>, f64), BalanceError> {
+    let held: Vec<usize> = (0..NK / 3)
+        .filter(|&k| modes.get(k) == ContactMode::Stick)
+        .collect();
+    let margin = |l: &SVector<f64, NK>| {
+        held.iter().fold(f64::INFINITY, |m, &k| {
+            m.min(mu[3 * k + 2] * l[3 * k + 2] - l[3 * k].hypot(l[3 * k + 1]))
+        })
+    };
+    let nz = internal.ncols();
+    if nz == 0 || held.is_empty() {
+        return Ok((*forces, margin(forces)));
+    }
+    // Variables (z, t); minimize −t; per held contact (μ λ_n − t, λ_t₁, λ_t₂) ∈ SOC,
+    // as s = b − A x with λ = forces + N z.
+    let nx = nz + 1;
+    let rows = 3 * held.len();
+    let mut b = Vec::with_capacity(rows);
+    let mut a = vec![0.0; rows * nx];
+    for (i, &k) in held.iter().enumerate() {
+        let m = mu[3 * k + 2];
+        for (o, (r, scale)) in [(3 * k + 2, m), (3 * k, 1.0), (3 * k + 1, 1.0)]
+            .into_iter()
+            .enumerate()
+        {
+            let row = 3 * i + o;
+            b.push(scale * forces[r]);
+            for c in 0..nz {
+                a[c * rows + row] = -scale * internal[(r, c)];
+            }
+            if o == 0 {
+                a[nz * rows + row] = 1.0;
+            }
+        }
+    }
+    let p = CscMatrix::new(nx, nx, vec![0; nx + 1], Vec::new(), Vec::new());
+    let mut q = vec![0.0; nx];
+    q[nz] = -1.0;
+    let a = CscMatrix::new(
+        rows,
+        nx,
+        (0..=nx).map(|j| j * rows).collect(),
+        (0..nx).flat_map(|_| 0..rows).collect(),
+        a,
+    );
+    let cones: Vec<_> = held
+        .iter()
+        .map(|_| SupportedConeT::SecondOrderConeT(3))
+        .collect();
+    let mut solver = DefaultSolver::new(&p, &q, &a, &b, &cones, settings()).map_err(|e| {
+        BalanceError::NotSolved {
+            status: format!("set-up: {e}"),
+        }
+    })?;
+    solver.solve();
+    match solver.solution.status {
+        SolverStatus::Solved | SolverStatus::AlmostSolved => {}
+        status => {
+            return Err(BalanceError::NotSolved {
+                status: format!("{status:?}"),
+            })
+        }
+    }
+    let mut out = *forces;
+    for c in 0..nz {
+        let z = solver.solution.x[c];
+        for r in 0..NK {
+            out[r] += internal[(r, c)] * z;
+        }
+    }
+    Ok((out, margin(&out)))
 }
 
 /// Clarabel's settings: quiet, and no presolve (it would forbid updating the data in

@@ -12,12 +12,18 @@
 //!
 //! ```text
 //! |u(q) / (m g ℓ)|² + |q̈(q)|² ℓ / g · 10⁶ + w² |q − q₀|²
+//!   + Σ_k (|λ_t,k|² + (λ_n,k − λ̄_n)²) / (m g)²
 //! ```
 //!
 //! where `u(q)` are the least torques that hold the robot still at `q`
 //! ([`super::holding_torques`]) and `q̈(q)` what they leave (motions no motor, closure or
 //! contact holds: a rod spinning about its own axis), `m g` the robot's weight, `ℓ` its
-//! size, and `w` a posture weight per radian (or per size, for the body's translation).
+//! size, `w` a posture weight per radian (or per size, for the body's translation), and
+//! `λ_k` the held contacts' forces under those torques: the last term asks every contact
+//! to bear its share `λ̄_n` of the weight with nothing along the ground, so that the pose
+//! is one the feet hold with margin in their friction cones, not only one the torques
+//! hold (the least torques alone tip the weight onto Cassie's toes and pull on its
+//! heels).
 //! Gauss–Newton on the poses' tangent space (the null space of the closure and contact
 //! heights' Jacobian), the residual's Jacobian by central differences of poses put back
 //! on the constraints, with Levenberg–Marquardt damping.
@@ -131,7 +137,8 @@ where
         let m = L::mass_matrix(&q0, params);
         m[(f, f)]
     };
-    let torque_scale = (mass * g * size).max(f64::MIN_POSITIVE);
+    let weight = (mass * g).max(f64::MIN_POSITIVE);
+    let torque_scale = weight * size;
     let accel_weight = 1e3 * (size / g.max(f64::MIN_POSITIVE)).sqrt();
     let held: Vec<usize> = (0..NK / 3)
         .filter(|&k| modes.get(k) != crate::dynamics::contact::ContactMode::Flight)
@@ -194,10 +201,23 @@ where
         |q: &SVector<f64, NQ>| -> Result<(DVector<f64>, SVector<f64, NU>, f64), StandingError> {
             let s = at(q);
             let (u, _) = holding_torques::<L, f64, NQ, NC, NU, NK>(params, &s, modes, ground, mu)?;
-            let qdd = stance_dynamics::<L, f64, NQ, NC, NU, NK>(params, &s, &u, modes, ground, mu)?
-                .solution
-                .x;
-            let mut r = DVector::<f64>::zeros(NU + 2 * NQ);
+            let solution =
+                stance_dynamics::<L, f64, NQ, NC, NU, NK>(params, &s, &u, modes, ground, mu)?
+                    .solution;
+            let qdd = solution.x;
+            let mut r = DVector::<f64>::zeros(NU + 2 * NQ + NK);
+            // The held contacts' loads, each against its share of the whole, and their
+            // forces along the ground, over the weight.
+            let share = held
+                .iter()
+                .map(|&k| solution.contact[3 * k + 2])
+                .sum::<f64>()
+                / held.len().max(1) as f64;
+            for &k in &held {
+                r[NU + 2 * NQ + 3 * k] = solution.contact[3 * k] / weight;
+                r[NU + 2 * NQ + 3 * k + 1] = solution.contact[3 * k + 1] / weight;
+                r[NU + 2 * NQ + 3 * k + 2] = (solution.contact[3 * k + 2] - share) / weight;
+            }
             for i in 0..NU {
                 r[i] = u[i] / torque_scale;
             }
