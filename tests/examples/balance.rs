@@ -2,9 +2,12 @@
 //! (`leg_models::robot::balance`), pushed on the
 //! body's origin for 0.1 s along the ground (sideways, then forwards): the largest push
 //! each survives (no foot's force leaves its friction cone, and the body is back within
-//! 1 mm and 1 mrad after 2 s), found by bisection. A robot whose home it cannot hold
+//! 1 mm and 1 mrad after 2 s, a rigid foot's load split between its points as deep in
+//! their cones as any split goes), found by bisection. A robot whose home it cannot hold
 //! still stands where `standing_pose` puts it; robots that cannot stand this way (fewer
-//! than three contact points) are said not applicable, with why.
+//! than three contact points) are said not applicable, with why. Cassie is measured
+//! too, though the QP does not hold its sprung stance once pushed (the robot tests say
+//! it not applicable there).
 //!
 //! `cargo run --release -p leg-tests --example balance`
 

@@ -325,7 +325,8 @@ pub struct PushRun {
     /// `None` if the robot stayed on its feet and came back; else why not, and when (s).
     pub failed: Option<(f64, String)>,
     /// The largest `|λ_t| / (μ λ_n)` of any foot over the run, from the simulator's
-    /// forces (above 1: a foot would slip).
+    /// forces, a rigid foot's split between its points the deepest in their cones
+    /// ([`judged_forces`]; above 1: a foot would slip).
     pub worst_friction: f64,
     /// The least normal force of any foot over the run (N).
     pub least_normal: f64,

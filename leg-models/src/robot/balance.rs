@@ -31,18 +31,20 @@
 //! the robot's size, so that the body's rows and the revolute joints' are accelerations
 //! in m/s².
 //!
-//! Where held contacts repeat each other (two points of one rigid foot: Cassie's toe and
-//! heel), part of their forces moves nothing: the foot's two points can push apart or
-//! together along their line ([`internal_forces`], a basis `N`). The stance solve gives
-//! the least of the forces that act (`λ₀ + F u`, least in norm), and the QP adds the
-//! internal part as variables `z`, `λ = λ₀ + F u + N z`, with the cones on the sum: the
-//! foot holds if some split of its load between its points is inside their cones, and
-//! the controller picks one. [`deepest_split`] answers the same question for any forces
-//! (a simulator's): the split that puts every held contact deepest inside its cone.
-//!
 //! The problem's sparsity is fixed by the held contacts: the solver is set up once and
 //! its data updated in place while they stay the same (a new set of held contacts sets
 //! it up again).
+//!
+//! Where held contacts repeat each other (two points of one rigid foot: Cassie's toe and
+//! heel), part of their forces moves nothing: the foot's two points can push apart or
+//! together along their line ([`internal_forces`], a basis `N`). The stance solve gives
+//! the least of the forces that act, and a foot holds if some split of its load between
+//! its points is inside their cones: [`deepest_split`] finds the split that puts every
+//! held contact deepest inside its cone (a simulator's forces judged as a rigid foot
+//! holds). Both allocate (an SVD, a cone program): they are for judging and analysis.
+//! The QP itself puts its cones on the least split; taking `z` in `λ = λ₀ + F u + N z`
+//! as variables, allocation-free, is the next step (a first version that did, on heap
+//! matrices, broke the controller's allocation bound).
 
 use core::fmt;
 use std::vec::Vec;
@@ -51,7 +53,7 @@ use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
     DefaultSettings, DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
 };
-use nalgebra::{DMatrix, DVector, SMatrix, SVector, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, SMatrix, SVector, UnitQuaternion, Vector3};
 
 use super::{
     chart_params, forces_in_world, free_joint, ground_in_chart, stance_system, velocity_derivative,
@@ -122,9 +124,7 @@ impl<const NQ: usize> BalanceTarget<NQ> {
 pub struct BalanceCommand<const NQ: usize, const NC: usize, const NU: usize, const NK: usize> {
     /// The motor torques.
     pub torques: SVector<f64, NU>,
-    /// `q̈`, closure and ground forces under `torques`, the ground forces in the world:
-    /// the planned ones, with the split of the internal forces the controller chose
-    /// (the stance solve alone gives the least split).
+    /// `q̈`, closure and ground forces under `torques`, the ground forces in the world.
     pub stance: Stance<f64, NQ, NC, NK>,
     /// Clarabel's interior-point iterations.
     pub iterations: u32,
@@ -195,9 +195,8 @@ pub struct BalanceController<const NQ: usize, const NC: usize, const NU: usize, 
     pub gains: BalanceGains,
     /// `|u_i| ≤ torque_limit[i]` when given.
     pub torque_limit: Option<SVector<f64, NU>>,
-    /// The solver, and the held contacts, constraint rows and internal forces it was set
-    /// up for.
-    qp: Option<(DefaultSolver<f64>, Modes<NK, 3>, usize, usize)>,
+    /// The solver, and the held contacts and constraint rows it was set up for.
+    qp: Option<(DefaultSolver<f64>, Modes<NK, 3>, usize)>,
     /// The QP's data, refilled each tick (dense, in the solver's column order).
     p: Vec<f64>,
     q: Vec<f64>,
@@ -285,20 +284,6 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
             force.set_column(i, &(x.contact - free.contact));
         }
 
-        // The internal forces' directions, and the variables: the torques, then their
-        // weights `z`.
-        let internal = internal_forces::<L, NQ, NC, NU, NK>(params, &s, modes, ground)?;
-        let nz = internal.ncols();
-        let nx = NU + nz;
-        // λ's map over all variables: [F N].
-        let force_map = |r: usize, j: usize| {
-            if j < NU {
-                force[(r, j)]
-            } else {
-                internal[(r, j - NU)]
-            }
-        };
-
         // The tasks: the desired q̈ of each coordinate and its row's scale.
         let size = L::leg_size(&s.q, params);
         let g = &self.gains;
@@ -336,27 +321,21 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
         // and the tangential forces' term likewise.
         let wa = SMatrix::<f64, NQ, NQ>::from_diagonal(&scale) * accel;
         let residual = (free.x - desired).component_mul(&scale);
-        let mut hessian = DMatrix::<f64>::zeros(nx, nx);
-        hessian
-            .view_mut((0, 0), (NU, NU))
-            .copy_from(&(wa.transpose() * wa));
-        let mut linear_cost = DVector::<f64>::zeros(nx);
-        linear_cost
-            .rows_mut(0, NU)
-            .copy_from(&(wa.transpose() * residual));
+        let mut hessian = wa.transpose() * wa;
+        let mut linear_cost = wa.transpose() * residual;
         // The tangential forces of the held contacts, over the mass (an acceleration).
         let mass = system.mass_matrix[(f, f)];
         let wt = g.tangential_weight.sqrt() / mass;
         for k in (0..contacts).filter(|&k| modes.get(k) == ContactMode::Stick) {
             for r in [3 * k, 3 * k + 1] {
-                let row = DVector::<f64>::from_fn(nx, |j, _| force_map(r, j) * wt);
-                hessian += &row * row.transpose();
-                linear_cost += &row * (free.contact[r] * wt);
+                let row = force.row(r) * wt;
+                hessian += row.transpose() * row;
+                linear_cost += row.transpose() * (free.contact[r] * wt);
             }
         }
-        let mean = hessian.trace() / nx as f64;
+        let mean = hessian.trace() / NU as f64;
         let ridge = g.torque_weight * mean.max(f64::MIN_POSITIVE);
-        for i in 0..nx {
+        for i in 0..NU {
             hessian[(i, i)] += ridge;
         }
 
@@ -365,7 +344,7 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
         let limits = self.torque_limit.is_some();
         let rows = 3 * held + if limits { 2 * NU } else { 0 };
         self.p.clear();
-        for j in 0..nx {
+        for j in 0..NU {
             for i in 0..=j {
                 self.p.push(hessian[(i, j)]);
             }
@@ -389,12 +368,11 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
             self.b.extend(lim.iter());
         }
         self.a.clear();
-        for j in 0..nx {
+        for j in 0..NU {
             for &(r, m) in cone_rows.iter() {
-                self.a.push(-m * force_map(r, j));
+                self.a.push(-m * force[(r, j)]);
             }
             if limits {
-                // The limits bind the torques, not the internal forces.
                 for i in 0..NU {
                     self.a.push(if i == j { 1.0 } else { 0.0 });
                 }
@@ -406,20 +384,20 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
 
         // Set up again where the held contacts or the rows (torque limits on or off)
         // changed: the data's pattern is the solver's.
-        let setup = !matches!(&self.qp, Some((_, m, r, z)) if m == modes && *r == rows && *z == nz);
+        let setup = !matches!(&self.qp, Some((_, m, r)) if m == modes && *r == rows);
         if setup {
             let p = CscMatrix::new(
-                nx,
-                nx,
-                (0..=nx).map(|j| j * (j + 1) / 2).collect(),
-                (0..nx).flat_map(|j| 0..=j).collect(),
+                NU,
+                NU,
+                (0..=NU).map(|j| j * (j + 1) / 2).collect(),
+                (0..NU).flat_map(|j| 0..=j).collect(),
                 self.p.clone(),
             );
             let a = CscMatrix::new(
                 rows,
-                nx,
-                (0..=nx).map(|j| j * rows).collect(),
-                (0..nx).flat_map(|_| 0..rows).collect(),
+                NU,
+                (0..=NU).map(|j| j * rows).collect(),
+                (0..NU).flat_map(|_| 0..rows).collect(),
                 self.a.clone(),
             );
             let mut cones = Vec::with_capacity(held + 1);
@@ -433,9 +411,9 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
                         status: format!("set-up: {e}"),
                     }
                 })?;
-            self.qp = Some((solver, *modes, rows, nz));
+            self.qp = Some((solver, *modes, rows));
         }
-        let Some((solver, _, _, _)) = self.qp.as_mut() else {
+        let Some((solver, _, _)) = self.qp.as_mut() else {
             unreachable!("set up above")
         };
         if !setup {
@@ -457,14 +435,9 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
                 return Err(BalanceError::NotSolved { status });
             }
         }
-        let torques = SVector::<f64, NU>::from_column_slice(&out.x[..NU]);
+        let torques = SVector::<f64, NU>::from_column_slice(&out.x);
         let iterations = out.iterations;
-        let mut solution = solve(&torques)?;
-        for (c, z) in out.x[NU..].iter().enumerate() {
-            for r in 0..NK {
-                solution.contact[r] += internal[(r, c)] * z;
-            }
-        }
+        let solution = solve(&torques)?;
         Ok(BalanceCommand {
             torques,
             stance: Stance {

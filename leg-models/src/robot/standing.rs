@@ -11,16 +11,19 @@
 //! closure closed and every contact point on the ground, it minimizes
 //!
 //! ```text
-//! |u(q) / (m g ℓ)|² + |q̈(q)|² ℓ / g · 10⁶ + w² |q − q₀|²
+//! |u(q) / (m g ℓ)|² + 10⁶ (ℓ / g) |q̈(q)|² + w² |q − q₀|²
 //!   + Σ_k (|λ_t,k|² + (λ_n,k − λ̄_n)²) / (m g)²
 //! ```
 //!
-//! where `u(q)` are the least torques that hold the robot still at `q`
+//! (the `q̈` term is not dimensionless, and mixes m/s² and rad/s² rows: it only has
+//! to make what the torques leave dominate, and it does), where `u(q)` are the least
+//! torques that hold the robot still at `q`
 //! ([`super::holding_torques`]) and `q̈(q)` what they leave (motions no motor, closure or
 //! contact holds: a rod spinning about its own axis), `m g` the robot's weight, `ℓ` its
 //! size, `w` a posture weight per radian (or per size, for the body's translation), and
-//! `λ_k` the held contacts' forces under those torques: the last term asks every contact
-//! to bear its share `λ̄_n` of the weight with nothing along the ground, so that the pose
+//! `λ_k` the held contacts' forces under those torques (the least split where two share
+//! a rigid foot): the last term asks every contact to bear the mean `λ̄_n` of their
+//! normal forces with nothing along the ground, so that the pose
 //! is one the feet hold with margin in their friction cones, not only one the torques
 //! hold (the least torques alone tip the weight onto Cassie's toes and pull on its
 //! heels).
@@ -66,8 +69,11 @@ pub enum StandingError {
         /// The largest closure or height residual left (m).
         residual: f64,
     },
-    /// The start or the posture weight is not finite, or the weight not positive.
+    /// The start, the ground or the posture weight is not finite (or a pose tried gave a
+    /// non-finite residual), the weight is not positive, or the ground's normal is zero.
     NonFinite,
+    /// No contact in `modes` is held: there is nothing to stand on.
+    NoStance,
 }
 
 impl From<RobotDynamicsError> for StandingError {
@@ -84,6 +90,7 @@ impl fmt::Display for StandingError {
                 f,
                 "standing pose: the closures and the contacts' heights cannot be closed near the start ({residual:e} m left)"
             ),
+            StandingError::NoStance => write!(f, "standing pose: no contact is held"),
             StandingError::NonFinite => write!(
                 f,
                 "standing pose: the start or the posture weight is not finite (or the weight is not positive)"
@@ -118,8 +125,13 @@ where
         .q
         .iter()
         .chain(start.position.iter())
+        .chain(start.orientation.coords.iter())
+        .chain(ground.normal.iter())
+        .chain(core::iter::once(&ground.offset))
         .all(|x| x.is_finite());
-    if !(finite && posture_weight.is_finite() && posture_weight > 0.0) {
+    if !(finite && posture_weight.is_finite() && posture_weight > 0.0)
+        || ground.normal.norm() == 0.0
+    {
         return Err(StandingError::NonFinite);
     }
     let mut centre = *start;
@@ -143,6 +155,9 @@ where
     let held: Vec<usize> = (0..NK / 3)
         .filter(|&k| modes.get(k) != crate::dynamics::contact::ContactMode::Flight)
         .collect();
+    if held.is_empty() {
+        return Err(StandingError::NoStance);
+    }
     // The constraints: closures, then each held contact's height above the chart's
     // ground.
     let rows = NC + held.len();
@@ -175,6 +190,9 @@ where
     let project = |q: &mut SVector<f64, NQ>| -> Result<(), StandingError> {
         let mut h = constraint(q);
         for _ in 0..50 {
+            if !h.iter().all(|x| x.is_finite()) {
+                return Err(StandingError::NonFinite);
+            }
             if h.amax() <= limit {
                 return Ok(());
             }
@@ -237,15 +255,32 @@ where
     let mut iterations = 0;
     for _ in 0..max_iterations {
         iterations += 1;
-        // The tangent space: the constraints' Jacobian's null space, from `JᵀJ`'s
-        // eigenvectors (its eigenvalues are the singular values squared).
+        // The tangent space: the constraints' Jacobian's null space, from its SVD (padded
+        // with zero rows to be square, so that V is whole), singular values below 1e-9
+        // of the largest.
         let j = constraint_jacobian(&q);
-        let eigen = (j.transpose() * &j).symmetric_eigen();
-        let top = eigen.eigenvalues.amax();
+        if !j.iter().all(|x| x.is_finite()) {
+            return Err(StandingError::NonFinite);
+        }
+        let padded =
+            DMatrix::<f64>::from_fn(
+                NQ.max(rows),
+                NQ,
+                |i, c| {
+                    if i < rows {
+                        j[(i, c)]
+                    } else {
+                        0.0
+                    }
+                },
+            );
+        let svd = padded.svd(false, true);
+        let v_t = svd.v_t.expect("asked for");
+        let top = svd.singular_values.amax();
         let free: Vec<usize> = (0..NQ)
-            .filter(|&i| eigen.eigenvalues[i] <= 1e-18 * top)
+            .filter(|&i| svd.singular_values[i] <= 1e-9 * top)
             .collect();
-        let tangent = eigen.eigenvectors.select_columns(&free);
+        let tangent = v_t.select_rows(&free).transpose();
         let m = tangent.ncols();
         let h = 1e-6;
         let mut jac = DMatrix::<f64>::zeros(r.len(), m);
