@@ -1261,3 +1261,34 @@ fn standing_pose_refuses_bad_input_and_a_fixed_base() {
     .unwrap_err();
     assert!(e.to_string().contains("fixed base"), "{e}");
 }
+
+#[test]
+fn deepest_split_meets_a_hand_solution_and_refuses_bad_input() {
+    use leg_models::dynamics::contact::Modes;
+    use leg_models::nalgebra::DMatrix;
+    use leg_models::robot::balance::{deepest_split, BalanceError};
+    // Two points of one foot, rows (λ_t₁, λ_t₂, λ_n): 1.5 N and 0.5 N along t₁ on 1 N
+    // each, μ = 1; they may push apart along t₁. By hand: the least margin
+    // min(1 − |1.5 + z|, 1 − |0.5 − z|) is largest, 0, at z = −0.5: both (1, 0, 1).
+    let forces = SVector::<f64, 6>::from_column_slice(&[1.5, 0.0, 1.0, 0.5, 0.0, 1.0]);
+    let mu = SVector::<f64, 6>::from_element(1.0);
+    let modes = Modes::<6, 3>::stick();
+    let mut n = DMatrix::<f64>::zeros(6, 1);
+    n[(0, 0)] = std::f64::consts::FRAC_1_SQRT_2;
+    n[(3, 0)] = -std::f64::consts::FRAC_1_SQRT_2;
+    let (split, margin) = deepest_split(&forces, &n, &modes, &mu).unwrap();
+    let by_hand = SVector::<f64, 6>::from_column_slice(&[1.0, 0.0, 1.0, 1.0, 0.0, 1.0]);
+    assert!(margin.abs() < 1e-7, "margin {margin}");
+    assert!((split - by_hand).amax() < 1e-7, "split {split:?}");
+    // Without the internal direction, the forces as they are: 1.5 N on 1 N, 0.5 outside.
+    let (same, least) = deepest_split(&forces, &DMatrix::zeros(6, 0), &modes, &mu).unwrap();
+    assert_eq!(same, forces);
+    assert!((least + 0.5).abs() < 1e-15, "{least}");
+    // Refused: the wrong rows, and a NaN.
+    let e = deepest_split(&forces, &DMatrix::zeros(5, 1), &modes, &mu).unwrap_err();
+    assert!(matches!(e, BalanceError::SplitInput { .. }), "{e}");
+    let mut bad = forces;
+    bad[2] = f64::NAN;
+    let e = deepest_split(&bad, &n, &modes, &mu).unwrap_err();
+    assert!(e.to_string().contains("not finite"), "{e}");
+}

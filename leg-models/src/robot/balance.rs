@@ -156,6 +156,12 @@ pub enum BalanceError {
         /// Clarabel's status.
         status: String,
     },
+    /// [`deepest_split`]'s input is not what it takes: `internal` with other than `NK`
+    /// rows, or a force, internal force or friction coefficient that is not finite.
+    SplitInput {
+        /// What is wrong.
+        why: &'static str,
+    },
 }
 
 impl From<RobotDynamicsError> for BalanceError {
@@ -180,6 +186,7 @@ impl fmt::Display for BalanceError {
             BalanceError::NotSolved { status } => {
                 write!(f, "balance: the QP was not solved ({status})")
             }
+            BalanceError::SplitInput { why } => write!(f, "deepest split: {why}"),
         }
     }
 }
@@ -527,13 +534,25 @@ where
 /// `modes` that stick, and that margin, negative where no split keeps every held contact
 /// in its cone (the feet slip whatever the split). `forces` and the result are in the
 /// ground's frame per contact (`(λ_t₁, λ_t₂, λ_n)`); with no internal forces they are
-/// `forces` unchanged. A second-order cone program, by Clarabel.
+/// `forces` unchanged. A second-order cone program, by Clarabel. Refuses (`SplitInput`)
+/// `internal` with other than `NK` rows and non-finite input.
 pub fn deepest_split<const NK: usize>(
     forces: &SVector<f64, NK>,
     internal: &DMatrix<f64>,
     modes: &Modes<NK, 3>,
     mu: &SVector<f64, NK>,
 ) -> Result<(SVector<f64, NK>, f64), BalanceError> {
+    if internal.nrows() != NK {
+        return Err(BalanceError::SplitInput {
+            why: "the internal forces have other than one row per contact row",
+        });
+    }
+    let finite = |x: &f64| x.is_finite();
+    if !(forces.iter().all(finite) && internal.iter().all(finite) && mu.iter().all(finite)) {
+        return Err(BalanceError::SplitInput {
+            why: "a force, internal force or friction coefficient is not finite",
+        });
+    }
     let held: Vec<usize> = (0..NK / 3)
         .filter(|&k| modes.get(k) == ContactMode::Stick)
         .collect();
