@@ -5,9 +5,9 @@
 //! 1 mm and 1 mrad after 2 s, a rigid foot's load split between its points as deep in
 //! their cones as any split goes), found by bisection. A robot whose home it cannot hold
 //! still stands where `standing_pose` puts it; robots that cannot stand this way (fewer
-//! than three contact points) are said not applicable, with why. Cassie is measured
-//! too, though the QP does not hold its sprung stance once pushed (the robot tests say
-//! it not applicable there).
+//! than three contact points) are said not applicable, with why. Where the legs carry
+//! springs (Cassie), the controller holds them rigid in its model and servos the motors
+//! (its defaults); the same pushes planned with the springs as they are follow.
 //!
 //! `cargo run --release -p leg-tests --example balance`
 
@@ -121,26 +121,45 @@ where
         .cross(&start.orientation.transform_vector(&Vector3::x()))
         .normalize();
     let forward = side.cross(&ground.normal);
-    for (name, d) in [
-        ("sideways", side),
-        ("forwards", forward),
-        ("backwards", -forward),
-    ] {
-        let (lo, hi, why) = largest_push::<L, NQ, NC, NU, NK>(
-            &p,
-            &start,
-            &ground,
-            Holding::Balance(BalanceGains::default()),
-            d,
-            PUSH_TIME,
-            DURATION,
-            DT,
-            6,
-        );
-        println!(
-            "  balance QP, pushed {name} for {PUSH_TIME} s: survives {lo:.2} N ({:.2} of its weight); fails at {hi:.2} N: {why}",
-            lo / weight
-        );
+    let mut plans = vec![("balance QP", BalanceGains::default())];
+    if !L::SPRINGS.is_empty() {
+        plans.push((
+            "balance QP, springs as they are",
+            BalanceGains {
+                rigid_springs: false,
+                ..BalanceGains::default()
+            },
+        ));
+        plans.push((
+            "balance QP, springs rigid, no servo",
+            BalanceGains {
+                servo_stiffness: 0.0,
+                ..BalanceGains::default()
+            },
+        ));
+    }
+    for (plan, gains) in plans {
+        for (name, d) in [
+            ("sideways", side),
+            ("forwards", forward),
+            ("backwards", -forward),
+        ] {
+            let (lo, hi, why) = largest_push::<L, NQ, NC, NU, NK>(
+                &p,
+                &start,
+                &ground,
+                Holding::Balance(gains),
+                d,
+                PUSH_TIME,
+                DURATION,
+                DT,
+                6,
+            );
+            println!(
+                "  {plan}, pushed {name} for {PUSH_TIME} s: survives {lo:.2} N ({:.2} of its weight); fails at {hi:.2} N: {why}",
+                lo / weight
+            );
+        }
     }
 }
 

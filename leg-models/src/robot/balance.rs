@@ -31,6 +31,23 @@
 //! the robot's size, so that the body's rows and the revolute joints' are accelerations
 //! in m/s².
 //!
+//! Where the legs carry springs (Cassie's shin and heel springs), the controller's model
+//! holds them rigid, as controllers of sprung robots do: a virtual generalized force
+//! along each spring's deflection holds the deflection's acceleration at zero, and the
+//! maps above become the rigid model's (`σ = −(S A_σ)⁻¹ S (q̈₀ + A u)` substituted, `A_σ`
+//! the accelerations under a unit virtual force, `S` the deflections' rows). The spring
+//! modes the rigid model leaves out are damped by a servo the QP does not see (it would
+//! cancel it): a motor PD towards the posture, `−k (q_a − q_a*) − k d q̇_a` with `k`
+//! [`BalanceGains::servo_stiffness`] `m g ℓ` per rad, added to the QP's torques (and
+//! clipped to the limits). Both are needed on Cassie (measured at its standing pose, 1 ms
+//! steps, `cargo run --release -p leg-tests --example balance`): planned with the springs
+//! as they are, a forward push of 0.51 N for 0.1 s puts a toe out of its cone in 40 ms;
+//! held rigid without the servo, the spring modes grow (|q̇| 1.5e-2 after 1 s unpushed);
+//! with both it survives pushes of about a tenth of its weight (see docs/figures.md). The
+//! command's stance is the true (sprung) model's under the torques sent, so its forces
+//! are what the simulator applies, and may leave the cones the QP planned by the servo's
+//! share.
+//!
 //! The problem's sparsity is fixed by the held contacts: the solver is set up once and
 //! its data updated in place while they stay the same (a new set of held contacts sets
 //! it up again).
@@ -62,6 +79,7 @@ use super::{
 use crate::dynamics::actuation;
 use crate::dynamics::contact::{ContactMode, Ground, Modes};
 use crate::model::contract::ContactModel;
+use crate::model::linalg::Lu;
 
 /// The controller's gains: natural frequencies (rad/s), damping ratio and weights.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -81,6 +99,17 @@ pub struct BalanceGains {
     pub tangential_weight: f64,
     /// The torques' weight, relative to the tasks' mean curvature per torque.
     pub torque_weight: f64,
+    /// Where the model has springs: hold them rigid in the controller's model (their
+    /// deflections' accelerations zero), as controllers of sprung robots such as Cassie
+    /// do. `false` plans with the springs as they are (on Cassie that fails under a push
+    /// of 0.51 N: see the module's doc).
+    pub rigid_springs: bool,
+    /// Where the springs are held rigid: the stiffness of the motor PD towards the
+    /// target's posture added to the QP's torques, which damps the spring modes the rigid
+    /// model leaves out, per rad in units of `m g ℓ` (0 turns it off).
+    pub servo_stiffness: f64,
+    /// That PD's damping over its stiffness (s).
+    pub servo_damping: f64,
 }
 
 impl Default for BalanceGains {
@@ -92,6 +121,9 @@ impl Default for BalanceGains {
             posture_weight: 1e-2,
             tangential_weight: 1e-4,
             torque_weight: 1e-8,
+            rigid_springs: true,
+            servo_stiffness: 0.3,
+            servo_damping: 0.1,
         }
     }
 }
@@ -124,8 +156,13 @@ impl<const NQ: usize> BalanceTarget<NQ> {
 pub struct BalanceCommand<const NQ: usize, const NC: usize, const NU: usize, const NK: usize> {
     /// The motor torques.
     pub torques: SVector<f64, NU>,
-    /// `q̈`, closure and ground forces under `torques`, the ground forces in the world.
+    /// `q̈`, closure and ground forces under `torques`, the ground forces in the world:
+    /// the robot's model (springs as they are), so what a simulator applies.
     pub stance: Stance<f64, NQ, NC, NK>,
+    /// The ground forces the QP planned inside their cones, in the world: its model's
+    /// under its own torques. Where the springs are held rigid, the rigid model's and
+    /// without the servo's torques, so they differ from `stance`'s; elsewhere the same.
+    pub planned_forces: SVector<f64, NK>,
     /// Clarabel's interior-point iterations.
     pub iterations: u32,
 }
@@ -155,6 +192,14 @@ pub enum BalanceError {
     NotSolved {
         /// Clarabel's status.
         status: String,
+    },
+    /// The springs cannot be held rigid in the controller's model: `spring`'s
+    /// deflection is already held still by the stance (or, `(several)`, some
+    /// combination of the springs' is). Plan with the springs as they are
+    /// ([`BalanceGains::rigid_springs`] `false`).
+    SpringHeld {
+        /// The spring's name in the spec.
+        spring: &'static str,
     },
     /// [`deepest_split`]'s input is not what it takes: `internal` with other than `NK`
     /// rows, or a force, internal force or friction coefficient that is not finite.
@@ -187,6 +232,10 @@ impl fmt::Display for BalanceError {
                 write!(f, "balance: the QP was not solved ({status})")
             }
             BalanceError::SplitInput { why } => write!(f, "deepest split: {why}"),
+            BalanceError::SpringHeld { spring } => write!(
+                f,
+                "balance: spring {spring} cannot be held rigid: the stance already holds its deflection (plan with rigid_springs false)"
+            ),
         }
     }
 }
@@ -274,11 +323,12 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
         s.recentre(f);
         let (system, local, orientation) =
             stance_system::<L, f64, NQ, NC, NU, NK>(params, &s, modes, ground, mu)?;
-        let solve = |u: &SVector<f64, NU>| {
+        let solve_applied = |applied: &SVector<f64, NQ>| {
             system
-                .solve(&actuation::<L, f64, NQ, NC, NU>(u))
+                .solve(applied)
                 .map_err(|e| BalanceError::Dynamics(e.into()))
         };
+        let solve = |u: &SVector<f64, NU>| solve_applied(&actuation::<L, f64, NQ, NC, NU>(u));
         // The affine maps q̈ = q̈₀ + A u, λ = λ₀ + F u.
         let free = solve(&SVector::zeros())?;
         let mut accel = SMatrix::<f64, NQ, NU>::zeros();
@@ -289,6 +339,65 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
             let x = solve(&e)?;
             accel.set_column(i, &(x.x - free.x));
             force.set_column(i, &(x.contact - free.contact));
+        }
+        // Where the legs carry springs, the controller's model holds them rigid: a
+        // virtual generalized force `σ_j` along each spring's deflection holds the
+        // deflection's acceleration at zero, `S (q̈₀ + A u + A_σ σ) = 0`, and `σ`
+        // substituted gives the rigid model's maps (`A_σ`, `F_σ` from one solve each).
+        let mut free = free;
+        let springs = L::SPRINGS.len();
+        let rigid = self.gains.rigid_springs && springs > 0;
+        if rigid {
+            // A spring's deflection: q_a, or q_a − q_b for a coupling spring.
+            let deflection = |j: usize, x: &dyn Fn(usize) -> f64| {
+                let sp = &L::SPRINGS[j];
+                x(sp.a) - sp.b.map_or(0.0, x)
+            };
+            let mut a_s = SMatrix::<f64, NQ, NQ>::zeros();
+            let mut f_s = SMatrix::<f64, NK, NQ>::zeros();
+            for (j, sp) in L::SPRINGS.iter().enumerate() {
+                let mut along = SVector::<f64, NQ>::zeros();
+                along[sp.a] = 1.0;
+                if let Some(b) = sp.b {
+                    along[b] = -1.0;
+                }
+                let x = solve_applied(&along)?;
+                a_s.set_column(j, &(x.x - free.x));
+                f_s.set_column(j, &(x.contact - free.contact));
+            }
+            // `S A_σ`, padded to NQ × NQ with the identity; `S q̈₀` and `S A` beside it.
+            let mut a_ss = SMatrix::<f64, NQ, NQ>::identity();
+            let mut rhs = SMatrix::<f64, NQ, NU>::zeros();
+            let mut rhs0 = SVector::<f64, NQ>::zeros();
+            for i in 0..springs {
+                for j in 0..springs {
+                    a_ss[(i, j)] = deflection(i, &|r| a_s[(r, j)]);
+                }
+                for j in 0..NU {
+                    rhs[(i, j)] = deflection(i, &|r| accel[(r, j)]);
+                }
+                rhs0[i] = deflection(i, &|r| free.x[r]);
+            }
+            // A spring the stance already holds still has no virtual force to find (its
+            // diagonal, a mobility, is zero to rounding against the others').
+            let largest = (0..springs).fold(0.0f64, |m, j| m.max(a_ss[(j, j)].abs()));
+            let held = |d: f64| d.is_nan() || d <= 1e-12 * largest;
+            if let Some(j) = (0..springs).find(|&j| held(a_ss[(j, j)])) {
+                return Err(BalanceError::SpringHeld {
+                    spring: L::SPRINGS[j].name,
+                });
+            }
+            let Some(lu) = Lu::new(&a_ss) else {
+                return Err(BalanceError::SpringHeld {
+                    spring: "(several)",
+                });
+            };
+            let k0 = lu.solve(&rhs0);
+            let ka = lu.solve(&rhs);
+            free.x -= a_s * k0;
+            free.contact -= f_s * k0;
+            accel -= a_s * ka;
+            force -= f_s * ka;
         }
 
         // The tasks: the desired q̈ of each coordinate and its row's scale.
@@ -442,7 +551,25 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
                 return Err(BalanceError::NotSolved { status });
             }
         }
-        let torques = SVector::<f64, NU>::from_column_slice(&out.x);
+        let mut torques = SVector::<f64, NU>::from_column_slice(&out.x);
+        let planned_forces =
+            forces_in_world(&local, &orientation, &(free.contact + force * torques));
+        if rigid && g.servo_stiffness > 0.0 {
+            // The servo the QP does not see (it would cancel it): its torques are outside
+            // the QP's plan, and the limits clip their sum.
+            let gravity = super::world_gravity::<L, f64, NQ, NC, NU>(params)
+                .map_err(RobotDynamicsError::from)?
+                .norm();
+            let k = g.servo_stiffness * mass * gravity * size;
+            for (j, &a) in L::ACTUATED.iter().enumerate() {
+                torques[j] -= k * ((s.q[a] - self.target.posture[a]) + g.servo_damping * s.v[a]);
+            }
+            if let Some(lim) = &self.torque_limit {
+                for j in 0..NU {
+                    torques[j] = torques[j].clamp(-lim[j], lim[j]);
+                }
+            }
+        }
         let iterations = out.iterations;
         let solution = solve(&torques)?;
         Ok(BalanceCommand {
@@ -451,6 +578,7 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
                 world_forces: forces_in_world(&local, &orientation, &solution.contact),
                 solution,
             },
+            planned_forces,
             iterations,
         })
     }
