@@ -12,8 +12,9 @@
 //!
 //! so the QP over joint accelerations, ground forces and torques is solved in the
 //! torques alone, with the other two eliminated exactly (the equality rows of the
-//! dynamics, the closures and the held contacts are then satisfied by construction, and
-//! the forces the controller plans are the ones the simulator applies):
+//! dynamics, the closures and the held contacts are then satisfied by construction, and,
+//! where no springs are held rigid (below), the forces the controller plans are the ones
+//! the simulator applies):
 //!
 //! ```text
 //! min ½ |W (S q̈ − a*)|² + ½ w_t |λ_t / m|² + ½ r |u|²
@@ -193,6 +194,13 @@ pub enum BalanceError {
         /// Clarabel's status.
         status: String,
     },
+    /// A gain of the servo is not a finite non-negative number.
+    Gain {
+        /// The gain's field in [`BalanceGains`].
+        gain: &'static str,
+        /// Its value.
+        value: f64,
+    },
     /// The springs cannot be held rigid in the controller's model: `spring`'s
     /// deflection is already held still by the stance (or, `(several)`, some
     /// combination of the springs' is). Plan with the springs as they are
@@ -232,6 +240,10 @@ impl fmt::Display for BalanceError {
                 write!(f, "balance: the QP was not solved ({status})")
             }
             BalanceError::SplitInput { why } => write!(f, "deepest split: {why}"),
+            BalanceError::Gain { gain, value } => write!(
+                f,
+                "balance: the gain {gain} = {value} is not a finite non-negative number"
+            ),
             BalanceError::SpringHeld { spring } => write!(
                 f,
                 "balance: spring {spring} cannot be held rigid: the stance already holds its deflection (plan with rigid_springs false)"
@@ -318,6 +330,15 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
                 return Err(BalanceError::TorqueLimit { motor, limit });
             }
         }
+        let g = &self.gains;
+        for (gain, value) in [
+            ("servo_stiffness", g.servo_stiffness),
+            ("servo_damping", g.servo_damping),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(BalanceError::Gain { gain, value });
+            }
+        }
         let f = free_joint::<L, NQ, NC, NU>().map_err(RobotDynamicsError::from)?;
         let mut s = *state;
         s.recentre(f);
@@ -365,8 +386,9 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
                 a_s.set_column(j, &(x.x - free.x));
                 f_s.set_column(j, &(x.contact - free.contact));
             }
-            // `S A_σ`, padded to NQ × NQ with the identity; `S q̈₀` and `S A` beside it.
-            let mut a_ss = SMatrix::<f64, NQ, NQ>::identity();
+            // `S A_σ`, padded to NQ × NQ with a multiple of the identity; `S q̈₀` and `S A`
+            // beside it.
+            let mut a_ss = SMatrix::<f64, NQ, NQ>::zeros();
             let mut rhs = SMatrix::<f64, NQ, NU>::zeros();
             let mut rhs0 = SVector::<f64, NQ>::zeros();
             for i in 0..springs {
@@ -381,11 +403,14 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
             // A spring the stance already holds still has no virtual force to find (its
             // diagonal, a mobility, is zero to rounding against the others').
             let largest = (0..springs).fold(0.0f64, |m, j| m.max(a_ss[(j, j)].abs()));
-            let held = |d: f64| d.is_nan() || d <= 1e-12 * largest;
-            if let Some(j) = (0..springs).find(|&j| held(a_ss[(j, j)])) {
+            let still = |d: f64| d.is_nan() || d <= 1e-12 * largest;
+            if let Some(j) = (0..springs).find(|&j| still(a_ss[(j, j)])) {
                 return Err(BalanceError::SpringHeld {
                     spring: L::SPRINGS[j].name,
                 });
+            }
+            for j in springs..NQ {
+                a_ss[(j, j)] = largest;
             }
             let Some(lu) = Lu::new(&a_ss) else {
                 return Err(BalanceError::SpringHeld {
@@ -402,7 +427,6 @@ impl<const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
 
         // The tasks: the desired q̈ of each coordinate and its row's scale.
         let size = L::leg_size(&s.q, params);
-        let g = &self.gains;
         let (kp, kd) = (
             g.body_frequency * g.body_frequency,
             2.0 * g.damping_ratio * g.body_frequency,
