@@ -1,7 +1,8 @@
 //! Benchmarks of every generated model beside CasADi's own C code of the same
 //! derivation: the generated terms, the fused terms, forward dynamics, the actuated
 //! reduction, a control step and a simulation step, in f64 (and f32 for the fused terms
-//! and forward dynamics). `cargo xtask bench` runs them and prints the table.
+//! and forward dynamics); a floating robot's through `leg_models::robot`. `cargo xtask
+//! bench` runs them and prints the table.
 
 use std::hint::black_box;
 use std::time::Duration;
@@ -10,8 +11,10 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use leg_models::assembly::project_velocity;
 use leg_models::control::reference::Sinusoid;
 use leg_models::control::{actuated_reduction, Gains, JointFeedbackLinearization};
+use leg_models::dynamics::contact::{project_held_velocity, spec_friction, Ground, Modes};
 use leg_models::dynamics::forward_dynamics;
-use leg_models::nalgebra::SVector;
+use leg_models::nalgebra::{SVector, UnitQuaternion, Vector3};
+use leg_models::robot::{self, RobotState};
 use leg_models::simulate::hybrid::{HybridSimulator, HybridState};
 use leg_models::simulate::{step, State, StepOptions, TorqueSource};
 use leg_models::ContactModel;
@@ -396,6 +399,76 @@ where
     g.finish();
 }
 
+/// A floating robot as a user calls it (`leg_models::robot`), to compare with Pinocchio's
+/// free flyer (not yet in `cargo xtask bench --pinocchio`'s tables: run it with `cargo
+/// bench -p leg-tests --features peers --bench dynamics -- '^cassie/'`): the fused terms
+/// in the chart; forward dynamics at a
+/// state (`forward_dynamics_at`, the chart centred on the body, then `velocity_derivative`:
+/// the body's v̇, what Pinocchio returns) and, with contact points, the stance with every
+/// one held (`stance_dynamics`, v̇ too). The state: `passive_release_state`'s joints, the
+/// body level at the origin, rates `0.3 + 0.1 i` put on the closures and the held contacts.
+fn bench_floating<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    c: &mut Criterion,
+) where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    let p = L::Params::<f64>::default();
+    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
+    let q = passive_release_state::<L, NQ, NC, NU>(&p).q;
+    let mut s = RobotState::at_rest(Vector3::zeros(), UnitQuaternion::identity(), q);
+    s.recentre(f);
+    let mut v = SVector::<f64, NQ>::from_fn(|i, _| 0.3 + 0.1 * i as f64);
+    project_velocity::<L, f64, NQ, NC, NU>(&p, &s.q, &mut v).unwrap();
+    // Any plane: a held contact's q̈ does not depend on where the ground is.
+    let ground = Ground::<f64, 3>::of::<L, NQ, NC, NU, NK>();
+    let modes = Modes::<NK, 3>::stick();
+    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
+    if NK > 0 {
+        project_held_velocity::<L, f64, NQ, NC, NU, NK, 3>(&p, &s.q, &mut v, &modes, &ground)
+            .unwrap();
+    }
+    s.v = v;
+    let u = SVector::<f64, NU>::from_fn(|k, _| 0.05 * (k as f64 + 1.0));
+    let mut g = c.benchmark_group(L::NAME);
+    g.warm_up_time(Duration::from_millis(300))
+        .measurement_time(Duration::from_millis(1200))
+        .sample_size(40);
+    g.bench_function("empty", |bch| {
+        bch.iter(|| black_box((black_box(&s), black_box(&u), black_box(&p))))
+    });
+    g.bench_function("fused-ours", |bch| {
+        bch.iter(|| L::dynamics_terms(black_box(&s.q), black_box(&s.v), black_box(&p)))
+    });
+    g.bench_function("fd-ours", |bch| {
+        bch.iter(|| {
+            let s = black_box(&s);
+            robot::forward_dynamics_at::<L, f64, NQ, NC, NU>(black_box(&p), s, black_box(&u))
+                .map(|a| (robot::velocity_derivative(f, &s.v, &a.qdd), a.forces))
+        })
+    });
+    let stance = |s: &RobotState<f64, NQ>| {
+        robot::stance_dynamics::<L, f64, NQ, NC, NU, NK>(
+            black_box(&p),
+            s,
+            black_box(&u),
+            &modes,
+            &ground,
+            &mu,
+        )
+        .map(|st| {
+            (
+                robot::velocity_derivative(f, &s.v, &st.solution.x),
+                st.world_forces,
+            )
+        })
+    };
+    // Measured only where the stance solves: its error path is not what is compared.
+    if NK > 0 && stance(&s).is_ok() {
+        g.bench_function("stance-ours", |bch| bch.iter(|| stance(black_box(&s))));
+    }
+    g.finish();
+}
+
 fn benches(c: &mut Criterion) {
     macro_rules! each {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
@@ -409,6 +482,12 @@ fn benches(c: &mut Criterion) {
         };
     }
     generated::for_each_spatial_model!(spatial);
+    macro_rules! floating {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
+            bench_floating::<$ty, $nq, $nc, $nu, $nk>(c);
+        };
+    }
+    generated::for_each_floating_model!(floating);
 }
 
 criterion_group!(dynamics, benches);
