@@ -24,10 +24,13 @@ use core::fmt;
 use nalgebra::{SMatrix, SVector};
 
 use crate::dynamics::forward::{
-    actuation, checked_mass_factor, mass_tree, rcond_floor, Baumgarte, DynamicsError,
+    actuation, checked_mass_factor, factor_mass, mass_tree, rcond_floor, Baumgarte,
+    ConstraintFactor, DynamicsError,
 };
-use crate::model::contract::{ContactModel, Real};
-use crate::model::linalg::{all_finite, mul, Cholesky, Factored, PivotedLdlt, TreeLdl};
+use crate::model::contract::{ContactModel, DynamicsTerms, Real};
+use crate::model::linalg::{
+    all_finite, mul, mul_tn, Cholesky, Factored, MassFactor, PivotedLdlt, TreeLdl,
+};
 
 /// The ground `n · x = d` (base frame), `n` a unit normal out of the ground: a line for a
 /// planar leg (`ND = 2`), a plane for a spatial one (`ND = 3`).
@@ -280,6 +283,8 @@ pub fn solve_structured_columns<
         let s = mul(j, &y);
         f0 = r_j - mul(j, &a);
         g = mul(j, &z);
+        // Written out, not through `ConstraintFactor`: the enum cost the small legs'
+        // contact paths 2.6 to 2.9 % (abducted_five_bar contact_slide 7565 → 7761).
         if closure_deficiency == 0 {
             let chol_s =
                 Cholesky::new(&s).ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?;
@@ -309,6 +314,131 @@ pub fn solve_structured_columns<
     let lambda = solve_held(&k, &rhs, held, pieces)?;
     let x = a0 + mul(&zp, &lambda);
     let closure = f0 - mul(&g, &lambda);
+    finish_structured(rows, x, closure, lambda, tau)
+}
+
+/// [`solve_structured_columns`] with `M = Lᵀ D L` factored along the tree, in half
+/// solves as [`crate::dynamics::forward`]'s tree path does: with `t = L⁻ᵀ τ` and the
+/// rows' `L⁻ᵀ Jᵀ`, `L⁻ᵀ Wᵀ`, `L⁻ᵀ Cᵀ`, every product `X M⁻¹ Yᵀ` is `(L⁻ᵀ Xᵀ)ᵀ D⁻¹ (L⁻ᵀ Yᵀ)`
+/// and `q̈` takes one last half solve: `NC + NK (+ NK where a slide makes W ≠ C) + 2 C`
+/// half solves where the full form takes `2 (NC + NK + C)` whole ones (Featherstone,
+/// RBDA §8.5). The same elimination, so the same refusals (held rows that repeat, closures
+/// singular).
+#[allow(clippy::type_complexity)]
+pub(crate) fn solve_structured_on_tree<
+    T: Real,
+    const NQ: usize,
+    const NC: usize,
+    const NK: usize,
+    const ND: usize,
+    const C: usize,
+>(
+    chol_m: &TreeLdl<T, NQ>,
+    j: &SMatrix<T, NC, NQ>,
+    r_j: &SMatrix<T, NC, C>,
+    closure_deficiency: usize,
+    rows: &ContactRows<T, NQ, NK, ND>,
+    r_c: &SMatrix<T, NK, C>,
+    tau: &SMatrix<T, NQ, C>,
+) -> Result<(SMatrix<T, NQ, C>, SMatrix<T, NC, C>, SMatrix<T, NK, C>), DynamicsError> {
+    let (c, held) = (&rows.c, &rows.held);
+    let inv_d = chol_m.inv_diag();
+    let scaled = |m: &SMatrix<T, NQ, NK>| {
+        let mut out = *m;
+        for mut column in out.column_iter_mut() {
+            column.component_mul_assign(inv_d);
+        }
+        out
+    };
+    let mut t = *tau;
+    chol_m.solve_lt_mut(&mut t); // L⁻ᵀ τ
+                                 // The held rows only (the others' forces are zero and their equations not asked).
+    let mut ww = rows.w.transpose();
+    let mut same = true;
+    for (r, &h) in held.iter().enumerate() {
+        if h {
+            same &= rows.w.row(r) == c.row(r);
+        } else {
+            ww.column_mut(r).fill(T::zero());
+        }
+    }
+    let mut wc = ww;
+    chol_m.solve_lt_mut(&mut ww); // L⁻ᵀ Wᵀ
+    if same {
+        // Every held row sticks (or slides with W = C): C's rows are W's.
+        wc = ww;
+    } else {
+        for (r, &h) in held.iter().enumerate() {
+            if h {
+                wc.set_column(r, &c.row(r).transpose());
+            }
+        }
+        chol_m.solve_lt_mut(&mut wc); // L⁻ᵀ Cᵀ
+    }
+    // Closure elimination in the half space: u0 = t + Wj f0 (so a0 = L⁻¹ D⁻¹ u0), and the
+    // held rows' columns less the closures' response, Wp = Ww − Wj g (Zp = L⁻¹ D⁻¹ Wp).
+    let (mut u0, mut wp) = (t, ww);
+    let mut f0 = SMatrix::<T, NC, C>::zeros();
+    let mut g = SMatrix::<T, NC, NK>::zeros();
+    if NC > 0 {
+        let mut wj = j.transpose();
+        chol_m.solve_lt_mut(&mut wj); // L⁻ᵀ Jᵀ
+        let mut wj_d = wj;
+        for mut column in wj_d.column_iter_mut() {
+            column.component_mul_assign(inv_d);
+        }
+        let s = ConstraintFactor::new(&mul_tn(&wj, &wj_d), closure_deficiency)?;
+        f0 = r_j - mul_tn(&wj_d, &t);
+        g = mul_tn(&wj_d, &ww);
+        s.solve_mut(&mut f0);
+        s.solve_mut(&mut g);
+        u0 += mul(&wj, &f0);
+        wp -= mul(&wj, &g);
+    }
+    let mut u0_d = u0;
+    for mut column in u0_d.column_iter_mut() {
+        column.component_mul_assign(inv_d);
+    }
+    let wp_d = scaled(&wp);
+    // Held contact rows: K λ = r_c − C a0, K = C Zp.
+    let k = mul_tn(&wc, &wp_d);
+    let rhs = r_c - mul_tn(&wc, &u0_d);
+    // a0 itself only where held rows repeat (its size judges the rows left out).
+    let a0 = core::cell::OnceCell::new();
+    let pieces = |col: usize| {
+        let a0 = a0.get_or_init(|| {
+            let mut a = u0_d;
+            chol_m.solve_l_mut(&mut a);
+            a
+        });
+        r_c.column(col).amax().max(c.amax() * a0.column(col).amax())
+    };
+    let lambda = solve_held(&k, &rhs, held, pieces)?;
+    let mut x = u0_d + mul(&wp_d, &lambda);
+    chol_m.solve_l_mut(&mut x);
+    let closure = f0 - mul(&g, &lambda);
+    finish_structured(rows, x, closure, lambda, tau)
+}
+
+/// The end of a structured solve: the free tangential rows of sliding contacts from their
+/// normal force (`λ_t = slide λ_n`), and every result checked finite.
+#[allow(clippy::type_complexity)]
+#[inline(always)]
+fn finish_structured<
+    T: Real,
+    const NQ: usize,
+    const NC: usize,
+    const NK: usize,
+    const ND: usize,
+    const C: usize,
+>(
+    rows: &ContactRows<T, NQ, NK, ND>,
+    x: SMatrix<T, NQ, C>,
+    closure: SMatrix<T, NC, C>,
+    lambda: SMatrix<T, NK, C>,
+    tau: &SMatrix<T, NQ, C>,
+) -> Result<(SMatrix<T, NQ, C>, SMatrix<T, NC, C>, SMatrix<T, NK, C>), DynamicsError> {
+    let held = &rows.held;
     let mut contact = lambda;
     for k in 0..NK / ND {
         let n = ND * k + ND - 1;
@@ -778,9 +908,110 @@ where
     L: ContactModel<NQ, NC, NU, NK, ND>,
     T: Real,
 {
-    ContactSystem::new::<L, NU>(params, q, qd, modes, anchors, ground, mu, baumgarte)?
-        .solve(&actuation::<L, T, NQ, NC, NU>(u))
+    // The factor chosen at compile time (no `MassFactor` to carry and match: that cost
+    // the small legs' contact paths 3 %, raibert_hopper contact_slide 3082 → 3174).
+    let terms = L::dynamics_terms(q, qd, params);
+    let m = &terms.mass_matrix;
+    let applied = actuation::<L, T, NQ, NC, NU>(u);
+    let args = (params, q, qd, modes, anchors, ground, mu, baumgarte, None);
+    if let Some(ends) = mass_tree::<L, NQ, NC, NU>() {
+        let f = positive_factor(TreeLdl::new(m, ends))?;
+        ContactSystem::<T, NQ, NC, NK, ND, _>::assemble::<L, NU>(&terms, f, args)?.solve(&applied)
+    } else {
+        let f = positive_factor(Cholesky::new(m))?;
+        ContactSystem::<T, NQ, NC, NK, ND, _>::assemble::<L, NU>(&terms, f, args)?.solve(&applied)
+    }
 }
+
+/// How a factor of `M` solves a stance's structured system ([`solve_structured_columns`]
+/// densely, [`solve_structured_on_tree`] along the tree): the solve belongs to the factor.
+pub trait StructuredSolve<T: Real, const NQ: usize>: Factored<T, NQ> {
+    /// [`solve_structured_columns`] with this factor.
+    #[allow(clippy::type_complexity, clippy::too_many_arguments)]
+    fn solve_structured<const NC: usize, const NK: usize, const ND: usize, const C: usize>(
+        &self,
+        j: &SMatrix<T, NC, NQ>,
+        r_j: &SMatrix<T, NC, C>,
+        closure_deficiency: usize,
+        rows: &ContactRows<T, NQ, NK, ND>,
+        r_c: &SMatrix<T, NK, C>,
+        tau: &SMatrix<T, NQ, C>,
+    ) -> Result<(SMatrix<T, NQ, C>, SMatrix<T, NC, C>, SMatrix<T, NK, C>), DynamicsError>;
+}
+
+impl<T: Real, const NQ: usize> StructuredSolve<T, NQ> for Cholesky<T, NQ> {
+    #[inline(always)]
+    fn solve_structured<const NC: usize, const NK: usize, const ND: usize, const C: usize>(
+        &self,
+        j: &SMatrix<T, NC, NQ>,
+        r_j: &SMatrix<T, NC, C>,
+        d: usize,
+        rows: &ContactRows<T, NQ, NK, ND>,
+        r_c: &SMatrix<T, NK, C>,
+        tau: &SMatrix<T, NQ, C>,
+    ) -> Result<(SMatrix<T, NQ, C>, SMatrix<T, NC, C>, SMatrix<T, NK, C>), DynamicsError> {
+        solve_structured_columns(self, j, r_j, d, rows, r_c, tau)
+    }
+}
+
+impl<T: Real, const NQ: usize> StructuredSolve<T, NQ> for TreeLdl<T, NQ> {
+    #[inline(always)]
+    fn solve_structured<const NC: usize, const NK: usize, const ND: usize, const C: usize>(
+        &self,
+        j: &SMatrix<T, NC, NQ>,
+        r_j: &SMatrix<T, NC, C>,
+        d: usize,
+        rows: &ContactRows<T, NQ, NK, ND>,
+        r_c: &SMatrix<T, NK, C>,
+        tau: &SMatrix<T, NQ, C>,
+    ) -> Result<(SMatrix<T, NQ, C>, SMatrix<T, NC, C>, SMatrix<T, NK, C>), DynamicsError> {
+        solve_structured_on_tree(self, j, r_j, d, rows, r_c, tau)
+    }
+}
+
+impl<T: Real, const NQ: usize> StructuredSolve<T, NQ> for MassFactor<T, NQ> {
+    #[inline(always)]
+    fn solve_structured<const NC: usize, const NK: usize, const ND: usize, const C: usize>(
+        &self,
+        j: &SMatrix<T, NC, NQ>,
+        r_j: &SMatrix<T, NC, C>,
+        d: usize,
+        rows: &ContactRows<T, NQ, NK, ND>,
+        r_c: &SMatrix<T, NK, C>,
+        tau: &SMatrix<T, NQ, C>,
+    ) -> Result<(SMatrix<T, NQ, C>, SMatrix<T, NC, C>, SMatrix<T, NK, C>), DynamicsError> {
+        match self {
+            MassFactor::Dense(f) => f.solve_structured(j, r_j, d, rows, r_c, tau),
+            MassFactor::Tree(f) => f.solve_structured(j, r_j, d, rows, r_c, tau),
+        }
+    }
+}
+
+/// A factor of `M`, refused where it failed or its pivot ratio is below [`rcond_floor`]
+/// (`MassMatrixNotPositiveDefinite`; a NaN shows in the pivots).
+#[inline(always)]
+fn positive_factor<T: Real, F: Factored<T, NQ>, const NQ: usize>(
+    f: Option<F>,
+) -> Result<F, DynamicsError> {
+    match f {
+        Some(f) if f.rcond() >= rcond_floor::<T>() => Ok(f),
+        _ => Err(DynamicsError::MassMatrixNotPositiveDefinite),
+    }
+}
+
+/// The arguments of [`ContactSystem::with_slip`] after the model's terms:
+/// `(params, q, qd, modes, anchors, ground, mu, baumgarte, rest)`.
+type SystemArgs<'a, P, T, const NQ: usize, const NK: usize, const ND: usize> = (
+    &'a P,
+    &'a SVector<T, NQ>,
+    &'a SVector<T, NQ>,
+    &'a Modes<NK, ND>,
+    &'a SVector<T, NK>,
+    &'a Ground<T, ND>,
+    &'a SVector<T, NK>,
+    Option<Baumgarte<T>>,
+    Option<&'a SVector<T, NK>>,
+);
 
 /// The stance (or flight) system of leg `L` at one state, evaluated and factored once,
 /// for the solves of several applied forces: what a controller that needs the response
@@ -793,8 +1024,10 @@ pub struct ContactSystem<
     const NC: usize,
     const NK: usize,
     const ND: usize = 2,
+    F = MassFactor<T, NQ>,
 > {
-    pub(crate) chol_m: Cholesky<T, NQ>,
+    /// `M` factored densely, or along the tree where that pays ([`MassFactor`]).
+    pub(crate) chol_m: F,
     pub(crate) jacobian: SMatrix<T, NC, NQ>,
     pub(crate) r_j: SVector<T, NC>,
     redundant_rows: usize,
@@ -850,11 +1083,41 @@ impl<T: Real, const NQ: usize, const NC: usize, const NK: usize, const ND: usize
         L: ContactModel<NQ, NC, NU, NK, ND>,
     {
         let terms = L::dynamics_terms(q, qd, params);
-        let chol_m = Cholesky::new(&terms.mass_matrix)
-            .ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
-        if chol_m.rcond < rcond_floor::<T>() {
-            return Err(DynamicsError::MassMatrixNotPositiveDefinite);
-        }
+        let chol_m = factor_mass::<L, T, NQ, NC, NU>(&terms.mass_matrix)?;
+        Self::assemble::<L, NU>(
+            &terms,
+            chol_m,
+            (params, q, qd, modes, anchors, ground, mu, baumgarte, rest),
+        )
+    }
+}
+
+impl<
+        T: Real,
+        const NQ: usize,
+        const NC: usize,
+        const NK: usize,
+        const ND: usize,
+        F: StructuredSolve<T, NQ>,
+    > ContactSystem<T, NQ, NC, NK, ND, F>
+{
+    /// The system from the model's terms and `M` factored.
+    #[inline(always)]
+    pub(crate) fn assemble<L, const NU: usize>(
+        terms: &DynamicsTerms<T, NQ, NC>,
+        chol_m: F,
+        (params, q, qd, modes, anchors, ground, mu, baumgarte, rest): SystemArgs<
+            '_,
+            L::Params<T>,
+            T,
+            NQ,
+            NK,
+            ND,
+        >,
+    ) -> Result<Self, DynamicsError>
+    where
+        L: ContactModel<NQ, NC, NU, NK, ND>,
+    {
         let passive = -terms.bias_forces - L::damping_forces(qd, params);
         let mut r_j = -terms.constraint_bias;
         let jc = L::contact_jacobian(q, params);
@@ -891,15 +1154,28 @@ impl<T: Real, const NQ: usize, const NC: usize, const NK: usize, const ND: usize
         &self,
         applied: &SVector<T, NQ>,
     ) -> Result<ContactSolution<T, NQ, NC, NK>, DynamicsError> {
-        solve_structured(
-            &self.chol_m,
-            &self.jacobian,
-            &self.r_j,
-            self.redundant_rows,
-            &self.rows,
-            &self.r_c,
-            &(applied + self.passive),
-        )
+        let (x, closure, contact) =
+            self.solve_columns(&(applied + self.passive), &self.r_j, &self.r_c)?;
+        Ok(ContactSolution {
+            x,
+            closure,
+            contact,
+        })
+    }
+
+    /// The system's solve for `C` right-hand sides at once (columns of the whole
+    /// generalized force `τ` and of the closure and contact rows' right-hand sides),
+    /// along the tree where `M` was factored along it: what [`ContactSystem::solve`] and
+    /// the derivatives call, so that their solutions agree to the bit. Returns `(x, F, λ)`.
+    #[allow(clippy::type_complexity)]
+    pub(crate) fn solve_columns<const C: usize>(
+        &self,
+        tau: &SMatrix<T, NQ, C>,
+        r_j: &SMatrix<T, NC, C>,
+        r_c: &SMatrix<T, NK, C>,
+    ) -> Result<(SMatrix<T, NQ, C>, SMatrix<T, NC, C>, SMatrix<T, NK, C>), DynamicsError> {
+        let (j, d, rows) = (&self.jacobian, self.redundant_rows, &self.rows);
+        self.chol_m.solve_structured(j, r_j, d, rows, r_c, tau)
     }
 }
 

@@ -20,8 +20,7 @@
 use nalgebra::{SMatrix, SVector};
 
 use crate::dynamics::contact::{
-    solve_structured_columns, tangential_velocity, ContactMode, ContactSolution, ContactSystem,
-    Ground, Modes,
+    tangential_velocity, ContactMode, ContactSolution, ContactSystem, Ground, Modes,
 };
 use crate::dynamics::forward::{
     actuation, checked_mass_factor, classify_non_finite, kkt_rhs, mass_tree, Acceleration,
@@ -282,12 +281,11 @@ where
     let sys = ContactSystem::with_slip::<L, NU>(
         params, q, qd, modes, anchors, ground, mu, baumgarte, rest,
     )?;
-    let (chol_m, j, rows) = (&sys.chol_m, &sys.jacobian, &sys.rows);
+    let (j, rows) = (&sys.jacobian, &sys.rows);
     let (two, zero) = (T::lit(2.0), T::zero());
     let (two_alpha, beta2) = baumgarte.map_or((zero, zero), |b| (b.alpha * two, b.beta * b.beta));
     let tau = actuation::<L, T, NQ, NC, NU>(u) + sys.passive;
-    let (x, closure, contact) =
-        solve_structured_columns(chol_m, j, &sys.r_j, L::REDUNDANT_ROWS, rows, &sys.r_c, &tau)?;
+    let (x, closure, contact) = sys.solve_columns(&tau, &sys.r_j, &sys.r_c)?;
     // The ground forces in the base frame (Σ_j λ_j e_j over the frame's rows: the
     // tangents, then the normal) for J_cᵀ λ.
     let frame = ground.frame();
@@ -326,12 +324,9 @@ where
     }
     let tau_u = actuation_matrix::<L, T, NQ, NC, NU>();
     let (rj_u, rc_u) = (SMatrix::<T, NC, NU>::zeros(), SMatrix::<T, NK, NU>::zeros());
-    let (qdd_q, forces_q, mut contact_q) =
-        solve_structured_columns(chol_m, j, &rj_q, L::REDUNDANT_ROWS, rows, &rc_q, &tau_q)?;
-    let (qdd_qd, forces_qd, mut contact_qd) =
-        solve_structured_columns(chol_m, j, &rj_qd, L::REDUNDANT_ROWS, rows, &rc_qd, &tau_qd)?;
-    let (qdd_u, forces_u, contact_u) =
-        solve_structured_columns(chol_m, j, &rj_u, L::REDUNDANT_ROWS, rows, &rc_u, &tau_u)?;
+    let (qdd_q, forces_q, mut contact_q) = sys.solve_columns(&tau_q, &rj_q, &rc_q)?;
+    let (qdd_qd, forces_qd, mut contact_qd) = sys.solve_columns(&tau_qd, &rj_qd, &rc_qd)?;
+    let (qdd_u, forces_u, contact_u) = sys.solve_columns(&tau_u, &rj_u, &rc_u)?;
     // λ_t = −μ λ_n ŝ: its change with ŝ.
     for k in 0..NK / ND {
         if let Some((scale, ds_q, ds_qd)) = turning(k) {

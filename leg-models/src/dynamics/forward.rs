@@ -15,8 +15,8 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::model::contract::{DynamicsTerms, LegDynamics, Real};
 use crate::model::linalg::{
-    all_finite, factors_along_the_tree, mul, mul_tn, Cholesky, Factored, PivotedLdlt, SubtreeEnds,
-    TreeLdl,
+    all_finite, factors_along_the_tree, mul, mul_tn, Cholesky, Factored, MassFactor, PivotedLdlt,
+    SubtreeEnds, TreeLdl,
 };
 
 /// Why the constrained dynamics cannot be solved at a state.
@@ -141,9 +141,41 @@ where
 /// The factorization of `S = J M⁻¹ Jᵀ`: plain on a leg whose closure rows are
 /// independent, pivoted on one closed redundantly.
 #[derive(Clone, Copy, Debug)]
-enum ConstraintFactor<T: Real, const NC: usize> {
+pub(crate) enum ConstraintFactor<T: Real, const NC: usize> {
     Regular(Cholesky<T, NC>),
     Redundant(PivotedLdlt<T, NC>),
+}
+
+impl<T: Real, const NC: usize> ConstraintFactor<T, NC> {
+    /// Factors `S`; up to `deficiency` of its rows may repeat the others (a leg closed
+    /// redundantly): pivoted then, plain (unrolled, no pivoting) otherwise.
+    #[inline(always)]
+    pub(crate) fn new(s: &SMatrix<T, NC, NC>, deficiency: usize) -> Result<Self, DynamicsError> {
+        Ok(if deficiency == 0 {
+            let chol_s =
+                Cholesky::new(s).ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?;
+            if chol_s.rcond < rcond_floor::<T>() {
+                return Err(DynamicsError::SingularConstraints {
+                    rcond: to_f64(chol_s.rcond),
+                });
+            }
+            ConstraintFactor::Regular(chol_s)
+        } else {
+            ConstraintFactor::Redundant(
+                PivotedLdlt::new(s, deficiency, rcond_floor::<T>())
+                    .ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?,
+            )
+        })
+    }
+
+    /// Overwrites `b` with `S⁻¹ b` (the forces of rows left out as redundant zero).
+    #[inline(always)]
+    pub(crate) fn solve_mut<const C: usize>(&self, b: &mut SMatrix<T, NC, C>) {
+        match self {
+            ConstraintFactor::Regular(c) => c.solve_mut(b),
+            ConstraintFactor::Redundant(c) => c.solve_mut(b),
+        }
+    }
 }
 
 /// The KKT matrix `[M −Jᵀ; J 0]` of one state, factored once (`M` densely, `L D Lᵀ`, or
@@ -190,23 +222,7 @@ impl<T: Real, const NQ: usize, const NC: usize, F: Factored<T, NQ>> KktFactoriza
         let mut s = None;
         if NC > 0 {
             chol_m.solve_mut(&mut y); // Y = M⁻¹ Jᵀ
-            let schur = mul(jacobian, &y);
-            s = Some(if deficiency == 0 {
-                // The common case, unrolled without pivoting.
-                let chol_s = Cholesky::new(&schur)
-                    .ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?;
-                if chol_s.rcond < rcond_floor::<T>() {
-                    return Err(DynamicsError::SingularConstraints {
-                        rcond: to_f64(chol_s.rcond),
-                    });
-                }
-                ConstraintFactor::Regular(chol_s)
-            } else {
-                ConstraintFactor::Redundant(
-                    PivotedLdlt::new(&schur, deficiency, rcond_floor::<T>())
-                        .ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?,
-                )
-            });
+            s = Some(ConstraintFactor::new(&mul(jacobian, &y), deficiency)?);
         }
         Ok(KktFactorization {
             chol_m,
@@ -230,10 +246,7 @@ impl<T: Real, const NQ: usize, const NC: usize, F: Factored<T, NQ>> KktFactoriza
             return;
         };
         *bottom -= mul(&self.jacobian, top);
-        match s {
-            ConstraintFactor::Regular(c) => c.solve_mut(bottom),
-            ConstraintFactor::Redundant(c) => c.solve_mut(bottom),
-        }
+        s.solve_mut(bottom);
         *top += mul(&self.y, bottom);
     }
 }
@@ -361,6 +374,28 @@ where
             None
         }
     }
+}
+
+/// `M` factored as `L`'s model pays for ([`mass_tree`]), for a system solved several
+/// times; not positive definite, or a pivot ratio below [`rcond_floor`], is
+/// `MassMatrixNotPositiveDefinite` (a NaN in `M` too: it shows in the pivots).
+#[inline(always)]
+pub(crate) fn factor_mass<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    m: &SMatrix<T, NQ, NQ>,
+) -> Result<MassFactor<T, NQ>, DynamicsError>
+where
+    L: LegDynamics<NQ, NC, NU>,
+    T: Real,
+{
+    let factor = match mass_tree::<L, NQ, NC, NU>() {
+        Some(ends) => TreeLdl::new(m, ends).map(MassFactor::Tree),
+        None => Cholesky::new(m).map(MassFactor::Dense),
+    }
+    .ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
+    if factor.rcond() < rcond_floor::<T>() {
+        return Err(DynamicsError::MassMatrixNotPositiveDefinite);
+    }
+    Ok(factor)
 }
 
 /// [`SubtreeEnds::of`] where they exist (`factors_along_the_tree` says so): a value of

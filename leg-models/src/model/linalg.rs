@@ -359,6 +359,34 @@ impl<T: Real, const N: usize> Factored<T, N> for TreeLdl<T, N> {
     }
 }
 
+/// `M` factored the way its model pays for ([`factors_along_the_tree`]): densely, or along
+/// the tree. For a system built once and solved several times (the stance's
+/// `ContactSystem`), where one match a solve is nothing beside the solve.
+#[derive(Clone, Copy, Debug)]
+pub enum MassFactor<T: Real, const N: usize> {
+    /// `M = L Lᵀ`.
+    Dense(Cholesky<T, N>),
+    /// `M = Lᵀ D L` along the tree.
+    Tree(TreeLdl<T, N>),
+}
+
+impl<T: Real, const N: usize> Factored<T, N> for MassFactor<T, N> {
+    #[inline(always)]
+    fn rcond(&self) -> T {
+        match self {
+            MassFactor::Dense(f) => f.rcond,
+            MassFactor::Tree(f) => f.rcond,
+        }
+    }
+    #[inline(always)]
+    fn solve_mut<const C: usize>(&self, b: &mut SMatrix<T, N, C>) {
+        match self {
+            MassFactor::Dense(f) => f.solve_mut(b),
+            MassFactor::Tree(f) => f.solve_mut(b),
+        }
+    }
+}
+
 /// `P A Pᵀ = L D Lᵀ` with symmetric (diagonal) pivoting, for a positive semidefinite `A`
 /// whose rank may fall short of `N` by up to `deficiency`: the closure rows of a leg
 /// closed redundantly (a parallelogram closed twice). Which rows repeat the others
