@@ -29,7 +29,7 @@ use crate::dynamics::forward::{
 };
 use crate::model::contract::{ContactModel, DynamicsTerms, Real};
 use crate::model::linalg::{
-    all_finite, mul, mul_tn, Cholesky, Factored, MassFactor, PivotedLdlt, TreeLdl,
+    all_finite, mul, mul_nt, mul_tn, Cholesky, Factored, MassFactor, PivotedLdlt, TreeLdl,
 };
 
 /// The ground `n · x = d` (base frame), `n` a unit normal out of the ground: a line for a
@@ -343,66 +343,68 @@ pub(crate) fn solve_structured_on_tree<
 ) -> Result<(SMatrix<T, NQ, C>, SMatrix<T, NC, C>, SMatrix<T, NK, C>), DynamicsError> {
     let (c, held) = (&rows.c, &rows.held);
     let inv_d = chol_m.inv_diag();
-    let scaled = |m: &SMatrix<T, NQ, NK>| {
-        let mut out = *m;
-        for mut column in out.column_iter_mut() {
-            column.component_mul_assign(inv_d);
+    // The rows' factors kept as rows (`P = X L⁻¹`, X's layout as stored), so that the half
+    // solves and the products `P D⁻¹ Qᵀ` run over contiguous columns.
+    let scaled = |p: &SMatrix<T, NK, NQ>| {
+        let mut out = *p;
+        for (k, mut column) in out.column_iter_mut().enumerate() {
+            column *= inv_d[k];
         }
         out
     };
     let mut t = *tau;
     chol_m.solve_lt_mut(&mut t); // L⁻ᵀ τ
                                  // The held rows only (the others' forces are zero and their equations not asked).
-    let mut ww = rows.w.transpose();
+    let mut pw = rows.w;
     let mut same = true;
     for (r, &h) in held.iter().enumerate() {
         if h {
             same &= rows.w.row(r) == c.row(r);
         } else {
-            ww.column_mut(r).fill(T::zero());
+            pw.row_mut(r).fill(T::zero());
         }
     }
-    let mut wc = ww;
-    chol_m.solve_lt_mut(&mut ww); // L⁻ᵀ Wᵀ
+    let mut pc = pw;
+    chol_m.solve_lt_rows_mut(&mut pw); // W L⁻¹
     if same {
         // Every held row sticks (or slides with W = C): C's rows are W's.
-        wc = ww;
+        pc = pw;
     } else {
         for (r, &h) in held.iter().enumerate() {
             if h {
-                wc.set_column(r, &c.row(r).transpose());
+                pc.set_row(r, &c.row(r));
             }
         }
-        chol_m.solve_lt_mut(&mut wc); // L⁻ᵀ Cᵀ
+        chol_m.solve_lt_rows_mut(&mut pc); // C L⁻¹
     }
-    // Closure elimination in the half space: u0 = t + Wj f0 (so a0 = L⁻¹ D⁻¹ u0), and the
-    // held rows' columns less the closures' response, Wp = Ww − Wj g (Zp = L⁻¹ D⁻¹ Wp).
-    let (mut u0, mut wp) = (t, ww);
+    // Closure elimination in the half space: u0 = t + Pjᵀ f0 (so a0 = L⁻¹ D⁻¹ u0), and the
+    // held rows less the closures' response, Pp = Pw − gᵀ Pj (Zp = L⁻¹ D⁻¹ Ppᵀ).
+    let (mut u0, mut pp) = (t, pw);
     let mut f0 = SMatrix::<T, NC, C>::zeros();
     let mut g = SMatrix::<T, NC, NK>::zeros();
     if NC > 0 {
-        let mut wj = j.transpose();
-        chol_m.solve_lt_mut(&mut wj); // L⁻ᵀ Jᵀ
-        let mut wj_d = wj;
-        for mut column in wj_d.column_iter_mut() {
-            column.component_mul_assign(inv_d);
+        let mut pj = *j;
+        chol_m.solve_lt_rows_mut(&mut pj); // J L⁻¹
+        let mut pj_d = pj;
+        for (k, mut column) in pj_d.column_iter_mut().enumerate() {
+            column *= inv_d[k];
         }
-        let s = ConstraintFactor::new(&mul_tn(&wj, &wj_d), closure_deficiency)?;
-        f0 = r_j - mul_tn(&wj_d, &t);
-        g = mul_tn(&wj_d, &ww);
+        let s = ConstraintFactor::new(&mul_nt(&pj, &pj_d), closure_deficiency)?;
+        f0 = r_j - mul(&pj_d, &t);
+        g = mul_nt(&pj_d, &pw);
         s.solve_mut(&mut f0);
         s.solve_mut(&mut g);
-        u0 += mul(&wj, &f0);
-        wp -= mul(&wj, &g);
+        u0 += mul_tn(&pj, &f0);
+        pp -= mul(&g.transpose(), &pj);
     }
     let mut u0_d = u0;
     for mut column in u0_d.column_iter_mut() {
         column.component_mul_assign(inv_d);
     }
-    let wp_d = scaled(&wp);
+    let pp_d = scaled(&pp);
     // Held contact rows: K λ = r_c − C a0, K = C Zp.
-    let k = mul_tn(&wc, &wp_d);
-    let rhs = r_c - mul_tn(&wc, &u0_d);
+    let k = mul_nt(&pc, &pp_d);
+    let rhs = r_c - mul(&pc, &u0_d);
     // a0 itself only where held rows repeat (its size judges the rows left out).
     let a0 = core::cell::OnceCell::new();
     let pieces = |col: usize| {
@@ -414,7 +416,7 @@ pub(crate) fn solve_structured_on_tree<
         r_c.column(col).amax().max(c.amax() * a0.column(col).amax())
     };
     let lambda = solve_held(&k, &rhs, held, pieces)?;
-    let mut x = u0_d + mul(&wp_d, &lambda);
+    let mut x = u0_d + mul_tn(&pp_d, &lambda);
     chol_m.solve_l_mut(&mut x);
     let closure = f0 - mul(&g, &lambda);
     finish_structured(rows, x, closure, lambda, tau)

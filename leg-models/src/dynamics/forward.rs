@@ -15,8 +15,8 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::model::contract::{DynamicsTerms, LegDynamics, Real};
 use crate::model::linalg::{
-    all_finite, factors_along_the_tree, mul, mul_tn, Cholesky, Factored, MassFactor, PivotedLdlt,
-    SubtreeEnds, TreeLdl,
+    all_finite, factors_along_the_tree, mul, mul_nt, mul_tn, Cholesky, Factored, MassFactor,
+    PivotedLdlt, SubtreeEnds, TreeLdl,
 };
 
 /// Why the constrained dynamics cannot be solved at a state.
@@ -317,16 +317,19 @@ pub(crate) fn solve_kkt_on_tree<T: Real, const NQ: usize, const NC: usize>(
     let inv_d = chol_m.inv_diag();
     let mut forces = SVector::<T, NC>::zeros();
     if NC > 0 {
-        let mut w = jacobian.transpose();
-        chol_m.solve_lt_mut(&mut w);
-        let mut w_d = w;
-        for mut column in w_d.column_iter_mut() {
-            column.component_mul_assign(inv_d);
+        // Kept as rows, P = J L⁻¹ = Wᵀ (J's layout as stored): the half solve and
+        // `S = P D⁻¹ Pᵀ` then run over contiguous columns, which the compiler vectorizes
+        // (cassie's stance 28.5 → 22.1 µs the same way).
+        let mut p = *jacobian;
+        chol_m.solve_lt_rows_mut(&mut p);
+        let mut p_d = p;
+        for (k, mut column) in p_d.column_iter_mut().enumerate() {
+            column *= inv_d[k];
         }
-        let s = mul_tn(&w, &w_d);
-        forces = closure_rhs - mul_tn(&w_d, &t);
+        let s = mul_nt(&p, &p_d);
+        forces = closure_rhs - mul(&p_d, &t);
         solve_closure_forces(&s, &mut forces, deficiency)?;
-        t += mul(&w, &forces);
+        t += mul_tn(&p, &forces);
     }
     let mut qdd = t.component_mul(inv_d);
     chol_m.solve_l_mut(&mut qdd);

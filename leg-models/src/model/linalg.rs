@@ -309,6 +309,28 @@ impl<T: Real, const N: usize> TreeLdl<T, N> {
         }
     }
 
+    /// Overwrites `b` with `b L⁻¹`: [`TreeLdl::solve_lt_mut`] of `bᵀ`, for `R` right-hand
+    /// sides laid out as the rows of `b` (a constraint Jacobian as it is stored). Each step
+    /// takes a whole column of `b` (the `R` sides' entries of one coordinate, contiguous)
+    /// less multiples of its descendants' columns: loops the compiler vectorizes over the
+    /// sides, where a side at a time is a chain of dependent multiply–adds.
+    #[inline]
+    pub fn solve_lt_rows_mut<const R: usize>(&self, b: &mut SMatrix<T, R, N>) {
+        let l = self.l.as_slice();
+        let data = b.as_mut_slice();
+        for i in (0..N).rev() {
+            let (head, tail) = data.split_at_mut((i + 1) * R);
+            let col_i = &mut head[i * R..];
+            for k in i + 1..self.ends[i] {
+                let lki = l[i * N + k];
+                let col_k = &tail[(k - i - 1) * R..(k - i) * R];
+                for (y, x) in col_i.iter_mut().zip(col_k) {
+                    *y -= lki * *x;
+                }
+            }
+        }
+    }
+
     /// Overwrites `b` with `L⁻¹ b` (`L x = b`, from the root down): the last half of a
     /// solve.
     #[inline]
@@ -592,6 +614,25 @@ pub fn mul<T: Real, const R: usize, const K: usize, const C: usize>(
     out
 }
 
+/// `A Bᵀ`, as rank-one updates over the shared columns (each a contiguous run the
+/// compiler vectorizes).
+#[inline]
+pub fn mul_nt<T: Real, const R: usize, const K: usize, const C: usize>(
+    a: &SMatrix<T, R, K>,
+    b: &SMatrix<T, C, K>,
+) -> SMatrix<T, R, C> {
+    let mut out = SMatrix::<T, R, C>::zeros();
+    for k in 0..K {
+        for c in 0..C {
+            let bck = b[(c, k)];
+            for r in 0..R {
+                out[(r, c)] += a[(r, k)] * bck;
+            }
+        }
+    }
+    out
+}
+
 /// `Aᵀ B`, as plain loops.
 #[inline]
 pub fn mul_tn<T: Real, const K: usize, const R: usize, const C: usize>(
@@ -713,6 +754,19 @@ mod tests {
         assert!((a * x - b).amax() < 1e-13, "{}", a * x - b);
         assert!((x - y).amax() < 1e-13);
         assert!(tree.rcond > 0.0 && tree.rcond <= 1.0);
+        // The half solve on sides laid out as rows is the column one's transpose, and the
+        // halves with D⁻¹ between them give the whole solve (A⁻¹ = L⁻¹ D⁻¹ L⁻ᵀ), x.
+        let mut columns = b;
+        tree.solve_lt_mut(&mut columns);
+        let mut rows = b.transpose();
+        tree.solve_lt_rows_mut(&mut rows);
+        assert!((rows.transpose() - columns).amax() < 1e-15);
+        let mut whole = SMatrix::<f64, N, 2>::from_fn(|i, j| rows[(j, i)] * tree.inv_diag()[i]);
+        tree.solve_l_mut(&mut whole);
+        assert!((whole - x).amax() < 1e-13);
+        // A Bᵀ by rank-one updates against nalgebra's product.
+        let c = SMatrix::<f64, 3, N>::from_fn(|i, j| (i * N + j) as f64 * 0.1 - 1.0);
+        assert!((mul_nt(&rows, &c) - rows * c.transpose()).amax() < 1e-13);
         // Whatever is off the tree is not read.
         let mut noisy = a;
         noisy[(4, 6)] = 7.0;
