@@ -404,7 +404,7 @@ where
 {
     use leg_models::assembly::{project_position, project_velocity, Tolerance};
     let home = leg_tests::standing::assembled_home::<L, NQ, NC, NU>(p);
-    loop {
+    for _ in 0..100 {
         let mut q = home + SVector::<f64, NQ>::from_fn(|_, _| rng.range(-0.2, 0.2));
         let mut qd = SVector::<f64, NQ>::from_fn(|_, _| rng.range(-2.0, 2.0));
         if project_position::<L, f64, NQ, NC, NU>(p, &mut q, &Tolerance::default()).is_ok()
@@ -413,6 +413,7 @@ where
             return State { q, qd };
         }
     }
+    panic!("{}: no state near home assembles in 100 tries", L::NAME);
 }
 
 /// [`check_against_dense`] at the states `state` draws.

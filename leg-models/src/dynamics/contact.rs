@@ -321,9 +321,10 @@ pub fn solve_structured_columns<
 /// solves as [`crate::dynamics::forward`]'s tree path does: with `t = L⁻ᵀ τ` and the
 /// rows' `L⁻ᵀ Jᵀ`, `L⁻ᵀ Wᵀ`, `L⁻ᵀ Cᵀ`, every product `X M⁻¹ Yᵀ` is `(L⁻ᵀ Xᵀ)ᵀ D⁻¹ (L⁻ᵀ Yᵀ)`
 /// and `q̈` takes one last half solve: `NC + NK (+ NK where a slide makes W ≠ C) + 2 C`
-/// half solves where the full form takes `2 (NC + NK + C)` whole ones (Featherstone,
-/// RBDA §8.5). The same elimination, so the same refusals (held rows that repeat, closures
-/// singular).
+/// half solves (`+ C` where held rows repeat, for `a0`'s size) where the full form takes
+/// `NC + NK + C` whole ones, two half solves each (Featherstone, RBDA §8.5). The same
+/// elimination, so the same refusals of the closures and the held rows (`M`'s own refusal
+/// is the tree factor's: its pivot ratio is of another ordering than the dense one's).
 #[allow(clippy::type_complexity)]
 pub(crate) fn solve_structured_on_tree<
     T: Real,
@@ -926,7 +927,7 @@ where
 }
 
 /// How a factor of `M` solves a stance's structured system ([`solve_structured_columns`]
-/// densely, [`solve_structured_on_tree`] along the tree): the solve belongs to the factor.
+/// densely, in half solves along the tree): the solve belongs to the factor.
 pub trait StructuredSolve<T: Real, const NQ: usize>: Factored<T, NQ> {
     /// [`solve_structured_columns`] with this factor.
     #[allow(clippy::type_complexity, clippy::too_many_arguments)]

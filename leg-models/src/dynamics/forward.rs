@@ -319,7 +319,7 @@ pub(crate) fn solve_kkt_on_tree<T: Real, const NQ: usize, const NC: usize>(
     if NC > 0 {
         // Kept as rows, P = J L⁻¹ = Wᵀ (J's layout as stored): the half solve and
         // `S = P D⁻¹ Pᵀ` then run over contiguous columns, which the compiler vectorizes
-        // (cassie's stance 28.5 → 22.1 µs the same way).
+        // (cassie 125 050 → 108 455 instructions).
         let mut p = *jacobian;
         chol_m.solve_lt_rows_mut(&mut p);
         let mut p_d = p;
