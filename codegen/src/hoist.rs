@@ -19,6 +19,21 @@ pub struct Hoisted {
     /// The programs, each reading hoisted value `k` as element `fields + k` of its parameter
     /// input (`InputShape::Struct::prepared` says how many there are).
     pub programs: Vec<Program>,
+    /// Which of the struct's fields `prepare` reads: changing any other field leaves the
+    /// prepared values as they are (gravity, which only multiplies state-dependent terms,
+    /// is usually one of those).
+    pub reads: Vec<bool>,
+}
+
+/// Which fields of its one struct input the live code of `prog` reads.
+fn fields_read(prog: &Program, fields: usize) -> Vec<bool> {
+    let mut reads = vec![false; fields];
+    for (instr, live) in prog.instructions.iter().zip(prog.live()) {
+        if let (Instr::Input { index, .. }, true) = (instr, live) {
+            reads[*index] = true;
+        }
+    }
+    reads
 }
 
 /// Which values of `prog` come from its input `param` and constants alone.
@@ -152,5 +167,10 @@ pub fn hoist(programs: &[Program], param: &str, values_type: &str) -> Hoisted {
             prog
         })
         .collect();
-    Hoisted { prepare, programs }
+    let reads = fields_read(&prepare, fields.len());
+    Hoisted {
+        prepare,
+        programs,
+        reads,
+    }
 }

@@ -186,3 +186,29 @@ fn programs_without_parameters_are_unchanged() {
     assert_eq!(h.programs[0], prog);
     assert_eq!(h.prepare.outputs[0].rows, 0);
 }
+
+#[test]
+fn prepare_reads_only_the_fields_of_hoisted_values() {
+    // Every field is in a hoisted value of `programs()`.
+    assert_eq!(hoist(&programs(), "p", "Values").reads, [true; 3]);
+    // `y = [I sin q, m l]`: I multiplies a state-dependent value only, so changing it
+    // leaves the prepared values as they are.
+    let prog = program(
+        "inertia_per_state",
+        vec![
+            In { input: 0, index: 0 }, // 0 q
+            In { input: 1, index: 0 }, // 1 m
+            In { input: 1, index: 1 }, // 2 l
+            In { input: 1, index: 2 }, // 3 I
+            Unary(UnaryOp::Sin, 0),    // 4
+            Binary(Mul, 3, 4),         // 5 I sin q
+            Binary(Mul, 1, 2),         // 6 m l (parameters only)
+        ],
+        vec![5, 6],
+    );
+    let h = hoist(&[prog], "p", "Values");
+    assert_eq!(h.reads, [true, true, false]);
+    // The prepared values indeed do not depend on I.
+    let with = |inertia: f64| eval(&h.prepare, &[], &[1.5, 0.25, inertia]);
+    assert_eq!(with(0.01), with(7.0));
+}

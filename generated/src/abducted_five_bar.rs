@@ -289,7 +289,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 /// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
 /// computed once when a value changes instead of in every call. `Default` holds
 /// the spec's values; change them at run time, without regenerating, with
-/// [`Params::update`] or [`Parameters::set`].
+/// [`Params::update`], [`Parameters::set`] or [`Parameters::set_many`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
@@ -310,7 +310,7 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
-        *self = Self::new(self.values);
+        self.prepared = prepare(&self.values).data.0[0];
     }
 }
 impl<T> core::ops::Deref for Params<T> {
@@ -329,6 +329,16 @@ impl<T: Arithmetic> Default for Params<T> {
         Self::new(ParamValues::default())
     }
 }
+/// Which parameters (in [`Parameters::NAMES`] order) `prepare` reads: setting any
+/// other leaves the prepared quantities as they are.
+const PREPARE_READS: [bool; 79] = [
+    true, false, false, true, true, true, true, false, false, true, true, true, true,
+    true, false, false, false, false, false, false, true, true, true, true, true, true,
+    true, true, true, true, true, true, true, true, true, false, true, true, false, true,
+    false, true, true, true, true, true, true, true, false, true, true, true, true, true,
+    true, true, true, true, true, true, true, true, false, true, true, false, false,
+    false, true, true, true, true, true, true, true, false, true, true, true,
+];
 impl<T: Arithmetic> Parameters<T> for Params<T> {
     const NAMES: &'static [&'static str] = &[
         "gravity_x",
@@ -495,90 +505,99 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             _ => None,
         }
     }
-    fn set(&mut self, i: usize, value: T) -> bool {
-        match i {
-            0 => self.values.gravity_x = value,
-            1 => self.values.gravity_y = value,
-            2 => self.values.gravity_z = value,
-            3 => self.values.abduction_origin_x = value,
-            4 => self.values.abduction_origin_y = value,
-            5 => self.values.abduction_origin_z = value,
-            6 => self.values.abduction_length_x = value,
-            7 => self.values.abduction_length_y = value,
-            8 => self.values.abduction_length_z = value,
-            9 => self.values.abduction_mass = value,
-            10 => self.values.abduction_com_x = value,
-            11 => self.values.abduction_com_y = value,
-            12 => self.values.abduction_com_z = value,
-            13 => self.values.abduction_inertia_xx = value,
-            14 => self.values.abduction_inertia_yy = value,
-            15 => self.values.abduction_inertia_zz = value,
-            16 => self.values.abduction_inertia_xy = value,
-            17 => self.values.abduction_inertia_xz = value,
-            18 => self.values.abduction_inertia_yz = value,
-            19 => self.values.abduction_damping = value,
-            20 => self.values.abduction_rotor_inertia = value,
-            21 => self.values.abduction_gear_ratio = value,
-            22 => self.values.upper_a_origin_x = value,
-            23 => self.values.upper_a_origin_y = value,
-            24 => self.values.upper_a_origin_z = value,
-            25 => self.values.upper_a_length_x = value,
-            26 => self.values.upper_a_length_y = value,
-            27 => self.values.upper_a_length_z = value,
-            28 => self.values.upper_a_mass = value,
-            29 => self.values.upper_a_com_x = value,
-            30 => self.values.upper_a_com_y = value,
-            31 => self.values.upper_a_com_z = value,
-            32 => self.values.upper_a_inertia_xx = value,
-            33 => self.values.upper_a_inertia_yy = value,
-            34 => self.values.upper_a_inertia_zz = value,
-            35 => self.values.upper_a_damping = value,
-            36 => self.values.upper_a_rotor_inertia = value,
-            37 => self.values.upper_a_gear_ratio = value,
-            38 => self.values.lower_a_length_x = value,
-            39 => self.values.lower_a_length_y = value,
-            40 => self.values.lower_a_length_z = value,
-            41 => self.values.lower_a_mass = value,
-            42 => self.values.lower_a_com_x = value,
-            43 => self.values.lower_a_com_y = value,
-            44 => self.values.lower_a_com_z = value,
-            45 => self.values.lower_a_inertia_xx = value,
-            46 => self.values.lower_a_inertia_yy = value,
-            47 => self.values.lower_a_inertia_zz = value,
-            48 => self.values.lower_a_damping = value,
-            49 => self.values.upper_b_origin_x = value,
-            50 => self.values.upper_b_origin_y = value,
-            51 => self.values.upper_b_origin_z = value,
-            52 => self.values.upper_b_length_x = value,
-            53 => self.values.upper_b_length_y = value,
-            54 => self.values.upper_b_length_z = value,
-            55 => self.values.upper_b_mass = value,
-            56 => self.values.upper_b_com_x = value,
-            57 => self.values.upper_b_com_y = value,
-            58 => self.values.upper_b_com_z = value,
-            59 => self.values.upper_b_inertia_xx = value,
-            60 => self.values.upper_b_inertia_yy = value,
-            61 => self.values.upper_b_inertia_zz = value,
-            62 => self.values.upper_b_damping = value,
-            63 => self.values.upper_b_rotor_inertia = value,
-            64 => self.values.upper_b_gear_ratio = value,
-            65 => self.values.lower_b_length_x = value,
-            66 => self.values.lower_b_length_y = value,
-            67 => self.values.lower_b_length_z = value,
-            68 => self.values.lower_b_mass = value,
-            69 => self.values.lower_b_com_x = value,
-            70 => self.values.lower_b_com_y = value,
-            71 => self.values.lower_b_com_z = value,
-            72 => self.values.lower_b_inertia_xx = value,
-            73 => self.values.lower_b_inertia_yy = value,
-            74 => self.values.lower_b_inertia_zz = value,
-            75 => self.values.lower_b_damping = value,
-            76 => self.values.toe_b_x = value,
-            77 => self.values.toe_b_y = value,
-            78 => self.values.toe_b_z = value,
-            _ => return false,
+    fn set_many(&mut self, changes: &[(usize, T)]) -> bool {
+        if changes.iter().any(|c| c.0 >= Self::NAMES.len()) {
+            return false;
         }
-        *self = Self::new(self.values);
+        let mut stale = false;
+        for &(i, value) in changes {
+            match i {
+                0 => self.values.gravity_x = value,
+                1 => self.values.gravity_y = value,
+                2 => self.values.gravity_z = value,
+                3 => self.values.abduction_origin_x = value,
+                4 => self.values.abduction_origin_y = value,
+                5 => self.values.abduction_origin_z = value,
+                6 => self.values.abduction_length_x = value,
+                7 => self.values.abduction_length_y = value,
+                8 => self.values.abduction_length_z = value,
+                9 => self.values.abduction_mass = value,
+                10 => self.values.abduction_com_x = value,
+                11 => self.values.abduction_com_y = value,
+                12 => self.values.abduction_com_z = value,
+                13 => self.values.abduction_inertia_xx = value,
+                14 => self.values.abduction_inertia_yy = value,
+                15 => self.values.abduction_inertia_zz = value,
+                16 => self.values.abduction_inertia_xy = value,
+                17 => self.values.abduction_inertia_xz = value,
+                18 => self.values.abduction_inertia_yz = value,
+                19 => self.values.abduction_damping = value,
+                20 => self.values.abduction_rotor_inertia = value,
+                21 => self.values.abduction_gear_ratio = value,
+                22 => self.values.upper_a_origin_x = value,
+                23 => self.values.upper_a_origin_y = value,
+                24 => self.values.upper_a_origin_z = value,
+                25 => self.values.upper_a_length_x = value,
+                26 => self.values.upper_a_length_y = value,
+                27 => self.values.upper_a_length_z = value,
+                28 => self.values.upper_a_mass = value,
+                29 => self.values.upper_a_com_x = value,
+                30 => self.values.upper_a_com_y = value,
+                31 => self.values.upper_a_com_z = value,
+                32 => self.values.upper_a_inertia_xx = value,
+                33 => self.values.upper_a_inertia_yy = value,
+                34 => self.values.upper_a_inertia_zz = value,
+                35 => self.values.upper_a_damping = value,
+                36 => self.values.upper_a_rotor_inertia = value,
+                37 => self.values.upper_a_gear_ratio = value,
+                38 => self.values.lower_a_length_x = value,
+                39 => self.values.lower_a_length_y = value,
+                40 => self.values.lower_a_length_z = value,
+                41 => self.values.lower_a_mass = value,
+                42 => self.values.lower_a_com_x = value,
+                43 => self.values.lower_a_com_y = value,
+                44 => self.values.lower_a_com_z = value,
+                45 => self.values.lower_a_inertia_xx = value,
+                46 => self.values.lower_a_inertia_yy = value,
+                47 => self.values.lower_a_inertia_zz = value,
+                48 => self.values.lower_a_damping = value,
+                49 => self.values.upper_b_origin_x = value,
+                50 => self.values.upper_b_origin_y = value,
+                51 => self.values.upper_b_origin_z = value,
+                52 => self.values.upper_b_length_x = value,
+                53 => self.values.upper_b_length_y = value,
+                54 => self.values.upper_b_length_z = value,
+                55 => self.values.upper_b_mass = value,
+                56 => self.values.upper_b_com_x = value,
+                57 => self.values.upper_b_com_y = value,
+                58 => self.values.upper_b_com_z = value,
+                59 => self.values.upper_b_inertia_xx = value,
+                60 => self.values.upper_b_inertia_yy = value,
+                61 => self.values.upper_b_inertia_zz = value,
+                62 => self.values.upper_b_damping = value,
+                63 => self.values.upper_b_rotor_inertia = value,
+                64 => self.values.upper_b_gear_ratio = value,
+                65 => self.values.lower_b_length_x = value,
+                66 => self.values.lower_b_length_y = value,
+                67 => self.values.lower_b_length_z = value,
+                68 => self.values.lower_b_mass = value,
+                69 => self.values.lower_b_com_x = value,
+                70 => self.values.lower_b_com_y = value,
+                71 => self.values.lower_b_com_z = value,
+                72 => self.values.lower_b_inertia_xx = value,
+                73 => self.values.lower_b_inertia_yy = value,
+                74 => self.values.lower_b_inertia_zz = value,
+                75 => self.values.lower_b_damping = value,
+                76 => self.values.toe_b_x = value,
+                77 => self.values.toe_b_y = value,
+                78 => self.values.toe_b_z = value,
+                _ => {}
+            }
+            stale |= PREPARE_READS[i];
+        }
+        if stale {
+            self.prepared = prepare(&self.values).data.0[0];
+        }
         true
     }
 }

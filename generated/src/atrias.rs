@@ -166,7 +166,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 /// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
 /// computed once when a value changes instead of in every call. `Default` holds
 /// the spec's values; change them at run time, without regenerating, with
-/// [`Params::update`] or [`Parameters::set`].
+/// [`Params::update`], [`Parameters::set`] or [`Parameters::set_many`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
@@ -187,7 +187,7 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
-        *self = Self::new(self.values);
+        self.prepared = prepare(&self.values).data.0[0];
     }
 }
 impl<T> core::ops::Deref for Params<T> {
@@ -206,6 +206,13 @@ impl<T: Arithmetic> Default for Params<T> {
         Self::new(ParamValues::default())
     }
 }
+/// Which parameters (in [`Parameters::NAMES`] order) `prepare` reads: setting any
+/// other leaves the prepared quantities as they are.
+const PREPARE_READS: [bool; 40] = [
+    true, true, true, true, true, true, true, true, true, true, false, true, true, false,
+    false, true, true, true, true, false, true, true, true, true, true, true, true, true,
+    false, true, true, false, false, true, true, true, true, false, false, false,
+];
 impl<T: Arithmetic> Parameters<T> for Params<T> {
     const NAMES: &'static [&'static str] = &[
         "gravity_x",
@@ -294,51 +301,60 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             _ => None,
         }
     }
-    fn set(&mut self, i: usize, value: T) -> bool {
-        match i {
-            0 => self.values.gravity_x = value,
-            1 => self.values.gravity_y = value,
-            2 => self.values.thigh_origin_x = value,
-            3 => self.values.thigh_origin_y = value,
-            4 => self.values.thigh_length_x = value,
-            5 => self.values.thigh_length_y = value,
-            6 => self.values.thigh_mass = value,
-            7 => self.values.thigh_com_x = value,
-            8 => self.values.thigh_com_y = value,
-            9 => self.values.thigh_inertia = value,
-            10 => self.values.thigh_damping = value,
-            11 => self.values.thigh_rotor_inertia = value,
-            12 => self.values.thigh_gear_ratio = value,
-            13 => self.values.shin_length_x = value,
-            14 => self.values.shin_length_y = value,
-            15 => self.values.shin_mass = value,
-            16 => self.values.shin_com_x = value,
-            17 => self.values.shin_com_y = value,
-            18 => self.values.shin_inertia = value,
-            19 => self.values.shin_damping = value,
-            20 => self.values.four_bar_link_origin_x = value,
-            21 => self.values.four_bar_link_origin_y = value,
-            22 => self.values.four_bar_link_length_x = value,
-            23 => self.values.four_bar_link_length_y = value,
-            24 => self.values.four_bar_link_mass = value,
-            25 => self.values.four_bar_link_com_x = value,
-            26 => self.values.four_bar_link_com_y = value,
-            27 => self.values.four_bar_link_inertia = value,
-            28 => self.values.four_bar_link_damping = value,
-            29 => self.values.four_bar_link_rotor_inertia = value,
-            30 => self.values.four_bar_link_gear_ratio = value,
-            31 => self.values.lower_leg_length_x = value,
-            32 => self.values.lower_leg_length_y = value,
-            33 => self.values.lower_leg_mass = value,
-            34 => self.values.lower_leg_com_x = value,
-            35 => self.values.lower_leg_com_y = value,
-            36 => self.values.lower_leg_inertia = value,
-            37 => self.values.lower_leg_damping = value,
-            38 => self.values.shin_pin_a_x = value,
-            39 => self.values.shin_pin_a_y = value,
-            _ => return false,
+    fn set_many(&mut self, changes: &[(usize, T)]) -> bool {
+        if changes.iter().any(|c| c.0 >= Self::NAMES.len()) {
+            return false;
         }
-        *self = Self::new(self.values);
+        let mut stale = false;
+        for &(i, value) in changes {
+            match i {
+                0 => self.values.gravity_x = value,
+                1 => self.values.gravity_y = value,
+                2 => self.values.thigh_origin_x = value,
+                3 => self.values.thigh_origin_y = value,
+                4 => self.values.thigh_length_x = value,
+                5 => self.values.thigh_length_y = value,
+                6 => self.values.thigh_mass = value,
+                7 => self.values.thigh_com_x = value,
+                8 => self.values.thigh_com_y = value,
+                9 => self.values.thigh_inertia = value,
+                10 => self.values.thigh_damping = value,
+                11 => self.values.thigh_rotor_inertia = value,
+                12 => self.values.thigh_gear_ratio = value,
+                13 => self.values.shin_length_x = value,
+                14 => self.values.shin_length_y = value,
+                15 => self.values.shin_mass = value,
+                16 => self.values.shin_com_x = value,
+                17 => self.values.shin_com_y = value,
+                18 => self.values.shin_inertia = value,
+                19 => self.values.shin_damping = value,
+                20 => self.values.four_bar_link_origin_x = value,
+                21 => self.values.four_bar_link_origin_y = value,
+                22 => self.values.four_bar_link_length_x = value,
+                23 => self.values.four_bar_link_length_y = value,
+                24 => self.values.four_bar_link_mass = value,
+                25 => self.values.four_bar_link_com_x = value,
+                26 => self.values.four_bar_link_com_y = value,
+                27 => self.values.four_bar_link_inertia = value,
+                28 => self.values.four_bar_link_damping = value,
+                29 => self.values.four_bar_link_rotor_inertia = value,
+                30 => self.values.four_bar_link_gear_ratio = value,
+                31 => self.values.lower_leg_length_x = value,
+                32 => self.values.lower_leg_length_y = value,
+                33 => self.values.lower_leg_mass = value,
+                34 => self.values.lower_leg_com_x = value,
+                35 => self.values.lower_leg_com_y = value,
+                36 => self.values.lower_leg_inertia = value,
+                37 => self.values.lower_leg_damping = value,
+                38 => self.values.shin_pin_a_x = value,
+                39 => self.values.shin_pin_a_y = value,
+                _ => {}
+            }
+            stale |= PREPARE_READS[i];
+        }
+        if stale {
+            self.prepared = prepare(&self.values).data.0[0];
+        }
         true
     }
 }

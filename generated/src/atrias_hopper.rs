@@ -277,7 +277,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 /// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
 /// computed once when a value changes instead of in every call. `Default` holds
 /// the spec's values; change them at run time, without regenerating, with
-/// [`Params::update`] or [`Parameters::set`].
+/// [`Params::update`], [`Parameters::set`] or [`Parameters::set_many`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
@@ -298,7 +298,7 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
-        *self = Self::new(self.values);
+        self.prepared = prepare(&self.values).data.0[0];
     }
 }
 impl<T> core::ops::Deref for Params<T> {
@@ -317,6 +317,16 @@ impl<T: Arithmetic> Default for Params<T> {
         Self::new(ParamValues::default())
     }
 }
+/// Which parameters (in [`Parameters::NAMES`] order) `prepare` reads: setting any
+/// other leaves the prepared quantities as they are.
+const PREPARE_READS: [bool; 77] = [
+    true, true, false, true, true, true, true, true, true, false, false, true, true,
+    true, true, true, false, false, true, true, true, true, true, true, false, false,
+    false, true, true, true, true, false, true, true, false, false, true, true, true,
+    true, false, true, true, true, true, true, true, true, true, false, false, false,
+    true, true, true, true, false, true, true, true, true, true, true, false, false,
+    false, true, true, true, true, false, false, false, true, false, true, false,
+];
 impl<T: Arithmetic> Parameters<T> for Params<T> {
     const NAMES: &'static [&'static str] = &[
         "gravity_x",
@@ -479,88 +489,97 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             _ => None,
         }
     }
-    fn set(&mut self, i: usize, value: T) -> bool {
-        match i {
-            0 => self.values.gravity_x = value,
-            1 => self.values.gravity_y = value,
-            2 => self.values.slide_x_origin_x = value,
-            3 => self.values.slide_x_origin_y = value,
-            4 => self.values.slide_x_length_x = value,
-            5 => self.values.slide_x_length_y = value,
-            6 => self.values.slide_x_mass = value,
-            7 => self.values.slide_x_com_x = value,
-            8 => self.values.slide_x_com_y = value,
-            9 => self.values.slide_x_inertia = value,
-            10 => self.values.slide_x_damping = value,
-            11 => self.values.slide_y_length_x = value,
-            12 => self.values.slide_y_length_y = value,
-            13 => self.values.slide_y_mass = value,
-            14 => self.values.slide_y_com_x = value,
-            15 => self.values.slide_y_com_y = value,
-            16 => self.values.slide_y_inertia = value,
-            17 => self.values.slide_y_damping = value,
-            18 => self.values.torso_length_x = value,
-            19 => self.values.torso_length_y = value,
-            20 => self.values.torso_mass = value,
-            21 => self.values.torso_com_x = value,
-            22 => self.values.torso_com_y = value,
-            23 => self.values.torso_inertia = value,
-            24 => self.values.torso_damping = value,
-            25 => self.values.thigh_motor_length_x = value,
-            26 => self.values.thigh_motor_length_y = value,
-            27 => self.values.thigh_motor_mass = value,
-            28 => self.values.thigh_motor_com_x = value,
-            29 => self.values.thigh_motor_com_y = value,
-            30 => self.values.thigh_motor_inertia = value,
-            31 => self.values.thigh_motor_damping = value,
-            32 => self.values.thigh_motor_rotor_inertia = value,
-            33 => self.values.thigh_motor_gear_ratio = value,
-            34 => self.values.four_bar_motor_length_x = value,
-            35 => self.values.four_bar_motor_length_y = value,
-            36 => self.values.four_bar_motor_mass = value,
-            37 => self.values.four_bar_motor_com_x = value,
-            38 => self.values.four_bar_motor_com_y = value,
-            39 => self.values.four_bar_motor_inertia = value,
-            40 => self.values.four_bar_motor_damping = value,
-            41 => self.values.four_bar_motor_rotor_inertia = value,
-            42 => self.values.four_bar_motor_gear_ratio = value,
-            43 => self.values.thigh_length_x = value,
-            44 => self.values.thigh_length_y = value,
-            45 => self.values.thigh_mass = value,
-            46 => self.values.thigh_com_x = value,
-            47 => self.values.thigh_com_y = value,
-            48 => self.values.thigh_inertia = value,
-            49 => self.values.thigh_damping = value,
-            50 => self.values.shin_length_x = value,
-            51 => self.values.shin_length_y = value,
-            52 => self.values.shin_mass = value,
-            53 => self.values.shin_com_x = value,
-            54 => self.values.shin_com_y = value,
-            55 => self.values.shin_inertia = value,
-            56 => self.values.shin_damping = value,
-            57 => self.values.four_bar_link_length_x = value,
-            58 => self.values.four_bar_link_length_y = value,
-            59 => self.values.four_bar_link_mass = value,
-            60 => self.values.four_bar_link_com_x = value,
-            61 => self.values.four_bar_link_com_y = value,
-            62 => self.values.four_bar_link_inertia = value,
-            63 => self.values.four_bar_link_damping = value,
-            64 => self.values.lower_leg_length_x = value,
-            65 => self.values.lower_leg_length_y = value,
-            66 => self.values.lower_leg_mass = value,
-            67 => self.values.lower_leg_com_x = value,
-            68 => self.values.lower_leg_com_y = value,
-            69 => self.values.lower_leg_inertia = value,
-            70 => self.values.lower_leg_damping = value,
-            71 => self.values.shin_pin_a_x = value,
-            72 => self.values.shin_pin_a_y = value,
-            73 => self.values.thigh_spring_stiffness = value,
-            74 => self.values.thigh_spring_rest = value,
-            75 => self.values.four_bar_spring_stiffness = value,
-            76 => self.values.four_bar_spring_rest = value,
-            _ => return false,
+    fn set_many(&mut self, changes: &[(usize, T)]) -> bool {
+        if changes.iter().any(|c| c.0 >= Self::NAMES.len()) {
+            return false;
         }
-        *self = Self::new(self.values);
+        let mut stale = false;
+        for &(i, value) in changes {
+            match i {
+                0 => self.values.gravity_x = value,
+                1 => self.values.gravity_y = value,
+                2 => self.values.slide_x_origin_x = value,
+                3 => self.values.slide_x_origin_y = value,
+                4 => self.values.slide_x_length_x = value,
+                5 => self.values.slide_x_length_y = value,
+                6 => self.values.slide_x_mass = value,
+                7 => self.values.slide_x_com_x = value,
+                8 => self.values.slide_x_com_y = value,
+                9 => self.values.slide_x_inertia = value,
+                10 => self.values.slide_x_damping = value,
+                11 => self.values.slide_y_length_x = value,
+                12 => self.values.slide_y_length_y = value,
+                13 => self.values.slide_y_mass = value,
+                14 => self.values.slide_y_com_x = value,
+                15 => self.values.slide_y_com_y = value,
+                16 => self.values.slide_y_inertia = value,
+                17 => self.values.slide_y_damping = value,
+                18 => self.values.torso_length_x = value,
+                19 => self.values.torso_length_y = value,
+                20 => self.values.torso_mass = value,
+                21 => self.values.torso_com_x = value,
+                22 => self.values.torso_com_y = value,
+                23 => self.values.torso_inertia = value,
+                24 => self.values.torso_damping = value,
+                25 => self.values.thigh_motor_length_x = value,
+                26 => self.values.thigh_motor_length_y = value,
+                27 => self.values.thigh_motor_mass = value,
+                28 => self.values.thigh_motor_com_x = value,
+                29 => self.values.thigh_motor_com_y = value,
+                30 => self.values.thigh_motor_inertia = value,
+                31 => self.values.thigh_motor_damping = value,
+                32 => self.values.thigh_motor_rotor_inertia = value,
+                33 => self.values.thigh_motor_gear_ratio = value,
+                34 => self.values.four_bar_motor_length_x = value,
+                35 => self.values.four_bar_motor_length_y = value,
+                36 => self.values.four_bar_motor_mass = value,
+                37 => self.values.four_bar_motor_com_x = value,
+                38 => self.values.four_bar_motor_com_y = value,
+                39 => self.values.four_bar_motor_inertia = value,
+                40 => self.values.four_bar_motor_damping = value,
+                41 => self.values.four_bar_motor_rotor_inertia = value,
+                42 => self.values.four_bar_motor_gear_ratio = value,
+                43 => self.values.thigh_length_x = value,
+                44 => self.values.thigh_length_y = value,
+                45 => self.values.thigh_mass = value,
+                46 => self.values.thigh_com_x = value,
+                47 => self.values.thigh_com_y = value,
+                48 => self.values.thigh_inertia = value,
+                49 => self.values.thigh_damping = value,
+                50 => self.values.shin_length_x = value,
+                51 => self.values.shin_length_y = value,
+                52 => self.values.shin_mass = value,
+                53 => self.values.shin_com_x = value,
+                54 => self.values.shin_com_y = value,
+                55 => self.values.shin_inertia = value,
+                56 => self.values.shin_damping = value,
+                57 => self.values.four_bar_link_length_x = value,
+                58 => self.values.four_bar_link_length_y = value,
+                59 => self.values.four_bar_link_mass = value,
+                60 => self.values.four_bar_link_com_x = value,
+                61 => self.values.four_bar_link_com_y = value,
+                62 => self.values.four_bar_link_inertia = value,
+                63 => self.values.four_bar_link_damping = value,
+                64 => self.values.lower_leg_length_x = value,
+                65 => self.values.lower_leg_length_y = value,
+                66 => self.values.lower_leg_mass = value,
+                67 => self.values.lower_leg_com_x = value,
+                68 => self.values.lower_leg_com_y = value,
+                69 => self.values.lower_leg_inertia = value,
+                70 => self.values.lower_leg_damping = value,
+                71 => self.values.shin_pin_a_x = value,
+                72 => self.values.shin_pin_a_y = value,
+                73 => self.values.thigh_spring_stiffness = value,
+                74 => self.values.thigh_spring_rest = value,
+                75 => self.values.four_bar_spring_stiffness = value,
+                76 => self.values.four_bar_spring_rest = value,
+                _ => {}
+            }
+            stale |= PREPARE_READS[i];
+        }
+        if stale {
+            self.prepared = prepare(&self.values).data.0[0];
+        }
         true
     }
 }

@@ -259,7 +259,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 /// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
 /// computed once when a value changes instead of in every call. `Default` holds
 /// the spec's values; change them at run time, without regenerating, with
-/// [`Params::update`] or [`Parameters::set`].
+/// [`Params::update`], [`Parameters::set`] or [`Parameters::set_many`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
@@ -280,7 +280,7 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
-        *self = Self::new(self.values);
+        self.prepared = prepare(&self.values).data.0[0];
     }
 }
 impl<T> core::ops::Deref for Params<T> {
@@ -299,6 +299,15 @@ impl<T: Arithmetic> Default for Params<T> {
         Self::new(ParamValues::default())
     }
 }
+/// Which parameters (in [`Parameters::NAMES`] order) `prepare` reads: setting any
+/// other leaves the prepared quantities as they are.
+const PREPARE_READS: [bool; 69] = [
+    false, false, false, false, true, true, false, false, false, true, true, true, true,
+    true, true, true, true, true, true, false, true, true, true, true, true, true, true,
+    true, true, true, true, true, true, true, true, true, false, true, true, true, true,
+    true, true, true, true, true, true, true, true, true, true, true, false, true, true,
+    false, true, false, true, true, true, true, true, true, true, true, true, true, false,
+];
 impl<T: Arithmetic> Parameters<T> for Params<T> {
     const NAMES: &'static [&'static str] = &[
         "gravity_x",
@@ -445,80 +454,89 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             _ => None,
         }
     }
-    fn set(&mut self, i: usize, value: T) -> bool {
-        match i {
-            0 => self.values.gravity_x = value,
-            1 => self.values.gravity_y = value,
-            2 => self.values.gravity_z = value,
-            3 => self.values.body_origin_x = value,
-            4 => self.values.body_origin_y = value,
-            5 => self.values.body_origin_z = value,
-            6 => self.values.body_length_x = value,
-            7 => self.values.body_length_y = value,
-            8 => self.values.body_length_z = value,
-            9 => self.values.body_mass = value,
-            10 => self.values.body_com_x = value,
-            11 => self.values.body_com_y = value,
-            12 => self.values.body_com_z = value,
-            13 => self.values.body_inertia_xx = value,
-            14 => self.values.body_inertia_yy = value,
-            15 => self.values.body_inertia_zz = value,
-            16 => self.values.body_inertia_xy = value,
-            17 => self.values.body_inertia_xz = value,
-            18 => self.values.body_inertia_yz = value,
-            19 => self.values.body_damping = value,
-            20 => self.values.hip_origin_x = value,
-            21 => self.values.hip_origin_y = value,
-            22 => self.values.hip_origin_z = value,
-            23 => self.values.hip_length_x = value,
-            24 => self.values.hip_length_y = value,
-            25 => self.values.hip_length_z = value,
-            26 => self.values.hip_mass = value,
-            27 => self.values.hip_com_x = value,
-            28 => self.values.hip_com_y = value,
-            29 => self.values.hip_com_z = value,
-            30 => self.values.hip_inertia_xx = value,
-            31 => self.values.hip_inertia_yy = value,
-            32 => self.values.hip_inertia_zz = value,
-            33 => self.values.hip_inertia_xy = value,
-            34 => self.values.hip_inertia_xz = value,
-            35 => self.values.hip_inertia_yz = value,
-            36 => self.values.hip_damping = value,
-            37 => self.values.hip_rotor_inertia = value,
-            38 => self.values.hip_gear_ratio = value,
-            39 => self.values.thigh_length_x = value,
-            40 => self.values.thigh_length_y = value,
-            41 => self.values.thigh_length_z = value,
-            42 => self.values.thigh_mass = value,
-            43 => self.values.thigh_com_x = value,
-            44 => self.values.thigh_com_y = value,
-            45 => self.values.thigh_com_z = value,
-            46 => self.values.thigh_inertia_xx = value,
-            47 => self.values.thigh_inertia_yy = value,
-            48 => self.values.thigh_inertia_zz = value,
-            49 => self.values.thigh_inertia_xy = value,
-            50 => self.values.thigh_inertia_xz = value,
-            51 => self.values.thigh_inertia_yz = value,
-            52 => self.values.thigh_damping = value,
-            53 => self.values.thigh_rotor_inertia = value,
-            54 => self.values.thigh_gear_ratio = value,
-            55 => self.values.shin_length_x = value,
-            56 => self.values.shin_length_y = value,
-            57 => self.values.shin_length_z = value,
-            58 => self.values.shin_mass = value,
-            59 => self.values.shin_com_x = value,
-            60 => self.values.shin_com_y = value,
-            61 => self.values.shin_com_z = value,
-            62 => self.values.shin_inertia_xx = value,
-            63 => self.values.shin_inertia_yy = value,
-            64 => self.values.shin_inertia_zz = value,
-            65 => self.values.shin_inertia_xy = value,
-            66 => self.values.shin_inertia_xz = value,
-            67 => self.values.shin_inertia_yz = value,
-            68 => self.values.shin_damping = value,
-            _ => return false,
+    fn set_many(&mut self, changes: &[(usize, T)]) -> bool {
+        if changes.iter().any(|c| c.0 >= Self::NAMES.len()) {
+            return false;
         }
-        *self = Self::new(self.values);
+        let mut stale = false;
+        for &(i, value) in changes {
+            match i {
+                0 => self.values.gravity_x = value,
+                1 => self.values.gravity_y = value,
+                2 => self.values.gravity_z = value,
+                3 => self.values.body_origin_x = value,
+                4 => self.values.body_origin_y = value,
+                5 => self.values.body_origin_z = value,
+                6 => self.values.body_length_x = value,
+                7 => self.values.body_length_y = value,
+                8 => self.values.body_length_z = value,
+                9 => self.values.body_mass = value,
+                10 => self.values.body_com_x = value,
+                11 => self.values.body_com_y = value,
+                12 => self.values.body_com_z = value,
+                13 => self.values.body_inertia_xx = value,
+                14 => self.values.body_inertia_yy = value,
+                15 => self.values.body_inertia_zz = value,
+                16 => self.values.body_inertia_xy = value,
+                17 => self.values.body_inertia_xz = value,
+                18 => self.values.body_inertia_yz = value,
+                19 => self.values.body_damping = value,
+                20 => self.values.hip_origin_x = value,
+                21 => self.values.hip_origin_y = value,
+                22 => self.values.hip_origin_z = value,
+                23 => self.values.hip_length_x = value,
+                24 => self.values.hip_length_y = value,
+                25 => self.values.hip_length_z = value,
+                26 => self.values.hip_mass = value,
+                27 => self.values.hip_com_x = value,
+                28 => self.values.hip_com_y = value,
+                29 => self.values.hip_com_z = value,
+                30 => self.values.hip_inertia_xx = value,
+                31 => self.values.hip_inertia_yy = value,
+                32 => self.values.hip_inertia_zz = value,
+                33 => self.values.hip_inertia_xy = value,
+                34 => self.values.hip_inertia_xz = value,
+                35 => self.values.hip_inertia_yz = value,
+                36 => self.values.hip_damping = value,
+                37 => self.values.hip_rotor_inertia = value,
+                38 => self.values.hip_gear_ratio = value,
+                39 => self.values.thigh_length_x = value,
+                40 => self.values.thigh_length_y = value,
+                41 => self.values.thigh_length_z = value,
+                42 => self.values.thigh_mass = value,
+                43 => self.values.thigh_com_x = value,
+                44 => self.values.thigh_com_y = value,
+                45 => self.values.thigh_com_z = value,
+                46 => self.values.thigh_inertia_xx = value,
+                47 => self.values.thigh_inertia_yy = value,
+                48 => self.values.thigh_inertia_zz = value,
+                49 => self.values.thigh_inertia_xy = value,
+                50 => self.values.thigh_inertia_xz = value,
+                51 => self.values.thigh_inertia_yz = value,
+                52 => self.values.thigh_damping = value,
+                53 => self.values.thigh_rotor_inertia = value,
+                54 => self.values.thigh_gear_ratio = value,
+                55 => self.values.shin_length_x = value,
+                56 => self.values.shin_length_y = value,
+                57 => self.values.shin_length_z = value,
+                58 => self.values.shin_mass = value,
+                59 => self.values.shin_com_x = value,
+                60 => self.values.shin_com_y = value,
+                61 => self.values.shin_com_z = value,
+                62 => self.values.shin_inertia_xx = value,
+                63 => self.values.shin_inertia_yy = value,
+                64 => self.values.shin_inertia_zz = value,
+                65 => self.values.shin_inertia_xy = value,
+                66 => self.values.shin_inertia_xz = value,
+                67 => self.values.shin_inertia_yz = value,
+                68 => self.values.shin_damping = value,
+                _ => {}
+            }
+            stale |= PREPARE_READS[i];
+        }
+        if stale {
+            self.prepared = prepare(&self.values).data.0[0];
+        }
         true
     }
 }

@@ -247,7 +247,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 /// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
 /// computed once when a value changes instead of in every call. `Default` holds
 /// the spec's values; change them at run time, without regenerating, with
-/// [`Params::update`] or [`Parameters::set`].
+/// [`Params::update`], [`Parameters::set`] or [`Parameters::set_many`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
@@ -268,7 +268,7 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
-        *self = Self::new(self.values);
+        self.prepared = prepare(&self.values).data.0[0];
     }
 }
 impl<T> core::ops::Deref for Params<T> {
@@ -287,6 +287,16 @@ impl<T: Arithmetic> Default for Params<T> {
         Self::new(ParamValues::default())
     }
 }
+/// Which parameters (in [`Parameters::NAMES`] order) `prepare` reads: setting any
+/// other leaves the prepared quantities as they are.
+const PREPARE_READS: [bool; 67] = [
+    true, true, true, true, true, true, true, true, true, true, false, true, true, false,
+    false, true, true, true, true, false, true, true, false, false, true, true, true,
+    true, false, true, true, true, true, true, true, true, true, false, true, true,
+    false, false, true, true, true, true, false, false, false, true, true, true, true,
+    false, true, true, false, false, true, true, true, true, false, false, false, false,
+    false,
+];
 impl<T: Arithmetic> Parameters<T> for Params<T> {
     const NAMES: &'static [&'static str] = &[
         "gravity_x",
@@ -429,78 +439,87 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             _ => None,
         }
     }
-    fn set(&mut self, i: usize, value: T) -> bool {
-        match i {
-            0 => self.values.gravity_x = value,
-            1 => self.values.gravity_y = value,
-            2 => self.values.crank_origin_x = value,
-            3 => self.values.crank_origin_y = value,
-            4 => self.values.crank_length_x = value,
-            5 => self.values.crank_length_y = value,
-            6 => self.values.crank_mass = value,
-            7 => self.values.crank_com_x = value,
-            8 => self.values.crank_com_y = value,
-            9 => self.values.crank_inertia = value,
-            10 => self.values.crank_damping = value,
-            11 => self.values.crank_rotor_inertia = value,
-            12 => self.values.crank_gear_ratio = value,
-            13 => self.values.coupler_length_x = value,
-            14 => self.values.coupler_length_y = value,
-            15 => self.values.coupler_mass = value,
-            16 => self.values.coupler_com_x = value,
-            17 => self.values.coupler_com_y = value,
-            18 => self.values.coupler_inertia = value,
-            19 => self.values.coupler_damping = value,
-            20 => self.values.rocker_origin_x = value,
-            21 => self.values.rocker_origin_y = value,
-            22 => self.values.rocker_length_x = value,
-            23 => self.values.rocker_length_y = value,
-            24 => self.values.rocker_mass = value,
-            25 => self.values.rocker_com_x = value,
-            26 => self.values.rocker_com_y = value,
-            27 => self.values.rocker_inertia = value,
-            28 => self.values.rocker_damping = value,
-            29 => self.values.leg_origin_x = value,
-            30 => self.values.leg_origin_y = value,
-            31 => self.values.leg_length_x = value,
-            32 => self.values.leg_length_y = value,
-            33 => self.values.leg_mass = value,
-            34 => self.values.leg_com_x = value,
-            35 => self.values.leg_com_y = value,
-            36 => self.values.leg_inertia = value,
-            37 => self.values.leg_damping = value,
-            38 => self.values.guide_origin_x = value,
-            39 => self.values.guide_origin_y = value,
-            40 => self.values.guide_length_x = value,
-            41 => self.values.guide_length_y = value,
-            42 => self.values.guide_mass = value,
-            43 => self.values.guide_com_x = value,
-            44 => self.values.guide_com_y = value,
-            45 => self.values.guide_inertia = value,
-            46 => self.values.guide_damping = value,
-            47 => self.values.strut_length_x = value,
-            48 => self.values.strut_length_y = value,
-            49 => self.values.strut_mass = value,
-            50 => self.values.strut_com_x = value,
-            51 => self.values.strut_com_y = value,
-            52 => self.values.strut_inertia = value,
-            53 => self.values.strut_damping = value,
-            54 => self.values.brace_origin_x = value,
-            55 => self.values.brace_origin_y = value,
-            56 => self.values.brace_length_x = value,
-            57 => self.values.brace_length_y = value,
-            58 => self.values.brace_mass = value,
-            59 => self.values.brace_com_x = value,
-            60 => self.values.brace_com_y = value,
-            61 => self.values.brace_inertia = value,
-            62 => self.values.brace_damping = value,
-            63 => self.values.hip_guide_b_x = value,
-            64 => self.values.hip_guide_b_y = value,
-            65 => self.values.ankle_b_x = value,
-            66 => self.values.ankle_b_y = value,
-            _ => return false,
+    fn set_many(&mut self, changes: &[(usize, T)]) -> bool {
+        if changes.iter().any(|c| c.0 >= Self::NAMES.len()) {
+            return false;
         }
-        *self = Self::new(self.values);
+        let mut stale = false;
+        for &(i, value) in changes {
+            match i {
+                0 => self.values.gravity_x = value,
+                1 => self.values.gravity_y = value,
+                2 => self.values.crank_origin_x = value,
+                3 => self.values.crank_origin_y = value,
+                4 => self.values.crank_length_x = value,
+                5 => self.values.crank_length_y = value,
+                6 => self.values.crank_mass = value,
+                7 => self.values.crank_com_x = value,
+                8 => self.values.crank_com_y = value,
+                9 => self.values.crank_inertia = value,
+                10 => self.values.crank_damping = value,
+                11 => self.values.crank_rotor_inertia = value,
+                12 => self.values.crank_gear_ratio = value,
+                13 => self.values.coupler_length_x = value,
+                14 => self.values.coupler_length_y = value,
+                15 => self.values.coupler_mass = value,
+                16 => self.values.coupler_com_x = value,
+                17 => self.values.coupler_com_y = value,
+                18 => self.values.coupler_inertia = value,
+                19 => self.values.coupler_damping = value,
+                20 => self.values.rocker_origin_x = value,
+                21 => self.values.rocker_origin_y = value,
+                22 => self.values.rocker_length_x = value,
+                23 => self.values.rocker_length_y = value,
+                24 => self.values.rocker_mass = value,
+                25 => self.values.rocker_com_x = value,
+                26 => self.values.rocker_com_y = value,
+                27 => self.values.rocker_inertia = value,
+                28 => self.values.rocker_damping = value,
+                29 => self.values.leg_origin_x = value,
+                30 => self.values.leg_origin_y = value,
+                31 => self.values.leg_length_x = value,
+                32 => self.values.leg_length_y = value,
+                33 => self.values.leg_mass = value,
+                34 => self.values.leg_com_x = value,
+                35 => self.values.leg_com_y = value,
+                36 => self.values.leg_inertia = value,
+                37 => self.values.leg_damping = value,
+                38 => self.values.guide_origin_x = value,
+                39 => self.values.guide_origin_y = value,
+                40 => self.values.guide_length_x = value,
+                41 => self.values.guide_length_y = value,
+                42 => self.values.guide_mass = value,
+                43 => self.values.guide_com_x = value,
+                44 => self.values.guide_com_y = value,
+                45 => self.values.guide_inertia = value,
+                46 => self.values.guide_damping = value,
+                47 => self.values.strut_length_x = value,
+                48 => self.values.strut_length_y = value,
+                49 => self.values.strut_mass = value,
+                50 => self.values.strut_com_x = value,
+                51 => self.values.strut_com_y = value,
+                52 => self.values.strut_inertia = value,
+                53 => self.values.strut_damping = value,
+                54 => self.values.brace_origin_x = value,
+                55 => self.values.brace_origin_y = value,
+                56 => self.values.brace_length_x = value,
+                57 => self.values.brace_length_y = value,
+                58 => self.values.brace_mass = value,
+                59 => self.values.brace_com_x = value,
+                60 => self.values.brace_com_y = value,
+                61 => self.values.brace_inertia = value,
+                62 => self.values.brace_damping = value,
+                63 => self.values.hip_guide_b_x = value,
+                64 => self.values.hip_guide_b_y = value,
+                65 => self.values.ankle_b_x = value,
+                66 => self.values.ankle_b_y = value,
+                _ => {}
+            }
+            stale |= PREPARE_READS[i];
+        }
+        if stale {
+            self.prepared = prepare(&self.values).data.0[0];
+        }
         true
     }
 }

@@ -187,7 +187,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 /// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
 /// computed once when a value changes instead of in every call. `Default` holds
 /// the spec's values; change them at run time, without regenerating, with
-/// [`Params::update`] or [`Parameters::set`].
+/// [`Params::update`], [`Parameters::set`] or [`Parameters::set_many`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
@@ -208,7 +208,7 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
-        *self = Self::new(self.values);
+        self.prepared = prepare(&self.values).data.0[0];
     }
 }
 impl<T> core::ops::Deref for Params<T> {
@@ -227,6 +227,14 @@ impl<T: Arithmetic> Default for Params<T> {
         Self::new(ParamValues::default())
     }
 }
+/// Which parameters (in [`Parameters::NAMES`] order) `prepare` reads: setting any
+/// other leaves the prepared quantities as they are.
+const PREPARE_READS: [bool; 47] = [
+    true, true, false, true, true, true, true, true, true, false, false, true, true,
+    true, true, true, false, false, false, false, true, true, true, true, false, true,
+    true, true, true, true, true, true, true, false, true, true, false, false, true,
+    true, true, true, false, true, true, true, false,
+];
 impl<T: Arithmetic> Parameters<T> for Params<T> {
     const NAMES: &'static [&'static str] = &[
         "gravity_x",
@@ -329,58 +337,67 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             _ => None,
         }
     }
-    fn set(&mut self, i: usize, value: T) -> bool {
-        match i {
-            0 => self.values.gravity_x = value,
-            1 => self.values.gravity_y = value,
-            2 => self.values.slide_x_origin_x = value,
-            3 => self.values.slide_x_origin_y = value,
-            4 => self.values.slide_x_length_x = value,
-            5 => self.values.slide_x_length_y = value,
-            6 => self.values.slide_x_mass = value,
-            7 => self.values.slide_x_com_x = value,
-            8 => self.values.slide_x_com_y = value,
-            9 => self.values.slide_x_inertia = value,
-            10 => self.values.slide_x_damping = value,
-            11 => self.values.slide_y_length_x = value,
-            12 => self.values.slide_y_length_y = value,
-            13 => self.values.slide_y_mass = value,
-            14 => self.values.slide_y_com_x = value,
-            15 => self.values.slide_y_com_y = value,
-            16 => self.values.slide_y_inertia = value,
-            17 => self.values.slide_y_damping = value,
-            18 => self.values.torso_length_x = value,
-            19 => self.values.torso_length_y = value,
-            20 => self.values.torso_mass = value,
-            21 => self.values.torso_com_x = value,
-            22 => self.values.torso_com_y = value,
-            23 => self.values.torso_inertia = value,
-            24 => self.values.torso_damping = value,
-            25 => self.values.thigh_origin_x = value,
-            26 => self.values.thigh_origin_y = value,
-            27 => self.values.thigh_length_x = value,
-            28 => self.values.thigh_length_y = value,
-            29 => self.values.thigh_mass = value,
-            30 => self.values.thigh_com_x = value,
-            31 => self.values.thigh_com_y = value,
-            32 => self.values.thigh_inertia = value,
-            33 => self.values.thigh_damping = value,
-            34 => self.values.thigh_rotor_inertia = value,
-            35 => self.values.thigh_gear_ratio = value,
-            36 => self.values.shin_length_x = value,
-            37 => self.values.shin_length_y = value,
-            38 => self.values.shin_mass = value,
-            39 => self.values.shin_com_x = value,
-            40 => self.values.shin_com_y = value,
-            41 => self.values.shin_inertia = value,
-            42 => self.values.shin_damping = value,
-            43 => self.values.shin_rotor_inertia = value,
-            44 => self.values.shin_gear_ratio = value,
-            45 => self.values.knee_spring_stiffness = value,
-            46 => self.values.knee_spring_rest = value,
-            _ => return false,
+    fn set_many(&mut self, changes: &[(usize, T)]) -> bool {
+        if changes.iter().any(|c| c.0 >= Self::NAMES.len()) {
+            return false;
         }
-        *self = Self::new(self.values);
+        let mut stale = false;
+        for &(i, value) in changes {
+            match i {
+                0 => self.values.gravity_x = value,
+                1 => self.values.gravity_y = value,
+                2 => self.values.slide_x_origin_x = value,
+                3 => self.values.slide_x_origin_y = value,
+                4 => self.values.slide_x_length_x = value,
+                5 => self.values.slide_x_length_y = value,
+                6 => self.values.slide_x_mass = value,
+                7 => self.values.slide_x_com_x = value,
+                8 => self.values.slide_x_com_y = value,
+                9 => self.values.slide_x_inertia = value,
+                10 => self.values.slide_x_damping = value,
+                11 => self.values.slide_y_length_x = value,
+                12 => self.values.slide_y_length_y = value,
+                13 => self.values.slide_y_mass = value,
+                14 => self.values.slide_y_com_x = value,
+                15 => self.values.slide_y_com_y = value,
+                16 => self.values.slide_y_inertia = value,
+                17 => self.values.slide_y_damping = value,
+                18 => self.values.torso_length_x = value,
+                19 => self.values.torso_length_y = value,
+                20 => self.values.torso_mass = value,
+                21 => self.values.torso_com_x = value,
+                22 => self.values.torso_com_y = value,
+                23 => self.values.torso_inertia = value,
+                24 => self.values.torso_damping = value,
+                25 => self.values.thigh_origin_x = value,
+                26 => self.values.thigh_origin_y = value,
+                27 => self.values.thigh_length_x = value,
+                28 => self.values.thigh_length_y = value,
+                29 => self.values.thigh_mass = value,
+                30 => self.values.thigh_com_x = value,
+                31 => self.values.thigh_com_y = value,
+                32 => self.values.thigh_inertia = value,
+                33 => self.values.thigh_damping = value,
+                34 => self.values.thigh_rotor_inertia = value,
+                35 => self.values.thigh_gear_ratio = value,
+                36 => self.values.shin_length_x = value,
+                37 => self.values.shin_length_y = value,
+                38 => self.values.shin_mass = value,
+                39 => self.values.shin_com_x = value,
+                40 => self.values.shin_com_y = value,
+                41 => self.values.shin_inertia = value,
+                42 => self.values.shin_damping = value,
+                43 => self.values.shin_rotor_inertia = value,
+                44 => self.values.shin_gear_ratio = value,
+                45 => self.values.knee_spring_stiffness = value,
+                46 => self.values.knee_spring_rest = value,
+                _ => {}
+            }
+            stale |= PREPARE_READS[i];
+        }
+        if stale {
+            self.prepared = prepare(&self.values).data.0[0];
+        }
         true
     }
 }

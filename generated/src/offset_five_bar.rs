@@ -190,7 +190,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 /// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
 /// computed once when a value changes instead of in every call. `Default` holds
 /// the spec's values; change them at run time, without regenerating, with
-/// [`Params::update`] or [`Parameters::set`].
+/// [`Params::update`], [`Parameters::set`] or [`Parameters::set_many`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
@@ -211,7 +211,7 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
-        *self = Self::new(self.values);
+        self.prepared = prepare(&self.values).data.0[0];
     }
 }
 impl<T> core::ops::Deref for Params<T> {
@@ -230,6 +230,14 @@ impl<T: Arithmetic> Default for Params<T> {
         Self::new(ParamValues::default())
     }
 }
+/// Which parameters (in [`Parameters::NAMES`] order) `prepare` reads: setting any
+/// other leaves the prepared quantities as they are.
+const PREPARE_READS: [bool; 48] = [
+    true, true, true, true, false, false, true, true, true, true, false, true, true,
+    true, true, false, false, true, true, true, true, false, true, true, false, false,
+    true, true, true, true, false, true, true, true, true, false, false, true, true,
+    true, true, false, false, false, false, false, false, false,
+];
 impl<T: Arithmetic> Parameters<T> for Params<T> {
     const NAMES: &'static [&'static str] = &[
         "gravity_x",
@@ -334,59 +342,68 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             _ => None,
         }
     }
-    fn set(&mut self, i: usize, value: T) -> bool {
-        match i {
-            0 => self.values.gravity_x = value,
-            1 => self.values.gravity_y = value,
-            2 => self.values.upper_a_origin_x = value,
-            3 => self.values.upper_a_origin_y = value,
-            4 => self.values.upper_a_length_x = value,
-            5 => self.values.upper_a_length_y = value,
-            6 => self.values.upper_a_mass = value,
-            7 => self.values.upper_a_com_x = value,
-            8 => self.values.upper_a_com_y = value,
-            9 => self.values.upper_a_inertia = value,
-            10 => self.values.upper_a_damping = value,
-            11 => self.values.upper_a_rotor_inertia = value,
-            12 => self.values.upper_a_gear_ratio = value,
-            13 => self.values.lower_a_origin_x = value,
-            14 => self.values.lower_a_origin_y = value,
-            15 => self.values.lower_a_length_x = value,
-            16 => self.values.lower_a_length_y = value,
-            17 => self.values.lower_a_mass = value,
-            18 => self.values.lower_a_com_x = value,
-            19 => self.values.lower_a_com_y = value,
-            20 => self.values.lower_a_inertia = value,
-            21 => self.values.lower_a_damping = value,
-            22 => self.values.upper_b_origin_x = value,
-            23 => self.values.upper_b_origin_y = value,
-            24 => self.values.upper_b_length_x = value,
-            25 => self.values.upper_b_length_y = value,
-            26 => self.values.upper_b_mass = value,
-            27 => self.values.upper_b_com_x = value,
-            28 => self.values.upper_b_com_y = value,
-            29 => self.values.upper_b_inertia = value,
-            30 => self.values.upper_b_damping = value,
-            31 => self.values.upper_b_rotor_inertia = value,
-            32 => self.values.upper_b_gear_ratio = value,
-            33 => self.values.lower_b_origin_x = value,
-            34 => self.values.lower_b_origin_y = value,
-            35 => self.values.lower_b_length_x = value,
-            36 => self.values.lower_b_length_y = value,
-            37 => self.values.lower_b_mass = value,
-            38 => self.values.lower_b_com_x = value,
-            39 => self.values.lower_b_com_y = value,
-            40 => self.values.lower_b_inertia = value,
-            41 => self.values.lower_b_damping = value,
-            42 => self.values.toe_a_x = value,
-            43 => self.values.toe_a_y = value,
-            44 => self.values.toe_b_x = value,
-            45 => self.values.toe_b_y = value,
-            46 => self.values.foot_x = value,
-            47 => self.values.foot_y = value,
-            _ => return false,
+    fn set_many(&mut self, changes: &[(usize, T)]) -> bool {
+        if changes.iter().any(|c| c.0 >= Self::NAMES.len()) {
+            return false;
         }
-        *self = Self::new(self.values);
+        let mut stale = false;
+        for &(i, value) in changes {
+            match i {
+                0 => self.values.gravity_x = value,
+                1 => self.values.gravity_y = value,
+                2 => self.values.upper_a_origin_x = value,
+                3 => self.values.upper_a_origin_y = value,
+                4 => self.values.upper_a_length_x = value,
+                5 => self.values.upper_a_length_y = value,
+                6 => self.values.upper_a_mass = value,
+                7 => self.values.upper_a_com_x = value,
+                8 => self.values.upper_a_com_y = value,
+                9 => self.values.upper_a_inertia = value,
+                10 => self.values.upper_a_damping = value,
+                11 => self.values.upper_a_rotor_inertia = value,
+                12 => self.values.upper_a_gear_ratio = value,
+                13 => self.values.lower_a_origin_x = value,
+                14 => self.values.lower_a_origin_y = value,
+                15 => self.values.lower_a_length_x = value,
+                16 => self.values.lower_a_length_y = value,
+                17 => self.values.lower_a_mass = value,
+                18 => self.values.lower_a_com_x = value,
+                19 => self.values.lower_a_com_y = value,
+                20 => self.values.lower_a_inertia = value,
+                21 => self.values.lower_a_damping = value,
+                22 => self.values.upper_b_origin_x = value,
+                23 => self.values.upper_b_origin_y = value,
+                24 => self.values.upper_b_length_x = value,
+                25 => self.values.upper_b_length_y = value,
+                26 => self.values.upper_b_mass = value,
+                27 => self.values.upper_b_com_x = value,
+                28 => self.values.upper_b_com_y = value,
+                29 => self.values.upper_b_inertia = value,
+                30 => self.values.upper_b_damping = value,
+                31 => self.values.upper_b_rotor_inertia = value,
+                32 => self.values.upper_b_gear_ratio = value,
+                33 => self.values.lower_b_origin_x = value,
+                34 => self.values.lower_b_origin_y = value,
+                35 => self.values.lower_b_length_x = value,
+                36 => self.values.lower_b_length_y = value,
+                37 => self.values.lower_b_mass = value,
+                38 => self.values.lower_b_com_x = value,
+                39 => self.values.lower_b_com_y = value,
+                40 => self.values.lower_b_inertia = value,
+                41 => self.values.lower_b_damping = value,
+                42 => self.values.toe_a_x = value,
+                43 => self.values.toe_a_y = value,
+                44 => self.values.toe_b_x = value,
+                45 => self.values.toe_b_y = value,
+                46 => self.values.foot_x = value,
+                47 => self.values.foot_y = value,
+                _ => {}
+            }
+            stale |= PREPARE_READS[i];
+        }
+        if stale {
+            self.prepared = prepare(&self.values).data.0[0];
+        }
         true
     }
 }

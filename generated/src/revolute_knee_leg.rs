@@ -271,7 +271,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 /// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
 /// computed once when a value changes instead of in every call. `Default` holds
 /// the spec's values; change them at run time, without regenerating, with
-/// [`Params::update`] or [`Parameters::set`].
+/// [`Params::update`], [`Parameters::set`] or [`Parameters::set_many`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
@@ -292,7 +292,7 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
-        *self = Self::new(self.values);
+        self.prepared = prepare(&self.values).data.0[0];
     }
 }
 impl<T> core::ops::Deref for Params<T> {
@@ -311,6 +311,16 @@ impl<T: Arithmetic> Default for Params<T> {
         Self::new(ParamValues::default())
     }
 }
+/// Which parameters (in [`Parameters::NAMES`] order) `prepare` reads: setting any
+/// other leaves the prepared quantities as they are.
+const PREPARE_READS: [bool; 73] = [
+    true, false, false, true, true, true, true, true, true, true, true, true, true, true,
+    false, false, false, true, true, true, true, true, true, true, true, true, true,
+    true, true, true, true, true, false, true, true, false, true, false, true, true,
+    true, true, true, true, true, false, true, true, true, true, true, true, true, true,
+    true, true, false, true, true, false, false, false, true, true, true, true, true,
+    true, true, false, false, true, false,
+];
 impl<T: Arithmetic> Parameters<T> for Params<T> {
     const NAMES: &'static [&'static str] = &[
         "gravity_x",
@@ -465,84 +475,93 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             _ => None,
         }
     }
-    fn set(&mut self, i: usize, value: T) -> bool {
-        match i {
-            0 => self.values.gravity_x = value,
-            1 => self.values.gravity_y = value,
-            2 => self.values.gravity_z = value,
-            3 => self.values.abduction_origin_x = value,
-            4 => self.values.abduction_origin_y = value,
-            5 => self.values.abduction_origin_z = value,
-            6 => self.values.abduction_length_x = value,
-            7 => self.values.abduction_length_y = value,
-            8 => self.values.abduction_length_z = value,
-            9 => self.values.abduction_mass = value,
-            10 => self.values.abduction_com_x = value,
-            11 => self.values.abduction_com_y = value,
-            12 => self.values.abduction_com_z = value,
-            13 => self.values.abduction_inertia_xx = value,
-            14 => self.values.abduction_inertia_yy = value,
-            15 => self.values.abduction_inertia_zz = value,
-            16 => self.values.abduction_damping = value,
-            17 => self.values.abduction_rotor_inertia = value,
-            18 => self.values.abduction_gear_ratio = value,
-            19 => self.values.thigh_length_x = value,
-            20 => self.values.thigh_length_y = value,
-            21 => self.values.thigh_length_z = value,
-            22 => self.values.thigh_mass = value,
-            23 => self.values.thigh_com_x = value,
-            24 => self.values.thigh_com_y = value,
-            25 => self.values.thigh_com_z = value,
-            26 => self.values.thigh_inertia_xx = value,
-            27 => self.values.thigh_inertia_yy = value,
-            28 => self.values.thigh_inertia_zz = value,
-            29 => self.values.thigh_inertia_xy = value,
-            30 => self.values.thigh_inertia_xz = value,
-            31 => self.values.thigh_inertia_yz = value,
-            32 => self.values.thigh_damping = value,
-            33 => self.values.thigh_rotor_inertia = value,
-            34 => self.values.thigh_gear_ratio = value,
-            35 => self.values.shin_length_x = value,
-            36 => self.values.shin_length_y = value,
-            37 => self.values.shin_length_z = value,
-            38 => self.values.shin_mass = value,
-            39 => self.values.shin_com_x = value,
-            40 => self.values.shin_com_y = value,
-            41 => self.values.shin_com_z = value,
-            42 => self.values.shin_inertia_xx = value,
-            43 => self.values.shin_inertia_yy = value,
-            44 => self.values.shin_inertia_zz = value,
-            45 => self.values.shin_damping = value,
-            46 => self.values.crank_length_x = value,
-            47 => self.values.crank_length_y = value,
-            48 => self.values.crank_length_z = value,
-            49 => self.values.crank_mass = value,
-            50 => self.values.crank_com_x = value,
-            51 => self.values.crank_com_y = value,
-            52 => self.values.crank_com_z = value,
-            53 => self.values.crank_inertia_xx = value,
-            54 => self.values.crank_inertia_yy = value,
-            55 => self.values.crank_inertia_zz = value,
-            56 => self.values.crank_damping = value,
-            57 => self.values.crank_rotor_inertia = value,
-            58 => self.values.crank_gear_ratio = value,
-            59 => self.values.coupler_length_x = value,
-            60 => self.values.coupler_length_y = value,
-            61 => self.values.coupler_length_z = value,
-            62 => self.values.coupler_mass = value,
-            63 => self.values.coupler_com_x = value,
-            64 => self.values.coupler_com_y = value,
-            65 => self.values.coupler_com_z = value,
-            66 => self.values.coupler_inertia_xx = value,
-            67 => self.values.coupler_inertia_yy = value,
-            68 => self.values.coupler_inertia_zz = value,
-            69 => self.values.coupler_damping = value,
-            70 => self.values.knee_link_b_x = value,
-            71 => self.values.knee_link_b_y = value,
-            72 => self.values.knee_link_b_z = value,
-            _ => return false,
+    fn set_many(&mut self, changes: &[(usize, T)]) -> bool {
+        if changes.iter().any(|c| c.0 >= Self::NAMES.len()) {
+            return false;
         }
-        *self = Self::new(self.values);
+        let mut stale = false;
+        for &(i, value) in changes {
+            match i {
+                0 => self.values.gravity_x = value,
+                1 => self.values.gravity_y = value,
+                2 => self.values.gravity_z = value,
+                3 => self.values.abduction_origin_x = value,
+                4 => self.values.abduction_origin_y = value,
+                5 => self.values.abduction_origin_z = value,
+                6 => self.values.abduction_length_x = value,
+                7 => self.values.abduction_length_y = value,
+                8 => self.values.abduction_length_z = value,
+                9 => self.values.abduction_mass = value,
+                10 => self.values.abduction_com_x = value,
+                11 => self.values.abduction_com_y = value,
+                12 => self.values.abduction_com_z = value,
+                13 => self.values.abduction_inertia_xx = value,
+                14 => self.values.abduction_inertia_yy = value,
+                15 => self.values.abduction_inertia_zz = value,
+                16 => self.values.abduction_damping = value,
+                17 => self.values.abduction_rotor_inertia = value,
+                18 => self.values.abduction_gear_ratio = value,
+                19 => self.values.thigh_length_x = value,
+                20 => self.values.thigh_length_y = value,
+                21 => self.values.thigh_length_z = value,
+                22 => self.values.thigh_mass = value,
+                23 => self.values.thigh_com_x = value,
+                24 => self.values.thigh_com_y = value,
+                25 => self.values.thigh_com_z = value,
+                26 => self.values.thigh_inertia_xx = value,
+                27 => self.values.thigh_inertia_yy = value,
+                28 => self.values.thigh_inertia_zz = value,
+                29 => self.values.thigh_inertia_xy = value,
+                30 => self.values.thigh_inertia_xz = value,
+                31 => self.values.thigh_inertia_yz = value,
+                32 => self.values.thigh_damping = value,
+                33 => self.values.thigh_rotor_inertia = value,
+                34 => self.values.thigh_gear_ratio = value,
+                35 => self.values.shin_length_x = value,
+                36 => self.values.shin_length_y = value,
+                37 => self.values.shin_length_z = value,
+                38 => self.values.shin_mass = value,
+                39 => self.values.shin_com_x = value,
+                40 => self.values.shin_com_y = value,
+                41 => self.values.shin_com_z = value,
+                42 => self.values.shin_inertia_xx = value,
+                43 => self.values.shin_inertia_yy = value,
+                44 => self.values.shin_inertia_zz = value,
+                45 => self.values.shin_damping = value,
+                46 => self.values.crank_length_x = value,
+                47 => self.values.crank_length_y = value,
+                48 => self.values.crank_length_z = value,
+                49 => self.values.crank_mass = value,
+                50 => self.values.crank_com_x = value,
+                51 => self.values.crank_com_y = value,
+                52 => self.values.crank_com_z = value,
+                53 => self.values.crank_inertia_xx = value,
+                54 => self.values.crank_inertia_yy = value,
+                55 => self.values.crank_inertia_zz = value,
+                56 => self.values.crank_damping = value,
+                57 => self.values.crank_rotor_inertia = value,
+                58 => self.values.crank_gear_ratio = value,
+                59 => self.values.coupler_length_x = value,
+                60 => self.values.coupler_length_y = value,
+                61 => self.values.coupler_length_z = value,
+                62 => self.values.coupler_mass = value,
+                63 => self.values.coupler_com_x = value,
+                64 => self.values.coupler_com_y = value,
+                65 => self.values.coupler_com_z = value,
+                66 => self.values.coupler_inertia_xx = value,
+                67 => self.values.coupler_inertia_yy = value,
+                68 => self.values.coupler_inertia_zz = value,
+                69 => self.values.coupler_damping = value,
+                70 => self.values.knee_link_b_x = value,
+                71 => self.values.knee_link_b_y = value,
+                72 => self.values.knee_link_b_z = value,
+                _ => {}
+            }
+            stale |= PREPARE_READS[i];
+        }
+        if stale {
+            self.prepared = prepare(&self.values).data.0[0];
+        }
         true
     }
 }

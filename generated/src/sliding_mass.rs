@@ -199,7 +199,7 @@ impl<T: Arithmetic> Default for ParamValues<T> {
 /// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
 /// computed once when a value changes instead of in every call. `Default` holds
 /// the spec's values; change them at run time, without regenerating, with
-/// [`Params::update`] or [`Parameters::set`].
+/// [`Params::update`], [`Parameters::set`] or [`Parameters::set_many`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Params<T> {
     values: ParamValues<T>,
@@ -220,7 +220,7 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
-        *self = Self::new(self.values);
+        self.prepared = prepare(&self.values).data.0[0];
     }
 }
 impl<T> core::ops::Deref for Params<T> {
@@ -239,6 +239,14 @@ impl<T: Arithmetic> Default for Params<T> {
         Self::new(ParamValues::default())
     }
 }
+/// Which parameters (in [`Parameters::NAMES`] order) `prepare` reads: setting any
+/// other leaves the prepared quantities as they are.
+const PREPARE_READS: [bool; 49] = [
+    true, true, true, false, true, true, false, true, true, true, true, true, true,
+    false, false, false, false, true, true, false, false, true, true, true, true, true,
+    false, false, false, false, true, true, false, false, false, true, true, true, true,
+    false, false, false, false, false, false, false, false, false, false,
+];
 impl<T: Arithmetic> Parameters<T> for Params<T> {
     const NAMES: &'static [&'static str] = &[
         "gravity_x",
@@ -345,60 +353,69 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             _ => None,
         }
     }
-    fn set(&mut self, i: usize, value: T) -> bool {
-        match i {
-            0 => self.values.gravity_x = value,
-            1 => self.values.gravity_y = value,
-            2 => self.values.gravity_z = value,
-            3 => self.values.slide_x_origin_x = value,
-            4 => self.values.slide_x_origin_y = value,
-            5 => self.values.slide_x_origin_z = value,
-            6 => self.values.slide_x_length_x = value,
-            7 => self.values.slide_x_length_y = value,
-            8 => self.values.slide_x_length_z = value,
-            9 => self.values.slide_x_mass = value,
-            10 => self.values.slide_x_com_x = value,
-            11 => self.values.slide_x_com_y = value,
-            12 => self.values.slide_x_com_z = value,
-            13 => self.values.slide_x_inertia_xx = value,
-            14 => self.values.slide_x_inertia_yy = value,
-            15 => self.values.slide_x_inertia_zz = value,
-            16 => self.values.slide_x_damping = value,
-            17 => self.values.slide_x_rotor_inertia = value,
-            18 => self.values.slide_x_gear_ratio = value,
-            19 => self.values.slide_y_length_x = value,
-            20 => self.values.slide_y_length_y = value,
-            21 => self.values.slide_y_length_z = value,
-            22 => self.values.slide_y_mass = value,
-            23 => self.values.slide_y_com_x = value,
-            24 => self.values.slide_y_com_y = value,
-            25 => self.values.slide_y_com_z = value,
-            26 => self.values.slide_y_inertia_xx = value,
-            27 => self.values.slide_y_inertia_yy = value,
-            28 => self.values.slide_y_inertia_zz = value,
-            29 => self.values.slide_y_damping = value,
-            30 => self.values.slide_y_rotor_inertia = value,
-            31 => self.values.slide_y_gear_ratio = value,
-            32 => self.values.block_length_x = value,
-            33 => self.values.block_length_y = value,
-            34 => self.values.block_length_z = value,
-            35 => self.values.block_mass = value,
-            36 => self.values.block_com_x = value,
-            37 => self.values.block_com_y = value,
-            38 => self.values.block_com_z = value,
-            39 => self.values.block_inertia_xx = value,
-            40 => self.values.block_inertia_yy = value,
-            41 => self.values.block_inertia_zz = value,
-            42 => self.values.block_damping = value,
-            43 => self.values.foot_x = value,
-            44 => self.values.foot_y = value,
-            45 => self.values.foot_z = value,
-            46 => self.values.bottom_x = value,
-            47 => self.values.bottom_y = value,
-            48 => self.values.bottom_z = value,
-            _ => return false,
+    fn set_many(&mut self, changes: &[(usize, T)]) -> bool {
+        if changes.iter().any(|c| c.0 >= Self::NAMES.len()) {
+            return false;
         }
-        *self = Self::new(self.values);
+        let mut stale = false;
+        for &(i, value) in changes {
+            match i {
+                0 => self.values.gravity_x = value,
+                1 => self.values.gravity_y = value,
+                2 => self.values.gravity_z = value,
+                3 => self.values.slide_x_origin_x = value,
+                4 => self.values.slide_x_origin_y = value,
+                5 => self.values.slide_x_origin_z = value,
+                6 => self.values.slide_x_length_x = value,
+                7 => self.values.slide_x_length_y = value,
+                8 => self.values.slide_x_length_z = value,
+                9 => self.values.slide_x_mass = value,
+                10 => self.values.slide_x_com_x = value,
+                11 => self.values.slide_x_com_y = value,
+                12 => self.values.slide_x_com_z = value,
+                13 => self.values.slide_x_inertia_xx = value,
+                14 => self.values.slide_x_inertia_yy = value,
+                15 => self.values.slide_x_inertia_zz = value,
+                16 => self.values.slide_x_damping = value,
+                17 => self.values.slide_x_rotor_inertia = value,
+                18 => self.values.slide_x_gear_ratio = value,
+                19 => self.values.slide_y_length_x = value,
+                20 => self.values.slide_y_length_y = value,
+                21 => self.values.slide_y_length_z = value,
+                22 => self.values.slide_y_mass = value,
+                23 => self.values.slide_y_com_x = value,
+                24 => self.values.slide_y_com_y = value,
+                25 => self.values.slide_y_com_z = value,
+                26 => self.values.slide_y_inertia_xx = value,
+                27 => self.values.slide_y_inertia_yy = value,
+                28 => self.values.slide_y_inertia_zz = value,
+                29 => self.values.slide_y_damping = value,
+                30 => self.values.slide_y_rotor_inertia = value,
+                31 => self.values.slide_y_gear_ratio = value,
+                32 => self.values.block_length_x = value,
+                33 => self.values.block_length_y = value,
+                34 => self.values.block_length_z = value,
+                35 => self.values.block_mass = value,
+                36 => self.values.block_com_x = value,
+                37 => self.values.block_com_y = value,
+                38 => self.values.block_com_z = value,
+                39 => self.values.block_inertia_xx = value,
+                40 => self.values.block_inertia_yy = value,
+                41 => self.values.block_inertia_zz = value,
+                42 => self.values.block_damping = value,
+                43 => self.values.foot_x = value,
+                44 => self.values.foot_y = value,
+                45 => self.values.foot_z = value,
+                46 => self.values.bottom_x = value,
+                47 => self.values.bottom_y = value,
+                48 => self.values.bottom_z = value,
+                _ => {}
+            }
+            stale |= PREPARE_READS[i];
+        }
+        if stale {
+            self.prepared = prepare(&self.values).data.0[0];
+        }
         true
     }
 }

@@ -5,11 +5,12 @@
 //!
 //! `count_calls MODEL PATH CALLS`, PATH one of `empty`, `fused`, `forward_dynamics`,
 //! `batch_fused`, `batch_forward_dynamics` (four states per call, `F64x4` lanes),
-//! `set_parameter` (one parameter set, everything prepared again), `derivatives` (forward
+//! `set_parameter` (parameter 0 set, prepared again where `prepare` reads it), `derivatives` (forward
 //! dynamics and its derivatives), `finite_differences` (the same by forward differences of
 //! forward dynamics), on a leg with contacts `contact_stance` (forward dynamics with every
 //! contact sticking where it is) and `contact_slide` (every contact sliding: in 3-D its
-//! friction along its slip velocity) and, with the `peers` feature, `casadi_fused`, `casadi_forward_dynamics`,
+//! friction along its slip velocity), on a floating robot `robot_forward_dynamics` and
+//! `robot_stance` (`run_robot`) and, with the `peers` feature, `casadi_fused`, `casadi_forward_dynamics`,
 //! `casadi_closed_fused`, `casadi_closed_forward_dynamics`, `casadi_closed_derivatives`.
 //!
 //! Every contender runs in the same loop (`measure`) and does only its own work per call:
@@ -275,6 +276,70 @@ fn run_contact<
     Some(measure(n, || call().map_or(0.0, |s| s.x[0])))
 }
 
+/// A floating robot as a user calls it (`leg_models::robot`), at the state the criterion
+/// benchmark uses: `robot_forward_dynamics` (`forward_dynamics_at`: the chart centred on
+/// the body, gravity rotated into it, then the body's v̇) and `robot_stance`
+/// (`stance_dynamics` with every contact held, v̇ too).
+fn run_robot<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    what: &str,
+    n: usize,
+) -> Option<f64>
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    use leg_models::assembly::project_velocity;
+    use leg_models::dynamics::contact::project_held_velocity;
+    use leg_models::nalgebra::{UnitQuaternion, Vector3};
+    use leg_models::robot::{self, RobotState};
+    if !matches!(what, "robot_forward_dynamics" | "robot_stance")
+        || (what == "robot_stance" && NK == 0)
+    {
+        return None;
+    }
+    let p = L::Params::<f64>::default();
+    let f = robot::free_joint::<L, NQ, NC, NU>().ok()?;
+    let q = leg_tests::passive_release_state::<L, NQ, NC, NU>(&p).q;
+    let mut s = RobotState::at_rest(Vector3::zeros(), UnitQuaternion::identity(), q);
+    s.recentre(f);
+    let mut v = SVector::<f64, NQ>::from_fn(|i, _| 0.3 + 0.1 * i as f64);
+    project_velocity::<L, f64, NQ, NC, NU>(&p, &s.q, &mut v).ok()?;
+    let ground = Ground::<f64, 3>::of::<L, NQ, NC, NU, NK>();
+    let modes = Modes::<NK, 3>::stick();
+    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
+    if NK > 0 {
+        project_held_velocity::<L, f64, NQ, NC, NU, NK, 3>(&p, &s.q, &mut v, &modes, &ground)
+            .ok()?;
+    }
+    s.v = v;
+    let u = SVector::<f64, NU>::from_fn(|k, _| 0.05 * (k as f64 + 1.0));
+    if what == "robot_forward_dynamics" {
+        let call = || {
+            robot::forward_dynamics_at::<L, f64, NQ, NC, NU>(
+                black_box(&p),
+                black_box(&s),
+                black_box(&u),
+            )
+            .map(|a| robot::velocity_derivative(f, &s.v, &a.qdd))
+        };
+        call().ok()?;
+        return Some(measure(n, || call().map_or(0.0, |a| a[0])));
+    }
+    let call = || {
+        robot::stance_dynamics::<L, f64, NQ, NC, NU, NK>(
+            black_box(&p),
+            black_box(&s),
+            black_box(&u),
+            &modes,
+            &ground,
+            &mu,
+        )
+        .map(|st| robot::velocity_derivative(f, &s.v, &st.solution.x))
+    };
+    // Measured only where the stance solves: its error path is not what a budget guards.
+    call().ok()?;
+    Some(measure(n, || call().map_or(0.0, |a| a[0])))
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let (Some(model), Some(what), Some(n)) = (
@@ -305,8 +370,18 @@ fn main() {
         };
     }
     generated::for_each_spatial_model!(dispatch_spatial);
-    // Floating robots: their terms in the body's chart, the same paths.
-    generated::for_each_floating_model!(dispatch_spatial);
+    // Floating robots: their terms in the body's chart, the same paths, and the robot's
+    // own calls.
+    macro_rules! dispatch_floating {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
+            if model == stringify!($module) {
+                found = run::<$ty, $nq, $nc, $nu>(what, n)
+                    .or_else(|| run_contact::<$ty, $nq, $nc, $nu, $nk, 3>(what, n))
+                    .or_else(|| run_robot::<$ty, $nq, $nc, $nu, $nk>(what, n));
+            }
+        };
+    }
+    generated::for_each_floating_model!(dispatch_floating);
     match found {
         Some(acc) => println!("{acc}"),
         None => {

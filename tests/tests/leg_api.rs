@@ -270,3 +270,61 @@ fn a_record_over_its_budget_is_refused_before_it_is_allocated() {
         .unwrap();
     assert_eq!(run.len(), 11);
 }
+
+/// Setting parameters one at a time or together leaves each model's prepared quantities
+/// equal to preparing all its values afresh (`update`), though `set_many` prepares again
+/// only when a changed parameter enters them; an index past the end changes nothing.
+fn setting_equals_preparing_afresh<P>(name: &str, fresh: impl Fn(&P) -> P)
+where
+    P: Parameters<f64> + Default + Copy + PartialEq + core::fmt::Debug,
+{
+    let n = P::NAMES.len();
+    let changed = |p: &P, i: usize| p.get(i).unwrap() * 1.25 + 0.5;
+    for i in 0..n {
+        let mut p = P::default();
+        let v = changed(&p, i);
+        assert!(p.set(i, v), "{name}: {}", P::NAMES[i]);
+        assert_eq!(p.get(i), Some(v));
+        assert_eq!(p, fresh(&p), "{name}: set {}", P::NAMES[i]);
+    }
+    let mut all = P::default();
+    let mut changes = [(0, 0.0); 512];
+    for (i, c) in changes.iter_mut().enumerate().take(n) {
+        *c = (i, changed(&all, i));
+    }
+    // In order: a later change of the same parameter wins.
+    let last = (n - 1, -3.0);
+    changes[n] = last;
+    assert!(all.set_many(&changes[..=n]));
+    assert_eq!(all.get(last.0), Some(last.1));
+    assert_eq!(all.get(0), Some(changed(&P::default(), 0)));
+    assert_eq!(all, fresh(&all), "{name}: set_many");
+    let before = all;
+    assert!(!all.set_many(&[(0, 9.0), (n, 1.0)]), "{name}");
+    assert_eq!(all, before, "{name}: a refused set_many changed something");
+}
+
+macro_rules! set_planar {
+    ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $nk:expr) => {
+        setting_equals_preparing_afresh::<generated::$module::Params<f64>>(
+            stringify!($module),
+            |p| {
+                let mut r = *p;
+                r.update(|_| {});
+                r
+            },
+        );
+    };
+}
+macro_rules! set_spatial {
+    ($module:ident, $ty:ty, $nq:expr, $nc:expr, $nu:expr, $np:expr, $nk:expr) => {
+        set_planar!($module, $ty, $nq, $nc, $nu, $nk);
+    };
+}
+
+#[test]
+fn setting_parameters_equals_preparing_afresh_on_every_model() {
+    generated::for_each_model!(set_planar);
+    generated::for_each_spatial_model!(set_spatial);
+    generated::for_each_floating_model!(set_spatial);
+}

@@ -190,7 +190,13 @@ pub trait Parameters<T>: Sized {
     /// The value of parameter `i` (an index into [`Parameters::NAMES`]).
     fn get(&self, i: usize) -> Option<T>;
     /// Sets parameter `i`; returns `false` (and changes nothing) if there is none.
-    fn set(&mut self, i: usize, value: T) -> bool;
+    fn set(&mut self, i: usize, value: T) -> bool {
+        self.set_many(&[(i, value)])
+    }
+    /// Sets several parameters `(i, value)`, in order, then prepares the parameter-only
+    /// quantities once, and only if a changed parameter enters them (gravity usually does
+    /// not); returns `false` (and changes nothing) if any `i` names no parameter.
+    fn set_many(&mut self, changes: &[(usize, T)]) -> bool;
 }
 
 /// The terms of the constrained equations of motion at one state, evaluated together so

@@ -136,9 +136,7 @@ where
     let g = world_gravity::<L, T, NQ, NC, NU>(params)?;
     let local = orientation.inverse_transform_vector(&g);
     let mut out = *params;
-    for k in 0..3 {
-        out.set(idx[k], local[k]);
-    }
+    out.set_many(&[(idx[0], local[0]), (idx[1], local[1]), (idx[2], local[2])]);
     Ok(out)
 }
 
@@ -445,9 +443,8 @@ where
     let mass = L::mass_matrix(q, params)[(f, f)];
     let with = |k: Option<usize>| {
         let mut p = *params;
-        for (i, &g) in idx.iter().enumerate() {
-            p.set(g, if Some(i) == k { T::one() } else { T::zero() });
-        }
+        let unit = |i: usize| if Some(i) == k { T::one() } else { T::zero() };
+        p.set_many(&[(idx[0], unit(0)), (idx[1], unit(1)), (idx[2], unit(2))]);
         L::potential_energy(q, &p)
     };
     let springs = with(None);

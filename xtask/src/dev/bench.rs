@@ -17,9 +17,17 @@ pub const BUDGETS: &str = "tests/instruction-budgets.json";
 /// (they are repeatable, but differ slightly between compiler versions).
 pub const TOLERANCE: f64 = 0.02;
 const PATHS: [&str; 3] = ["fused", "forward_dynamics", "derivatives"];
-/// The paths of a leg with contacts: forward dynamics with every contact held, and with
-/// every contact sliding.
-const CONTACT_PATHS: [&str; 2] = ["contact_stance", "contact_slide"];
+/// The paths only some models have (count_calls refuses them elsewhere): on a leg with
+/// contacts, forward dynamics with every contact held and with every contact sliding; on
+/// a floating robot, as a user calls it (`leg_models::robot`: the chart centred on the
+/// body, gravity rotated into it), forward dynamics and the stance with every contact
+/// held.
+const APPLICABLE_PATHS: [&str; 4] = [
+    "contact_stance",
+    "contact_slide",
+    "robot_forward_dynamics",
+    "robot_stance",
+];
 /// The paths CasADi's C has in both forms (its derivatives are compared apart).
 const COMPARED: [&str; 2] = ["fused", "forward_dynamics"];
 const CALLS: u64 = 10_000;
@@ -109,11 +117,11 @@ pub fn instruction_counts(root: &Path) -> Result<BTreeMap<String, BTreeMap<Strin
     let mut out = BTreeMap::new();
     let mut models = crate::gen::planar_model_names(root)?;
     models.extend(crate::gen::spatial_model_names(root)?);
-    // A leg with contacts adds its contact paths (count_calls refuses them elsewhere).
+    // A leg with contacts adds its contact paths, a floating robot its own.
     let mut paths: Vec<(String, Vec<&str>)> = Vec::new();
     for model in models {
         let mut own = PATHS.to_vec();
-        for path in CONTACT_PATHS {
+        for path in APPLICABLE_PATHS {
             if applies(&bin, &model, path)? {
                 own.push(path);
             }

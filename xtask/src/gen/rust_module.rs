@@ -488,7 +488,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     let mut defaults = Vec::new();
     let mut param_names = Vec::new();
     let mut getters = Vec::new();
-    let mut setters = Vec::new();
+    let mut setter_fields = Vec::new();
     for p in &info.params {
         let id = codegen::ident(&ctx, &p.name)?;
         // Units are written `[m]`: escaped, so rustdoc does not read them as links.
@@ -504,12 +504,22 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         defaults.push(quote!(#id: #v));
         let i = lit(param_names.len());
         getters.push(quote!(#i => Some(self.values.#id)));
-        setters.push(quote!(#i => self.values.#id = value));
+        setter_fields.push((i, id));
         param_names.push(p.name.clone());
     }
 
     // Parameter-only work is done once per parameter set (`Params::new`), not per call.
     let hoisted = codegen::hoist::hoist(&ir.functions, "p", "ParamValues");
+    // A field `prepare` does not read (gravity, as a rule) is set without preparing again:
+    // a floating robot writes its chart's gravity every call.
+    let setters: Vec<_> = setter_fields
+        .iter()
+        .map(|(i, id)| quote!(#i => self.values.#id = value))
+        .collect();
+    let n_params = lit(setter_fields.len());
+    let reads: Vec<bool> = (0..setter_fields.len())
+        .map(|k| hoisted.reads.get(k).copied().unwrap_or(true))
+        .collect();
     let prepared = lit(hoisted.prepare.outputs[0].rows);
     let mut functions = vec![codegen::emit_function(
         &hoisted.prepare,
@@ -664,7 +674,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         /// `Deref`, `p.gravity_y`) and the parameter-only quantities every term reads,
         /// computed once when a value changes instead of in every call. `Default` holds
         /// the spec's values; change them at run time, without regenerating, with
-        /// [`Params::update`] or [`Parameters::set`].
+        /// [`Params::update`], [`Parameters::set`] or [`Parameters::set_many`].
         #[derive(Clone, Copy, Debug, PartialEq)]
         pub struct Params<T> {
             values: ParamValues<T>,
@@ -685,7 +695,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
             pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
                 change(&mut self.values);
-                *self = Self::new(self.values);
+                self.prepared = prepare(&self.values).data.0[0];
             }
         }
 
@@ -708,6 +718,10 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             }
         }
 
+        /// Which parameters (in [`Parameters::NAMES`] order) `prepare` reads: setting any
+        /// other leaves the prepared quantities as they are.
+        const PREPARE_READS: [bool; #n_params] = [#(#reads),*];
+
         impl<T: Arithmetic> Parameters<T> for Params<T> {
             const NAMES: &'static [&'static str] = &[#(#param_names),*];
             fn get(&self, i: usize) -> Option<T> {
@@ -716,12 +730,21 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
                     _ => None,
                 }
             }
-            fn set(&mut self, i: usize, value: T) -> bool {
-                match i {
-                    #(#setters,)*
-                    _ => return false,
+            fn set_many(&mut self, changes: &[(usize, T)]) -> bool {
+                if changes.iter().any(|c| c.0 >= Self::NAMES.len()) {
+                    return false;
                 }
-                *self = Self::new(self.values);
+                let mut stale = false;
+                for &(i, value) in changes {
+                    match i {
+                        #(#setters,)*
+                        _ => {}
+                    }
+                    stale |= PREPARE_READS[i];
+                }
+                if stale {
+                    self.prepared = prepare(&self.values).data.0[0];
+                }
                 true
             }
         }
