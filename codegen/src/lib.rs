@@ -227,6 +227,18 @@ fn output_type(kind: OutputKind, rows: usize, cols: usize) -> TokenStream {
 /// Emits `prog` as `pub fn name<T: Arithmetic>(inputs…) -> outputs { … }` with `doc` as its
 /// documentation. Values no output needs are not emitted.
 pub fn emit_function(prog: &Program, doc: &str) -> Result<TokenStream, Error> {
+    emit_function_returning(prog, doc, None)
+}
+
+/// [`emit_function`], several outputs returned in the struct `wrap` (its type, and its
+/// name as an expression; its fields named as the outputs) instead of a tuple: built in the caller's place, where a tuple
+/// moved into the struct afterwards was a copy of every output (a 32-coordinate mass
+/// matrix is 8 KB).
+pub fn emit_function_returning(
+    prog: &Program,
+    doc: &str,
+    wrap: Option<(TokenStream, TokenStream)>,
+) -> Result<TokenStream, Error> {
     prog.validate()?;
     let prog = &optimize::optimize(prog);
     let n = prog.instructions.len();
@@ -366,10 +378,13 @@ pub fn emit_function(prog: &Program, doc: &str) -> Result<TokenStream, Error> {
         };
         results.push(value);
     }
-    let (ret, result) = if results.len() == 1 {
-        (types.remove(0), results.remove(0))
-    } else {
-        (quote!((#(#types),*)), quote!((#(#results),*)))
+    let (ret, result) = match wrap {
+        _ if results.len() == 1 => (types.remove(0), results.remove(0)),
+        Some((ty, st)) => {
+            let fields = prog.outputs.iter().map(|o| format_ident!("{}", o.name));
+            (ty, quote!(#st { #(#fields: #results),* }))
+        }
+        None => (quote!((#(#types),*)), quote!((#(#results),*))),
     };
 
     let name = format_ident!("{}", prog.name);

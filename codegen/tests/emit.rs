@@ -104,6 +104,59 @@ fn dead_values_are_not_emitted_and_unused_inputs_are_marked() {
     assert!(!text.contains("unused"), "{text}");
 }
 
+/// Several outputs returned in a struct are the tuple's values, in order, as its fields
+/// named as the outputs; the function returns the struct's type.
+#[test]
+fn outputs_returned_in_a_struct_are_the_tuples_values_by_name() {
+    let p = fixture("shapes");
+    let tail = |tokens: TokenStream| {
+        let f: syn::ItemFn = syn::parse2(tokens).unwrap();
+        let Some(syn::Stmt::Expr(e, None)) = f.block.stmts.last().cloned() else {
+            panic!("the result is the function's tail expression")
+        };
+        (f.sig.output, e)
+    };
+    let (_, tuple) = tail(emit(&p));
+    let wrap = (quote::quote!(Shapes<T, 2>), quote::quote!(Shapes));
+    let (ret, wrapped) = tail(codegen::emit_function_returning(&p, "", Some(wrap)).unwrap());
+    assert_eq!(
+        quote::quote!(#ret).to_string(),
+        quote::quote!(-> Shapes<T, 2>).to_string()
+    );
+    let (syn::Expr::Tuple(tuple), syn::Expr::Struct(wrapped)) = (tuple, wrapped) else {
+        panic!("a tuple, then a struct")
+    };
+    let path = &wrapped.path;
+    assert_eq!(quote::quote!(#path).to_string(), "Shapes");
+    let names: Vec<String> = wrapped
+        .fields
+        .iter()
+        .map(|f| match &f.member {
+            syn::Member::Named(id) => id.to_string(),
+            syn::Member::Unnamed(_) => panic!("fields are named"),
+        })
+        .collect();
+    let outputs: Vec<&str> = p.outputs.iter().map(|o| o.name.as_str()).collect();
+    assert_eq!(names, outputs);
+    for (field, element) in wrapped.fields.iter().zip(&tuple.elems) {
+        let value = &field.expr;
+        assert_eq!(
+            quote::quote!(#value).to_string(),
+            quote::quote!(#element).to_string()
+        );
+    }
+    // One output is returned as it is, wrap or not.
+    let mut one = p.clone();
+    one.outputs.truncate(1);
+    let wrap = (quote::quote!(Shapes<T, 2>), quote::quote!(Shapes));
+    assert_eq!(
+        codegen::emit_function_returning(&one, "", Some(wrap))
+            .unwrap()
+            .to_string(),
+        codegen::emit_function(&one, "").unwrap().to_string()
+    );
+}
+
 #[test]
 fn values_are_numbered_in_emission_order() {
     let text = pretty(emit(&fixture("binary")));

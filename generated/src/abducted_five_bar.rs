@@ -681,17 +681,7 @@ impl LegDynamics<NQ, NC, NU> for AbductedFiveBar {
         qd: &SVector<T, 5>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 5, 3> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 5>,
@@ -714,19 +704,7 @@ impl LegDynamics<NQ, NC, NU> for AbductedFiveBar {
         f: &SVector<T, 3>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 5, 3> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 5>,
@@ -735,19 +713,7 @@ impl LegDynamics<NQ, NC, NU> for AbductedFiveBar {
         f: &SVector<T, 3>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 5, 3> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU, ND, NP> for AbductedFiveBar {
@@ -814,19 +780,7 @@ impl ContactModel<NQ, NC, NU, NK, ND> for AbductedFiveBar {
         lambda: &SVector<T, 3>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 5, 3> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -4819,7 +4773,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 5>,
     qd: &SVector<T, 5>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SVector<T, 5>, SMatrix<T, 3, 5>, SVector<T, 3>) {
+) -> DynamicsTerms<T, 5, 3> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
     let (v33, v0) = q_3.sincos();
@@ -5957,8 +5911,8 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v1137 = v921 * v1078;
     let v1138 = v1136 + v1137;
     let v1139 = v1133 - v1138;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [v176, v200, v218, v242, v270],
                 [v200, v275, v279, T::lit(0.0), T::lit(0.0)],
@@ -5967,8 +5921,8 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [v270, T::lit(0.0), T::lit(0.0), v289, p.prepared[69]],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v738, v764, v771, v797, v805]])),
-        SMatrix::from_data(
+        bias_forces: SMatrix::from_data(ArrayStorage([[v738, v764, v771, v797, v805]])),
+        constraint_jacobian: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v840, v847],
                 [v848, v853, v858],
@@ -5977,8 +5931,8 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [v908, v918, v928],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v1081, v1128, v1139]])),
-    )
+        constraint_bias: SMatrix::from_data(ArrayStorage([[v1081, v1128, v1139]])),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -8075,7 +8029,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
     a: &SVector<T, 5>,
     f: &SVector<T, 3>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 3, 5>, SMatrix<T, 3, 5>, SMatrix<T, 3, 5>) {
+) -> ConstraintDerivatives<T, 5, 3> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
@@ -9193,8 +9147,8 @@ pub fn constraint_derivatives<T: Arithmetic>(
     let v1115 = v1113 - v1114;
     let v1116 = v367 * qd_4;
     let v1117 = v1115 + v1116;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [v60, v73, v95, v109, v142],
                 [v153, v167, v197, T::lit(0.0), T::lit(0.0)],
@@ -9203,7 +9157,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v318, T::lit(0.0), T::lit(0.0), v330, v370],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v379, v388],
                 [v392, v397, v403],
@@ -9212,7 +9166,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v434, v439, v444],
             ]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v637, v648],
                 [v718, v750, v762],
@@ -9221,7 +9175,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v1013, v1033, v1043],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v1052, v1061],
                 [v1065, v1070, v1076],
@@ -9230,7 +9184,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v1107, v1112, v1117],
             ]),
         ),
-    )
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -9240,7 +9194,7 @@ pub fn contact_derivatives<T: Arithmetic>(
     a: &SVector<T, 5>,
     lambda: &SVector<T, 3>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 3, 5>, SMatrix<T, 3, 5>, SMatrix<T, 3, 5>) {
+) -> ConstraintDerivatives<T, 5, 3> {
     let [q_0, q_1, q_2, _, _] = q.data.0[0];
     let [qd_0, qd_1, qd_2, _, _] = qd.data.0[0];
     let [a_0, a_1, a_2, _, _] = a.data.0[0];
@@ -9786,8 +9740,8 @@ pub fn contact_derivatives<T: Arithmetic>(
     let v541 = v173 * qd_2;
     let v542 = v540 + v541;
     let v543 = -v542;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [v32, v45, v67, T::lit(0.0), T::lit(0.0)],
                 [v78, v92, v122, T::lit(0.0), T::lit(0.0)],
@@ -9796,7 +9750,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v180, v185],
                 [v189, v194, v200],
@@ -9805,7 +9759,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v311, v316],
                 [v386, v418, v430],
@@ -9814,7 +9768,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v508, v513],
                 [v517, v522, v528],
@@ -9823,7 +9777,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-    )
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -9833,7 +9787,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 5>,
     f: &SVector<T, 3>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>, SMatrix<T, 3, 5>, SMatrix<T, 3, 5>) {
+) -> DynamicsDerivatives<T, 5, 3> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
@@ -12491,8 +12445,8 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v2655 = v2653 - v2654;
     let v2656 = qd_4 * v1829;
     let v2657 = v2655 + v2656;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [v206, v232, v255, v280, v302],
                 [v699, v735, v773, T::lit(0.0), T::lit(0.0)],
@@ -12501,7 +12455,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v1743, T::lit(0.0), T::lit(0.0), v1787, v1832],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [v1840, v1846, v1850, v1855, v1860],
                 [v1867, v1869, v1872, T::lit(0.0), T::lit(0.0)],
@@ -12510,7 +12464,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v1900, T::lit(0.0), T::lit(0.0), v1905, p.lower_b_damping],
             ]),
         ),
-        SMatrix::from_data(
+        constraint_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v2108, v2129],
                 [v2203, v2241, v2259],
@@ -12519,7 +12473,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v2542, v2568, v2583],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v2592, v2601],
                 [v2605, v2610, v2616],
@@ -12528,5 +12482,5 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v2647, v2652, v2657],
             ]),
         ),
-    )
+    }
 }

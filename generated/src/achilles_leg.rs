@@ -1245,17 +1245,7 @@ impl LegDynamics<NQ, NC, NU> for AchillesLeg {
         qd: &SVector<T, 10>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 10, 6> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 10>,
@@ -1278,19 +1268,7 @@ impl LegDynamics<NQ, NC, NU> for AchillesLeg {
         f: &SVector<T, 6>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 10, 6> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 10>,
@@ -1299,19 +1277,7 @@ impl LegDynamics<NQ, NC, NU> for AchillesLeg {
         f: &SVector<T, 6>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 10, 6> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU, ND, NP> for AchillesLeg {
@@ -1378,19 +1344,7 @@ impl ContactModel<NQ, NC, NU, NK, ND> for AchillesLeg {
         lambda: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 10, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -12393,7 +12347,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 10>,
     qd: &SVector<T, 10>,
     p: &Params<T>,
-) -> (SMatrix<T, 10, 10>, SVector<T, 10>, SMatrix<T, 6, 10>, SVector<T, 6>) {
+) -> DynamicsTerms<T, 10, 6> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6, q_7, q_8, q_9] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6, qd_7, qd_8, qd_9] = qd.data.0[0];
     let (v4, v0) = q_1.sincos();
@@ -15928,8 +15882,8 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v3539 = v3114 * v3516;
     let v3540 = v3538 + v3539;
     let v3541 = v3535 - v3540;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [v784, v794, v834, v872, v942, v971, v1030, v1079, v1158, v1206],
                 [v794, v1207, v818, v856, v926, v959, v1018, v1067, v1146, v1194],
@@ -16031,12 +15985,12 @@ pub fn dynamics_terms<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(
+        bias_forces: SMatrix::from_data(
             ArrayStorage([
                 [v2822, v2823, v2824, v2825, v2826, v2827, v2831, v2832, v2833, v2834],
             ]),
         ),
-        SMatrix::from_data(
+        constraint_jacobian: SMatrix::from_data(
             ArrayStorage([
                 [v2911, v2918, v2925, v2996, v3003, v3010],
                 [v3027, v3040, v3057, v3064, v3071, v3078],
@@ -16050,8 +16004,10 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), v3335, v3345, v3355],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v3428, v3439, v3450, v3519, v3530, v3541]])),
-    )
+        constraint_bias: SMatrix::from_data(
+            ArrayStorage([[v3428, v3439, v3450, v3519, v3530, v3541]]),
+        ),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -30736,7 +30692,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
     a: &SVector<T, 10>,
     f: &SVector<T, 6>,
     p: &Params<T>,
-) -> (SMatrix<T, 10, 10>, SMatrix<T, 6, 10>, SMatrix<T, 6, 10>, SMatrix<T, 6, 10>) {
+) -> ConstraintDerivatives<T, 10, 6> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6, q_7, q_8, q_9] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6, qd_7, qd_8, qd_9] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4, a_5, a_6, a_7, a_8, a_9] = a.data.0[0];
@@ -36267,8 +36223,8 @@ pub fn constraint_derivatives<T: Arithmetic>(
     let v5533 = v5531 + v5532;
     let v5534 = v2371 * qd_9;
     let v5535 = v5533 + v5534;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [v260, v331, v383, v424, v457, v516, v560, v592, v635, v669],
                 [v758, v841, v874, v915, v947, v1006, v1039, v1071, v1103, v1136],
@@ -36370,7 +36326,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([
                 [v2386, v2399, v2412, v2423, v2434, v2445],
                 [v2458, v2471, v2484, v2495, v2506, v2517],
@@ -36384,7 +36340,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), v2734, v2741, v2748],
             ]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([
                 [v3059, v3070, v3081, v3307, v3318, v3329],
                 [v3668, v3699, v3730, v3990, v4019, v4048],
@@ -36398,7 +36354,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), v5140, v5150, v5160],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [v5173, v5186, v5199, v5210, v5221, v5232],
                 [v5245, v5258, v5271, v5282, v5293, v5304],
@@ -36412,7 +36368,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), v5521, v5528, v5535],
             ]),
         ),
-    )
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -36422,9 +36378,9 @@ pub fn contact_derivatives<T: Arithmetic>(
     _a: &SVector<T, 10>,
     _lambda: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 10, 10>, SMatrix<T, 0, 10>, SMatrix<T, 0, 10>, SMatrix<T, 0, 10>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 10, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [
                     T::lit(0.0),
@@ -36548,10 +36504,16 @@ pub fn contact_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], [], [], [], []])),
-    )
+        jacobian_q: SMatrix::from_data(
+            ArrayStorage([[], [], [], [], [], [], [], [], [], []]),
+        ),
+        bias_q: SMatrix::from_data(
+            ArrayStorage([[], [], [], [], [], [], [], [], [], []]),
+        ),
+        jacobian_rate: SMatrix::from_data(
+            ArrayStorage([[], [], [], [], [], [], [], [], [], []]),
+        ),
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -36561,7 +36523,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 10>,
     f: &SVector<T, 6>,
     p: &Params<T>,
-) -> (SMatrix<T, 10, 10>, SMatrix<T, 10, 10>, SMatrix<T, 6, 10>, SMatrix<T, 6, 10>) {
+) -> DynamicsDerivatives<T, 10, 6> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6, q_7, q_8, q_9] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6, qd_7, qd_8, qd_9] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4, a_5, a_6, a_7, a_8, a_9] = a.data.0[0];
@@ -55030,8 +54992,8 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v18471 = v18469 + v18470;
     let v18472 = qd_9 * v13054;
     let v18473 = v18471 + v18472;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [v688, v760, v813, v856, v890, v950, v983, v1016, v1050, v1083],
                 [v5197, v5280, v5316, v5361, v5397, v5460, v5496, v5532, v5568, v5604],
@@ -55133,7 +55095,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [
                     v14443,
@@ -55257,7 +55219,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(
+        constraint_q: SMatrix::from_data(
             ArrayStorage([
                 [v16626, v16651, v16676, v16757, v16780, v16803],
                 [v16926, v16971, v17016, v17123, v17164, v17205],
@@ -55271,7 +55233,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), v18064, v18081, v18098],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [v18111, v18124, v18137, v18148, v18159, v18170],
                 [v18183, v18196, v18209, v18220, v18231, v18242],
@@ -55285,5 +55247,5 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), v18459, v18466, v18473],
             ]),
         ),
-    )
+    }
 }

@@ -928,17 +928,7 @@ impl LegDynamics<NQ, NC, NU> for AnkleRodLeg {
         qd: &SVector<T, 6>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 6, 4> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 6>,
@@ -961,19 +951,7 @@ impl LegDynamics<NQ, NC, NU> for AnkleRodLeg {
         f: &SVector<T, 4>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 6, 4> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 6>,
@@ -982,19 +960,7 @@ impl LegDynamics<NQ, NC, NU> for AnkleRodLeg {
         f: &SVector<T, 4>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 6, 4> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU, ND, NP> for AnkleRodLeg {
@@ -1061,19 +1027,7 @@ impl ContactModel<NQ, NC, NU, NK, ND> for AnkleRodLeg {
         lambda: &SVector<T, 6>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 6, 6> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -7409,7 +7363,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 6>,
     qd: &SVector<T, 6>,
     p: &Params<T>,
-) -> (SMatrix<T, 6, 6>, SVector<T, 6>, SMatrix<T, 4, 6>, SVector<T, 4>) {
+) -> DynamicsTerms<T, 6, 4> {
     let [q_0, q_1, q_2, q_3, q_4, q_5] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5] = qd.data.0[0];
     let (v4, v0) = q_3.sincos();
@@ -9299,8 +9253,8 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v1890 = v1877 + v1889;
     let v1891 = v1798 + v1890;
     let v1892 = v1891 / p.ankle_rod_distance;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [v256, v296, v306, v330, v348, v392],
                 [v296, v402, v403, T::lit(0.0), T::lit(0.0), v411],
@@ -9310,8 +9264,10 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [v392, v411, v407, T::lit(0.0), T::lit(0.0), p.prepared[83]],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v1222, v1285, v1286, v1325, v1326, v1327]])),
-        SMatrix::from_data(
+        bias_forces: SMatrix::from_data(
+            ArrayStorage([[v1222, v1285, v1286, v1325, v1326, v1327]]),
+        ),
+        constraint_jacobian: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v1362, v1369, v1545],
                 [v1548, v1551, v1554, v1609],
@@ -9321,8 +9277,8 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), v1704],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v1732, v1751, v1762, v1892]])),
-    )
+        constraint_bias: SMatrix::from_data(ArrayStorage([[v1732, v1751, v1762, v1892]])),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -14299,7 +14255,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
     a: &SVector<T, 6>,
     f: &SVector<T, 4>,
     p: &Params<T>,
-) -> (SMatrix<T, 6, 6>, SMatrix<T, 4, 6>, SMatrix<T, 4, 6>, SMatrix<T, 4, 6>) {
+) -> ConstraintDerivatives<T, 6, 4> {
     let [q_0, q_1, q_2, q_3, q_4, q_5] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4, a_5] = a.data.0[0];
@@ -17315,8 +17271,8 @@ pub fn constraint_derivatives<T: Arithmetic>(
     let v3014 = v3012 - v3013;
     let v3015 = v1426 * qd_5;
     let v3016 = v3014 - v3015;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [v359, v387, v415, v443, v471, v490],
                 [v567, v680, v720, v731, v742, v768],
@@ -17326,7 +17282,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v1334, v1366, v1389, v1397, v1405, v1428],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v1437, v1446, v1457],
                 [v1461, v1466, v1472, v1483],
@@ -17336,7 +17292,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), v1568],
             ]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v1761, v1772, v1944],
                 [v2021, v2053, v2062, v2196],
@@ -17346,7 +17302,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), v2876],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v2885, v2894, v2905],
                 [v2909, v2914, v2920, v2931],
@@ -17356,7 +17312,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), v3016],
             ]),
         ),
-    )
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -17366,7 +17322,7 @@ pub fn contact_derivatives<T: Arithmetic>(
     a: &SVector<T, 6>,
     lambda: &SVector<T, 6>,
     p: &Params<T>,
-) -> (SMatrix<T, 6, 6>, SMatrix<T, 6, 6>, SMatrix<T, 6, 6>, SMatrix<T, 6, 6>) {
+) -> ConstraintDerivatives<T, 6, 6> {
     let [q_0, q_1, q_2, _, _, q_5] = q.data.0[0];
     let [qd_0, qd_1, qd_2, _, _, qd_5] = qd.data.0[0];
     let [a_0, a_1, a_2, _, _, a_5] = a.data.0[0];
@@ -19054,8 +19010,8 @@ pub fn contact_derivatives<T: Arithmetic>(
     let v1684 = v1682 + v1683;
     let v1685 = v643 * qd_5;
     let v1686 = v1684 - v1685;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [v82, v105, v136, T::lit(0.0), T::lit(0.0), v178],
                 [v202, v239, v286, T::lit(0.0), T::lit(0.0), v333],
@@ -19079,7 +19035,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [v525, v554, v591, T::lit(0.0), T::lit(0.0), v645],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v652, v659, T::lit(0.0), v666, v673],
                 [v678, v685, v692, v697, v704, v711],
@@ -19103,7 +19059,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [v754, v761, v768, v773, v780, v787],
             ]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v935, v940, T::lit(0.0), v974, v979],
                 [v1105, v1149, v1164, v1192, v1213, v1222],
@@ -19127,7 +19083,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [v1458, v1478, v1487, v1515, v1535, v1544],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v1551, v1558, T::lit(0.0), v1565, v1572],
                 [v1577, v1584, v1591, v1596, v1603, v1610],
@@ -19151,7 +19107,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [v1653, v1660, v1667, v1672, v1679, v1686],
             ]),
         ),
-    )
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -19161,7 +19117,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 6>,
     f: &SVector<T, 4>,
     p: &Params<T>,
-) -> (SMatrix<T, 6, 6>, SMatrix<T, 6, 6>, SMatrix<T, 4, 6>, SMatrix<T, 4, 6>) {
+) -> DynamicsDerivatives<T, 6, 4> {
     let [q_0, q_1, q_2, q_3, q_4, q_5] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4, a_5] = a.data.0[0];
@@ -26514,8 +26470,8 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v7351 = v7349 - v7350;
     let v7352 = qd_5 * v4954;
     let v7353 = v7351 - v7352;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [v541, v589, v618, v659, v689, v708],
                 [v1965, v2145, v2189, v2199, v2209, v2238],
@@ -26525,7 +26481,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v4794, v4881, v4912, v4919, v4926, v4956],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [v5567, v5622, v5617, v5657, v5652, v5612],
                 [v5849, v5885, v5879, T::lit(0.0), T::lit(0.0), v5874],
@@ -26535,7 +26491,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v6203, v6213, v6209, T::lit(0.0), T::lit(0.0), v6214],
             ]),
         ),
-        SMatrix::from_data(
+        constraint_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v6264, v6285, v6446],
                 [v6457, v6472, v6487, v6611],
@@ -26545,7 +26501,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), v7213],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v7222, v7231, v7242],
                 [v7246, v7251, v7257, v7268],
@@ -26555,5 +26511,5 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), v7353],
             ]),
         ),
-    )
+    }
 }

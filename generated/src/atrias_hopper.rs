@@ -705,17 +705,7 @@ impl LegDynamics<NQ, NC, NU> for AtriasHopper {
         qd: &SVector<T, 9>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 9, 2> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 9>,
@@ -738,19 +728,7 @@ impl LegDynamics<NQ, NC, NU> for AtriasHopper {
         f: &SVector<T, 2>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 9, 2> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 9>,
@@ -759,19 +737,7 @@ impl LegDynamics<NQ, NC, NU> for AtriasHopper {
         f: &SVector<T, 2>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 9, 2> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU> for AtriasHopper {
@@ -838,19 +804,7 @@ impl ContactModel<NQ, NC, NU, NK> for AtriasHopper {
         lambda: &SVector<T, 2>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 9, 2> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -3266,7 +3220,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 9>,
     qd: &SVector<T, 9>,
     p: &Params<T>,
-) -> (SMatrix<T, 9, 9>, SVector<T, 9>, SMatrix<T, 2, 9>, SVector<T, 2>) {
+) -> DynamicsTerms<T, 9, 2> {
     let [_, _, q_2, q_3, q_4, q_5, q_6, q_7, q_8] = q.data.0[0];
     let [_, _, qd_2, qd_3, qd_4, qd_5, qd_6, qd_7, qd_8] = qd.data.0[0];
     let (v46, v0) = q_2.sincos();
@@ -3782,8 +3736,8 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v517 = v326 + v516;
     let v518 = v301 + v517;
     let v519 = v515 - v518;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [p.prepared[1], T::lit(0.0), v65, v69, v73, v77, v87, v91, v101],
                 [T::lit(0.0), p.prepared[0], v104, v107, v110, v113, v116, v119, v122],
@@ -3856,10 +3810,10 @@ pub fn dynamics_terms<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(
+        bias_forces: SMatrix::from_data(
             ArrayStorage([[v288, v351, v429, v438, v447, v458, v463, v474, v479]]),
         ),
-        SMatrix::from_data(
+        constraint_jacobian: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0)],
@@ -3872,8 +3826,8 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [v482, v505],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v512, v519]])),
-    )
+        constraint_bias: SMatrix::from_data(ArrayStorage([[v512, v519]])),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -5246,7 +5200,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
     a: &SVector<T, 9>,
     f: &SVector<T, 2>,
     p: &Params<T>,
-) -> (SMatrix<T, 9, 9>, SMatrix<T, 2, 9>, SMatrix<T, 2, 9>, SMatrix<T, 2, 9>) {
+) -> ConstraintDerivatives<T, 9, 2> {
     let [_, _, q_2, _, _, q_5, q_6, q_7, q_8] = q.data.0[0];
     let [_, _, qd_2, _, _, qd_5, qd_6, qd_7, qd_8] = qd.data.0[0];
     let [_, _, a_2, _, _, a_5, a_6, a_7, a_8] = a.data.0[0];
@@ -5756,8 +5710,8 @@ pub fn constraint_derivatives<T: Arithmetic>(
     let v507 = v498 - v497;
     let v508 = v9 * v507;
     let v509 = v506 - v508;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [
                     T::lit(0.0),
@@ -5860,7 +5814,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0)],
@@ -5873,7 +5827,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v226, v230],
             ]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0)],
@@ -5886,7 +5840,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v370, v373],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0)],
@@ -5899,7 +5853,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v505, v509],
             ]),
         ),
-    )
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -5909,7 +5863,7 @@ pub fn contact_derivatives<T: Arithmetic>(
     a: &SVector<T, 9>,
     lambda: &SVector<T, 2>,
     p: &Params<T>,
-) -> (SMatrix<T, 9, 9>, SMatrix<T, 2, 9>, SMatrix<T, 2, 9>, SMatrix<T, 2, 9>) {
+) -> ConstraintDerivatives<T, 9, 2> {
     let [_, _, q_2, _, _, q_5, q_6, _, _] = q.data.0[0];
     let [_, _, qd_2, _, _, qd_5, qd_6, _, _] = qd.data.0[0];
     let [_, _, a_2, _, _, a_5, a_6, _, _] = a.data.0[0];
@@ -6041,8 +5995,8 @@ pub fn contact_derivatives<T: Arithmetic>(
     let v127 = v125 + v126;
     let v128 = v109 + v127;
     let v129 = -v128;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [
                     T::lit(0.0),
@@ -6145,7 +6099,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0)],
@@ -6158,7 +6112,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0)],
@@ -6171,7 +6125,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0)],
@@ -6184,7 +6138,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-    )
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -6194,7 +6148,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 9>,
     f: &SVector<T, 2>,
     p: &Params<T>,
-) -> (SMatrix<T, 9, 9>, SMatrix<T, 9, 9>, SMatrix<T, 2, 9>, SMatrix<T, 2, 9>) {
+) -> DynamicsDerivatives<T, 9, 2> {
     let [_, _, q_2, q_3, q_4, q_5, q_6, q_7, q_8] = q.data.0[0];
     let [_, _, qd_2, qd_3, qd_4, qd_5, qd_6, qd_7, qd_8] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4, a_5, a_6, a_7, a_8] = a.data.0[0];
@@ -7645,8 +7599,8 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v1450 = v1441 - v1440;
     let v1451 = v106 * v1450;
     let v1452 = v1449 - v1451;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [
                     T::lit(0.0),
@@ -7739,7 +7693,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [
                     p.slide_x_damping,
@@ -7832,7 +7786,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(
+        constraint_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0)],
@@ -7845,7 +7799,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v1309, v1316],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0)],
@@ -7858,5 +7812,5 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v1448, v1452],
             ]),
         ),
-    )
+    }
 }

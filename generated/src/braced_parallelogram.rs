@@ -504,17 +504,7 @@ impl LegDynamics<NQ, NC, NU> for BracedParallelogram {
         qd: &SVector<T, 5>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 5, 4> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 5>,
@@ -537,19 +527,7 @@ impl LegDynamics<NQ, NC, NU> for BracedParallelogram {
         f: &SVector<T, 4>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 5, 4> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 5>,
@@ -558,19 +536,7 @@ impl LegDynamics<NQ, NC, NU> for BracedParallelogram {
         f: &SVector<T, 4>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 5, 4> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU> for BracedParallelogram {
@@ -637,19 +603,7 @@ impl ContactModel<NQ, NC, NU, NK> for BracedParallelogram {
         lambda: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 5, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -1888,7 +1842,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 5>,
     qd: &SVector<T, 5>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SVector<T, 5>, SMatrix<T, 4, 5>, SVector<T, 4>) {
+) -> DynamicsTerms<T, 5, 4> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
     let (v2, v0) = q_1.sincos();
@@ -2093,8 +2047,8 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v204 = v112 * v163;
     let v205 = v203 + v204;
     let v206 = v202 - v205;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [v6, v9, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [v9, p.prepared[0], T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -2103,8 +2057,8 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v29, T::lit(0.0), p.prepared[5]],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v57, v60, v111, v114, v116]])),
-        SMatrix::from_data(
+        bias_forces: SMatrix::from_data(ArrayStorage([[v57, v60, v111, v114, v116]])),
+        constraint_jacobian: SMatrix::from_data(
             ArrayStorage([
                 [v124, v131, v135, v140],
                 [v141, v127, v134, v142],
@@ -2113,8 +2067,8 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v174, v168],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v185, v192, v200, v206]])),
-    )
+        constraint_bias: SMatrix::from_data(ArrayStorage([[v185, v192, v200, v206]])),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -2337,7 +2291,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
     a: &SVector<T, 5>,
     f: &SVector<T, 4>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 4, 5>, SMatrix<T, 4, 5>, SMatrix<T, 4, 5>) {
+) -> ConstraintDerivatives<T, 5, 4> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
@@ -2577,8 +2531,8 @@ pub fn constraint_derivatives<T: Arithmetic>(
     let v237 = v92 * qd_2;
     let v238 = v227 + v237;
     let v239 = -v238;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [v38, v45, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [v45, v45, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -2587,7 +2541,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v105, T::lit(0.0), v105],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([
                 [v109, v113, v116, v119],
                 [v122, v125, v127, v129],
@@ -2596,7 +2550,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v150, v153],
             ]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([
                 [v159, v163, v166, v168],
                 [v156, v169, v170, v167],
@@ -2605,7 +2559,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v183, v191],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [v195, v199, v202, v205],
                 [v208, v211, v213, v215],
@@ -2614,7 +2568,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v236, v239],
             ]),
         ),
-    )
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -2624,9 +2578,9 @@ pub fn contact_derivatives<T: Arithmetic>(
     _a: &SVector<T, 5>,
     _lambda: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 5, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -2635,10 +2589,10 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-    )
+        jacobian_q: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        bias_q: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -2648,7 +2602,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 5>,
     f: &SVector<T, 4>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>, SMatrix<T, 4, 5>, SMatrix<T, 4, 5>) {
+) -> DynamicsDerivatives<T, 5, 4> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
@@ -3027,8 +2981,8 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v376 = v143 * qd_2;
     let v377 = v366 + v376;
     let v378 = -v377;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [v46, v54, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [v79, v85, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -3037,7 +2991,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v214, T::lit(0.0), v219],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [v221, v223, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [v227, p.shin_damping, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -3046,7 +3000,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v242, T::lit(0.0), p.brace_damping],
             ]),
         ),
-        SMatrix::from_data(
+        constraint_q: SMatrix::from_data(
             ArrayStorage([
                 [v251, v259, v265, v271],
                 [v274, v278, v281, v284],
@@ -3055,7 +3009,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v326, v330],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [v334, v338, v341, v344],
                 [v347, v350, v352, v354],
@@ -3064,5 +3018,5 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v375, v378],
             ]),
         ),
-    )
+    }
 }

@@ -1598,17 +1598,7 @@ impl LegDynamics<NQ, NC, NU> for CassieLeg {
         qd: &SVector<T, 13>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 13, 6> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 13>,
@@ -1631,19 +1621,7 @@ impl LegDynamics<NQ, NC, NU> for CassieLeg {
         f: &SVector<T, 6>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 13, 6> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 13>,
@@ -1652,19 +1630,7 @@ impl LegDynamics<NQ, NC, NU> for CassieLeg {
         f: &SVector<T, 6>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 13, 6> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU, ND, NP> for CassieLeg {
@@ -1731,19 +1697,7 @@ impl ContactModel<NQ, NC, NU, NK, ND> for CassieLeg {
         lambda: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 13, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -17876,7 +17830,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 13>,
     qd: &SVector<T, 13>,
     p: &Params<T>,
-) -> (SMatrix<T, 13, 13>, SVector<T, 13>, SMatrix<T, 6, 13>, SVector<T, 6>) {
+) -> DynamicsTerms<T, 13, 6> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6, q_7, q_8, q_9, q_10, q_11, q_12] = q
         .data
         .0[0];
@@ -23372,8 +23326,8 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v5500 = v5467 * v5499;
     let v5501 = v5494 + v5500;
     let v5502 = v5491 - v5501;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [
                     v1157,
@@ -23572,7 +23526,7 @@ pub fn dynamics_terms<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(
+        bias_forces: SMatrix::from_data(
             ArrayStorage([
                 [
                     v4496,
@@ -23591,7 +23545,7 @@ pub fn dynamics_terms<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(
+        constraint_jacobian: SMatrix::from_data(
             ArrayStorage([
                 [v4631, v4638, v4645, v4762, v4769, v4776],
                 [v4791, v4804, v4819, v4826, v4833, v4840],
@@ -23608,8 +23562,10 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [v5269, v5279, v5289, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v5366, v5377, v5388, v5470, v5486, v5502]])),
-    )
+        constraint_bias: SMatrix::from_data(
+            ArrayStorage([[v5366, v5377, v5388, v5470, v5486, v5502]]),
+        ),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -57184,7 +57140,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
     a: &SVector<T, 13>,
     f: &SVector<T, 6>,
     p: &Params<T>,
-) -> (SMatrix<T, 13, 13>, SMatrix<T, 6, 13>, SMatrix<T, 6, 13>, SMatrix<T, 6, 13>) {
+) -> ConstraintDerivatives<T, 13, 6> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6, q_7, q_8, q_9, q_10, q_11, q_12] = q
         .data
         .0[0];
@@ -68747,8 +68703,8 @@ pub fn constraint_derivatives<T: Arithmetic>(
     let v11563 = v11553 - v11562;
     let v11564 = v4833 * qd_12;
     let v11565 = v11563 + v11564;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [
                     v358,
@@ -68947,7 +68903,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([
                 [v4852, v4869, v4886, v4905, v4924, v4943],
                 [v4960, v4977, v4994, v5013, v5032, v5051],
@@ -68964,7 +68920,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v5672, v5685, v5698, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([
                 [v6175, v6186, v6197, v6491, v6507, v6523],
                 [v7095, v7126, v7157, v7526, v7573, v7620],
@@ -68981,7 +68937,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v10682, v10692, v10702, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [v10719, v10736, v10753, v10772, v10791, v10810],
                 [v10827, v10844, v10861, v10880, v10899, v10918],
@@ -68998,7 +68954,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v11539, v11552, v11565, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-    )
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -69008,9 +68964,9 @@ pub fn contact_derivatives<T: Arithmetic>(
     _a: &SVector<T, 13>,
     _lambda: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 13, 13>, SMatrix<T, 0, 13>, SMatrix<T, 0, 13>, SMatrix<T, 0, 13>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 13, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [
                     T::lit(0.0),
@@ -69209,16 +69165,16 @@ pub fn contact_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([[], [], [], [], [], [], [], [], [], [], [], [], []]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([[], [], [], [], [], [], [], [], [], [], [], [], []]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([[], [], [], [], [], [], [], [], [], [], [], [], []]),
         ),
-    )
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -69228,7 +69184,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 13>,
     f: &SVector<T, 6>,
     p: &Params<T>,
-) -> (SMatrix<T, 13, 13>, SMatrix<T, 13, 13>, SMatrix<T, 6, 13>, SMatrix<T, 6, 13>) {
+) -> DynamicsDerivatives<T, 13, 6> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6, q_7, q_8, q_9, q_10, q_11, q_12] = q
         .data
         .0[0];
@@ -110701,8 +110657,8 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v41473 = v41463 - v41472;
     let v41474 = qd_12 * v29760;
     let v41475 = v41473 + v41474;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [
                     v951,
@@ -110901,7 +110857,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [
                     v31936,
@@ -111100,7 +111056,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(
+        constraint_q: SMatrix::from_data(
             ArrayStorage([
                 [v37787, v37816, v37845, v37947, v37983, v38019],
                 [v38158, v38207, v38256, v38413, v38480, v38547],
@@ -111117,7 +111073,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v40566, v40589, v40612, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [v40629, v40646, v40663, v40682, v40701, v40720],
                 [v40737, v40754, v40771, v40790, v40809, v40828],
@@ -111134,5 +111090,5 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v41449, v41462, v41475, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-    )
+    }
 }

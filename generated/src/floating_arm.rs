@@ -640,17 +640,7 @@ impl LegDynamics<NQ, NC, NU> for FloatingArm {
         qd: &SVector<T, 9>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 9, 0> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 9>,
@@ -673,19 +663,7 @@ impl LegDynamics<NQ, NC, NU> for FloatingArm {
         f: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 9, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 9>,
@@ -694,19 +672,7 @@ impl LegDynamics<NQ, NC, NU> for FloatingArm {
         f: &SVector<T, 0>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 9, 0> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU, ND, NP> for FloatingArm {
@@ -773,19 +739,7 @@ impl ContactModel<NQ, NC, NU, NK, ND> for FloatingArm {
         lambda: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 9, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -5535,7 +5489,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 9>,
     qd: &SVector<T, 9>,
     p: &Params<T>,
-) -> (SMatrix<T, 9, 9>, SVector<T, 9>, SMatrix<T, 0, 9>, SVector<T, 0>) {
+) -> DynamicsTerms<T, 9, 0> {
     let [_, _, _, q_3, q_4, q_5, q_6, q_7, q_8] = q.data.0[0];
     let [_, _, _, qd_3, qd_4, qd_5, qd_6, qd_7, qd_8] = qd.data.0[0];
     let (v45, v0) = q_4.sincos();
@@ -7063,8 +7017,8 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v1528 = v1307 + v1458;
     let v1529 = v1277 - v1435;
     let v1530 = v1272 - v1430;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [
                     p.prepared[0],
@@ -7107,14 +7061,16 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [v121, v163, v180, v600, v621, v598, v560, v548, p.prepared[37]],
             ]),
         ),
-        SMatrix::from_data(
+        bias_forces: SMatrix::from_data(
             ArrayStorage([
                 [v1100, v1119, v1126, v1519, v1526, v1527, v1528, v1529, v1530],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[]])),
-    )
+        constraint_jacobian: SMatrix::from_data(
+            ArrayStorage([[], [], [], [], [], [], [], [], []]),
+        ),
+        constraint_bias: SMatrix::from_data(ArrayStorage([[]])),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -17620,9 +17576,9 @@ pub fn constraint_derivatives<T: Arithmetic>(
     _a: &SVector<T, 9>,
     _f: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 9, 9>, SMatrix<T, 0, 9>, SMatrix<T, 0, 9>, SMatrix<T, 0, 9>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 9, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [
                     T::lit(0.0),
@@ -17725,10 +17681,14 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], [], [], []])),
-    )
+        jacobian_q: SMatrix::from_data(
+            ArrayStorage([[], [], [], [], [], [], [], [], []]),
+        ),
+        bias_q: SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], [], [], []])),
+        jacobian_rate: SMatrix::from_data(
+            ArrayStorage([[], [], [], [], [], [], [], [], []]),
+        ),
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -17738,9 +17698,9 @@ pub fn contact_derivatives<T: Arithmetic>(
     _a: &SVector<T, 9>,
     _lambda: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 9, 9>, SMatrix<T, 0, 9>, SMatrix<T, 0, 9>, SMatrix<T, 0, 9>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 9, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [
                     T::lit(0.0),
@@ -17843,10 +17803,14 @@ pub fn contact_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], [], [], []])),
-    )
+        jacobian_q: SMatrix::from_data(
+            ArrayStorage([[], [], [], [], [], [], [], [], []]),
+        ),
+        bias_q: SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], [], [], []])),
+        jacobian_rate: SMatrix::from_data(
+            ArrayStorage([[], [], [], [], [], [], [], [], []]),
+        ),
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -17856,7 +17820,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 9>,
     _f: &SVector<T, 0>,
     p: &Params<T>,
-) -> (SMatrix<T, 9, 9>, SMatrix<T, 9, 9>, SMatrix<T, 0, 9>, SMatrix<T, 0, 9>) {
+) -> DynamicsDerivatives<T, 9, 0> {
     let [_, _, _, q_3, q_4, q_5, q_6, q_7, q_8] = q.data.0[0];
     let [_, _, _, qd_3, qd_4, qd_5, qd_6, qd_7, qd_8] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4, a_5, a_6, a_7, a_8] = a.data.0[0];
@@ -28238,8 +28202,8 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v10381 = v5 * v10367;
     let v10382 = v10380 + v10381;
     let v10383 = v10191 + p.shin_damping;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [
                     T::lit(0.0),
@@ -28282,7 +28246,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v6610, v6677, v6712, v7273, v7319, v7338, v7357, v7377, v7394],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [
                     p.body_damping,
@@ -28325,7 +28289,11 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v10300, v10309, v10312, v10379, v10382, v10377, v10339, v10324, v10383],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], [], [], []])),
-    )
+        constraint_q: SMatrix::from_data(
+            ArrayStorage([[], [], [], [], [], [], [], [], []]),
+        ),
+        jacobian_rate: SMatrix::from_data(
+            ArrayStorage([[], [], [], [], [], [], [], [], []]),
+        ),
+    }
 }

@@ -622,17 +622,7 @@ impl LegDynamics<NQ, NC, NU> for KlannLinkage {
         qd: &SVector<T, 7>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 7, 6> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 7>,
@@ -655,19 +645,7 @@ impl LegDynamics<NQ, NC, NU> for KlannLinkage {
         f: &SVector<T, 6>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 7, 6> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 7>,
@@ -676,19 +654,7 @@ impl LegDynamics<NQ, NC, NU> for KlannLinkage {
         f: &SVector<T, 6>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 7, 6> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU> for KlannLinkage {
@@ -755,19 +721,7 @@ impl ContactModel<NQ, NC, NU, NK> for KlannLinkage {
         lambda: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 7, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -2773,7 +2727,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 7>,
     qd: &SVector<T, 7>,
     p: &Params<T>,
-) -> (SMatrix<T, 7, 7>, SVector<T, 7>, SMatrix<T, 6, 7>, SVector<T, 6>) {
+) -> DynamicsTerms<T, 7, 6> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6] = qd.data.0[0];
     let (v2, v0) = q_5.sincos();
@@ -3206,8 +3160,8 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v434 = v276 * v387;
     let v435 = v289 + v434;
     let v436 = v433 - v435;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [v44, v45, T::lit(0.0), v56, T::lit(0.0), v79, T::lit(0.0)],
                 [v45, v28, T::lit(0.0), v46, T::lit(0.0), v69, T::lit(0.0)],
@@ -3242,8 +3196,10 @@ pub fn dynamics_terms<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v231, v246, v302, v312, v331, v336, v341]])),
-        SMatrix::from_data(
+        bias_forces: SMatrix::from_data(
+            ArrayStorage([[v231, v246, v302, v312, v331, v336, v341]]),
+        ),
+        constraint_jacobian: SMatrix::from_data(
             ArrayStorage([
                 [v346, v350, v355, v361, v367, v374],
                 [v375, v349, v354, v376, v366, v377],
@@ -3254,8 +3210,10 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v404, v392],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v408, v412, v417, v422, v429, v436]])),
-    )
+        constraint_bias: SMatrix::from_data(
+            ArrayStorage([[v408, v412, v417, v422, v429, v436]]),
+        ),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -4162,7 +4120,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
     a: &SVector<T, 7>,
     f: &SVector<T, 6>,
     p: &Params<T>,
-) -> (SMatrix<T, 7, 7>, SMatrix<T, 6, 7>, SMatrix<T, 6, 7>, SMatrix<T, 6, 7>) {
+) -> ConstraintDerivatives<T, 7, 6> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4, a_5, a_6] = a.data.0[0];
@@ -4581,8 +4539,8 @@ pub fn constraint_derivatives<T: Arithmetic>(
     let v418 = v136 * qd_2;
     let v419 = v378 + v418;
     let v420 = -v419;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [v84, v95, T::lit(0.0), v102, T::lit(0.0), v105, T::lit(0.0)],
                 [v95, v95, T::lit(0.0), v102, T::lit(0.0), v105, T::lit(0.0)],
@@ -4617,7 +4575,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([
                 [v162, v166, v171, v176, v183, v190],
                 [v193, v196, v199, v202, v206, v210],
@@ -4628,7 +4586,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v257, v260],
             ]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([
                 [v266, v270, v277, v281, v289, v294],
                 [v263, v295, v296, v280, v297, v293],
@@ -4639,7 +4597,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v304, v318],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [v322, v326, v331, v336, v343, v350],
                 [v353, v356, v359, v362, v366, v370],
@@ -4650,7 +4608,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v417, v420],
             ]),
         ),
-    )
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -4660,9 +4618,9 @@ pub fn contact_derivatives<T: Arithmetic>(
     _a: &SVector<T, 7>,
     _lambda: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 7, 7>, SMatrix<T, 0, 7>, SMatrix<T, 0, 7>, SMatrix<T, 0, 7>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 7, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [
                     T::lit(0.0),
@@ -4729,10 +4687,10 @@ pub fn contact_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
-    )
+        jacobian_q: SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
+        bias_q: SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -4742,7 +4700,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 7>,
     f: &SVector<T, 6>,
     p: &Params<T>,
-) -> (SMatrix<T, 7, 7>, SMatrix<T, 7, 7>, SMatrix<T, 6, 7>, SMatrix<T, 6, 7>) {
+) -> DynamicsDerivatives<T, 7, 6> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4, a_5, a_6] = a.data.0[0];
@@ -5903,8 +5861,8 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v1160 = qd_2 * v462;
     let v1161 = v1120 + v1160;
     let v1162 = -v1161;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [v193, v223, T::lit(0.0), v243, T::lit(0.0), v253, T::lit(0.0)],
                 [v333, v357, T::lit(0.0), v374, T::lit(0.0), v384, T::lit(0.0)],
@@ -5939,7 +5897,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [v752, v766, T::lit(0.0), v775, T::lit(0.0), v779, T::lit(0.0)],
                 [v793, v808, T::lit(0.0), v817, T::lit(0.0), v821, T::lit(0.0)],
@@ -5974,7 +5932,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(
+        constraint_q: SMatrix::from_data(
             ArrayStorage([
                 [v917, v924, v933, v942, v954, v966],
                 [v969, v973, v977, v981, v986, v991],
@@ -5985,7 +5943,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v1056, v1060],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [v1064, v1068, v1073, v1078, v1085, v1092],
                 [v1095, v1098, v1101, v1104, v1108, v1112],
@@ -5996,5 +5954,5 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v1159, v1162],
             ]),
         ),
-    )
+    }
 }

@@ -395,17 +395,7 @@ impl LegDynamics<NQ, NC, NU> for KneeHopper {
         qd: &SVector<T, 3>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 3, 0> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 3>,
@@ -428,19 +418,7 @@ impl LegDynamics<NQ, NC, NU> for KneeHopper {
         f: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 3, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 3>,
@@ -449,19 +427,7 @@ impl LegDynamics<NQ, NC, NU> for KneeHopper {
         f: &SVector<T, 0>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 3, 0> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU> for KneeHopper {
@@ -528,19 +494,7 @@ impl ContactModel<NQ, NC, NU, NK> for KneeHopper {
         lambda: &SVector<T, 2>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 3, 2> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -1222,7 +1176,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 3>,
     qd: &SVector<T, 3>,
     p: &Params<T>,
-) -> (SMatrix<T, 3, 3>, SVector<T, 3>, SMatrix<T, 0, 3>, SVector<T, 0>) {
+) -> DynamicsTerms<T, 3, 0> {
     let [_, q_1, q_2] = q.data.0[0];
     let [_, qd_1, qd_2] = qd.data.0[0];
     let (v8, v0) = q_1.sincos();
@@ -1295,18 +1249,18 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v69 = p.knee_spring_stiffness * v68;
     let v70 = v64 + v69;
     let v71 = v67 + v70;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [p.prepared[0], v14, v17],
                 [v14, v22, v25],
                 [v17, v25, p.prepared[10]],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v42, v66, v71]])),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-        SMatrix::from_data(ArrayStorage([[]])),
-    )
+        bias_forces: SMatrix::from_data(ArrayStorage([[v42, v66, v71]])),
+        constraint_jacobian: SMatrix::from_data(ArrayStorage([[], [], []])),
+        constraint_bias: SMatrix::from_data(ArrayStorage([[]])),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -1485,19 +1439,19 @@ pub fn constraint_derivatives<T: Arithmetic>(
     _a: &SVector<T, 3>,
     _f: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 3, 3>, SMatrix<T, 0, 3>, SMatrix<T, 0, 3>, SMatrix<T, 0, 3>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 3, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-    )
+        jacobian_q: SMatrix::from_data(ArrayStorage([[], [], []])),
+        bias_q: SMatrix::from_data(ArrayStorage([[], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], []])),
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -1507,7 +1461,7 @@ pub fn contact_derivatives<T: Arithmetic>(
     a: &SVector<T, 3>,
     lambda: &SVector<T, 2>,
     p: &Params<T>,
-) -> (SMatrix<T, 3, 3>, SMatrix<T, 2, 3>, SMatrix<T, 2, 3>, SMatrix<T, 2, 3>) {
+) -> ConstraintDerivatives<T, 3, 2> {
     let [_, q_1, q_2] = q.data.0[0];
     let [_, qd_1, qd_2] = qd.data.0[0];
     let [_, a_1, a_2] = a.data.0[0];
@@ -1581,24 +1535,24 @@ pub fn contact_derivatives<T: Arithmetic>(
     let v68 = v12 * qd_1;
     let v69 = v62 + v68;
     let v70 = -v69;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), v27, v31],
                 [T::lit(0.0), v31, v31],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([[T::lit(0.0), T::lit(0.0)], [v35, v39], [v42, v45]]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([[T::lit(0.0), T::lit(0.0)], [v51, v55], [v48, v56]]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([[T::lit(0.0), T::lit(0.0)], [v60, v64], [v67, v70]]),
         ),
-    )
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -1608,7 +1562,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 3>,
     _f: &SVector<T, 0>,
     p: &Params<T>,
-) -> (SMatrix<T, 3, 3>, SMatrix<T, 3, 3>, SMatrix<T, 0, 3>, SMatrix<T, 0, 3>) {
+) -> DynamicsDerivatives<T, 3, 0> {
     let [_, q_1, q_2] = q.data.0[0];
     let [_, qd_1, qd_2] = qd.data.0[0];
     let [a_0, a_1, a_2] = a.data.0[0];
@@ -1720,22 +1674,22 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v107 = qd_1 * v68;
     let v108 = v72 * v103;
     let v109 = v107 + v108;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [v37, v52, v54],
                 [v63, v86, v92],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [p.body_damping, T::lit(0.0), T::lit(0.0)],
                 [v98, v100, v101],
                 [v106, v109, p.shin_damping],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-    )
+        constraint_q: SMatrix::from_data(ArrayStorage([[], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], []])),
+    }
 }

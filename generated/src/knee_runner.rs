@@ -488,17 +488,7 @@ impl LegDynamics<NQ, NC, NU> for KneeRunner {
         qd: &SVector<T, 5>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 5, 0> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 5>,
@@ -521,19 +511,7 @@ impl LegDynamics<NQ, NC, NU> for KneeRunner {
         f: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 5, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 5>,
@@ -542,19 +520,7 @@ impl LegDynamics<NQ, NC, NU> for KneeRunner {
         f: &SVector<T, 0>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 5, 0> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU> for KneeRunner {
@@ -621,19 +587,7 @@ impl ContactModel<NQ, NC, NU, NK> for KneeRunner {
         lambda: &SVector<T, 2>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 5, 2> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -1789,7 +1743,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 5>,
     qd: &SVector<T, 5>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SVector<T, 5>, SMatrix<T, 0, 5>, SVector<T, 0>) {
+) -> DynamicsTerms<T, 5, 0> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
     let [_, _, qd_2, qd_3, qd_4] = qd.data.0[0];
     let (v18, v0) = q_2.sincos();
@@ -1985,8 +1939,8 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v193 = p.knee_spring_stiffness * v192;
     let v194 = v174 + v193;
     let v195 = v191 + v194;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [p.prepared[1], T::lit(0.0), v25, v29, v39],
                 [T::lit(0.0), p.prepared[0], v42, v45, v48],
@@ -1995,10 +1949,10 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [v39, v48, v67, v63, p.prepared[15]],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v115, v145, v177, v187, v195]])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[]])),
-    )
+        bias_forces: SMatrix::from_data(ArrayStorage([[v115, v145, v177, v187, v195]])),
+        constraint_jacobian: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        constraint_bias: SMatrix::from_data(ArrayStorage([[]])),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -2485,9 +2439,9 @@ pub fn constraint_derivatives<T: Arithmetic>(
     _a: &SVector<T, 5>,
     _f: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 5, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -2496,10 +2450,10 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-    )
+        jacobian_q: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        bias_q: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -2509,7 +2463,7 @@ pub fn contact_derivatives<T: Arithmetic>(
     a: &SVector<T, 5>,
     lambda: &SVector<T, 2>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 2, 5>, SMatrix<T, 2, 5>, SMatrix<T, 2, 5>) {
+) -> ConstraintDerivatives<T, 5, 2> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
     let [_, _, qd_2, qd_3, qd_4] = qd.data.0[0];
     let [_, _, a_2, a_3, a_4] = a.data.0[0];
@@ -2641,8 +2595,8 @@ pub fn contact_derivatives<T: Arithmetic>(
     let v127 = v125 + v126;
     let v128 = v109 + v127;
     let v129 = -v128;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -2651,7 +2605,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v51, v51, v51],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0)],
@@ -2660,7 +2614,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [v76, v81],
             ]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0)],
@@ -2669,7 +2623,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [v85, v99],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0)],
@@ -2678,7 +2632,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [v124, v129],
             ]),
         ),
-    )
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -2688,7 +2642,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 5>,
     _f: &SVector<T, 0>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>) {
+) -> DynamicsDerivatives<T, 5, 0> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
     let [_, _, qd_2, qd_3, qd_4] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
@@ -3128,8 +3082,8 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v436 = v434 - v435;
     let v437 = p.shin_mass * v436;
     let v438 = v437 + p.shin_damping;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -3138,7 +3092,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v272, v279, v304, v318, v331],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [p.slide_x_damping, T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), p.slide_y_damping, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -3147,7 +3101,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v423, v425, v429, v433, v438],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-    )
+        constraint_q: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+    }
 }

@@ -418,17 +418,7 @@ impl LegDynamics<NQ, NC, NU> for Minitaur {
         qd: &SVector<T, 4>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 4, 2> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 4>,
@@ -451,19 +441,7 @@ impl LegDynamics<NQ, NC, NU> for Minitaur {
         f: &SVector<T, 2>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 4, 2> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 4>,
@@ -472,19 +450,7 @@ impl LegDynamics<NQ, NC, NU> for Minitaur {
         f: &SVector<T, 2>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 4, 2> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU> for Minitaur {
@@ -551,19 +517,7 @@ impl ContactModel<NQ, NC, NU, NK> for Minitaur {
         lambda: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 4, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -1480,7 +1434,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 4>,
     qd: &SVector<T, 4>,
     p: &Params<T>,
-) -> (SMatrix<T, 4, 4>, SVector<T, 4>, SMatrix<T, 2, 4>, SVector<T, 2>) {
+) -> DynamicsTerms<T, 4, 2> {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3] = qd.data.0[0];
     let (v2, v0) = q_1.sincos();
@@ -1611,8 +1565,8 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v129 = v48 * v87;
     let v130 = v128 + v129;
     let v131 = v127 - v130;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [v6, v9, T::lit(0.0), T::lit(0.0)],
                 [v9, p.prepared[0], T::lit(0.0), T::lit(0.0)],
@@ -1620,12 +1574,12 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v19, p.prepared[5]],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v47, v50, v78, v81]])),
-        SMatrix::from_data(
+        bias_forces: SMatrix::from_data(ArrayStorage([[v47, v50, v78, v81]])),
+        constraint_jacobian: SMatrix::from_data(
             ArrayStorage([[v89, v96], [v97, v92], [v104, v112], [v100, v113]]),
         ),
-        SMatrix::from_data(ArrayStorage([[v124, v131]])),
-    )
+        constraint_bias: SMatrix::from_data(ArrayStorage([[v124, v131]])),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -1793,7 +1747,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
     a: &SVector<T, 4>,
     f: &SVector<T, 2>,
     p: &Params<T>,
-) -> (SMatrix<T, 4, 4>, SMatrix<T, 2, 4>, SMatrix<T, 2, 4>, SMatrix<T, 2, 4>) {
+) -> ConstraintDerivatives<T, 4, 2> {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3] = a.data.0[0];
@@ -1926,8 +1880,8 @@ pub fn constraint_derivatives<T: Arithmetic>(
     let v129 = v123 + v128;
     let v130 = v52 * qd_2;
     let v131 = v126 + v130;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [v27, v31, T::lit(0.0), T::lit(0.0)],
                 [v31, v31, T::lit(0.0), T::lit(0.0)],
@@ -1935,16 +1889,16 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v61, v61],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([[v65, v69], [v72, v75], [v78, v81], [v83, v85]]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([[v91, v95], [v88, v96], [v103, v106], [v107, v104]]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([[v111, v115], [v118, v121], [v124, v127], [v129, v131]]),
         ),
-    )
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -1954,9 +1908,9 @@ pub fn contact_derivatives<T: Arithmetic>(
     _a: &SVector<T, 4>,
     _lambda: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 4, 4>, SMatrix<T, 0, 4>, SMatrix<T, 0, 4>, SMatrix<T, 0, 4>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 4, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -1964,10 +1918,10 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], []])),
-    )
+        jacobian_q: SMatrix::from_data(ArrayStorage([[], [], [], []])),
+        bias_q: SMatrix::from_data(ArrayStorage([[], [], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], [], []])),
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -1977,7 +1931,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 4>,
     f: &SVector<T, 2>,
     p: &Params<T>,
-) -> (SMatrix<T, 4, 4>, SMatrix<T, 4, 4>, SMatrix<T, 2, 4>, SMatrix<T, 2, 4>) {
+) -> DynamicsDerivatives<T, 4, 2> {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3] = a.data.0[0];
@@ -2204,8 +2158,8 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v223 = v217 + v222;
     let v224 = v97 * qd_2;
     let v225 = v220 + v224;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [v34, v38, T::lit(0.0), T::lit(0.0)],
                 [v63, v69, T::lit(0.0), T::lit(0.0)],
@@ -2213,7 +2167,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v133, v139],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [v141, v143, T::lit(0.0), T::lit(0.0)],
                 [v147, p.lower_a_damping, T::lit(0.0), T::lit(0.0)],
@@ -2221,11 +2175,11 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v155, p.lower_b_damping],
             ]),
         ),
-        SMatrix::from_data(
+        constraint_q: SMatrix::from_data(
             ArrayStorage([[v164, v172], [v175, v179], [v188, v195], [v198, v201]]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([[v205, v209], [v212, v215], [v218, v221], [v223, v225]]),
         ),
-    )
+    }
 }

@@ -480,17 +480,7 @@ impl LegDynamics<NQ, NC, NU> for MinitaurHopper {
         qd: &SVector<T, 5>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 5, 2> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 5>,
@@ -513,19 +503,7 @@ impl LegDynamics<NQ, NC, NU> for MinitaurHopper {
         f: &SVector<T, 2>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 5, 2> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 5>,
@@ -534,19 +512,7 @@ impl LegDynamics<NQ, NC, NU> for MinitaurHopper {
         f: &SVector<T, 2>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 5, 2> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU> for MinitaurHopper {
@@ -613,19 +579,7 @@ impl ContactModel<NQ, NC, NU, NK> for MinitaurHopper {
         lambda: &SVector<T, 2>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 5, 2> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -1838,7 +1792,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 5>,
     qd: &SVector<T, 5>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SVector<T, 5>, SMatrix<T, 2, 5>, SVector<T, 2>) {
+) -> DynamicsTerms<T, 5, 2> {
     let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
     let [_, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
     let (v8, v0) = q_1.sincos();
@@ -2024,8 +1978,8 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v184 = v55 * v142;
     let v185 = v183 + v184;
     let v186 = v182 - v185;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [p.prepared[0], v14, v17, v32, v35],
                 [v14, v40, v43, T::lit(0.0), T::lit(0.0)],
@@ -2034,8 +1988,8 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [v35, T::lit(0.0), T::lit(0.0), v51, p.prepared[14]],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v84, v108, v110, v134, v136]])),
-        SMatrix::from_data(
+        bias_forces: SMatrix::from_data(ArrayStorage([[v84, v108, v110, v134, v136]])),
+        constraint_jacobian: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [v144, v151],
@@ -2044,8 +1998,8 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [v155, v168],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v179, v186]])),
-    )
+        constraint_bias: SMatrix::from_data(ArrayStorage([[v179, v186]])),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -2356,7 +2310,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
     a: &SVector<T, 5>,
     f: &SVector<T, 2>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 2, 5>, SMatrix<T, 2, 5>, SMatrix<T, 2, 5>) {
+) -> ConstraintDerivatives<T, 5, 2> {
     let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
     let [_, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
     let [_, a_1, a_2, a_3, a_4] = a.data.0[0];
@@ -2489,8 +2443,8 @@ pub fn constraint_derivatives<T: Arithmetic>(
     let v129 = v123 + v128;
     let v130 = v52 * qd_3;
     let v131 = v126 + v130;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), v27, v31, T::lit(0.0), T::lit(0.0)],
@@ -2499,7 +2453,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), v61, v61],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [v65, v69],
@@ -2508,7 +2462,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v83, v85],
             ]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [v91, v95],
@@ -2517,7 +2471,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v107, v104],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [v111, v115],
@@ -2526,7 +2480,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v129, v131],
             ]),
         ),
-    )
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -2536,7 +2490,7 @@ pub fn contact_derivatives<T: Arithmetic>(
     a: &SVector<T, 5>,
     lambda: &SVector<T, 2>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 2, 5>, SMatrix<T, 2, 5>, SMatrix<T, 2, 5>) {
+) -> ConstraintDerivatives<T, 5, 2> {
     let [_, q_1, q_2, _, _] = q.data.0[0];
     let [_, qd_1, qd_2, _, _] = qd.data.0[0];
     let [_, a_1, a_2, _, _] = a.data.0[0];
@@ -2610,8 +2564,8 @@ pub fn contact_derivatives<T: Arithmetic>(
     let v68 = v12 * qd_1;
     let v69 = v62 + v68;
     let v70 = -v69;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), v27, v31, T::lit(0.0), T::lit(0.0)],
@@ -2620,7 +2574,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [v35, v39],
@@ -2629,7 +2583,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [v51, v55],
@@ -2638,7 +2592,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [v60, v64],
@@ -2647,7 +2601,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-    )
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -2657,7 +2611,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 5>,
     f: &SVector<T, 2>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>, SMatrix<T, 2, 5>, SMatrix<T, 2, 5>) {
+) -> DynamicsDerivatives<T, 5, 2> {
     let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
     let [_, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
@@ -2994,8 +2948,8 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v333 = v327 + v332;
     let v334 = qd_3 * v179;
     let v335 = v330 + v334;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [v37, v70, v76, T::lit(0.0), T::lit(0.0)],
@@ -3004,7 +2958,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v201, T::lit(0.0), T::lit(0.0), v225, v231],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [p.body_damping, T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [v237, v239, v240, T::lit(0.0), T::lit(0.0)],
@@ -3013,7 +2967,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v262, T::lit(0.0), T::lit(0.0), v265, p.lower_b_damping],
             ]),
         ),
-        SMatrix::from_data(
+        constraint_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [v274, v282],
@@ -3022,7 +2976,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v308, v311],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0)],
                 [v315, v319],
@@ -3031,5 +2985,5 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v333, v335],
             ]),
         ),
-    )
+    }
 }

@@ -492,17 +492,7 @@ impl LegDynamics<NQ, NC, NU> for MinitaurPinnedToe {
         qd: &SVector<T, 5>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 5, 4> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 5>,
@@ -525,19 +515,7 @@ impl LegDynamics<NQ, NC, NU> for MinitaurPinnedToe {
         f: &SVector<T, 4>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 5, 4> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 5>,
@@ -546,19 +524,7 @@ impl LegDynamics<NQ, NC, NU> for MinitaurPinnedToe {
         f: &SVector<T, 4>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 5, 4> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU> for MinitaurPinnedToe {
@@ -625,19 +591,7 @@ impl ContactModel<NQ, NC, NU, NK> for MinitaurPinnedToe {
         lambda: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 5, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -1768,7 +1722,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 5>,
     qd: &SVector<T, 5>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SVector<T, 5>, SMatrix<T, 4, 5>, SVector<T, 4>) {
+) -> DynamicsTerms<T, 5, 4> {
     let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
     let [_, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
     let (v8, v0) = q_1.sincos();
@@ -1956,8 +1910,8 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v186 = v182 - v185;
     let v187 = -v178;
     let v188 = -v185;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [p.prepared[0], v14, v17, v32, v35],
                 [v14, v40, v43, T::lit(0.0), T::lit(0.0)],
@@ -1966,8 +1920,8 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [v35, T::lit(0.0), T::lit(0.0), v51, p.prepared[14]],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v84, v108, v110, v134, v136]])),
-        SMatrix::from_data(
+        bias_forces: SMatrix::from_data(ArrayStorage([[v84, v108, v110, v134, v136]])),
+        constraint_jacobian: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(1.0)],
                 [v144, v151, v144, v151],
@@ -1976,8 +1930,8 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [v155, v168, T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v179, v186, v187, v188]])),
-    )
+        constraint_bias: SMatrix::from_data(ArrayStorage([[v179, v186, v187, v188]])),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -2288,7 +2242,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
     a: &SVector<T, 5>,
     f: &SVector<T, 4>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 4, 5>, SMatrix<T, 4, 5>, SMatrix<T, 4, 5>) {
+) -> ConstraintDerivatives<T, 5, 4> {
     let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
     let [_, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
     let [_, a_1, a_2, a_3, a_4] = a.data.0[0];
@@ -2429,8 +2383,8 @@ pub fn constraint_derivatives<T: Arithmetic>(
     let v137 = v131 + v136;
     let v138 = v60 * qd_3;
     let v139 = v134 + v138;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), v31, v39, T::lit(0.0), T::lit(0.0)],
@@ -2439,7 +2393,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), v69, v69],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [v73, v77, v73, v77],
@@ -2448,7 +2402,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v91, v93, T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [v99, v103, v99, v103],
@@ -2457,7 +2411,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v115, v112, T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [v119, v123, v119, v123],
@@ -2466,7 +2420,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v137, v139, T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-    )
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -2476,9 +2430,9 @@ pub fn contact_derivatives<T: Arithmetic>(
     _a: &SVector<T, 5>,
     _lambda: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 5, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -2487,10 +2441,10 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-    )
+        jacobian_q: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        bias_q: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -2500,7 +2454,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 5>,
     f: &SVector<T, 4>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>, SMatrix<T, 4, 5>, SMatrix<T, 4, 5>) {
+) -> DynamicsDerivatives<T, 5, 4> {
     let [_, q_1, q_2, q_3, q_4] = q.data.0[0];
     let [_, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
@@ -2849,8 +2803,8 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v345 = v339 + v344;
     let v346 = qd_3 * v187;
     let v347 = v342 + v346;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [v37, v74, v84, T::lit(0.0), T::lit(0.0)],
@@ -2859,7 +2813,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v209, T::lit(0.0), T::lit(0.0), v233, v239],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [p.body_damping, T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [v245, v247, v248, T::lit(0.0), T::lit(0.0)],
@@ -2868,7 +2822,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v270, T::lit(0.0), T::lit(0.0), v273, p.lower_b_damping],
             ]),
         ),
-        SMatrix::from_data(
+        constraint_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [v282, v290, v292, v290],
@@ -2877,7 +2831,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v320, v323, T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [v327, v331, v327, v331],
@@ -2886,5 +2840,5 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v345, v347, T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-    )
+    }
 }

@@ -363,17 +363,7 @@ impl LegDynamics<NQ, NC, NU> for OpenThreeLink {
         qd: &SVector<T, 3>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 3, 0> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 3>,
@@ -396,19 +386,7 @@ impl LegDynamics<NQ, NC, NU> for OpenThreeLink {
         f: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 3, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 3>,
@@ -417,19 +395,7 @@ impl LegDynamics<NQ, NC, NU> for OpenThreeLink {
         f: &SVector<T, 0>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 3, 0> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU> for OpenThreeLink {
@@ -496,19 +462,7 @@ impl ContactModel<NQ, NC, NU, NK> for OpenThreeLink {
         lambda: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 3, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -1274,7 +1228,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 3>,
     qd: &SVector<T, 3>,
     p: &Params<T>,
-) -> (SMatrix<T, 3, 3>, SVector<T, 3>, SMatrix<T, 0, 3>, SVector<T, 0>) {
+) -> DynamicsTerms<T, 3, 0> {
     let [q_0, q_1, q_2] = q.data.0[0];
     let [qd_0, qd_1, qd_2] = qd.data.0[0];
     let (v2, v0) = q_2.sincos();
@@ -1395,14 +1349,14 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v118 = v52 * v63;
     let v119 = v117 + v118;
     let v120 = v99 + v119;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([[v28, v29, v42], [v29, v43, v32], [v42, v32, p.prepared[1]]]),
         ),
-        SMatrix::from_data(ArrayStorage([[v102, v112, v120]])),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-        SMatrix::from_data(ArrayStorage([[]])),
-    )
+        bias_forces: SMatrix::from_data(ArrayStorage([[v102, v112, v120]])),
+        constraint_jacobian: SMatrix::from_data(ArrayStorage([[], [], []])),
+        constraint_bias: SMatrix::from_data(ArrayStorage([[]])),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -1679,19 +1633,19 @@ pub fn constraint_derivatives<T: Arithmetic>(
     _a: &SVector<T, 3>,
     _f: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 3, 3>, SMatrix<T, 0, 3>, SMatrix<T, 0, 3>, SMatrix<T, 0, 3>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 3, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-    )
+        jacobian_q: SMatrix::from_data(ArrayStorage([[], [], []])),
+        bias_q: SMatrix::from_data(ArrayStorage([[], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], []])),
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -1701,19 +1655,19 @@ pub fn contact_derivatives<T: Arithmetic>(
     _a: &SVector<T, 3>,
     _lambda: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 3, 3>, SMatrix<T, 0, 3>, SMatrix<T, 0, 3>, SMatrix<T, 0, 3>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 3, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-    )
+        jacobian_q: SMatrix::from_data(ArrayStorage([[], [], []])),
+        bias_q: SMatrix::from_data(ArrayStorage([[], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], []])),
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -1723,7 +1677,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 3>,
     _f: &SVector<T, 0>,
     p: &Params<T>,
-) -> (SMatrix<T, 3, 3>, SMatrix<T, 3, 3>, SMatrix<T, 0, 3>, SMatrix<T, 0, 3>) {
+) -> DynamicsDerivatives<T, 3, 0> {
     let [q_0, q_1, q_2] = q.data.0[0];
     let [qd_0, qd_1, qd_2] = qd.data.0[0];
     let [a_0, a_1, a_2] = a.data.0[0];
@@ -1925,18 +1879,18 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v198 = v196 + v197;
     let v199 = v114 * v193;
     let v200 = v198 + v199;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([[v28, v27, v26], [v87, v95, v101], [v139, v152, v163]]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [v167, v172, v177],
                 [v184, v186, v189],
                 [v195, v200, p.ankle_damping],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-    )
+        constraint_q: SMatrix::from_data(ArrayStorage([[], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], []])),
+    }
 }

@@ -519,17 +519,7 @@ impl LegDynamics<NQ, NC, NU> for RaibertHopper {
         qd: &SVector<T, 5>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 5, 0> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 5>,
@@ -552,19 +542,7 @@ impl LegDynamics<NQ, NC, NU> for RaibertHopper {
         f: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 5, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 5>,
@@ -573,19 +551,7 @@ impl LegDynamics<NQ, NC, NU> for RaibertHopper {
         f: &SVector<T, 0>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 5, 0> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU> for RaibertHopper {
@@ -652,19 +618,7 @@ impl ContactModel<NQ, NC, NU, NK> for RaibertHopper {
         lambda: &SVector<T, 4>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 5, 4> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -1819,7 +1773,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 5>,
     qd: &SVector<T, 5>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SVector<T, 5>, SMatrix<T, 0, 5>, SVector<T, 0>) {
+) -> DynamicsTerms<T, 5, 0> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
     let [_, _, qd_2, qd_3, qd_4] = qd.data.0[0];
     let (v11, v0) = q_2.sincos();
@@ -2018,8 +1972,8 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v195 = p.shin_mass * v194;
     let v196 = v191 - v195;
     let v197 = v189 + v196;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [p.prepared[1], T::lit(0.0), v18, v22, v27],
                 [T::lit(0.0), p.prepared[0], v30, v33, v36],
@@ -2028,10 +1982,10 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [v27, v36, v56, p.prepared[15], p.prepared[16]],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v100, v131, v174, v185, v197]])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[]])),
-    )
+        bias_forces: SMatrix::from_data(ArrayStorage([[v100, v131, v174, v185, v197]])),
+        constraint_jacobian: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        constraint_bias: SMatrix::from_data(ArrayStorage([[]])),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -2515,9 +2469,9 @@ pub fn constraint_derivatives<T: Arithmetic>(
     _a: &SVector<T, 5>,
     _f: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 5, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -2526,10 +2480,10 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-    )
+        jacobian_q: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        bias_q: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -2539,7 +2493,7 @@ pub fn contact_derivatives<T: Arithmetic>(
     a: &SVector<T, 5>,
     lambda: &SVector<T, 4>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 4, 5>, SMatrix<T, 4, 5>, SMatrix<T, 4, 5>) {
+) -> ConstraintDerivatives<T, 5, 4> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
     let [_, _, qd_2, qd_3, qd_4] = qd.data.0[0];
     let [_, _, a_2, a_3, a_4] = a.data.0[0];
@@ -2710,8 +2664,8 @@ pub fn contact_derivatives<T: Arithmetic>(
     let v165 = v6 * qd_2;
     let v166 = v6 * qd_3;
     let v167 = v165 + v166;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -2720,7 +2674,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v65, v65, T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -2729,7 +2683,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [v98, v101, v98, v101],
             ]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -2738,7 +2692,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [v130, v131, v130, v131],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -2747,7 +2701,7 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [v164, v167, v164, v167],
             ]),
         ),
-    )
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -2757,7 +2711,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 5>,
     _f: &SVector<T, 0>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>) {
+) -> DynamicsDerivatives<T, 5, 0> {
     let [_, _, q_2, q_3, q_4] = q.data.0[0];
     let [_, _, qd_2, qd_3, qd_4] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
@@ -3198,8 +3152,8 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v436 = v434 - v435;
     let v437 = p.shin_mass * v436;
     let v438 = v437 + p.shin_damping;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -3208,7 +3162,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v281, v287, v315, v327, v332],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [p.slide_x_damping, T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), p.slide_y_damping, T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -3217,7 +3171,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v423, v425, v429, v433, v438],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-    )
+        constraint_q: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+    }
 }

@@ -659,17 +659,7 @@ impl LegDynamics<NQ, NC, NU> for RevoluteKneeLeg {
         qd: &SVector<T, 7>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 7, 5> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 7>,
@@ -692,19 +682,7 @@ impl LegDynamics<NQ, NC, NU> for RevoluteKneeLeg {
         f: &SVector<T, 5>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 7, 5> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 7>,
@@ -713,19 +691,7 @@ impl LegDynamics<NQ, NC, NU> for RevoluteKneeLeg {
         f: &SVector<T, 5>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 7, 5> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU, ND, NP> for RevoluteKneeLeg {
@@ -792,19 +758,7 @@ impl ContactModel<NQ, NC, NU, NK, ND> for RevoluteKneeLeg {
         lambda: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 7, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -6113,7 +6067,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 7>,
     qd: &SVector<T, 7>,
     p: &Params<T>,
-) -> (SMatrix<T, 7, 7>, SVector<T, 7>, SMatrix<T, 5, 7>, SVector<T, 5>) {
+) -> DynamicsTerms<T, 7, 5> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6] = qd.data.0[0];
     let (v71, v0) = q_3.sincos();
@@ -8359,8 +8313,8 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v2247 = v2232 + v2246;
     let v2248 = qd_5 * v2247;
     let v2249 = v2218 + v2248;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [v251, v275, v293, v319, v339, v359, v399],
                 [v275, v404, v407, T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -8379,10 +8333,10 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [v399, T::lit(0.0), T::lit(0.0), v438, v364, v380, p.prepared[7]],
             ]),
         ),
-        SMatrix::from_data(
+        bias_forces: SMatrix::from_data(
             ArrayStorage([[v1171, v1210, v1211, v1242, v1243, v1244, v1245]]),
         ),
-        SMatrix::from_data(
+        constraint_jacobian: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v1294, v1301, v1358, v1391],
                 [v1392, v1396, v1399, v1416, v1421],
@@ -8393,8 +8347,10 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [v1596, v1605, v1614, T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v1677, v1696, v1707, v2044, v2249]])),
-    )
+        constraint_bias: SMatrix::from_data(
+            ArrayStorage([[v1677, v1696, v1707, v2044, v2249]]),
+        ),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -13922,7 +13878,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
     a: &SVector<T, 7>,
     f: &SVector<T, 5>,
     p: &Params<T>,
-) -> (SMatrix<T, 7, 7>, SMatrix<T, 5, 7>, SMatrix<T, 5, 7>, SMatrix<T, 5, 7>) {
+) -> ConstraintDerivatives<T, 7, 5> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4, a_5, a_6] = a.data.0[0];
@@ -20061,8 +20017,8 @@ pub fn constraint_derivatives<T: Arithmetic>(
     let v6138 = v6136 + v6137;
     let v6139 = v1893 * qd_6;
     let v6140 = v6138 + v6139;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [v256, v290, v324, v371, v434, v487, v509],
                 [v581, v618, v660, v691, v728, v757, T::lit(0.0)],
@@ -20073,7 +20029,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v1849, T::lit(0.0), T::lit(0.0), v1860, v1874, v1882, v1919],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v1932, v1945, v1956, v1967],
                 [v1970, v1976, v1981, v1992, v2003],
@@ -20084,7 +20040,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v2187, v2196, v2205, T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v2440, v2451, v2914, v3198],
                 [v3266, v3299, v3309, v3554, v3745],
@@ -20095,7 +20051,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v5836, v5845, v5854, T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v5867, v5880, v5891, v5902],
                 [v5905, v5911, v5916, v5927, v5938],
@@ -20106,7 +20062,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v6122, v6131, v6140, T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-    )
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -20116,9 +20072,9 @@ pub fn contact_derivatives<T: Arithmetic>(
     _a: &SVector<T, 7>,
     _lambda: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 7, 7>, SMatrix<T, 0, 7>, SMatrix<T, 0, 7>, SMatrix<T, 0, 7>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 7, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [
                     T::lit(0.0),
@@ -20185,10 +20141,10 @@ pub fn contact_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
-    )
+        jacobian_q: SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
+        bias_q: SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -20198,7 +20154,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 7>,
     f: &SVector<T, 5>,
     p: &Params<T>,
-) -> (SMatrix<T, 7, 7>, SMatrix<T, 7, 7>, SMatrix<T, 5, 7>, SMatrix<T, 5, 7>) {
+) -> DynamicsDerivatives<T, 7, 5> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4, a_5, a_6] = a.data.0[0];
@@ -31362,8 +31318,8 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v11163 = v11161 + v11162;
     let v11164 = qd_6 * v5890;
     let v11165 = v11163 + v11164;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [v427, v474, v510, v569, v633, v688, v711],
                 [v1461, v1548, v1594, v1626, v1664, v1694, T::lit(0.0)],
@@ -31374,7 +31330,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v5759, T::lit(0.0), T::lit(0.0), v5824, v5850, v5870, v5917],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [v6477, v6512, v6507, v6535, v6095, v6183, v6093],
                 [
@@ -31401,7 +31357,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v7330, T::lit(0.0), T::lit(0.0), v7337, v7277, v7308, v7338],
             ]),
         ),
-        SMatrix::from_data(
+        constraint_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v7425, v7450, v7922, v8218],
                 [v8250, v8278, v8293, v8548, v8750],
@@ -31412,7 +31368,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v10841, v10860, v10879, T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v10892, v10905, v10916, v10927],
                 [v10930, v10936, v10941, v10952, v10963],
@@ -31423,5 +31379,5 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v11147, v11156, v11165, T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-    )
+    }
 }

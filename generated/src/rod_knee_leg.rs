@@ -596,17 +596,7 @@ impl LegDynamics<NQ, NC, NU> for RodKneeLeg {
         qd: &SVector<T, 4>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 4, 1> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 4>,
@@ -629,19 +619,7 @@ impl LegDynamics<NQ, NC, NU> for RodKneeLeg {
         f: &SVector<T, 1>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 4, 1> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 4>,
@@ -650,19 +628,7 @@ impl LegDynamics<NQ, NC, NU> for RodKneeLeg {
         f: &SVector<T, 1>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 4, 1> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU, ND, NP> for RodKneeLeg {
@@ -729,19 +695,7 @@ impl ContactModel<NQ, NC, NU, NK, ND> for RodKneeLeg {
         lambda: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 4, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -3495,7 +3449,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 4>,
     qd: &SVector<T, 4>,
     p: &Params<T>,
-) -> (SMatrix<T, 4, 4>, SVector<T, 4>, SMatrix<T, 1, 4>, SVector<T, 1>) {
+) -> DynamicsTerms<T, 4, 1> {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3] = qd.data.0[0];
     let (v4, v0) = q_3.sincos();
@@ -4333,8 +4287,8 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v836 = v823 + v835;
     let v837 = v672 + v836;
     let v838 = v837 / p.rod_distance;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [v105, v129, v147, v157],
                 [v129, v162, v165, T::lit(0.0)],
@@ -4342,10 +4296,12 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [v157, T::lit(0.0), T::lit(0.0), p.prepared[41]],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v437, v463, v471, v477]])),
-        SMatrix::from_data(ArrayStorage([[v588], [v619], [v634], [v648]])),
-        SMatrix::from_data(ArrayStorage([[v838]])),
-    )
+        bias_forces: SMatrix::from_data(ArrayStorage([[v437, v463, v471, v477]])),
+        constraint_jacobian: SMatrix::from_data(
+            ArrayStorage([[v588], [v619], [v634], [v648]]),
+        ),
+        constraint_bias: SMatrix::from_data(ArrayStorage([[v838]])),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -5516,7 +5472,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
     a: &SVector<T, 4>,
     f: &SVector<T, 1>,
     p: &Params<T>,
-) -> (SMatrix<T, 4, 4>, SMatrix<T, 1, 4>, SMatrix<T, 1, 4>, SMatrix<T, 1, 4>) {
+) -> ConstraintDerivatives<T, 4, 1> {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3] = a.data.0[0];
@@ -7179,8 +7135,8 @@ pub fn constraint_derivatives<T: Arithmetic>(
     let v1659 = v1657 + v1658;
     let v1660 = v31 * v1659;
     let v1661 = v1652 + v1660;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [v188, v206, v225, v243],
                 [v281, v330, v355, v365],
@@ -7188,10 +7144,12 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v472, v482, v490, v507],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v646], [v691], [v740], [v764]])),
-        SMatrix::from_data(ArrayStorage([[v1083], [v1252], [v1325], [v1404]])),
-        SMatrix::from_data(ArrayStorage([[v1543], [v1588], [v1637], [v1661]])),
-    )
+        jacobian_q: SMatrix::from_data(ArrayStorage([[v646], [v691], [v740], [v764]])),
+        bias_q: SMatrix::from_data(ArrayStorage([[v1083], [v1252], [v1325], [v1404]])),
+        jacobian_rate: SMatrix::from_data(
+            ArrayStorage([[v1543], [v1588], [v1637], [v1661]]),
+        ),
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -7201,9 +7159,9 @@ pub fn contact_derivatives<T: Arithmetic>(
     _a: &SVector<T, 4>,
     _lambda: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 4, 4>, SMatrix<T, 0, 4>, SMatrix<T, 0, 4>, SMatrix<T, 0, 4>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 4, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -7211,10 +7169,10 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], []])),
-    )
+        jacobian_q: SMatrix::from_data(ArrayStorage([[], [], [], []])),
+        bias_q: SMatrix::from_data(ArrayStorage([[], [], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], [], []])),
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -7224,7 +7182,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 4>,
     f: &SVector<T, 1>,
     p: &Params<T>,
-) -> (SMatrix<T, 4, 4>, SMatrix<T, 4, 4>, SMatrix<T, 1, 4>, SMatrix<T, 1, 4>) {
+) -> DynamicsDerivatives<T, 4, 1> {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3] = a.data.0[0];
@@ -9545,8 +9503,8 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v2317 = v2315 + v2316;
     let v2318 = v9 * v2317;
     let v2319 = v2310 + v2318;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [v282, v313, v334, v357],
                 [v783, v853, v886, v895],
@@ -9554,7 +9512,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v1286, v1295, v1302, v1328],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [v1334, v1340, v1345, v1347],
                 [v1354, v1356, v1359, T::lit(0.0)],
@@ -9562,7 +9520,11 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v1374, T::lit(0.0), T::lit(0.0), p.crank_damping],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v1729], [v1908], [v1981], [v2062]])),
-        SMatrix::from_data(ArrayStorage([[v2201], [v2246], [v2295], [v2319]])),
-    )
+        constraint_q: SMatrix::from_data(
+            ArrayStorage([[v1729], [v1908], [v1981], [v2062]]),
+        ),
+        jacobian_rate: SMatrix::from_data(
+            ArrayStorage([[v2201], [v2246], [v2295], [v2319]]),
+        ),
+    }
 }

@@ -506,17 +506,7 @@ impl LegDynamics<NQ, NC, NU> for RssrLinkage {
         qd: &SVector<T, 5>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 5, 3> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 5>,
@@ -539,19 +529,7 @@ impl LegDynamics<NQ, NC, NU> for RssrLinkage {
         f: &SVector<T, 3>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 5, 3> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 5>,
@@ -560,19 +538,7 @@ impl LegDynamics<NQ, NC, NU> for RssrLinkage {
         f: &SVector<T, 3>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 5, 3> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU, ND, NP> for RssrLinkage {
@@ -639,19 +605,7 @@ impl ContactModel<NQ, NC, NU, NK, ND> for RssrLinkage {
         lambda: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 5, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -2482,7 +2436,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 5>,
     qd: &SVector<T, 5>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SVector<T, 5>, SMatrix<T, 3, 5>, SVector<T, 3>) {
+) -> DynamicsTerms<T, 5, 3> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
     let (v17, v0) = q_2.sincos();
@@ -2969,8 +2923,8 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v486 = v484 + v485;
     let v487 = v394 * v464;
     let v488 = v486 + v487;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [v57, v58, v76, v93, T::lit(0.0)],
                 [v58, v28, v67, v81, T::lit(0.0)],
@@ -2979,8 +2933,8 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), p.prepared[12]],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v324, v325, v332, v333, v347]])),
-        SMatrix::from_data(
+        bias_forces: SMatrix::from_data(ArrayStorage([[v324, v325, v332, v333, v347]])),
+        constraint_jacobian: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v370, v373],
                 [T::lit(0.0), v383, v386],
@@ -2989,8 +2943,8 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [v424, v428, T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v474, v483, v488]])),
-    )
+        constraint_bias: SMatrix::from_data(ArrayStorage([[v474, v483, v488]])),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -4467,7 +4421,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
     a: &SVector<T, 5>,
     f: &SVector<T, 3>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 3, 5>, SMatrix<T, 3, 5>, SMatrix<T, 3, 5>) {
+) -> ConstraintDerivatives<T, 5, 3> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
@@ -5190,8 +5144,8 @@ pub fn constraint_derivatives<T: Arithmetic>(
     let v720 = v718 + v719;
     let v721 = v285 * qd_4;
     let v722 = v289 * qd_4;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [v41, v57, v70, v92, T::lit(0.0)],
                 [v108, v123, v136, v157, T::lit(0.0)],
@@ -5200,7 +5154,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v291],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v298, v305],
                 [T::lit(0.0), v312, v319],
@@ -5209,7 +5163,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v355, v356, T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v430, v435],
                 [v453, v468, v483],
@@ -5218,7 +5172,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v654, v657, T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v664, v671],
                 [T::lit(0.0), v678, v685],
@@ -5227,7 +5181,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v721, v722, T::lit(0.0)],
             ]),
         ),
-    )
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -5237,9 +5191,9 @@ pub fn contact_derivatives<T: Arithmetic>(
     _a: &SVector<T, 5>,
     _lambda: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>, SMatrix<T, 0, 5>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 5, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -5248,10 +5202,10 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
-    )
+        jacobian_q: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        bias_q: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], [], [], []])),
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -5261,7 +5215,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 5>,
     f: &SVector<T, 3>,
     p: &Params<T>,
-) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>, SMatrix<T, 3, 5>, SMatrix<T, 3, 5>) {
+) -> DynamicsDerivatives<T, 5, 3> {
     let [q_0, q_1, q_2, q_3, q_4] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4] = a.data.0[0];
@@ -7333,8 +7287,8 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v2069 = v2067 + v2068;
     let v2070 = v1344 * qd_4;
     let v2071 = v1348 * qd_4;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [v103, v119, v137, v160, T::lit(0.0)],
                 [v454, v472, v495, v520, T::lit(0.0)],
@@ -7343,7 +7297,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), v1351],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [v1515, v1447, v1518, v1445, T::lit(0.0)],
                 [v1546, v1547, v1550, v1441, T::lit(0.0)],
@@ -7352,7 +7306,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0), p.rocker_damping],
             ]),
         ),
-        SMatrix::from_data(
+        constraint_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v1751, v1764],
                 [v1769, v1792, v1815],
@@ -7361,7 +7315,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v2001, v2006, T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), v2013, v2020],
                 [T::lit(0.0), v2027, v2034],
@@ -7370,5 +7324,5 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v2070, v2071, T::lit(0.0)],
             ]),
         ),
-    )
+    }
 }

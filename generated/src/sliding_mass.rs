@@ -491,17 +491,7 @@ impl LegDynamics<NQ, NC, NU> for SlidingMass {
         qd: &SVector<T, 3>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 3, 0> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 3>,
@@ -524,19 +514,7 @@ impl LegDynamics<NQ, NC, NU> for SlidingMass {
         f: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 3, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 3>,
@@ -545,19 +523,7 @@ impl LegDynamics<NQ, NC, NU> for SlidingMass {
         f: &SVector<T, 0>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 3, 0> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU, ND, NP> for SlidingMass {
@@ -624,19 +590,7 @@ impl ContactModel<NQ, NC, NU, NK, ND> for SlidingMass {
         lambda: &SVector<T, 3>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 3, 3> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -1013,21 +967,21 @@ pub fn dynamics_terms<T: Arithmetic>(
     _q: &SVector<T, 3>,
     _qd: &SVector<T, 3>,
     p: &Params<T>,
-) -> (SMatrix<T, 3, 3>, SVector<T, 3>, SMatrix<T, 0, 3>, SVector<T, 0>) {
-    (
-        SMatrix::from_data(
+) -> DynamicsTerms<T, 3, 0> {
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [p.prepared[0], T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), p.prepared[1], T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), p.block_mass],
             ]),
         ),
-        SMatrix::from_data(
+        bias_forces: SMatrix::from_data(
             ArrayStorage([[p.prepared[2], p.prepared[3], p.prepared[4]]]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-        SMatrix::from_data(ArrayStorage([[]])),
-    )
+        constraint_jacobian: SMatrix::from_data(ArrayStorage([[], [], []])),
+        constraint_bias: SMatrix::from_data(ArrayStorage([[]])),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -1074,19 +1028,19 @@ pub fn constraint_derivatives<T: Arithmetic>(
     _a: &SVector<T, 3>,
     _f: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 3, 3>, SMatrix<T, 0, 3>, SMatrix<T, 0, 3>, SMatrix<T, 0, 3>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 3, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-    )
+        jacobian_q: SMatrix::from_data(ArrayStorage([[], [], []])),
+        bias_q: SMatrix::from_data(ArrayStorage([[], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], []])),
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -1096,37 +1050,37 @@ pub fn contact_derivatives<T: Arithmetic>(
     _a: &SVector<T, 3>,
     _lambda: &SVector<T, 3>,
     _p: &Params<T>,
-) -> (SMatrix<T, 3, 3>, SMatrix<T, 3, 3>, SMatrix<T, 3, 3>, SMatrix<T, 3, 3>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 3, 3> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-    )
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -1136,23 +1090,23 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     _a: &SVector<T, 3>,
     _f: &SVector<T, 0>,
     p: &Params<T>,
-) -> (SMatrix<T, 3, 3>, SMatrix<T, 3, 3>, SMatrix<T, 0, 3>, SMatrix<T, 0, 3>) {
-    (
-        SMatrix::from_data(
+) -> DynamicsDerivatives<T, 3, 0> {
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [p.slide_x_damping, T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), p.slide_y_damping, T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), p.block_damping],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], []])),
-    )
+        constraint_q: SMatrix::from_data(ArrayStorage([[], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], []])),
+    }
 }

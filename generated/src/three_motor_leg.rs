@@ -621,17 +621,7 @@ impl LegDynamics<NQ, NC, NU> for ThreeMotorLeg {
         qd: &SVector<T, 7>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 7, 4> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 7>,
@@ -654,19 +644,7 @@ impl LegDynamics<NQ, NC, NU> for ThreeMotorLeg {
         f: &SVector<T, 4>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 7, 4> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 7>,
@@ -675,19 +653,7 @@ impl LegDynamics<NQ, NC, NU> for ThreeMotorLeg {
         f: &SVector<T, 4>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 7, 4> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU> for ThreeMotorLeg {
@@ -754,19 +720,7 @@ impl ContactModel<NQ, NC, NU, NK> for ThreeMotorLeg {
         lambda: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 7, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -3212,7 +3166,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 7>,
     qd: &SVector<T, 7>,
     p: &Params<T>,
-) -> (SMatrix<T, 7, 7>, SVector<T, 7>, SMatrix<T, 4, 7>, SVector<T, 4>) {
+) -> DynamicsTerms<T, 7, 4> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6] = qd.data.0[0];
     let (v2, v0) = q_4.sincos();
@@ -3819,8 +3773,8 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v608 = v256 + v607;
     let v609 = v220 + v608;
     let v610 = v604 - v609;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [v82, v83, v94, v117, v120, v141, v174],
                 [v83, v176, v84, v107, T::lit(0.0), v131, v164],
@@ -3839,8 +3793,10 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [v174, v164, v154, T::lit(0.0), T::lit(0.0), v144, p.prepared[7]],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v450, v475, v495, v500, v505, v515, v520]])),
-        SMatrix::from_data(
+        bias_forces: SMatrix::from_data(
+            ArrayStorage([[v450, v475, v495, v500, v505, v515, v520]]),
+        ),
+        constraint_jacobian: SMatrix::from_data(
             ArrayStorage([
                 [v530, v540, v554, v568],
                 [v524, v569, v570, v571],
@@ -3851,8 +3807,8 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v578, v557],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v584, v590, v600, v610]])),
-    )
+        constraint_bias: SMatrix::from_data(ArrayStorage([[v584, v590, v600, v610]])),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -5446,7 +5402,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
     a: &SVector<T, 7>,
     f: &SVector<T, 4>,
     p: &Params<T>,
-) -> (SMatrix<T, 7, 7>, SMatrix<T, 4, 7>, SMatrix<T, 4, 7>, SMatrix<T, 4, 7>) {
+) -> ConstraintDerivatives<T, 7, 4> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4, a_5, a_6] = a.data.0[0];
@@ -5941,8 +5897,8 @@ pub fn constraint_derivatives<T: Arithmetic>(
     let v494 = v492 + v493;
     let v495 = v403 + v494;
     let v496 = -v495;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [v140, v149, v158, v161, v165, v169, v173],
                 [v149, v149, v158, v161, T::lit(0.0), v169, v173],
@@ -5961,7 +5917,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [v173, v173, v173, T::lit(0.0), T::lit(0.0), v173, v173],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([
                 [v180, v187, v198, v209],
                 [v212, v215, v221, v227],
@@ -5972,7 +5928,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v292, v301],
             ]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([
                 [v317, v326, v345, v358],
                 [v359, v320, v360, v361],
@@ -5983,7 +5939,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v330, v368],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [v375, v382, v393, v404],
                 [v407, v410, v416, v422],
@@ -5994,7 +5950,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v487, v496],
             ]),
         ),
-    )
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -6004,9 +5960,9 @@ pub fn contact_derivatives<T: Arithmetic>(
     _a: &SVector<T, 7>,
     _lambda: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 7, 7>, SMatrix<T, 0, 7>, SMatrix<T, 0, 7>, SMatrix<T, 0, 7>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 7, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [
                     T::lit(0.0),
@@ -6073,10 +6029,10 @@ pub fn contact_derivatives<T: Arithmetic>(
                 ],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
-    )
+        jacobian_q: SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
+        bias_q: SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], [], [], [], [], []])),
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -6086,7 +6042,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 7>,
     f: &SVector<T, 4>,
     p: &Params<T>,
-) -> (SMatrix<T, 7, 7>, SMatrix<T, 7, 7>, SMatrix<T, 4, 7>, SMatrix<T, 4, 7>) {
+) -> DynamicsDerivatives<T, 7, 4> {
     let [q_0, q_1, q_2, q_3, q_4, q_5, q_6] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3, a_4, a_5, a_6] = a.data.0[0];
@@ -8048,8 +8004,8 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v1961 = v1959 + v1960;
     let v1962 = v1870 + v1961;
     let v1963 = -v1962;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [v347, v387, v421, v431, v441, v457, v467],
                 [v617, v655, v686, v696, T::lit(0.0), v713, v723],
@@ -8068,7 +8024,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v1176, v1194, v1212, T::lit(0.0), T::lit(0.0), v1230, v1246],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [v1342, v1366, v1385, v1389, v1393, v1402, v1406],
                 [v1430, v1455, v1474, v1478, T::lit(0.0), v1487, v1491],
@@ -8087,7 +8043,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [v1637, v1641, v1645, T::lit(0.0), T::lit(0.0), v1649, v1654],
             ]),
         ),
-        SMatrix::from_data(
+        constraint_q: SMatrix::from_data(
             ArrayStorage([
                 [v1668, v1682, v1704, v1726],
                 [v1730, v1734, v1742, v1750],
@@ -8098,7 +8054,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v1825, v1835],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([
                 [v1842, v1849, v1860, v1871],
                 [v1874, v1877, v1883, v1889],
@@ -8109,5 +8065,5 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v1954, v1963],
             ]),
         ),
-    )
+    }
 }

@@ -316,17 +316,7 @@ impl LegDynamics<NQ, NC, NU> for TwoLink {
         qd: &SVector<T, 2>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 2, 0> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 2>,
@@ -349,19 +339,7 @@ impl LegDynamics<NQ, NC, NU> for TwoLink {
         f: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 2, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 2>,
@@ -370,19 +348,7 @@ impl LegDynamics<NQ, NC, NU> for TwoLink {
         f: &SVector<T, 0>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 2, 0> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU> for TwoLink {
@@ -449,19 +415,7 @@ impl ContactModel<NQ, NC, NU, NK> for TwoLink {
         lambda: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 2, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -912,7 +866,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 2>,
     qd: &SVector<T, 2>,
     p: &Params<T>,
-) -> (SMatrix<T, 2, 2>, SVector<T, 2>, SMatrix<T, 0, 2>, SVector<T, 0>) {
+) -> DynamicsTerms<T, 2, 0> {
     let [q_0, q_1] = q.data.0[0];
     let [qd_0, qd_1] = qd.data.0[0];
     let (v2, v0) = q_1.sincos();
@@ -954,12 +908,12 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v38 = qd_0 * qd_0;
     let v39 = v12 * v38;
     let v40 = v35 + v39;
-    (
-        SMatrix::from_data(ArrayStorage([[v6, v9], [v9, p.prepared[5]]])),
-        SMatrix::from_data(ArrayStorage([[v37, v40]])),
-        SMatrix::from_data(ArrayStorage([[], []])),
-        SMatrix::from_data(ArrayStorage([[]])),
-    )
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(ArrayStorage([[v6, v9], [v9, p.prepared[5]]])),
+        bias_forces: SMatrix::from_data(ArrayStorage([[v37, v40]])),
+        constraint_jacobian: SMatrix::from_data(ArrayStorage([[], []])),
+        constraint_bias: SMatrix::from_data(ArrayStorage([[]])),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -1049,15 +1003,15 @@ pub fn constraint_derivatives<T: Arithmetic>(
     _a: &SVector<T, 2>,
     _f: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 2, 2>, SMatrix<T, 0, 2>, SMatrix<T, 0, 2>, SMatrix<T, 0, 2>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 2, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([[T::lit(0.0), T::lit(0.0)], [T::lit(0.0), T::lit(0.0)]]),
         ),
-        SMatrix::from_data(ArrayStorage([[], []])),
-        SMatrix::from_data(ArrayStorage([[], []])),
-        SMatrix::from_data(ArrayStorage([[], []])),
-    )
+        jacobian_q: SMatrix::from_data(ArrayStorage([[], []])),
+        bias_q: SMatrix::from_data(ArrayStorage([[], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], []])),
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -1067,15 +1021,15 @@ pub fn contact_derivatives<T: Arithmetic>(
     _a: &SVector<T, 2>,
     _lambda: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 2, 2>, SMatrix<T, 0, 2>, SMatrix<T, 0, 2>, SMatrix<T, 0, 2>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 2, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([[T::lit(0.0), T::lit(0.0)], [T::lit(0.0), T::lit(0.0)]]),
         ),
-        SMatrix::from_data(ArrayStorage([[], []])),
-        SMatrix::from_data(ArrayStorage([[], []])),
-        SMatrix::from_data(ArrayStorage([[], []])),
-    )
+        jacobian_q: SMatrix::from_data(ArrayStorage([[], []])),
+        bias_q: SMatrix::from_data(ArrayStorage([[], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], []])),
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -1085,7 +1039,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 2>,
     _f: &SVector<T, 0>,
     p: &Params<T>,
-) -> (SMatrix<T, 2, 2>, SMatrix<T, 2, 2>, SMatrix<T, 0, 2>, SMatrix<T, 0, 2>) {
+) -> DynamicsDerivatives<T, 2, 0> {
     let [q_0, q_1] = q.data.0[0];
     let [qd_0, qd_1] = qd.data.0[0];
     let [a_0, a_1] = a.data.0[0];
@@ -1141,10 +1095,12 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v51 = qd_1 + qd_1;
     let v52 = v24 * v51;
     let v53 = v50 + v52;
-    (
-        SMatrix::from_data(ArrayStorage([[v16, v15], [v40, v45]])),
-        SMatrix::from_data(ArrayStorage([[v47, v49], [v53, p.forearm_damping]])),
-        SMatrix::from_data(ArrayStorage([[], []])),
-        SMatrix::from_data(ArrayStorage([[], []])),
-    )
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(ArrayStorage([[v16, v15], [v40, v45]])),
+        dynamics_qd: SMatrix::from_data(
+            ArrayStorage([[v47, v49], [v53, p.forearm_damping]]),
+        ),
+        constraint_q: SMatrix::from_data(ArrayStorage([[], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], []])),
+    }
 }

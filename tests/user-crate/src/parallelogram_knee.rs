@@ -430,17 +430,7 @@ impl LegDynamics<NQ, NC, NU> for ParallelogramKnee {
         qd: &SVector<T, 4>,
         p: &Params<T>,
     ) -> DynamicsTerms<T, 4, 2> {
-        let (mass_matrix, bias_forces, constraint_jacobian, constraint_bias) = dynamics_terms(
-            q,
-            qd,
-            p,
-        );
-        DynamicsTerms {
-            mass_matrix,
-            bias_forces,
-            constraint_jacobian,
-            constraint_bias,
-        }
+        dynamics_terms(q, qd, p)
     }
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 4>,
@@ -463,19 +453,7 @@ impl LegDynamics<NQ, NC, NU> for ParallelogramKnee {
         f: &SVector<T, 2>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 4, 2> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = constraint_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        constraint_derivatives(q, qd, a, f, p)
     }
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 4>,
@@ -484,19 +462,7 @@ impl LegDynamics<NQ, NC, NU> for ParallelogramKnee {
         f: &SVector<T, 2>,
         p: &Params<T>,
     ) -> DynamicsDerivatives<T, 4, 2> {
-        let (dynamics_q, dynamics_qd, constraint_q, jacobian_rate) = dynamics_derivatives(
-            q,
-            qd,
-            a,
-            f,
-            p,
-        );
-        DynamicsDerivatives {
-            dynamics_q,
-            dynamics_qd,
-            constraint_q,
-            jacobian_rate,
-        }
+        dynamics_derivatives(q, qd, a, f, p)
     }
 }
 impl LegModel<NQ, NC, NU> for ParallelogramKnee {
@@ -563,19 +529,7 @@ impl ContactModel<NQ, NC, NU, NK> for ParallelogramKnee {
         lambda: &SVector<T, 0>,
         p: &Params<T>,
     ) -> ConstraintDerivatives<T, 4, 0> {
-        let (force_q, jacobian_q, bias_q, jacobian_rate) = contact_derivatives(
-            q,
-            qd,
-            a,
-            lambda,
-            p,
-        );
-        ConstraintDerivatives {
-            force_q,
-            jacobian_q,
-            bias_q,
-            jacobian_rate,
-        }
+        contact_derivatives(q, qd, a, lambda, p)
     }
 }
 /// The parameter-only quantities the terms read (products of masses, lengths and
@@ -1492,7 +1446,7 @@ pub fn dynamics_terms<T: Arithmetic>(
     q: &SVector<T, 4>,
     qd: &SVector<T, 4>,
     p: &Params<T>,
-) -> (SMatrix<T, 4, 4>, SVector<T, 4>, SMatrix<T, 2, 4>, SVector<T, 2>) {
+) -> DynamicsTerms<T, 4, 2> {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3] = qd.data.0[0];
     let (v2, v0) = q_1.sincos();
@@ -1623,8 +1577,8 @@ pub fn dynamics_terms<T: Arithmetic>(
     let v129 = v79 * v103;
     let v130 = v128 + v129;
     let v131 = v127 - v130;
-    (
-        SMatrix::from_data(
+    DynamicsTerms {
+        mass_matrix: SMatrix::from_data(
             ArrayStorage([
                 [v6, v9, T::lit(0.0), T::lit(0.0)],
                 [v9, p.prepared[0], T::lit(0.0), T::lit(0.0)],
@@ -1632,12 +1586,12 @@ pub fn dynamics_terms<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v19, p.prepared[5]],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[v47, v50, v78, v81]])),
-        SMatrix::from_data(
+        bias_forces: SMatrix::from_data(ArrayStorage([[v47, v50, v78, v81]])),
+        constraint_jacobian: SMatrix::from_data(
             ArrayStorage([[v88, v96], [v84, v97], [v105, v112], [v113, v108]]),
         ),
-        SMatrix::from_data(ArrayStorage([[v124, v131]])),
-    )
+        constraint_bias: SMatrix::from_data(ArrayStorage([[v124, v131]])),
+    }
 }
 /// `∂(M a)/∂q` at the accelerations `a`.
 pub fn mass_matrix_derivative<T: Arithmetic>(
@@ -1805,7 +1759,7 @@ pub fn constraint_derivatives<T: Arithmetic>(
     a: &SVector<T, 4>,
     f: &SVector<T, 2>,
     p: &Params<T>,
-) -> (SMatrix<T, 4, 4>, SMatrix<T, 2, 4>, SMatrix<T, 2, 4>, SMatrix<T, 2, 4>) {
+) -> ConstraintDerivatives<T, 4, 2> {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3] = a.data.0[0];
@@ -1938,8 +1892,8 @@ pub fn constraint_derivatives<T: Arithmetic>(
     let v129 = v42 * qd_2;
     let v130 = v123 + v129;
     let v131 = -v130;
-    (
-        SMatrix::from_data(
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [v26, v29, T::lit(0.0), T::lit(0.0)],
                 [v29, v29, T::lit(0.0), T::lit(0.0)],
@@ -1947,16 +1901,16 @@ pub fn constraint_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v61, v61],
             ]),
         ),
-        SMatrix::from_data(
+        jacobian_q: SMatrix::from_data(
             ArrayStorage([[v64, v67], [v69, v71], [v75, v79], [v82, v85]]),
         ),
-        SMatrix::from_data(
+        bias_q: SMatrix::from_data(
             ArrayStorage([[v92, v95], [v96, v93], [v102, v106], [v99, v107]]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([[v110, v113], [v115, v117], [v121, v125], [v128, v131]]),
         ),
-    )
+    }
 }
 /// `∂(J_cᵀ λ)/∂q`, `∂(J_c a)/∂q`, `∂(J̇_c q̇)/∂q` and `J̇_c` at the contact forces `λ`
 /// (base frame) and the accelerations `a`.
@@ -1966,9 +1920,9 @@ pub fn contact_derivatives<T: Arithmetic>(
     _a: &SVector<T, 4>,
     _lambda: &SVector<T, 0>,
     _p: &Params<T>,
-) -> (SMatrix<T, 4, 4>, SMatrix<T, 0, 4>, SMatrix<T, 0, 4>, SMatrix<T, 0, 4>) {
-    (
-        SMatrix::from_data(
+) -> ConstraintDerivatives<T, 4, 0> {
+    ConstraintDerivatives {
+        force_q: SMatrix::from_data(
             ArrayStorage([
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
@@ -1976,10 +1930,10 @@ pub fn contact_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), T::lit(0.0), T::lit(0.0)],
             ]),
         ),
-        SMatrix::from_data(ArrayStorage([[], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], []])),
-        SMatrix::from_data(ArrayStorage([[], [], [], []])),
-    )
+        jacobian_q: SMatrix::from_data(ArrayStorage([[], [], [], []])),
+        bias_q: SMatrix::from_data(ArrayStorage([[], [], [], []])),
+        jacobian_rate: SMatrix::from_data(ArrayStorage([[], [], [], []])),
+    }
 }
 /// `∂(M a + N − Jᵀ f)/∂q`, `∂(N + D q̇)/∂q̇`, `∂(J a + J̇ q̇)/∂q` and `J̇` together, sharing
 /// subexpressions: the derivatives the linearized dynamics need (DESIGN.md §3.2).
@@ -1989,7 +1943,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     a: &SVector<T, 4>,
     f: &SVector<T, 2>,
     p: &Params<T>,
-) -> (SMatrix<T, 4, 4>, SMatrix<T, 4, 4>, SMatrix<T, 2, 4>, SMatrix<T, 2, 4>) {
+) -> DynamicsDerivatives<T, 4, 2> {
     let [q_0, q_1, q_2, q_3] = q.data.0[0];
     let [qd_0, qd_1, qd_2, qd_3] = qd.data.0[0];
     let [a_0, a_1, a_2, a_3] = a.data.0[0];
@@ -2216,8 +2170,8 @@ pub fn dynamics_derivatives<T: Arithmetic>(
     let v223 = v89 * qd_2;
     let v224 = v217 + v223;
     let v225 = -v224;
-    (
-        SMatrix::from_data(
+    DynamicsDerivatives {
+        dynamics_q: SMatrix::from_data(
             ArrayStorage([
                 [v34, v38, T::lit(0.0), T::lit(0.0)],
                 [v63, v69, T::lit(0.0), T::lit(0.0)],
@@ -2225,7 +2179,7 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v133, v139],
             ]),
         ),
-        SMatrix::from_data(
+        dynamics_qd: SMatrix::from_data(
             ArrayStorage([
                 [v141, v143, T::lit(0.0), T::lit(0.0)],
                 [v147, p.shank_damping, T::lit(0.0), T::lit(0.0)],
@@ -2233,11 +2187,11 @@ pub fn dynamics_derivatives<T: Arithmetic>(
                 [T::lit(0.0), T::lit(0.0), v155, p.coupler_damping],
             ]),
         ),
-        SMatrix::from_data(
+        constraint_q: SMatrix::from_data(
             ArrayStorage([[v164, v171], [v174, v177], [v186, v194], [v197, v201]]),
         ),
-        SMatrix::from_data(
+        jacobian_rate: SMatrix::from_data(
             ArrayStorage([[v204, v207], [v209, v211], [v215, v219], [v222, v225]]),
         ),
-    )
+    }
 }

@@ -535,7 +535,11 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         .iter()
         .zip(terms(nq, nc, nk, nd, info.closure_points()))
     {
-        functions.push(codegen::emit_function(f, t.doc)?);
+        functions.push(codegen::emit_function_returning(
+            f,
+            t.doc,
+            wrap_type(f, nq, t.wrap),
+        )?);
         if f.name.starts_with("contact_") {
             contact_methods.push(trait_method(f, nq, t.wrap));
         } else if POINT_TERMS.contains(&f.name.as_str()) {
@@ -779,9 +783,19 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     codegen::format_file(&[header(ir)], tokens)
 }
 
-/// The trait method that forwards to the generated function `f`. One output is returned
-/// as it is; several are returned in the runtime's struct `wrap` (fields named as the
-/// outputs, sizes `NQ` and the rows of the last output), or as a tuple without one.
+/// The runtime struct `wrap` a term of several outputs returns: its type `Wrap<T, NQ,
+/// rows>` (rows those of its last output) and its name; `None` for a term of one
+/// output, or not wrapped.
+fn wrap_type(f: &Program, nq: usize, wrap: Option<&str>) -> Option<(TokenStream, TokenStream)> {
+    let wrap = wrap.filter(|_| f.outputs.len() > 1)?;
+    let st = format_ident!("{}", wrap);
+    let (lq, rows) = (lit(nq), lit(f.outputs.last().map_or(0, |o| o.rows)));
+    Some((quote!(#st<T, #lq, #rows>), quote!(#st)))
+}
+
+/// The trait method that forwards to the generated function `f`, returning what it
+/// returns: one output as it is; several in the runtime's struct `wrap` (built by `f`
+/// itself, [`wrap_type`]), or as a tuple without one.
 fn trait_method(f: &Program, nq: usize, wrap: Option<&str>) -> TokenStream {
     let name = format_ident!("{}", f.name);
     let args: Vec<_> = f
@@ -810,36 +824,19 @@ fn trait_method(f: &Program, nq: usize, wrap: Option<&str>) -> TokenStream {
             OutputKind::Matrix => quote!(SMatrix<T, #r, #c>),
         }
     };
-    match (f.outputs.as_slice(), wrap) {
-        ([one], _) => {
-            let ret = ty(one);
-            quote! {
-                fn #name<T: Arithmetic>(#(#args),*) -> #ret {
-                    #name(#(#pass),*)
-                }
-            }
-        }
-        (outputs, Some(wrap)) => {
-            let st = format_ident!("{}", wrap);
-            let (lq, rows) = (lit(nq), lit(outputs.last().map_or(0, |o| o.rows)));
-            let fields: Vec<_> = outputs
-                .iter()
-                .map(|o| format_ident!("{}", o.name))
-                .collect();
-            quote! {
-                fn #name<T: Arithmetic>(#(#args),*) -> #st<T, #lq, #rows> {
-                    let (#(#fields),*) = #name(#(#pass),*);
-                    #st { #(#fields),* }
-                }
-            }
-        }
+    // `f` returns what the method does (a wrapped struct built in the caller's place):
+    // nothing is moved here.
+    let ret = match (f.outputs.as_slice(), wrap_type(f, nq, wrap)) {
+        ([one], _) => ty(one),
+        (_, Some((st, _))) => st,
         (outputs, None) => {
             let types = outputs.iter().map(ty);
-            quote! {
-                fn #name<T: Arithmetic>(#(#args),*) -> (#(#types),*) {
-                    #name(#(#pass),*)
-                }
-            }
+            quote!((#(#types),*))
+        }
+    };
+    quote! {
+        fn #name<T: Arithmetic>(#(#args),*) -> #ret {
+            #name(#(#pass),*)
         }
     }
 }
