@@ -132,12 +132,27 @@ where
     L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
+    let gravity = chart_gravity::<L, T, NQ, NC, NU>(params, orientation)?;
+    let mut out = *params;
+    out.set_many(&gravity);
+    Ok(out)
+}
+
+/// The chart's gravity `R₀ᵀ g` as the changes `Parameters::set_many` takes. The hot
+/// paths copy the parameters and set these on the copy (one copy; returning the copied
+/// parameters in a `Result` moved them twice more: a robot's are 8 KB).
+fn chart_gravity<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    orientation: &UnitQuaternion<T>,
+) -> Result<[(usize, T); 3], RobotError>
+where
+    L: LegDynamics<NQ, NC, NU>,
+    T: Real,
+{
     let idx = gravity_indices::<L, T, NQ, NC, NU>()?;
     let g = world_gravity::<L, T, NQ, NC, NU>(params)?;
     let local = orientation.inverse_transform_vector(&g);
-    let mut out = *params;
-    out.set_many(&[(idx[0], local[0]), (idx[1], local[1]), (idx[2], local[2])]);
-    Ok(out)
+    Ok([(idx[0], local[0]), (idx[1], local[1]), (idx[2], local[2])])
 }
 
 /// `R_x(α) R_y(β) R_z(γ)`, the ball joint's rotation, as a unit quaternion.
@@ -244,7 +259,9 @@ where
     let f = free_joint::<L, NQ, NC, NU>()?;
     let mut s = *state;
     s.recentre(f);
-    let chart = chart_params::<L, T, NQ, NC, NU>(params, &s.orientation)?;
+    let gravity = chart_gravity::<L, T, NQ, NC, NU>(params, &s.orientation)?;
+    let mut chart = *params;
+    chart.set_many(&gravity);
     Ok(forward_dynamics::<L, T, NQ, NC, NU>(
         &chart, &s.q, &s.v, u, None,
     )?)
@@ -360,7 +377,9 @@ where
     let f = free_joint::<L, NQ, NC, NU>()?;
     let mut next = *state;
     next.recentre(f);
-    let chart = chart_params::<L, T, NQ, NC, NU>(params, &next.orientation)?;
+    let gravity = chart_gravity::<L, T, NQ, NC, NU>(params, &next.orientation)?;
+    let mut chart = *params;
+    chart.set_many(&gravity);
     let mut local = State {
         q: next.q,
         qd: next.v,
@@ -388,7 +407,9 @@ where
     let f = free_joint::<L, NQ, NC, NU>()?;
     let mut s = *state;
     s.recentre(f);
-    let chart = chart_params::<L, T, NQ, NC, NU>(params, &s.orientation)?;
+    let gravity = chart_gravity::<L, T, NQ, NC, NU>(params, &s.orientation)?;
+    let mut chart = *params;
+    chart.set_many(&gravity);
     let kinetic = L::kinetic_energy(&s.q, &s.v, &chart);
     let g = L::gravity_forces(&s.q, &chart);
     let weight_in_world = s
@@ -415,7 +436,9 @@ where
     let f = free_joint::<L, NQ, NC, NU>()?;
     let mut s = *state;
     s.recentre(f);
-    let chart = chart_params::<L, T, NQ, NC, NU>(params, &s.orientation)?;
+    let gravity = chart_gravity::<L, T, NQ, NC, NU>(params, &s.orientation)?;
+    let mut chart = *params;
+    chart.set_many(&gravity);
     let h = L::mass_matrix(&s.q, &chart) * s.v;
     let linear = s
         .orientation
@@ -638,7 +661,9 @@ where
     let f = free_joint::<L, NQ, NC, NU>()?;
     let mut s = *state;
     s.recentre(f);
-    let chart = chart_params::<L, T, NQ, NC, NU>(params, &s.orientation)?;
+    let gravity = chart_gravity::<L, T, NQ, NC, NU>(params, &s.orientation)?;
+    let mut chart = *params;
+    chart.set_many(&gravity);
     let local = ground_in_chart(ground, &s.position, &s.orientation);
     let system = ContactSystem::new::<L, NU>(
         &chart,
@@ -791,7 +816,9 @@ where
     let f = free_joint::<L, NQ, NC, NU>()?;
     let mut next = *state;
     next.recentre(f);
-    let chart = chart_params::<L, T, NQ, NC, NU>(params, &next.orientation)?;
+    let gravity = chart_gravity::<L, T, NQ, NC, NU>(params, &next.orientation)?;
+    let mut chart = *params;
+    chart.set_many(&gravity);
     let local = ground_in_chart(ground, &next.position, &next.orientation);
     // The forces are in the chart of the step's start, turned by its centre.
     let centre = next.orientation;
@@ -848,7 +875,9 @@ where
     let f = free_joint::<L, NQ, NC, NU>()?;
     let mut next = *state;
     next.recentre(f);
-    let chart = chart_params::<L, T, NQ, NC, NU>(params, &next.orientation)?;
+    let gravity = chart_gravity::<L, T, NQ, NC, NU>(params, &next.orientation)?;
+    let mut chart = *params;
+    chart.set_many(&gravity);
     let local = ground_in_chart(ground, &next.position, &next.orientation);
     // `modes` changes (a sticking contact resolved as sliding) only if the impact does.
     let mut resolved = *modes;
