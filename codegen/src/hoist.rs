@@ -20,8 +20,8 @@ pub struct Hoisted {
     /// input (`InputShape::Struct::prepared` says how many there are).
     pub programs: Vec<Program>,
     /// Which of the struct's fields `prepare` reads: changing any other field leaves the
-    /// prepared values as they are (gravity, which only multiplies state-dependent terms,
-    /// is usually one of those).
+    /// prepared values as they are (a floating robot's gravity, which only multiplies
+    /// state-dependent terms, is one of those; a planar leg's usually is not).
     pub reads: Vec<bool>,
 }
 

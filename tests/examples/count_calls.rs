@@ -115,8 +115,9 @@ fn run<L: LegDynamics<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: u
                 black_box(&jac)[0]
             })
         }
-        // What a change of parameters costs: one value set, every prepared value computed
-        // again (the work the per-state functions no longer do).
+        // What a change of parameters costs: parameter 0 set, every prepared value computed
+        // again where `prepare` reads it (the work the per-state functions no longer do; a
+        // floating robot's parameter 0, gravity, enters none, so there it costs a write).
         "set_parameter" => {
             let mut changed = p;
             let value = p.get(0).unwrap_or(0.0);

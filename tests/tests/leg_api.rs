@@ -288,14 +288,11 @@ where
         assert_eq!(p, fresh(&p), "{name}: set {}", P::NAMES[i]);
     }
     let mut all = P::default();
-    let mut changes = [(0, 0.0); 512];
-    for (i, c) in changes.iter_mut().enumerate().take(n) {
-        *c = (i, changed(&all, i));
-    }
+    let mut changes: Vec<(usize, f64)> = (0..n).map(|i| (i, changed(&all, i))).collect();
     // In order: a later change of the same parameter wins.
     let last = (n - 1, -3.0);
-    changes[n] = last;
-    assert!(all.set_many(&changes[..=n]));
+    changes.push(last);
+    assert!(all.set_many(&changes));
     assert_eq!(all.get(last.0), Some(last.1));
     assert_eq!(all.get(0), Some(changed(&P::default(), 0)));
     assert_eq!(all, fresh(&all), "{name}: set_many");

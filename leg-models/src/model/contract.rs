@@ -194,8 +194,8 @@ pub trait Parameters<T>: Sized {
         self.set_many(&[(i, value)])
     }
     /// Sets several parameters `(i, value)`, in order, then prepares the parameter-only
-    /// quantities once, and only if a changed parameter enters them (gravity usually does
-    /// not); returns `false` (and changes nothing) if any `i` names no parameter.
+    /// quantities once, and only if a changed parameter enters them (a floating robot's
+    /// gravity does not); returns `false` (and changes nothing) if any `i` names no parameter.
     fn set_many(&mut self, changes: &[(usize, T)]) -> bool;
 }
 

@@ -510,7 +510,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
 
     // Parameter-only work is done once per parameter set (`Params::new`), not per call.
     let hoisted = codegen::hoist::hoist(&ir.functions, "p", "ParamValues");
-    // A field `prepare` does not read (gravity, as a rule) is set without preparing again:
+    // A field `prepare` does not read (a floating robot's gravity) is set without preparing:
     // a floating robot writes its chart's gravity every call.
     let setters: Vec<_> = setter_fields
         .iter()
