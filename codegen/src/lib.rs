@@ -212,6 +212,20 @@ fn input_type(input: &Input) -> TokenStream {
     }
 }
 
+/// The Rust type a function emitted from `prog` returns: one output as it is, several in
+/// the struct type `wrap` when given, or as a tuple.
+pub fn return_type(prog: &Program, wrap: Option<&TokenStream>) -> TokenStream {
+    let mut types = prog
+        .outputs
+        .iter()
+        .map(|o| output_type(o.kind, o.rows, o.cols));
+    match (prog.outputs.len(), wrap) {
+        (1, _) => types.next().expect("one output"),
+        (_, Some(ty)) => ty.clone(),
+        (_, None) => quote!((#(#types),*)),
+    }
+}
+
 fn output_type(kind: OutputKind, rows: usize, cols: usize) -> TokenStream {
     let (r, c) = (
         Literal::usize_unsuffixed(rows),
@@ -353,10 +367,9 @@ pub fn emit_function_returning(
         body.push(quote!(let #lhs = #rhs;));
     }
 
+    let ret = return_type(prog, wrap.as_ref().map(|(ty, _)| ty));
     let mut results = Vec::new();
-    let mut types = Vec::new();
     for out in &prog.outputs {
-        types.push(output_type(out.kind, out.rows, out.cols));
         let value = if out.kind == OutputKind::Scalar {
             values[out.entries[0]].tokens()
         } else {
@@ -378,13 +391,13 @@ pub fn emit_function_returning(
         };
         results.push(value);
     }
-    let (ret, result) = match wrap {
-        _ if results.len() == 1 => (types.remove(0), results.remove(0)),
-        Some((ty, st)) => {
+    let result = match wrap {
+        _ if results.len() == 1 => results.remove(0),
+        Some((_, st)) => {
             let fields = prog.outputs.iter().map(|o| format_ident!("{}", o.name));
-            (ty, quote!(#st { #(#fields: #results),* }))
+            quote!(#st { #(#fields: #results),* })
         }
-        None => (quote!((#(#types),*)), quote!((#(#results),*))),
+        None => quote!((#(#results),*)),
     };
 
     let name = format_ident!("{}", prog.name);

@@ -116,12 +116,25 @@ fn outputs_returned_in_a_struct_are_the_tuples_values_by_name() {
         };
         (f.sig.output, e)
     };
-    let (_, tuple) = tail(emit(&p));
+    let (tuple_ret, tuple) = tail(emit(&p));
+    // `return_type` (what the generated trait methods declare) is what is emitted.
+    let declared = |ret: &syn::ReturnType| match ret {
+        syn::ReturnType::Type(_, ty) => quote::quote!(#ty).to_string(),
+        syn::ReturnType::Default => panic!("a return type"),
+    };
+    assert_eq!(
+        declared(&tuple_ret),
+        codegen::return_type(&p, None).to_string()
+    );
     let wrap = (quote::quote!(Shapes<T, 2>), quote::quote!(Shapes));
     let (ret, wrapped) = tail(codegen::emit_function_returning(&p, "", Some(wrap)).unwrap());
     assert_eq!(
         quote::quote!(#ret).to_string(),
         quote::quote!(-> Shapes<T, 2>).to_string()
+    );
+    assert_eq!(
+        declared(&ret),
+        codegen::return_type(&p, Some(&quote::quote!(Shapes<T, 2>))).to_string()
     );
     let (syn::Expr::Tuple(tuple), syn::Expr::Struct(wrapped)) = (tuple, wrapped) else {
         panic!("a tuple, then a struct")
@@ -148,6 +161,11 @@ fn outputs_returned_in_a_struct_are_the_tuples_values_by_name() {
     // One output is returned as it is, wrap or not.
     let mut one = p.clone();
     one.outputs.truncate(1);
+    let (one_ret, _) = tail(emit(&one));
+    assert_eq!(
+        declared(&one_ret),
+        codegen::return_type(&one, Some(&quote::quote!(Shapes<T, 2>))).to_string()
+    );
     let wrap = (quote::quote!(Shapes<T, 2>), quote::quote!(Shapes));
     assert_eq!(
         codegen::emit_function_returning(&one, "", Some(wrap))

@@ -565,6 +565,10 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
+        self.prepare_again();
+    }
+    /// The prepared quantities of the present values, in place.
+    fn prepare_again(&mut self) {
         self.prepared = prepare(&self.values).data.0[0];
     }
 }
@@ -1113,7 +1117,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             stale |= PREPARE_READS[i];
         }
         if stale {
-            self.prepared = prepare(&self.values).data.0[0];
+            self.prepare_again();
         }
         true
     }
@@ -1183,12 +1187,14 @@ impl LegDynamics<NQ, NC, NU> for AchillesLeg {
     const BALL_JOINTS: &'static [usize] = &[2];
     const DIMENSION: usize = 3;
     type Params<T: Arithmetic> = Params<T>;
+    #[inline]
     fn mass_matrix<T: Arithmetic>(
         q: &SVector<T, 10>,
         p: &Params<T>,
     ) -> SMatrix<T, 10, 10> {
         mass_matrix(q, p)
     }
+    #[inline]
     fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 10>,
         qd: &SVector<T, 10>,
@@ -1196,30 +1202,35 @@ impl LegDynamics<NQ, NC, NU> for AchillesLeg {
     ) -> SVector<T, 10> {
         bias_forces(q, qd, p)
     }
+    #[inline]
     fn gravity_forces<T: Arithmetic>(
         q: &SVector<T, 10>,
         p: &Params<T>,
     ) -> SVector<T, 10> {
         gravity_forces(q, p)
     }
+    #[inline]
     fn damping_forces<T: Arithmetic>(
         qd: &SVector<T, 10>,
         p: &Params<T>,
     ) -> SVector<T, 10> {
         damping_forces(qd, p)
     }
+    #[inline]
     fn closure_residual<T: Arithmetic>(
         q: &SVector<T, 10>,
         p: &Params<T>,
     ) -> SVector<T, 6> {
         closure_residual(q, p)
     }
+    #[inline]
     fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 10>,
         p: &Params<T>,
     ) -> SMatrix<T, 6, 10> {
         constraint_jacobian(q, p)
     }
+    #[inline]
     fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 10>,
         qd: &SVector<T, 10>,
@@ -1227,6 +1238,7 @@ impl LegDynamics<NQ, NC, NU> for AchillesLeg {
     ) -> SVector<T, 6> {
         constraint_bias(q, qd, p)
     }
+    #[inline]
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 10>,
         qd: &SVector<T, 10>,
@@ -1234,12 +1246,15 @@ impl LegDynamics<NQ, NC, NU> for AchillesLeg {
     ) -> T {
         kinetic_energy(q, qd, p)
     }
+    #[inline]
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 10>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
+    #[inline]
     fn leg_size<T: Arithmetic>(q: &SVector<T, 10>, p: &Params<T>) -> T {
         leg_size(q, p)
     }
+    #[inline]
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 10>,
         qd: &SVector<T, 10>,
@@ -1247,6 +1262,7 @@ impl LegDynamics<NQ, NC, NU> for AchillesLeg {
     ) -> DynamicsTerms<T, 10, 6> {
         dynamics_terms(q, qd, p)
     }
+    #[inline]
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 10>,
         a: &SVector<T, 10>,
@@ -1254,6 +1270,7 @@ impl LegDynamics<NQ, NC, NU> for AchillesLeg {
     ) -> SMatrix<T, 10, 10> {
         mass_matrix_derivative(q, a, p)
     }
+    #[inline]
     fn bias_forces_derivatives<T: Arithmetic>(
         q: &SVector<T, 10>,
         qd: &SVector<T, 10>,
@@ -1261,6 +1278,7 @@ impl LegDynamics<NQ, NC, NU> for AchillesLeg {
     ) -> (SMatrix<T, 10, 10>, SMatrix<T, 10, 10>) {
         bias_forces_derivatives(q, qd, p)
     }
+    #[inline]
     fn constraint_derivatives<T: Arithmetic>(
         q: &SVector<T, 10>,
         qd: &SVector<T, 10>,
@@ -1270,6 +1288,7 @@ impl LegDynamics<NQ, NC, NU> for AchillesLeg {
     ) -> ConstraintDerivatives<T, 10, 6> {
         constraint_derivatives(q, qd, a, f, p)
     }
+    #[inline]
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 10>,
         qd: &SVector<T, 10>,
@@ -1281,15 +1300,18 @@ impl LegDynamics<NQ, NC, NU> for AchillesLeg {
     }
 }
 impl LegModel<NQ, NC, NU, ND, NP> for AchillesLeg {
+    #[inline]
     fn foot_position<T: Arithmetic>(q: &SVector<T, 10>, p: &Params<T>) -> SVector<T, 3> {
         foot_position(q, p)
     }
+    #[inline]
     fn foot_jacobian<T: Arithmetic>(
         q: &SVector<T, 10>,
         p: &Params<T>,
     ) -> SMatrix<T, 3, 10> {
         foot_jacobian(q, p)
     }
+    #[inline]
     fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 10>,
         qd: &SVector<T, 10>,
@@ -1297,15 +1319,18 @@ impl LegModel<NQ, NC, NU, ND, NP> for AchillesLeg {
     ) -> SVector<T, 3> {
         foot_bias(q, qd, p)
     }
+    #[inline]
     fn joint_positions<T: Arithmetic>(
         q: &SVector<T, 10>,
         p: &Params<T>,
     ) -> SMatrix<T, 3, 10> {
         joint_positions(q, p)
     }
+    #[inline]
     fn link_tips<T: Arithmetic>(q: &SVector<T, 10>, p: &Params<T>) -> SMatrix<T, 3, 10> {
         link_tips(q, p)
     }
+    #[inline]
     fn closure_points<T: Arithmetic>(
         q: &SVector<T, 10>,
         p: &Params<T>,
@@ -1318,18 +1343,21 @@ impl ContactModel<NQ, NC, NU, NK, ND> for AchillesLeg {
     const CONTACT_FRICTION: &'static [f64] = &[];
     const GROUND_NORMAL: [f64; 3] = [0.0, 0.0, 1.0];
     const GROUND_OFFSET: f64 = 0.0;
+    #[inline]
     fn contact_positions<T: Arithmetic>(
         q: &SVector<T, 10>,
         p: &Params<T>,
     ) -> SVector<T, 0> {
         contact_positions(q, p)
     }
+    #[inline]
     fn contact_jacobian<T: Arithmetic>(
         q: &SVector<T, 10>,
         p: &Params<T>,
     ) -> SMatrix<T, 0, 10> {
         contact_jacobian(q, p)
     }
+    #[inline]
     fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 10>,
         qd: &SVector<T, 10>,
@@ -1337,6 +1365,7 @@ impl ContactModel<NQ, NC, NU, NK, ND> for AchillesLeg {
     ) -> SVector<T, 0> {
         contact_bias(q, qd, p)
     }
+    #[inline]
     fn contact_derivatives<T: Arithmetic>(
         q: &SVector<T, 10>,
         qd: &SVector<T, 10>,

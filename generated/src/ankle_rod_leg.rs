@@ -427,6 +427,10 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
+        self.prepare_again();
+    }
+    /// The prepared quantities of the present values, in place.
+    fn prepare_again(&mut self) {
         self.prepared = prepare(&self.values).data.0[0];
     }
 }
@@ -833,7 +837,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             stale |= PREPARE_READS[i];
         }
         if stale {
-            self.prepared = prepare(&self.values).data.0[0];
+            self.prepare_again();
         }
         true
     }
@@ -872,9 +876,11 @@ impl LegDynamics<NQ, NC, NU> for AnkleRodLeg {
     const DIMENSION: usize = 3;
     const DISTANCE_CLOSURES: &'static [usize] = &[1];
     type Params<T: Arithmetic> = Params<T>;
+    #[inline]
     fn mass_matrix<T: Arithmetic>(q: &SVector<T, 6>, p: &Params<T>) -> SMatrix<T, 6, 6> {
         mass_matrix(q, p)
     }
+    #[inline]
     fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 6>,
         qd: &SVector<T, 6>,
@@ -882,27 +888,32 @@ impl LegDynamics<NQ, NC, NU> for AnkleRodLeg {
     ) -> SVector<T, 6> {
         bias_forces(q, qd, p)
     }
+    #[inline]
     fn gravity_forces<T: Arithmetic>(q: &SVector<T, 6>, p: &Params<T>) -> SVector<T, 6> {
         gravity_forces(q, p)
     }
+    #[inline]
     fn damping_forces<T: Arithmetic>(
         qd: &SVector<T, 6>,
         p: &Params<T>,
     ) -> SVector<T, 6> {
         damping_forces(qd, p)
     }
+    #[inline]
     fn closure_residual<T: Arithmetic>(
         q: &SVector<T, 6>,
         p: &Params<T>,
     ) -> SVector<T, 4> {
         closure_residual(q, p)
     }
+    #[inline]
     fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 6>,
         p: &Params<T>,
     ) -> SMatrix<T, 4, 6> {
         constraint_jacobian(q, p)
     }
+    #[inline]
     fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 6>,
         qd: &SVector<T, 6>,
@@ -910,6 +921,7 @@ impl LegDynamics<NQ, NC, NU> for AnkleRodLeg {
     ) -> SVector<T, 4> {
         constraint_bias(q, qd, p)
     }
+    #[inline]
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 6>,
         qd: &SVector<T, 6>,
@@ -917,12 +929,15 @@ impl LegDynamics<NQ, NC, NU> for AnkleRodLeg {
     ) -> T {
         kinetic_energy(q, qd, p)
     }
+    #[inline]
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 6>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
+    #[inline]
     fn leg_size<T: Arithmetic>(q: &SVector<T, 6>, p: &Params<T>) -> T {
         leg_size(q, p)
     }
+    #[inline]
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 6>,
         qd: &SVector<T, 6>,
@@ -930,6 +945,7 @@ impl LegDynamics<NQ, NC, NU> for AnkleRodLeg {
     ) -> DynamicsTerms<T, 6, 4> {
         dynamics_terms(q, qd, p)
     }
+    #[inline]
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 6>,
         a: &SVector<T, 6>,
@@ -937,6 +953,7 @@ impl LegDynamics<NQ, NC, NU> for AnkleRodLeg {
     ) -> SMatrix<T, 6, 6> {
         mass_matrix_derivative(q, a, p)
     }
+    #[inline]
     fn bias_forces_derivatives<T: Arithmetic>(
         q: &SVector<T, 6>,
         qd: &SVector<T, 6>,
@@ -944,6 +961,7 @@ impl LegDynamics<NQ, NC, NU> for AnkleRodLeg {
     ) -> (SMatrix<T, 6, 6>, SMatrix<T, 6, 6>) {
         bias_forces_derivatives(q, qd, p)
     }
+    #[inline]
     fn constraint_derivatives<T: Arithmetic>(
         q: &SVector<T, 6>,
         qd: &SVector<T, 6>,
@@ -953,6 +971,7 @@ impl LegDynamics<NQ, NC, NU> for AnkleRodLeg {
     ) -> ConstraintDerivatives<T, 6, 4> {
         constraint_derivatives(q, qd, a, f, p)
     }
+    #[inline]
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 6>,
         qd: &SVector<T, 6>,
@@ -964,15 +983,18 @@ impl LegDynamics<NQ, NC, NU> for AnkleRodLeg {
     }
 }
 impl LegModel<NQ, NC, NU, ND, NP> for AnkleRodLeg {
+    #[inline]
     fn foot_position<T: Arithmetic>(q: &SVector<T, 6>, p: &Params<T>) -> SVector<T, 3> {
         foot_position(q, p)
     }
+    #[inline]
     fn foot_jacobian<T: Arithmetic>(
         q: &SVector<T, 6>,
         p: &Params<T>,
     ) -> SMatrix<T, 3, 6> {
         foot_jacobian(q, p)
     }
+    #[inline]
     fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 6>,
         qd: &SVector<T, 6>,
@@ -980,15 +1002,18 @@ impl LegModel<NQ, NC, NU, ND, NP> for AnkleRodLeg {
     ) -> SVector<T, 3> {
         foot_bias(q, qd, p)
     }
+    #[inline]
     fn joint_positions<T: Arithmetic>(
         q: &SVector<T, 6>,
         p: &Params<T>,
     ) -> SMatrix<T, 3, 6> {
         joint_positions(q, p)
     }
+    #[inline]
     fn link_tips<T: Arithmetic>(q: &SVector<T, 6>, p: &Params<T>) -> SMatrix<T, 3, 6> {
         link_tips(q, p)
     }
+    #[inline]
     fn closure_points<T: Arithmetic>(
         q: &SVector<T, 6>,
         p: &Params<T>,
@@ -1001,18 +1026,21 @@ impl ContactModel<NQ, NC, NU, NK, ND> for AnkleRodLeg {
     const CONTACT_FRICTION: &'static [f64] = &[0.8, 0.8];
     const GROUND_NORMAL: [f64; 3] = [0.0, 0.0, 1.0];
     const GROUND_OFFSET: f64 = -0.32;
+    #[inline]
     fn contact_positions<T: Arithmetic>(
         q: &SVector<T, 6>,
         p: &Params<T>,
     ) -> SVector<T, 6> {
         contact_positions(q, p)
     }
+    #[inline]
     fn contact_jacobian<T: Arithmetic>(
         q: &SVector<T, 6>,
         p: &Params<T>,
     ) -> SMatrix<T, 6, 6> {
         contact_jacobian(q, p)
     }
+    #[inline]
     fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 6>,
         qd: &SVector<T, 6>,
@@ -1020,6 +1048,7 @@ impl ContactModel<NQ, NC, NU, NK, ND> for AnkleRodLeg {
     ) -> SVector<T, 6> {
         contact_bias(q, qd, p)
     }
+    #[inline]
     fn contact_derivatives<T: Arithmetic>(
         q: &SVector<T, 6>,
         qd: &SVector<T, 6>,

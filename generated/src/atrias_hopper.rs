@@ -298,6 +298,10 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
+        self.prepare_again();
+    }
+    /// The prepared quantities of the present values, in place.
+    fn prepare_again(&mut self) {
         self.prepared = prepare(&self.values).data.0[0];
     }
 }
@@ -578,7 +582,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             stale |= PREPARE_READS[i];
         }
         if stale {
-            self.prepared = prepare(&self.values).data.0[0];
+            self.prepare_again();
         }
         true
     }
@@ -649,9 +653,11 @@ impl LegDynamics<NQ, NC, NU> for AtriasHopper {
     const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 7;
     type Params<T: Arithmetic> = Params<T>;
+    #[inline]
     fn mass_matrix<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 9, 9> {
         mass_matrix(q, p)
     }
+    #[inline]
     fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
@@ -659,27 +665,32 @@ impl LegDynamics<NQ, NC, NU> for AtriasHopper {
     ) -> SVector<T, 9> {
         bias_forces(q, qd, p)
     }
+    #[inline]
     fn gravity_forces<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 9> {
         gravity_forces(q, p)
     }
+    #[inline]
     fn damping_forces<T: Arithmetic>(
         qd: &SVector<T, 9>,
         p: &Params<T>,
     ) -> SVector<T, 9> {
         damping_forces(qd, p)
     }
+    #[inline]
     fn closure_residual<T: Arithmetic>(
         q: &SVector<T, 9>,
         p: &Params<T>,
     ) -> SVector<T, 2> {
         closure_residual(q, p)
     }
+    #[inline]
     fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 9>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 9> {
         constraint_jacobian(q, p)
     }
+    #[inline]
     fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
@@ -687,6 +698,7 @@ impl LegDynamics<NQ, NC, NU> for AtriasHopper {
     ) -> SVector<T, 2> {
         constraint_bias(q, qd, p)
     }
+    #[inline]
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
@@ -694,12 +706,15 @@ impl LegDynamics<NQ, NC, NU> for AtriasHopper {
     ) -> T {
         kinetic_energy(q, qd, p)
     }
+    #[inline]
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
+    #[inline]
     fn leg_size<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> T {
         leg_size(q, p)
     }
+    #[inline]
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
@@ -707,6 +722,7 @@ impl LegDynamics<NQ, NC, NU> for AtriasHopper {
     ) -> DynamicsTerms<T, 9, 2> {
         dynamics_terms(q, qd, p)
     }
+    #[inline]
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 9>,
         a: &SVector<T, 9>,
@@ -714,6 +730,7 @@ impl LegDynamics<NQ, NC, NU> for AtriasHopper {
     ) -> SMatrix<T, 9, 9> {
         mass_matrix_derivative(q, a, p)
     }
+    #[inline]
     fn bias_forces_derivatives<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
@@ -721,6 +738,7 @@ impl LegDynamics<NQ, NC, NU> for AtriasHopper {
     ) -> (SMatrix<T, 9, 9>, SMatrix<T, 9, 9>) {
         bias_forces_derivatives(q, qd, p)
     }
+    #[inline]
     fn constraint_derivatives<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
@@ -730,6 +748,7 @@ impl LegDynamics<NQ, NC, NU> for AtriasHopper {
     ) -> ConstraintDerivatives<T, 9, 2> {
         constraint_derivatives(q, qd, a, f, p)
     }
+    #[inline]
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
@@ -741,15 +760,18 @@ impl LegDynamics<NQ, NC, NU> for AtriasHopper {
     }
 }
 impl LegModel<NQ, NC, NU> for AtriasHopper {
+    #[inline]
     fn foot_position<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 2> {
         foot_position(q, p)
     }
+    #[inline]
     fn foot_jacobian<T: Arithmetic>(
         q: &SVector<T, 9>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 9> {
         foot_jacobian(q, p)
     }
+    #[inline]
     fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
@@ -757,15 +779,18 @@ impl LegModel<NQ, NC, NU> for AtriasHopper {
     ) -> SVector<T, 2> {
         foot_bias(q, qd, p)
     }
+    #[inline]
     fn joint_positions<T: Arithmetic>(
         q: &SVector<T, 9>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 9> {
         joint_positions(q, p)
     }
+    #[inline]
     fn link_tips<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 2, 9> {
         link_tips(q, p)
     }
+    #[inline]
     fn closure_points<T: Arithmetic>(
         q: &SVector<T, 9>,
         p: &Params<T>,
@@ -778,18 +803,21 @@ impl ContactModel<NQ, NC, NU, NK> for AtriasHopper {
     const CONTACT_FRICTION: &'static [f64] = &[0.8];
     const GROUND_NORMAL: [f64; 2] = [0.0, 1.0];
     const GROUND_OFFSET: f64 = 0.0;
+    #[inline]
     fn contact_positions<T: Arithmetic>(
         q: &SVector<T, 9>,
         p: &Params<T>,
     ) -> SVector<T, 2> {
         contact_positions(q, p)
     }
+    #[inline]
     fn contact_jacobian<T: Arithmetic>(
         q: &SVector<T, 9>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 9> {
         contact_jacobian(q, p)
     }
+    #[inline]
     fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
@@ -797,6 +825,7 @@ impl ContactModel<NQ, NC, NU, NK> for AtriasHopper {
     ) -> SVector<T, 2> {
         contact_bias(q, qd, p)
     }
+    #[inline]
     fn contact_derivatives<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,

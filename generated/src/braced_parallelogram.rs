@@ -220,6 +220,10 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
+        self.prepare_again();
+    }
+    /// The prepared quantities of the present values, in place.
+    fn prepare_again(&mut self) {
         self.prepared = prepare(&self.values).data.0[0];
     }
 }
@@ -420,7 +424,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             stale |= PREPARE_READS[i];
         }
         if stale {
-            self.prepared = prepare(&self.values).data.0[0];
+            self.prepare_again();
         }
         true
     }
@@ -448,9 +452,11 @@ impl LegDynamics<NQ, NC, NU> for BracedParallelogram {
     const REDUNDANT_ROWS: usize = 1;
     const MOBILITY: usize = 2;
     type Params<T: Arithmetic> = Params<T>;
+    #[inline]
     fn mass_matrix<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5> {
         mass_matrix(q, p)
     }
+    #[inline]
     fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -458,27 +464,32 @@ impl LegDynamics<NQ, NC, NU> for BracedParallelogram {
     ) -> SVector<T, 5> {
         bias_forces(q, qd, p)
     }
+    #[inline]
     fn gravity_forces<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
         gravity_forces(q, p)
     }
+    #[inline]
     fn damping_forces<T: Arithmetic>(
         qd: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SVector<T, 5> {
         damping_forces(qd, p)
     }
+    #[inline]
     fn closure_residual<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SVector<T, 4> {
         closure_residual(q, p)
     }
+    #[inline]
     fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SMatrix<T, 4, 5> {
         constraint_jacobian(q, p)
     }
+    #[inline]
     fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -486,6 +497,7 @@ impl LegDynamics<NQ, NC, NU> for BracedParallelogram {
     ) -> SVector<T, 4> {
         constraint_bias(q, qd, p)
     }
+    #[inline]
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -493,12 +505,15 @@ impl LegDynamics<NQ, NC, NU> for BracedParallelogram {
     ) -> T {
         kinetic_energy(q, qd, p)
     }
+    #[inline]
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
+    #[inline]
     fn leg_size<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
         leg_size(q, p)
     }
+    #[inline]
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -506,6 +521,7 @@ impl LegDynamics<NQ, NC, NU> for BracedParallelogram {
     ) -> DynamicsTerms<T, 5, 4> {
         dynamics_terms(q, qd, p)
     }
+    #[inline]
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 5>,
         a: &SVector<T, 5>,
@@ -513,6 +529,7 @@ impl LegDynamics<NQ, NC, NU> for BracedParallelogram {
     ) -> SMatrix<T, 5, 5> {
         mass_matrix_derivative(q, a, p)
     }
+    #[inline]
     fn bias_forces_derivatives<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -520,6 +537,7 @@ impl LegDynamics<NQ, NC, NU> for BracedParallelogram {
     ) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>) {
         bias_forces_derivatives(q, qd, p)
     }
+    #[inline]
     fn constraint_derivatives<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -529,6 +547,7 @@ impl LegDynamics<NQ, NC, NU> for BracedParallelogram {
     ) -> ConstraintDerivatives<T, 5, 4> {
         constraint_derivatives(q, qd, a, f, p)
     }
+    #[inline]
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -540,15 +559,18 @@ impl LegDynamics<NQ, NC, NU> for BracedParallelogram {
     }
 }
 impl LegModel<NQ, NC, NU> for BracedParallelogram {
+    #[inline]
     fn foot_position<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
         foot_position(q, p)
     }
+    #[inline]
     fn foot_jacobian<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 5> {
         foot_jacobian(q, p)
     }
+    #[inline]
     fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -556,15 +578,18 @@ impl LegModel<NQ, NC, NU> for BracedParallelogram {
     ) -> SVector<T, 2> {
         foot_bias(q, qd, p)
     }
+    #[inline]
     fn joint_positions<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 5> {
         joint_positions(q, p)
     }
+    #[inline]
     fn link_tips<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
         link_tips(q, p)
     }
+    #[inline]
     fn closure_points<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
@@ -577,18 +602,21 @@ impl ContactModel<NQ, NC, NU, NK> for BracedParallelogram {
     const CONTACT_FRICTION: &'static [f64] = &[];
     const GROUND_NORMAL: [f64; 2] = [0.0, 1.0];
     const GROUND_OFFSET: f64 = 0.0;
+    #[inline]
     fn contact_positions<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SVector<T, 0> {
         contact_positions(q, p)
     }
+    #[inline]
     fn contact_jacobian<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SMatrix<T, 0, 5> {
         contact_jacobian(q, p)
     }
+    #[inline]
     fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -596,6 +624,7 @@ impl ContactModel<NQ, NC, NU, NK> for BracedParallelogram {
     ) -> SVector<T, 0> {
         contact_bias(q, qd, p)
     }
+    #[inline]
     fn contact_derivatives<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,

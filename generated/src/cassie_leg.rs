@@ -730,6 +730,10 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
+        self.prepare_again();
+    }
+    /// The prepared quantities of the present values, in place.
+    fn prepare_again(&mut self) {
         self.prepared = prepare(&self.values).data.0[0];
     }
 }
@@ -1447,7 +1451,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             stale |= PREPARE_READS[i];
         }
         if stale {
-            self.prepared = prepare(&self.values).data.0[0];
+            self.prepare_again();
         }
         true
     }
@@ -1536,12 +1540,14 @@ impl LegDynamics<NQ, NC, NU> for CassieLeg {
     const BALL_JOINTS: &'static [usize] = &[3];
     const DIMENSION: usize = 3;
     type Params<T: Arithmetic> = Params<T>;
+    #[inline]
     fn mass_matrix<T: Arithmetic>(
         q: &SVector<T, 13>,
         p: &Params<T>,
     ) -> SMatrix<T, 13, 13> {
         mass_matrix(q, p)
     }
+    #[inline]
     fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 13>,
         qd: &SVector<T, 13>,
@@ -1549,30 +1555,35 @@ impl LegDynamics<NQ, NC, NU> for CassieLeg {
     ) -> SVector<T, 13> {
         bias_forces(q, qd, p)
     }
+    #[inline]
     fn gravity_forces<T: Arithmetic>(
         q: &SVector<T, 13>,
         p: &Params<T>,
     ) -> SVector<T, 13> {
         gravity_forces(q, p)
     }
+    #[inline]
     fn damping_forces<T: Arithmetic>(
         qd: &SVector<T, 13>,
         p: &Params<T>,
     ) -> SVector<T, 13> {
         damping_forces(qd, p)
     }
+    #[inline]
     fn closure_residual<T: Arithmetic>(
         q: &SVector<T, 13>,
         p: &Params<T>,
     ) -> SVector<T, 6> {
         closure_residual(q, p)
     }
+    #[inline]
     fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 13>,
         p: &Params<T>,
     ) -> SMatrix<T, 6, 13> {
         constraint_jacobian(q, p)
     }
+    #[inline]
     fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 13>,
         qd: &SVector<T, 13>,
@@ -1580,6 +1591,7 @@ impl LegDynamics<NQ, NC, NU> for CassieLeg {
     ) -> SVector<T, 6> {
         constraint_bias(q, qd, p)
     }
+    #[inline]
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 13>,
         qd: &SVector<T, 13>,
@@ -1587,12 +1599,15 @@ impl LegDynamics<NQ, NC, NU> for CassieLeg {
     ) -> T {
         kinetic_energy(q, qd, p)
     }
+    #[inline]
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 13>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
+    #[inline]
     fn leg_size<T: Arithmetic>(q: &SVector<T, 13>, p: &Params<T>) -> T {
         leg_size(q, p)
     }
+    #[inline]
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 13>,
         qd: &SVector<T, 13>,
@@ -1600,6 +1615,7 @@ impl LegDynamics<NQ, NC, NU> for CassieLeg {
     ) -> DynamicsTerms<T, 13, 6> {
         dynamics_terms(q, qd, p)
     }
+    #[inline]
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 13>,
         a: &SVector<T, 13>,
@@ -1607,6 +1623,7 @@ impl LegDynamics<NQ, NC, NU> for CassieLeg {
     ) -> SMatrix<T, 13, 13> {
         mass_matrix_derivative(q, a, p)
     }
+    #[inline]
     fn bias_forces_derivatives<T: Arithmetic>(
         q: &SVector<T, 13>,
         qd: &SVector<T, 13>,
@@ -1614,6 +1631,7 @@ impl LegDynamics<NQ, NC, NU> for CassieLeg {
     ) -> (SMatrix<T, 13, 13>, SMatrix<T, 13, 13>) {
         bias_forces_derivatives(q, qd, p)
     }
+    #[inline]
     fn constraint_derivatives<T: Arithmetic>(
         q: &SVector<T, 13>,
         qd: &SVector<T, 13>,
@@ -1623,6 +1641,7 @@ impl LegDynamics<NQ, NC, NU> for CassieLeg {
     ) -> ConstraintDerivatives<T, 13, 6> {
         constraint_derivatives(q, qd, a, f, p)
     }
+    #[inline]
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 13>,
         qd: &SVector<T, 13>,
@@ -1634,15 +1653,18 @@ impl LegDynamics<NQ, NC, NU> for CassieLeg {
     }
 }
 impl LegModel<NQ, NC, NU, ND, NP> for CassieLeg {
+    #[inline]
     fn foot_position<T: Arithmetic>(q: &SVector<T, 13>, p: &Params<T>) -> SVector<T, 3> {
         foot_position(q, p)
     }
+    #[inline]
     fn foot_jacobian<T: Arithmetic>(
         q: &SVector<T, 13>,
         p: &Params<T>,
     ) -> SMatrix<T, 3, 13> {
         foot_jacobian(q, p)
     }
+    #[inline]
     fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 13>,
         qd: &SVector<T, 13>,
@@ -1650,15 +1672,18 @@ impl LegModel<NQ, NC, NU, ND, NP> for CassieLeg {
     ) -> SVector<T, 3> {
         foot_bias(q, qd, p)
     }
+    #[inline]
     fn joint_positions<T: Arithmetic>(
         q: &SVector<T, 13>,
         p: &Params<T>,
     ) -> SMatrix<T, 3, 13> {
         joint_positions(q, p)
     }
+    #[inline]
     fn link_tips<T: Arithmetic>(q: &SVector<T, 13>, p: &Params<T>) -> SMatrix<T, 3, 13> {
         link_tips(q, p)
     }
+    #[inline]
     fn closure_points<T: Arithmetic>(
         q: &SVector<T, 13>,
         p: &Params<T>,
@@ -1671,18 +1696,21 @@ impl ContactModel<NQ, NC, NU, NK, ND> for CassieLeg {
     const CONTACT_FRICTION: &'static [f64] = &[];
     const GROUND_NORMAL: [f64; 3] = [0.0, 0.0, 1.0];
     const GROUND_OFFSET: f64 = 0.0;
+    #[inline]
     fn contact_positions<T: Arithmetic>(
         q: &SVector<T, 13>,
         p: &Params<T>,
     ) -> SVector<T, 0> {
         contact_positions(q, p)
     }
+    #[inline]
     fn contact_jacobian<T: Arithmetic>(
         q: &SVector<T, 13>,
         p: &Params<T>,
     ) -> SMatrix<T, 0, 13> {
         contact_jacobian(q, p)
     }
+    #[inline]
     fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 13>,
         qd: &SVector<T, 13>,
@@ -1690,6 +1718,7 @@ impl ContactModel<NQ, NC, NU, NK, ND> for CassieLeg {
     ) -> SVector<T, 0> {
         contact_bias(q, qd, p)
     }
+    #[inline]
     fn contact_derivatives<T: Arithmetic>(
         q: &SVector<T, 13>,
         qd: &SVector<T, 13>,

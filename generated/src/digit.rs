@@ -187,6 +187,10 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
+        self.prepare_again();
+    }
+    /// The prepared quantities of the present values, in place.
+    fn prepare_again(&mut self) {
         self.prepared = prepare(&self.values).data.0[0];
     }
 }
@@ -353,7 +357,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             stale |= PREPARE_READS[i];
         }
         if stale {
-            self.prepared = prepare(&self.values).data.0[0];
+            self.prepare_again();
         }
         true
     }
@@ -379,9 +383,11 @@ impl LegDynamics<NQ, NC, NU> for Digit {
     const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 2;
     type Params<T: Arithmetic> = Params<T>;
+    #[inline]
     fn mass_matrix<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 4, 4> {
         mass_matrix(q, p)
     }
+    #[inline]
     fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -389,27 +395,32 @@ impl LegDynamics<NQ, NC, NU> for Digit {
     ) -> SVector<T, 4> {
         bias_forces(q, qd, p)
     }
+    #[inline]
     fn gravity_forces<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 4> {
         gravity_forces(q, p)
     }
+    #[inline]
     fn damping_forces<T: Arithmetic>(
         qd: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SVector<T, 4> {
         damping_forces(qd, p)
     }
+    #[inline]
     fn closure_residual<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SVector<T, 2> {
         closure_residual(q, p)
     }
+    #[inline]
     fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 4> {
         constraint_jacobian(q, p)
     }
+    #[inline]
     fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -417,6 +428,7 @@ impl LegDynamics<NQ, NC, NU> for Digit {
     ) -> SVector<T, 2> {
         constraint_bias(q, qd, p)
     }
+    #[inline]
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -424,12 +436,15 @@ impl LegDynamics<NQ, NC, NU> for Digit {
     ) -> T {
         kinetic_energy(q, qd, p)
     }
+    #[inline]
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
+    #[inline]
     fn leg_size<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> T {
         leg_size(q, p)
     }
+    #[inline]
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -437,6 +452,7 @@ impl LegDynamics<NQ, NC, NU> for Digit {
     ) -> DynamicsTerms<T, 4, 2> {
         dynamics_terms(q, qd, p)
     }
+    #[inline]
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 4>,
         a: &SVector<T, 4>,
@@ -444,6 +460,7 @@ impl LegDynamics<NQ, NC, NU> for Digit {
     ) -> SMatrix<T, 4, 4> {
         mass_matrix_derivative(q, a, p)
     }
+    #[inline]
     fn bias_forces_derivatives<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -451,6 +468,7 @@ impl LegDynamics<NQ, NC, NU> for Digit {
     ) -> (SMatrix<T, 4, 4>, SMatrix<T, 4, 4>) {
         bias_forces_derivatives(q, qd, p)
     }
+    #[inline]
     fn constraint_derivatives<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -460,6 +478,7 @@ impl LegDynamics<NQ, NC, NU> for Digit {
     ) -> ConstraintDerivatives<T, 4, 2> {
         constraint_derivatives(q, qd, a, f, p)
     }
+    #[inline]
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -471,15 +490,18 @@ impl LegDynamics<NQ, NC, NU> for Digit {
     }
 }
 impl LegModel<NQ, NC, NU> for Digit {
+    #[inline]
     fn foot_position<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 2> {
         foot_position(q, p)
     }
+    #[inline]
     fn foot_jacobian<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 4> {
         foot_jacobian(q, p)
     }
+    #[inline]
     fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -487,15 +509,18 @@ impl LegModel<NQ, NC, NU> for Digit {
     ) -> SVector<T, 2> {
         foot_bias(q, qd, p)
     }
+    #[inline]
     fn joint_positions<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 4> {
         joint_positions(q, p)
     }
+    #[inline]
     fn link_tips<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> {
         link_tips(q, p)
     }
+    #[inline]
     fn closure_points<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
@@ -508,18 +533,21 @@ impl ContactModel<NQ, NC, NU, NK> for Digit {
     const CONTACT_FRICTION: &'static [f64] = &[];
     const GROUND_NORMAL: [f64; 2] = [0.0, 1.0];
     const GROUND_OFFSET: f64 = 0.0;
+    #[inline]
     fn contact_positions<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SVector<T, 0> {
         contact_positions(q, p)
     }
+    #[inline]
     fn contact_jacobian<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SMatrix<T, 0, 4> {
         contact_jacobian(q, p)
     }
+    #[inline]
     fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -527,6 +555,7 @@ impl ContactModel<NQ, NC, NU, NK> for Digit {
     ) -> SVector<T, 0> {
         contact_bias(q, qd, p)
     }
+    #[inline]
     fn contact_derivatives<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,

@@ -181,6 +181,10 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
+        self.prepare_again();
+    }
+    /// The prepared quantities of the present values, in place.
+    fn prepare_again(&mut self) {
         self.prepared = prepare(&self.values).data.0[0];
     }
 }
@@ -341,7 +345,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             stale |= PREPARE_READS[i];
         }
         if stale {
-            self.prepared = prepare(&self.values).data.0[0];
+            self.prepare_again();
         }
         true
     }
@@ -362,9 +366,11 @@ impl LegDynamics<NQ, NC, NU> for FiveBarOffset {
     const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 2;
     type Params<T: Arithmetic> = Params<T>;
+    #[inline]
     fn mass_matrix<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 4, 4> {
         mass_matrix(q, p)
     }
+    #[inline]
     fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -372,27 +378,32 @@ impl LegDynamics<NQ, NC, NU> for FiveBarOffset {
     ) -> SVector<T, 4> {
         bias_forces(q, qd, p)
     }
+    #[inline]
     fn gravity_forces<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 4> {
         gravity_forces(q, p)
     }
+    #[inline]
     fn damping_forces<T: Arithmetic>(
         qd: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SVector<T, 4> {
         damping_forces(qd, p)
     }
+    #[inline]
     fn closure_residual<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SVector<T, 2> {
         closure_residual(q, p)
     }
+    #[inline]
     fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 4> {
         constraint_jacobian(q, p)
     }
+    #[inline]
     fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -400,6 +411,7 @@ impl LegDynamics<NQ, NC, NU> for FiveBarOffset {
     ) -> SVector<T, 2> {
         constraint_bias(q, qd, p)
     }
+    #[inline]
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -407,12 +419,15 @@ impl LegDynamics<NQ, NC, NU> for FiveBarOffset {
     ) -> T {
         kinetic_energy(q, qd, p)
     }
+    #[inline]
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
+    #[inline]
     fn leg_size<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> T {
         leg_size(q, p)
     }
+    #[inline]
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -420,6 +435,7 @@ impl LegDynamics<NQ, NC, NU> for FiveBarOffset {
     ) -> DynamicsTerms<T, 4, 2> {
         dynamics_terms(q, qd, p)
     }
+    #[inline]
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 4>,
         a: &SVector<T, 4>,
@@ -427,6 +443,7 @@ impl LegDynamics<NQ, NC, NU> for FiveBarOffset {
     ) -> SMatrix<T, 4, 4> {
         mass_matrix_derivative(q, a, p)
     }
+    #[inline]
     fn bias_forces_derivatives<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -434,6 +451,7 @@ impl LegDynamics<NQ, NC, NU> for FiveBarOffset {
     ) -> (SMatrix<T, 4, 4>, SMatrix<T, 4, 4>) {
         bias_forces_derivatives(q, qd, p)
     }
+    #[inline]
     fn constraint_derivatives<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -443,6 +461,7 @@ impl LegDynamics<NQ, NC, NU> for FiveBarOffset {
     ) -> ConstraintDerivatives<T, 4, 2> {
         constraint_derivatives(q, qd, a, f, p)
     }
+    #[inline]
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -454,15 +473,18 @@ impl LegDynamics<NQ, NC, NU> for FiveBarOffset {
     }
 }
 impl LegModel<NQ, NC, NU> for FiveBarOffset {
+    #[inline]
     fn foot_position<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 2> {
         foot_position(q, p)
     }
+    #[inline]
     fn foot_jacobian<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 4> {
         foot_jacobian(q, p)
     }
+    #[inline]
     fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -470,15 +492,18 @@ impl LegModel<NQ, NC, NU> for FiveBarOffset {
     ) -> SVector<T, 2> {
         foot_bias(q, qd, p)
     }
+    #[inline]
     fn joint_positions<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 4> {
         joint_positions(q, p)
     }
+    #[inline]
     fn link_tips<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> {
         link_tips(q, p)
     }
+    #[inline]
     fn closure_points<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
@@ -491,18 +516,21 @@ impl ContactModel<NQ, NC, NU, NK> for FiveBarOffset {
     const CONTACT_FRICTION: &'static [f64] = &[];
     const GROUND_NORMAL: [f64; 2] = [0.0, 1.0];
     const GROUND_OFFSET: f64 = 0.0;
+    #[inline]
     fn contact_positions<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SVector<T, 0> {
         contact_positions(q, p)
     }
+    #[inline]
     fn contact_jacobian<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SMatrix<T, 0, 4> {
         contact_jacobian(q, p)
     }
+    #[inline]
     fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -510,6 +538,7 @@ impl ContactModel<NQ, NC, NU, NK> for FiveBarOffset {
     ) -> SVector<T, 0> {
         contact_bias(q, qd, p)
     }
+    #[inline]
     fn contact_derivatives<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,

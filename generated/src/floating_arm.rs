@@ -280,6 +280,10 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
+        self.prepare_again();
+    }
+    /// The prepared quantities of the present values, in place.
+    fn prepare_again(&mut self) {
         self.prepared = prepare(&self.values).data.0[0];
     }
 }
@@ -535,7 +539,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             stale |= PREPARE_READS[i];
         }
         if stale {
-            self.prepared = prepare(&self.values).data.0[0];
+            self.prepare_again();
         }
         true
     }
@@ -584,9 +588,11 @@ impl LegDynamics<NQ, NC, NU> for FloatingArm {
     const FREE_JOINT: Option<usize> = Some(0);
     const DIMENSION: usize = 3;
     type Params<T: Arithmetic> = Params<T>;
+    #[inline]
     fn mass_matrix<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 9, 9> {
         mass_matrix(q, p)
     }
+    #[inline]
     fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
@@ -594,27 +600,32 @@ impl LegDynamics<NQ, NC, NU> for FloatingArm {
     ) -> SVector<T, 9> {
         bias_forces(q, qd, p)
     }
+    #[inline]
     fn gravity_forces<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 9> {
         gravity_forces(q, p)
     }
+    #[inline]
     fn damping_forces<T: Arithmetic>(
         qd: &SVector<T, 9>,
         p: &Params<T>,
     ) -> SVector<T, 9> {
         damping_forces(qd, p)
     }
+    #[inline]
     fn closure_residual<T: Arithmetic>(
         q: &SVector<T, 9>,
         p: &Params<T>,
     ) -> SVector<T, 0> {
         closure_residual(q, p)
     }
+    #[inline]
     fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 9>,
         p: &Params<T>,
     ) -> SMatrix<T, 0, 9> {
         constraint_jacobian(q, p)
     }
+    #[inline]
     fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
@@ -622,6 +633,7 @@ impl LegDynamics<NQ, NC, NU> for FloatingArm {
     ) -> SVector<T, 0> {
         constraint_bias(q, qd, p)
     }
+    #[inline]
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
@@ -629,12 +641,15 @@ impl LegDynamics<NQ, NC, NU> for FloatingArm {
     ) -> T {
         kinetic_energy(q, qd, p)
     }
+    #[inline]
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
+    #[inline]
     fn leg_size<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> T {
         leg_size(q, p)
     }
+    #[inline]
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
@@ -642,6 +657,7 @@ impl LegDynamics<NQ, NC, NU> for FloatingArm {
     ) -> DynamicsTerms<T, 9, 0> {
         dynamics_terms(q, qd, p)
     }
+    #[inline]
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 9>,
         a: &SVector<T, 9>,
@@ -649,6 +665,7 @@ impl LegDynamics<NQ, NC, NU> for FloatingArm {
     ) -> SMatrix<T, 9, 9> {
         mass_matrix_derivative(q, a, p)
     }
+    #[inline]
     fn bias_forces_derivatives<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
@@ -656,6 +673,7 @@ impl LegDynamics<NQ, NC, NU> for FloatingArm {
     ) -> (SMatrix<T, 9, 9>, SMatrix<T, 9, 9>) {
         bias_forces_derivatives(q, qd, p)
     }
+    #[inline]
     fn constraint_derivatives<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
@@ -665,6 +683,7 @@ impl LegDynamics<NQ, NC, NU> for FloatingArm {
     ) -> ConstraintDerivatives<T, 9, 0> {
         constraint_derivatives(q, qd, a, f, p)
     }
+    #[inline]
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
@@ -676,15 +695,18 @@ impl LegDynamics<NQ, NC, NU> for FloatingArm {
     }
 }
 impl LegModel<NQ, NC, NU, ND, NP> for FloatingArm {
+    #[inline]
     fn foot_position<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SVector<T, 3> {
         foot_position(q, p)
     }
+    #[inline]
     fn foot_jacobian<T: Arithmetic>(
         q: &SVector<T, 9>,
         p: &Params<T>,
     ) -> SMatrix<T, 3, 9> {
         foot_jacobian(q, p)
     }
+    #[inline]
     fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
@@ -692,15 +714,18 @@ impl LegModel<NQ, NC, NU, ND, NP> for FloatingArm {
     ) -> SVector<T, 3> {
         foot_bias(q, qd, p)
     }
+    #[inline]
     fn joint_positions<T: Arithmetic>(
         q: &SVector<T, 9>,
         p: &Params<T>,
     ) -> SMatrix<T, 3, 9> {
         joint_positions(q, p)
     }
+    #[inline]
     fn link_tips<T: Arithmetic>(q: &SVector<T, 9>, p: &Params<T>) -> SMatrix<T, 3, 9> {
         link_tips(q, p)
     }
+    #[inline]
     fn closure_points<T: Arithmetic>(
         q: &SVector<T, 9>,
         p: &Params<T>,
@@ -713,18 +738,21 @@ impl ContactModel<NQ, NC, NU, NK, ND> for FloatingArm {
     const CONTACT_FRICTION: &'static [f64] = &[];
     const GROUND_NORMAL: [f64; 3] = [0.0, 0.0, 1.0];
     const GROUND_OFFSET: f64 = 0.0;
+    #[inline]
     fn contact_positions<T: Arithmetic>(
         q: &SVector<T, 9>,
         p: &Params<T>,
     ) -> SVector<T, 0> {
         contact_positions(q, p)
     }
+    #[inline]
     fn contact_jacobian<T: Arithmetic>(
         q: &SVector<T, 9>,
         p: &Params<T>,
     ) -> SMatrix<T, 0, 9> {
         contact_jacobian(q, p)
     }
+    #[inline]
     fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,
@@ -732,6 +760,7 @@ impl ContactModel<NQ, NC, NU, NK, ND> for FloatingArm {
     ) -> SVector<T, 0> {
         contact_bias(q, qd, p)
     }
+    #[inline]
     fn contact_derivatives<T: Arithmetic>(
         q: &SVector<T, 9>,
         qd: &SVector<T, 9>,

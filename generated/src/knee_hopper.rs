@@ -166,6 +166,10 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
+        self.prepare_again();
+    }
+    /// The prepared quantities of the present values, in place.
+    fn prepare_again(&mut self) {
         self.prepared = prepare(&self.values).data.0[0];
     }
 }
@@ -311,7 +315,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             stale |= PREPARE_READS[i];
         }
         if stale {
-            self.prepared = prepare(&self.values).data.0[0];
+            self.prepare_again();
         }
         true
     }
@@ -339,9 +343,11 @@ impl LegDynamics<NQ, NC, NU> for KneeHopper {
     const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 3;
     type Params<T: Arithmetic> = Params<T>;
+    #[inline]
     fn mass_matrix<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 3, 3> {
         mass_matrix(q, p)
     }
+    #[inline]
     fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -349,27 +355,32 @@ impl LegDynamics<NQ, NC, NU> for KneeHopper {
     ) -> SVector<T, 3> {
         bias_forces(q, qd, p)
     }
+    #[inline]
     fn gravity_forces<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 3> {
         gravity_forces(q, p)
     }
+    #[inline]
     fn damping_forces<T: Arithmetic>(
         qd: &SVector<T, 3>,
         p: &Params<T>,
     ) -> SVector<T, 3> {
         damping_forces(qd, p)
     }
+    #[inline]
     fn closure_residual<T: Arithmetic>(
         q: &SVector<T, 3>,
         p: &Params<T>,
     ) -> SVector<T, 0> {
         closure_residual(q, p)
     }
+    #[inline]
     fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 3>,
         p: &Params<T>,
     ) -> SMatrix<T, 0, 3> {
         constraint_jacobian(q, p)
     }
+    #[inline]
     fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -377,6 +388,7 @@ impl LegDynamics<NQ, NC, NU> for KneeHopper {
     ) -> SVector<T, 0> {
         constraint_bias(q, qd, p)
     }
+    #[inline]
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -384,12 +396,15 @@ impl LegDynamics<NQ, NC, NU> for KneeHopper {
     ) -> T {
         kinetic_energy(q, qd, p)
     }
+    #[inline]
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
+    #[inline]
     fn leg_size<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> T {
         leg_size(q, p)
     }
+    #[inline]
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -397,6 +412,7 @@ impl LegDynamics<NQ, NC, NU> for KneeHopper {
     ) -> DynamicsTerms<T, 3, 0> {
         dynamics_terms(q, qd, p)
     }
+    #[inline]
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 3>,
         a: &SVector<T, 3>,
@@ -404,6 +420,7 @@ impl LegDynamics<NQ, NC, NU> for KneeHopper {
     ) -> SMatrix<T, 3, 3> {
         mass_matrix_derivative(q, a, p)
     }
+    #[inline]
     fn bias_forces_derivatives<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -411,6 +428,7 @@ impl LegDynamics<NQ, NC, NU> for KneeHopper {
     ) -> (SMatrix<T, 3, 3>, SMatrix<T, 3, 3>) {
         bias_forces_derivatives(q, qd, p)
     }
+    #[inline]
     fn constraint_derivatives<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -420,6 +438,7 @@ impl LegDynamics<NQ, NC, NU> for KneeHopper {
     ) -> ConstraintDerivatives<T, 3, 0> {
         constraint_derivatives(q, qd, a, f, p)
     }
+    #[inline]
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -431,15 +450,18 @@ impl LegDynamics<NQ, NC, NU> for KneeHopper {
     }
 }
 impl LegModel<NQ, NC, NU> for KneeHopper {
+    #[inline]
     fn foot_position<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 2> {
         foot_position(q, p)
     }
+    #[inline]
     fn foot_jacobian<T: Arithmetic>(
         q: &SVector<T, 3>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 3> {
         foot_jacobian(q, p)
     }
+    #[inline]
     fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -447,15 +469,18 @@ impl LegModel<NQ, NC, NU> for KneeHopper {
     ) -> SVector<T, 2> {
         foot_bias(q, qd, p)
     }
+    #[inline]
     fn joint_positions<T: Arithmetic>(
         q: &SVector<T, 3>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 3> {
         joint_positions(q, p)
     }
+    #[inline]
     fn link_tips<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 2, 3> {
         link_tips(q, p)
     }
+    #[inline]
     fn closure_points<T: Arithmetic>(
         q: &SVector<T, 3>,
         p: &Params<T>,
@@ -468,18 +493,21 @@ impl ContactModel<NQ, NC, NU, NK> for KneeHopper {
     const CONTACT_FRICTION: &'static [f64] = &[0.8];
     const GROUND_NORMAL: [f64; 2] = [0.0, 1.0];
     const GROUND_OFFSET: f64 = 0.0;
+    #[inline]
     fn contact_positions<T: Arithmetic>(
         q: &SVector<T, 3>,
         p: &Params<T>,
     ) -> SVector<T, 2> {
         contact_positions(q, p)
     }
+    #[inline]
     fn contact_jacobian<T: Arithmetic>(
         q: &SVector<T, 3>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 3> {
         contact_jacobian(q, p)
     }
+    #[inline]
     fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -487,6 +515,7 @@ impl ContactModel<NQ, NC, NU, NK> for KneeHopper {
     ) -> SVector<T, 2> {
         contact_bias(q, qd, p)
     }
+    #[inline]
     fn contact_derivatives<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,

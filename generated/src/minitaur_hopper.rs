@@ -208,6 +208,10 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
+        self.prepare_again();
+    }
+    /// The prepared quantities of the present values, in place.
+    fn prepare_again(&mut self) {
         self.prepared = prepare(&self.values).data.0[0];
     }
 }
@@ -396,7 +400,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             stale |= PREPARE_READS[i];
         }
         if stale {
-            self.prepared = prepare(&self.values).data.0[0];
+            self.prepare_again();
         }
         true
     }
@@ -424,9 +428,11 @@ impl LegDynamics<NQ, NC, NU> for MinitaurHopper {
     const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 3;
     type Params<T: Arithmetic> = Params<T>;
+    #[inline]
     fn mass_matrix<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5> {
         mass_matrix(q, p)
     }
+    #[inline]
     fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -434,27 +440,32 @@ impl LegDynamics<NQ, NC, NU> for MinitaurHopper {
     ) -> SVector<T, 5> {
         bias_forces(q, qd, p)
     }
+    #[inline]
     fn gravity_forces<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
         gravity_forces(q, p)
     }
+    #[inline]
     fn damping_forces<T: Arithmetic>(
         qd: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SVector<T, 5> {
         damping_forces(qd, p)
     }
+    #[inline]
     fn closure_residual<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SVector<T, 2> {
         closure_residual(q, p)
     }
+    #[inline]
     fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 5> {
         constraint_jacobian(q, p)
     }
+    #[inline]
     fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -462,6 +473,7 @@ impl LegDynamics<NQ, NC, NU> for MinitaurHopper {
     ) -> SVector<T, 2> {
         constraint_bias(q, qd, p)
     }
+    #[inline]
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -469,12 +481,15 @@ impl LegDynamics<NQ, NC, NU> for MinitaurHopper {
     ) -> T {
         kinetic_energy(q, qd, p)
     }
+    #[inline]
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
+    #[inline]
     fn leg_size<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
         leg_size(q, p)
     }
+    #[inline]
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -482,6 +497,7 @@ impl LegDynamics<NQ, NC, NU> for MinitaurHopper {
     ) -> DynamicsTerms<T, 5, 2> {
         dynamics_terms(q, qd, p)
     }
+    #[inline]
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 5>,
         a: &SVector<T, 5>,
@@ -489,6 +505,7 @@ impl LegDynamics<NQ, NC, NU> for MinitaurHopper {
     ) -> SMatrix<T, 5, 5> {
         mass_matrix_derivative(q, a, p)
     }
+    #[inline]
     fn bias_forces_derivatives<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -496,6 +513,7 @@ impl LegDynamics<NQ, NC, NU> for MinitaurHopper {
     ) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>) {
         bias_forces_derivatives(q, qd, p)
     }
+    #[inline]
     fn constraint_derivatives<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -505,6 +523,7 @@ impl LegDynamics<NQ, NC, NU> for MinitaurHopper {
     ) -> ConstraintDerivatives<T, 5, 2> {
         constraint_derivatives(q, qd, a, f, p)
     }
+    #[inline]
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -516,15 +535,18 @@ impl LegDynamics<NQ, NC, NU> for MinitaurHopper {
     }
 }
 impl LegModel<NQ, NC, NU> for MinitaurHopper {
+    #[inline]
     fn foot_position<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
         foot_position(q, p)
     }
+    #[inline]
     fn foot_jacobian<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 5> {
         foot_jacobian(q, p)
     }
+    #[inline]
     fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -532,15 +554,18 @@ impl LegModel<NQ, NC, NU> for MinitaurHopper {
     ) -> SVector<T, 2> {
         foot_bias(q, qd, p)
     }
+    #[inline]
     fn joint_positions<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 5> {
         joint_positions(q, p)
     }
+    #[inline]
     fn link_tips<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
         link_tips(q, p)
     }
+    #[inline]
     fn closure_points<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
@@ -553,18 +578,21 @@ impl ContactModel<NQ, NC, NU, NK> for MinitaurHopper {
     const CONTACT_FRICTION: &'static [f64] = &[0.8];
     const GROUND_NORMAL: [f64; 2] = [0.0, 1.0];
     const GROUND_OFFSET: f64 = 0.0;
+    #[inline]
     fn contact_positions<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SVector<T, 2> {
         contact_positions(q, p)
     }
+    #[inline]
     fn contact_jacobian<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 5> {
         contact_jacobian(q, p)
     }
+    #[inline]
     fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -572,6 +600,7 @@ impl ContactModel<NQ, NC, NU, NK> for MinitaurHopper {
     ) -> SVector<T, 2> {
         contact_bias(q, qd, p)
     }
+    #[inline]
     fn contact_derivatives<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,

@@ -220,6 +220,10 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
+        self.prepare_again();
+    }
+    /// The prepared quantities of the present values, in place.
+    fn prepare_again(&mut self) {
         self.prepared = prepare(&self.values).data.0[0];
     }
 }
@@ -420,7 +424,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             stale |= PREPARE_READS[i];
         }
         if stale {
-            self.prepared = prepare(&self.values).data.0[0];
+            self.prepare_again();
         }
         true
     }
@@ -463,9 +467,11 @@ impl LegDynamics<NQ, NC, NU> for RaibertHopper {
     const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 5;
     type Params<T: Arithmetic> = Params<T>;
+    #[inline]
     fn mass_matrix<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 5, 5> {
         mass_matrix(q, p)
     }
+    #[inline]
     fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -473,27 +479,32 @@ impl LegDynamics<NQ, NC, NU> for RaibertHopper {
     ) -> SVector<T, 5> {
         bias_forces(q, qd, p)
     }
+    #[inline]
     fn gravity_forces<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 5> {
         gravity_forces(q, p)
     }
+    #[inline]
     fn damping_forces<T: Arithmetic>(
         qd: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SVector<T, 5> {
         damping_forces(qd, p)
     }
+    #[inline]
     fn closure_residual<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SVector<T, 0> {
         closure_residual(q, p)
     }
+    #[inline]
     fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SMatrix<T, 0, 5> {
         constraint_jacobian(q, p)
     }
+    #[inline]
     fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -501,6 +512,7 @@ impl LegDynamics<NQ, NC, NU> for RaibertHopper {
     ) -> SVector<T, 0> {
         constraint_bias(q, qd, p)
     }
+    #[inline]
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -508,12 +520,15 @@ impl LegDynamics<NQ, NC, NU> for RaibertHopper {
     ) -> T {
         kinetic_energy(q, qd, p)
     }
+    #[inline]
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
+    #[inline]
     fn leg_size<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> T {
         leg_size(q, p)
     }
+    #[inline]
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -521,6 +536,7 @@ impl LegDynamics<NQ, NC, NU> for RaibertHopper {
     ) -> DynamicsTerms<T, 5, 0> {
         dynamics_terms(q, qd, p)
     }
+    #[inline]
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 5>,
         a: &SVector<T, 5>,
@@ -528,6 +544,7 @@ impl LegDynamics<NQ, NC, NU> for RaibertHopper {
     ) -> SMatrix<T, 5, 5> {
         mass_matrix_derivative(q, a, p)
     }
+    #[inline]
     fn bias_forces_derivatives<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -535,6 +552,7 @@ impl LegDynamics<NQ, NC, NU> for RaibertHopper {
     ) -> (SMatrix<T, 5, 5>, SMatrix<T, 5, 5>) {
         bias_forces_derivatives(q, qd, p)
     }
+    #[inline]
     fn constraint_derivatives<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -544,6 +562,7 @@ impl LegDynamics<NQ, NC, NU> for RaibertHopper {
     ) -> ConstraintDerivatives<T, 5, 0> {
         constraint_derivatives(q, qd, a, f, p)
     }
+    #[inline]
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -555,15 +574,18 @@ impl LegDynamics<NQ, NC, NU> for RaibertHopper {
     }
 }
 impl LegModel<NQ, NC, NU> for RaibertHopper {
+    #[inline]
     fn foot_position<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SVector<T, 2> {
         foot_position(q, p)
     }
+    #[inline]
     fn foot_jacobian<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 5> {
         foot_jacobian(q, p)
     }
+    #[inline]
     fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -571,15 +593,18 @@ impl LegModel<NQ, NC, NU> for RaibertHopper {
     ) -> SVector<T, 2> {
         foot_bias(q, qd, p)
     }
+    #[inline]
     fn joint_positions<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 5> {
         joint_positions(q, p)
     }
+    #[inline]
     fn link_tips<T: Arithmetic>(q: &SVector<T, 5>, p: &Params<T>) -> SMatrix<T, 2, 5> {
         link_tips(q, p)
     }
+    #[inline]
     fn closure_points<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
@@ -592,18 +617,21 @@ impl ContactModel<NQ, NC, NU, NK> for RaibertHopper {
     const CONTACT_FRICTION: &'static [f64] = &[0.6, 0.6];
     const GROUND_NORMAL: [f64; 2] = [0.09950371902099893, 0.9950371902099893];
     const GROUND_OFFSET: f64 = -0.05;
+    #[inline]
     fn contact_positions<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SVector<T, 4> {
         contact_positions(q, p)
     }
+    #[inline]
     fn contact_jacobian<T: Arithmetic>(
         q: &SVector<T, 5>,
         p: &Params<T>,
     ) -> SMatrix<T, 4, 5> {
         contact_jacobian(q, p)
     }
+    #[inline]
     fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,
@@ -611,6 +639,7 @@ impl ContactModel<NQ, NC, NU, NK> for RaibertHopper {
     ) -> SVector<T, 4> {
         contact_bias(q, qd, p)
     }
+    #[inline]
     fn contact_derivatives<T: Arithmetic>(
         q: &SVector<T, 5>,
         qd: &SVector<T, 5>,

@@ -292,6 +292,10 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
+        self.prepare_again();
+    }
+    /// The prepared quantities of the present values, in place.
+    fn prepare_again(&mut self) {
         self.prepared = prepare(&self.values).data.0[0];
     }
 }
@@ -560,7 +564,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             stale |= PREPARE_READS[i];
         }
         if stale {
-            self.prepared = prepare(&self.values).data.0[0];
+            self.prepare_again();
         }
         true
     }
@@ -603,9 +607,11 @@ impl LegDynamics<NQ, NC, NU> for RevoluteKneeLeg {
     const DIMENSION: usize = 3;
     const REVOLUTE_CLOSURES: &'static [usize] = &[0];
     type Params<T: Arithmetic> = Params<T>;
+    #[inline]
     fn mass_matrix<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 7, 7> {
         mass_matrix(q, p)
     }
+    #[inline]
     fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -613,27 +619,32 @@ impl LegDynamics<NQ, NC, NU> for RevoluteKneeLeg {
     ) -> SVector<T, 7> {
         bias_forces(q, qd, p)
     }
+    #[inline]
     fn gravity_forces<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 7> {
         gravity_forces(q, p)
     }
+    #[inline]
     fn damping_forces<T: Arithmetic>(
         qd: &SVector<T, 7>,
         p: &Params<T>,
     ) -> SVector<T, 7> {
         damping_forces(qd, p)
     }
+    #[inline]
     fn closure_residual<T: Arithmetic>(
         q: &SVector<T, 7>,
         p: &Params<T>,
     ) -> SVector<T, 5> {
         closure_residual(q, p)
     }
+    #[inline]
     fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 7>,
         p: &Params<T>,
     ) -> SMatrix<T, 5, 7> {
         constraint_jacobian(q, p)
     }
+    #[inline]
     fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -641,6 +652,7 @@ impl LegDynamics<NQ, NC, NU> for RevoluteKneeLeg {
     ) -> SVector<T, 5> {
         constraint_bias(q, qd, p)
     }
+    #[inline]
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -648,12 +660,15 @@ impl LegDynamics<NQ, NC, NU> for RevoluteKneeLeg {
     ) -> T {
         kinetic_energy(q, qd, p)
     }
+    #[inline]
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
+    #[inline]
     fn leg_size<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> T {
         leg_size(q, p)
     }
+    #[inline]
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -661,6 +676,7 @@ impl LegDynamics<NQ, NC, NU> for RevoluteKneeLeg {
     ) -> DynamicsTerms<T, 7, 5> {
         dynamics_terms(q, qd, p)
     }
+    #[inline]
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 7>,
         a: &SVector<T, 7>,
@@ -668,6 +684,7 @@ impl LegDynamics<NQ, NC, NU> for RevoluteKneeLeg {
     ) -> SMatrix<T, 7, 7> {
         mass_matrix_derivative(q, a, p)
     }
+    #[inline]
     fn bias_forces_derivatives<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -675,6 +692,7 @@ impl LegDynamics<NQ, NC, NU> for RevoluteKneeLeg {
     ) -> (SMatrix<T, 7, 7>, SMatrix<T, 7, 7>) {
         bias_forces_derivatives(q, qd, p)
     }
+    #[inline]
     fn constraint_derivatives<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -684,6 +702,7 @@ impl LegDynamics<NQ, NC, NU> for RevoluteKneeLeg {
     ) -> ConstraintDerivatives<T, 7, 5> {
         constraint_derivatives(q, qd, a, f, p)
     }
+    #[inline]
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -695,15 +714,18 @@ impl LegDynamics<NQ, NC, NU> for RevoluteKneeLeg {
     }
 }
 impl LegModel<NQ, NC, NU, ND, NP> for RevoluteKneeLeg {
+    #[inline]
     fn foot_position<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 3> {
         foot_position(q, p)
     }
+    #[inline]
     fn foot_jacobian<T: Arithmetic>(
         q: &SVector<T, 7>,
         p: &Params<T>,
     ) -> SMatrix<T, 3, 7> {
         foot_jacobian(q, p)
     }
+    #[inline]
     fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -711,15 +733,18 @@ impl LegModel<NQ, NC, NU, ND, NP> for RevoluteKneeLeg {
     ) -> SVector<T, 3> {
         foot_bias(q, qd, p)
     }
+    #[inline]
     fn joint_positions<T: Arithmetic>(
         q: &SVector<T, 7>,
         p: &Params<T>,
     ) -> SMatrix<T, 3, 7> {
         joint_positions(q, p)
     }
+    #[inline]
     fn link_tips<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 3, 7> {
         link_tips(q, p)
     }
+    #[inline]
     fn closure_points<T: Arithmetic>(
         q: &SVector<T, 7>,
         p: &Params<T>,
@@ -732,18 +757,21 @@ impl ContactModel<NQ, NC, NU, NK, ND> for RevoluteKneeLeg {
     const CONTACT_FRICTION: &'static [f64] = &[];
     const GROUND_NORMAL: [f64; 3] = [0.0, 0.0, 1.0];
     const GROUND_OFFSET: f64 = 0.0;
+    #[inline]
     fn contact_positions<T: Arithmetic>(
         q: &SVector<T, 7>,
         p: &Params<T>,
     ) -> SVector<T, 0> {
         contact_positions(q, p)
     }
+    #[inline]
     fn contact_jacobian<T: Arithmetic>(
         q: &SVector<T, 7>,
         p: &Params<T>,
     ) -> SMatrix<T, 0, 7> {
         contact_jacobian(q, p)
     }
+    #[inline]
     fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -751,6 +779,7 @@ impl ContactModel<NQ, NC, NU, NK, ND> for RevoluteKneeLeg {
     ) -> SVector<T, 0> {
         contact_bias(q, qd, p)
     }
+    #[inline]
     fn contact_derivatives<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,

@@ -220,6 +220,10 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
+        self.prepare_again();
+    }
+    /// The prepared quantities of the present values, in place.
+    fn prepare_again(&mut self) {
         self.prepared = prepare(&self.values).data.0[0];
     }
 }
@@ -414,7 +418,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             stale |= PREPARE_READS[i];
         }
         if stale {
-            self.prepared = prepare(&self.values).data.0[0];
+            self.prepare_again();
         }
         true
     }
@@ -435,9 +439,11 @@ impl LegDynamics<NQ, NC, NU> for SlidingMass {
     const MOBILITY: usize = 3;
     const DIMENSION: usize = 3;
     type Params<T: Arithmetic> = Params<T>;
+    #[inline]
     fn mass_matrix<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 3, 3> {
         mass_matrix(q, p)
     }
+    #[inline]
     fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -445,27 +451,32 @@ impl LegDynamics<NQ, NC, NU> for SlidingMass {
     ) -> SVector<T, 3> {
         bias_forces(q, qd, p)
     }
+    #[inline]
     fn gravity_forces<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 3> {
         gravity_forces(q, p)
     }
+    #[inline]
     fn damping_forces<T: Arithmetic>(
         qd: &SVector<T, 3>,
         p: &Params<T>,
     ) -> SVector<T, 3> {
         damping_forces(qd, p)
     }
+    #[inline]
     fn closure_residual<T: Arithmetic>(
         q: &SVector<T, 3>,
         p: &Params<T>,
     ) -> SVector<T, 0> {
         closure_residual(q, p)
     }
+    #[inline]
     fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 3>,
         p: &Params<T>,
     ) -> SMatrix<T, 0, 3> {
         constraint_jacobian(q, p)
     }
+    #[inline]
     fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -473,6 +484,7 @@ impl LegDynamics<NQ, NC, NU> for SlidingMass {
     ) -> SVector<T, 0> {
         constraint_bias(q, qd, p)
     }
+    #[inline]
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -480,12 +492,15 @@ impl LegDynamics<NQ, NC, NU> for SlidingMass {
     ) -> T {
         kinetic_energy(q, qd, p)
     }
+    #[inline]
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
+    #[inline]
     fn leg_size<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> T {
         leg_size(q, p)
     }
+    #[inline]
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -493,6 +508,7 @@ impl LegDynamics<NQ, NC, NU> for SlidingMass {
     ) -> DynamicsTerms<T, 3, 0> {
         dynamics_terms(q, qd, p)
     }
+    #[inline]
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 3>,
         a: &SVector<T, 3>,
@@ -500,6 +516,7 @@ impl LegDynamics<NQ, NC, NU> for SlidingMass {
     ) -> SMatrix<T, 3, 3> {
         mass_matrix_derivative(q, a, p)
     }
+    #[inline]
     fn bias_forces_derivatives<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -507,6 +524,7 @@ impl LegDynamics<NQ, NC, NU> for SlidingMass {
     ) -> (SMatrix<T, 3, 3>, SMatrix<T, 3, 3>) {
         bias_forces_derivatives(q, qd, p)
     }
+    #[inline]
     fn constraint_derivatives<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -516,6 +534,7 @@ impl LegDynamics<NQ, NC, NU> for SlidingMass {
     ) -> ConstraintDerivatives<T, 3, 0> {
         constraint_derivatives(q, qd, a, f, p)
     }
+    #[inline]
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -527,15 +546,18 @@ impl LegDynamics<NQ, NC, NU> for SlidingMass {
     }
 }
 impl LegModel<NQ, NC, NU, ND, NP> for SlidingMass {
+    #[inline]
     fn foot_position<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SVector<T, 3> {
         foot_position(q, p)
     }
+    #[inline]
     fn foot_jacobian<T: Arithmetic>(
         q: &SVector<T, 3>,
         p: &Params<T>,
     ) -> SMatrix<T, 3, 3> {
         foot_jacobian(q, p)
     }
+    #[inline]
     fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -543,15 +565,18 @@ impl LegModel<NQ, NC, NU, ND, NP> for SlidingMass {
     ) -> SVector<T, 3> {
         foot_bias(q, qd, p)
     }
+    #[inline]
     fn joint_positions<T: Arithmetic>(
         q: &SVector<T, 3>,
         p: &Params<T>,
     ) -> SMatrix<T, 3, 3> {
         joint_positions(q, p)
     }
+    #[inline]
     fn link_tips<T: Arithmetic>(q: &SVector<T, 3>, p: &Params<T>) -> SMatrix<T, 3, 3> {
         link_tips(q, p)
     }
+    #[inline]
     fn closure_points<T: Arithmetic>(
         q: &SVector<T, 3>,
         p: &Params<T>,
@@ -564,18 +589,21 @@ impl ContactModel<NQ, NC, NU, NK, ND> for SlidingMass {
     const CONTACT_FRICTION: &'static [f64] = &[0.5];
     const GROUND_NORMAL: [f64; 3] = [0.0, 0.0, 1.0];
     const GROUND_OFFSET: f64 = 0.0;
+    #[inline]
     fn contact_positions<T: Arithmetic>(
         q: &SVector<T, 3>,
         p: &Params<T>,
     ) -> SVector<T, 3> {
         contact_positions(q, p)
     }
+    #[inline]
     fn contact_jacobian<T: Arithmetic>(
         q: &SVector<T, 3>,
         p: &Params<T>,
     ) -> SMatrix<T, 3, 3> {
         contact_jacobian(q, p)
     }
+    #[inline]
     fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,
@@ -583,6 +611,7 @@ impl ContactModel<NQ, NC, NU, NK, ND> for SlidingMass {
     ) -> SVector<T, 3> {
         contact_bias(q, qd, p)
     }
+    #[inline]
     fn contact_derivatives<T: Arithmetic>(
         q: &SVector<T, 3>,
         qd: &SVector<T, 3>,

@@ -268,6 +268,10 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
+        self.prepare_again();
+    }
+    /// The prepared quantities of the present values, in place.
+    fn prepare_again(&mut self) {
         self.prepared = prepare(&self.values).data.0[0];
     }
 }
@@ -517,7 +521,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             stale |= PREPARE_READS[i];
         }
         if stale {
-            self.prepared = prepare(&self.values).data.0[0];
+            self.prepare_again();
         }
         true
     }
@@ -565,9 +569,11 @@ impl LegDynamics<NQ, NC, NU> for ThreeMotorLeg {
     const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 3;
     type Params<T: Arithmetic> = Params<T>;
+    #[inline]
     fn mass_matrix<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 7, 7> {
         mass_matrix(q, p)
     }
+    #[inline]
     fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -575,27 +581,32 @@ impl LegDynamics<NQ, NC, NU> for ThreeMotorLeg {
     ) -> SVector<T, 7> {
         bias_forces(q, qd, p)
     }
+    #[inline]
     fn gravity_forces<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 7> {
         gravity_forces(q, p)
     }
+    #[inline]
     fn damping_forces<T: Arithmetic>(
         qd: &SVector<T, 7>,
         p: &Params<T>,
     ) -> SVector<T, 7> {
         damping_forces(qd, p)
     }
+    #[inline]
     fn closure_residual<T: Arithmetic>(
         q: &SVector<T, 7>,
         p: &Params<T>,
     ) -> SVector<T, 4> {
         closure_residual(q, p)
     }
+    #[inline]
     fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 7>,
         p: &Params<T>,
     ) -> SMatrix<T, 4, 7> {
         constraint_jacobian(q, p)
     }
+    #[inline]
     fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -603,6 +614,7 @@ impl LegDynamics<NQ, NC, NU> for ThreeMotorLeg {
     ) -> SVector<T, 4> {
         constraint_bias(q, qd, p)
     }
+    #[inline]
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -610,12 +622,15 @@ impl LegDynamics<NQ, NC, NU> for ThreeMotorLeg {
     ) -> T {
         kinetic_energy(q, qd, p)
     }
+    #[inline]
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
+    #[inline]
     fn leg_size<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> T {
         leg_size(q, p)
     }
+    #[inline]
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -623,6 +638,7 @@ impl LegDynamics<NQ, NC, NU> for ThreeMotorLeg {
     ) -> DynamicsTerms<T, 7, 4> {
         dynamics_terms(q, qd, p)
     }
+    #[inline]
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 7>,
         a: &SVector<T, 7>,
@@ -630,6 +646,7 @@ impl LegDynamics<NQ, NC, NU> for ThreeMotorLeg {
     ) -> SMatrix<T, 7, 7> {
         mass_matrix_derivative(q, a, p)
     }
+    #[inline]
     fn bias_forces_derivatives<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -637,6 +654,7 @@ impl LegDynamics<NQ, NC, NU> for ThreeMotorLeg {
     ) -> (SMatrix<T, 7, 7>, SMatrix<T, 7, 7>) {
         bias_forces_derivatives(q, qd, p)
     }
+    #[inline]
     fn constraint_derivatives<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -646,6 +664,7 @@ impl LegDynamics<NQ, NC, NU> for ThreeMotorLeg {
     ) -> ConstraintDerivatives<T, 7, 4> {
         constraint_derivatives(q, qd, a, f, p)
     }
+    #[inline]
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -657,15 +676,18 @@ impl LegDynamics<NQ, NC, NU> for ThreeMotorLeg {
     }
 }
 impl LegModel<NQ, NC, NU> for ThreeMotorLeg {
+    #[inline]
     fn foot_position<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SVector<T, 2> {
         foot_position(q, p)
     }
+    #[inline]
     fn foot_jacobian<T: Arithmetic>(
         q: &SVector<T, 7>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 7> {
         foot_jacobian(q, p)
     }
+    #[inline]
     fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -673,15 +695,18 @@ impl LegModel<NQ, NC, NU> for ThreeMotorLeg {
     ) -> SVector<T, 2> {
         foot_bias(q, qd, p)
     }
+    #[inline]
     fn joint_positions<T: Arithmetic>(
         q: &SVector<T, 7>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 7> {
         joint_positions(q, p)
     }
+    #[inline]
     fn link_tips<T: Arithmetic>(q: &SVector<T, 7>, p: &Params<T>) -> SMatrix<T, 2, 7> {
         link_tips(q, p)
     }
+    #[inline]
     fn closure_points<T: Arithmetic>(
         q: &SVector<T, 7>,
         p: &Params<T>,
@@ -694,18 +719,21 @@ impl ContactModel<NQ, NC, NU, NK> for ThreeMotorLeg {
     const CONTACT_FRICTION: &'static [f64] = &[];
     const GROUND_NORMAL: [f64; 2] = [0.0, 1.0];
     const GROUND_OFFSET: f64 = 0.0;
+    #[inline]
     fn contact_positions<T: Arithmetic>(
         q: &SVector<T, 7>,
         p: &Params<T>,
     ) -> SVector<T, 0> {
         contact_positions(q, p)
     }
+    #[inline]
     fn contact_jacobian<T: Arithmetic>(
         q: &SVector<T, 7>,
         p: &Params<T>,
     ) -> SMatrix<T, 0, 7> {
         contact_jacobian(q, p)
     }
+    #[inline]
     fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,
@@ -713,6 +741,7 @@ impl ContactModel<NQ, NC, NU, NK> for ThreeMotorLeg {
     ) -> SVector<T, 0> {
         contact_bias(q, qd, p)
     }
+    #[inline]
     fn contact_derivatives<T: Arithmetic>(
         q: &SVector<T, 7>,
         qd: &SVector<T, 7>,

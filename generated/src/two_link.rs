@@ -133,6 +133,10 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
+        self.prepare_again();
+    }
+    /// The prepared quantities of the present values, in place.
+    fn prepare_again(&mut self) {
         self.prepared = prepare(&self.values).data.0[0];
     }
 }
@@ -244,7 +248,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             stale |= PREPARE_READS[i];
         }
         if stale {
-            self.prepared = prepare(&self.values).data.0[0];
+            self.prepare_again();
         }
         true
     }
@@ -260,9 +264,11 @@ impl LegDynamics<NQ, NC, NU> for TwoLink {
     const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 2;
     type Params<T: Arithmetic> = Params<T>;
+    #[inline]
     fn mass_matrix<T: Arithmetic>(q: &SVector<T, 2>, p: &Params<T>) -> SMatrix<T, 2, 2> {
         mass_matrix(q, p)
     }
+    #[inline]
     fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 2>,
         qd: &SVector<T, 2>,
@@ -270,27 +276,32 @@ impl LegDynamics<NQ, NC, NU> for TwoLink {
     ) -> SVector<T, 2> {
         bias_forces(q, qd, p)
     }
+    #[inline]
     fn gravity_forces<T: Arithmetic>(q: &SVector<T, 2>, p: &Params<T>) -> SVector<T, 2> {
         gravity_forces(q, p)
     }
+    #[inline]
     fn damping_forces<T: Arithmetic>(
         qd: &SVector<T, 2>,
         p: &Params<T>,
     ) -> SVector<T, 2> {
         damping_forces(qd, p)
     }
+    #[inline]
     fn closure_residual<T: Arithmetic>(
         q: &SVector<T, 2>,
         p: &Params<T>,
     ) -> SVector<T, 0> {
         closure_residual(q, p)
     }
+    #[inline]
     fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 2>,
         p: &Params<T>,
     ) -> SMatrix<T, 0, 2> {
         constraint_jacobian(q, p)
     }
+    #[inline]
     fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 2>,
         qd: &SVector<T, 2>,
@@ -298,6 +309,7 @@ impl LegDynamics<NQ, NC, NU> for TwoLink {
     ) -> SVector<T, 0> {
         constraint_bias(q, qd, p)
     }
+    #[inline]
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 2>,
         qd: &SVector<T, 2>,
@@ -305,12 +317,15 @@ impl LegDynamics<NQ, NC, NU> for TwoLink {
     ) -> T {
         kinetic_energy(q, qd, p)
     }
+    #[inline]
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 2>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
+    #[inline]
     fn leg_size<T: Arithmetic>(q: &SVector<T, 2>, p: &Params<T>) -> T {
         leg_size(q, p)
     }
+    #[inline]
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 2>,
         qd: &SVector<T, 2>,
@@ -318,6 +333,7 @@ impl LegDynamics<NQ, NC, NU> for TwoLink {
     ) -> DynamicsTerms<T, 2, 0> {
         dynamics_terms(q, qd, p)
     }
+    #[inline]
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 2>,
         a: &SVector<T, 2>,
@@ -325,6 +341,7 @@ impl LegDynamics<NQ, NC, NU> for TwoLink {
     ) -> SMatrix<T, 2, 2> {
         mass_matrix_derivative(q, a, p)
     }
+    #[inline]
     fn bias_forces_derivatives<T: Arithmetic>(
         q: &SVector<T, 2>,
         qd: &SVector<T, 2>,
@@ -332,6 +349,7 @@ impl LegDynamics<NQ, NC, NU> for TwoLink {
     ) -> (SMatrix<T, 2, 2>, SMatrix<T, 2, 2>) {
         bias_forces_derivatives(q, qd, p)
     }
+    #[inline]
     fn constraint_derivatives<T: Arithmetic>(
         q: &SVector<T, 2>,
         qd: &SVector<T, 2>,
@@ -341,6 +359,7 @@ impl LegDynamics<NQ, NC, NU> for TwoLink {
     ) -> ConstraintDerivatives<T, 2, 0> {
         constraint_derivatives(q, qd, a, f, p)
     }
+    #[inline]
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 2>,
         qd: &SVector<T, 2>,
@@ -352,15 +371,18 @@ impl LegDynamics<NQ, NC, NU> for TwoLink {
     }
 }
 impl LegModel<NQ, NC, NU> for TwoLink {
+    #[inline]
     fn foot_position<T: Arithmetic>(q: &SVector<T, 2>, p: &Params<T>) -> SVector<T, 2> {
         foot_position(q, p)
     }
+    #[inline]
     fn foot_jacobian<T: Arithmetic>(
         q: &SVector<T, 2>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 2> {
         foot_jacobian(q, p)
     }
+    #[inline]
     fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 2>,
         qd: &SVector<T, 2>,
@@ -368,15 +390,18 @@ impl LegModel<NQ, NC, NU> for TwoLink {
     ) -> SVector<T, 2> {
         foot_bias(q, qd, p)
     }
+    #[inline]
     fn joint_positions<T: Arithmetic>(
         q: &SVector<T, 2>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 2> {
         joint_positions(q, p)
     }
+    #[inline]
     fn link_tips<T: Arithmetic>(q: &SVector<T, 2>, p: &Params<T>) -> SMatrix<T, 2, 2> {
         link_tips(q, p)
     }
+    #[inline]
     fn closure_points<T: Arithmetic>(
         q: &SVector<T, 2>,
         p: &Params<T>,
@@ -389,18 +414,21 @@ impl ContactModel<NQ, NC, NU, NK> for TwoLink {
     const CONTACT_FRICTION: &'static [f64] = &[];
     const GROUND_NORMAL: [f64; 2] = [0.0, 1.0];
     const GROUND_OFFSET: f64 = 0.0;
+    #[inline]
     fn contact_positions<T: Arithmetic>(
         q: &SVector<T, 2>,
         p: &Params<T>,
     ) -> SVector<T, 0> {
         contact_positions(q, p)
     }
+    #[inline]
     fn contact_jacobian<T: Arithmetic>(
         q: &SVector<T, 2>,
         p: &Params<T>,
     ) -> SMatrix<T, 0, 2> {
         contact_jacobian(q, p)
     }
+    #[inline]
     fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 2>,
         qd: &SVector<T, 2>,
@@ -408,6 +436,7 @@ impl ContactModel<NQ, NC, NU, NK> for TwoLink {
     ) -> SVector<T, 0> {
         contact_bias(q, qd, p)
     }
+    #[inline]
     fn contact_derivatives<T: Arithmetic>(
         q: &SVector<T, 2>,
         qd: &SVector<T, 2>,

@@ -187,6 +187,10 @@ impl<T: Arithmetic> Params<T> {
     /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
     pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
         change(&mut self.values);
+        self.prepare_again();
+    }
+    /// The prepared quantities of the present values, in place.
+    fn prepare_again(&mut self) {
         self.prepared = prepare(&self.values).data.0[0];
     }
 }
@@ -353,7 +357,7 @@ impl<T: Arithmetic> Parameters<T> for Params<T> {
             stale |= PREPARE_READS[i];
         }
         if stale {
-            self.prepared = prepare(&self.values).data.0[0];
+            self.prepare_again();
         }
         true
     }
@@ -374,9 +378,11 @@ impl LegDynamics<NQ, NC, NU> for ParallelogramKnee {
     const REDUNDANT_ROWS: usize = 0;
     const MOBILITY: usize = 2;
     type Params<T: Arithmetic> = Params<T>;
+    #[inline]
     fn mass_matrix<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 4, 4> {
         mass_matrix(q, p)
     }
+    #[inline]
     fn bias_forces<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -384,27 +390,32 @@ impl LegDynamics<NQ, NC, NU> for ParallelogramKnee {
     ) -> SVector<T, 4> {
         bias_forces(q, qd, p)
     }
+    #[inline]
     fn gravity_forces<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 4> {
         gravity_forces(q, p)
     }
+    #[inline]
     fn damping_forces<T: Arithmetic>(
         qd: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SVector<T, 4> {
         damping_forces(qd, p)
     }
+    #[inline]
     fn closure_residual<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SVector<T, 2> {
         closure_residual(q, p)
     }
+    #[inline]
     fn constraint_jacobian<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 4> {
         constraint_jacobian(q, p)
     }
+    #[inline]
     fn constraint_bias<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -412,6 +423,7 @@ impl LegDynamics<NQ, NC, NU> for ParallelogramKnee {
     ) -> SVector<T, 2> {
         constraint_bias(q, qd, p)
     }
+    #[inline]
     fn kinetic_energy<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -419,12 +431,15 @@ impl LegDynamics<NQ, NC, NU> for ParallelogramKnee {
     ) -> T {
         kinetic_energy(q, qd, p)
     }
+    #[inline]
     fn potential_energy<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> T {
         potential_energy(q, p)
     }
+    #[inline]
     fn leg_size<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> T {
         leg_size(q, p)
     }
+    #[inline]
     fn dynamics_terms<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -432,6 +447,7 @@ impl LegDynamics<NQ, NC, NU> for ParallelogramKnee {
     ) -> DynamicsTerms<T, 4, 2> {
         dynamics_terms(q, qd, p)
     }
+    #[inline]
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, 4>,
         a: &SVector<T, 4>,
@@ -439,6 +455,7 @@ impl LegDynamics<NQ, NC, NU> for ParallelogramKnee {
     ) -> SMatrix<T, 4, 4> {
         mass_matrix_derivative(q, a, p)
     }
+    #[inline]
     fn bias_forces_derivatives<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -446,6 +463,7 @@ impl LegDynamics<NQ, NC, NU> for ParallelogramKnee {
     ) -> (SMatrix<T, 4, 4>, SMatrix<T, 4, 4>) {
         bias_forces_derivatives(q, qd, p)
     }
+    #[inline]
     fn constraint_derivatives<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -455,6 +473,7 @@ impl LegDynamics<NQ, NC, NU> for ParallelogramKnee {
     ) -> ConstraintDerivatives<T, 4, 2> {
         constraint_derivatives(q, qd, a, f, p)
     }
+    #[inline]
     fn dynamics_derivatives<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -466,15 +485,18 @@ impl LegDynamics<NQ, NC, NU> for ParallelogramKnee {
     }
 }
 impl LegModel<NQ, NC, NU> for ParallelogramKnee {
+    #[inline]
     fn foot_position<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SVector<T, 2> {
         foot_position(q, p)
     }
+    #[inline]
     fn foot_jacobian<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 4> {
         foot_jacobian(q, p)
     }
+    #[inline]
     fn foot_bias<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -482,15 +504,18 @@ impl LegModel<NQ, NC, NU> for ParallelogramKnee {
     ) -> SVector<T, 2> {
         foot_bias(q, qd, p)
     }
+    #[inline]
     fn joint_positions<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SMatrix<T, 2, 4> {
         joint_positions(q, p)
     }
+    #[inline]
     fn link_tips<T: Arithmetic>(q: &SVector<T, 4>, p: &Params<T>) -> SMatrix<T, 2, 4> {
         link_tips(q, p)
     }
+    #[inline]
     fn closure_points<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
@@ -503,18 +528,21 @@ impl ContactModel<NQ, NC, NU, NK> for ParallelogramKnee {
     const CONTACT_FRICTION: &'static [f64] = &[];
     const GROUND_NORMAL: [f64; 2] = [0.0, 1.0];
     const GROUND_OFFSET: f64 = 0.0;
+    #[inline]
     fn contact_positions<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SVector<T, 0> {
         contact_positions(q, p)
     }
+    #[inline]
     fn contact_jacobian<T: Arithmetic>(
         q: &SVector<T, 4>,
         p: &Params<T>,
     ) -> SMatrix<T, 0, 4> {
         contact_jacobian(q, p)
     }
+    #[inline]
     fn contact_bias<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,
@@ -522,6 +550,7 @@ impl ContactModel<NQ, NC, NU, NK> for ParallelogramKnee {
     ) -> SVector<T, 0> {
         contact_bias(q, qd, p)
     }
+    #[inline]
     fn contact_derivatives<T: Arithmetic>(
         q: &SVector<T, 4>,
         qd: &SVector<T, 4>,

@@ -488,7 +488,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
     let mut defaults = Vec::new();
     let mut param_names = Vec::new();
     let mut getters = Vec::new();
-    let mut setter_fields = Vec::new();
+    let mut setters = Vec::new();
     for p in &info.params {
         let id = codegen::ident(&ctx, &p.name)?;
         // Units are written `[m]`: escaped, so rustdoc does not read them as links.
@@ -504,22 +504,29 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
         defaults.push(quote!(#id: #v));
         let i = lit(param_names.len());
         getters.push(quote!(#i => Some(self.values.#id)));
-        setter_fields.push((i, id));
+        setters.push(quote!(#i => self.values.#id = value));
         param_names.push(p.name.clone());
     }
 
     // Parameter-only work is done once per parameter set (`Params::new`), not per call.
     let hoisted = codegen::hoist::hoist(&ir.functions, "p", "ParamValues");
     // A field `prepare` does not read (a floating robot's gravity) is set without preparing:
-    // a floating robot writes its chart's gravity every call.
-    let setters: Vec<_> = setter_fields
+    // a floating robot writes its chart's gravity every call. Matched by name, so the
+    // setters' order (the spec's) need not be the struct's; a name not found re-prepares.
+    let read_fields: &[String] = match &hoisted.prepare.inputs[0].shape {
+        codegen::ir::InputShape::Struct { fields, .. } => fields,
+        _ => &[],
+    };
+    let reads: Vec<bool> = param_names
         .iter()
-        .map(|(i, id)| quote!(#i => self.values.#id = value))
+        .map(|name| {
+            read_fields
+                .iter()
+                .position(|f| f == name)
+                .is_none_or(|k| hoisted.reads[k])
+        })
         .collect();
-    let n_params = lit(setter_fields.len());
-    let reads: Vec<bool> = (0..setter_fields.len())
-        .map(|k| hoisted.reads.get(k).copied().unwrap_or(true))
-        .collect();
+    let n_params = lit(param_names.len());
     let prepared = lit(hoisted.prepare.outputs[0].rows);
     let mut functions = vec![codegen::emit_function(
         &hoisted.prepare,
@@ -699,6 +706,11 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             /// Changes values, then prepares once: `p.update(|v| v.gravity_y = -1.62)`.
             pub fn update(&mut self, change: impl FnOnce(&mut ParamValues<T>)) {
                 change(&mut self.values);
+                self.prepare_again();
+            }
+
+            /// The prepared quantities of the present values, in place.
+            fn prepare_again(&mut self) {
                 self.prepared = prepare(&self.values).data.0[0];
             }
         }
@@ -747,7 +759,7 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
                     stale |= PREPARE_READS[i];
                 }
                 if stale {
-                    self.prepared = prepare(&self.values).data.0[0];
+                    self.prepare_again();
                 }
                 true
             }
@@ -816,25 +828,14 @@ fn trait_method(f: &Program, nq: usize, wrap: Option<&str>) -> TokenStream {
         .iter()
         .map(|i| format_ident!("{}", i.name))
         .collect();
-    let ty = |o: &codegen::ir::Output| {
-        let (r, c) = (lit(o.rows), lit(o.cols));
-        match o.kind {
-            OutputKind::Scalar => quote!(T),
-            OutputKind::Vector => quote!(SVector<T, #r>),
-            OutputKind::Matrix => quote!(SMatrix<T, #r, #c>),
-        }
-    };
     // `f` returns what the method does (a wrapped struct built in the caller's place):
     // nothing is moved here.
-    let ret = match (f.outputs.as_slice(), wrap_type(f, nq, wrap)) {
-        ([one], _) => ty(one),
-        (_, Some((st, _))) => st,
-        (outputs, None) => {
-            let types = outputs.iter().map(ty);
-            quote!((#(#types),*))
-        }
-    };
+    let ret = codegen::return_type(f, wrap_type(f, nq, wrap).map(|(ty, _)| ty).as_ref());
+    // Inlined so the forward adds no call: without it, a small model's method stayed a
+    // separate function and its terms' shared sines were computed twice (two_link's
+    // derivatives, 585 -> 837 instructions).
     quote! {
+        #[inline]
         fn #name<T: Arithmetic>(#(#args),*) -> #ret {
             #name(#(#pass),*)
         }
