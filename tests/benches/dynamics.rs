@@ -11,9 +11,8 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use leg_models::assembly::project_velocity;
 use leg_models::control::reference::Sinusoid;
 use leg_models::control::{actuated_reduction, Gains, JointFeedbackLinearization};
-use leg_models::dynamics::contact::{project_held_velocity, spec_friction, Ground, Modes};
 use leg_models::dynamics::forward_dynamics;
-use leg_models::nalgebra::{SVector, UnitQuaternion, Vector3};
+use leg_models::nalgebra::SVector;
 use leg_models::robot::{self, RobotState};
 use leg_models::simulate::hybrid::{HybridSimulator, HybridState};
 use leg_models::simulate::{step, State, StepOptions, TorqueSource};
@@ -412,23 +411,15 @@ fn bench_floating<L, const NQ: usize, const NC: usize, const NU: usize, const NK
 ) where
     L: ContactModel<NQ, NC, NU, NK, 3>,
 {
-    let p = L::Params::<f64>::default();
-    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
-    let q = passive_release_state::<L, NQ, NC, NU>(&p).q;
-    let mut s = RobotState::at_rest(Vector3::zeros(), UnitQuaternion::identity(), q);
-    s.recentre(f);
-    let mut v = SVector::<f64, NQ>::from_fn(|i, _| 0.3 + 0.1 * i as f64);
-    project_velocity::<L, f64, NQ, NC, NU>(&p, &s.q, &mut v).unwrap();
-    // Any plane: a held contact's q̈ does not depend on where the ground is.
-    let ground = Ground::<f64, 3>::of::<L, NQ, NC, NU, NK>();
-    let modes = Modes::<NK, 3>::stick();
-    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
-    if NK > 0 {
-        project_held_velocity::<L, f64, NQ, NC, NU, NK, 3>(&p, &s.q, &mut v, &modes, &ground)
-            .unwrap();
-    }
-    s.v = v;
-    let u = SVector::<f64, NU>::from_fn(|k, _| 0.05 * (k as f64 + 1.0));
+    let leg_tests::RobotScene {
+        params: p,
+        free: f,
+        state: s,
+        ground,
+        modes,
+        friction: mu,
+        torques: u,
+    } = leg_tests::robot_scene::<L, NQ, NC, NU, NK>().expect("the robot's scene assembles");
     let mut g = c.benchmark_group(L::NAME);
     g.warm_up_time(Duration::from_millis(300))
         .measurement_time(Duration::from_millis(1200))

@@ -288,31 +288,22 @@ fn run_robot<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usi
 where
     L: ContactModel<NQ, NC, NU, NK, 3>,
 {
-    use leg_models::assembly::project_velocity;
-    use leg_models::dynamics::contact::project_held_velocity;
-    use leg_models::nalgebra::{UnitQuaternion, Vector3};
-    use leg_models::robot::{self, RobotState};
+    use leg_models::robot;
     if !matches!(what, "robot_forward_dynamics" | "robot_stance")
         || (what == "robot_stance" && NK == 0)
     {
         return None;
     }
-    let p = L::Params::<f64>::default();
-    let f = robot::free_joint::<L, NQ, NC, NU>().ok()?;
-    let q = leg_tests::passive_release_state::<L, NQ, NC, NU>(&p).q;
-    let mut s = RobotState::at_rest(Vector3::zeros(), UnitQuaternion::identity(), q);
-    s.recentre(f);
-    let mut v = SVector::<f64, NQ>::from_fn(|i, _| 0.3 + 0.1 * i as f64);
-    project_velocity::<L, f64, NQ, NC, NU>(&p, &s.q, &mut v).ok()?;
-    let ground = Ground::<f64, 3>::of::<L, NQ, NC, NU, NK>();
-    let modes = Modes::<NK, 3>::stick();
-    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
-    if NK > 0 {
-        project_held_velocity::<L, f64, NQ, NC, NU, NK, 3>(&p, &s.q, &mut v, &modes, &ground)
-            .ok()?;
-    }
-    s.v = v;
-    let u = SVector::<f64, NU>::from_fn(|k, _| 0.05 * (k as f64 + 1.0));
+    // The criterion benchmark's scene.
+    let leg_tests::RobotScene {
+        params: p,
+        free: f,
+        state: s,
+        ground,
+        modes,
+        friction: mu,
+        torques: u,
+    } = leg_tests::robot_scene::<L, NQ, NC, NU, NK>()?;
     if what == "robot_forward_dynamics" {
         let call = || {
             robot::forward_dynamics_at::<L, f64, NQ, NC, NU>(

@@ -191,6 +191,60 @@ pub fn passive_release_state<
     }
 }
 
+/// The scene a floating robot's calls are measured at, by the criterion benchmark and
+/// by `count_calls` alike: the home pose on a body at the origin, a velocity of every
+/// coordinate projected onto the closures and onto every contact held, and small
+/// torques. `None` where the model does not float or the scene does not assemble.
+pub struct RobotScene<const NQ: usize, const NU: usize, const NK: usize, P> {
+    pub params: P,
+    /// The free joint's first coordinate.
+    pub free: usize,
+    pub state: leg_models::robot::RobotState<f64, NQ>,
+    /// Any plane: a held contact's `q̈` does not depend on where the ground is.
+    pub ground: leg_models::dynamics::contact::Ground<f64, 3>,
+    /// Every contact held.
+    pub modes: leg_models::dynamics::contact::Modes<NK, 3>,
+    /// The spec's friction coefficients.
+    pub friction: SVector<f64, NK>,
+    pub torques: SVector<f64, NU>,
+}
+
+/// [`RobotScene`] of `L` at its default parameters.
+pub fn robot_scene<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+) -> Option<RobotScene<NQ, NU, NK, L::Params<f64>>>
+where
+    L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
+{
+    use leg_models::dynamics::contact::{project_held_velocity, spec_friction, Ground, Modes};
+    use leg_models::nalgebra::{UnitQuaternion, Vector3};
+    use leg_models::robot::{self, RobotState};
+    let params = L::Params::<f64>::default();
+    let free = robot::free_joint::<L, NQ, NC, NU>().ok()?;
+    let q = passive_release_state::<L, NQ, NC, NU>(&params).q;
+    let mut state = RobotState::at_rest(Vector3::zeros(), UnitQuaternion::identity(), q);
+    state.recentre(free);
+    let mut v = SVector::<f64, NQ>::from_fn(|i, _| 0.3 + 0.1 * i as f64);
+    project_velocity::<L, f64, NQ, NC, NU>(&params, &state.q, &mut v).ok()?;
+    let ground = Ground::<f64, 3>::of::<L, NQ, NC, NU, NK>();
+    let modes = Modes::<NK, 3>::stick();
+    if NK > 0 {
+        project_held_velocity::<L, f64, NQ, NC, NU, NK, 3>(
+            &params, &state.q, &mut v, &modes, &ground,
+        )
+        .ok()?;
+    }
+    state.v = v;
+    Some(RobotScene {
+        params,
+        free,
+        state,
+        ground,
+        modes,
+        friction: spec_friction::<L, f64, NQ, NC, NU, NK, 3>(),
+        torques: SVector::from_fn(|k, _| 0.05 * (k as f64 + 1.0)),
+    })
+}
+
 /// The reciprocal condition of `J_p J_pᵀ` (`J` without the actuated columns), from the
 /// pivots of its Cholesky factor; 1 without closures, 0 where it is singular.
 pub fn passive_rcond<

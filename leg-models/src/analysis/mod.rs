@@ -1191,9 +1191,10 @@ impl<P> BodyCoupling<P> {
         }
         let with = |along: Option<usize>| {
             let mut p = params.clone();
-            for (k, &i) in axes.iter().enumerate().take(dimension) {
-                p.set(i, T::lit(if along == Some(k) { 1.0 } else { 0.0 }));
-            }
+            let unit = core::array::from_fn::<_, 3, _>(|k| {
+                (axes[k], T::lit(if along == Some(k) { 1.0 } else { 0.0 }))
+            });
+            p.set_many(&unit[..dimension]);
             p
         };
         Some(BodyCoupling {

@@ -22,7 +22,7 @@
 //! quaternion is renormalized after each step, so it stays unit to rounding.
 //!
 //! Gravity is a parameter of the generated model: the robot's parameters hold it in
-//! the world, and [`chart_params`] turns it into the chart each step. Closures are
+//! the world, and each call turns it into the chart's (`R₀ᵀ g`, [`chart_params`]). Closures are
 //! between the robot's own links, so they do not see the chart at all.
 
 #[cfg(feature = "balance")]
@@ -132,19 +132,19 @@ where
     L: LegDynamics<NQ, NC, NU>,
     T: Real,
 {
-    let gravity = chart_gravity::<L, T, NQ, NC, NU>(params, orientation)?;
     let mut out = *params;
-    out.set_many(&gravity);
+    into_chart::<L, T, NQ, NC, NU>(&mut out, orientation)?;
     Ok(out)
 }
 
-/// The chart's gravity `R₀ᵀ g` as the changes `Parameters::set_many` takes. The hot
-/// paths copy the parameters and set these on the copy (one copy; returning the copied
-/// parameters in a `Result` moved them twice more: a robot's are 8 KB).
-fn chart_gravity<L, T, const NQ: usize, const NC: usize, const NU: usize>(
-    params: &L::Params<T>,
+/// Turns the robot's parameters, in place, into those of the chart centred on a body
+/// turned by `orientation` (gravity `g` in the world becomes `R₀ᵀ g`). The hot paths
+/// copy the parameters once and turn the copy; returning the copy in a `Result`
+/// ([`chart_params`]) moved it twice more, and a robot's are 8 KB.
+fn into_chart<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &mut L::Params<T>,
     orientation: &UnitQuaternion<T>,
-) -> Result<[(usize, T); 3], RobotError>
+) -> Result<(), RobotError>
 where
     L: LegDynamics<NQ, NC, NU>,
     T: Real,
@@ -152,7 +152,8 @@ where
     let idx = gravity_indices::<L, T, NQ, NC, NU>()?;
     let g = world_gravity::<L, T, NQ, NC, NU>(params)?;
     let local = orientation.inverse_transform_vector(&g);
-    Ok([(idx[0], local[0]), (idx[1], local[1]), (idx[2], local[2])])
+    params.set_many(&[(idx[0], local[0]), (idx[1], local[1]), (idx[2], local[2])]);
+    Ok(())
 }
 
 /// `R_x(α) R_y(β) R_z(γ)`, the ball joint's rotation, as a unit quaternion.
@@ -259,9 +260,8 @@ where
     let f = free_joint::<L, NQ, NC, NU>()?;
     let mut s = *state;
     s.recentre(f);
-    let gravity = chart_gravity::<L, T, NQ, NC, NU>(params, &s.orientation)?;
     let mut chart = *params;
-    chart.set_many(&gravity);
+    into_chart::<L, T, NQ, NC, NU>(&mut chart, &s.orientation)?;
     Ok(forward_dynamics::<L, T, NQ, NC, NU>(
         &chart, &s.q, &s.v, u, None,
     )?)
@@ -377,9 +377,8 @@ where
     let f = free_joint::<L, NQ, NC, NU>()?;
     let mut next = *state;
     next.recentre(f);
-    let gravity = chart_gravity::<L, T, NQ, NC, NU>(params, &next.orientation)?;
     let mut chart = *params;
-    chart.set_many(&gravity);
+    into_chart::<L, T, NQ, NC, NU>(&mut chart, &next.orientation)?;
     let mut local = State {
         q: next.q,
         qd: next.v,
@@ -407,9 +406,8 @@ where
     let f = free_joint::<L, NQ, NC, NU>()?;
     let mut s = *state;
     s.recentre(f);
-    let gravity = chart_gravity::<L, T, NQ, NC, NU>(params, &s.orientation)?;
     let mut chart = *params;
-    chart.set_many(&gravity);
+    into_chart::<L, T, NQ, NC, NU>(&mut chart, &s.orientation)?;
     let kinetic = L::kinetic_energy(&s.q, &s.v, &chart);
     let g = L::gravity_forces(&s.q, &chart);
     let weight_in_world = s
@@ -436,9 +434,8 @@ where
     let f = free_joint::<L, NQ, NC, NU>()?;
     let mut s = *state;
     s.recentre(f);
-    let gravity = chart_gravity::<L, T, NQ, NC, NU>(params, &s.orientation)?;
     let mut chart = *params;
-    chart.set_many(&gravity);
+    into_chart::<L, T, NQ, NC, NU>(&mut chart, &s.orientation)?;
     let h = L::mass_matrix(&s.q, &chart) * s.v;
     let linear = s
         .orientation
@@ -661,9 +658,8 @@ where
     let f = free_joint::<L, NQ, NC, NU>()?;
     let mut s = *state;
     s.recentre(f);
-    let gravity = chart_gravity::<L, T, NQ, NC, NU>(params, &s.orientation)?;
     let mut chart = *params;
-    chart.set_many(&gravity);
+    into_chart::<L, T, NQ, NC, NU>(&mut chart, &s.orientation)?;
     let local = ground_in_chart(ground, &s.position, &s.orientation);
     let system = ContactSystem::new::<L, NU>(
         &chart,
@@ -816,9 +812,8 @@ where
     let f = free_joint::<L, NQ, NC, NU>()?;
     let mut next = *state;
     next.recentre(f);
-    let gravity = chart_gravity::<L, T, NQ, NC, NU>(params, &next.orientation)?;
     let mut chart = *params;
-    chart.set_many(&gravity);
+    into_chart::<L, T, NQ, NC, NU>(&mut chart, &next.orientation)?;
     let local = ground_in_chart(ground, &next.position, &next.orientation);
     // The forces are in the chart of the step's start, turned by its centre.
     let centre = next.orientation;
@@ -875,9 +870,8 @@ where
     let f = free_joint::<L, NQ, NC, NU>()?;
     let mut next = *state;
     next.recentre(f);
-    let gravity = chart_gravity::<L, T, NQ, NC, NU>(params, &next.orientation)?;
     let mut chart = *params;
-    chart.set_many(&gravity);
+    into_chart::<L, T, NQ, NC, NU>(&mut chart, &next.orientation)?;
     let local = ground_in_chart(ground, &next.position, &next.orientation);
     // `modes` changes (a sticking contact resolved as sliding) only if the impact does.
     let mut resolved = *modes;
