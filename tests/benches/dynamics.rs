@@ -419,7 +419,8 @@ fn bench_floating<L, const NQ: usize, const NC: usize, const NU: usize, const NK
         modes,
         friction: mu,
         torques: u,
-    } = leg_tests::robot_scene::<L, NQ, NC, NU, NK>().expect("the robot's scene assembles");
+    } = leg_tests::robot_scene::<L, NQ, NC, NU, NK>()
+        .unwrap_or_else(|e| panic!("{}: the robot's scene: {e}", L::NAME));
     let mut g = c.benchmark_group(L::NAME);
     g.warm_up_time(Duration::from_millis(300))
         .measurement_time(Duration::from_millis(1200))

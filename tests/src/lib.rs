@@ -194,7 +194,7 @@ pub fn passive_release_state<
 /// The scene a floating robot's calls are measured at, by the criterion benchmark and
 /// by `count_calls` alike: the home pose on a body at the origin, a velocity of every
 /// coordinate projected onto the closures and onto every contact held, and small
-/// torques. `None` where the model does not float or the scene does not assemble.
+/// torques.
 pub struct RobotScene<const NQ: usize, const NU: usize, const NK: usize, P> {
     pub params: P,
     /// The free joint's first coordinate.
@@ -209,9 +209,11 @@ pub struct RobotScene<const NQ: usize, const NU: usize, const NK: usize, P> {
     pub torques: SVector<f64, NU>,
 }
 
-/// [`RobotScene`] of `L` at its default parameters.
+/// [`RobotScene`] of `L` at its default parameters, or why there is none (the model
+/// does not float, or a velocity projection fails). Panics where the home pose does not
+/// assemble ([`passive_release_state`]).
 pub fn robot_scene<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
-) -> Option<RobotScene<NQ, NU, NK, L::Params<f64>>>
+) -> Result<RobotScene<NQ, NU, NK, L::Params<f64>>, String>
 where
     L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
 {
@@ -219,22 +221,23 @@ where
     use leg_models::nalgebra::{UnitQuaternion, Vector3};
     use leg_models::robot::{self, RobotState};
     let params = L::Params::<f64>::default();
-    let free = robot::free_joint::<L, NQ, NC, NU>().ok()?;
+    let free = robot::free_joint::<L, NQ, NC, NU>().map_err(|e| e.to_string())?;
     let q = passive_release_state::<L, NQ, NC, NU>(&params).q;
     let mut state = RobotState::at_rest(Vector3::zeros(), UnitQuaternion::identity(), q);
     state.recentre(free);
     let mut v = SVector::<f64, NQ>::from_fn(|i, _| 0.3 + 0.1 * i as f64);
-    project_velocity::<L, f64, NQ, NC, NU>(&params, &state.q, &mut v).ok()?;
+    project_velocity::<L, f64, NQ, NC, NU>(&params, &state.q, &mut v)
+        .map_err(|e| format!("the closures' velocity projection: {e}"))?;
     let ground = Ground::<f64, 3>::of::<L, NQ, NC, NU, NK>();
     let modes = Modes::<NK, 3>::stick();
     if NK > 0 {
         project_held_velocity::<L, f64, NQ, NC, NU, NK, 3>(
             &params, &state.q, &mut v, &modes, &ground,
         )
-        .ok()?;
+        .map_err(|e| format!("the held contacts' velocity projection: {e}"))?;
     }
     state.v = v;
-    Some(RobotScene {
+    Ok(RobotScene {
         params,
         free,
         state,

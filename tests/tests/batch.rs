@@ -1,6 +1,6 @@
 //! Batched forward dynamics on `F64x4` lanes against the scalar path, lane by lane, on
 //! every leg: four assembled random states with random torques, the same to 1e-12
-//! relative; lanes with different parameters (a sweep); a broken lane flagged while the
+//! relative; every parameter broadcast; lanes with different parameters (a sweep); a broken lane flagged while the
 //! others stay right; legs whose closure repeats rows refused with a typed error.
 
 use leg_models::dynamics::batch::{broadcast, forward_dynamics as batch_fd, BatchError};
@@ -20,6 +20,50 @@ fn close<const N: usize>(a: &SVector<f64, N>, b: &SVector<f64, N>, what: &str) -
     e
 }
 
+/// `broadcast` of parameters that all differ from the defaults it starts from: every
+/// value in every lane, and the prepared quantities of those values (the terms that read
+/// them, lane by lane, against the scalar terms).
+fn broadcast_sets_every_parameter<L, const NQ: usize, const NC: usize, const NU: usize>(
+    p: &L::Params<f64>,
+    rng: &mut Rng,
+) where
+    L: LegModel<NQ, NC, NU>,
+{
+    let names = <L::Params<f64> as Parameters<f64>>::NAMES;
+    let changes: Vec<(usize, f64)> = (0..names.len())
+        .map(|i| (i, p.get(i).unwrap() * (1.0 + 1e-3 * (i + 1) as f64) + 1e-4))
+        .collect();
+    let mut changed = *p;
+    assert!(changed.set_many(&changes));
+    let p4 = broadcast::<L, NQ, NC, NU>(&changed);
+    for (i, name) in names.iter().enumerate() {
+        assert_eq!(
+            p4.get(i),
+            Some(F64x4::splat(changed.get(i).unwrap())),
+            "{}: parameter {name}",
+            L::NAME
+        );
+    }
+    let s = random_assembled_state::<L, NQ, NC, NU>(p, rng, 1.0);
+    let (q4, qd4) = (pack([&s.q; 4]), pack([&s.qd; 4]));
+    let gravity = L::gravity_forces(&q4, &p4);
+    let energy = L::kinetic_energy(&q4, &qd4, &p4);
+    let want_energy = L::kinetic_energy(&s.q, &s.qd, &changed);
+    for k in 0..4 {
+        close(
+            &unpack(&gravity, k),
+            &L::gravity_forces(&s.q, &changed),
+            L::NAME,
+        );
+        assert!(
+            (energy.0[k] - want_energy).abs() <= 1e-12 * want_energy.abs().max(1e-9),
+            "{}: kinetic energy {} against {want_energy}",
+            L::NAME,
+            energy.0[k]
+        );
+    }
+}
+
 fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: usize>() {
     let p = L::Params::<f64>::default();
     let p4 = broadcast::<L, NQ, NC, NU>(&p);
@@ -33,6 +77,7 @@ fn check<L: LegModel<NQ, NC, NU>, const NQ: usize, const NC: usize, const NU: us
         );
         return;
     }
+    broadcast_sets_every_parameter::<L, NQ, NC, NU>(&p, &mut rng);
     let mut worst = 0.0f64;
     for _ in 0..25 {
         let states: Vec<_> = (0..4)

@@ -54,18 +54,22 @@ pub fn broadcast<L, const NQ: usize, const NC: usize, const NU: usize>(
 where
     L: LegDynamics<NQ, NC, NU>,
 {
-    // Set in chunks, each prepared once: one `set` each prepared once per parameter
-    // (337 times for Cassie).
+    // Set in chunks, each prepared once: a `set` per parameter prepared once for each
+    // one `prepare` reads (337 of Cassie's 461); in chunks of 64, 8 times.
     const CHUNK: usize = 64;
     let mut out = L::Params::<F64x4>::default();
-    let n = <L::Params<f64> as Parameters<f64>>::NAMES.len();
+    let n = <L::Params<F64x4> as Parameters<F64x4>>::NAMES.len();
     let mut changes = [(0, ZERO); CHUNK];
     for start in (0..n).step_by(CHUNK) {
-        let end = (start + CHUNK).min(n);
-        for (slot, i) in changes.iter_mut().zip(start..end) {
-            *slot = (i, F64x4::splat(p.get(i).expect("an index of NAMES")));
+        let mut len = 0;
+        for i in start..(start + CHUNK).min(n) {
+            if let Some(v) = p.get(i) {
+                changes[len] = (i, F64x4::splat(v));
+                len += 1;
+            }
         }
-        out.set_many(&changes[..end - start]);
+        let set = out.set_many(&changes[..len]);
+        debug_assert!(set, "indices below NAMES.len()");
     }
     out
 }

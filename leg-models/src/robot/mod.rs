@@ -22,7 +22,7 @@
 //! quaternion is renormalized after each step, so it stays unit to rounding.
 //!
 //! Gravity is a parameter of the generated model: the robot's parameters hold it in
-//! the world, and each call turns it into the chart's (`R₀ᵀ g`, [`chart_params`]). Closures are
+//! the world, and each call turns it into the chart's, `R₀ᵀ g` ([`chart_params`]). Closures are
 //! between the robot's own links, so they do not see the chart at all.
 
 #[cfg(feature = "balance")]
@@ -150,7 +150,8 @@ where
     T: Real,
 {
     let idx = gravity_indices::<L, T, NQ, NC, NU>()?;
-    let g = world_gravity::<L, T, NQ, NC, NU>(params)?;
+    let get = |i| params.get(i).expect("an index of NAMES");
+    let g = Vector3::new(get(idx[0]), get(idx[1]), get(idx[2]));
     let local = orientation.inverse_transform_vector(&g);
     params.set_many(&[(idx[0], local[0]), (idx[1], local[1]), (idx[2], local[2])]);
     Ok(())
