@@ -108,6 +108,10 @@ pub struct BenchArgs {
     /// Rewrite tests/instruction-budgets.json with today's counts
     #[arg(long, conflicts_with = "pinocchio")]
     pub update_budgets: bool,
+    /// Models to time (default: every one); with --pinocchio, Pinocchio's programs are
+    /// built and run for these only
+    #[arg(value_name = "MODEL", conflicts_with_all = ["instructions", "update_budgets"])]
+    pub models: Vec<String>,
 }
 
 #[derive(Args, Debug)]
@@ -304,12 +308,18 @@ pub struct EvalArgs {
     /// slide)
     #[arg(long, value_name = "CONTACT")]
     pub impact: Option<String>,
+    /// Every contact point held where it is (sticking): `stance` holds that forward
+    /// dynamics' qdd, closure forces F and contact forces (per contact, the ground's
+    /// frame: tangential, then normal); with --project, --qd is also moved onto the held
+    /// contacts (their velocities zero)
+    #[arg(long)]
+    pub stance: bool,
     /// Also the derivatives of forward dynamics: dqdd_dq, dqdd_dqd, dqdd_du, dF_dq,
     /// dF_dqd, dF_du (arrays of rows), exact, from the generated directional terms
     #[arg(long)]
     pub derivatives: bool,
     /// One JSON object: q, qd, u, M, N, G, J, Jdot_qdot, qdd, F, A_tilde, b_tilde, foot,
-    /// foot_jacobian, kinetic, potential, phi, contacts (positions, gaps), impact
+    /// foot_jacobian, kinetic, potential, phi, contacts (positions, gaps), impact, stance
     /// (matrices as arrays of rows), and with --derivatives the six derivatives; a term
     /// that cannot be computed at this state is null, and `errors` says why
     #[arg(long)]

@@ -324,27 +324,47 @@ fn per_state(v: Option<f64>) -> Option<f64> {
     v.map(|x| x / 4.0)
 }
 
-/// Runs the criterion benchmarks (and Pinocchio's pipeline when `pinocchio`), then
-/// prints the table.
-pub fn run(root: &Path, pinocchio: bool) -> Result<(), String> {
-    cargo(
-        root,
-        &[
-            "bench",
-            "-p",
-            "leg-tests",
-            "--features",
-            "peers",
-            "--bench",
-            "dynamics",
-        ],
-    )?;
+/// Runs the criterion benchmarks (and Pinocchio's pipeline when `pinocchio`) of `only`
+/// (every model when empty), then prints the tables.
+pub fn run(root: &Path, pinocchio: bool, only: &[String]) -> Result<(), String> {
+    let planar = crate::gen::planar_model_names(root)?;
+    let spatial = crate::gen::spatial_model_names(root)?;
+    for m in only {
+        if !planar.contains(m) && !spatial.contains(m) {
+            return Err(format!(
+                "bench: no model `{}` (the models: {})",
+                crate::cli::shown(m),
+                planar
+                    .iter()
+                    .chain(&spatial)
+                    .cloned()
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
+        }
+    }
+    let chosen = |m: &String| only.is_empty() || only.contains(m);
+    // Criterion's groups are the models' names.
+    let filter = format!("^({})/", only.join("|"));
+    let mut args = vec![
+        "bench",
+        "-p",
+        "leg-tests",
+        "--features",
+        "peers",
+        "--bench",
+        "dynamics",
+    ];
+    if !only.is_empty() {
+        args.extend(["--", filter.as_str()]);
+    }
+    cargo(root, &args)?;
     let (pin, pin_spatial) = if pinocchio {
-        crate::dev::pinocchio::run(root)?
+        crate::dev::pinocchio::run(root, &chosen)?
     } else {
         (BTreeMap::new(), BTreeMap::new())
     };
-    let models = crate::gen::planar_model_names(root)?;
+    let models: Vec<String> = planar.into_iter().filter(chosen).collect();
     println!();
     println!("| model | harness | fused ours | CasADi C closed | ratio | CasADi C Lagrange | ratio | Pinocchio-on-CasADi C | ratio | FD ours | CasADi C closed | ratio | CasADi C Lagrange | ratio | Pinocchio-on-CasADi C | ratio | Pinocchio C++ | ratio | control step | control / FD | fused f32/f64 | FD f32/f64 | sim step | fused batch per state | × scalar | FD batch per state | × scalar |");
     println!("|{}", "---|".repeat(27));
@@ -415,7 +435,15 @@ pub fn run(root: &Path, pinocchio: bool) -> Result<(), String> {
     println!();
     println!("| spatial model | harness | fused ours | CasADi C Lagrange | ratio | CasADi C closed | ratio | FD ours | Pinocchio C++ constraintDynamics (converged) | ratio | its iterations | Pinocchio, one iteration | ratio | its q̈ off by | sim step |");
     println!("|{}", "---|".repeat(15));
-    for m in crate::gen::spatial_model_names(root)? {
+    let floating = |m: &str| -> Result<bool, String> {
+        Ok(crate::gen::committed_ir(root, m)?.is_some_and(|ir| ir.model.free_joint.is_some()))
+    };
+    let mut robots = Vec::new();
+    for m in spatial.into_iter().filter(chosen) {
+        if floating(&m)? {
+            robots.push(m);
+            continue;
+        }
         let g = |id: &str| median(root, &m, id);
         let (fo, fd) = (g("fused-ours"), g("fd-ours"));
         let p = pin_spatial.get(&m);
@@ -434,6 +462,50 @@ pub fn run(root: &Path, pinocchio: bool) -> Result<(), String> {
             ratio(fd, p.map(|p| p.one_iteration)),
             p.map_or("–".into(), |p| format!("{:.1e}", p.one_iteration_error)),
             ns(g("step-ours")),
+        ];
+        println!("| {m} | {} |", cells.join(" | "));
+    }
+    // Floating robots: ours through leg_models::robot (the chart centred on the body, v̇
+    // from its q̈), Pinocchio with its free flyer; on the ground every contact held.
+    println!();
+    println!("| floating robot | harness | fused ours | FD ours (forward_dynamics_at, v̇) | Pinocchio C++ constraintDynamics, free flyer (converged) | ratio | its iterations | Pinocchio at the fewest iterations that give its converged q̈ | ratio | those iterations | Pinocchio, one iteration | ratio | its q̈ off by | stance ours (stance_dynamics, every contact held) | Pinocchio, every contact held (converged) | ratio | its iterations | Pinocchio held, fewest iterations | ratio | those iterations |");
+    println!("|{}", "---|".repeat(20));
+    for m in &robots {
+        let g = |id: &str| median(root, m, id);
+        let (fd, st) = (g("fd-ours"), g("stance-ours"));
+        let p = pin_spatial.get(m);
+        let (stance, stance_fewest) = (p.and_then(|p| p.stance), p.and_then(|p| p.stance_fewest));
+        let fewest = p.and_then(|p| p.fewest);
+        let count = |n: Option<u64>| n.map_or("–".into(), |n| n.to_string());
+        let cells = [
+            ns(g("empty")),
+            ns(g("fused-ours")),
+            ns(fd),
+            ns(p.map(|p| p.converged)),
+            ratio(fd, p.map(|p| p.converged)),
+            count(p.map(|p| p.iterations)),
+            ns(fewest),
+            ratio(fd, fewest),
+            count(
+                p.filter(|p| p.fewest.is_some())
+                    .map(|p| p.fewest_iterations),
+            ),
+            ns(p.map(|p| p.one_iteration)),
+            ratio(fd, p.map(|p| p.one_iteration)),
+            p.map_or("–".into(), |p| format!("{:.1e}", p.one_iteration_error)),
+            ns(st),
+            ns(stance),
+            ratio(st, stance),
+            count(
+                p.filter(|p| p.stance.is_some())
+                    .map(|p| p.stance_iterations),
+            ),
+            ns(stance_fewest),
+            ratio(st, stance_fewest),
+            count(
+                p.filter(|p| p.stance_fewest.is_some())
+                    .map(|p| p.stance_fewest_iterations),
+            ),
         ];
         println!("| {m} | {} |", cells.join(" | "));
     }

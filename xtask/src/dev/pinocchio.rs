@@ -114,6 +114,17 @@ pub struct SpatialFigures {
     pub one_iteration: f64,
     /// That solution's largest q̈ difference from ours, relative to our largest q̈.
     pub one_iteration_error: f64,
+    /// The fewest proximal iterations that give the converged q̈ (where rows repeat each
+    /// other the converged solve runs to its cap of 100 though q̈ is exact after two or
+    /// three), and their time: Pinocchio's exact solution at its fairest.
+    pub fewest: Option<f64>,
+    pub fewest_iterations: u64,
+    /// A floating robot with contact points: the closures and every contact point held
+    /// (a stance), converged, its iterations, and at the fewest iterations.
+    pub stance: Option<f64>,
+    pub stance_iterations: u64,
+    pub stance_fewest: Option<f64>,
+    pub stance_fewest_iterations: u64,
 }
 
 /// Whether `out` is older than any of `sources` (or missing).
@@ -186,8 +197,8 @@ fn compile(
 
 /// Pinocchio's figures for every model: its C++ pipeline where the C++ program has a
 /// fixed-size instance, and its algorithms on casadi::SX emitted as C for every leg
-/// without redundant closure rows.
-pub fn run(root: &Path) -> Result<AllFigures, String> {
+/// without redundant closure rows; of the models `chosen` says.
+pub fn run(root: &Path, chosen: &dyn Fn(&String) -> bool) -> Result<AllFigures, String> {
     let py = gen::python(root)?;
     eprintln!("==> installing {REQUIREMENTS} into {}/", gen::VENV_DIR);
     run_command(
@@ -214,18 +225,33 @@ pub fn run(root: &Path) -> Result<AllFigures, String> {
     let target = crate::cli::target_dir(root);
     let dir = target.join("pinocchio");
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    // Each program takes minutes to compile: only those the chosen models need.
+    let planar: Vec<String> = crate::gen::planar_model_names(root)?
+        .into_iter()
+        .filter(chosen)
+        .collect();
+    let spatial: Vec<String> = crate::gen::spatial_model_names(root)?
+        .into_iter()
+        .filter(chosen)
+        .collect();
     let bin = dir.join("pinocchio_bench");
-    compile(root, SOURCE, &bin, &prefix, None)?;
     let sx_bin = dir.join("pinocchio_casadi");
-    compile(root, SX_SOURCE, &sx_bin, &prefix, Some(&casadi_dir))?;
     let derivatives_bin = dir.join("pinocchio_derivatives");
-    compile(root, DERIVATIVES_SOURCE, &derivatives_bin, &prefix, None)?;
-    let spatial_bin = dir.join("pinocchio_spatial_bench");
-    compile(root, SPATIAL_SOURCE, &spatial_bin, &prefix, None)?;
+    if !planar.is_empty() {
+        compile(root, SOURCE, &bin, &prefix, None)?;
+        compile(root, SX_SOURCE, &sx_bin, &prefix, Some(&casadi_dir))?;
+        compile(root, DERIVATIVES_SOURCE, &derivatives_bin, &prefix, None)?;
+    }
     let target_legs = crate::cli::build_legs(root)?;
-    let spatial = spatial_figures(root, &dir, &spatial_bin, &target_legs)?;
+    let spatial = if spatial.is_empty() {
+        BTreeMap::new()
+    } else {
+        let spatial_bin = dir.join("pinocchio_spatial_bench");
+        compile(root, SPATIAL_SOURCE, &spatial_bin, &prefix, None)?;
+        spatial_figures(root, &dir, &spatial_bin, &target_legs, &spatial)?
+    };
     let mut out = BTreeMap::new();
-    for name in crate::gen::planar_model_names(root)? {
+    for name in planar {
         let spec = gen::load_spec(
             root,
             &root.join(gen::SPECS_DIR).join(format!("{name}.toml")),
@@ -343,12 +369,16 @@ pub fn run(root: &Path) -> Result<AllFigures, String> {
 }
 
 /// Every spatial leg's URDF in `pinocchio_spatial_bench` at its assembled home pose with
-/// rates and torques, its q̈ checked against ours (`legs eval`) before it is timed.
+/// rates and torques, its q̈ checked against ours (`legs eval`) before it is timed. A
+/// floating robot's body is Pinocchio's free flyer (its URDF's root link the body), level
+/// at the origin, the chart centred on it; with contact points, every one held too (its
+/// rates put on them: a stance), checked and timed apart.
 fn spatial_figures(
     root: &Path,
     dir: &Path,
     bin: &Path,
     legs: &Path,
+    models: &[String],
 ) -> Result<BTreeMap<String, SpatialFigures>, String> {
     // Numbers written exactly: comma-separated for `legs`, space-separated for the file.
     let joined = |v: &[f64], sep: &str| {
@@ -364,7 +394,7 @@ fn spatial_figures(
             .unwrap_or_default()
     };
     let mut out = BTreeMap::new();
-    for name in crate::gen::spatial_model_names(root)? {
+    for name in models.iter().cloned() {
         let spec = gen::load_spec(
             root,
             &root.join(gen::SPECS_DIR).join(format!("{name}.toml")),
@@ -378,34 +408,70 @@ fn spatial_figures(
             eprintln!("{name}: not timed against Pinocchio: its constraintDynamics has no rod (distance) constraint");
             continue;
         }
+        // A floating robot's free joint: Pinocchio's own (one 6-dof joint), not the
+        // chart's six 1-dof joints.
+        let free = m
+            .links
+            .iter()
+            .position(|l| l.spec_kind == crate::gen::spec::JointKind::Free);
+        let stance = free.is_some() && !m.contacts.is_empty();
         let urdf = dir.join(format!("{name}.urdf"));
-        crate::cli::write_atomic(&urdf, &crate::commands::export::spatial::urdf(&m))?;
+        let text = match free {
+            Some(_) => crate::commands::export::spatial::urdf_floating(&m),
+            None => crate::commands::export::spatial::urdf(&m),
+        };
+        crate::cli::write_atomic(&urdf, &text)?;
         let n = m.links.len();
         let qd: Vec<f64> = (0..n).map(|i| 0.3 + 0.1 * i as f64).collect();
         let u: Vec<f64> = (0..m.actuated.len())
             .map(|k| 0.05 * (k as f64 + 1.0))
             .collect();
-        let ours: Value = serde_json::from_str(&run_command(
-            Command::new(legs).args([
+        let eval = |q: &[f64], qd: &[f64], project: bool, stance: bool| -> Result<Value, String> {
+            let mut cmd = Command::new(legs);
+            cmd.args([
                 "eval",
                 &name,
                 "--q",
-                &join(&m.home),
+                &join(q),
                 "--qd",
-                &join(&qd),
+                &join(qd),
                 "--u",
                 &join(&u),
-                "--project",
                 "--json",
-            ]),
-            "legs eval",
-        )?)
-        .map_err(|e| e.to_string())?;
-        let (q, qd, qdd) = (
-            floats(&ours["q"]),
-            floats(&ours["qd"]),
-            floats(&ours["qdd"]),
-        );
+            ]);
+            if project {
+                cmd.arg("--project");
+            }
+            if stance {
+                cmd.arg("--stance");
+            }
+            serde_json::from_str(&run_command(&mut cmd, "legs eval")?).map_err(|e| e.to_string())
+        };
+        let mut ours = eval(&m.home, &qd, true, false)?;
+        if let Some(f) = free {
+            // The chart centred on the body: the free joint's six q zero (closing the
+            // loops moves them a little, the body with the legs; the closures do not see
+            // the chart, so they stay closed), ours again at that very state: with
+            // contacts, the rates put on the held ones there too (two held points of one
+            // rigid foot contradict each other where the foot turns about another line),
+            // which leaves q as it is.
+            let mut q = floats(&ours["q"]);
+            q[f..f + 6].fill(0.0);
+            ours = eval(&q, &floats(&ours["qd"]), stance, stance)?;
+            let mut q = floats(&ours["q"]);
+            if q[f..f + 6].iter().any(|&x| x != 0.0) {
+                // The projection stepped after all: centred once more, not projected.
+                q[f..f + 6].fill(0.0);
+                ours = eval(&q, &floats(&ours["qd"]), false, stance)?;
+            }
+        }
+        // Pinocchio's q̈ of a free flyer is v̇ (body frame): `legs eval` gives ours as
+        // `vdot` beside the chart's q̈.
+        let rates = |terms: &Value| match free {
+            Some(_) => floats(&terms["vdot"]),
+            None => floats(&terms["qdd"]),
+        };
+        let (q, qd, qdd) = (floats(&ours["q"]), floats(&ours["qd"]), rates(&ours));
         // τ = B u − D q̇ − ∂V_spring/∂q: Pinocchio's constraintDynamics has no damping or
         // springs.
         let v = |p: &String| value(&m.params, p);
@@ -429,7 +495,14 @@ fn spatial_figures(
                 .collect::<Vec<_>>()
                 .join(" ")
         );
-        for l in &m.links {
+        if let Some(f) = free {
+            // Level at the origin: the world's gravity is the chart's, as `legs eval` has it.
+            let _ = writeln!(file, "free {f} 0 0 0 1 0 0 0");
+        }
+        for (i, l) in m.links.iter().enumerate() {
+            if free.is_some_and(|f| (f..f + 6).contains(&i)) {
+                continue;
+            }
             let _ = writeln!(file, "joint {}", l.name);
             if let Some(r) = &l.rotor {
                 let _ = writeln!(
@@ -443,6 +516,11 @@ fn spatial_figures(
         for c in &m.closures {
             let _ = writeln!(file, "closure {}", c.name);
         }
+        if stance {
+            for c in &m.contacts {
+                let _ = writeln!(file, "contact {}", c.name);
+            }
+        }
         let line = |v: &[f64]| joined(v, " ");
         let _ = writeln!(file, "q {}\nv {}\ntau {}", line(&q), line(&qd), line(&tau));
         let state = dir.join(format!("{name}.state"));
@@ -453,15 +531,16 @@ fn spatial_figures(
         )?;
         let pin: Value = serde_json::from_str(&text)
             .map_err(|e| format!("pinocchio_spatial_bench printed {text}: {e}"))?;
-        let scale = qdd.iter().fold(0.0f64, |a, x| a.max(x.abs()));
-        let off = |theirs: &[f64]| {
+        let off_from = |ours: &[f64], theirs: &[f64]| {
+            let scale = ours.iter().fold(0.0f64, |a, x| a.max(x.abs()));
             theirs
                 .iter()
-                .zip(&qdd)
+                .zip(ours)
                 .map(|(a, b)| (a - b).abs())
                 .fold(0.0f64, f64::max)
                 / scale
         };
+        let off = |theirs: &[f64]| off_from(&qdd, theirs);
         let converged = off(&floats(&pin["qdd"]));
         if converged.is_nan() || converged >= 1e-9 {
             eprintln!(
@@ -469,16 +548,58 @@ fn spatial_figures(
             );
             continue;
         }
-        let figures = SpatialFigures {
+        let mut figures = SpatialFigures {
             converged: pin["median_ns"].as_f64().unwrap_or(f64::NAN),
             iterations: pin["iterations"].as_u64().unwrap_or(0),
             one_iteration: pin["one_iteration_ns"].as_f64().unwrap_or(f64::NAN),
             one_iteration_error: off(&floats(&pin["one_iteration_qdd"])),
+            fewest: None,
+            fewest_iterations: pin["fewest_iterations"].as_u64().unwrap_or(0),
+            stance: None,
+            stance_iterations: 0,
+            stance_fewest: None,
+            stance_fewest_iterations: 0,
         };
+        // The fewest iterations' q̈ equal to ours too, or that figure is not given.
+        if off(&floats(&pin["fewest_qdd"])) < 1e-9 {
+            figures.fewest = pin["fewest_ns"].as_f64();
+        }
         eprintln!(
-            "{name:<16} Pinocchio constraintDynamics {:.0} ns ({} iterations, q̈ equal to ours to {converged:.1e}); one iteration {:.0} ns (q̈ off by {:.1e})",
-            figures.converged, figures.iterations, figures.one_iteration, figures.one_iteration_error
+            "{name:<16} Pinocchio constraintDynamics {:.0} ns ({} iterations, q̈ equal to ours to {converged:.1e}); at {} iterations {}; one iteration {:.0} ns (q̈ off by {:.1e})",
+            figures.converged,
+            figures.iterations,
+            figures.fewest_iterations,
+            show(figures.fewest),
+            figures.one_iteration,
+            figures.one_iteration_error
         );
+        if stance {
+            // Ours with every contact held (`legs eval --stance`), the same rule: timed
+            // only where both compute the same thing.
+            let held = rates(&ours["stance"]);
+            let differs = off_from(&held, &floats(&pin["stance_qdd"]));
+            if held.len() == n && differs < 1e-9 {
+                figures.stance = pin["stance_median_ns"].as_f64();
+                figures.stance_iterations = pin["stance_iterations"].as_u64().unwrap_or(0);
+                figures.stance_fewest_iterations =
+                    pin["stance_fewest_iterations"].as_u64().unwrap_or(0);
+                if off_from(&held, &floats(&pin["stance_fewest_qdd"])) < 1e-9 {
+                    figures.stance_fewest = pin["stance_fewest_ns"].as_f64();
+                }
+                eprintln!(
+                    "{name:<16} Pinocchio constraintDynamics, every contact held: {:.0} ns ({} iterations, q̈ equal to ours to {differs:.1e}); at {} iterations {}",
+                    figures.stance.unwrap_or(f64::NAN),
+                    figures.stance_iterations,
+                    figures.stance_fewest_iterations,
+                    show(figures.stance_fewest)
+                );
+            } else {
+                eprintln!(
+                    "{name}: stance not timed: Pinocchio's q̈ with every contact held differs from ours by {differs:e} (relative){}",
+                    ours["errors"]["stance"].as_str().map_or(String::new(), |e| format!("; ours: {e}"))
+                );
+            }
+        }
         out.insert(name, figures);
     }
     Ok(out)

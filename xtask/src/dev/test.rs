@@ -74,12 +74,19 @@ fn cross_checks(root: &Path) -> Result<Vec<String>, String> {
             ));
             let urdf = dir.join(format!("{name}.urdf"));
             crate::cli::write_atomic(&urdf, &crate::commands::export::spatial::urdf(&model))?;
-            jobs.push((
-                "urdf_check.py",
-                name.clone(),
-                vec![urdf.clone()],
-                "Pinocchio",
-            ));
+            let mut files = vec![urdf.clone()];
+            if model
+                .links
+                .iter()
+                .any(|l| l.spec_kind == crate::gen::spec::JointKind::Free)
+            {
+                // The body as the root link too, for Pinocchio's own free joint.
+                let floating = dir.join(format!("{name}.floating.urdf"));
+                let text = crate::commands::export::spatial::urdf_floating(&model);
+                crate::cli::write_atomic(&floating, &text)?;
+                files.push(floating);
+            }
+            jobs.push(("urdf_check.py", name.clone(), files, "Pinocchio"));
             if let Some(a) = crate::commands::import::header_args(root, &spec.text) {
                 // A source in the repository that is missing fails its check below.
                 if a.file.exists() || !crate::commands::import::outside_repository(root, &a.file) {

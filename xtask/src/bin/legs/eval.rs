@@ -5,7 +5,10 @@ use leg_models::assembly::{
     assemble, assemble_along, consistent_velocity, project_position, project_velocity, Tolerance,
 };
 use leg_models::control::actuated_reduction;
-use leg_models::dynamics::contact::{impact_map, spec_friction, ContactMode, Ground, Modes};
+use leg_models::dynamics::contact::{
+    forward_dynamics_with_contacts, impact_map, project_held_velocity, spec_friction, ContactMode,
+    Ground, Modes,
+};
 use leg_models::dynamics::derivatives::forward_dynamics_derivatives;
 use leg_models::dynamics::forward_dynamics_from_terms;
 use leg_models::nalgebra::{SMatrix, SVector};
@@ -123,6 +126,9 @@ pub fn run<
                 .map_err(|e| Error::usage(format!("cannot project --q onto the closures: {e}")))?;
             project_velocity::<L, f64, NQ, NC, NU>(&p, &q, &mut qd)
                 .map_err(|e| Error::usage(format!("cannot project --qd onto the closures: {e}")))?;
+            if args.stance {
+                hold_velocity::<L, NQ, NC, NU, NK, 2>(&p, &q, &mut qd)?;
+            }
         }
         (q, qd)
     };
@@ -163,6 +169,9 @@ pub fn run<
         &mut errors,
         &mut warnings,
     );
+    if args.stance {
+        stance::<L, NQ, NC, NU, NK, 2>(&p, &q, &qd, &u, &mut out, &mut errors);
+    }
     let big = largest_input(q.as_slice(), qd.as_slice(), u.as_slice());
     emit(out, errors, warnings, big, json_out);
     Ok(())
@@ -293,6 +302,91 @@ fn contacts<
                 other => other.to_string(),
             };
             errors.insert("impact".into(), json!(why));
+        }
+    }
+}
+
+/// With `--stance --project`: `qd` moved onto the held contacts too (every contact
+/// sticking, its velocity zero), the least change in the metric of `M`.
+fn hold_velocity<
+    L: ContactModel<NQ, NC, NU, NK, ND>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+    const ND: usize,
+>(
+    p: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+    qd: &mut SVector<f64, NQ>,
+) -> Result<(), Error> {
+    if NK == 0 {
+        return Err(Error::usage(format!(
+            "--stance: {} has no contact points",
+            L::NAME
+        )));
+    }
+    let ground = Ground::<f64, ND>::of::<L, NQ, NC, NU, NK>();
+    project_held_velocity::<L, f64, NQ, NC, NU, NK, ND>(p, q, qd, &Modes::stick(), &ground)
+        .map_err(|e| Error::usage(format!("cannot project --qd onto the held contacts: {e}")))
+}
+
+/// `stance` (with `--stance`): forward dynamics with every contact held where it is
+/// (sticking, `dynamics::contact`), the closures closed, motor torques `u`: its qdd,
+/// closure forces F and contact forces (per contact in the ground's frame, tangential
+/// then normal). A floating robot's is in its chart, as `leg_models::robot::stance_dynamics`
+/// gives it at the chart's centre with the body level (a held contact's q̈ does not depend
+/// on where the ground is).
+fn stance<
+    L: ContactModel<NQ, NC, NU, NK, ND>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+    const ND: usize,
+>(
+    p: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+    qd: &SVector<f64, NQ>,
+    u: &SVector<f64, NU>,
+    out: &mut Map<String, Value>,
+    errors: &mut Map<String, Value>,
+) {
+    if NK == 0 {
+        out.insert("stance".into(), Value::Null);
+        errors.insert(
+            "stance".into(),
+            json!(format!("{} has no contact points", L::NAME)),
+        );
+        return;
+    }
+    let ground = Ground::<f64, ND>::of::<L, NQ, NC, NU, NK>();
+    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, ND>();
+    let anchors = ground.coordinates(&L::contact_positions(q, p));
+    match forward_dynamics_with_contacts::<L, f64, NQ, NC, NU, NK, ND>(
+        p,
+        q,
+        qd,
+        u,
+        &Modes::stick(),
+        &anchors,
+        &ground,
+        &mu,
+        None,
+    ) {
+        Ok(s) => {
+            out.insert(
+                "stance".into(),
+                json!({
+                    "qdd": s.x.as_slice(),
+                    "F": s.closure.as_slice(),
+                    "contact": s.contact.as_slice(),
+                }),
+            );
+        }
+        Err(e) => {
+            out.insert("stance".into(), Value::Null);
+            errors.insert("stance".into(), json!(format!("stance: {e}")));
         }
     }
 }
@@ -532,6 +626,9 @@ pub fn run_spatial<
             .map_err(|e| Error::usage(format!("cannot project --q onto the closures: {e}")))?;
         project_velocity::<L, f64, NQ, NC, NU>(&p, &q, &mut qd)
             .map_err(|e| Error::usage(format!("cannot project --qd onto the closures: {e}")))?;
+        if args.stance {
+            hold_velocity::<L, NQ, NC, NU, NK, 3>(&p, &q, &mut qd)?;
+        }
     }
     let u = match &args.u {
         Some(t) => SVector::<f64, NU>::from_column_slice(&numbers("--u", t, NU, "motor torques")?),
@@ -553,7 +650,56 @@ pub fn run_spatial<
         &mut errors,
         &mut warnings,
     );
+    if args.stance {
+        stance::<L, NQ, NC, NU, NK, 3>(&p, &q, &qd, &u, &mut out, &mut errors);
+    }
+    if let Ok(f) = leg_models::robot::free_joint::<L, NQ, NC, NU>() {
+        body_rates(f, &q, &qd, &mut out, &mut errors);
+    }
     let big = largest_input(q.as_slice(), qd.as_slice(), u.as_slice());
     emit(out, errors, warnings, big, args.json);
     Ok(())
+}
+
+/// A floating robot's `vdot` (and the stance's, with `--stance`): the body's velocity
+/// derivative in its own frame, then the joints' `q̈`, from the chart's `q̈`
+/// ([`leg_models::robot::velocity_derivative`]); what Pinocchio's free flyer returns.
+/// Only at the chart's centre (the free joint's six `q` zero), where that map holds.
+fn body_rates<const NQ: usize>(
+    f: usize,
+    q: &SVector<f64, NQ>,
+    qd: &SVector<f64, NQ>,
+    out: &mut Map<String, Value>,
+    errors: &mut Map<String, Value>,
+) {
+    if q.rows(f, 6).iter().any(|&x| x != 0.0) {
+        out.insert("vdot".into(), Value::Null);
+        errors.insert(
+            "vdot".into(),
+            json!(format!(
+                "the body's velocity derivative is given at the chart's centre only: --q's values {}..{} (the free joint) must be zero",
+                f + 1,
+                f + 6
+            )),
+        );
+        return;
+    }
+    let vdot = |qdd: &Value| -> Option<Value> {
+        let qdd: Vec<f64> = qdd
+            .as_array()?
+            .iter()
+            .map(Value::as_f64)
+            .collect::<Option<_>>()?;
+        (qdd.len() == NQ).then(|| {
+            let qdd = SVector::<f64, NQ>::from_column_slice(&qdd);
+            json!(leg_models::robot::velocity_derivative(f, qd, &qdd).as_slice())
+        })
+    };
+    let flight = out.get("qdd").and_then(vdot).unwrap_or(Value::Null);
+    out.insert("vdot".into(), flight);
+    if let Some(held) = out.get("stance").and_then(|s| s.get("qdd")).and_then(vdot) {
+        if let Some(Value::Object(s)) = out.get_mut("stance") {
+            s.insert("vdot".into(), held);
+        }
+    }
 }

@@ -378,8 +378,24 @@ pub fn rpy(r: &[[f64; 3]; 3]) -> [f64; 3] {
 /// `orientation` (`rpy`) in its parent, about the link's `axis`; inertias are whole, about
 /// the centre of mass in the link's axes. Closures, the foot and the motors are as in the
 /// planar URDF: fixed frames and transmissions. Springs have no URDF element: the spec
-/// holds them.
+/// holds them. A floating robot's free joint is six joints here, the chart's coordinates
+/// (`<body>.tx`, `.ty`, `.tz` prismatic, `.x`, `.y`, `.z` continuous): see
+/// [`urdf_floating`] for the body as the root link.
 pub fn urdf(m: &Model) -> String {
+    write_urdf(m, false)
+}
+
+/// A floating robot's URDF with its body as the root link (`<body>.z`) and no joint for
+/// the free joint, for a URDF tool that floats the root itself (Pinocchio's
+/// `JointModelFreeFlyer`: its configuration the body's position and unit quaternion, its
+/// velocity the body's linear and angular velocity in the body's frame). Everything else
+/// is [`urdf`]'s. At the chart's centre the base frame is the body's, so every placement
+/// is unchanged. Not for a model without a free joint.
+pub fn urdf_floating(m: &Model) -> String {
+    write_urdf(m, true)
+}
+
+fn write_urdf(m: &Model, floating_root: bool) -> String {
     let mut out = String::new();
     let _ = writeln!(out, "<?xml version=\"1.0\"?>");
     let _ = writeln!(
@@ -399,7 +415,7 @@ pub fn urdf(m: &Model) -> String {
         .collect();
     let _ = writeln!(
         out,
-        "     Spatial leg. URDF holds the spanning tree only: each closure k joins the frames\n     k.a and k.b (they must coincide{}). A ball joint is three continuous joints about x,\n     y, z on massless links. Gravity of the spec: {} m/s^2. Reflected rotor inertia: see\n     the transmissions. Springs: see the spec. -->",
+        "     Spatial leg. URDF holds the spanning tree only: each closure k joins the frames\n     k.a and k.b (they must coincide{}). A ball joint is three continuous joints about x,\n     y, z on massless links. Gravity of the spec: {} m/s^2. Reflected rotor inertia: see\n     the transmissions. Springs: see the spec.{} -->",
         if rods.is_empty() {
             String::new()
         } else {
@@ -408,15 +424,27 @@ pub fn urdf(m: &Model) -> String {
                 rods.join(", ")
             )
         },
-        triple(m, &m.gravity)
+        triple(m, &m.gravity),
+        if floating_root {
+            "\n     The root link is the body of a free joint: give it a floating root joint (Pinocchio's\n     JointModelFreeFlyer), whose velocity is the body's, in the body's frame."
+        } else {
+            ""
+        }
     );
     let _ = writeln!(
         out,
         "<robot name=\"{}\" xmlns:drake=\"http://drake.mit.edu\">",
         m.name
     );
-    let _ = writeln!(out, "  <link name=\"base\"/>");
-    for l in &m.links {
+    if !floating_root {
+        let _ = writeln!(out, "  <link name=\"base\"/>");
+    }
+    for (i, l) in m.links.iter().enumerate() {
+        // The root link floats: no `base`, and nothing of the free joint but its body.
+        let free = floating_root && is_free(m, i);
+        if free && l.massless {
+            continue;
+        }
         if l.massless {
             let _ = writeln!(out, "  <link name=\"{}\"/>", l.name);
         } else {
@@ -438,6 +466,9 @@ pub fn urdf(m: &Model) -> String {
                 i(2)
             );
             let _ = writeln!(out, "  </link>");
+        }
+        if free {
+            continue;
         }
         let parent = l.parent.map_or("base", |p| m.links[p].name.as_str());
         let kind = if l.joint == "prismatic" {
@@ -478,6 +509,54 @@ pub fn urdf(m: &Model) -> String {
 #[cfg(test)]
 mod tests {
     use super::rpy;
+
+    /// The floating URDF is the chart's URDF less the free joint: no `base`, none of the
+    /// six joints or their massless links, the body the only link nothing is the child
+    /// of, every other link and joint as they were (Pinocchio's free flyer on it is
+    /// checked against our dynamics in `cargo xtask test`, urdf_check.py).
+    #[test]
+    fn a_floating_urdf_has_the_body_as_its_root() {
+        let root = crate::gen::workspace_root();
+        let spec = crate::gen::load_spec(
+            &root,
+            &root.join("leg-models/specs/minitaur_quadruped.toml"),
+        )
+        .unwrap();
+        let m = crate::gen::model::build(&spec).unwrap();
+        let f = (0..m.links.len()).find(|&i| super::is_free(&m, i)).unwrap();
+        let body = &m.links[f + 5].name;
+        let (chart, floating) = (super::urdf(&m), super::urdf_floating(&m));
+        let names = |text: &str, tag: &str| -> Vec<String> {
+            text.lines()
+                .filter_map(|l| l.trim().strip_prefix(&format!("<{tag} name=\"")))
+                .map(|l| l[..l.find('"').unwrap()].to_string())
+                .collect()
+        };
+        let free: Vec<&String> = m.links[f..f + 6].iter().map(|l| &l.name).collect();
+        let chart_links = names(&chart, "link");
+        assert!(chart_links.contains(&"base".to_string()));
+        let kept: Vec<String> = chart_links
+            .into_iter()
+            .filter(|n| n == body || (n != "base" && !free.contains(&n)))
+            .collect();
+        assert_eq!(names(&floating, "link"), kept);
+        let joints: Vec<String> = names(&chart, "joint")
+            .into_iter()
+            .filter(|n| !free.contains(&n))
+            .collect();
+        assert_eq!(names(&floating, "joint"), joints);
+        assert!(!floating.contains("\"base\""));
+        let children: Vec<&str> = floating
+            .lines()
+            .filter_map(|l| l.trim().strip_prefix("<child link=\""))
+            .map(|l| &l[..l.find('"').unwrap()])
+            .collect();
+        let roots: Vec<String> = names(&floating, "link")
+            .into_iter()
+            .filter(|n| !children.contains(&n.as_str()))
+            .collect();
+        assert_eq!(roots, vec![body.clone()]);
+    }
 
     /// `R_z(yaw) R_y(pitch) R_x(roll)` of the angles `rpy` finds gives the matrix back,
     /// at pitch ±90° too (where roll and yaw share an axis).
