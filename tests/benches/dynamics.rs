@@ -398,14 +398,14 @@ where
     g.finish();
 }
 
-/// A floating robot as a user calls it (`leg_models::robot`), to compare with Pinocchio's
-/// free flyer (not yet in `cargo xtask bench --pinocchio`'s tables: run it with `cargo
-/// bench -p leg-tests --features peers --bench dynamics -- '^cassie/'`): the fused terms
-/// in the chart; forward dynamics at a
-/// state (`forward_dynamics_at`, the chart centred on the body, then `velocity_derivative`:
-/// the body's v̇, what Pinocchio returns) and, with contact points, the stance with every
-/// one held (`stance_dynamics`, v̇ too). The state: `passive_release_state`'s joints, the
-/// body level at the origin, rates `0.3 + 0.1 i` put on the closures and the held contacts.
+/// A floating robot as a user calls it (`leg_models::robot`), beside Pinocchio's free
+/// flyer (`cargo xtask bench --pinocchio cassie minitaur_quadruped`): the fused terms in
+/// the chart; forward dynamics at a state (`forward_dynamics_at`, the chart centred on the
+/// body, then `velocity_derivative`: the body's v̇, what Pinocchio returns) and, with
+/// contact points, the stance with every one held (`stance_dynamics`, v̇ too). The state
+/// (`leg_tests::robot_scene`): `passive_release_state`'s joints, the body level at the
+/// origin, rates `0.3 + 0.1 i` put on the closures and the held contacts; the xtask's
+/// state for Pinocchio is the same pose, its flight rates on the closures only.
 fn bench_floating<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
     c: &mut Criterion,
 ) where
