@@ -239,7 +239,8 @@ int main(int argc, char** argv) {
   };
   // The fewest proximal iterations whose q̈ is the converged one to 1e-10 of its largest
   // entry: where rows repeat each other the stopping test never passes and every call runs
-  // to the cap, while q̈ is exact after two or three; this is the fair figure.
+  // to the cap, while q̈ is exact after two or three. An oracle's choice (found against the capped answer, at this
+  // one state): Pinocchio's lower bound, which a user cannot know in advance.
   auto fewest = [&](pin::Data& d, const std::vector<pin::RigidConstraintModel>& cm,
                     std::vector<pin::RigidConstraintData>& cd, const Eigen::VectorXd& exact, int cap) {
     const double scale = exact.lpNorm<Eigen::Infinity>();

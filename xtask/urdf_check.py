@@ -32,6 +32,12 @@ REL_TOL = 1e-9
 DRAKE = "{http://drake.mit.edu}"
 
 
+def worse(a, b):
+    """The larger of two errors, NaN counted as infinitely large (Python's `max` keeps
+    the first of a NaN and a number, so a NaN would pass)."""
+    return max(a, b) if np.isfinite(b) else np.inf
+
+
 def pinocchio_leg(urdf, ir):
     """Pinocchio's model of an exported URDF, set up as ours: gravity from the spec, the
     joint armature from the transmissions' `<drake:rotor_inertia>` and `<drake:gear_ratio>`,
@@ -147,9 +153,9 @@ def main():
         pin.framesForwardKinematics(model, data, qp)
         foot = data.oMf[foot_frame].translation[:dim]
         m_ours, n_ours = np.array(t["M"]), np.array(t["N"])
-        worst["M"] = max(worst["M"], np.abs(mp[np.ix_(idx, idx)] - m_ours).max() / np.abs(m_ours).max())
-        worst["N"] = max(worst["N"], np.abs(np_ - n_ours).max() / max(np.abs(n_ours).max(), 1e-300))
-        worst["foot"] = max(worst["foot"], np.abs(foot - np.array(t["foot"])).max())
+        worst["M"] = worse(worst["M"], np.abs(mp[np.ix_(idx, idx)] - m_ours).max() / np.abs(m_ours).max())
+        worst["N"] = worse(worst["N"], np.abs(np_ - n_ours).max() / max(np.abs(n_ours).max(), 1e-300))
+        worst["foot"] = worse(worst["foot"], np.abs(foot - np.array(t["foot"])).max())
     ok = worst["M"] < REL_TOL and worst["N"] < REL_TOL and worst["foot"] < 1e-12
     closure = 0.0
     if ir["model"]["closures"]:
@@ -217,7 +223,7 @@ def constraint_dynamics(legs, name, ir, leg):
         nan_free += bool(np.all(np.isfinite(exact)))
         qdd = pin.constraintDynamics(model, data, qp, vp, tau, cm, cd, pin.ProximalSettings(1e-12, 1e-8, 100))[idx]
         mine = np.array(t["qdd"])
-        worst = max(worst, np.abs(qdd - mine).max() / np.abs(mine).max())
+        worst = worse(worst, np.abs(qdd - mine).max() / np.abs(mine).max())
         j, b = np.array(t["J"]), np.array(t["Jdot_qdot"])
         scale = np.abs(j) @ np.abs(mine) + np.abs(b)
         residual["ours"] = max(residual["ours"], np.abs(j @ mine + b).max() / scale.max())
@@ -313,7 +319,7 @@ def free_flyer(legs, name, ir, leg, urdf):
             cm, cd = constraints(qp, held)
             theirs = pin.constraintDynamics(model, data, qp, vp, tau, cm, cd, pin.ProximalSettings(1e-12, 1e-8, 100))[idx]
             mine = np.array((t["stance"] if held else t)["vdot"])
-            worst[phase] = max(worst[phase], np.abs(theirs - mine).max() / np.abs(mine).max())
+            worst[phase] = worse(worst[phase], np.abs(theirs - mine).max() / np.abs(mine).max())
     ok = max(worst.values()) < 1e-9
     held = f", every contact held {worst['stance']:.1e}" if ir["model"]["contacts"] else ""
     what = "the closures" if ir["model"]["closures"] else "unconstrained"

@@ -116,7 +116,8 @@ pub struct SpatialFigures {
     pub one_iteration_error: f64,
     /// The fewest proximal iterations that give the converged q̈ (where rows repeat each
     /// other the converged solve runs to its cap of 100 though q̈ is exact after two or
-    /// three), and their time: Pinocchio's exact solution at its fairest.
+    /// three), and their time: an oracle's choice (found against the capped answer at this one
+    /// state), Pinocchio's lower bound for the exact solution, not a setting a user knows.
     pub fewest: Option<f64>,
     pub fewest_iterations: u64,
     /// A floating robot with contact points: the closures and every contact point held
@@ -460,7 +461,8 @@ fn spatial_figures(
             ours = eval(&q, &floats(&ours["qd"]), stance, stance)?;
             let mut q = floats(&ours["q"]);
             if q[f..f + 6].iter().any(|&x| x != 0.0) {
-                // The projection stepped after all: centred once more, not projected.
+                // The projection stepped after all: centred once more, not projected
+                // (the rates then as they were; both sides are given this same state).
                 q[f..f + 6].fill(0.0);
                 ours = eval(&q, &floats(&ours["qd"]), false, stance)?;
             }
@@ -531,7 +533,11 @@ fn spatial_figures(
         )?;
         let pin: Value = serde_json::from_str(&text)
             .map_err(|e| format!("pinocchio_spatial_bench printed {text}: {e}"))?;
+        // NaN (never below a tolerance) where a side is missing or short.
         let off_from = |ours: &[f64], theirs: &[f64]| {
+            if ours.is_empty() || theirs.len() != ours.len() {
+                return f64::NAN;
+            }
             let scale = ours.iter().fold(0.0f64, |a, x| a.max(x.abs()));
             theirs
                 .iter()

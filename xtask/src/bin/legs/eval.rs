@@ -60,6 +60,7 @@ pub fn run<
     let p = L::Params::<f64>::default();
     // The contact to land, named before anything is computed.
     let impact_contact = impact_contact::<L, NQ, NC, NU, NK, 2>(args)?;
+    stance_has_contacts::<NK>(args, L::NAME)?;
     let json_out = args.json;
     let assembled = args.assemble;
     let q_text = &args.q;
@@ -306,6 +307,16 @@ fn contacts<
     }
 }
 
+/// `--stance` on a model without contact points is refused before anything is computed.
+fn stance_has_contacts<const NK: usize>(args: &EvalArgs, name: &str) -> Result<(), Error> {
+    if args.stance && NK == 0 {
+        return Err(Error::usage(format!(
+            "--stance: {name} has no contact points to hold"
+        )));
+    }
+    Ok(())
+}
+
 /// With `--stance --project`: `qd` moved onto the held contacts too (every contact
 /// sticking, its velocity zero), the least change in the metric of `M`.
 fn hold_velocity<
@@ -320,12 +331,6 @@ fn hold_velocity<
     q: &SVector<f64, NQ>,
     qd: &mut SVector<f64, NQ>,
 ) -> Result<(), Error> {
-    if NK == 0 {
-        return Err(Error::usage(format!(
-            "--stance: {} has no contact points",
-            L::NAME
-        )));
-    }
     let ground = Ground::<f64, ND>::of::<L, NQ, NC, NU, NK>();
     project_held_velocity::<L, f64, NQ, NC, NU, NK, ND>(p, q, qd, &Modes::stick(), &ground)
         .map_err(|e| Error::usage(format!("cannot project --qd onto the held contacts: {e}")))
@@ -352,14 +357,6 @@ fn stance<
     out: &mut Map<String, Value>,
     errors: &mut Map<String, Value>,
 ) {
-    if NK == 0 {
-        out.insert("stance".into(), Value::Null);
-        errors.insert(
-            "stance".into(),
-            json!(format!("{} has no contact points", L::NAME)),
-        );
-        return;
-    }
     let ground = Ground::<f64, ND>::of::<L, NQ, NC, NU, NK>();
     let mu = spec_friction::<L, f64, NQ, NC, NU, NK, ND>();
     let anchors = ground.coordinates(&L::contact_positions(q, p));
@@ -599,6 +596,7 @@ pub fn run_spatial<
         }
     }
     let impact_contact = impact_contact::<L, NQ, NC, NU, NK, 3>(args)?;
+    stance_has_contacts::<NK>(args, L::NAME)?;
     // What --q holds: one value per joint, a ball joint's three angles named where the
     // leg has one.
     let balls: Vec<&str> = L::BALL_JOINTS
@@ -677,7 +675,7 @@ fn body_rates<const NQ: usize>(
         errors.insert(
             "vdot".into(),
             json!(format!(
-                "the body's velocity derivative is given at the chart's centre only: --q's values {}..{} (the free joint) must be zero",
+                "the body's velocity derivative is given at the chart's centre only: the free joint's values {}..{} of q are not all zero (as given, or as --project moved them)",
                 f + 1,
                 f + 6
             )),
