@@ -38,6 +38,39 @@ def worse(a, b):
     return max(a, b) if np.isfinite(b) else np.inf
 
 
+def closure_constraints(model, data, ir, held=None):
+    """The closures as 3-D point constraints (CONTACT_3D between the frames `<c>.a`
+    and `<c>.b`), initialised on `data`. A revolute closure, which Pinocchio has no
+    5-D constraint for (pinocchio#2729), is two: at its point and at the frames
+    `<c>.a.axis`, `<c>.b.axis` along its axes (six rows, one implied: a hinge). With
+    `held` (a configuration), every contact point `<c>.point` held to the world where it
+    is there, one more each."""
+    cm, cd = pin.StdVec_RigidConstraintModel(), pin.StdVec_RigidConstraintData()
+    revolute = ir["model"].get("revolute_closures", [])
+    pairs = []
+    for k, c in enumerate(ir["model"]["closures"]):
+        pairs.append((f"{c}.a", f"{c}.b"))
+        if k in revolute:
+            pairs.append((f"{c}.a.axis", f"{c}.b.axis"))
+    for a, b in pairs:
+        fa = model.frames[model.getFrameId(a)]
+        fb = model.frames[model.getFrameId(b)]
+        first, second = (fb, fa) if fa.parentJoint == 0 else (fa, fb)
+        cm.append(pin.RigidConstraintModel(pin.ContactType.CONTACT_3D, model, first.parentJoint, first.placement,
+                                           second.parentJoint, second.placement, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED))
+    if held is not None:
+        pin.framesForwardKinematics(model, data, held)
+        for c in ir["model"]["contacts"]:
+            i = model.getFrameId(f"{c}.point")
+            f = model.frames[i]
+            cm.append(pin.RigidConstraintModel(pin.ContactType.CONTACT_3D, model, f.parentJoint, f.placement,
+                                               0, data.oMf[i], pin.ReferenceFrame.LOCAL_WORLD_ALIGNED))
+    for m in cm:
+        cd.append(m.createData())
+    pin.initConstraintDynamics(model, data, cm, cd)
+    return cm, cd
+
+
 def pinocchio_leg(urdf, ir):
     """Pinocchio's model of an exported URDF, set up as ours: gravity from the spec, the
     joint armature from the transmissions' `<drake:rotor_inertia>` and `<drake:gear_ratio>`,
@@ -88,27 +121,7 @@ def pinocchio_leg(urdf, ir):
             damping[model.joints[model.getJointId(j.get("name"))].idx_v] = float(d.get("damping"))
 
     def constraints(data):
-        """The closures as 3-D point constraints (CONTACT_3D between the frames `<c>.a`
-        and `<c>.b`), initialised on `data`. A revolute closure, which Pinocchio has no
-        5-D constraint for (pinocchio#2729), is two: at its point and at the frames
-        `<c>.a.axis`, `<c>.b.axis` along its axes (six rows, one implied: a hinge)."""
-        cm, cd = pin.StdVec_RigidConstraintModel(), pin.StdVec_RigidConstraintData()
-        revolute = ir["model"].get("revolute_closures", [])
-        pairs = []
-        for k, c in enumerate(ir["model"]["closures"]):
-            pairs.append((f"{c}.a", f"{c}.b"))
-            if k in revolute:
-                pairs.append((f"{c}.a.axis", f"{c}.b.axis"))
-        for a, b in pairs:
-            fa = model.frames[model.getFrameId(a)]
-            fb = model.frames[model.getFrameId(b)]
-            first, second = (fb, fa) if fa.parentJoint == 0 else (fa, fb)
-            m = pin.RigidConstraintModel(pin.ContactType.CONTACT_3D, model, first.parentJoint, first.placement,
-                                         second.parentJoint, second.placement, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
-            cm.append(m)
-            cd.append(m.createData())
-        pin.initConstraintDynamics(model, data, cm, cd)
-        return cm, cd
+        return closure_constraints(model, data, ir)
 
     def torques(q, qd, u):
         """Pinocchio's τ for our state and motor torques: the motors, and the damping and
@@ -240,7 +253,7 @@ def free_flyer(legs, name, ir, leg, urdf):
     """A floating robot on Pinocchio's free flyer (the URDF whose root link is the body)
     beside ours, at 5 assembled states with the chart centred on the body (the free
     joint's six q zero: the body at the origin, level), the closures as in
-    `constraint_dynamics` and, with contact points, every one held too (CONTACT_3D to the
+    `constraint_dynamics` (`closure_constraints`, the same builder) and, with contact points, every one held too (CONTACT_3D to the
     world where the point is, the rates put on them by `legs eval --stance --project`).
     Pinocchio's q̈ of a free flyer is the body's velocity derivative in its frame, then the
     joints': ours is `vdot` (`leg_models::robot::velocity_derivative` of the chart's q̈).
@@ -272,25 +285,6 @@ def free_flyer(legs, name, ir, leg, urdf):
                 qp[jm.idx_q] = q[i]
         return qp
 
-    def constraints(qp, held):
-        pin.framesForwardKinematics(model, data, qp)
-        cm, cd = pin.StdVec_RigidConstraintModel(), pin.StdVec_RigidConstraintData()
-        pairs = [(f"{c}.a", f"{c}.b") for c in ir["model"]["closures"]]
-        pairs += [(f"{c}.point", None) for c in (ir["model"]["contacts"] if held else [])]
-        for a, b in pairs:
-            fa = model.frames[model.getFrameId(a)]
-            if b is None:  # held where it is in the world
-                m = pin.RigidConstraintModel(pin.ContactType.CONTACT_3D, model, fa.parentJoint, fa.placement,
-                                             0, data.oMf[model.getFrameId(a)], pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
-            else:
-                fb = model.frames[model.getFrameId(b)]
-                m = pin.RigidConstraintModel(pin.ContactType.CONTACT_3D, model, fa.parentJoint, fa.placement,
-                                             fb.parentJoint, fb.placement, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
-            cm.append(m)
-            cd.append(m.createData())
-        pin.initConstraintDynamics(model, data, cm, cd)
-        return cm, cd
-
     home, actuated = ir["model"]["home"], ir["model"]["actuated"]
     rng = np.random.default_rng(11)
     worst = {"flight": 0.0, "stance": 0.0}
@@ -316,7 +310,7 @@ def free_flyer(legs, name, ir, leg, urdf):
             tau_chart = leg.torques(q, qd, u)
             tau = np.zeros(model.nv)
             tau[idx] = tau_chart[leg.idx]
-            cm, cd = constraints(qp, held)
+            cm, cd = closure_constraints(model, data, ir, qp if held else None)
             theirs = pin.constraintDynamics(model, data, qp, vp, tau, cm, cd, pin.ProximalSettings(1e-12, 1e-8, 100))[idx]
             mine = np.array((t["stance"] if held else t)["vdot"])
             worst[phase] = worse(worst[phase], np.abs(theirs - mine).max() / np.abs(mine).max())
