@@ -29,7 +29,8 @@ use crate::dynamics::forward::{
 };
 use crate::model::contract::{ContactModel, DynamicsTerms, Real};
 use crate::model::linalg::{
-    all_finite, mul, mul_nt, mul_tn, Cholesky, Factored, MassFactor, PivotedLdlt, TreeLdl,
+    all_finite, mul, mul_nt_spans, mul_spans_left, mul_tn, mul_tn_spans, scale_columns, scale_rows,
+    Cholesky, Factored, MassFactor, PivotedLdlt, TreeLdl,
 };
 
 /// The ground `n · x = d` (base frame), `n` a unit normal out of the ground: a line for a
@@ -346,13 +347,6 @@ pub(crate) fn solve_structured_on_tree<
     let inv_d = chol_m.inv_diag();
     // The rows' factors kept as rows (`P = X L⁻¹`, X's layout as stored), so that the half
     // solves and the products `P D⁻¹ Qᵀ` run over contiguous columns.
-    let scaled = |p: &SMatrix<T, NK, NQ>| {
-        let mut out = *p;
-        for (k, mut column) in out.column_iter_mut().enumerate() {
-            column *= inv_d[k];
-        }
-        out
-    };
     let mut t = *tau;
     chol_m.solve_lt_mut(&mut t); // L⁻ᵀ τ
                                  // The held rows only (the others' forces are zero and their equations not asked).
@@ -365,47 +359,56 @@ pub(crate) fn solve_structured_on_tree<
             pw.row_mut(r).fill(T::zero());
         }
     }
+    // Each factor with the rows its columns may be nonzero in ([`Spans`]): the products
+    // skip a leg's columns for another leg's rows.
     let mut pc = pw;
-    chol_m.solve_lt_rows_mut(&mut pw); // W L⁻¹
-    if same {
+    let w_spans = chol_m.solve_lt_rows_spans_mut(&mut pw); // W L⁻¹
+    let c_spans = if same {
         // Every held row sticks (or slides with W = C): C's rows are W's.
         pc = pw;
+        w_spans
     } else {
         for (r, &h) in held.iter().enumerate() {
             if h {
                 pc.set_row(r, &c.row(r));
             }
         }
-        chol_m.solve_lt_rows_mut(&mut pc); // C L⁻¹
-    }
+        chol_m.solve_lt_rows_spans_mut(&mut pc) // C L⁻¹
+    };
     // Closure elimination in the half space: u0 = t + Pjᵀ f0 (so a0 = L⁻¹ D⁻¹ u0), and the
-    // held rows less the closures' response, Pp = Pw − gᵀ Pj (Zp = L⁻¹ D⁻¹ Ppᵀ).
-    let (mut u0, mut pp) = (t, pw);
+    // held rows' matrix less the closures' response, K = C Zp = C M⁻¹ Wᵀ − Gcᵀ S⁻¹ G with
+    // G = J M⁻¹ Wᵀ and Gc = J M⁻¹ Cᵀ (G itself where C's rows are W's). Pp = Pw − gᵀ Pj
+    // (Zp = L⁻¹ D⁻¹ Ppᵀ) is never formed: the closures couple the legs through the body,
+    // so it would be dense where Pw and Pj are leg by leg.
+    let mut pj = *j;
+    let j_spans = if NC > 0 {
+        chol_m.solve_lt_rows_spans_mut(&mut pj) // J L⁻¹
+    } else {
+        [(0, 0); NQ]
+    };
+    let pj_d = scale_columns(&pj, inv_d);
+    let mut k = mul_nt_spans(&pc, &c_spans, &scale_columns(&pw, inv_d), &w_spans);
+    let mut u0 = t;
     let mut f0 = SMatrix::<T, NC, C>::zeros();
     let mut g = SMatrix::<T, NC, NK>::zeros();
     if NC > 0 {
-        let mut pj = *j;
-        chol_m.solve_lt_rows_mut(&mut pj); // J L⁻¹
-        let mut pj_d = pj;
-        for (k, mut column) in pj_d.column_iter_mut().enumerate() {
-            column *= inv_d[k];
-        }
-        let s = ConstraintFactor::new(&mul_nt(&pj, &pj_d), closure_deficiency)?;
-        f0 = r_j - mul(&pj_d, &t);
-        g = mul_nt(&pj_d, &pw);
+        let s = mul_nt_spans(&pj, &j_spans, &pj_d, &j_spans);
+        let s = ConstraintFactor::new(&s, closure_deficiency)?;
+        f0 = r_j - mul_spans_left(&pj_d, &j_spans, &t);
+        g = mul_nt_spans(&pj_d, &j_spans, &pw, &w_spans);
+        let gc = if same {
+            g
+        } else {
+            mul_nt_spans(&pj_d, &j_spans, &pc, &c_spans)
+        };
         s.solve_mut(&mut f0);
         s.solve_mut(&mut g);
-        u0 += mul_tn(&pj, &f0);
-        pp -= mul(&g.transpose(), &pj);
+        u0 += mul_tn_spans(&pj, &j_spans, &f0);
+        k -= mul_tn(&gc, &g);
     }
-    let mut u0_d = u0;
-    for mut column in u0_d.column_iter_mut() {
-        column.component_mul_assign(inv_d);
-    }
-    let pp_d = scaled(&pp);
-    // Held contact rows: K λ = r_c − C a0, K = C Zp.
-    let k = mul_nt(&pc, &pp_d);
-    let rhs = r_c - mul(&pc, &u0_d);
+    let u0_d = scale_rows(&u0, inv_d);
+    // Held contact rows: K λ = r_c − C a0.
+    let rhs = r_c - mul_spans_left(&pc, &c_spans, &u0_d);
     // a0 itself only where held rows repeat (its size judges the rows left out).
     let a0 = core::cell::OnceCell::new();
     let pieces = |col: usize| {
@@ -417,9 +420,12 @@ pub(crate) fn solve_structured_on_tree<
         r_c.column(col).amax().max(c.amax() * a0.column(col).amax())
     };
     let lambda = solve_held(&k, &rhs, held, pieces)?;
-    let mut x = u0_d + mul_tn(&pp_d, &lambda);
+    // q̈ = a0 + Zp λ = L⁻¹ D⁻¹ (u0 + Pwᵀ λ − Pjᵀ g λ).
+    let g_lambda = mul(&g, &lambda);
+    let half = u0 + mul_tn_spans(&pw, &w_spans, &lambda) - mul_tn_spans(&pj, &j_spans, &g_lambda);
+    let mut x = scale_rows(&half, inv_d);
     chol_m.solve_l_mut(&mut x);
-    let closure = f0 - mul(&g, &lambda);
+    let closure = f0 - g_lambda;
     finish_structured(rows, x, closure, lambda, tau)
 }
 
@@ -1050,6 +1056,7 @@ impl<T: Real, const NQ: usize, const NC: usize, const NK: usize, const ND: usize
     /// Evaluates the terms and factors `M` (the arguments as for
     /// [`forward_dynamics_with_contacts`]).
     #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
     pub fn new<L, const NU: usize>(
         params: &L::Params<T>,
         q: &SVector<T, NQ>,
@@ -1071,6 +1078,7 @@ impl<T: Real, const NQ: usize, const NC: usize, const NK: usize, const ND: usize
     /// velocity along the ground is zero has no slip direction of its own, and the one it
     /// starts to slip in depends on the applied forces ([`slip_directions`]).
     #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
     pub fn with_slip<L, const NU: usize>(
         params: &L::Params<T>,
         q: &SVector<T, NQ>,

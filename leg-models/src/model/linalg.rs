@@ -223,7 +223,9 @@ impl<T: Real, const N: usize> TreeLdl<T, N> {
     /// `None` unless every pivot is positive and finite. The pivots are taken from the
     /// leaves up, so `rcond` is not the dense factor's estimate for the same matrix (both
     /// are pivot ratios of an `L D Lᵀ`-type factor, of different orderings).
-    #[inline]
+    // Inlined: the factor (`L` is N × N) is then built where its caller keeps it, not
+    // moved through the `Option` and the `MassFactor` that wrap it.
+    #[inline(always)]
     pub fn new(a: &SMatrix<T, N, N>, tree: &'static SubtreeEnds<N>) -> Option<Self> {
         let ends = &tree.0;
         // Factored in place in a copy of A: L below the diagonal (column-major, so a
@@ -329,6 +331,39 @@ impl<T: Real, const N: usize> TreeLdl<T, N> {
                 }
             }
         }
+    }
+
+    /// [`TreeLdl::solve_lt_rows_mut`] over the rows each column may be nonzero in, and
+    /// those rows ([`Spans`]) of the result: a coordinate's column takes its descendants'
+    /// rows. The same sums in the same order, the zero terms left out.
+    #[inline]
+    pub fn solve_lt_rows_spans_mut<const R: usize>(&self, b: &mut SMatrix<T, R, N>) -> Spans<N> {
+        let mut spans = column_spans(b);
+        let l = self.l.as_slice();
+        let data = b.as_mut_slice();
+        for i in (0..N).rev() {
+            let (head, tail) = data.split_at_mut((i + 1) * R);
+            let col_i = &mut head[i * R..];
+            let (mut lo, mut hi) = spans[i];
+            for k in i + 1..self.ends[i] {
+                let (klo, khi) = spans[k];
+                if klo >= khi {
+                    continue;
+                }
+                let lki = l[i * N + k];
+                let col_k = &tail[(k - i - 1) * R..(k - i) * R];
+                for (y, x) in col_i[klo..khi].iter_mut().zip(&col_k[klo..khi]) {
+                    *y -= lki * *x;
+                }
+                (lo, hi) = if lo >= hi {
+                    (klo, khi)
+                } else {
+                    (lo.min(klo), hi.max(khi))
+                };
+            }
+            spans[i] = (lo, hi);
+        }
+        spans
     }
 
     /// Overwrites `b` with `L⁻¹ b` (`L x = b`, from the root down): the last half of a
@@ -633,6 +668,128 @@ pub fn mul_nt<T: Real, const R: usize, const K: usize, const C: usize>(
     out
 }
 
+/// `A diag(d)`: column `k` of `A` times `dₖ` (the rows' factors `P D⁻¹` of a tree solve).
+#[inline]
+pub fn scale_columns<T: Real, const R: usize, const N: usize>(
+    a: &SMatrix<T, R, N>,
+    d: &nalgebra::SVector<T, N>,
+) -> SMatrix<T, R, N> {
+    let mut out = *a;
+    for (k, mut column) in out.column_iter_mut().enumerate() {
+        column *= d[k];
+    }
+    out
+}
+
+/// `diag(d) A`: row `k` of `A` times `dₖ` (`D⁻¹ t` of a tree solve, for `C` sides).
+#[inline]
+pub fn scale_rows<T: Real, const N: usize, const C: usize>(
+    a: &SMatrix<T, N, C>,
+    d: &nalgebra::SVector<T, N>,
+) -> SMatrix<T, N, C> {
+    let mut out = *a;
+    for mut column in out.column_iter_mut() {
+        column.component_mul_assign(d);
+    }
+    out
+}
+
+/// The rows of each column of a matrix that may be nonzero, `[lo, hi)` from its first to
+/// its last nonzero entry (`lo == hi` for a zero column). A constraint or contact row of one
+/// leg of a robot is zero on every other leg's coordinates (its half solve along the tree
+/// too: a coordinate's value comes from its descendants), so where the rows are stored leg
+/// by leg, a leg's column meets only that leg's rows and the body's meet all of them: the
+/// products below skip the rest. Skipped terms are exact zeros (`0 · x`), so the sums are
+/// the dense ones to the bit, in the same order (but for the sign of a zero).
+pub type Spans<const K: usize> = [(usize, usize); K];
+
+/// The [`Spans`] of `a`'s columns.
+#[inline]
+pub fn column_spans<T: Real, const R: usize, const K: usize>(a: &SMatrix<T, R, K>) -> Spans<K> {
+    core::array::from_fn(|k| {
+        let column = &a.as_slice()[k * R..(k + 1) * R];
+        match column.iter().position(|x| *x != T::zero()) {
+            Some(lo) => (
+                lo,
+                R - column
+                    .iter()
+                    .rev()
+                    .position(|x| *x != T::zero())
+                    .unwrap_or(0),
+            ),
+            None => (0, 0),
+        }
+    })
+}
+
+/// `A Bᵀ` as [`mul_nt`], each shared column's rank-one update over the rows `A` and `B`
+/// may be nonzero in (their [`Spans`]).
+#[inline]
+pub fn mul_nt_spans<T: Real, const R: usize, const K: usize, const C: usize>(
+    a: &SMatrix<T, R, K>,
+    a_spans: &Spans<K>,
+    b: &SMatrix<T, C, K>,
+    b_spans: &Spans<K>,
+) -> SMatrix<T, R, C> {
+    let mut out = SMatrix::<T, R, C>::zeros();
+    let (a_data, out_data) = (a.as_slice(), out.as_mut_slice());
+    for k in 0..K {
+        let ((alo, ahi), (blo, bhi)) = (a_spans[k], b_spans[k]);
+        if alo >= ahi {
+            continue;
+        }
+        let a_col = &a_data[k * R + alo..k * R + ahi];
+        for c in blo..bhi {
+            let bck = b[(c, k)];
+            for (o, x) in out_data[c * R + alo..c * R + ahi].iter_mut().zip(a_col) {
+                *o += *x * bck;
+            }
+        }
+    }
+    out
+}
+
+/// `A B` as [`mul`], each of `A`'s columns added over the rows it may be nonzero in
+/// (`a_spans`, its [`Spans`]).
+#[inline]
+pub fn mul_spans_left<T: Real, const R: usize, const K: usize, const C: usize>(
+    a: &SMatrix<T, R, K>,
+    a_spans: &Spans<K>,
+    b: &SMatrix<T, K, C>,
+) -> SMatrix<T, R, C> {
+    let mut out = SMatrix::<T, R, C>::zeros();
+    for c in 0..C {
+        for (k, &(lo, hi)) in a_spans.iter().enumerate() {
+            let bkc = b[(k, c)];
+            for r in lo..hi {
+                out[(r, c)] += a[(r, k)] * bkc;
+            }
+        }
+    }
+    out
+}
+
+/// `Aᵀ B` as [`mul_tn`], each of `A`'s columns summed over the rows it may be nonzero in
+/// (`a_spans`, its [`Spans`]).
+#[inline]
+pub fn mul_tn_spans<T: Real, const K: usize, const R: usize, const C: usize>(
+    a: &SMatrix<T, K, R>,
+    a_spans: &Spans<R>,
+    b: &SMatrix<T, K, C>,
+) -> SMatrix<T, R, C> {
+    let mut out = SMatrix::<T, R, C>::zeros();
+    for c in 0..C {
+        for (r, &(lo, hi)) in a_spans.iter().enumerate() {
+            let mut s = T::zero();
+            for k in lo..hi {
+                s += a[(k, r)] * b[(k, c)];
+            }
+            out[(r, c)] = s;
+        }
+    }
+    out
+}
+
 /// `Aᵀ B`, as plain loops.
 #[inline]
 pub fn mul_tn<T: Real, const K: usize, const R: usize, const C: usize>(
@@ -767,6 +924,52 @@ mod tests {
         // A Bᵀ by rank-one updates against nalgebra's product.
         let c = SMatrix::<f64, 3, N>::from_fn(|i, j| (i * N + j) as f64 * 0.1 - 1.0);
         assert!((mul_nt(&rows, &c) - rows * c.transpose()).amax() < 1e-13);
+        // Rows of two branches (as a robot's legs' loops): rows 0 and 1 on the branch
+        // under 3, rows 2 and 3 on the one under 6 (row 3 reaching into the chain at 1).
+        // The half solve over the spans is the dense one, and a branch's columns meet only
+        // its own rows; the chain's meet every row.
+        let mut branches = SMatrix::<f64, 4, N>::zeros();
+        branches[(0, 4)] = 0.7;
+        branches[(1, 5)] = -1.3;
+        branches[(1, 3)] = 0.4;
+        branches[(2, 7)] = 2.1;
+        branches[(3, 7)] = -0.6;
+        branches[(3, 1)] = 0.9;
+        let mut dense_half = branches;
+        tree.solve_lt_rows_mut(&mut dense_half);
+        let mut sparse_half = branches;
+        let spans = tree.solve_lt_rows_spans_mut(&mut sparse_half);
+        assert_eq!(sparse_half, dense_half);
+        assert_eq!(
+            spans,
+            [
+                (0, 4),
+                (0, 4),
+                (0, 4),
+                (0, 2),
+                (0, 1),
+                (1, 2),
+                (2, 4),
+                (2, 4)
+            ]
+        );
+        assert_eq!(spans, column_spans(&dense_half));
+        // The products over the spans are nalgebra's (and an empty column is skipped).
+        let mut other = c;
+        other.column_mut(5).fill(0.0);
+        let other_spans = column_spans(&other);
+        assert_eq!(other_spans[5], (0, 0));
+        let near = |x: f64, y: f64| (x - y).abs() <= 1e-14 * (1.0 + y.abs());
+        let same = |p: &[f64], q: &[f64]| p.iter().zip(q).all(|(x, y)| near(*x, *y));
+        let (h, h_spans) = (sparse_half, spans);
+        let nt = mul_nt_spans(&h, &h_spans, &other, &other_spans);
+        assert!(same(nt.as_slice(), (h * other.transpose()).as_slice()));
+        let sides = SMatrix::<f64, N, 2>::from_fn(|i, j| 0.3 * i as f64 - j as f64);
+        let left = mul_spans_left(&h, &h_spans, &sides);
+        assert!(same(left.as_slice(), (h * sides).as_slice()));
+        let forces = SMatrix::<f64, 4, 2>::from_fn(|i, j| 1.0 + i as f64 * 0.5 - j as f64);
+        let tn = mul_tn_spans(&h, &h_spans, &forces);
+        assert!(same(tn.as_slice(), (h.transpose() * forces).as_slice()));
         // Whatever is off the tree is not read.
         let mut noisy = a;
         noisy[(4, 6)] = 7.0;

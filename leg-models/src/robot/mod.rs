@@ -637,7 +637,9 @@ pub(crate) type ChartStance<T, const NQ: usize, const NC: usize, const NK: usize
 
 /// The stance system at a state: the chart centred on the body, gravity and the ground
 /// turned into it, the contacts in `modes` held (sticking, or sliding with friction
-/// `mu`), evaluated and factored once.
+/// `mu`), evaluated and factored once. Inlined, so that the system (~28 KB for Cassie)
+/// is built where its caller keeps it rather than moved out through the `Result`s.
+#[inline(always)]
 pub(crate) fn stance_system<
     L,
     T,
