@@ -29,8 +29,8 @@ use crate::dynamics::forward::{
 };
 use crate::model::contract::{ContactModel, DynamicsTerms, Real};
 use crate::model::linalg::{
-    all_finite, mul, mul_nt_spans, mul_spans_left, mul_tn, mul_tn_spans, scale_columns, scale_rows,
-    Cholesky, Factored, MassFactor, PivotedLdlt, TreeLdl,
+    all_finite, mul, mul_nt_spans, mul_tn, scale_columns, scale_rows, Cholesky, Factored,
+    MassFactor, PivotedLdlt, TreeLdl,
 };
 
 /// The ground `n · x = d` (base frame), `n` a unit normal out of the ground: a line for a
@@ -394,7 +394,7 @@ pub(crate) fn solve_structured_on_tree<
     if NC > 0 {
         let s = mul_nt_spans(&pj, &j_spans, &pj_d, &j_spans);
         let s = ConstraintFactor::new(&s, closure_deficiency)?;
-        f0 = r_j - mul_spans_left(&pj_d, &j_spans, &t);
+        f0 = r_j - mul(&pj_d, &t);
         g = mul_nt_spans(&pj_d, &j_spans, &pw, &w_spans);
         let gc = if same {
             g
@@ -403,12 +403,12 @@ pub(crate) fn solve_structured_on_tree<
         };
         s.solve_mut(&mut f0);
         s.solve_mut(&mut g);
-        u0 += mul_tn_spans(&pj, &j_spans, &f0);
+        u0 += mul_tn(&pj, &f0);
         k -= mul_tn(&gc, &g);
     }
     let u0_d = scale_rows(&u0, inv_d);
     // Held contact rows: K λ = r_c − C a0.
-    let rhs = r_c - mul_spans_left(&pc, &c_spans, &u0_d);
+    let rhs = r_c - mul(&pc, &u0_d);
     // a0 itself only where held rows repeat (its size judges the rows left out).
     let a0 = core::cell::OnceCell::new();
     let pieces = |col: usize| {
@@ -422,7 +422,7 @@ pub(crate) fn solve_structured_on_tree<
     let lambda = solve_held(&k, &rhs, held, pieces)?;
     // q̈ = a0 + Zp λ = L⁻¹ D⁻¹ (u0 + Pwᵀ λ − Pjᵀ g λ).
     let g_lambda = mul(&g, &lambda);
-    let half = u0 + mul_tn_spans(&pw, &w_spans, &lambda) - mul_tn_spans(&pj, &j_spans, &g_lambda);
+    let half = u0 + mul_tn(&pw, &lambda) - mul_tn(&pj, &g_lambda);
     let mut x = scale_rows(&half, inv_d);
     chol_m.solve_l_mut(&mut x);
     let closure = f0 - g_lambda;

@@ -15,8 +15,8 @@ use nalgebra::{SMatrix, SVector};
 
 use crate::model::contract::{DynamicsTerms, LegDynamics, Real};
 use crate::model::linalg::{
-    all_finite, factors_along_the_tree, mul, mul_nt_spans, mul_spans_left, mul_tn_spans,
-    scale_columns, Cholesky, Factored, MassFactor, PivotedLdlt, SubtreeEnds, TreeLdl,
+    all_finite, factors_along_the_tree, mul, mul_nt_spans, mul_tn, scale_columns, Cholesky,
+    Factored, MassFactor, PivotedLdlt, SubtreeEnds, TreeLdl,
 };
 
 /// Why the constrained dynamics cannot be solved at a state.
@@ -326,9 +326,9 @@ pub(crate) fn solve_kkt_on_tree<T: Real, const NQ: usize, const NC: usize>(
         let spans = chol_m.solve_lt_rows_spans_mut(&mut p);
         let p_d = scale_columns(&p, inv_d);
         let s = mul_nt_spans(&p, &spans, &p_d, &spans);
-        forces = closure_rhs - mul_spans_left(&p_d, &spans, &t);
+        forces = closure_rhs - mul(&p_d, &t);
         solve_closure_forces(&s, &mut forces, deficiency)?;
-        t += mul_tn_spans(&p, &spans, &forces);
+        t += mul_tn(&p, &forces);
     }
     let mut qdd = t.component_mul(inv_d);
     chol_m.solve_l_mut(&mut qdd);

@@ -333,9 +333,10 @@ impl<T: Real, const N: usize> TreeLdl<T, N> {
         }
     }
 
-    /// [`TreeLdl::solve_lt_rows_mut`] over the rows each column may be nonzero in, and
-    /// those rows ([`Spans`]) of the result: a coordinate's column takes its descendants'
-    /// rows. The same sums in the same order, the zero terms left out.
+    /// [`TreeLdl::solve_lt_rows_mut`], and the rows each column of the result may be
+    /// nonzero in ([`Spans`]): a coordinate's column takes its descendants' rows. A zero
+    /// column is skipped; the others are taken whole (a fixed length the compiler
+    /// vectorizes), so the result is the dense one's.
     #[inline]
     pub fn solve_lt_rows_spans_mut<const R: usize>(&self, b: &mut SMatrix<T, R, N>) -> Spans<N> {
         let mut spans = column_spans(b);
@@ -352,7 +353,7 @@ impl<T: Real, const N: usize> TreeLdl<T, N> {
                 }
                 let lki = l[i * N + k];
                 let col_k = &tail[(k - i - 1) * R..(k - i) * R];
-                for (y, x) in col_i[klo..khi].iter_mut().zip(&col_k[klo..khi]) {
+                for (y, x) in col_i.iter_mut().zip(col_k) {
                     *y -= lki * *x;
                 }
                 (lo, hi) = if lo >= hi {
@@ -698,9 +699,8 @@ pub fn scale_rows<T: Real, const N: usize, const C: usize>(
 /// its last nonzero entry (`lo == hi` for a zero column). A constraint or contact row of one
 /// leg of a robot is zero on every other leg's coordinates (its half solve along the tree
 /// too: a coordinate's value comes from its descendants), so where the rows are stored leg
-/// by leg, a leg's column meets only that leg's rows and the body's meet all of them: the
-/// products below skip the rest. Skipped terms are exact zeros (`0 · x`), so the sums are
-/// the dense ones to the bit, in the same order (but for the sign of a zero).
+/// by leg, a leg's column meets only that leg's rows and the body's meet all of them:
+/// [`mul_nt_spans`] skips the rest.
 pub type Spans<const K: usize> = [(usize, usize); K];
 
 /// The [`Spans`] of `a`'s columns.
@@ -722,8 +722,12 @@ pub fn column_spans<T: Real, const R: usize, const K: usize>(a: &SMatrix<T, R, K
     })
 }
 
-/// `A Bᵀ` as [`mul_nt`], each shared column's rank-one update over the rows `A` and `B`
-/// may be nonzero in (their [`Spans`]).
+/// `A Bᵀ` as [`mul_nt`], each shared column's rank-one update made only for the columns of
+/// the result where `B`'s column may be nonzero (`b_spans`), and not at all where `A`'s
+/// column is zero (`a_spans`). Each update still runs over all of `A`'s column: a fixed
+/// length the compiler unrolls and vectorizes, where a span's varying length would cost
+/// more than its zeros (Cassie's forward dynamics took 16 % more). The skipped terms are
+/// exact zeros, so the result is the dense one to the bit, but for the sign of a zero.
 #[inline]
 pub fn mul_nt_spans<T: Real, const R: usize, const K: usize, const C: usize>(
     a: &SMatrix<T, R, K>,
@@ -732,59 +736,16 @@ pub fn mul_nt_spans<T: Real, const R: usize, const K: usize, const C: usize>(
     b_spans: &Spans<K>,
 ) -> SMatrix<T, R, C> {
     let mut out = SMatrix::<T, R, C>::zeros();
-    let (a_data, out_data) = (a.as_slice(), out.as_mut_slice());
     for k in 0..K {
         let ((alo, ahi), (blo, bhi)) = (a_spans[k], b_spans[k]);
         if alo >= ahi {
             continue;
         }
-        let a_col = &a_data[k * R + alo..k * R + ahi];
         for c in blo..bhi {
             let bck = b[(c, k)];
-            for (o, x) in out_data[c * R + alo..c * R + ahi].iter_mut().zip(a_col) {
-                *o += *x * bck;
+            for r in 0..R {
+                out[(r, c)] += a[(r, k)] * bck;
             }
-        }
-    }
-    out
-}
-
-/// `A B` as [`mul`], each of `A`'s columns added over the rows it may be nonzero in
-/// (`a_spans`, its [`Spans`]).
-#[inline]
-pub fn mul_spans_left<T: Real, const R: usize, const K: usize, const C: usize>(
-    a: &SMatrix<T, R, K>,
-    a_spans: &Spans<K>,
-    b: &SMatrix<T, K, C>,
-) -> SMatrix<T, R, C> {
-    let mut out = SMatrix::<T, R, C>::zeros();
-    for c in 0..C {
-        for (k, &(lo, hi)) in a_spans.iter().enumerate() {
-            let bkc = b[(k, c)];
-            for r in lo..hi {
-                out[(r, c)] += a[(r, k)] * bkc;
-            }
-        }
-    }
-    out
-}
-
-/// `Aᵀ B` as [`mul_tn`], each of `A`'s columns summed over the rows it may be nonzero in
-/// (`a_spans`, its [`Spans`]).
-#[inline]
-pub fn mul_tn_spans<T: Real, const K: usize, const R: usize, const C: usize>(
-    a: &SMatrix<T, K, R>,
-    a_spans: &Spans<R>,
-    b: &SMatrix<T, K, C>,
-) -> SMatrix<T, R, C> {
-    let mut out = SMatrix::<T, R, C>::zeros();
-    for c in 0..C {
-        for (r, &(lo, hi)) in a_spans.iter().enumerate() {
-            let mut s = T::zero();
-            for k in lo..hi {
-                s += a[(k, r)] * b[(k, c)];
-            }
-            out[(r, c)] = s;
         }
     }
     out
@@ -964,12 +925,6 @@ mod tests {
         let (h, h_spans) = (sparse_half, spans);
         let nt = mul_nt_spans(&h, &h_spans, &other, &other_spans);
         assert!(same(nt.as_slice(), (h * other.transpose()).as_slice()));
-        let sides = SMatrix::<f64, N, 2>::from_fn(|i, j| 0.3 * i as f64 - j as f64);
-        let left = mul_spans_left(&h, &h_spans, &sides);
-        assert!(same(left.as_slice(), (h * sides).as_slice()));
-        let forces = SMatrix::<f64, 4, 2>::from_fn(|i, j| 1.0 + i as f64 * 0.5 - j as f64);
-        let tn = mul_tn_spans(&h, &h_spans, &forces);
-        assert!(same(tn.as_slice(), (h.transpose() * forces).as_slice()));
         // Whatever is off the tree is not read.
         let mut noisy = a;
         noisy[(4, 6)] = 7.0;
