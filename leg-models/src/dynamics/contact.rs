@@ -29,8 +29,8 @@ use crate::dynamics::forward::{
 };
 use crate::model::contract::{ContactModel, DynamicsTerms, Real};
 use crate::model::linalg::{
-    all_finite, mul, mul_nt_spans, mul_tn, scale_columns, scale_rows, Cholesky, Factored,
-    MassFactor, PivotedLdlt, TreeLdl,
+    all_finite, column_spans, mul, mul_nt_spans, mul_tn, scale_columns, scale_rows, Cholesky,
+    Factored, MassFactor, PivotedLdlt, TreeLdl,
 };
 
 /// The ground `n · x = d` (base frame), `n` a unit normal out of the ground: a line for a
@@ -362,7 +362,8 @@ pub(crate) fn solve_structured_on_tree<
     // Each factor with the rows its columns may be nonzero in ([`Spans`]): the products
     // skip a leg's columns for another leg's rows.
     let mut pc = pw;
-    let w_spans = chol_m.solve_lt_rows_spans_mut(&mut pw); // W L⁻¹
+    chol_m.solve_lt_rows_mut(&mut pw); // W L⁻¹
+    let w_spans = column_spans(&pw);
     let c_spans = if same {
         // Every held row sticks (or slides with W = C): C's rows are W's.
         pc = pw;
@@ -373,7 +374,8 @@ pub(crate) fn solve_structured_on_tree<
                 pc.set_row(r, &c.row(r));
             }
         }
-        chol_m.solve_lt_rows_spans_mut(&mut pc) // C L⁻¹
+        chol_m.solve_lt_rows_mut(&mut pc); // C L⁻¹
+        column_spans(&pc)
     };
     // Closure elimination in the half space: u0 = t + Pjᵀ f0 (so a0 = L⁻¹ D⁻¹ u0), and the
     // held rows' matrix less the closures' response, K = C Zp = C M⁻¹ Wᵀ − Gcᵀ S⁻¹ G with
@@ -382,7 +384,8 @@ pub(crate) fn solve_structured_on_tree<
     // so it would be dense where Pw and Pj are leg by leg.
     let mut pj = *j;
     let j_spans = if NC > 0 {
-        chol_m.solve_lt_rows_spans_mut(&mut pj) // J L⁻¹
+        chol_m.solve_lt_rows_mut(&mut pj); // J L⁻¹
+        column_spans(&pj)
     } else {
         [(0, 0); NQ]
     };
