@@ -326,6 +326,9 @@ pub fn solve_structured_columns<
 /// `NC + NK + C` whole ones, two half solves each (Featherstone, RBDA §8.5). The same
 /// elimination, so the same refusals of the closures and the held rows (`M`'s own refusal
 /// is the tree factor's: its pivot ratio is of another ordering than the dense one's).
+/// On a robot, the products skip a leg's columns for the other legs' rows
+/// ([`crate::model::linalg::Spans`]), and nothing that the closures couple through the body
+/// is formed as a dense `NK × NQ` matrix.
 #[allow(clippy::type_complexity)]
 pub(crate) fn solve_structured_on_tree<
     T: Real,
