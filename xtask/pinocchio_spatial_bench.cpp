@@ -45,6 +45,7 @@
 
 #include <pinocchio/multibody.hpp>
 #include <pinocchio/parsers/urdf.hpp>
+#include <pinocchio/algorithm/aba.hpp>
 #include <pinocchio/algorithm/constrained-dynamics.hpp>
 #include <pinocchio/algorithm/frames.hpp>
 
@@ -211,12 +212,10 @@ int main(int argc, char** argv) {
   pin::initConstraintDynamics(model, data, cmodels, cdatas);
   pin::initConstraintDynamics(model, stance_data, stance, stance_datas);
 
-  auto timed_on = [&](pin::Data& d, const std::vector<pin::RigidConstraintModel>& cm,
-                      std::vector<pin::RigidConstraintData>& cd, pin::ProximalSettings& settings,
-                      Eigen::VectorXd& out) {
-    out = pin::constraintDynamics(model, d, q, v, tau, cm, cd, settings);
-    // Median over batches of the time of one call, on states that change every call (a
-    // rate: a revolute joint's (cos, sin) stays a unit pair).
+  // Median over batches of the time of one call, on states that change every call (a
+  // rate: a revolute joint's (cos, sin) stays a unit pair). `call` returns Pinocchio's
+  // own reference to its q̈ (no copy in the loop).
+  auto median_ns = [&](auto&& call) {
     const int batch = 20000, batches = 15;
     std::vector<double> times;
     Eigen::VectorXd vv = v;
@@ -225,7 +224,7 @@ int main(int argc, char** argv) {
       auto t0 = std::chrono::steady_clock::now();
       for (int i = 0; i < batch; ++i) {
         vv(0) = v(0) + 1e-12 * i;
-        sink += pin::constraintDynamics(model, d, q, vv, tau, cm, cd, settings)(0);
+        sink += call(vv)(0);
       }
       auto t1 = std::chrono::steady_clock::now();
       times.push_back(std::chrono::duration<double, std::nano>(t1 - t0).count() / batch);
@@ -233,6 +232,14 @@ int main(int argc, char** argv) {
     std::sort(times.begin(), times.end());
     if (!std::isfinite(sink)) std::fprintf(stderr, "non-finite q̈ while timing\n");
     return times[times.size() / 2];
+  };
+  auto timed_on = [&](pin::Data& d, const std::vector<pin::RigidConstraintModel>& cm,
+                      std::vector<pin::RigidConstraintData>& cd, pin::ProximalSettings& settings,
+                      Eigen::VectorXd& out) {
+    out = pin::constraintDynamics(model, d, q, v, tau, cm, cd, settings);
+    return median_ns([&](const Eigen::VectorXd& vv) -> const Eigen::VectorXd& {
+      return pin::constraintDynamics(model, d, q, vv, tau, cm, cd, settings);
+    });
   };
   auto timed = [&](pin::ProximalSettings& settings, Eigen::VectorXd& out) {
     return timed_on(data, cmodels, cdatas, settings, out);
@@ -271,6 +278,18 @@ int main(int argc, char** argv) {
   std::printf(", \"one_iteration_ns\": %.3f, ", ns_one);
   print("fewest_qdd", qdd_few);
   std::printf(", \"fewest_iterations\": %d, \"fewest_ns\": %.3f", few.max_iter, ns_few);
+  if (cmodels.empty()) {
+    // Nothing to hold: Pinocchio's own call for that is `aba`, faster than
+    // `constraintDynamics` with no constraints, so it is the peer.
+    pin::Data aba_data(model);
+    const Eigen::VectorXd qdd_aba = pin::aba(model, aba_data, q, v, tau);
+    const double ns_aba = median_ns([&](const Eigen::VectorXd& vv) -> const Eigen::VectorXd& {
+      return pin::aba(model, aba_data, q, vv, tau);
+    });
+    std::printf(", ");
+    print("aba_qdd", qdd_aba);
+    std::printf(", \"aba_ns\": %.3f", ns_aba);
+  }
   if (!contacts.empty()) {
     pin::ProximalSettings held(1e-12, 1e-8, 100);
     Eigen::VectorXd qdd_stance, qdd_stance_few;

@@ -444,7 +444,7 @@ pub fn run(root: &Path, pinocchio: bool, only: &[String]) -> Result<(), String> 
             legs.push(m);
         }
     }
-    header("| spatial model | harness | fused ours | CasADi C Lagrange | ratio | CasADi C closed | ratio | FD ours | Pinocchio C++ constraintDynamics (converged) | ratio | its iterations | Pinocchio, one iteration | ratio | its q̈ off by | sim step |", 15, legs.len());
+    header("| spatial model | harness | fused ours | CasADi C Lagrange | ratio | CasADi C closed | ratio | FD ours | Pinocchio C++ constraintDynamics (converged) | ratio | its iterations | Pinocchio, one iteration | ratio | its q̈ off by | sim step | Pinocchio aba (no closures) | ratio |", 17, legs.len());
     for m in legs {
         let g = |id: &str| median(root, &m, id);
         let (fo, fd) = (g("fused-ours"), g("fd-ours"));
@@ -464,12 +464,14 @@ pub fn run(root: &Path, pinocchio: bool, only: &[String]) -> Result<(), String> 
             ratio(fd, p.map(|p| p.one_iteration)),
             p.map_or("–".into(), |p| format!("{:.1e}", p.one_iteration_error)),
             ns(g("step-ours")),
+            ns(p.and_then(|p| p.aba)),
+            ratio(fd, p.and_then(|p| p.aba)),
         ];
         println!("| {m} | {} |", cells.join(" | "));
     }
     // Floating robots: ours through leg_models::robot (the chart centred on the body, v̇
     // from its q̈), Pinocchio with its free flyer; on the ground every contact held.
-    header("| floating robot | harness | fused ours | FD ours (forward_dynamics_at, v̇) | Pinocchio C++ constraintDynamics, free flyer (to its stopping test or its cap of 100) | ratio | its iterations | Pinocchio at the fewest iterations that give that q̈ (an oracle's choice) | ratio | those iterations | Pinocchio, one iteration | ratio | its q̈ off by | stance ours (stance_dynamics, every contact held) | Pinocchio, every contact held (to its stopping test or cap) | ratio | its iterations | Pinocchio held, fewest iterations (an oracle's choice) | ratio | those iterations |", 20, robots.len());
+    header("| floating robot | harness | fused ours | FD ours (forward_dynamics_at, v̇) | Pinocchio C++ constraintDynamics, free flyer (to its stopping test or its cap of 100) | ratio | its iterations | Pinocchio at the fewest iterations that give that q̈ (an oracle's choice) | ratio | those iterations | Pinocchio, one iteration | ratio | its q̈ off by | stance ours (stance_dynamics, every contact held) | Pinocchio, every contact held (to its stopping test or cap) | ratio | its iterations | Pinocchio held, fewest iterations (an oracle's choice) | ratio | those iterations | Pinocchio aba (no closures) | ratio |", 22, robots.len());
     for m in &robots {
         let g = |id: &str| median(root, m, id);
         let (fd, st) = (g("fd-ours"), g("stance-ours"));
@@ -506,6 +508,8 @@ pub fn run(root: &Path, pinocchio: bool, only: &[String]) -> Result<(), String> 
                 p.filter(|p| p.stance_fewest.is_some())
                     .map(|p| p.stance_fewest_iterations),
             ),
+            ns(p.and_then(|p| p.aba)),
+            ratio(fd, p.and_then(|p| p.aba)),
         ];
         println!("| {m} | {} |", cells.join(" | "));
     }

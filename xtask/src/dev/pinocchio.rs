@@ -126,6 +126,9 @@ pub struct SpatialFigures {
     pub stance_iterations: u64,
     pub stance_fewest: Option<f64>,
     pub stance_fewest_iterations: u64,
+    /// A model with nothing to hold (no closures): Pinocchio's `aba`, its faster call
+    /// there, where its q̈ equals ours.
+    pub aba: Option<f64>,
 }
 
 /// Whether `out` is older than any of `sources` (or missing).
@@ -565,10 +568,18 @@ fn spatial_figures(
             stance_iterations: 0,
             stance_fewest: None,
             stance_fewest_iterations: 0,
+            aba: None,
         };
         // The fewest iterations' q̈ equal to ours too, or that figure is not given.
         if off(&floats(&pin["fewest_qdd"])) < 1e-9 {
             figures.fewest = pin["fewest_ns"].as_f64();
+        }
+        if off(&floats(&pin["aba_qdd"])) < 1e-9 {
+            figures.aba = pin["aba_ns"].as_f64();
+            eprintln!(
+                "{name:<16} Pinocchio aba (nothing to hold) {}",
+                show(figures.aba)
+            );
         }
         eprintln!(
             "{name:<16} Pinocchio constraintDynamics {:.0} ns ({} iterations, q̈ equal to ours to {converged:.1e}); at {} iterations {}; one iteration {:.0} ns (q̈ off by {:.1e})",
