@@ -321,7 +321,7 @@ pub(crate) fn solve_kkt_on_tree<T: Real, const NQ: usize, const NC: usize>(
         // `S = P D⁻¹ Pᵀ` then run over contiguous columns, which the compiler vectorizes
         // (cassie 125 050 → 108 455 instructions).
         // S dense: skipping a leg's columns for the other legs' rows (`linalg::Spans`, as
-        // the stance does) cost Cassie's forward dynamics 3.6 % more instructions here,
+        // the stance does) cost Cassie's forward dynamics 3.7 % more instructions here,
         // where S is the one product.
         let mut p = *jacobian;
         chol_m.solve_lt_rows_mut(&mut p);

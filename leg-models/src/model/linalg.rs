@@ -854,8 +854,8 @@ mod tests {
         assert!((mul_nt(&rows, &c) - rows * c.transpose()).amax() < 1e-13);
         // Rows of two branches (as a robot's legs' loops): rows 0 and 1 on the branch
         // under 3, rows 2 and 3 on the one under 6 (row 3 reaching into the chain at 1).
-        // The half solve over the spans is the dense one, and a branch's columns meet only
-        // its own rows; the chain's meet every row.
+        // After the half solve a branch's columns meet only its own rows; the chain's meet
+        // every row (spans read off the tree by hand).
         let mut branches = SMatrix::<f64, 4, N>::zeros();
         branches[(0, 4)] = 0.7;
         branches[(1, 5)] = -1.3;
@@ -891,6 +891,11 @@ mod tests {
         assert!(same(nt.as_slice(), (h * other.transpose()).as_slice()));
         // and to the bit the dense rank-one updates' (the same sums in the same order).
         assert_eq!(nt, mul_nt(&h, &other));
+        // With the branch rows on the right, each update reaches only the result's columns
+        // of the rows its column meets: the skipping the stance relies on.
+        let tn = mul_nt_spans(&other, &other_spans, &h, &h_spans);
+        assert!(same(tn.as_slice(), (other * h.transpose()).as_slice()));
+        assert_eq!(tn, mul_nt(&other, &h));
         // Whatever is off the tree is not read.
         let mut noisy = a;
         noisy[(4, 6)] = 7.0;
