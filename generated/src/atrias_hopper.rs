@@ -758,6 +758,128 @@ impl LegDynamics<NQ, NC, NU> for AtriasHopper {
     ) -> DynamicsDerivatives<T, 9, 2> {
         dynamics_derivatives(q, qd, a, f, p)
     }
+    #[inline]
+    fn mass_tree_factor<T: Arithmetic>(
+        l: &mut SMatrix<T, NQ, NQ>,
+        d: &mut SVector<T, NQ>,
+        inv_d: &mut SVector<T, NQ>,
+    ) {
+        let d_8 = l[(8, 8)];
+        let inv_8 = T::lit(1.0) / d_8;
+        let s_8_7 = l[(7, 8)];
+        let l_8_7 = s_8_7 * inv_8;
+        let d_7 = l[(7, 7)] - l_8_7 * s_8_7;
+        let inv_7 = T::lit(1.0) / d_7;
+        let d_6 = l[(6, 6)];
+        let inv_6 = T::lit(1.0) / d_6;
+        let s_6_5 = l[(5, 6)];
+        let l_6_5 = s_6_5 * inv_6;
+        let d_5 = l[(5, 5)] - l_6_5 * s_6_5;
+        let inv_5 = T::lit(1.0) / d_5;
+        let d_4 = l[(4, 4)];
+        let inv_4 = T::lit(1.0) / d_4;
+        let d_3 = l[(3, 3)];
+        let inv_3 = T::lit(1.0) / d_3;
+        let s_8_2 = l[(2, 8)];
+        let l_8_2 = s_8_2 * inv_8;
+        let s_7_2 = l[(2, 7)] - l_8_2 * d_8 * l_8_7;
+        let l_7_2 = s_7_2 * inv_7;
+        let s_6_2 = l[(2, 6)];
+        let l_6_2 = s_6_2 * inv_6;
+        let s_5_2 = l[(2, 5)] - l_6_2 * d_6 * l_6_5;
+        let l_5_2 = s_5_2 * inv_5;
+        let s_4_2 = l[(2, 4)];
+        let l_4_2 = s_4_2 * inv_4;
+        let s_3_2 = l[(2, 3)];
+        let l_3_2 = s_3_2 * inv_3;
+        let d_2 = l[(2, 2)] - l_8_2 * s_8_2 - l_7_2 * s_7_2 - l_6_2 * s_6_2
+            - l_5_2 * s_5_2 - l_4_2 * s_4_2 - l_3_2 * s_3_2;
+        let inv_2 = T::lit(1.0) / d_2;
+        let s_8_1 = l[(1, 8)];
+        let l_8_1 = s_8_1 * inv_8;
+        let s_7_1 = l[(1, 7)] - l_8_1 * d_8 * l_8_7;
+        let l_7_1 = s_7_1 * inv_7;
+        let s_6_1 = l[(1, 6)];
+        let l_6_1 = s_6_1 * inv_6;
+        let s_5_1 = l[(1, 5)] - l_6_1 * d_6 * l_6_5;
+        let l_5_1 = s_5_1 * inv_5;
+        let s_4_1 = l[(1, 4)];
+        let l_4_1 = s_4_1 * inv_4;
+        let s_3_1 = l[(1, 3)];
+        let l_3_1 = s_3_1 * inv_3;
+        let s_2_1 = l[(1, 2)] - l_3_1 * d_3 * l_3_2 - l_4_1 * d_4 * l_4_2
+            - l_5_1 * d_5 * l_5_2 - l_6_1 * d_6 * l_6_2 - l_7_1 * d_7 * l_7_2
+            - l_8_1 * d_8 * l_8_2;
+        let l_2_1 = s_2_1 * inv_2;
+        let d_1 = l[(1, 1)] - l_8_1 * s_8_1 - l_7_1 * s_7_1 - l_6_1 * s_6_1
+            - l_5_1 * s_5_1 - l_4_1 * s_4_1 - l_3_1 * s_3_1 - l_2_1 * s_2_1;
+        let inv_1 = T::lit(1.0) / d_1;
+        let s_8_0 = l[(0, 8)];
+        let l_8_0 = s_8_0 * inv_8;
+        let s_7_0 = l[(0, 7)] - l_8_0 * d_8 * l_8_7;
+        let l_7_0 = s_7_0 * inv_7;
+        let s_6_0 = l[(0, 6)];
+        let l_6_0 = s_6_0 * inv_6;
+        let s_5_0 = l[(0, 5)] - l_6_0 * d_6 * l_6_5;
+        let l_5_0 = s_5_0 * inv_5;
+        let s_4_0 = l[(0, 4)];
+        let l_4_0 = s_4_0 * inv_4;
+        let s_3_0 = l[(0, 3)];
+        let l_3_0 = s_3_0 * inv_3;
+        let s_2_0 = l[(0, 2)] - l_3_0 * d_3 * l_3_2 - l_4_0 * d_4 * l_4_2
+            - l_5_0 * d_5 * l_5_2 - l_6_0 * d_6 * l_6_2 - l_7_0 * d_7 * l_7_2
+            - l_8_0 * d_8 * l_8_2;
+        let l_2_0 = s_2_0 * inv_2;
+        let s_1_0 = l[(0, 1)] - l_2_0 * d_2 * l_2_1 - l_3_0 * d_3 * l_3_1
+            - l_4_0 * d_4 * l_4_1 - l_5_0 * d_5 * l_5_1 - l_6_0 * d_6 * l_6_1
+            - l_7_0 * d_7 * l_7_1 - l_8_0 * d_8 * l_8_1;
+        let l_1_0 = s_1_0 * inv_1;
+        let d_0 = l[(0, 0)] - l_8_0 * s_8_0 - l_7_0 * s_7_0 - l_6_0 * s_6_0
+            - l_5_0 * s_5_0 - l_4_0 * s_4_0 - l_3_0 * s_3_0 - l_2_0 * s_2_0
+            - l_1_0 * s_1_0;
+        let inv_0 = T::lit(1.0) / d_0;
+        l[(1, 0)] = l_1_0;
+        l[(2, 0)] = l_2_0;
+        l[(3, 0)] = l_3_0;
+        l[(4, 0)] = l_4_0;
+        l[(5, 0)] = l_5_0;
+        l[(6, 0)] = l_6_0;
+        l[(7, 0)] = l_7_0;
+        l[(8, 0)] = l_8_0;
+        d[0] = d_0;
+        inv_d[0] = inv_0;
+        l[(2, 1)] = l_2_1;
+        l[(3, 1)] = l_3_1;
+        l[(4, 1)] = l_4_1;
+        l[(5, 1)] = l_5_1;
+        l[(6, 1)] = l_6_1;
+        l[(7, 1)] = l_7_1;
+        l[(8, 1)] = l_8_1;
+        d[1] = d_1;
+        inv_d[1] = inv_1;
+        l[(3, 2)] = l_3_2;
+        l[(4, 2)] = l_4_2;
+        l[(5, 2)] = l_5_2;
+        l[(6, 2)] = l_6_2;
+        l[(7, 2)] = l_7_2;
+        l[(8, 2)] = l_8_2;
+        d[2] = d_2;
+        inv_d[2] = inv_2;
+        d[3] = d_3;
+        inv_d[3] = inv_3;
+        d[4] = d_4;
+        inv_d[4] = inv_4;
+        l[(6, 5)] = l_6_5;
+        d[5] = d_5;
+        inv_d[5] = inv_5;
+        d[6] = d_6;
+        inv_d[6] = inv_6;
+        l[(8, 7)] = l_8_7;
+        d[7] = d_7;
+        inv_d[7] = inv_7;
+        d[8] = d_8;
+        inv_d[8] = inv_8;
+    }
 }
 impl LegModel<NQ, NC, NU> for AtriasHopper {
     #[inline]

@@ -712,6 +712,82 @@ impl LegDynamics<NQ, NC, NU> for RevoluteKneeLeg {
     ) -> DynamicsDerivatives<T, 7, 5> {
         dynamics_derivatives(q, qd, a, f, p)
     }
+    #[inline]
+    fn mass_tree_factor<T: Arithmetic>(
+        l: &mut SMatrix<T, NQ, NQ>,
+        d: &mut SVector<T, NQ>,
+        inv_d: &mut SVector<T, NQ>,
+    ) {
+        let d_6 = l[(6, 6)];
+        let inv_6 = T::lit(1.0) / d_6;
+        let s_6_5 = l[(5, 6)];
+        let l_6_5 = s_6_5 * inv_6;
+        let d_5 = l[(5, 5)] - l_6_5 * s_6_5;
+        let inv_5 = T::lit(1.0) / d_5;
+        let s_6_4 = l[(4, 6)];
+        let l_6_4 = s_6_4 * inv_6;
+        let s_5_4 = l[(4, 5)] - l_6_4 * d_6 * l_6_5;
+        let l_5_4 = s_5_4 * inv_5;
+        let d_4 = l[(4, 4)] - l_6_4 * s_6_4 - l_5_4 * s_5_4;
+        let inv_4 = T::lit(1.0) / d_4;
+        let s_6_3 = l[(3, 6)];
+        let l_6_3 = s_6_3 * inv_6;
+        let s_5_3 = l[(3, 5)] - l_6_3 * d_6 * l_6_5;
+        let l_5_3 = s_5_3 * inv_5;
+        let s_4_3 = l[(3, 4)] - l_5_3 * d_5 * l_5_4 - l_6_3 * d_6 * l_6_4;
+        let l_4_3 = s_4_3 * inv_4;
+        let d_3 = l[(3, 3)] - l_6_3 * s_6_3 - l_5_3 * s_5_3 - l_4_3 * s_4_3;
+        let inv_3 = T::lit(1.0) / d_3;
+        let d_2 = l[(2, 2)];
+        let inv_2 = T::lit(1.0) / d_2;
+        let s_2_1 = l[(1, 2)];
+        let l_2_1 = s_2_1 * inv_2;
+        let d_1 = l[(1, 1)] - l_2_1 * s_2_1;
+        let inv_1 = T::lit(1.0) / d_1;
+        let s_6_0 = l[(0, 6)];
+        let l_6_0 = s_6_0 * inv_6;
+        let s_5_0 = l[(0, 5)] - l_6_0 * d_6 * l_6_5;
+        let l_5_0 = s_5_0 * inv_5;
+        let s_4_0 = l[(0, 4)] - l_5_0 * d_5 * l_5_4 - l_6_0 * d_6 * l_6_4;
+        let l_4_0 = s_4_0 * inv_4;
+        let s_3_0 = l[(0, 3)] - l_4_0 * d_4 * l_4_3 - l_5_0 * d_5 * l_5_3
+            - l_6_0 * d_6 * l_6_3;
+        let l_3_0 = s_3_0 * inv_3;
+        let s_2_0 = l[(0, 2)];
+        let l_2_0 = s_2_0 * inv_2;
+        let s_1_0 = l[(0, 1)] - l_2_0 * d_2 * l_2_1;
+        let l_1_0 = s_1_0 * inv_1;
+        let d_0 = l[(0, 0)] - l_6_0 * s_6_0 - l_5_0 * s_5_0 - l_4_0 * s_4_0
+            - l_3_0 * s_3_0 - l_2_0 * s_2_0 - l_1_0 * s_1_0;
+        let inv_0 = T::lit(1.0) / d_0;
+        l[(1, 0)] = l_1_0;
+        l[(2, 0)] = l_2_0;
+        l[(3, 0)] = l_3_0;
+        l[(4, 0)] = l_4_0;
+        l[(5, 0)] = l_5_0;
+        l[(6, 0)] = l_6_0;
+        d[0] = d_0;
+        inv_d[0] = inv_0;
+        l[(2, 1)] = l_2_1;
+        d[1] = d_1;
+        inv_d[1] = inv_1;
+        d[2] = d_2;
+        inv_d[2] = inv_2;
+        l[(4, 3)] = l_4_3;
+        l[(5, 3)] = l_5_3;
+        l[(6, 3)] = l_6_3;
+        d[3] = d_3;
+        inv_d[3] = inv_3;
+        l[(5, 4)] = l_5_4;
+        l[(6, 4)] = l_6_4;
+        d[4] = d_4;
+        inv_d[4] = inv_4;
+        l[(6, 5)] = l_6_5;
+        d[5] = d_5;
+        inv_d[5] = inv_5;
+        d[6] = d_6;
+        inv_d[6] = inv_6;
+    }
 }
 impl LegModel<NQ, NC, NU, ND, NP> for RevoluteKneeLeg {
     #[inline]

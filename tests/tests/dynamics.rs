@@ -468,3 +468,69 @@ mod minitaur_singularities {
         assert_eq!((stop.t, stop.samples.len()), (0.0, 0));
     }
 }
+
+/// A model's written-out tree factor (`LegDynamics::mass_tree_factor`, generated) does
+/// the runtime's loops' arithmetic (`linalg::factor_along_tree`) in the same order: the
+/// two agree to the bit on the model's own mass matrix at states about its home pose,
+/// every entry of `L`, `D` and `1 / D`. Returns whether the model had a tree to factor.
+fn tree_factor_is_the_loops<L, const NQ: usize, const NC: usize, const NU: usize>() -> bool
+where
+    L: LegDynamics<NQ, NC, NU>,
+{
+    use leg_models::linalg::{factor_along_tree, SubtreeEnds};
+    use leg_models::nalgebra::SMatrix;
+    let Some(tree) = SubtreeEnds::of(&L::PARENTS) else {
+        return false;
+    };
+    let p = L::Params::<f64>::default();
+    let mut rng = Rng::new(29);
+    for _ in 0..5 {
+        let q = SVector::<f64, NQ>::from_fn(|i, _| L::HOME[i] + rng.range(-0.2, 0.2));
+        let m = L::mass_matrix(&q, &p);
+        let (mut l1, mut d1, mut i1) = (m, SVector::<f64, NQ>::zeros(), SVector::zeros());
+        factor_along_tree(&mut l1, &mut d1, &mut i1, &tree);
+        let (mut l2, mut d2, mut i2) = (m, SVector::<f64, NQ>::zeros(), SVector::zeros());
+        L::mass_tree_factor(&mut l2, &mut d2, &mut i2);
+        let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(l1.as_slice()), bits(l2.as_slice()), "{}: L", L::NAME);
+        assert_eq!(bits(d1.as_slice()), bits(d2.as_slice()), "{}: D", L::NAME);
+        assert_eq!(bits(i1.as_slice()), bits(i2.as_slice()), "{}: 1/D", L::NAME);
+        // And it is a factor: Lᵀ D L (L unit lower on the tree's entries) is M.
+        let mut unit = SMatrix::<f64, NQ, NQ>::identity();
+        for i in 0..NQ {
+            for j in i + 1..tree.get()[i] {
+                unit[(j, i)] = l2[(j, i)];
+            }
+        }
+        let back = unit.transpose() * SMatrix::from_diagonal(&d2) * unit;
+        let err = (back - m).amax() / m.amax();
+        assert!(err < 1e-13, "{}: Lᵀ D L − M {err:e}", L::NAME);
+    }
+    true
+}
+
+#[test]
+fn generated_tree_factors_are_the_runtime_loops_to_the_bit() {
+    let mut checked = Vec::new();
+    macro_rules! planar {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
+            if tree_factor_is_the_loops::<$ty, $nq, $nc, $nu>() {
+                checked.push(stringify!($module));
+            }
+        };
+    }
+    macro_rules! spatial {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
+            if tree_factor_is_the_loops::<$ty, $nq, $nc, $nu>() {
+                checked.push(stringify!($module));
+            }
+        };
+    }
+    generated::for_each_model!(planar);
+    generated::for_each_spatial_model!(spatial);
+    generated::for_each_floating_model!(spatial);
+    // The robots the runtime factors along the tree are among them.
+    for robot in ["cassie", "minitaur_quadruped"] {
+        assert!(checked.contains(&robot), "{robot} not checked: {checked:?}");
+    }
+}
