@@ -488,35 +488,6 @@ impl LegDynamics<NQ, NC, NU> for Atrias {
     ) -> DynamicsDerivatives<T, 4, 2> {
         dynamics_derivatives(q, qd, a, f, p)
     }
-    #[inline]
-    fn mass_tree_factor<T: Arithmetic>(
-        l: &mut SMatrix<T, NQ, NQ>,
-        d: &mut SVector<T, NQ>,
-        inv_d: &mut SVector<T, NQ>,
-    ) {
-        let d_3 = l[(3, 3)];
-        let inv_3 = T::lit(1.0) / d_3;
-        let s_3_2 = l[(2, 3)];
-        let l_3_2 = s_3_2 * inv_3;
-        let d_2 = l[(2, 2)] - l_3_2 * s_3_2;
-        let inv_2 = T::lit(1.0) / d_2;
-        let d_1 = l[(1, 1)];
-        let inv_1 = T::lit(1.0) / d_1;
-        let s_1_0 = l[(0, 1)];
-        let l_1_0 = s_1_0 * inv_1;
-        let d_0 = l[(0, 0)] - l_1_0 * s_1_0;
-        let inv_0 = T::lit(1.0) / d_0;
-        l[(1, 0)] = l_1_0;
-        d[0] = d_0;
-        inv_d[0] = inv_0;
-        d[1] = d_1;
-        inv_d[1] = inv_1;
-        l[(3, 2)] = l_3_2;
-        d[2] = d_2;
-        inv_d[2] = inv_2;
-        d[3] = d_3;
-        inv_d[3] = inv_3;
-    }
 }
 impl LegModel<NQ, NC, NU> for Atrias {
     #[inline]

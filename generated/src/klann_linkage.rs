@@ -675,16 +675,6 @@ impl LegDynamics<NQ, NC, NU> for KlannLinkage {
     ) -> DynamicsDerivatives<T, 7, 6> {
         dynamics_derivatives(q, qd, a, f, p)
     }
-    #[inline]
-    fn mass_tree_factor<T: Arithmetic>(
-        l: &mut SMatrix<T, NQ, NQ>,
-        d: &mut SVector<T, NQ>,
-        inv_d: &mut SVector<T, NQ>,
-    ) {
-        let _ = l;
-        d.fill(T::lit(f64::NAN));
-        inv_d.fill(T::lit(f64::NAN));
-    }
 }
 impl LegModel<NQ, NC, NU> for KlannLinkage {
     #[inline]

@@ -545,52 +545,6 @@ impl LegDynamics<NQ, NC, NU> for MinitaurPinnedToe {
     ) -> DynamicsDerivatives<T, 5, 4> {
         dynamics_derivatives(q, qd, a, f, p)
     }
-    #[inline]
-    fn mass_tree_factor<T: Arithmetic>(
-        l: &mut SMatrix<T, NQ, NQ>,
-        d: &mut SVector<T, NQ>,
-        inv_d: &mut SVector<T, NQ>,
-    ) {
-        let d_4 = l[(4, 4)];
-        let inv_4 = T::lit(1.0) / d_4;
-        let s_4_3 = l[(3, 4)];
-        let l_4_3 = s_4_3 * inv_4;
-        let d_3 = l[(3, 3)] - l_4_3 * s_4_3;
-        let inv_3 = T::lit(1.0) / d_3;
-        let d_2 = l[(2, 2)];
-        let inv_2 = T::lit(1.0) / d_2;
-        let s_2_1 = l[(1, 2)];
-        let l_2_1 = s_2_1 * inv_2;
-        let d_1 = l[(1, 1)] - l_2_1 * s_2_1;
-        let inv_1 = T::lit(1.0) / d_1;
-        let s_4_0 = l[(0, 4)];
-        let l_4_0 = s_4_0 * inv_4;
-        let s_3_0 = l[(0, 3)] - l_4_0 * d_4 * l_4_3;
-        let l_3_0 = s_3_0 * inv_3;
-        let s_2_0 = l[(0, 2)];
-        let l_2_0 = s_2_0 * inv_2;
-        let s_1_0 = l[(0, 1)] - l_2_0 * d_2 * l_2_1;
-        let l_1_0 = s_1_0 * inv_1;
-        let d_0 = l[(0, 0)] - l_4_0 * s_4_0 - l_3_0 * s_3_0 - l_2_0 * s_2_0
-            - l_1_0 * s_1_0;
-        let inv_0 = T::lit(1.0) / d_0;
-        l[(1, 0)] = l_1_0;
-        l[(2, 0)] = l_2_0;
-        l[(3, 0)] = l_3_0;
-        l[(4, 0)] = l_4_0;
-        d[0] = d_0;
-        inv_d[0] = inv_0;
-        l[(2, 1)] = l_2_1;
-        d[1] = d_1;
-        inv_d[1] = inv_1;
-        d[2] = d_2;
-        inv_d[2] = inv_2;
-        l[(4, 3)] = l_4_3;
-        d[3] = d_3;
-        inv_d[3] = inv_3;
-        d[4] = d_4;
-        inv_d[4] = inv_4;
-    }
 }
 impl LegModel<NQ, NC, NU> for MinitaurPinnedToe {
     #[inline]

@@ -369,24 +369,6 @@ impl LegDynamics<NQ, NC, NU> for TwoLink {
     ) -> DynamicsDerivatives<T, 2, 0> {
         dynamics_derivatives(q, qd, a, f, p)
     }
-    #[inline]
-    fn mass_tree_factor<T: Arithmetic>(
-        l: &mut SMatrix<T, NQ, NQ>,
-        d: &mut SVector<T, NQ>,
-        inv_d: &mut SVector<T, NQ>,
-    ) {
-        let d_1 = l[(1, 1)];
-        let inv_1 = T::lit(1.0) / d_1;
-        let s_1_0 = l[(0, 1)];
-        let l_1_0 = s_1_0 * inv_1;
-        let d_0 = l[(0, 0)] - l_1_0 * s_1_0;
-        let inv_0 = T::lit(1.0) / d_0;
-        l[(1, 0)] = l_1_0;
-        d[0] = d_0;
-        inv_d[0] = inv_0;
-        d[1] = d_1;
-        inv_d[1] = inv_1;
-    }
 }
 impl LegModel<NQ, NC, NU> for TwoLink {
     #[inline]

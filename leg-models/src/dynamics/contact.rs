@@ -24,7 +24,7 @@ use core::fmt;
 use nalgebra::{SMatrix, SVector};
 
 use crate::dynamics::forward::{
-    actuation, checked_mass_factor, factor_mass, mass_tree, rcond_floor, tree_factor, Baumgarte,
+    actuation, checked_mass_factor, factor_mass, mass_tree, rcond_floor, Baumgarte,
     ConstraintFactor, DynamicsError,
 };
 use crate::model::contract::{ContactModel, DynamicsTerms, Real};
@@ -930,7 +930,7 @@ where
     let applied = actuation::<L, T, NQ, NC, NU>(u);
     let args = (params, q, qd, modes, anchors, ground, mu, baumgarte, None);
     if let Some(ends) = mass_tree::<L, NQ, NC, NU>() {
-        let f = positive_factor(tree_factor::<L, T, NQ, NC, NU>(m, ends))?;
+        let f = positive_factor(TreeLdl::new(m, ends))?;
         ContactSystem::<T, NQ, NC, NK, ND, _>::assemble::<L, NU>(&terms, f, args)?.solve(&applied)
     } else {
         let f = positive_factor(Cholesky::new(m))?;
@@ -1267,7 +1267,7 @@ where
     let d = L::REDUNDANT_ROWS;
     *qd = if let Some(ends) = mass_tree::<L, NQ, NC, NU>() {
         onto(
-            &checked_mass_factor(tree_factor::<L, T, NQ, NC, NU>(&m, ends), &m)?,
+            &checked_mass_factor(TreeLdl::new(&m, ends), &m)?,
             &j,
             d,
             &rows,

@@ -23,11 +23,11 @@ use crate::dynamics::contact::{
     tangential_velocity, ContactMode, ContactSolution, ContactSystem, Ground, Modes,
 };
 use crate::dynamics::forward::{
-    actuation, checked_mass_factor, classify_non_finite, kkt_rhs, mass_tree, tree_factor,
-    Acceleration, Baumgarte, DynamicsError, KktFactorization,
+    actuation, checked_mass_factor, classify_non_finite, kkt_rhs, mass_tree, Acceleration,
+    Baumgarte, DynamicsError, KktFactorization,
 };
 use crate::model::contract::{ContactModel, DynamicsTerms, LegDynamics, Real};
-use crate::model::linalg::{all_finite, negate, Factored};
+use crate::model::linalg::{all_finite, negate, Factored, TreeLdl};
 
 /// Forward dynamics and its derivatives at one state and input.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -106,7 +106,7 @@ where
     let (m, j) = (&terms.mass_matrix, &terms.constraint_jacobian);
     let explained = |e| classify_non_finite(e, q, qd, u);
     if let Some(ends) = mass_tree::<L, NQ, NC, NU>() {
-        let kkt = checked_mass_factor(tree_factor::<L, T, NQ, NC, NU>(m, ends), m)
+        let kkt = checked_mass_factor(TreeLdl::new(m, ends), m)
             .and_then(|f| KktFactorization::with_mass_factor(f, j, L::REDUNDANT_ROWS))
             .map_err(explained)?;
         derivatives_with::<L, T, _, NQ, NC, NU>(&kkt, params, terms, q, qd, u, baumgarte)

@@ -363,20 +363,6 @@ fn solve_closure_forces<T: Real, const NC: usize>(
     Ok(())
 }
 
-/// `M` factored along the tree by `L`'s own written-out factor
-/// ([`LegDynamics::mass_tree_factor`]), `None` unless every pivot is positive and finite.
-#[inline(always)]
-pub(crate) fn tree_factor<L, T, const NQ: usize, const NC: usize, const NU: usize>(
-    m: &SMatrix<T, NQ, NQ>,
-    ends: &'static SubtreeEnds<NQ>,
-) -> Option<TreeLdl<T, NQ>>
-where
-    L: LegDynamics<NQ, NC, NU>,
-    T: Real,
-{
-    TreeLdl::with_factor(m, ends, L::mass_tree_factor::<T>)
-}
-
 /// The subtree ends of `L`'s coordinates ([`SubtreeEnds`]) where its mass matrix is
 /// factored along the tree ([`factors_along_the_tree`]); `None` where it is dense.
 pub(crate) const fn mass_tree<L, const NQ: usize, const NC: usize, const NU: usize>(
@@ -405,7 +391,7 @@ where
     T: Real,
 {
     let factor = match mass_tree::<L, NQ, NC, NU>() {
-        Some(ends) => tree_factor::<L, T, NQ, NC, NU>(m, ends).map(MassFactor::Tree),
+        Some(ends) => TreeLdl::new(m, ends).map(MassFactor::Tree),
         None => Cholesky::new(m).map(MassFactor::Dense),
     }
     .ok_or(DynamicsError::MassMatrixNotPositiveDefinite)?;
@@ -545,7 +531,7 @@ where
     let (m, j) = (&terms.mass_matrix, &terms.constraint_jacobian);
     if let Some(ends) = mass_tree::<L, NQ, NC, NU>() {
         // The same raw error as the dense path's (`solve_kkt`); said by `explained`.
-        let chol_m = match tree_factor::<L, T, NQ, NC, NU>(m, ends) {
+        let chol_m = match TreeLdl::new(m, ends) {
             Some(f) if f.rcond >= rcond_floor::<T>() => f,
             _ => return Err(DynamicsError::MassMatrixNotPositiveDefinite),
         };

@@ -383,19 +383,6 @@ pub trait LegDynamics<const NQ: usize, const NC: usize, const NU: usize> {
         qd: &SVector<T, NQ>,
         p: &Self::Params<T>,
     ) -> DynamicsTerms<T, NQ, NC>;
-    /// `M = Lᵀ D L` along the spec's tree, written out for this model's coordinates:
-    /// [`crate::linalg::factor_along_tree`]'s operations in the same order (the
-    /// arguments as there: `l` holds `M` on entry), without its loops and index checks.
-    /// The runtime calls it where `M` is factored along the tree
-    /// ([`crate::linalg::factors_along_the_tree`]), through
-    /// [`crate::linalg::TreeLdl::with_factor`], which checks the pivots. Where the
-    /// coordinates are not in depth-first order there is no such factor and it writes
-    /// NaN pivots.
-    fn mass_tree_factor<T: Arithmetic>(
-        l: &mut SMatrix<T, NQ, NQ>,
-        d: &mut SVector<T, NQ>,
-        inv_d: &mut SVector<T, NQ>,
-    );
     /// `∂(M a)/∂q` at the accelerations `a`.
     fn mass_matrix_derivative<T: Arithmetic>(
         q: &SVector<T, NQ>,

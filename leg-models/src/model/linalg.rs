@@ -3,7 +3,7 @@
 
 use nalgebra::SMatrix;
 
-use crate::model::contract::{Arithmetic, Real};
+use crate::model::contract::Real;
 
 /// The factorization `A = L D Lᵀ` (`L` unit lower triangular, `D` diagonal and positive)
 /// of a symmetric positive definite `A`: the Cholesky factorization without its square
@@ -197,43 +197,6 @@ pub const fn factors_along_the_tree<const N: usize>(parents: &[Option<usize>; N]
     }
 }
 
-/// The arithmetic of [`TreeLdl`]'s factor, in place and in the order every model's
-/// generated `mass_tree_factor` repeats (its tests hold the two equal to the bit): `l`
-/// holds `A` on entry (its upper triangle is read) and `Lⱼᵢ` below the diagonal on exit
-/// for `j` a descendant of `i`; `d` the pivots `Dᵢᵢ`, `inv_d` their reciprocals. No pivot
-/// is refused here: [`TreeLdl::with_factor`] checks them after (a bad one leaves
-/// NaN or infinities, not a panic).
-pub fn factor_along_tree<T: Arithmetic, const N: usize>(
-    l: &mut SMatrix<T, N, N>,
-    d: &mut nalgebra::SVector<T, N>,
-    inv_d: &mut nalgebra::SVector<T, N>,
-    tree: &SubtreeEnds<N>,
-) {
-    let ends = &tree.0;
-    // L below the diagonal (column-major, so a column's stretch is contiguous), A read
-    // from above it.
-    let data = l.as_mut_slice();
-    for i in (0..N).rev() {
-        // Lⱼᵢ for j below i, from the deepest up:
-        // Lⱼᵢ Dⱼ = Aᵢⱼ − Σ_{k below j} Lₖᵢ Dₖ Lₖⱼ.
-        let mut di = data[i + i * N];
-        for j in (i + 1..ends[i]).rev() {
-            let mut s = data[i + j * N];
-            let below = j + 1..ends[j];
-            let col_i = &data[i * N + below.start..i * N + below.end];
-            let col_j = &data[j * N + below.start..j * N + below.end];
-            for ((x, y), dk) in col_i.iter().zip(col_j).zip(&d.as_slice()[below]) {
-                s = s - *x * *dk * *y;
-            }
-            let lji = s * inv_d[j];
-            data[j + i * N] = lji;
-            di = di - lji * s;
-        }
-        d[i] = di;
-        inv_d[i] = T::lit(1.0) / di;
-    }
-}
-
 /// `A = Lᵀ D L` (`L` unit lower triangular, `D` diagonal and positive) of a joint-space
 /// mass matrix whose sparsity is a tree's: `Aᵢⱼ` is zero unless one of `i`, `j` descends
 /// from the other. With the coordinates in depth-first order (every subtree contiguous,
@@ -264,45 +227,48 @@ impl<T: Real, const N: usize> TreeLdl<T, N> {
     // moved through the `Option` and the `MassFactor` that wrap it.
     #[inline(always)]
     pub fn new(a: &SMatrix<T, N, N>, tree: &'static SubtreeEnds<N>) -> Option<Self> {
-        Self::with_factor(a, tree, |l, d, inv_d| factor_along_tree(l, d, inv_d, tree))
-    }
-
-    /// [`TreeLdl::new`] with the factor's arithmetic done by `factor` (in place: `A` in,
-    /// `L` below the diagonal, the pivots and their reciprocals out), which must do
-    /// [`factor_along_tree`]'s: a model's own, written out for its tree
-    /// ([`crate::LegDynamics::mass_tree_factor`]). The pivots are checked here, after.
-    #[inline(always)]
-    pub fn with_factor(
-        a: &SMatrix<T, N, N>,
-        tree: &'static SubtreeEnds<N>,
-        factor: impl FnOnce(
-            &mut SMatrix<T, N, N>,
-            &mut nalgebra::SVector<T, N>,
-            &mut nalgebra::SVector<T, N>,
-        ),
-    ) -> Option<Self> {
+        let ends = &tree.0;
+        // Factored in place in a copy of A: L below the diagonal (column-major, so a
+        // column's stretch is contiguous), A read from above it.
         let mut l = *a;
         let mut d = nalgebra::SVector::<T, N>::zeros();
         let mut inv_diag = nalgebra::SVector::<T, N>::zeros();
-        factor(&mut l, &mut d, &mut inv_diag);
         let (mut lo, mut hi) = (T::zero(), T::zero());
-        for (i, &di) in d.iter().enumerate() {
+        let data = l.as_mut_slice();
+        for i in (0..N).rev() {
+            // Lⱼᵢ for j below i, from the deepest up:
+            // Lⱼᵢ Dⱼ = Aᵢⱼ − Σ_{k below j} Lₖᵢ Dₖ Lₖⱼ.
+            let mut di = data[i + i * N];
+            for j in (i + 1..ends[i]).rev() {
+                let mut s = data[i + j * N];
+                let below = j + 1..ends[j];
+                let col_i = &data[i * N + below.start..i * N + below.end];
+                let col_j = &data[j * N + below.start..j * N + below.end];
+                for ((x, y), dk) in col_i.iter().zip(col_j).zip(&d.as_slice()[below]) {
+                    s -= *x * *dk * *y;
+                }
+                let lji = s * inv_diag[j];
+                data[j + i * N] = lji;
+                di -= lji * s;
+            }
             // A NaN pivot compares as nothing, so it is refused too.
             if di.partial_cmp(&T::zero()) != Some(core::cmp::Ordering::Greater) || !di.is_finite() {
                 return None;
             }
-            if i == 0 {
+            if i == N - 1 {
                 (lo, hi) = (di, di);
             } else {
                 lo = lo.min(di);
                 hi = hi.max(di);
             }
+            d[i] = di;
+            inv_diag[i] = T::one() / di;
         }
         let rcond = if N == 0 { T::one() } else { lo / hi };
         Some(TreeLdl {
             l,
             inv_diag,
-            ends: &tree.0,
+            ends,
             rcond,
         })
     }

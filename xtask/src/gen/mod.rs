@@ -6,8 +6,7 @@
 //!   (`xtask/derive.py`, in the project's `.venv/`), the IR it prints, and the files
 //!   written only when every model succeeded; re-exported here;
 //! - [`ir_file`]: the committed IR (`generated/ir/*.json`) and what it records of the leg;
-//! - [`rust_module`]: IR → one generated Rust module (through `codegen`);
-//! - [`tree_factor`]: the mass matrix's factor along the tree, written out for a model.
+//! - [`rust_module`]: IR → one generated Rust module (through `codegen`).
 //!
 //! May import: [`crate::cli`].
 
@@ -16,7 +15,6 @@ pub mod model;
 pub(crate) mod pipeline;
 pub mod rust_module;
 pub mod spec;
-pub mod tree_factor;
 
 pub use pipeline::{
     actuation_note, check_model, committed_ir, committed_irs, dry_run, load_spec, model_names,

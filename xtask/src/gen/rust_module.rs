@@ -374,7 +374,6 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             }),
         })
         .collect::<Result<Vec<_>, _>>()?;
-    let mass_tree_factor = super::tree_factor::mass_tree_factor(&info.parents);
     let parents = info.parents.iter().map(|p| match p {
         Some(p) => {
             let p = lit(*p);
@@ -783,7 +782,6 @@ pub fn model_source(ir: &IrFile) -> Result<String, Error> {
             #revolute_closures
             type Params<T: Arithmetic> = Params<T>;
             #(#methods)*
-            #mass_tree_factor
         }
 
         impl LegModel<#leg_sizes> for #ty {
