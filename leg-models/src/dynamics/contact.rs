@@ -24,13 +24,13 @@ use core::fmt;
 use nalgebra::{SMatrix, SVector};
 
 use crate::dynamics::forward::{
-    actuation, checked_mass_factor, factor_mass, mass_tree, rcond_floor, Baumgarte,
-    ConstraintFactor, DynamicsError,
+    actuation, checked_mass_factor, factor_mass, mass_tree, rcond_floor, redundant_closure_factor,
+    regular_closure_factor, Baumgarte, ConstraintFactor, DynamicsError,
 };
 use crate::model::contract::{ContactModel, DynamicsTerms, Real};
 use crate::model::linalg::{
     all_finite, column_spans, mul, mul_nt_spans, mul_tn, scale_columns, scale_rows, Cholesky,
-    Factored, MassFactor, PivotedLdlt, TreeLdl,
+    Factored, MassFactor, TreeLdl,
 };
 
 /// The ground `n · x = d` (base frame), `n` a unit normal out of the ground: a line for a
@@ -287,18 +287,11 @@ pub fn solve_structured_columns<
         // Written out, not through `ConstraintFactor`: the enum cost the small legs'
         // contact paths 2.6 to 2.9 % (abducted_five_bar contact_slide 7565 → 7761).
         if closure_deficiency == 0 {
-            let chol_s =
-                Cholesky::new(&s).ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?;
-            if chol_s.rcond < rcond_floor::<T>() {
-                return Err(DynamicsError::SingularConstraints {
-                    rcond: to_f64(chol_s.rcond),
-                });
-            }
+            let chol_s = regular_closure_factor(&s)?;
             chol_s.solve_mut(&mut f0);
             chol_s.solve_mut(&mut g);
         } else {
-            let ldlt = PivotedLdlt::new(&s, closure_deficiency, rcond_floor::<T>())
-                .ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?;
+            let ldlt = redundant_closure_factor(&s, closure_deficiency)?;
             ldlt.solve_mut(&mut f0);
             ldlt.solve_mut(&mut g);
         }

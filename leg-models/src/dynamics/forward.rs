@@ -152,19 +152,9 @@ impl<T: Real, const NC: usize> ConstraintFactor<T, NC> {
     #[inline(always)]
     pub(crate) fn new(s: &SMatrix<T, NC, NC>, deficiency: usize) -> Result<Self, DynamicsError> {
         Ok(if deficiency == 0 {
-            let chol_s =
-                Cholesky::new(s).ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?;
-            if chol_s.rcond < rcond_floor::<T>() {
-                return Err(DynamicsError::SingularConstraints {
-                    rcond: to_f64(chol_s.rcond),
-                });
-            }
-            ConstraintFactor::Regular(chol_s)
+            ConstraintFactor::Regular(regular_closure_factor(s)?)
         } else {
-            ConstraintFactor::Redundant(
-                PivotedLdlt::new(s, deficiency, rcond_floor::<T>())
-                    .ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?,
-            )
+            ConstraintFactor::Redundant(redundant_closure_factor(s, deficiency)?)
         })
     }
 
@@ -348,19 +338,40 @@ fn solve_closure_forces<T: Real, const NC: usize>(
     deficiency: usize,
 ) -> Result<(), DynamicsError> {
     if deficiency == 0 {
-        let chol_s = Cholesky::new(s).ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?;
-        if chol_s.rcond < rcond_floor::<T>() {
-            return Err(DynamicsError::SingularConstraints {
-                rcond: to_f64(chol_s.rcond),
-            });
-        }
-        chol_s.solve_mut(forces);
+        regular_closure_factor(s)?.solve_mut(forces);
     } else {
-        PivotedLdlt::new(s, deficiency, rcond_floor::<T>())
-            .ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?
-            .solve_mut(forces);
+        redundant_closure_factor(s, deficiency)?.solve_mut(forces);
     }
     Ok(())
+}
+
+/// `S = J M⁻¹ Jᵀ` factored where no closure row repeats the others; refused as
+/// [`DynamicsError::SingularConstraints`] where a pivot is not positive or the pivots'
+/// ratio is below [`rcond_floor`]. Written out at each use rather than through
+/// [`ConstraintFactor`] where the enum costs (the small legs' contact paths).
+#[inline(always)]
+pub(crate) fn regular_closure_factor<T: Real, const NC: usize>(
+    s: &SMatrix<T, NC, NC>,
+) -> Result<Cholesky<T, NC>, DynamicsError> {
+    let chol_s = Cholesky::new(s).ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })?;
+    if chol_s.rcond < rcond_floor::<T>() {
+        return Err(DynamicsError::SingularConstraints {
+            rcond: to_f64(chol_s.rcond),
+        });
+    }
+    Ok(chol_s)
+}
+
+/// `S` factored with pivoting where up to `deficiency` of its rows may repeat the others
+/// (their forces are then zero); refused as [`DynamicsError::SingularConstraints`] where
+/// more than that do.
+#[inline(always)]
+pub(crate) fn redundant_closure_factor<T: Real, const NC: usize>(
+    s: &SMatrix<T, NC, NC>,
+    deficiency: usize,
+) -> Result<PivotedLdlt<T, NC>, DynamicsError> {
+    PivotedLdlt::new(s, deficiency, rcond_floor::<T>())
+        .ok_or(DynamicsError::SingularConstraints { rcond: 0.0 })
 }
 
 /// The subtree ends of `L`'s coordinates ([`SubtreeEnds`]) where its mass matrix is

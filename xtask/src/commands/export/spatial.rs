@@ -556,6 +556,56 @@ mod tests {
             .filter(|n| !children.contains(&n.as_str()))
             .collect();
         assert_eq!(roots, vec![body.clone()]);
+        // Every link and joint kept is the chart's to the attribute: inertias, parents,
+        // placements (origins), axes and damping; the legs still hang from the body.
+        let (chart_doc, floating_doc) = (
+            roxmltree::Document::parse(&chart).unwrap(),
+            roxmltree::Document::parse(&floating).unwrap(),
+        );
+        let element = |doc: &roxmltree::Document<'_>, tag: &str, name: &str| -> String {
+            let node = doc
+                .root_element()
+                .children()
+                .find(|n| n.has_tag_name(tag) && n.attribute("name") == Some(name))
+                .unwrap_or_else(|| panic!("no {tag} {name}"));
+            node.descendants()
+                .filter(|n| n.is_element())
+                .map(|n| {
+                    let attrs: Vec<String> = n
+                        .attributes()
+                        .map(|a| format!("{}={}", a.name(), a.value()))
+                        .collect();
+                    format!("{}[{}]", n.tag_name().name(), attrs.join(" "))
+                })
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
+        let mut placed = 0;
+        for (tag, list) in [
+            ("link", names(&floating, "link")),
+            ("joint", joints.clone()),
+        ] {
+            for name in list {
+                let kept = element(&floating_doc, tag, &name);
+                assert_eq!(kept, element(&chart_doc, tag, &name), "{tag} {name}");
+                placed += usize::from(kept.contains("origin[xyz="));
+            }
+        }
+        assert!(placed > joints.len(), "{placed} placements compared");
+        let from_body = floating_doc
+            .descendants()
+            .filter(|n| n.has_tag_name("parent") && n.attribute("link") == Some(body.as_str()))
+            .count();
+        // The legs hang from the body as they did: each five-bar's two motor links, and
+        // any closure frame fixed on the body.
+        let chart_from_body = chart_doc
+            .descendants()
+            .filter(|n| n.has_tag_name("parent") && n.attribute("link") == Some(body.as_str()))
+            .count();
+        let motor_links = m.links.iter().filter(|l| l.parent == Some(f + 5)).count();
+        assert_eq!(motor_links, 8, "four five-bars, two motor links each");
+        assert_eq!(from_body, chart_from_body);
+        assert!(from_body >= motor_links, "{from_body}");
     }
 
     /// `R_z(yaw) R_y(pitch) R_x(roll)` of the angles `rpy` finds gives the matrix back,
