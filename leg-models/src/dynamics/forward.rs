@@ -347,8 +347,9 @@ fn solve_closure_forces<T: Real, const NC: usize>(
 
 /// `S = J M⁻¹ Jᵀ` factored where no closure row repeats the others; refused as
 /// [`DynamicsError::SingularConstraints`] where a pivot is not positive or the pivots'
-/// ratio is below [`rcond_floor`]. Written out at each use rather than through
-/// [`ConstraintFactor`] where the enum costs (the small legs' contact paths).
+/// ratio is below [`rcond_floor`]. Inlined, so that a caller that avoids
+/// [`ConstraintFactor`]'s enum (the contact solve: it cost the small legs' contact paths)
+/// pays nothing for it.
 #[inline(always)]
 pub(crate) fn regular_closure_factor<T: Real, const NC: usize>(
     s: &SMatrix<T, NC, NC>,
