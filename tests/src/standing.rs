@@ -5,7 +5,8 @@
 
 use leg_models::dynamics::contact::{spec_friction, Ground, Modes};
 use leg_models::nalgebra::{SVector, UnitQuaternion, Vector3};
-use leg_models::robot::balance::{BalanceController, BalanceGains, BalanceTarget};
+use leg_models::robot::balance::{cone_reading, ConeReading};
+use leg_models::robot::balance::{judged_forces, BalanceController, BalanceGains, BalanceTarget};
 use leg_models::robot::{self, RobotState};
 use leg_models::{ContactModel, LegDynamics, Parameters};
 
@@ -46,179 +47,8 @@ where
     p
 }
 
-/// The robot at home, its contact points on a ground plane through them (the plane's
-/// normal up along the body's side), or why it cannot stand there. Where they are not on
-/// one plane at home, the joints put them flat under the body first
-/// ([`robot::feet_on_a_plane`], the plane square to the body's `z`).
-pub fn on_its_feet<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
-    p: &L::Params<f64>,
-) -> Result<(RobotState<f64, NQ>, Ground<f64, 3>), &'static str>
-where
-    L: ContactModel<NQ, NC, NU, NK, 3>,
-{
-    if NK < 9 {
-        return Err("fewer than three contact points");
-    }
-    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
-    let mut q = assembled_home::<L, NQ, NC, NU>(p);
-    if !coplanar::<L, NQ, NC, NU, NK>(p, &q) {
-        robot::feet_on_a_plane::<L, f64, NQ, NC, NU, NK>(
-            p,
-            &mut q,
-            &Vector3::z(),
-            &leg_models::assembly::Tolerance::default(),
-        )
-        .map_err(|_| {
-            "its contact points cannot be put on one plane, its centre of mass over them, from home"
-        })?;
-    }
-
-    let turn = UnitQuaternion::from_euler_angles(0.02, -0.03, 0.4);
-    let mut s = RobotState::at_rest(Vector3::new(1.0, -2.0, 0.5), turn, q);
-    // Closing the loops may have moved the chart's six (Cassie's home is off its
-    // closures): centred again, the state's rates are the body's velocity.
-    s.recentre(f);
-    let chart = robot::chart_params::<L, f64, NQ, NC, NU>(p, &s.orientation).unwrap();
-    let x = L::contact_positions(&s.q, &chart);
-    let at = |k: usize| {
-        s.position
-            + s.orientation
-                .transform_vector(&Vector3::new(x[3 * k], x[3 * k + 1], x[3 * k + 2]))
-    };
-    let mut n = (at(1) - at(0)).cross(&(at(2) - at(0))).normalize();
-    if n.dot(&(s.position - at(0))) < 0.0 {
-        n = -n;
-    }
-    let size = (at(1) - at(0)).norm();
-    for k in 3..NK / 3 {
-        if n.dot(&(at(k) - at(0))).abs() > 1e-12 * size {
-            return Err("its contact points at home are not on one plane");
-        }
-    }
-    Ok((
-        s,
-        Ground {
-            normal: n,
-            offset: n.dot(&at(0)),
-        },
-    ))
-}
-
-/// Whether the contact points at `q` (a chart centred on the body) are on one plane, to
-/// rounding of their spread.
-fn coplanar<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
-    p: &L::Params<f64>,
-    q: &SVector<f64, NQ>,
-) -> bool
-where
-    L: ContactModel<NQ, NC, NU, NK, 3>,
-{
-    let x = L::contact_positions(q, p);
-    let at = |k: usize| Vector3::new(x[3 * k], x[3 * k + 1], x[3 * k + 2]);
-    let n = (at(1) - at(0)).cross(&(at(2) - at(0)));
-    if n.norm() == 0.0 {
-        return false;
-    }
-    let n = n.normalize();
-    let size = (at(1) - at(0)).norm();
-    (3..NK / 3).all(|k| n.dot(&(at(k) - at(0))).abs() <= 1e-12 * size)
-}
-
-/// Contact `k`'s force from `world_forces` (three a contact, in the world), its normal
-/// and tangential parts on `ground`, and how far it is into its friction cone:
-/// `‖λ_t‖ / (μ λ_n)`, at most 1 inside the cone, 0 for a contact that bears nothing,
-/// infinite where it pulls or slides on no load.
-pub fn cone_reading<const NK: usize>(
-    world_forces: &SVector<f64, NK>,
-    ground: &Ground<f64, 3>,
-    mu: &SVector<f64, NK>,
-    k: usize,
-) -> ConeReading {
-    let force = Vector3::new(
-        world_forces[3 * k],
-        world_forces[3 * k + 1],
-        world_forces[3 * k + 2],
-    );
-    let normal = force.dot(&ground.normal);
-    let tangential = (force - ground.normal * normal).norm();
-    let ratio = if normal > 0.0 {
-        tangential / (mu[3 * k + 2] * normal)
-    } else if normal == 0.0 && tangential == 0.0 {
-        0.0
-    } else {
-        f64::INFINITY
-    };
-    ConeReading {
-        force,
-        normal,
-        tangential,
-        ratio,
-    }
-}
-
-/// What [`cone_reading`] reads.
-#[derive(Clone, Copy, Debug)]
-pub struct ConeReading {
-    /// The force (N, world).
-    pub force: Vector3<f64>,
-    /// Along the ground's normal (N).
-    pub normal: f64,
-    /// Along the ground (N).
-    pub tangential: f64,
-    /// `‖λ_t‖ / (μ λ_n)`.
-    pub ratio: f64,
-}
-
-/// The ground forces of `stance` (a step from `before`, centred, on `ground`) in the world,
-/// with their internal part split as puts every held contact deepest inside its cone
-/// ([`leg_models::robot::balance::deepest_split`]): two points of one rigid foot hold if
-/// any split of its load between them does, whatever split the stance solve reports (the
-/// least). Where no held rows repeat each other, the stance's own forces.
-pub fn judged_forces<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
-    p: &L::Params<f64>,
-    before: &RobotState<f64, NQ>,
-    stance: &robot::Stance<f64, NQ, NC, NK>,
-    modes: &Modes<NK, 3>,
-    ground: &Ground<f64, 3>,
-    mu: &SVector<f64, NK>,
-) -> SVector<f64, NK>
-where
-    L: ContactModel<NQ, NC, NU, NK, 3>,
-{
-    use leg_models::robot::balance::{deepest_split, internal_forces};
-    let internal = internal_forces::<L, NQ, NC, NU, NK>(p, before, modes, ground).unwrap();
-    if internal.ncols() == 0 {
-        return stance.world_forces;
-    }
-    let (split, _) = deepest_split(&stance.solution.contact, &internal, modes, mu).unwrap();
-    let local = robot::ground_in_chart(ground, &before.position, &before.orientation);
-    robot::forces_in_world(&local, &before.orientation, &split)
-}
-
-/// The robot's home with the body's six chart coordinates zeroed, put on its closures
-/// (an imported home is off them by a little); the body may have moved in closing them.
-pub fn assembled_home<L, const NQ: usize, const NC: usize, const NU: usize>(
-    p: &L::Params<f64>,
-) -> SVector<f64, NQ>
-where
-    L: LegDynamics<NQ, NC, NU>,
-{
-    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
-    let mut q = SVector::<f64, NQ>::from_column_slice(&L::HOME);
-    for k in 0..6 {
-        q[f + k] = 0.0;
-    }
-    leg_models::assembly::project_position::<L, f64, NQ, NC, NU>(
-        p,
-        &mut q,
-        &leg_models::assembly::Tolerance::default(),
-    )
-    .unwrap_or_else(|e| panic!("{}: home does not assemble: {e}", L::NAME));
-    q
-}
-
 /// A robot standing for a check: its parameters with gravity along −z, its start on its
-/// feet ([`on_its_feet`]) and the ground there, every contact held, the spec's friction.
+/// feet ([`robot::standing::on_its_feet`]) and the ground there, every contact held, the spec's friction.
 pub struct Stance<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>
 where
     L: ContactModel<NQ, NC, NU, NK, 3>,
@@ -236,9 +66,9 @@ where
 }
 
 /// [`Stance`] for the check named `check`, or `None`, said as not applicable with why:
-/// where the robot cannot be put on its feet or stand still there. Where its home is not
-/// a pose its least torques hold, it starts where [`robot::standing::standing_pose`]
-/// puts it.
+/// where the robot cannot be put on its feet or stand still there
+/// ([`robot::standing::standing_start`]). The body starts off the origin and turned, so
+/// that no check leans on a level body at the world's origin.
 pub fn standing_start<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
     check: &str,
 ) -> Option<Stance<L, NQ, NC, NU, NK>>
@@ -246,65 +76,23 @@ where
     L: ContactModel<NQ, NC, NU, NK, 3>,
 {
     let params = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
-    let (start, ground) = match on_its_feet::<L, NQ, NC, NU, NK>(&params) {
-        Ok(x) => x,
+    let turn = UnitQuaternion::from_euler_angles(0.02, -0.03, 0.4);
+    match robot::standing::standing_start::<L, NQ, NC, NU, NK>(
+        &params,
+        Vector3::new(1.0, -2.0, 0.5),
+        turn,
+    ) {
+        Ok(s) => Some(Stance {
+            params,
+            start: s.state,
+            ground: s.ground,
+            modes: s.modes,
+            mu: s.mu,
+        }),
         Err(why) => {
-            crate::not_applicable(L::NAME, check, &why);
-            return None;
+            crate::not_applicable(L::NAME, check, &why.to_string());
+            None
         }
-    };
-    let modes = Modes::stick();
-    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
-    let start = match held_start::<L, NQ, NC, NU, NK>(&params, &start, &modes, &ground, &mu) {
-        Ok(s) => s,
-        Err(why) => {
-            crate::not_applicable(L::NAME, check, &why);
-            return None;
-        }
-    };
-    Some(Stance {
-        params,
-        start,
-        ground,
-        modes,
-        mu,
-    })
-}
-
-/// The largest `|q̈|` (m/s² or rad/s²) the least holding torques may leave for a pose
-/// to count as one the robot stands still in: 1e-10 g.
-pub const HELD: f64 = 1e-10 * 9.81;
-
-/// `start` where its least holding torques hold it still ([`HELD`]); else the pose
-/// [`robot::standing::standing_pose`] finds near it (springs settled under the weight,
-/// posture weight 0.1 per radian), or why there is none.
-fn held_start<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
-    params: &L::Params<f64>,
-    start: &RobotState<f64, NQ>,
-    modes: &Modes<NK, 3>,
-    ground: &Ground<f64, 3>,
-    mu: &SVector<f64, NK>,
-) -> Result<RobotState<f64, NQ>, String>
-where
-    L: ContactModel<NQ, NC, NU, NK, 3>,
-{
-    let (_, left) =
-        robot::holding_torques::<L, f64, NQ, NC, NU, NK>(params, start, modes, ground, mu)
-            .map_err(|e| e.to_string())?;
-    if left < HELD {
-        return Ok(*start);
-    }
-    let pose = robot::standing::standing_pose::<L, NQ, NC, NU, NK>(
-        params, start, modes, ground, mu, 0.1, 100,
-    )
-    .map_err(|e| e.to_string())?;
-    if pose.left < HELD {
-        Ok(pose.state)
-    } else {
-        Err(format!(
-            "its least holding torques leave |q̈| {left:.1e} at home, and {:.1e} at the best standing pose found near it",
-            pose.left
-        ))
     }
 }
 
@@ -429,7 +217,14 @@ where
                 return run;
             }
         };
-        let forces = judged_forces::<L, NQ, NC, NU, NK>(p, &before, &stance, &modes, ground, &mu);
+        let forces =
+            match judged_forces::<L, NQ, NC, NU, NK>(p, &before, &stance, &modes, ground, &mu) {
+                Ok(f) => f,
+                Err(e) => {
+                    run.failed = Some((t, format!("judging the ground forces: {e}")));
+                    return run;
+                }
+            };
         for k in 0..NK / 3 {
             let ConeReading {
                 normal,

@@ -403,7 +403,8 @@ where
     L: LegDynamics<NQ, NC, NU>,
 {
     use leg_models::assembly::{project_position, project_velocity, Tolerance};
-    let home = leg_tests::standing::assembled_home::<L, NQ, NC, NU>(p);
+    let home = leg_models::robot::standing::assembled_home::<L, NQ, NC, NU>(p)
+        .unwrap_or_else(|e| panic!("{}: {e}", L::NAME));
     for _ in 0..100 {
         let mut q = home + SVector::<f64, NQ>::from_fn(|_, _| rng.range(-0.2, 0.2));
         let mut qd = SVector::<f64, NQ>::from_fn(|_, _| rng.range(-2.0, 2.0));

@@ -20,13 +20,13 @@
 //!   split goes), and back where it stood.
 
 use leg_models::nalgebra::{SVector, UnitQuaternion, Vector3};
+use leg_models::robot::balance::{cone_reading, judged_forces};
+use leg_models::robot::standing::assembled_home;
 use leg_models::robot::{self, RobotState};
 use leg_models::simulate::State;
 use leg_models::simulate::{step as fixed_step, StepOptions};
 use leg_models::LegDynamics;
-use leg_tests::standing::{
-    assembled_home, cone_reading, judged_forces, spec_mass, standing_start, with_gravity, Stance,
-};
+use leg_tests::standing::{spec_mass, standing_start, with_gravity, Stance};
 use leg_tests::Rng;
 
 /// A tumbling start: the body off the origin, turned, moving and spinning; the joints at
@@ -40,7 +40,7 @@ where
 {
     let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
     let mut rng = Rng::new(seed);
-    let q = assembled_home::<L, NQ, NC, NU>(p);
+    let q = assembled_home::<L, NQ, NC, NU>(p).unwrap_or_else(|e| panic!("{}: {e}", L::NAME));
     let orientation = UnitQuaternion::from_euler_angles(0.3, -0.2, 0.7);
     let mut s = RobotState::at_rest(Vector3::new(0.4, -0.3, 1.2), orientation, q);
     // Closing the loops may have moved the body too (a home off its closures by a little,
@@ -415,7 +415,8 @@ where
     // theirs (the balance QP is what keeps forces in them); printed.
     let at_start =
         robot::stance_dynamics::<L, f64, NQ, NC, NU, NK>(&p, &s, &u, &modes, &ground, &mu).unwrap();
-    let forces = judged_forces::<L, NQ, NC, NU, NK>(&p, &s, &at_start, &modes, &ground, &mu);
+    let forces =
+        judged_forces::<L, NQ, NC, NU, NK>(&p, &s, &at_start, &modes, &ground, &mu).unwrap();
     let mut cone = 0.0f64;
     for k in 0..NK / 3 {
         let c = cone_reading(&forces, &ground, &mu, k);
@@ -662,7 +663,8 @@ where
             1e-3,
         )
         .unwrap_or_else(|e| panic!("{name}: {e}"));
-        let forces = judged_forces::<L, NQ, NC, NU, NK>(&p, &before, &stance, &modes, &ground, &mu);
+        let forces =
+            judged_forces::<L, NQ, NC, NU, NK>(&p, &before, &stance, &modes, &ground, &mu).unwrap();
         let mut total = Vector3::zeros();
         for k in 0..NK / 3 {
             let c = cone_reading(&forces, &ground, &mu, k);
@@ -939,7 +941,7 @@ where
     }
     let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
     let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
-    let home = assembled_home::<L, NQ, NC, NU>(&p);
+    let home = assembled_home::<L, NQ, NC, NU>(&p).unwrap_or_else(|e| panic!("{}: {e}", L::NAME));
     let tol = leg_models::assembly::Tolerance::default();
     let heights = |q: &SVector<f64, NQ>| {
         let x = L::contact_positions(q, &p);
@@ -1036,7 +1038,7 @@ where
         return;
     }
     let p = with_gravity::<L, NQ, NC, NU>([0.0, 0.0, -9.81], true);
-    let mut q = assembled_home::<L, NQ, NC, NU>(&p);
+    let mut q = assembled_home::<L, NQ, NC, NU>(&p).unwrap_or_else(|e| panic!("{}: {e}", L::NAME));
     let tol = leg_models::assembly::Tolerance::default();
     robot::feet_on_a_plane::<L, f64, NQ, NC, NU, NK>(&p, &mut q, &Vector3::z(), &tol).unwrap();
     let x = L::contact_positions(&q, &p);
@@ -1288,7 +1290,7 @@ fn standing_pose_refuses_bad_input_and_a_fixed_base() {
     let start = robot::RobotState::at_rest(
         Vector3::zeros(),
         leg_models::nalgebra::UnitQuaternion::identity(),
-        assembled_home::<R, 22, 12, 8>(&p),
+        assembled_home::<R, 22, 12, 8>(&p).unwrap(),
     );
     let (modes, ground) = (Modes::<12, 3>::stick(), Ground::of::<R, 22, 12, 8, 12>());
     let mu = spec_friction::<R, f64, 22, 12, 8, 12, 3>();

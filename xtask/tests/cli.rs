@@ -2293,3 +2293,147 @@ fn eval_of_a_spatial_leg_says_what_it_takes() {
         "--assemble: cassie_leg is a spatial leg; its assembly from the motors' angles is planar only for now",
     );
 }
+
+/// `sim` of a floating robot stands it under the balance QP and pushes its body. Checked
+/// from the written trajectory and the spec's own numbers, not the summary's figures: at
+/// rest the ground forces carry the weight (the spec's link masses); every foot's force
+/// pushes and stays in its friction cone (the spec's μ) in every row; the push is in the
+/// rows of its window only; the loops stay closed and the feet on the ground; the body's
+/// quaternion stays unit and the body comes back where it stood. A push too strong for
+/// held feet stops the run where a foot would slip or lift, keeping what it computed; the
+/// flags of a leg's run and a malformed push are refused, a robot that cannot stand says
+/// why.
+#[test]
+fn sim_stands_a_floating_robot_and_pushes_it() {
+    use generated::MinitaurQuadruped as Q;
+    use leg_models::Parameters;
+    let d = temp_dir("robot");
+    let out = legs(&[
+        "sim",
+        "minitaur_quadruped",
+        "--duration",
+        "1.5",
+        "--push",
+        "0,8,0",
+        "--out",
+        d.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let p = <Q as LegDynamics<22, 12, 8>>::Params::<f64>::default();
+    let names = <<Q as LegDynamics<22, 12, 8>>::Params<f64> as Parameters<f64>>::NAMES;
+    let mass: f64 = (0..names.len())
+        .filter(|&i| names[i].ends_with("_mass"))
+        .map(|i| p.get(i).unwrap())
+        .sum();
+    let mu = leg_models::dynamics::contact::spec_friction::<Q, f64, 22, 12, 8, 12, 3>();
+    let rows = csv_rows(&std::fs::read_to_string(d.join("trajectory.csv")).unwrap());
+    assert_eq!(rows.len(), 1500);
+    let num = |r: &std::collections::HashMap<String, String>, c: &str| -> f64 {
+        r.get(c)
+            .unwrap_or_else(|| panic!("no column {c}"))
+            .parse()
+            .unwrap()
+    };
+    let contacts = <Q as leg_models::ContactModel<22, 12, 8, 12, 3>>::CONTACT_NAMES;
+    assert_eq!(contacts.len(), 4);
+    let first = &rows[0];
+    let carried: f64 = contacts
+        .iter()
+        .map(|c| num(first, &format!("F_{c}_z")))
+        .sum();
+    assert!(
+        (carried - mass * 9.81).abs() < 1e-9 * mass * 9.81,
+        "at rest the feet carry {carried} N, the weight is {} N",
+        mass * 9.81
+    );
+    for r in &rows {
+        let t = num(r, "t");
+        for (k, c) in contacts.iter().enumerate() {
+            let (fx, fy, fz) = (
+                num(r, &format!("F_{c}_x")),
+                num(r, &format!("F_{c}_y")),
+                num(r, &format!("F_{c}_z")),
+            );
+            // The ground is the world's z = 0 plane.
+            assert!(fz > 0.0, "t = {t}: {c} pulls ({fz} N)");
+            assert!(
+                fx.hypot(fy) <= mu[3 * k + 2] * fz,
+                "t = {t}: {c} outside its cone"
+            );
+        }
+        let pushed = (0.5..0.6 - 1e-9).contains(&t);
+        assert_eq!(num(r, "push_y"), if pushed { 8.0 } else { 0.0 }, "t = {t}");
+        assert!(num(r, "closure_residual") < 1e-12, "t = {t}");
+        assert!(num(r, "contact_height") < 1e-12, "t = {t}");
+        let quaternion = ["w", "x", "y", "z"]
+            .iter()
+            .map(|a| num(r, &format!("body_q{a}")).powi(2))
+            .sum::<f64>();
+        assert!((quaternion - 1.0).abs() < 1e-12, "t = {t}");
+    }
+    let last = rows.last().unwrap();
+    let moved: Vec<f64> = ["x", "y", "z"]
+        .iter()
+        .map(|a| num(last, &format!("body_{a}")) - num(first, &format!("body_{a}")))
+        .collect();
+    let during = rows
+        .iter()
+        .map(|r| (num(r, "body_y") - num(first, "body_y")).abs())
+        .fold(0.0, f64::max);
+    assert!(during > 1e-4, "the push moved the body only {during} m");
+    assert!(moved.iter().all(|m| m.abs() < 1e-3), "not back: {moved:?}");
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["recovered"], true);
+    assert!(std::fs::read_to_string(d.join("report.html"))
+        .unwrap()
+        .contains("standing under the balance QP"));
+
+    // Too strong for held feet: stopped where a foot would slip or lift, its rows kept.
+    let strong = temp_dir("robot-strong");
+    let out = legs(&[
+        "sim",
+        "minitaur_quadruped",
+        "--duration",
+        "1",
+        "--push",
+        "0,80,0",
+        "--out",
+        strong.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("would slip") || err.contains("would lift off"),
+        "{err}"
+    );
+    let kept = csv_rows(&std::fs::read_to_string(strong.join("trajectory.csv")).unwrap());
+    let end = num(kept.last().unwrap(), "t");
+    assert!((0.5..0.99).contains(&end), "stopped at {end}");
+
+    for (args, says) in [
+        (vec!["--kp", "3"], "--kp is for a leg"),
+        (vec!["--push", "1,2"], "expected 3"),
+        (vec!["--push", "1,x,2"], "--push"),
+        (vec!["--push-at", "-1"], "a time in [0, 600] s"),
+    ] {
+        let mut a = vec!["sim", "minitaur_quadruped", "--out", "/nonexistent/never"];
+        a.extend(args);
+        refused(&legs(&a), says);
+    }
+    refused(
+        &legs(&["sim", "minitaur", "--push", "1,0,0"]),
+        "is a leg on a fixed base",
+    );
+    let arm = temp_dir("robot-arm");
+    let out = legs(&["sim", "floating_arm", "--out", arm.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("fewer than three contact points"));
+    assert!(!arm.exists());
+    for dir in [d, strong] {
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}

@@ -786,3 +786,72 @@ fn settings() -> DefaultSettings<f64> {
         .build()
         .expect("valid settings")
 }
+
+/// What [`cone_reading`] reads of one contact's force.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ConeReading {
+    /// The force (N, world).
+    pub force: Vector3<f64>,
+    /// Along the ground's normal (N).
+    pub normal: f64,
+    /// Along the ground (N).
+    pub tangential: f64,
+    /// `‖λ_t‖ / (μ λ_n)`: at most 1 inside the friction cone, 0 for a contact that bears
+    /// nothing, infinite where it pulls or slides on no load.
+    pub ratio: f64,
+}
+
+/// Contact `k`'s force from `world_forces` (three a contact, in the world), its normal
+/// and tangential parts on `ground`, and how far it is into its friction cone.
+pub fn cone_reading<const NK: usize>(
+    world_forces: &SVector<f64, NK>,
+    ground: &Ground<f64, 3>,
+    mu: &SVector<f64, NK>,
+    k: usize,
+) -> ConeReading {
+    let force = Vector3::new(
+        world_forces[3 * k],
+        world_forces[3 * k + 1],
+        world_forces[3 * k + 2],
+    );
+    let normal = force.dot(&ground.normal);
+    let tangential = (force - ground.normal * normal).norm();
+    let ratio = if normal > 0.0 {
+        tangential / (mu[3 * k + 2] * normal)
+    } else if normal == 0.0 && tangential == 0.0 {
+        0.0
+    } else {
+        f64::INFINITY
+    };
+    ConeReading {
+        force,
+        normal,
+        tangential,
+        ratio,
+    }
+}
+
+/// The ground forces of `stance` (a step from `before` on `ground`) in the world, with
+/// their internal part split as puts every held contact deepest inside its cone
+/// ([`deepest_split`]): two points of one rigid foot hold if any split of its load
+/// between them does, whatever split the stance solve reports (the least). Where no held
+/// rows repeat each other, the stance's own forces.
+pub fn judged_forces<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    params: &L::Params<f64>,
+    before: &RobotState<f64, NQ>,
+    stance: &Stance<f64, NQ, NC, NK>,
+    modes: &Modes<NK, 3>,
+    ground: &Ground<f64, 3>,
+    mu: &SVector<f64, NK>,
+) -> Result<SVector<f64, NK>, BalanceError>
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    let internal = internal_forces::<L, NQ, NC, NU, NK>(params, before, modes, ground)?;
+    if internal.ncols() == 0 {
+        return Ok(stance.world_forces);
+    }
+    let (split, _) = deepest_split(&stance.solution.contact, &internal, modes, mu)?;
+    let local = ground_in_chart(ground, &before.position, &before.orientation);
+    Ok(forces_in_world(&local, &before.orientation, &split))
+}

@@ -37,13 +37,15 @@
 use core::fmt;
 use std::vec::Vec;
 
-use nalgebra::{DMatrix, DVector, SVector};
+use nalgebra::{DMatrix, DVector, SVector, UnitQuaternion, Vector3};
 
 use super::{
-    free_joint, ground_in_chart, holding_torques, stance_dynamics, RobotDynamicsError, RobotState,
+    chart_params, free_joint, ground_in_chart, holding_torques, stance_dynamics,
+    RobotDynamicsError, RobotState,
 };
-use crate::dynamics::contact::{Ground, Modes};
-use crate::model::contract::ContactModel;
+use crate::assembly::{project_position, AssemblyError, Tolerance};
+use crate::dynamics::contact::{spec_friction, Ground, Modes};
+use crate::model::contract::{ContactModel, LegDynamics};
 
 /// What [`standing_pose`] found.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -335,5 +337,221 @@ where
         torques: u,
         left,
         iterations,
+    })
+}
+
+/// Why a robot cannot be put on its feet ([`on_its_feet`], [`standing_start`]).
+#[derive(Clone, Debug, PartialEq)]
+pub enum CannotStand {
+    /// The model is not a floating robot, or a stance's dynamics failed.
+    Dynamics(RobotDynamicsError),
+    /// Fewer than three contact points: nothing spans a plane to stand on.
+    FewerThanThreeContacts,
+    /// The home pose does not assemble (its closures cannot be closed).
+    Home(AssemblyError),
+    /// The contact points cannot be put on one plane from home
+    /// ([`super::feet_on_a_plane`]).
+    NotFlat(AssemblyError),
+    /// The contact points, put flat, are still not on one plane to rounding, or the
+    /// first three are on one line.
+    NotOnOnePlane,
+    /// The least holding torques leave `|q̈|` `at_home` at home, and no pose near it
+    /// that [`standing_pose`] finds holds still either (`at_best`, or why it found none).
+    NoStandingPose {
+        /// What the least torques leave at home (m/s² or rad/s²).
+        at_home: f64,
+        /// What they leave at the best pose found, or why none was found.
+        at_best: Result<f64, StandingError>,
+    },
+}
+
+impl fmt::Display for CannotStand {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            CannotStand::Dynamics(e) => write!(f, "cannot stand: {e}"),
+            CannotStand::FewerThanThreeContacts => {
+                write!(f, "cannot stand: fewer than three contact points")
+            }
+            CannotStand::Home(e) => write!(f, "cannot stand: its home does not assemble: {e}"),
+            CannotStand::NotFlat(e) => write!(
+                f,
+                "cannot stand: its contact points cannot be put on one plane from home: {e}"
+            ),
+            CannotStand::NotOnOnePlane => {
+                write!(f, "cannot stand: its contact points are not on one plane")
+            }
+            CannotStand::NoStandingPose { at_home, at_best } => match at_best {
+                Ok(best) => write!(
+                    f,
+                    "cannot stand still: its least holding torques leave |q̈| {at_home:.1e} at home and {best:.1e} at the best standing pose found near it"
+                ),
+                Err(e) => write!(
+                    f,
+                    "cannot stand still: its least holding torques leave |q̈| {at_home:.1e} at home, and no standing pose was found near it: {e}"
+                ),
+            },
+        }
+    }
+}
+
+impl std::error::Error for CannotStand {}
+
+impl From<RobotDynamicsError> for CannotStand {
+    fn from(e: RobotDynamicsError) -> Self {
+        CannotStand::Dynamics(e)
+    }
+}
+
+/// The largest `|q̈|` (m/s² or rad/s²) the least holding torques may leave for a pose to
+/// count as one the robot stands still in: 1e-10 g.
+pub const HELD: f64 = 1e-10 * 9.81;
+
+/// The robot's home with the body's six chart coordinates zeroed, put on its closures
+/// (an imported home is off them by a little); the body may have moved in closing them.
+pub fn assembled_home<L, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<f64>,
+) -> Result<SVector<f64, NQ>, CannotStand>
+where
+    L: LegDynamics<NQ, NC, NU>,
+{
+    let f = free_joint::<L, NQ, NC, NU>().map_err(RobotDynamicsError::from)?;
+    let mut q = SVector::<f64, NQ>::from_column_slice(&L::HOME);
+    for k in 0..6 {
+        q[f + k] = 0.0;
+    }
+    project_position::<L, f64, NQ, NC, NU>(params, &mut q, &Tolerance::default())
+        .map_err(CannotStand::Home)?;
+    Ok(q)
+}
+
+/// The robot at home with its body at `position`, turned by `orientation`, at rest, and
+/// the ground plane through its contact points (its normal up along the body's side of
+/// them). Where the points are not on one plane at home, the joints put them flat under
+/// the body first ([`super::feet_on_a_plane`], the plane square to the body's `z`).
+pub fn on_its_feet<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    params: &L::Params<f64>,
+    position: Vector3<f64>,
+    orientation: UnitQuaternion<f64>,
+) -> Result<(RobotState<f64, NQ>, Ground<f64, 3>), CannotStand>
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    if NK < 9 {
+        return Err(CannotStand::FewerThanThreeContacts);
+    }
+    let f = free_joint::<L, NQ, NC, NU>().map_err(RobotDynamicsError::from)?;
+    let mut q = assembled_home::<L, NQ, NC, NU>(params)?;
+    if !coplanar::<L, NQ, NC, NU, NK>(params, &q) {
+        super::feet_on_a_plane::<L, f64, NQ, NC, NU, NK>(
+            params,
+            &mut q,
+            &Vector3::z(),
+            &Tolerance::default(),
+        )
+        .map_err(CannotStand::NotFlat)?;
+    }
+    let mut s = RobotState::at_rest(position, orientation, q);
+    // Closing the loops may have moved the chart's six (Cassie's home is off its
+    // closures): centred again, the state's rates are the body's velocity.
+    s.recentre(f);
+    let chart = chart_params::<L, f64, NQ, NC, NU>(params, &s.orientation)
+        .map_err(RobotDynamicsError::from)?;
+    let x = L::contact_positions(&s.q, &chart);
+    let at = |k: usize| {
+        s.position
+            + s.orientation
+                .transform_vector(&Vector3::new(x[3 * k], x[3 * k + 1], x[3 * k + 2]))
+    };
+    let n = (at(1) - at(0)).cross(&(at(2) - at(0)));
+    if n.norm() == 0.0 || !n.norm().is_finite() {
+        return Err(CannotStand::NotOnOnePlane);
+    }
+    let mut n = n.normalize();
+    if n.dot(&(s.position - at(0))) < 0.0 {
+        n = -n;
+    }
+    let size = (at(1) - at(0)).norm();
+    if (3..NK / 3).any(|k| n.dot(&(at(k) - at(0))).abs() > 1e-12 * size) {
+        return Err(CannotStand::NotOnOnePlane);
+    }
+    Ok((
+        s,
+        Ground {
+            normal: n,
+            offset: n.dot(&at(0)),
+        },
+    ))
+}
+
+/// Whether the contact points at `q` (a chart centred on the body) are on one plane, to
+/// rounding of their spread.
+fn coplanar<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    params: &L::Params<f64>,
+    q: &SVector<f64, NQ>,
+) -> bool
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    let x = L::contact_positions(q, params);
+    let at = |k: usize| Vector3::new(x[3 * k], x[3 * k + 1], x[3 * k + 2]);
+    let n = (at(1) - at(0)).cross(&(at(2) - at(0)));
+    if n.norm() == 0.0 {
+        return false;
+    }
+    let n = n.normalize();
+    let size = (at(1) - at(0)).norm();
+    (3..NK / 3).all(|k| n.dot(&(at(k) - at(0))).abs() <= 1e-12 * size)
+}
+
+/// A robot on its feet, at rest where it stands still ([`standing_start`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StandingStart<const NQ: usize, const NK: usize> {
+    /// On its feet, at rest.
+    pub state: RobotState<f64, NQ>,
+    /// The ground through its contact points.
+    pub ground: Ground<f64, 3>,
+    /// Every contact held.
+    pub modes: Modes<NK, 3>,
+    /// The spec's friction coefficients.
+    pub mu: SVector<f64, NK>,
+}
+
+/// The robot on its feet ([`on_its_feet`], its body at `position` turned by
+/// `orientation`), every contact held, where its least holding torques hold it still
+/// ([`HELD`]); where they do not at home, the pose [`standing_pose`] finds near it
+/// (springs settled under the weight, posture weight 0.1 per radian).
+pub fn standing_start<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    params: &L::Params<f64>,
+    position: Vector3<f64>,
+    orientation: UnitQuaternion<f64>,
+) -> Result<StandingStart<NQ, NK>, CannotStand>
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    let (start, ground) = on_its_feet::<L, NQ, NC, NU, NK>(params, position, orientation)?;
+    let modes = Modes::stick();
+    let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
+    let (_, at_home) =
+        holding_torques::<L, f64, NQ, NC, NU, NK>(params, &start, &modes, &ground, &mu)?;
+    let state = if at_home < HELD {
+        start
+    } else {
+        let pose =
+            standing_pose::<L, NQ, NC, NU, NK>(params, &start, &modes, &ground, &mu, 0.1, 100);
+        match pose {
+            Ok(pose) if pose.left < HELD => pose.state,
+            other => {
+                return Err(CannotStand::NoStandingPose {
+                    at_home,
+                    at_best: other.map(|p| p.left),
+                })
+            }
+        }
+    };
+    Ok(StandingStart {
+        state,
+        ground,
+        modes,
+        mu,
     })
 }

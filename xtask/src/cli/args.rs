@@ -225,6 +225,19 @@ pub struct SimArgs {
     /// home pose's height + 5 cm); the leg hops to it
     #[arg(long, value_name = "H", value_parser = number("a height in m", |x| x.abs() <= 1e3))]
     pub apex: Option<f64>,
+    /// On a floating robot (it stands under the balance QP): the push on its body, a force
+    /// `FX,FY,FZ` in N in the world (z up, the robot standing at the origin facing +x);
+    /// default 5 % of its weight sideways (+y); `0,0,0` for none
+    #[arg(long, value_name = "FX,FY,FZ", allow_hyphen_values = true, value_parser = numbers_text)]
+    pub push: Option<String>,
+    /// On a floating robot: when the push starts, in s (default 0.5)
+    #[arg(long, value_name = "S",
+          value_parser = number("a time in [0, 600] s", |x| (0.0..=600.0).contains(&x)))]
+    pub push_at: Option<f64>,
+    /// On a floating robot: how long the push lasts, in s (default 0.1)
+    #[arg(long, value_name = "S",
+          value_parser = number("a duration in (0, 600] s", |x| x > 0.0 && x <= 600.0))]
+    pub push_for: Option<f64>,
     /// On a leg with contacts: serve the hopping controller's torques on stdin/stdout
     /// instead of simulating (one line `t q… q̇… (on_ground anchor)…` in, one line of
     /// torques out), for the MuJoCo cross-check's closed loop

@@ -102,8 +102,22 @@ fn eval(args: EvalArgs) -> Result<(), Error> {
 
 fn simulate(args: SimArgs) -> Result<(), Error> {
     let name = args.model.clone().unwrap_or_else(|| "minitaur".to_string());
-    not_for_floating("sim", &name)?;
     let settings = sim::Settings::from_args(&args)?;
+    macro_rules! floating {
+        ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $np:literal, $nk:literal) => {
+            if name == stringify!($module) {
+                return sim::robot::run::<$ty, $nq, $nc, $nu, $np, $nk>(&settings);
+            }
+        };
+    }
+    generated::for_each_floating_model!(floating);
+    // A push is a floating robot's; on a leg it would be silently ignored.
+    if settings.push.is_some() || settings.push_timed {
+        return Err(Error::usage(format!(
+            "--push, --push-at and --push-for push a floating robot's body; `{name}` is a leg on a fixed base (floating robots: {})",
+            floating_models().join(", ")
+        )));
+    }
     macro_rules! dispatch {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
             if name == stringify!($module) {

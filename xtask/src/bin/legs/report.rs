@@ -16,6 +16,9 @@ pub struct Series {
     log: bool,
     /// Time intervals shaded behind the curves (a leg's stance phases).
     shade: Vec<(f64, f64)>,
+    /// What the shaded intervals are, for the caption (`stance (a contact on the
+    /// ground)` unless [`Series::shaded_as`] says).
+    shade_meaning: String,
     /// The y axis: the quantity and its SI unit (`""` for a pure number); the unit gets
     /// the prefix that suits the data's range (mm, mN m).
     axis: Option<(String, String)>,
@@ -31,6 +34,7 @@ impl Series {
             lines,
             log: false,
             shade: Vec::new(),
+            shade_meaning: "stance (a contact on the ground)".to_string(),
             axis: None,
             caption: String::new(),
         }
@@ -39,6 +43,13 @@ impl Series {
     /// The intervals `[t0, t1]` shaded grey behind the curves.
     pub fn shaded(mut self, intervals: &[(f64, f64)]) -> Series {
         self.shade = intervals.to_vec();
+        self
+    }
+
+    /// The intervals shaded grey, and what they are (for the caption).
+    pub fn shaded_as(mut self, intervals: &[(f64, f64)], meaning: &str) -> Series {
+        self.shade = intervals.to_vec();
+        self.shade_meaning = meaning.to_string();
         self
     }
 
@@ -93,6 +104,8 @@ pub struct Report<'a> {
     /// The closures that are rods ([`leg_models::LegDynamics::DISTANCE_CLOSURES`]): a line
     /// joins their two points, which stay the rod's length apart.
     pub rods: &'a [usize],
+    /// A floating robot, drawn in the world (its body moves; the axes are the world's).
+    pub robot: bool,
 }
 
 const COLORS: [RGBColor; 4] = [
@@ -687,11 +700,12 @@ fn summary_rows(v: &Value) -> String {
 fn animation_caption(r: &Report) -> String {
     let mut parts = vec![
         format!(
-            "The leg as simulated, played back in real time (scrub with the slider){}: each link a rigid body (blue outline through all its points)",
-            if r.frames.first().is_some_and(|f| f.foot.len() == 3) {
-                ", in 3-D: drag it to turn the view (the base's axes at the bottom right: x red, y green, z blue)"
-            } else {
-                ""
+            "The {} as simulated, played back in real time (scrub with the slider){}: each link a rigid body (blue outline through all its points)",
+            if r.robot { "robot" } else { "leg" },
+            match (r.frames.first().is_some_and(|f| f.foot.len() == 3), r.robot) {
+                (true, true) => ", in 3-D in the world: drag it to turn the view (the world's axes at the bottom right: x red, y green, z blue)",
+                (true, false) => ", in 3-D: drag it to turn the view (the base's axes at the bottom right: x red, y green, z blue)",
+                _ => "",
             }
         ),
         "joints (black dots)".to_string(),
@@ -703,14 +717,19 @@ fn animation_caption(r: &Report) -> String {
             "the closure points (red rings) where the chains meet, or at a rod's ends, joined by the rod (grey line)".into()
         });
     }
-    parts.push("the foot (green dot) and its path over the last second (green)".into());
+    parts.push(if r.robot {
+        "the spec's foot (green dot) and its path over the last second (green)".into()
+    } else {
+        "the foot (green dot) and its path over the last second (green)".into()
+    });
     if r.frames.iter().any(|f| f.reference.is_some()) {
         parts.push("the reference the foot tracks (grey ring, its path dashed)".into());
     }
     match &r.ground {
-        Some(g) if g.len() == 4 => {
-            parts.push("the ground (a brown square of its plane under the leg, with a grid)".into())
-        }
+        Some(g) if g.len() == 4 => parts.push(format!(
+            "the ground (a brown square of its plane under the {}, with a grid)",
+            if r.robot { "robot" } else { "leg" }
+        )),
         Some(_) => parts.push("the ground (brown line, earth below)".into()),
         None => parts.push("the fixed base at the origin (grey disc)".into()),
     }
@@ -728,7 +747,7 @@ fn plot_caption(s: &Series, number: usize) -> String {
         text.push_str(&format!(" {}", escape(&s.caption)));
     }
     if !s.shade.is_empty() {
-        text.push_str(" Grey bands: stance (a contact on the ground).");
+        text.push_str(&format!(" Grey bands: {}.", escape(&s.shade_meaning)));
     }
     if s.log {
         let (floor_e, _) = log_decades(s);

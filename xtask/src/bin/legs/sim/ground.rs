@@ -505,6 +505,7 @@ pub fn run<
                 .collect(),
         ),
         rods: L::DISTANCE_CLOSURES,
+        robot: false,
     })
     .map_err(Error::Failed)?;
     let out = s.out_dir(L::NAME);

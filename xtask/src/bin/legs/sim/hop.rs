@@ -494,6 +494,7 @@ pub fn run<
         frames: &frames,
         ground: Some(vec![ground.normal[0], ground.normal[1], ground.offset]),
         rods: L::DISTANCE_CLOSURES,
+        robot: false,
     })
     .map_err(Error::Failed)?;
     let files = [

@@ -17,6 +17,7 @@ use crate::report::{self, quantity as report_quantity, Report, Series};
 mod drive;
 pub mod ground;
 pub mod hop;
+pub mod robot;
 mod settings;
 
 use drive::Drive;
@@ -432,6 +433,7 @@ pub fn run<
         frames: &frames,
         ground: None,
         rods: L::DISTANCE_CLOSURES,
+        robot: false,
     })
     .map_err(Error::Failed)?;
 

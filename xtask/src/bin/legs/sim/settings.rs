@@ -50,6 +50,13 @@ pub struct Settings {
     pub(crate) apex: Option<f64>,
     /// Serve the hopping controller's torques on stdin/stdout (the MuJoCo closed loop).
     pub(crate) serve: bool,
+    /// A floating robot's push on its body (N, world), `None` for the default.
+    pub(crate) push: Option<[f64; 3]>,
+    /// When the push starts and how long it lasts (s).
+    pub(crate) push_at: f64,
+    pub(crate) push_for: f64,
+    /// Whether `--push-at` or `--push-for` was given (they mean nothing on a leg).
+    pub(crate) push_timed: bool,
 }
 
 impl Settings {
@@ -182,6 +189,21 @@ impl Settings {
             every: every as usize,
             apex: a.apex,
             serve: a.serve,
+            push: match &a.push {
+                None => None,
+                Some(text) => {
+                    let f = xtask::cli::numbers("--push", text, 3, "a force FX,FY,FZ in N")?;
+                    if f.iter().any(|x| x.abs() > 1e6) {
+                        return Err(Error::usage(format!(
+                            "--push {text}: a force of at most 1e6 N along each axis"
+                        )));
+                    }
+                    Some([f[0], f[1], f[2]])
+                }
+            },
+            push_at: a.push_at.unwrap_or(0.5),
+            push_for: a.push_for.unwrap_or(0.1),
+            push_timed: a.push_at.is_some() || a.push_for.is_some(),
         };
         if let (Some(c), Some(t)) = (controller, trajectory) {
             settings.check_pair(c, t)?;

@@ -1,0 +1,514 @@
+//! `sim` of a floating robot: it stands on its feet under the whole-body balance QP
+//! (`leg_models::robot::balance`) and is pushed on its body; every contact is held, and
+//! the run stops, keeping what it computed, where a foot's force would leave its
+//! friction cone or pull on the ground (the stance no longer holds). Writes
+//! `trajectory.csv`, `summary.json` and `report.html` (the robot drawn in 3-D in the
+//! world, the body's motion, the feet's forces against their cones, the torques and the
+//! residuals).
+
+use std::fmt::Write as _;
+
+use leg_models::dynamics::contact::Ground;
+use leg_models::nalgebra::{SVector, UnitQuaternion, Vector3};
+use leg_models::robot::balance::{
+    cone_reading, judged_forces, BalanceController, BalanceGains, BalanceTarget,
+};
+use leg_models::robot::standing::{on_its_feet, standing_start};
+use leg_models::robot::{self, RobotState};
+use leg_models::{ContactModel, LegModel};
+use serde_json::json;
+use xtask::cli::progress::Progress;
+use xtask::cli::{check_targets, write_all, Error};
+
+use super::{body_points, frame_at, max, Settings};
+use crate::report::{self, quantity, Report, Series};
+
+/// One step's record: the state at its start, the torques and push held over it, the
+/// ground forces (world, a rigid foot's split the deepest in its cones), the largest
+/// closure residual and contact height at its start.
+struct Sample<const NQ: usize, const NU: usize, const NK: usize> {
+    t: f64,
+    state: RobotState<f64, NQ>,
+    u: SVector<f64, NU>,
+    push: Vector3<f64>,
+    forces: SVector<f64, NK>,
+    closure_gap: f64,
+    contact_gap: f64,
+}
+
+/// The flags of the swing-leg and hopping runs, which mean nothing to a standing robot.
+fn refuse_leg_flags(s: &Settings, name: &str) -> Result<(), Error> {
+    let given = [
+        (s.controller.is_some(), "--controller"),
+        (s.trajectory.is_some(), "--trajectory"),
+        (s.speed.is_some(), "--speed"),
+        (s.kp.is_some(), "--kp"),
+        (s.apex.is_some(), "--apex"),
+        (s.serve, "--serve"),
+    ];
+    match given.iter().find(|(g, _)| *g) {
+        Some((_, flag)) => Err(Error::usage(format!(
+            "{flag} is for a leg; `{name}` is a floating robot, which stands under the balance QP (its flags: --push, --push-at, --push-for, --torque-limit, --duration, --dt, --every, --out)"
+        ))),
+        None => Ok(()),
+    }
+}
+
+pub fn run<
+    L: ContactModel<NQ, NC, NU, NK, 3> + LegModel<NQ, NC, NU, 3, NP>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NP: usize,
+    const NK: usize,
+>(
+    s: &Settings,
+) -> Result<(), Error> {
+    refuse_leg_flags(s, L::NAME)?;
+    let out = s.out_dir(L::NAME);
+    check_targets(&out, &["trajectory.csv", "summary.json", "report.html"])
+        .map_err(Error::Failed)?;
+    let p = <L as leg_models::LegDynamics<NQ, NC, NU>>::Params::<f64>::default();
+    let failed = |e: String| Error::Failed(format!("{}: {e}", L::NAME));
+    // Stood first as its spec has it, then turned and lifted so that the ground is the
+    // world's z = 0 and the body is above it: pushes are given in that world.
+    let (_, spec_ground) =
+        on_its_feet::<L, NQ, NC, NU, NK>(&p, Vector3::zeros(), UnitQuaternion::identity())
+            .map_err(|e| failed(e.to_string()))?;
+    let level = UnitQuaternion::rotation_between(&spec_ground.normal, &Vector3::z())
+        .unwrap_or_else(UnitQuaternion::identity);
+    let start = standing_start::<L, NQ, NC, NU, NK>(&p, Vector3::z() * -spec_ground.offset, level)
+        .map_err(|e| failed(e.to_string()))?;
+    let (ground, modes, mu) = (start.ground, start.modes, start.mu);
+    let f = robot::free_joint::<L, NQ, NC, NU>().map_err(|e| failed(e.to_string()))?;
+    let gravity =
+        robot::world_gravity::<L, f64, NQ, NC, NU>(&p).map_err(|e| failed(e.to_string()))?;
+    let mass = L::mass_matrix(&start.state.q, &p)[(f, f)];
+    let weight = mass * gravity.norm();
+    // Sideways: along the ground, square to the body's x.
+    let side = ground
+        .normal
+        .cross(&start.state.orientation.transform_vector(&Vector3::x()))
+        .normalize();
+    let push = match s.push {
+        Some(f) => Vector3::from(f),
+        None => side * (0.05 * weight),
+    };
+    let torque_limit = s.torque_limit.map(SVector::<f64, NU>::repeat);
+    let mut controller = BalanceController::<NQ, NC, NU, NK>::new(
+        BalanceTarget::holding(&start.state),
+        BalanceGains::default(),
+        torque_limit,
+    );
+
+    let steps = (s.duration / s.dt).round() as usize;
+    let mut progress = Progress::new(steps as u64, &format!("simulating {}", L::NAME));
+    let mut samples: Vec<Sample<NQ, NU, NK>> = Vec::with_capacity(steps);
+    let mut state = start.state;
+    let mut stopped: Option<(f64, String)> = None;
+    let mut iterations = 0u64;
+    for i in 0..steps {
+        let t = i as f64 * s.dt;
+        progress.set(i as u64);
+        let before = state;
+        let u = match controller.command::<L>(&p, &state, &modes, &ground, &mu) {
+            Ok(c) => {
+                iterations += u64::from(c.iterations);
+                c.torques
+            }
+            Err(e) => {
+                stopped = Some((t, format!("the balance QP has no command: {e}")));
+                break;
+            }
+        };
+        let pushing = t >= s.push_at && t < s.push_at + s.push_for;
+        let force = if pushing { push } else { Vector3::zeros() };
+        let stance = match robot::pushed_stance_step::<L, f64, NQ, NC, NU, NK>(
+            &p, &mut state, &u, &force, &modes, &ground, &mu, s.dt,
+        ) {
+            Ok(x) => x,
+            Err(e) => {
+                stopped = Some((t, e.to_string()));
+                break;
+            }
+        };
+        let forces =
+            match judged_forces::<L, NQ, NC, NU, NK>(&p, &before, &stance, &modes, &ground, &mu) {
+                Ok(x) => x,
+                Err(e) => {
+                    stopped = Some((t, format!("judging the ground forces: {e}")));
+                    break;
+                }
+            };
+        samples.push(Sample {
+            t,
+            state: before,
+            u,
+            push: force,
+            forces,
+            closure_gap: L::closure_residual(&before.q, &p).amax(),
+            contact_gap: contact_heights::<L, NQ, NC, NU, NK>(&p, &before, &ground),
+        });
+        // Held contacts are the model of this run: where a foot would lift or slip it no
+        // longer holds, and the run ends there.
+        if let Some(why) = (0..NK / 3).find_map(|k| {
+            let c = cone_reading(&forces, &ground, &mu, k);
+            if c.normal <= 0.0 {
+                Some(format!("contact `{}` would lift off (its normal force {:.3} N): every contact is held in this run", L::CONTACT_NAMES[k], c.normal))
+            } else if c.ratio > 1.0 {
+                Some(format!("contact `{}` would slip (tangential {:.3} N over μ λ_n {:.3} N): every contact is held in this run", L::CONTACT_NAMES[k], c.tangential, c.tangential / c.ratio))
+            } else {
+                None
+            }
+        }) {
+            stopped = Some((t, why));
+            break;
+        }
+    }
+    drop(progress);
+
+    let end = samples.last().map(|x| x.t + s.dt).unwrap_or(0.0);
+    let offset = |x: &RobotState<f64, NQ>| {
+        (
+            (x.position - start.state.position).norm(),
+            x.orientation.angle_to(&start.state.orientation),
+        )
+    };
+    let excursion = max(samples.iter().map(|x| offset(&x.state).0));
+    let turned = max(samples.iter().map(|x| offset(&x.state).1));
+    let (end_offset, end_angle) = offset(&state);
+    let readings: Vec<_> = samples
+        .iter()
+        .flat_map(|x| (0..NK / 3).map(|k| cone_reading(&x.forces, &ground, &mu, k)))
+        .collect();
+    let worst_cone = max(readings.iter().map(|c| c.ratio));
+    let least_normal = readings
+        .iter()
+        .map(|c| c.normal)
+        .fold(f64::INFINITY, f64::min);
+    let closure_gap = max(samples.iter().map(|x| x.closure_gap));
+    let contact_gap = max(samples.iter().map(|x| x.contact_gap));
+    let recovered = stopped.is_none() && end_offset <= 1e-3 && end_angle <= 1e-3;
+    let summary = json!({
+        "model": L::NAME,
+        "kind": "floating robot standing under the balance QP (leg_models::robot::balance, default gains), every contact held",
+        "weight_n": weight,
+        "push": {
+            "force_n": [push.x, push.y, push.z],
+            "magnitude_n": push.norm(),
+            "share_of_weight": push.norm() / weight,
+            "default": s.push.is_none(),
+            "at_s": s.push_at,
+            "for_s": s.push_for,
+        },
+        "duration_s": s.duration,
+        "simulated_s": end,
+        "dt_s": s.dt,
+        "integrator": "rk4",
+        "torque_limit_nm": s.torque_limit,
+        "stopped": stopped.as_ref().map(|(t, why)| json!({"t_s": t, "why": why})),
+        "recovered": recovered,
+        "recovered_means": "ran to the end with every foot's force in its cone, and the body within 1 mm and 1 mrad of where it stood",
+        "body": {
+            "largest_excursion_m": excursion,
+            "largest_turn_rad": turned,
+            "end_offset_m": end_offset,
+            "end_angle_rad": end_angle,
+        },
+        "ground": {
+            "normal": [ground.normal.x, ground.normal.y, ground.normal.z],
+            "offset_m": ground.offset,
+            "largest_cone_ratio": worst_cone,
+            "least_normal_force_n": least_normal,
+        },
+        "largest_closure_residual": closure_gap,
+        "largest_contact_height_m": contact_gap,
+        "mean_qp_iterations": iterations as f64 / samples.len().max(1) as f64,
+        "peak_torque_nm": max(samples.iter().map(|x| x.u.amax())),
+    });
+
+    let csv = trajectory_csv::<L, NQ, NC, NU, NP, NK>(&samples, s.every);
+    let html = report_html::<L, NQ, NC, NU, NP, NK>(
+        &p,
+        &samples,
+        &summary,
+        &ground,
+        &mu,
+        &start.state,
+        s,
+    )?;
+    let files = [
+        ("trajectory.csv".into(), csv),
+        ("summary.json".into(), format!("{summary:#}\n")),
+        ("report.html".into(), html),
+    ];
+    write_all(&out, &files).map_err(Error::Failed)?;
+    println!(
+        "{} standing under the balance QP, pushed {} ({:.2} of its weight) at {} s for {} s; {} s at dt = {} s: wrote {}/{{trajectory.csv, summary.json, report.html}}",
+        L::NAME,
+        quantity(push.norm(), "N"),
+        push.norm() / weight,
+        s.push_at,
+        s.push_for,
+        end,
+        s.dt,
+        out.display()
+    );
+    println!(
+        "  body: largest excursion {}, {} rad; at the end {} and {:.1e} rad from where it stood ({}); feet at most {:.3} of their cones, least normal force {}; largest closure residual {closure_gap:.1e}, contact height {contact_gap:.1e} m",
+        quantity(excursion, "m"),
+        significant(turned),
+        quantity(end_offset, "m"),
+        end_angle,
+        if recovered { "recovered" } else { "not recovered" },
+        worst_cone,
+        quantity(least_normal, "N"),
+    );
+    match stopped {
+        None => Ok(()),
+        Some((t, why)) => Err(Error::Failed(format!(
+            "the simulation stopped at t = {t} s: {why} (the output holds everything until then)"
+        ))),
+    }
+}
+
+fn significant(x: f64) -> String {
+    report::significant(x, 3)
+}
+
+/// The largest distance of a contact point from the ground plane (m).
+fn contact_heights<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    p: &L::Params<f64>,
+    s: &RobotState<f64, NQ>,
+    ground: &Ground<f64, 3>,
+) -> f64
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    let x = L::contact_positions(&s.q, p);
+    (0..NK / 3)
+        .map(|k| {
+            let at = s.position
+                + s.orientation.transform_vector(&Vector3::new(
+                    x[3 * k],
+                    x[3 * k + 1],
+                    x[3 * k + 2],
+                ));
+            (ground.normal.dot(&at) - ground.offset).abs()
+        })
+        .fold(0.0, f64::max)
+}
+
+/// trajectory.csv: the time; the body's position and orientation (a unit quaternion,
+/// `w` first) in the world; the chart's coordinates and the velocity `v` (the free
+/// joint's: the body's linear and angular velocity in the body frame); the torques; each
+/// contact's ground force in the world; the push; the residuals.
+fn trajectory_csv<
+    L: ContactModel<NQ, NC, NU, NK, 3> + LegModel<NQ, NC, NU, 3, NP>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NP: usize,
+    const NK: usize,
+>(
+    samples: &[Sample<NQ, NU, NK>],
+    every: usize,
+) -> String {
+    let mut csv = String::from("t,body_x,body_y,body_z,body_qw,body_qx,body_qy,body_qz");
+    for j in L::JOINT_NAMES {
+        let _ = write!(csv, ",q_{j}");
+    }
+    for j in L::JOINT_NAMES {
+        let _ = write!(csv, ",v_{j}");
+    }
+    for name in super::motor_names::<L, NQ, NC, NU>() {
+        let _ = write!(csv, ",u_{name}");
+    }
+    for c in L::CONTACT_NAMES {
+        let _ = write!(csv, ",F_{c}_x,F_{c}_y,F_{c}_z");
+    }
+    csv.push_str(",push_x,push_y,push_z,closure_residual,contact_height\n");
+    for (k, x) in samples.iter().enumerate() {
+        if !super::written(k, samples.len(), every) {
+            continue;
+        }
+        let o = x.state.orientation.quaternion();
+        let _ = write!(
+            csv,
+            "{},{},{},{},{},{},{},{}",
+            x.t, x.state.position.x, x.state.position.y, x.state.position.z, o.w, o.i, o.j, o.k
+        );
+        for v in x.state.q.iter().chain(x.state.v.iter()).chain(x.u.iter()) {
+            let _ = write!(csv, ",{v}");
+        }
+        for v in x.forces.iter().chain(x.push.iter()) {
+            let _ = write!(csv, ",{v}");
+        }
+        let _ = writeln!(csv, ",{},{}", x.closure_gap, x.contact_gap);
+    }
+    csv
+}
+
+/// Every point of a frame drawn in the chart, moved into the world by the body's pose.
+fn into_world<const NQ: usize>(frame: &mut report::Frame, s: &RobotState<f64, NQ>) {
+    let moved = |xs: &mut Vec<f64>| {
+        for c in xs.chunks_exact_mut(3) {
+            let w = s.position
+                + s.orientation
+                    .transform_vector(&Vector3::new(c[0], c[1], c[2]));
+            c.copy_from_slice(w.as_slice());
+        }
+    };
+    frame.bodies.iter_mut().flatten().for_each(moved);
+    frame.links.iter_mut().for_each(moved);
+    frame.closures.iter_mut().for_each(moved);
+    moved(&mut frame.foot);
+    if let Some(r) = frame.reference.as_mut() {
+        moved(r);
+    }
+}
+
+/// report.html: the robot over its ground, its body's motion, the feet's forces against
+/// their cones, the torques and the residuals; the push shaded.
+#[allow(clippy::too_many_arguments)]
+fn report_html<
+    L: ContactModel<NQ, NC, NU, NK, 3> + LegModel<NQ, NC, NU, 3, NP>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NP: usize,
+    const NK: usize,
+>(
+    p: &L::Params<f64>,
+    samples: &[Sample<NQ, NU, NK>],
+    summary: &serde_json::Value,
+    ground: &Ground<f64, 3>,
+    mu: &SVector<f64, NK>,
+    start: &RobotState<f64, NQ>,
+    s: &Settings,
+) -> Result<String, Error> {
+    let members = body_points(L::NAME, NQ);
+    let frame_every = ((0.01 / s.dt).round() as usize).max(1);
+    let frames: Vec<report::Frame> = samples
+        .iter()
+        .step_by(frame_every)
+        .map(|x| {
+            let mut frame = frame_at::<L, NQ, NC, NU, 3, NP>(p, &members, x.t, &x.state.q, None);
+            into_world(&mut frame, &x.state);
+            frame
+        })
+        .collect();
+    let t: Vec<f64> = samples.iter().map(|x| x.t).collect();
+    let axes = ["x", "y", "z"];
+    let mut plots = vec![
+        Series::new(
+            "The body's position, from where it stood",
+            &t,
+            (0..3)
+                .map(|a| {
+                    (
+                        axes[a].to_string(),
+                        samples
+                            .iter()
+                            .map(|x| x.state.position[a] - start.position[a])
+                            .collect(),
+                    )
+                })
+                .collect(),
+        )
+        .axis("offset", "m")
+        .caption("The body frame's origin in the world less where it stood; the balance QP holds it there (stiffness (10 rad/s)², critically damped)."),
+        Series::new(
+            "The body's orientation, from how it stood",
+            &t,
+            (0..3)
+                .map(|a| {
+                    (
+                        format!("about {}", axes[a]),
+                        samples
+                            .iter()
+                            .map(|x| {
+                                (start.orientation.inverse() * x.state.orientation).scaled_axis()[a]
+                            })
+                            .collect(),
+                    )
+                })
+                .collect(),
+        )
+        .axis("rotation", "rad")
+        .caption("The rotation from the standing orientation to the body's, as a rotation vector in the standing body's frame."),
+    ];
+    plots.push(
+        Series::new(
+            "Ground forces: normal",
+            &t,
+            L::CONTACT_NAMES
+                .iter()
+                .enumerate()
+                .map(|(k, name)| {
+                    (
+                        name.to_string(),
+                        samples
+                            .iter()
+                            .map(|x| cone_reading(&x.forces, ground, mu, k).normal)
+                            .collect(),
+                    )
+                })
+                .collect(),
+        )
+        .axis("force", "N")
+        .caption("Each contact's force along the ground's normal; they sum to the weight at rest. A contact whose normal force would reach zero would lift off, which ends this run: every contact is held."),
+    );
+    plots.push(
+        Series::new(
+            "Ground forces in their friction cones: |λ_t| / (μ λ_n)",
+            &t,
+            L::CONTACT_NAMES
+                .iter()
+                .enumerate()
+                .map(|(k, name)| {
+                    (
+                        name.to_string(),
+                        samples
+                            .iter()
+                            .map(|x| cone_reading(&x.forces, ground, mu, k).ratio)
+                            .collect(),
+                    )
+                })
+                .collect(),
+        )
+        .axis("share of the cone", "")
+        .caption("How far each contact's force is towards its friction cone's edge (1: about to slip, which ends this run). Where a rigid foot is held at two points, its load is split between them as deep in their cones as any split goes."),
+    );
+    plots.push(super::torque_plot(
+        &t,
+        &super::motor_names::<L, NQ, NC, NU>(),
+        samples.iter().map(|x| x.u),
+    ));
+    plots.push(super::ground::residual_plot(
+        &t,
+        samples.iter().map(|x| (x.closure_gap, x.contact_gap)),
+    ));
+    let pushed = [(s.push_at, s.push_at + s.push_for)];
+    let plots: Vec<Series> = plots
+        .into_iter()
+        .map(|p| p.shaded_as(&pushed, "the push on the body"))
+        .collect();
+    report::html(&Report {
+        title: format!("{} — standing under the balance QP, pushed", L::NAME),
+        summary,
+        plots: &plots,
+        frames: &frames,
+        ground: Some(
+            ground
+                .normal
+                .iter()
+                .copied()
+                .chain([ground.offset])
+                .collect(),
+        ),
+        rods: L::DISTANCE_CLOSURES,
+        robot: true,
+    })
+    .map_err(Error::Failed)
+}
