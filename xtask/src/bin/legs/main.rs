@@ -2,7 +2,9 @@
 //! xtask sim|eval|analyze …` build and run it. One room per command:
 //!
 //! - `sim/`: `settings.rs` (the command line, checked), `mod.rs` (the simulation and its
-//!   outputs), `hop.rs` (legs on the ground, under the hopping controller);
+//!   outputs), `hop.rs` (legs on the ground, under the hopping controller), `ground.rs`
+//!   (spatial legs on their ground), `robot.rs` (a floating robot standing under the
+//!   balance QP, pushed);
 //! - `eval.rs`: every term at one state, as text or JSON;
 //! - `analyze/`: `mod.rs` (the measures over the workspace), `design.rs` (what both
 //!   outputs read), `report.rs` (its `report.html`);
