@@ -7,6 +7,7 @@ use leg_models::dynamics::contact::{spec_friction, Ground, Modes};
 use leg_models::nalgebra::{SVector, UnitQuaternion, Vector3};
 use leg_models::robot::balance::{cone_reading, ConeReading};
 use leg_models::robot::balance::{judged_forces, BalanceController, BalanceGains, BalanceTarget};
+use leg_models::robot::standing::CannotStand;
 use leg_models::robot::{self, RobotState};
 use leg_models::{ContactModel, LegDynamics, Parameters};
 
@@ -89,6 +90,11 @@ where
             modes: s.modes,
             mu: s.mu,
         }),
+        // A home that does not assemble, or a model that is not a robot, is a failure of
+        // the model, not a robot that cannot stand.
+        Err(e @ (CannotStand::Home(_) | CannotStand::Dynamics(_))) => {
+            panic!("{}: {e}", L::NAME)
+        }
         Err(why) => {
             crate::not_applicable(L::NAME, check, &why.to_string());
             None
@@ -217,14 +223,8 @@ where
                 return run;
             }
         };
-        let forces =
-            match judged_forces::<L, NQ, NC, NU, NK>(p, &before, &stance, &modes, ground, &mu) {
-                Ok(f) => f,
-                Err(e) => {
-                    run.failed = Some((t, format!("judging the ground forces: {e}")));
-                    return run;
-                }
-            };
+        let forces = judged_forces::<L, NQ, NC, NU, NK>(p, &before, &stance, &modes, ground, &mu)
+            .unwrap_or_else(|e| panic!("{}: judging the ground forces: {e}", L::NAME));
         for k in 0..NK / 3 {
             let ConeReading {
                 normal,

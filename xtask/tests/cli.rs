@@ -2365,8 +2365,8 @@ fn sim_stands_a_floating_robot_and_pushes_it() {
                 "t = {t}: {c} outside its cone"
             );
         }
-        let pushed = (0.5..0.6 - 1e-9).contains(&t);
-        assert_eq!(num(r, "push_y"), if pushed { 8.0 } else { 0.0 }, "t = {t}");
+        assert!([0.0, 8.0].contains(&num(r, "push_y")), "t = {t}");
+        assert_eq!(num(r, "push_x"), 0.0);
         assert!(num(r, "closure_residual") < 1e-12, "t = {t}");
         assert!(num(r, "contact_height") < 1e-12, "t = {t}");
         let quaternion = ["w", "x", "y", "z"]
@@ -2375,6 +2375,14 @@ fn sim_stands_a_floating_robot_and_pushes_it() {
             .sum::<f64>();
         assert!((quaternion - 1.0).abs() < 1e-12, "t = {t}");
     }
+    // 0.1 s at 1 ms from 0.5 s: a hundred rows, the first at 0.5 s.
+    let pushed: Vec<f64> = rows
+        .iter()
+        .filter(|r| num(r, "push_y") != 0.0)
+        .map(|r| num(r, "t"))
+        .collect();
+    assert_eq!(pushed.len(), 100);
+    assert!((pushed[0] - 0.5).abs() < 1e-9 && (pushed[99] - 0.599).abs() < 1e-9);
     let last = rows.last().unwrap();
     let moved: Vec<f64> = ["x", "y", "z"]
         .iter()
@@ -2414,23 +2422,37 @@ fn sim_stands_a_floating_robot_and_pushes_it() {
     let kept = csv_rows(&std::fs::read_to_string(strong.join("trajectory.csv")).unwrap());
     let end = num(kept.last().unwrap(), "t");
     assert!((0.5..0.99).contains(&end), "stopped at {end}");
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(strong.join("summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(summary["stopped"]["t_s"].as_f64(), Some(end));
+    assert_eq!(summary["recovered"], false);
+    assert!(strong.join("report.html").exists());
 
     for (args, says) in [
         (vec!["--kp", "3"], "--kp is for a leg"),
         (vec!["--push", "1,2"], "expected 3"),
-        (vec!["--push", "1,x,2"], "--push"),
+        (
+            vec!["--push", "1,x,2"],
+            "expected 3 comma-separated numbers",
+        ),
         (vec!["--push-at", "-1"], "a time in [0, 600] s"),
+        (vec!["--push-at", "4"], "not before the run's end"),
+        (vec!["--push-for", "0.0001"], "shorter than one step"),
     ] {
         let mut a = vec!["sim", "minitaur_quadruped", "--out", "/nonexistent/never"];
         a.extend(args);
         refused(&legs(&a), says);
     }
-    refused(
-        &legs(&["sim", "minitaur", "--push", "1,0,0"]),
-        "is a leg on a fixed base",
-    );
+    for flag in [["--push", "1,0,0"], ["--push-at", "0.2"]] {
+        refused(
+            &legs(&["sim", "minitaur", flag[0], flag[1]]),
+            "is a leg on a fixed base",
+        );
+    }
     let arm = temp_dir("robot-arm");
     let out = legs(&["sim", "floating_arm", "--out", arm.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("fewer than three contact points"));
     assert!(!arm.exists());
     for dir in [d, strong] {

@@ -343,8 +343,10 @@ where
 /// Why a robot cannot be put on its feet ([`on_its_feet`], [`standing_start`]).
 #[derive(Clone, Debug, PartialEq)]
 pub enum CannotStand {
-    /// The model is not a floating robot, or a stance's dynamics failed.
+    /// The model is not a floating robot, or its dynamics failed putting it on its feet.
     Dynamics(RobotDynamicsError),
+    /// The stance at the start has no holding torques (its dynamics failed there).
+    Holding(RobotDynamicsError),
     /// Fewer than three contact points: nothing spans a plane to stand on.
     FewerThanThreeContacts,
     /// The home pose does not assemble (its closures cannot be closed).
@@ -369,6 +371,9 @@ impl fmt::Display for CannotStand {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             CannotStand::Dynamics(e) => write!(f, "cannot stand: {e}"),
+            CannotStand::Holding(e) => {
+                write!(f, "cannot stand: no torques hold its stance: {e}")
+            }
             CannotStand::FewerThanThreeContacts => {
                 write!(f, "cannot stand: fewer than three contact points")
             }
@@ -532,7 +537,8 @@ where
     let modes = Modes::stick();
     let mu = spec_friction::<L, f64, NQ, NC, NU, NK, 3>();
     let (_, at_home) =
-        holding_torques::<L, f64, NQ, NC, NU, NK>(params, &start, &modes, &ground, &mu)?;
+        holding_torques::<L, f64, NQ, NC, NU, NK>(params, &start, &modes, &ground, &mu)
+            .map_err(CannotStand::Holding)?;
     let state = if at_home < HELD {
         start
     } else {

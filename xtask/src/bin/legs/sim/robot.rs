@@ -13,9 +13,9 @@ use leg_models::nalgebra::{SVector, UnitQuaternion, Vector3};
 use leg_models::robot::balance::{
     cone_reading, judged_forces, BalanceController, BalanceGains, BalanceTarget,
 };
-use leg_models::robot::standing::{on_its_feet, standing_start};
+use leg_models::robot::standing::{on_its_feet, standing_start, StandingStart};
 use leg_models::robot::{self, RobotState};
-use leg_models::{ContactModel, LegModel};
+use leg_models::{ContactModel, LegModel, ShownNumber};
 use serde_json::json;
 use xtask::cli::progress::Progress;
 use xtask::cli::{check_targets, write_all, Error};
@@ -36,22 +36,40 @@ struct Sample<const NQ: usize, const NU: usize, const NK: usize> {
     contact_gap: f64,
 }
 
-/// The flags of the swing-leg and hopping runs, which mean nothing to a standing robot.
-fn refuse_leg_flags(s: &Settings, name: &str) -> Result<(), Error> {
+/// The flags of the swing-leg and hopping runs, which mean nothing to a standing robot,
+/// and a push that would not act as asked.
+fn check_flags(s: &Settings, name: &str) -> Result<(), Error> {
     let given = [
         (s.controller.is_some(), "--controller"),
         (s.trajectory.is_some(), "--trajectory"),
         (s.speed.is_some(), "--speed"),
         (s.kp.is_some(), "--kp"),
         (s.apex.is_some(), "--apex"),
-        (s.serve, "--serve"),
     ];
     match given.iter().find(|(g, _)| *g) {
         Some((_, flag)) => Err(Error::usage(format!(
             "{flag} is for a leg; `{name}` is a floating robot, which stands under the balance QP (its flags: --push, --push-at, --push-for, --torque-limit, --duration, --dt, --every, --out)"
         ))),
         None => Ok(()),
+    }?;
+    // A push that would not happen, or not for as long as asked, is refused, not
+    // reported as given.
+    let none = s.push == Some([0.0; 3]);
+    if !none && s.push_at >= s.duration {
+        return Err(Error::usage(format!(
+                "--push-at {} s is not before the run's end (--duration {} s): the push would never act (--push 0,0,0 for none)",
+                ShownNumber(s.push_at),
+                ShownNumber(s.duration)
+            )));
     }
+    if !none && s.push_for < s.dt {
+        return Err(Error::usage(format!(
+            "--push-for {} s is shorter than one step (--dt {} s): the push acts for whole steps",
+            ShownNumber(s.push_for),
+            ShownNumber(s.dt)
+        )));
+    }
+    Ok(())
 }
 
 pub fn run<
@@ -64,27 +82,16 @@ pub fn run<
 >(
     s: &Settings,
 ) -> Result<(), Error> {
-    refuse_leg_flags(s, L::NAME)?;
+    check_flags(s, L::NAME)?;
     let out = s.out_dir(L::NAME);
     check_targets(&out, &["trajectory.csv", "summary.json", "report.html"])
         .map_err(Error::Failed)?;
     let p = <L as leg_models::LegDynamics<NQ, NC, NU>>::Params::<f64>::default();
-    let failed = |e: String| Error::Failed(format!("{}: {e}", L::NAME));
-    // Stood first as its spec has it, then turned and lifted so that the ground is the
-    // world's z = 0 and the body is above it: pushes are given in that world.
-    let (_, spec_ground) =
-        on_its_feet::<L, NQ, NC, NU, NK>(&p, Vector3::zeros(), UnitQuaternion::identity())
-            .map_err(|e| failed(e.to_string()))?;
-    let level = UnitQuaternion::rotation_between(&spec_ground.normal, &Vector3::z())
-        .unwrap_or_else(UnitQuaternion::identity);
-    let start = standing_start::<L, NQ, NC, NU, NK>(&p, Vector3::z() * -spec_ground.offset, level)
-        .map_err(|e| failed(e.to_string()))?;
+    let (start, weight) = stand::<L, NQ, NC, NU, NK>(&p)?;
     let (ground, modes, mu) = (start.ground, start.modes, start.mu);
-    let f = robot::free_joint::<L, NQ, NC, NU>().map_err(|e| failed(e.to_string()))?;
-    let gravity =
-        robot::world_gravity::<L, f64, NQ, NC, NU>(&p).map_err(|e| failed(e.to_string()))?;
-    let mass = L::mass_matrix(&start.state.q, &p)[(f, f)];
-    let weight = mass * gravity.norm();
+    if s.serve {
+        return serve::<L, NQ, NC, NU, NK>(&p, &start, s);
+    }
     // Sideways: along the ground, square to the body's x.
     let side = ground
         .normal
@@ -107,22 +114,27 @@ pub fn run<
     let mut state = start.state;
     let mut stopped: Option<(f64, String)> = None;
     let mut iterations = 0u64;
+    // The push in whole steps, as the run counts them (`t` is `i dt`).
+    let pushed = {
+        let first = (s.push_at / s.dt).round() as usize;
+        first..first + (s.push_for / s.dt).round() as usize
+    };
     for i in 0..steps {
         let t = i as f64 * s.dt;
         progress.set(i as u64);
         let before = state;
-        let u = match controller.command::<L>(&p, &state, &modes, &ground, &mu) {
-            Ok(c) => {
-                iterations += u64::from(c.iterations);
-                c.torques
-            }
+        let (u, qp_iterations) = match controller.command::<L>(&p, &state, &modes, &ground, &mu) {
+            Ok(c) => (c.torques, c.iterations),
             Err(e) => {
                 stopped = Some((t, format!("the balance QP has no command: {e}")));
                 break;
             }
         };
-        let pushing = t >= s.push_at && t < s.push_at + s.push_for;
-        let force = if pushing { push } else { Vector3::zeros() };
+        let force = if pushed.contains(&i) {
+            push
+        } else {
+            Vector3::zeros()
+        };
         let stance = match robot::pushed_stance_step::<L, f64, NQ, NC, NU, NK>(
             &p, &mut state, &u, &force, &modes, &ground, &mu, s.dt,
         ) {
@@ -149,6 +161,7 @@ pub fn run<
             closure_gap: L::closure_residual(&before.q, &p).amax(),
             contact_gap: contact_heights::<L, NQ, NC, NU, NK>(&p, &before, &ground),
         });
+        iterations += u64::from(qp_iterations);
         // Held contacts are the model of this run: where a foot would lift or slip it no
         // longer holds, and the run ends there.
         if let Some(why) = (0..NK / 3).find_map(|k| {
@@ -167,25 +180,30 @@ pub fn run<
     }
     drop(progress);
 
-    let end = samples.last().map(|x| x.t + s.dt).unwrap_or(0.0);
+    let end = samples.len() as f64 * s.dt;
     let offset = |x: &RobotState<f64, NQ>| {
         (
             (x.position - start.state.position).norm(),
             x.orientation.angle_to(&start.state.orientation),
         )
     };
-    let excursion = max(samples.iter().map(|x| offset(&x.state).0));
-    let turned = max(samples.iter().map(|x| offset(&x.state).1));
+    // Over every step's start and the state the run ended in.
+    let visited = || samples.iter().map(|x| &x.state).chain([&state]);
+    let excursion = max(visited().map(|x| offset(x).0));
+    let turned = max(visited().map(|x| offset(x).1));
     let (end_offset, end_angle) = offset(&state);
     let readings: Vec<_> = samples
         .iter()
         .flat_map(|x| (0..NK / 3).map(|k| cone_reading(&x.forces, &ground, &mu, k)))
         .collect();
-    let worst_cone = max(readings.iter().map(|c| c.ratio));
-    let least_normal = readings
+    // A force that pulls has no finite cone ratio: the stop says so, these are over the
+    // rest (null where there is none).
+    let finite = |x: f64| x.is_finite().then_some(x);
+    let worst_cone = readings
         .iter()
-        .map(|c| c.normal)
-        .fold(f64::INFINITY, f64::min);
+        .filter_map(|c| finite(c.ratio))
+        .reduce(f64::max);
+    let least_normal = readings.iter().map(|c| c.normal).reduce(f64::min);
     let closure_gap = max(samples.iter().map(|x| x.closure_gap));
     let contact_gap = max(samples.iter().map(|x| x.contact_gap));
     let recovered = stopped.is_none() && end_offset <= 1e-3 && end_angle <= 1e-3;
@@ -200,6 +218,7 @@ pub fn run<
             "default": s.push.is_none(),
             "at_s": s.push_at,
             "for_s": s.push_for,
+            "steps": pushed.filter(|&i| i < samples.len()).count(),
         },
         "duration_s": s.duration,
         "simulated_s": end,
@@ -261,8 +280,8 @@ pub fn run<
         quantity(end_offset, "m"),
         end_angle,
         if recovered { "recovered" } else { "not recovered" },
-        worst_cone,
-        quantity(least_normal, "N"),
+        worst_cone.unwrap_or(f64::NAN),
+        least_normal.map_or("none".into(), |n| quantity(n, "N")),
     );
     match stopped {
         None => Ok(()),
@@ -270,6 +289,102 @@ pub fn run<
             "the simulation stopped at t = {t} s: {why} (the output holds everything until then)"
         ))),
     }
+}
+
+/// The robot on its feet as `sim` stands it, and its weight (N): stood first as its spec
+/// has it, then turned and lifted so that the ground is the world's z = 0 and the body is
+/// above it, so that pushes are given in that world.
+fn stand<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    p: &L::Params<f64>,
+) -> Result<(StandingStart<NQ, NK>, f64), Error>
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    let failed = |e: String| Error::Failed(format!("{}: {e}", L::NAME));
+    let (_, spec_ground) =
+        on_its_feet::<L, NQ, NC, NU, NK>(p, Vector3::zeros(), UnitQuaternion::identity())
+            .map_err(|e| failed(e.to_string()))?;
+    let level = UnitQuaternion::rotation_between(&spec_ground.normal, &Vector3::z())
+        .unwrap_or_else(UnitQuaternion::identity);
+    let start = standing_start::<L, NQ, NC, NU, NK>(p, Vector3::z() * -spec_ground.offset, level)
+        .map_err(|e| failed(e.to_string()))?;
+    let f = robot::free_joint::<L, NQ, NC, NU>().map_err(|e| failed(e.to_string()))?;
+    let gravity =
+        robot::world_gravity::<L, f64, NQ, NC, NU>(p).map_err(|e| failed(e.to_string()))?;
+    let mass = L::mass_matrix(&start.state.q, p)[(f, f)];
+    Ok((start, mass * gravity.norm()))
+}
+
+/// The balance QP as a torque server (`--serve`, for the MuJoCo push run): holding the
+/// robot where [`stand`] puts it, each line on stdin is a state — the body's position and
+/// orientation (`w x y z`) in the world, the chart's coordinates (the free joint's six
+/// zero) and its rates `v` (the body's linear and angular velocity in its own frame, then
+/// the joints') — and each line out the torques, or `error: …`. A state off the closures
+/// (a soft-loop simulator's) is put on them first, as the controller's model holds them.
+fn serve<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    p: &L::Params<f64>,
+    start: &StandingStart<NQ, NK>,
+    s: &Settings,
+) -> Result<(), Error>
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    use leg_models::assembly::{project_position, project_velocity, Tolerance};
+    use leg_models::nalgebra::Quaternion;
+    use std::io::{BufRead, Write};
+    let f = robot::free_joint::<L, NQ, NC, NU>()
+        .map_err(|e| Error::Failed(format!("{}: {e}", L::NAME)))?;
+    let mut controller = BalanceController::<NQ, NC, NU, NK>::new(
+        BalanceTarget::holding(&start.state),
+        BalanceGains::default(),
+        s.torque_limit.map(SVector::<f64, NU>::repeat),
+    );
+    let stdin = std::io::stdin();
+    let mut stdout = std::io::stdout().lock();
+    let width = 7 + 2 * NQ;
+    for line in stdin.lock().lines() {
+        let line = line.map_err(|e| Error::Failed(format!("stdin: {e}")))?;
+        let values: Result<Vec<f64>, _> = line.split_whitespace().map(str::parse).collect();
+        let answer = match values {
+            Ok(v) if v.len() == width => {
+                let mut state = RobotState {
+                    position: Vector3::new(v[0], v[1], v[2]),
+                    orientation: UnitQuaternion::from_quaternion(Quaternion::new(
+                        v[3], v[4], v[5], v[6],
+                    )),
+                    q: SVector::from_column_slice(&v[7..7 + NQ]),
+                    v: SVector::from_column_slice(&v[7 + NQ..]),
+                };
+                let closed =
+                    project_position::<L, f64, NQ, NC, NU>(p, &mut state.q, &Tolerance::default())
+                        .map_err(|e| e.to_string())
+                        .and_then(|_| {
+                            project_velocity::<L, f64, NQ, NC, NU>(p, &state.q, &mut state.v)
+                                .map_err(|e| e.to_string())
+                        });
+                state.recentre(f);
+                match closed.and_then(|_| {
+                    controller
+                        .command::<L>(p, &state, &start.modes, &start.ground, &start.mu)
+                        .map_err(|e| e.to_string())
+                }) {
+                    Ok(c) => c
+                        .torques
+                        .iter()
+                        .map(|x| format!("{x:e}"))
+                        .collect::<Vec<_>>()
+                        .join(" "),
+                    Err(e) => format!("error: {e}"),
+                }
+            }
+            Ok(v) => format!("error: {} numbers, expected {width}", v.len()),
+            Err(e) => format!("error: {e}"),
+        };
+        writeln!(stdout, "{answer}")
+            .and_then(|_| stdout.flush())
+            .map_err(|e| Error::Failed(format!("stdout: {e}")))?;
+    }
+    Ok(())
 }
 
 fn significant(x: f64) -> String {
