@@ -35,7 +35,7 @@ fn pending_snapshots(root: &Path) -> Vec<String> {
 /// forces, foot and closure frames against ours). Returns the models that disagree.
 fn cross_checks(root: &Path) -> Result<Vec<String>, String> {
     eprintln!(
-        "==> MuJoCo (xtask/mujoco_check.py) and Pinocchio (xtask/urdf_check.py) cross-checks"
+        "==> MuJoCo (xtask/mujoco_check.py, mujoco_push.py) and Pinocchio (xtask/urdf_check.py) cross-checks"
     );
     let legs = crate::cli::build_legs(root)?;
     let target = target_dir(root);
@@ -69,7 +69,7 @@ fn cross_checks(root: &Path) -> Result<Vec<String>, String> {
             jobs.push((
                 "mujoco_spatial_check.py",
                 name.clone(),
-                vec![mjcf],
+                vec![mjcf.clone()],
                 "MuJoCo",
             ));
             let urdf = dir.join(format!("{name}.urdf"));
@@ -85,6 +85,15 @@ fn cross_checks(root: &Path) -> Result<Vec<String>, String> {
                 let text = crate::commands::export::spatial::urdf_floating(&model);
                 crate::cli::write_atomic(&floating, &text)?;
                 files.push(floating);
+                // Standing under the balance QP and pushed, ours beside MuJoCo on the
+                // export (the same controller closing both loops).
+                let runs = target.join("mujoco-push").join(name);
+                jobs.push((
+                    "mujoco_push.py",
+                    name.clone(),
+                    vec![mjcf, runs],
+                    "the MuJoCo push run",
+                ));
             }
             jobs.push(("urdf_check.py", name.clone(), files, "Pinocchio"));
             if let Some(a) = crate::commands::import::header_args(root, &spec.text) {

@@ -320,7 +320,9 @@ where
 /// orientation (`w x y z`) in the world, the chart's coordinates (the free joint's six
 /// zero) and its rates `v` (the body's linear and angular velocity in its own frame, then
 /// the joints') — and each line out the torques, or `error: …`. A state off the closures
-/// (a soft-loop simulator's) is put on them first, as the controller's model holds them.
+/// (a soft-loop simulator's) is put on them first, and its rates on the closures and the
+/// held feet (a foot's two points moving apart make its held rows contradict each other),
+/// as the controller's model holds them.
 fn serve<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
     p: &L::Params<f64>,
     start: &StandingStart<NQ, NK>,
@@ -329,7 +331,8 @@ fn serve<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
 where
     L: ContactModel<NQ, NC, NU, NK, 3>,
 {
-    use leg_models::assembly::{project_position, project_velocity, Tolerance};
+    use leg_models::assembly::{project_position, Tolerance};
+    use leg_models::dynamics::contact::project_held_velocity;
     use leg_models::nalgebra::Quaternion;
     use std::io::{BufRead, Write};
     let f = robot::free_joint::<L, NQ, NC, NU>()
@@ -359,10 +362,21 @@ where
                     project_position::<L, f64, NQ, NC, NU>(p, &mut state.q, &Tolerance::default())
                         .map_err(|e| e.to_string())
                         .and_then(|_| {
-                            project_velocity::<L, f64, NQ, NC, NU>(p, &state.q, &mut state.v)
-                                .map_err(|e| e.to_string())
+                            state.recentre(f);
+                            let local = robot::ground_in_chart(
+                                &start.ground,
+                                &state.position,
+                                &state.orientation,
+                            );
+                            project_held_velocity::<L, f64, NQ, NC, NU, NK, 3>(
+                                p,
+                                &state.q,
+                                &mut state.v,
+                                &start.modes,
+                                &local,
+                            )
+                            .map_err(|e| e.to_string())
                         });
-                state.recentre(f);
                 match closed.and_then(|_| {
                     controller
                         .command::<L>(p, &state, &start.modes, &start.ground, &start.mu)
