@@ -1,10 +1,10 @@
 """A floating robot standing under our balance QP and pushed, ours beside MuJoCo; run by
 `cargo xtask test` for every floating robot that can stand.
 
-usage: python mujoco_push.py LEGS_BINARY ROBOT MJCF_FILE OUT_DIR
+usage: python mujoco_push.py LEGS_BINARY ROBOT MJCF_FILE OUT_DIR [FX,FY,FZ]
 
-Ours: `legs sim ROBOT --duration 2` (the default push: 5 % of the weight sideways from
-0.5 s for 0.1 s; RK4 at 1 ms, every contact held, the loops closed exactly).
+Ours: `legs sim ROBOT --duration 2` (the default push, 5 % of the weight sideways, or
+`--push FX,FY,FZ` where given; from 0.5 s for 0.1 s; RK4 at 1 ms, every contact held, the loops closed exactly).
 
 MuJoCo: the robot's exported MJCF (its toes small spheres on a floor plane, its loops
 `connect` equalities; soft contacts and soft loops), at our time step (1 ms, RK4), from
@@ -140,10 +140,11 @@ class Robot:
 
 
 def main():
-    if len(sys.argv) != 5:
-        sys.exit(f"usage: {sys.argv[0]} LEGS_BINARY ROBOT MJCF_FILE OUT_DIR")
+    if len(sys.argv) not in (5, 6):
+        sys.exit(f"usage: {sys.argv[0]} LEGS_BINARY ROBOT MJCF_FILE OUT_DIR [FX,FY,FZ]")
     legs, name, mjcf, out = sys.argv[1], sys.argv[2], sys.argv[3], pathlib.Path(sys.argv[4])
-    run = subprocess.run([legs, "sim", name, "--duration", str(DURATION), "--out", str(out)], capture_output=True, text=True)
+    push = ["--push", sys.argv[5]] if len(sys.argv) == 6 else []
+    run = subprocess.run([legs, "sim", name, "--duration", str(DURATION), "--out", str(out), *push], capture_output=True, text=True)
     if "cannot stand" in run.stderr:
         print(f"{name}: not applicable ({run.stderr.strip().removeprefix('error: ')})")
         return
@@ -206,7 +207,7 @@ def main():
     ours_gap = max(float(r["closure_residual"]) for r in rows)
     weight = sum(float(first[f"F_{c}_z"]) for c in contacts)
     print(f"{name}: pushed {np.linalg.norm(pushes[push_start]):.3g} N from {push_start / 1000:.3f} s for {sum(1 for p in pushes if np.any(p))} steps; 1 ms steps, RK4, the balance QP closing both loops")
-    print(f"  body along the push, largest: ours {1e3 * float(((ours_body - start) @ side).max()):.3f} mm, MuJoCo {1e3 * float(((theirs - start) @ side).max()):.3f} mm; at the end: ours {1e3 * float(np.linalg.norm(ours_body[-1] - start)):.4f} mm, MuJoCo {1e3 * float(np.linalg.norm(theirs[-1] - start)):.4f} mm from where ours stood; MuJoCo's body from ours at most {1e3 * apart:.3f} mm")
+    print(f"  body along the push, largest: ours {1e3 * float(((ours_body - start) @ side).max()):.3f} mm, MuJoCo {1e3 * float(((theirs - start) @ side).max()):.3f} mm; at the end: ours {1e3 * float(np.linalg.norm(ours_body[-1] - start)):.4f} mm, MuJoCo {1e3 * float(np.linalg.norm(theirs[-1] - start)):.4f} mm from where ours stood (MuJoCo's {1e3 * float(np.linalg.norm(theirs[push_start - 1] - start)):.4f} mm just before the push: its soft contacts and loops settled); MuJoCo's body from ours at most {1e3 * apart:.3f} mm")
     print(f"  largest loop gap: ours {ours_gap:.1e} m, MuJoCo {max(gaps):.2e} m")
     ours_before = {c: float(rows[push_start][f"F_{c}_z"]) for c in contacts}
     print("  normal forces just before the push (N), ours / MuJoCo: " + ", ".join(f"{c} {ours_before[c]:.2f} / {before_push[c]:.2f}" for c in contacts))
