@@ -128,6 +128,16 @@ pub(crate) fn energy_plot<
     .caption(&format!("The energy T + V (blue) falls at each touchdown by what the plastic impact dissipates and changes in stance because the motors do work W = Σ ∫ u θ̇ dt. The impacts' losses added back (red), only the motors' work remains; with that subtracted too (green) what is left moves by {} over the run: what neither the impacts nor the motors account for (joint damping, if the leg has any, and integration error).", crate::report::quantity(spread, "J")))
 }
 
+/// The ground as the report draws it: the normal's entries, then the offset.
+pub(crate) fn drawn<const ND: usize>(ground: &Ground<f64, ND>) -> Vec<f64> {
+    ground
+        .normal
+        .iter()
+        .copied()
+        .chain([ground.offset])
+        .collect()
+}
+
 /// The report's log plot of the residuals after each step's projection: the closures'
 /// largest gap and the held contacts' largest distance from their anchors, per sample.
 pub(crate) fn residual_plot(
@@ -496,14 +506,7 @@ pub fn run<
         summary: &summary,
         plots: &plots,
         frames: &frames,
-        ground: Some(
-            ground
-                .normal
-                .iter()
-                .copied()
-                .chain([ground.offset])
-                .collect(),
-        ),
+        ground: Some(drawn(&ground)),
         rods: L::DISTANCE_CLOSURES,
         robot: false,
     })

@@ -569,44 +569,21 @@ where
     L: ContactModel<NQ, NC, NU, NK> + leg_models::LegModel<NQ, NC, NU>,
 {
     use leg_models::simulate::hybrid::HybridTorqueSource;
-    use std::io::{BufRead, Write};
-    let stdin = std::io::stdin();
-    let mut stdout = std::io::stdout().lock();
-    let width = 1 + 2 * NQ + NK;
-    for line in stdin.lock().lines() {
-        let line = line.map_err(|e| Error::Failed(format!("stdin: {e}")))?;
-        let values: Result<Vec<f64>, _> = line.split_whitespace().map(str::parse).collect();
-        let answer = match values {
-            Ok(v) if v.len() == width => {
-                let mut hs = HybridState::flight(State {
-                    q: SVector::from_column_slice(&v[1..1 + NQ]),
-                    qd: SVector::from_column_slice(&v[1 + NQ..1 + 2 * NQ]),
-                });
-                for k in 0..NK / 2 {
-                    if v[1 + 2 * NQ + 2 * k] != 0.0 {
-                        hs.modes.set(k, ContactMode::Stick);
-                        hs.anchors[2 * k] = v[2 + 2 * NQ + 2 * k];
-                    }
-                }
-                let mut projected = hs;
-                if sim.project(&mut projected).is_ok() {
-                    hs = projected;
-                }
-                match controller.torque(v[0], &hs) {
-                    Ok(u) => u
-                        .iter()
-                        .map(|x| format!("{x:e}"))
-                        .collect::<Vec<_>>()
-                        .join(" "),
-                    Err(e) => format!("error: {e}"),
-                }
+    crate::sim::serve_lines::<NU>(1 + 2 * NQ + NK, |v| {
+        let mut hs = HybridState::flight(State {
+            q: SVector::from_column_slice(&v[1..1 + NQ]),
+            qd: SVector::from_column_slice(&v[1 + NQ..1 + 2 * NQ]),
+        });
+        for k in 0..NK / 2 {
+            if v[1 + 2 * NQ + 2 * k] != 0.0 {
+                hs.modes.set(k, ContactMode::Stick);
+                hs.anchors[2 * k] = v[2 + 2 * NQ + 2 * k];
             }
-            Ok(v) => format!("error: {} numbers, expected {width}", v.len()),
-            Err(e) => format!("error: {e}"),
-        };
-        writeln!(stdout, "{answer}")
-            .and_then(|_| stdout.flush())
-            .map_err(|e| Error::Failed(format!("stdout: {e}")))?;
-    }
-    Ok(())
+        }
+        let mut projected = hs;
+        if sim.project(&mut projected).is_ok() {
+            hs = projected;
+        }
+        controller.torque(v[0], &hs).map_err(|e| e.to_string())
+    })
 }

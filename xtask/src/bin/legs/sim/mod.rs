@@ -57,6 +57,39 @@ where
     }
 }
 
+/// A torque server's loop (`--serve`): each line on stdin is `width` numbers, handed to
+/// `torques`; each answer on stdout is its torques, or `error: …` (for a line of another
+/// width or not numbers too), flushed at once, so that another simulator can close its
+/// loop through it line by line.
+pub(crate) fn serve_lines<const NU: usize>(
+    width: usize,
+    mut torques: impl FnMut(&[f64]) -> Result<SVector<f64, NU>, String>,
+) -> Result<(), Error> {
+    use std::io::{BufRead, Write};
+    let stdin = std::io::stdin();
+    let mut stdout = std::io::stdout().lock();
+    for line in stdin.lock().lines() {
+        let line = line.map_err(|e| Error::Failed(format!("stdin: {e}")))?;
+        let values: Result<Vec<f64>, _> = line.split_whitespace().map(str::parse).collect();
+        let answer = match values {
+            Ok(v) if v.len() == width => match torques(&v) {
+                Ok(u) => u
+                    .iter()
+                    .map(|x| format!("{x:e}"))
+                    .collect::<Vec<_>>()
+                    .join(" "),
+                Err(e) => format!("error: {e}"),
+            },
+            Ok(v) => format!("error: {} numbers, expected {width}", v.len()),
+            Err(e) => format!("error: {e}"),
+        };
+        writeln!(stdout, "{answer}")
+            .and_then(|_| stdout.flush())
+            .map_err(|e| Error::Failed(format!("stdout: {e}")))?;
+    }
+    Ok(())
+}
+
 /// trajectory.csv's first columns: the time, the joints' positions and rates, and the
 /// motors' torques.
 pub(crate) fn state_columns<

@@ -11,7 +11,7 @@ use std::fmt::Write as _;
 use leg_models::dynamics::contact::Ground;
 use leg_models::nalgebra::{SVector, UnitQuaternion, Vector3};
 use leg_models::robot::balance::{
-    cone_reading, judged_forces, BalanceController, BalanceGains, BalanceTarget,
+    cone_reading, judged_forces, BalanceController, BalanceGains, BalanceTarget, ConeReading,
 };
 use leg_models::robot::standing::{on_its_feet, standing_start, StandingStart};
 use leg_models::robot::{self, RobotState};
@@ -334,7 +334,6 @@ where
     use leg_models::assembly::{project_position, Tolerance};
     use leg_models::dynamics::contact::project_held_velocity;
     use leg_models::nalgebra::Quaternion;
-    use std::io::{BufRead, Write};
     let f = robot::free_joint::<L, NQ, NC, NU>()
         .map_err(|e| Error::Failed(format!("{}: {e}", L::NAME)))?;
     let mut controller = BalanceController::<NQ, NC, NU, NK>::new(
@@ -342,63 +341,30 @@ where
         BalanceGains::default(),
         s.torque_limit.map(SVector::<f64, NU>::repeat),
     );
-    let stdin = std::io::stdin();
-    let mut stdout = std::io::stdout().lock();
-    let width = 7 + 2 * NQ;
-    for line in stdin.lock().lines() {
-        let line = line.map_err(|e| Error::Failed(format!("stdin: {e}")))?;
-        let values: Result<Vec<f64>, _> = line.split_whitespace().map(str::parse).collect();
-        let answer = match values {
-            Ok(v) if v.len() == width => {
-                let mut state = RobotState {
-                    position: Vector3::new(v[0], v[1], v[2]),
-                    orientation: UnitQuaternion::from_quaternion(Quaternion::new(
-                        v[3], v[4], v[5], v[6],
-                    )),
-                    q: SVector::from_column_slice(&v[7..7 + NQ]),
-                    v: SVector::from_column_slice(&v[7 + NQ..]),
-                };
-                let closed =
-                    project_position::<L, f64, NQ, NC, NU>(p, &mut state.q, &Tolerance::default())
-                        .map_err(|e| e.to_string())
-                        .and_then(|_| {
-                            state.recentre(f);
-                            let local = robot::ground_in_chart(
-                                &start.ground,
-                                &state.position,
-                                &state.orientation,
-                            );
-                            project_held_velocity::<L, f64, NQ, NC, NU, NK, 3>(
-                                p,
-                                &state.q,
-                                &mut state.v,
-                                &start.modes,
-                                &local,
-                            )
-                            .map_err(|e| e.to_string())
-                        });
-                match closed.and_then(|_| {
-                    controller
-                        .command::<L>(p, &state, &start.modes, &start.ground, &start.mu)
-                        .map_err(|e| e.to_string())
-                }) {
-                    Ok(c) => c
-                        .torques
-                        .iter()
-                        .map(|x| format!("{x:e}"))
-                        .collect::<Vec<_>>()
-                        .join(" "),
-                    Err(e) => format!("error: {e}"),
-                }
-            }
-            Ok(v) => format!("error: {} numbers, expected {width}", v.len()),
-            Err(e) => format!("error: {e}"),
+    super::serve_lines::<NU>(7 + 2 * NQ, |v| {
+        let mut state = RobotState {
+            position: Vector3::new(v[0], v[1], v[2]),
+            orientation: UnitQuaternion::from_quaternion(Quaternion::new(v[3], v[4], v[5], v[6])),
+            q: SVector::from_column_slice(&v[7..7 + NQ]),
+            v: SVector::from_column_slice(&v[7 + NQ..]),
         };
-        writeln!(stdout, "{answer}")
-            .and_then(|_| stdout.flush())
-            .map_err(|e| Error::Failed(format!("stdout: {e}")))?;
-    }
-    Ok(())
+        project_position::<L, f64, NQ, NC, NU>(p, &mut state.q, &Tolerance::default())
+            .map_err(|e| e.to_string())?;
+        state.recentre(f);
+        let local = robot::ground_in_chart(&start.ground, &state.position, &state.orientation);
+        project_held_velocity::<L, f64, NQ, NC, NU, NK, 3>(
+            p,
+            &state.q,
+            &mut state.v,
+            &start.modes,
+            &local,
+        )
+        .map_err(|e| e.to_string())?;
+        controller
+            .command::<L>(p, &state, &start.modes, &start.ground, &start.mu)
+            .map(|c| c.torques)
+            .map_err(|e| e.to_string())
+    })
 }
 
 fn significant(x: f64) -> String {
@@ -567,44 +533,30 @@ fn report_html<
         .axis("rotation", "rad")
         .caption("The rotation from the standing orientation to the body's, as a rotation vector in the standing body's frame."),
     ];
+    // One line per contact of what `read` reads of its force.
+    let per_contact = |read: fn(&ConeReading) -> f64| -> Vec<(String, Vec<f64>)> {
+        L::CONTACT_NAMES
+            .iter()
+            .enumerate()
+            .map(|(k, name)| {
+                let line = samples
+                    .iter()
+                    .map(|x| read(&cone_reading(&x.forces, ground, mu, k)))
+                    .collect();
+                (name.to_string(), line)
+            })
+            .collect()
+    };
     plots.push(
-        Series::new(
-            "Ground forces: normal",
-            &t,
-            L::CONTACT_NAMES
-                .iter()
-                .enumerate()
-                .map(|(k, name)| {
-                    (
-                        name.to_string(),
-                        samples
-                            .iter()
-                            .map(|x| cone_reading(&x.forces, ground, mu, k).normal)
-                            .collect(),
-                    )
-                })
-                .collect(),
-        )
-        .axis("force", "N")
-        .caption("Each contact's force along the ground's normal; they sum to the weight at rest. A contact whose normal force would reach zero would lift off, which ends this run: every contact is held."),
+        Series::new("Ground forces: normal", &t, per_contact(|c| c.normal))
+            .axis("force", "N")
+            .caption("Each contact's force along the ground's normal; they sum to the weight at rest. A contact whose normal force would reach zero would lift off, which ends this run: every contact is held."),
     );
     plots.push(
         Series::new(
             "Ground forces in their friction cones: |λ_t| / (μ λ_n)",
             &t,
-            L::CONTACT_NAMES
-                .iter()
-                .enumerate()
-                .map(|(k, name)| {
-                    (
-                        name.to_string(),
-                        samples
-                            .iter()
-                            .map(|x| cone_reading(&x.forces, ground, mu, k).ratio)
-                            .collect(),
-                    )
-                })
-                .collect(),
+            per_contact(|c| c.ratio),
         )
         .axis("share of the cone", "")
         .caption("How far each contact's force is towards its friction cone's edge (1: about to slip, which ends this run). Where a rigid foot is held at two points, its load is split between them as deep in their cones as any split goes."),
@@ -628,14 +580,7 @@ fn report_html<
         summary,
         plots: &plots,
         frames: &frames,
-        ground: Some(
-            ground
-                .normal
-                .iter()
-                .copied()
-                .chain([ground.offset])
-                .collect(),
-        ),
+        ground: Some(super::ground::drawn(ground)),
         rods: L::DISTANCE_CLOSURES,
         robot: true,
     })
