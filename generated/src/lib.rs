@@ -52,6 +52,8 @@ pub mod revolute_knee_leg;
 pub use revolute_knee_leg::RevoluteKneeLeg;
 pub mod rod_knee_leg;
 pub use rod_knee_leg::RodKneeLeg;
+pub mod rod_tripod;
+pub use rod_tripod::RodTripod;
 pub mod rssr_linkage;
 pub use rssr_linkage::RssrLinkage;
 pub mod sliding_mass;
@@ -110,6 +112,6 @@ macro_rules! for_each_floating_model {
         $callback ! (cassie, $crate::cassie::Cassie, 32, 12, 10, 8, 12); $callback !
         (floating_arm, $crate::floating_arm::FloatingArm, 9, 0, 2, 0, 0); $callback !
         (minitaur_quadruped, $crate::minitaur_quadruped::MinitaurQuadruped, 22, 12, 8, 8,
-        12);
+        12); $callback ! (rod_tripod, $crate::rod_tripod::RodTripod, 12, 3, 3, 6, 9);
     };
 }

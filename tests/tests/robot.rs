@@ -607,6 +607,33 @@ where
     assert!(into < 1e-12 && stuck_speed < 1e-12, "{name}: a foot still moves into the ground ({into:e}) or a stuck one along it ({stuck_speed:e})");
 }
 
+/// How many motions the held contacts and the closures leave the robot at `s`: `NQ` less
+/// the rank of the contact rows and the closure rows stacked (singular values above 1e-9
+/// of the largest). None where the feet hold every coordinate (three point feet under
+/// one-motor legs): the body cannot move, so there is nothing for a balance controller
+/// to steer, and a push is carried by the feet alone.
+fn free_on_its_feet<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    p: &L::Params<f64>,
+    s: &RobotState<f64, NQ>,
+) -> usize
+where
+    L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
+{
+    let chart = robot::chart_params::<L, f64, NQ, NC, NU>(p, &s.orientation).unwrap();
+    let c = L::contact_jacobian(&s.q, &chart);
+    let j = L::constraint_jacobian(&s.q, &chart);
+    let rows = leg_models::nalgebra::DMatrix::<f64>::from_fn(NK + NC, NQ, |r, k| {
+        if r < NK {
+            c[(r, k)]
+        } else {
+            j[(r - NK, k)]
+        }
+    });
+    let sv = rows.svd(false, false).singular_values;
+    let top = sv.amax();
+    NQ - sv.iter().filter(|&&x| x > 1e-9 * top).count()
+}
+
 /// Balanced by the QP (`robot::balance`) on its feet at 1 ms steps: unpushed for 0.25 s,
 /// the ground forces the simulator applies add up to the weight from the spec's masses
 /// and every foot's stays well inside its friction cone (the least holding torques of
@@ -640,6 +667,14 @@ where
     else {
         return;
     };
+    if free_on_its_feet::<L, NQ, NC, NU, NK>(&p, &start) == 0 {
+        leg_tests::not_applicable(
+            name,
+            "balance",
+            &"its held feet and closures hold every coordinate: there is no motion to balance",
+        );
+        return;
+    }
     let weight = spec_mass::<L, NQ, NC, NU>(&p) * 9.81;
     // Unpushed: the weight on the feet, inside the cones.
     let mut control = BalanceController::<NQ, NC, NU, NK>::new(
@@ -800,6 +835,14 @@ where
     else {
         return;
     };
+    if free_on_its_feet::<L, NQ, NC, NU, NK>(&p, &start) == 0 {
+        leg_tests::not_applicable(
+            name,
+            "balance constraints",
+            &"its held feet and closures hold every coordinate: its torques set its ground forces alone, with no internal forces to shift",
+        );
+        return;
+    }
     // A state off the target, so the tasks ask for something.
     let mut s = start;
     s.position += ground.normal.cross(&Vector3::x()).normalize() * 2e-3;
