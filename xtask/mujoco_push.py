@@ -40,6 +40,8 @@ DURATION = 2.0
 OURS_TOL = 1e-12
 APART_TOL = 0.02  # m: MuJoCo's body from ours
 WEIGHT_TOL = 0.02  # of the weight: MuJoCo's toes' load before the push
+ANSWER_SHARE = 0.25  # MuJoCo's largest excursion along the push against ours
+ANSWER_TOL = 1e-3  # m: the two bodies' answers to the push, each from where it stood
 
 
 def quat_matrix(q):
@@ -147,7 +149,7 @@ def main():
     legs, name, mjcf, out = sys.argv[1], sys.argv[2], sys.argv[3], pathlib.Path(sys.argv[4])
     push = ["--push", sys.argv[5]] if len(sys.argv) == 6 else []
     run = subprocess.run([legs, "sim", name, "--duration", str(DURATION), "--out", str(out), *push], capture_output=True, text=True)
-    if "cannot stand" in run.stderr:
+    if "fewer than three contact points" in run.stderr:
         print(f"{name}: not applicable ({run.stderr.strip().removeprefix('error: ')})")
         return
     stopped = None
@@ -159,6 +161,8 @@ def main():
         stopped = run.stderr.strip().removeprefix("error: ")
     with open(out / "trajectory.csv") as f:
         rows = list(csv.DictReader(f))
+    if len(rows) < 2:
+        sys.exit(f"{name}: ours has {len(rows)} rows: {stopped}")
     header = list(rows[0].keys())
     joints = [h[2:] for h in header if h.startswith("q_")]
     motors = [h[2:] for h in header if h.startswith("u_")]
@@ -176,8 +180,10 @@ def main():
     server = subprocess.Popen([legs, "sim", name, "--serve"], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     m, d = robot.m, robot.d
     theirs, gaps, before_push = [], [], None
-    # The first pushed step (the last row where ours stopped before any push).
-    push_start = next((i for i, p in enumerate(pushes) if np.any(p)), len(rows) - 1)
+    pushed = [i for i, p in enumerate(pushes) if np.any(p)]
+    if not pushed:
+        sys.exit(f"{name}: ours stopped before the push: {stopped}")
+    push_start = pushed[0]
     try:
         for i in range(len(rows)):
             pos, quat, q, v = robot.state()
@@ -203,28 +209,44 @@ def main():
         server.wait()
 
     failures = []
-    if not np.all(np.isfinite(d.qpos)):
-        sys.exit(f"{name}: MuJoCo's run is not finite")
+    # MuJoCo resets a diverging state to qpos0 (finite) and counts a warning.
+    if not np.all(np.isfinite(d.qpos)) or d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number:
+        sys.exit(f"{name}: MuJoCo's run diverged")
     ours_body = np.array([body(r) for r in rows])
     # Ours after each step: the next row's start (the last step's end is not a row).
     ours_after = ours_body[1:]
     theirs = np.array(theirs)
     apart = float(np.abs(theirs[:-1] - ours_after).max())
-    side = pushes[push_start] / np.linalg.norm(pushes[push_start]) if np.any(pushes[push_start]) else np.array([0.0, 1.0, 0.0])
+    side = pushes[push_start] / np.linalg.norm(pushes[push_start])
+    # Each body's answer to the push, from where each stood at its start (MuJoCo's has
+    # settled into its soft contacts by then): after step i, from step push_start on.
+    ours_answer = ours_after[push_start:] - ours_body[push_start]
+    theirs_answer = theirs[push_start:len(ours_after)] - theirs[push_start - 1]
+    answer_apart = float(np.abs(theirs_answer - ours_answer).max(initial=0.0))
+    ours_most = float((ours_answer @ side).max(initial=0.0))
+    theirs_most = float((theirs_answer @ side).max(initial=0.0))
+    whole_push = len(rows) > pushed[-1] + 1 and not stopped
     start = ours_body[0]
     ours_gap = max(float(r["closure_residual"]) for r in rows)
     weight = sum(float(first[f"F_{c}_z"]) for c in contacts)
     print(f"{name}: pushed {np.linalg.norm(pushes[push_start]):.3g} N from {push_start / 1000:.3f} s for {sum(1 for p in pushes if np.any(p))} steps; 1 ms steps, RK4, the balance QP closing both loops")
     print(f"  body along the push, largest: ours {1e3 * float(((ours_body - start) @ side).max()):.3f} mm, MuJoCo {1e3 * float(((theirs - start) @ side).max()):.3f} mm; at the end: ours {1e3 * float(np.linalg.norm(ours_body[-1] - start)):.4f} mm, MuJoCo {1e3 * float(np.linalg.norm(theirs[-1] - start)):.4f} mm from where ours stood (MuJoCo's {1e3 * float(np.linalg.norm(theirs[push_start - 1] - start)):.4f} mm just before the push: its soft contacts and loops settled); MuJoCo's body from ours at most {1e3 * apart:.3f} mm")
-    print(f"  largest loop gap: ours {ours_gap:.1e} m, MuJoCo {max(gaps):.2e} m")
+    print(f"  the push's answer, each from where it stood: along the push at most ours {1e3 * ours_most:.3f} mm, MuJoCo {1e3 * theirs_most:.3f} mm; the two answers at most {1e3 * answer_apart:.3f} mm apart")
+    rods = sum(1 for e in range(m.neq) if m.eq_type[e] == mujoco.mjtEq.mjEQ_TENDON)
+    print(f"  largest loop gap: ours {ours_gap:.1e} m, MuJoCo {max(gaps):.2e} m" + (f" (its {rods} rods' tendon equalities not measured)" if rods else ""))
     if stopped:
         print(f"  ours: {stopped}; compared until then")
-    ours_before = {c: float(rows[push_start][f"F_{c}_z"]) for c in contacts}
+    # Ours over the step before the push (the pushed step's forces carry the push).
+    ours_before = {c: float(rows[push_start - 1][f"F_{c}_z"]) for c in contacts}
     print("  normal forces just before the push (N), ours / MuJoCo: " + ", ".join(f"{c} {ours_before[c]:.2f} / {before_push[c]:.2f}" for c in contacts))
     if ours_gap > OURS_TOL:
         failures.append(f"our loop gap {ours_gap:.1e} m is above {OURS_TOL:.0e} m")
     if not apart <= APART_TOL:
         failures.append(f"MuJoCo's body strays {apart:.3f} m from ours")
+    if whole_push and not abs(theirs_most - ours_most) <= ANSWER_SHARE * ours_most:
+        failures.append(f"MuJoCo's body goes {1e3 * theirs_most:.3f} mm along the push, ours {1e3 * ours_most:.3f} mm")
+    if whole_push and not answer_apart <= ANSWER_TOL:
+        failures.append(f"the two bodies' answers to the push are {1e3 * answer_apart:.3f} mm apart")
     carried = sum(before_push.values())
     if not abs(carried - weight) <= WEIGHT_TOL * weight:
         failures.append(f"MuJoCo's toes carry {carried:.3f} N before the push, the weight is {weight:.3f} N")
