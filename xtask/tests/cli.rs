@@ -724,6 +724,84 @@ fn sim_serve_answers_torques_for_states() {
     assert_eq!(answers[2], "error: 4 numbers, expected 13");
 }
 
+/// `sim ROBOT --serve` answers the balance QP's torques line by line (the MuJoCo push
+/// run's loop): at the state `sim` stands the robot in (its trajectory's first row) the
+/// answer is that row's torques, the command `sim` itself applied (to the QP solver's
+/// tolerance); a line of another
+/// width or of words gets `error: …`, and the server answers the next line.
+#[test]
+fn sim_serve_answers_a_robots_balance_torques() {
+    use std::io::Write;
+    let d = temp_dir("robot-serve");
+    let out = legs(&[
+        "sim",
+        "minitaur_quadruped",
+        "--duration",
+        "0.002",
+        "--push",
+        "0,0,0",
+        "--out",
+        d.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(d.join("trajectory.csv")).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let first: Vec<&str> = text.lines().nth(1).unwrap().split(',').collect();
+    let pick = |keep: &dyn Fn(&str) -> bool| -> Vec<&str> {
+        header
+            .iter()
+            .zip(&first)
+            .filter(|(h, _)| keep(h))
+            .map(|(_, v)| *v)
+            .collect()
+    };
+    let state = pick(&|h| h.starts_with("body_") || h.starts_with("q_") || h.starts_with("v_"));
+    assert_eq!(state.len(), 7 + 2 * 22);
+    let applied: Vec<f64> = pick(&|h| h.starts_with("u_"))
+        .iter()
+        .map(|x| x.parse().unwrap())
+        .collect();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_legs"))
+        .args(["sim", "minitaur_quadruped", "--serve"])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let line = state.join(" ");
+    let lines = format!("{line}\n1 2 3\nnot numbers\n{line}\n");
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(lines.as_bytes())
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8(out.stdout).unwrap();
+    let answers: Vec<&str> = text.lines().collect();
+    assert_eq!(answers.len(), 4, "{text}");
+    for a in [answers[0], answers[3]] {
+        let u: Vec<f64> = a.split_whitespace().map(|x| x.parse().unwrap()).collect();
+        assert_eq!(u.len(), applied.len(), "{a}");
+        let scale = applied.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        for (mine, theirs) in u.iter().zip(&applied) {
+            // The same QP at the same state, to its interior-point solver's stopping
+            // tolerance (Clarabel's 1e-8; the state read back differs at rounding).
+            assert!(
+                (mine - theirs).abs() <= 1e-6 * scale,
+                "served {u:?}, sim applied {applied:?}"
+            );
+        }
+    }
+    assert_eq!(answers[1], "error: 3 numbers, expected 51");
+    assert!(answers[2].starts_with("error: "), "{}", answers[2]);
+    let _ = std::fs::remove_dir_all(d);
+}
+
 /// `eval --impact`: the impact map at a state, against its own identities (the toe at
 /// rest after it, the energy lost equal to ½ Δq̇ᵀ M Δq̇, a pushing normal impulse).
 #[test]
