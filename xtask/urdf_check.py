@@ -199,8 +199,12 @@ def main():
         ok_fd, dynamics = constraint_dynamics(legs, name, ir, leg)
         ok = ok and ok_fd
     if len(sys.argv) == 5:
-        ok_ff, said = free_flyer(legs, name, ir, leg, sys.argv[4])
-        ok, dynamics = ok and ok_ff, dynamics + said
+        if ir["model"].get("distance_closures"):
+            # Its rods are closures too: on the free flyer they would be left out.
+            dynamics += ", on its free flyer either"
+        else:
+            ok_ff, said = free_flyer(legs, name, ir, leg, sys.argv[4])
+            ok, dynamics = ok and ok_ff, dynamics + said
     print(
         f"{name}: Pinocchio loads the URDF; M {worst['M']:.1e}, N {worst['N']:.1e} (relative), "
         f"foot {worst['foot']:.1e} m, closure frames {closure:.1e} m at an assembled pose{dynamics} "
