@@ -11,11 +11,12 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use leg_models::assembly::project_velocity;
 use leg_models::control::reference::Sinusoid;
 use leg_models::control::{actuated_reduction, Gains, JointFeedbackLinearization};
+use leg_models::dynamics::contact::Ground;
 use leg_models::dynamics::forward_dynamics;
-use leg_models::nalgebra::SVector;
+use leg_models::nalgebra::{SVector, UnitQuaternion, Vector3};
 use leg_models::robot::{self, RobotState};
 use leg_models::simulate::hybrid::{HybridSimulator, HybridState};
-use leg_models::simulate::{step, State, StepOptions, TorqueSource};
+use leg_models::simulate::{step, Method, State, StepOptions, TorqueSource};
 use leg_models::ContactModel;
 use leg_tests::casadi;
 use leg_tests::passive_release_state;
@@ -459,8 +460,197 @@ fn bench_floating<L, const NQ: usize, const NC: usize, const NU: usize, const NK
     // Measured only where the stance solves: its error path is not what is compared.
     if NK > 0 && stance(&s).is_ok() {
         g.bench_function("stance-ours", |bch| bch.iter(|| stance(black_box(&s))));
+        // One stance step at 0.5 ms (MuJoCo Menagerie's Cassie's time step), every
+        // contact held, the closures projected after it: RK4 and semi-implicit Euler.
+        for (id, method) in [
+            ("step-ours", Method::Rk4),
+            ("step-ours-euler", Method::SemiImplicitEuler),
+        ] {
+            let step = |s: &RobotState<f64, NQ>| {
+                let mut s = *s;
+                robot::pushed_stance_step_by::<L, f64, NQ, NC, NU, NK>(
+                    method,
+                    black_box(&p),
+                    &mut s,
+                    black_box(&u),
+                    &Vector3::zeros(),
+                    &modes,
+                    &ground,
+                    &mu,
+                    5e-4,
+                )
+                .map(|st| (s, st.world_forces))
+            };
+            if step(&s).is_ok() {
+                g.bench_function(id, |bch| bch.iter(|| step(black_box(&s))));
+            }
+        }
+    }
+    if let Some(replay) = Replay::<NQ, NU>::read(L::NAME) {
+        bench_second::<L, NQ, NC, NU, NK>(&mut g, &replay);
     }
     g.finish();
+}
+
+/// The environment variable naming the folder of `legs sim ROBOT` runs (`ROBOT/trajectory.csv`)
+/// that `second-ours` replays (`cargo xtask bench --mujoco` sets it).
+const REPLAY_DIR: &str = "LEG_BENCH_REPLAY";
+
+/// A run of `legs sim ROBOT` (the balance QP closing the loop, the push on the body): the
+/// state it started from, each step's torques and push, and each step's start.
+struct Replay<const NQ: usize, const NU: usize> {
+    dt: f64,
+    starts: Vec<RobotState<f64, NQ>>,
+    torques: Vec<SVector<f64, NU>>,
+    pushes: Vec<Vector3<f64>>,
+}
+
+impl<const NQ: usize, const NU: usize> Replay<NQ, NU> {
+    /// `$LEG_BENCH_REPLAY/NAME/trajectory.csv`; `None` where the variable is not set.
+    /// Panics on a file that is not `sim`'s (the bench is not to run on half a replay).
+    fn read(name: &str) -> Option<Self> {
+        let dir = std::env::var_os(REPLAY_DIR)?;
+        let path = std::path::Path::new(&dir).join(name).join("trajectory.csv");
+        // A robot `sim` cannot run (fewer than three contact points) has no replay.
+        if !path.exists() {
+            return None;
+        }
+        let text =
+            std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let mut lines = text.lines();
+        let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+        let columns = |prefix: &str| -> Vec<usize> {
+            (0..header.len())
+                .filter(|&i| header[i].starts_with(prefix))
+                .collect()
+        };
+        let one = |name: &str| {
+            header
+                .iter()
+                .position(|h| *h == name)
+                .unwrap_or_else(|| panic!("{}: no column {name}", path.display()))
+        };
+        let (q, v, u) = (columns("q_"), columns("v_"), columns("u_"));
+        assert!(
+            q.len() == NQ && v.len() == NQ && u.len() == NU,
+            "{}: {} q, {} v and {} u columns, the model has {NQ} coordinates and {NU} motors",
+            path.display(),
+            q.len(),
+            v.len(),
+            u.len()
+        );
+        let pose = [
+            "body_x", "body_y", "body_z", "body_qw", "body_qx", "body_qy", "body_qz",
+        ]
+        .map(one);
+        let push = ["push_x", "push_y", "push_z"].map(one);
+        let time = one("t");
+        let (mut starts, mut torques, mut pushes, mut times) = (vec![], vec![], vec![], vec![]);
+        for line in lines {
+            let row: Vec<f64> = line
+                .split(',')
+                .map(|x| x.parse().unwrap_or(f64::NAN))
+                .collect();
+            let at = |i: &usize| row[*i];
+            let [x, y, z, w, i, j, k] = pose.map(|c| row[c]);
+            starts.push(RobotState {
+                position: Vector3::new(x, y, z),
+                orientation: UnitQuaternion::new_normalize(leg_models::nalgebra::Quaternion::new(
+                    w, i, j, k,
+                )),
+                q: SVector::from_iterator(q.iter().map(at)),
+                v: SVector::from_iterator(v.iter().map(at)),
+            });
+            torques.push(SVector::from_iterator(u.iter().map(at)));
+            pushes.push(Vector3::from_iterator(push.iter().map(at)));
+            times.push(row[time]);
+        }
+        assert!(times.len() >= 2, "{}: fewer than two rows", path.display());
+        Some(Replay {
+            dt: times[1] - times[0],
+            starts,
+            torques,
+            pushes,
+        })
+    }
+}
+
+/// A simulated second (the replay's steps) of the standing, pushed robot, beside MuJoCo's
+/// (`xtask/mujoco_step_bench.py`, the same torques and pushes): each step's recorded
+/// torques and a motor servo about the recorded motion (the servo MuJoCo's run needs to
+/// keep its robot on its feet open-loop; here it adds nothing to what was recorded, but its
+/// work is done), every contact held, on the world's ground `z = 0` where `sim` stands
+/// robots. RK4 (as `sim` steps) must end where the recorded run did, or the replay is not
+/// the run and nothing is timed.
+fn bench_second<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    g: &mut criterion::BenchmarkGroup<criterion::measurement::WallTime>,
+    replay: &Replay<NQ, NU>,
+) where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+{
+    use leg_models::dynamics::contact::{spec_friction, Modes};
+    const KP: f64 = 200.0;
+    const KD: f64 = 5.0;
+    let p = L::Params::<f64>::default();
+    let ground = Ground {
+        normal: Vector3::z(),
+        offset: 0.0,
+    };
+    let (modes, mu) = (
+        Modes::<NK, 3>::stick(),
+        spec_friction::<L, f64, NQ, NC, NU, NK, 3>(),
+    );
+    let second = |method: Method, every: &mut dyn FnMut(usize, &RobotState<f64, NQ>)| {
+        let mut s = replay.starts[0];
+        for i in 0..replay.starts.len() {
+            let (recorded, mut u) = (&replay.starts[i], replay.torques[i]);
+            for (k, &a) in L::ACTUATED.iter().enumerate() {
+                u[k] += KP * (recorded.q[a] - s.q[a]) + KD * (recorded.v[a] - s.v[a]);
+            }
+            robot::pushed_stance_step_by::<L, f64, NQ, NC, NU, NK>(
+                method,
+                &p,
+                &mut s,
+                &u,
+                &replay.pushes[i],
+                &modes,
+                &ground,
+                &mu,
+                replay.dt,
+            )
+            .unwrap_or_else(|e| panic!("{}: replayed step {i}: {e}", L::NAME));
+            every(i, &s);
+        }
+        s
+    };
+    // Each step's end against the next row's start (the last step's end is not a row).
+    let mut off = 0.0f64;
+    second(Method::Rk4, &mut |i, s| {
+        if let Some(next) = replay.starts.get(i + 1) {
+            off = off.max((s.position - next.position).amax());
+            off = off.max((s.q - next.q).amax());
+        }
+    });
+    assert!(
+        off <= 1e-9,
+        "{}: the RK4 replay parts from the recorded run by {off:.1e} m: not the same run",
+        L::NAME
+    );
+    g.sample_size(10)
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(4));
+    for (id, method) in [
+        ("second-ours", Method::Rk4),
+        ("second-ours-euler", Method::SemiImplicitEuler),
+    ] {
+        g.bench_function(id, |bch| {
+            bch.iter(|| {
+                second(black_box(method), &mut |_, s| {
+                    black_box(s);
+                })
+            })
+        });
+    }
 }
 
 fn benches(c: &mut Criterion) {

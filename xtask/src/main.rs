@@ -66,7 +66,7 @@ fn run_bench(root: &Path, a: args::BenchArgs) -> Result<(), cli::Error> {
         }
         return Ok(());
     }
-    xtask::dev::bench::run(root, a.pinocchio, &a.models).map_err(cli::Error::Failed)
+    xtask::dev::bench::run(root, a.pinocchio, a.mujoco, &a.models).map_err(cli::Error::Failed)
 }
 
 /// Builds `legs` (this package's binary with the generated models) and runs it with the

@@ -812,6 +812,45 @@ where
     L: ContactModel<NQ, NC, NU, NK, 3>,
     T: Real,
 {
+    pushed_stance_step_by::<L, T, NQ, NC, NU, NK>(
+        Method::Rk4,
+        params,
+        state,
+        u,
+        push,
+        modes,
+        ground,
+        mu,
+        dt,
+    )
+}
+
+/// [`pushed_stance_step`] with the integrator `method`: [`Method::Rk4`] (four stance
+/// solves a step) or [`Method::SemiImplicitEuler`] (one, as MuJoCo's default integrator
+/// takes; first order, with the same projections after it, so the closures stay exact).
+#[allow(clippy::too_many_arguments)]
+pub fn pushed_stance_step_by<
+    L,
+    T,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+>(
+    method: Method,
+    params: &L::Params<T>,
+    state: &mut RobotState<T, NQ>,
+    u: &SVector<T, NU>,
+    push: &Vector3<T>,
+    modes: &Modes<NK, 3>,
+    ground: &Ground<T, 3>,
+    mu: &SVector<T, NK>,
+    dt: T,
+) -> Result<Stance<T, NQ, NC, NK>, RobotStepError>
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+    T: Real,
+{
     let f = free_joint::<L, NQ, NC, NU>()?;
     let mut next = *state;
     next.recentre(f);
@@ -831,7 +870,7 @@ where
             .map_err(StepError::from)
     };
     let first = accel(&next.q, &next.v)?;
-    let out = advance(Method::Rk4, dt, &next.q, &next.v, first.x, |_, q, qd| {
+    let out = advance(method, dt, &next.q, &next.v, first.x, |_, q, qd| {
         accel(&q, &qd).map(|s| s.x)
     })?;
     next.q = out.q;

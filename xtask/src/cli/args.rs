@@ -101,12 +101,16 @@ pub struct BenchArgs {
     /// Also build and time Pinocchio's pipeline (C++) from each spec
     #[arg(long)]
     pub pinocchio: bool,
+    /// Also time a simulated second of each standing, pushed floating robot beside
+    /// MuJoCo's `mj_step` at the same 0.5 ms step (the same recorded torques and push)
+    #[arg(long)]
+    pub mujoco: bool,
     /// Instructions per call of the hot paths (callgrind), against the budgets and
     /// beside CasADi's C, instead of the criterion timings
-    #[arg(long, conflicts_with = "pinocchio")]
+    #[arg(long, conflicts_with_all = ["pinocchio", "mujoco"])]
     pub instructions: bool,
     /// Rewrite tests/instruction-budgets.json with today's counts
-    #[arg(long, conflicts_with = "pinocchio")]
+    #[arg(long, conflicts_with_all = ["pinocchio", "mujoco"])]
     pub update_budgets: bool,
     /// Models to time (default: every one); with --pinocchio, Pinocchio's programs are
     /// built and run for these only
@@ -575,6 +579,8 @@ mod tests {
         let m = refused(&["eval", "minitaur", "--q", "1,2,3,4", "--guess", "1,2,3,4"]);
         assert!(m.contains("--assemble"), "{m}");
         let m = refused(&["bench", "--pinocchio", "--instructions"]);
+        assert!(m.contains("cannot be used with"), "{m}");
+        let m = refused(&["bench", "--mujoco", "--update-budgets"]);
         assert!(m.contains("cannot be used with"), "{m}");
         let m = refused(&["eval", "minitaur", "--q", "--json"]);
         assert!(m.contains("got the flag `--json`"), "{m}");

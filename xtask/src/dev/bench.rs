@@ -302,7 +302,9 @@ fn median(root: &Path, group: &str, id: &str) -> Option<f64> {
 
 fn ns(v: Option<f64>) -> String {
     v.map_or("–".into(), |x| {
-        if x >= 1000.0 {
+        if x >= 1e6 {
+            format!("{:.1} ms", x / 1e6)
+        } else if x >= 1000.0 {
             format!("{:.2} µs", x / 1000.0)
         } else if x >= 10.0 {
             format!("{x:.0} ns")
@@ -324,9 +326,10 @@ fn per_state(v: Option<f64>) -> Option<f64> {
     v.map(|x| x / 4.0)
 }
 
-/// Runs the criterion benchmarks (and Pinocchio's pipeline when `pinocchio`) of `only`
-/// (every model when empty), then prints the tables.
-pub fn run(root: &Path, pinocchio: bool, only: &[String]) -> Result<(), String> {
+/// Runs the criterion benchmarks (and Pinocchio's pipeline when `pinocchio`, MuJoCo's
+/// simulated second of the floating robots when `mujoco`) of `only` (every model when
+/// empty), then prints the tables.
+pub fn run(root: &Path, pinocchio: bool, mujoco: bool, only: &[String]) -> Result<(), String> {
     let planar = crate::gen::planar_model_names(root)?;
     let spatial = crate::gen::spatial_model_names(root)?;
     for m in only {
@@ -358,7 +361,36 @@ pub fn run(root: &Path, pinocchio: bool, only: &[String]) -> Result<(), String> 
     if !only.is_empty() {
         args.extend(["--", filter.as_str()]);
     }
-    cargo(root, &args)?;
+    let floating = |m: &String| {
+        crate::gen::committed_ir(root, m)
+            .map(|ir| ir.is_some_and(|ir| ir.model.free_joint.is_some()))
+    };
+    let mut robots = Vec::new();
+    for m in spatial.iter().filter(|m| chosen(m)) {
+        if floating(m)? {
+            robots.push(m.clone());
+        }
+    }
+    // The runs criterion and MuJoCo replay, recorded before criterion starts.
+    let (replay, legs) = if mujoco {
+        let legs = crate::cli::build_legs(root)?;
+        (
+            crate::dev::mujoco_step::record(root, &legs, &robots)?,
+            Some(legs),
+        )
+    } else {
+        (Vec::new(), None)
+    };
+    let replay_dir = crate::dev::mujoco_step::dir(root);
+    let env = match mujoco {
+        true => vec![("LEG_BENCH_REPLAY", replay_dir.to_str().unwrap_or_default())],
+        false => vec![],
+    };
+    crate::cli::cargo(root, &args, &env)?;
+    let mujoco_figures = match &legs {
+        Some(legs) => crate::dev::mujoco_step::run(root, legs, &replay)?,
+        None => BTreeMap::new(),
+    };
     let (pin, pin_spatial) = if pinocchio {
         crate::dev::pinocchio::run(root, &chosen)?
     } else {
@@ -434,16 +466,10 @@ pub fn run(root: &Path, pinocchio: bool, only: &[String]) -> Result<(), String> 
             ratio(ours, p.derivatives)
         );
     }
-    let (mut legs, mut robots) = (Vec::new(), Vec::new());
-    for m in spatial.into_iter().filter(chosen) {
-        let floating =
-            crate::gen::committed_ir(root, &m)?.is_some_and(|ir| ir.model.free_joint.is_some());
-        if floating {
-            robots.push(m);
-        } else {
-            legs.push(m);
-        }
-    }
+    let legs: Vec<String> = spatial
+        .into_iter()
+        .filter(|m| chosen(m) && !robots.contains(m))
+        .collect();
     header("| spatial model | harness | fused ours | CasADi C Lagrange | ratio | CasADi C closed | ratio | FD ours | Pinocchio C++ constraintDynamics (converged) | ratio | its iterations | Pinocchio, one iteration | ratio | its q̈ off by | sim step | Pinocchio aba (no closures) | ratio |", 17, legs.len());
     for m in legs {
         let g = |id: &str| median(root, &m, id);
@@ -510,6 +536,33 @@ pub fn run(root: &Path, pinocchio: bool, only: &[String]) -> Result<(), String> 
             ),
             ns(p.and_then(|p| p.aba)),
             ratio(fd, p.and_then(|p| p.aba)),
+        ];
+        println!("| {m} | {} |", cells.join(" | "));
+    }
+    header("| floating robot, a simulated second standing and pushed (the same recorded torques and push, 0.5 ms steps) | ours RK4 | MuJoCo RK4 | ratio | ours semi-implicit Euler | MuJoCo Euler (its default) | ratio | one step ours RK4 / Euler | MuJoCo's largest loop gap (RK4 / Euler) | MuJoCo's body from ours, largest (RK4 / Euler) |", 10, mujoco_figures.len());
+    for (m, f) in &mujoco_figures {
+        let g = |id: &str| median(root, m, id);
+        let theirs = |integrator: &str, key: &str| f[integrator][key].as_f64();
+        let seconds = |integrator: &str| theirs(integrator, "median_s").map(|s| s * 1e9);
+        let (rk4, euler) = (g("second-ours"), g("second-ours-euler"));
+        let cells = [
+            ns(rk4),
+            ns(seconds("rk4")),
+            ratio(rk4, seconds("rk4")),
+            ns(euler),
+            ns(seconds("euler")),
+            ratio(euler, seconds("euler")),
+            format!("{} / {}", ns(g("step-ours")), ns(g("step-ours-euler"))),
+            format!(
+                "{:.1e} / {:.1e} m",
+                theirs("rk4", "largest_gap_m").unwrap_or(f64::NAN),
+                theirs("euler", "largest_gap_m").unwrap_or(f64::NAN)
+            ),
+            format!(
+                "{:.1} / {:.1} mm",
+                1e3 * theirs("rk4", "body_from_ours_m").unwrap_or(f64::NAN),
+                1e3 * theirs("euler", "body_from_ours_m").unwrap_or(f64::NAN)
+            ),
         ];
         println!("| {m} | {} |", cells.join(" | "));
     }
