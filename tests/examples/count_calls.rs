@@ -10,7 +10,8 @@
 //! forward dynamics), on a leg with contacts `contact_stance` (forward dynamics with every
 //! contact sticking where it is) and `contact_slide` (every contact sliding: in 3-D its
 //! friction along its slip velocity), on a floating robot `robot_forward_dynamics` and
-//! `robot_stance` (`run_robot`) and, with the `peers` feature, `casadi_fused`, `casadi_forward_dynamics`,
+//! `robot_stance`, `robot_stance_step` (`run_robot`) and, with the `peers` feature, `casadi_fused`,
+//! `casadi_forward_dynamics`,
 //! `casadi_closed_fused`, `casadi_closed_forward_dynamics`, `casadi_closed_derivatives`.
 //!
 //! Every contender runs in the same loop (`measure`) and does only its own work per call:
@@ -280,7 +281,8 @@ fn run_contact<
 /// A floating robot as a user calls it (`leg_models::robot`), at the state the criterion
 /// benchmark uses: `robot_forward_dynamics` (`forward_dynamics_at`: the chart centred on
 /// the body, gravity rotated into it, then the body's v̇) and `robot_stance`
-/// (`stance_dynamics` with every contact held, v̇ too).
+/// (`stance_dynamics` with every contact held, v̇ too), and `robot_stance_step` (one
+/// semi-implicit Euler step of that stance at 0.5 ms, its projections included).
 fn run_robot<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
     what: &str,
     n: usize,
@@ -289,8 +291,10 @@ where
     L: ContactModel<NQ, NC, NU, NK, 3>,
 {
     use leg_models::robot;
-    if !matches!(what, "robot_forward_dynamics" | "robot_stance")
-        || (what == "robot_stance" && NK == 0)
+    if !matches!(
+        what,
+        "robot_forward_dynamics" | "robot_stance" | "robot_stance_step"
+    ) || (what != "robot_forward_dynamics" && NK == 0)
     {
         return None;
     }
@@ -315,6 +319,27 @@ where
         };
         call().ok()?;
         return Some(measure(n, || call().map_or(0.0, |a| a[0])));
+    }
+    if what == "robot_stance_step" {
+        // One semi-implicit Euler stance step at 0.5 ms (`bench --mujoco`'s step), the
+        // projections after it included.
+        let call = || {
+            let mut s = black_box(s);
+            robot::pushed_stance_step_by::<L, f64, NQ, NC, NU, NK>(
+                leg_models::simulate::Method::SemiImplicitEuler,
+                black_box(&p),
+                &mut s,
+                black_box(&u),
+                &leg_models::nalgebra::Vector3::zeros(),
+                &modes,
+                &ground,
+                &mu,
+                5e-4,
+            )
+            .map(|_| s)
+        };
+        call().ok()?;
+        return Some(measure(n, || call().map_or(0.0, |s| s.v[0])));
     }
     let call = || {
         robot::stance_dynamics::<L, f64, NQ, NC, NU, NK>(

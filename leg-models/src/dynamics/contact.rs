@@ -1231,9 +1231,12 @@ where
     }
     let rows = ContactRows::new(ground, &jc, &held, &SVector::zeros(), &SVector::zeros());
     // M q̇⁺ − Rᵀ Λ = M q̇, R q̇⁺ = 0: the least change in M's metric onto the rows.
+    // The factor's own structured solve: along the tree where `M` is factored there
+    // (half solves, a leg's columns skipped for another leg's rows), not the dense
+    // columns, which cost Cassie's projection more than its stance solve.
     fn onto<
         T: Real,
-        F: Factored<T, NQ>,
+        F: StructuredSolve<T, NQ>,
         const NQ: usize,
         const NC: usize,
         const NK: usize,
@@ -1245,16 +1248,15 @@ where
         rows: &ContactRows<T, NQ, NK, ND>,
         momentum: &SVector<T, NQ>,
     ) -> Result<SVector<T, NQ>, DynamicsError> {
-        Ok(solve_structured(
-            chol_m,
+        let (x, _, _) = chol_m.solve_structured::<NC, NK, ND, 1>(
             j,
             &SVector::zeros(),
             deficiency,
             rows,
             &SVector::zeros(),
             momentum,
-        )?
-        .x)
+        )?;
+        Ok(x)
     }
     let momentum = mul(&m, qd);
     let d = L::REDUNDANT_ROWS;

@@ -36,9 +36,10 @@ use nalgebra::{Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
 
 use crate::assembly::{project_position, AssemblyError, Tolerance};
 use crate::dynamics::contact::{
-    impact_map, project_held_velocity, ContactSolution, ContactSystem, Ground, Impact, ImpactError,
-    Modes,
+    impact_map, project_held_velocity, slip_directions, ContactRows, ContactSolution,
+    ContactSystem, Ground, Impact, ImpactError, Modes, StructuredSolve,
 };
+use crate::dynamics::forward::factor_mass;
 use crate::dynamics::{actuation, forward_dynamics, Acceleration, DynamicsError};
 use crate::model::contract::{ContactModel, LegDynamics, Parameters, Real};
 use crate::model::linalg::Cholesky;
@@ -827,7 +828,12 @@ where
 
 /// [`pushed_stance_step`] with the integrator `method`: [`Method::Rk4`] (four stance
 /// solves a step) or [`Method::SemiImplicitEuler`] (one, as MuJoCo's default integrator
-/// takes; first order, with the same projections after it, so the closures stay exact).
+/// takes; first order). Semi-implicit Euler steps at the velocity level: the rates after
+/// the step keep the closures and the held contacts at the step's start (`J v⁺ = 0`,
+/// `C v⁺ = 0`), the forces are the step's impulses over `dt`, and `solution.x` is
+/// `(v⁺ − v) / dt`; the closures are projected after it as after RK4, so they stay
+/// exact. Only RK4's rates are projected onto the held rows after the step (its
+/// acceleration-level solve needs them there).
 #[allow(clippy::too_many_arguments)]
 pub fn pushed_stance_step_by<
     L,
@@ -864,25 +870,88 @@ where
     for k in 0..3 {
         applied[f + k] += on_body[k];
     }
-    let accel = |q: &SVector<T, NQ>, qd: &SVector<T, NQ>| {
-        ContactSystem::new::<L, NU>(&chart, q, qd, modes, &SVector::zeros(), &local, mu, None)
-            .and_then(|s| s.solve(&applied))
-            .map_err(StepError::from)
+    let first = match method {
+        Method::Rk4 => {
+            let accel = |q: &SVector<T, NQ>, qd: &SVector<T, NQ>| {
+                ContactSystem::new::<L, NU>(
+                    &chart,
+                    q,
+                    qd,
+                    modes,
+                    &SVector::zeros(),
+                    &local,
+                    mu,
+                    None,
+                )
+                .and_then(|s| s.solve(&applied))
+                .map_err(StepError::from)
+            };
+            let first = accel(&next.q, &next.v)?;
+            let out = advance(method, dt, &next.q, &next.v, first.x, |_, q, qd| {
+                accel(&q, &qd).map(|s| s.x)
+            })?;
+            next.q = out.q;
+            next.v = out.qd;
+            first
+        }
+        Method::SemiImplicitEuler => {
+            // At the velocity level (Moreau's time stepping): the rates after the step
+            // are held on the closures and the held rows at the step's start,
+            // `J v⁺ = 0`, `C v⁺ = 0`, by the same solve with `−J v / dt`, `−C v / dt` on
+            // its rows where the acceleration's takes `−J̇ v`, `−Ċ v`. Rows that repeat
+            // each other (a rigid foot's toe and heel) then always agree, whatever the
+            // rates, so the held rates need no projection after the step; each step's
+            // solve puts them back on the rows where the pose moved them.
+            // The system's parts built here rather than as a `ContactSystem` (the same
+            // terms, factor and rows): moving that whole struct (M, its factor, the rows)
+            // out of its constructor's `Result` cost a tenth of the step.
+            let (q, v) = (&next.q, &next.v);
+            let terms = L::dynamics_terms(q, v, &chart);
+            let chol_m =
+                factor_mass::<L, T, NQ, NC, NU>(&terms.mass_matrix).map_err(StepError::from)?;
+            let c = local.rows(&L::contact_jacobian(q, &chart));
+            let slip = slip_directions(&c, v, modes, None).map_err(StepError::from)?;
+            let rows = ContactRows::from_rows(c, modes, mu, &slip);
+            let per_dt = T::one() / dt;
+            let r_j = -(terms.constraint_jacobian * v) * per_dt;
+            let r_c = -(rows.c * v) * per_dt;
+            let tau = applied - terms.bias_forces - L::damping_forces(v, &chart);
+            let (x, closure, contact) = chol_m
+                .solve_structured(
+                    &terms.constraint_jacobian,
+                    &r_j,
+                    L::REDUNDANT_ROWS,
+                    &rows,
+                    &r_c,
+                    &tau,
+                )
+                .map_err(StepError::from)?;
+            next.v += x * dt;
+            next.q += next.v * dt;
+            ContactSolution {
+                x,
+                closure,
+                contact,
+            }
+        }
     };
-    let first = accel(&next.q, &next.v)?;
-    let out = advance(method, dt, &next.q, &next.v, first.x, |_, q, qd| {
-        accel(&q, &qd).map(|s| s.x)
-    })?;
-    next.q = out.q;
-    next.v = out.qd;
     if NC > 0 {
         project_position::<L, T, NQ, NC, NU>(&chart, &mut next.q, &Tolerance::default())
             .map_err(StepError::from)?;
     }
-    // The rates back on the closures and the held contacts: the step's drift off them
-    // would make the held rows of one rigid foot contradict each other next step.
-    project_held_velocity::<L, T, NQ, NC, NU, NK, 3>(&chart, &next.q, &mut next.v, modes, &local)
+    if method == Method::Rk4 {
+        // The rates back on the closures and the held contacts: the step's drift off
+        // them would make the held rows of one rigid foot contradict each other next
+        // step.
+        project_held_velocity::<L, T, NQ, NC, NU, NK, 3>(
+            &chart,
+            &next.q,
+            &mut next.v,
+            modes,
+            &local,
+        )
         .map_err(StepError::from)?;
+    }
     next.recentre(f);
     let stance = Stance {
         world_forces: forces_in_world(&local, &centre, &first.contact),

@@ -20,13 +20,15 @@ const PATHS: [&str; 3] = ["fused", "forward_dynamics", "derivatives"];
 /// The paths only some models have (count_calls refuses them elsewhere): on a leg with
 /// contacts, forward dynamics with every contact held and with every contact sliding; on
 /// a floating robot, as a user calls it (`leg_models::robot`: the chart centred on the
-/// body, gravity rotated into it), forward dynamics and the stance with every contact
-/// held.
-const APPLICABLE_PATHS: [&str; 4] = [
+/// body, gravity rotated into it), forward dynamics, the stance with every contact
+/// held, and one semi-implicit Euler step of that stance at 0.5 ms (its projection
+/// included: `bench --mujoco`'s step).
+const APPLICABLE_PATHS: [&str; 5] = [
     "contact_stance",
     "contact_slide",
     "robot_forward_dynamics",
     "robot_stance",
+    "robot_stance_step",
 ];
 /// The paths CasADi's C has in both forms (its derivatives are compared apart).
 const COMPARED: [&str; 2] = ["fused", "forward_dynamics"];
