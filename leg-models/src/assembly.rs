@@ -348,6 +348,49 @@ where
     solve_closure::<L, T, NQ, NC, NU>(params, q, &[true; NQ], tol)
 }
 
+/// [`project_position`] for a pose one step's move from `near`, whose closure Jacobian
+/// `j` the caller already has (a step's start): chord Gauss–Newton steps
+/// `Jᵀ (J Jᵀ)⁻¹ φ` with that `J` held, each shrinking `φ` by about the step's move, judged
+/// against the tolerance at the leg's size at `near` (a step changes that size by far
+/// less than the tolerance's own scale), at most four. Where they do not get there (a
+/// long step, a pose near a singularity) the full projection runs from where they
+/// started, so the result is held to the same tolerance either way.
+pub fn project_position_near<L, T, const NQ: usize, const NC: usize, const NU: usize>(
+    params: &L::Params<T>,
+    q: &mut SVector<T, NQ>,
+    near: &SVector<T, NQ>,
+    j: &SMatrix<T, NC, NQ>,
+    tol: &Tolerance<T>,
+) -> Result<(), AssemblyError>
+where
+    L: LegDynamics<NQ, NC, NU>,
+    T: Real,
+{
+    if NC == 0 {
+        return Ok(());
+    }
+    let start = *q;
+    let limit = tol.relative_residual * leg_size::<L, T, NQ, NC, NU>(params, near);
+    if let Some(f) = factor_closure_rows::<L, T, NQ, NC, NU>(&(j * j.transpose())) {
+        for _ in 0..4 {
+            let mut w = L::closure_residual(q, params);
+            if within(&w, limit) {
+                return Ok(());
+            }
+            if !crate::model::linalg::all_finite(&w) {
+                break;
+            }
+            f.solve_mut(&mut w);
+            *q -= j.transpose() * w;
+        }
+        if within(&L::closure_residual(q, params), limit) {
+            return Ok(());
+        }
+    }
+    *q = start;
+    project_position::<L, T, NQ, NC, NU>(params, q, tol)
+}
+
 /// Removes from `q̇` the part that violates `J q̇ = 0`, in the metric of `M` (the
 /// correction of least kinetic energy): `q̇ ← q̇ − M⁻¹Jᵀ (J M⁻¹ Jᵀ)⁻¹ J q̇`.
 pub fn project_velocity<L, T, const NQ: usize, const NC: usize, const NU: usize>(

@@ -566,6 +566,20 @@ fn check_robot<
             1e-3
         )
     );
+    none_and_ok!(
+        "robot::pushed_stance_step_by (semi-implicit Euler)",
+        robot::pushed_stance_step_by::<L, f64, NQ, NC, NU, NK>(
+            leg_models::simulate::Method::SemiImplicitEuler,
+            &p,
+            &mut standing,
+            &u,
+            &leg_models::nalgebra::Vector3::new(1.0, 0.0, 0.0),
+            &modes,
+            &ground,
+            &mu,
+            5e-4
+        )
+    );
     // The balance QP: its first command sets the solver up (and allocates); the next,
     // with the same held contacts, update it in place. Clarabel 0.11.1's `solve` itself
     // allocates once a call (measured on Clarabel alone: its updates allocate nothing,

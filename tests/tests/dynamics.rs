@@ -311,6 +311,60 @@ pub fn check_assembly<
     );
 }
 
+/// `project_position_near` (the Euler stance step's projection, chord steps with the
+/// step's start's `J`): from a step's move along assembled rates, and from a long one
+/// (which may take the fallback), the pose ends on the closures to the tolerance, and a
+/// short move's projection is where `project_position`'s is to second order of the move
+/// (both are minimal-norm corrections, with `J` from the start and at the pose).
+pub fn check_projection_near<
+    L: LegModel<NQ, NC, NU>,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+>() {
+    use leg_models::assembly::{leg_size, project_position, project_position_near};
+    if NC == 0 {
+        return;
+    }
+    let p = L::Params::<f64>::default();
+    let tol = Tolerance::default();
+    let mut rng = Rng::new(29);
+    let (mut worst, mut apart) = (0.0f64, 0.0f64);
+    for _ in 0..20 {
+        let s = random_assembled_state::<L, NQ, NC, NU>(&p, &mut rng, 3.0);
+        let j = L::constraint_jacobian(&s.q, &p);
+        for dt in [1e-3, 0.1] {
+            let moved = s.q + s.qd * dt;
+            let mut near = moved;
+            project_position_near::<L, f64, NQ, NC, NU>(&p, &mut near, &s.q, &j, &tol)
+                .unwrap_or_else(|e| panic!("{}: {e} after a move of {dt} s", L::NAME));
+            let size = leg_size::<L, f64, NQ, NC, NU>(&p, &near);
+            let r = L::closure_residual(&near, &p).amax() / size;
+            worst = worst.max(r);
+            assert!(
+                r <= 1.01 * tol.relative_residual,
+                "{}: {r:e} of its size off the closures after a move of {dt} s",
+                L::NAME
+            );
+            if dt == 1e-3 {
+                let mut full = moved;
+                project_position::<L, f64, NQ, NC, NU>(&p, &mut full, &tol).unwrap();
+                let step = (moved - s.q).amax();
+                apart = apart.max((near - full).amax() / (step * step).max(1e-300));
+            }
+        }
+    }
+    eprintln!(
+        "{}: projected near a step's start: residual {worst:.1e} of the size; off project_position's by {apart:.1e} × the move²",
+        L::NAME
+    );
+    assert!(
+        apart < 100.0,
+        "{}: the chord projection lands {apart:e} × the move² from project_position's",
+        L::NAME
+    );
+}
+
 macro_rules! runtime {
     ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
         mod $module {
@@ -326,6 +380,10 @@ macro_rules! runtime {
             #[test]
             fn assembly_velocities_and_foot_inverse() {
                 super::check_assembly::<Model, $nq, $nc, $nu>();
+            }
+            #[test]
+            fn projection_near_a_step_start_closes_the_loops() {
+                super::check_projection_near::<Model, $nq, $nc, $nu>();
             }
         }
     };

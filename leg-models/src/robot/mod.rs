@@ -34,7 +34,7 @@ use core::fmt;
 
 use nalgebra::{Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
 
-use crate::assembly::{project_position, AssemblyError, Tolerance};
+use crate::assembly::{project_position, project_position_near, AssemblyError, Tolerance};
 use crate::dynamics::contact::{
     impact_map, project_held_velocity, slip_directions, ContactRows, ContactSolution,
     ContactSystem, Ground, Impact, ImpactError, Modes, StructuredSolve,
@@ -927,7 +927,17 @@ where
                 )
                 .map_err(StepError::from)?;
             next.v += x * dt;
+            let start = next.q;
             next.q += next.v * dt;
+            // The closures' Jacobian at the step's start serves the projection too.
+            project_position_near::<L, T, NQ, NC, NU>(
+                &chart,
+                &mut next.q,
+                &start,
+                &terms.constraint_jacobian,
+                &Tolerance::default(),
+            )
+            .map_err(StepError::from)?;
             ContactSolution {
                 x,
                 closure,
@@ -935,11 +945,11 @@ where
             }
         }
     };
-    if NC > 0 {
-        project_position::<L, T, NQ, NC, NU>(&chart, &mut next.q, &Tolerance::default())
-            .map_err(StepError::from)?;
-    }
     if method == Method::Rk4 {
+        if NC > 0 {
+            project_position::<L, T, NQ, NC, NU>(&chart, &mut next.q, &Tolerance::default())
+                .map_err(StepError::from)?;
+        }
         // The rates back on the closures and the held contacts: the step's drift off
         // them would make the held rows of one rigid foot contradict each other next
         // step.
