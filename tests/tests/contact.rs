@@ -665,3 +665,151 @@ fn sticking_stance_equals_the_toe_pinned_by_a_closure() {
     }
     assert!(compared > STATES / 2, "{compared} states compared");
 }
+
+/// Lemke's method against enumeration: on random LCPs whose `M` is a P-matrix (a
+/// positive definite symmetric part plus a skew part), which have exactly one solution,
+/// every one of the `2ⁿ` complementary bases is tried by a dense LU and the one
+/// feasible basis's solution must be Lemke's, to 1e-10; and Lemke's `w`, `z` satisfy
+/// the conditions themselves.
+#[test]
+fn lemke_meets_enumeration_on_p_matrix_problems() {
+    use leg_models::dynamics::lcp::Lemke;
+    let mut rng = Rng::new(31);
+    let mut pivots = 0;
+    let mut problems = 0;
+    for n in 1..=7usize {
+        let mut lemke = Lemke::<f64>::new(n);
+        for _ in 0..60 {
+            let a = DMatrix::<f64>::from_fn(n, n, |_, _| rng.range(-1.0, 1.0));
+            let skew = DMatrix::<f64>::from_fn(n, n, |_, _| rng.range(-1.0, 1.0));
+            let m = a.transpose() * &a
+                + DMatrix::<f64>::identity(n, n) * 0.05
+                + (&skew - skew.transpose());
+            let q = DVector::<f64>::from_fn(n, |_, _| rng.range(-1.0, 1.0));
+            let flat: Vec<f64> = (0..n * n).map(|k| m[(k / n, k % n)]).collect();
+            lemke.solve(&flat, q.as_slice()).unwrap();
+            pivots += lemke.pivots;
+            problems += 1;
+            let z = DVector::from_column_slice(lemke.z());
+            let w = DVector::from_column_slice(lemke.w());
+            let mut found = Vec::new();
+            for set in 0..(1usize << n) {
+                let basic: Vec<usize> = (0..n).filter(|i| set >> i & 1 == 1).collect();
+                let k = basic.len();
+                let mut zb = DVector::<f64>::zeros(n);
+                if k > 0 {
+                    let mbb = DMatrix::from_fn(k, k, |r, c| m[(basic[r], basic[c])]);
+                    let qb = DVector::from_fn(k, |r, _| -q[basic[r]]);
+                    let Some(sol) = mbb.lu().solve(&qb) else {
+                        continue;
+                    };
+                    for (r, &i) in basic.iter().enumerate() {
+                        zb[i] = sol[r];
+                    }
+                }
+                let wb = &m * &zb + &q;
+                let feasible = (0..n).all(|i| {
+                    if set >> i & 1 == 1 {
+                        zb[i] >= -1e-12
+                    } else {
+                        wb[i] >= -1e-12
+                    }
+                });
+                if feasible {
+                    found.push(zb);
+                }
+            }
+            assert!(!found.is_empty(), "n = {n}: no basis is feasible");
+            for zb in &found {
+                assert!(
+                    (zb - &z).amax() < 1e-10,
+                    "n = {n}: Lemke's z {z} is not the enumerated {zb}"
+                );
+            }
+            assert!((&w - (&m * &z + &q)).amax() < 1e-12);
+            for i in 0..n {
+                assert!(z[i] >= 0.0 && w[i] >= -1e-12 && z[i] * w[i] == 0.0);
+            }
+        }
+    }
+    eprintln!(
+        "Lemke on {problems} P-matrix problems of sizes 1..7: {:.2} pivots each on average, every one the enumerated solution",
+        pivots as f64 / problems as f64
+    );
+}
+
+/// Degenerate problems of the kind contact gives (a positive semidefinite `M` of
+/// repeated rows, as a rigid foot's toe and heel make, and `q` with zeros, as resting
+/// contacts make): Lemke's solution satisfies the conditions, complementarity exactly.
+#[test]
+fn lemke_solves_degenerate_problems() {
+    use leg_models::dynamics::lcp::Lemke;
+    let mut rng = Rng::new(7);
+    for n in [2usize, 4, 6, 9] {
+        let mut lemke = Lemke::<f64>::new(n);
+        for _ in 0..100 {
+            // Rank about half: rows repeated.
+            let half = DMatrix::<f64>::from_fn(n.div_ceil(2), n, |_, _| rng.range(-1.0, 1.0));
+            let a = DMatrix::from_fn(n, n, |r, c| half[(r % half.nrows(), c)]);
+            let m = a.transpose() * &a;
+            // q in M's range plus a non-negative part, some entries zero: the problem then
+            // has a solution (q = M z₀ + s with z₀, s ≥ 0).
+            let z0 = DVector::<f64>::from_fn(n, |_, _| rng.range(0.0, 1.0).max(0.5) - 0.5);
+            let s = DVector::<f64>::from_fn(n, |_, _| rng.range(0.0, 1.0).max(0.5) - 0.5);
+            let q = -(&m * &z0) + s;
+            let flat: Vec<f64> = (0..n * n).map(|k| m[(k / n, k % n)]).collect();
+            lemke
+                .solve(&flat, q.as_slice())
+                .unwrap_or_else(|e| panic!("n = {n}: {e}"));
+            let (z, w) = (lemke.z(), lemke.w());
+            let scale = 1.0 + m.amax() + q.amax();
+            for i in 0..n {
+                assert!(z[i] >= 0.0, "n = {n}: z[{i}] = {}", z[i]);
+                assert!(w[i] >= -1e-10 * scale, "n = {n}: w[{i}] = {}", w[i]);
+                assert!(z[i] * w[i] == 0.0, "n = {n}: z w at {i}");
+            }
+            let residual =
+                (DVector::from_column_slice(w) - (&m * DVector::from_column_slice(z) + &q)).amax();
+            assert!(
+                residual < 1e-12 * scale,
+                "n = {n}: w off M z + q by {residual}"
+            );
+        }
+    }
+}
+
+/// Bad input is refused by name: the wrong size, a NaN, and a problem with no solution
+/// (`w = −z − 1` can never be non-negative), which Lemke's path ends on a ray.
+#[test]
+fn lemke_refuses_bad_input() {
+    use leg_models::dynamics::lcp::{LcpError, Lemke};
+    let mut lemke = Lemke::<f64>::new(2);
+    assert_eq!(
+        lemke.solve(&[1.0, 0.0, 0.0], &[1.0, 1.0]),
+        Err(LcpError::Size {
+            expected: 2,
+            got: 3
+        })
+    );
+    assert_eq!(
+        lemke.solve(&[1.0, 0.0, 0.0, 1.0], &[1.0]),
+        Err(LcpError::Size {
+            expected: 2,
+            got: 1
+        })
+    );
+    assert_eq!(
+        lemke.solve(&[1.0, 0.0, 0.0, f64::NAN], &[1.0, -1.0]),
+        Err(LcpError::NonFinite)
+    );
+    let mut one = Lemke::<f64>::new(1);
+    assert!(matches!(
+        one.solve(&[-1.0], &[-1.0]),
+        Err(LcpError::Ray { .. })
+    ));
+    // q ≥ 0: z = 0 without a pivot.
+    one.solve(&[-1.0], &[2.0]).unwrap();
+    assert_eq!((one.z()[0], one.w()[0], one.pivots), (0.0, 2.0, 0));
+    let text = LcpError::Ray { pivots: 3 }.to_string();
+    assert!(text.contains("ray") && text.contains('3'), "{text}");
+}

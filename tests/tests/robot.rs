@@ -1368,6 +1368,26 @@ macro_rules! floating_robot_tests {
             fn stands_still_with_its_weight_on_its_feet() {
                 super::stands_still_on_its_feet::<$ty, $nq, $nc, $nu, $nk>();
             }
+
+            #[test]
+            fn free_feet_stand_as_held_feet_do() {
+                super::free_feet_stand_as_held_feet_do::<$ty, $nq, $nc, $nu, $nk>();
+            }
+
+            #[test]
+            fn free_feet_land_flat() {
+                super::free_feet_land_flat::<$ty, $nq, $nc, $nu, $nk>();
+            }
+
+            #[test]
+            fn free_feet_lift_off_and_slide() {
+                super::free_feet_lift_off_and_slide::<$ty, $nq, $nc, $nu, $nk>();
+            }
+
+            #[test]
+            fn free_feet_refuse_bad_input() {
+                super::free_feet_refuse_bad_input::<$ty, $nq, $nc, $nu, $nk>();
+            }
         }
     };
 }
@@ -1480,4 +1500,547 @@ fn deepest_split_meets_a_hand_solution_and_refuses_bad_input() {
     bad[2] = f64::NAN;
     let e = deepest_split(&bad, &n, &modes, &mu).unwrap_err();
     assert!(e.to_string().contains("not finite"), "{e}");
+}
+
+/// What one free-feet step (`robot::time_stepping::contact_step`) must satisfy, checked
+/// from outside it, in the chart centred at the step's start, from the step's `v⁺` (its
+/// `acceleration`), its impulses and its modes:
+///
+/// - complementarity per contact: `p_n ≥ 0`, `n·C v⁺ + φ/h ≥ 0`, one of them zero;
+///   friction inside the 4-edge pyramid `|p_t₁| + |p_t₂| ≤ μ p_n`; a sticking contact's
+///   velocity along the ground zero, a sliding one's friction on the pyramid's edge and
+///   opposing its slip (`p_t · v_t = −γ μ p_n`), a contact in flight with no impulse;
+/// - Newton: the free joint's translation rows of `M (v⁺ − v) + h (N − G)` at the step's
+///   start, in the world, are `h (m g + push)` plus the feet's impulses in the world (the
+///   weight from the spec's masses);
+/// - the impulses' energy identity: `T(v⁺) − T(v*) = −½ Δᵀ M Δ − Σ p_n φ/h − Σ γ μ p_n`
+///   with `Δ = v⁺ − v*` (`v*` the step's rates without the ground).
+///
+/// Returns the largest violation of each, scaled: complementarity in m/s and N s over
+/// the step's scale, Newton over the weight's impulse, energy over the kinetic energy
+/// (or the weight's work over the step where that is larger).
+#[allow(clippy::too_many_arguments)]
+fn free_step_violations<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    p: &L::Params<f64>,
+    before: &RobotState<f64, NQ>,
+    step: &leg_models::robot::time_stepping::ContactStep<f64, NQ, NC, NK>,
+    push: &Vector3<f64>,
+    ground: &leg_models::dynamics::contact::Ground<f64, 3>,
+    mu: &SVector<f64, NK>,
+    dt: f64,
+) -> [f64; 3]
+where
+    L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
+{
+    use leg_models::dynamics::contact::ContactMode;
+    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
+    let mut s0 = *before;
+    s0.recentre(f);
+    let chart = robot::chart_params::<L, f64, NQ, NC, NU>(p, &s0.orientation).unwrap();
+    let local = robot::ground_in_chart(ground, &s0.position, &s0.orientation);
+    let c = local.rows(&L::contact_jacobian(&s0.q, &chart));
+    let heights = local.coordinates(&L::contact_positions(&s0.q, &chart));
+    let v_plus = s0.v + step.acceleration * dt;
+    let v_free = s0.v + step.free_acceleration * dt;
+    let rates = c * v_plus;
+    let mass = spec_mass::<L, NQ, NC, NU>(p);
+    let weight_impulse = mass * 9.81 * dt;
+    let speed_scale = v_plus.amax() * L::leg_size(&s0.q, p) + 9.81 * dt;
+    let mut comp = 0.0f64;
+    let mut slip_work = 0.0;
+    let mut gap_work = 0.0;
+    for k in 0..NK / 3 {
+        let (pt1, pt2, pn) = (
+            step.impulses[3 * k],
+            step.impulses[3 * k + 1],
+            step.impulses[3 * k + 2],
+        );
+        let (vt1, vt2) = (rates[3 * k], rates[3 * k + 1]);
+        let wn = rates[3 * k + 2] + heights[3 * k + 2] / dt;
+        let gamma = step.slip_speed[3 * k + 2];
+        let m = mu[3 * k];
+        let imp = |x: f64| x / weight_impulse;
+        let vel = |x: f64| x / speed_scale;
+        comp = comp
+            .max(imp(-pn))
+            .max(vel(-wn))
+            .max(imp(pn).min(vel(wn)))
+            .max(imp(pt1.abs() + pt2.abs() - m * pn));
+        match step.modes.get(k) {
+            ContactMode::Flight => {
+                comp = comp.max(imp(step.impulses.fixed_rows::<3>(3 * k).amax()))
+            }
+            ContactMode::Stick => comp = comp.max(vel(vt1.abs().max(vt2.abs()))),
+            ContactMode::Slide { .. } => {
+                comp = comp
+                    .max(imp((pt1.abs() + pt2.abs() - m * pn).abs()))
+                    .max(imp(pt1 * vt1 + pt2 * vt2 + gamma * m * pn) / speed_scale)
+            }
+        }
+        slip_work += gamma * m * pn;
+        gap_work += pn * heights[3 * k + 2] / dt;
+    }
+    // Newton for the step: the free joint's translation rows of `M (v⁺ − v) + h (N −
+    // G)` (the momentum's change less the Coriolis terms over the step, at the step's
+    // start pose), turned into the world, against the weight from the spec's masses, the
+    // push and the feet's impulses in the world. (The momentum at the pose after the
+    // step differs from it by O(h²): semi-implicit Euler keeps it only to its order.)
+    let terms = L::dynamics_terms(&s0.q, &s0.v, &chart);
+    let gravity_terms = L::dynamics_terms(&s0.q, &SVector::zeros(), &chart).bias_forces;
+    let rows = terms.mass_matrix * (v_plus - s0.v) + (terms.bias_forces - gravity_terms) * dt;
+    let lin = s0
+        .orientation
+        .transform_vector(&Vector3::new(rows[f], rows[f + 1], rows[f + 2]));
+    let impulses = (0..NK / 3).fold(Vector3::zeros(), |a, k| {
+        a + Vector3::new(
+            step.world_forces[3 * k],
+            step.world_forces[3 * k + 1],
+            step.world_forces[3 * k + 2],
+        ) * dt
+    });
+    let expected = (Vector3::new(0.0, 0.0, -9.81) * mass + push) * dt + impulses;
+    let newton = (lin - expected).norm() / weight_impulse;
+    let m = L::mass_matrix(&s0.q, &chart);
+    let kinetic = |v: &SVector<f64, NQ>| 0.5 * v.dot(&(m * v));
+    let delta = v_plus - v_free;
+    let identity = -0.5 * delta.dot(&(m * delta)) - gap_work - slip_work;
+    let energy_scale = kinetic(&v_plus)
+        .max(kinetic(&v_free))
+        .max(weight_impulse * 9.81 * dt)
+        .max(weight_impulse * speed_scale);
+    let energy = (kinetic(&v_plus) - kinetic(&v_free) - identity).abs() / energy_scale;
+    [comp, newton, energy]
+}
+
+/// The largest of each of [`free_step_violations`] over a run, and how many steps had
+/// each contact mode (flight, stick, slide) summed over the contacts.
+#[derive(Debug, Default)]
+struct FreeRun {
+    worst: [f64; 3],
+    modes: [usize; 3],
+    pivots: usize,
+    steps: usize,
+}
+
+impl FreeRun {
+    #[allow(clippy::too_many_arguments)]
+    fn step<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+        &mut self,
+        problem: &mut leg_models::robot::time_stepping::FootContacts<f64>,
+        p: &L::Params<f64>,
+        s: &mut RobotState<f64, NQ>,
+        u: &SVector<f64, NU>,
+        push: &Vector3<f64>,
+        ground: &leg_models::dynamics::contact::Ground<f64, 3>,
+        mu: &SVector<f64, NK>,
+        dt: f64,
+    ) -> leg_models::robot::time_stepping::ContactStep<f64, NQ, NC, NK>
+    where
+        L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
+    {
+        use leg_models::dynamics::contact::ContactMode;
+        let before = *s;
+        let step = robot::time_stepping::contact_step::<L, f64, NQ, NC, NU, NK>(
+            problem, p, s, u, push, ground, mu, dt,
+        )
+        .unwrap_or_else(|e| panic!("{}: step {}: {e}", L::NAME, self.steps));
+        let v = free_step_violations::<L, NQ, NC, NU, NK>(p, &before, &step, push, ground, mu, dt);
+        for (worst, v) in self.worst.iter_mut().zip(v) {
+            *worst = worst.max(v);
+        }
+        for k in 0..NK / 3 {
+            self.modes[match step.modes.get(k) {
+                ContactMode::Flight => 0,
+                ContactMode::Stick => 1,
+                ContactMode::Slide { .. } => 2,
+            }] += 1;
+        }
+        self.pivots += step.pivots;
+        self.steps += 1;
+        step
+    }
+
+    /// Every step complementary, Newton's and the energy identity to rounding.
+    fn check(&self, name: &str, scene: &str) {
+        let [comp, newton, energy] = self.worst;
+        eprintln!(
+            "{name}: {scene}: {} steps, contact-steps in flight / stick / slide {:?}, {:.1} pivots a step; worst complementarity {comp:.1e}, Newton {newton:.1e}, energy identity {energy:.1e}",
+            self.steps,
+            self.modes,
+            self.pivots as f64 / self.steps.max(1) as f64
+        );
+        assert!(comp < 1e-8, "{name}: {scene}: not complementary ({comp:e})");
+        assert!(
+            newton < 1e-9,
+            "{name}: {scene}: momentum off Newton ({newton:e})"
+        );
+        assert!(
+            energy < 1e-8,
+            "{name}: {scene}: energy identity off ({energy:e})"
+        );
+    }
+}
+
+/// Feet free (`robot::time_stepping`) under the balance QP: standing 0.25 s at 0.5 ms
+/// steps, every foot sticks, the forces add up to the weight and the body stays put; the first step's rates
+/// are those of the held-feet Euler stance step (the same physics by a KKT solve with
+/// every contact held, not a complementarity solve), to rounding; and every step passes
+/// [`free_step_violations`]. (At 1 ms, Cassie under the QP diverged within 24 steps of
+/// this first-order step, as its held-feet Euler step nears its stability limit there.)
+fn free_feet_stand_as_held_feet_do<
+    L,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+>()
+where
+    L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
+{
+    use leg_models::robot::balance::{BalanceController, BalanceGains, BalanceTarget};
+    use leg_models::robot::time_stepping::FootContacts;
+    use leg_models::simulate::Method;
+    let name = L::NAME;
+    let Some(Stance {
+        params: p,
+        start,
+        ground,
+        modes,
+        mu,
+    }) = standing_start::<L, NQ, NC, NU, NK>("free feet standing")
+    else {
+        return;
+    };
+    if free_on_its_feet::<L, NQ, NC, NU, NK>(&p, &start) == 0 {
+        leg_tests::not_applicable(
+            name,
+            "free feet standing",
+            &"its held feet and closures hold every coordinate: there is no balance QP to stand under",
+        );
+        return;
+    }
+    let dt = 5e-4;
+    let mass = spec_mass::<L, NQ, NC, NU>(&p);
+    let mut control = BalanceController::<NQ, NC, NU, NK>::new(
+        BalanceTarget::holding(&start),
+        BalanceGains::default(),
+        None,
+    );
+    let mut problem = FootContacts::of::<L, NQ, NC, NU, NK>();
+    let mut run = FreeRun::default();
+    let (mut s, mut force_err) = (start, 0.0f64);
+    let zero = Vector3::zeros();
+    for i in 0..500 {
+        let cmd = control
+            .command::<L>(&p, &s, &modes, &ground, &mu)
+            .unwrap_or_else(|e| panic!("{name}: step {i}: {e}"));
+        if i == 0 {
+            let mut held = s;
+            robot::pushed_stance_step_by::<L, f64, NQ, NC, NU, NK>(
+                Method::SemiImplicitEuler,
+                &p,
+                &mut held,
+                &cmd.torques,
+                &zero,
+                &modes,
+                &ground,
+                &mu,
+                dt,
+            )
+            .unwrap();
+            let mut free = s;
+            run.step::<L, NQ, NC, NU, NK>(
+                &mut problem,
+                &p,
+                &mut free,
+                &cmd.torques,
+                &zero,
+                &ground,
+                &mu,
+                dt,
+            );
+            // Both recentred on where the body went: the same chart.
+            let d = (free.v - held.v)
+                .amax()
+                .max((free.position - held.position).amax());
+            eprintln!("{name}: free feet's first step off the held feet's Euler step by {d:.1e}");
+            assert!(
+                d < 1e-10,
+                "{name}: the free-feet step is not the held stance's ({d:e})"
+            );
+            s = free;
+            continue;
+        }
+        let step = run.step::<L, NQ, NC, NU, NK>(
+            &mut problem,
+            &p,
+            &mut s,
+            &cmd.torques,
+            &zero,
+            &ground,
+            &mu,
+            dt,
+        );
+        let total = (0..NK / 3).fold(Vector3::zeros(), |a, k| {
+            a + Vector3::new(
+                step.world_forces[3 * k],
+                step.world_forces[3 * k + 1],
+                step.world_forces[3 * k + 2],
+            )
+        });
+        force_err = force_err.max((total - Vector3::new(0.0, 0.0, 9.81 * mass)).norm());
+    }
+    run.check(name, "standing under the balance QP, feet free");
+    let moved = (s.position - start.position).norm();
+    eprintln!("{name}: feet free, standing 0.25 s: forces off the weight by {force_err:.1e} N, moved {moved:.1e} m");
+    assert_eq!(
+        run.modes[0] + run.modes[2],
+        0,
+        "{name}: a foot lifted or slid standing"
+    );
+    assert!(
+        force_err < 1e-4 * 9.81 * mass,
+        "{name}: forces off the weight by {force_err:e} N"
+    );
+    assert!(moved < 1e-6, "{name}: moved {moved:e} m");
+}
+
+/// Feet free, dropped flat from 5 mm above the ground at 1 m/s down and 0.2 m/s along
+/// it, motors limp: the feet fall freely (no impulse) until the step they would pass
+/// through the ground, all of them land in that one step (they are on one plane and the
+/// robot falls as one body), each pushes, and none sinks after it; every step passes
+/// [`free_step_violations`] (Newton's law carries the touchdown's impulses, the energy
+/// identity the plastic impact's loss).
+fn free_feet_land_flat<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>()
+where
+    L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
+{
+    use leg_models::dynamics::contact::ContactMode;
+    use leg_models::robot::time_stepping::FootContacts;
+    let name = L::NAME;
+    let Some(Stance {
+        params: p,
+        start: mut s,
+        ground,
+        mu,
+        ..
+    }) = standing_start::<L, NQ, NC, NU, NK>("free feet landing")
+    else {
+        return;
+    };
+    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
+    let along = ground.normal.cross(&Vector3::x()).normalize();
+    let velocity = s
+        .orientation
+        .inverse_transform_vector(&(-ground.normal + along * 0.2));
+    for k in 0..3 {
+        s.v[f + k] = velocity[k];
+    }
+    s.position += ground.normal * 5e-3;
+    let dt = 1e-3;
+    let mut problem = FootContacts::of::<L, NQ, NC, NU, NK>();
+    let mut run = FreeRun::default();
+    let zero = Vector3::zeros();
+    let mut landed = None;
+    for i in 0..20 {
+        let step = run.step::<L, NQ, NC, NU, NK>(
+            &mut problem,
+            &p,
+            &mut s,
+            &SVector::zeros(),
+            &zero,
+            &ground,
+            &mu,
+            dt,
+        );
+        let touching = (0..NK / 3)
+            .filter(|&k| step.modes.get(k) != ContactMode::Flight)
+            .count();
+        match landed {
+            None if touching == 0 => {}
+            None => {
+                assert_eq!(
+                    touching,
+                    NK / 3,
+                    "{name}: {touching} of {} feet landed at step {i}",
+                    NK / 3
+                );
+                landed = Some(i);
+            }
+            Some(_) => {}
+        }
+    }
+    let landed = landed.unwrap_or_else(|| panic!("{name}: never landed"));
+    // 5 mm at 1 m/s or more (limp legs swing their feet down faster): not in the first
+    // step, by the sixth.
+    assert!((1..=5).contains(&landed), "{name}: landed at step {landed}");
+    run.check(name, "dropped flat, feet free");
+    let chart = robot::chart_params::<L, f64, NQ, NC, NU>(&p, &s.orientation).unwrap();
+    let local = robot::ground_in_chart(&ground, &s.position, &s.orientation);
+    let depth = local
+        .coordinates(&L::contact_positions(&s.q, &chart))
+        .iter()
+        .skip(2)
+        .step_by(3)
+        .fold(0.0f64, |a, &h| a.max(-h));
+    eprintln!("{name}: feet free, landed at step {landed}; deepest foot 15 ms later {depth:.1e} m");
+    assert!(depth < 1e-4, "{name}: a foot sank {depth:e} m");
+}
+
+/// Feet free, thrown up from standing at 1 m/s along the ground's normal (the body and
+/// its legs as one, motors limp): every foot leaves the ground in the first step (later
+/// a limp leg may swing a foot back down: Cassie's springs, loaded where it stood,
+/// unload); pushed sideways at a fifth of the weight on ice (μ =
+/// 0.05, and the least holding torques and a joint PD, 0.1 s at 0.5 ms), the feet slide; every step passes
+/// [`free_step_violations`].
+fn free_feet_lift_off_and_slide<
+    L,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+>()
+where
+    L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
+{
+    use leg_models::robot::time_stepping::FootContacts;
+    let name = L::NAME;
+    let Some(Stance {
+        params: p,
+        start,
+        ground,
+        modes,
+        mu,
+    }) = standing_start::<L, NQ, NC, NU, NK>("free feet lifting off and sliding")
+    else {
+        return;
+    };
+    let dt = 1e-3;
+    let weight = spec_mass::<L, NQ, NC, NU>(&p) * 9.81;
+    let mut problem = FootContacts::of::<L, NQ, NC, NU, NK>();
+    let (u, _) =
+        robot::holding_torques::<L, f64, NQ, NC, NU, NK>(&p, &start, &modes, &ground, &mu).unwrap();
+    let f = robot::free_joint::<L, NQ, NC, NU>().unwrap();
+    let up = start.orientation.inverse_transform_vector(&ground.normal);
+    let mut run = FreeRun::default();
+    let mut s = start;
+    for k in 0..3 {
+        s.v[f + k] = up[k];
+    }
+    for i in 0..20 {
+        run.step::<L, NQ, NC, NU, NK>(
+            &mut problem,
+            &p,
+            &mut s,
+            &SVector::zeros(),
+            &Vector3::zeros(),
+            &ground,
+            &mu,
+            dt,
+        );
+        if i == 0 {
+            assert_eq!(
+                run.modes[0],
+                NK / 3,
+                "{name}: a foot stayed on the ground thrown up: {:?}",
+                run.modes
+            );
+        }
+    }
+    run.check(name, "thrown up at 1 m/s, motors limp, feet free");
+    let size = L::leg_size(&start.q, &p);
+    let stiffness = weight * size;
+    let damping = stiffness / 10.0;
+    let ice = SVector::<f64, NK>::repeat(0.05);
+    let side = ground.normal.cross(&Vector3::x()).normalize() * (0.2 * weight);
+    // Half a millisecond: at 1 ms this first-order step under the joint PD diverges on
+    // Cassie (its held-feet Euler step's stability limit, as standing).
+    let dt = 5e-4;
+    let mut run = FreeRun::default();
+    let mut s = start;
+    for _ in 0..200 {
+        let pd = SVector::<f64, NU>::from_fn(|i, _| {
+            let a = L::ACTUATED[i];
+            -stiffness * (s.q[a] - start.q[a]) - damping * s.v[a]
+        });
+        run.step::<L, NQ, NC, NU, NK>(
+            &mut problem,
+            &p,
+            &mut s,
+            &(u + pd),
+            &side,
+            &ground,
+            &ice,
+            dt,
+        );
+    }
+    run.check(
+        name,
+        "pushed sideways at 0.2 of its weight on ice (μ 0.05), feet free",
+    );
+    let slid = (s.position - start.position).dot(&side.normalize());
+    eprintln!("{name}: on ice, slid {slid:.3e} m along the push in 0.1 s");
+    assert!(
+        run.modes[2] > 0,
+        "{name}: no foot slid on ice: {:?}",
+        run.modes
+    );
+    assert!(slid > 0.0, "{name}: did not go the push's way ({slid:e} m)");
+}
+
+/// A free-feet step refuses a bad step length and a problem made for another robot,
+/// and leaves the state as it was.
+fn free_feet_refuse_bad_input<
+    L,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+>()
+where
+    L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
+{
+    use leg_models::robot::time_stepping::{contact_step, ContactStepError, FootContacts};
+    let Some(Stance {
+        params: p,
+        start,
+        ground,
+        mu,
+        ..
+    }) = standing_start::<L, NQ, NC, NU, NK>("free feet bad input")
+    else {
+        return;
+    };
+    let mut problem = FootContacts::of::<L, NQ, NC, NU, NK>();
+    let mut s = start;
+    for dt in [0.0, -1e-3, f64::NAN, f64::INFINITY] {
+        let e = contact_step::<L, f64, NQ, NC, NU, NK>(
+            &mut problem,
+            &p,
+            &mut s,
+            &SVector::zeros(),
+            &Vector3::zeros(),
+            &ground,
+            &mu,
+            dt,
+        )
+        .unwrap_err();
+        assert!(matches!(e, ContactStepError::TimeStep { .. }), "{e}");
+        assert!(e.to_string().contains("time step"), "{e}");
+    }
+    let mut other = FootContacts::<f64>::new(NK / 3 + 1, 4).unwrap();
+    let e = contact_step::<L, f64, NQ, NC, NU, NK>(
+        &mut other,
+        &p,
+        &mut s,
+        &SVector::zeros(),
+        &Vector3::zeros(),
+        &ground,
+        &mu,
+        1e-3,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("contacts"), "{e}");
+    assert_eq!(s, start, "{}: a refused step moved the state", L::NAME);
+    assert!(FootContacts::<f64>::new(2, 2).is_err());
 }

@@ -6,7 +6,8 @@
 //!   mobility, the kind of actuation);
 //! - [`contact`]: contact rows on the ground, the dynamics with contacts and the impact map;
 //! - [`derivatives`]: exact derivatives of the forward and contact dynamics;
-//! - [`batch`]: forward dynamics of four states at once in SIMD lanes.
+//! - [`batch`]: forward dynamics of four states at once in SIMD lanes;
+//! - `lcp` (feature `std`): the linear complementarity problem, solved exactly by Lemke's pivoting.
 //!
 //! May import: the contract ([`LegModel`](crate::LegModel), [`Real`](crate::Real), [`linalg`](crate::linalg), [`simd`](crate::simd)) only.
 
@@ -14,6 +15,8 @@ pub mod batch;
 pub mod contact;
 pub mod derivatives;
 pub(crate) mod forward;
+#[cfg(feature = "std")]
+pub mod lcp;
 pub mod structure;
 
 pub use forward::{

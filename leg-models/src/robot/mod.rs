@@ -29,6 +29,8 @@
 pub mod balance;
 #[cfg(feature = "std")]
 pub mod standing;
+#[cfg(feature = "std")]
+pub mod time_stepping;
 
 use core::fmt;
 
