@@ -580,6 +580,50 @@ fn check_robot<
             5e-4
         )
     );
+    // Feet free: the contact problem is allocated once, before the step; the step (its
+    // Delassus matrix, Lemke's pivoting on the problem's tableau) allocates nothing. A
+    // landing, so that the pivoting has contacts to push.
+    let mut problem = leg_models::robot::time_stepping::FootContacts::of::<L, NQ, NC, NU, NK>();
+    let mut falling = landing;
+    falling.v = SVector::zeros();
+    for k in 0..3 {
+        falling.v[f + k] = down[k];
+    }
+    // The ground 0.1 mm over the lowest contact: the step must push it out.
+    let chart = robot::chart_params::<L, f64, NQ, NC, NU>(&p, &falling.orientation).unwrap();
+    let x = L::contact_positions(&falling.q, &chart);
+    let lowest = (0..NK / 3)
+        .map(|k| {
+            (falling.position
+                + falling.orientation.transform_vector(&Vector3::new(
+                    x[3 * k],
+                    x[3 * k + 1],
+                    x[3 * k + 2],
+                )))
+            .z
+        })
+        .fold(f64::INFINITY, f64::min);
+    let touched = Ground {
+        normal: Vector3::z(),
+        offset: lowest + 1e-4,
+    };
+    let step = none_and_ok!(
+        "robot::time_stepping::contact_step",
+        leg_models::robot::time_stepping::contact_step::<L, f64, NQ, NC, NU, NK>(
+            &mut problem,
+            &p,
+            &mut falling,
+            &u,
+            &leg_models::nalgebra::Vector3::new(1.0, 0.0, 0.0),
+            &touched,
+            &mu,
+            5e-4
+        )
+    );
+    assert!(
+        NK == 0 || step.pivots > 0,
+        "{name}: the landing step took no pivot"
+    );
     // The balance QP: its first command sets the solver up (and allocates); the next,
     // with the same held contacts, update it in place. Clarabel 0.11.1's `solve` itself
     // allocates once a call (measured on Clarabel alone: its updates allocate nothing,

@@ -2372,6 +2372,124 @@ fn eval_of_a_spatial_leg_says_what_it_takes() {
     );
 }
 
+/// `sim ROBOT --feet free`: pushed harder than held feet can take (the held run of this
+/// push stops where a foot would slip or lift), the quadruped's feet lift, slip and land
+/// and the run goes to its end. Checked from the written trajectory and the spec's own
+/// numbers: at rest every foot sticks and the feet carry the weight; in every row each
+/// foot's force is in its friction cone and pushes, a foot in flight has none, the loops
+/// stay closed; some foot leaves the ground and some slides; the default step is 0.5 ms.
+/// `--feet` on a leg, and an unknown kind of feet, are refused.
+#[test]
+fn sim_lets_a_robots_feet_lift_slip_and_land() {
+    use generated::MinitaurQuadruped as Q;
+    use leg_models::Parameters;
+    let d = temp_dir("robot-free");
+    let out = legs(&[
+        "sim",
+        "minitaur_quadruped",
+        "--feet",
+        "free",
+        "--duration",
+        "1",
+        "--push",
+        "0,60,0",
+        "--out",
+        d.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let p = <Q as LegDynamics<22, 12, 8>>::Params::<f64>::default();
+    let names = <<Q as LegDynamics<22, 12, 8>>::Params<f64> as Parameters<f64>>::NAMES;
+    let mass: f64 = (0..names.len())
+        .filter(|&i| names[i].ends_with("_mass"))
+        .map(|i| p.get(i).unwrap())
+        .sum();
+    let mu = leg_models::dynamics::contact::spec_friction::<Q, f64, 22, 12, 8, 12, 3>();
+    let rows = csv_rows(&std::fs::read_to_string(d.join("trajectory.csv")).unwrap());
+    assert_eq!(rows.len(), 2000, "1 s at the default 0.5 ms");
+    let num = |r: &std::collections::HashMap<String, String>, c: &str| -> f64 {
+        r.get(c)
+            .unwrap_or_else(|| panic!("no column {c}"))
+            .parse()
+            .unwrap()
+    };
+    let contacts = <Q as leg_models::ContactModel<22, 12, 8, 12, 3>>::CONTACT_NAMES;
+    let (mut flight, mut slide) = (0, 0);
+    for r in &rows {
+        let t = num(r, "t");
+        let mut carried = 0.0;
+        for (k, c) in contacts.iter().enumerate() {
+            let (fx, fy, fz) = (
+                num(r, &format!("F_{c}_x")),
+                num(r, &format!("F_{c}_y")),
+                num(r, &format!("F_{c}_z")),
+            );
+            carried += fz;
+            let mode = r[&format!("mode_{c}")].as_str();
+            match mode {
+                "flight" => {
+                    flight += 1;
+                    assert!(
+                        fx.abs().max(fy.abs()).max(fz.abs()) < 1e-9,
+                        "t = {t}: {c} in flight with a force"
+                    );
+                }
+                "stick" | "slide" => {
+                    slide += usize::from(mode == "slide");
+                    assert!(
+                        fz > 0.0,
+                        "t = {t}: {c} on the ground without a push ({fz} N)"
+                    );
+                    assert!(
+                        fx.hypot(fy) <= mu[3 * k + 2] * fz * (1.0 + 1e-9),
+                        "t = {t}: {c} outside its cone"
+                    );
+                }
+                other => panic!("t = {t}: {c}: mode {other:?}"),
+            }
+            if t < 0.5 {
+                assert_eq!(mode, "stick", "t = {t}: {c} before the push");
+            }
+        }
+        if t < 0.5 {
+            assert!(
+                (carried - mass * 9.81).abs() < 1e-4 * mass * 9.81,
+                "t = {t}: the feet carry {carried} N of the weight {} N",
+                mass * 9.81
+            );
+        }
+        assert!(num(r, "closure_residual") < 1e-12, "t = {t}");
+    }
+    assert!(
+        flight > 0 && slide > 0,
+        "no foot left the ground ({flight}) or slid ({slide})"
+    );
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["feet_free"], true);
+    assert_eq!(summary["dt_s"].as_f64(), Some(5e-4));
+    assert!(summary["stopped"].is_null());
+    let in_flight: u64 = summary["feet"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["steps_in_flight"].as_u64().unwrap())
+        .sum();
+    assert_eq!(in_flight as usize, flight);
+    refused(
+        &legs(&["sim", "minitaur", "--feet", "free"]),
+        "is a leg on a fixed base",
+    );
+    refused(
+        &legs(&["sim", "minitaur_quadruped", "--feet", "loose"]),
+        "free",
+    );
+    let _ = std::fs::remove_dir_all(d);
+}
+
 /// `sim` of a floating robot stands it under the balance QP and pushes its body. Checked
 /// from the written trajectory and the spec's own numbers, not the summary's figures: at
 /// rest the ground forces carry the weight (the spec's link masses); every foot's force

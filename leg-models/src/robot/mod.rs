@@ -973,6 +973,40 @@ where
     Ok(stance)
 }
 
+/// The robot's rates put back on its closures and on the contacts `modes` holds, in the
+/// metric of `M` (the least kinetic energy taken away; [`project_held_velocity`] in the
+/// chart centred on the body): what a stance controller that plans every foot held
+/// should see of a robot whose feet are free ([`time_stepping`]), where a foot that
+/// slides or turns would make a rigid foot's held rows contradict each other. On an
+/// error `state` is left as it was.
+pub fn project_held_rates<
+    L,
+    T,
+    const NQ: usize,
+    const NC: usize,
+    const NU: usize,
+    const NK: usize,
+>(
+    params: &L::Params<T>,
+    state: &mut RobotState<T, NQ>,
+    modes: &Modes<NK, 3>,
+    ground: &Ground<T, 3>,
+) -> Result<(), RobotDynamicsError>
+where
+    L: ContactModel<NQ, NC, NU, NK, 3>,
+    T: Real,
+{
+    let f = free_joint::<L, NQ, NC, NU>()?;
+    let mut next = *state;
+    next.recentre(f);
+    let mut chart = *params;
+    into_chart::<L, T, NQ, NC, NU>(&mut chart, &next.orientation)?;
+    let local = ground_in_chart(ground, &next.position, &next.orientation);
+    project_held_velocity::<L, T, NQ, NC, NU, NK, 3>(&chart, &next.q, &mut next.v, modes, &local)?;
+    *state = next;
+    Ok(())
+}
+
 /// A plastic impact of the robot on the world's ground: the contacts in `modes` (those
 /// touching) held after it, every closure kept, a sticking impulse outside the cone
 /// resolved as sliding (and its mode changed), by [`impact_map`] in the chart centred on

@@ -205,10 +205,11 @@ pub struct SimArgs {
     #[arg(long, value_name = "S", default_value_t = 3.0,
           value_parser = number("a duration in (0, 600] s", |x| x > 0.0 && x <= 600.0))]
     pub duration: f64,
-    /// Step in s; torques are updated once per step
-    #[arg(long, value_name = "S", default_value_t = 1e-3,
+    /// Step in s; torques are updated once per step (default 0.001; 0.0005 with
+    /// `--feet free`, whose first-order step needs it on Cassie)
+    #[arg(long, value_name = "S",
           value_parser = number("a step in (0, 0.05] s", |x| x > 0.0 && x <= 0.05))]
-    pub dt: f64,
+    pub dt: Option<f64>,
     /// Stiffness of the error dynamics in 1/s² (default 400 foot, 100 joint); k_d = 2√k_p;
     /// PD gains are scaled by the leg's inertia at home
     #[arg(long, value_name = "K",
@@ -242,6 +243,12 @@ pub struct SimArgs {
     #[arg(long, value_name = "S",
           value_parser = number("a duration in (0, 600] s", |x| x > 0.0 && x <= 600.0))]
     pub push_for: Option<f64>,
+    /// On a floating robot: `held` keeps every contact on the ground where it stands (RK4;
+    /// the run stops where a foot would lift or slip), `free` lets every foot lift, slip
+    /// and land (time stepping, each step's contact modes from one complementarity
+    /// solve); default held
+    #[arg(long, value_enum, value_name = "F")]
+    pub feet: Option<FeetArg>,
     /// On a leg with contacts: serve the hopping controller's torques on stdin/stdout
     /// instead of simulating (one line `t q… q̇… (on_ground anchor)…` in, one line of
     /// torques out), for the MuJoCo cross-check's closed loop
@@ -261,6 +268,14 @@ pub enum ControllerArg {
     JointPd,
     /// No torque
     Passive,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum FeetArg {
+    /// Every contact held where it stands (the run stops where one would lift or slip)
+    Held,
+    /// Every foot free to lift, slip and land
+    Free,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -537,7 +552,7 @@ mod tests {
     fn both_value_forms_and_negative_numbers() {
         let a = sim(&["sim", "atrias", "--dt=0.002", "--speed", "-3", "--kp", "50"]);
         assert_eq!(a.model.as_deref(), Some("atrias"));
-        assert_eq!((a.dt, a.speed, a.kp), (0.002, Some(-3.0), Some(50.0)));
+        assert_eq!((a.dt, a.speed, a.kp), (Some(0.002), Some(-3.0), Some(50.0)));
         assert_eq!(a.duration, 3.0);
         let Ok(Parsed::Run(Xtask {
             command: Command::Eval(e),

@@ -120,6 +120,12 @@ fn simulate(args: SimArgs) -> Result<(), Error> {
             floating_models().join(", ")
         )));
     }
+    if settings.feet_given {
+        return Err(Error::usage(format!(
+            "--feet says how a floating robot's feet meet the ground; `{name}` is a leg on a fixed base (floating robots: {})",
+            floating_models().join(", ")
+        )));
+    }
     macro_rules! dispatch {
         ($module:ident, $ty:path, $nq:literal, $nc:literal, $nu:literal, $nk:literal) => {
             if name == stringify!($module) {

@@ -1,19 +1,23 @@
 //! `sim` of a floating robot: it stands on its feet under the whole-body balance QP
-//! (`leg_models::robot::balance`) and is pushed on its body; every contact is held, and
-//! the run stops, keeping what it computed, where a foot's force would leave its
-//! friction cone or pull on the ground (the stance no longer holds). Writes
+//! (`leg_models::robot::balance`) and is pushed on its body. With `--feet held` (the
+//! default) every contact is held, and the run stops, keeping what it computed, where a
+//! foot's force would leave its friction cone or pull on the ground (the stance no longer
+//! holds). With `--feet free` every foot may lift, slip and land
+//! (`leg_models::robot::time_stepping`: each step's contact modes from one
+//! complementarity solve), and the run goes on through them. Writes
 //! `trajectory.csv`, `summary.json` and `report.html` (the robot drawn in 3-D in the
 //! world, the body's motion, the feet's forces against their cones, the torques and the
 //! residuals).
 
 use std::fmt::Write as _;
 
-use leg_models::dynamics::contact::Ground;
+use leg_models::dynamics::contact::{ContactMode, Ground, Modes};
 use leg_models::nalgebra::{SVector, UnitQuaternion, Vector3};
 use leg_models::robot::balance::{
     cone_reading, judged_forces, BalanceController, BalanceGains, BalanceTarget, ConeReading,
 };
 use leg_models::robot::standing::{on_its_feet, standing_start, StandingStart};
+use leg_models::robot::time_stepping::{contact_step, FootContacts};
 use leg_models::robot::{self, RobotState};
 use leg_models::{ContactModel, LegModel, ShownNumber};
 use serde_json::json;
@@ -24,16 +28,27 @@ use super::{body_points, frame_at, max, Settings};
 use crate::report::{self, quantity, Report, Series};
 
 /// One step's record: the state at its start, the torques and push held over it, the
-/// ground forces (world, a rigid foot's split the deepest in its cones), the largest
-/// closure residual and contact height at its start.
+/// ground forces (world; held feet: a rigid foot's split the deepest in its cones; free
+/// feet: the step's mean forces), each contact's mode over the step, the largest closure
+/// residual and contact height at its start.
 struct Sample<const NQ: usize, const NU: usize, const NK: usize> {
     t: f64,
     state: RobotState<f64, NQ>,
     u: SVector<f64, NU>,
     push: Vector3<f64>,
     forces: SVector<f64, NK>,
+    modes: Modes<NK, 3>,
     closure_gap: f64,
     contact_gap: f64,
+}
+
+/// A contact mode as `trajectory.csv` and `summary.json` name it.
+fn mode_name(m: ContactMode) -> &'static str {
+    match m {
+        ContactMode::Flight => "flight",
+        ContactMode::Stick => "stick",
+        ContactMode::Slide { .. } => "slide",
+    }
 }
 
 /// The flags of the swing-leg and hopping runs, which mean nothing to a standing robot,
@@ -48,7 +63,7 @@ fn check_flags(s: &Settings, name: &str) -> Result<(), Error> {
     ];
     match given.iter().find(|(g, _)| *g) {
         Some((_, flag)) => Err(Error::usage(format!(
-            "{flag} is for a leg; `{name}` is a floating robot, which stands under the balance QP (its flags: --push, --push-at, --push-for, --torque-limit, --duration, --dt, --every, --out)"
+            "{flag} is for a leg; `{name}` is a floating robot, which stands under the balance QP (its flags: --feet, --push, --push-at, --push-for, --torque-limit, --duration, --dt, --every, --out)"
         ))),
         None => Ok(()),
     }?;
@@ -114,6 +129,10 @@ pub fn run<
     let mut state = start.state;
     let mut stopped: Option<(f64, String)> = None;
     let mut iterations = 0u64;
+    // Free feet: the contact problem, allocated once.
+    let mut free = s
+        .free_feet
+        .then(FootContacts::<f64>::of::<L, NQ, NC, NU, NK>);
     // The push in whole steps, as the run counts them (`t` is `i dt`).
     let pushed = {
         let first = (s.push_at / s.dt).round() as usize;
@@ -123,7 +142,19 @@ pub fn run<
         let t = i as f64 * s.dt;
         progress.set(i as u64);
         let before = state;
-        let (u, qp_iterations) = match controller.command::<L>(&p, &state, &modes, &ground, &mu) {
+        // The QP plans every foot held: with free feet it sees the rates put back on the
+        // held rows (a sliding or turning rigid foot's toe and heel rows would
+        // contradict each other in its model).
+        let mut seen = state;
+        if s.free_feet {
+            if let Err(e) =
+                robot::project_held_rates::<L, f64, NQ, NC, NU, NK>(&p, &mut seen, &modes, &ground)
+            {
+                stopped = Some((t, format!("the balance QP's view of the state: {e}")));
+                break;
+            }
+        }
+        let (u, qp_iterations) = match controller.command::<L>(&p, &seen, &modes, &ground, &mu) {
             Ok(c) => (c.torques, c.iterations),
             Err(e) => {
                 stopped = Some((t, format!("the balance QP has no command: {e}")));
@@ -135,6 +166,29 @@ pub fn run<
         } else {
             Vector3::zeros()
         };
+        if let Some(problem) = free.as_mut() {
+            let step = match contact_step::<L, f64, NQ, NC, NU, NK>(
+                problem, &p, &mut state, &u, &force, &ground, &mu, s.dt,
+            ) {
+                Ok(x) => x,
+                Err(e) => {
+                    stopped = Some((t, e.to_string()));
+                    break;
+                }
+            };
+            samples.push(Sample {
+                t,
+                state: before,
+                u,
+                push: force,
+                forces: step.world_forces,
+                modes: step.modes,
+                closure_gap: L::closure_residual(&before.q, &p).amax(),
+                contact_gap: contact_heights::<L, NQ, NC, NU, NK>(&p, &before, &ground),
+            });
+            iterations += u64::from(qp_iterations);
+            continue;
+        }
         let stance = match robot::pushed_stance_step::<L, f64, NQ, NC, NU, NK>(
             &p, &mut state, &u, &force, &modes, &ground, &mu, s.dt,
         ) {
@@ -158,6 +212,7 @@ pub fn run<
             u,
             push: force,
             forces,
+            modes,
             closure_gap: L::closure_residual(&before.q, &p).amax(),
             contact_gap: contact_heights::<L, NQ, NC, NU, NK>(&p, &before, &ground),
         });
@@ -194,7 +249,12 @@ pub fn run<
     let (end_offset, end_angle) = offset(&state);
     let readings: Vec<_> = samples
         .iter()
-        .flat_map(|x| (0..NK / 3).map(|k| cone_reading(&x.forces, &ground, &mu, k)))
+        .flat_map(|x| {
+            // A foot off the ground has no force to read (free feet only).
+            (0..NK / 3)
+                .filter(|&k| x.modes.get(k).on_ground())
+                .map(|k| cone_reading(&x.forces, &ground, &mu, k))
+        })
         .collect();
     // A force that pulls has no finite cone ratio: the stop says so, these are over the
     // rest (null where there is none).
@@ -207,9 +267,41 @@ pub fn run<
     let closure_gap = max(samples.iter().map(|x| x.closure_gap));
     let contact_gap = max(samples.iter().map(|x| x.contact_gap));
     let recovered = stopped.is_none() && end_offset <= 1e-3 && end_angle <= 1e-3;
+    // Each contact's steps off the ground and sliding, and when it first left or slid.
+    let feet: Vec<_> = (0..NK / 3)
+        .map(|k| {
+            let when = |m: fn(ContactMode) -> bool| {
+                samples.iter().find(|x| m(x.modes.get(k))).map(|x| x.t)
+            };
+            let count =
+                |m: fn(ContactMode) -> bool| samples.iter().filter(|x| m(x.modes.get(k))).count();
+            let flight = |m: ContactMode| m == ContactMode::Flight;
+            let slide = |m: ContactMode| matches!(m, ContactMode::Slide { .. });
+            json!({
+                "contact": L::CONTACT_NAMES[k],
+                "steps_in_flight": count(flight),
+                "steps_sliding": count(slide),
+                "first_liftoff_s": when(flight),
+                "first_slip_s": when(slide),
+            })
+        })
+        .collect();
+    let (kind, integrator, recovered_means) = if s.free_feet {
+        (
+            "floating robot standing under the balance QP (leg_models::robot::balance, default gains; it plans every foot sticking), every foot free to lift, slip and land",
+            "velocity-level time stepping (semi-implicit Euler), every contact's mode each step from one complementarity solve (Lemke), a 4-edge friction pyramid, the closures projected",
+            "ran to the end, and the body within 1 mm and 1 mrad of where it stood",
+        )
+    } else {
+        (
+            "floating robot standing under the balance QP (leg_models::robot::balance, default gains), every contact held",
+            "rk4",
+            "ran to the end with every foot's force in its cone, and the body within 1 mm and 1 mrad of where it stood",
+        )
+    };
     let summary = json!({
         "model": L::NAME,
-        "kind": "floating robot standing under the balance QP (leg_models::robot::balance, default gains), every contact held",
+        "kind": kind,
         "weight_n": weight,
         "push": {
             "force_n": [push.x, push.y, push.z],
@@ -223,11 +315,13 @@ pub fn run<
         "duration_s": s.duration,
         "simulated_s": end,
         "dt_s": s.dt,
-        "integrator": "rk4",
+        "integrator": integrator,
+        "feet_free": s.free_feet,
+        "feet": feet,
         "torque_limit_nm": s.torque_limit,
         "stopped": stopped.as_ref().map(|(t, why)| json!({"t_s": t, "why": why})),
         "recovered": recovered,
-        "recovered_means": "ran to the end with every foot's force in its cone, and the body within 1 mm and 1 mrad of where it stood",
+        "recovered_means": recovered_means,
         "body": {
             "largest_excursion_m": excursion,
             "largest_turn_rad": turned,
@@ -283,6 +377,34 @@ pub fn run<
         worst_cone.unwrap_or(f64::NAN),
         least_normal.map_or("none".into(), |n| quantity(n, "N")),
     );
+    if s.free_feet {
+        let lifted: Vec<_> = (0..NK / 3)
+            .filter_map(|k| {
+                let (flight, slide) =
+                    samples
+                        .iter()
+                        .fold((0, 0), |(f, sl), x| match x.modes.get(k) {
+                            ContactMode::Flight => (f + 1, sl),
+                            ContactMode::Slide { .. } => (f, sl + 1),
+                            ContactMode::Stick => (f, sl),
+                        });
+                (flight + slide > 0).then(|| {
+                    format!(
+                        "`{}` {flight} steps off the ground, {slide} sliding",
+                        L::CONTACT_NAMES[k]
+                    )
+                })
+            })
+            .collect();
+        println!(
+            "  feet free: {}",
+            if lifted.is_empty() {
+                "every foot stuck where it stood".to_string()
+            } else {
+                lifted.join("; ")
+            }
+        );
+    }
     match stopped {
         None => Ok(()),
         Some((t, why)) => Err(Error::Failed(format!(
@@ -422,7 +544,11 @@ fn trajectory_csv<
     for c in L::CONTACT_NAMES {
         let _ = write!(csv, ",F_{c}_x,F_{c}_y,F_{c}_z");
     }
-    csv.push_str(",push_x,push_y,push_z,closure_residual,contact_height\n");
+    csv.push_str(",push_x,push_y,push_z,closure_residual,contact_height");
+    for c in L::CONTACT_NAMES {
+        let _ = write!(csv, ",mode_{c}");
+    }
+    csv.push('\n');
     for (k, x) in samples.iter().enumerate() {
         if !super::written(k, samples.len(), every) {
             continue;
@@ -439,7 +565,11 @@ fn trajectory_csv<
         for v in x.forces.iter().chain(x.push.iter()) {
             let _ = write!(csv, ",{v}");
         }
-        let _ = writeln!(csv, ",{},{}", x.closure_gap, x.contact_gap);
+        let _ = write!(csv, ",{},{}", x.closure_gap, x.contact_gap);
+        for k in 0..NK / 3 {
+            let _ = write!(csv, ",{}", mode_name(x.modes.get(k)));
+        }
+        csv.push('\n');
     }
     csv
 }
@@ -541,7 +671,14 @@ fn report_html<
             .map(|(k, name)| {
                 let line = samples
                     .iter()
-                    .map(|x| read(&cone_reading(&x.forces, ground, mu, k)))
+                    .map(|x| {
+                        // A foot off the ground (free feet) has no force: a gap in the line.
+                        if x.modes.get(k).on_ground() {
+                            read(&cone_reading(&x.forces, ground, mu, k))
+                        } else {
+                            f64::NAN
+                        }
+                    })
                     .collect();
                 (name.to_string(), line)
             })
@@ -550,7 +687,11 @@ fn report_html<
     plots.push(
         Series::new("Ground forces: normal", &t, per_contact(|c| c.normal))
             .axis("force", "N")
-            .caption("Each contact's force along the ground's normal; they sum to the weight at rest. A contact whose normal force would reach zero would lift off, which ends this run: every contact is held."),
+            .caption(if s.free_feet {
+                "Each contact's mean force over a step along the ground's normal; they sum to the weight at rest. A gap: the contact is off the ground (feet free)."
+            } else {
+                "Each contact's force along the ground's normal; they sum to the weight at rest. A contact whose normal force would reach zero would lift off, which ends this run: every contact is held."
+            }),
     );
     plots.push(
         Series::new(
@@ -559,7 +700,11 @@ fn report_html<
             per_contact(|c| c.ratio),
         )
         .axis("share of the cone", "")
-        .caption("How far each contact's force is towards its friction cone's edge (1: about to slip, which ends this run). Where a rigid foot is held at two points, its load is split between them as deep in their cones as any split goes."),
+        .caption(if s.free_feet {
+            "How far each contact's force is towards its friction cone's edge. Feet free: friction is bounded by a 4-edge pyramid inscribed in the cone, and a sliding contact's force is on the pyramid's edge (up to 1 along its edges, 0.71 between them); each foot's force is the complementarity solve's own split between its points."
+        } else {
+            "How far each contact's force is towards its friction cone's edge (1: about to slip, which ends this run). Where a rigid foot is held at two points, its load is split between them as deep in their cones as any split goes."
+        }),
     );
     plots.push(super::torque_plot(
         &t,
@@ -576,7 +721,11 @@ fn report_html<
         .map(|p| p.shaded_as(&pushed, "the push on the body"))
         .collect();
     report::html(&Report {
-        title: format!("{} — standing under the balance QP, pushed", L::NAME),
+        title: format!(
+            "{} — standing under the balance QP, pushed{}",
+            L::NAME,
+            if s.free_feet { ", feet free" } else { "" }
+        ),
         summary,
         plots: &plots,
         frames: &frames,

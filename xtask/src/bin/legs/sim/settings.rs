@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use leg_models::dynamics::structure::{NotApplicable, Structure};
 use leg_models::ShownNumber;
-use xtask::cli::args::{ControllerArg, SimArgs, TrajectoryArg};
+use xtask::cli::args::{ControllerArg, FeetArg, SimArgs, TrajectoryArg};
 use xtask::cli::Error;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -57,6 +57,10 @@ pub struct Settings {
     pub(crate) push_for: f64,
     /// Whether `--push-at` or `--push-for` was given (they mean nothing on a leg).
     pub(crate) push_timed: bool,
+    /// A floating robot's feet free to lift, slip and land (`--feet free`).
+    pub(crate) free_feet: bool,
+    /// Whether `--feet` was given (it means nothing on a leg).
+    pub(crate) feet_given: bool,
 }
 
 impl Settings {
@@ -149,31 +153,35 @@ impl Settings {
             TrajectoryArg::MinJerk => Trajectory::MinJerk,
             TrajectoryArg::Hold => Trajectory::Hold,
         });
+        let free_feet = a.feet == Some(FeetArg::Free);
+        // Free feet step at the velocity level, first order: half a millisecond by
+        // default, where Cassie under the balance QP is stable (at 1 ms it diverges).
+        let dt = a.dt.unwrap_or(if free_feet { 5e-4 } else { 1e-3 });
         // Not one step: nothing would be simulated, and the report would show nothing.
-        if a.duration < a.dt {
+        if a.duration < dt {
             return Err(Error::usage(format!(
                 "`--duration {} s` is shorter than one step (`--dt {} s`): nothing would be simulated",
                 ShownNumber(a.duration),
-                ShownNumber(a.dt)
+                ShownNumber(dt)
             )));
         }
-        if a.duration / a.dt > 5e6 {
+        if a.duration / dt > 5e6 {
             return Err(Error::usage(format!(
                 "{} s at dt = {} s is more than 5 million steps",
                 ShownNumber(a.duration),
-                ShownNumber(a.dt)
+                ShownNumber(dt)
             )));
         }
         // trajectory.csv is bounded as the record is: a run of 5 million steps would write
         // about a gigabyte of text; such a run names the --every that fits.
-        let steps = (a.duration / a.dt).round() as u64;
+        let steps = (a.duration / dt).round() as u64;
         let every = a.every.max(1);
         let rows = steps / every + 2;
         if rows > MAX_CSV_ROWS {
             return Err(Error::usage(format!(
                 "{} s at dt = {} s with --every {every} writes {rows} rows to trajectory.csv, more than the file's limit of {MAX_CSV_ROWS}: pass --every {} or more",
                 ShownNumber(a.duration),
-                ShownNumber(a.dt),
+                ShownNumber(dt),
                 steps.div_ceil(MAX_CSV_ROWS - 2)
             )));
         }
@@ -182,7 +190,7 @@ impl Settings {
             trajectory,
             speed: a.speed,
             duration: a.duration,
-            dt: a.dt,
+            dt,
             kp: a.kp,
             torque_limit: a.torque_limit,
             out: a.out.clone(),
@@ -204,6 +212,8 @@ impl Settings {
             push_at: a.push_at.unwrap_or(0.5),
             push_for: a.push_for.unwrap_or(0.1),
             push_timed: a.push_at.is_some() || a.push_for.is_some(),
+            free_feet,
+            feet_given: a.feet.is_some(),
         };
         if let (Some(c), Some(t)) = (controller, trajectory) {
             settings.check_pair(c, t)?;
