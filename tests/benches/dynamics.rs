@@ -485,6 +485,28 @@ fn bench_floating<L, const NQ: usize, const NC: usize, const NU: usize, const NK
                 g.bench_function(id, |bch| bch.iter(|| step(black_box(&s))));
             }
         }
+        // One step with every foot free (`robot::time_stepping`): the contact modes from
+        // one complementarity solve, the problem allocated once outside the loop.
+        let mut problem = robot::time_stepping::FootContacts::of::<L, NQ, NC, NU, NK>();
+        let mut free_step = |s: &RobotState<f64, NQ>| {
+            let mut s = *s;
+            robot::time_stepping::contact_step::<L, f64, NQ, NC, NU, NK>(
+                &mut problem,
+                black_box(&p),
+                &mut s,
+                black_box(&u),
+                &Vector3::zeros(),
+                &ground,
+                &mu,
+                5e-4,
+            )
+            .map(|st| (s, st.world_forces))
+        };
+        if free_step(&s).is_ok() {
+            g.bench_function("step-ours-free", |bch| {
+                bch.iter(|| free_step(black_box(&s)))
+            });
+        }
     }
     if let Some(replay) = Replay::<NQ, NU>::read(L::NAME) {
         bench_second::<L, NQ, NC, NU, NK>(&mut g, &replay);
@@ -651,6 +673,43 @@ fn bench_second<L, const NQ: usize, const NC: usize, const NU: usize, const NK: 
             })
         });
     }
+    // Every foot free (`robot::time_stepping`): each step finds every contact's mode, as
+    // MuJoCo's finds its contacts and solves them, rather than holding the given ones.
+    let mut problem = robot::time_stepping::FootContacts::of::<L, NQ, NC, NU, NK>();
+    let free_second = |problem: &mut robot::time_stepping::FootContacts<f64>| {
+        let mut s = replay.starts[0];
+        let mut lifted = 0usize;
+        for i in 0..replay.starts.len() {
+            let (recorded, mut u) = (&replay.starts[i], replay.torques[i]);
+            for (k, &a) in L::ACTUATED.iter().enumerate() {
+                u[k] += KP * (recorded.q[a] - s.q[a]) + KD * (recorded.v[a] - s.v[a]);
+            }
+            let step = robot::time_stepping::contact_step::<L, f64, NQ, NC, NU, NK>(
+                problem,
+                &p,
+                &mut s,
+                &u,
+                &replay.pushes[i],
+                &ground,
+                &mu,
+                replay.dt,
+            )
+            .unwrap_or_else(|e| panic!("{}: replayed free-feet step {i}: {e}", L::NAME));
+            lifted += (0..NK / 3)
+                .filter(|&k| !step.modes.get(k).on_ground())
+                .count();
+            black_box(&s);
+        }
+        (s, lifted)
+    };
+    let (_, lifted) = free_second(&mut problem);
+    eprintln!(
+        "{}: the free-feet replay: {lifted} contact-steps off the ground",
+        L::NAME
+    );
+    g.bench_function("second-ours-free", |bch| {
+        bch.iter(|| free_second(&mut problem))
+    });
 }
 
 fn benches(c: &mut Criterion) {

@@ -541,12 +541,16 @@ pub fn run(root: &Path, pinocchio: bool, mujoco: bool, only: &[String]) -> Resul
         ];
         println!("| {m} | {} |", cells.join(" | "));
     }
-    header("| floating robot, a simulated second standing and pushed (the same recorded torques and push, 0.5 ms steps) | ours RK4 | MuJoCo RK4 | ratio | ours semi-implicit Euler | MuJoCo Euler (its default) | ratio | one step ours RK4 / Euler | MuJoCo's largest loop gap (RK4 / Euler) | MuJoCo's body from ours, largest (RK4 / Euler) |", 10, mujoco_figures.len());
+    header("| floating robot, a simulated second standing and pushed (the same recorded torques and push, 0.5 ms steps) | ours RK4 | MuJoCo RK4 | ratio | ours semi-implicit Euler | MuJoCo Euler (its default) | ratio | ours feet free (every contact's mode solved each step) | ratio to MuJoCo Euler | one step ours RK4 / Euler / feet free | MuJoCo's largest loop gap (RK4 / Euler) | MuJoCo's body from ours, largest (RK4 / Euler) |", 12, mujoco_figures.len());
     for (m, f) in &mujoco_figures {
         let g = |id: &str| median(root, m, id);
         let theirs = |integrator: &str, key: &str| f[integrator][key].as_f64();
         let seconds = |integrator: &str| theirs(integrator, "median_s").map(|s| s * 1e9);
-        let (rk4, euler) = (g("second-ours"), g("second-ours-euler"));
+        let (rk4, euler, free) = (
+            g("second-ours"),
+            g("second-ours-euler"),
+            g("second-ours-free"),
+        );
         let cells = [
             ns(rk4),
             ns(seconds("rk4")),
@@ -554,7 +558,14 @@ pub fn run(root: &Path, pinocchio: bool, mujoco: bool, only: &[String]) -> Resul
             ns(euler),
             ns(seconds("euler")),
             ratio(euler, seconds("euler")),
-            format!("{} / {}", ns(g("step-ours")), ns(g("step-ours-euler"))),
+            ns(free),
+            ratio(free, seconds("euler")),
+            format!(
+                "{} / {} / {}",
+                ns(g("step-ours")),
+                ns(g("step-ours-euler")),
+                ns(g("step-ours-free"))
+            ),
             format!(
                 "{:.1e} / {:.1e} m",
                 theirs("rk4", "largest_gap_m").unwrap_or(f64::NAN),
