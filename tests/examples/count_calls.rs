@@ -10,7 +10,7 @@
 //! forward dynamics), on a leg with contacts `contact_stance` (forward dynamics with every
 //! contact sticking where it is) and `contact_slide` (every contact sliding: in 3-D its
 //! friction along its slip velocity), on a floating robot `robot_forward_dynamics` and
-//! `robot_stance`, `robot_stance_step` (`run_robot`) and, with the `peers` feature, `casadi_fused`,
+//! `robot_stance`, `robot_stance_step`, `robot_free_step` (`run_robot`) and, with the `peers` feature, `casadi_fused`,
 //! `casadi_forward_dynamics`,
 //! `casadi_closed_fused`, `casadi_closed_forward_dynamics`, `casadi_closed_derivatives`.
 //!
@@ -281,8 +281,10 @@ fn run_contact<
 /// A floating robot as a user calls it (`leg_models::robot`), at the state the criterion
 /// benchmark uses: `robot_forward_dynamics` (`forward_dynamics_at`: the chart centred on
 /// the body, gravity rotated into it, then the body's v̇) and `robot_stance`
-/// (`stance_dynamics` with every contact held, v̇ too), and `robot_stance_step` (one
-/// semi-implicit Euler step of that stance at 0.5 ms, its projections included).
+/// (`stance_dynamics` with every contact held, v̇ too), `robot_stance_step` (one
+/// semi-implicit Euler step of that stance at 0.5 ms, its projections included) and
+/// `robot_free_step` (one step at 0.5 ms with every foot free, `time_stepping`: its
+/// complementarity solve included, the problem allocated once before the loop).
 fn run_robot<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
     what: &str,
     n: usize,
@@ -293,7 +295,7 @@ where
     use leg_models::robot;
     if !matches!(
         what,
-        "robot_forward_dynamics" | "robot_stance" | "robot_stance_step"
+        "robot_forward_dynamics" | "robot_stance" | "robot_stance_step" | "robot_free_step"
     ) || (what != "robot_forward_dynamics" && NK == 0)
     {
         return None;
@@ -332,6 +334,25 @@ where
                 black_box(&u),
                 &leg_models::nalgebra::Vector3::zeros(),
                 &modes,
+                &ground,
+                &mu,
+                5e-4,
+            )
+            .map(|_| s)
+        };
+        call().ok()?;
+        return Some(measure(n, || call().map_or(0.0, |s| s.v[0])));
+    }
+    if what == "robot_free_step" {
+        let mut problem = robot::time_stepping::FootContacts::of::<L, NQ, NC, NU, NK>();
+        let mut call = || {
+            let mut s = black_box(s);
+            robot::time_stepping::contact_step::<L, f64, NQ, NC, NU, NK>(
+                &mut problem,
+                black_box(&p),
+                &mut s,
+                black_box(&u),
+                &leg_models::nalgebra::Vector3::zeros(),
                 &ground,
                 &mu,
                 5e-4,

@@ -778,6 +778,37 @@ fn lemke_solves_degenerate_problems() {
     }
 }
 
+/// Warm starts: a problem solved again takes no pivot and gives the same solution; one
+/// whose last basis is infeasible for it is solved by pivoting, and still matches
+/// enumeration (`lemke_meets_enumeration_on_p_matrix_problems` runs with warm starts on,
+/// each problem after another's basis); with warm starts off, every solve pivots.
+#[test]
+fn lemke_warm_starts_from_its_last_basis() {
+    use leg_models::dynamics::lcp::Lemke;
+    let mut lemke = Lemke::<f64>::new(3);
+    // A P-matrix, and q with one negative entry.
+    let m = [2.0, 1.0, 0.0, -1.0, 3.0, 1.0, 0.5, 0.0, 4.0];
+    let q = [-1.0, 2.0, -3.0];
+    lemke.solve(&m, &q).unwrap();
+    let (first, pivots) = (lemke.z().to_vec(), lemke.pivots);
+    assert!(pivots > 0 && !lemke.warm);
+    lemke.solve(&m, &q).unwrap();
+    assert!(lemke.warm && lemke.pivots == 0);
+    assert_eq!(lemke.z(), first.as_slice());
+    // Another q: the last basis (z₀, z₂ basic) gives z₀ < 0 there, so it pivots.
+    let other = [1.0, -2.0, 3.0];
+    lemke.solve(&m, &other).unwrap();
+    assert!(!lemke.warm && lemke.pivots > 0);
+    let (z, w) = (lemke.z(), lemke.w());
+    for i in 0..3 {
+        let wi = other[i] + (0..3).map(|j| m[3 * i + j] * z[j]).sum::<f64>();
+        assert!((wi - w[i]).abs() < 1e-14 && w[i] >= 0.0 && z[i] >= 0.0 && w[i] * z[i] == 0.0);
+    }
+    lemke.warm_start = false;
+    lemke.solve(&m, &other).unwrap();
+    assert!(!lemke.warm && lemke.pivots > 0);
+}
+
 /// Bad input is refused by name: the wrong size, a NaN, and a problem with no solution
 /// (`w = −z − 1` can never be non-negative), which Lemke's path ends on a ray.
 #[test]

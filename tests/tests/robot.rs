@@ -1619,6 +1619,7 @@ struct FreeRun {
     worst: [f64; 3],
     modes: [usize; 3],
     pivots: usize,
+    warm: usize,
     steps: usize,
 }
 
@@ -1656,6 +1657,7 @@ impl FreeRun {
             }] += 1;
         }
         self.pivots += step.pivots;
+        self.warm += usize::from(step.warm);
         self.steps += 1;
         step
     }
@@ -1664,10 +1666,11 @@ impl FreeRun {
     fn check(&self, name: &str, scene: &str) {
         let [comp, newton, energy] = self.worst;
         eprintln!(
-            "{name}: {scene}: {} steps, contact-steps in flight / stick / slide {:?}, {:.1} pivots a step; worst complementarity {comp:.1e}, Newton {newton:.1e}, energy identity {energy:.1e}",
+            "{name}: {scene}: {} steps, contact-steps in flight / stick / slide {:?}, {:.1} pivots a step, {} steps solved on the last step's basis; worst complementarity {comp:.1e}, Newton {newton:.1e}, energy identity {energy:.1e}",
             self.steps,
             self.modes,
-            self.pivots as f64 / self.steps.max(1) as f64
+            self.pivots as f64 / self.steps.max(1) as f64,
+            self.warm
         );
         assert!(comp < 1e-8, "{name}: {scene}: not complementary ({comp:e})");
         assert!(
@@ -1988,8 +1991,8 @@ where
     assert!(slid > 0.0, "{name}: did not go the push's way ({slid:e} m)");
 }
 
-/// A free-feet step refuses a bad step length and a problem made for another robot,
-/// and leaves the state as it was.
+/// A free-feet step refuses a bad step length (as the held-feet step does) and a
+/// problem made for another robot, and leaves the state as it was.
 fn free_feet_refuse_bad_input<
     L,
     const NQ: usize,
@@ -2014,6 +2017,25 @@ where
     let mut problem = FootContacts::of::<L, NQ, NC, NU, NK>();
     let mut s = start;
     for dt in [0.0, -1e-3, f64::NAN, f64::INFINITY] {
+        // The held-feet step refuses it too, with either integrator.
+        for method in [
+            leg_models::simulate::Method::Rk4,
+            leg_models::simulate::Method::SemiImplicitEuler,
+        ] {
+            let e = robot::pushed_stance_step_by::<L, f64, NQ, NC, NU, NK>(
+                method,
+                &p,
+                &mut s,
+                &SVector::zeros(),
+                &Vector3::zeros(),
+                &leg_models::dynamics::contact::Modes::stick(),
+                &ground,
+                &mu,
+                dt,
+            )
+            .unwrap_err();
+            assert!(matches!(e, robot::RobotStepError::TimeStep { .. }), "{e}");
+        }
         let e = contact_step::<L, f64, NQ, NC, NU, NK>(
             &mut problem,
             &p,

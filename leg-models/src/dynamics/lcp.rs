@@ -95,6 +95,12 @@ pub struct Lemke<T: Real> {
     pub max_pivots: usize,
     /// Pivots the last solve took.
     pub pivots: usize,
+    /// Whether a solve first tries the last solve's basis (on by default): one linear
+    /// solve on it, kept where it is feasible (`z_B ≥ 0`, `w_N ≥ 0` to rounding), which
+    /// it is wherever a time step's contact modes have not changed; else Lemke's path.
+    pub warm_start: bool,
+    /// Whether the last solve's answer came from the last basis, with no pivot.
+    pub warm: bool,
 }
 
 impl<T: Real> Lemke<T> {
@@ -113,6 +119,8 @@ impl<T: Real> Lemke<T> {
             // limit only stops a path that has lost its way to rounding.
             max_pivots: 50 * (n + 1),
             pivots: 0,
+            warm_start: true,
+            warm: false,
         }
     }
 
@@ -143,6 +151,7 @@ impl<T: Real> Lemke<T> {
             return Err(LcpError::NonFinite);
         }
         self.pivots = 0;
+        self.warm = false;
         // z = 0 solves it where q ≥ 0.
         let mut lowest = None;
         for (i, &qi) in q.iter().enumerate() {
@@ -155,8 +164,13 @@ impl<T: Real> Lemke<T> {
         let Some(first) = lowest else {
             self.z.iter_mut().for_each(|z| *z = T::zero());
             self.w.copy_from_slice(q);
+            self.basic.clear();
             return Ok(());
         };
+        if self.warm_start && !self.basic.is_empty() && self.try_last_basis(m, q) {
+            self.warm = true;
+            return Ok(());
+        }
         // I w − M z − 1 z₀ = q.
         let width = 2 * n + 2;
         for i in 0..n {
@@ -206,6 +220,47 @@ impl<T: Real> Lemke<T> {
     /// The last solution's `w = M z + q`.
     pub fn w(&self) -> &[T] {
         &self.w
+    }
+
+    /// The solution on the last solve's basis `B` (`M_BB z_B = −q_B`, `w = M z + q`), kept
+    /// where it is feasible to rounding (`z_B ≥ 0`, `w_N ≥ 0` within `1e-12` of the
+    /// problem's scale; a `z_B` within that of zero is put at zero); `false` where it is
+    /// not (the buffers then hold nothing the caller reads).
+    fn try_last_basis(&mut self, m: &[T], q: &[T]) -> bool {
+        let (n, k) = (self.n, self.basic.len());
+        for (a, &i) in self.basic.iter().enumerate() {
+            for (b, &j) in self.basic.iter().enumerate() {
+                self.lu[a * k + b] = m[i * n + j];
+            }
+            self.rhs[a] = -q[i];
+        }
+        if !lu_solve(&mut self.lu[..k * k], &mut self.rhs[..k], k)
+            || !self.rhs[..k].iter().all(|x| x.is_finite())
+        {
+            return false;
+        }
+        let big = |v: &[T]| v.iter().fold(T::zero(), |a, x| a.max(x.abs()));
+        let z_size = big(&self.rhs[..k]);
+        let tol = T::lit(1e-12) * (big(q) + big(m) * z_size);
+        if self.rhs[..k].iter().any(|&x| x < -tol) {
+            return false;
+        }
+        self.z.iter_mut().for_each(|z| *z = T::zero());
+        for a in 0..k {
+            self.z[self.basic[a]] = self.rhs[a].max(T::zero());
+        }
+        for i in 0..n {
+            let mut wi = q[i];
+            for j in 0..n {
+                wi += m[i * n + j] * self.z[j];
+            }
+            self.w[i] = wi;
+        }
+        for &i in &self.basic {
+            self.w[i] = T::zero();
+        }
+        // w_N as computed: non-negative to rounding, as on Lemke's path.
+        !self.w.iter().any(|&x| x < -tol)
     }
 
     /// Pivots on `(row, col)`; returns the variable that left the basis.

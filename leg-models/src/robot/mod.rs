@@ -333,6 +333,11 @@ pub enum RobotStepError {
     Robot(RobotError),
     /// See [`StepError`].
     Step(StepError),
+    /// The step length is not positive and finite.
+    TimeStep {
+        /// The step asked for (s).
+        dt: f64,
+    },
 }
 
 impl From<RobotError> for RobotStepError {
@@ -352,6 +357,9 @@ impl fmt::Display for RobotStepError {
         match self {
             RobotStepError::Robot(e) => write!(f, "{e}"),
             RobotStepError::Step(e) => write!(f, "{e}"),
+            RobotStepError::TimeStep { dt } => {
+                write!(f, "the time step {dt} s is not positive and finite")
+            }
         }
     }
 }
@@ -835,7 +843,8 @@ where
 /// `C v⁺ = 0`), the forces are the step's impulses over `dt`, and `solution.x` is
 /// `(v⁺ − v) / dt`; the closures are projected after it as after RK4, so they stay
 /// exact. Only RK4's rates are projected onto the held rows after the step (its
-/// acceleration-level solve needs them there).
+/// acceleration-level solve needs them there). A `dt` that is not positive and finite is
+/// refused ([`RobotStepError::TimeStep`]).
 #[allow(clippy::too_many_arguments)]
 pub fn pushed_stance_step_by<
     L,
@@ -859,6 +868,12 @@ where
     L: ContactModel<NQ, NC, NU, NK, 3>,
     T: Real,
 {
+    // Euler divides by it; neither integrator means anything with it.
+    if !(dt.is_finite() && dt > T::zero()) {
+        return Err(RobotStepError::TimeStep {
+            dt: dt.to_subset().unwrap_or(f64::NAN),
+        });
+    }
     let f = free_joint::<L, NQ, NC, NU>()?;
     let mut next = *state;
     next.recentre(f);

@@ -23,7 +23,10 @@
 //!
 //! Eliminating `v⁺` through the closures' KKT system leaves an LCP in `(p_n, β, γ)` on
 //! the Delassus matrix `C K Cᵀ`; [`Lemke`] solves it exactly, and its basis is the step's
-//! contact mode. The pose then moves by `h v⁺` and the closures are projected
+//! contact mode. Each step first tries the last step's basis (one linear solve, kept
+//! where it is feasible): where the modes have not changed, no pivot is taken, and a
+//! rigid foot's load split between its points (not unique) stays as it was rather than
+//! jumping between the solutions pivoting would reach. The pose then moves by `h v⁺` and the closures are projected
 //! (`project_position_near`), as in the Euler stance step; a contact's height is put
 //! back by the `φ/h` of the next step rather than by a projection.
 
@@ -117,8 +120,11 @@ pub struct ContactStep<T: Real, const NQ: usize, const NC: usize, const NK: usiz
     pub acceleration: SVector<T, NQ>,
     /// `(v* − v) / h`: what it would be without the ground (the closures kept).
     pub free_acceleration: SVector<T, NQ>,
-    /// Lemke's pivots.
+    /// Lemke's pivots (zero where the last step's contact modes solved this one).
     pub pivots: usize,
+    /// Whether the last step's modes (its basis) solved this step's problem, checked
+    /// feasible, with no pivot ([`Lemke::warm_start`]).
+    pub warm: bool,
 }
 
 /// Why a [`contact_step`] failed.
@@ -274,7 +280,7 @@ where
     let b = c * v_free;
     fill_problem(problem, &delassus, &b, &heights, mu, per_dt);
     problem.lemke.solve(&problem.m, &problem.q)?;
-    let (z, pivots) = (problem.lemke.z(), problem.lemke.pivots);
+    let (z, pivots, warm) = (problem.lemke.z(), problem.lemke.pivots, problem.lemke.warm);
     // The impulses in the contact rows, and the modes from the basis.
     let edges = &problem.edges;
     let ne = edges.len();
@@ -316,6 +322,7 @@ where
         acceleration: (v_plus - v) * per_dt,
         free_acceleration: a_free,
         pivots,
+        warm,
     };
     *state = next;
     Ok(step)
@@ -336,7 +343,9 @@ fn fill_problem<T: Real, const NK: usize>(
     let ne = problem.edges.len();
     let n = points * (ne + 2);
     let edges = &problem.edges;
-    // Each variable's direction in the contact rows: (row, weight) pairs.
+    // Each variable's direction in the contact rows, as (row, weight) pairs: an edge's
+    // `β` two (its `cos`, `sin` on the tangential rows), a normal impulse one (its
+    // second pair weighs nothing).
     let dir = |a: usize| -> [(usize, T); 2] {
         if a < points {
             [(3 * a + 2, T::one()), (3 * a + 2, T::zero())]

@@ -21,14 +21,16 @@ const PATHS: [&str; 3] = ["fused", "forward_dynamics", "derivatives"];
 /// contacts, forward dynamics with every contact held and with every contact sliding; on
 /// a floating robot, as a user calls it (`leg_models::robot`: the chart centred on the
 /// body, gravity rotated into it), forward dynamics, the stance with every contact
-/// held, and one semi-implicit Euler step of that stance at 0.5 ms (its projection
-/// included: `bench --mujoco`'s step).
-const APPLICABLE_PATHS: [&str; 5] = [
+/// held, one semi-implicit Euler step of that stance at 0.5 ms (its projection
+/// included: `bench --mujoco`'s step), and one step at 0.5 ms with every foot free
+/// (`time_stepping`: the contact modes' complementarity solve included).
+const APPLICABLE_PATHS: [&str; 6] = [
     "contact_stance",
     "contact_slide",
     "robot_forward_dynamics",
     "robot_stance",
     "robot_stance_step",
+    "robot_free_step",
 ];
 /// The paths CasADi's C has in both forms (its derivatives are compared apart).
 const COMPARED: [&str; 2] = ["fused", "forward_dynamics"];
@@ -384,10 +386,17 @@ pub fn run(root: &Path, pinocchio: bool, mujoco: bool, only: &[String]) -> Resul
         (Vec::new(), None)
     };
     let replay_dir = crate::dev::mujoco_step::dir(root);
-    let env = match mujoco {
-        true => vec![("LEG_BENCH_REPLAY", replay_dir.to_str().unwrap_or_default())],
-        false => vec![],
-    };
+    let mut env = Vec::new();
+    if mujoco {
+        // An empty variable would run the bench without the replay: refused instead.
+        let dir = replay_dir.to_str().ok_or_else(|| {
+            format!(
+                "{}: the replay folder's path is not UTF-8, which the bench's environment variable cannot carry",
+                replay_dir.display()
+            )
+        })?;
+        env.push(("LEG_BENCH_REPLAY", dir));
+    }
     crate::cli::cargo(root, &args, &env)?;
     let mujoco_figures = match &legs {
         Some(legs) => crate::dev::mujoco_step::run(root, legs, &replay)?,
