@@ -486,7 +486,11 @@ fn bench_floating<L, const NQ: usize, const NC: usize, const NU: usize, const NK
             }
         }
         // One step with every foot free (`robot::time_stepping`): the contact modes from
-        // one complementarity solve, the problem allocated once outside the loop.
+        // one complementarity solve, the problem allocated once outside the loop, on the
+        // ground through the lowest foot (count_calls' `robot_free_step`).
+        let under = leg_tests::ground_under::<L, NQ, NC, NU, NK>(
+            &leg_tests::robot_scene::<L, NQ, NC, NU, NK>().expect("the scene above"),
+        );
         let mut problem = robot::time_stepping::FootContacts::of::<L, NQ, NC, NU, NK>();
         let mut free_step = |s: &RobotState<f64, NQ>| {
             let mut s = *s;
@@ -496,7 +500,7 @@ fn bench_floating<L, const NQ: usize, const NC: usize, const NU: usize, const NK
                 &mut s,
                 black_box(&u),
                 &Vector3::zeros(),
-                &ground,
+                &under,
                 &mu,
                 5e-4,
             )

@@ -344,6 +344,10 @@ where
         return Some(measure(n, || call().map_or(0.0, |s| s.v[0])));
     }
     if what == "robot_free_step" {
+        // The ground where the lowest foot is, so that the step's solve has a contact to
+        // hold and none to push out of the ground.
+        let scene = leg_tests::robot_scene::<L, NQ, NC, NU, NK>().ok()?;
+        let ground = leg_tests::ground_under::<L, NQ, NC, NU, NK>(&scene);
         let mut problem = robot::time_stepping::FootContacts::of::<L, NQ, NC, NU, NK>();
         let mut call = || {
             let mut s = black_box(s);

@@ -248,6 +248,27 @@ where
     })
 }
 
+/// The scene's ground moved to touch its lowest contact point (the spec's normal, the
+/// offset the least `n · x` of the contacts), for the steps in which the ground's place
+/// matters (every foot free, `robot::time_stepping`): the lowest contact on it, the
+/// others above it, none pushed out of it.
+pub fn ground_under<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
+    scene: &RobotScene<NQ, NU, NK, L::Params<f64>>,
+) -> leg_models::dynamics::contact::Ground<f64, 3>
+where
+    L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
+{
+    let x = L::contact_positions(&scene.state.q, &scene.params);
+    let n = scene.ground.normal;
+    let lowest = (0..NK / 3)
+        .map(|k| n.dot(&x.fixed_rows::<3>(3 * k)))
+        .fold(f64::INFINITY, f64::min);
+    leg_models::dynamics::contact::Ground {
+        normal: n,
+        offset: if lowest.is_finite() { lowest } else { 0.0 },
+    }
+}
+
 /// The reciprocal condition of `J_p J_pᵀ` (`J` without the actuated columns), from the
 /// pivots of its Cholesky factor; 1 without closures, 0 where it is singular.
 pub fn passive_rcond<
