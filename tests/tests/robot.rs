@@ -1514,21 +1514,27 @@ fn deepest_split_meets_a_hand_solution_and_refuses_bad_input() {
 ///   start, in the world, are `h (m g + push)` plus the feet's impulses in the world (the
 ///   weight from the spec's masses);
 /// - the impulses' energy identity: `T(v⁺) − T(v*) = −½ Δᵀ M Δ − Σ p_n φ/h − Σ γ μ p_n`
-///   with `Δ = v⁺ − v*` (`v*` the step's rates without the ground).
+///   with `Δ = v⁺ − v*` (`v*` the step's rates without the ground);
+/// - the whole equations of motion, every row, from the model's terms: `M (v⁺ − v) − h
+///   (B u + push − N − D v) − Jᵀ F − Cᵀ p = 0` (the step's closure and contact impulses),
+///   and `J v⁺ = 0`; and maximum dissipation on the 4-edge pyramid: `±v_t,i + γ ≥ 0`
+///   for each edge, `γ ≥ 0` (friction on the edge most against the slip).
 ///
-/// Returns the largest violation of each, scaled: complementarity in m/s and N s over
-/// the step's scale, Newton over the weight's impulse, energy over the kinetic energy
-/// (or the weight's work over the step where that is larger).
+/// Returns the largest violation of each, scaled: complementarity (with maximum
+/// dissipation) in m/s and N s over the step's scale, Newton over the weight's impulse,
+/// energy over the kinetic energy (or the weight's work over the step where that is
+/// larger), the equations of motion over the largest of their terms.
 #[allow(clippy::too_many_arguments)]
 fn free_step_violations<L, const NQ: usize, const NC: usize, const NU: usize, const NK: usize>(
     p: &L::Params<f64>,
     before: &RobotState<f64, NQ>,
     step: &leg_models::robot::time_stepping::ContactStep<f64, NQ, NC, NK>,
+    u: &SVector<f64, NU>,
     push: &Vector3<f64>,
     ground: &leg_models::dynamics::contact::Ground<f64, 3>,
     mu: &SVector<f64, NK>,
     dt: f64,
-) -> [f64; 3]
+) -> [f64; 4]
 where
     L: leg_models::ContactModel<NQ, NC, NU, NK, 3>,
 {
@@ -1577,6 +1583,13 @@ where
                     .max(imp(pt1 * vt1 + pt2 * vt2 + gamma * m * pn) / speed_scale)
             }
         }
+        if step.modes.get(k) != ContactMode::Flight {
+            // Maximum dissipation: no edge of the pyramid slides faster than γ.
+            for d in [vt1, -vt1, vt2, -vt2] {
+                comp = comp.max(vel(-(d + gamma)));
+            }
+            comp = comp.max(vel(-gamma));
+        }
         slip_work += gamma * m * pn;
         gap_work += pn * heights[3 * k + 2] / dt;
     }
@@ -1609,14 +1622,30 @@ where
         .max(weight_impulse * 9.81 * dt)
         .max(weight_impulse * speed_scale);
     let energy = (kinetic(&v_plus) - kinetic(&v_free) - identity).abs() / energy_scale;
-    [comp, newton, energy]
+    // The equations of motion, every row, from the model's terms.
+    let mut applied = leg_models::dynamics::actuation::<L, f64, NQ, NC, NU>(u);
+    let on_body = s0.orientation.inverse_transform_vector(push);
+    for k in 0..3 {
+        applied[f + k] += on_body[k];
+    }
+    let j = L::constraint_jacobian(&s0.q, &chart);
+    let parts = [
+        terms.mass_matrix * (v_plus - s0.v),
+        (applied - terms.bias_forces - L::damping_forces(&s0.v, &chart)) * dt,
+        j.transpose() * step.closure,
+        c.transpose() * step.impulses,
+    ];
+    let motion_scale = parts.iter().fold(weight_impulse, |a, x| a.max(x.amax()));
+    let motion = ((parts[0] - parts[1] - parts[2] - parts[3]).amax() / motion_scale)
+        .max((j * v_plus).amax() / speed_scale);
+    [comp, newton, energy, motion]
 }
 
 /// The largest of each of [`free_step_violations`] over a run, and how many steps had
 /// each contact mode (flight, stick, slide) summed over the contacts.
 #[derive(Debug, Default)]
 struct FreeRun {
-    worst: [f64; 3],
+    worst: [f64; 4],
     modes: [usize; 3],
     pivots: usize,
     warm: usize,
@@ -1645,7 +1674,8 @@ impl FreeRun {
             problem, p, s, u, push, ground, mu, dt,
         )
         .unwrap_or_else(|e| panic!("{}: step {}: {e}", L::NAME, self.steps));
-        let v = free_step_violations::<L, NQ, NC, NU, NK>(p, &before, &step, push, ground, mu, dt);
+        let v =
+            free_step_violations::<L, NQ, NC, NU, NK>(p, &before, &step, u, push, ground, mu, dt);
         for (worst, v) in self.worst.iter_mut().zip(v) {
             *worst = worst.max(v);
         }
@@ -1664,9 +1694,9 @@ impl FreeRun {
 
     /// Every step complementary, Newton's and the energy identity to rounding.
     fn check(&self, name: &str, scene: &str) {
-        let [comp, newton, energy] = self.worst;
+        let [comp, newton, energy, motion] = self.worst;
         eprintln!(
-            "{name}: {scene}: {} steps, contact-steps in flight / stick / slide {:?}, {:.1} pivots a step, {} steps solved on the last step's basis; worst complementarity {comp:.1e}, Newton {newton:.1e}, energy identity {energy:.1e}",
+            "{name}: {scene}: {} steps, contact-steps in flight / stick / slide {:?}, {:.1} pivots a step, {} steps solved on the last step's basis; worst complementarity {comp:.1e}, Newton {newton:.1e}, energy identity {energy:.1e}, equations of motion {motion:.1e}",
             self.steps,
             self.modes,
             self.pivots as f64 / self.steps.max(1) as f64,
@@ -1680,6 +1710,10 @@ impl FreeRun {
         assert!(
             energy < 1e-8,
             "{name}: {scene}: energy identity off ({energy:e})"
+        );
+        assert!(
+            motion < 1e-8,
+            "{name}: {scene}: equations of motion off ({motion:e})"
         );
     }
 }

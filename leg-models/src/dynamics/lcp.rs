@@ -28,7 +28,7 @@ use std::vec::Vec;
 use crate::model::contract::Real;
 
 /// Why an LCP was not solved.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum LcpError {
     /// `M` or `q` is not the size the solver was made for.
     Size {
@@ -50,6 +50,13 @@ pub enum LcpError {
         /// The limit.
         pivots: usize,
     },
+    /// The path ended, but its solution solved again on its basis misses `z ≥ 0` or
+    /// `w ≥ 0` by more than `√ε` of the problem's size (rounding has led the pivoting
+    /// astray: a problem too ill-conditioned for it).
+    Inaccurate {
+        /// The most negative entry of `z` or `w`, over the problem's size.
+        off: f64,
+    },
 }
 
 impl core::fmt::Display for LcpError {
@@ -67,6 +74,10 @@ impl core::fmt::Display for LcpError {
             LcpError::TooManyPivots { pivots } => {
                 write!(f, "Lemke's pivoting took more than {pivots} pivots")
             }
+            LcpError::Inaccurate { off } => write!(
+                f,
+                "Lemke's solution misses z ≥ 0 or w ≥ 0 by {off:.1e} of the problem's size: too ill-conditioned"
+            ),
         }
     }
 }
@@ -208,8 +219,7 @@ impl<T: Real> Lemke<T> {
             }
             leaving = self.pivot(row, entering);
         }
-        self.read_solution(m, q);
-        Ok(())
+        self.read_solution(m, q)
     }
 
     /// The last solution's `z`.
@@ -223,25 +233,15 @@ impl<T: Real> Lemke<T> {
     }
 
     /// The solution on the last solve's basis `B` (`M_BB z_B = −q_B`, `w = M z + q`), kept
-    /// where it is feasible to rounding (`z_B ≥ 0`, `w_N ≥ 0` within `1e-12` of the
-    /// problem's scale; a `z_B` within that of zero is put at zero); `false` where it is
+    /// where it is feasible to rounding (`z_B ≥ 0`, `w_N ≥ 0` within `10⁴ ε` of the
+    /// problem's size; a `z_B` within that of zero is put at zero); `false` where it is
     /// not (the buffers then hold nothing the caller reads).
     fn try_last_basis(&mut self, m: &[T], q: &[T]) -> bool {
-        let (n, k) = (self.n, self.basic.len());
-        for (a, &i) in self.basic.iter().enumerate() {
-            for (b, &j) in self.basic.iter().enumerate() {
-                self.lu[a * k + b] = m[i * n + j];
-            }
-            self.rhs[a] = -q[i];
-        }
-        if !lu_solve(&mut self.lu[..k * k], &mut self.rhs[..k], k)
-            || !self.rhs[..k].iter().all(|x| x.is_finite())
-        {
+        if !self.solve_on_basis(m, q) {
             return false;
         }
-        let big = |v: &[T]| v.iter().fold(T::zero(), |a, x| a.max(x.abs()));
-        let z_size = big(&self.rhs[..k]);
-        let tol = T::lit(1e-12) * (big(q) + big(m) * z_size);
+        let k = self.basic.len();
+        let tol = T::lit(1e4) * T::default_epsilon() * self.problem_size(m, q, &self.rhs[..k]);
         if self.rhs[..k].iter().any(|&x| x < -tol) {
             return false;
         }
@@ -249,6 +249,28 @@ impl<T: Real> Lemke<T> {
         for a in 0..k {
             self.z[self.basic[a]] = self.rhs[a].max(T::zero());
         }
+        self.set_w(m, q);
+        // w_N as computed: non-negative to rounding, as on Lemke's path.
+        !self.w.iter().any(|&x| x < -tol)
+    }
+
+    /// `M_BB x = −q_B` on the basis `self.basic` into `self.rhs`; `false` where it is
+    /// singular or its solution not finite.
+    fn solve_on_basis(&mut self, m: &[T], q: &[T]) -> bool {
+        let (n, k) = (self.n, self.basic.len());
+        for (a, &i) in self.basic.iter().enumerate() {
+            for (b, &j) in self.basic.iter().enumerate() {
+                self.lu[a * k + b] = m[i * n + j];
+            }
+            self.rhs[a] = -q[i];
+        }
+        lu_solve(&mut self.lu[..k * k], &mut self.rhs[..k], k)
+            && self.rhs[..k].iter().all(|x| x.is_finite())
+    }
+
+    /// `w = M z + q`, then `w_B = 0` exactly.
+    fn set_w(&mut self, m: &[T], q: &[T]) {
+        let n = self.n;
         for i in 0..n {
             let mut wi = q[i];
             for j in 0..n {
@@ -259,8 +281,12 @@ impl<T: Real> Lemke<T> {
         for &i in &self.basic {
             self.w[i] = T::zero();
         }
-        // w_N as computed: non-negative to rounding, as on Lemke's path.
-        !self.w.iter().any(|&x| x < -tol)
+    }
+
+    /// The problem's size at a solution `z`: `max |q| + max |M| max |z|`.
+    fn problem_size(&self, m: &[T], q: &[T], z: &[T]) -> T {
+        let big = |v: &[T]| v.iter().fold(T::zero(), |a, x| a.max(x.abs()));
+        big(q) + big(m) * big(z)
     }
 
     /// Pivots on `(row, col)`; returns the variable that left the basis.
@@ -294,7 +320,7 @@ impl<T: Real> Lemke<T> {
         let (n, width) = (self.n, 2 * self.n + 2);
         let scale = (0..n).fold(T::zero(), |a, i| a.max(self.tableau[i * width + col].abs()));
         // An entry below this is rounding of a zero: pivoting on it would blow up.
-        let floor = scale * T::lit(1e-11);
+        let floor = scale * T::lit(1e5) * T::default_epsilon();
         let mut best: Option<(usize, T)> = None;
         for i in 0..n {
             let a = self.tableau[i * width + col];
@@ -309,8 +335,12 @@ impl<T: Real> Lemke<T> {
             };
         }
         let (_, least) = best?;
-        // Every row within rounding of the least ratio ties.
-        let tie = T::lit(1e-12) * (T::one() + least.abs());
+        // Every row within rounding of the least ratio ties (relative to it, or to the
+        // ratios' own size where it is zero).
+        let rhs_size = (0..n).fold(T::zero(), |a, i| {
+            a.max(self.tableau[i * width + 2 * n + 1].abs())
+        });
+        let tie = T::lit(1e4) * T::default_epsilon() * (least.abs() + rhs_size / scale);
         let ties = |i: &usize| {
             let a = self.tableau[i * width + col];
             a > floor && self.tableau[i * width + 2 * n + 1] / a <= least + tie
@@ -337,49 +367,50 @@ impl<T: Real> Lemke<T> {
     }
 
     /// The solution on the final basis, solved again from `M` and `q`: `M_BB z_B = −q_B`
-    /// (the basic `z`), `w = M z + q`, so that `w_B = 0` and `z_N = 0` exactly. Kept
-    /// from the tableau instead where that solve is singular to rounding.
-    fn read_solution(&mut self, m: &[T], q: &[T]) {
+    /// (the basic `z`), `w = M z + q`, so that `w_B = 0` and `z_N = 0` exactly (kept
+    /// from the tableau instead where that solve strays from it, a basis singular to
+    /// rounding); then checked: `z` and `w` non-negative within `√ε` of the problem's
+    /// size, else [`LcpError::Inaccurate`].
+    fn read_solution(&mut self, m: &[T], q: &[T]) -> Result<(), LcpError> {
         let (n, width) = (self.n, 2 * self.n + 2);
         self.z.iter_mut().for_each(|z| *z = T::zero());
         self.basic.clear();
         for i in 0..n {
             let v = self.basis[i];
             if (n..2 * n).contains(&v) {
-                self.z[v - n] = self.tableau[i * width + 2 * n + 1].max(T::zero());
+                self.z[v - n] = self.tableau[i * width + 2 * n + 1];
                 self.basic.push(v - n);
             }
         }
         let k = self.basic.len();
-        for (a, &i) in self.basic.iter().enumerate() {
-            for (b, &j) in self.basic.iter().enumerate() {
-                self.lu[a * k + b] = m[i * n + j];
-            }
-            self.rhs[a] = -q[i];
-        }
-        if lu_solve(&mut self.lu[..k * k], &mut self.rhs[..k], k) {
-            let all_finite = self.rhs[..k].iter().all(|x| x.is_finite());
-            // The tableau's own values where the re-solve strays (a basis singular to
-            // rounding): it must agree with them to well within their size.
-            let size = self.z.iter().fold(T::one(), |a, z| a.max(z.abs()));
-            let agrees =
-                (0..k).all(|a| (self.rhs[a] - self.z[self.basic[a]]).abs() <= T::lit(1e-6) * size);
-            if all_finite && agrees {
+        if self.solve_on_basis(m, q) {
+            let size = self.problem_size(m, q, &self.z);
+            let agrees = (0..k).all(|a| {
+                (self.rhs[a] - self.z[self.basic[a]]).abs() <= T::default_epsilon().sqrt() * size
+            });
+            if agrees {
                 for a in 0..k {
-                    self.z[self.basic[a]] = self.rhs[a].max(T::zero());
+                    self.z[self.basic[a]] = self.rhs[a];
                 }
             }
         }
-        for i in 0..n {
-            let mut wi = q[i];
-            for j in 0..n {
-                wi += m[i * n + j] * self.z[j];
-            }
-            self.w[i] = wi;
+        self.set_w(m, q);
+        let size = self.problem_size(m, q, &self.z);
+        let lowest = self
+            .z
+            .iter()
+            .chain(self.w.iter())
+            .fold(T::zero(), |a, &x| a.min(x));
+        if -lowest > T::default_epsilon().sqrt() * size {
+            return Err(LcpError::Inaccurate {
+                off: (-lowest / size).to_subset().unwrap_or(f64::NAN),
+            });
         }
-        for &i in &self.basic {
-            self.w[i] = T::zero();
+        // Rounding's negatives of z put at zero (w_B stays zero: complementarity exact).
+        for z in &mut self.z {
+            *z = z.max(T::zero());
         }
+        Ok(())
     }
 }
 

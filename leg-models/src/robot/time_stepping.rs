@@ -110,9 +110,11 @@ pub struct ContactStep<T: Real, const NQ: usize, const NC: usize, const NK: usiz
     /// Each contact's mean force over the step in the world (`p / h`, stacked `x, y, z`).
     pub world_forces: SVector<T, NK>,
     /// Each contact's mode over the step: flight where it takes no push, sliding where
-    /// its slip speed `γ` is positive, sticking otherwise.
+    /// its slip speed `γ` is positive, sticking otherwise (each within `10⁴ ε` of the
+    /// problem's impulses and speeds: a degenerate basis's rounding is not a mode).
     pub modes: Modes<NK, 3>,
-    /// Each contact's slip speed `γ` (m/s) on its normal row, zero elsewhere.
+    /// Each contact's slip speed `γ` (m/s) on its normal row, zero elsewhere and on a
+    /// contact in flight.
     pub slip_speed: SVector<T, NK>,
     /// The closures' impulses.
     pub closure: SVector<T, NC>,
@@ -287,6 +289,10 @@ where
     let mut p = SVector::<T, NK>::zeros();
     let mut modes = Modes::<NK, 3>::flight();
     let mut slip_speed = SVector::<T, NK>::zeros();
+    // A push or a slip speed within rounding of zero (a degenerate basis's) is none.
+    let big = |v: &[T]| v.iter().fold(T::zero(), |a, x| a.max(x.abs()));
+    let rounding = T::lit(1e4) * T::default_epsilon();
+    let (least_push, least_slip) = (rounding * big(z), rounding * big(&problem.q));
     for k in 0..points {
         p[3 * k + 2] = z[k];
         for (e, &(cj, sj)) in edges.iter().enumerate() {
@@ -294,12 +300,13 @@ where
             p[3 * k] += beta * cj;
             p[3 * k + 1] += beta * sj;
         }
-        let gamma = z[points * (ne + 1) + k];
-        slip_speed[3 * k + 2] = gamma;
-        if z[k] > T::zero() {
+        // In flight the slip speed means nothing (γ is not unique there): left zero.
+        if z[k] > least_push {
+            let gamma = z[points * (ne + 1) + k];
+            slip_speed[3 * k + 2] = gamma;
             modes.set(
                 k,
-                if gamma > T::zero() {
+                if gamma > least_slip {
                     ContactMode::Slide { forward: true }
                 } else {
                     ContactMode::Stick
